@@ -1,0 +1,5 @@
+"""Allow ``python -m cartctl``."""
+
+from cartctl.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,76 @@
+"""The one exception family of cartctl.
+
+Every error a user can cause derives from :class:`CartctlError` and from the matching builtin, so
+callers may catch either. The command line turns a :class:`CartctlError` into one line on stderr and
+exit code 2 (no traceback). Messages say what was wrong, the value received, and what is expected.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class CartctlError(Exception):
+    """Base of all errors that cartctl reports to the user."""
+
+    exit_code: int = 2
+
+
+class InputError(CartctlError, ValueError):
+    """A bad option, argument or value (wrong range, wrong shape, unknown name)."""
+
+
+class MissingFileError(CartctlError, FileNotFoundError):
+    """A file the user named does not exist."""
+
+    def __init__(self, path: str | Path, what: str = "file") -> None:
+        self.path = Path(path)
+        super().__init__(f"{what} not found: {self.path}")
+
+    def __str__(self) -> str:  # FileNotFoundError would otherwise format (errno, strerror)
+        return self.args[0]
+
+
+class DataFileError(CartctlError, ValueError):
+    """A data or model file whose content is wrong.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    problem : str
+        What is wrong and what is expected.
+    line : int, optional
+        1-based line number in the file, where known.
+    column : str, optional
+        Column name, where known.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        problem: str,
+        *,
+        line: int | None = None,
+        column: str | None = None,
+    ) -> None:
+        self.path = Path(path)
+        self.problem = problem
+        self.line = line
+        self.column = column
+        where = str(self.path)
+        if line is not None:
+            where += f", line {line}"
+        if column is not None:
+            where += f", column '{column}'"
+        super().__init__(f"{where}: {problem}")
+
+
+class PlantError(CartctlError, RuntimeError):
+    """A plant failed while running (a vanished port, a silent cart, a stalled link)."""
+
+    exit_code = 1
+
+
+class DataWarning(UserWarning):
+    """Data that can be used but looks suspicious (uneven sample spacing, a clipped channel)."""
