@@ -1,0 +1,76 @@
+"""The ``cartctl`` command line: parses arguments and turns errors into one clear line.
+
+Each subcommand lives in :mod:`cartctl.commands` as a module with ``add_parser(subparsers)`` and
+``run(args) -> int``. User mistakes (:class:`~cartctl.errors.CartctlError`, bad options) print one
+line on stderr and exit with code 2, with no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from collections.abc import Sequence
+from typing import NoReturn
+
+from cartctl import __version__
+from cartctl.commands import COMMANDS
+from cartctl.errors import CartctlError
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage mistake is one line (plus where to look) and exit code 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full parser with every subcommand of contract 2."""
+    parser = _Parser(
+        prog="cartctl",
+        description=(
+            "Identify, design and run velocity control of a two-wheeled DC-motor cart. "
+            "Workflow: excite → identify → design → run → review."
+        ),
+    )
+    parser.add_argument("--version", action="version", version=f"cartctl {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+    for module in COMMANDS:
+        module.add_parser(sub)
+    return parser
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"cartctl: warning: {message}", file=sys.stderr)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit code (0 ok, 2 user mistake, 1 runtime failure)."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    previous = warnings.showwarning
+    warnings.showwarning = _show_warning
+    try:
+        return int(args.func(args))
+    except CartctlError as exc:
+        print(f"cartctl {args.command}: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except OSError as exc:  # a file we could not write or read for a reason the user can fix
+        print(
+            f"cartctl {args.command}: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(
+                ": "
+            ),
+            file=sys.stderr,
+        )
+        return 2
+    except KeyboardInterrupt:
+        print(f"cartctl {args.command}: interrupted", file=sys.stderr)
+        return 130
+    finally:
+        warnings.showwarning = previous
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,10 @@
+"""The ``cartctl`` subcommands, in the order of the workflow.
+
+Each entry has ``add_parser(subparsers)``; the parser it adds sets ``func`` to a handler
+``run(args) -> int``.
+"""
+
+from cartctl.commands import excite, inspect
+from cartctl.commands.pending import design, identify, linearity, review, run, validate
+
+COMMANDS = (excite, identify, inspect, validate, linearity, design, run, review)

@@ -1,0 +1,101 @@
+"""``cartctl inspect MODEL.toml [--json]``: poles, zeros, continuous-equivalent frequencies, DC gain."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from typing import Any
+
+from cartctl.model import ArxModel, Root
+from cartctl.modelfile import ModelFile, load_models
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "inspect",
+        help="poles, zeros, continuous-equivalent frequencies and DC gain of a model file",
+        description=(
+            "Show each motor's transfer function, its poles and zeros with their continuous-equivalent "
+            "frequencies f = |ln z| / (2π Ts) and damping, and its DC gain. A pole at z = 0 is a pure "
+            "delay and has no frequency."
+        ),
+    )
+    p.add_argument("model", metavar="MODEL.toml", help="model file, e.g. models/ground.toml")
+    p.add_argument(
+        "--json", action="store_true", help="print one JSON object (contract 3) instead of a table"
+    )
+    p.set_defaults(func=run)
+
+
+def _finite_or_none(value: float) -> float | None:
+    return value if math.isfinite(value) else None
+
+
+def model_summary(model: ArxModel) -> dict[str, Any]:
+    """Contract-3 ``inspect`` entry of one motor (plus nk, num and den)."""
+    return {
+        "poles": [r.to_dict() for r in model.poles()],
+        "zeros": [r.to_dict() for r in model.zeros()],
+        "dc_gain": _finite_or_none(model.dc_gain()),
+        "stable": model.is_stable(),
+        "nk": model.nk,
+        "num": model.num().tolist(),
+        "den": model.den().tolist(),
+    }
+
+
+def inspect_dict(models: ModelFile) -> dict[str, Any]:
+    """The whole ``inspect --json`` object."""
+    return {
+        "Ts": models.period_s,
+        "motors": {n: model_summary(m) for n, m in models.motors.items()},
+    }
+
+
+def _fmt_z(z: complex) -> str:
+    if z.imag == 0.0:
+        return f"{z.real:.4f}"
+    return f"{z.real:.4f} {'+' if z.imag > 0 else '−'} {abs(z.imag):.4f}j"
+
+
+def _row(root: Root) -> str:
+    freq = "—" if root.freq_hz is None else f"{root.freq_hz:.2f}"
+    damp = "—" if root.damping is None else f"{root.damping:.3f}"
+    return (
+        f"    {root.kind:<6} {_fmt_z(root.value):>22} {abs(root.value):>8.4f} {freq:>8} {damp:>7}"
+    )
+
+
+def format_table(models: ModelFile) -> str:
+    """The human-readable report."""
+    prov = models.provenance
+    lines = [
+        f"{models.path}",
+        f"  {prov.source}",
+        f"  method {prov.method}, prefilter {prov.prefilter}, created {prov.created}; Ts = {models.period_s * 1e3:g} ms",
+    ]
+    for name, m in models.motors.items():
+        gain = m.dc_gain()
+        lines += [
+            "",
+            f"  motor {name}:  H(z) = {m.describe()}    (input delay nk = {m.nk})",
+            f"    {'kind':<6} {'z':>22} {'|z|':>8} {'f (Hz)':>8} {'ζ':>7}",
+        ]
+        lines += [_row(r) for r in (*m.poles(), *m.zeros())]
+        gain_txt = f"{gain:.4g} rad/s/V" if math.isfinite(gain) else "unbounded (integrator)"
+        lines.append(f"    DC gain {gain_txt}, {'stable' if m.is_stable() else 'UNSTABLE'}")
+    lines.append("")
+    lines.append(
+        "  f = |ln z| / (2π Ts); a delay pole (z = 0) has no frequency; ζ is the damping ratio."
+    )
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    models = load_models(args.model)
+    if args.json:
+        print(json.dumps(inspect_dict(models)))
+    else:
+        print(format_table(models))
+    return 0

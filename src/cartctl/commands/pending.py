@@ -1,0 +1,107 @@
+"""Subcommands whose options are fixed by contract 2 but whose work is not built yet.
+
+They parse their contract options (so ``--help`` documents them) and then say plainly that the
+command is not built yet, with exit code 2. Each moves to a module of its own when it is built.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from cartctl.errors import CartctlError
+
+
+class NotBuiltError(CartctlError):
+    """The command exists in the interface but its work has not landed yet."""
+
+
+@dataclass(frozen=True)
+class PendingCommand:
+    """A subcommand that parses its options and reports that it is not built yet."""
+
+    name: str
+    help: str
+    stage: str
+    options: Callable[[argparse.ArgumentParser], None]
+
+    def add_parser(self, sub: argparse._SubParsersAction) -> None:
+        parser = sub.add_parser(self.name, help=self.help, description=self.help)
+        self.options(parser)
+        parser.set_defaults(func=self.run)
+
+    def run(self, args: argparse.Namespace) -> int:
+        raise NotBuiltError(
+            f"'cartctl {self.name}' is not built yet (it arrives with the {self.stage})"
+        )
+
+
+def _identify(p: argparse.ArgumentParser) -> None:
+    p.add_argument("files", nargs="+", metavar="FILE", help="experiment traces (CSV or QRC logs)")
+    p.add_argument("--motor", choices=("a", "b", "both"), default="both")
+    p.add_argument("--prefilter", choices=("none", "butter"), default="none")
+    p.add_argument("--order", type=int, default=2, metavar="N")
+    p.add_argument("--cutoff-hz", type=float, default=20.0, metavar="F")
+    p.add_argument("--delay", default="2", metavar="auto|N")
+    p.add_argument("--method", choices=("arx", "oe"), default="arx")
+    p.add_argument("--out", metavar="MODEL.toml")
+    p.add_argument("--report", metavar="DIR")
+    p.add_argument("--json", action="store_true")
+
+
+def _validate(p: argparse.ArgumentParser) -> None:
+    p.add_argument("model", metavar="MODEL.toml")
+    p.add_argument("data", metavar="FILE.csv")
+    p.add_argument("--json", action="store_true")
+
+
+def _linearity(p: argparse.ArgumentParser) -> None:
+    p.add_argument("small", metavar="STEP_SMALL.csv")
+    p.add_argument("large", metavar="STEP_LARGE.csv")
+    p.add_argument("sum", metavar="STEP_SUM.csv")
+    p.add_argument("--json", action="store_true")
+
+
+def _design(p: argparse.ArgumentParser) -> None:
+    p.add_argument("model", metavar="MODEL.toml")
+    p.add_argument("--method", choices=("pi", "poles"), required=True)
+    p.add_argument("--out", metavar="CONTROLLER.toml")
+    p.add_argument("--json", action="store_true")
+
+
+def _run(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--plant", default="sim", metavar="PLANT")
+    p.add_argument("--controller", metavar="CONTROLLER.toml")
+    p.add_argument("--reference", metavar="SPEC")
+    p.add_argument("--duration", type=float, metavar="S")
+    p.add_argument("--fast", action="store_true")
+    p.add_argument("--rerun", metavar="MODE")
+    p.add_argument("--out", metavar="DIR")
+    p.add_argument("--json", action="store_true")
+
+
+def _review(p: argparse.ArgumentParser) -> None:
+    p.add_argument("recording", metavar="FILE.rrd")
+
+
+identify = PendingCommand(
+    "identify", "fit ARX motor models to recorded experiments", "identification stage", _identify
+)
+validate = PendingCommand(
+    "validate",
+    "simulate a model on recorded data against the measured speed",
+    "identification stage",
+    _validate,
+)
+linearity = PendingCommand(
+    "linearity",
+    "the superposition test: two small steps added against their sum",
+    "identification stage",
+    _linearity,
+)
+design = PendingCommand(
+    "design", "design PI or pole-placement controllers on a model", "design stage", _design
+)
+run = PendingCommand("run", "run the 10 ms closed loop against a plant", "10 ms loop", _run)
+review = PendingCommand("review", "open a recorded run in the Rerun viewer", "10 ms loop", _review)

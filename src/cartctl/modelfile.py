@@ -1,0 +1,218 @@
+"""Model files: the identified motor models of a cart as TOML, with their provenance.
+
+``identify --out`` writes these files, ``design``, ``inspect``, ``validate`` and the simulated plant
+read them. A file holds one model per motor and says where the models came from::
+
+    format = "cartctl-model/1"
+    period_s = 0.01
+
+    [provenance]
+    source = "report, equation 12 (cart on the ground)"
+    created = "2023-11-06"
+    data = ["ground_square.csv"]
+    method = "arx"
+    prefilter = "none"
+
+    [motors.a]
+    theta = [-0.9356, 0.2173, 0.6466, -0.07751]   # [c, d, a, b]
+    na = 2
+    nb = 2
+    nk = 2
+
+Extra keys in ``[motors.X]`` (``theta_std``, fit percentages …) are kept as ``stats``.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+from cartctl.errors import CartctlError, DataFileError, InputError, MissingFileError
+from cartctl.model import ArxModel
+
+FORMAT = "cartctl-model/1"
+MOTORS = ("a", "b")
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """Where a model came from.
+
+    Attributes
+    ----------
+    source : str
+        Free text: the experiment, report or command that produced the models.
+    created : str
+        ISO 8601 date or date-time.
+    data : tuple of str
+        Data files the models were fitted to (empty when not from data).
+    method : str
+        'arx', 'oe', 'report', …
+    prefilter : str
+        'none', or a description such as 'butter order 6, 20 Hz, causal'.
+    notes : str
+        Anything else a reader should know.
+    """
+
+    source: str
+    created: str
+    data: tuple[str, ...] = ()
+    method: str = "arx"
+    prefilter: str = "none"
+    notes: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        """TOML/JSON form."""
+        out: dict[str, Any] = {
+            "source": self.source,
+            "created": self.created,
+            "data": list(self.data),
+            "method": self.method,
+            "prefilter": self.prefilter,
+        }
+        if self.notes:
+            out["notes"] = self.notes
+        return out
+
+
+@dataclass(frozen=True)
+class ModelFile:
+    """The motor models of one cart, per motor ('a', 'b'), with provenance.
+
+    Attributes
+    ----------
+    motors : dict of str to ArxModel
+        At least one of 'a' and 'b'.
+    provenance : Provenance
+    stats : dict of str to dict
+        Per motor, extra figures from identification (theta_std, fits …), kept as written.
+    path : Path or None
+        The file it was read from.
+    """
+
+    motors: dict[str, ArxModel]
+    provenance: Provenance
+    stats: dict[str, dict[str, Any]] = field(default_factory=dict)
+    path: Path | None = None
+
+    def motor(self, name: str) -> ArxModel:
+        """The model of motor ``name``, with an error naming the motors present."""
+        try:
+            return self.motors[name]
+        except KeyError:
+            where = f" in {self.path}" if self.path else ""
+            raise InputError(
+                f"no model for motor '{name}'{where}; it has motor(s) {', '.join(self.motors)}"
+            ) from None
+
+    @property
+    def period_s(self) -> float:
+        """The common sample period of the models (s)."""
+        return next(iter(self.motors.values())).period_s
+
+    def to_toml_dict(self) -> dict[str, Any]:
+        """The document written by :func:`save_models`."""
+        motors: dict[str, Any] = {}
+        for name, m in self.motors.items():
+            entry: dict[str, Any] = {
+                "theta": [float(v) for v in m.theta],
+                "na": m.na,
+                "nb": m.nb,
+                "nk": m.nk,
+            }
+            entry.update(self.stats.get(name, {}))
+            motors[name] = entry
+        return {
+            "format": FORMAT,
+            "period_s": self.period_s,
+            "provenance": self.provenance.to_dict(),
+            "motors": motors,
+        }
+
+
+def save_models(models: ModelFile, path: str | Path) -> Path:
+    """Write a model file (TOML), creating parent folders. Returns the path written."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    header = "# cartctl motor models: theta = [a_1..a_na, b_0..b_nb-1], the report's [c, d, a, b]\n"
+    path.write_text(header + tomli_w.dumps(models.to_toml_dict()), encoding="utf-8")
+    return path
+
+
+def load_models(path: str | Path) -> ModelFile:
+    """Read a model file.
+
+    Raises
+    ------
+    MissingFileError
+        The file does not exist.
+    DataFileError
+        The file is not valid TOML or misses a required key; the message names the key.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise MissingFileError(path, "model file")
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise DataFileError(path, f"not a valid TOML model file ({exc})") from None
+    try:
+        return _parse(doc, path)
+    except DataFileError:
+        raise
+    except CartctlError as exc:
+        raise DataFileError(path, str(exc)) from None
+
+
+def _require(
+    table: Mapping[str, Any], key: str, kind: type | tuple[type, ...], path: Path, where: str
+) -> Any:
+    if key not in table:
+        raise DataFileError(path, f"missing key '{key}' in {where}")
+    value = table[key]
+    if not isinstance(value, kind) or isinstance(value, bool):
+        raise DataFileError(path, f"key '{key}' in {where} has the wrong type: {value!r}")
+    return value
+
+
+def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
+    fmt = doc.get("format", FORMAT)
+    if fmt != FORMAT:
+        raise DataFileError(path, f"unknown format {fmt!r}; expected {FORMAT!r}")
+    period_s = float(_require(doc, "period_s", (int, float), path, "the top level"))
+    prov_tab = doc.get("provenance", {})
+    provenance = Provenance(
+        source=str(prov_tab.get("source", "unknown")),
+        created=str(prov_tab.get("created", "unknown")),
+        data=tuple(str(d) for d in prov_tab.get("data", ())),
+        method=str(prov_tab.get("method", "unknown")),
+        prefilter=str(prov_tab.get("prefilter", "none")),
+        notes=str(prov_tab.get("notes", "")),
+    )
+    motors_tab = _require(doc, "motors", dict, path, "the top level")
+    unknown = sorted(set(motors_tab) - set(MOTORS))
+    if unknown:
+        raise DataFileError(path, f"unknown motor(s) {unknown}; motors are 'a' and 'b'")
+    if not motors_tab:
+        raise DataFileError(path, "[motors] is empty; expected [motors.a] and/or [motors.b]")
+    motors: dict[str, ArxModel] = {}
+    stats: dict[str, dict[str, Any]] = {}
+    for name in MOTORS:
+        if name not in motors_tab:
+            continue
+        entry = motors_tab[name]
+        where = f"[motors.{name}]"
+        theta = _require(entry, "theta", list, path, where)
+        na = _require(entry, "na", int, path, where)
+        nb = _require(entry, "nb", int, path, where)
+        nk = _require(entry, "nk", int, path, where)
+        if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in theta):
+            raise DataFileError(path, f"theta in {where} must be a list of numbers, got {theta!r}")
+        motors[name] = ArxModel.from_theta(theta, na=na, nb=nb, nk=nk, period_s=period_s)
+        stats[name] = {k: v for k, v in entry.items() if k not in ("theta", "na", "nb", "nk")}
+    return ModelFile(motors, provenance, stats, path)

@@ -1,0 +1,122 @@
+"""The simulated ARX cart: each motor runs the difference equation of a model file.
+
+``--plant sim`` (default model ``models/ground.toml``). The model's own input delay nk is the
+whole delay from command to measurement; nothing else is added. Like the real cart, the commanded
+voltage is saturated at the supply limit (±12 V), and a non-finite command is treated as 0 V.
+Optional measurement noise is white and Gaussian, seeded.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from cartctl.errors import InputError
+from cartctl.model import ArxModel
+from cartctl.plants.base import Measurement
+
+SUPPLY_V = 12.0
+"""The cart's supply voltage: the command saturates at ± this value (V)."""
+
+
+def saturate(voltage_v: float, limit_v: float = SUPPLY_V) -> float:
+    """Clamp a command to ±``limit_v``; NaN or ±inf becomes 0 V (the safe value)."""
+    if not math.isfinite(voltage_v):
+        return 0.0
+    return min(limit_v, max(-limit_v, voltage_v))
+
+
+class _ArxMotor:
+    """One motor's difference equation, stepped one tick at a time with plain floats."""
+
+    def __init__(self, model: ArxModel) -> None:
+        self.ar = model.ar
+        self.x = model.x
+        self.nk = model.nk
+        self.reset()
+
+    def reset(self) -> None:
+        self.y: deque[float] = deque([0.0] * len(self.ar), maxlen=len(self.ar) or None)
+        n_u = self.nk + len(self.x)
+        self.u: deque[float] = deque([0.0] * n_u, maxlen=n_u)
+
+    def step(self, voltage_v: float) -> float:
+        """Take v[k] (V) and return y[k+1]: y[k+1] = Σ x_i v[k+1−nk−i] − Σ a_j y[k+1−j]."""
+        self.u.appendleft(voltage_v)  # u[0] = v[k], u[1] = v[k-1], ...
+        u, y = self.u, self.y  # y[0] = y[k], y[1] = y[k-1], ...
+        y_next = 0.0
+        for i, xi in enumerate(self.x):
+            y_next += xi * u[self.nk - 1 + i]
+        for j, aj in enumerate(self.ar):
+            y_next -= aj * y[j]
+        if self.ar:
+            y.appendleft(y_next)
+        return y_next
+
+
+class ArxPlant:
+    """Two ARX motors behind the :class:`~cartctl.plants.base.Plant` interface.
+
+    Parameters
+    ----------
+    model_a, model_b : ArxModel
+        The motors' models (same sample period).
+    noise_std_rad_s : float
+        Standard deviation of white Gaussian measurement noise (rad/s); 0 turns it off.
+    seed : int or None
+        Seed of the noise generator (reproducible runs).
+    voltage_limit_v : float
+        Saturation of the command (V).
+    """
+
+    def __init__(
+        self,
+        model_a: ArxModel,
+        model_b: ArxModel,
+        *,
+        noise_std_rad_s: float = 0.0,
+        seed: int | None = None,
+        voltage_limit_v: float = SUPPLY_V,
+    ) -> None:
+        if model_a.period_s != model_b.period_s:
+            raise InputError(
+                f"motor models have different sample periods: {model_a.period_s} s and {model_b.period_s} s"
+            )
+        for m in (model_a, model_b):
+            if m.nk < 1:
+                raise InputError(f"a plant model needs an input delay nk >= 1, got nk = {m.nk}")
+        if not (math.isfinite(noise_std_rad_s) and noise_std_rad_s >= 0.0):
+            raise InputError(
+                f"noise must be a standard deviation >= 0 rad/s, got {noise_std_rad_s}"
+            )
+        self.period_s = model_a.period_s
+        self.models = (model_a, model_b)
+        self.noise_std_rad_s = float(noise_std_rad_s)
+        self.seed = seed
+        self.voltage_limit_v = float(voltage_limit_v)
+        self._motors = (_ArxMotor(model_a), _ArxMotor(model_b))
+        self._rng = np.random.default_rng(seed)
+
+    def _measure(self, ya: float, yb: float) -> Measurement:
+        if self.noise_std_rad_s > 0.0:
+            na, nb = self._rng.normal(0.0, self.noise_std_rad_s, 2)
+            return Measurement(ya + float(na), yb + float(nb), ya, yb)
+        return Measurement(ya, yb, ya, yb)
+
+    def reset(self) -> Measurement:
+        """Back to rest (and the noise generator back to its seed); the tick-0 measurement."""
+        for m in self._motors:
+            m.reset()
+        self._rng = np.random.default_rng(self.seed)
+        return self._measure(0.0, 0.0)
+
+    def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
+        """Command voltages at tick k (saturated), advance, return the tick k+1 measurement."""
+        ya = self._motors[0].step(saturate(voltage_a_v, self.voltage_limit_v))
+        yb = self._motors[1].step(saturate(voltage_b_v, self.voltage_limit_v))
+        return self._measure(ya, yb)
+
+    def close(self) -> None:
+        """Nothing to release; a simulated cart simply stops being stepped."""

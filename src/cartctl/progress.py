@@ -1,0 +1,61 @@
+"""A minimal progress bar on stderr for long runs (shown only on a terminal)."""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import TextIO
+
+
+class ProgressBar:
+    """Draws ``label [#####-----]  42 %  630/1500`` on one terminal line, at most 10 times a second.
+
+    Parameters
+    ----------
+    total : int
+        Number of steps that make 100 %.
+    label : str
+        Text before the bar.
+    stream : text stream, optional
+        Where to draw (stderr by default).
+    enabled : bool, optional
+        Default: only when ``stream`` is a terminal, so logs and pipes stay clean.
+    """
+
+    def __init__(
+        self,
+        total: int,
+        label: str = "",
+        *,
+        stream: TextIO | None = None,
+        enabled: bool | None = None,
+    ) -> None:
+        self.total = max(1, total)
+        self.label = label
+        self.stream = stream if stream is not None else sys.stderr
+        self.enabled = self.stream.isatty() if enabled is None else enabled
+        self._last_draw = 0.0
+        self._drawn = False
+
+    def update(self, done: int) -> None:
+        """Report ``done`` steps finished; redraws when 0.1 s has passed or at the end."""
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if done < self.total and now - self._last_draw < 0.1:
+            return
+        self._last_draw = now
+        frac = min(1.0, done / self.total)
+        width = 30
+        filled = round(width * frac)
+        self.stream.write(
+            f"\r{self.label} [{'#' * filled}{'-' * (width - filled)}] {100 * frac:3.0f} %  {done}/{self.total}"
+        )
+        self.stream.flush()
+        self._drawn = True
+
+    def close(self) -> None:
+        """End the bar's line."""
+        if self.enabled and self._drawn:
+            self.stream.write("\n")
+            self.stream.flush()

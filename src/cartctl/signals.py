@@ -1,0 +1,224 @@
+"""Excitation and reference signals, sampled at the control period.
+
+Used by ``cartctl excite`` (identification experiments) and by the loop for references. Each
+signal is defined by its amplitude in volts (or rad/s for references) and its durations in seconds,
+and is returned as one value per tick. Pure numpy; no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import signal as sps
+
+from cartctl import TS_S
+from cartctl.errors import InputError
+
+SIGNALS = ("square", "step", "prbs", "multisine", "chirp")
+"""Names accepted by :func:`make_signal` (and ``cartctl excite --signal``)."""
+
+
+def _ticks(duration_s: float, period_s: float, what: str) -> int:
+    if not (math.isfinite(duration_s) and duration_s > 0.0):
+        raise InputError(f"{what} must be a positive number of seconds, got {duration_s}")
+    if not (math.isfinite(period_s) and period_s > 0.0):
+        raise InputError(f"sample period must be a positive number of seconds, got {period_s}")
+    n = round(duration_s / period_s)
+    if n < 1:
+        raise InputError(
+            f"{what} of {duration_s} s is shorter than one sample period ({period_s} s)"
+        )
+    return n
+
+
+def _check_amplitude(amplitude: float) -> float:
+    if not (math.isfinite(amplitude) and amplitude > 0.0):
+        raise InputError(f"amplitude must be a positive finite number, got {amplitude}")
+    return float(amplitude)
+
+
+def square(
+    amplitude_v: float, *, hold_s: float = 1.0, cycles: int = 5, period_s: float = TS_S
+) -> NDArray[np.float64]:
+    """The report's excitation: +A for ``hold_s``, 0 for ``hold_s``, −A for ``hold_s``, repeated.
+
+    It has no DC component over whole cycles and excites a wide band.
+
+    Returns
+    -------
+    ndarray, shape (3 * cycles * round(hold_s / period_s),)
+    """
+    amp = _check_amplitude(amplitude_v)
+    n = _ticks(hold_s, period_s, "hold time")
+    if cycles < 1:
+        raise InputError(f"cycles must be at least 1, got {cycles}")
+    one = np.concatenate([np.full(n, amp), np.zeros(n), np.full(n, -amp)])
+    return np.tile(one, cycles)
+
+
+def step(
+    amplitude_v: float, *, duration_s: float = 3.0, delay_s: float = 0.5, period_s: float = TS_S
+) -> NDArray[np.float64]:
+    """Zero for ``delay_s``, then ``amplitude_v`` until ``duration_s`` (total length)."""
+    amp = _check_amplitude(amplitude_v)
+    n = _ticks(duration_s, period_s, "duration")
+    if not (math.isfinite(delay_s) and 0.0 <= delay_s < duration_s):
+        raise InputError(f"step delay must be in [0, duration), got {delay_s} s")
+    out = np.zeros(n)
+    out[round(delay_s / period_s) :] = amp
+    return out
+
+
+def prbs(
+    amplitude_v: float,
+    *,
+    duration_s: float = 15.0,
+    bit_s: float = 0.05,
+    order: int = 8,
+    seed: int = 1,
+    period_s: float = TS_S,
+) -> NDArray[np.float64]:
+    """A pseudo-random binary sequence of ±A from a maximum-length shift register.
+
+    Parameters
+    ----------
+    bit_s : float
+        Duration of one bit (s): the shortest constant stretch. Its band reaches about
+        0.44 / bit_s Hz.
+    order : int
+        Register length; the sequence repeats every 2**order − 1 bits.
+    seed : int
+        Non-zero initial register state (selects the shift of the sequence).
+    """
+    amp = _check_amplitude(amplitude_v)
+    n = _ticks(duration_s, period_s, "duration")
+    per_bit = _ticks(bit_s, period_s, "bit duration")
+    if not 2 <= order <= 32:
+        raise InputError(f"PRBS order must be in 2..32, got {order}")
+    state = np.array([(seed >> i) & 1 for i in range(order)], dtype=np.int8)
+    if not state.any():
+        raise InputError("PRBS seed must have a non-zero low-order bit pattern")
+    bits, _ = sps.max_len_seq(order, state=state)
+    n_bits = -(-n // per_bit)
+    reps = -(-n_bits // bits.size)
+    levels = np.where(np.tile(bits, reps)[:n_bits] > 0, amp, -amp)
+    return np.repeat(levels, per_bit)[:n]
+
+
+def multisine(
+    amplitude_v: float,
+    *,
+    duration_s: float = 15.36,
+    cycle_s: float = 2.56,
+    f_min_hz: float = 0.5,
+    f_max_hz: float = 20.0,
+    period_s: float = TS_S,
+) -> NDArray[np.float64]:
+    """Equal-amplitude harmonics of 1/cycle_s in [f_min_hz, f_max_hz], Schroeder phases.
+
+    Schroeder's phases keep the crest factor low (about 1.5 to 1.8 instead of about √(2N) for
+    zero phases), so more power fits under the voltage limit. The result is scaled so its peak is
+    ``amplitude_v``. Whole cycles give exact periodicity for an empirical transfer function.
+    """
+    amp = _check_amplitude(amplitude_v)
+    n = _ticks(duration_s, period_s, "duration")
+    n_cycle = _ticks(cycle_s, period_s, "cycle time")
+    nyquist_hz = 0.5 / period_s
+    if not (0.0 < f_min_hz <= f_max_hz < nyquist_hz):
+        raise InputError(
+            f"multisine band must satisfy 0 < f_min <= f_max < {nyquist_hz:g} Hz, "
+            f"got {f_min_hz}..{f_max_hz} Hz"
+        )
+    df = 1.0 / (n_cycle * period_s)
+    harmonics = np.arange(max(1, math.ceil(f_min_hz / df)), math.floor(f_max_hz / df) + 1)
+    if harmonics.size == 0:
+        raise InputError(
+            f"no harmonic of {df:g} Hz lies in {f_min_hz}..{f_max_hz} Hz; lengthen the cycle"
+        )
+    k = np.arange(1, harmonics.size + 1)
+    phases = -np.pi * k * (k - 1) / harmonics.size
+    t = np.arange(n_cycle) * period_s
+    one = np.cos(2.0 * np.pi * df * np.outer(t, harmonics) + phases).sum(axis=1)
+    one *= amp / np.max(np.abs(one))
+    return np.resize(one, n)
+
+
+def chirp(
+    amplitude_v: float,
+    *,
+    duration_s: float = 20.0,
+    f_start_hz: float = 0.1,
+    f_end_hz: float = 20.0,
+    period_s: float = TS_S,
+) -> NDArray[np.float64]:
+    """A logarithmic sine sweep from ``f_start_hz`` to ``f_end_hz`` over ``duration_s``."""
+    amp = _check_amplitude(amplitude_v)
+    n = _ticks(duration_s, period_s, "duration")
+    nyquist_hz = 0.5 / period_s
+    if not (0.0 < f_start_hz < nyquist_hz and 0.0 < f_end_hz < nyquist_hz):
+        raise InputError(
+            f"chirp frequencies must lie in (0, {nyquist_hz:g}) Hz, got {f_start_hz}..{f_end_hz}"
+        )
+    t = np.arange(n) * period_s
+    return amp * sps.chirp(
+        t, f0=f_start_hz, t1=t[-1] if n > 1 else period_s, f1=f_end_hz, method="logarithmic"
+    )
+
+
+def ramp(
+    slope_per_s: float,
+    *,
+    duration_s: float = 5.0,
+    limit: float | None = None,
+    period_s: float = TS_S,
+) -> NDArray[np.float64]:
+    """A ramp from 0 rising ``slope_per_s`` units per second, held at ``limit`` when given."""
+    if not math.isfinite(slope_per_s):
+        raise InputError(f"ramp slope must be finite, got {slope_per_s}")
+    n = _ticks(duration_s, period_s, "duration")
+    out = slope_per_s * np.arange(n) * period_s
+    if limit is not None:
+        out = np.clip(out, -abs(limit), abs(limit))
+    return out
+
+
+def make_signal(
+    name: str,
+    amplitude_v: float,
+    *,
+    cycles: int | None = None,
+    duration_s: float | None = None,
+    period_s: float = TS_S,
+) -> NDArray[np.float64]:
+    """Build an excitation by name with sensible defaults (``cartctl excite``).
+
+    Parameters
+    ----------
+    name : {'square', 'step', 'prbs', 'multisine', 'chirp'}
+    amplitude_v : float
+        Peak voltage (V).
+    cycles : int, optional
+        Repetitions: of the +A/0/−A cycle for 'square' (default 5), of the 2.56 s period for
+        'multisine' (default 6). Not used by the others.
+    duration_s : float, optional
+        Total length for 'step', 'prbs', 'chirp' (and 'multisine' when ``cycles`` is not given).
+    """
+    builders: dict[str, Callable[[], NDArray[np.float64]]] = {
+        "square": lambda: square(amplitude_v, cycles=cycles or 5, period_s=period_s),
+        "step": lambda: step(amplitude_v, duration_s=duration_s or 3.0, period_s=period_s),
+        "prbs": lambda: prbs(amplitude_v, duration_s=duration_s or 15.0, period_s=period_s),
+        "multisine": lambda: multisine(
+            amplitude_v,
+            duration_s=2.56 * cycles if cycles else (duration_s or 15.36),
+            period_s=period_s,
+        ),
+        "chirp": lambda: chirp(amplitude_v, duration_s=duration_s or 20.0, period_s=period_s),
+    }
+    if name not in builders:
+        raise InputError(f"unknown signal '{name}'; choose one of {', '.join(SIGNALS)}")
+    if cycles is not None and cycles < 1:
+        raise InputError(f"cycles must be at least 1, got {cycles}")
+    return builders[name]()
