@@ -28,7 +28,7 @@ def test_is_a_plant() -> None:
 def test_experiment_trace_equals_model_simulation(nk: int) -> None:
     ma = ArxModel.from_theta(GROUND_A.theta, nk=nk)
     rng = np.random.default_rng(nk)
-    ua, ub = rng.uniform(-12, 12, 500), square(10.0, cycles=1)[:500]
+    ua, ub = rng.uniform(-12, 12, 500), square(10.0, cycles=2)[:500]
     trace = run_experiment(ArxPlant(ma, GROUND_B), ua, ub).trace
     np.testing.assert_allclose(trace.speed_a, ma.simulate(ua), atol=1e-12)
     np.testing.assert_allclose(trace.speed_b, GROUND_B.simulate(ub), atol=1e-12)

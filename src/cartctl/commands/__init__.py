@@ -4,7 +4,7 @@ Each entry has ``add_parser(subparsers)``; the parser it adds sets ``func`` to a
 ``run(args) -> int``.
 """
 
-from cartctl.commands import excite, inspect
+from cartctl.commands import convert, excite, inspect
 from cartctl.commands.pending import design, identify, linearity, review, run, validate
 
-COMMANDS = (excite, identify, inspect, validate, linearity, design, run, review)
+COMMANDS = (excite, identify, inspect, validate, linearity, design, run, review, convert)

@@ -10,6 +10,7 @@ import argparse
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from cartctl.commands.convert import add_map_option
 from cartctl.errors import CartctlError
 
 
@@ -39,6 +40,7 @@ class PendingCommand:
 
 def _identify(p: argparse.ArgumentParser) -> None:
     p.add_argument("files", nargs="+", metavar="FILE", help="experiment traces (CSV or QRC logs)")
+    add_map_option(p)
     p.add_argument("--motor", choices=("a", "b", "both"), default="both")
     p.add_argument("--prefilter", choices=("none", "butter"), default="none")
     p.add_argument("--order", type=int, default=2, metavar="N")
@@ -53,6 +55,7 @@ def _identify(p: argparse.ArgumentParser) -> None:
 def _validate(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", metavar="MODEL.toml")
     p.add_argument("data", metavar="FILE.csv")
+    add_map_option(p)
     p.add_argument("--json", action="store_true")
 
 

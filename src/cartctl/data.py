@@ -1,0 +1,672 @@
+"""Experiment traces: the :class:`Trace` type, its readers and its writer.
+
+The first stage of the pipeline (data → identify → models/ → design → controllers/ → runtime →
+logs/). A trace holds, per 10 ms tick k, the voltage *commanded* at tick k (V) and the speed
+*measured* at tick k (rad/s) of both motors: contract 1 in docs/architecture.md.
+:func:`read_trace` reads contract-1 CSV files and QRoboticsCenter logs (whose layout
+:mod:`cartctl.qrc` parses), optionally mapping QRC labels or foreign CSV headers onto trace
+columns. :func:`write_trace` writes contract-1 CSV that reads back bit for bit.
+"""
+
+from __future__ import annotations
+
+import csv
+import difflib
+import warnings
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TextIO
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from cartctl import TS_S, qrc
+from cartctl.errors import DataFileError, DataWarning, InputError, MissingFileError
+
+__all__ = [
+    "MOTORS",
+    "REQUIRED_COLUMNS",
+    "SPACING_TOLERANCE_S",
+    "Trace",
+    "parse_mapping",
+    "read_trace",
+    "write_trace",
+]
+
+REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "voltage_a", "voltage_b", "speed_a", "speed_b")
+"""The columns every trace has, in contract order."""
+
+MOTORS: tuple[str, ...] = ("a", "b")
+"""The motor names, as in ``voltage_a`` and ``speed_b``."""
+
+SPACING_TOLERANCE_S: float = 0.0015
+"""How far a time step may stray from the 10 ms tick (s) before :func:`read_trace` warns.
+
+QRC 5 stamps rows with the cart's millis(), so steps of 9, 10 and 11 ms are normal; a lost frame
+gives about 20 ms."""
+
+_MAP_FORM = "NAME=LABEL[,NAME=LABEL...], e.g. voltage_a=FloatIn2,speed_a=FloatIn0"
+_WRITE_CHUNK_ROWS = 65536
+
+
+@dataclass(frozen=True, eq=False)
+class Trace:
+    """One experiment: per tick, the time, the commanded voltages and the measured speeds.
+
+    Row k holds the voltage commanded at tick k and the speed measured at tick k (contract 1).
+    All arrays are 1-D float64 copies of equal length, made read-only.
+
+    Attributes
+    ----------
+    time_s : ndarray, shape (n,)
+        Time of each tick (s).
+    voltage_a, voltage_b : ndarray, shape (n,)
+        Voltage commanded at tick k (V); zeros for a motor the experiment did not drive.
+    speed_a, speed_b : ndarray, shape (n,)
+        Wheel speed measured at tick k (rad/s).
+    extra : dict of str to ndarray, shape (n,)
+        Further columns in file order (``true_speed_a``, ``tick``, ``reference_a``, ...).
+    source : str or None
+        The file the trace came from, for messages and provenance.
+
+    Raises
+    ------
+    InputError
+        A column that is not 1-D numbers, columns of unequal length, or an extra column with
+        no name or with a required column's name.
+    """
+
+    time_s: np.ndarray
+    voltage_a: np.ndarray
+    voltage_b: np.ndarray
+    speed_a: np.ndarray
+    speed_b: np.ndarray
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
+    source: str | None = None
+
+    def __post_init__(self) -> None:
+        for name in REQUIRED_COLUMNS:
+            object.__setattr__(self, name, _as_column(name, getattr(self, name)))
+        extra: dict[str, np.ndarray] = {}
+        for name, values in self.extra.items():
+            if not isinstance(name, str) or not name.strip():
+                raise InputError(f"extra column name {name!r} is not a usable column name")
+            if name in REQUIRED_COLUMNS:
+                raise InputError(f"extra column {name!r} repeats a required column; drop it")
+            extra[name] = _as_column(name, values)
+        object.__setattr__(self, "extra", extra)
+        if self.source is not None:
+            object.__setattr__(self, "source", str(self.source))
+        n = len(self.time_s)
+        for name, values in self.columns().items():
+            if len(values) != n:
+                raise InputError(
+                    f"column {name!r} has {len(values)} values but time_s has {n}; "
+                    "every column needs one value per tick"
+                )
+
+    def __len__(self) -> int:
+        return len(self.time_s)
+
+    def __repr__(self) -> str:
+        names = ", ".join(self.columns())
+        return f"Trace({len(self)} ticks, columns [{names}], source={self.source!r})"
+
+    def voltage(self, motor: str) -> np.ndarray:
+        """The voltage commanded to motor ``'a'`` or ``'b'`` at each tick (V), shape (n,)."""
+        return getattr(self, f"voltage_{_motor(motor)}")
+
+    def speed(self, motor: str) -> np.ndarray:
+        """The speed of motor ``'a'`` or ``'b'`` measured at each tick (rad/s), shape (n,)."""
+        return getattr(self, f"speed_{_motor(motor)}")
+
+    def column(self, name: str) -> np.ndarray:
+        """A required or extra column by name, shape (n,).
+
+        Raises
+        ------
+        InputError
+            No such column; the message lists the trace's columns.
+        """
+        columns = self.columns()
+        if name not in columns:
+            where = f" from {self.source}" if self.source else ""
+            raise InputError(f"no column {name!r} in the trace{where}; it has {', '.join(columns)}")
+        return columns[name]
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """All columns by name: the required ones in contract order, then the extras."""
+        return {name: getattr(self, name) for name in REQUIRED_COLUMNS} | self.extra
+
+    @property
+    def period_s(self) -> float:
+        """The median time step (s).
+
+        Raises
+        ------
+        InputError
+            Fewer than two ticks.
+        """
+        if len(self) < 2:
+            raise InputError(f"a trace needs two ticks or more to have a period; has {len(self)}")
+        return float(np.median(np.diff(self.time_s)))
+
+    @classmethod
+    def from_columns(cls, columns: Mapping[str, ArrayLike], source: str | None = None) -> Trace:
+        """Build a trace from named columns.
+
+        Parameters
+        ----------
+        columns : mapping of str to array_like, each shape (n,)
+            All of :data:`REQUIRED_COLUMNS`, plus any extras (kept in the mapping's order).
+        source : str, optional
+            Where the columns came from.
+
+        Raises
+        ------
+        InputError
+            A required column is missing, or as for :class:`Trace`.
+        """
+        missing = [name for name in REQUIRED_COLUMNS if name not in columns]
+        if missing:
+            raise InputError(
+                f"missing required column(s) {', '.join(missing)}; a trace needs "
+                f"{', '.join(REQUIRED_COLUMNS)} (got {', '.join(columns) or 'none'})"
+            )
+        extra = {name: values for name, values in columns.items() if name not in REQUIRED_COLUMNS}
+        required = {name: columns[name] for name in REQUIRED_COLUMNS}
+        return cls(**required, extra=extra, source=source)
+
+
+def _as_column(name: str, values: ArrayLike) -> np.ndarray:
+    """Copy one column into a read-only 1-D float64 array."""
+    try:
+        array = np.array(values, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise InputError(f"column {name!r} must hold numbers ({err})") from err
+    if array.ndim != 1:
+        raise InputError(
+            f"column {name!r} must be 1-D (one value per tick), got shape {array.shape}"
+        )
+    array.flags.writeable = False
+    return array
+
+
+def _motor(motor: str) -> str:
+    if motor not in MOTORS:
+        raise InputError(f"motor must be 'a' or 'b', got {motor!r}")
+    return motor
+
+
+def parse_mapping(text: str) -> dict[str, str]:
+    """Parse a column mapping as given on the command line (``--map``).
+
+    Parameters
+    ----------
+    text : str
+        ``NAME=LABEL`` items separated by commas, e.g. ``"voltage_a=FloatIn2,speed_a=FloatIn0"``.
+        NAME is a trace column: a required one, or any identifier for an extra column.
+        LABEL is a QRC channel label or a CSV header name; spaces around items are ignored.
+
+    Returns
+    -------
+    dict of str to str
+        Trace column name → label, in the order given.
+
+    Raises
+    ------
+    InputError
+        An item without ``=``, an empty name or label, a name that is not an identifier or is
+        a near miss of a required column (``speed_A``), or a name given twice.
+    """
+    mapping: dict[str, str] = {}
+    for item in (part.strip() for part in text.split(",")):
+        if not item:
+            continue
+        name, equals, label = (part.strip() for part in item.partition("="))
+        if not equals or not name or not label:
+            raise InputError(f"bad column mapping item {item!r}; expected {_MAP_FORM}")
+        _check_name(name)
+        if name in mapping:
+            raise InputError(
+                f"column {name!r} is mapped twice ({mapping[name]!r} and {label!r}); map it once"
+            )
+        mapping[name] = label
+    if not mapping:
+        raise InputError(f"empty column mapping {text!r}; expected {_MAP_FORM}")
+    return mapping
+
+
+def _check_name(name: object) -> None:
+    """Refuse a mapping key that is not a column name, or that looks like a mistyped one."""
+    if not isinstance(name, str) or not name.isidentifier():
+        raise InputError(
+            f"{name!r} is not a column name; expected a name such as voltage_a, speed_b or "
+            f"reference_a, in {_MAP_FORM}"
+        )
+    near = difflib.get_close_matches(name.lower(), REQUIRED_COLUMNS, n=1, cutoff=0.8)
+    if name not in REQUIRED_COLUMNS and near:
+        raise InputError(
+            f"unknown column {name!r} in the mapping; did you mean {near[0]!r}? "
+            f"The required columns are {', '.join(REQUIRED_COLUMNS)}"
+        )
+
+
+class _Where:
+    """Where row i of a file's data is: its line, or its row number when lines are unknown."""
+
+    def __init__(
+        self,
+        path: Path,
+        *,
+        row_lines: list[int] | None = None,
+        header_line: int | None = None,
+    ) -> None:
+        self.path = path
+        self.row_lines = row_lines
+        self.header_line = header_line
+
+    def __call__(self, i: int) -> tuple[int | None, str]:
+        if self.row_lines is None and self.header_line is not None:
+            self.row_lines = _data_lines(self.path, self.header_line)[1]
+        if self.row_lines is None:
+            return None, f"row {i + 1}"
+        return self.row_lines[i], f"line {self.row_lines[i]}"
+
+    def error(self, i: int, problem: str, column: str | None = None) -> DataFileError:
+        line, label = self(i)
+        if line is None:
+            problem = f"{label}: {problem}"
+        return DataFileError(self.path, problem, line=line, column=column)
+
+
+@dataclass
+class _Table:
+    """Numbers read from a file, before they become trace columns."""
+
+    path: Path
+    names: list[str]  # the file's column names; for QRC, "time" then the channel labels
+    values: np.ndarray  # shape (n, len(names))
+    where: _Where
+
+
+def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Trace:
+    """Read an experiment trace: contract-1 CSV, a QRC 5 XML log or a QRC 6 CSV log.
+
+    The format is told from the content: an XML root ``<QGPIORecord>`` is QRC 5, a first line
+    starting with ``QGPIORecord`` is QRC 6, anything else is contract-1 CSV. QRC times (ms) become
+    seconds from the first row. Time steps that stray from the 10 ms tick by more than
+    :data:`SPACING_TOLERANCE_S` give one :class:`~cartctl.errors.DataWarning` per file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    mapping : mapping of str to str, optional
+        Trace column name → QRC label or CSV header name (see :func:`parse_mapping`). Without
+        one, a CSV must have the contract's columns, and a QRC log's labels that equal trace
+        column names are used (compared in lower case, with other characters read as ``_``). With one, or for any QRC log, a motor whose
+        voltage and speed are both unmapped is filled with zeros, but at least one motor must
+        have both. Unmapped channels and columns are kept as extras (QRC labels made into names
+        such as ``floatin3``) unless their name is taken.
+
+    Returns
+    -------
+    Trace
+        With ``source`` set to ``path``.
+
+    Raises
+    ------
+    MissingFileError
+        No such file.
+    DataFileError
+        Content that is not a trace, naming the file and the line, row or column.
+    InputError
+        A malformed mapping.
+    """
+    path = Path(path)
+    checked = None if mapping is None else _check_mapping(mapping)
+    kind = _sniff(path)
+    if kind == "csv":
+        names, header_line = _read_header(path)
+        time_j, plan = _plan(path, "CSV", names, checked, header_line)
+        table = _read_csv_rows(path, names, header_line)
+    else:
+        log = qrc.read_qrc5(path) if kind == "qrc5" else qrc.read_qrc6(path)
+        if log.truncated:
+            warnings.warn(
+                f"{path}: the QRC log ends without its closing tags (QRC did not close the "
+                f"recording); read its {len(log.rows)} complete rows",
+                DataWarning,
+                stacklevel=2,
+            )
+        names = ["time", *log.labels]
+        time_j, plan = _plan(path, log.kind, names, checked, None)
+        where = _Where(path, row_lines=log.row_lines)
+        expected = f"the log has {len(names)} columns (time and {len(log.labels)} channels)"
+        table = _Table(path, names, _to_floats(where, log.rows, names, expected), where)
+    _check_finite(table)
+    time = table.values[:, time_j]
+    _check_increasing(table, time, table.names[time_j], "s" if kind == "csv" else "ms")
+    columns = {
+        name: np.zeros(len(time)) if j is None else table.values[:, j] for name, j in plan.items()
+    }
+    if kind != "csv":
+        columns["time_s"] = (time - time[0]) / 1000.0
+    _warn_spacing(table, columns["time_s"])
+    return Trace.from_columns(columns, source=str(path))
+
+
+def _check_mapping(mapping: Mapping[str, str]) -> dict[str, str]:
+    checked: dict[str, str] = {}
+    for name, label in mapping.items():
+        _check_name(name)
+        if not isinstance(label, str) or not label.strip():
+            raise InputError(f"the mapping gives {name} no label ({label!r}); expected {_MAP_FORM}")
+        checked[name] = label.strip()
+    return checked
+
+
+def _sniff(path: Path) -> str:
+    """Return "csv", "qrc5" or "qrc6" for an existing, non-empty text file."""
+    if not path.exists():
+        raise MissingFileError(path, "trace file")
+    if path.is_dir():
+        raise DataFileError(path, "is a directory; expected a trace file (.csv or a QRC log)")
+    with path.open("rb") as file:
+        head = file.read(4096)
+    if b"\0" in head:
+        raise DataFileError(path, "binary content; expected a text trace (.csv) or a QRC log")
+    text = head.decode("utf-8", errors="replace").lstrip("\ufeff \t\r\n")
+    if not text:
+        raise DataFileError(
+            path,
+            f"the file is empty; expected a header row ({','.join(REQUIRED_COLUMNS)}) and one "
+            "row per 10 ms tick",
+        )
+    return qrc.detect(text) or "csv"
+
+
+def _read_header(path: Path) -> tuple[list[str], int]:
+    """The CSV header's names and line; also make sure that data rows follow."""
+    with _open_text(path) as file:
+        number, line = 1, file.readline()
+        while line and not line.strip():
+            number, line = number + 1, file.readline()
+        names = [name.strip() for name in next(csv.reader([line]))]
+        if all(_is_number(name) for name in names):
+            raise DataFileError(
+                path,
+                "no header row: the first row holds numbers; expected column names first, "
+                f"e.g. {','.join(REQUIRED_COLUMNS)}",
+                line=number,
+            )
+        for k, name in enumerate(names):
+            if not name:
+                raise DataFileError(path, f"column {k + 1} of the header has no name", line=number)
+            if names.index(name) != k:
+                raise DataFileError(
+                    path, f"column name {name!r} appears twice; names must be unique", line=number
+                )
+        if not any(line.strip() for line in file):
+            raise DataFileError(path, "no data rows after the header; expected one per 10 ms tick")
+    return names, number
+
+
+def _read_csv_rows(path: Path, names: list[str], header_line: int) -> _Table:
+    """The numbers after the header: np.loadtxt first, and on failure a scan for the culprit."""
+    with _open_text(path) as file:
+        for _ in range(header_line):
+            file.readline()
+        try:
+            values = np.loadtxt(file, delimiter=",", comments=None, ndmin=2, dtype=np.float64)
+        except ValueError:
+            values = None
+    if values is not None and values.shape[1] == len(names):
+        return _Table(path, names, values, _Where(path, header_line=header_line))
+    rows, lines = _data_lines(path, header_line)
+    where = _Where(path, row_lines=lines)
+    return _Table(
+        path, names, _to_floats(where, rows, names, f"the header has {len(names)}"), where
+    )
+
+
+def _data_lines(path: Path, header_line: int) -> tuple[list[list[str]], list[int]]:
+    """The non-blank lines after the header, split at commas, and their line numbers."""
+    rows: list[list[str]] = []
+    lines: list[int] = []
+    with _open_text(path) as file:
+        for number, line in enumerate(file, start=1):
+            if number > header_line and line.strip():
+                rows.append(line.split(","))
+                lines.append(number)
+    return rows, lines
+
+
+@contextmanager
+def _open_text(path: Path) -> Iterator[TextIO]:
+    """Open a text file, turning a decoding failure into a DataFileError."""
+    try:
+        with path.open(encoding="utf-8-sig") as file:
+            yield file
+    except UnicodeDecodeError as err:
+        raise DataFileError(path, f"not UTF-8 text (byte {err.start}); expected CSV") from err
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _to_floats(where: _Where, rows: list[list[str]], names: list[str], expected: str) -> np.ndarray:
+    """Convert rows of text fields to an (n, len(names)) array, naming the first bad field."""
+    try:
+        values = np.array(rows, dtype=np.float64)
+    except ValueError:
+        values = None
+    if values is not None and values.ndim == 2 and values.shape[1] == len(names):
+        return values
+    for i, fields in enumerate(rows):
+        if len(fields) != len(names):
+            raise where.error(i, f"{len(fields)} fields, {expected}")
+        for name, text in zip(names, fields, strict=True):
+            if not _is_number(text):
+                value = repr(text.strip()) if text.strip() else "an empty field"
+                raise where.error(i, f"{value} is not a number", column=name)
+    return np.array(rows, dtype=np.float64)
+
+
+def _check_finite(table: _Table) -> None:
+    bad = ~np.isfinite(table.values)
+    if bad.any():
+        i, j = np.unravel_index(np.argmax(bad), bad.shape)
+        raise table.where.error(
+            int(i),
+            f"{table.values[i, j]} is not a finite number; traces hold finite numbers only",
+            column=table.names[j],
+        )
+
+
+def _plan(
+    path: Path, kind: str, names: list[str], mapping: dict[str, str] | None, header_line: int | None
+) -> tuple[int, dict[str, int | None]]:
+    """Decide where each trace column comes from: a file column's index, or None for zeros.
+
+    For QRC logs ``names`` starts with the time column, which always gives time_s. Returns the
+    time column's index and the plan, in trace column order.
+    """
+    if kind == "CSV" and mapping is None:
+        missing = [name for name in REQUIRED_COLUMNS if name not in names]
+        if missing:
+            hint = ""
+            if len(names) == 1 and (";" in names[0] or "\t" in names[0]):
+                hint = "; the columns seem separated by ';' or tabs, but trace files use ','"
+            raise DataFileError(
+                path,
+                f"missing required column(s) {', '.join(missing)}; the header has "
+                f"{', '.join(names)}; a trace needs {', '.join(REQUIRED_COLUMNS)}{hint}",
+                line=header_line,
+            )
+        plan: dict[str, int | None] = {name: names.index(name) for name in REQUIRED_COLUMNS}
+        plan |= {n: j for j, n in enumerate(names) if n not in REQUIRED_COLUMNS}
+        return names.index("time_s"), plan
+    mapping = mapping or {}
+    first = 0 if kind == "CSV" else 1  # QRC: names[0] is the time column
+    what = "column" if kind == "CSV" else "channel"
+    listing = ", ".join(names[first:])
+    if first and "time_s" in mapping:
+        raise DataFileError(
+            path,
+            f"a {kind} log carries its own time (ms), which becomes time_s; "
+            f"drop time_s={mapping['time_s']} from the mapping",
+        )
+    auto = [n if not first else qrc.column_name(n, j - 1, kind) for j, n in enumerate(names)]
+    source = {"time_s": 0} if first else {}
+    for name, label in mapping.items():
+        hits = [j for j, n in enumerate(names) if n == label and j >= first]
+        if len(hits) != 1:
+            problem = "lacks" if not hits else f"has {len(hits)} times"
+            raise DataFileError(
+                path,
+                f"the mapping {name}={label} names {what} {label!r}, which this {kind} file "
+                f"{problem}; its {what}s are {listing}",
+            )
+        source[name] = hits[0]
+    # Where the mapping is silent, take a column named like the trace column; but a motor's
+    # voltage or speed only if its partner is mapped or named too (else it half-maps a motor).
+    explicit = set(source.values())
+    partners = {f"voltage_{m}": f"speed_{m}" for m in MOTORS}
+    partners |= {speed: voltage for voltage, speed in partners.items()}
+    for name in REQUIRED_COLUMNS:
+        if name in source or name not in auto[first:] or auto.index(name) in explicit:
+            continue
+        partner = partners.get(name)
+        if partner is None or partner in source or partner in auto[first:]:
+            source[name] = auto.index(name)
+    if "time_s" not in source:
+        raise DataFileError(
+            path,
+            f"no time column: the header has {listing}; say which column holds the time (s) "
+            "with --map time_s=<column>",
+            line=header_line,
+        )
+    for motor in MOTORS:
+        pair = [f"voltage_{motor}", f"speed_{motor}"]
+        have = [name for name in pair if name in source]
+        if len(have) == 1:
+            lack = pair[1 - pair.index(have[0])]
+            raise DataFileError(
+                path,
+                f"{have[0]} comes from {what} {names[source[have[0]]]!r} but {lack} from none; "
+                f"map both of motor {motor}'s columns, or neither",
+            )
+    if not any(f"voltage_{motor}" in source for motor in MOTORS):
+        example = "voltage_a=<label>,speed_a=<label>"
+        if first and len(names) >= 4:
+            example = f"voltage_a={names[3]},speed_a={names[1]}"  # the bridge's channel map
+        raise DataFileError(
+            path,
+            f"no mapping for voltage/speed columns; this {kind} file has {what}s {listing}; "
+            f"say which is which with --map {example}",
+        )
+    plan = {name: source.get(name) for name in REQUIRED_COLUMNS}
+    taken = set(REQUIRED_COLUMNS) | set(source)
+    used = set(source.values())
+    for j in range(first, len(names)):  # extras, in file order
+        plan |= {name: k for name, k in source.items() if k == j and name not in plan}
+        if j not in used and auto[j] not in taken:
+            name, suffix = auto[j], 2
+            while name in plan:
+                name, suffix = f"{auto[j]}_{suffix}", suffix + 1
+            plan[name] = j
+    return source["time_s"], plan
+
+
+def _check_increasing(table: _Table, time: np.ndarray, label: str, unit: str) -> None:
+    """Refuse time that stands still or goes back, naming the first row where it does."""
+    back = np.flatnonzero(np.diff(time) <= 0)
+    if back.size:
+        i = int(back[0]) + 1
+        raise table.where.error(
+            i,
+            f"time goes from {time[i - 1]:.10g} {unit} to {time[i]:.10g} {unit}; it must "
+            "increase from row to row (one row per tick)",
+            column=label,
+        )
+
+
+def _warn_spacing(table: _Table, time_s: np.ndarray) -> None:
+    """Warn once if time steps stray from the 10 ms tick by more than the tolerance."""
+    steps = np.diff(time_s)
+    off = np.abs(steps - TS_S)
+    stray = np.flatnonzero(off > SPACING_TOLERANCE_S)
+    if not stray.size:
+        return
+    worst = int(stray[np.argmax(off[stray])])
+    _, worst_at = table.where(worst + 1)
+    _, first_at = table.where(int(stray[0]) + 1)
+    warnings.warn(
+        f"{table.path}: {stray.size} of {steps.size} time steps stray from the "
+        f"{TS_S * 1000:g} ms tick by more than {SPACING_TOLERANCE_S * 1000:g} ms; the farthest "
+        f"is {steps[worst] * 1000:.4g} ms (at {worst_at}), the first at {first_at}. Rows may be "
+        "missing (lost frames); identification assumes one row per tick",
+        DataWarning,
+        stacklevel=3,
+    )
+
+
+def write_trace(trace: Trace, path: str | Path) -> None:
+    """Write a trace as contract-1 CSV, creating parent directories.
+
+    The header row names the required columns then the extras; each value is written as the
+    shortest text that reads back to the same float64, so a round trip is bit-exact.
+
+    Parameters
+    ----------
+    trace : Trace
+        At least one tick, finite values, strictly increasing time: what :func:`read_trace`
+        accepts.
+    path : str or Path
+        The ``.csv`` file to write (overwritten if it exists).
+
+    Raises
+    ------
+    InputError
+        An empty trace, a column name that CSV cannot carry, a value that is not finite, or
+        time that does not increase.
+    """
+    path = Path(path)
+    columns = trace.columns()
+    for name in columns:
+        if name != name.strip() or any(c in name for c in ',"\r\n'):
+            raise InputError(
+                f"cannot write column name {name!r} to {path}: no commas, quotes, line breaks "
+                "or surrounding spaces"
+            )
+    if not len(trace):
+        raise InputError(f"cannot write {path}: the trace has no ticks")
+    data = np.column_stack(list(columns.values()))
+    bad = ~np.isfinite(data)
+    if bad.any():
+        i, j = np.unravel_index(np.argmax(bad), bad.shape)
+        raise InputError(
+            f"cannot write {path}: column {list(columns)[j]!r} holds {data[i, j]} at tick {i}; "
+            "trace files hold finite numbers only"
+        )
+    back = np.flatnonzero(np.diff(trace.time_s) <= 0)
+    if back.size:
+        raise InputError(
+            f"cannot write {path}: time_s does not increase at tick {back[0] + 1} "
+            f"({float(trace.time_s[back[0]])!r} s, then {float(trace.time_s[back[0] + 1])!r} s)"
+        )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", encoding="utf-8", newline="\n") as file:
+        file.write(",".join(columns) + "\n")
+        for start in range(0, len(data), _WRITE_CHUNK_ROWS):
+            block = data[start : start + _WRITE_CHUNK_ROWS].tolist()
+            file.write("".join(",".join(map(repr, row)) + "\n" for row in block))
