@@ -17,7 +17,16 @@ from scipy import signal
 from cartctl.cli import main
 from cartctl.data import read_trace
 
-CONTRACT_COMMANDS = ("excite", "identify", "inspect", "validate", "linearity", "design", "run", "review")
+CONTRACT_COMMANDS = (
+    "excite",
+    "identify",
+    "inspect",
+    "validate",
+    "linearity",
+    "design",
+    "run",
+    "review",
+)
 
 
 def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
@@ -43,7 +52,9 @@ def test_every_command_has_help(capsys: pytest.CaptureFixture[str], name: str) -
     assert f"cartctl {name}" in out
 
 
-def test_inspect_json_reproduces_equation_12(capsys: pytest.CaptureFixture[str], ground_path: Path) -> None:
+def test_inspect_json_reproduces_equation_12(
+    capsys: pytest.CaptureFixture[str], ground_path: Path
+) -> None:
     code, out, err = _run(capsys, "inspect", str(ground_path), "--json")
     assert code == 0
     assert err == ""
@@ -96,7 +107,9 @@ def test_excite_sim_square_equals_equation_12(
     assert len(trace) == 1500
     assert set(np.unique(trace.voltage_a)) == {-10.0, 0.0, 10.0}
     for motor in ("a", "b"):
-        np.testing.assert_allclose(trace.speed(motor), _report_eq12(trace.voltage(motor), motor), atol=1e-9)
+        np.testing.assert_allclose(
+            trace.speed(motor), _report_eq12(trace.voltage(motor), motor), atol=1e-9
+        )
 
 
 @pytest.mark.parametrize("signal_name", ["step", "prbs", "multisine", "chirp"])
@@ -119,15 +132,28 @@ def test_excite_other_signals_one_motor(
     [
         (["inspect", "missing.toml"], "model file not found: missing.toml"),
         (["excite", "--amplitude", "20", "--out", "x.csv"], "beyond the cart's ±12 V supply"),
-        (["excite", "--amplitude", "5", "--model", "nope.toml", "--out", "x.csv"], "model file not found"),
-        (["excite", "--plant", "moon", "--amplitude", "5", "--out", "x.csv"], "unknown plant 'moon'"),
-        (["excite", "--signal", "sawtooth", "--amplitude", "5", "--out", "x.csv"], "invalid choice"),
+        (
+            ["excite", "--amplitude", "5", "--model", "nope.toml", "--out", "x.csv"],
+            "model file not found",
+        ),
+        (
+            ["excite", "--plant", "moon", "--amplitude", "5", "--out", "x.csv"],
+            "unknown plant 'moon'",
+        ),
+        (
+            ["excite", "--signal", "sawtooth", "--amplitude", "5", "--out", "x.csv"],
+            "invalid choice",
+        ),
         (["excite", "--amplitude", "ten", "--out", "x.csv"], "invalid float value"),
         (["identify", "x.csv"], "not built yet"),
     ],
 )
 def test_user_mistakes_give_one_line_and_exit_2(
-    capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, argv: list[str], message: str
+    capsys: pytest.CaptureFixture[str],
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    argv: list[str],
+    message: str,
 ) -> None:
     monkeypatch.chdir(tmp_path)
     code, out, err = _run(capsys, *argv)
@@ -140,7 +166,13 @@ def test_user_mistakes_give_one_line_and_exit_2(
 
 @pytest.mark.skipif(shutil.which("cartctl") is None, reason="console script not installed")
 def test_console_script_end_to_end(tmp_path: Path) -> None:
-    proc = subprocess.run(["cartctl", "inspect", "nope.toml"], capture_output=True, text=True, cwd=tmp_path, check=False)
+    proc = subprocess.run(
+        ["cartctl", "inspect", "nope.toml"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        check=False,
+    )
     assert proc.returncode == 2
     assert proc.stderr.strip() == "cartctl inspect: error: model file not found: nope.toml"
 
@@ -152,7 +184,10 @@ DATA = Path(__file__).parent / "data"
     ("content", "message"),
     [
         ("time_s,voltage_a,voltage_b,speed_a\n0,1,0,0\n", "speed_b"),  # a missing column
-        ("time_s,voltage_a,voltage_b,speed_a,speed_b\n0,1,0,0,0\n0.01,nan,0,0,0\n", "line 3"),  # NaN
+        (
+            "time_s,voltage_a,voltage_b,speed_a,speed_b\n0,1,0,0,0\n0.01,nan,0,0,0\n",
+            "line 3",
+        ),  # NaN
         ("", "empty"),
     ],
 )

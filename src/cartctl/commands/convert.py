@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from cartctl.data import Trace, parse_mapping, read_trace, write_trace
+from cartctl.errors import InputError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -32,11 +33,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _mapping_arg(text: str) -> dict[str, str]:
+    try:
+        return parse_mapping(text)
+    except InputError as exc:  # argparse shows an ArgumentTypeError's own message
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def add_map_option(p: argparse.ArgumentParser) -> None:
     """The ``--map`` option shared by every command that reads traces."""
     p.add_argument(
         "--map",
-        type=parse_mapping,
+        type=_mapping_arg,
         metavar="COLUMN=LABEL,...",
         help="which log channel is which column, e.g. voltage_a=FloatIn2,speed_a=FloatIn0",
     )
