@@ -106,10 +106,13 @@ class ArxPlant:
         return Measurement(ya, yb, ya, yb)
 
     def reset(self) -> Measurement:
-        """Back to rest (and the noise generator back to its seed); the tick-0 measurement."""
+        """Back to rest; the tick-0 measurement.
+
+        The noise stream carries on (as in the physics plant), so repeated experiments on one
+        plant see fresh noise; the same seed and the same calls reproduce the same results.
+        """
         for m in self._motors:
             m.reset()
-        self._rng = np.random.default_rng(self.seed)
         return self._measure(0.0, 0.0)
 
     def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:

@@ -1,0 +1,352 @@
+"""The physical cart simulator: two DC motors with friction, driven and sensed like the real cart.
+
+Where it sits: a plant (see :mod:`cartctl.plants.base`) that experiments (``cartctl excite``) and the
+control loop (``cartctl run --plant physics``) run against when no cart is attached, and that the
+virtual serial cart puts behind a pseudo-terminal. Unlike the ARX plant it is not linear: it has
+Coulomb friction with stiction, voltage saturation, PWM and encoder quantisation, and the
+firmware's one-tick delay, so identification and control meet the same defects as on the cart.
+
+Per motor, at the wheel (gearbox folded in; report, equation 1, plus dry friction)::
+
+    J dω/dt + b ω + τ_c sign(ω) = K i          L di/dt + R i = v − K ω
+
+On the ground the cart adds inertia and rolling resistance to each wheel (see
+:mod:`cartctl.plants.physics_params`). Zero volts brakes: the H-bridge shorts the terminals, which
+is ``v = 0`` in the electrical equation, so the back-EMF drives a braking current (coasting would be
+``i = 0`` instead).
+
+Tick timing, as microOS does it (``docs/serial-protocol.md`` §2): the voltage commanded at tick k is
+written to the H-bridge at the start of tick k+1's ``io()``, saturated to ±12 V and rounded to the
+nearest 12/255 V PWM step, and held for one period. ``io()`` then reads the encoder, whose count is
+``floor(θ / (2π/1792))``; the measured speed is the count difference over the last tick times
+``(2π/1792) / Ts``. So a voltage commanded at tick k first shows in the speed measured at tick k+2.
+
+Integration: with the voltage and the friction torque held, the (i, ω, θ) dynamics are linear, so
+each substep (``period / substeps``, 1 ms by default) applies the exact zero-order-hold map (a matrix
+exponential, computed once). Only when ω reaches zero inside a substep, or a stuck wheel's drive
+torque passes τ_c, does the substep switch to the closed-form 2×2 exponential: the crossing time is
+found by Newton's method, and from there the wheel sticks while ``|K i| ≤ τ_c`` (only the current
+moves, exactly) or moves off the other way. So friction events are resolved exactly in time, at the
+cost of a few µs each, and there is no chattering around zero speed.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.linalg import expm
+
+from cartctl.errors import InputError
+from cartctl.plants.base import Measurement
+from cartctl.plants.physics_params import PRESETS, CartParams, MotorParams, preset
+
+__all__ = ["PRESETS", "CartParams", "MotorParams", "PhysicsPlant", "preset"]
+
+
+class _Wheel:
+    """One wheel's dynamics: the exact substep map for the hot loop, the closed form for events.
+
+    The state is (i [A], ω [rad/s], θ [rad]); the held inputs are v [V] and the friction torque
+    τ [N·m], positive when it opposes positive ω. With both held, ``d(i, ω)/dt = A (i, ω) + g``.
+    """
+
+    def __init__(
+        self, motor: MotorParams, added_inertia_kg_m2: float, rolling_n_m: float, h: float
+    ) -> None:
+        J = motor.inertia_kg_m2 + added_inertia_kg_m2
+        K, R, L = motor.torque_constant_n_m_a, motor.resistance_ohm, motor.inductance_h
+        b = motor.viscous_n_m_s
+        self.J, self.K, self.R, self.b, self.rl = J, K, R, b, R / L
+        self.tc = motor.coulomb_n_m + rolling_n_m
+        self.a11, self.a12, self.a21, self.a22 = -R / L, -K / L, K / J, -b / J
+        self.det = (R * b + K * K) / (L * J)
+        self.half_tr = 0.5 * (self.a11 + self.a22)
+        M = np.zeros((5, 5))  # (i, ω, θ, v, τ): the exact ZOH map over one substep
+        M[0, :2] = self.a11, self.a12
+        M[1, :2] = self.a21, self.a22
+        M[2, 1] = 1.0
+        M[0, 3] = 1.0 / L
+        M[1, 4] = -1.0 / J
+        E = expm(M * h)
+        index = ((0, 0), (0, 1), (1, 0), (1, 1), (2, 0), (2, 1), (0, 3), (1, 3), (2, 3))
+        index += ((0, 4), (1, 4), (2, 4))
+        self.fast = (*(float(E[r, c]) for r, c in index), K, self.tc, R, h, math.exp(-h * R / L))
+
+    def flow(
+        self, i: float, w: float, th: float, v: float, tau: float, t: float
+    ) -> tuple[float, float, float]:
+        """Exact state after ``t`` seconds with v and τ held (closed-form 2×2 exponential)."""
+        K, R = self.K, self.R
+        den = K * K + R * self.b  # the steady state (i_eq, ω_eq) of these inputs
+        i_eq = (self.b * v + K * tau) / den
+        w_eq = (K * v - R * tau) / den
+        y0, y1 = i - i_eq, w - w_eq
+        m = self.half_tr
+        disc = m * m - self.det
+        if disc > 1e-12 * m * m:
+            q = math.sqrt(disc)
+            c, s = math.cosh(q * t), math.sinh(q * t) / q
+        elif disc < -1e-12 * m * m:
+            q = math.sqrt(-disc)
+            c, s = math.cos(q * t), math.sin(q * t) / q
+        else:
+            c, s = 1.0, t
+        e = math.exp(m * t)
+        z0 = e * (c * y0 + s * ((self.a11 - m) * y0 + self.a12 * y1))
+        z1 = e * (c * y1 + s * (self.a21 * y0 + (self.a22 - m) * y1))
+        # θ gains ∫ω = ω_eq t + [A⁻¹ (e^{At} − I) y]_ω
+        th += w_eq * t + (-self.a21 * (z0 - y0) + self.a11 * (z1 - y1)) / self.det
+        return i_eq + z0, w_eq + z1, th
+
+    def relax(self, i: float, v: float, t: float) -> float:
+        """The current of a stuck wheel (ω = 0) after ``t`` seconds at voltage v (A)."""
+        i_rest = v / self.R
+        return i_rest + (i - i_rest) * math.exp(-self.rl * t)
+
+    def event(
+        self, i: float, w: float, th: float, v: float, t_end: float
+    ) -> tuple[float, float, float]:
+        """Run ``t_end`` seconds from (i, ω, θ), resolving each stop, stick and breakaway exactly."""
+        K, tc = self.K, self.tc
+        i_rest = v / self.R  # the current a stuck wheel relaxes to
+        t0 = 0.0
+        for _ in range(4):  # a stop, a breakaway, a stop again: more cannot fit in a substep
+            span = t_end - t0
+            if w == 0.0:
+                if abs(K * i) <= tc:  # stuck until the drive torque passes τ_c
+                    if abs(K * i_rest) <= tc:
+                        return self.relax(i, v, span), 0.0, th
+                    i_edge = math.copysign(tc / K, i_rest)
+                    t_break = math.log((i - i_rest) / (i_edge - i_rest)) / self.rl
+                    if t_break >= span:
+                        return self.relax(i, v, span), 0.0, th
+                    i, t0, span = i_edge, t0 + t_break, span - t_break
+                    s = 1.0 if i_rest > 0.0 else -1.0
+                else:
+                    s = 1.0 if K * i > 0.0 else -1.0
+            else:
+                s = 1.0 if w > 0.0 else -1.0
+            tau = s * tc
+            i1, w1, th1 = self.flow(i, w, th, v, tau, span)
+            if w1 * s > 0.0:
+                return i1, w1, th1
+            t = self._stop_time(i, w, v, tau, s, span, w1)
+            if t is None:  # a start too brief to resolve: the wheel stays put
+                return self.relax(i, v, span), 0.0, th
+            i, _, th = self.flow(i, w, th, v, tau, t)
+            w, t0 = 0.0, t0 + t
+        return self.relax(i, v, t_end - t0), 0.0, th
+
+    def _stop_time(
+        self, i: float, w: float, v: float, tau: float, s: float, span: float, w_end: float
+    ) -> float | None:
+        """Time (s) at which ω, moving in direction s from w or from rest, is back at zero.
+
+        ``w_end`` is ω after ``span`` seconds, no longer in direction s. Newton's method kept inside
+        a shrinking bracket; None when a wheel leaving rest never visibly moves.
+        """
+
+        def along(t: float) -> tuple[float, float]:  # (ω, dω/dt) in direction s
+            i_t, w_t, _ = self.flow(i, w, 0.0, v, tau, t)
+            return w_t * s, (self.K * i_t - self.b * w_t - tau) / self.J * s
+
+        lo, f_lo, hi, f_hi = 0.0, w * s, span, w_end * s
+        if w == 0.0:  # leaving rest: bracket the first moving sample and the next stopped one
+            for k in range(1, 16):
+                f = along(span * k / 16)[0]
+                if f > 0.0 and f_lo <= 0.0:
+                    lo, f_lo = span * k / 16, f
+                elif f <= 0.0 and f_lo > 0.0:
+                    hi, f_hi = span * k / 16, f
+                    break
+            if f_lo <= 0.0:
+                return None
+        t = lo + (hi - lo) * f_lo / (f_lo - f_hi)
+        for _ in range(50):
+            f, slope = along(t)
+            if f == 0.0:
+                return t
+            lo, hi = (t, hi) if f > 0.0 else (lo, t)
+            newton = t - f / slope if slope != 0.0 else math.nan
+            t_next = newton if lo < newton < hi else 0.5 * (lo + hi)  # nan fails the test too
+            if abs(t_next - t) < 1e-13:
+                return t_next
+            t = t_next
+        return t
+
+
+def _advance(
+    wheel: _Wheel, i: float, w: float, th: float, v: float, n: int
+) -> tuple[float, float, float]:
+    """Advance one wheel by ``n`` substeps at held voltage ``v``; return (i, ω, θ)."""
+    p00, p01, p10, p11, p20, p21, gv0, gv1, gv2, gt0, gt1, gt2, K, tc, R, h, ae = wheel.fast
+    i_rest = v / R  # the current a stuck wheel relaxes to
+    stuck_for_good = -tc <= K * i_rest <= tc  # at rest, this voltage can never break away
+    for _ in range(n):
+        if w == 0.0:
+            if -tc <= K * i <= tc:  # stuck: only the current moves
+                if stuck_for_good or -tc <= K * (i_rest + (i - i_rest) * ae) <= tc:
+                    i = i_rest + (i - i_rest) * ae
+                    continue
+                i, w, th = wheel.event(i, w, th, v, h)  # breaks away inside this substep
+                continue
+            s = 1.0 if K * i > 0.0 else -1.0
+        else:
+            s = 1.0 if w > 0.0 else -1.0
+        tau = s * tc
+        i1 = p00 * i + p01 * w + gv0 * v + gt0 * tau
+        w1 = p10 * i + p11 * w + gv1 * v + gt1 * tau
+        if w1 * s > 0.0 or tc == 0.0:  # moving on the same way (or no dry friction at all)
+            th += p20 * i + p21 * w + gv2 * v + gt2 * tau
+            i, w = i1, w1
+            continue
+        i, w, th = wheel.event(i, w, th, v, h)  # stops inside this substep
+    return i, w, th
+
+
+class PhysicsPlant:
+    """A simulated cart with two physical DC motors (see the module docstring for the model).
+
+    Parameters
+    ----------
+    cart : str or CartParams, default "ground"
+        A preset name (``"air"`` or ``"ground"``) or explicit parameters.
+    noise_std_rad_s : float, optional
+        Measurement noise (rad/s standard deviation) added to each measured speed; overrides the
+        cart's ``noise_std_rad_s`` (0, off, in the presets).
+    seed : int, optional
+        Seed of the numpy Generator that draws the noise. The noise stream is not restarted by
+        :meth:`reset`, so repeated experiments see fresh noise; the same seed and the same calls
+        reproduce the same measurements.
+
+    Raises
+    ------
+    InputError
+        For an unknown preset name or a negative or non-finite noise level.
+    """
+
+    def __init__(
+        self,
+        cart: str | CartParams = "ground",
+        *,
+        noise_std_rad_s: float | None = None,
+        seed: int | None = None,
+    ) -> None:
+        params = preset(cart) if isinstance(cart, str) else cart
+        if not isinstance(params, CartParams):
+            raise InputError(f"cart must be a preset name or CartParams, got {type(cart).__name__}")
+        if noise_std_rad_s is not None:
+            params = params.with_noise(float(noise_std_rad_s))
+        self.params: CartParams = params
+        self.period_s: float = params.period_s
+        h = params.period_s / params.substeps
+        self._wheel_a = _Wheel(params.motor_a, params.added_inertia_kg_m2, params.rolling_n_m, h)
+        self._wheel_b = _Wheel(params.motor_b, params.added_inertia_kg_m2, params.rolling_n_m, h)
+        self._rad_per_count = 2.0 * math.pi / params.counts_per_rev
+        self._speed_per_count = self._rad_per_count / params.period_s
+        self._rng = np.random.default_rng(seed) if params.noise_std_rad_s > 0.0 else None
+        self.reset()
+
+    # -- the Plant protocol -------------------------------------------------------------------
+
+    def reset(self, *, position_rad: tuple[float, float] = (0.0, 0.0)) -> Measurement:
+        """Put both wheels at rest with no current and 0 V, and measure tick 0.
+
+        Parameters
+        ----------
+        position_rad : tuple of float, default (0, 0)
+            Wheel positions (rad) to start from. Only their place between encoder edges matters:
+            it shifts when the counts tick over, as the arbitrary start angle of a real wheel does.
+        """
+        self._ia = self._wa = 0.0
+        self._ib = self._wb = 0.0
+        self._tha, self._thb = (float(x) for x in position_rad)
+        self._count_a = math.floor(self._tha / self._rad_per_count)
+        self._count_b = math.floor(self._thb / self._rad_per_count)
+        self._applied = (0.0, 0.0)
+        self._driving = (0.0, 0.0)
+        self.tick: int = 0
+        return Measurement(0.0, 0.0, 0.0, 0.0)
+
+    def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
+        """Command voltages (V) at this tick, advance one tick, and measure the next tick.
+
+        The command is applied at the next tick (the firmware delay); the interval simulated now
+        is driven by the command of the previous call. A non-finite command counts as 0 V.
+        """
+        n = self.params.substeps
+        va, vb = self._applied  # written by io() at the tick we start from
+        self._ia, self._wa, self._tha = _advance(
+            self._wheel_a, self._ia, self._wa, self._tha, va, n
+        )
+        self._ib, self._wb, self._thb = _advance(
+            self._wheel_b, self._ib, self._wb, self._thb, vb, n
+        )
+        # io() of the new tick: write the command from the tick we started at, read the encoders.
+        self._driving = self._applied
+        self._applied = (self.condition_voltage(voltage_a_v), self.condition_voltage(voltage_b_v))
+        count_a = math.floor(self._tha / self._rad_per_count)
+        count_b = math.floor(self._thb / self._rad_per_count)
+        speed_a = (count_a - self._count_a) * self._speed_per_count
+        speed_b = (count_b - self._count_b) * self._speed_per_count
+        self._count_a, self._count_b = count_a, count_b
+        if self._rng is not None:
+            noise = self._rng.standard_normal(2) * self.params.noise_std_rad_s
+            speed_a += float(noise[0])
+            speed_b += float(noise[1])
+        self.tick += 1
+        return Measurement(speed_a, speed_b, self._wa, self._wb)
+
+    def close(self) -> None:
+        """Command zero volts (the motors brake); there is no resource to release."""
+        self._applied = (0.0, 0.0)
+
+    # -- what the cart also knows ---------------------------------------------------------------
+
+    def condition_voltage(self, voltage_v: float) -> float:
+        """What the firmware makes of a command (V): 0 if non-finite, saturated, on the PWM grid.
+
+        Rounds to the nearest PWM step (ties to even: 10 V is 212.5 steps and gives 212, as a
+        truncating firmware would), never beyond the supply.
+        """
+        v = float(voltage_v)
+        if not math.isfinite(v):
+            return 0.0
+        limit, step = self.params.supply_v, self.params.pwm_step_v
+        top = math.floor(limit / step + 1e-9)  # the last whole step within the supply
+        return min(max(round(min(max(v, -limit), limit) / step), -top), top) * step
+
+    @property
+    def applied_voltage_v(self) -> tuple[float, float]:
+        """Voltages (V) on the H-bridges now: written by the latest tick's ``io()``.
+
+        That is the previous :meth:`step` call's command, saturated and quantised, held until the
+        next tick; what the bridge reports in gpio_float[2], [3] at this tick.
+        """
+        return self._applied
+
+    @property
+    def last_interval_voltage_v(self) -> tuple[float, float]:
+        """Voltages (V) that drove the motors during the tick interval that just ended."""
+        return self._driving
+
+    @property
+    def position_rad(self) -> tuple[float, float]:
+        """True wheel positions (rad) since the last reset (the encoder floors these)."""
+        return (self._tha, self._thb)
+
+    @property
+    def encoder_counts(self) -> tuple[int, int]:
+        """Encoder counts at the latest tick (1792 per revolution by default)."""
+        return (self._count_a, self._count_b)
+
+    @property
+    def true_speed_rad_s(self) -> tuple[float, float]:
+        """True wheel speeds (rad/s) now."""
+        return (self._wa, self._wb)
+
+    @property
+    def armature_current_amp(self) -> tuple[float, float]:
+        """True armature currents (A) now."""
+        return (self._ia, self._ib)

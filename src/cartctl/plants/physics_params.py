@@ -1,0 +1,192 @@
+"""Physical parameters of the cart simulator: one motor, the whole cart, and the shipped presets.
+
+These are plain frozen dataclasses, read by :mod:`cartctl.plants.physics`. Every motor quantity is
+given *at the wheel*: the gearbox is folded in, so the inertia, the friction torques and the torque
+constant are what the wheel shaft sees, and the speed is the wheel's speed (rad/s).
+
+The presets are calibrated, not measured. ``benchmarks/calibrate_physics.py --fit`` chooses them so
+that the report's ARX fit (equation 6), run on the simulator's *measured* speed under the report's
+square wave, gives back the report's poles and DC gains (equation 8 in the air, equation 12 on the
+ground): within 5 % from a plain ``reset()``, within 13 % over all start angles of the wheels. The
+script with no options checks them.
+
+=============================  =========  =========  ============================================
+quantity                       motor A    motor B    remark
+=============================  =========  =========  ============================================
+inertia_kg_m2                  1.10e-3    1.15e-3    rotor × gear ratio² plus wheel; fitted
+viscous_n_m_s                  1.6e-3     1.6e-3     chosen (not identifiable from the targets)
+coulomb_n_m                    0.05       0.05       chosen; breakaway ≈ 0.34 V in the air
+torque_constant_n_m_a          0.4476     0.4476     fitted to the gain; no-load ≈ 25 rad/s at 12 V
+resistance_ohm                 3.0        3.0        chosen; stall ≈ 4 A and 1.8 N·m at 12 V
+inductance_h, air              6.47e-3    7.58e-3    fitted; an *effective* lag, see below
+inductance_h, ground           16.0e-3    15.1e-3    fitted; the one motor constant that changes
+added_inertia_kg_m2, ground    6.93e-4    6.93e-4    fitted; ≈ a 1.3 kg cart, m r² / 2, r = 32.5 mm
+rolling_n_m, ground            0.07184    0.07184    fitted to the gain; breakaway ≈ 0.82 V
+=============================  =========  =========  ============================================
+
+No-load current ≈ 0.2 A. The inductances give L/R ≈ 2.3 ms in the air and 5 ms on the ground, more
+than a small motor's winding (≈ 1 ms): they stand for every lag between the PWM and the wheel
+torque. The ground models cannot be reached by adding inertia and rolling friction to the air
+motors alone (the sum of the two continuous poles, R/L + b/J, must fall from ≈ 380 1/s to ≈ 180
+1/s, which the air poles forbid), so the ground preset also raises L, standing in for the tyre
+compliance and slip that the report sees as a plateau. The rolling friction is likewise an
+effective value (gearbox load losses and caster scrub included), above textbook rolling resistance.
+
+K and the rolling friction are set to four digits so that the 10 V plateau (9.976 V after PWM
+rounding) moves a whole number of encoder counts per tick: 60 in the air, 57 on the ground. With a
+fractional count, the quantisation error repeats in a pattern that the ARX fit explains with its
+fast pole, which then swings by tens of percent for a 0.2 % change of K. Anything that moves the
+plateau (K, the friction, the PWM rounding) needs the calibration rerun.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, replace
+from types import MappingProxyType
+from typing import Any
+
+from cartctl.errors import InputError
+
+__all__ = ["PRESETS", "CartParams", "MotorParams", "preset"]
+
+
+def _require_positive(owner: str, name: str, value: float, *, allow_zero: bool = False) -> None:
+    """Raise InputError unless ``value`` is finite and positive (or zero when allowed)."""
+    ok = math.isfinite(value) and (value >= 0.0 if allow_zero else value > 0.0)
+    if not ok:
+        expected = "a finite number ≥ 0" if allow_zero else "a finite number > 0"
+        raise InputError(f"{owner}.{name} must be {expected}, got {value!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class MotorParams:
+    """One geared DC motor with its wheel, seen at the wheel shaft (report eq. 1 + dry friction).
+
+    ``J dω/dt + b ω + τ_c sign(ω) = K i`` and ``L di/dt + R i = v − K ω``.
+
+    Attributes
+    ----------
+    inertia_kg_m2 : float
+        J, rotor inertia times the gear ratio squared plus the wheel's own (kg·m²).
+    viscous_n_m_s : float
+        b, viscous friction (N·m·s/rad).
+    coulomb_n_m : float
+        τ_c, Coulomb (dry) friction torque (N·m); also the breakaway torque at rest.
+    torque_constant_n_m_a : float
+        K, torque constant (N·m/A), equal to the back-EMF constant (V·s/rad).
+    resistance_ohm : float
+        R, armature resistance (Ω).
+    inductance_h : float
+        L, armature inductance (H).
+    """
+
+    inertia_kg_m2: float
+    viscous_n_m_s: float
+    coulomb_n_m: float
+    torque_constant_n_m_a: float
+    resistance_ohm: float
+    inductance_h: float
+
+    def __post_init__(self) -> None:
+        for name in ("inertia_kg_m2", "torque_constant_n_m_a", "resistance_ohm", "inductance_h"):
+            _require_positive("MotorParams", name, getattr(self, name))
+        for name in ("viscous_n_m_s", "coulomb_n_m"):
+            _require_positive("MotorParams", name, getattr(self, name), allow_zero=True)
+
+
+@dataclass(frozen=True, slots=True)
+class CartParams:
+    """The whole cart: two motors, the ground load, the firmware's limits and the sensor.
+
+    Attributes
+    ----------
+    name : str
+        A label (the preset name, or anything for a custom cart).
+    motor_a, motor_b : MotorParams
+        The two motors (each with its own constants).
+    added_inertia_kg_m2 : float
+        Inertia the cart body adds to each wheel when it drives on the ground (kg·m²); 0 in the air.
+        The two wheels are not coupled through the chassis (the report models each motor alone).
+    rolling_n_m : float
+        Rolling resistance torque at each wheel on the ground (N·m), added to the motor's Coulomb
+        friction (so it also resists breakaway); 0 in the air.
+    supply_v : float
+        Supply voltage (V); commands saturate at ± this.
+    pwm_step_v : float
+        Resolution of the applied voltage (V); the firmware rounds to the nearest step (ties to
+        even), never beyond the supply.
+    counts_per_rev : int
+        Encoder counts per wheel revolution.
+    period_s : float
+        Control tick period (s).
+    substeps : int
+        Integration substeps per tick. The integration is exact for any number: a substep is only
+        the window in which a stop is looked for (a speed that crossed zero and back within one
+        would be missed), so it must stay short against the motor's time constants.
+    noise_std_rad_s : float
+        Standard deviation of white Gaussian noise added to each measured speed (rad/s); 0 = off.
+    """
+
+    name: str
+    motor_a: MotorParams
+    motor_b: MotorParams
+    added_inertia_kg_m2: float = 0.0
+    rolling_n_m: float = 0.0
+    supply_v: float = 12.0
+    pwm_step_v: float = 12.0 / 255.0
+    counts_per_rev: int = 1792
+    period_s: float = 0.01
+    substeps: int = 10
+    noise_std_rad_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("supply_v", "pwm_step_v", "period_s"):
+            _require_positive("CartParams", name, getattr(self, name))
+        for name in ("added_inertia_kg_m2", "rolling_n_m", "noise_std_rad_s"):
+            _require_positive("CartParams", name, getattr(self, name), allow_zero=True)
+        for name in ("counts_per_rev", "substeps"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 1:
+                raise InputError(f"CartParams.{name} must be an integer ≥ 1, got {value!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The parameters as plain JSON-ready values (motors as nested dicts)."""
+        return asdict(self)
+
+    def with_noise(self, noise_std_rad_s: float) -> CartParams:
+        """Return a copy with another measurement noise level (rad/s standard deviation)."""
+        return replace(self, noise_std_rad_s=noise_std_rad_s)
+
+
+_AIR_A = MotorParams(1.10e-3, 1.6e-3, 0.05, 0.4476, 3.0, 6.47e-3)
+_AIR_B = MotorParams(1.15e-3, 1.6e-3, 0.05, 0.4476, 3.0, 7.58e-3)
+
+PRESETS: MappingProxyType[str, CartParams] = MappingProxyType(
+    {
+        "air": CartParams(name="air", motor_a=_AIR_A, motor_b=_AIR_B),
+        "ground": CartParams(
+            name="ground",
+            motor_a=replace(_AIR_A, inductance_h=16.0e-3),
+            motor_b=replace(_AIR_B, inductance_h=15.1e-3),
+            added_inertia_kg_m2=6.93e-4,
+            rolling_n_m=0.07184,
+        ),
+    }
+)
+"""The shipped presets by name (read-only): ``air`` (cart held up) and ``ground`` (driving)."""
+
+
+def preset(name: str) -> CartParams:
+    """Return the preset called ``name``.
+
+    Raises
+    ------
+    InputError
+        If there is no such preset; the message lists the valid names.
+    """
+    try:
+        return PRESETS[name]
+    except (KeyError, TypeError):
+        valid = ", ".join(sorted(PRESETS))
+        raise InputError(f"unknown physics preset {name!r}; expected one of: {valid}") from None
