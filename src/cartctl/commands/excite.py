@@ -101,9 +101,12 @@ def run(args: argparse.Namespace) -> int:
         result = run_experiment(plant, ua, ub, on_tick=bar.update, source=description)
     finally:
         bar.close()
+    n = len(result.trace)
+    if n == 0:
+        print("cartctl excite: interrupted before the first tick; nothing written", file=sys.stderr)
+        return 130
     write_trace(result.trace, args.out)
     path = args.out
-    n = len(result.trace)
     print(
         f"wrote {path}: {n} ticks ({n * plant.period_s:.2f} s), {args.signal} {args.amplitude:g} V "
         f"on motor {args.motor}, plant {description}"
