@@ -10,7 +10,6 @@ import argparse
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from cartctl.commands.convert import add_map_option
 from cartctl.errors import CartctlError
 
 
@@ -38,34 +37,6 @@ class PendingCommand:
         )
 
 
-def _identify(p: argparse.ArgumentParser) -> None:
-    p.add_argument("files", nargs="+", metavar="FILE", help="experiment traces (CSV or QRC logs)")
-    add_map_option(p)
-    p.add_argument("--motor", choices=("a", "b", "both"), default="both")
-    p.add_argument("--prefilter", choices=("none", "butter"), default="none")
-    p.add_argument("--order", type=int, default=2, metavar="N")
-    p.add_argument("--cutoff-hz", type=float, default=20.0, metavar="F")
-    p.add_argument("--delay", default="2", metavar="auto|N")
-    p.add_argument("--method", choices=("arx", "oe"), default="arx")
-    p.add_argument("--out", metavar="MODEL.toml")
-    p.add_argument("--report", metavar="DIR")
-    p.add_argument("--json", action="store_true")
-
-
-def _validate(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.toml")
-    p.add_argument("data", metavar="FILE.csv")
-    add_map_option(p)
-    p.add_argument("--json", action="store_true")
-
-
-def _linearity(p: argparse.ArgumentParser) -> None:
-    p.add_argument("small", metavar="STEP_SMALL.csv")
-    p.add_argument("large", metavar="STEP_LARGE.csv")
-    p.add_argument("sum", metavar="STEP_SUM.csv")
-    p.add_argument("--json", action="store_true")
-
-
 def _design(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", metavar="MODEL.toml")
     p.add_argument("--method", choices=("pi", "poles"), required=True)
@@ -88,21 +59,6 @@ def _review(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", metavar="FILE.rrd")
 
 
-identify = PendingCommand(
-    "identify", "fit ARX motor models to recorded experiments", "identification stage", _identify
-)
-validate = PendingCommand(
-    "validate",
-    "simulate a model on recorded data against the measured speed",
-    "identification stage",
-    _validate,
-)
-linearity = PendingCommand(
-    "linearity",
-    "the superposition test: two small steps added against their sum",
-    "identification stage",
-    _linearity,
-)
 design = PendingCommand(
     "design", "design PI or pole-placement controllers on a model", "design stage", _design
 )

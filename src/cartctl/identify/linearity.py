@@ -1,0 +1,207 @@
+"""The superposition test: do the responses to two steps add up to the response to their sum?
+
+Part of the identification stage (report §3.3, equation 11 and figure 8) and the work of
+``cartctl linearity``. Three step experiments on one motor (say 3 V, 7 V and 10 V) are aligned at
+their step onsets; the responses to the small and the large step are added and compared with the
+response to the summed step. A linear motor gives zero error; Coulomb friction makes the summed
+step's response run above the added ones (each small step loses the friction once, the summed
+step only once in all). Pure numpy on :class:`~cartctl.data.Trace` objects; no I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from cartctl.data import Trace
+from cartctl.errors import InputError
+from cartctl.stepinfo import StepOnset, final_value, find_step
+
+__all__ = [
+    "AMPLITUDE_ABS_TOLERANCE_V",
+    "AMPLITUDE_REL_TOLERANCE",
+    "LinearityResult",
+    "linearity",
+]
+
+AMPLITUDE_REL_TOLERANCE = 0.02
+"""Small + large may differ from the summed step by this fraction of the summed step ..."""
+
+AMPLITUDE_ABS_TOLERANCE_V = 0.1
+"""... or by this many volts, whichever is larger."""
+
+_ROLES = ("small", "large", "sum")
+_MIN_ALIGNED_TICKS = 2
+
+
+def _where(trace: Trace, role: str) -> str:
+    return trace.source if trace.source else f"the {role} step trace"
+
+
+@dataclass(frozen=True, eq=False)
+class LinearityResult:
+    """The outcome of the superposition test on one motor.
+
+    Attributes
+    ----------
+    motor : str
+        'a' or 'b'.
+    period_s : float
+        The traces' tick (s).
+    sources : tuple of (str or None)
+        The small, large and sum traces' files.
+    amplitudes_v : tuple of float
+        The small, large and summed voltage steps (V).
+    onsets_s : tuple of float
+        When each step is commanded, on its own trace's time axis (s).
+    time_s : ndarray, shape (n,)
+        Time since the onsets (s), over the span all three traces cover.
+    speed_small_rad_s, speed_large_rad_s, speed_sum_rad_s : ndarray, shape (n,)
+        The three measured responses, aligned at their onsets (rad/s).
+    speed_added_rad_s : ndarray, shape (n,)
+        speed_small + speed_large (rad/s).
+    error_rad_s : ndarray, shape (n,)
+        speed_sum − speed_added (rad/s): positive where the summed step runs faster.
+    """
+
+    motor: str
+    period_s: float
+    sources: tuple[str | None, str | None, str | None]
+    amplitudes_v: tuple[float, float, float]
+    onsets_s: tuple[float, float, float]
+    time_s: np.ndarray = field(repr=False)
+    speed_small_rad_s: np.ndarray = field(repr=False)
+    speed_large_rad_s: np.ndarray = field(repr=False)
+    speed_sum_rad_s: np.ndarray = field(repr=False)
+    speed_added_rad_s: np.ndarray = field(repr=False)
+    error_rad_s: np.ndarray = field(repr=False)
+
+    @property
+    def mean_error_rad_s(self) -> float:
+        """Mean of the error (rad/s); positive when the summed step runs above the added ones."""
+        return float(np.mean(self.error_rad_s))
+
+    @property
+    def max_abs_error_rad_s(self) -> float:
+        """Largest |error| (rad/s)."""
+        return float(np.max(np.abs(self.error_rad_s)))
+
+    @property
+    def rms_error_rad_s(self) -> float:
+        """Root mean square of the error (rad/s)."""
+        return float(np.sqrt(np.mean(self.error_rad_s**2)))
+
+    @property
+    def steady_state_sum_rad_s(self) -> float:
+        """Final value of the summed step's response: mean of its last 5 % (rad/s)."""
+        return final_value(self.speed_sum_rad_s)
+
+    @property
+    def rms_error_percent(self) -> float | None:
+        """RMS error over the RMS of the summed step's response (%); None if that is zero."""
+        rms_sum = float(np.sqrt(np.mean(self.speed_sum_rad_s**2)))
+        return 100.0 * self.rms_error_rad_s / rms_sum if rms_sum > 0.0 else None
+
+    @property
+    def mean_error_percent(self) -> float | None:
+        """Mean error over the summed step's steady state (%); None if that is zero."""
+        steady = self.steady_state_sum_rad_s
+        return 100.0 * self.mean_error_rad_s / steady if steady != 0.0 else None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form: files, amplitudes, onsets, the error summary and the relative figures."""
+        return {
+            "motor": self.motor,
+            "Ts": self.period_s,
+            "data": dict(zip(_ROLES, self.sources, strict=True)),
+            "amplitudes_v": dict(zip(_ROLES, self.amplitudes_v, strict=True)),
+            "onsets_s": dict(zip(_ROLES, self.onsets_s, strict=True)),
+            "duration_s": float(self.time_s[-1]),
+            "steady_state_sum_rad_s": self.steady_state_sum_rad_s,
+            "error_rad_s": {
+                "mean": self.mean_error_rad_s,
+                "max_abs": self.max_abs_error_rad_s,
+                "rms": self.rms_error_rad_s,
+            },
+            "relative_percent": {
+                "rms": self.rms_error_percent,
+                "mean": self.mean_error_percent,
+            },
+        }
+
+
+def _onset(trace: Trace, motor: str, role: str) -> StepOnset:
+    """The step in ``motor``'s voltage of one trace, or an error saying what the trace holds."""
+    voltage = trace.voltage(motor)
+    onset = find_step(voltage)
+    if onset is None:
+        held = "zero throughout" if not np.any(voltage) else "not a single step from 0 V"
+        raise InputError(
+            f"motor {motor}'s voltage in {_where(trace, role)} is {held} "
+            f"(from {np.min(voltage):g} V to {np.max(voltage):g} V); the superposition test "
+            "needs three step experiments on that motor"
+        )
+    if len(trace) - onset.index < _MIN_ALIGNED_TICKS:
+        raise InputError(
+            f"{_where(trace, role)} ends {len(trace) - onset.index} tick(s) after its step; "
+            "record the response to the step"
+        )
+    return onset
+
+
+def linearity(small: Trace, large: Trace, total: Trace, motor: str = "a") -> LinearityResult:
+    """Run the superposition test on three step experiments.
+
+    Parameters
+    ----------
+    small, large : Trace
+        Responses to two steps from 0 V (e.g. 3 V and 7 V).
+    total : Trace
+        Response to the step of their sum (e.g. 10 V).
+    motor : {'a', 'b'}
+        The motor whose voltage steps and whose speed is compared.
+
+    Returns
+    -------
+    LinearityResult
+        Over the longest span after the onsets that all three traces cover.
+
+    Raises
+    ------
+    InputError
+        A trace whose voltage is not one step from 0 V, traces with different ticks, or
+        amplitudes that do not add up (small + large ≠ sum beyond 2 % or 0.1 V).
+    """
+    traces = (small, large, total)
+    onsets = tuple(_onset(t, motor, role) for t, role in zip(traces, _ROLES, strict=True))
+    periods = [t.period_s for t in traces]
+    if max(periods) - min(periods) > 0.01 * min(periods):
+        listing = ", ".join(f"{p * 1e3:.4g} ms" for p in periods)
+        raise InputError(f"the three traces must share one tick; their time steps are {listing}")
+    amp_small, amp_large, amp_sum = (o.amplitude for o in onsets)
+    tolerance = max(AMPLITUDE_REL_TOLERANCE * abs(amp_sum), AMPLITUDE_ABS_TOLERANCE_V)
+    if abs(amp_small + amp_large - amp_sum) > tolerance:
+        raise InputError(
+            f"the steps do not add up: {amp_small:g} V + {amp_large:g} V = "
+            f"{amp_small + amp_large:g} V, but the sum step is {amp_sum:g} V (tolerance "
+            f"{tolerance:.3g} V); give the small, the large and their sum, in that order"
+        )
+    n = min(len(t) - o.index for t, o in zip(traces, onsets, strict=True))
+    speeds = [t.speed(motor)[o.index : o.index + n] for t, o in zip(traces, onsets, strict=True)]
+    added = speeds[0] + speeds[1]
+    period_s = float(f"{np.median(periods):.9g}")  # 0.01, not 0.010000000000000009
+    return LinearityResult(
+        motor=motor,
+        period_s=period_s,
+        sources=(small.source, large.source, total.source),
+        amplitudes_v=(amp_small, amp_large, amp_sum),
+        onsets_s=tuple(float(t.time_s[o.index]) for t, o in zip(traces, onsets, strict=True)),
+        time_s=np.arange(n) * period_s,
+        speed_small_rad_s=speeds[0],
+        speed_large_rad_s=speeds[1],
+        speed_sum_rad_s=speeds[2],
+        speed_added_rad_s=added,
+        error_rad_s=speeds[2] - added,
+    )

@@ -1,0 +1,235 @@
+"""The identification pipeline behind ``cartctl identify``: traces in, one result per motor out.
+
+Per motor: gather the experiments that drive it, optionally average whole cycles, optionally
+prefilter (and then also fit without the filter, to show the filter's effect), pick the delay
+(given or estimated), fit ARX, and optionally refine by output error (reporting both). Simulation
+fits are always computed on the raw, unaveraged data, so every variant compares on equal terms.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from cartctl.data import Trace
+from cartctl.errors import InputError
+from cartctl.identify.arx import ArxFit, Segment, first_row, fit_arx
+from cartctl.identify.cycles import average_cycles, find_period, periodic_regression_pad
+from cartctl.identify.delay import DelayEstimate, estimate_delay
+from cartctl.identify.oe import fit_oe
+from cartctl.identify.prefilter import Prefilter
+
+METHODS = ("arx", "oe")
+
+
+@dataclass(frozen=True)
+class IdentifyRequest:
+    """What the user asked for.
+
+    Attributes
+    ----------
+    motors : tuple of str
+        Motors to identify ('a', 'b'). A motor whose voltage is zero in every trace is an error
+        when named alone and skipped (with a note) when both are asked for.
+    na, nb : int
+        Model orders (2, 2 is the report's structure).
+    delay : int or None
+        Input delay nk in samples, or None to estimate it over ``delay_candidates``.
+    prefilter : Prefilter or None
+        Butterworth prefilter on input and output before the fit.
+    method : {'arx', 'oe'}
+        The model returned: ARX least squares, or its output-error refinement.
+    average : bool
+        Average whole excitation cycles before the ARX fit (the input must be periodic).
+    delay_candidates : tuple of int
+        Delays tried when ``delay`` is None.
+    """
+
+    motors: tuple[str, ...] = ("a", "b")
+    na: int = 2
+    nb: int = 2
+    delay: int | None = 2
+    prefilter: Prefilter | None = None
+    method: str = "arx"
+    average: bool = False
+    delay_candidates: tuple[int, ...] = (1, 2, 3, 4, 5, 6)
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise InputError(f"unknown method '{self.method}'; choose one of {', '.join(METHODS)}")
+        bad = [m for m in self.motors if m not in ("a", "b")]
+        if bad or not self.motors:
+            raise InputError(f"motors must be 'a' and/or 'b', got {list(self.motors)}")
+
+
+@dataclass(frozen=True)
+class MotorIdentification:
+    """The result for one motor.
+
+    Attributes
+    ----------
+    motor : str
+    chosen : ArxFit
+        The model the user asked for (``method``, with the prefilter if any).
+    arx : ArxFit
+        The ARX fit (with the prefilter if any).
+    oe : ArxFit or None
+        The output-error refinement, when ``method='oe'``.
+    unfiltered : ArxFit or None
+        ARX without the prefilter, when a prefilter was used: the filter's effect.
+    delay : DelayEstimate or None
+        The delay evidence, when the delay was estimated.
+    cycles_averaged : int or None
+        Number of cycles averaged, when averaging was used.
+    """
+
+    motor: str
+    chosen: ArxFit
+    arx: ArxFit
+    oe: ArxFit | None = None
+    unfiltered: ArxFit | None = None
+    delay: DelayEstimate | None = None
+    cycles_averaged: int | None = None
+
+    def variants(self) -> dict[str, ArxFit]:
+        """Every fit made, by label, for tables and plots."""
+        out: dict[str, ArxFit] = {}
+        if self.unfiltered is not None:
+            out["ARX, unfiltered"] = self.unfiltered
+            out["ARX, prefiltered"] = self.arx
+        else:
+            out["ARX"] = self.arx
+        if self.oe is not None:
+            out["OE"] = self.oe
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        """Contract-3 entry (the chosen fit) plus the side-by-side variants and the evidence."""
+        out = self.chosen.to_dict()
+        if self.oe is not None:
+            out["arx"] = self.arx.to_dict()
+            out["oe"] = self.oe.to_dict()
+        if self.unfiltered is not None:
+            out["unfiltered"] = self.unfiltered.to_dict()
+        out["delay_estimate"] = None if self.delay is None else self.delay.to_dict()
+        out["cycles_averaged"] = self.cycles_averaged
+        return out
+
+
+@dataclass(frozen=True)
+class IdentifyResult:
+    """Per motor results, and notes for the user (skipped motors)."""
+
+    period_s: float
+    motors: dict[str, MotorIdentification]
+    notes: tuple[str, ...] = field(default=())
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``identify --json`` object (contract 3)."""
+        return {"Ts": self.period_s, "motors": {m: r.to_dict() for m, r in self.motors.items()}}
+
+
+def _segments(traces: Sequence[Trace], motor: str) -> list[Segment]:
+    return [(t.speed(motor), t.voltage(motor)) for t in traces if np.any(t.voltage(motor) != 0.0)]
+
+
+def _averaged(
+    segments: Sequence[Segment], lags: int, sources: Sequence[str]
+) -> tuple[list[Segment], int]:
+    out: list[Segment] = []
+    total = 0
+    for (y, u), src in zip(segments, sources, strict=True):
+        period = find_period(u)
+        if period is None:
+            raise InputError(
+                f"--average needs a periodic input with at least two whole cycles; {src}'s is not"
+            )
+        y_avg, u_avg, n = average_cycles(y, u, period)
+        out.append(periodic_regression_pad(y_avg, u_avg, lags))
+        total += n
+    return out, total
+
+
+def identify_motor(
+    motor: str,
+    segments: Sequence[Segment],
+    request: IdentifyRequest,
+    *,
+    period_s: float,
+    sources: Sequence[str],
+) -> MotorIdentification:
+    """Run the pipeline on one motor's experiments (raw (y, u) pairs, rad/s and V)."""
+    raw = list(segments)
+    pf = request.prefilter
+    work = [(pf.apply(y, period_s), pf.apply(u, period_s)) for y, u in raw] if pf else raw
+    delay_est = None
+    nk = request.delay
+    if nk is None:
+        delay_est = estimate_delay(
+            work, na=request.na, nb=request.nb, candidates=request.delay_candidates,
+            period_s=period_s, eval_segments=raw,
+        )  # fmt: skip
+        nk = delay_est.nk
+    cycles = None
+    fit_data, start = work, None
+    if request.average:
+        start = first_row(request.na, request.nb, nk)
+        fit_data, cycles = _averaged(work, start, sources)
+
+    def arx(data: Sequence[Segment]) -> ArxFit:
+        return fit_arx(data, na=request.na, nb=request.nb, nk=nk, period_s=period_s, start=start,
+                       eval_segments=raw)  # fmt: skip
+
+    arx_fit = arx(fit_data)
+    unfiltered = None
+    if pf is not None:
+        unfiltered = arx(_averaged(raw, start, sources)[0] if request.average else raw)
+    oe_fit = fit_oe(work, arx_fit.model, eval_segments=raw) if request.method == "oe" else None
+    return MotorIdentification(
+        motor=motor,
+        chosen=oe_fit or arx_fit,
+        arx=arx_fit,
+        oe=oe_fit,
+        unfiltered=unfiltered,
+        delay=delay_est,
+        cycles_averaged=cycles,
+    )
+
+
+def identify(traces: Sequence[Trace], request: IdentifyRequest) -> IdentifyResult:
+    """Identify the requested motors from the traces.
+
+    Raises
+    ------
+    InputError
+        Traces with different sample periods, or a motor named alone that no trace drives.
+    """
+    if not traces:
+        raise InputError("no traces to identify from")
+    period_s = round(traces[0].period_s, 9)
+    for t in traces[1:]:
+        if abs(t.period_s - period_s) > 1e-6:
+            raise InputError(
+                f"traces have different sample periods: {period_s} s ({traces[0].source}) and "
+                f"{t.period_s} s ({t.source})"
+            )
+    results: dict[str, MotorIdentification] = {}
+    notes: list[str] = []
+    for motor in request.motors:
+        segments = _segments(traces, motor)
+        if not segments:
+            names = ", ".join(str(t.source) for t in traces)
+            if len(request.motors) == 1:
+                raise InputError(
+                    f"motor {motor}'s voltage is zero throughout {names}; nothing to identify"
+                )
+            notes.append(f"motor {motor} skipped: its voltage is zero throughout {names}")
+            continue
+        sources = [str(t.source) for t in traces if np.any(t.voltage(motor) != 0.0)]
+        results[motor] = identify_motor(
+            motor, segments, request, period_s=period_s, sources=sources
+        )
+    return IdentifyResult(period_s, results, tuple(notes))
