@@ -277,3 +277,33 @@ def test_delay_estimate_ties_go_to_the_smaller_delay() -> None:
     assert est.residual_rms[1] < 1e-9
     assert est.residual_rms[2] < 1e-9
     assert est.nk == 2
+
+
+def test_report_writes_the_figures_and_summary(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, air_path: Path
+) -> None:
+    import matplotlib.image
+
+    u = square(10.0, cycles=3)
+    trace = run_experiment(PhysicsPlant("air", noise_std_rad_s=0.2, seed=4), u, u).trace
+    data = tmp_path / "air.csv"
+    write_trace(trace, data)
+    report = tmp_path / "report"
+    code = main(["identify", str(data), "--prefilter", "butter", "--method", "oe",
+                 "--report", str(report), "--compare", str(air_path), "--json"])  # fmt: skip
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    doc = json.loads(out)  # --json stays one object even with --report
+    summary = (report / "summary.md").read_text()
+    for name in ("io", "etfe_a", "etfe_b", "pzmap_a", "pzmap_b", "simulation_a", "simulation_b"):
+        png = report / f"{name}.png"
+        image = matplotlib.image.imread(png)
+        assert image.shape[0] > 300
+        assert image.shape[1] > 500
+        assert f"({name}.png)" in summary
+    # the table shows the same numbers as --json
+    fit = doc["motors"]["a"]["oe"]["fit_simulation_percent"]
+    assert "| OE | 2 |" in summary
+    assert f"{fit:.2f}" in summary
+    assert "ARX, unfiltered" in summary
+    assert "ARX, prefiltered" in summary

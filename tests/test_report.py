@@ -151,7 +151,6 @@ def test_report_end_to_end(tmp_path: Path, trace: Trace, models: dict[str, ArxMo
     """The figures of one identification, embedded in summary.md, all exist."""
     e = etfe(trace.speed_a, trace.voltage_a, TS, period_ticks=300)
     images = [
-        plot_io(trace, ("a", "b"), tmp_path / "io.png", title="io"),
         plot_etfe(e, models, tmp_path / "etfe_a.png", title="etfe"),
         plot_pzmap(models, tmp_path / "pz_a.png", title="pz"),
     ]

@@ -8,6 +8,7 @@ line on stderr and exit with code 2, with no traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import warnings
 from collections.abc import Sequence
@@ -57,6 +58,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except CartctlError as exc:
         print(f"cartctl {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except BrokenPipeError:  # output piped into a command that stopped reading (| head)
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - keeps the interpreter's flush quiet
+        return 0
     except OSError as exc:  # a file we could not write or read for a reason the user can fix
         print(
             f"cartctl {args.command}: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(

@@ -57,7 +57,7 @@ _COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:
 
 @contextmanager
 def _figure(width_in: float, height_in: float) -> Iterator[Figure]:
-    """A constrained-layout figure under the report's style, closed on exit."""
+    """A constrained-layout figure drawn under the report's style (no pyplot, nothing to close)."""
     import matplotlib as mpl
     from matplotlib.figure import Figure
 
