@@ -24,7 +24,6 @@ Extra keys in ``[motors.X]`` (``theta_std``, fit percentages …) are kept as ``
 
 from __future__ import annotations
 
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,8 +31,9 @@ from typing import Any
 
 import tomli_w
 
-from cartctl.errors import CartctlError, DataFileError, InputError, MissingFileError
+from cartctl.errors import CartctlError, DataFileError, InputError
 from cartctl.model import ArxModel
+from cartctl.tomlfile import read_toml, require
 
 FORMAT = "cartctl-model/1"
 MOTORS = ("a", "b")
@@ -155,12 +155,7 @@ def load_models(path: str | Path) -> ModelFile:
         The file is not valid TOML or misses a required key; the message names the key.
     """
     path = Path(path)
-    if not path.is_file():
-        raise MissingFileError(path, "model file")
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise DataFileError(path, f"not a valid TOML model file ({exc})") from None
+    doc = read_toml(path, "model file")
     try:
         return _parse(doc, path)
     except DataFileError:
@@ -169,22 +164,11 @@ def load_models(path: str | Path) -> ModelFile:
         raise DataFileError(path, str(exc)) from None
 
 
-def _require(
-    table: Mapping[str, Any], key: str, kind: type | tuple[type, ...], path: Path, where: str
-) -> Any:
-    if key not in table:
-        raise DataFileError(path, f"missing key '{key}' in {where}")
-    value = table[key]
-    if not isinstance(value, kind) or isinstance(value, bool):
-        raise DataFileError(path, f"key '{key}' in {where} has the wrong type: {value!r}")
-    return value
-
-
 def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
     fmt = doc.get("format", FORMAT)
     if fmt != FORMAT:
         raise DataFileError(path, f"unknown format {fmt!r}; expected {FORMAT!r}")
-    period_s = float(_require(doc, "period_s", (int, float), path, "the top level"))
+    period_s = float(require(doc, "period_s", (int, float), path, "the top level"))
     prov_tab = doc.get("provenance", {})
     provenance = Provenance(
         source=str(prov_tab.get("source", "unknown")),
@@ -194,7 +178,7 @@ def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
         prefilter=str(prov_tab.get("prefilter", "none")),
         notes=str(prov_tab.get("notes", "")),
     )
-    motors_tab = _require(doc, "motors", dict, path, "the top level")
+    motors_tab = require(doc, "motors", dict, path, "the top level")
     unknown = sorted(set(motors_tab) - set(MOTORS))
     if unknown:
         raise DataFileError(path, f"unknown motor(s) {unknown}; motors are 'a' and 'b'")
@@ -207,10 +191,10 @@ def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
             continue
         entry = motors_tab[name]
         where = f"[motors.{name}]"
-        theta = _require(entry, "theta", list, path, where)
-        na = _require(entry, "na", int, path, where)
-        nb = _require(entry, "nb", int, path, where)
-        nk = _require(entry, "nk", int, path, where)
+        theta = require(entry, "theta", list, path, where)
+        na = require(entry, "na", int, path, where)
+        nb = require(entry, "nb", int, path, where)
+        nk = require(entry, "nk", int, path, where)
         if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in theta):
             raise DataFileError(path, f"theta in {where} must be a list of numbers, got {theta!r}")
         motors[name] = ArxModel.from_theta(theta, na=na, nb=nb, nk=nk, period_s=period_s)
