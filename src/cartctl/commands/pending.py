@@ -37,13 +37,6 @@ class PendingCommand:
         )
 
 
-def _design(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.toml")
-    p.add_argument("--method", choices=("pi", "poles"), required=True)
-    p.add_argument("--out", metavar="CONTROLLER.toml")
-    p.add_argument("--json", action="store_true")
-
-
 def _run(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plant", default="sim", metavar="PLANT")
     p.add_argument("--controller", metavar="CONTROLLER.toml")
@@ -59,8 +52,5 @@ def _review(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", metavar="FILE.rrd")
 
 
-design = PendingCommand(
-    "design", "design PI or pole-placement controllers on a model", "design stage", _design
-)
 run = PendingCommand("run", "run the 10 ms closed loop against a plant", "10 ms loop", _run)
 review = PendingCommand("review", "open a recorded run in the Rerun viewer", "10 ms loop", _review)

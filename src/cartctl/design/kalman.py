@@ -1,0 +1,254 @@
+"""The steady-state Kalman speed estimator, designed on the realisation of a motor model.
+
+Where it sits: the ``design`` stage, beside pole placement (which embeds one in every
+:class:`~cartctl.design.poles.PolesDesign`). The runtime estimators in
+:mod:`cartctl.runtime.kalman` run what is designed here.
+
+The estimator's model is the observer-form realisation of :mod:`cartctl.design.statespace`
+(x_1 = the modelled speed), optionally extended by one input-disturbance state b (V). The model
+is fitted to the measured speed, a count difference over the last tick, so x̂_1 estimates the
+*average* speed over the last tick, which is about the true speed half a tick earlier::
+
+    x[k+1] = A x[k] + B (u[k] + b[k] + w[k]),    b[k+1] = b[k] + w_b[k],    y[k] = x_1[k] + v[k]
+
+- w (V std ``process_noise_std_v``): an input-equivalent voltage disturbance standing for PWM
+  rounding (47 mV steps: 14 mV std), the part of friction that varies fast, and model error. The
+  default 0.1 V is a few percent of a typical 3–6 V command; on the cart simulator 0.05–0.1 V gave
+  the smallest speed error, 0.2 V a third more.
+- b (a random walk, step std ``bias_drift_std_v`` per tick): the slowly varying part of that
+  disturbance, mainly dry friction and rolling resistance (≈ 0.8 V on the ground, an offset the ARX
+  model cannot represent). Without it the estimate carries the model's static error (0.6–0.9
+  rad/s RMS on the simulator with the report's model); with it the estimate is offset-free. The
+  default 0.03 V per tick gives b a 40 ms time constant (estimator pole ≈ 0.78 on the ground
+  models). 0 leaves the state out.
+- v (variance R): the encoder quantisation. The speed is a whole-count difference over one tick,
+  q = (2π / counts_per_rev) / Ts rad/s per count (0.3506 rad/s for 1792 counts and 10 ms). Each
+  count reading floors the angle, an error uniform on [0, 1) count (variance 1/12 count²); the
+  difference of two such errors has variance 1/6 count², so R = q² / 6 + (extra noise)². This
+  treats the errors of successive speeds as white, which they are not (they are the differences of
+  one white sequence, so neighbours correlate by −½, and at a whole number of counts per tick the
+  error freezes); it is the usual simplification.
+
+The gain is the steady-state *filter* gain L = P Cᵀ (C P Cᵀ + R)⁻¹, with P the a priori (predicted)
+covariance, the stabilising solution of the filter DARE ``P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ
++ Q``. It corrects the prediction with the measurement of the same tick: x̂[k|k] = x̂[k|k−1] +
+L (y[k] − C x̂[k|k−1]); filterpy's time-varying gain converges to it. ``control.dlqe`` returns the
+*predictor* gain A L instead. The estimation error of x̂[k|k] evolves with (I − L C) A, whose
+eigenvalues are the estimator poles.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import NDArray
+
+from cartctl.design.statespace import StateSpace, realise
+from cartctl.errors import InputError
+from cartctl.model import ArxModel
+
+__all__ = [
+    "DEFAULT_BIAS_DRIFT_STD_V",
+    "DEFAULT_PROCESS_NOISE_STD_V",
+    "KalmanDesign",
+    "design_kalman",
+    "quantisation_std_rad_s",
+]
+
+DEFAULT_PROCESS_NOISE_STD_V = 0.1
+"""Input-equivalent white voltage disturbance (V std per tick); see the module docstring."""
+
+DEFAULT_BIAS_DRIFT_STD_V = 0.03
+"""Random-walk step of the input-disturbance state (V std per tick); see the module docstring."""
+
+COUNTS_PER_REV = 1792
+"""Encoder counts per wheel revolution on the cart."""
+
+
+def quantisation_std_rad_s(period_s: float, counts_per_rev: int = COUNTS_PER_REV) -> float:
+    """Standard deviation (rad/s) of the quantisation error of a whole-count speed: q / √6.
+
+    q = (2π / counts_per_rev) / Ts is one count per tick in rad/s; the error is the difference of
+    two independent errors uniform over one count (variance 2 × q²/12).
+    """
+    return (2.0 * math.pi / counts_per_rev) / period_s / math.sqrt(6.0)
+
+
+@dataclass(frozen=True, eq=False)
+class KalmanDesign:
+    """A steady-state Kalman filter for the speed (names as in the literature and filterpy).
+
+    The state is x = [x_1 … x_n, b]: the n states of the realisation (rad/s; x_1 is the speed),
+    then, when ``has_bias``, the input disturbance b (V). m = n + 1 with the bias, else n.
+
+    Attributes
+    ----------
+    A : ndarray, shape (m, m)
+        State transition (filterpy's F).
+    B : ndarray, shape (m,)
+        Input vector (rad/s per V); 0 in the bias row.
+    C : ndarray, shape (m,)
+        Measurement row (filterpy's H), [1, 0, …, 0].
+    Q : ndarray, shape (m, m)
+        Process-noise covariance per tick: σ_w² B_x B_xᵀ on the realisation, σ_b² on the bias.
+    R : float
+        Measurement-noise variance ((rad/s)²).
+    P : ndarray, shape (m, m)
+        Steady-state a priori covariance (the DARE solution), P[k|k−1].
+    L : ndarray, shape (m,)
+        Steady-state filter gain, P Cᵀ (C P Cᵀ + R)⁻¹.
+    n_model_states : int
+        n, the realisation's order (the states a state-feedback gain acts on).
+    period_s : float
+        Ts (s).
+    process_noise_std_v, bias_drift_std_v, measurement_noise_std_rad_s : float
+        The noise levels the design used (σ_w in V, σ_b in V per tick, √R in rad/s).
+    """
+
+    A: NDArray[np.float64]
+    B: NDArray[np.float64]
+    C: NDArray[np.float64]
+    Q: NDArray[np.float64]
+    R: float
+    P: NDArray[np.float64]
+    L: NDArray[np.float64]
+    n_model_states: int
+    period_s: float
+    process_noise_std_v: float
+    bias_drift_std_v: float
+    measurement_noise_std_rad_s: float
+
+    @property
+    def has_bias(self) -> bool:
+        """True when the state ends with the input-disturbance state b."""
+        return self.A.shape[0] > self.n_model_states
+
+    def posterior_covariance(self) -> NDArray[np.float64]:
+        """Steady-state a posteriori covariance P[k|k] = (I − L C) P, shape (m, m)."""
+        m = self.A.shape[0]
+        return (np.eye(m) - np.outer(self.L, self.C)) @ self.P
+
+    def poles(self) -> NDArray[np.complex128]:
+        """Estimator poles: eigenvalues of (I − L C) A, shape (m,), sorted by magnitude."""
+        m = self.A.shape[0]
+        eig = np.linalg.eigvals((np.eye(m) - np.outer(self.L, self.C)) @ self.A)
+        return np.array(sorted(eig.astype(complex), key=lambda p: (abs(p), p.imag)))
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON form: the matrices as nested lists, the noise levels and ``estimator_poles``."""
+        return {
+            "A": self.A.tolist(),
+            "B": self.B.tolist(),
+            "C": self.C.tolist(),
+            "Q": self.Q.tolist(),
+            "R": self.R,
+            "P": self.P.tolist(),
+            "L": self.L.tolist(),
+            "n_model_states": self.n_model_states,
+            "has_bias": self.has_bias,
+            "period_s": self.period_s,
+            "process_noise_std_v": self.process_noise_std_v,
+            "bias_drift_std_v": self.bias_drift_std_v,
+            "measurement_noise_std_rad_s": self.measurement_noise_std_rad_s,
+            "estimator_poles": [[float(p.real), float(p.imag)] for p in self.poles()],
+        }
+
+
+def _nonnegative(name: str, value: float, *, positive: bool = False) -> float:
+    value = float(value)
+    if not math.isfinite(value) or value < 0.0 or (positive and value == 0.0):
+        need = "> 0" if positive else ">= 0"
+        raise InputError(f"{name} must be a finite number {need}, got {value}")
+    return value
+
+
+def _frozen(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+def design_kalman(
+    plant: ArxModel | StateSpace,
+    *,
+    process_noise_std_v: float = DEFAULT_PROCESS_NOISE_STD_V,
+    bias_drift_std_v: float = DEFAULT_BIAS_DRIFT_STD_V,
+    extra_noise_std_rad_s: float = 0.0,
+    counts_per_rev: int = COUNTS_PER_REV,
+    extra_delay_ticks: int = 0,
+) -> KalmanDesign:
+    """Design the steady-state Kalman filter (see the module docstring for the model).
+
+    Parameters
+    ----------
+    plant : ArxModel or StateSpace
+        The motor model, or its realisation from :func:`~cartctl.design.statespace.realise`.
+    process_noise_std_v : float
+        σ_w, white input-equivalent voltage disturbance (V), > 0.
+    bias_drift_std_v : float
+        σ_b, random-walk step of the input-disturbance state (V per tick); 0 leaves it out.
+    extra_noise_std_rad_s : float
+        Measurement noise beyond the quantisation (rad/s std), added in variance.
+    counts_per_rev : int
+        Encoder counts per wheel revolution (sets the quantisation step).
+    extra_delay_ticks : int
+        With an ArxModel: extra ticks of input delay to realise (see ``realise``). Must be 0 with
+        a StateSpace (which has its delay built in).
+
+    Returns
+    -------
+    KalmanDesign
+
+    Raises
+    ------
+    InputError
+        A noise level that is negative, non-finite, or zero where it must not be; a bad count; no
+        stabilising DARE solution.
+    """
+    if isinstance(plant, ArxModel):
+        plant = realise(plant, extra_delay_ticks=extra_delay_ticks)
+    elif extra_delay_ticks != 0:
+        raise InputError("extra_delay_ticks applies to an ArxModel; realise the delay into it")
+    sw = _nonnegative("process_noise_std_v", process_noise_std_v, positive=True)
+    sb = _nonnegative("bias_drift_std_v", bias_drift_std_v)
+    extra = _nonnegative("extra_noise_std_rad_s", extra_noise_std_rad_s)
+    if not isinstance(counts_per_rev, int | np.integer) or counts_per_rev < 1:
+        raise InputError(f"counts_per_rev must be a whole number >= 1, got {counts_per_rev!r}")
+    R = quantisation_std_rad_s(plant.period_s, int(counts_per_rev)) ** 2 + extra**2
+    n = plant.order
+    m = n + (1 if sb > 0.0 else 0)
+    A = np.zeros((m, m))
+    A[:n, :n] = plant.A
+    B = np.zeros(m)
+    B[:n] = plant.B
+    C = np.zeros(m)
+    C[:n] = plant.C
+    Q = np.zeros((m, m))
+    Q[:n, :n] = sw**2 * np.outer(plant.B, plant.B)
+    if m > n:
+        A[:n, n] = plant.B  # the disturbance enters where the voltage does
+        A[n, n] = 1.0
+        Q[n, n] = sb**2
+    try:
+        P = scipy.linalg.solve_discrete_are(A.T, C.reshape(m, 1), Q, np.array([[R]]))
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        raise InputError(f"no steady-state Kalman gain for this model and noise ({exc})") from None
+    P = 0.5 * (P + P.T)
+    L = P @ C / (C @ P @ C + R)
+    return KalmanDesign(
+        A=_frozen(A),
+        B=_frozen(B),
+        C=_frozen(C),
+        Q=_frozen(Q),
+        R=float(R),
+        P=_frozen(P),
+        L=_frozen(L),
+        n_model_states=n,
+        period_s=plant.period_s,
+        process_noise_std_v=sw,
+        bias_drift_std_v=sb,
+        measurement_noise_std_rad_s=math.sqrt(R),
+    )

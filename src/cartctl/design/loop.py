@@ -1,0 +1,80 @@
+"""The linear feedback part of a pole-placement controller, for margins and ``controller_num/den``.
+
+With the steady-state estimator the pole-placement controller is linear time-invariant. Its state
+is the predicted estimate x̂[k|k−1] (m states) and the error integral x_i; per tick (the order of
+:class:`~cartctl.runtime.statefeedback.StateFeedbackController`)::
+
+    x̂c     = x̂ + L (y − C x̂)
+    u      = −K x̂c[:n] − Ki x_i + Kr r
+    x̂⁺     = A x̂c + B u
+    x_i⁺   = x_i + Ts (r − y)
+
+The loop is broken at the measurement: C_fb(z) = −U(z)/Y(z) with r = 0, so that the open loop is
+C_fb(z) G(z) z^(−extra) with negative feedback, as for the PI.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cartctl.design.poles import PolesDesign
+from cartctl.model import ArxModel
+
+
+def feedback_tf_coeffs(design: PolesDesign) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """C_fb(z) = −U/Y as (num, den) in descending powers of z (minimal: common roots cancelled)."""
+    import control
+
+    est = design.estimator
+    m = est.A.shape[0]
+    n = design.K.size
+    k_full = np.zeros(m)
+    k_full[:n] = design.K
+    lc = np.eye(m) - np.outer(est.L, est.C)
+    # state s = [x̂ (m), x_i], input y, output u
+    a = np.zeros((m + 1, m + 1))
+    a[:m, :m] = est.A @ lc - np.outer(est.B, k_full @ lc)
+    a[:m, m] = -est.B * design.Ki
+    a[m, m] = 1.0
+    b = np.zeros((m + 1, 1))
+    b[:m, 0] = est.A @ est.L - est.B * float(k_full @ est.L)
+    b[m, 0] = -design.period_s
+    c = np.zeros((1, m + 1))
+    c[0, :m] = -(k_full @ lc)
+    c[0, m] = -design.Ki
+    d = np.array([[-float(k_full @ est.L)]])
+    # ss2tf then a transfer-function minreal: the state-space minreal needs slycot
+    tf = control.ss2tf(control.ss(a, b, -c, -d, design.period_s)).minreal(tol=1e-9)
+    num = np.atleast_1d(np.squeeze(tf.num[0][0]))
+    den = np.atleast_1d(np.squeeze(tf.den[0][0]))
+    return num / den[0], den / den[0]
+
+
+def loop_analysis(
+    num: NDArray[np.float64], den: NDArray[np.float64], model: ArxModel, extra_delay_ticks: int
+) -> dict[str, Any]:
+    """Margins and crossover of the open loop C(z) G(z) z^(−extra), and the closed-loop poles."""
+    import control
+
+    ts = model.period_s
+    loop = (
+        control.tf(num, den, ts)
+        * model.to_tf()
+        * control.tf([1.0], [1.0] + [0.0] * extra_delay_ticks, ts)
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        gm, pm, _, _, wcp, _ = control.stability_margins(loop, method="poly")
+    ln, ld = np.squeeze(loop.num[0][0]), np.squeeze(loop.den[0][0])
+    poles = np.roots(np.polyadd(ld, ln))
+    return {
+        "phase_margin_deg": float(pm) if math.isfinite(pm) else None,
+        "gain_margin_db": 20.0 * math.log10(gm) if math.isfinite(gm) and gm > 0 else None,
+        "crossover_hz": float(wcp) / (2.0 * math.pi) if math.isfinite(wcp) else None,
+        "loop_poles": [[float(p.real), float(p.imag)] for p in sorted(poles, key=abs)],
+    }

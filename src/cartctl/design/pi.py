@@ -1,0 +1,372 @@
+"""Discrete PI speed controller design on an identified ARX model (pure maths, no I/O).
+
+Pipeline: after ``identify`` (a model from ``models/*.toml``), before the runtime
+:class:`cartctl.runtime.pi.PiController`, which runs the gains found here in the 10 ms loop.
+
+The PI form (backward-Euler integral, the error of this tick enters the integral at once)::
+
+    I[k] = I[k−1] + Ki·Ts·e[k],     u[k] = Kp·e[k] + I[k]
+
+    C(z) = U(z)/E(z) = Kp + Ki·Ts·z/(z − 1) = ((Kp + Ki·Ts)·z − Kp) / (z − 1)
+
+with e = reference − speed (rad/s), u the voltage (V), Kp in V/(rad/s), Ki in V/rad, Ts in s.
+The design places one point of the open loop L(z) = C(z)·G(z)·z^−extra on the unit circle at the
+crossover: |L| = 1 and ∠L = −180° + PM. That one complex equation, linear in (Kp, Ki), gives the
+two gains. On a plant with little lag a low crossover leaves more margin than asked (the solution
+needs Kp < 0); at a high one the plant lags too much (it needs Ki ≤ 0, phase lead). Both are refused
+with the range of crossovers that works.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import optimize
+
+from cartctl.errors import InputError
+from cartctl.model import ArxModel
+
+PM_RANGE_DEG = (0.0, 89.0)
+"""Phase margins accepted: (0, 89] degrees."""
+
+_GRID_POINTS = 400
+_FREQ_POINTS = 4001
+_BANDWIDTH_GRID = 41
+
+
+def _check_common(model: ArxModel, phase_margin_deg: float, extra_delay_ticks: int) -> None:
+    if not model.is_stable():
+        raise InputError(
+            "the model is unstable (a pole on or outside the unit circle); this PI design needs "
+            "a stable model"
+        )
+    if not (math.isfinite(phase_margin_deg) and 0.0 < phase_margin_deg <= PM_RANGE_DEG[1]):
+        raise InputError(
+            f"phase margin must be in (0, {PM_RANGE_DEG[1]:g}] degrees, got {phase_margin_deg}"
+        )
+    if not isinstance(extra_delay_ticks, int | np.integer) or extra_delay_ticks < 0:
+        raise InputError(
+            f"extra delay must be a whole number of ticks >= 0, got {extra_delay_ticks!r}"
+        )
+
+
+def _loop_coeffs(
+    model: ArxModel, kp: float, ki: float, extra: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Open loop C·G·z^−extra as (num, den), descending powers of z."""
+    ts = model.period_s
+    num = np.polymul([kp + ki * ts, -kp], model.num())
+    den = np.polymul(np.polymul([1.0, -1.0], model.den()), np.r_[1.0, np.zeros(extra)])
+    return num, den
+
+
+def _gains(
+    model: ArxModel, phase_margin_deg: float, freq_hz: NDArray[np.float64], extra: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Kp, Ki (arrays) that put L(e^{jωTs}) at angle −180° + PM on the unit circle."""
+    ts = model.period_s
+    z = np.exp(2j * np.pi * freq_hz * ts)
+    plant = np.polyval(model.num(), z) / np.polyval(model.den(), z) * z ** (-extra)
+    target = np.exp(1j * np.deg2rad(phase_margin_deg - 180.0)) / plant  # required C(e^{jωTs})
+    w = ts * z / (z - 1.0)  # C = Kp·1 + Ki·w: Re and Im give two real equations
+    ki = target.imag / w.imag
+    kp = target.real - ki * w.real
+    return kp, ki
+
+
+def _stable(model: ArxModel, kp: float, ki: float, extra: int) -> bool:
+    num, den = _loop_coeffs(model, kp, ki, extra)
+    return bool(np.all(np.abs(np.roots(np.polyadd(den, num))) < 1.0))
+
+
+def _solve(model: ArxModel, pm: float, freq_hz: float, extra: int) -> tuple[float, float, str]:
+    """(Kp, Ki, why a PI cannot meet (pm, freq_hz)); the reason is '' when it can."""
+    kp, ki = (float(v[0]) for v in _gains(model, pm, np.array([freq_hz]), extra))
+    return kp, ki, _problem(model, pm, kp, ki, extra)
+
+
+def _problem(model: ArxModel, pm: float, kp: float, ki: float, extra: int) -> str:
+    if kp < 0.0:
+        return (
+            f"it would need Kp = {kp:.3g} V/(rad/s) < 0: there even a pure integrator leaves more "
+            f"than {pm:g}° of margin"
+        )
+    if ki <= 0.0:
+        return (
+            f"it would need Ki = {ki:.3g} V/rad <= 0: there even a pure gain leaves less than "
+            f"{pm:g}° of margin"
+        )
+    if not _stable(model, kp, ki, extra):
+        return "the closed loop would be unstable"
+    return ""
+
+
+def crossover_range(
+    model: ArxModel, *, phase_margin_deg: float, extra_delay_ticks: int = 0
+) -> tuple[float, float] | None:
+    """The crossovers (Hz) at which a PI gives exactly this phase margin on the model.
+
+    The lowest band of frequencies where the solution has Kp ≥ 0, Ki > 0 and a stable closed
+    loop, its edges refined by bisection to about 1e-6 Hz.
+
+    Returns
+    -------
+    (low_hz, high_hz) or None
+        None when no crossover below Nyquist works.
+    """
+    _check_common(model, phase_margin_deg, extra_delay_ticks)
+    nyquist = 0.5 / model.period_s
+    grid = np.geomspace(nyquist * 1e-4, nyquist * (1.0 - 1e-6), _GRID_POINTS)
+    ok = [not _solve(model, phase_margin_deg, f, extra_delay_ticks)[2] for f in grid]
+    if not any(ok):
+        return None
+    first = ok.index(True)
+    last = ok.index(False, first) - 1 if False in ok[first:] else len(ok) - 1
+
+    def edge(good: float, bad: float) -> float:
+        for _ in range(60):
+            mid = 0.5 * (good + bad)
+            if not _solve(model, phase_margin_deg, mid, extra_delay_ticks)[2]:
+                good = mid
+            else:
+                bad = mid
+        return good
+
+    low = edge(grid[first], grid[first - 1]) if first > 0 else float(grid[0])
+    high = edge(grid[last], grid[last + 1]) if last < len(grid) - 1 else float(grid[-1])
+    return float(low), float(high)
+
+
+def _range_text(model: ArxModel, pm: float, extra: int) -> str:
+    span = crossover_range(model, phase_margin_deg=pm, extra_delay_ticks=extra)
+    if span is None:
+        return f"no crossover below Nyquist gives {pm:g}° on this model; try a smaller margin"
+    low, high = math.ceil(span[0] * 100.0) / 100.0, math.floor(span[1] * 100.0) / 100.0
+    return f"for {pm:g}° the crossover must lie between {low:.2f} Hz and {high:.2f} Hz"
+
+
+def design_pi(
+    model: ArxModel,
+    *,
+    phase_margin_deg: float,
+    crossover_hz: float,
+    extra_delay_ticks: int = 0,
+) -> PiDesign:
+    """PI gains for an exact phase margin at a given gain-crossover frequency.
+
+    Parameters
+    ----------
+    model : ArxModel
+        Stable motor model, voltage (V) to speed (rad/s).
+    phase_margin_deg : float
+        Phase margin PM in (0, 89] degrees.
+    crossover_hz : float
+        Gain-crossover frequency in (0, Nyquist) Hz.
+    extra_delay_ticks : int
+        Ticks of delay in the loop beyond the model's own (a PC-side serial link, say).
+
+    Returns
+    -------
+    PiDesign
+
+    Raises
+    ------
+    InputError
+        A value out of range, an unstable model, or a request no PI meets (the message gives the
+        crossovers that work for that margin).
+    """
+    _check_common(model, phase_margin_deg, extra_delay_ticks)
+    nyquist = 0.5 / model.period_s
+    if not (math.isfinite(crossover_hz) and 0.0 < crossover_hz < nyquist):
+        raise InputError(
+            f"crossover must be in (0, {nyquist:g}) Hz (below Nyquist), got {crossover_hz}"
+        )
+    extra = int(extra_delay_ticks)
+    kp, ki, problem = _solve(model, phase_margin_deg, crossover_hz, extra)
+    if problem:
+        raise InputError(
+            f"a PI cannot give {phase_margin_deg:g}° phase margin at {crossover_hz:g} Hz on this "
+            f"model ({problem}); {_range_text(model, phase_margin_deg, extra)}"
+        )
+    return PiDesign(kp, ki, model.period_s, extra, model, phase_margin_deg, crossover_hz)
+
+
+def design_pi_bandwidth(
+    model: ArxModel,
+    *,
+    bandwidth_hz: float,
+    phase_margin_deg: float = 60.0,
+    extra_delay_ticks: int = 0,
+) -> PiDesign:
+    """PI gains for a closed-loop −3 dB bandwidth at a given phase margin.
+
+    The crossover is found with :func:`scipy.optimize.brentq` inside :func:`crossover_range`, on
+    the branch where the bandwidth grows with the crossover (near the top of the range Ki → 0 and
+    the bandwidth falls again); of two crossovers with the same bandwidth, the lower is chosen.
+
+    Parameters
+    ----------
+    bandwidth_hz : float
+        Wanted closed-loop (reference → speed) −3 dB bandwidth (Hz).
+    phase_margin_deg, extra_delay_ticks
+        As in :func:`design_pi`.
+
+    Raises
+    ------
+    InputError
+        As :func:`design_pi`, or a bandwidth that no crossover in range gives (the message says
+        which bandwidths are possible at that margin).
+    """
+    pm, extra = phase_margin_deg, extra_delay_ticks
+    span = crossover_range(model, phase_margin_deg=pm, extra_delay_ticks=extra)
+    if not (math.isfinite(bandwidth_hz) and bandwidth_hz > 0.0):
+        raise InputError(f"bandwidth must be a positive number of Hz, got {bandwidth_hz}")
+    if span is None:
+        raise InputError(_range_text(model, pm, extra))
+    low, high = span[0] + 1e-6 * (span[1] - span[0]), span[1] - 1e-6 * (span[1] - span[0])
+
+    def at(fc: float) -> PiDesign:
+        return design_pi(model, phase_margin_deg=pm, crossover_hz=fc, extra_delay_ticks=extra)
+
+    grid = np.linspace(low, high, _BANDWIDTH_GRID)
+    widths = [at(fc).bandwidth_hz() for fc in grid]
+    top = int(np.argmax(widths))
+    if not widths[0] <= bandwidth_hz <= widths[top]:
+        raise InputError(
+            f"a PI with {pm:g}° phase margin cannot give a {bandwidth_hz:g} Hz closed-loop "
+            f"bandwidth on this model; it gives {widths[0]:.2f} Hz to {widths[top]:.2f} Hz"
+        )
+    fc = float(grid[top])
+    if bandwidth_hz < widths[top]:
+        fc = optimize.brentq(lambda f: at(f).bandwidth_hz() - bandwidth_hz, low, fc, xtol=1e-9)
+    design = at(fc)
+    return replace(design, target_bandwidth_hz=float(bandwidth_hz))
+
+
+@dataclass(frozen=True)
+class PiDesign:
+    """A PI design: the gains, the model and the request it came from.
+
+    Attributes
+    ----------
+    kp : float
+        Proportional gain Kp (V/(rad/s)).
+    ki : float
+        Integral gain Ki (V/rad): volts per radian of accumulated speed error.
+    period_s : float
+        Sample period Ts (s).
+    extra_delay_ticks : int
+        Loop delay assumed beyond the model's own (ticks).
+    model : ArxModel
+        The model designed on.
+    target_phase_margin_deg, target_crossover_hz : float
+        The request (for a bandwidth design, the crossover found for it).
+    target_bandwidth_hz : float or None
+        The requested closed-loop bandwidth, for :func:`design_pi_bandwidth`.
+    """
+
+    kp: float
+    ki: float
+    period_s: float
+    extra_delay_ticks: int
+    model: ArxModel
+    target_phase_margin_deg: float
+    target_crossover_hz: float
+    target_bandwidth_hz: float | None = None
+
+    def controller_tf_coeffs(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """C(z) from error (rad/s) to voltage (V): ``([Kp + Ki·Ts, −Kp], [1, −1])``, powers of z."""
+        return np.array([self.kp + self.ki * self.period_s, -self.kp]), np.array([1.0, -1.0])
+
+    def _loop(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        return _loop_coeffs(self.model, self.kp, self.ki, self.extra_delay_ticks)
+
+    def open_loop(self) -> Any:
+        """L(z) = C(z)·G(z)·z^−extra as a python-control ``TransferFunction`` (dt = Ts)."""
+        import control
+
+        return control.tf(*self._loop(), dt=self.period_s)
+
+    def closed_loop(self) -> Any:
+        """Reference → speed, L / (1 + L), as a python-control ``TransferFunction`` (dt = Ts)."""
+        import control
+
+        num, den = self._loop()
+        return control.tf(num, np.polyadd(den, num), dt=self.period_s)
+
+    def _sensitivity(
+        self, freq_hz: NDArray[np.float64]
+    ) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
+        """S = 1/(1 + L) and T = L/(1 + L) at these frequencies (Hz); T = 1 at 0 Hz."""
+        num, den = self._loop()
+        z = np.exp(2j * np.pi * freq_hz * self.period_s)
+        n, d = np.polyval(num, z), np.polyval(den, z)
+        return d / (d + n), n / (d + n)
+
+    def bandwidth_hz(self) -> float:
+        """Closed-loop −3 dB bandwidth (Hz): where |T| first falls below 1/√2; Nyquist if never."""
+        nyquist = 0.5 / self.period_s
+        grid = np.linspace(0.0, nyquist, _FREQ_POINTS)
+
+        def excess(f: float | NDArray[np.float64]) -> Any:
+            return np.abs(self._sensitivity(np.atleast_1d(f))[1]) - 1.0 / math.sqrt(2.0)
+
+        below = np.flatnonzero(excess(grid) < 0.0)
+        if below.size == 0:
+            return nyquist
+        i = int(below[0])
+        return float(optimize.brentq(lambda f: float(excess(f)[0]), grid[i - 1], grid[i]))
+
+    def analysis(self) -> dict[str, Any]:
+        """Margins, closed-loop poles, sensitivity peak and bandwidth.
+
+        The margins are python-control's ``stability_margins`` (what ``margin`` returns) with
+        the exact polynomial method: ``margin``'s default falls back, for some well-damped
+        low-crossover designs, to a frequency grid that misses the crossover.
+
+        Returns
+        -------
+        dict
+            ``phase_margin_deg``, ``gain_margin_db`` (None when infinite), ``crossover_hz``,
+            ``closed_loop_poles`` ([[re, im], ...]), ``sensitivity_peak`` (max |1/(1+L)| on a
+            dense grid up to Nyquist), ``sensitivity_peak_db``, ``bandwidth_hz``.
+        """
+        import control
+
+        with warnings.catch_warnings():  # the margins may evaluate L at its pole z = 1
+            warnings.simplefilter("ignore", RuntimeWarning)
+            gm, pm, _, _, wcp, _ = control.stability_margins(self.open_loop(), method="poly")
+        num, den = self._loop()
+        poles = sorted(np.roots(np.polyadd(den, num)), key=lambda p: (abs(p), p.imag))
+        grid = np.linspace(0.0, 0.5 / self.period_s, _FREQ_POINTS)
+        ms = float(np.max(np.abs(self._sensitivity(grid)[0])))
+        return {
+            "phase_margin_deg": float(pm) if math.isfinite(pm) else None,
+            "gain_margin_db": 20.0 * math.log10(gm) if math.isfinite(gm) and gm > 0 else None,
+            "crossover_hz": float(wcp) / (2.0 * math.pi) if math.isfinite(wcp) else None,
+            "closed_loop_poles": [[float(p.real), float(p.imag)] for p in poles],
+            "sensitivity_peak": ms,
+            "sensitivity_peak_db": 20.0 * math.log10(ms),
+            "bandwidth_hz": self.bandwidth_hz(),
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        """Contract-3 ``design`` entry of one motor (without the simulated ``step``)."""
+        num, den = self.controller_tf_coeffs()
+        return {
+            "kp": self.kp,
+            "ki": self.ki,
+            "period_s": self.period_s,
+            "extra_delay_ticks": self.extra_delay_ticks,
+            "target_phase_margin_deg": self.target_phase_margin_deg,
+            "target_crossover_hz": self.target_crossover_hz,
+            "target_bandwidth_hz": self.target_bandwidth_hz,
+            "controller_num": num.tolist(),
+            "controller_den": den.tolist(),
+            **self.analysis(),
+        }

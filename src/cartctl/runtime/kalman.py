@@ -1,0 +1,152 @@
+"""Kalman speed estimators for the 10 ms loop: a filterpy one and a cheap fixed-gain one.
+
+Where it sits: the runtime, stepped once per tick by a controller
+(:class:`~cartctl.runtime.statefeedback.StateFeedbackController`) or by the loop, in the order of
+:mod:`cartctl.runtime.base`: ``correct(y[k])`` then ``predict(u[k])``. Both run a
+:class:`~cartctl.design.kalman.KalmanDesign` (state x = [x_1 … x_n, b]; x_1 is the speed, rad/s)::
+
+    correct:  x̂[k|k]   = x̂[k|k−1] + L (y[k] − C x̂[k|k−1])
+    predict:  x̂[k+1|k] = A x̂[k|k] + B u[k]
+
+:class:`KalmanSpeedEstimator` runs filterpy's ``KalmanFilter`` (covariance propagated, gain L[k]
+time-varying, converging to the design's L); :class:`SteadyStateSpeedEstimator` uses the fixed
+steady-state L with plain floats. Both return x̂_1 as the speed (the design's C is [1, 0, …]).
+A non-finite measurement is skipped (the prediction stands) and a non-finite voltage counts as
+0 V (what the cart applies), so a glitch never poisons the state.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from filterpy.kalman import KalmanFilter
+from numpy.typing import ArrayLike, NDArray
+
+from cartctl.design.kalman import KalmanDesign
+from cartctl.errors import InputError
+from cartctl.runtime.base import SpeedEstimator
+
+__all__ = ["KalmanSpeedEstimator", "StateEstimator", "SteadyStateSpeedEstimator"]
+
+
+@runtime_checkable
+class StateEstimator(SpeedEstimator, Protocol):
+    """A speed estimator that also exposes its whole state, for state feedback."""
+
+    @property
+    def state(self) -> NDArray[np.float64]:
+        """The current state estimate x̂, shape (m,): after ``correct``, x̂[k|k]."""
+        ...
+
+
+class KalmanSpeedEstimator:
+    """The Kalman filter with time-varying gain (filterpy), on a designed model.
+
+    Parameters
+    ----------
+    design : KalmanDesign
+        F = A, B, H = C, Q and R come from here.
+    initial_covariance : array_like, shape (m, m), optional
+        P[0|−1], the covariance at reset; default the design's steady-state P (then the gain
+        starts at its steady-state value). The state starts at rest, x̂ = 0.
+
+    Attributes
+    ----------
+    filter : filterpy.kalman.KalmanFilter
+        The underlying filter (x is a column, shape (m, 1)).
+    """
+
+    def __init__(
+        self, design: KalmanDesign, *, initial_covariance: ArrayLike | None = None
+    ) -> None:
+        m = design.A.shape[0]
+        P0 = design.P if initial_covariance is None else np.asarray(initial_covariance, float)
+        if P0.shape != (m, m) or not np.all(np.isfinite(P0)):
+            raise InputError(
+                f"initial_covariance must be a finite ({m}, {m}) matrix, got shape {P0.shape}"
+            )
+        self.design = design
+        self._P0 = np.array(P0, dtype=float)
+        kf = KalmanFilter(dim_x=m, dim_z=1, dim_u=1)
+        kf.F = np.array(design.A)
+        kf.B = np.array(design.B).reshape(m, 1)
+        kf.H = np.array(design.C).reshape(1, m)
+        kf.Q = np.array(design.Q)
+        kf.R = np.array([[design.R]])
+        self.filter = kf
+        self.reset()
+
+    def reset(self) -> None:
+        """State at rest (x̂ = 0), covariance back to ``initial_covariance``."""
+        self.filter.x = np.zeros((self.design.A.shape[0], 1))
+        self.filter.P = self._P0.copy()
+
+    def correct(self, measured_rad_s: float) -> float:
+        """Update with the speed measured at this tick (rad/s); return x̂_1[k|k] (rad/s)."""
+        if math.isfinite(measured_rad_s):
+            self.filter.update(float(measured_rad_s))
+        return float(self.filter.x[0, 0])
+
+    def predict(self, voltage_v: float) -> None:
+        """Propagate state and covariance with the voltage applied at this tick (V)."""
+        self.filter.predict(u=float(voltage_v) if math.isfinite(voltage_v) else 0.0)
+
+    @property
+    def state(self) -> NDArray[np.float64]:
+        """x̂, shape (m,) (a copy)."""
+        return self.filter.x[:, 0].copy()
+
+    @property
+    def gain(self) -> NDArray[np.float64]:
+        """The latest gain L[k], shape (m,)."""
+        return np.asarray(self.filter.K, dtype=float)[:, 0].copy()
+
+
+class SteadyStateSpeedEstimator:
+    """The steady-state Kalman filter: fixed gain L, plain floats, a few µs per tick.
+
+    Parameters
+    ----------
+    design : KalmanDesign
+        A, B, C and the steady-state filter gain L come from here.
+    """
+
+    def __init__(self, design: KalmanDesign) -> None:
+        m = design.A.shape[0]
+        self.design = design
+        self._m = m
+        self._L = [float(v) for v in design.L]
+        self._C = [(j, float(c)) for j, c in enumerate(design.C) if c != 0.0]
+        # each row of A as its non-zero entries: the observer form has at most three per row
+        self._A = [[(j, float(a)) for j, a in enumerate(design.A[i]) if a != 0.0] for i in range(m)]
+        self._B = [float(b) for b in design.B]
+        self.reset()
+
+    def reset(self) -> None:
+        """State at rest (x̂ = 0)."""
+        self._x = [0.0] * self._m
+
+    def correct(self, measured_rad_s: float) -> float:
+        """x̂ += L (y − C x̂) with the speed measured at this tick (rad/s); return x̂_1 (rad/s)."""
+        x = self._x
+        if math.isfinite(measured_rad_s):
+            innovation = float(measured_rad_s)  # plain floats throughout: no numpy overhead
+            for j, c in self._C:
+                innovation -= c * x[j]
+            self._x = x = [xi + li * innovation for xi, li in zip(x, self._L, strict=True)]
+        return x[0]
+
+    def predict(self, voltage_v: float) -> None:
+        """x̂ ← A x̂ + B u with the voltage applied at this tick (V; non-finite counts as 0)."""
+        u = float(voltage_v) if math.isfinite(voltage_v) else 0.0
+        x = self._x
+        self._x = [
+            sum(a * x[j] for j, a in row) + b * u for row, b in zip(self._A, self._B, strict=True)
+        ]
+
+    @property
+    def state(self) -> NDArray[np.float64]:
+        """x̂, shape (m,) (a copy)."""
+        return np.array(self._x)

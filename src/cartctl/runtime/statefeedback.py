@@ -1,0 +1,119 @@
+"""The pole-placement speed controller: state feedback on a Kalman estimate, with an integrator.
+
+Where it sits: the runtime, one object per motor, stepped once per tick by the loop; it runs a
+:class:`~cartctl.design.poles.PolesDesign`. Per tick, in the order of :mod:`cartctl.runtime.base`::
+
+    x̂      = estimator.correct(y[k])                      # x̂[k|k]
+    u_raw  = −K x̂ − Ki x_i + Kr r[k]                       (V)
+    u      = clamp(u_raw, ±voltage_limit_v)
+    x_i   += Ts (r[k] − y[k])    unless u is saturated and the error would drive it further
+    estimator.predict(u)                                   # the clamped voltage the motor gets
+
+The integrator stops only while it would push the command deeper into saturation (conditional
+integration), so it never winds up, and the estimator always predicts with the voltage actually
+sent, so it does not wind up either. A non-finite reference or measurement gives 0 V for that
+tick: the integrator holds, the estimator skips the correction and predicts with 0 V. A command
+that overflows (after an absurd measurement such as 1e308 rad/s) gives 0 V and resets the
+controller, so it recovers instead of holding a poisoned state.
+"""
+
+from __future__ import annotations
+
+import math
+
+from cartctl.design.poles import PolesDesign
+from cartctl.errors import InputError
+from cartctl.runtime.kalman import StateEstimator, SteadyStateSpeedEstimator
+
+__all__ = ["MAX_VOLTAGE_V", "StateFeedbackController"]
+
+MAX_VOLTAGE_V = 12.0
+"""The cart's supply: no voltage limit may exceed it (V)."""
+
+
+class StateFeedbackController:
+    """Pole-placement speed control with integral action on a Kalman state estimate.
+
+    Parameters
+    ----------
+    design : PolesDesign
+        K (n,), Ki, Kr and Ts come from here.
+    estimator : StateEstimator, optional
+        Owned by the controller (reset with it). Its state must start with the design's n
+        realisation states; default a :class:`SteadyStateSpeedEstimator` on ``design.estimator``.
+    voltage_limit_v : float
+        The command stays within ±voltage_limit_v (V), 0 < limit ≤ 12.
+
+    Attributes
+    ----------
+    estimate_rad_s : float
+        The speed estimate x̂_1 the last step acted on (rad/s).
+    integral_rad : float
+        The integrator state x_i, the integral of (r − y) (rad of wheel angle).
+    saturated : bool
+        Whether the last command hit the limit.
+    """
+
+    def __init__(
+        self,
+        design: PolesDesign,
+        *,
+        estimator: StateEstimator | None = None,
+        voltage_limit_v: float = MAX_VOLTAGE_V,
+    ) -> None:
+        limit = float(voltage_limit_v)
+        if not (math.isfinite(limit) and 0.0 < limit <= MAX_VOLTAGE_V):
+            raise InputError(
+                f"voltage_limit_v must be in (0, {MAX_VOLTAGE_V:g}] V, got {voltage_limit_v}"
+            )
+        if estimator is None:
+            estimator = SteadyStateSpeedEstimator(design.estimator)
+        n = design.K.size
+        if not isinstance(estimator, StateEstimator) or estimator.state.size < n:
+            raise InputError(
+                f"the estimator must expose a state of at least {n} values (the design's "
+                f"realisation), got {type(estimator).__name__}"
+            )
+        self.design = design
+        self.estimator = estimator
+        self.voltage_limit_v = limit
+        self._K = tuple(float(k) for k in design.K)
+        self._Ki = float(design.Ki)
+        self._Kr = float(design.Kr)
+        self._Ts = float(design.period_s)
+        self.reset()
+
+    def reset(self) -> None:
+        """Integrator cleared, estimator at rest."""
+        self.estimator.reset()
+        self.integral_rad = 0.0
+        self.estimate_rad_s = 0.0
+        self.saturated = False
+
+    def step(self, reference_rad_s: float, measured_rad_s: float) -> float:
+        """One tick (see the module docstring); return the voltage command (V)."""
+        est = self.estimator
+        if not math.isfinite(measured_rad_s) or not math.isfinite(reference_rad_s):
+            if math.isfinite(measured_rad_s):
+                est.correct(measured_rad_s)
+            self.estimate_rad_s = float(est.state[0])
+            self.saturated = False
+            est.predict(0.0)
+            return 0.0
+        self.estimate_rad_s = est.correct(measured_rad_s)
+        u_raw = self._Kr * reference_rad_s - self._Ki * self.integral_rad
+        for k, xk in zip(self._K, est.state.tolist(), strict=False):  # plain floats: no warnings
+            u_raw -= k * xk
+        if not math.isfinite(u_raw):  # overflowed on an absurd value: 0 V and start afresh
+            self.reset()
+            est.predict(0.0)
+            return 0.0
+        limit = self.voltage_limit_v
+        u = min(limit, max(-limit, u_raw))
+        self.saturated = u != u_raw
+        error = reference_rad_s - measured_rad_s
+        # the integrator moves u by −Ki·Ts·error next tick: hold it if that deepens saturation
+        if not self.saturated or (u_raw > u) != (-self._Ki * error > 0.0):
+            self.integral_rad += self._Ts * error
+        est.predict(u)
+        return u

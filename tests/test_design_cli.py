@@ -1,0 +1,168 @@
+"""``cartctl design``: contract-3 JSON checked independently, the shipped controllers, controller
+files, and refused requests."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import control
+import numpy as np
+import pytest
+
+from cartctl.cli import main
+from cartctl.design.analysis import simulate_step
+from cartctl.design.build import build_controllers
+from cartctl.design.controllerfile import load_controller
+from cartctl.modelfile import load_models
+
+ROOT = Path(__file__).resolve().parents[1]
+CONTROLLERS = ROOT / "controllers"
+
+
+def _design(capsys: pytest.CaptureFixture[str], *argv: str) -> dict:
+    code = main(["design", *argv, "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    return json.loads(out)
+
+
+@pytest.mark.parametrize(("pm", "fc", "extra"), [(60.0, 3.0, 0), (65.0, 4.4, 0), (50.0, 2.5, 2)])
+def test_pi_margins_hold_when_checked_from_controller_num_den(
+    capsys: pytest.CaptureFixture[str], ground_path: Path, pm: float, fc: float, extra: int
+) -> None:
+    doc = _design(capsys, str(ground_path), "--method", "pi", "--phase-margin", str(pm),
+                  "--crossover-hz", str(fc), "--extra-delay", str(extra))  # fmt: skip
+    assert doc["method"] == "pi"
+    models = load_models(ground_path)
+    for motor, entry in doc["motors"].items():
+        model = models.motor(motor)
+        c = control.tf(entry["controller_num"], entry["controller_den"], 0.01)
+        g = control.tf(model.num(), model.den(), 0.01)
+        delay = control.tf([1.0], [1.0] + [0.0] * extra, 0.01)
+        _, pm_got, _, _, wcp, _ = control.stability_margins(c * g * delay, method="poly")
+        assert pm_got == pytest.approx(pm, abs=1.0)
+        assert wcp / (2 * math.pi) == pytest.approx(fc, rel=0.02)
+        step = entry["step"]
+        assert {"overshoot_percent", "settling_time_s", "rise_time_s"} <= set(step)
+        assert entry["settling_bound_s"] > 0
+        assert entry["settling_ratio"] >= 1.0
+
+
+def test_poles_are_placed_where_asked(
+    capsys: pytest.CaptureFixture[str], ground_path: Path
+) -> None:
+    asked = [0.5 + 0.2j, 0.5 - 0.2j, 0.3, 0.1]
+    doc = _design(
+        capsys, str(ground_path), "--method", "poles", "--poles", "0.5+0.2j,0.5-0.2j,0.3,0.1"
+    )
+    for entry in doc["motors"].values():
+        got = np.sort_complex([complex(re, im) for re, im in entry["closed_loop_poles"]])
+        np.testing.assert_allclose(got, np.sort_complex(asked), atol=1e-6)
+        assert len(entry["estimator_poles"]) >= 3
+        assert all(abs(complex(*p)) < 1 for p in entry["estimator_poles"])
+        # the linear feedback part closes the loop on the placed poles (separation principle)
+        num, den = entry["controller_num"], entry["controller_den"]
+        model = load_models(ground_path).motor("a")
+        loop_poles = np.roots(
+            np.polyadd(np.polymul(den, model.den()), np.polymul(num, model.num()))
+        )
+        for p in asked:
+            assert np.min(np.abs(loop_poles - p)) < 1e-5
+        break
+
+
+@pytest.mark.parametrize("name", ["pi.toml", "poles.toml"])
+def test_shipped_controllers_take_a_good_10_rad_s_step(name: str, ground_path: Path) -> None:
+    shipped = load_controller(CONTROLLERS / name)
+    assert shipped.model_path == "models/ground.toml"
+    assert not shipped.model_changed() or not Path(shipped.model_path).exists()
+    models = load_models(ground_path)
+    for motor, ctrl in build_controllers(shipped).items():
+        for extra in (0, 1):  # the report's model, and with the tick of margin designed for
+            step = simulate_step(
+                ctrl, models.motor(motor), step_rad_s=10.0, extra_delay_ticks=extra
+            )
+            assert step.info.overshoot_percent <= 5.0
+            assert abs(step.info.steady_state_error) < 1e-6
+            assert step.peak_voltage_v <= 12.0
+            assert step.info.settling_time_s is not None
+        assert shipped.motors[motor]["analysis"]["settling_ratio"] >= 1.0
+
+
+@pytest.mark.parametrize("name", ["pi.toml", "poles.toml"])
+def test_shipped_controllers_regenerate_from_their_command(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, name: str
+) -> None:
+    shipped = load_controller(CONTROLLERS / name)
+    argv = shipped.command.split()[1:]  # drop 'cartctl'
+    out = tmp_path / name
+    argv[argv.index("--out") + 1] = str(out)
+    monkeypatch.chdir(ROOT)
+    assert main(argv) == 0
+    capsys.readouterr()
+    again = load_controller(out)
+    assert again.request == shipped.request
+    for motor, entry in shipped.motors.items():
+        for key in ("kp", "ki", "K", "Ki", "Kr"):
+            if key in entry:
+                np.testing.assert_allclose(again.motors[motor][key], entry[key], rtol=1e-9)
+
+
+def test_controller_file_runs_what_was_designed(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, ground_path: Path
+) -> None:
+    out = tmp_path / "c.toml"
+    doc = _design(capsys, str(ground_path), "--method", "pi", "--estimator", "kalman",
+                  "--estimator-gain", "steady-state", "--out", str(out))  # fmt: skip
+    loaded = build_controllers(load_controller(out))
+    models = load_models(ground_path)
+    for motor, ctrl in loaded.items():
+        step = simulate_step(ctrl, models.motor(motor))
+        assert step.info.overshoot_percent == pytest.approx(
+            doc["motors"][motor]["step"]["overshoot_percent"]
+        )
+        assert step.peak_voltage_v == pytest.approx(doc["motors"][motor]["step"]["peak_voltage_v"])
+
+
+def test_report_writes_a_figure_per_motor(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, ground_path: Path
+) -> None:
+    import matplotlib.image
+
+    assert main(["design", str(ground_path), "--method", "poles", "--report", str(tmp_path)]) == 0
+    capsys.readouterr()
+    for motor in ("a", "b"):
+        image = matplotlib.image.imread(tmp_path / f"design_{motor}.png")
+        assert image.shape[0] > 500
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--method", "poles", "--poles", "1.2,0.5,0.3,0.1"], "unit circle"),
+        (["--method", "poles", "--poles", "0.5,0.3"], "4"),
+        (["--method", "poles", "--poles", "0.5,zz"], "not a number"),
+        (["--method", "pi", "--phase-margin", "120"], "phase margin"),
+        (["--method", "pi", "--crossover-hz", "80"], "Nyquist"),
+        (["--method", "pi", "--voltage-limit", "15"], "--voltage-limit"),
+        (["--method", "pi", "--extra-delay", "-1"], "--extra-delay"),
+    ],
+)
+def test_impossible_requests_give_one_line_and_exit_2(
+    capsys: pytest.CaptureFixture[str], ground_path: Path, argv: list[str], message: str
+) -> None:
+    code = main(["design", str(ground_path), *argv])
+    out, err = capsys.readouterr()
+    assert code == 2
+    assert out == ""
+    assert message in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_missing_model_file(capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["design", "nope.toml", "--method", "pi"])
+    _, err = capsys.readouterr()
+    assert code == 2
+    assert "model file not found: nope.toml" in err
