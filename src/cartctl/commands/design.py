@@ -198,6 +198,8 @@ def _design_motor(
         "phase_margin_deg": loop["phase_margin_deg"],
         "gain_margin_db": loop["gain_margin_db"],
         "crossover_hz": loop["crossover_hz"],
+        "sensitivity_peak": loop["sensitivity_peak"],
+        "sensitivity_peak_db": loop["sensitivity_peak_db"],
         "controller_num": num.tolist(),
         "controller_den": den.tolist(),
     }
@@ -236,7 +238,8 @@ def _format(method: str, motors: dict[str, dict[str, Any]]) -> str:
         lines += [
             f"motor {m}: {gains}",
             f"  margins: phase {pm:.1f}°, gain {'∞' if gm is None else f'{gm:.1f} dB'}, "
-            f"crossover {fc:.2f} Hz" if pm is not None and fc is not None else "  margins: —",
+            f"crossover {fc:.2f} Hz, sensitivity peak {e['sensitivity_peak']:.2f}"
+            if pm is not None and fc is not None else "  margins: —",
             "  closed-loop poles: " + ", ".join(
                 f"{complex(*p):.4f}".strip("()") for p in e["closed_loop_poles"]),
             f"  {step['step_rad_s']:g} rad/s step: overshoot {step['overshoot_percent']:.2f} %, "
@@ -268,7 +271,7 @@ def run(args: argparse.Namespace) -> int:
         entry["settling_ratio"] = None if settle is None else settle / bound.settling_time_s
         motors_json[m] = entry
         motors_file[m] = {**file_entry, "analysis": {k: v for k, v in entry.items()
-                                                     if k in ("phase_margin_deg", "gain_margin_db", "crossover_hz",
+                                                     if k in ("phase_margin_deg", "gain_margin_db", "crossover_hz", "sensitivity_peak",
                                                               "closed_loop_poles", "estimator_poles", "step",
                                                               "settling_bound_s", "settling_ratio")}}  # fmt: skip
         steps[m] = step
