@@ -1,0 +1,1 @@
+"""Sinks: where the loop's per-tick values go (CSV trace, Rerun recording/viewer, summary)."""

@@ -1,0 +1,50 @@
+"""The sink interface and the closed-loop trace columns (contract 1 plus the closed-loop columns).
+
+The loop opens every sink with the column names, writes one row of floats per tick in that order,
+and closes every sink on every exit path. ``write`` runs inside the 10 ms tick: it must never
+block (buffer, hand off to a thread) and must never raise into the loop for an I/O problem; it
+records the problem and reports it at ``close``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Protocol, runtime_checkable
+
+TRACE_COLUMNS: tuple[str, ...] = (
+    "time_s",
+    "voltage_a",
+    "voltage_b",
+    "speed_a",
+    "speed_b",
+    "tick",
+    "reference_a",
+    "reference_b",
+    "estimate_a",
+    "estimate_b",
+    "period_error_us",
+    "compute_us",
+)
+"""Columns of a closed-loop trace, in file order. Simulated plants add ``true_speed_a``,
+``true_speed_b`` after these. Row k: the voltage commanded at tick k and the speed measured at
+tick k (contract 1); ``period_error_us`` is how late tick k started against its deadline (µs),
+``compute_us`` the time from its start to the command being sent (µs)."""
+
+TRUE_SPEED_COLUMNS: tuple[str, ...] = ("true_speed_a", "true_speed_b")
+
+
+@runtime_checkable
+class Sink(Protocol):
+    """A consumer of the loop's rows."""
+
+    def open(self, columns: Sequence[str]) -> None:
+        """Prepare for rows with these columns (before the first tick)."""
+        ...
+
+    def write(self, row: Sequence[float]) -> None:
+        """One tick's values, in column order. Cheap and non-blocking."""
+        ...
+
+    def close(self) -> None:
+        """Flush everything; the files are complete and valid afterwards."""
+        ...
