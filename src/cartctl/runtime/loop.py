@@ -1,0 +1,178 @@
+"""The closed loop: one tick reads the plant, runs each motor's controller, sends, and logs.
+
+:class:`ControlLoop` is the per-tick body; a periodic executor (:mod:`cartctl.runtime.executor`)
+calls it on a real or virtual clock, so the real-time run and the fast simulated run are the same
+code. Per tick k::
+
+    y      = the speeds measured at tick k (kept from the previous plant.step)
+    u_m    = controller_m.step(reference_m[k], y_m)      clamped to ±voltage_limit_v
+    y_next = plant.step(u_a, u_b)                         sends u, measures tick k + 1
+    row    = [time, u, y, k, reference, estimate, period error, compute time (, true speed)]
+    every sink gets the row
+
+:meth:`ControlLoop.finish` runs on every exit path: zero volts to the plant, the plant closed, every
+sink closed (files valid), whatever happened.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cartctl.errors import InputError
+from cartctl.plants.base import Measurement, Plant
+from cartctl.runtime.base import Controller
+from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS, Sink
+
+MAX_VOLTAGE_V = 12.0
+
+
+class MemorySink:
+    """Keeps every row in memory, for the run summary (same numbers as the CSV)."""
+
+    def __init__(self) -> None:
+        self.columns: tuple[str, ...] = ()
+        self.rows: list[Sequence[float]] = []
+
+    def open(self, columns: Sequence[str]) -> None:
+        self.columns = tuple(columns)
+        self.rows = []
+
+    def write(self, row: Sequence[float]) -> None:
+        self.rows.append(row)
+
+    def close(self) -> None:
+        """Nothing to flush."""
+
+    def arrays(self) -> dict[str, NDArray[np.float64]]:
+        """The rows as one array per column."""
+        table = np.array(self.rows, dtype=float).reshape(-1, len(self.columns))
+        return {name: table[:, i] for i, name in enumerate(self.columns)}
+
+
+@dataclass
+class LoopState:
+    """What happened, for the summary and the exit code."""
+
+    ticks: int = 0
+    interrupted: bool = False
+    failure: str | None = None
+    sink_errors: list[str] = field(default_factory=list)
+
+
+class ControlLoop:
+    """The per-tick body of the closed loop over both motors.
+
+    Parameters
+    ----------
+    plant : Plant
+        What is controlled; reset in :meth:`start`, closed in :meth:`finish`.
+    controllers : mapping of {'a', 'b'} to Controller
+        One per motor; a motor without a controller gets 0 V.
+    references : mapping of {'a', 'b'} to ndarray, shape (n,)
+        Reference speed per tick (rad/s); n is the number of ticks to run.
+    sinks : sequence of Sink
+        Receive one row per tick.
+    now_s : callable
+        The clock's ``now_s`` (s), to time the compute of each tick.
+    voltage_limit_v : float
+        Command clamp (V), at most 12; a controller's own limit may be lower.
+    period_s : float
+        Tick period (s), for the time column.
+    """
+
+    def __init__(
+        self,
+        plant: Plant,
+        controllers: Mapping[str, Controller],
+        references: Mapping[str, NDArray[np.float64]],
+        sinks: Sequence[Sink],
+        *,
+        now_s: Callable[[], float],
+        voltage_limit_v: float = MAX_VOLTAGE_V,
+        period_s: float = 0.01,
+    ) -> None:
+        if not (math.isfinite(voltage_limit_v) and 0.0 < voltage_limit_v <= MAX_VOLTAGE_V):
+            raise InputError(
+                f"voltage limit must be in (0, {MAX_VOLTAGE_V:g}] V, got {voltage_limit_v}"
+            )
+        lengths = {len(r) for r in references.values()}
+        if len(lengths) != 1:
+            raise InputError(
+                "the references of both motors must have one value per tick, equally many"
+            )
+        self.plant = plant
+        self.controllers = dict(controllers)
+        n = lengths.pop()
+        self.ref_a = [float(v) for v in references.get("a", np.zeros(n))]
+        self.ref_b = [float(v) for v in references.get("b", np.zeros(n))]
+        self.n_ticks = n
+        self.sinks = list(sinks)
+        self.now_s = now_s
+        self.limit = float(voltage_limit_v)
+        self.period_s = float(period_s)
+        self.state = LoopState()
+        self._y: Measurement | None = None
+        self._true = False
+        self.columns: tuple[str, ...] = TRACE_COLUMNS
+
+    def start(self) -> None:
+        """Reset the plant and controllers and open the sinks (before the first deadline)."""
+        self._y = self.plant.reset()
+        self._true = self._y.true_speed_a_rad_s is not None
+        self.columns = TRACE_COLUMNS + (TRUE_SPEED_COLUMNS if self._true else ())
+        for c in self.controllers.values():
+            c.reset()
+        for s in self.sinks:
+            s.open(self.columns)
+
+    def _command(self, motor: str, reference: float, measured: float) -> tuple[float, float]:
+        ctrl = self.controllers.get(motor)
+        if ctrl is None:
+            return 0.0, measured
+        u = ctrl.step(reference, measured)
+        if not math.isfinite(u):
+            u = 0.0
+        return min(self.limit, max(-self.limit, u)), ctrl.estimate_rad_s
+
+    def tick(self, k: int, period_error_us: float, start_s: float) -> bool:
+        """Run tick k; returns False after the last tick."""
+        y = self._y
+        if y is None:
+            raise InputError("ControlLoop.start() must run before the first tick")
+        ra, rb = self.ref_a[k], self.ref_b[k]
+        ua, ea = self._command("a", ra, y.speed_a_rad_s)
+        ub, eb = self._command("b", rb, y.speed_b_rad_s)
+        y_next = self.plant.step(ua, ub)
+        compute_us = (self.now_s() - start_s) * 1e6
+        row: tuple[float, ...] = (
+            k * self.period_s, ua, ub, y.speed_a_rad_s, y.speed_b_rad_s, float(k), ra, rb, ea, eb,
+            period_error_us, compute_us,
+        )  # fmt: skip
+        if self._true:
+            row += (y.true_speed_a_rad_s, y.true_speed_b_rad_s)  # type: ignore[operator]
+        for s in self.sinks:
+            s.write(row)
+        self._y = y_next
+        self.state.ticks = k + 1
+        return k + 1 < self.n_ticks
+
+    def finish(self) -> None:
+        """Zero volts, plant closed, sinks closed: on every exit path. Never raises."""
+        try:
+            self.plant.step(0.0, 0.0)
+        except Exception as exc:  # a vanished port: still close what can be closed
+            self.state.failure = self.state.failure or f"could not send zero volts: {exc}"
+        try:
+            self.plant.close()
+        except Exception as exc:
+            self.state.failure = self.state.failure or f"could not close the plant: {exc}"
+        for s in self.sinks:
+            try:
+                s.close()
+            except Exception as exc:  # report, but close the others too
+                self.state.sink_errors.append(f"{type(s).__name__}: {exc}")

@@ -1,0 +1,156 @@
+"""Run metrics, from a trace: the ``run`` summary and ``cartctl review RUN.csv --json`` share this code.
+
+Per motor: the step metrics of the first reference step, from rest to the reference's first
+non-zero level and until its next change (10–90 % rise, overshoot, 2 % settling, steady-state
+error), the RMS tracking error over the whole run and the largest |voltage|. For the
+loop: period error and compute time percentiles, and deadline misses (a tick whose start error
+plus compute time passes the period).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cartctl.errors import InputError
+from cartctl.stepinfo import step_info
+
+
+def _json(x: float | None) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def motor_metrics(
+    time_s: NDArray[np.float64],
+    reference: NDArray[np.float64],
+    speed: NDArray[np.float64],
+    voltage: NDArray[np.float64],
+) -> dict[str, Any]:
+    """Contract-3 ``run`` entry of one motor (step metrics None when the reference has no step)."""
+    out: dict[str, Any] = {
+        "overshoot_percent": None,
+        "settling_time_s": None,
+        "rise_time_s": None,
+        "steady_state_error": None,
+        "rms_error": _json(float(np.sqrt(np.mean((reference - speed) ** 2))))
+        if speed.size
+        else None,
+        "max_abs_voltage": _json(float(np.max(np.abs(voltage)))) if voltage.size else None,
+    }
+    initial = 0.0  # the loop starts from rest: the first step is the first departure from 0
+    moved = np.flatnonzero(np.abs(reference - initial) > 1e-9)
+    if moved.size == 0:
+        return out
+    start = int(moved[0])
+    changes = np.flatnonzero(np.abs(np.diff(reference[start:])) > 1e-9)
+    end = start + int(changes[0]) + 1 if changes.size else reference.size
+    target = float(reference[start])
+    if end - start < 5:
+        return out
+    info = step_info(
+        time_s[:end], speed[:end], reference=target, initial=initial, onset_s=float(time_s[start])
+    )
+    out.update(
+        overshoot_percent=_json(info.overshoot_percent),
+        settling_time_s=_json(info.settling_time_s),
+        rise_time_s=_json(info.rise_time_s),
+        steady_state_error=_json(info.steady_state_error),
+    )
+    return out
+
+
+def timing_metrics(
+    period_error_us: NDArray[np.float64], compute_us: NDArray[np.float64], period_s: float
+) -> dict[str, Any]:
+    """Percentiles of the period error and compute time (µs), and the deadline misses."""
+    if period_error_us.size == 0:
+        return {"deadline_misses": 0, "period_error_us": {"p50": None, "p99": None, "max": None},
+                "compute_us": {"p50": None, "p99": None}}  # fmt: skip
+    misses = int(np.count_nonzero(period_error_us + compute_us > period_s * 1e6))
+    return {
+        "deadline_misses": misses,
+        "period_error_us": {
+            "p50": float(np.percentile(period_error_us, 50)),
+            "p99": float(np.percentile(period_error_us, 99)),
+            "max": float(np.max(period_error_us)),
+        },
+        "compute_us": {
+            "p50": float(np.percentile(compute_us, 50)),
+            "p99": float(np.percentile(compute_us, 99)),
+        },
+    }
+
+
+def trace_metrics(columns: Mapping[str, NDArray[np.float64]], period_s: float) -> dict[str, Any]:
+    """The whole summary (without file names) from trace columns (contract 1 + closed loop)."""
+    for name in ("time_s", "reference_a", "speed_a", "voltage_a", "period_error_us", "compute_us"):
+        if name not in columns:
+            raise InputError(f"the trace has no '{name}' column: it is not a closed-loop run trace")
+    t = columns["time_s"]
+    out = {
+        "ticks": int(t.size),
+        "duration_s": float(t.size * period_s),
+        **timing_metrics(columns["period_error_us"], columns["compute_us"], period_s),
+        "motors": {
+            m: motor_metrics(
+                t, columns[f"reference_{m}"], columns[f"speed_{m}"], columns[f"voltage_{m}"]
+            )
+            for m in ("a", "b")
+            if f"reference_{m}" in columns
+        },
+    }
+    return out
+
+
+def format_summary(summary: Mapping[str, Any]) -> str:
+    """A short table for the terminal."""
+
+    def ms(x: float | None) -> str:
+        return "—" if x is None else f"{x * 1e3:.0f} ms"
+
+    def num(x: float | None, fmt: str) -> str:
+        return "—" if x is None else format(x, fmt)
+
+    pe, cu = summary["period_error_us"], summary["compute_us"]
+    lines = [
+        f"{summary['ticks']} ticks, {summary['duration_s']:.2f} s; deadline misses {summary['deadline_misses']}; "
+        f"period error p50/p99/max {num(pe['p50'], '.0f')}/{num(pe['p99'], '.0f')}/{num(pe['max'], '.0f')} µs; "
+        f"compute p50/p99 {num(cu['p50'], '.0f')}/{num(cu['p99'], '.0f')} µs",
+        f"  {'motor':<6}{'overshoot':>11}{'rise':>9}{'settling':>10}{'ss error':>10}{'rms error':>11}{'max |V|':>9}",
+    ]
+    for m, e in summary["motors"].items():
+        lines.append(
+            f"  {m:<6}{num(e['overshoot_percent'], '.2f') + ' %':>11}{ms(e['rise_time_s']):>9}"
+            f"{ms(e['settling_time_s']):>10}{num(e['steady_state_error'], '.3f'):>10}"
+            f"{num(e['rms_error'], '.3f'):>11}{num(e['max_abs_voltage'], '.2f'):>9}"
+        )
+    for key in ("trace", "recording"):
+        if summary.get(key):
+            lines.append(f"  {key}: {summary[key]}")
+    return "\n".join(lines)
+
+
+def review_csv(args: argparse.Namespace) -> int:
+    """``cartctl review RUN.csv [--compare OTHER.csv] [--json]``: the run metrics from traces."""
+    from cartctl.data import read_trace
+
+    paths: Sequence[str] = [args.recording] + (
+        [args.compare] if getattr(args, "compare", None) else []
+    )
+    summaries = []
+    for path in paths:
+        trace = read_trace(path)
+        summary = trace_metrics(trace.columns(), trace.period_s)
+        summary["trace"] = str(path)
+        summaries.append(summary)
+    if args.json:
+        print(json.dumps(summaries[0] if len(summaries) == 1 else {"runs": summaries}))
+        return 0
+    print("\n\n".join(format_summary(s) for s in summaries))
+    return 0
