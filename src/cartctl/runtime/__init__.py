@@ -1,1 +1,2 @@
-"""Per-tick objects the 10 ms loop runs: controllers and speed estimators (pure, no clock, no I/O)."""
+"""The runtime: the per-tick controllers and estimators (pure, plain floats), and the shell that
+runs them every 10 ms: clocks, the periodic executor, real-time scheduling, and the loop."""

@@ -139,8 +139,15 @@ class ControlLoop:
             u = 0.0
         return min(self.limit, max(-self.limit, u)), ctrl.estimate_rad_s
 
-    def tick(self, k: int, period_error_us: float, start_s: float) -> bool:
-        """Run tick k; returns False after the last tick."""
+    def tick(
+        self, k: int, period_error_us: float, start_s: float, time_s: float | None = None
+    ) -> bool:
+        """Run tick k; returns False after the last tick.
+
+        ``period_error_us`` is how late the tick started (µs), ``start_s`` when it started (clock
+        seconds), ``time_s`` its place on the time axis (default k·Ts; after skipped deadlines the
+        executor's grid time).
+        """
         y = self._y
         if y is None:
             raise InputError("ControlLoop.start() must run before the first tick")
@@ -150,7 +157,7 @@ class ControlLoop:
         y_next = self.plant.step(ua, ub)
         compute_us = (self.now_s() - start_s) * 1e6
         row: tuple[float, ...] = (
-            k * self.period_s, ua, ub, y.speed_a_rad_s, y.speed_b_rad_s, float(k), ra, rb, ea, eb,
+            k * self.period_s if time_s is None else time_s, ua, ub, y.speed_a_rad_s, y.speed_b_rad_s, float(k), ra, rb, ea, eb,
             period_error_us, compute_us,
         )  # fmt: skip
         if self._true:
