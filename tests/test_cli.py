@@ -145,7 +145,6 @@ def test_excite_other_signals_one_motor(
             "invalid choice",
         ),
         (["excite", "--amplitude", "ten", "--out", "x.csv"], "invalid float value"),
-        (["run", "--duration", "1"], "not built yet"),
     ],
 )
 def test_user_mistakes_give_one_line_and_exit_2(

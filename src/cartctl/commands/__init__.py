@@ -4,7 +4,16 @@ Each entry has ``add_parser(subparsers)``; the parser it adds sets ``func`` to a
 ``run(args) -> int``.
 """
 
-from cartctl.commands import convert, design, excite, identify, inspect, linearity, validate
-from cartctl.commands.pending import review, run
+from cartctl.commands import (
+    convert,
+    design,
+    excite,
+    identify,
+    inspect,
+    linearity,
+    review,
+    run,
+    validate,
+)
 
 COMMANDS = (excite, identify, inspect, validate, linearity, design, run, review, convert)

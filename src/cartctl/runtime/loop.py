@@ -157,7 +157,7 @@ class ControlLoop:
         y_next = self.plant.step(ua, ub)
         compute_us = (self.now_s() - start_s) * 1e6
         row: tuple[float, ...] = (
-            k * self.period_s if time_s is None else time_s, ua, ub, y.speed_a_rad_s, y.speed_b_rad_s, float(k), ra, rb, ea, eb,
+            k * self.period_s if time_s is None else time_s, ua, ub, y.speed_a_rad_s, y.speed_b_rad_s, k, ra, rb, ea, eb,
             period_error_us, compute_us,
         )  # fmt: skip
         if self._true:

@@ -14,7 +14,7 @@ from typing import TextIO
 
 
 class CsvSink:
-    """Writes the loop's rows to a CSV file.
+    """Writes the loop's rows to a CSV file (``str`` of each value: shortest exact floats, whole ticks).
 
     Parameters
     ----------
@@ -29,7 +29,6 @@ class CsvSink:
         self.flush_every = max(1, int(flush_every))
         self._file: TextIO | None = None
         self._rows: list[Sequence[float]] = []
-        self._int_columns: tuple[int, ...] = ()
         self.rows_written = 0
 
     def open(self, columns: Sequence[str]) -> None:
@@ -37,7 +36,6 @@ class CsvSink:
         self._file = self.path.open("w", encoding="utf-8", newline="")
         self._file.write(",".join(columns) + "\n")
         self._file.flush()
-        self._int_columns = tuple(i for i, c in enumerate(columns) if c == "tick")
 
     def write(self, row: Sequence[float]) -> None:
         self._rows.append(row)
@@ -47,13 +45,9 @@ class CsvSink:
     def _flush(self) -> None:
         if self._file is None or not self._rows:
             return
-        ints = self._int_columns
-        lines = []
-        for row in self._rows:
-            cells = [repr(float(v)) for v in row]
-            for i in ints:
-                cells[i] = str(int(row[i]))
-            lines.append(",".join(cells))
+        lines = [
+            ",".join(map(str, row)) for row in self._rows
+        ]  # str: exact for floats (numpy ones too), whole ticks
         self._file.write("\n".join(lines) + "\n")
         self._file.flush()
         self.rows_written += len(self._rows)

@@ -1,0 +1,235 @@
+"""Grid tuning, the pure part: grid specs, the design command of a setting, results, Pareto front.
+
+Pipeline: between ``design`` and ``run``. ``cartctl tune`` (:mod:`cartctl.commands.tune`) designs
+one controller per grid setting, runs it in the simulated loop and compares the run metrics; this
+module holds what needs no I/O: parsing ``--grid``, the ``cartctl design`` arguments of a setting
+(the single source of truth for both the tuning run and ``--choose``), the result rows and the
+non-dominated (Pareto) set over overshoot, settling time, RMS error and peak voltage.
+
+Grid spec (``--grid``): comma-separated axes, each ``NAME=START:STOP:STEP`` (an inclusive range,
+STEP > 0) or ``NAME=VALUE`` (one value). Axes left out keep their default range. Names::
+
+    pi      phase_margin (deg, default 50:75:5)   crossover_hz (Hz, default 2:5:0.5)
+    poles   settling_time (s, default 0.04:0.16:0.02)   overshoot (%, default 0.5:5:1.5)
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from cartctl.errors import InputError
+
+MAX_SETTINGS = 10_000
+"""Largest grid accepted (settings)."""
+
+METRICS = ("overshoot_percent", "settling_time_s", "rms_error", "max_abs_voltage")
+"""The per-motor run metrics compared (%, s, rad/s, V), all to be minimised."""
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One tuning axis: its grid name, the ``cartctl design`` option, unit and default range."""
+
+    name: str
+    option: str
+    unit: str
+    default: tuple[float, float, float]
+
+
+AXES: dict[str, tuple[Axis, ...]] = {
+    "pi": (
+        Axis("phase_margin", "--phase-margin", "deg", (50.0, 75.0, 5.0)),
+        Axis("crossover_hz", "--crossover-hz", "Hz", (2.0, 5.0, 0.5)),
+    ),
+    "poles": (
+        Axis("settling_time", "--settling-time", "s", (0.04, 0.16, 0.02)),
+        Axis("overshoot", "--overshoot", "%", (0.5, 5.0, 1.5)),
+    ),
+}
+
+
+def grid_form(method: str) -> str:
+    """The expected ``--grid`` form for a method, for help texts and error messages."""
+    a, b = AXES[method]
+    return f"'{a.name}=START:STOP:STEP,{b.name}=START:STOP:STEP' (inclusive; or NAME=VALUE)"
+
+
+def inclusive_range(start: float, stop: float, step: float) -> tuple[float, ...]:
+    """``start, start + step, …`` up to and including ``stop`` (to 1e-9 of a step), rounded to 1e-10."""
+    count = math.floor((stop - start) / step + 1e-9) + 1
+    return tuple(round(start + i * step, 10) for i in range(count))
+
+
+def parse_grid(spec: str | None, method: str) -> dict[str, tuple[float, ...]]:
+    """The values of each axis of ``method`` (module docstring), defaults where ``spec`` is silent.
+
+    Raises
+    ------
+    InputError
+        An unknown axis name, a repeated one, a malformed or empty range, or too many settings;
+        the message gives the expected form.
+    """
+    axes = {a.name: a for a in AXES[method]}
+    out = {name: inclusive_range(*a.default) for name, a in axes.items()}
+    form = grid_form(method)
+    seen: set[str] = set()
+    for item in (spec or "").split(",") if spec and spec.strip() else []:
+        name, eq, text = (s.strip() for s in item.partition("="))
+        if not eq or name not in axes:
+            raise InputError(f"--grid: bad axis '{item.strip()}' for --method {method}; expected {form}")
+        if name in seen:
+            raise InputError(f"--grid: axis '{name}' is given twice; expected {form}")
+        seen.add(name)
+        try:
+            numbers = [float(p) for p in text.split(":")]
+        except ValueError:
+            numbers = []
+        if len(numbers) not in (1, 3) or not all(math.isfinite(v) for v in numbers):
+            raise InputError(f"--grid: '{item.strip()}' is not NAME=START:STOP:STEP or NAME=VALUE; expected {form}")
+        if len(numbers) == 3 and not (numbers[2] > 0 and numbers[1] >= numbers[0]):
+            raise InputError(
+                f"--grid: '{item.strip()}' needs STEP > 0 and STOP >= START; expected {form}"
+            )
+        out[name] = (numbers[0],) if len(numbers) == 1 else inclusive_range(*numbers)
+    size = math.prod(len(v) for v in out.values())
+    if size > MAX_SETTINGS:
+        raise InputError(f"--grid gives {size} settings, more than {MAX_SETTINGS}; use coarser steps")
+    return out
+
+
+def grid_settings(axes: Mapping[str, Sequence[float]]) -> list[dict[str, float]]:
+    """Every combination of the axis values, the first axis varying slowest."""
+    settings: list[dict[str, float]] = [{}]
+    for name, values in axes.items():
+        settings = [{**s, name: float(v)} for s in settings for v in values]
+    return settings
+
+
+def _number(value: float) -> str:
+    text = repr(float(value))
+    return text[:-2] if text.endswith(".0") else text
+
+
+def design_argv(
+    model: str, method: str, settings: Mapping[str, float], extra_delay_ticks: int = 0
+) -> list[str]:
+    """The ``cartctl design`` arguments (without the command name) that design a setting.
+
+    The tuning run parses these with the design command's own parser, and ``--choose`` passes
+    them to it, so both get the very same controller.
+    """
+    argv = [model, "--method", method]
+    for axis in AXES[method]:
+        argv += [axis.option, _number(settings[axis.name])]
+    if extra_delay_ticks:
+        argv += ["--extra-delay", str(extra_delay_ticks)]
+    return argv
+
+
+def worst_metrics(motors: Mapping[str, Mapping[str, Any]]) -> dict[str, float | None]:
+    """Per metric of :data:`METRICS`, the larger (worse) value of the motors; None if any is None."""
+    out: dict[str, float | None] = {}
+    for key in METRICS:
+        values = [m.get(key) for m in motors.values()]
+        out[key] = None if not values or None in values else float(max(values))
+    return out
+
+
+@dataclass(frozen=True)
+class TuneResult:
+    """One grid setting: what was asked, whether it could be designed and run, and how it ran.
+
+    Attributes
+    ----------
+    index : int
+        1-based place in the grid (first axis slowest); ``--choose`` takes it.
+    settings : dict of str to float
+        The axis values (units in :data:`AXES`).
+    feasible : bool
+        False when the design refused the setting or the run failed; ``reason`` says why.
+    reason : str or None
+        Why the setting is infeasible.
+    motors : dict
+        The run summary entry of each motor (as ``cartctl run --json`` gives it).
+    pareto : bool
+        On the non-dominated front (see :func:`mark_pareto`).
+    """
+
+    index: int
+    settings: dict[str, float]
+    feasible: bool
+    reason: str | None = None
+    motors: dict[str, dict[str, Any]] = field(default_factory=dict)
+    pareto: bool = False
+
+    @property
+    def worst(self) -> dict[str, float | None]:
+        """The worse of the motors per metric (%, s, rad/s, V); all None when infeasible."""
+        if not self.feasible:
+            return dict.fromkeys(METRICS)
+        return worst_metrics(self.motors)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON row: index, settings, feasible, reason, worst-of-motors metrics, pareto, motors."""
+        worst = self.worst
+        return {"index": self.index, "settings": dict(self.settings), "feasible": self.feasible,
+                "reason": self.reason, "overshoot_percent": worst["overshoot_percent"],
+                "settling_time_s": worst["settling_time_s"], "rms_error": worst["rms_error"],
+                "peak_voltage_v": worst["max_abs_voltage"], "pareto": self.pareto,
+                "motors": self.motors}  # fmt: skip
+
+
+def pareto_front(points: ArrayLike) -> NDArray[np.bool_]:
+    """Which rows are non-dominated, every column to be minimised.
+
+    Parameters
+    ----------
+    points : array_like, shape (n, k)
+        One row per candidate; a row with a NaN is never on the front and dominates nothing.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+        True where no other row is at most as large in every column and smaller in one. Equal
+        rows do not dominate each other.
+    """
+    p = np.asarray(points, dtype=float)
+    if p.ndim != 2:
+        raise InputError(f"points must be a 2-D array (n, k), got shape {p.shape}")
+    valid = ~np.isnan(p).any(axis=1)
+    front = valid.copy()
+    q = p[valid]
+    for i in np.flatnonzero(valid):
+        dominated = np.all(q <= p[i], axis=1) & np.any(q < p[i], axis=1)
+        front[i] = not dominated.any()
+    return front
+
+
+def mark_pareto(results: Sequence[TuneResult]) -> list[TuneResult]:
+    """The results with ``pareto`` set: the front over :data:`METRICS` (worse motor), among
+    feasible settings whose metrics (settling in particular) are all defined."""
+    rows = [[math.nan if v is None else v for v in r.worst.values()] for r in results]
+    front = pareto_front(np.reshape(rows, (len(results), len(METRICS))))
+    return [replace(r, pareto=bool(f)) for r, f in zip(results, front, strict=True)]
+
+
+def sort_results(results: Sequence[TuneResult]) -> list[TuneResult]:
+    """Pareto front first, then the other settled runs, each by settling time then overshoot;
+    then feasible runs that did not settle (by RMS error), then the infeasible (by index)."""
+
+    def key(r: TuneResult) -> tuple[int, float, float, int]:
+        w = r.worst
+        if not r.feasible:
+            return (3, 0.0, 0.0, r.index)
+        if w["settling_time_s"] is None:
+            return (2, w["rms_error"] if w["rms_error"] is not None else math.inf, 0.0, r.index)
+        overshoot = w["overshoot_percent"] if w["overshoot_percent"] is not None else math.inf
+        return (0 if r.pareto else 1, w["settling_time_s"], overshoot, r.index)
+
+    return sorted(results, key=key)

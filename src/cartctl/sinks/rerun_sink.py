@@ -1,0 +1,507 @@
+"""The Rerun sink: the loop's rows as a ``.rrd`` recording and/or a live viewer (contract 4).
+
+Sits at the end of the run stage (runtime loop → sinks → logs/ → review). ``write`` only copies the
+row into a preallocated numpy block. Every ``batch_ticks`` rows the block goes through a queue to a
+background thread, which sends one column per entity with ``send_columns`` on the ``time``
+(duration, s) and ``tick`` (sequence) timelines. The recording stream is the sink's own, never the
+global one. Logging problems never raise into the loop: they are recorded and reported as one
+warning at ``close`` (or raised there with ``strict=True``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import queue
+import shutil
+import socket
+import sys
+import threading
+import uuid
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Final
+from urllib.parse import urlsplit
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+from numpy.typing import NDArray
+
+from cartctl.errors import CartctlError, InputError
+
+RERUN_MODES: Final[tuple[str, ...]] = ("save", "spawn", "connect", "off")
+"""``save``: the ``.rrd`` file only; ``spawn``: the file (if a path is given) and a viewer started
+for the run; ``connect``: the file (if a path is given) and a viewer already running at
+``connect_url``; ``off``: nothing."""
+
+APPLICATION_ID: Final[str] = "cartctl"
+DEFAULT_CONNECT_URL: Final[str] = "rerun+http://127.0.0.1:9876/proxy"
+VIEWER_PORT: Final[int] = 9876
+
+ENTITY_PATHS: Final[dict[str, str]] = {
+    "reference_a": "motor/a/reference",
+    "speed_a": "motor/a/speed",
+    "estimate_a": "motor/a/estimate",
+    "voltage_a": "motor/a/voltage",
+    "reference_b": "motor/b/reference",
+    "speed_b": "motor/b/speed",
+    "estimate_b": "motor/b/estimate",
+    "voltage_b": "motor/b/voltage",
+    "period_error_us": "loop/period_error_us",
+    "compute_us": "loop/compute_us",
+    "true_speed_a": "motor/a/true_speed",
+    "true_speed_b": "motor/b/true_speed",
+}
+"""Trace column → entity path. The first ten are contract 4; ``true_speed_*`` (simulated plants
+only) is an extension."""
+
+TIME_COLUMN: Final[str] = "time_s"
+TICK_COLUMN: Final[str] = "tick"
+
+
+@dataclass(frozen=True)
+class SeriesStyle:
+    """How one entity's line is drawn: legend label, colour (RGB, 0–255) and width (UI points)."""
+
+    name: str
+    color: tuple[int, int, int]
+    width: float = 1.5
+
+
+# The viewer draws a plot's series in entity-path order (estimate, reference, speed, true_speed),
+# so the estimate is drawn wider to stay visible under a noisy measured speed.
+_REFERENCE = SeriesStyle("reference (rad/s)", (150, 150, 150), 1.5)
+_SPEED = SeriesStyle("measured speed (rad/s)", (31, 119, 180), 1.0)
+_ESTIMATE = SeriesStyle("estimate (rad/s)", (255, 127, 14), 2.5)
+_TRUE = SeriesStyle("true speed (rad/s)", (44, 160, 44), 1.0)
+_VOLTAGE = SeriesStyle("voltage (V)", (148, 103, 189), 1.5)
+
+STYLES: Final[dict[str, SeriesStyle]] = {
+    "motor/a/reference": _REFERENCE,
+    "motor/a/speed": _SPEED,
+    "motor/a/estimate": _ESTIMATE,
+    "motor/a/true_speed": _TRUE,
+    "motor/a/voltage": _VOLTAGE,
+    "motor/b/reference": _REFERENCE,
+    "motor/b/speed": _SPEED,
+    "motor/b/estimate": _ESTIMATE,
+    "motor/b/true_speed": _TRUE,
+    "motor/b/voltage": _VOLTAGE,
+    "loop/period_error_us": SeriesStyle("period error (µs)", (214, 39, 40), 1.0),
+    "loop/compute_us": SeriesStyle("compute time (µs)", (23, 190, 207), 1.0),
+}
+
+_MAX_PROBLEMS = 10  # messages kept; further problems are only counted
+_MAX_COALESCED_ROWS = 100_000  # rows the thread merges into one send when it falls behind
+_CLOSE_TIMEOUT_S = 10.0  # for the sending thread to finish
+_FLUSH_TIMEOUT_S = 5.0  # for the SDK to hand everything to the file and the viewer
+
+
+class RecordingError(CartctlError, RuntimeError):
+    """The Rerun recording could not be written completely (raised at ``close`` when strict)."""
+
+    exit_code = 1
+
+
+class RecordingWarning(UserWarning):
+    """The Rerun recording had problems; the run itself went on."""
+
+
+def display_available() -> bool:
+    """Whether a native viewer window can open here (``DISPLAY`` or ``WAYLAND_DISPLAY`` is set)."""
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def viewer_executable() -> str | None:
+    """The ``rerun`` viewer next to the running interpreter (the venv's ``bin``), else on PATH."""
+    name = "rerun.exe" if sys.platform == "win32" else "rerun"
+    beside = Path(sys.executable).parent / name
+    if beside.is_file():
+        return str(beside)
+    return shutil.which("rerun")
+
+
+def blueprint(motors: Sequence[str] = ("a", "b")) -> rrb.Blueprint:
+    """The project's default layout.
+
+    The motors side by side; for each, speed with its reference and estimate (and the true speed of
+    a simulated plant) above the voltage. The loop timing (period error and compute time) spans the
+    bottom. Side panels start collapsed and the plots follow the ``time`` timeline.
+
+    Parameters
+    ----------
+    motors : sequence of str
+        Motor names, as in the entity paths ``motor/<name>/...``.
+
+    Returns
+    -------
+    rerun.blueprint.Blueprint
+    """
+    columns = []
+    for m in motors:
+        speed = rrb.TimeSeriesView(
+            name=f"Motor {m.upper()}: speed (rad/s)",
+            origin=f"/motor/{m}",
+            contents=["$origin/**", "- $origin/voltage"],
+            plot_legend=rrb.PlotLegend(corner="RightBottom", visible=True),
+        )
+        voltage = rrb.TimeSeriesView(
+            name=f"Motor {m.upper()}: voltage (V)",
+            origin=f"/motor/{m}/voltage",
+            plot_legend=rrb.PlotLegend(visible=False),
+        )
+        columns.append(rrb.Vertical(speed, voltage, row_shares=[3, 2]))
+    timing = rrb.TimeSeriesView(
+        name="Loop timing (µs)",
+        origin="/loop",
+        plot_legend=rrb.PlotLegend(corner="RightTop", visible=True),
+    )
+    return rrb.Blueprint(
+        rrb.Vertical(rrb.Horizontal(*columns), timing, row_shares=[3, 1]),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(state="collapsed", timeline="time"),
+    )
+
+
+class RerunSink:
+    """Streams the loop's rows to a Rerun recording (file and/or viewer) without stalling the loop.
+
+    Parameters
+    ----------
+    mode : {"save", "spawn", "connect", "off"}
+        Where the data goes (see :data:`RERUN_MODES`). ``spawn`` and ``connect`` also write ``path``
+        when it is given.
+    path : Path or None
+        The ``.rrd`` file (parent folders are created). Required for ``save``.
+    application_id : str
+        Rerun application id; the blueprint is stored under it.
+    recording_name : str, optional
+        Name shown in the viewer; defaults to the file's stem.
+    connect_url : str, optional
+        Viewer address for ``connect`` (default ``rerun+http://127.0.0.1:9876/proxy``).
+    batch_ticks : int
+        Rows per hand-off to the sending thread (10 ticks = 0.1 s at 10 ms).
+    strict : bool
+        Raise on the first problem (in ``write``) or at ``close`` instead of warning. For tests.
+
+    Notes
+    -----
+    ``open`` does the slow first calls (the blueprint, the static styling: 5–20 ms) before the loop
+    starts. Rows need the ``time_s`` column (s since start); ``tick`` is used when present, the row
+    count otherwise. Columns without an entity path (see :data:`ENTITY_PATHS`) are ignored.
+    """
+
+    def __init__(
+        self,
+        mode: str = "save",
+        path: str | Path | None = None,
+        *,
+        application_id: str = APPLICATION_ID,
+        recording_name: str | None = None,
+        connect_url: str | None = None,
+        batch_ticks: int = 10,
+        strict: bool = False,
+    ) -> None:
+        if mode not in RERUN_MODES:
+            raise InputError(f"rerun mode must be one of {', '.join(RERUN_MODES)}, got '{mode}'")
+        if mode == "save" and path is None:
+            raise InputError("rerun mode 'save' needs a path for the .rrd file")
+        if int(batch_ticks) < 1:
+            raise InputError(f"batch_ticks must be at least 1, got {batch_ticks}")
+        self.mode = mode
+        self.path = None if path is None or mode == "off" else Path(path)
+        self.application_id = application_id
+        self.recording_name = recording_name or (self.path.stem if self.path else "cartctl run")
+        self.connect_url = connect_url or DEFAULT_CONNECT_URL
+        self.batch_ticks = int(batch_ticks)
+        self.strict = strict
+        self.rows_written = 0
+        self._problems: list[str] = []
+        self._problem_count = 0
+        self._recording: rr.RecordingStream | None = None
+        self._block: NDArray[np.float64] | None = None
+        self._filled = 0
+        self._queue: queue.SimpleQueue[NDArray[np.float64] | None] = queue.SimpleQueue()
+        self._thread: threading.Thread | None = None
+        self._time_index = 0
+        self._tick_index: int | None = None
+        self._signals: tuple[tuple[int, str], ...] = ()
+        self._sent_rows = 0
+        self._closed = False
+
+    # -- the Sink protocol ------------------------------------------------------------------
+
+    def open(self, columns: Sequence[str]) -> None:
+        """Start the recording for rows with these columns; makes the slow first calls.
+
+        Parameters
+        ----------
+        columns : sequence of str
+            Column names, in row order (``time_s`` is required).
+
+        Raises
+        ------
+        InputError
+            No ``time_s`` column.
+        OSError
+            The recording's folder cannot be created.
+        """
+        columns = list(columns)
+        if TIME_COLUMN not in columns:
+            raise InputError(f"the Rerun sink needs a '{TIME_COLUMN}' column, got {columns}")
+        self._time_index = columns.index(TIME_COLUMN)
+        self._tick_index = columns.index(TICK_COLUMN) if TICK_COLUMN in columns else None
+        self._signals = tuple(
+            (i, ENTITY_PATHS[c]) for i, c in enumerate(columns) if c in ENTITY_PATHS
+        )
+        if self.mode == "off":
+            return
+        rec = rr.RecordingStream(self.application_id, recording_id=uuid.uuid4())
+        self._recording = rec
+        sinks: list[rr.FileSink | rr.GrpcSink] = []
+        if self.path is not None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            sinks.append(rr.FileSink(self.path))
+        url = self._viewer_url(rec)
+        if url is not None:
+            sinks.append(rr.GrpcSink(url))
+        try:
+            if sinks:
+                rec.set_sinks(*sinks)
+            rec.send_blueprint(blueprint(_motors(self._signals)))
+            rec.send_recording_name(self.recording_name)
+            for _, entity in self._signals:
+                style = STYLES[entity]
+                rec.log(
+                    entity,
+                    rr.SeriesLines(colors=[style.color], names=[style.name], widths=[style.width]),
+                    static=True,
+                    strict=True,
+                )
+            _warm_up_conversions()
+        except Exception as exc:  # the SDK's own failures: keep the run going without Rerun
+            self._problem(f"could not start the recording: {exc}", raise_now=True)
+            return
+        self._block = np.empty((self.batch_ticks, len(columns)))
+        self._filled = 0
+        self._thread = threading.Thread(target=self._send_loop, name="cartctl-rerun", daemon=True)
+        self._thread.start()
+
+    def write(self, row: Sequence[float]) -> None:
+        """Buffer one tick's values (in column order); hands a full block to the sending thread.
+
+        Never calls Rerun and never raises (unless ``strict``): a bad row is recorded and skipped.
+        """
+        block = self._block
+        if block is None:
+            return
+        try:
+            block[self._filled] = row
+        except (ValueError, TypeError) as exc:
+            self._problem(f"row {self.rows_written}: {exc}", raise_now=True)
+            return
+        self._filled += 1
+        self.rows_written += 1
+        if self._filled == self.batch_ticks:
+            self._queue.put(block)
+            self._block = np.empty_like(block)
+            self._filled = 0
+
+    def close(self) -> None:
+        """Send the remaining rows, stop the thread, and finish the file (footer written).
+
+        Safe to call more than once, and after a failed ``open``.
+
+        Raises
+        ------
+        RecordingError
+            Only with ``strict=True``, when anything went wrong while recording.
+        """
+        if self._closed:
+            return
+        self._closed = True
+        if self._thread is not None:
+            if self._block is not None and self._filled:
+                self._queue.put(self._block[: self._filled].copy())
+            self._block = None
+            self._queue.put(None)
+            self._thread.join(_CLOSE_TIMEOUT_S)
+            if self._thread.is_alive():
+                self._problem(f"the sending thread did not finish within {_CLOSE_TIMEOUT_S:g} s")
+        self._block = None
+        if self._recording is not None:
+            try:
+                self._recording.flush(timeout_sec=_FLUSH_TIMEOUT_S)
+            except Exception as exc:
+                self._problem(f"flushing the recording failed: {exc}")
+            try:
+                self._recording.disconnect()
+            except Exception as exc:
+                self._problem(f"closing the recording failed: {exc}")
+            self._recording = None
+        self._report()
+
+    # -- extras -----------------------------------------------------------------------------
+
+    @property
+    def problems(self) -> tuple[str, ...]:
+        """Messages of the problems met so far (the first few)."""
+        return tuple(self._problems)
+
+    def __enter__(self) -> RerunSink:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    # -- internals --------------------------------------------------------------------------
+
+    def _viewer_url(self, rec: rr.RecordingStream) -> str | None:
+        """Start the viewer for ``spawn``; the gRPC address to stream to, or None."""
+        if self.mode == "connect":
+            # The SDK waits 5 s for an unreachable viewer when the sinks are set, and at close.
+            if not viewer_reachable(self.connect_url):
+                self._problem(f"no viewer is listening at {self.connect_url}", raise_now=True)
+                return None
+            return self.connect_url
+        if self.mode != "spawn":
+            return None
+        if not display_available():
+            self._problem(
+                "no display (DISPLAY/WAYLAND_DISPLAY unset): not opening the viewer", raise_now=True
+            )
+            return None
+        executable = viewer_executable()
+        if executable is None:
+            self._problem(
+                "the 'rerun' viewer executable was not found next to Python or on PATH",
+                raise_now=True,
+            )
+            return None
+        try:
+            rr.spawn(port=VIEWER_PORT, connect=False, executable_path=executable, recording=rec)
+        except Exception as exc:
+            self._problem(f"could not start the viewer ({executable}): {exc}", raise_now=True)
+            return None
+        url = f"rerun+http://127.0.0.1:{VIEWER_PORT}/proxy"
+        if not viewer_reachable(url):
+            self._problem(f"the viewer ({executable}) did not start", raise_now=True)
+            return None
+        return url
+
+    def _send_loop(self) -> None:
+        """Background thread: send each block (merging a backlog) until the None sentinel."""
+        _drop_realtime_priority()
+        stop = False
+        while not stop:
+            first = self._queue.get()
+            if first is None:
+                return
+            blocks = [first]
+            rows = len(first)
+            while rows < _MAX_COALESCED_ROWS:
+                try:
+                    more = self._queue.get_nowait()
+                except queue.Empty:
+                    break
+                if more is None:
+                    stop = True
+                    break
+                blocks.append(more)
+                rows += len(more)
+            self._send(blocks[0] if len(blocks) == 1 else np.concatenate(blocks))
+
+    def _send(self, block: NDArray[np.float64]) -> None:
+        rec = self._recording
+        if rec is None:
+            return
+        try:
+            if self._tick_index is not None:
+                ticks = block[:, self._tick_index].astype(np.int64)
+            else:  # rows sent so far are exactly the rows before this block
+                start = self._sent_rows
+                ticks = np.arange(start, start + len(block), dtype=np.int64)
+            indexes = [
+                rr.TimeColumn("time", duration=block[:, self._time_index]),
+                rr.TimeColumn("tick", sequence=ticks),
+            ]
+            for column, entity in self._signals:
+                rec.send_columns(
+                    entity,
+                    indexes=indexes,
+                    columns=rr.Scalars.columns(scalars=block[:, column]),
+                    strict=True,
+                )
+        except Exception as exc:
+            self._problem(f"sending {len(block)} rows failed: {exc}")
+        finally:
+            self._sent_rows += len(block)
+
+    def _problem(self, message: str, *, raise_now: bool = False) -> None:
+        """Record a problem; with ``strict``, raise it at once when ``raise_now`` (not in threads)."""
+        self._problem_count += 1
+        if len(self._problems) < _MAX_PROBLEMS:
+            self._problems.append(message)
+        if self.strict and raise_now:
+            raise RecordingError(f"Rerun recording: {message}")
+
+    def _report(self) -> None:
+        if not self._problem_count:
+            return
+        where = f" ({self.path})" if self.path else ""
+        more = self._problem_count - len(self._problems)
+        text = f"Rerun recording{where}: " + "; ".join(self._problems)
+        if more > 0:
+            text += f"; and {more} more"
+        if self.strict:
+            raise RecordingError(text)
+        warnings.warn(text, RecordingWarning, stacklevel=3)
+
+
+def viewer_reachable(url: str, timeout_s: float = 0.5) -> bool:
+    """Whether something accepts TCP connections at a viewer's ``rerun+http://host:port/proxy``."""
+    parts = urlsplit(url.replace("rerun+", "", 1))
+    try:
+        port = parts.port or (80 if parts.scheme == "http" else 443)
+        with socket.create_connection((parts.hostname or "127.0.0.1", port), timeout=timeout_s):
+            return True
+    except (OSError, ValueError):
+        return False
+
+
+def _drop_realtime_priority() -> None:
+    """Run the calling thread at normal priority.
+
+    A thread inherits its creator's scheduling policy: if the loop already runs under SCHED_FIFO
+    when the sink opens, the sending thread must not compete with it at that priority.
+    """
+    if hasattr(os, "sched_setscheduler"):
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+def _motors(signals: Sequence[tuple[int, str]]) -> tuple[str, ...]:
+    """Motor names present among the entity paths, in order (both when none is present)."""
+    names: list[str] = []
+    for _, entity in signals:
+        parts = entity.split("/")
+        if parts[0] == "motor" and parts[1] not in names:
+            names.append(parts[1])
+    return tuple(names) or ("a", "b")
+
+
+def _warm_up_conversions() -> None:
+    """Run the column conversions once so the sending thread's first block is not slow."""
+    rr.TimeColumn("time", duration=np.zeros(1))
+    rr.TimeColumn("tick", sequence=np.zeros(1, dtype=np.int64))
+    rr.Scalars.columns(scalars=np.zeros(1))

@@ -1,0 +1,173 @@
+"""``cartctl run`` end to end: trace, recording, summary against review, Ctrl-C, real time."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+
+from cartctl.cli import main
+from cartctl.commands import run as run_command
+from cartctl.data import read_trace
+from cartctl.plants.sim import ArxPlant
+
+ROOT = Path(__file__).resolve().parents[1]
+CONTRACT_PATHS = [
+    f"motor/{m}/{s}" for m in "ab" for s in ("reference", "speed", "estimate", "voltage")
+]
+CONTRACT_PATHS += ["loop/period_error_us", "loop/compute_us"]
+
+
+@pytest.fixture
+def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A folder like a checkout: the shipped models and controllers, logs/ written there."""
+    shutil.copytree(ROOT / "models", tmp_path / "models")
+    shutil.copytree(ROOT / "controllers", tmp_path / "controllers")
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, dict | str, str]:
+    code = main(["run", *argv])
+    out, err = capsys.readouterr()
+    try:
+        return code, json.loads(out), err
+    except json.JSONDecodeError:
+        return code, out, err
+
+
+def _rrd_rows(path: Path) -> Counter:
+    rows: Counter = Counter()
+    for chunk in RrdReader(path).stream():
+        if not chunk.is_static:
+            rows[chunk.entity_path.lstrip("/")] += chunk.num_rows
+    return rows
+
+
+def test_fast_run_records_trace_and_contract_4_recording(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    code, summary, err = _run(
+        capsys, "--fast", "--duration", "3", "--rerun", "save", "--json", "--name", "r"
+    )
+    assert code == 0, err
+    assert isinstance(summary, dict)
+    assert summary["ticks"] == 300
+    assert summary["deadline_misses"] == 0
+    assert summary["loop_delay_ticks"] is None
+    trace = read_trace(summary["trace"])
+    assert len(trace) == 300
+    assert trace.column("tick")[-1] == 299
+    rows = _rrd_rows(Path(summary["recording"]))
+    for path in CONTRACT_PATHS:
+        assert rows[path] == 300, path
+    a = summary["motors"]["a"]
+    assert a["overshoot_percent"] <= 5.0
+    assert abs(a["steady_state_error"]) < 1e-6
+    assert a["max_abs_voltage"] <= 12.0
+    assert set(a) == {"overshoot_percent", "settling_time_s", "rise_time_s", "steady_state_error",
+                      "rms_error", "max_abs_voltage"}  # fmt: skip
+
+
+def test_summary_step_metrics_equal_review_of_the_csv(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    code, summary, _ = _run(capsys, "--fast", "--duration", "2", "--plant", "physics", "--rerun", "off",
+                            "--controller", "controllers/poles.toml", "--json")  # fmt: skip
+    assert code == 0
+    assert summary["recording"] is None
+    assert main(["review", summary["trace"], "--json"]) == 0
+    review = json.loads(capsys.readouterr().out)
+    assert review["motors"] == summary["motors"]
+
+
+def test_ctrl_c_leaves_zero_volts_and_readable_files(
+    capsys: pytest.CaptureFixture[str], workdir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    sent: list[tuple[float, float]] = []
+
+    class Interrupting(ArxPlant):
+        def step(self, voltage_a_v: float, voltage_b_v: float):
+            sent.append((voltage_a_v, voltage_b_v))
+            if len(sent) == 150:
+                raise KeyboardInterrupt
+            return super().step(voltage_a_v, voltage_b_v)
+
+    original = run_command.make_plant
+
+    def fake_make_plant(*args, **kwargs):
+        plant, _ = original(*args, **kwargs)
+        return Interrupting(*plant.models), "interrupting sim"
+
+    monkeypatch.setattr(run_command, "make_plant", fake_make_plant)
+    code, _out, err = _run(capsys, "--fast", "--duration", "5", "--rerun", "save", "--name", "cut")
+    assert code == 130
+    assert "interrupted" in err
+    assert sent[-1] == (0.0, 0.0)
+    assert max(abs(v) for v in sent[-2]) > 0.0  # it was driving when cut
+    trace = read_trace(workdir / "logs" / "cut.csv")
+    assert len(trace) == 149
+    rows = _rrd_rows(workdir / "logs" / "cut.rrd")
+    assert rows["motor/a/speed"] == 149
+    RrdReader(
+        workdir / "logs" / "cut.rrd"
+    ).store()  # needs the footer: the file was closed properly
+
+
+def test_short_real_time_run(capsys: pytest.CaptureFixture[str], workdir: Path) -> None:
+    """Real time on a shared machine: generous bounds; the benchmarks measure the real figures."""
+    code, summary, err = _run(capsys, "--duration", "1", "--rerun", "save", "--json")
+    assert code == 0, err
+    assert summary["ticks"] == 100
+    assert summary["deadline_misses"] <= 2
+    assert summary["period_error_us"]["p50"] < 2000
+    assert 0.9 < summary["duration_s"] < 1.5
+    assert Path(summary["recording"]).is_file()
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--controller", "nope.toml"], "controller file not found: nope.toml"),
+        (["--reference", "sine:3"], "unknown reference 'sine:3'"),
+        (["--duration", "-1"], "--duration"),
+        (["--voltage-limit", "20"], "--voltage-limit"),
+        (["--plant", "moon"], "'moon'"),
+    ],
+)
+def test_user_mistakes(
+    capsys: pytest.CaptureFixture[str], workdir: Path, argv: list[str], message: str
+) -> None:
+    code, _out, err = _run(capsys, "--fast", *argv)
+    assert code == 2
+    assert message in err
+    assert len(err.strip().splitlines()) == 1
+    assert not (workdir / "logs").exists() or not any((workdir / "logs").iterdir())
+
+
+def test_runs_do_not_overwrite_each_other(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    traces = set()
+    for _ in range(2):
+        code, summary, _ = _run(capsys, "--fast", "--duration", "0.5", "--rerun", "off", "--json")
+        assert code == 0
+        traces.add(summary["trace"])
+    assert len(traces) == 2
+
+
+def test_trace_has_one_row_per_tick_with_true_speed(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    code, summary, _ = _run(
+        capsys, "--fast", "--duration", "1", "--plant", "physics", "--rerun", "off", "--json"
+    )
+    assert code == 0
+    trace = read_trace(summary["trace"])
+    np.testing.assert_allclose(np.diff(trace.time_s), 0.01)
+    assert "true_speed_a" in trace.columns()
