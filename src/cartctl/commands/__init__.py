@@ -13,7 +13,8 @@ from cartctl.commands import (
     linearity,
     review,
     run,
+    tune,
     validate,
 )
 
-COMMANDS = (excite, identify, inspect, validate, linearity, design, run, review, convert)
+COMMANDS = (excite, identify, inspect, validate, linearity, design, run, review, tune, convert)

@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from cartctl.data import Trace, parse_mapping, read_trace, write_trace
-from cartctl.errors import InputError
+from cartctl.commands.options import add_map_option
+from cartctl.data import Trace, read_trace, write_trace
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -31,23 +31,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", metavar="FILE.csv", help="write the trace as a cartctl CSV")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=run)
-
-
-def _mapping_arg(text: str) -> dict[str, str]:
-    try:
-        return parse_mapping(text)
-    except InputError as exc:  # argparse shows an ArgumentTypeError's own message
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def add_map_option(p: argparse.ArgumentParser) -> None:
-    """The ``--map`` option shared by every command that reads traces."""
-    p.add_argument(
-        "--map",
-        type=_mapping_arg,
-        metavar="COLUMN=LABEL,...",
-        help="which log channel is which column, e.g. voltage_a=FloatIn2,speed_a=FloatIn0",
-    )
 
 
 def summary(trace: Trace) -> dict[str, Any]:

@@ -7,10 +7,11 @@ import sys
 
 import numpy as np
 
+from cartctl.commands.options import add_plant_options
 from cartctl.data import write_trace
 from cartctl.errors import InputError
 from cartctl.experiment import run_experiment
-from cartctl.plants.factory import DEFAULT_MODEL, make_plant
+from cartctl.plants.factory import make_plant
 from cartctl.plants.sim import SUPPLY_V
 from cartctl.progress import ProgressBar
 from cartctl.signals import SIGNALS, make_signal
@@ -27,12 +28,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "'--signal square --amplitude 10': +10 V, 0 V, −10 V for 1 s each, repeated."
         ),
     )
-    p.add_argument(
-        "--plant",
-        default="sim",
-        metavar="PLANT",
-        help="sim (ARX model file), physics (physical simulator); default sim",
-    )
+    add_plant_options(p, what="what to excite")
     p.add_argument(
         "--signal", choices=SIGNALS, default="square", help="excitation shape (default square)"
     )
@@ -55,26 +51,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="which motor gets the signal; the other stays at 0 V (default both)",
     )
     p.add_argument("--out", required=True, metavar="FILE.csv", help="where to write the trace")
-    p.add_argument(
-        "--model",
-        default=str(DEFAULT_MODEL),
-        metavar="MODEL.toml",
-        help=f"model file of the sim plant (default {DEFAULT_MODEL})",
-    )
-    p.add_argument(
-        "--preset",
-        choices=("air", "ground"),
-        default="ground",
-        help="physics plant: wheels in the air or cart on the ground (default ground)",
-    )
-    p.add_argument(
-        "--noise",
-        type=float,
-        default=0.0,
-        metavar="RAD_S",
-        help="extra white measurement noise, standard deviation in rad/s (default 0: off)",
-    )
-    p.add_argument("--seed", type=int, default=None, help="seed of the measurement noise")
     p.set_defaults(func=run)
 
 

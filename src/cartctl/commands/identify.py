@@ -8,7 +8,7 @@ import shlex
 import sys
 from datetime import UTC, datetime
 
-from cartctl.commands.convert import add_map_option
+from cartctl.commands.options import add_map_option
 from cartctl.data import read_trace
 from cartctl.errors import InputError
 from cartctl.identify.arx import ArxFit

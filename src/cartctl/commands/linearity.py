@@ -11,7 +11,7 @@ import argparse
 import json
 from pathlib import Path
 
-from cartctl.commands.convert import add_map_option
+from cartctl.commands.options import add_map_option
 from cartctl.commands.validate import (
     add_plot_option,
     check_plot_path,

@@ -11,10 +11,11 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from cartctl.commands.options import add_plant_options
 from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import load_controller
 from cartctl.errors import DataWarning, InputError, PlantError
-from cartctl.plants.factory import DEFAULT_MODEL, make_plant
+from cartctl.plants.factory import make_plant
 from cartctl.runtime.loop import ControlLoop, MemorySink
 from cartctl.runtime.reference import FORMS, reference_signal
 from cartctl.sinks.csv_sink import CsvSink
@@ -34,7 +35,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "controller on the simulated ground model, a 10 rad/s step, 5 s in real time."
         ),
     )
-    p.add_argument("--plant", default="sim", metavar="PLANT", help="sim (default), physics")
+    add_plant_options(p, what="what to control")
     p.add_argument(
         "--controller",
         default=str(DEFAULT_CONTROLLER),
@@ -63,16 +64,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--connect-url", metavar="URL", help="viewer address for --rerun connect")
     p.add_argument("--out", default="logs", metavar="DIR", help="where the trace and recording go")
     p.add_argument("--name", metavar="NAME", help="file name stem (default run-DATE-TIME)")
-    p.add_argument(
-        "--model", default=str(DEFAULT_MODEL), metavar="MODEL.toml", help="model of the sim plant"
-    )
-    p.add_argument(
-        "--preset", choices=("air", "ground"), default="ground", help="physics plant preset"
-    )
-    p.add_argument(
-        "--noise", type=float, default=0.0, metavar="RAD_S", help="simulated measurement noise"
-    )
-    p.add_argument("--seed", type=int, help="noise seed")
     p.add_argument(
         "--voltage-limit",
         type=float,

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from cartctl.commands.convert import add_map_option
+from cartctl.commands.options import add_map_option
 from cartctl.data import MOTORS, read_trace
 from cartctl.errors import InputError
 from cartctl.identify.validate import ModelValidation, ValidationResult, validate_models

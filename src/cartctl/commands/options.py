@@ -1,0 +1,56 @@
+"""Command-line options shared by several subcommands (one definition each)."""
+
+from __future__ import annotations
+
+import argparse
+
+from cartctl.data import parse_mapping
+from cartctl.errors import InputError
+from cartctl.plants.factory import DEFAULT_MODEL
+
+
+def _mapping_arg(text: str) -> dict[str, str]:
+    try:
+        return parse_mapping(text)
+    except InputError as exc:  # argparse shows an ArgumentTypeError's own message
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_map_option(p: argparse.ArgumentParser) -> None:
+    """``--map``: which QRoboticsCenter channel is which trace column."""
+    p.add_argument(
+        "--map",
+        type=_mapping_arg,
+        metavar="COLUMN=LABEL,...",
+        help="which log channel is which column, e.g. voltage_a=FloatIn2,speed_a=FloatIn0",
+    )
+
+
+def add_plant_options(p: argparse.ArgumentParser, *, what: str) -> None:
+    """``--plant`` and the simulated plants' ``--model``, ``--preset``, ``--noise``, ``--seed``."""
+    p.add_argument(
+        "--plant",
+        default="sim",
+        metavar="PLANT",
+        help=f"{what}: sim (the ARX models of --model, default) or physics (the physical simulator)",
+    )
+    p.add_argument(
+        "--model",
+        default=str(DEFAULT_MODEL),
+        metavar="MODEL.toml",
+        help=f"model file of the sim plant (default {DEFAULT_MODEL})",
+    )
+    p.add_argument(
+        "--preset",
+        choices=("air", "ground"),
+        default="ground",
+        help="physics plant: wheels in the air or cart on the ground (default ground)",
+    )
+    p.add_argument(
+        "--noise",
+        type=float,
+        default=0.0,
+        metavar="RAD_S",
+        help="extra white measurement noise, standard deviation in rad/s (default 0: off)",
+    )
+    p.add_argument("--seed", type=int, default=None, help="seed of the measurement noise")
