@@ -60,10 +60,13 @@ def grid_form(method: str) -> str:
     return f"'{a.name}=START:STOP:STEP,{b.name}=START:STOP:STEP' (inclusive; or NAME=VALUE)"
 
 
+def _count(start: float, stop: float, step: float) -> int:
+    return math.floor((stop - start) / step + 1e-9) + 1
+
+
 def inclusive_range(start: float, stop: float, step: float) -> tuple[float, ...]:
     """``start, start + step, …`` up to and including ``stop`` (to 1e-9 of a step), rounded to 1e-10."""
-    count = math.floor((stop - start) / step + 1e-9) + 1
-    return tuple(round(start + i * step, 10) for i in range(count))
+    return tuple(round(start + i * step, 10) for i in range(_count(start, stop, step)))
 
 
 def parse_grid(spec: str | None, method: str) -> dict[str, tuple[float, ...]]:
@@ -76,13 +79,15 @@ def parse_grid(spec: str | None, method: str) -> dict[str, tuple[float, ...]]:
         the message gives the expected form.
     """
     axes = {a.name: a for a in AXES[method]}
-    out = {name: inclusive_range(*a.default) for name, a in axes.items()}
+    ranges = {name: a.default for name, a in axes.items()}
     form = grid_form(method)
     seen: set[str] = set()
     for item in (spec or "").split(",") if spec and spec.strip() else []:
         name, eq, text = (s.strip() for s in item.partition("="))
         if not eq or name not in axes:
-            raise InputError(f"--grid: bad axis '{item.strip()}' for --method {method}; expected {form}")
+            raise InputError(
+                f"--grid: bad axis '{item.strip()}' for --method {method}; expected {form}"
+            )
         if name in seen:
             raise InputError(f"--grid: axis '{name}' is given twice; expected {form}")
         seen.add(name)
@@ -91,16 +96,24 @@ def parse_grid(spec: str | None, method: str) -> dict[str, tuple[float, ...]]:
         except ValueError:
             numbers = []
         if len(numbers) not in (1, 3) or not all(math.isfinite(v) for v in numbers):
-            raise InputError(f"--grid: '{item.strip()}' is not NAME=START:STOP:STEP or NAME=VALUE; expected {form}")
+            raise InputError(
+                f"--grid: '{item.strip()}' is not NAME=START:STOP:STEP or NAME=VALUE; expected {form}"
+            )
         if len(numbers) == 3 and not (numbers[2] > 0 and numbers[1] >= numbers[0]):
             raise InputError(
                 f"--grid: '{item.strip()}' needs STEP > 0 and STOP >= START; expected {form}"
             )
-        out[name] = (numbers[0],) if len(numbers) == 1 else inclusive_range(*numbers)
-    size = math.prod(len(v) for v in out.values())
+        ranges[name] = (
+            (numbers[0], numbers[0], 1.0)
+            if len(numbers) == 1
+            else (numbers[0], numbers[1], numbers[2])
+        )
+    size = math.prod(_count(*r) for r in ranges.values())
     if size > MAX_SETTINGS:
-        raise InputError(f"--grid gives {size} settings, more than {MAX_SETTINGS}; use coarser steps")
-    return out
+        raise InputError(
+            f"--grid gives {size} settings, more than {MAX_SETTINGS}; use coarser steps"
+        )
+    return {name: inclusive_range(*r) for name, r in ranges.items()}
 
 
 def grid_settings(axes: Mapping[str, Sequence[float]]) -> list[dict[str, float]]:
@@ -233,3 +246,24 @@ def sort_results(results: Sequence[TuneResult]) -> list[TuneResult]:
         return (0 if r.pareto else 1, w["settling_time_s"], overshoot, r.index)
 
     return sorted(results, key=key)
+
+
+def _num(x: float | None, fmt: str, scale: float = 1.0) -> str:
+    return "—" if x is None else format(x * scale, fmt)
+
+
+def format_table(method: str, results: Sequence[TuneResult]) -> str:
+    """One row per setting; ``*`` marks the Pareto front; infeasible reasons below the table."""
+    axes = AXES[method]
+    heads = [f"{a.name} ({a.unit})" for a in axes]
+    lines = ["   #  " + "".join(f"{h:>19}" for h in heads)
+             + f"{'overshoot %':>13}{'settling ms':>13}{'rms error':>11}{'peak V':>8}  feasible"]  # fmt: skip
+    for r in results:
+        w = r.worst
+        lines.append(
+            f"{'*' if r.pareto else ' '}{r.index:>3}  " + "".join(f"{r.settings[a.name]:>19g}" for a in axes)
+            + f"{_num(w['overshoot_percent'], '.2f'):>13}{_num(w['settling_time_s'], '.0f', 1e3):>13}"
+            f"{_num(w['rms_error'], '.3f'):>11}{_num(w['max_abs_voltage'], '.2f'):>8}  {'yes' if r.feasible else 'no'}"
+        )  # fmt: skip
+    lines += [f"  #{r.index}: {r.reason}" for r in results if not r.feasible]
+    return "\n".join(lines)

@@ -1,0 +1,191 @@
+"""Running a tuning grid: each setting designed, then run in the loop of ``cartctl run --fast``.
+
+The execution part of ``cartctl tune`` (:mod:`cartctl.commands.tune`); the grid, the result rows
+and the Pareto front are in :mod:`cartctl.design.tune`. A setting is designed per motor by the
+design command's own ``_design_motor`` (from its ``cartctl design`` arguments), run by
+:func:`simulate` (ControlLoop, PeriodicExecutor, VirtualClock and a MemorySink: the loop of
+``run --fast`` without files) and summarised by the run summary's ``trace_metrics``. The
+settings are spread over worker processes in chunks; a refused design is a result, not an error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import math
+from collections.abc import Callable, Mapping
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cartctl.design.tune import TuneResult, design_argv
+from cartctl.errors import CartctlError, PlantError
+from cartctl.modelfile import ModelFile, load_models
+from cartctl.plants.base import Plant
+from cartctl.plants.factory import make_plant
+from cartctl.runtime.base import Controller
+from cartctl.runtime.clock import VirtualClock
+from cartctl.runtime.executor import PeriodicExecutor
+from cartctl.runtime.loop import ControlLoop, MemorySink
+from cartctl.runtime.reference import reference_signal
+from cartctl.sinks.summary import trace_metrics
+
+
+@dataclass(frozen=True)
+class TuneJob:
+    """A chunk of settings, with what every setting shares (picklable, for a worker process).
+
+    Attributes
+    ----------
+    model : str
+        Model file designed on, and the sim plant's model.
+    method : {'pi', 'poles'}
+    plant, preset : str
+        Plant name ('sim' or 'physics') and physics preset, as for ``make_plant``.
+    reference : str
+        Reference spec of both motors (rad/s; see :mod:`cartctl.runtime.reference`).
+    duration_s : float
+        Run time per setting (s).
+    extra_delay_ticks : int
+        Loop delay the design allows for (ticks); the simulated loop has none, as in ``run --fast``.
+    items : tuple of (int, dict)
+        The settings: (1-based grid index, axis values).
+    """
+
+    model: str
+    method: str
+    plant: str
+    preset: str
+    reference: str
+    duration_s: float
+    extra_delay_ticks: int
+    items: tuple[tuple[int, dict[str, float]], ...]
+
+
+def simulate(
+    plant: Plant,
+    controllers: Mapping[str, Controller],
+    references: Mapping[str, NDArray[np.float64]],
+    *,
+    period_s: float,
+    voltage_limit_v: float,
+) -> tuple[dict[str, Any], str | None]:
+    """The loop of ``cartctl run --fast`` kept in memory: (``trace_metrics`` summary, failure).
+
+    ``plant``, ``controllers`` and ``references`` (rad/s per tick) are as for
+    :class:`~cartctl.runtime.loop.ControlLoop`; ``period_s`` is the tick (s), ``voltage_limit_v``
+    the clamp (V). The failure is the plant's error message, or None.
+    """
+    clock, memory = VirtualClock(), MemorySink()
+    loop = ControlLoop(plant, controllers, references, [memory], now_s=clock.now_s,
+                       voltage_limit_v=voltage_limit_v, period_s=period_s)  # fmt: skip
+    executor = PeriodicExecutor(period_s, clock, max_ticks=len(references["a"]))
+    try:
+        loop.start()
+
+        def tick(k: int) -> bool:
+            return loop.tick(k, executor.period_error_us, executor.start_s, executor.grid_index * period_s)  # fmt: skip
+
+        executor.run(tick)
+    except PlantError as exc:
+        loop.state.failure = str(exc)
+    finally:
+        loop.finish()
+    return trace_metrics(memory.arrays(), period_s), loop.state.failure
+
+
+def _evaluate(job: TuneJob, models: ModelFile, parser: argparse.ArgumentParser,
+              index: int, settings: dict[str, float]) -> TuneResult:  # fmt: skip
+    from cartctl.commands.design import _design_motor
+
+    args = parser.parse_args(design_argv(job.model, job.method, settings, job.extra_delay_ticks))
+    controllers: dict[str, Controller] = {}
+    for m in ("a", "b"):
+        try:
+            controllers[m] = _design_motor(args, models.motor(m))[0]
+        except (CartctlError, np.linalg.LinAlgError) as exc:
+            return TuneResult(index, settings, False, f"motor {m}: {exc}")
+    plant, _ = make_plant(job.plant, model_path=job.model, preset=job.preset)
+    n = max(1, round(job.duration_s / plant.period_s))
+    refs = {m: reference_signal(job.reference, n, plant.period_s, m) for m in ("a", "b")}
+    summary, failure = simulate(plant, controllers, refs, period_s=plant.period_s,
+                                voltage_limit_v=min(12.0, args.voltage_limit))  # fmt: skip
+    if failure:
+        return TuneResult(index, settings, False, f"the run failed: {failure}")
+    return TuneResult(index, settings, True, motors=summary["motors"])
+
+
+def evaluate_chunk(job: TuneJob) -> list[TuneResult]:
+    """Design and run every setting of a chunk (the worker function of the process pool)."""
+    from cartctl.commands import design
+
+    sub = argparse.ArgumentParser(prog="cartctl").add_subparsers()
+    design.add_parser(sub)
+    parser = sub.choices["design"]  # the design command's own options and defaults
+    models = load_models(job.model)
+    return [_evaluate(job, models, parser, i, s) for i, s in job.items]
+
+
+def one_blas_thread() -> None:
+    """Worker initializer: one OpenBLAS thread in this process (best effort, Linux).
+
+    A forked worker keeps the parent's OpenBLAS thread pool (as many threads as cores); two
+    workers on two cores then compete with each other's BLAS threads and the grid runs no faster
+    than in one process. The libraries loaded (numpy's and scipy's) are found in
+    ``/proc/self/maps``; elsewhere, or without the setter, nothing changes.
+    """
+    try:
+        with open("/proc/self/maps", encoding="utf-8") as f:
+            paths = {line.split()[-1] for line in f if "openblas" in line.lower() and "/" in line}
+    except OSError:
+        return
+    names = ("openblas_set_num_threads", "scipy_openblas_set_num_threads64_",
+             "scipy_openblas_set_num_threads")  # fmt: skip
+    for path in sorted(paths):
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        setter = next((getattr(lib, n) for n in names if hasattr(lib, n)), None)
+        if setter is not None:
+            setter(1)
+
+
+def run_grid(
+    job: TuneJob, jobs: int, progress: Callable[[int], None] | None = None
+) -> list[TuneResult]:
+    """Every setting of ``job``, in grid order, on ``jobs`` processes.
+
+    Parameters
+    ----------
+    job : TuneJob
+        All the settings.
+    jobs : int
+        Processes (>= 1). With 1 everything runs in this process. Otherwise the first setting
+        runs here (its lazy imports and first-call costs are then paid before the workers fork,
+        not once per worker) and the rest in chunks of about a quarter of a worker's share.
+    progress : callable, optional
+        Called with the number of settings done so far as results arrive.
+    """
+    items = job.items
+    results: list[TuneResult] = []
+    for item in items if jobs == 1 else items[:1]:
+        results += evaluate_chunk(replace(job, items=(item,)))
+        if progress is not None:
+            progress(len(results))
+    rest = items[1:] if jobs > 1 else ()
+    if rest:
+        size = max(1, math.ceil(len(rest) / (4 * jobs)))
+        chunks = [replace(job, items=rest[i : i + size]) for i in range(0, len(rest), size)]
+        pool = ProcessPoolExecutor(max_workers=min(jobs, len(chunks)), initializer=one_blas_thread)
+        try:
+            for future in as_completed([pool.submit(evaluate_chunk, c) for c in chunks]):
+                results += future.result()
+                if progress is not None:
+                    progress(len(results))
+        finally:
+            pool.shutdown(cancel_futures=True)
+    return sorted(results, key=lambda r: r.index)

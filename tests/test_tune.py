@@ -1,0 +1,216 @@
+"""``cartctl tune``: grid specs, the Pareto front on fixed numbers, and a small grid run end to end
+against ``cartctl run --fast`` and ``cartctl design``."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import shlex
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from cartctl.cli import main
+from cartctl.design.controllerfile import load_controller
+from cartctl.design.tune import (
+    TuneResult,
+    design_argv,
+    grid_settings,
+    mark_pareto,
+    pareto_front,
+    parse_grid,
+)
+from cartctl.errors import InputError
+
+GROUND = Path(__file__).resolve().parents[1] / "models" / "ground.toml"
+# 60° at 2 Hz needs Kp < 0 on the ground model (infeasible); 4 Hz works for both margins.
+PI_GRID = "phase_margin=60:65:5,crossover_hz=2:4:2"
+CHOSEN = 4  # 65°, 4 Hz (the first axis varies slowest)
+
+
+def _motor(overshoot: float | None, settling: float | None, rms: float, peak: float) -> dict:
+    return {"overshoot_percent": overshoot, "settling_time_s": settling, "rms_error": rms,
+            "max_abs_voltage": peak}  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("points", "expected"),
+    [
+        (
+            [
+                [1.0, 1.0, 1.0, 1.0],  # dominated by the next two
+                [2.0, 2.0, 2.0, 2.0],  # dominated by everything but the NaN row
+                [0.0, 5.0, 1.0, 1.0],  # best first column
+                [1.0, 1.0, 1.0, 0.5],  # dominates row 0
+                [1.0, 1.0, 1.0, 0.5],  # equal rows do not dominate each other
+                [math.nan, 0.0, 0.0, 0.0],  # undefined: off the front, dominates nothing
+                [3.0, 0.5, 9.0, 9.0],  # best second column
+            ],
+            [False, False, True, True, True, False, True],
+        ),
+        ([[5.0, 5.0]], [True]),
+        (np.zeros((0, 4)), []),
+    ],
+)
+def test_pareto_front_on_fixed_numbers(points: Any, expected: list[bool]) -> None:
+    assert pareto_front(points).tolist() == expected
+
+
+def test_mark_pareto_uses_the_worse_motor_and_skips_unsettled_and_infeasible() -> None:
+    results = [
+        TuneResult(1, {"x": 1.0}, True, motors={"a": _motor(1.0, 0.10, 1.0, 5.0),
+                                                 "b": _motor(0.0, 0.30, 1.0, 5.0)}),  # worst: 1 %, 0.3 s
+        TuneResult(2, {"x": 2.0}, True, motors={"a": _motor(2.0, 0.20, 1.0, 5.0),
+                                                 "b": _motor(2.0, 0.20, 1.0, 5.0)}),  # 2 %, 0.2 s
+        TuneResult(3, {"x": 3.0}, True, motors={"a": _motor(3.0, 0.25, 1.0, 5.0),
+                                                 "b": _motor(3.0, 0.25, 1.0, 5.0)}),  # dominated by 2
+        TuneResult(4, {"x": 4.0}, True, motors={"a": _motor(0.0, None, 0.1, 1.0),
+                                                 "b": _motor(0.0, 0.01, 0.1, 1.0)}),  # never settled
+        TuneResult(5, {"x": 5.0}, False, "refused"),
+    ]  # fmt: skip
+    assert [r.pareto for r in mark_pareto(results)] == [True, True, False, False, False]
+    assert results[0].worst == {"overshoot_percent": 1.0, "settling_time_s": 0.3,
+                                "rms_error": 1.0, "max_abs_voltage": 5.0}  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("spec", "method", "expected"),
+    [
+        ("phase_margin=50:60:5", "pi", {"phase_margin": (50.0, 55.0, 60.0),
+                                        "crossover_hz": (2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0)}),
+        (" crossover_hz = 2:2.3:0.1 , phase_margin=70", "pi",
+         {"phase_margin": (70.0,), "crossover_hz": (2.0, 2.1, 2.2, 2.3)}),
+        ("overshoot=1", "poles", {"settling_time": (0.04, 0.06, 0.08, 0.1, 0.12, 0.14, 0.16),
+                                  "overshoot": (1.0,)}),
+    ],
+)  # fmt: skip
+def test_grid_specs(spec: str, method: str, expected: dict) -> None:
+    axes = parse_grid(spec, method)
+    assert axes == expected
+    assert len(grid_settings(axes)) == math.prod(len(v) for v in expected.values())
+
+
+@pytest.mark.parametrize(
+    "spec",
+    ["phase_margin=50-75", "phase_margin=50:40:5", "phase_margin=50:60:0", "margin=1",
+     "phase_margin=a:b:c", "phase_margin=1:2", "phase_margin=60,phase_margin=65",
+     "settling_time=0.1", "phase_margin=nan", "phase_margin=1:100000:0.001"],
+)  # fmt: skip
+def test_bad_grid_specs_are_refused(spec: str) -> None:
+    with pytest.raises(InputError, match="--grid"):
+        parse_grid(spec, "pi")
+
+
+def test_bad_grid_spec_on_the_command_line_is_one_line_and_exit_2(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    code = main(["tune", str(GROUND), "--method", "pi", "--grid", "phase_margin=50..75"])
+    out, err = capsys.readouterr()
+    assert code == 2
+    assert out == ""
+    assert err.count("\n") == 1
+    assert err.startswith("cartctl tune: error: --grid") and "START:STOP:STEP" in err
+
+
+def test_design_argv_is_the_design_command() -> None:
+    argv = design_argv("m.toml", "pi", {"phase_margin": 65.0, "crossover_hz": 3.5}, 1)
+    assert argv == ["m.toml", "--method", "pi", "--phase-margin", "65", "--crossover-hz", "3.5",
+                    "--extra-delay", "1"]  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def tuned(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """One 2×2 PI grid, 1 s runs, two workers, with --json, --plot and --choose/--out."""
+    tmp = tmp_path_factory.mktemp("tune")
+    out, plot = tmp / "chosen.toml", tmp / "tune.png"
+    stdout = io.StringIO()
+    with contextlib.redirect_stdout(stdout):
+        code = main(["tune", str(GROUND), "--method", "pi", "--grid", PI_GRID, "--duration", "1",
+                     "--jobs", "2", "--plot", str(plot), "--choose", str(CHOSEN), "--out", str(out),
+                     "--json"])  # fmt: skip
+    assert code == 0
+    return {"doc": json.loads(stdout.getvalue()), "out": out, "plot": plot, "tmp": tmp}
+
+
+def test_json_has_one_row_per_setting_and_reports_infeasible_ones(tuned: dict[str, Any]) -> None:
+    doc = tuned["doc"]
+    assert doc["method"] == "pi"
+    rows = {r["index"]: r for r in doc["settings"]}
+    assert sorted(rows) == [1, 2, 3, 4]
+    assert {(r["settings"]["phase_margin"], r["settings"]["crossover_hz"]) for r in rows.values()} == {
+        (60.0, 2.0), (60.0, 4.0), (65.0, 2.0), (65.0, 4.0)}  # fmt: skip
+    assert not rows[1]["feasible"] and "crossover must lie between" in rows[1]["reason"]
+    assert rows[1]["overshoot_percent"] is None and not rows[1]["pareto"]
+    assert rows[4]["feasible"] and rows[4]["reason"] is None
+    keys = ("overshoot_percent", "settling_time_s", "rms_error", "peak_voltage_v")
+    front = pareto_front(
+        [[math.nan if r[k] is None else r[k] for k in keys] for r in doc["settings"]]
+    )
+    assert [r["pareto"] for r in doc["settings"]] == front.tolist()
+    assert doc["settings"][-1]["feasible"] is False  # the infeasible sort last
+
+
+def test_tuned_metrics_equal_those_of_run_fast_with_the_chosen_controller(
+    tuned: dict[str, Any],
+) -> None:
+    stdout = io.StringIO()
+    with contextlib.redirect_stdout(stdout):
+        code = main(["run", "--fast", "--controller", str(tuned["out"]), "--model", str(GROUND),
+                     "--duration", "1", "--rerun", "off", "--out", str(tuned["tmp"]), "--json"])  # fmt: skip
+    assert code == 0
+    run_motors = json.loads(stdout.getvalue())["motors"]
+    row = next(r for r in tuned["doc"]["settings"] if r["index"] == CHOSEN)
+    for m in ("a", "b"):
+        for key in ("overshoot_percent", "settling_time_s", "rms_error", "max_abs_voltage"):
+            assert row["motors"][m][key] == pytest.approx(run_motors[m][key], abs=1e-9), (m, key)
+    assert row["settling_time_s"] == max(run_motors[m]["settling_time_s"] for m in "ab")
+
+
+def test_chosen_file_is_what_cartctl_design_writes(tuned: dict[str, Any]) -> None:
+    chosen = tuned["doc"]["chosen"]
+    assert chosen["index"] == CHOSEN
+    assert chosen["command"].startswith("cartctl design ")
+    argv = shlex.split(chosen["command"])[1:]
+    direct = tuned["tmp"] / "direct.toml"
+    argv[argv.index("--out") + 1] = str(direct)
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(argv) == 0
+    ours, theirs = load_controller(tuned["out"]), load_controller(direct)
+    assert ours.command == chosen["command"]
+    assert (ours.method, ours.request, ours.motors) == (
+        theirs.method,
+        theirs.request,
+        theirs.motors,
+    )
+    assert ours.request["phase_margin_deg"] == 65.0 and ours.request["crossover_hz"] == 4.0
+
+
+def test_plot_is_a_png(tuned: dict[str, Any]) -> None:
+    assert tuned["plot"].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_poles_table_has_one_row_per_setting(capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["tune", str(GROUND), "--method", "poles", "--grid",
+                 "settling_time=0.03:0.07:0.04,overshoot=1", "--duration", "1", "--jobs", "1"])  # fmt: skip
+    out, _ = capsys.readouterr()
+    assert code == 0
+    rows = [line for line in out.splitlines() if line[:4].strip().lstrip("*").strip().isdigit()]
+    assert len(rows) == 2
+    assert rows[0].startswith("*") and rows[0].endswith("yes")  # the only feasible one
+    assert rows[1].endswith("no")
+    assert "#1: motor a: settling_time_s must be at least" in out
+
+
+def test_choosing_an_infeasible_setting_is_a_clear_error(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    code = main(["tune", str(GROUND), "--method", "pi", "--grid", "phase_margin=60,crossover_hz=2",
+                 "--duration", "0.5", "--jobs", "1", "--choose", "1", "--out", str(tmp_path / "c.toml")])  # fmt: skip
+    _, err = capsys.readouterr()
+    assert code == 2
+    assert "--choose 1: that setting is infeasible" in err and err.count("\n") == 1
+    assert not (tmp_path / "c.toml").exists()
