@@ -73,7 +73,7 @@ def poles_entry(design: PolesDesign) -> dict[str, Any]:
 
 @dataclass(frozen=True)
 class _Gains:
-    """What :class:`StateFeedbackController` reads of a design, rebuilt from a file."""
+    """A :class:`~cartctl.runtime.statefeedback.FeedbackGains` rebuilt from a controller file."""
 
     K: NDArray[np.float64]
     Ki: float
@@ -127,7 +127,7 @@ def build_controllers(controller: ControllerFile) -> dict[str, Controller]:
                     kalman,
                 )
                 out[motor] = StateFeedbackController(
-                    gains,  # type: ignore[arg-type]  (duck-typed: the fields the controller reads)
+                    gains,
                     estimator=make_estimator(kalman, gain),
                     voltage_limit_v=controller.voltage_limit_v,
                 )

@@ -20,8 +20,12 @@ controller, so it recovers instead of holding a poisoned state.
 from __future__ import annotations
 
 import math
+from typing import Protocol
 
-from cartctl.design.poles import PolesDesign
+import numpy as np
+from numpy.typing import NDArray
+
+from cartctl.design.kalman import KalmanDesign
 from cartctl.errors import InputError
 from cartctl.runtime.kalman import StateEstimator, SteadyStateSpeedEstimator
 
@@ -31,12 +35,25 @@ MAX_VOLTAGE_V = 12.0
 """The cart's supply: no voltage limit may exceed it (V)."""
 
 
+class FeedbackGains(Protocol):
+    """What the controller needs of a design: a :class:`~cartctl.design.poles.PolesDesign`, or
+    the same numbers read back from a controller file."""
+
+    K: NDArray[np.float64]
+    Ki: float
+    Kr: float
+    estimator: KalmanDesign
+
+    @property
+    def period_s(self) -> float: ...
+
+
 class StateFeedbackController:
     """Pole-placement speed control with integral action on a Kalman state estimate.
 
     Parameters
     ----------
-    design : PolesDesign
+    design : FeedbackGains
         K (n,), Ki, Kr and Ts come from here.
     estimator : StateEstimator, optional
         Owned by the controller (reset with it). Its state must start with the design's n
@@ -56,7 +73,7 @@ class StateFeedbackController:
 
     def __init__(
         self,
-        design: PolesDesign,
+        design: FeedbackGains,
         *,
         estimator: StateEstimator | None = None,
         voltage_limit_v: float = MAX_VOLTAGE_V,
