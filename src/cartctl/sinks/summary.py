@@ -115,7 +115,7 @@ def format_summary(summary: Mapping[str, Any]) -> str:
         return "—" if x is None else f"{x * 1e3:.0f} ms"
 
     def num(x: float | None, fmt: str) -> str:
-        return "—" if x is None else format(x, fmt)
+        return "—" if x is None else format(x, fmt).replace("-0.000", "0.000")
 
     pe, cu = summary["period_error_us"], summary["compute_us"]
     lines = [
