@@ -20,7 +20,6 @@ with the range of crossovers that works.
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -336,22 +335,18 @@ class PiDesign:
             ``closed_loop_poles`` ([[re, im], ...]), ``sensitivity_peak`` (max |1/(1+L)| on a
             dense grid up to Nyquist), ``sensitivity_peak_db``, ``bandwidth_hz``.
         """
-        import control
+        from cartctl.design.loop import loop_analysis
 
-        with warnings.catch_warnings():  # the margins may evaluate L at its pole z = 1
-            warnings.simplefilter("ignore", RuntimeWarning)
-            gm, pm, _, _, wcp, _ = control.stability_margins(self.open_loop(), method="poly")
+        loop = loop_analysis(*self.controller_tf_coeffs(), self.model, self.extra_delay_ticks)
         num, den = self._loop()
         poles = sorted(np.roots(np.polyadd(den, num)), key=lambda p: (abs(p), p.imag))
-        grid = np.linspace(0.0, 0.5 / self.period_s, _FREQ_POINTS)
-        ms = float(np.max(np.abs(self._sensitivity(grid)[0])))
         return {
-            "phase_margin_deg": float(pm) if math.isfinite(pm) else None,
-            "gain_margin_db": 20.0 * math.log10(gm) if math.isfinite(gm) and gm > 0 else None,
-            "crossover_hz": float(wcp) / (2.0 * math.pi) if math.isfinite(wcp) else None,
+            "phase_margin_deg": loop["phase_margin_deg"],
+            "gain_margin_db": loop["gain_margin_db"],
+            "crossover_hz": loop["crossover_hz"],
             "closed_loop_poles": [[float(p.real), float(p.imag)] for p in poles],
-            "sensitivity_peak": ms,
-            "sensitivity_peak_db": 20.0 * math.log10(ms),
+            "sensitivity_peak": loop["sensitivity_peak"],
+            "sensitivity_peak_db": loop["sensitivity_peak_db"],
             "bandwidth_hz": self.bandwidth_hz(),
         }
 
