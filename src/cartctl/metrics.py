@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -29,3 +31,10 @@ def fit_percent(measured: ArrayLike, modelled: ArrayLike) -> float:
     if spread == 0.0:
         return float("nan")
     return float(100.0 * (1.0 - np.linalg.norm(y - y_hat) / spread))
+
+
+def finite_or_none(value: float | None) -> float | None:
+    """``value`` as a float when finite; None for None, NaN and ±inf (JSON has neither)."""
+    if value is None or not math.isfinite(value):
+        return None
+    return float(value)

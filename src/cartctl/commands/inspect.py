@@ -7,6 +7,7 @@ import json
 import math
 from typing import Any
 
+from cartctl.metrics import finite_or_none
 from cartctl.model import ArxModel, Root
 from cartctl.modelfile import ModelFile, load_models
 
@@ -28,16 +29,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _finite_or_none(value: float) -> float | None:
-    return value if math.isfinite(value) else None
-
-
 def model_summary(model: ArxModel) -> dict[str, Any]:
     """Contract-3 ``inspect`` entry of one motor (plus nk, num and den)."""
     return {
         "poles": [r.to_dict() for r in model.poles()],
         "zeros": [r.to_dict() for r in model.zeros()],
-        "dc_gain": _finite_or_none(model.dc_gain()),
+        "dc_gain": finite_or_none(model.dc_gain()),
         "stable": model.is_stable(),
         "nk": model.nk,
         "num": model.num().tolist(),

@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import solve_triangular
 
 from cartctl.errors import InputError
-from cartctl.metrics import fit_percent
+from cartctl.metrics import finite_or_none, fit_percent
 from cartctl.model import ArxModel
 
 Segment = tuple[ArrayLike, ArrayLike]
@@ -85,16 +85,12 @@ class ArxFit:
             "num": m.num().tolist(),
             "den": m.den().tolist(),
             "theta_std": self.theta_std.tolist(),
-            "fit_simulation_percent": _json_float(self.fit_simulation_percent),
-            "fit_prediction_percent": _json_float(self.fit_prediction_percent),
+            "fit_simulation_percent": finite_or_none(self.fit_simulation_percent),
+            "fit_prediction_percent": finite_or_none(self.fit_prediction_percent),
             "method": self.method,
-            "residual_rms": _json_float(self.residual_rms),
+            "residual_rms": finite_or_none(self.residual_rms),
             "n_samples": self.n_samples,
         }
-
-
-def _json_float(x: float) -> float | None:
-    return float(x) if np.isfinite(x) else None
 
 
 def as_segments(

@@ -9,7 +9,6 @@ and simulated responses side by side. Pure numpy on a :class:`~cartctl.data.Trac
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -18,7 +17,7 @@ import numpy as np
 
 from cartctl.data import MOTORS, Trace
 from cartctl.errors import InputError
-from cartctl.metrics import fit_percent
+from cartctl.metrics import finite_or_none, fit_percent
 from cartctl.model import ArxModel
 from cartctl.modelfile import ModelFile
 from cartctl.stepinfo import StepInfo, find_step, step_info
@@ -35,10 +34,6 @@ __all__ = [
 
 PERIOD_TOLERANCE = 0.1
 """How far (as a fraction) a trace's median time step may differ from the model's Ts."""
-
-
-def _finite_or_none(value: float) -> float | None:
-    return value if math.isfinite(value) else None
 
 
 def _where(trace: Trace) -> str:
@@ -140,7 +135,7 @@ class ValidationResult:
     def to_dict(self) -> dict[str, Any]:
         """JSON form: the fit, the error summary and the step comparison (or None); no arrays."""
         return {
-            "fit_simulation_percent": _finite_or_none(self.fit_simulation_percent),
+            "fit_simulation_percent": finite_or_none(self.fit_simulation_percent),
             "abs_error": self.error_summary(),
             "step": None if self.step is None else self.step.to_dict(),
         }

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -19,11 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.errors import InputError
+from cartctl.metrics import finite_or_none
 from cartctl.stepinfo import step_info
-
-
-def _json(x: float | None) -> float | None:
-    return None if x is None or not math.isfinite(x) else float(x)
 
 
 def motor_metrics(
@@ -38,10 +34,10 @@ def motor_metrics(
         "settling_time_s": None,
         "rise_time_s": None,
         "steady_state_error": None,
-        "rms_error": _json(float(np.sqrt(np.mean((reference - speed) ** 2))))
+        "rms_error": finite_or_none(float(np.sqrt(np.mean((reference - speed) ** 2))))
         if speed.size
         else None,
-        "max_abs_voltage": _json(float(np.max(np.abs(voltage)))) if voltage.size else None,
+        "max_abs_voltage": finite_or_none(float(np.max(np.abs(voltage)))) if voltage.size else None,
     }
     initial = 0.0  # the loop starts from rest: the first step is the first departure from 0
     moved = np.flatnonzero(np.abs(reference - initial) > 1e-9)
@@ -57,10 +53,10 @@ def motor_metrics(
         time_s[:end], speed[:end], reference=target, initial=initial, onset_s=float(time_s[start])
     )
     out.update(
-        overshoot_percent=_json(info.overshoot_percent),
-        settling_time_s=_json(info.settling_time_s),
-        rise_time_s=_json(info.rise_time_s),
-        steady_state_error=_json(info.steady_state_error),
+        overshoot_percent=finite_or_none(info.overshoot_percent),
+        settling_time_s=finite_or_none(info.settling_time_s),
+        rise_time_s=finite_or_none(info.rise_time_s),
+        steady_state_error=finite_or_none(info.steady_state_error),
     )
     return out
 
