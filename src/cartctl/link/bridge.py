@@ -1,0 +1,206 @@
+"""The bridge sketch's channel map: how GPIO channels carry commands and measurements.
+
+The PC drives the cart through GPIO frames in both directions (docs/serial-protocol.md §3):
+
+- PC → cart: floats 0, 1 are the requested voltages of motors A, B (V); int 0 is the host sequence
+  number (0..32767, +1 per frame) and int 1 is 1 to drive, 0 to stop.
+- cart → PC: floats 0..5 are the measured speeds (rad/s), the voltages actually applied (V) and the
+  wheel positions (rad) of A, B; int 0 echoes the last host sequence number, int 1 is the cart's
+  tick counter (0..32767) and int 2 holds status bits (driving, watchdog tripped).
+
+The cart's template helpers are int16, hence the sequence modulo 32768. The cart applies zero volts
+once the host sequence number has not changed for :data:`WATCHDOG_TICKS` ticks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT
+from cartctl.link.messages import Gpio
+
+__all__ = [
+    "CH_APPLIED_A",
+    "CH_APPLIED_B",
+    "CH_DRIVE",
+    "CH_ECHO",
+    "CH_POSITION_A",
+    "CH_POSITION_B",
+    "CH_SEQ",
+    "CH_SPEED_A",
+    "CH_SPEED_B",
+    "CH_STATUS",
+    "CH_TICK",
+    "CH_VOLTAGE_A",
+    "CH_VOLTAGE_B",
+    "SEQ_MODULO",
+    "STATUS_DRIVING",
+    "STATUS_WATCHDOG",
+    "WATCHDOG_TICKS",
+    "CartSample",
+    "HostCommand",
+    "next_seq",
+    "tick_difference",
+]
+
+SEQ_MODULO = 32768
+"""Host sequence numbers and cart ticks count modulo this (int16 helpers on the cart)."""
+WATCHDOG_TICKS = 10
+"""The cart stops after this many ticks (100 ms) without a new host sequence number."""
+STATUS_DRIVING = 1
+"""Status bit: the cart applies the requested voltages."""
+STATUS_WATCHDOG = 2
+"""Status bit: the watchdog has tripped, the cart applies zero volts."""
+
+# PC → cart
+CH_VOLTAGE_A = 0
+CH_VOLTAGE_B = 1
+CH_SEQ = 0
+CH_DRIVE = 1
+# cart → PC
+CH_SPEED_A = 0
+CH_SPEED_B = 1
+CH_APPLIED_A = 2
+CH_APPLIED_B = 3
+CH_POSITION_A = 4
+CH_POSITION_B = 5
+CH_ECHO = 0
+CH_TICK = 1
+CH_STATUS = 2
+
+
+def _check_counts(floats: Sequence[float], ints: Sequence[int]) -> None:
+    if len(floats) != GPIO_FLOAT_COUNT or len(ints) != GPIO_INT_COUNT:
+        raise ValueError(
+            f"GPIO has {GPIO_FLOAT_COUNT} floats and {GPIO_INT_COUNT} ints, "
+            f"got {len(floats)} and {len(ints)}"
+        )
+
+
+def next_seq(seq: int) -> int:
+    """The host sequence number after ``seq`` (wraps at :data:`SEQ_MODULO`)."""
+    return (seq + 1) % SEQ_MODULO
+
+
+def tick_difference(earlier: int, later: int) -> int:
+    """Ticks (or sequence steps) from ``earlier`` to ``later``, across the wrap, in 0..32767."""
+    return (later - earlier) % SEQ_MODULO
+
+
+@dataclass(frozen=True)
+class HostCommand:
+    """One PC → cart command frame.
+
+    Attributes
+    ----------
+    voltage_a_v, voltage_b_v
+        Requested motor voltages (V).
+    seq
+        Host sequence number, 0..32767.
+    drive
+        True to apply the voltages, False to stop (zero volts).
+    """
+
+    voltage_a_v: float
+    voltage_b_v: float
+    seq: int
+    drive: bool
+
+    def to_channels(self) -> tuple[tuple[float, ...], tuple[int, ...]]:
+        """The 8 floats and 4 ints of the GPIO frame."""
+        floats = [0.0] * GPIO_FLOAT_COUNT
+        ints = [0] * GPIO_INT_COUNT
+        floats[CH_VOLTAGE_A] = float(self.voltage_a_v)
+        floats[CH_VOLTAGE_B] = float(self.voltage_b_v)
+        ints[CH_SEQ] = self.seq
+        ints[CH_DRIVE] = 1 if self.drive else 0
+        return tuple(floats), tuple(ints)
+
+    @classmethod
+    def from_channels(cls, floats: Sequence[float], ints: Sequence[int]) -> HostCommand:
+        """The command carried by a GPIO frame's channels (drive only if int 1 is exactly 1)."""
+        _check_counts(floats, ints)
+        return cls(
+            voltage_a_v=float(floats[CH_VOLTAGE_A]),
+            voltage_b_v=float(floats[CH_VOLTAGE_B]),
+            seq=int(ints[CH_SEQ]),
+            drive=ints[CH_DRIVE] == 1,
+        )
+
+
+@dataclass(frozen=True)
+class CartSample:
+    """One cart → PC measurement frame (one 10 ms tick of the cart).
+
+    Attributes
+    ----------
+    time_ms
+        The cart's clock (ms).
+    speed_a_rad_s, speed_b_rad_s
+        Measured wheel speeds (rad/s).
+    applied_a_v, applied_b_v
+        Voltages actually applied at this tick (V).
+    position_a_rad, position_b_rad
+        Wheel positions (rad).
+    echo_seq
+        The last host sequence number the cart received.
+    cart_tick
+        The cart's tick counter, 0..32767.
+    driving, watchdog_tripped
+        The status bits.
+    """
+
+    time_ms: int
+    speed_a_rad_s: float
+    speed_b_rad_s: float
+    applied_a_v: float
+    applied_b_v: float
+    position_a_rad: float
+    position_b_rad: float
+    echo_seq: int
+    cart_tick: int
+    driving: bool
+    watchdog_tripped: bool
+
+    @property
+    def status(self) -> int:
+        """The status bits as sent in int channel 2."""
+        return (STATUS_DRIVING if self.driving else 0) | (
+            STATUS_WATCHDOG if self.watchdog_tripped else 0
+        )
+
+    def to_channels(self) -> tuple[tuple[float, ...], tuple[int, ...]]:
+        """The 8 floats and 4 ints of the GPIO frame."""
+        floats = [0.0] * GPIO_FLOAT_COUNT
+        ints = [0] * GPIO_INT_COUNT
+        floats[CH_SPEED_A] = float(self.speed_a_rad_s)
+        floats[CH_SPEED_B] = float(self.speed_b_rad_s)
+        floats[CH_APPLIED_A] = float(self.applied_a_v)
+        floats[CH_APPLIED_B] = float(self.applied_b_v)
+        floats[CH_POSITION_A] = float(self.position_a_rad)
+        floats[CH_POSITION_B] = float(self.position_b_rad)
+        ints[CH_ECHO] = self.echo_seq
+        ints[CH_TICK] = self.cart_tick
+        ints[CH_STATUS] = self.status
+        return tuple(floats), tuple(ints)
+
+    @classmethod
+    def from_gpio(cls, gpio: Gpio) -> CartSample:
+        """The sample carried by a GPIO message from the cart."""
+        floats, ints = gpio.floats, gpio.ints
+        _check_counts(floats, ints)
+        status = ints[CH_STATUS]
+        return cls(
+            time_ms=gpio.time_ms,
+            speed_a_rad_s=floats[CH_SPEED_A],
+            speed_b_rad_s=floats[CH_SPEED_B],
+            applied_a_v=floats[CH_APPLIED_A],
+            applied_b_v=floats[CH_APPLIED_B],
+            position_a_rad=floats[CH_POSITION_A],
+            position_b_rad=floats[CH_POSITION_B],
+            echo_seq=ints[CH_ECHO],
+            cart_tick=ints[CH_TICK],
+            driving=bool(status & STATUS_DRIVING),
+            watchdog_tripped=bool(status & STATUS_WATCHDOG),
+        )
