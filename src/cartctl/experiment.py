@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from cartctl.data import Trace
-from cartctl.errors import InputError
+from cartctl.errors import InputError, PlantError
 from cartctl.plants.base import Plant
 
 
@@ -28,10 +28,14 @@ class ExperimentResult:
         Contract-1 columns; simulated plants add ``true_speed_a`` and ``true_speed_b``.
     interrupted : bool
         True when Ctrl-C stopped the run early (the trace holds the ticks done so far).
+    failure : str or None
+        Why the plant stopped the run early (a serial cart gone silent, a vanished port); the
+        trace holds the ticks done so far.
     """
 
     trace: Trace
     interrupted: bool
+    failure: str | None = None
 
 
 def run_experiment(
@@ -43,6 +47,9 @@ def run_experiment(
     source: str | None = None,
 ) -> ExperimentResult:
     """Apply the voltage sequences tick by tick and record commanded voltages and measured speeds.
+
+    Ctrl-C or a plant fault (:class:`~cartctl.errors.PlantError`) after the first tick ends the run
+    early with the ticks recorded so far; a fault before it propagates.
 
     Row k of the trace holds the voltage commanded at tick k and the speed measured at tick k
     (contract 1), so the report's model applies to the trace as written.
@@ -73,6 +80,7 @@ def run_experiment(
     true_speed = np.full((n, 2), np.nan)
     done = 0
     interrupted = False
+    failure = None
     try:
         y = plant.reset()
         for k in range(n):
@@ -85,6 +93,10 @@ def run_experiment(
                 on_tick(done)
     except KeyboardInterrupt:
         interrupted = True
+    except PlantError as exc:
+        if done == 0:  # nothing recorded: the plant never worked; say so as such
+            raise
+        failure = str(exc)
     finally:
         plant.close()
     columns = {
@@ -97,4 +109,4 @@ def run_experiment(
     if done and not np.isnan(true_speed[:done]).any():
         columns["true_speed_a"] = true_speed[:done, 0]
         columns["true_speed_b"] = true_speed[:done, 1]
-    return ExperimentResult(Trace.from_columns(columns, source=source), interrupted)
+    return ExperimentResult(Trace.from_columns(columns, source=source), interrupted, failure)

@@ -8,6 +8,7 @@ from cartctl.commands import (
     convert,
     design,
     excite,
+    export,
     identify,
     inspect,
     linearity,
@@ -15,6 +16,8 @@ from cartctl.commands import (
     run,
     tune,
     validate,
+    virtual_cart,
 )
 
-COMMANDS = (excite, identify, inspect, validate, linearity, design, run, review, tune, convert)
+COMMANDS = (excite, identify, inspect, validate, linearity, design, run, review, tune, convert,
+            export, virtual_cart)  # fmt: skip

@@ -24,7 +24,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description=(
             "Drive the motors with an excitation signal and record the commanded voltage and the "
             "measured speed every 10 ms into a CSV trace (time_s, voltage_a, voltage_b, speed_a, "
-            "speed_b). Simulated plants run as fast as possible. The report's experiment is "
+            "speed_b). Simulated plants run as fast as possible, a serial or virtual cart at its own "
+            "10 ms tick (its loop delay is then in the data). The report's experiment is "
             "'--signal square --amplitude 10': +10 V, 0 V, −10 V for 1 s each, repeated."
         ),
     )
@@ -71,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
         preset=args.preset,
         noise_std_rad_s=args.noise,
         seed=args.seed,
+        connect_timeout_s=args.connect_timeout,
     )
     bar = ProgressBar(volts.size, f"excite {args.signal}")
     try:
@@ -87,6 +89,20 @@ def run(args: argparse.Namespace) -> int:
         f"wrote {path}: {n} ticks ({n * plant.period_s:.2f} s), {args.signal} {args.amplitude:g} V "
         f"on motor {args.motor}, plant {description}"
     )
+    link_summary = getattr(plant, "link_summary", None)
+    if link_summary is not None:
+        link = link_summary()
+        delay = link["loop_delay_ticks"]
+        stats = link["link"]
+        print(
+            f"  loop delay {delay} ticks from the echo (a model of this data has nk = "
+            f"{None if delay is None else delay + 1}); {stats['crc_errors']} CRC errors, "
+            f"{stats['lost_frames']} frames lost, {stats['missed_ticks']} cart ticks missed"
+        )
+    if result.failure:
+        print(f"cartctl excite: error: {result.failure}; the trace holds the ticks recorded so far",
+              file=sys.stderr)  # fmt: skip
+        return 1
     if result.interrupted:
         print(
             "cartctl excite: interrupted; the trace holds the ticks recorded so far",

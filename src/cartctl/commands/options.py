@@ -32,7 +32,10 @@ def add_plant_options(p: argparse.ArgumentParser, *, what: str) -> None:
         "--plant",
         default="sim",
         metavar="PLANT",
-        help=f"{what}: sim (the ARX models of --model, default) or physics (the physical simulator)",
+        help=f"{what}: sim (the ARX models of --model, default), physics (the physical "
+        "simulator), virtual (that simulator behind a pseudo-terminal, through the serial path; "
+        "virtual:garbage=0.05,corrupt=0.05,stall=S,pull=S injects faults) or serial:PORT (the "
+        "cart, e.g. serial:/dev/ttyACM0)",
     )
     p.add_argument(
         "--model",
@@ -54,3 +57,11 @@ def add_plant_options(p: argparse.ArgumentParser, *, what: str) -> None:
         help="extra white measurement noise, standard deviation in rad/s (default 0: off)",
     )
     p.add_argument("--seed", type=int, default=None, help="seed of the measurement noise")
+    p.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="serial and virtual carts: longest wait for the cart's first HEARTBEAT (default 5 s; "
+        "opening the port resets the Arduino, which takes 1-2 s)",
+    )

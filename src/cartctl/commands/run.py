@@ -15,6 +15,7 @@ from cartctl.commands.options import add_plant_options
 from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import load_controller
 from cartctl.errors import DataWarning, InputError, PlantError
+from cartctl.plants.base import ClockedPlant
 from cartctl.plants.factory import make_plant
 from cartctl.runtime.loop import ControlLoop, MemorySink
 from cartctl.runtime.reference import FORMS, reference_signal
@@ -123,12 +124,21 @@ def run(args: argparse.Namespace) -> int:
         )
     controllers = build_controllers(controller_file)
     plant, description = make_plant(args.plant, model_path=args.model, preset=args.preset,
-                                    noise_std_rad_s=args.noise, seed=args.seed)  # fmt: skip
+                                    noise_std_rad_s=args.noise, seed=args.seed,
+                                    connect_timeout_s=args.connect_timeout)  # fmt: skip
     period_s = plant.period_s
     if abs(period_s - controller_file.period_s) > 1e-9:
+        plant.close()
         raise InputError(
             f"the controller is for Ts = {controller_file.period_s} s but the plant ticks at {period_s} s"
         )
+    clocked = isinstance(plant, ClockedPlant)
+    if clocked:  # find the cart before any file is opened: a missing cart is one clear error
+        try:
+            plant.connect()
+        except BaseException:
+            plant.close()
+            raise
     n = max(1, round(args.duration / period_s))
     references = _references(args, n, period_s)
     out = Path(args.out)
@@ -140,6 +150,7 @@ def run(args: argparse.Namespace) -> int:
     if rerun is not None:
         sinks.append(rerun)
 
+    from cartctl.runtime.cartclock import CartClockedExecutor
     from cartctl.runtime.clock import MonotonicClock, VirtualClock
     from cartctl.runtime.executor import PeriodicExecutor
 
@@ -147,22 +158,26 @@ def run(args: argparse.Namespace) -> int:
     loop = ControlLoop(plant, controllers, references, sinks, now_s=clock.now_s,
                        voltage_limit_v=min(args.voltage_limit, controller_file.voltage_limit_v),
                        period_s=period_s)  # fmt: skip
-    executor = PeriodicExecutor(period_s, clock, max_ticks=n)
+    executor: Any
+    if clocked:
+        executor = CartClockedExecutor(plant, max_ticks=n, now_s=clock.now_s,  # type: ignore[arg-type]
+                                       compute_us=lambda: loop.last_compute_us)  # fmt: skip
+    else:
+        executor = PeriodicExecutor(period_s, clock, max_ticks=n)
     scheduling = "virtual clock (--fast)"
     switch_interval = sys.getswitchinterval()
     stats = None
     try:
-        loop.start()
-        if not args.fast:
+        if not args.fast:  # before the start: locking memory takes a while, and a cart ticks on
             from cartctl.runtime.realtime import enable_realtime
 
             scheduling = enable_realtime()
             sys.setswitchinterval(1e-4)  # a sink's thread must hand the GIL back within 0.1 ms
+        loop.start()
 
         def tick(k: int) -> bool:
-            return loop.tick(
-                k, executor.period_error_us, executor.start_s, executor.grid_index * period_s
-            )
+            time_s = executor.time_s if clocked else executor.grid_index * period_s
+            return loop.tick(k, executor.period_error_us, executor.start_s, time_s)
 
         stats = executor.run(tick)
     except KeyboardInterrupt:
@@ -177,10 +192,12 @@ def run(args: argparse.Namespace) -> int:
 
             restore()
     summary = trace_metrics(memory.arrays(), period_s)
-    if stats is not None:
-        summary.update(stats.to_dict())
+    summary.update((stats or executor.stats()).to_dict())
+    summary["loop_delay_ticks"] = None
+    link_summary = getattr(plant, "link_summary", None)
+    if link_summary is not None:
+        summary.update(link_summary())
     summary.update(
-        loop_delay_ticks=None,
         recording=str(rrd_path) if rerun is not None else None,
         trace=str(csv_path),
         plant=description,

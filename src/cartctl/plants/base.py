@@ -54,3 +54,30 @@ class Plant(Protocol):
     def close(self) -> None:
         """Leave the motors at zero volts and release any resource."""
         ...
+
+
+@runtime_checkable
+class ClockedPlant(Plant, Protocol):
+    """A plant that sets the pace itself: the real cart (or the virtual one) over serial.
+
+    Each :meth:`receive` returns when the cart's next tick arrives, so the loop runs at the cart's
+    10 ms and not on the host's clock. :meth:`step` is :meth:`send` then :meth:`receive`; the loop
+    calls them apart to time its own compute without the wait.
+    """
+
+    arrival_s: float
+    """Host time (``time.perf_counter``, s) when the latest measurement arrived."""
+    tick_index: int
+    """The latest measurement's cart tick, counted from the run's tick 0 (gaps included)."""
+
+    def connect(self) -> None:
+        """Open the line and wait for the cart (raises a clear error if it is not there)."""
+        ...
+
+    def send(self, voltage_a_v: float, voltage_b_v: float) -> None:
+        """Send this tick's voltages (V)."""
+        ...
+
+    def receive(self) -> Measurement:
+        """Wait for the cart's next tick and return its measurement."""
+        ...

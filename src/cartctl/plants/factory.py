@@ -8,7 +8,7 @@ from cartctl.errors import InputError
 from cartctl.modelfile import load_models
 from cartctl.plants.base import Plant
 
-PLANT_NAMES = ("sim", "physics", "virtual", "serial:PORT")
+PLANT_NAMES = ("sim", "physics", "virtual", "virtual:FAULTS", "serial:PORT")
 DEFAULT_MODEL = Path("models/ground.toml")
 
 
@@ -19,14 +19,20 @@ def make_plant(
     preset: str = "ground",
     noise_std_rad_s: float = 0.0,
     seed: int | None = None,
+    connect_timeout_s: float = 5.0,
 ) -> tuple[Plant, str]:
     """Create the plant named ``spec``.
+
+    A serial plant is returned unconnected: its ``connect()`` (or first ``reset()``) opens the
+    port and waits for the cart.
 
     Parameters
     ----------
     spec : str
         'sim' (the ARX models of ``model_path``), 'physics' (the physical simulator with
-        ``preset``), 'virtual' or 'serial:PORT'.
+        ``preset``), 'virtual' (that simulator behind a pseudo-terminal, through the serial
+        path; 'virtual:garbage=0.05,corrupt=0.05,stall=S,pull=S,generation=b' injects faults)
+        or 'serial:PORT' (the cart on that port).
     model_path : str or Path
         Model file for 'sim'.
     preset : str
@@ -35,6 +41,8 @@ def make_plant(
         Extra white measurement noise (rad/s) for simulated plants; 0 = off.
     seed : int, optional
         Noise seed.
+    connect_timeout_s : float
+        Longest wait for a serial cart's first HEARTBEAT (s).
 
     Returns
     -------
@@ -62,6 +70,20 @@ def make_plant(
             PhysicsPlant(preset, noise_std_rad_s=noise_std_rad_s, seed=seed),
             f"physics (preset {preset})",
         )
-    if spec == "virtual" or spec.startswith("serial:"):
-        raise InputError(f"plant '{spec}' is not built yet; use 'sim' or 'physics'")
+    if spec == "virtual" or spec.startswith("virtual:"):
+        from cartctl.plants.virtual_cart import CartFaults, VirtualCart, VirtualSerialCart
+
+        faults = CartFaults.parse(spec.partition(":")[2])
+        cart = VirtualCart(preset, noise_std_rad_s=noise_std_rad_s, seed=seed, faults=faults)
+        shown = f", faults {spec.partition(':')[2]}" if faults != CartFaults() else ""
+        return VirtualSerialCart(
+            cart
+        ), f"virtual cart on {cart.port} (physics preset {preset}{shown})"
+    if spec.startswith("serial:"):
+        port = spec.partition(":")[2]
+        if not port:
+            raise InputError("plant 'serial:' needs a port, e.g. serial:/dev/ttyACM0")
+        from cartctl.plants.serial_cart import SerialCart
+
+        return SerialCart(port, connect_timeout_s=connect_timeout_s), f"cart on {port}"
     raise InputError(f"unknown plant '{spec}'; expected one of {', '.join(PLANT_NAMES)}")

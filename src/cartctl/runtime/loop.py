@@ -7,6 +7,8 @@ code. Per tick k::
     y      = the speeds measured at tick k (kept from the previous plant.step)
     u_m    = controller_m.step(reference_m[k], y_m)      clamped to ±voltage_limit_v
     y_next = plant.step(u_a, u_b)                         sends u, measures tick k + 1
+                 (a cart-clocked plant: send u, log, then wait for the cart's next tick,
+                  so the compute time excludes the wait and a fault loses no row)
     row    = [time, u, y, k, reference, estimate, period error, compute time (, true speed)]
     every sink gets the row
 
@@ -24,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.errors import InputError
-from cartctl.plants.base import Measurement, Plant
+from cartctl.plants.base import ClockedPlant, Measurement, Plant
 from cartctl.runtime.base import Controller
 from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS, Sink
 
@@ -117,16 +119,28 @@ class ControlLoop:
         self.period_s = float(period_s)
         self.state = LoopState()
         self._y: Measurement | None = None
+        self._clocked = isinstance(plant, ClockedPlant)  # send, time the compute, then wait
+        self.last_compute_us = 0.0
         self._true = False
         self.columns: tuple[str, ...] = TRACE_COLUMNS
 
     def start(self) -> None:
-        """Reset the plant and controllers and open the sinks (before the first deadline)."""
+        """Reset the plant and controllers and open the sinks (before the first deadline).
+
+        A cart-clocked plant is reset last: its tick 0 is the GPIO that arrives then, and the
+        sinks' start-up time must not make the loop begin behind the cart.
+        """
+        for c in self.controllers.values():
+            c.reset()
+        if self._clocked:  # a real cart reports no true speed
+            self.columns = TRACE_COLUMNS
+            for s in self.sinks:
+                s.open(self.columns)
+            self._y = self.plant.reset()
+            return
         self._y = self.plant.reset()
         self._true = self._y.true_speed_a_rad_s is not None
         self.columns = TRACE_COLUMNS + (TRUE_SPEED_COLUMNS if self._true else ())
-        for c in self.controllers.values():
-            c.reset()
         for s in self.sinks:
             s.open(self.columns)
 
@@ -154,8 +168,23 @@ class ControlLoop:
         ra, rb = self.ref_a[k], self.ref_b[k]
         ua, ea = self._command("a", ra, y.speed_a_rad_s)
         ub, eb = self._command("b", rb, y.speed_b_rad_s)
-        y_next = self.plant.step(ua, ub)
+        if self._clocked:  # send, then log the tick, then wait for the cart's next one
+            self.plant.send(ua, ub)  # type: ignore[attr-defined]
+            self._log(k, time_s, ua, ub, y, ra, rb, ea, eb, period_error_us, start_s)
+            y_next = self.plant.receive()  # type: ignore[attr-defined]
+        else:
+            y_next = self.plant.step(ua, ub)
+            self._log(k, time_s, ua, ub, y, ra, rb, ea, eb, period_error_us, start_s)
+        self._y = y_next
+        self.state.ticks = k + 1
+        return k + 1 < self.n_ticks
+
+    def _log(
+        self, k: int, time_s: float | None, ua: float, ub: float, y: Measurement, ra: float,
+        rb: float, ea: float, eb: float, period_error_us: float, start_s: float,
+    ) -> None:  # fmt: skip
         compute_us = (self.now_s() - start_s) * 1e6
+        self.last_compute_us = compute_us
         row: tuple[float, ...] = (
             k * self.period_s if time_s is None else time_s, ua, ub, y.speed_a_rad_s, y.speed_b_rad_s, k, ra, rb, ea, eb,
             period_error_us, compute_us,
@@ -164,9 +193,6 @@ class ControlLoop:
             row += (y.true_speed_a_rad_s, y.true_speed_b_rad_s)  # type: ignore[operator]
         for s in self.sinks:
             s.write(row)
-        self._y = y_next
-        self.state.ticks = k + 1
-        return k + 1 < self.n_ticks
 
     def finish(self) -> None:
         """Zero volts, plant closed, sinks closed: on every exit path. Never raises."""

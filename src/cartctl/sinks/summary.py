@@ -126,6 +126,20 @@ def format_summary(summary: Mapping[str, Any]) -> str:
             f"{ms(e['settling_time_s']):>10}{num(e['steady_state_error'], '.3f'):>10}"
             f"{num(e['rms_error'], '.3f'):>11}{num(e['max_abs_voltage'], '.2f'):>9}"
         )
+    link = summary.get("link")
+    if link:
+        delay = summary.get("loop_delay_ticks")
+        shown = (
+            "—"
+            if delay is None
+            else f"{delay} ticks (echo {link['echo_delay_ticks']}; model nk = {delay + 1})"
+        )
+        lines.append(
+            f"  link {link['port']}: loop delay {shown}; {link['frames']} frames, "
+            f"{link['crc_errors']} CRC errors, {link['garbage_bytes']} garbage bytes, "
+            f"{link['lost_frames']} frames lost, {link['missed_ticks']} cart ticks missed, "
+            f"{link['skipped_ticks']} skipped by the host, {link['watchdog_trips']} watchdog trips"
+        )
     for key in ("trace", "recording"):
         if summary.get(key):
             lines.append(f"  {key}: {summary[key]}")

@@ -1,0 +1,88 @@
+"""``cartctl virtual-cart``: the physical simulator behind a pseudo-terminal, until Ctrl-C."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from cartctl.errors import InputError
+from cartctl.plants.onboard_firmware import OnboardFirmware
+from cartctl.plants.virtual_cart import CartFaults, VirtualCart
+from cartctl.runtime.reference import FORMS
+
+
+def _faults(text: str) -> CartFaults:
+    try:
+        return CartFaults.parse(text)
+    except ValueError as exc:  # InputError: argparse shows the message as one line
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "virtual-cart",
+        help="serve the simulated cart on a pseudo-terminal, as the bridge firmware would",
+        description=(
+            "Run the physical simulator behind a pseudo-terminal that speaks the cart's microOS "
+            "MAVLink protocol and the bridge contract (firmware/): 100 GPIO frames per second at "
+            "115200 baud, a HEARTBEAT every 1.1 s, the watchdog. Prints the port; point "
+            "'cartctl run --plant serial:PORT', 'excite' or 'monitor' at it. Ctrl-C stops it."
+        ),
+    )
+    p.add_argument(
+        "--preset", choices=("air", "ground"), default="ground",
+        help="wheels in the air or cart on the ground (default ground)",
+    )  # fmt: skip
+    p.add_argument("--noise", type=float, default=0.0, metavar="RAD_S",
+                   help="extra measurement noise, standard deviation in rad/s (default 0)")  # fmt: skip
+    p.add_argument("--seed", type=int, default=None, help="seed of the noise and the faults")
+    p.add_argument(
+        "--faults", type=_faults, default=CartFaults(), metavar="KEY=VALUE,...",
+        help="inject faults: garbage=FRACTION (bursts of random bytes before that fraction of "
+        "frames), corrupt=FRACTION (frames with a changed byte), stall=S (stop ticking S seconds "
+        "after the host's first frame, port open), pull=S (the port vanishes S seconds after the "
+        "host's first frame), generation=b (speak the "
+        "newer MAVLink 2 firmware instead)",
+    )  # fmt: skip
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument(
+        "--onboard", metavar="CONTROLLER.toml",
+        help="run this controller on the cart instead of the bridge sketch, as the C of 'cartctl "
+        "export --arduino' does (one tick of delay); out channels: float 0/1 speed A/B, 2/3 "
+        "voltage A/B, 4/5 reference A/B",
+    )  # fmt: skip
+    p.add_argument(
+        "--reference", metavar="SPEC",
+        help=f"with --onboard: the reference of both motors, {FORMS}; default: the float "
+        "channels 0 (A) and 1 (B) the host sends, held between frames, as the exported C reads them",
+    )  # fmt: skip
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.reference and not args.onboard:
+        raise InputError("--reference needs --onboard CONTROLLER.toml")
+    firmware = None
+    if args.onboard:
+        firmware = OnboardFirmware.from_file(args.onboard, reference=args.reference)
+    cart = VirtualCart(args.preset, noise_std_rad_s=args.noise, seed=args.seed, faults=args.faults,
+                       firmware=firmware)  # fmt: skip
+    print(cart.port, flush=True)
+    running = f"controller {args.onboard} on board" if args.onboard else "the bridge sketch"
+    example = "monitor serial:" if args.onboard else "run --plant serial:"
+    print(
+        f"virtual cart (physics preset {args.preset}, {running}) on {cart.port}; "
+        f"e.g. cartctl {example}{cart.port}; Ctrl-C stops it",
+        file=sys.stderr,
+        flush=True,
+    )
+    try:
+        with cart:
+            if args.duration is not None:
+                cart.wait_seconds(args.duration)
+            else:
+                cart.wait()
+    except KeyboardInterrupt:
+        pass
+    print(f"virtual cart stopped ({cart.state}) after {cart.ticks} ticks", file=sys.stderr)
+    return 0

@@ -1,0 +1,236 @@
+"""The host's end of the serial line to a microOS cart: port, framing, sign of life, silence.
+
+:class:`CartLink` owns the pyserial port and the pure framer of :mod:`cartctl.link`. It is shared by
+the serial plant (``--plant serial:PORT``, the PC-side loop) and ``cartctl monitor`` (recording what
+a cart running its own controller sends). It turns every way the line can fail into one clear
+error: a port that cannot be opened (with the ports that exist), no HEARTBEAT within the connect
+timeout, a cart of the other firmware generation, no GPIO for ``silence_timeout_s`` (a pulled cable
+or a stalled cart), and a port that vanishes mid-run.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+from cartctl.errors import CartctlError, PlantError
+from cartctl.link import (
+    Framer,
+    GenerationBFrame,
+    Gpio,
+    Heartbeat,
+    LineAssembler,
+    Message,
+    PrintText,
+)
+
+BAUD = 115200
+DEFAULT_CONNECT_TIMEOUT_S = 5.0
+"""Opening the port resets the Mega (DTR); its bootloader takes 1-2 s before the first HEARTBEAT."""
+DEFAULT_SILENCE_TIMEOUT_S = 0.1
+"""No GPIO for this long (10 ticks) ends a run: the cart's own watchdog trips at the same age."""
+READ_SLICE_S = 0.005
+"""A read returns after the first byte, or after this long without one."""
+
+
+class UnsupportedCartError(CartctlError):
+    """The cart speaks a firmware generation cartctl does not (exit 2: flash the bridge sketch)."""
+
+
+def present_ports() -> list[str]:
+    """Serial ports the OS lists (``/dev/ttyACM0`` …); empty when none or when listing fails."""
+    try:
+        from serial.tools import list_ports
+
+        return sorted(p.device for p in list_ports.comports())
+    except Exception:  # listing is a courtesy in an error message; never fail on it
+        return []
+
+
+def _ports_hint() -> str:
+    ports = present_ports()
+    return "serial ports present: " + (", ".join(ports) if ports else "none")
+
+
+def print_to_stderr(line: str) -> None:
+    """Default for the cart's PRINT lines: ``cart: TEXT`` on stderr (stdout may carry JSON)."""
+    print(f"cart: {line}", file=sys.stderr, flush=True)
+
+
+class CartLink:
+    """A serial connection to a microOS cart (generation A, 115200 baud).
+
+    Parameters
+    ----------
+    port : str
+        Device path, e.g. ``/dev/ttyACM0``.
+    silence_timeout_s : float
+        Longest wait for the next GPIO before :class:`~cartctl.errors.PlantError`.
+    on_print : callable, optional
+        Receives each PRINT line of the cart (default: :func:`print_to_stderr`).
+    serial_factory : callable, optional
+        Opens the port (default ``serial.Serial``); for tests.
+    """
+
+    def __init__(
+        self,
+        port: str,
+        *,
+        silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
+        on_print: Callable[[str], None] | None = None,
+        serial_factory: Callable[..., Any] | None = None,
+    ) -> None:
+        self.port = port
+        self.silence_timeout_s = float(silence_timeout_s)
+        self.on_print = on_print or print_to_stderr
+        self._factory = serial_factory
+        self.framer = Framer()
+        self.lines = LineAssembler()
+        self._pending: collections.deque[Message] = collections.deque()
+        self._serial: Any = None
+        self.heartbeat: Heartbeat | None = None
+        self.failure: str | None = None
+        """Why the stream stopped (silence or a vanished port); None while it flows."""
+        self.vanished = False
+        """True once the port itself is gone (nothing can be sent any more)."""
+
+    @property
+    def stats(self) -> Any:
+        """The framer's :class:`~cartctl.link.LinkStats` (frames, CRC errors, garbage, gaps)."""
+        return self.framer.stats
+
+    # -- opening -------------------------------------------------------------------------------
+
+    def open(self) -> None:
+        """Open the port at 115200 8N1, no flow control."""
+        import serial
+
+        factory = self._factory or serial.Serial
+        try:
+            self._serial = factory(self.port, BAUD, timeout=READ_SLICE_S, write_timeout=0.5)
+        except (OSError, serial.SerialException) as exc:
+            reason = getattr(exc, "strerror", None) or str(exc)
+            raise PlantError(
+                f"cannot open serial port {self.port}: {reason}; {_ports_hint()}"
+            ) from None
+
+    def wait_heartbeat(self, timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> Heartbeat:
+        """Read until the cart's HEARTBEAT; PRINT lines are shown on the way.
+
+        Raises
+        ------
+        PlantError
+            No HEARTBEAT within ``timeout_s`` (nothing on the port, or not a microOS cart).
+        UnsupportedCartError
+            The port carries generation-B frames.
+        """
+        deadline = time.perf_counter() + timeout_s
+        while True:
+            remaining = deadline - time.perf_counter()
+            if remaining <= 0:
+                seen = self.stats.frames + self.stats.garbage_bytes
+                what = "bytes but no HEARTBEAT" if seen else "nothing"
+                raise PlantError(
+                    f"no HEARTBEAT from a cart on {self.port} within {timeout_s:g} s (received "
+                    f"{what}); is the cart on, running the bridge sketch (firmware/), and on this "
+                    f"port? {_ports_hint()}"
+                )
+            message = self._next_message(remaining)
+            if isinstance(message, Heartbeat):
+                self.heartbeat = message
+                return message
+
+    # -- the stream -----------------------------------------------------------------------------
+
+    def next_gpio(self, timeout_s: float | None = None) -> tuple[Gpio, float]:
+        """The next GPIO and the host time it arrived (``time.perf_counter`` s).
+
+        Raises
+        ------
+        PlantError
+            No GPIO within ``timeout_s`` (default :attr:`silence_timeout_s`), or the port vanished.
+        UnsupportedCartError
+            The port carries generation-B frames.
+        """
+        wait_s = self.silence_timeout_s if timeout_s is None else timeout_s
+        deadline = time.perf_counter() + wait_s
+        while True:
+            remaining = deadline - time.perf_counter()
+            if remaining <= 0:
+                self.failure = (
+                    f"no data from the cart on {self.port} for {wait_s * 1000:.0f} ms "
+                    "(cable pulled, cart stalled or reset)"
+                )
+                raise PlantError(self.failure)
+            message = self._next_message(remaining)
+            if isinstance(message, Gpio):
+                return message, time.perf_counter()
+
+    def gpio_waiting(self) -> bool:
+        """Whether another complete GPIO is already buffered (the host is behind the cart)."""
+        self._poll(0.0)
+        return any(isinstance(m, Gpio) for m in self._pending)
+
+    def _next_message(self, timeout_s: float) -> Message | None:
+        """One decoded message, or None when ``timeout_s`` passed without one."""
+        deadline = time.perf_counter() + timeout_s
+        while not self._pending:
+            remaining = deadline - time.perf_counter()
+            if remaining <= 0:
+                return None
+            self._poll(remaining)
+        return self._pending.popleft()
+
+    def _poll(self, timeout_s: float) -> None:
+        """Read what the port has (waiting up to :data:`READ_SLICE_S` for a first byte) and decode it."""
+        ser = self._serial
+        if ser is None:
+            raise PlantError(f"serial port {self.port} is not open")
+        try:
+            waiting = ser.in_waiting
+            data = ser.read(max(1, waiting)) if waiting or timeout_s > 0 else b""
+        except Exception as exc:  # pyserial raises SerialException or OSError when the device goes
+            raise self._vanish(exc) from None
+        if not data:
+            return
+        for message in self.framer.feed(data):
+            if isinstance(message, PrintText):
+                for line in self.lines.feed(message.text):
+                    self.on_print(line)
+            elif isinstance(message, GenerationBFrame):
+                raise UnsupportedCartError(
+                    f"the cart on {self.port} speaks microOS generation B (MAVLink 2, GPIOX "
+                    "messages); cartctl speaks generation A (MAVLink 1, GPIO): flash the bridge "
+                    "sketch of firmware/ (see firmware/README.md)"
+                )
+            else:
+                self._pending.append(message)
+
+    def _vanish(self, exc: BaseException) -> PlantError:
+        self.vanished = True
+        self.failure = f"serial port {self.port} vanished ({exc}); cable pulled?"
+        return PlantError(self.failure)
+
+    def send(self, frame: bytes) -> None:
+        """Write one frame; a vanished port raises :class:`~cartctl.errors.PlantError`."""
+        if self._serial is None:
+            raise PlantError(f"serial port {self.port} is not open")
+        try:
+            self._serial.write(frame)
+        except Exception as exc:
+            raise self._vanish(exc) from None
+
+    def close(self) -> None:
+        """Flush what was written and close the port; never raises."""
+        ser, self._serial = self._serial, None
+        if ser is None:
+            return
+        with contextlib.suppress(Exception):
+            if not self.vanished:
+                ser.flush()
+        with contextlib.suppress(Exception):
+            ser.close()

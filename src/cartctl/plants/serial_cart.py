@@ -1,0 +1,211 @@
+"""The real cart over serial (``--plant serial:PORT``), running the bridge sketch of ``firmware/``.
+
+The loop is clocked by the cart: each GPIO the cart sends (every 10 ms) is one tick. The host
+answers each with the full channel vector of the bridge contract (``docs/serial-protocol.md`` §3):
+voltages A and B, drive = 1 and a sequence number that increases by one per frame. The cart echoes
+the last sequence number it received; from that echo the plant measures the loop delay::
+
+    tick k      the cart measures, sends GPIO k (5.2 ms on the line)
+    host        computes from GPIO k, sends command s (5.2 ms on the line)
+    tick k+E    the first GPIO echoing s: control() of that tick read s and stored its voltage
+    tick k+E+1  io() puts the voltage on the motor
+
+so the loop delay from measurement to applied voltage is E + 1 ticks (1 for the cart's on-board
+control, the report's "microOS delay"), and a model of the loop has an input delay of
+``nk = loop_delay_ticks + 1`` (2 on board, as in the report).
+
+Faults are counted, not fatal: CRC errors and garbage are skipped by the framer, missing cart ticks
+are counted. No GPIO for 100 ms, or a vanished port, raises :class:`~cartctl.errors.PlantError`.
+:meth:`SerialCart.close` sends drive = 0 with zero volts whenever the port still works.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import statistics
+from collections.abc import Callable
+from typing import Any
+
+from cartctl.errors import PlantError
+from cartctl.link import CartSample, Encoder, Gpio, HostCommand, next_seq, tick_difference
+from cartctl.plants.base import Measurement
+from cartctl.plants.cart_link import DEFAULT_CONNECT_TIMEOUT_S, DEFAULT_SILENCE_TIMEOUT_S, CartLink
+
+PERIOD_S = 0.01
+STOP_FRAMES = 3
+"""drive = 0 frames sent on close (one may be lost to line noise)."""
+
+
+class SerialCart:
+    """A cart on a serial port as a :class:`~cartctl.plants.base.Plant`, clocked by the cart.
+
+    Parameters
+    ----------
+    port : str
+        Device path (``/dev/ttyACM0``, or the virtual cart's ``/dev/pts/N``).
+    connect_timeout_s : float
+        Longest wait for the first HEARTBEAT after opening the port.
+    silence_timeout_s : float
+        Longest wait for a GPIO once running (default 0.1 s).
+    on_print : callable, optional
+        Receives the cart's PRINT lines (default: ``cart: …`` on stderr).
+    serial_factory : callable, optional
+        Opens the port (default ``serial.Serial``).
+
+    Besides the Plant protocol it offers the split :meth:`send` / :meth:`receive` that the
+    cart-clocked loop uses to time its own compute, and :meth:`link_summary` for the run summary.
+    """
+
+    period_s: float = PERIOD_S
+
+    def __init__(
+        self,
+        port: str,
+        *,
+        connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S,
+        silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
+        on_print: Callable[[str], None] | None = None,
+        serial_factory: Callable[..., Any] | None = None,
+    ) -> None:
+        self.port = port
+        self.connect_timeout_s = float(connect_timeout_s)
+        self.link = CartLink(port, silence_timeout_s=silence_timeout_s, on_print=on_print,
+                             serial_factory=serial_factory)  # fmt: skip
+        self.encoder = Encoder(sysid=0, compid=0)
+        self.connected = False
+        self.sample: CartSample | None = None
+        self.arrival_s = 0.0
+        self.tick_index = 0
+        self._seq = 1
+        self._sent_at: dict[int, int] = {}
+        self._echo = -1
+        self.echo_delays: collections.Counter[int] = collections.Counter()
+        self.missed_ticks = 0
+        self.skipped_ticks = 0
+        self.watchdog_trips = 0
+
+    # -- connecting -----------------------------------------------------------------------------
+
+    def connect(self) -> None:
+        """Open the port and wait for the cart's HEARTBEAT (raises a clear error otherwise)."""
+        if self.connected:
+            return
+        self.link.open()
+        try:
+            self.link.wait_heartbeat(self.connect_timeout_s)
+        except BaseException:
+            self.link.close()
+            raise
+        self.connected = True
+
+    # -- the Plant protocol ---------------------------------------------------------------------
+
+    def reset(self) -> Measurement:
+        """Connect if needed, drop what waited in the buffer, and take the next GPIO as tick 0."""
+        self.connect()
+        while self.link.gpio_waiting():  # stale ticks from before the run
+            self.link.next_gpio()
+        gpio, arrival = self.link.next_gpio(max(self.link.silence_timeout_s, 0.5))
+        sample = CartSample.from_gpio(gpio)
+        self.sample, self.arrival_s, self.tick_index = sample, arrival, 0
+        self._seq = next_seq(sample.echo_seq)  # differs from what the cart holds: counts as new
+        self._echo = sample.echo_seq
+        self._sent_at.clear()
+        return Measurement(sample.speed_a_rad_s, sample.speed_b_rad_s)
+
+    def send(self, voltage_a_v: float, voltage_b_v: float, *, drive: bool = True) -> None:
+        """Send the channel vector for this tick (voltages, sequence number, drive)."""
+        if self.link.vanished:
+            raise PlantError(self.link.failure)
+        command = HostCommand(float(voltage_a_v), float(voltage_b_v), self._seq, drive)
+        floats, ints = command.to_channels()
+        self.link.send(self.encoder.gpio(0, floats, ints))
+        self._sent_at[self._seq] = self.tick_index
+        if len(self._sent_at) > 256:  # only the recent ones can still be echoed
+            self._sent_at.pop(next(iter(self._sent_at)))
+        self._seq = next_seq(self._seq)
+
+    def receive(self) -> Measurement:
+        """Wait for the cart's next tick and return its measurement.
+
+        When the host has fallen behind (more GPIOs already waiting), the older ones are dropped
+        and counted in ``skipped_ticks``: the loop always answers the freshest measurement.
+        """
+        if self.link.failure:  # after a fault, do not wait again (zero volts go out at once)
+            raise PlantError(self.link.failure)
+        self._accept(*self.link.next_gpio())
+        while self.link.gpio_waiting():
+            self._accept(*self.link.next_gpio())
+            self.skipped_ticks += 1
+        sample = self.sample
+        assert sample is not None
+        return Measurement(sample.speed_a_rad_s, sample.speed_b_rad_s)
+
+    def _accept(self, gpio: Gpio, arrival_s: float) -> None:
+        """Take one GPIO: count missing cart ticks, watchdog trips and the echo delay."""
+        sample = CartSample.from_gpio(gpio)
+        previous = self.sample
+        if previous is not None:
+            gap = tick_difference(previous.cart_tick, sample.cart_tick)
+            self.missed_ticks += max(0, gap - 1)
+            self.tick_index += max(1, gap)
+            if sample.watchdog_tripped and not previous.watchdog_tripped:
+                self.watchdog_trips += 1
+        if sample.echo_seq != self._echo:
+            self._echo = sample.echo_seq
+            sent = self._sent_at.get(sample.echo_seq)
+            if sent is not None:
+                self.echo_delays[self.tick_index - sent] += 1
+        self.sample, self.arrival_s = sample, arrival_s
+
+    def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
+        """Send this tick's voltages, then wait for the cart's next tick."""
+        self.send(voltage_a_v, voltage_b_v)
+        return self.receive()
+
+    def close(self) -> None:
+        """Send drive = 0 with zero volts (if the port still works), then close it."""
+        if self.connected and not self.link.vanished:
+            with contextlib.suppress(PlantError):
+                for _ in range(STOP_FRAMES):
+                    self.send(0.0, 0.0, drive=False)
+        self.link.close()
+        self.connected = False
+
+    # -- what the link measured ------------------------------------------------------------------
+
+    @property
+    def echo_delay_ticks(self) -> int | None:
+        """The most frequent echo delay E (ticks), None before any echo."""
+        if not self.echo_delays:
+            return None
+        return self.echo_delays.most_common(1)[0][0]
+
+    @property
+    def loop_delay_ticks(self) -> int | None:
+        """Ticks from a measurement to the tick its voltage is on the motor: E + 1."""
+        echo = self.echo_delay_ticks
+        return None if echo is None else echo + 1
+
+    def link_summary(self) -> dict[str, Any]:
+        """Link figures for the run summary (extends contract 3)."""
+        stats = self.link.stats
+        delays = list(self.echo_delays.elements())
+        return {
+            "loop_delay_ticks": self.loop_delay_ticks,
+            "link": {
+                "port": self.port,
+                "echo_delay_ticks": self.echo_delay_ticks,
+                "echo_delay_range": [min(delays), max(delays)] if delays else None,
+                "echo_delay_median": statistics.median(delays) if delays else None,
+                "frames": stats.frames,
+                "crc_errors": stats.crc_errors,
+                "garbage_bytes": stats.garbage_bytes,
+                "seq_gaps": stats.seq_gaps,
+                "lost_frames": stats.lost_frames,
+                "missed_ticks": self.missed_ticks,
+                "skipped_ticks": self.skipped_ticks,
+                "watchdog_trips": self.watchdog_trips,
+            },
+        }

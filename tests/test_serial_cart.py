@@ -1,0 +1,227 @@
+"""The serial plant against a scripted cart (no pty, no clock): echo, loop delay, faults, stop."""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+
+from cartctl.errors import PlantError
+from cartctl.link import Encoder, Framer, Gpio, HostCommand, encode_gpiox_v2
+from cartctl.plants.bridge_firmware import BridgeFirmware, CartIO
+from cartctl.plants.cart_link import UnsupportedCartError
+from cartctl.plants.physics import PhysicsPlant
+from cartctl.plants.serial_cart import SerialCart
+
+
+class ScriptedCart:
+    """A cart in discrete time behind a fake pyserial port: one read() = one cart tick.
+
+    The host's frames reach the bridge logic ``line_ticks`` ticks after they were written (the
+    receive slot after control(), as on the cart). The physics is the real simulator.
+    """
+
+    def __init__(self, line_ticks: int = 2, *, heartbeat: bool = True) -> None:
+        self.line_ticks = line_ticks
+        self.physics = PhysicsPlant("ground")
+        self.firmware = BridgeFirmware()
+        self.encoder = Encoder()
+        self.framer = Framer()
+        self.in_flight: list[tuple[int, bytes]] = []
+        self.received: list[HostCommand] = []
+        self.tick = 0
+        self.voltage = (0.0, 0.0)
+        self.outbox = bytearray(self.encoder.heartbeat(0) if heartbeat else b"")
+        self.drop_ticks: set[int] = set()
+        self.garbage: dict[int, bytes] = {}
+        self.silent_from: int | None = None
+        self.vanish_from: int | None = None
+        self.generation_b = False
+        self.timeout = 0.005
+
+    # -- pyserial's surface -------------------------------------------------------------------
+
+    def __call__(self, *args: object, **kwargs: object) -> ScriptedCart:  # the serial_factory
+        return self
+
+    @property
+    def in_waiting(self) -> int:
+        if self.vanish_from is not None and self.tick >= self.vanish_from:
+            raise OSError(5, "Input/output error")
+        return len(self.outbox)
+
+    def read(self, size: int = 1) -> bytes:
+        if self.vanish_from is not None and self.tick >= self.vanish_from:
+            raise OSError(5, "Input/output error")
+        if not self.outbox:
+            self._tick()
+        data = bytes(self.outbox[:size])
+        del self.outbox[:size]
+        return data
+
+    def write(self, data: bytes) -> int:
+        if self.vanish_from is not None and self.tick >= self.vanish_from:
+            raise OSError(5, "Input/output error")
+        self.in_flight.append((self.tick + self.line_ticks - 1, bytes(data)))
+        return len(data)
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+    # -- the firmware -------------------------------------------------------------------------
+
+    def _tick(self) -> None:
+        if self.silent_from is not None and self.tick >= self.silent_from:
+            return
+        j = self.tick
+        y = self.physics.step(*self.voltage) if j else self.physics.reset()
+        applied = self.physics.applied_voltage_v
+        io = CartIO(y.speed_a_rad_s, y.speed_b_rad_s, applied[0], applied[1], 0.0, 0.0)
+        self.voltage = self.firmware.control(io)
+        due = [d for t, d in self.in_flight if t <= j]
+        self.in_flight = [(t, d) for t, d in self.in_flight if t > j]
+        for message in self.framer.feed(b"".join(due)):
+            if isinstance(message, Gpio):
+                self.firmware.receive(message.floats, message.ints)
+                self.received.append(HostCommand.from_channels(message.floats, message.ints))
+        self.outbox += self.garbage.get(j, b"")
+        if self.generation_b:
+            frame = encode_gpiox_v2(j * 10, [0.0] * 12, seq=j % 256)
+        else:
+            frame = self.encoder.gpio(j * 10, self.firmware.out_floats, self.firmware.out_ints)
+        if j not in self.drop_ticks:  # a lost frame still used its sequence number
+            self.outbox += frame
+        self.tick += 1
+
+
+def _plant(cart: ScriptedCart, **kwargs: object) -> SerialCart:
+    lines: list[str] = []
+    plant = SerialCart("/dev/fake", serial_factory=cart, on_print=lines.append, **kwargs)  # type: ignore[arg-type]
+    return plant
+
+
+@pytest.mark.parametrize("line_ticks", [1, 2, 3])
+def test_loop_delay_from_the_echo_is_when_the_voltage_is_applied(line_ticks: int) -> None:
+    cart = ScriptedCart(line_ticks)
+    plant = _plant(cart)
+    plant.reset()
+    applied_at: dict[int, int] = {}
+    for k in range(40):
+        volts = 0.5 + 0.1 * k  # every command distinct and on the PWM grid's scale
+        plant.send(volts, 0.0)
+        sent_tick = plant.tick_index
+        plant.receive()
+        applied_at[sent_tick] = volts  # type: ignore[assignment]
+    # the echo says E = line_ticks + 1; the voltage is on the motor one tick later
+    assert plant.echo_delay_ticks == line_ticks + 1
+    assert plant.loop_delay_ticks == line_ticks + 2
+    plant.close()
+
+
+def test_applied_voltage_channel_confirms_the_loop_delay() -> None:
+    cart = ScriptedCart(2)
+    plant = _plant(cart)
+    plant.reset()
+    samples = []
+    for k in range(30):
+        plant.step(6.0 if k >= 10 else 0.0, 0.0)
+        samples.append((plant.tick_index, plant.sample.applied_a_v))  # type: ignore[union-attr]
+    first_on = next(t for t, v in samples if v > 5.0)
+    # the command computed from tick 10's measurement is on the motor at tick 10 + loop delay
+    assert first_on == 10 + plant.loop_delay_ticks  # type: ignore[operator]
+
+
+def test_close_sends_drive_zero_with_zero_volts() -> None:
+    cart = ScriptedCart(1)
+    plant = _plant(cart)
+    plant.reset()
+    for _ in range(5):
+        plant.step(3.0, -3.0)
+    plant.close()
+    cart._tick()  # the stop frames reach the bridge logic
+    cart._tick()
+    last = cart.received[-1]
+    assert (last.drive, last.voltage_a_v, last.voltage_b_v) == (False, 0.0, 0.0)
+    assert cart.voltage == (0.0, 0.0)
+
+
+def test_sequence_numbers_increase_by_one_and_differ_from_the_held_one() -> None:
+    cart = ScriptedCart(1)
+    plant = _plant(cart)
+    plant.reset()
+    for _ in range(6):
+        plant.step(1.0, 1.0)
+    seqs = [c.seq for c in cart.received]
+    assert all(b == a + 1 for a, b in itertools.pairwise(seqs))
+    assert all(c.drive for c in cart.received)
+
+
+def test_missing_ticks_are_counted_and_the_tick_index_keeps_the_gap() -> None:
+    cart = ScriptedCart(2)
+    cart.drop_ticks = {5, 6, 12}
+    plant = _plant(cart)
+    plant.reset()
+    for _ in range(15):
+        plant.step(0.0, 0.0)
+    assert plant.missed_ticks == 3
+    assert plant.tick_index == 15 + 3
+    assert plant.link.stats.lost_frames == 3  # the MAVLink sequence saw the same gaps
+
+
+def test_garbage_between_frames_is_counted_and_skipped() -> None:
+    cart = ScriptedCart(2)
+    cart.garbage = {3: b"\x00\xfe\x34junk", 7: bytes(range(200, 256))}
+    plant = _plant(cart)
+    plant.reset()
+    for _ in range(12):
+        plant.step(0.0, 0.0)
+    assert plant.missed_ticks == 0
+    assert plant.link.stats.garbage_bytes > 0
+
+
+def test_silence_is_a_plant_error_and_later_steps_fail_at_once() -> None:
+    cart = ScriptedCart(2)
+    cart.silent_from = 8
+    plant = _plant(cart, silence_timeout_s=0.02)
+    plant.reset()
+    with pytest.raises(PlantError, match="no data from the cart on /dev/fake for 20 ms"):  # noqa: PT012
+        for _ in range(20):
+            plant.step(1.0, 1.0)
+    with pytest.raises(PlantError):
+        plant.receive()  # no second wait
+    plant.send(0.0, 0.0)  # the port still works: zero volts can go out
+    plant.close()
+    assert cart.in_flight[-1][1]  # the stop frames were written
+
+
+def test_a_vanished_port_is_a_plant_error_and_close_does_not_write() -> None:
+    cart = ScriptedCart(2)
+    cart.vanish_from = 6
+    plant = _plant(cart)
+    plant.reset()
+    with pytest.raises(PlantError, match="vanished"):  # noqa: PT012
+        for _ in range(20):
+            plant.step(1.0, 1.0)
+    plant.close()  # no exception
+
+
+def test_no_heartbeat_is_a_timeout_naming_the_port() -> None:
+    cart = ScriptedCart(2, heartbeat=False)
+    cart.silent_from = 0
+    plant = _plant(cart, connect_timeout_s=0.05)
+    with pytest.raises(
+        PlantError,
+        match=r"no HEARTBEAT from a cart on /dev/fake within 0.05 s.*serial ports present",
+    ):
+        plant.reset()
+
+
+def test_generation_b_is_refused_by_name() -> None:
+    cart = ScriptedCart(2, heartbeat=False)
+    cart.generation_b = True
+    plant = _plant(cart, connect_timeout_s=0.5)
+    with pytest.raises(UnsupportedCartError, match="generation B"):
+        plant.reset()

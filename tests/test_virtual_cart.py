@@ -1,0 +1,180 @@
+"""The serial path end to end: ``cartctl`` against the virtual cart behind a real pseudo-terminal.
+
+These run in real time (the cart ticks every 10 ms), so they are few and short, with generous
+bounds. They cover the acceptance of the serial issue: tracking with the loop delay measured and
+zero volts at the end, line noise, a pulled cable and a stall, a silent port, a generation-B cart,
+and the identified delay against the echo.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+import tty
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+
+from cartctl.cli import main
+from cartctl.data import read_trace
+from cartctl.errors import PlantError
+from cartctl.plants.serial_cart import SerialCart
+from cartctl.plants.virtual_cart import CartFaults, VirtualCart
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def delay_controller(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """PI on the report's model, designed for the virtual loop's 4-tick delay (nk = 2 + 3)."""
+    path = tmp_path_factory.mktemp("ctl") / "pi_serial.toml"
+    code = main(["design", str(ROOT / "models/ground.toml"), "--method", "pi", "--phase-margin",
+                 "65", "--crossover-hz", "2", "--extra-delay", "3", "--out", str(path)])  # fmt: skip
+    assert code == 0
+    return path
+
+
+@pytest.fixture
+def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    shutil.copytree(ROOT / "models", tmp_path / "models")
+    shutil.copytree(ROOT / "controllers", tmp_path / "controllers")
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def _cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, dict | str, str]:
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    try:
+        return code, json.loads(out), err
+    except json.JSONDecodeError:
+        return code, out, err
+
+
+def _error_lines(err: str) -> list[str]:
+    return [line for line in err.splitlines() if line.startswith("cartctl")]
+
+
+def test_closed_loop_tracks_8_rad_s_reports_the_delay_and_ends_at_zero_volts(
+    capsys: pytest.CaptureFixture[str], workdir: Path, delay_controller: Path
+) -> None:
+    with VirtualCart(seed=1) as cart:
+        code, summary, err = _cli(capsys, "run", "--plant", f"serial:{cart.port}", "--controller",
+                                  str(delay_controller), "--reference", "step:8", "--duration",
+                                  "2", "--rerun", "save", "--json", "--name", "v")  # fmt: skip
+        cart.wait_ticks(3)
+        assert code == 0, err
+        # zero volts: the cart's last frame from the host says drive = 0, and it applies 0 V
+        assert cart.firmware.in_ints[1] == 0
+        assert cart.firmware.in_floats[:2] == [0.0, 0.0]
+        assert cart.last_voltage_v == (0.0, 0.0)
+    assert isinstance(summary, dict)
+    assert summary["loop_delay_ticks"] == 4  # echo 3 ticks + the cart's own 1
+    assert summary["link"]["echo_delay_ticks"] == 3
+    assert summary["ticks"] == 200
+    trace = read_trace(workdir / "logs/v.csv")
+    for m in "ab":
+        speed = trace.columns()[f"speed_{m}"]
+        assert abs(np.mean(speed[-50:]) - 8.0) < 0.4, m
+        assert summary["motors"][m]["overshoot_percent"] < 25.0
+    RrdReader(workdir / "logs/v.rrd").store()
+
+
+def test_line_noise_is_counted_and_the_run_still_tracks(
+    capsys: pytest.CaptureFixture[str], workdir: Path, delay_controller: Path
+) -> None:
+    code, summary, err = _cli(capsys, "run", "--plant", "virtual:garbage=0.05,corrupt=0.05",
+                              "--seed", "7", "--controller", str(delay_controller), "--reference",
+                              "step:8", "--duration", "2", "--rerun", "off", "--json")  # fmt: skip
+    assert code == 0, err
+    assert isinstance(summary, dict)
+    link = summary["link"]
+    assert link["crc_errors"] > 0 and link["garbage_bytes"] > 0
+    assert link["lost_frames"] >= link["crc_errors"] - 2  # a corrupted frame is a lost one
+    assert summary["ticks"] == 200
+    assert summary["loop_delay_ticks"] == 4
+    assert "cart: cartctl bridge ready" in err  # the cart's PRINT line, shown on stderr
+    for m in "ab":
+        assert abs(summary["motors"][m]["steady_state_error"]) < 0.5
+
+
+@pytest.mark.parametrize(("fault", "message"), [("pull", "vanished"), ("stall", "no data")])
+def test_a_fault_mid_run_stops_within_0_2_s_with_one_line_and_valid_files(
+    capsys: pytest.CaptureFixture[str],
+    workdir: Path,
+    delay_controller: Path,
+    fault: str,
+    message: str,
+) -> None:
+    faults = CartFaults.parse(f"{fault}=0.8")
+    with VirtualCart(faults=faults) as cart:
+        code, _out, err = _cli(capsys, "run", "--plant", f"serial:{cart.port}", "--controller",
+                               str(delay_controller), "--reference", "step:8", "--duration", "5",
+                              "--rerun", "save", "--name", "f")  # fmt: skip
+        assert cart.fault_at_s is not None
+    assert code == 1
+    lines = _error_lines(err)
+    assert len(lines) == 1 and message in lines[0], err
+    trace = read_trace(workdir / "logs/f.csv")
+    assert 70 <= len(trace) <= 90  # 0.8 s of driving, nothing after the fault
+    RrdReader(workdir / "logs/f.rrd").store()
+
+
+@pytest.mark.parametrize("fault", ["pull", "stall"])
+def test_the_serial_plant_notices_a_fault_within_0_2_s(fault: str) -> None:
+    with VirtualCart(faults=CartFaults.parse(f"{fault}=0.3")) as cart:
+        plant = SerialCart(cart.port, on_print=lambda line: None)
+        plant.reset()
+        with pytest.raises(PlantError):  # noqa: PT012
+            for _ in range(300):
+                plant.step(1.0, 1.0)
+        noticed = time.perf_counter()
+        plant.close()
+    assert cart.fault_at_s is not None
+    assert noticed - cart.fault_at_s < 0.2
+
+
+def test_a_silent_port_is_a_clear_timeout(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    try:
+        code, _out, err = _cli(capsys, "run", "--plant", f"serial:{os.ttyname(slave)}",
+                               "--connect-timeout", "0.3", "--rerun", "off")  # fmt: skip
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert code == 1
+    lines = _error_lines(err)
+    assert len(lines) == 1 and "no HEARTBEAT" in lines[0] and "within 0.3 s" in lines[0]
+    assert not (workdir / "logs").exists()  # nothing recorded before the cart answered
+
+
+def test_a_generation_b_cart_is_named_and_refused(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    code, _out, err = _cli(capsys, "run", "--plant", "virtual:generation=b", "--connect-timeout",
+                           "1", "--rerun", "off")  # fmt: skip
+    assert code == 2
+    lines = _error_lines(err)
+    assert len(lines) == 1 and "generation B" in lines[0] and "firmware/" in lines[0]
+
+
+def test_identified_delay_matches_the_echo(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    code, out, err = _cli(capsys, "excite", "--plant", "virtual", "--signal", "prbs",
+                          "--amplitude", "6", "--duration", "2", "--out", "x.csv")  # fmt: skip
+    assert code == 0, err
+    assert isinstance(out, str)
+    echo_delay = int(out.split("loop delay ")[1].split()[0])
+    code, result, err = _cli(capsys, "identify", "x.csv", "--delay", "auto", "--json")
+    assert code == 0, err
+    assert isinstance(result, dict)
+    for m in "ab":
+        assert result["motors"][m]["nk"] == echo_delay + 1
