@@ -1,0 +1,123 @@
+// cartctl bridge: the contract logic of the bridge sketch, as plain C++ with no Arduino dependency.
+//
+// The contract is docs/serial-protocol.md section 3 (the channel map is also in firmware/README.md).
+// Its Python twin is src/cartctl/plants/bridge_firmware.py (class BridgeFirmware), which the
+// virtual cart runs; tests/test_firmware.py compiles this file with g++ and compares both, tick by
+// tick. Change one, change the other.
+//
+// Per 10 ms tick, microOS runs io() (applies the voltage stored at the previous tick, reads the
+// encoders), then control(); the communication thread then receives every waiting GPIO (which
+// overwrites the held input channels) and sends one GPIO with the output channels. robot.cpp
+// calls bridge_receive() with the held input channels and bridge_control() once per control().
+//
+// Rules: the requested voltages (float 0 and 1) pass while drive (int 1) is 1 and the host's
+// sequence number (int 0) keeps changing; a request that is not a finite number counts as 0 V.
+// After BRIDGE_WATCHDOG_TICKS ticks without a new sequence number the watchdog trips: 0 V until a
+// new one arrives. It starts tripped, so nothing moves before the host's first frame.
+
+#ifndef CARTCTL_BRIDGE_LOGIC_H
+#define CARTCTL_BRIDGE_LOGIC_H
+
+#include <stdint.h>
+
+#define BRIDGE_FLOATS 8            // GPIO float channels, each way
+#define BRIDGE_INTS 4              // GPIO int channels, each way
+#define BRIDGE_TICK_MODULO 32768L  // tick counter and sequence numbers wrap here (int16 helpers)
+#define BRIDGE_WATCHDOG_TICKS 10   // ticks without a new sequence number before tripping (100 ms)
+#define BRIDGE_STATUS_DRIVING 1    // status bit 0: the requested voltages are applied
+#define BRIDGE_STATUS_WATCHDOG 2   // status bit 1: the watchdog has tripped
+
+// What io() read at this tick and what it wrote to the H-bridges.
+struct BridgeIO {
+  float speed_a_rad_s;
+  float speed_b_rad_s;
+  float applied_a_v;  // on the H-bridge at this tick (set at the previous one), quantised
+  float applied_b_v;
+  float position_a_rad;
+  float position_b_rad;
+};
+
+// The voltages control() stores for the next tick's io().
+struct BridgeVoltages {
+  float a_v;
+  float b_v;
+};
+
+// The held input channels, the output channels and the watchdog.
+struct BridgeState {
+  float in_floats[BRIDGE_FLOATS];
+  int32_t in_ints[BRIDGE_INTS];
+  float out_floats[BRIDGE_FLOATS];
+  int32_t out_ints[BRIDGE_INTS];
+  int32_t tick;         // 0 .. BRIDGE_TICK_MODULO - 1, +1 per control()
+  int32_t last_seq;     // the last host sequence number seen
+  int32_t stale_ticks;  // ticks since it last changed, up to BRIDGE_WATCHDOG_TICKS
+  bool driving;         // as decided at the last control()
+  bool tripped;
+};
+
+// A NaN or an infinity is not equal to itself minus itself; avoids depending on <math.h>'s
+// isfinite, which differs between avr-libc and a desktop C++ library.
+static inline bool bridge_is_finite(float value) {
+  float zero = value - value;
+  return zero == zero;
+}
+
+// Power-on state: every channel 0, the watchdog tripped until the host's first frame.
+static inline void bridge_reset(BridgeState* s) {
+  for (int k = 0; k < BRIDGE_FLOATS; ++k) {
+    s->in_floats[k] = 0.0f;
+    s->out_floats[k] = 0.0f;
+  }
+  for (int k = 0; k < BRIDGE_INTS; ++k) {
+    s->in_ints[k] = 0;
+    s->out_ints[k] = 0;
+  }
+  s->tick = 0;
+  s->last_seq = 0;
+  s->stale_ticks = BRIDGE_WATCHDOG_TICKS;
+  s->driving = false;
+  s->tripped = true;
+}
+
+// A GPIO from the host: every input channel is overwritten, then held. On the cart microOS does
+// this on receipt; robot.cpp copies the held channels in before each control(), which is the same.
+static inline void bridge_receive(BridgeState* s, const float floats[BRIDGE_FLOATS],
+                                  const int32_t ints[BRIDGE_INTS]) {
+  for (int k = 0; k < BRIDGE_FLOATS; ++k) s->in_floats[k] = floats[k];
+  for (int k = 0; k < BRIDGE_INTS; ++k) s->in_ints[k] = ints[k];
+}
+
+// One control(): fills out_floats / out_ints and returns the voltages for the next tick's io().
+static inline BridgeVoltages bridge_control(BridgeState* s, const BridgeIO* io) {
+  const int32_t seq = s->in_ints[0];
+  if (seq != s->last_seq) {
+    s->last_seq = seq;
+    s->stale_ticks = 0;
+  } else if (s->stale_ticks < BRIDGE_WATCHDOG_TICKS) {
+    s->stale_ticks += 1;
+  }
+  s->tripped = s->stale_ticks >= BRIDGE_WATCHDOG_TICKS;
+  s->driving = s->in_ints[1] == 1 && !s->tripped;
+
+  BridgeVoltages v;
+  v.a_v = (s->driving && bridge_is_finite(s->in_floats[0])) ? s->in_floats[0] : 0.0f;
+  v.b_v = (s->driving && bridge_is_finite(s->in_floats[1])) ? s->in_floats[1] : 0.0f;
+
+  s->out_floats[0] = io->speed_a_rad_s;
+  s->out_floats[1] = io->speed_b_rad_s;
+  s->out_floats[2] = io->applied_a_v;
+  s->out_floats[3] = io->applied_b_v;
+  s->out_floats[4] = io->position_a_rad;
+  s->out_floats[5] = io->position_b_rad;
+  s->out_floats[6] = 0.0f;
+  s->out_floats[7] = 0.0f;
+  s->out_ints[0] = seq;  // the echo: the sequence number held at this control()
+  s->out_ints[1] = s->tick;
+  s->out_ints[2] = (s->driving ? BRIDGE_STATUS_DRIVING : 0) | (s->tripped ? BRIDGE_STATUS_WATCHDOG : 0);
+  s->out_ints[3] = 0;
+  s->tick = (int32_t)((s->tick + 1) % BRIDGE_TICK_MODULO);
+  return v;
+}
+
+#endif  // CARTCTL_BRIDGE_LOGIC_H

@@ -1,0 +1,74 @@
+// cartctl bridge sketch: the cart runs no controller of its own; it applies the voltages the PC
+// sends and streams speeds, applied voltages and positions back at 100 Hz (firmware/README.md).
+//
+// Channel map (docs/serial-protocol.md section 3):
+//   PC -> cart  float 0, 1  requested voltage A, B (V)
+//               int 0       host sequence number, 0..32767, +1 per frame
+//               int 1       1 = drive, 0 = stop
+//   cart -> PC  float 0, 1  speed A, B (rad/s)
+//               float 2, 3  voltage A, B on the H-bridges at this tick (V)
+//               float 4, 5  wheel position A, B (rad)
+//               int 0       echo of the held host sequence number
+//               int 1       tick counter, 0..32767
+//               int 2       status: bit 0 driving, bit 1 watchdog tripped
+//
+// Motor A: the template's getSpeedMotorA() and getPositionMotorA() already carry motor A's sign
+// flip (a negative encoder scale in mecotron.h), so the bridge passes both motors through
+// unchanged and a positive voltage is assumed to give a positive speed on both. If motor A runs
+// backwards for a positive request on your cart, fix the sign in mecotron.h, not here.
+
+#include "robot.h"
+
+bool Robot::init() {
+  MECOtron::init();  // serial, PWM timer, encoders, LEDs
+  bridge_reset(&_bridge);
+  setVoltageMotorA(0.0f);
+  setVoltageMotorB(0.0f);
+  message("cartctl bridge ready");  // shows as a PRINT line in cartctl and QRC
+  return true;
+}
+
+// The H-bridge saturates at the 12 V supply by itself, but io() converts the voltage to int16
+// millivolts first, which overflows beyond 32.767 V: clamp here so any request is safe.
+static float clampToSupply(float volts) {
+  if (volts > BATTERY_VOLTAGE) return BATTERY_VOLTAGE;
+  if (volts < -BATTERY_VOLTAGE) return -BATTERY_VOLTAGE;
+  return volts;
+}
+
+void Robot::control() {
+  // microOS overwrites the input channels when a GPIO arrives and holds them in between, so
+  // copying them in every tick is the Python twin's receive() on arrival.
+  float in_floats[BRIDGE_FLOATS];
+  int32_t in_ints[BRIDGE_INTS];
+  for (uint8_t k = 0; k < BRIDGE_FLOATS; ++k) in_floats[k] = readFloat(k);
+  for (uint8_t k = 0; k < BRIDGE_INTS; ++k) in_ints[k] = readInt(k);
+  bridge_receive(&_bridge, in_floats, in_ints);
+
+  BridgeIO io;
+  io.speed_a_rad_s = getSpeedMotorA();
+  io.speed_b_rad_s = getSpeedMotorB();
+  io.applied_a_v = getVoltageMotorA();  // what io() put on the H-bridge at this tick
+  io.applied_b_v = getVoltageMotorB();
+  io.position_a_rad = getPositionMotorA();
+  io.position_b_rad = getPositionMotorB();
+
+  BridgeVoltages v = bridge_control(&_bridge, &io);
+  setVoltageMotorA(clampToSupply(v.a_v));  // reaches the motor at the next tick's io()
+  setVoltageMotorB(clampToSupply(v.b_v));
+
+  for (uint8_t k = 0; k < BRIDGE_FLOATS; ++k) writeFloat(k, _bridge.out_floats[k]);
+  for (uint8_t k = 0; k < BRIDGE_INTS; ++k) writeInt(k, (int16_t)_bridge.out_ints[k]);
+
+  LED1(_bridge.driving ? ON : OFF);  // LED 1: the PC's voltages are applied
+  LED2(_bridge.tripped ? ON : OFF);  // LED 2: watchdog tripped (no PC, or it stopped sending)
+}
+
+void Robot::button0callback() {
+  message("bridge: the PC drives");  // no local enable: drive comes from int channel 1
+}
+
+void Robot::button1callback() {
+  init();  // encoders to zero, bridge back to power-on state (tripped until a new frame)
+  message("Reset.");
+}
