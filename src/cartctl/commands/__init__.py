@@ -12,6 +12,7 @@ from cartctl.commands import (
     identify,
     inspect,
     linearity,
+    monitor,
     review,
     run,
     tune,
@@ -20,4 +21,4 @@ from cartctl.commands import (
 )
 
 COMMANDS = (excite, identify, inspect, validate, linearity, design, run, review, tune, convert,
-            export, virtual_cart)  # fmt: skip
+            export, virtual_cart, monitor)  # fmt: skip

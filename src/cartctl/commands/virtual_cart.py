@@ -6,7 +6,6 @@ import argparse
 import sys
 
 from cartctl.errors import InputError
-from cartctl.plants.onboard_firmware import OnboardFirmware
 from cartctl.plants.virtual_cart import CartFaults, VirtualCart
 from cartctl.runtime.reference import FORMS
 
@@ -64,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--reference needs --onboard CONTROLLER.toml")
     firmware = None
     if args.onboard:
+        from cartctl.plants.onboard_firmware import OnboardFirmware
+
         firmware = OnboardFirmware.from_file(args.onboard, reference=args.reference)
     cart = VirtualCart(args.preset, noise_std_rad_s=args.noise, seed=args.seed, faults=args.faults,
                        firmware=firmware)  # fmt: skip

@@ -1,0 +1,238 @@
+"""``cartctl monitor PLANT``: record and stream what a cart running its own controller sends.
+
+Like QRoboticsCenter's plots and logs, but live in Rerun: every GPIO the cart sends is one CSV row
+and one point per channel under ``gpio/<label>``; PRINT lines and QRC button events go to
+``cart/print`` and ``cart/events``. Passive: nothing is ever sent to the cart. See
+:mod:`cartctl.plants.cart_monitor` for the row format.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import signal
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from cartctl.commands.run import RERUN_MODES, _free_stem
+from cartctl.errors import InputError
+from cartctl.plants.cart_link import DEFAULT_CONNECT_TIMEOUT_S, print_to_stderr
+from cartctl.plants.cart_monitor import (
+    FLOAT_CHANNELS,
+    Monitor,
+    MonitorLink,
+    MonitorResult,
+    parse_labels,
+    wait_started,
+)
+from cartctl.runtime.reference import FORMS
+from cartctl.sinks.csv_sink import CsvSink
+
+DEFAULT_REFERENCE = "step:10"
+_STOPPED = {"duration": "after --duration", "interrupted": "by Ctrl-C", "fault": "by a line fault"}
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "monitor",
+        help="record and stream the GPIO channels a cart sends (a cart running its own controller)",
+        description=(
+            "Record every GPIO frame a cart sends to a CSV trace and a Rerun recording (live in "
+            "the viewer), with your channel labels, as QRoboticsCenter does. Passive: nothing is "
+            "sent to the cart. Stops after --duration, on Ctrl-C (exit 0) or on a line fault "
+            "(100 ms without data, the port gone: exit 1, the files hold what came before)."
+        ),
+    )
+    p.add_argument(
+        "plant", metavar="PLANT",
+        help="serial:PORT (a cart, e.g. serial:/dev/ttyACM0) or virtual[:FAULTS] (the simulated "
+        "cart behind a pseudo-terminal, in this process; FAULTS as for 'cartctl virtual-cart "
+        "--faults', e.g. virtual:pull=2)",
+    )  # fmt: skip
+    p.add_argument(
+        "--labels", metavar="KEY=LABEL,...",
+        help="channel labels (CSV columns, Rerun entities gpio/LABEL), KEY f0..f7 or i0..i3, e.g. "
+        "f0=speed_a,f1=speed_b,i0=echo; default FloatIn0..7, IntIn0..3 (QRoboticsCenter's)",
+    )  # fmt: skip
+    p.add_argument("--duration", type=float, metavar="S",
+                   help="stop after S seconds of cart time (default: run until Ctrl-C)")  # fmt: skip
+    p.add_argument("--out", default="logs", metavar="DIR", help="where the trace and recording go")
+    p.add_argument("--name", metavar="STEM", help="file name stem (default monitor-DATE-TIME)")
+    p.add_argument("--rerun", choices=RERUN_MODES, default="auto",
+                   help="auto: record to --out and open the viewer where a display exists; spawn: "
+                        "record and open the viewer; connect: record and stream to a running viewer; "
+                        "save: record only; off: no recording")  # fmt: skip
+    p.add_argument("--connect-url", metavar="URL", help="viewer address for --rerun connect")
+    p.add_argument(
+        "--connect-timeout", type=float, default=DEFAULT_CONNECT_TIMEOUT_S, metavar="S",
+        help=f"longest wait for the cart's HEARTBEAT (default {DEFAULT_CONNECT_TIMEOUT_S:g} s)",
+    )  # fmt: skip
+    p.add_argument(
+        "--onboard", metavar="CONTROLLER.toml",
+        help="virtual plant only: the cart runs this controller on board (as the C of 'cartctl "
+        "export --arduino' does on a real cart)",
+    )  # fmt: skip
+    p.add_argument(
+        "--reference", metavar="SPEC",
+        help=f"with --onboard: the on-board reference of both motors (default {DEFAULT_REFERENCE})"
+        f": {FORMS}",
+    )  # fmt: skip
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.set_defaults(func=run)
+
+
+def _check(args: argparse.Namespace) -> tuple[str, str]:
+    """Validate the options; returns (kind, rest) of PLANT: ('serial', PORT) or ('virtual', FAULTS)."""
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise InputError(f"--duration must be a positive number of seconds, got {args.duration}")
+    if not (math.isfinite(args.connect_timeout) and args.connect_timeout > 0):
+        raise InputError(f"--connect-timeout must be a positive number of seconds, got "
+                         f"{args.connect_timeout}")  # fmt: skip
+    kind, _, rest = args.plant.partition(":")
+    if kind == "serial" and rest:
+        if args.onboard or args.reference:
+            raise InputError(
+                "--onboard and --reference set up the virtual cart; a real cart runs the C of "
+                "'cartctl export CONTROLLER.toml --arduino' with its own references"
+            )
+        return kind, rest
+    if kind == "virtual":
+        if args.reference and not args.onboard:
+            raise InputError("--reference needs --onboard CONTROLLER.toml")
+        return kind, rest
+    raise InputError(f"unknown plant '{args.plant}'; expected serial:PORT or virtual[:FAULTS]")
+
+
+def _virtual_cart(faults_text: str, args: argparse.Namespace) -> Any:
+    from cartctl.plants.onboard_firmware import OnboardFirmware
+    from cartctl.plants.virtual_cart import CartFaults, VirtualCart
+
+    faults = CartFaults.parse(faults_text)
+    firmware = None
+    if args.onboard:
+        firmware = OnboardFirmware.from_file(
+            args.onboard, reference=args.reference or DEFAULT_REFERENCE
+        )
+    return VirtualCart(faults=faults, firmware=firmware)
+
+
+def _rerun_sink(args: argparse.Namespace, path: Path) -> Any:
+    if args.rerun == "off":
+        return None
+    from cartctl.sinks.channels_rerun import ChannelsRerunSink
+    from cartctl.sinks.rerun_sink import display_available
+
+    mode = args.rerun
+    if mode == "auto":
+        mode = "spawn" if display_available() else "save"
+    return ChannelsRerunSink(mode, path, float_count=FLOAT_CHANNELS, connect_url=args.connect_url)
+
+
+@contextlib.contextmanager
+def _stop_on_sigint(monitor: Monitor) -> Iterator[None]:
+    """Ctrl-C asks the monitor to stop after the current frame (a second one interrupts)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: Any) -> None:
+        monitor.stop_requested = True
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def run(args: argparse.Namespace) -> int:
+    kind, rest = _check(args)
+    labels = parse_labels(args.labels)
+    cart = _virtual_cart(rest, args) if kind == "virtual" else None
+    port = cart.port if cart is not None else rest
+    monitor = Monitor([], [], labels, echo=print_to_stderr)
+    link = MonitorLink(port, on_event=monitor.on_event, on_print=monitor.on_print)
+    try:
+        link.open()  # before the virtual cart boots: its first HEARTBEAT is not flushed away
+        if cart is not None:
+            cart.start()
+        wait_started(link, args.connect_timeout)  # no file is opened for a cart that is not there
+        if cart is not None and cart.first_frame_at_s is None:
+            # its faults count from the host's first frame, and a monitor never sends one
+            cart.first_frame_at_s = time.perf_counter()
+        out = Path(args.out)
+        stem = args.name or _free_stem(out, datetime.now().strftime("monitor-%Y%m%d-%H%M%S"))
+        csv_path, rrd_path = out / f"{stem}.csv", out / f"{stem}.rrd"
+        rerun = _rerun_sink(args, rrd_path)
+        monitor.rows.append(CsvSink(csv_path))
+        if rerun is not None:
+            monitor.rows.append(rerun)
+            monitor.texts.append(rerun)
+        try:
+            monitor.open()
+            with _stop_on_sigint(monitor):
+                result = monitor.run(link, args.duration)
+        finally:
+            for sink in monitor.rows:
+                sink.close()
+    finally:
+        link.close()
+        if cart is not None:
+            cart.stop()
+    summary = _summary(result, link, args.plant, labels, csv_path,
+                       rrd_path if rerun is not None else None)  # fmt: skip
+    print(json.dumps(summary) if args.json else _format(summary))
+    if result.failure:
+        print(f"cartctl monitor: error: {result.failure}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _summary(
+    result: MonitorResult,
+    link: MonitorLink,
+    plant: str,
+    labels: tuple[str, ...],
+    csv_path: Path,
+    rrd_path: Path | None,
+) -> dict[str, Any]:
+    stats = link.stats.to_dict()
+    stats.pop("generation_b_frames", None)
+    return {
+        "frames": result.frames,
+        "duration_s": result.duration_s,
+        "stopped": result.stopped,
+        "failure": result.failure,
+        "plant": plant,
+        "port": link.port,
+        "labels": list(labels),
+        "print_lines": result.print_lines,
+        "events": result.events,
+        "link": stats,
+        "trace": str(csv_path),
+        "recording": str(rrd_path) if rrd_path is not None else None,
+    }
+
+
+def _format(summary: dict[str, Any]) -> str:
+    link = summary["link"]
+    lines = [
+        f"monitor {summary['plant']}: {summary['frames']} frames over {summary['duration_s']:.2f} s "
+        f"of cart time, stopped {_STOPPED[summary['stopped']]}",
+        f"  link: {link['frames']} frames, {link['crc_errors']} CRC errors, "
+        f"{link['garbage_bytes']} garbage bytes, {link['lost_frames']} lost frames "
+        f"({link['seq_gaps']} gaps)",
+        f"  cart: {summary['print_lines']} PRINT lines, {summary['events']} events",
+        f"  trace {summary['trace']}",
+    ]
+    if summary["recording"]:
+        lines.append(f"  recording {summary['recording']}")
+    return "\n".join(lines)
