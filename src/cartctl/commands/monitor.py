@@ -15,7 +15,6 @@ import math
 import signal
 import sys
 import threading
-import time
 from collections.abc import Iterator
 from datetime import datetime
 from pathlib import Path
@@ -165,9 +164,8 @@ def run(args: argparse.Namespace) -> int:
         if cart is not None:
             cart.start()
         wait_started(link, args.connect_timeout)  # no file is opened for a cart that is not there
-        if cart is not None and cart.first_frame_at_s is None:
-            # its faults count from the host's first frame, and a monitor never sends one
-            cart.first_frame_at_s = time.perf_counter()
+        if cart is not None:  # its faults count from the host's first frame; a monitor sends none
+            cart.arm_faults()
         out = Path(args.out)
         stem = args.name or _free_stem(out, datetime.now().strftime("monitor-%Y%m%d-%H%M%S"))
         csv_path, rrd_path = out / f"{stem}.csv", out / f"{stem}.rrd"

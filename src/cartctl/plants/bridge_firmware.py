@@ -22,12 +22,11 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-TICK_MODULO = 32768
-"""The tick counter and sequence numbers wrap here (the template's int helpers are int16)."""
-WATCHDOG_TICKS = 10
-"""Ticks without a new host sequence number before the watchdog trips (100 ms)."""
-STATUS_DRIVING = 1
-STATUS_WATCHDOG = 2
+from cartctl.link.bridge import SEQ_MODULO as TICK_MODULO
+from cartctl.link.bridge import STATUS_DRIVING, STATUS_WATCHDOG, WATCHDOG_TICKS
+
+__all__ = ["STATUS_DRIVING", "STATUS_WATCHDOG", "TICK_MODULO", "WATCHDOG_TICKS", "BridgeFirmware",
+           "CartIO"]  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)

@@ -79,6 +79,8 @@ class OnboardFirmware:
         The cart's tick (s), the period the controllers were designed for.
     """
 
+    ready_text = "cartctl on-board controller ready"
+
     def __init__(
         self,
         controllers: Mapping[str, Controller],

@@ -284,6 +284,11 @@ class VirtualCart:
         while self._ticker.is_alive():
             self._ticker.join(timeout=0.2)
 
+    def arm_faults(self) -> None:
+        """Start the stall/pull clock now, for a host that never sends (``cartctl monitor``)."""
+        if self.first_frame_at_s is None:
+            self.first_frame_at_s = time.perf_counter()
+
     def wait_seconds(self, seconds: float) -> None:
         """Block for ``seconds`` or until the cart stops."""
         self._ticker.join(timeout=seconds)
@@ -326,7 +331,8 @@ class VirtualCart:
         generation_a = self.faults.generation == "a"
         if generation_a:  # a generation-B cart speaks MAVLink 2 only (its GPIOX frames, below)
             self._writer.queue.put(encoder.heartbeat(0))
-            for frame in encoder.print_text(READY_TEXT + "\r\n"):
+            ready = getattr(self.firmware, "ready_text", READY_TEXT)
+            for frame in encoder.print_text(ready + "\r\n"):
                 self._writer.queue.put(frame)
         next_heartbeat = boot + HEARTBEAT_PERIOD_S
         measurement = physics.reset()
