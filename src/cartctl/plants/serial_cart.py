@@ -92,12 +92,16 @@ class SerialCart:
         if self.connected:
             return
         self.link.open()
+        self._port_opened()
         try:
             self.link.wait_heartbeat(self.connect_timeout_s)
         except BaseException:
             self.link.close()
             raise
         self.connected = True
+
+    def _port_opened(self) -> None:
+        """Between opening the port and waiting for the HEARTBEAT (the virtual cart boots here)."""
 
     # -- the Plant protocol ---------------------------------------------------------------------
 

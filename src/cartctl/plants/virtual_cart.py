@@ -393,27 +393,19 @@ class VirtualCart:
 class VirtualSerialCart(SerialCart):
     """``--plant virtual``: a :class:`VirtualCart` in this process, driven through the serial path.
 
-    The cart boots on :meth:`connect` and is switched off on :meth:`close`, after it has taken the
-    host's drive = 0 frames (so a test can check what it was left applying).
+    The cart boots once :meth:`connect` has opened the port, and is switched off on
+    :meth:`close`, after it has taken the host's drive = 0 frames (so a test can check what it
+    was left applying).
     """
 
     def __init__(self, cart: VirtualCart, **kwargs: Any) -> None:
         super().__init__(cart.port, **kwargs)
         self.cart = cart
 
-    def connect(self) -> None:
-        """Open the port, then boot the cart (opening a real cart's port resets it, too)."""
-        if self.connected:
-            return
-        self.link.open()
+    def _port_opened(self) -> None:
+        """Boot the cart once the port is open (opening a real cart's port resets it, too)."""
         if self.cart.state == "idle":
             self.cart.start()
-        try:
-            self.link.wait_heartbeat(self.connect_timeout_s)
-        except BaseException:
-            self.link.close()
-            raise
-        self.connected = True
 
     def close(self) -> None:
         was_connected = self.connected and not self.link.failure

@@ -9,21 +9,16 @@ channels in another, and the cart's messages (``cart/print``, ``cart/events``) i
 
 from __future__ import annotations
 
-import threading
-import uuid
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from cartctl.errors import InputError
 from cartctl.sinks.rerun_sink import (
     TICK_COLUMN,
     TIME_COLUMN,
     RerunSink,
-    _warm_up_conversions,
 )
 
 GPIO_ROOT = "gpio"
@@ -93,52 +88,23 @@ class ChannelsRerunSink(RerunSink):
         ), connect_url=connect_url, batch_ticks=batch_ticks, strict=strict)  # fmt: skip
         self.float_count = int(float_count)
 
-    def open(self, columns: Sequence[str]) -> None:
-        """Start the recording for rows ``time_s, tick, <channels>``; makes the slow first calls.
+    def _entities(self, columns: list[str]) -> tuple[tuple[int, str], ...]:
+        """Every column but ``time_s`` and ``tick`` is a channel, under ``gpio/<label>``."""
+        return tuple(
+            (i, f"{GPIO_ROOT}/{c}")
+            for i, c in enumerate(columns)
+            if c not in (TIME_COLUMN, TICK_COLUMN)
+        )
 
-        Raises
-        ------
-        InputError
-            No ``time_s`` column.
-        OSError
-            The recording's folder cannot be created.
-        """
-        columns = list(columns)
-        if TIME_COLUMN not in columns:
-            raise InputError(f"the Rerun sink needs a '{TIME_COLUMN}' column, got {columns}")
-        self._time_index = columns.index(TIME_COLUMN)
-        self._tick_index = columns.index(TICK_COLUMN) if TICK_COLUMN in columns else None
-        labels = [c for c in columns if c not in (TIME_COLUMN, TICK_COLUMN)]
-        self._signals = tuple((columns.index(label), f"{GPIO_ROOT}/{label}") for label in labels)
-        if self.mode == "off":
-            return
-        rec = rr.RecordingStream(self.application_id, recording_id=uuid.uuid4())
-        self._recording = rec
-        sinks: list[rr.FileSink | rr.GrpcSink] = []
-        if self.path is not None:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            sinks.append(rr.FileSink(self.path))
-        url = self._viewer_url(rec)
-        if url is not None:
-            sinks.append(rr.GrpcSink(url))
-        try:
-            if sinks:
-                rec.set_sinks(*sinks)
-            floats, ints = labels[: self.float_count], labels[self.float_count :]
-            rec.send_blueprint(channels_blueprint(floats, ints))
-            rec.send_recording_name(self.recording_name)
-            for label in labels:
-                rec.log(f"{GPIO_ROOT}/{label}", rr.SeriesLines(names=[label]), static=True,
-                        strict=True)  # fmt: skip
-            _warm_up_conversions()
-            rr.TextLog.columns(text=[""], level=["INFO"])
-        except Exception as exc:  # the SDK's own failures: keep monitoring without Rerun
-            self._problem(f"could not start the recording: {exc}", raise_now=True)
-            return
-        self._block = np.empty((self.batch_ticks, len(columns)))
-        self._filled = 0
-        self._thread = threading.Thread(target=self._send_loop, name="cartctl-rerun", daemon=True)
-        self._thread.start()
+    def _describe(self, rec: rr.RecordingStream) -> None:
+        """Floats and ints in their own views, one series per label; text logs warmed up."""
+        labels = [entity.removeprefix(f"{GPIO_ROOT}/") for _, entity in self._signals]
+        floats, ints = labels[: self.float_count], labels[self.float_count :]
+        rec.send_blueprint(channels_blueprint(floats, ints))
+        for label in labels:
+            rec.log(f"{GPIO_ROOT}/{label}", rr.SeriesLines(names=[label]), static=True,
+                    strict=True)  # fmt: skip
+        rr.TextLog.columns(text=[""], level=["INFO"])
 
     def log_text(
         self, entity: str, text: str, time_s: float, tick: int, level: str = "INFO"

@@ -256,9 +256,7 @@ class RerunSink:
             raise InputError(f"the Rerun sink needs a '{TIME_COLUMN}' column, got {columns}")
         self._time_index = columns.index(TIME_COLUMN)
         self._tick_index = columns.index(TICK_COLUMN) if TICK_COLUMN in columns else None
-        self._signals = tuple(
-            (i, ENTITY_PATHS[c]) for i, c in enumerate(columns) if c in ENTITY_PATHS
-        )
+        self._signals = self._entities(columns)
         if self.mode == "off":
             return
         rec = rr.RecordingStream(self.application_id, recording_id=uuid.uuid4())
@@ -273,16 +271,8 @@ class RerunSink:
         try:
             if sinks:
                 rec.set_sinks(*sinks)
-            rec.send_blueprint(blueprint(_motors(self._signals)))
             rec.send_recording_name(self.recording_name)
-            for _, entity in self._signals:
-                style = STYLES[entity]
-                rec.log(
-                    entity,
-                    rr.SeriesLines(colors=[style.color], names=[style.name], widths=[style.width]),
-                    static=True,
-                    strict=True,
-                )
+            self._describe(rec)
             _warm_up_conversions()
         except Exception as exc:  # the SDK's own failures: keep the run going without Rerun
             self._problem(f"could not start the recording: {exc}", raise_now=True)
@@ -291,6 +281,22 @@ class RerunSink:
         self._filled = 0
         self._thread = threading.Thread(target=self._send_loop, name="cartctl-rerun", daemon=True)
         self._thread.start()
+
+    def _entities(self, columns: list[str]) -> tuple[tuple[int, str], ...]:
+        """(column index, entity path) of each column recorded: contract 4's paths."""
+        return tuple((i, ENTITY_PATHS[c]) for i, c in enumerate(columns) if c in ENTITY_PATHS)
+
+    def _describe(self, rec: rr.RecordingStream) -> None:
+        """Send the layout and the static series styles (before any value)."""
+        rec.send_blueprint(blueprint(_motors(self._signals)))
+        for _, entity in self._signals:
+            style = STYLES[entity]
+            rec.log(
+                entity,
+                rr.SeriesLines(colors=[style.color], names=[style.name], widths=[style.width]),
+                static=True,
+                strict=True,
+            )
 
     def write(self, row: Sequence[float]) -> None:
         """Buffer one tick's values (in column order); hands a full block to the sending thread.
