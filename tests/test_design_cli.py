@@ -16,6 +16,7 @@ from cartctl.design.analysis import simulate_step
 from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import load_controller
 from cartctl.modelfile import load_models
+from cartctl.stepinfo import step_info
 
 ROOT = Path(__file__).resolve().parents[1]
 CONTROLLERS = ROOT / "controllers"
@@ -50,13 +51,16 @@ def test_pi_margins_hold_when_checked_from_controller_num_den(
         assert entry["settling_ratio"] >= 1.0
 
 
+@pytest.mark.parametrize(
+    ("poles", "more"),
+    [("0.5+0.2j,0.5-0.2j,0.3", ()), ("0.5+0.2j,0.5-0.2j,0.3,0.1", ("--bias-drift-v", "0"))],
+    ids=["disturbance-estimate", "error-integrator"],
+)
 def test_poles_are_placed_where_asked(
-    capsys: pytest.CaptureFixture[str], ground_path: Path
+    capsys: pytest.CaptureFixture[str], ground_path: Path, poles: str, more: tuple[str, ...]
 ) -> None:
-    asked = [0.5 + 0.2j, 0.5 - 0.2j, 0.3, 0.1]
-    doc = _design(
-        capsys, str(ground_path), "--method", "poles", "--poles", "0.5+0.2j,0.5-0.2j,0.3,0.1"
-    )
+    asked = [complex(p) for p in poles.split(",")]
+    doc = _design(capsys, str(ground_path), "--method", "poles", "--poles", poles, *more)
     for entry in doc["motors"].values():
         got = np.sort_complex([complex(re, im) for re, im in entry["closed_loop_poles"]])
         np.testing.assert_allclose(got, np.sort_complex(asked), atol=1e-6)
@@ -73,21 +77,20 @@ def test_poles_are_placed_where_asked(
         break
 
 
-@pytest.mark.parametrize("name", ["pi.toml", "poles.toml"])
+@pytest.mark.parametrize("name", ["pi.toml", "poles.toml", "serial-pi.toml", "serial-poles.toml"])
 def test_shipped_controllers_take_a_good_10_rad_s_step(name: str, ground_path: Path) -> None:
     shipped = load_controller(CONTROLLERS / name)
-    assert shipped.model_path == "models/ground.toml"
-    assert not shipped.model_changed() or not Path(shipped.model_path).exists()
+    assert Path(shipped.model_path).resolve() == ground_path.resolve()
+    assert not shipped.model_changed()
     models = load_models(ground_path)
     for motor, ctrl in build_controllers(shipped).items():
-        for extra in (0, 1):  # the report's model, and with the tick of margin designed for
-            step = simulate_step(
-                ctrl, models.motor(motor), step_rad_s=10.0, extra_delay_ticks=extra
-            )
-            assert step.info.overshoot_percent <= 5.0
-            assert abs(step.info.steady_state_error) < 1e-6
-            assert step.peak_voltage_v <= 12.0
-            assert step.info.settling_time_s is not None
+        # on the loop it is designed for: loop delay = nk − 1 + extra delay
+        extra = shipped.loop_delay_ticks - (models.motor(motor).nk - 1)
+        step = simulate_step(ctrl, models.motor(motor), step_rad_s=10.0, extra_delay_ticks=extra)
+        assert step.info.overshoot_percent <= 5.0
+        assert abs(step.info.steady_state_error) < 1e-6
+        assert step.peak_voltage_v <= 12.0
+        assert step.info.settling_time_s is not None
         assert shipped.motors[motor]["analysis"]["settling_ratio"] >= 1.0
 
 
@@ -141,8 +144,10 @@ def test_report_writes_a_figure_per_motor(
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["--method", "poles", "--poles", "1.2,0.5,0.3,0.1"], "unit circle"),
-        (["--method", "poles", "--poles", "0.5,0.3"], "4"),
+        (["--method", "poles", "--poles", "1.2,0.5,0.3"], "unit circle"),
+        (["--method", "poles", "--poles", "0.5,0.3"], "needs 3 closed-loop poles"),
+        (["--method", "poles", "--poles", "0.5,0.3,0.2", "--bias-drift-v", "0"], "needs 4"),
+        (["--method", "poles", "--bias-drift-v", "-0.1"], "bias_drift_std_v"),
         (["--method", "poles", "--poles", "0.5,zz"], "not a number"),
         (["--method", "pi", "--phase-margin", "120"], "phase margin"),
         (["--method", "pi", "--crossover-hz", "80"], "Nyquist"),
@@ -166,3 +171,42 @@ def test_missing_model_file(capsys: pytest.CaptureFixture[str]) -> None:
     _, err = capsys.readouterr()
     assert code == 2
     assert "model file not found: nope.toml" in err
+
+
+def test_settling_bound_and_ratio_are_for_the_designs_loop_and_band(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, ground_path: Path
+) -> None:
+    """The bound is on the model with the extra delay (one tick later per tick of delay) and the
+    step's settling is measured in the same band, max(2 %, one encoder count = 0.3506 rad/s)."""
+    quantum = 2 * math.pi / 1792 / 0.01
+    docs = {}
+    for extra in (0, 3):
+        out = tmp_path / f"pi{extra}.toml"
+        docs[extra] = _design(capsys, str(ground_path), "--method", "pi", "--phase-margin", "65",
+                              "--crossover-hz", "3", "--extra-delay", str(extra), "--out", str(out))  # fmt: skip
+        models = load_models(ground_path)
+        for motor, ctrl in build_controllers(load_controller(out)).items():
+            entry = docs[extra]["motors"][motor]
+            assert entry["settling_bound_loop_delay_ticks"] == 1 + extra  # nk = 2: 1 + d
+            step = simulate_step(
+                ctrl, models.motor(motor), step_rad_s=10.0, extra_delay_ticks=extra
+            )
+            info = step_info(step.time_s, step.speed_rad_s, reference=10.0,
+                             settling_band=quantum / 10.0)  # fmt: skip
+            assert entry["step"]["settling_time_s"] == pytest.approx(info.settling_time_s)
+            assert entry["settling_ratio"] == pytest.approx(
+                info.settling_time_s / entry["settling_bound_s"]
+            )
+            assert entry["settling_ratio"] >= 1.0
+    for motor in ("a", "b"):
+        delta = (
+            docs[3]["motors"][motor]["settling_bound_s"]
+            - docs[0]["motors"][motor]["settling_bound_s"]
+        )
+        assert delta == pytest.approx(0.03)  # three ticks
+    assert main(["design", str(ground_path), "--method", "pi", "--phase-margin", "65",
+                 "--crossover-hz", "3", "--extra-delay", "3"]) == 0  # fmt: skip
+    text = capsys.readouterr().out
+    assert (
+        text.count("fastest settling within the voltage limit for a loop delay of 4 tick(s)") == 2
+    )

@@ -1,6 +1,9 @@
 """The Kalman speed estimator: design invariants, the two runtime filters, and accuracy on physics.
 
-Accuracy is judged against the true speed half a tick earlier, (ω[k−1] + ω[k]) / 2: the measured
+The filters' x̂_1[k|k] estimates the measured speed, the average over the last tick; the state
+feedback reports the mean of it and the next tick's predicted average, the true speed now (the
+shipped controller's estimate against the true speed: tests/test_shipped_targets.py). Accuracy of
+x̂_1 is judged against the true speed half a tick earlier, (ω[k−1] + ω[k]) / 2: the measured
 speed is a count difference over the last tick, so it (and the model fitted to it, whose x_1 the
 estimator tracks) is the tick-average speed, which lags the instantaneous ω[k] by about half a
 tick. The lag test then checks, against the instantaneous ω, that the estimate is no more than one
@@ -17,6 +20,7 @@ import numpy as np
 import pytest
 
 from cartctl.design.kalman import KalmanDesign, design_kalman, quantisation_std_rad_s
+from cartctl.design.pi import design_pi
 from cartctl.design.poles import design_poles
 from cartctl.design.statespace import realise
 from cartctl.errors import InputError
@@ -29,6 +33,7 @@ from cartctl.plants.physics import PhysicsPlant
 from cartctl.plants.sim import ArxPlant
 from cartctl.runtime.base import SpeedEstimator
 from cartctl.runtime.kalman import KalmanSpeedEstimator, SteadyStateSpeedEstimator
+from cartctl.runtime.pi import PiController
 from cartctl.runtime.statefeedback import StateFeedbackController
 
 REPORT_A = ArxModel((-0.9356, 0.2173), (0.6466, -0.07751))
@@ -155,6 +160,56 @@ def test_bad_initial_covariance() -> None:
         KalmanSpeedEstimator(design_kalman(REPORT_A), initial_covariance=np.eye(2))
 
 
+# -- what the estimate represents ----------------------------------------------------------------
+
+
+def test_state_feedback_reports_the_speed_between_two_tick_averages(ground) -> None:
+    """On an exact model the filter is exact, and the estimate the controller reports is the
+    mean of this tick's measured average and the next one: the true speed now, for a speed that
+    changes linearly over the two ticks."""
+    design = design_poles(ground[0], settling_time_s=0.045, overshoot_percent=1.0)
+    ctrl = StateFeedbackController(design)
+    plant = ArxPlant(*ground)
+    y = plant.reset()
+    measured, estimate = [], []
+    for k in range(120):
+        u = ctrl.step(10.0 if k >= 5 else 0.0, y.speed_a_rad_s)
+        measured.append(y.speed_a_rad_s)
+        estimate.append(ctrl.estimate_rad_s)
+        y = plant.step(u, 0.0)
+    measured.append(y.speed_a_rad_s)
+    m = np.array(measured)
+    np.testing.assert_allclose(estimate, 0.5 * (m[:-1] + m[1:]), atol=1e-9)
+
+
+class OffsetPlant(ArxPlant):
+    """The report's motor A with a constant voltage lost on the way, as dry friction takes it."""
+
+    def __init__(self, offset_v: float) -> None:
+        super().__init__(REPORT_A, REPORT_A)
+        self.offset_v = offset_v
+
+    def step(self, voltage_a_v: float, voltage_b_v: float):
+        return super().step(voltage_a_v - self.offset_v, voltage_b_v - self.offset_v)
+
+
+@pytest.mark.parametrize(("bias", "static_error"), [(0.03, False), (0.0, True)])
+def test_pi_on_the_estimate_needs_the_disturbance_state(bias: float, static_error: bool) -> None:
+    """The PI regulates its estimate: without the disturbance state the estimate carries the lost
+    voltage as a speed offset, and so does the measured speed the PI leaves behind."""
+    design = design_pi(REPORT_A, phase_margin_deg=70.0, crossover_hz=3.75)
+    estimator = SteadyStateSpeedEstimator(design_kalman(REPORT_A, bias_drift_std_v=bias))
+    ctrl = PiController(design.kp, design.ki, 0.01, estimator=estimator)
+    plant = OffsetPlant(0.8)
+    y = plant.reset()
+    for _ in range(400):
+        y = plant.step(ctrl.step(10.0, y.speed_a_rad_s), 0.0)
+    assert ctrl.estimate_rad_s == pytest.approx(10.0, abs=1e-6)
+    assert (abs(y.speed_a_rad_s - 10.0) > 0.5) == static_error
+    if not static_error:
+        assert estimator.state[-1] == pytest.approx(-0.8, abs=1e-6)
+
+
 # -- accuracy on the physics simulator ----------------------------------------------------------
 
 TICKS = 3000
@@ -211,7 +266,9 @@ def physics_model() -> ArxModel:
     """Motor A of the physics cart, identified as the report did but by output error.
 
     Random ±2.5 V steps around 6 V (held 3–10 ticks, no zero crossing), deviations from the
-    means (the friction offset is the estimator's bias state's job), the report's structure.
+    means (the friction offset is the estimator's bias state's job), two poles and two zeros.
+    The command lands 3 ms into its tick, so the next speed sample already sees most of it: the
+    delay that simulates this plant best is one tick (nk = 1), not the report's two.
     """
     rng = np.random.default_rng(1)
     u = np.empty(4000)
@@ -223,14 +280,21 @@ def physics_model() -> ArxModel:
     trace = run_experiment(PhysicsPlant("ground"), u, u).trace
     y, v = trace.speed("a")[200:], trace.voltage("a")[200:]
     data = [(y - y.mean(), v - v.mean())]
-    return fit_oe(data, fit_arx(data, na=2, nb=2, nk=2).model).model
+    return fit_oe(data, fit_arx(data, na=2, nb=2, nk=1).model).model
 
 
-def test_identified_model_is_not_the_reports(physics_model: ArxModel) -> None:
-    """Why the estimator for transients is designed on an identified model: the simulator's
-    speed responds about a tick later than the report's model says (b_0 ≈ 0.17 against 0.65)."""
-    assert physics_model.x[0] < 0.3 < REPORT_A.x[0]
-    assert physics_model.dc_gain() == pytest.approx(2.2, abs=0.1)
+def test_identified_model_predicts_the_simulator(physics_model: ArxModel) -> None:
+    """The estimator of these accuracy tests is designed on a model of the simulator itself (the
+    report's own model is judged on the shipped controller): it simulates fresh data of the same
+    kind to better than 90 % (NRMSE fit)."""
+    rng = np.random.default_rng(2)
+    u = 6.0 + 2.5 * rng.choice([-1.0, 1.0], size=1500).repeat(2)[:1500]
+    trace = run_experiment(PhysicsPlant("ground"), u, u).trace
+    y, v = trace.speed("a")[200:], trace.voltage("a")[200:]
+    y, v = y - y.mean(), v - v.mean()
+    fit = 1.0 - np.linalg.norm(y - physics_model.simulate(v)) / np.linalg.norm(y)
+    assert fit > 0.9
+    assert physics_model.dc_gain() == pytest.approx(2.2, abs=0.15)
 
 
 @pytest.mark.parametrize("scenario", ["slow multisine", "closed loop steps"])

@@ -22,6 +22,7 @@ import pytest
 from rerun.chunk import RrdReader
 
 from cartctl.cli import main
+from cartctl.design.controllerfile import load_controller
 from cartctl.errors import InputError, PlantError
 from cartctl.link import Event, Gpio
 from cartctl.plants.bridge_firmware import CartIO
@@ -276,8 +277,15 @@ def test_onboard_from_file(tmp_path: Path) -> None:
     firmware = OnboardFirmware.from_file(PI, reference="const:8")
     assert set(firmware.controllers) == {"a", "b"}
     assert firmware.control(_io(0.0, 0.0))[0] > 0.0
-    slow = tmp_path / "slow.toml"
-    slow.write_text(PI.read_text().replace("period_s = 0.01", "period_s = 0.02"))
+    slow = tmp_path / "slow.toml"  # a consistent 20 ms file: C(z) = Kp + Ki·Ts·z/(z−1) at 0.02 s
+    text = PI.read_text().replace("period_s = 0.01", "period_s = 0.02")
+    for entry in load_controller(PI).motors.values():
+        old = f"    {entry['kp'] + entry['ki'] * 0.01!r},\n    {-entry['kp']!r},"
+        assert old in text
+        text = text.replace(
+            old, f"    {entry['kp'] + entry['ki'] * 0.02!r},\n    {-entry['kp']!r},"
+        )
+    slow.write_text(text)
     with pytest.raises(InputError, match=r"every 0\.01 s"):
         OnboardFirmware.from_file(slow)
     with pytest.raises(InputError, match="unknown reference"):

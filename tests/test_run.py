@@ -59,7 +59,7 @@ def test_fast_run_records_trace_and_contract_4_recording(
     assert isinstance(summary, dict)
     assert summary["ticks"] == 300
     assert summary["deadline_misses"] == 0
-    assert summary["loop_delay_ticks"] is None
+    assert summary["loop_delay_ticks"] == 1  # models/ground.toml: nk = 2, loop delay nk − 1
     trace = read_trace(summary["trace"])
     assert len(trace) == 300
     assert trace.column("tick")[-1] == 299

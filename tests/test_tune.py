@@ -15,6 +15,9 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
+from cartctl.data import read_trace
+from cartctl.design.analysis import simulate_step
+from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import load_controller
 from cartctl.design.tune import (
     TuneResult,
@@ -25,11 +28,15 @@ from cartctl.design.tune import (
     parse_grid,
 )
 from cartctl.errors import InputError
+from cartctl.modelfile import load_models
+from cartctl.runtime.tune import TuneJob, scoring_plant
+from cartctl.stepinfo import step_info
 
 GROUND = Path(__file__).resolve().parents[1] / "models" / "ground.toml"
 # 60° at 2 Hz needs Kp < 0 on the ground model (infeasible); 4 Hz works for both margins.
 PI_GRID = "phase_margin=60:65:5,crossover_hz=2:4:2"
 CHOSEN = 4  # 65°, 4 Hz (the first axis varies slowest)
+QUANTUM = 2 * math.pi / 1792 / 0.01  # one encoder count per 10 ms tick (rad/s)
 
 
 def _motor(overshoot: float | None, settling: float | None, rms: float, peak: float) -> dict:
@@ -162,12 +169,20 @@ def test_tuned_metrics_equal_those_of_run_fast_with_the_chosen_controller(
         code = main(["run", "--fast", "--controller", str(tuned["out"]), "--model", str(GROUND),
                      "--duration", "1", "--rerun", "off", "--out", str(tuned["tmp"]), "--json"])  # fmt: skip
     assert code == 0
-    run_motors = json.loads(stdout.getvalue())["motors"]
+    summary = json.loads(stdout.getvalue())
+    run_motors = summary["motors"]
     row = next(r for r in tuned["doc"]["settings"] if r["index"] == CHOSEN)
     for m in ("a", "b"):
         for key in ("overshoot_percent", "settling_time_s", "rms_error", "max_abs_voltage"):
             assert row["motors"][m][key] == pytest.approx(run_motors[m][key], abs=1e-9), (m, key)
     assert row["settling_time_s"] == max(run_motors[m]["settling_time_s"] for m in "ab")
+    # settling in the band of the design's bound: one encoder count per tick (0.3506 rad/s) is
+    # wider than 2 % of the 10 rad/s step; the run's trace measured so by hand
+    columns = read_trace(summary["trace"]).columns()
+    for m in ("a", "b"):
+        info = step_info(columns["time_s"], columns[f"speed_{m}"], reference=10.0, onset_s=0.5,
+                         settling_band=QUANTUM / 10.0)  # fmt: skip
+        assert row["motors"][m]["settling_time_s"] == pytest.approx(info.settling_time_s, abs=1e-9)
 
 
 def test_chosen_file_is_what_cartctl_design_writes(tuned: dict[str, Any]) -> None:
@@ -195,7 +210,7 @@ def test_plot_is_a_png(tuned: dict[str, Any]) -> None:
 
 def test_poles_table_has_one_row_per_setting(capsys: pytest.CaptureFixture[str]) -> None:
     code = main(["tune", str(GROUND), "--method", "poles", "--grid",
-                 "settling_time=0.03:0.07:0.04,overshoot=1", "--duration", "1", "--jobs", "1"])  # fmt: skip
+                 "settling_time=0.02:0.06:0.04,overshoot=1", "--duration", "1", "--jobs", "1"])  # fmt: skip
     out, _ = capsys.readouterr()
     assert code == 0
     rows = [line for line in out.splitlines() if line[:4].strip().lstrip("*").strip().isdigit()]
@@ -214,3 +229,58 @@ def test_choosing_an_infeasible_setting_is_a_clear_error(
     assert code == 2
     assert "--choose 1: that setting is infeasible" in err and err.count("\n") == 1
     assert not (tmp_path / "c.toml").exists()
+
+
+@pytest.mark.parametrize("plant", ["sim", "physics"])
+def test_the_scored_plant_has_the_loop_delay_the_design_is_for(plant: str) -> None:
+    """--extra-delay 3 on the report's model (nk = 2, loop delay 1): a voltage commanded at tick 0
+    first shows in the measurement of tick 2 + 3 = 5, a loop delay of 4; the response is the
+    nominal one, three ticks later. On the physics cart the command lands 3 ms into its tick, so
+    the speed sample that closes that tick already sees part of it: one tick sooner there."""
+    speeds = {}
+    for extra in (0, 3):
+        p = scoring_plant(TuneJob(str(GROUND), "pi", plant, "ground", "step:10", 1.0, extra, ()))
+        p.reset()
+        speeds[extra] = np.array([p.step(6.0, 6.0).speed_a_rad_s for _ in range(40)])  # ticks 1..
+        p.close()
+    first_tick = {extra: int(np.flatnonzero(y)[0]) + 1 for extra, y in speeds.items()}
+    first = 2 if plant == "sim" else 1
+    assert first_tick == {0: first, 3: first + 3}  # loop delays 1 and 4
+    np.testing.assert_array_equal(speeds[3][3:], speeds[0][:-3])
+
+
+def _tune_json(capsys: pytest.CaptureFixture[str], *argv: str) -> dict[str, Any]:
+    code = main(["tune", str(GROUND), "--jobs", "1", "--json", *argv])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    return json.loads(out)
+
+
+def test_tuning_with_extra_delay_scores_the_designs_own_loop(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A PI setting tuned with --extra-delay 3 runs as ``cartctl design --extra-delay 3``
+    simulates its step (the model with nk + 3), and settles later than with no extra delay."""
+    grid = ["--method", "pi", "--grid", "phase_margin=65,crossover_hz=3", "--duration", "1",
+            "--reference", "step:10:0"]  # fmt: skip
+    rows = {extra: _tune_json(capsys, *grid, "--extra-delay", str(extra))["settings"][0]
+            for extra in (0, 3)}  # fmt: skip
+    assert rows[0]["feasible"] and rows[3]["feasible"]
+    models = load_models(GROUND)
+    out = tmp_path / "pi3.toml"
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(["design", str(GROUND), "--method", "pi", "--phase-margin", "65",
+                     "--crossover-hz", "3", "--extra-delay", "3", "--out", str(out)]) == 0  # fmt: skip
+    for m, ctrl in build_controllers(load_controller(out)).items():
+        step = simulate_step(ctrl, models.motor(m), step_rad_s=10.0, duration_s=1.0,
+                             extra_delay_ticks=3)  # fmt: skip
+        banded = step_info(step.time_s, step.speed_rad_s, reference=10.0,
+                           settling_band=QUANTUM / 10.0)  # fmt: skip
+        tuned = rows[3]["motors"][m]
+        assert tuned["overshoot_percent"] == pytest.approx(banded.overshoot_percent, abs=1e-9)
+        assert tuned["settling_time_s"] == pytest.approx(banded.settling_time_s, abs=1e-9)
+        assert tuned["max_abs_voltage"] == pytest.approx(step.peak_voltage_v, abs=1e-9)
+        # three more ticks in the loop: slower, and never faster than the bound on that loop (60 ms)
+        assert tuned["settling_time_s"] > rows[0]["motors"][m]["settling_time_s"] + 0.03
+        assert tuned["settling_time_s"] >= 0.06
+    assert rows[3]["settling_time_s"] > rows[0]["settling_time_s"]

@@ -176,5 +176,12 @@ def test_identified_delay_matches_the_echo(
     code, result, err = _cli(capsys, "identify", "x.csv", "--delay", "auto", "--json")
     assert code == 0, err
     assert isinstance(result, dict)
+    # Nothing answers before the echo's tick; the command lands 3 ms into it, so the sample that
+    # closes that tick already sees it and nk = echo fits about as well as or better than the
+    # report's nk = echo + 1. Earlier delays leave several times the residual.
     for m in "ab":
-        assert result["motors"][m]["nk"] == echo_delay + 1
+        estimate = result["motors"][m]["delay_estimate"]
+        assert result["motors"][m]["nk"] in (echo_delay, echo_delay + 1)
+        residual = {c["nk"]: c["residual_rms"] for c in estimate["candidates"]}
+        best = min(residual.values())
+        assert all(r > 3 * best for nk, r in residual.items() if nk < echo_delay)

@@ -12,7 +12,10 @@ negative step is handled like a positive one):
 - rise time: from the first reach of 10 % to the first reach of 90 %;
 - overshoot: how far the response goes beyond the target, in % of the step size (0 if never);
 - settling time: from the step onset to the moment the response enters, for good, the band of
-  ±2 % of the step size around the target;
+  ±2 % of the step size around the target (``settling_band``), or a wider one where a floor in
+  response units is given (``settling_floor``: :func:`settling_half_width` with the
+  :func:`encoder_quantum_rad_s` of a measured wheel speed, whose resolution is one encoder count
+  per tick);
 - peak: the sample farthest in the step's direction, its value and its time from the onset.
 
 With a reference, the metrics judge how the response tracks that reference, as
@@ -38,11 +41,15 @@ from numpy.typing import ArrayLike, NDArray
 from cartctl.errors import InputError
 
 __all__ = [
+    "ENCODER_COUNTS_PER_REV",
     "MIN_FINAL_SAMPLES",
+    "SETTLING_FRACTION",
     "StepInfo",
     "StepOnset",
+    "encoder_quantum_rad_s",
     "final_value",
     "find_step",
+    "settling_half_width",
     "step_info",
 ]
 
@@ -57,6 +64,55 @@ _ROUNDING = 1e-12
 
 RISE_LIMITS = (0.1, 0.9)
 """The rise time runs from the first reach of the first to the first reach of the second fraction."""
+
+SETTLING_FRACTION = 0.02
+"""The settling band's half-width as a fraction of the step (the 2 % criterion)."""
+
+ENCODER_COUNTS_PER_REV = 1792
+"""Encoder counts per wheel revolution of the cart (the measured speed moves in whole counts)."""
+
+
+def encoder_quantum_rad_s(period_s: float, counts_per_rev: int = ENCODER_COUNTS_PER_REV) -> float:
+    """One encoder count per tick as a speed: q = 2π / counts_per_rev / Ts (0.3506 rad/s at 10 ms).
+
+    Parameters
+    ----------
+    period_s : float
+        Tick Ts (s), > 0.
+    counts_per_rev : int
+        Encoder counts per wheel revolution.
+    """
+    if not (math.isfinite(period_s) and period_s > 0.0):
+        raise InputError(f"the period must be a positive number of seconds, got {period_s}")
+    return 2.0 * math.pi / counts_per_rev / period_s
+
+
+def settling_half_width(
+    step_size: float, floor: float = 0.0, fraction: float = SETTLING_FRACTION
+) -> float:
+    """Half-width of the settling band of a step: max(fraction · |step|, floor).
+
+    Parameters
+    ----------
+    step_size : float
+        Target − initial (response units, e.g. rad/s).
+    floor : float
+        The narrowest band worth judging (response units, ≥ 0): for a measured wheel speed one
+        encoder count per tick, :func:`encoder_quantum_rad_s`, so that a small step is not
+        judged on the encoder's resolution.
+    fraction : float
+        Band as a fraction of |step|, in (0, 1).
+
+    Returns
+    -------
+    float
+        The half-width (response units).
+    """
+    if not 0.0 < fraction < 1.0:
+        raise InputError(f"settling band must be a fraction in (0, 1), got {fraction}")
+    if not (math.isfinite(floor) and floor >= 0.0):
+        raise InputError(f"settling band floor must be a finite number >= 0, got {floor}")
+    return max(fraction * abs(step_size), floor)
 
 
 @dataclass(frozen=True)
@@ -191,7 +247,8 @@ def step_info(
     reference: float | None = None,
     initial: float = 0.0,
     onset_s: float | None = None,
-    settling_band: float = 0.02,
+    settling_band: float = SETTLING_FRACTION,
+    settling_floor: float = 0.0,
     interpolate: bool = True,
 ) -> StepInfo:
     """Measure a step response (see the module docstring for the definitions).
@@ -211,6 +268,9 @@ def step_info(
         settling and peak times count from it.
     settling_band : float
         Half-width of the settling band as a fraction of the step size (0.02 is 2 %).
+    settling_floor : float
+        The band is never narrower than this, in response units (default 0: the fraction alone;
+        see :func:`settling_half_width`). A step no larger than its band has no settling time (None).
     interpolate : bool
         Interpolate linearly between samples for the rise and settling instants; False takes the
         first sample past the level, as ``control.step_info`` does.
@@ -240,6 +300,8 @@ def step_info(
         raise InputError("time must increase from sample to sample")
     if not 0.0 < settling_band < 1.0:
         raise InputError(f"settling band must be a fraction in (0, 1), got {settling_band}")
+    if not (math.isfinite(settling_floor) and settling_floor >= 0.0):
+        raise InputError(f"settling band floor must be a finite number >= 0, got {settling_floor}")
     onset = float(t[0]) if onset_s is None else float(onset_s)
     if not t[0] <= onset <= t[-1]:
         raise InputError(
@@ -267,15 +329,18 @@ def step_info(
         )
         rise = hi - lo
 
-    outside = np.flatnonzero(np.abs(z - 1.0) > settling_band)
+    band = max(settling_band, settling_floor / abs(size))  # as a fraction of the step
+    outside = np.flatnonzero(np.abs(z - 1.0) > band)
     settling: float | None
-    if outside.size == 0:
+    if band >= 1.0:  # the band reaches back to the initial value: nothing to settle
+        settling = None
+    elif outside.size == 0:
         settling = float(ts[0] - onset)
     elif outside[-1] == z.size - 1:
         settling = None
     else:
         j = int(outside[-1])
-        edge = 1.0 + settling_band if z[j] > 1.0 else 1.0 - settling_band
+        edge = 1.0 + band if z[j] > 1.0 else 1.0 - band
         settled = _crossing(ts, z, j + 1, edge, interpolate=interpolate)
         settling = settled - onset
 

@@ -12,9 +12,18 @@ from typing import Any
 
 from cartctl.design.analysis import StepAnalysis, simulate_step
 from cartctl.design.build import ESTIMATOR_GAINS, make_estimator, pi_entry, poles_entry
-from cartctl.design.controllerfile import ControllerFile, file_sha256, save_controller
-from cartctl.design.kalman import DEFAULT_PROCESS_NOISE_STD_V, design_kalman
-from cartctl.design.limit import settling_bound
+from cartctl.design.controllerfile import (
+    ControllerFile,
+    common_loop_delay,
+    file_sha256,
+    save_controller,
+)
+from cartctl.design.kalman import (
+    DEFAULT_BIAS_DRIFT_STD_V,
+    DEFAULT_PROCESS_NOISE_STD_V,
+    design_kalman,
+)
+from cartctl.design.limit import in_settling_band, settling_bound
 from cartctl.design.loop import feedback_tf_coeffs, loop_analysis
 from cartctl.design.pi import design_pi, design_pi_bandwidth
 from cartctl.design.poles import design_poles
@@ -65,7 +74,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     pl.add_argument(
         "--poles",
         metavar="Z1,Z2,...",
-        help="closed-loop poles in the z-plane, complex as a+bj (4 for the report's model)",
+        help="closed-loop poles in the z-plane, complex as a+bj (3 for the report's model; 4 with "
+        "--bias-drift-v 0, which adds an error integrator)",
     )
     pl.add_argument(
         "--settling-time",
@@ -94,6 +104,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=DEFAULT_PROCESS_NOISE_STD_V,
         metavar="V",
         help=f"input-equivalent process noise, std in V (default {DEFAULT_PROCESS_NOISE_STD_V:g})",
+    )
+    est.add_argument(
+        "--bias-drift-v",
+        type=float,
+        default=DEFAULT_BIAS_DRIFT_STD_V,
+        metavar="V",
+        help="random-walk step per tick of the estimator's input-disturbance state (friction, "
+        f"model DC error), the integral action of pole placement (default "
+        f"{DEFAULT_BIAS_DRIFT_STD_V:g}; 0 leaves it out)",
     )
     est.add_argument(
         "--measurement-noise",
@@ -170,6 +189,7 @@ def _design_motor(
         kalman = None
         if args.estimator == "kalman":
             kalman = design_kalman(model, process_noise_std_v=args.process_noise_v,
+                                   bias_drift_std_v=args.bias_drift_v,
                                    extra_noise_std_rad_s=args.measurement_noise,
                                    extra_delay_ticks=extra)  # fmt: skip
         ctrl = PiController(d.kp, d.ki, model.period_s, voltage_limit_v=args.voltage_limit,
@@ -187,6 +207,7 @@ def _design_motor(
         overshoot_percent=None if poles else args.overshoot,
         extra_delay_ticks=extra,
         process_noise_std_v=args.process_noise_v,
+        bias_drift_std_v=args.bias_drift_v,
         extra_noise_std_rad_s=args.measurement_noise,
     )
     ctrl = StateFeedbackController(d, estimator=make_estimator(d.estimator, args.estimator_gain),
@@ -203,13 +224,14 @@ def _design_motor(
         "controller_num": num.tolist(),
         "controller_den": den.tolist(),
     }
-    return ctrl, entry, poles_entry(d)
+    return ctrl, entry, poles_entry(d, num, den)
 
 
 def _request(args: argparse.Namespace) -> dict[str, Any]:
     req: dict[str, Any] = {"extra_delay_ticks": args.extra_delay, "step_rad_s": args.step,
                            "estimator_gain": args.estimator_gain,
                            "process_noise_std_v": args.process_noise_v,
+                           "bias_drift_std_v": args.bias_drift_v,
                            "measurement_noise_std_rad_s": args.measurement_noise}  # fmt: skip
     if args.method == "pi":
         req.update(phase_margin_deg=args.phase_margin, anti_windup=args.anti_windup,
@@ -246,7 +268,8 @@ def _format(method: str, motors: dict[str, dict[str, Any]]) -> str:
             f"rise {step['rise_time_s'] * 1e3:.0f} ms, settling "
             + ("—" if settle is None else f"{settle * 1e3:.0f} ms")
             + f", peak {step['peak_voltage_v']:.2f} V, steady-state error {step['steady_state_error']:.2g} rad/s",
-            f"  fastest settling within the voltage limit: {bound * 1e3:.0f} ms"
+            f"  fastest settling within the voltage limit for a loop delay of "
+            f"{e['settling_bound_loop_delay_ticks']} tick(s): {bound * 1e3:.0f} ms"
             + ("" if settle is None else f" (this controller: {settle / bound:.1f}× that)"),
             "",
         ]  # fmt: skip
@@ -257,6 +280,12 @@ def run(args: argparse.Namespace) -> int:
     _check(args)
     models = load_models(args.model)
     names = ("a", "b") if args.motor == "both" else (args.motor,)
+    loop_delay = None
+    if args.out:  # a file is for one loop: refuse before designing when the motors' nk differ
+        try:
+            loop_delay = common_loop_delay({m: models.motor(m).nk for m in names}, args.extra_delay)
+        except ValueError as exc:
+            raise InputError(f"--out: {exc}") from None
     motors_json: dict[str, dict[str, Any]] = {}
     motors_file: dict[str, dict[str, Any]] = {}
     steps: dict[str, StepAnalysis] = {}
@@ -264,16 +293,20 @@ def run(args: argparse.Namespace) -> int:
         model = models.motor(m)
         ctrl, entry, file_entry = _design_motor(args, model)
         step = simulate_step(ctrl, model, step_rad_s=args.step, extra_delay_ticks=args.extra_delay)
-        bound = settling_bound(model, args.step, voltage_limit_v=args.voltage_limit)
+        bound = settling_bound(model, args.step, voltage_limit_v=args.voltage_limit,
+                               extra_delay_ticks=args.extra_delay)  # fmt: skip
+        step = in_settling_band(step, model.period_s)  # the bound's band: max(2 %, one count)
         settle = step.info.settling_time_s
         entry["step"] = step.to_dict()
         entry["settling_bound_s"] = bound.settling_time_s
         entry["settling_ratio"] = None if settle is None else settle / bound.settling_time_s
+        entry["settling_bound_loop_delay_ticks"] = bound.loop_delay_ticks
         motors_json[m] = entry
         motors_file[m] = {**file_entry, "analysis": {k: v for k, v in entry.items()
                                                      if k in ("phase_margin_deg", "gain_margin_db", "crossover_hz", "sensitivity_peak",
                                                               "closed_loop_poles", "estimator_poles", "step",
-                                                              "settling_bound_s", "settling_ratio")}}  # fmt: skip
+                                                              "settling_bound_s", "settling_ratio",
+                                                              "settling_bound_loop_delay_ticks")}}  # fmt: skip
         steps[m] = step
     if args.out:
         command = "cartctl " + shlex.join(sys.argv[1:]) if sys.argv[1:] else "cartctl design"
@@ -283,6 +316,7 @@ def run(args: argparse.Namespace) -> int:
                 model_path=str(args.model), model_sha256=file_sha256(args.model),
                 request=_request(args), motors=motors_file,
                 created=datetime.now(UTC).isoformat(timespec="seconds"), command=command,
+                loop_delay_ticks=loop_delay,
             ),
             args.out,
         )  # fmt: skip

@@ -95,8 +95,8 @@ def run(args: argparse.Namespace) -> int:
         delay = link["loop_delay_ticks"]
         stats = link["link"]
         print(
-            f"  loop delay {delay} ticks from the echo (a model of this data has nk = "
-            f"{None if delay is None else delay + 1}); {stats['crc_errors']} CRC errors, "
+            f"  loop delay {delay} ticks from the echo (the report's model structure for this "
+            f"loop: nk = {None if delay is None else delay + 1}); {stats['crc_errors']} CRC errors, "
             f"{stats['lost_frames']} frames lost, {stats['missed_ticks']} cart ticks missed"
         )
     if result.failure:

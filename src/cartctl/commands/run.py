@@ -13,16 +13,19 @@ from typing import Any
 
 from cartctl.commands.options import add_plant_options
 from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import load_controller
-from cartctl.errors import DataWarning, InputError, PlantError
-from cartctl.plants.base import ClockedPlant
-from cartctl.plants.factory import make_plant
+from cartctl.design.controllerfile import ControllerFile, load_controller
+from cartctl.errors import CartctlError, DataWarning, InputError, PlantError
+from cartctl.plants.base import ClockedPlant, Plant
+from cartctl.plants.factory import is_serial, make_plant, plant_loop_delay
 from cartctl.runtime.loop import ControlLoop, MemorySink
 from cartctl.runtime.reference import FORMS, reference_signal
 from cartctl.sinks.csv_sink import CsvSink
 from cartctl.sinks.summary import format_summary, trace_metrics
 
 DEFAULT_CONTROLLER = Path("controllers/pi.toml")
+DEFAULT_SERIAL_CONTROLLER = Path("controllers/serial-pi.toml")
+SHIPPED_CONTROLLERS = ("pi.toml", "poles.toml", "serial-pi.toml", "serial-poles.toml")
+"""The shipped controller files (in ``controllers/``), offered when a file does not fit a plant."""
 RERUN_MODES = ("auto", "spawn", "connect", "save", "off")
 
 
@@ -39,9 +42,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_plant_options(p, what="what to control")
     p.add_argument(
         "--controller",
-        default=str(DEFAULT_CONTROLLER),
         metavar="CONTROLLER.toml",
-        help=f"controller file (default {DEFAULT_CONTROLLER})",
+        help=f"controller file (default {DEFAULT_CONTROLLER}, or {DEFAULT_SERIAL_CONTROLLER} for "
+        "the virtual and serial plants)",
+    )
+    p.add_argument(
+        "--allow-delay-mismatch",
+        action="store_true",
+        help="run a controller designed for another loop delay than the plant's (a warning "
+        "instead of an error)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="run a controller file whose controller_num/controller_den disagree with its gains "
+        "(the gains run; a warning says what is ignored)",
     )
     p.add_argument(
         "--reference",
@@ -68,9 +83,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--voltage-limit",
         type=float,
-        default=12.0,
         metavar="V",
-        help="clamp the command lower than 12 V (never higher)",
+        help="a lower voltage limit than the controller file's (at most 12 V): the controllers, "
+        "their anti-windup and estimators work with it",
     )
     p.add_argument(
         "--json", action="store_true", help="print the summary as one JSON object (contract 3)"
@@ -107,22 +122,106 @@ def _free_stem(out: Path, stem: str) -> str:
     return candidate
 
 
+def default_controller(plant: str) -> Path:
+    """The shipped controller for a plant: the serial one over the serial line, else the PI."""
+    return DEFAULT_SERIAL_CONTROLLER if is_serial(plant) else DEFAULT_CONTROLLER
+
+
+def _fitting_controller(controller: ControllerFile, given: str, delay: int) -> str | None:
+    """A shipped controller file designed for ``delay``, the same method first (or None)."""
+    folders = dict.fromkeys([DEFAULT_CONTROLLER.parent, Path(given).parent])
+
+    def other_method(name: str) -> bool:
+        return name.removeprefix("serial-").removesuffix(".toml") != controller.method
+
+    names = sorted(SHIPPED_CONTROLLERS, key=other_method)
+    for name in names:
+        for folder in folders:
+            path = folder / name
+            if not path.is_file() or path.resolve() == Path(given).resolve():
+                continue
+            try:
+                if load_controller(path).loop_delay_ticks == delay:
+                    return str(path)
+            except CartctlError:
+                continue
+    return None
+
+
+def check_loop_delay(
+    controller: ControllerFile, given: str, plant: str, delay: int | None, *, allow: bool
+) -> None:
+    """Refuse (InputError) a controller designed for another loop delay than the plant's.
+
+    With ``allow`` the mismatch is a warning; an unknown plant delay (None) is not checked.
+    """
+    designed = controller.loop_delay_ticks
+    if delay is None or designed is None or designed == delay:
+        return
+    problem = (
+        f"{given} is designed for a loop delay of {designed} tick(s) but the plant '{plant}' has "
+        f"{delay}"
+    )
+    if allow:
+        warnings.warn(f"{problem}; running it anyway (--allow-delay-mismatch)", DataWarning,
+                      stacklevel=2)  # fmt: skip
+        return
+    fit = _fitting_controller(controller, given, delay)
+    if fit is not None:
+        hint = f"use {fit} (designed for {delay})"
+    else:
+        extra = int(controller.request.get("extra_delay_ticks", 0)) + delay - designed
+        hint = (
+            f"redesign it with --extra-delay {extra}"
+            if extra >= 0
+            else "redesign it on a model of this loop"
+        )
+    raise InputError(f"{problem}; {hint} or pass --allow-delay-mismatch")
+
+
+def _measured_delay(plant: Plant) -> int | None:
+    """A serial plant's loop delay from the echo (drive = 0, zero volts), before any driving."""
+    measure = getattr(plant, "measure_loop_delay", None)
+    return None if measure is None else int(measure())
+
+
 def run(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.duration) and args.duration > 0):
         raise InputError(f"--duration must be a positive number of seconds, got {args.duration}")
-    if not 0.0 < args.voltage_limit <= 12.0:
+    if args.voltage_limit is not None and not 0.0 < args.voltage_limit <= 12.0:
         raise InputError(f"--voltage-limit must be in (0, 12] V, got {args.voltage_limit}")
     if args.fast and args.plant not in ("sim", "physics"):
         raise InputError(f"--fast needs a simulated plant (sim or physics), not '{args.plant}'")
-    controller_file = load_controller(args.controller)
+    given = args.controller or str(default_controller(args.plant))
+    controller_file = load_controller(given, force=args.force)
+    if controller_file.ignored:
+        more = (
+            f" (and {len(controller_file.ignored) - 1} more)"
+            if len(controller_file.ignored) > 1
+            else ""
+        )
+        warnings.warn(
+            f"--force: {given}: running its gains; ignoring controller_num/controller_den, which "
+            f"disagree with them: {controller_file.ignored[0]}{more}",
+            DataWarning,
+            stacklevel=1,
+        )
+    limit = controller_file.voltage_limit_v
+    if args.voltage_limit is not None:
+        if args.voltage_limit > limit:
+            raise InputError(
+                f"--voltage-limit {args.voltage_limit:g} V is above the {limit:g} V {given} is "
+                "designed for; it can only be lowered"
+            )
+        limit = args.voltage_limit
     if controller_file.model_changed():
         warnings.warn(
-            f"{args.controller} was designed on {controller_file.model_path}, which has changed "
+            f"{given} was designed on {controller_file.model_path}, which has changed "
             "since (or is gone); redesign with the command in the file's header",
             DataWarning,
             stacklevel=1,
         )
-    controllers = build_controllers(controller_file)
+    controllers = build_controllers(controller_file, voltage_limit_v=limit)
     plant, description = make_plant(args.plant, model_path=args.model, preset=args.preset,
                                     noise_std_rad_s=args.noise, seed=args.seed,
                                     connect_timeout_s=args.connect_timeout)  # fmt: skip
@@ -133,12 +232,17 @@ def run(args: argparse.Namespace) -> int:
             f"the controller is for Ts = {controller_file.period_s} s but the plant ticks at {period_s} s"
         )
     clocked = isinstance(plant, ClockedPlant)
-    if clocked:  # find the cart before any file is opened: a missing cart is one clear error
-        try:
+    try:  # before any file is opened and before driving: a missing cart, a wrong controller
+        if clocked:
             plant.connect()
-        except BaseException:
-            plant.close()
-            raise
+            delay = _measured_delay(plant)
+        else:
+            delay = plant_loop_delay(plant)
+        check_loop_delay(controller_file, given, args.plant, delay,
+                         allow=args.allow_delay_mismatch)  # fmt: skip
+    except BaseException:
+        plant.close()
+        raise
     n = max(1, round(args.duration / period_s))
     references = _references(args, n, period_s)
     out = Path(args.out)
@@ -156,8 +260,7 @@ def run(args: argparse.Namespace) -> int:
 
     clock = VirtualClock() if args.fast else MonotonicClock()
     loop = ControlLoop(plant, controllers, references, sinks, now_s=clock.now_s,
-                       voltage_limit_v=min(args.voltage_limit, controller_file.voltage_limit_v),
-                       period_s=period_s)  # fmt: skip
+                       voltage_limit_v=limit, period_s=period_s)  # fmt: skip
     executor: Any
     if clocked:
         executor = CartClockedExecutor(plant, max_ticks=n, now_s=clock.now_s,  # type: ignore[arg-type]
@@ -193,22 +296,24 @@ def run(args: argparse.Namespace) -> int:
             restore()
     summary = trace_metrics(memory.arrays(), period_s)
     summary.update((stats or executor.stats()).to_dict())
-    summary["loop_delay_ticks"] = None
     link_summary = getattr(plant, "link_summary", None)
     if link_summary is not None:
         summary.update(link_summary())
+    if summary.get("loop_delay_ticks") is None:  # the run's own echoes, else the probe's
+        summary["loop_delay_ticks"] = delay
     summary.update(
+        controller_loop_delay_ticks=controller_file.loop_delay_ticks,
         recording=str(rrd_path) if rerun is not None else None,
         trace=str(csv_path),
         plant=description,
-        controller=str(args.controller),
+        controller=given,
         scheduling=scheduling,
     )
     if args.json:
         print(json.dumps(summary))
     else:
         print(format_summary(summary))
-        print(f"  plant {description}; controller {args.controller}; {scheduling}")
+        print(f"  plant {description}; controller {given}; {scheduling}")
     for problem in loop.state.sink_errors:
         print(f"cartctl run: warning: {problem}", file=sys.stderr)
     if loop.state.failure:

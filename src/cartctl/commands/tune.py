@@ -4,6 +4,10 @@ Between ``design`` and ``run``. The grid and the Pareto front are :mod:`cartctl.
 designing and running the settings on worker processes is :mod:`cartctl.runtime.tune`. Here: the
 options, the table or JSON, the plot, and ``--choose N --out FILE``, which writes setting N's
 controller file through ``cartctl design`` itself.
+
+Each setting is scored on the loop it is designed for: with ``--extra-delay N`` the simulated
+plant has N more ticks of delay too. Settling is measured in the band of ``cartctl design``'s
+settling bound, max(2 %, one encoder count per tick).
 """
 
 from __future__ import annotations
@@ -35,9 +39,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="design a grid of controllers, run each in the simulated loop, show the Pareto front",
         description=(
             "Design one controller per grid setting (pi: phase margin × crossover; poles: settling "
-            "time × overshoot), run each like 'cartctl run --fast' against a simulated plant and "
-            "compare overshoot, settling time, RMS error and peak voltage (the worse of motors a "
-            "and b). Grid: comma-separated NAME=START:STOP:STEP (inclusive) or NAME=VALUE; pi "
+            "time × overshoot), run each like 'cartctl run --fast' against a simulated plant with "
+            "the loop delay the design is for (--extra-delay) and compare overshoot, settling time "
+            "(band: 2 %% of the step or one encoder count per tick, whichever is wider), RMS error "
+            "and peak voltage (the worse of motors a and b). Grid: comma-separated "
+            "NAME=START:STOP:STEP (inclusive) or NAME=VALUE; pi "
             "axes phase_margin (deg, default 50:75:5), crossover_hz (Hz, 2:5:0.5); poles axes "
             "settling_time (s, 0.04:0.16:0.02), overshoot (%, 0.5:5:1.5)."
         ),
@@ -51,7 +57,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help=f"speed reference of both motors (default step:10): {FORMS}")  # fmt: skip
     p.add_argument("--duration", type=float, default=2.0, metavar="S", help="run time (default 2 s)")  # fmt: skip
     p.add_argument("--extra-delay", type=int, default=0, metavar="N",
-                   help="ticks of delay the design allows for (the simulated loop has none, as in run --fast)")  # fmt: skip
+                   help="ticks of loop delay beyond the model's, designed for and simulated "
+                        "(a PC-side loop over serial)")  # fmt: skip
     p.add_argument("--jobs", type=int, metavar="N", help="worker processes (default: all cores)")
     p.add_argument("--plot", metavar="FILE.png", help="settling time vs overshoot scatter")
     p.add_argument("--choose", type=int, metavar="N", help="write setting #N's controller (with --out)")  # fmt: skip
@@ -99,7 +106,7 @@ def plot_tuning(path: str, method: str, results: Sequence[tuning.TuneResult]) ->
         ax.scatter([xi], [yi], s=150, facecolors="none", edgecolors="tab:red", linewidths=1.5)
         ax.annotate(str(index), (xi, yi), xytext=(6, 6 if n % 2 == 0 else -14),
                     textcoords="offset points", color="tab:red", fontsize=9)  # fmt: skip
-    ax.set_xlabel("settling time, 2 % (ms)")
+    ax.set_xlabel("settling time, band max(2 %, one encoder count) (ms)")
     ax.set_ylabel("overshoot (%)")
     ax.set_title(f"cartctl tune --method {method}: {len(shown)} of {len(results)} settings settled; "
                  "worse of motors a, b; ringed: Pareto front", fontsize=10)  # fmt: skip
@@ -159,7 +166,8 @@ def run(args: argparse.Namespace) -> int:
                           "settings": [r.to_dict() for r in results], "chosen": chosen}))  # fmt: skip
         return 0
     front, feasible = sum(r.pareto for r in results), sum(r.feasible for r in results)
-    print(f"{args.method} on {args.model}, {args.plant} plant, {args.reference}, {args.duration:g} s: "
+    delay = f", {args.extra_delay} extra tick(s) of loop delay" if args.extra_delay else ""
+    print(f"{args.method} on {args.model}, {args.plant} plant{delay}, {args.reference}, {args.duration:g} s: "
           f"{len(results)} settings, {feasible} feasible, {front} on the Pareto front (*); "
           "metrics: the worse of motors a and b")  # fmt: skip
     print(tuning.format_table(args.method, results))

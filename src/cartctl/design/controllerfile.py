@@ -6,40 +6,86 @@
     method = "pi"                      # or "poles"
     period_s = 0.01
     voltage_limit_v = 12.0
+    loop_delay_ticks = 1               # the loop it is designed for: model nk − 1 + extra delay
+    plant_kind = "onboard"             # loop delay 1 (on the cart, simulators); "serial": more
     created = "2026-11-22T15:00:00+00:00"
     command = "cartctl design models/ground.toml --method pi ..."
 
     [model]                            # the model it was designed on
-    path = "models/ground.toml"
+    path = "../models/ground.toml"     # relative to this file's folder
     sha256 = "…"                       # of the model file's bytes
 
     [request]                          # the user's specification (method-specific)
     phase_margin_deg = 60.0
 
-    [motors.a]                         # the result: gains, estimator matrices, analysis
+    [motors.a]                         # the result: gains, C(z), estimator matrices, analysis
     kp = 0.5
     ki = 12.0
+    controller_num = [0.62, -0.5]      # C(z) error → voltage, descending powers of z
+    controller_den = [1.0, -1.0]
 
-Loading checks the format and the keys; :mod:`cartctl.design.build` turns a file into runtime
-controllers.
+The **loop delay** is the number of ticks from a measurement to the voltage it leads to being on
+the motor: 1 on board the cart and in the simulators, 4 over the PC serial loop. A design on an
+ARX model with input delay nk and ``--extra-delay d`` is for a loop delay of nk − 1 + d.
+
+Loading checks the format and the keys, resolves the model path against the file's folder, and
+checks that the file does not contradict itself: ``plant_kind`` against ``loop_delay_ticks``, and
+each motor's ``controller_num``/``controller_den`` against its gains
+(:func:`cartctl.design.build.consistency_problems`). A file without ``loop_delay_ticks`` (from an
+older cartctl) gets it from its model's nk and ``request.extra_delay_ticks``.
+:mod:`cartctl.design.build` turns a file into runtime controllers.
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import tomli_w
 
-from cartctl.errors import DataFileError
+from cartctl.errors import CartctlError, DataFileError
 from cartctl.tomlfile import read_toml, require
 
 FORMAT = "cartctl-controller/1"
 METHODS = ("pi", "poles")
+PLANT_KINDS = ("onboard", "serial")
+ONBOARD_LOOP_DELAY_TICKS = 1
+"""Loop delay of control on board the cart, and of the simulated plants (ticks)."""
+
+
+def design_loop_delay(nk: int, extra_delay_ticks: int) -> int:
+    """The loop delay (ticks) a design on a model with input delay ``nk`` is for: nk − 1 + d."""
+    return int(nk) - 1 + int(extra_delay_ticks)
+
+
+def plant_kind(loop_delay_ticks: int) -> str:
+    """'onboard' for a loop delay of at most one tick (the cart itself, the simulators), else
+    'serial' (the PC-side loop over the serial line)."""
+    return "onboard" if loop_delay_ticks <= ONBOARD_LOOP_DELAY_TICKS else "serial"
+
+
+def common_loop_delay(nk: Mapping[str, int], extra_delay_ticks: int) -> int:
+    """The one loop delay of a design on motors with input delays ``nk`` (motor → nk).
+
+    Raises
+    ------
+    ValueError
+        The motors' models have different input delays: a controller file is for one loop, and
+        a design on both would be for two different ones.
+    """
+    delays = {m: design_loop_delay(n, extra_delay_ticks) for m, n in nk.items()}
+    if len(set(delays.values())) > 1:
+        shown = ", ".join(f"motor {m}: nk = {n}" for m, n in sorted(nk.items()))
+        raise ValueError(
+            f"the motors' models have different input delays ({shown}), so one file cannot be "
+            "for one loop; identify with one --delay for both or design each motor on its own"
+        )
+    return next(iter(delays.values()))
 
 
 def file_sha256(path: str | Path) -> str:
@@ -72,7 +118,8 @@ class ControllerFile:
     voltage_limit_v : float
         Command saturation (V), at most 12.
     model_path : str
-        The model file designed on.
+        The model file designed on, as a path that opens from the working directory (in the file
+        it is stored relative to the file's own folder).
     model_sha256 : str
         Its content hash at design time.
     request : dict
@@ -85,6 +132,11 @@ class ControllerFile:
         The command line that made it (to regenerate it).
     path : Path or None
         Where it was read from.
+    loop_delay_ticks : int or None
+        The loop delay the design is for (ticks, see the module docstring); None only for a
+        file being built that does not know it yet (it is then not written).
+    ignored : tuple of str
+        Self-contradictions found on loading with ``force=True`` (see :func:`load_controller`).
     """
 
     method: str
@@ -97,18 +149,37 @@ class ControllerFile:
     created: str
     command: str = ""
     path: Path | None = field(default=None, compare=False)
+    loop_delay_ticks: int | None = None
+    ignored: tuple[str, ...] = field(default=(), compare=False)
 
-    def to_toml_dict(self) -> dict[str, Any]:
-        """The document :func:`save_controller` writes."""
+    @property
+    def plant_kind(self) -> str | None:
+        """'onboard' or 'serial' (:func:`plant_kind`), None without a loop delay."""
+        return None if self.loop_delay_ticks is None else plant_kind(self.loop_delay_ticks)
+
+    def to_toml_dict(self, folder: str | Path | None = None) -> dict[str, Any]:
+        """The document :func:`save_controller` writes.
+
+        Parameters
+        ----------
+        folder : str or Path, optional
+            The folder the file goes to: the model path is written relative to it (as given when
+            None).
+        """
+        delay: dict[str, Any] = {}
+        if self.loop_delay_ticks is not None:
+            delay = {"loop_delay_ticks": self.loop_delay_ticks, "plant_kind": self.plant_kind}
+        model_path = self.model_path if folder is None else _relative_to(self.model_path, folder)
         return _plain(
             {
                 "format": FORMAT,
                 "method": self.method,
                 "period_s": self.period_s,
                 "voltage_limit_v": self.voltage_limit_v,
+                **delay,
                 "created": self.created,
                 "command": self.command,
-                "model": {"path": self.model_path, "sha256": self.model_sha256},
+                "model": {"path": model_path, "sha256": self.model_sha256},
                 "request": self.request,
                 "motors": self.motors,
             }
@@ -120,17 +191,83 @@ class ControllerFile:
         return not path.is_file() or file_sha256(path) != self.model_sha256
 
 
+def _relative_to(model_path: str, folder: str | Path) -> str:
+    """``model_path`` (from the working directory) as a path from ``folder`` (POSIX separators)."""
+    try:
+        relative = os.path.relpath(os.path.abspath(model_path), os.path.abspath(folder))
+    except ValueError:  # another drive (Windows): only an absolute path works
+        return Path(os.path.abspath(model_path)).as_posix()
+    return Path(relative).as_posix()
+
+
+def _resolve_model(stored: str, controller_path: Path, *, legacy: bool) -> str:
+    """The stored ``[model] path`` (relative to the controller's folder) from the working directory.
+
+    A file from an older cartctl (``legacy``) stored it relative to the working directory of the
+    design; that is tried when the path does not resolve against the controller's folder.
+    """
+    if Path(stored).is_absolute():
+        return stored
+    resolved = os.path.normpath(os.path.join(controller_path.parent, stored))
+    if legacy and not Path(resolved).is_file() and Path(stored).is_file():
+        return stored
+    return resolved
+
+
 def save_controller(controller: ControllerFile, path: str | Path) -> Path:
-    """Write a controller file, creating parent folders."""
+    """Write a controller file, creating parent folders; the model path is written relative to
+    the file's folder."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     header = f"# cartctl controller ({controller.method}); regenerate with: {controller.command}\n"
-    path.write_text(header + tomli_w.dumps(controller.to_toml_dict()), encoding="utf-8")
+    document = controller.to_toml_dict(path.parent)
+    path.write_text(header + tomli_w.dumps(document), encoding="utf-8")
     return path
 
 
-def load_controller(path: str | Path) -> ControllerFile:
-    """Read a controller file; clear errors for a missing file, bad TOML or missing keys."""
+def _derived_loop_delay(
+    path: Path, model_path: str, request: Mapping[str, Any], motors: Mapping[str, Any]
+) -> int:
+    """The loop delay of a file without ``loop_delay_ticks``: its model's nk − 1 + extra delay."""
+    from cartctl.modelfile import load_models
+
+    extra = request.get("extra_delay_ticks", 0)
+    if not isinstance(extra, int) or isinstance(extra, bool) or extra < 0:
+        raise DataFileError(
+            path, f"request.extra_delay_ticks must be a whole number >= 0, got {extra!r}"
+        )
+    try:
+        models = load_models(model_path)
+        nk = {m: models.motor(m).nk for m in motors}
+        return common_loop_delay(nk, extra)
+    except (CartctlError, ValueError) as exc:
+        raise DataFileError(
+            path,
+            f"has no loop_delay_ticks (a file from an older cartctl) and it cannot be derived from "
+            f"its model {model_path} ({exc}); redesign it with the command in its header, or add "
+            "loop_delay_ticks = N (the model's nk − 1 + extra delay)",
+        ) from None
+
+
+def load_controller(path: str | Path, *, force: bool = False) -> ControllerFile:
+    """Read a controller file; clear errors for a missing file, bad TOML, missing keys or a file
+    that contradicts itself.
+
+    Parameters
+    ----------
+    path : str or Path
+        The controller file.
+    force : bool
+        Load a file whose ``controller_num``/``controller_den`` disagree with its gains anyway
+        (the gains are what runs); the disagreements are in the result's ``ignored``.
+
+    Raises
+    ------
+    MissingFileError, DataFileError
+        No such file; not a controller file; a key missing or of the wrong type; ``plant_kind``
+        against ``loop_delay_ticks``; without ``force``, a ``controller_num``/``controller_den``
+        that the gains do not give (relative tolerance 1e-6).
+    """
     path = Path(path)
     doc = read_toml(path, "controller file")
     if doc.get("format") != FORMAT:
@@ -147,15 +284,41 @@ def load_controller(path: str | Path) -> ControllerFile:
     limit = float(require(doc, "voltage_limit_v", (int, float), path, "the top level"))
     if not 0.0 < limit <= 12.0:
         raise DataFileError(path, f"voltage_limit_v must be in (0, 12] V, got {limit}")
-    return ControllerFile(
+    legacy = "loop_delay_ticks" not in doc
+    model_path = _resolve_model(
+        str(require(model, "path", str, path, "[model]")), path, legacy=legacy
+    )
+    request = dict(doc.get("request", {}))
+    if legacy:
+        delay = _derived_loop_delay(path, model_path, request, motors)
+    else:
+        delay = require(doc, "loop_delay_ticks", int, path, "the top level")
+        if delay < 0:
+            raise DataFileError(path, f"loop_delay_ticks must be >= 0 ticks, got {delay}")
+    kind = doc.get("plant_kind", plant_kind(delay))
+    if kind != plant_kind(delay):
+        raise DataFileError(
+            path,
+            f"plant_kind = {kind!r} contradicts loop_delay_ticks = {delay} ('onboard' is a loop "
+            f"delay of {ONBOARD_LOOP_DELAY_TICKS} tick, 'serial' more)",
+        )
+    controller = ControllerFile(
         method=method,
         period_s=float(require(doc, "period_s", (int, float), path, "the top level")),
         voltage_limit_v=limit,
-        model_path=str(require(model, "path", str, path, "[model]")),
+        model_path=model_path,
         model_sha256=str(require(model, "sha256", str, path, "[model]")),
-        request=dict(doc.get("request", {})),
+        request=request,
         motors={m: dict(v) for m, v in motors.items()},
         created=str(doc.get("created", "unknown")),
         command=str(doc.get("command", "")),
         path=path,
+        loop_delay_ticks=delay,
     )
+    from cartctl.design.build import consistency_problems  # build imports this module
+
+    problems = consistency_problems(controller)
+    if problems and not force:
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        raise DataFileError(path, problems[0] + more)
+    return replace(controller, ignored=tuple(problems))

@@ -1,26 +1,43 @@
 """The steady-state Kalman speed estimator, designed on the realisation of a motor model.
 
 Where it sits: the ``design`` stage, beside pole placement (which embeds one in every
-:class:`~cartctl.design.poles.PolesDesign`). The runtime estimators in
-:mod:`cartctl.runtime.kalman` run what is designed here.
+:class:`~cartctl.design.poles.PolesDesign`) and the PI (``--estimator kalman``). The runtime
+estimators in :mod:`cartctl.runtime.kalman` run what is designed here.
 
 The estimator's model is the observer-form realisation of :mod:`cartctl.design.statespace`
-(x_1 = the modelled speed), optionally extended by one input-disturbance state b (V). The model
-is fitted to the measured speed, a count difference over the last tick, so x̂_1 estimates the
-*average* speed over the last tick, which is about the true speed half a tick earlier::
+(x_1 = the modelled speed) with the loop's true delay in it: the model's nk (the report's 2: one
+tick of loop delay on board and in the simulators) plus ``extra_delay_ticks`` (3 through the PC
+serial loop), realised as states, so the prediction knows which voltages are already on their way.
+It is extended by one input-disturbance state b (V), on by default::
 
     x[k+1] = A x[k] + B (u[k] + b[k] + w[k]),    b[k+1] = b[k] + w_b[k],    y[k] = x_1[k] + v[k]
+
+What the estimate represents. The measured speed y[k] is a whole-count encoder difference over
+the last tick: the *average* of the true speed over [k − 1, k], about the true speed half a tick
+earlier. The model is fitted to that, so x̂_1[k|k] estimates the same average. The true speed *now*,
+at tick k, lies between that average and the next one, which the model predicts from the voltages
+already sent::
+
+    ω̂[k] = (x̂_1[k|k] + x̂_1[k+1|k]) / 2,    x̂_1[k+1|k] = (A x̂[k|k] + B u[k])_1
+
+(exact for a speed that changes linearly over the two ticks). The state-feedback controller
+reports ω̂ as its estimate (:mod:`cartctl.runtime.statefeedback`); the PI, designed on the model
+of the measured speed, acts on x̂_1[k|k].
 
 - w (V std ``process_noise_std_v``): an input-equivalent voltage disturbance standing for PWM
   rounding (47 mV steps: 14 mV std), the part of friction that varies fast, and model error. The
   default 0.1 V is a few percent of a typical 3–6 V command; on the cart simulator 0.05–0.1 V gave
   the smallest speed error, 0.2 V a third more.
 - b (a random walk, step std ``bias_drift_std_v`` per tick): the slowly varying part of that
-  disturbance, mainly dry friction and rolling resistance (≈ 0.8 V on the ground, an offset the ARX
-  model cannot represent). Without it the estimate carries the model's static error (0.6–0.9
-  rad/s RMS on the simulator with the report's model); with it the estimate is offset-free. The
-  default 0.03 V per tick gives b a 40 ms time constant (estimator pole ≈ 0.78 on the ground
-  models). 0 leaves the state out.
+  disturbance, mainly dry friction and rolling resistance (≈ 0.8 V on the ground, changing sign
+  with the direction: an offset the ARX model cannot represent), and the model's DC error.
+  Without it the estimate carries that static error (±0.5 rad/s on the physics simulator in
+  steady state, following the sign of the friction); with it the estimate is offset-free, and
+  pole placement uses b̂ as its integral action (:mod:`cartctl.design.poles`). The default 0.03 V
+  per tick gives b a time constant of about 40 ms (its estimator pole ≈ 0.78 on the ground
+  models): 0.01 (pole ≈ 0.92) leaves the friction wrong for longer after each reversal, 0.1
+  lets the quantisation into b̂ (the steady-state estimate error nearly doubles) and costs pole
+  placement 15–20° of phase margin. 0 leaves the state out.
 - v (variance R): the encoder quantisation. The speed is a whole-count difference over one tick,
   q = (2π / counts_per_rev) / Ts rad/s per count (0.3506 rad/s for 1792 counts and 10 ms). Each
   count reading floors the angle, an error uniform on [0, 1) count (variance 1/12 count²); the

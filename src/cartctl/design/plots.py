@@ -1,5 +1,9 @@
 """``cartctl design --report DIR``: the open-loop Bode plot with its margins and the simulated step
-beside the time-optimal one, per motor (PNG, matplotlib's Agg canvas)."""
+beside the time-optimal one, per motor (PNG, matplotlib's Agg canvas).
+
+The time-optimal step is computed on the loop the design is for (the model with the design's extra
+delay, as the simulated step), and both are judged in the same settling band, max(2 %, one encoder
+count per tick) (:mod:`cartctl.design.limit`)."""
 
 from __future__ import annotations
 
@@ -10,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from cartctl.design.analysis import StepAnalysis
-from cartctl.design.limit import settling_bound
+from cartctl.design.limit import in_settling_band, settling_bound
 from cartctl.model import ArxModel
 
 
@@ -33,7 +37,11 @@ def plot_design(
     extra_delay_ticks: int,
     voltage_limit_v: float,
 ) -> Path:
-    """One motor's figure: |L| and ∠L with the margins, then speed and voltage of the step."""
+    """One motor's figure: |L| and ∠L with the margins, then speed and voltage of the step.
+
+    The step is drawn beside the time-optimal one on the same loop (``extra_delay_ticks`` beyond
+    the model's delay), its settling measured in the bound's band.
+    """
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(11, 8.5), dpi=110, layout="constrained")
@@ -63,10 +71,15 @@ def plot_design(
     ph_ax.set_xlabel("frequency (Hz)")
     sp_ax, v_ax = axes[0, 1], axes[1, 1]
     r = float(step.reference_rad_s[-1])
-    bound = settling_bound(model, r, voltage_limit_v=voltage_limit_v)
+    bound = settling_bound(
+        model, r, voltage_limit_v=voltage_limit_v, extra_delay_ticks=extra_delay_ticks
+    )
+    band = bound.band_rad_s
+    step = in_settling_band(step, model.period_s)
     t_bound = np.arange(bound.speed_rad_s.size) * model.period_s
     sp_ax.plot(step.time_s, step.reference_rad_s, color="0.3", ls=":", label="reference")
-    sp_ax.fill_between(step.time_s, 0.98 * r, 1.02 * r, color="0.85", label="±2 % band")
+    sp_ax.fill_between(step.time_s, r - band, r + band, color="0.85",
+                       label=f"settling band ±{band:.2f} rad/s")  # fmt: skip
     sp_ax.plot(step.time_s, step.speed_rad_s, color="tab:blue", label="speed (model)")
     sp_ax.plot(
         step.time_s,
@@ -77,7 +90,8 @@ def plot_design(
         label="controller's speed",
     )
     sp_ax.plot(t_bound, bound.speed_rad_s, color="tab:orange", lw=0.9,
-               label=f"time-optimal ({bound.settling_time_s * 1e3:.0f} ms)")  # fmt: skip
+               label=f"time-optimal, loop delay {bound.loop_delay_ticks} tick(s) "
+                     f"({bound.settling_time_s * 1e3:.0f} ms)")  # fmt: skip
     settle = step.info.settling_time_s
     sp_ax.set_title(
         f"{r:g} rad/s step: overshoot {step.info.overshoot_percent or 0:.1f} %, settling "

@@ -5,43 +5,70 @@ Where it sits: the ``design`` stage (``cartctl design --method poles``). The res
 :class:`~cartctl.runtime.statefeedback.StateFeedbackController` runs it.
 
 The plant is the realisation x[k+1] = A x + B u, y = C x of :func:`~cartctl.design.statespace.realise`
-(n states, x_1 = speed; d extra delay ticks are realised into it, n = 3 + d for the report's
-structure), augmented with the integral of the speed error, which is the wheel's angle error (rad)::
+(n states, x_1 = speed). The loop's delay is part of it: the model's nk covers one tick of loop
+delay (the report's nk = 2: a voltage computed from y[k] is on the motor from tick k + 1), and
+``extra_delay_ticks`` = d more ticks (3 through the PC serial loop, loop delay 4) are realised as d
+more states, n = 3 + d for the report's structure. Every closed-loop pole is placed, the delay's
+included: with d = 3 there are 6 (or 7) of them.
+
+Integral action, by default from the estimator's input-disturbance state b̂ (V): the Kalman filter
+of :mod:`cartctl.design.kalman` models x[k+1] = A x + B (u + b), b a slow random walk, and the
+control law cancels the estimated disturbance::
+
+    u[k] = Kr r[k] − K x̂[k|k] − b̂[k|k]          (V; then clamped to ±voltage_limit_v)
+
+with K placing the n eigenvalues of A − B K, and Kr = 1 / (C (I − A + B K)⁻¹ B) the static gain
+that makes the model's closed loop r → y exact at DC. The measured speed then has no static error
+whatever the model's gain or the friction: in steady state the innovation y − C x̂ is zero, so
+y = C x̂, and the model, driven by u + b̂ = Kr r − K x̂, settles at C x̂ = r. On the model itself b̂
+stays at 0 and r → y is the placed loop, the reference acting at once through Kr. With the model
+exact the closed loop's eigenvalues are the n placed poles and the n + 1 estimator poles
+(separation); b̂'s own integrating mode is the controller's integrator, so nothing fights it.
+
+Without the disturbance state (``bias_drift_std_v=0``) the integral is an error integrator, the
+integral of the speed error, which is the wheel's angle error (rad)::
 
     x_i[k+1] = x_i[k] + Ts (r[k] − y[k])
 
     ⎡ x  ⎤        ⎡  A     0 ⎤ ⎡ x  ⎤   ⎡ B ⎤        ⎡ 0  ⎤
     ⎣ x_i⎦[k+1] = ⎣ −Ts C  1 ⎦ ⎣ x_i⎦ + ⎣ 0 ⎦ u  +   ⎣ Ts ⎦ r
 
-The control law is::
-
-    u[k] = −K x̂[k|k] − Ki x_i[k] + Kr r[k]          (V; then clamped to ±voltage_limit_v)
+    u[k] = −K x̂[k|k] − Ki x_i[k] + Kr r[k]
 
 with [K, Ki] placing the n + 1 eigenvalues of the augmented closed loop. Ki is negative: a
-positive angle error (the wheel behind) raises the voltage. The integrator acts on the measured y,
-so the measured speed has no static error even when the model's gain is off.
+positive angle error (the wheel behind) raises the voltage. The reference reaches u through the
+integrator and through Kr, which multiplies the closed loop's r → y transfer by
+(Kr (z − 1) − Ki Ts) / (−Ki Ts): one zero at z = 1 + Ki Ts / Kr. With Kr = 0 there is no zero;
+the default, Kr = −Ki Ts, puts the zero at z = 0: every signal's response to r is advanced by
+exactly one tick, with the same shape, overshoot and peak voltage. Without the disturbance state
+the estimate carries the model's static error (friction is about 0.8 V on the ground), which is
+why it is not the default.
 
-The reference reaches u through the integrator and through Kr, which multiplies the closed loop's
-r → y (and r → u) transfer by (Kr (z − 1) − Ki Ts) / (−Ki Ts): one zero at z = 1 + Ki Ts / Kr.
-With Kr = 0 there is no zero, and the step response is that of the placed poles (and the model's
-own zeros). The default, Kr = −Ki Ts, puts the zero at z = 0: every signal's response to r is
-advanced by exactly one tick, with the same shape, overshoot and peak voltage, so the loop settles
-one tick sooner. (The static feedforward (1 + K (I − A)⁻¹ B) / G(1) of the textbook puts the zero
-near z = 0.8 on the ground models and gave 30–45 % overshoot; it is not offered.) Zero steady-state
-error comes from the integrator alone.
+Why the disturbance estimate replaces the error integrator rather than joining it, measured on
+the report's ground model A for a 45 ms, 1 % specification (phase margin, gain margin, peak of
+|1/(1 + L)| with the loop broken at the measurement; a 10 rad/s step on the model, and on the
+physics simulator when it answered about 0.7 tick later than the model):
+
+=====================================================  =======  =======  ====  ======  ========
+integral action                                         PM       GM       Ms    model   late sim
+=====================================================  =======  =======  ====  ======  ========
+error integrator, no disturbance state                  56°      6.7 dB   1.91  1.2 %   32 %
+error integrator, b̂ estimated but not used              40°      5.5 dB   2.24  1.2 %   49 %
+error integrator and u −= b̂ (two integrators)           36°      5.1 dB   2.35  1.2 %   56 %
+b̂ fed back, no error integrator (the default)           75°      12.5 dB  1.36  1.3 %   13 %
+=====================================================  =======  =======  ====  ======  ========
+
+The disturbance state costs margin as long as an error integrator stays: its integrating mode
+and the integrator's act on the same low-frequency error, and feeding b̂ forward beside the
+integrator makes the controller type 2. Used as the integral action, b̂ corrects only what the
+model does not predict, so the placed response to the reference is untouched, and the margins are
+those of a model-based (two-degree-of-freedom) loop.
 
 Poles from a specification: ζ from the overshoot, ζ = −ln(OS) / √(π² + ln²(OS)); ω_n from the 2 %
 settling time, T_s ≈ 4 / (ζ ω_n); the dominant pair s = −ζ ω_n ± j ω_n √(1 − ζ²) maps to
-z = exp(s Ts). The other n − 1 poles are real and fast, distinct so that ``control.place``
-applies: z_j = exp(−(ratio + j) ζ ω_n Ts), j = 0, 1, …, with ratio = ``fast_pole_ratio``. Given
-poles that repeat are placed with Ackermann's formula (``control.acker``).
-
-The estimator is the steady-state Kalman filter of :mod:`cartctl.design.kalman` on the same
-realisation, by default *without* its input-disturbance state (``bias_drift_std_v=0``): that state
-makes the estimate offset-free, but it adds a second integrating mode to the loop, which cost
-15–20° of phase margin (57° → 40° for a 50 ms design on the ground model) and, on the physics
-simulator, 4–6 % overshoot instead of 1 %. The integrator already removes the static error; without
-the state the estimate alone carries the model's static error.
+z = exp(s Ts). The other poles are real and fast, distinct so that ``control.place`` applies:
+z_j = exp(−(ratio + j) ζ ω_n Ts), j = 0, 1, …, with ratio = ``fast_pole_ratio``. Given poles
+that repeat are placed with Ackermann's formula (``control.acker``).
 """
 
 from __future__ import annotations
@@ -53,7 +80,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.design.kalman import DEFAULT_PROCESS_NOISE_STD_V, KalmanDesign, design_kalman
+from cartctl.design.kalman import (
+    DEFAULT_BIAS_DRIFT_STD_V,
+    DEFAULT_PROCESS_NOISE_STD_V,
+    KalmanDesign,
+    design_kalman,
+)
 from cartctl.design.statespace import StateSpace, realise, uncontrollable_modes
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
@@ -96,17 +128,25 @@ class PolesDesign:
     extra_delay_ticks : int
         d, the extra loop delay designed for (ticks).
     poles : tuple of complex
-        The n + 1 placed closed-loop poles (z-plane), sorted by magnitude.
-    K : ndarray, shape (n,)
-        State gain (V per rad/s).
+        The placed closed-loop poles (z-plane), sorted by magnitude: n with the disturbance
+        estimate, n + 1 with the error integrator.
+    K : ndarray, shape (m,)
+        Gain on the estimator's whole state x̂ (m states): V per rad/s on the n realisation
+        states, then, with the disturbance state, 1 (V per V) on b̂. ``K[:n]`` is the placed
+        state-feedback gain (:attr:`state_gain`).
     Ki : float
-        Integrator gain (V per rad of angle error); negative.
+        Error-integrator gain (V per rad of angle error); negative, or 0 with the disturbance
+        estimate.
     Kr : float
-        Reference feedforward (V per rad/s): −Ki Ts, or 0 without feedforward.
+        Reference gain (V per rad/s): the static gain with the disturbance estimate; −Ki Ts, or 0
+        without feedforward, with the error integrator.
     estimator : KalmanDesign
         The speed estimator, on the same realisation.
     method : {'place', 'acker'}
         How the gains were computed.
+    integral : {'disturbance', 'error'}
+        Where the integral action comes from: the estimator's input-disturbance state b̂ fed
+        back (n placed poles, Ki = 0), or the error integrator x_i (n + 1 placed poles).
     settling_time_s, overshoot_percent : float or None
         The specification the poles came from, None when the poles were given.
     """
@@ -120,6 +160,7 @@ class PolesDesign:
     Kr: float
     estimator: KalmanDesign
     method: str
+    integral: str = "error"
     settling_time_s: float | None = None
     overshoot_percent: float | None = None
 
@@ -128,10 +169,21 @@ class PolesDesign:
         """Ts (s)."""
         return self.plant.period_s
 
+    @property
+    def state_gain(self) -> NDArray[np.float64]:
+        """The placed gain on the n realisation states, ``K[:n]`` (V per rad/s), shape (n,)."""
+        return self.K[: self.plant.order]
+
     def closed_loop_matrix(self) -> NDArray[np.float64]:
-        """A_a − B_a [K, Ki], shape (n + 1, n + 1): its eigenvalues are the placed poles."""
+        """The state-feedback loop on the model; its eigenvalues are the placed poles.
+
+        A − B K[:n], shape (n, n), with the disturbance estimate; A_a − B_a [K[:n], Ki], shape
+        (n + 1, n + 1), with the error integrator.
+        """
+        if self.integral == "disturbance":
+            return self.plant.A - np.outer(self.plant.B, self.state_gain)
         A_a, B_a = augment(self.plant)
-        return A_a - np.outer(B_a, np.append(self.K, self.Ki))
+        return A_a - np.outer(B_a, np.append(self.state_gain, self.Ki))
 
     def to_dict(self) -> dict[str, object]:
         """JSON form (contract 3's ``closed_loop_poles`` and ``estimator_poles`` as [re, im])."""
@@ -145,6 +197,7 @@ class PolesDesign:
             "Ki": self.Ki,
             "Kr": self.Kr,
             "gain_method": self.method,
+            "integral_action": self.integral,
             "settling_time_s": self.settling_time_s,
             "overshoot_percent": self.overshoot_percent,
             "closed_loop_poles": [[float(p.real), float(p.imag)] for p in self.poles],
@@ -240,36 +293,41 @@ def design_poles(
     fast_pole_ratio: float = 4.0,
     reference_feedforward: bool = True,
     process_noise_std_v: float = DEFAULT_PROCESS_NOISE_STD_V,
-    bias_drift_std_v: float = 0.0,
+    bias_drift_std_v: float = DEFAULT_BIAS_DRIFT_STD_V,
     extra_noise_std_rad_s: float = 0.0,
 ) -> PolesDesign:
     """Place the closed-loop poles of a speed loop with integral action (module docstring).
 
-    Give either ``poles`` or both ``settling_time_s`` and ``overshoot_percent``.
+    Give either ``poles`` or both ``settling_time_s`` and ``overshoot_percent``. With the
+    estimator's input-disturbance state (``bias_drift_std_v > 0``, the default) the integral
+    action is the disturbance estimate fed back and n poles are placed; without it (0) an error
+    integrator is added and n + 1 poles are placed.
 
     Parameters
     ----------
     model : ArxModel
         Voltage (V) to speed (rad/s), nk ≥ 1.
     poles : sequence of complex, optional
-        The n + 1 closed-loop poles (z-plane): n states of the realisation with the extra delay
-        (3 + ``extra_delay_ticks`` for the report's structure), one for the integrator. Inside the unit circle;
-        complex ones with their conjugates; repeats allowed (Ackermann).
+        The closed-loop poles (z-plane): one per state of the realisation with the extra delay
+        (3 + ``extra_delay_ticks`` for the report's structure), plus one for the error integrator
+        when ``bias_drift_std_v`` is 0. Inside the unit circle; complex ones with their
+        conjugates; repeats allowed (Ackermann).
     settling_time_s : float, optional
-        2 % settling time of the dominant pair (s); at least n + 1 ticks.
+        2 % settling time of the dominant pair (s); at least as many ticks as there are poles.
     overshoot_percent : float, optional
         Overshoot of the dominant pair (%), in (0, 100).
     extra_delay_ticks : int
-        Extra loop delay d (ticks), e.g. a PC-side serial loop; adds d states and d poles (for
-        the report's structure).
+        Loop delay beyond the model's own (ticks), e.g. 3 for a PC-side serial loop; adds d
+        states and d poles (for the report's structure).
     fast_pole_ratio : float
         In the specification mode, how many times faster (in decay rate) the first non-dominant
         pole is than the dominant pair; the next ones are ratio + 1, ratio + 2, ….
     reference_feedforward : bool
-        Kr = −Ki Ts (True: the response one tick sooner) or Kr = 0 (r through the integrator only).
+        Error integrator only: Kr = −Ki Ts (True: the response one tick sooner) or Kr = 0 (r
+        through the integrator only). With the disturbance estimate Kr is always the static gain.
     process_noise_std_v, bias_drift_std_v, extra_noise_std_rad_s : float
-        The estimator's noise levels (see :func:`~cartctl.design.kalman.design_kalman`); the
-        input-disturbance state is off by default here (see the module docstring).
+        The estimator's noise levels (see :func:`~cartctl.design.kalman.design_kalman`);
+        ``bias_drift_std_v`` also chooses the integral action (see above).
 
     Returns
     -------
@@ -280,15 +338,11 @@ def design_poles(
     InputError
         Both or neither pole modes; a bad specification; poles in the wrong number, outside the
         unit circle or without their conjugates; an uncontrollable model (a pole-zero
-        cancellation, or a zero at z = 1 that the integrator cannot get past); a numerically
-        failed placement.
+        cancellation, or a zero at z = 1 that no integral action can get past); a numerically
+        failed placement; estimator noise levels that :func:`design_kalman` refuses.
     """
     import control
 
-    plant = realise(model, extra_delay_ticks=extra_delay_ticks)
-    count = plant.order + 1
-    delay = f" with {extra_delay_ticks} extra delay tick(s)" if extra_delay_ticks else ""
-    what = f"a model of order {model.order}{delay} and an integrator"
     from_spec = settling_time_s is not None or overshoot_percent is not None
     if (poles is None) == (not from_spec) or (
         from_spec and (settling_time_s is None or overshoot_percent is None)
@@ -298,6 +352,30 @@ def design_poles(
             f"neither); got poles={poles}, settling_time_s={settling_time_s}, "
             f"overshoot_percent={overshoot_percent}"
         )
+    plant = realise(model, extra_delay_ticks=extra_delay_ticks)
+    A_a, B_a = augment(plant)  # either integral action needs this pair controllable
+    bad = uncontrollable_modes(A_a, B_a)
+    if bad:
+        raise InputError(
+            f"the model {model.describe()} cannot be controlled with integral action: mode(s) "
+            f"{[f'{v:.4g}' for v in bad]} cannot be moved (a pole-zero cancellation, or a zero at "
+            "z = 1)"
+        )
+    estimator = design_kalman(
+        plant,
+        process_noise_std_v=process_noise_std_v,
+        bias_drift_std_v=bias_drift_std_v,
+        extra_noise_std_rad_s=extra_noise_std_rad_s,
+    )
+    integral = "disturbance" if estimator.has_bias else "error"
+    n = plant.order
+    count = n if integral == "disturbance" else n + 1
+    delay = f" with {extra_delay_ticks} extra delay tick(s)" if extra_delay_ticks else ""
+    what = f"a model of order {model.order}{delay}" + (
+        " (integral action from the disturbance estimate)"
+        if integral == "disturbance"
+        else " and an error integrator"
+    )
     if poles is None:
         wanted = spec_poles(
             count, plant.period_s, float(settling_time_s), float(overshoot_percent), fast_pole_ratio
@@ -306,39 +384,31 @@ def design_poles(
         wanted = list(poles)
     placed = _check_poles(wanted, count, what)
 
-    A_a, B_a = augment(plant)
-    bad = uncontrollable_modes(A_a, B_a)
-    if bad:
-        raise InputError(
-            f"the model {model.describe()} cannot be controlled with integral action: mode(s) "
-            f"{[f'{v:.4g}' for v in bad]} cannot be moved (a pole-zero cancellation, or a zero at "
-            "z = 1)"
-        )
-    B_col = B_a.reshape(count, 1)
+    A_p, B_p = (plant.A, plant.B) if integral == "disturbance" else (A_a, B_a)
+    B_col = B_p.reshape(count, 1)
     if _repeats(placed):
         method = "acker"
-        gains = np.asarray(control.acker(A_a, B_col, placed), dtype=float).ravel()
+        gains = np.asarray(control.acker(A_p, B_col, placed), dtype=float).ravel()
     else:
         method = "place"
-        gains = np.asarray(control.place(A_a, B_col, placed), dtype=float).ravel()
-    A_cl = A_a - np.outer(B_a, gains)
+        gains = np.asarray(control.place(A_p, B_col, placed), dtype=float).ravel()
+    A_cl = A_p - np.outer(B_p, gains)
     got, target = np.poly(A_cl), np.real(np.poly(placed))
     if not np.allclose(got, target, rtol=0.0, atol=_CHECK_TOL):
         raise InputError(
             f"pole placement is numerically ill-conditioned for poles {placed}: the closed loop "
             f"has {np.linalg.eigvals(A_cl)}; choose poles further apart or less extreme"
         )
-    K, Ki = gains[:-1], float(gains[-1])
-    Kr = 0.0
-    if reference_feedforward:
-        Kr = -Ki * plant.period_s
+    if integral == "disturbance":
+        # u = Kr r − K x̂ − b̂: the model's closed loop C (I − A + B K)⁻¹ B Kr has unit DC gain
+        dc = float(plant.C @ np.linalg.solve(np.eye(n) - A_cl, plant.B))
+        K = np.append(gains, 1.0)
+        Ki, Kr = 0.0, 1.0 / dc  # dc ≠ 0: a zero at z = 1 was refused above
+    else:
+        K = gains[:-1]
+        Ki = float(gains[-1])
+        Kr = -Ki * plant.period_s if reference_feedforward else 0.0
     K.setflags(write=False)
-    estimator = design_kalman(
-        plant,
-        process_noise_std_v=process_noise_std_v,
-        bias_drift_std_v=bias_drift_std_v,
-        extra_noise_std_rad_s=extra_noise_std_rad_s,
-    )
     return PolesDesign(
         model=model,
         plant=plant,
@@ -349,6 +419,7 @@ def design_poles(
         Kr=Kr,
         estimator=estimator,
         method=method,
+        integral=integral,
         settling_time_s=None if poles is not None else float(settling_time_s),
         overshoot_percent=None if poles is not None else float(overshoot_percent),
     )

@@ -4,7 +4,7 @@ Where it sits: a plant (see :mod:`cartctl.plants.base`) that experiments (``cart
 control loop (``cartctl run --plant physics``) run against when no cart is attached, and that the
 virtual serial cart puts behind a pseudo-terminal. Unlike the ARX plant it is not linear: it has
 Coulomb friction with stiction, voltage saturation, PWM and encoder quantisation, and the
-firmware's one-tick delay, so identification and control meet the same defects as on the cart.
+firmware's delay, so identification and control meet the same defects as on the cart.
 
 Per motor, at the wheel (gearbox folded in; report, equation 1, plus dry friction)::
 
@@ -15,11 +15,25 @@ On the ground the cart adds inertia and rolling resistance to each wheel (see
 is ``v = 0`` in the electrical equation, so the back-EMF drives a braking current (coasting would be
 ``i = 0`` instead).
 
-Tick timing, as microOS does it (``docs/serial-protocol.md`` §2): the voltage commanded at tick k is
-written to the H-bridge at the start of tick k+1's ``io()``, saturated to ±12 V and rounded to the
-nearest 12/255 V PWM step, and held for one period. ``io()`` then reads the encoder, whose count is
-``floor(θ / (2π/1792))``; the measured speed is the count difference over the last tick times
-``(2π/1792) / Ts``. So a voltage commanded at tick k first shows in the speed measured at tick k+2.
+Tick timing. microOS's control thread runs ``io()`` then ``control()`` every 10 ms, and ``io()``
+first writes the voltage stored by the previous ``control()`` to the H-bridges, then reads the
+encoders. The measured speed of tick k is the whole-count difference between the encoder reads of
+ticks k−1 and k, times ``(2π/1792) / Ts``: the *average* wheel speed over [k−1, k], quantised to
+0.35 rad/s. The command is saturated to ±12 V and rounded to the nearest 12/255 V PWM step.
+
+When a command reaches the motor is the one calibrated timing: ``CartParams.actuation_delay_s``
+after the tick it was given at (the previous command drives until then). Taken literally, the order
+above puts it one full period later, at tick k+1's ``io()`` (``actuation_delay_s = None``). But the
+report's cart answers sooner than that: a motor whose first averaged speed sample after a step
+comes a full tick after the voltage reaches at most 6–30 % of the final speed in that sample, the
+report's models say 32 % (ground) and 51 % (air), and no two-pole motor gives back their θ that way.
+The presets therefore apply a command 3 ms after its tick (0.7 tick sooner). It stands for whatever
+makes the real cart respond sooner than the documented order (the motor's shaft answering before the
+wheel and the cart, the exact moments of the write and the read); it is a calibration, not a claim
+about the firmware. The voltage commanded at tick k thus drives [k + 0.3, k + 1.3] (in ticks) and
+shows partly in the speed measured at tick k+1 and mostly at tick k+2: the report's model, with
+its two-tick input delay, describes it, and the loop delay (measurement to applied voltage) is one
+tick, as on the cart.
 
 Integration: with the voltage and the friction torque held, the (i, ω, θ) dynamics are linear, so
 each substep (``period / substeps``, 1 ms by default) applies the exact zero-order-hold map (a matrix
@@ -245,6 +259,7 @@ class PhysicsPlant:
         self._wheel_b = _Wheel(params.motor_b, params.added_inertia_kg_m2, params.rolling_n_m, h)
         self._rad_per_count = 2.0 * math.pi / params.counts_per_rev
         self._speed_per_count = self._rad_per_count / params.period_s
+        self._delay_substeps = round(params.actuation_delay() / h)
         self._rng = np.random.default_rng(seed) if params.noise_std_rad_s > 0.0 else None
         self.reset()
 
@@ -272,22 +287,25 @@ class PhysicsPlant:
     def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
         """Command voltages (V) at this tick, advance one tick, and measure the next tick.
 
-        The command is applied at the next tick (the firmware delay); the interval simulated now
-        is driven by the command of the previous call. A non-finite command counts as 0 V.
+        The command reaches the motors ``actuation_delay_s`` after this tick (see the module
+        docstring); until then the previous command drives them. A non-finite command counts as
+        0 V.
         """
-        n = self.params.substeps
-        va, vb = self._applied  # written by io() at the tick we start from
-        self._ia, self._wa, self._tha = _advance(
-            self._wheel_a, self._ia, self._wa, self._tha, va, n
-        )
-        self._ib, self._wb, self._thb = _advance(
-            self._wheel_b, self._ib, self._wb, self._thb, vb, n
-        )
-        # io() of the new tick: write the command from the tick we started at, read the encoders.
-        self._driving = self._applied
-        self._applied = (self.condition_voltage(voltage_a_v), self.condition_voltage(voltage_b_v))
-        count_a = math.floor(self._tha / self._rad_per_count)
-        count_b = math.floor(self._thb / self._rad_per_count)
+        n, nd = self.params.substeps, self._delay_substeps
+        va, vb = self._applied  # on the bridges since the previous command landed
+        ca, cb = self.condition_voltage(voltage_a_v), self.condition_voltage(voltage_b_v)
+        ia, wa, tha = _advance(self._wheel_a, self._ia, self._wa, self._tha, va, nd)
+        ib, wb, thb = _advance(self._wheel_b, self._ib, self._wb, self._thb, vb, nd)
+        if nd < n:  # the new command lands inside this tick
+            ia, wa, tha = _advance(self._wheel_a, ia, wa, tha, ca, n - nd)
+            ib, wb, thb = _advance(self._wheel_b, ib, wb, thb, cb, n - nd)
+        self._ia, self._wa, self._tha = ia, wa, tha
+        self._ib, self._wb, self._thb = ib, wb, thb
+        self._driving = (va, vb)
+        self._applied = (ca, cb)
+        # io() of the new tick: read the encoders; the speed is the count difference over the tick
+        count_a = math.floor(tha / self._rad_per_count)
+        count_b = math.floor(thb / self._rad_per_count)
         speed_a = (count_a - self._count_a) * self._speed_per_count
         speed_b = (count_b - self._count_b) * self._speed_per_count
         self._count_a, self._count_b = count_a, count_b
@@ -296,7 +314,7 @@ class PhysicsPlant:
             speed_a += float(noise[0])
             speed_b += float(noise[1])
         self.tick += 1
-        return Measurement(speed_a, speed_b, self._wa, self._wb)
+        return Measurement(speed_a, speed_b, wa, wb)
 
     def close(self) -> None:
         """Command zero volts (the motors brake); there is no resource to release."""
@@ -319,16 +337,21 @@ class PhysicsPlant:
 
     @property
     def applied_voltage_v(self) -> tuple[float, float]:
-        """Voltages (V) on the H-bridges now: written by the latest tick's ``io()``.
+        """Voltages (V) of the latest command, saturated and quantised: what the bridges hold.
 
-        That is the previous :meth:`step` call's command, saturated and quantised, held until the
-        next tick; what the bridge reports in gpio_float[2], [3] at this tick.
+        That is the previous :meth:`step` call's command; it drives the motors from
+        ``actuation_delay_s`` after the tick it was given at until the next command lands. What
+        the bridge reports in gpio_float[2], [3].
         """
         return self._applied
 
     @property
     def last_interval_voltage_v(self) -> tuple[float, float]:
-        """Voltages (V) that drove the motors during the tick interval that just ended."""
+        """Voltages (V) that drove the motors at the start of the tick interval that just ended.
+
+        They held until the newest command landed, ``actuation_delay_s`` into the interval (for
+        the whole interval when the delay is one period).
+        """
         return self._driving
 
     @property

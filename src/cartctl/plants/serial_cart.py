@@ -35,6 +35,10 @@ from cartctl.plants.cart_link import DEFAULT_CONNECT_TIMEOUT_S, DEFAULT_SILENCE_
 PERIOD_S = 0.01
 STOP_FRAMES = 3
 """drive = 0 frames sent on close (one may be lost to line noise)."""
+PROBE_ECHOES = 3
+"""Echoes :meth:`SerialCart.measure_loop_delay` waits for (the most frequent delay counts)."""
+PROBE_MAX_TICKS = 50
+"""Longest :meth:`SerialCart.measure_loop_delay` waits for them (ticks, 0.5 s)."""
 
 
 class SerialCart:
@@ -162,6 +166,39 @@ class SerialCart:
             if sent is not None:
                 self.echo_delays[self.tick_index - sent] += 1
         self.sample, self.arrival_s = sample, arrival_s
+
+    def measure_loop_delay(
+        self, *, echoes: int = PROBE_ECHOES, max_ticks: int = PROBE_MAX_TICKS
+    ) -> int:
+        """The loop delay (ticks), measured from the echo without driving the motors.
+
+        Connects if needed, then answers each cart tick with drive = 0 and zero volts (the bridge
+        echoes the sequence number whatever drive says) until ``echoes`` echoes came back; the most
+        frequent delay counts. The echo statistics are then cleared, so the run's own are not mixed
+        with the probe's; a following :meth:`reset` starts the run at the next tick.
+
+        Raises
+        ------
+        PlantError
+            No echo within ``max_ticks`` ticks (the cart does not run the bridge sketch), or a
+            fault of the link.
+        """
+        self.reset()
+        self.echo_delays.clear()
+        for _ in range(max_ticks):
+            self.send(0.0, 0.0, drive=False)
+            self.receive()
+            if self.echo_delays.total() >= echoes:
+                break
+        delay = self.loop_delay_ticks
+        if delay is None:
+            raise PlantError(
+                f"the cart on {self.port} echoed none of {max_ticks} commands: is the bridge "
+                "sketch of firmware/ on it?"
+            )
+        self.echo_delays.clear()
+        self.missed_ticks = self.skipped_ticks = self.watchdog_trips = 0
+        return delay
 
     def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
         """Send this tick's voltages, then wait for the cart's next tick."""

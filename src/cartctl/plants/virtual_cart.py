@@ -39,7 +39,8 @@ from typing import Any, Protocol
 
 from cartctl.errors import InputError
 from cartctl.link import Encoder, Framer, Gpio, encode_gpiox_v2
-from cartctl.plants.bridge_firmware import BridgeFirmware, CartIO
+from cartctl.plants.base import Measurement
+from cartctl.plants.bridge_firmware import TICK_MODULO, BridgeFirmware, CartIO
 from cartctl.plants.physics import PhysicsPlant
 from cartctl.plants.serial_cart import SerialCart
 
@@ -250,6 +251,8 @@ class VirtualCart:
         self._reader = _LineReader(self._master, self._stop)
         self._ticker = threading.Thread(target=self._run, name="virtual-cart", daemon=True)
         self.ticks = 0
+        self.true_speeds: dict[int, tuple[float, float]] = {}
+        """True wheel speeds (rad/s) at each recent tick, by the tick counter the cart sends."""
         self.frames_received = 0
         self.last_voltage_v: tuple[float, float] = (0.0, 0.0)
         self.state = "idle"
@@ -367,6 +370,12 @@ class VirtualCart:
                 measurement.speed_a_rad_s, measurement.speed_b_rad_s, applied[0], applied[1],
                 counts[0] * rad_per_count, counts[1] * rad_per_count,
             )  # fmt: skip
+            tick_counter = firmware.tick
+            self.true_speeds[tick_counter] = (
+                measurement.true_speed_a_rad_s or 0.0,
+                measurement.true_speed_b_rad_s or 0.0,
+            )
+            self.true_speeds.pop((tick_counter - 512) % TICK_MODULO, None)  # keep the recent ones
             voltage = firmware.control(io)
             self.last_voltage_v = voltage
             # the communication thread: receive everything that has arrived, then send
@@ -398,6 +407,9 @@ class VirtualSerialCart(SerialCart):
     was left applying).
     """
 
+    reports_true_speed = True
+    """The simulator behind the line knows the true speeds: the trace gets them too."""
+
     def __init__(self, cart: VirtualCart, **kwargs: Any) -> None:
         super().__init__(cart.port, **kwargs)
         self.cart = cart
@@ -406,6 +418,20 @@ class VirtualSerialCart(SerialCart):
         """Boot the cart once the port is open (opening a real cart's port resets it, too)."""
         if self.cart.state == "idle":
             self.cart.start()
+
+    def _with_true_speed(self, measured: Measurement) -> Measurement:
+        """The measurement with the simulator's true speeds at the same cart tick (rad/s)."""
+        assert self.sample is not None
+        true_a, true_b = self.cart.true_speeds.get(self.sample.cart_tick, (math.nan, math.nan))
+        return Measurement(measured.speed_a_rad_s, measured.speed_b_rad_s, true_a, true_b)
+
+    def reset(self) -> Measurement:
+        """As :meth:`SerialCart.reset`, with the true speed: the simulator knows it."""
+        return self._with_true_speed(super().reset())
+
+    def receive(self) -> Measurement:
+        """As :meth:`SerialCart.receive`, with the true speed: the simulator knows it."""
+        return self._with_true_speed(super().receive())
 
     def close(self) -> None:
         was_connected = self.connected and not self.link.failure

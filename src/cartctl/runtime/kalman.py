@@ -10,7 +10,10 @@ Where it sits: the runtime, stepped once per tick by a controller
 
 :class:`KalmanSpeedEstimator` runs filterpy's ``KalmanFilter`` (covariance propagated, gain L[k]
 time-varying, converging to the design's L); :class:`SteadyStateSpeedEstimator` uses the fixed
-steady-state L with plain floats. Both return x̂_1 as the speed (the design's C is [1, 0, …]).
+steady-state L with plain floats. ``correct`` returns x̂_1[k|k] (the design's C is [1, 0, …]), the
+estimate of the *measured* speed, an average over the last tick; after ``predict``, ``state[0]``
+is x̂_1[k+1|k], and the mean of the two estimates the true speed at tick k (see
+:mod:`cartctl.design.kalman`), which the state-feedback controller reports.
 A non-finite measurement is skipped (the prediction stands) and a non-finite voltage counts as
 0 V (what the cart applies), so a glitch never poisons the state.
 """

@@ -132,8 +132,9 @@ class ControlLoop:
         """
         for c in self.controllers.values():
             c.reset()
-        if self._clocked:  # a real cart reports no true speed
-            self.columns = TRACE_COLUMNS
+        if self._clocked:  # a real cart reports no true speed; the virtual one does
+            self._true = bool(getattr(self.plant, "reports_true_speed", False))
+            self.columns = TRACE_COLUMNS + (TRUE_SPEED_COLUMNS if self._true else ())
             for s in self.sinks:
                 s.open(self.columns)
             self._y = self.plant.reset()

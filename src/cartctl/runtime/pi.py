@@ -67,7 +67,11 @@ class PiController:
     tracking_gain : float, optional
         Kt in (0, 1] for back-calculation (dimensionless, per tick); only with that mode.
     estimator : SpeedEstimator, optional
-        When given, the PI acts on its estimate instead of the raw measurement.
+        When given, the PI acts on its estimate instead of the raw measurement: for the Kalman
+        estimators x̂_1[k|k], the estimate of the measured (tick-average) speed that the PI's
+        design model describes. Its input-disturbance state (on by default in
+        :func:`~cartctl.design.kalman.design_kalman`) keeps that estimate offset-free; without
+        it the estimate carries friction as a speed offset, and the PI holds the offset.
     """
 
     __slots__ = (

@@ -1,13 +1,21 @@
-"""The pole-placement speed controller: state feedback on a Kalman estimate, with an integrator.
+"""The pole-placement speed controller: state feedback on a Kalman estimate, with integral action.
 
 Where it sits: the runtime, one object per motor, stepped once per tick by the loop; it runs a
 :class:`~cartctl.design.poles.PolesDesign`. Per tick, in the order of :mod:`cartctl.runtime.base`::
 
     x̂      = estimator.correct(y[k])                      # x̂[k|k]
-    u_raw  = −K x̂ − Ki x_i + Kr r[k]                       (V)
+    u_raw  = Kr r[k] − K x̂ − Ki x_i                        (V)
     u      = clamp(u_raw, ±voltage_limit_v)
     x_i   += Ts (r[k] − y[k])    unless u is saturated and the error would drive it further
-    estimator.predict(u)                                   # the clamped voltage the motor gets
+    estimator.predict(u)                                   # x̂[k+1|k], with the clamped voltage
+    estimate = (x̂_1[k|k] + x̂_1[k+1|k]) / 2                 # the true speed now (rad/s)
+
+K covers the whole estimator state: with the input-disturbance state its last entry is 1, so
+u carries −b̂, the integral action, and Ki is 0 (see :mod:`cartctl.design.poles`). The estimate
+reported is the true speed at tick k: the measured speed is the average over the last tick, which
+x̂_1[k|k] estimates, and the true speed now lies half-way to the next tick's average, which the
+prediction gives (see :mod:`cartctl.design.kalman`). On ``--plant sim`` the "true" speed is the
+model's output, itself a tick average, so there this estimate leads it by half a tick.
 
 The integrator stops only while it would push the command deeper into saturation (conditional
 integration), so it never winds up, and the estimator always predicts with the voltage actually
@@ -54,19 +62,21 @@ class StateFeedbackController:
     Parameters
     ----------
     design : FeedbackGains
-        K (n,), Ki, Kr and Ts come from here.
+        K (one gain per estimator state fed back), Ki, Kr and Ts come from here.
     estimator : StateEstimator, optional
-        Owned by the controller (reset with it). Its state must start with the design's n
-        realisation states; default a :class:`SteadyStateSpeedEstimator` on ``design.estimator``.
+        Owned by the controller (reset with it). Its state must start with the states K acts
+        on; default a :class:`SteadyStateSpeedEstimator` on ``design.estimator``.
     voltage_limit_v : float
         The command stays within ±voltage_limit_v (V), 0 < limit ≤ 12.
 
     Attributes
     ----------
     estimate_rad_s : float
-        The speed estimate x̂_1 the last step acted on (rad/s).
+        The estimate of the true speed at the last step's tick, (x̂_1[k|k] + x̂_1[k+1|k]) / 2
+        (rad/s).
     integral_rad : float
-        The integrator state x_i, the integral of (r − y) (rad of wheel angle).
+        The integrator state x_i, the integral of (r − y) (rad of wheel angle); it acts only
+        when Ki ≠ 0.
     saturated : bool
         Whether the last command hit the limit.
     """
@@ -113,17 +123,17 @@ class StateFeedbackController:
         if not math.isfinite(measured_rad_s) or not math.isfinite(reference_rad_s):
             if math.isfinite(measured_rad_s):
                 est.correct(measured_rad_s)
-            self.estimate_rad_s = float(est.state[0])
+            self._predict_and_estimate(float(est.state[0]), 0.0)
             self.saturated = False
-            est.predict(0.0)
             return 0.0
-        self.estimate_rad_s = est.correct(measured_rad_s)
+        x1 = est.correct(measured_rad_s)
+        state = est.state.tolist()
         u_raw = self._Kr * reference_rad_s - self._Ki * self.integral_rad
-        for k, xk in zip(self._K, est.state.tolist(), strict=False):  # plain floats: no warnings
+        for k, xk in zip(self._K, state, strict=False):  # plain floats: no warnings
             u_raw -= k * xk
         if not math.isfinite(u_raw):  # overflowed on an absurd value: 0 V and start afresh
             self.reset()
-            est.predict(0.0)
+            self._predict_and_estimate(0.0, 0.0)
             return 0.0
         limit = self.voltage_limit_v
         u = min(limit, max(-limit, u_raw))
@@ -132,5 +142,11 @@ class StateFeedbackController:
         # the integrator moves u by −Ki·Ts·error next tick: hold it if that deepens saturation
         if not self.saturated or (u_raw > u) != (-self._Ki * error > 0.0):
             self.integral_rad += self._Ts * error
-        est.predict(u)
+        self._predict_and_estimate(x1, u)
         return u
+
+    def _predict_and_estimate(self, filtered_rad_s: float, voltage_v: float) -> None:
+        """Predict with the voltage sent; the estimate is the mean of x̂_1[k|k] and x̂_1[k+1|k]."""
+        est = self.estimator
+        est.predict(voltage_v)
+        self.estimate_rad_s = 0.5 * (filtered_rad_s + float(est.state[0]))

@@ -4,8 +4,13 @@ The execution part of ``cartctl tune`` (:mod:`cartctl.commands.tune`); the grid,
 and the Pareto front are in :mod:`cartctl.design.tune`. A setting is designed per motor by the
 design command's own ``_design_motor`` (from its ``cartctl design`` arguments), run by
 :func:`simulate` (ControlLoop, PeriodicExecutor, VirtualClock and a MemorySink: the loop of
-``run --fast`` without files) and summarised by the run summary's ``trace_metrics``. The
-settings are spread over worker processes in chunks; a refused design is a result, not an error.
+``run --fast`` without files) and summarised by the run summary's ``trace_metrics`` (settling in
+the band of the design's settling bound, max(2 %, one encoder count per tick)). The settings are
+spread over worker processes in chunks; a refused design is a result, not an error.
+
+Every setting is scored on the loop it is designed for (:func:`scoring_plant`): with
+``--extra-delay d`` the plant carries d more ticks of delay, the sim plant being the model with
+nk + d as in ``cartctl design``'s simulated step.
 """
 
 from __future__ import annotations
@@ -13,6 +18,7 @@ from __future__ import annotations
 import argparse
 import ctypes
 import math
+from collections import deque
 from collections.abc import Callable, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, replace
@@ -21,11 +27,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from cartctl.design.limit import with_extra_delay
 from cartctl.design.tune import TuneResult, design_argv
-from cartctl.errors import CartctlError, PlantError
+from cartctl.errors import CartctlError, InputError, PlantError
 from cartctl.modelfile import ModelFile, load_models
-from cartctl.plants.base import Plant
+from cartctl.plants.base import Measurement, Plant
 from cartctl.plants.factory import make_plant
+from cartctl.plants.sim import ArxPlant
 from cartctl.runtime.base import Controller
 from cartctl.runtime.clock import VirtualClock
 from cartctl.runtime.executor import PeriodicExecutor
@@ -50,7 +58,8 @@ class TuneJob:
     duration_s : float
         Run time per setting (s).
     extra_delay_ticks : int
-        Loop delay the design allows for (ticks); the simulated loop has none, as in ``run --fast``.
+        Loop delay beyond the model's (ticks): the designs allow for it and the simulated loop has
+        it (:func:`scoring_plant`).
     items : tuple of (int, dict)
         The settings: (1-based grid index, axis values).
     """
@@ -63,6 +72,60 @@ class TuneJob:
     duration_s: float
     extra_delay_ticks: int
     items: tuple[tuple[int, dict[str, float]], ...]
+
+
+class DelayedPlant:
+    """A plant whose commands arrive ``ticks`` ticks late (a PC-side loop's extra delay).
+
+    Commands wait in a queue, zero volts at first; the inner plant saturates them as usual.
+
+    Parameters
+    ----------
+    plant : Plant
+        The plant delayed (it keeps its own delay).
+    ticks : int
+        Extra ticks of delay (>= 0).
+    """
+
+    def __init__(self, plant: Plant, ticks: int) -> None:
+        if isinstance(ticks, bool) or not isinstance(ticks, int) or ticks < 0:
+            raise InputError(f"extra delay must be a whole number >= 0 ticks, got {ticks!r}")
+        self.plant = plant
+        self.ticks = ticks
+        self.period_s = plant.period_s
+        self._queue: deque[tuple[float, float]] = deque()
+
+    def reset(self) -> Measurement:
+        """Inner plant at rest, the queue back to zero volts; the tick-0 measurement."""
+        self._queue = deque([(0.0, 0.0)] * self.ticks)
+        return self.plant.reset()
+
+    def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
+        """Queue this tick's command, send the one ``ticks`` ticks old, measure tick k + 1."""
+        self._queue.append((voltage_a_v, voltage_b_v))
+        return self.plant.step(*self._queue.popleft())
+
+    def close(self) -> None:
+        """Close the inner plant."""
+        self.plant.close()
+
+
+def scoring_plant(job: TuneJob) -> Plant:
+    """The plant a setting of ``job`` is scored on: the loop its design is for.
+
+    ``make_plant(job.plant, …)`` with ``job.extra_delay_ticks`` more ticks of delay: for the sim
+    plant, the ARX models with input delay nk + d (the plant of ``cartctl design``'s simulated
+    step with ``--extra-delay d``); for the physics plant, its commands delayed by d ticks.
+    """
+    plant, _ = make_plant(job.plant, model_path=job.model, preset=job.preset)
+    d = job.extra_delay_ticks
+    if d == 0:
+        return plant
+    if isinstance(plant, ArxPlant):
+        a, b = (with_extra_delay(m, d) for m in plant.models)
+        return ArxPlant(a, b, noise_std_rad_s=plant.noise_std_rad_s, seed=plant.seed,
+                        voltage_limit_v=plant.voltage_limit_v)  # fmt: skip
+    return DelayedPlant(plant, d)
 
 
 def simulate(
@@ -108,7 +171,7 @@ def _evaluate(job: TuneJob, models: ModelFile, parser: argparse.ArgumentParser,
             controllers[m] = _design_motor(args, models.motor(m))[0]
         except (CartctlError, np.linalg.LinAlgError) as exc:
             return TuneResult(index, settings, False, f"motor {m}: {exc}")
-    plant, _ = make_plant(job.plant, model_path=job.model, preset=job.preset)
+    plant = scoring_plant(job)
     n = max(1, round(job.duration_s / plant.period_s))
     refs = {m: reference_signal(job.reference, n, plant.period_s, m) for m in ("a", "b")}
     summary, failure = simulate(plant, controllers, refs, period_s=plant.period_s,

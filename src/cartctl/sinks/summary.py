@@ -1,10 +1,15 @@
 """Run metrics, from a trace: the ``run`` summary and ``cartctl review RUN.csv --json`` share this code.
 
 Per motor: the step metrics of the first reference step, from rest to the reference's first
-non-zero level and until its next change (10–90 % rise, overshoot, 2 % settling, steady-state
+non-zero level and until its next change (10–90 % rise, overshoot, settling, steady-state
 error), the RMS tracking error over the whole run and the largest |voltage|. For the
 loop: period error and compute time percentiles, and deadline misses (a tick whose start error
 plus compute time passes the period).
+
+The tracking metrics are measured on the **true speed** (the ``true_speed_a/b`` columns) where
+the plant gives one (the simulators), else on the measured speed; ``metrics_signal`` says which
+('true_speed' or 'speed'). Settling is judged in a band of max(2 % of the step, one encoder
+count per tick = 2π/1792/Ts, 0.3506 rad/s at 10 ms): a measured speed cannot resolve less.
 """
 
 from __future__ import annotations
@@ -19,7 +24,10 @@ from numpy.typing import NDArray
 
 from cartctl.errors import InputError
 from cartctl.metrics import finite_or_none
-from cartctl.stepinfo import step_info
+from cartctl.stepinfo import SETTLING_FRACTION, encoder_quantum_rad_s, step_info
+
+SIGNALS = {"true_speed": "the true speed", "speed": "the measured speed"}
+"""``metrics_signal`` values and how the summary text names them."""
 
 
 def motor_metrics(
@@ -27,8 +35,14 @@ def motor_metrics(
     reference: NDArray[np.float64],
     speed: NDArray[np.float64],
     voltage: NDArray[np.float64],
+    *,
+    settling_floor: float = 0.0,
 ) -> dict[str, Any]:
-    """Contract-3 ``run`` entry of one motor (step metrics None when the reference has no step)."""
+    """Contract-3 ``run`` entry of one motor (step metrics None when the reference has no step).
+
+    ``speed`` is the signal judged (rad/s); the settling band is max(2 % of the step,
+    ``settling_floor``) (rad/s).
+    """
     out: dict[str, Any] = {
         "overshoot_percent": None,
         "settling_time_s": None,
@@ -49,9 +63,8 @@ def motor_metrics(
     target = float(reference[start])
     if end - start < 5:
         return out
-    info = step_info(
-        time_s[:end], speed[:end], reference=target, initial=initial, onset_s=float(time_s[start])
-    )
+    info = step_info(time_s[:end], speed[:end], reference=target, initial=initial,
+                     onset_s=float(time_s[start]), settling_floor=settling_floor)  # fmt: skip
     out.update(
         overshoot_percent=finite_or_none(info.overshoot_percent),
         settling_time_s=finite_or_none(info.settling_time_s),
@@ -83,19 +96,36 @@ def timing_metrics(
     }
 
 
+def metrics_signal(columns: Mapping[str, NDArray[np.float64]]) -> str:
+    """'true_speed' when every motor of the trace has a finite true-speed column, else 'speed'."""
+    motors = [m for m in ("a", "b") if f"reference_{m}" in columns]
+    true = [columns.get(f"true_speed_{m}") for m in motors]
+    if motors and all(c is not None and np.all(np.isfinite(c)) for c in true):
+        return "true_speed"
+    return "speed"
+
+
 def trace_metrics(columns: Mapping[str, NDArray[np.float64]], period_s: float) -> dict[str, Any]:
     """The whole summary (without file names) from trace columns (contract 1 + closed loop)."""
     for name in ("time_s", "reference_a", "speed_a", "voltage_a", "period_error_us", "compute_us"):
         if name not in columns:
             raise InputError(f"the trace has no '{name}' column: it is not a closed-loop run trace")
     t = columns["time_s"]
+    signal = metrics_signal(columns)
+    quantum = encoder_quantum_rad_s(period_s)
     out = {
         "ticks": int(t.size),
         "duration_s": float(t.size * period_s),
         **timing_metrics(columns["period_error_us"], columns["compute_us"], period_s),
+        "metrics_signal": signal,
+        "settling_band": {"fraction": SETTLING_FRACTION, "floor_rad_s": quantum},
         "motors": {
             m: motor_metrics(
-                t, columns[f"reference_{m}"], columns[f"speed_{m}"], columns[f"voltage_{m}"]
+                t,
+                columns[f"reference_{m}"],
+                columns[f"{signal}_{m}"],
+                columns[f"voltage_{m}"],
+                settling_floor=quantum,
             )
             for m in ("a", "b")
             if f"reference_{m}" in columns
@@ -118,6 +148,18 @@ def format_summary(summary: Mapping[str, Any]) -> str:
         f"{summary['ticks']} ticks, {summary['duration_s']:.2f} s; deadline misses {summary['deadline_misses']}; "
         f"period error p50/p99/max {num(pe['p50'], '.0f')}/{num(pe['p99'], '.0f')}/{num(pe['max'], '.0f')} µs; "
         f"compute p50/p99 {num(cu['p50'], '.0f')}/{num(cu['p99'], '.0f')} µs",
+    ]
+    signal = summary.get("metrics_signal")
+    if signal in SIGNALS:
+        band = summary.get("settling_band") or {}
+        floor = band.get("floor_rad_s")
+        shown = (
+            ""
+            if floor is None
+            else f", settling band max({band['fraction']:.0%}, {floor:.4f} rad/s)"
+        )
+        lines.append(f"  tracking on {SIGNALS[signal]}{shown}")
+    lines += [
         f"  {'motor':<6}{'overshoot':>11}{'rise':>9}{'settling':>10}{'ss error':>10}{'rms error':>11}{'max |V|':>9}",
     ]
     for m, e in summary["motors"].items():
@@ -127,6 +169,12 @@ def format_summary(summary: Mapping[str, Any]) -> str:
             f"{num(e['rms_error'], '.3f'):>11}{num(e['max_abs_voltage'], '.2f'):>9}"
         )
     link = summary.get("link")
+    delay, designed = summary.get("loop_delay_ticks"), summary.get("controller_loop_delay_ticks")
+    if not link and (delay is not None or designed is not None):
+        lines.append(
+            f"  loop delay {'—' if delay is None else delay} tick(s); the controller is designed "
+            f"for {'—' if designed is None else designed}"
+        )
     if link:
         delay = summary.get("loop_delay_ticks")
         shown = (
@@ -134,6 +182,8 @@ def format_summary(summary: Mapping[str, Any]) -> str:
             if delay is None
             else f"{delay} ticks (echo {link['echo_delay_ticks']}; model nk = {delay + 1})"
         )
+        if designed is not None:
+            shown += f", the controller is designed for {designed}"
         lines.append(
             f"  link {link['port']}: loop delay {shown}; {link['frames']} frames, "
             f"{link['crc_errors']} CRC errors, {link['garbage_bytes']} garbage bytes, "

@@ -1,0 +1,236 @@
+"""Measure the shipped controllers on the plants they are for: step, settling bound, estimator.
+
+Usage::
+
+    python benchmarks/measure_shipped.py                  # controllers/{pi,poles,serial-pi,serial-poles}.toml
+    python benchmarks/measure_shipped.py --no-virtual     # skip the real-time serial runs
+    python benchmarks/measure_shipped.py --controllers DIR --json
+
+Every number comes from ``cartctl run`` itself (a subprocess, ``--rerun off``), read back from the
+trace it writes. For each controller file and each plant that has the controller's loop delay:
+
+- ``sim``: the ARX cart on the controller's own model, with the loop delay of the file (a model
+  with nk = loop delay + 1 is written to a temporary file for a serial controller);
+- ``physics``: the physical simulator, loop delay 1 (on-board controllers only);
+- ``virtual``: the physical simulator behind the serial link, loop delay 4, in real time (serial
+  controllers only; the virtual cart hands the simulator's true speed to the trace as well).
+
+Step (``--reference step:10``, 2 s): overshoot and settling of each motor's *true* speed where the
+plant gives one, in the band max(2 % of the step, one encoder count per tick = 0.3506 rad/s), and
+the settling time as a multiple of the time-optimal bound
+(:func:`cartctl.design.limit.settling_bound`) on the model with the same loop delay.
+
+Estimator (``--reference square:8:2``, 10 s, plants with a true speed): RMS(estimate − true speed)
+divided by RMS(measured speed − true speed), over the whole run and over the steady windows alone
+(the second half of every stretch of constant reference: the last 0.5 s of each 1 s level). Below 1
+the estimate is closer to the true speed than the encoder; a controller without an estimator logs
+the measurement as its estimate, so its ratio is 1. On ``sim`` the true speed is the model's output,
+itself a tick average like the measurement, and without ``--noise`` equal to it (no ratio).
+
+The script exits with 1 when a run fails (it prints the run's error line).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import itertools
+import json
+import math
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+try:
+    from cartctl.design.controllerfile import load_controller
+    from cartctl.design.limit import settling_bound
+    from cartctl.model import ArxModel
+    from cartctl.modelfile import load_models
+    from cartctl.stepinfo import step_info
+except ModuleNotFoundError:  # not installed: run from a checkout
+    sys.path.insert(0, str(ROOT / "src"))
+    from cartctl.design.controllerfile import load_controller
+    from cartctl.design.limit import settling_bound
+    from cartctl.model import ArxModel
+    from cartctl.modelfile import load_models
+    from cartctl.stepinfo import step_info
+
+SHIPPED = ("pi", "poles", "serial-pi", "serial-poles")
+STEP_RAD_S = 10.0
+STEP_AT_S = 0.5
+QUANTUM_RAD_S = 2.0 * math.pi / 1792 / 0.01
+"""One encoder count per tick (rad/s): the narrowest settling band."""
+
+
+def read_trace(path: Path) -> dict[str, np.ndarray]:
+    """The trace's columns by name."""
+    with path.open(newline="", encoding="utf-8") as f:
+        rows = list(csv.reader(f))
+    table = np.array([[float(v) for v in row] for row in rows[1:]])
+    return {name: table[:, i] for i, name in enumerate(rows[0])}
+
+
+def run(args: list[str], out: Path, name: str) -> tuple[dict[str, np.ndarray] | None, str]:
+    """``cartctl run ARGS`` into ``out``; (trace columns, '') or (None, the error line)."""
+    cmd = [sys.executable, "-m", "cartctl", "run", *args, "--rerun", "off", "--out", str(out),
+           "--name", name, "--json"]  # fmt: skip
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+    if proc.returncode != 0:
+        lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+        return None, lines[-1] if lines else f"exit code {proc.returncode}"
+    return read_trace(out / f"{name}.csv"), ""
+
+
+def step_numbers(trace: dict[str, np.ndarray], motor: str) -> dict[str, Any]:
+    """Overshoot (%) and settling (s) of one motor's step, on the true speed where there is one."""
+    column = f"true_speed_{motor}" if f"true_speed_{motor}" in trace else f"speed_{motor}"
+    band = max(0.02, QUANTUM_RAD_S / STEP_RAD_S)
+    info = step_info(trace["time_s"], trace[column], reference=STEP_RAD_S, onset_s=STEP_AT_S,
+                     settling_band=band)  # fmt: skip
+    return {"overshoot_percent": info.overshoot_percent, "settling_time_s": info.settling_time_s,
+            "on": column}  # fmt: skip
+
+
+def steady_mask(reference: np.ndarray) -> np.ndarray:
+    """True in the second half of every stretch of constant reference."""
+    mask = np.zeros(reference.size, dtype=bool)
+    edges = np.r_[0, np.flatnonzero(np.diff(reference) != 0.0) + 1, reference.size]
+    for start, end in itertools.pairwise(edges):
+        mask[start + (end - start) // 2 : end] = True
+    return mask
+
+
+def estimator_ratios(trace: dict[str, np.ndarray], motor: str) -> dict[str, Any]:
+    """RMS(estimate − true) / RMS(measured − true), whole run and steady windows."""
+    true = trace.get(f"true_speed_{motor}")
+    if true is None:
+        return {"whole": None, "steady": None}
+    est, meas = trace[f"estimate_{motor}"], trace[f"speed_{motor}"]
+    steady = steady_mask(trace[f"reference_{motor}"])
+
+    def ratio(mask: np.ndarray) -> float | None:
+        encoder = float(np.sqrt(np.mean((meas[mask] - true[mask]) ** 2)))
+        if encoder == 0.0:  # a noise-free sim: the measurement is the true speed
+            return None
+        return float(np.sqrt(np.mean((est[mask] - true[mask]) ** 2))) / encoder
+
+    return {"whole": ratio(np.ones(true.size, dtype=bool)), "steady": ratio(steady)}
+
+
+def with_delay(model: ArxModel, nk: int) -> ArxModel:
+    return ArxModel(model.ar, model.x, nk, model.period_s)
+
+
+def write_model(path: Path, models: dict[str, ArxModel]) -> None:
+    """A model file (the project's format) with these motor models."""
+    lines = ['format = "cartctl-model/1"', "period_s = 0.01", "", "[provenance]",
+             'source = "benchmarks/measure_shipped.py: the controller\'s model with its loop delay"',
+             ""]  # fmt: skip
+    for motor, m in models.items():
+        theta = ", ".join(repr(float(v)) for v in (*m.ar, *m.x))
+        lines += [f"[motors.{motor}]", f"theta = [{theta}]", f"na = {len(m.ar)}",
+                  f"nb = {len(m.x)}", f"nk = {m.nk}", ""]  # fmt: skip
+    path.write_text("\n".join(lines), encoding="utf-8")
+
+
+def measure(path: Path, out: Path, virtual: bool) -> tuple[list[dict[str, Any]], list[str]]:
+    """Rows (one per plant and motor) for one controller file, and the failures."""
+    controller = load_controller(path)
+    models = load_models(controller.model_path)
+    extra = int(controller.request.get("extra_delay_ticks", 0))
+    nk = {m: models.motor(m).nk for m in ("a", "b")}
+    delay = getattr(controller, "loop_delay_ticks", None) or nk["a"] - 1 + extra
+    plants: list[tuple[str, list[str], bool]] = []
+    if delay == nk["a"] - 1:
+        plants.append(("sim", ["--plant", "sim", "--model", str(controller.model_path), "--fast"],
+                       True))  # fmt: skip
+    else:
+        delayed = out / f"{path.stem}-model.toml"
+        write_model(delayed, {m: with_delay(models.motor(m), delay + 1) for m in ("a", "b")})
+        plants.append(("sim", ["--plant", "sim", "--model", str(delayed), "--fast"], True))
+    if delay == 1:
+        plants.append(("physics", ["--plant", "physics", "--fast"], True))
+    if delay == 4 and virtual:
+        plants.append(("virtual", ["--plant", "virtual"], True))
+    rows, failures = [], []
+    for plant, plant_args, has_true in plants:
+        common = ["--controller", str(path), *plant_args]
+        step, problem = run([*common, "--reference", f"step:{STEP_RAD_S:g}", "--duration", "2"],
+                            out, f"{path.stem}-{plant}-step")  # fmt: skip
+        if step is None:
+            failures.append(f"{path.name} on {plant}: {problem}")
+            continue
+        square = None
+        if has_true:
+            square, problem = run([*common, "--reference", "square:8:2", "--duration", "10"],
+                                  out, f"{path.stem}-{plant}-square")  # fmt: skip
+            if square is None:
+                failures.append(f"{path.name} on {plant} (square): {problem}")
+        for motor in ("a", "b"):
+            model = with_delay(models.motor(motor), delay + 1)
+            bound = settling_bound(model, STEP_RAD_S).settling_time_s
+            numbers = step_numbers(step, motor)
+            settle = numbers["settling_time_s"]
+            rows.append({
+                "controller": path.name, "plant": plant, "motor": motor, "loop_delay_ticks": delay,
+                **numbers, "bound_s": bound,
+                "ratio_to_bound": None if settle is None else settle / bound,
+                "estimator_rms_ratio": estimator_ratios(square, motor) if square else
+                {"whole": None, "steady": None},
+            })  # fmt: skip
+    return rows, failures
+
+
+def table(rows: list[dict[str, Any]]) -> str:
+    def num(x: float | None, fmt: str) -> str:
+        return "—" if x is None else format(x, fmt)
+
+    head = (f"{'controller':<19}{'plant':<9}{'m':<3}{'delay':>6}{'overshoot':>11}{'settling':>10}"
+            f"{'bound':>8}{'ratio':>7}{'est/enc':>9}{'steady':>8}  on")  # fmt: skip
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        settle = r["settling_time_s"]
+        est = r["estimator_rms_ratio"]
+        lines.append(
+            f"{r['controller']:<19}{r['plant']:<9}{r['motor']:<3}{r['loop_delay_ticks']:>6}"
+            f"{num(r['overshoot_percent'], '.1f') + ' %':>11}"
+            f"{('—' if settle is None else f'{settle * 1e3:.0f} ms'):>10}"
+            f"{r['bound_s'] * 1e3:>6.0f}ms{num(r['ratio_to_bound'], '.2f'):>7}"
+            f"{num(est['whole'], '.2f'):>9}{num(est['steady'], '.2f'):>8}  {r['on']}"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--controllers", default=str(ROOT / "controllers"), metavar="DIR")
+    parser.add_argument("--no-virtual", action="store_true", help="skip the real-time serial runs")
+    parser.add_argument("--json", action="store_true", help="one JSON object instead of the table")
+    args = parser.parse_args(argv)
+    rows: list[dict[str, Any]] = []
+    failures: list[str] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in SHIPPED:
+            path = Path(args.controllers) / f"{name}.toml"
+            if not path.is_file():
+                failures.append(f"{path}: no such file")
+                continue
+            got, failed = measure(path.resolve(), Path(tmp), virtual=not args.no_virtual)
+            rows += got
+            failures += failed
+    if args.json:
+        print(json.dumps({"rows": rows, "failures": failures}))
+    else:
+        print(table(rows))
+        for problem in failures:
+            print(f"failed: {problem}")
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,197 @@
+"""``cartctl run`` knows the loop delay of every plant and refuses a controller designed for
+another one before driving; ``--voltage-limit`` is the limit the controllers work with."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cartctl.cli import main
+from cartctl.commands import run as run_command
+from cartctl.data import read_trace
+
+ROOT = Path(__file__).resolve().parents[1]
+MISMATCH = (
+    "cartctl run: error: controllers/{given} is designed for a loop delay of {designed} tick(s) "
+    "but the plant '{plant}' has {delay}; use controllers/{fit} (designed for {delay}) or pass "
+    "--allow-delay-mismatch"
+)
+
+
+@pytest.fixture
+def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A folder like a checkout: the shipped models and controllers, logs/ written there."""
+    shutil.copytree(ROOT / "models", tmp_path / "models")
+    shutil.copytree(ROOT / "controllers", tmp_path / "controllers")
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    code = main(["run", *argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _errors(err: str) -> list[str]:
+    """stderr lines of cartctl (the virtual cart's own 'cart: …' lines left out)."""
+    return [line for line in err.splitlines() if not line.startswith("cart: ")]
+
+
+def _nothing_written(workdir: Path) -> bool:
+    return not (workdir / "logs").exists() or not any((workdir / "logs").iterdir())
+
+
+@pytest.mark.parametrize(
+    ("plant", "given", "fit"),
+    [("sim", "serial-pi.toml", "pi.toml"), ("physics", "serial-poles.toml", "poles.toml")],
+)
+def test_serial_controller_on_a_simulator_stops_before_driving(
+    capsys: pytest.CaptureFixture[str], workdir: Path, plant: str, given: str, fit: str
+) -> None:
+    code, out, err = _run(capsys, "--fast", "--plant", plant, "--controller",
+                          f"controllers/{given}", "--rerun", "off")  # fmt: skip
+    assert code == 2
+    assert out == ""
+    expected = MISMATCH.format(given=given, designed=4, plant=plant, delay=1, fit=fit)
+    assert err.strip().splitlines() == [expected]
+    assert _nothing_written(workdir)
+
+
+@pytest.mark.filterwarnings("always::cartctl.errors.DataWarning")  # the CLI prints it
+def test_allow_delay_mismatch_runs_with_one_warning(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    code, out, err = _run(capsys, "--fast", "--controller", "controllers/serial-pi.toml",
+                          "--allow-delay-mismatch", "--duration", "1", "--rerun", "off", "--json")  # fmt: skip
+    assert code == 0, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1
+    assert "warning" in lines[0] and "loop delay of 4 tick(s)" in lines[0] and "has 1" in lines[0]
+    summary = json.loads(out)
+    assert summary["loop_delay_ticks"] == 1
+    assert summary["controller_loop_delay_ticks"] == 4
+
+
+def test_sim_delay_comes_from_its_model(
+    capsys: pytest.CaptureFixture[str], workdir: Path, ground_path: Path
+) -> None:
+    slow = workdir / "models" / "slow.toml"
+    text = ground_path.read_text(encoding="utf-8")
+    slower, count = re.subn(r"^nk = 2$", "nk = 3", text, flags=re.M)  # both motors one later
+    assert count == 2
+    slow.write_text(slower, encoding="utf-8")
+    code, _out, err = _run(capsys, "--fast", "--model", "models/slow.toml", "--rerun", "off")
+    assert code == 2
+    # loop delay nk − 1 = 2: no shipped file is for it; pi.toml (1, extra 0) needs one more tick
+    assert err.strip().splitlines() == [
+        "cartctl run: error: controllers/pi.toml is designed for a loop delay of 1 tick(s) but the "
+        "plant 'sim' has 2; redesign it with --extra-delay 1 or pass --allow-delay-mismatch"
+    ]
+
+
+@pytest.mark.parametrize("plant", ["sim", "physics"])
+def test_summary_has_the_loop_delay_of_simulators(
+    capsys: pytest.CaptureFixture[str], workdir: Path, plant: str
+) -> None:
+    code, out, err = _run(capsys, "--fast", "--plant", plant, "--duration", "0.5", "--rerun", "off")
+    assert code == 0, err
+    assert "loop delay 1 tick(s); the controller is designed for 1" in out
+    assert "controller controllers/pi.toml" in out
+
+
+def test_virtual_plant_takes_the_serial_controller(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    code, out, err = _run(capsys, "--plant", "virtual", "--reference", "step:8", "--duration",
+                          "0.5", "--rerun", "off", "--json")  # fmt: skip
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["controller"] == "controllers/serial-pi.toml"
+    assert summary["loop_delay_ticks"] == 4  # echo 3 + the cart's own tick
+    assert summary["controller_loop_delay_ticks"] == 4
+
+
+def test_onboard_controller_on_the_virtual_cart_stops_before_driving(
+    capsys: pytest.CaptureFixture[str], workdir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    sent: list[tuple[float, float, bool]] = []
+    original = run_command.make_plant
+
+    def recording_make_plant(*args, **kwargs):
+        plant, description = original(*args, **kwargs)
+        send = plant.send
+
+        def record(voltage_a_v: float, voltage_b_v: float, *, drive: bool = True) -> None:
+            sent.append((voltage_a_v, voltage_b_v, drive))
+            send(voltage_a_v, voltage_b_v, drive=drive)
+
+        plant.send = record
+        return plant, description
+
+    monkeypatch.setattr(run_command, "make_plant", recording_make_plant)
+    code, _out, err = _run(capsys, "--plant", "virtual", "--controller", "controllers/pi.toml",
+                          "--rerun", "off")  # fmt: skip
+    assert code == 2
+    expected = MISMATCH.format(given="pi.toml", designed=1, plant="virtual", delay=4,
+                               fit="serial-pi.toml")  # fmt: skip
+    assert _errors(err) == [expected]
+    assert sent, "the echo was measured by sending"
+    assert all(not drive and a == 0.0 and b == 0.0 for a, b, drive in sent)
+    assert _nothing_written(workdir)
+
+
+# -- the voltage limit ------------------------------------------------------------------------
+
+
+def test_voltage_limit_is_the_controllers_limit(
+    capsys: pytest.CaptureFixture[str], workdir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """10 rad/s needs 4.95 V on the ground model (DC gain 2.02 rad/s/V): at 4 V the PI saturates
+    for 1 s, then the reference drops to 6 rad/s (2.97 V). Designed for 4 V, its integral stops
+    where the command is on the limit, so the command leaves the limit on the very tick of the
+    drop; a PI limited at 12 V and clamped after would have wound up towards 12 V and hold 4 V
+    for tens of ticks."""
+    (workdir / "ref.csv").write_text("time_s,reference\n0,10\n0.999,10\n1.0,6\n3,6\n", "utf-8")
+    built = []
+    original = run_command.build_controllers
+
+    def capture(*args, **kwargs):
+        controllers = original(*args, **kwargs)
+        built.append(controllers)
+        return controllers
+
+    monkeypatch.setattr(run_command, "build_controllers", capture)
+    code, out, err = _run(capsys, "--fast", "--voltage-limit", "4", "--reference", "file:ref.csv",
+                          "--duration", "2", "--rerun", "off", "--json")  # fmt: skip
+    assert code == 0, err
+    assert [c.voltage_limit_v for c in built[0].values()] == [4.0, 4.0]
+    trace = read_trace(json.loads(out)["trace"])
+    for motor in ("a", "b"):
+        u = trace.column(f"voltage_{motor}")
+        assert np.max(np.abs(u)) <= 4.0
+        drop = int(np.flatnonzero(trace.column(f"reference_{motor}") == 6.0)[0])
+        assert u[drop - 1] == pytest.approx(4.0)  # saturated while 10 rad/s was asked
+        assert u[drop] < 4.0 - 0.1  # no wound-up integral to unwind
+        speed = trace.column(f"speed_{motor}")
+        assert np.all(speed[drop + 30 :] < 6.0 + 0.3)  # and no windup overshoot after it
+
+
+def test_voltage_limit_above_the_files_is_refused(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    text = (workdir / "controllers" / "pi.toml").read_text(encoding="utf-8")
+    low = text.replace("voltage_limit_v = 12.0", "voltage_limit_v = 6.0")
+    (workdir / "controllers" / "low.toml").write_text(low, encoding="utf-8")
+    code, _, err = _run(capsys, "--fast", "--controller", "controllers/low.toml",
+                        "--voltage-limit", "8", "--rerun", "off")  # fmt: skip
+    assert code == 2
+    assert err.strip().splitlines() == [
+        "cartctl run: error: --voltage-limit 8 V is above the 6 V controllers/low.toml is "
+        "designed for; it can only be lowered"
+    ]
