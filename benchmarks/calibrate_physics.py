@@ -32,9 +32,12 @@ fast pole, which then swings by tens of percent for a 0.2 % change of K; on whol
 plateaus are clean and the fit reflects the dynamics.
 
 The ground preset also changes the inductance: it stands for every lag between the PWM and the
-wheel torque, which on the ground includes the tyres' compliance and slip. Even so, at a 3 ms delay
-the ground θ stay up to about 2.3 tolerances off from reset (a too high, d too low, b too
-negative): a known gap of the calibration.
+wheel torque, which on the ground includes the tyres' compliance and slip. Even so, with J and L
+alone, at a 3 ms delay, the ground θ stay up to about 2.3 tolerances off from reset (a too high, d
+too low, b too negative). The shipped ground preset is not what ``--fit`` gives: its motors carry
+less viscous friction (6.8e-4) and more rolling friction, with J and L from a random search, which
+puts every θ within 0.8 tolerance from reset, on a narrow point (see
+:mod:`cartctl.plants.physics_params`).
 
 This is a script, not part of the package; it exits with 1 when a θ error from reset exceeds one tolerance.
 """

@@ -160,12 +160,6 @@ def test_pole_placement_estimate_beats_the_encoder_in_steady_state(poles_square)
         assert rms(est) < rms(meas), motor
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the ground preset answers the report's procedure with θ up to 2.3 tolerances off the "
-    "report's model (a too high): after each step the estimate, on the report's model, runs "
-    "ahead of the simulator by up to 0.8 rad/s for a few ticks; measured ratio 0.59-0.65",
-)
 def test_pole_placement_estimate_halves_the_encoder_error_over_the_whole_run(poles_square) -> None:
     for motor in ("a", "b"):
         est, meas, _ = estimator_errors(poles_square, motor)
