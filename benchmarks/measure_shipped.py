@@ -33,10 +33,8 @@ The script exits with 1 when a run fails (it prints the run's error line).
 from __future__ import annotations
 
 import argparse
-import csv
 import itertools
 import json
-import math
 import subprocess
 import sys
 import tempfile
@@ -47,32 +45,26 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 try:
+    from cartctl.data import read_trace
     from cartctl.design.controllerfile import load_controller
     from cartctl.design.limit import settling_bound
     from cartctl.model import ArxModel
     from cartctl.modelfile import load_models
-    from cartctl.stepinfo import step_info
+    from cartctl.stepinfo import encoder_quantum_rad_s, step_info
 except ModuleNotFoundError:  # not installed: run from a checkout
     sys.path.insert(0, str(ROOT / "src"))
+    from cartctl.data import read_trace
     from cartctl.design.controllerfile import load_controller
     from cartctl.design.limit import settling_bound
     from cartctl.model import ArxModel
     from cartctl.modelfile import load_models
-    from cartctl.stepinfo import step_info
+    from cartctl.stepinfo import encoder_quantum_rad_s, step_info
 
 SHIPPED = ("pi", "poles", "serial-pi", "serial-poles")
 STEP_RAD_S = 10.0
 STEP_AT_S = 0.5
-QUANTUM_RAD_S = 2.0 * math.pi / 1792 / 0.01
+QUANTUM_RAD_S = encoder_quantum_rad_s(0.01)
 """One encoder count per tick (rad/s): the narrowest settling band."""
-
-
-def read_trace(path: Path) -> dict[str, np.ndarray]:
-    """The trace's columns by name."""
-    with path.open(newline="", encoding="utf-8") as f:
-        rows = list(csv.reader(f))
-    table = np.array([[float(v) for v in row] for row in rows[1:]])
-    return {name: table[:, i] for i, name in enumerate(rows[0])}
 
 
 def run(args: list[str], out: Path, name: str) -> tuple[dict[str, np.ndarray] | None, str]:
@@ -83,15 +75,14 @@ def run(args: list[str], out: Path, name: str) -> tuple[dict[str, np.ndarray] | 
     if proc.returncode != 0:
         lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
         return None, lines[-1] if lines else f"exit code {proc.returncode}"
-    return read_trace(out / f"{name}.csv"), ""
+    return read_trace(out / f"{name}.csv").columns(), ""
 
 
 def step_numbers(trace: dict[str, np.ndarray], motor: str) -> dict[str, Any]:
     """Overshoot (%) and settling (s) of one motor's step, on the true speed where there is one."""
     column = f"true_speed_{motor}" if f"true_speed_{motor}" in trace else f"speed_{motor}"
-    band = max(0.02, QUANTUM_RAD_S / STEP_RAD_S)
     info = step_info(trace["time_s"], trace[column], reference=STEP_RAD_S, onset_s=STEP_AT_S,
-                     settling_band=band)  # fmt: skip
+                     settling_floor=QUANTUM_RAD_S)  # fmt: skip
     return {"overshoot_percent": info.overshoot_percent, "settling_time_s": info.settling_time_s,
             "on": column}  # fmt: skip
 

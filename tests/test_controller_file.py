@@ -7,7 +7,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import shutil
 import tomllib
 from pathlib import Path
 
@@ -23,15 +22,6 @@ from cartctl.modelfile import load_models
 ROOT = Path(__file__).resolve().parents[1]
 CONTROLLERS = ROOT / "controllers"
 SHIPPED = ["pi.toml", "poles.toml", "serial-pi.toml", "serial-poles.toml"]
-
-
-@pytest.fixture
-def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """A folder like a checkout: the shipped models and controllers, logs/ written there."""
-    shutil.copytree(ROOT / "models", tmp_path / "models")
-    shutil.copytree(ROOT / "controllers", tmp_path / "controllers")
-    monkeypatch.chdir(tmp_path)
-    return tmp_path
 
 
 def _cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:

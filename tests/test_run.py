@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import shutil
 from collections import Counter
 from pathlib import Path
 
@@ -21,15 +20,6 @@ CONTRACT_PATHS = [
     f"motor/{m}/{s}" for m in "ab" for s in ("reference", "speed", "estimate", "voltage")
 ]
 CONTRACT_PATHS += ["loop/period_error_us", "loop/compute_us"]
-
-
-@pytest.fixture
-def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """A folder like a checkout: the shipped models and controllers, logs/ written there."""
-    shutil.copytree(ROOT / "models", tmp_path / "models")
-    shutil.copytree(ROOT / "controllers", tmp_path / "controllers")
-    monkeypatch.chdir(tmp_path)
-    return tmp_path
 
 
 def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, dict | str, str]:

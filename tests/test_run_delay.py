@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -21,15 +20,6 @@ MISMATCH = (
     "but the plant '{plant}' has {delay}; use controllers/{fit} (designed for {delay}) or pass "
     "--allow-delay-mismatch"
 )
-
-
-@pytest.fixture
-def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """A folder like a checkout: the shipped models and controllers, logs/ written there."""
-    shutil.copytree(ROOT / "models", tmp_path / "models")
-    shutil.copytree(ROOT / "controllers", tmp_path / "controllers")
-    monkeypatch.chdir(tmp_path)
-    return tmp_path
 
 
 def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:

@@ -19,7 +19,6 @@ from __future__ import annotations
 import itertools
 import json
 import math
-import shutil
 import tomllib
 from pathlib import Path
 
@@ -37,15 +36,6 @@ ROOT = Path(__file__).resolve().parents[1]
 QUANTUM_RAD_S = 2 * math.pi / 1792 / 0.01
 """One encoder count per tick (rad/s)."""
 STEP_RAD_S = 10.0
-
-
-@pytest.fixture
-def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """A folder like a checkout: the shipped models and controllers, logs/ written there."""
-    shutil.copytree(ROOT / "models", tmp_path / "models")
-    shutil.copytree(ROOT / "controllers", tmp_path / "controllers")
-    monkeypatch.chdir(tmp_path)
-    return tmp_path
 
 
 def cartctl_run(capsys: pytest.CaptureFixture[str], *argv: str) -> dict[str, np.ndarray]:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import time
 import tty
 from pathlib import Path
@@ -36,14 +35,6 @@ def delay_controller(tmp_path_factory: pytest.TempPathFactory) -> Path:
                  "65", "--crossover-hz", "2", "--extra-delay", "3", "--out", str(path)])  # fmt: skip
     assert code == 0
     return path
-
-
-@pytest.fixture
-def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    shutil.copytree(ROOT / "models", tmp_path / "models")
-    shutil.copytree(ROOT / "controllers", tmp_path / "controllers")
-    monkeypatch.chdir(tmp_path)
-    return tmp_path
 
 
 def _cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, dict | str, str]:
