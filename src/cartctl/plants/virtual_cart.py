@@ -9,7 +9,9 @@ It keeps the firmware's order within each 10 ms tick (``docs/serial-protocol.md`
     io()       the physics advances one tick under the voltage stored at the previous tick,
                and the encoders are read
     control()  the bridge logic (:class:`~cartctl.plants.bridge_firmware.BridgeFirmware`)
-    receive    every GPIO whose last byte has arrived by now overwrites the held channels
+    receive    every GPIO whose last byte has arrived by now (on the cart's schedule: a tick
+               the host's load starts late looks as early as an on-time one would) overwrites
+               the held channels
     send       one GPIO with what control() wrote (a HEARTBEAT every 1.1 s as well)
 
 and the line's speed: 115200 baud 8N1 is 86.8 µs per byte in each direction. A pseudo-terminal
@@ -378,8 +380,11 @@ class VirtualCart:
             self.true_speeds.pop((tick_counter - 512) % TICK_MODULO, None)  # keep the recent ones
             voltage = firmware.control(io)
             self.last_voltage_v = voltage
-            # the communication thread: receive everything that has arrived, then send
-            for message in framer.feed(self._reader.take(time.perf_counter())):
+            # the communication thread: receive everything that has arrived, then send. "By now"
+            # is on the cart's own schedule: a tick this thread starts late (a busy host) must not
+            # take in bytes that arrived after the moment an on-time cart would have looked.
+            receive_at = deadline + (time.perf_counter() - now)
+            for message in framer.feed(self._reader.take(receive_at)):
                 if isinstance(message, Gpio):
                     firmware.receive(message.floats, message.ints)
                     self.frames_received += 1
