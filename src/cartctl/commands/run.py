@@ -16,7 +16,7 @@ from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.errors import CartctlError, DataWarning, InputError, PlantError
 from cartctl.plants.base import ClockedPlant, Plant
-from cartctl.plants.factory import is_serial, make_plant, plant_loop_delay
+from cartctl.plants.factory import is_serial, make_plant
 from cartctl.runtime.loop import ControlLoop, MemorySink
 from cartctl.runtime.reference import FORMS, reference_signal
 from cartctl.sinks.csv_sink import CsvSink
@@ -237,7 +237,7 @@ def run(args: argparse.Namespace) -> int:
             plant.connect()
             delay = _measured_delay(plant)
         else:
-            delay = plant_loop_delay(plant)
+            delay = getattr(plant, "loop_delay_ticks", None)  # sim and physics know theirs
         check_loop_delay(controller_file, given, args.plant, delay,
                          allow=args.allow_delay_mismatch)  # fmt: skip
     except BaseException:

@@ -10,30 +10,11 @@ from cartctl.plants.base import Plant
 
 PLANT_NAMES = ("sim", "physics", "virtual", "virtual:FAULTS", "serial:PORT")
 DEFAULT_MODEL = Path("models/ground.toml")
-PHYSICS_LOOP_DELAY_TICKS = 1
-"""The physical simulator applies a command one tick late, like microOS on the cart."""
 
 
 def is_serial(spec: str) -> bool:
     """Whether a plant name is one reached over the serial line ('virtual…', 'serial:…')."""
     return spec == "virtual" or spec.startswith(("virtual:", "serial:"))
-
-
-def plant_loop_delay(plant: Plant) -> int | None:
-    """The loop delay of a plant (ticks from a measurement to its voltage on the motor).
-
-    The ARX plant: its models' input delay nk − 1 (the largest, if the motors differ); the
-    physical simulator: 1. A serial plant must measure it (``measure_loop_delay``, from the
-    echo): None here, as for a plant of unknown kind.
-    """
-    from cartctl.plants.physics import PhysicsPlant
-    from cartctl.plants.sim import ArxPlant
-
-    if isinstance(plant, ArxPlant):
-        return max(m.nk for m in plant.models) - 1
-    if isinstance(plant, PhysicsPlant):
-        return PHYSICS_LOOP_DELAY_TICKS
-    return None
 
 
 def make_plant(

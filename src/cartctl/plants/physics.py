@@ -265,6 +265,10 @@ class PhysicsPlant:
 
     # -- the Plant protocol -------------------------------------------------------------------
 
+    loop_delay_ticks = 1
+    """Ticks from a measurement to its voltage on the motor, as with microOS on the cart: the
+    command of tick k lands within the tick after it (``CartParams.actuation_delay_s``)."""
+
     def reset(self, *, position_rad: tuple[float, float] = (0.0, 0.0)) -> Measurement:
         """Put both wheels at rest with no current and 0 V, and measure tick 0.
 

@@ -99,6 +99,11 @@ class ArxPlant:
         self._motors = (_ArxMotor(model_a), _ArxMotor(model_b))
         self._rng = np.random.default_rng(seed)
 
+    @property
+    def loop_delay_ticks(self) -> int:
+        """Ticks from a measurement to its voltage on the motor: the models' nk − 1 (the larger)."""
+        return max(m.nk for m in self.models) - 1
+
     def _measure(self, ya: float, yb: float) -> Measurement:
         if self.noise_std_rad_s > 0.0:
             na, nb = self._rng.normal(0.0, self.noise_std_rad_s, 2)
