@@ -38,6 +38,7 @@ import json
 import subprocess
 import sys
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -47,17 +48,17 @@ ROOT = Path(__file__).resolve().parents[1]
 try:
     from cartctl.data import read_trace
     from cartctl.design.controllerfile import load_controller
-    from cartctl.design.limit import settling_bound
+    from cartctl.design.limit import settling_bound, with_extra_delay
     from cartctl.model import ArxModel
-    from cartctl.modelfile import load_models
+    from cartctl.modelfile import load_models, save_models
     from cartctl.stepinfo import encoder_quantum_rad_s, step_info
 except ModuleNotFoundError:  # not installed: run from a checkout
     sys.path.insert(0, str(ROOT / "src"))
     from cartctl.data import read_trace
     from cartctl.design.controllerfile import load_controller
-    from cartctl.design.limit import settling_bound
+    from cartctl.design.limit import settling_bound, with_extra_delay
     from cartctl.model import ArxModel
-    from cartctl.modelfile import load_models
+    from cartctl.modelfile import load_models, save_models
     from cartctl.stepinfo import encoder_quantum_rad_s, step_info
 
 SHIPPED = ("pi", "poles", "serial-pi", "serial-poles")
@@ -113,20 +114,9 @@ def estimator_ratios(trace: dict[str, np.ndarray], motor: str) -> dict[str, Any]
     return {"whole": ratio(np.ones(true.size, dtype=bool)), "steady": ratio(steady)}
 
 
-def with_delay(model: ArxModel, nk: int) -> ArxModel:
-    return ArxModel(model.ar, model.x, nk, model.period_s)
-
-
-def write_model(path: Path, models: dict[str, ArxModel]) -> None:
-    """A model file (the project's format) with these motor models."""
-    lines = ['format = "cartctl-model/1"', "period_s = 0.01", "", "[provenance]",
-             'source = "benchmarks/measure_shipped.py: the controller\'s model with its loop delay"',
-             ""]  # fmt: skip
-    for motor, m in models.items():
-        theta = ", ".join(repr(float(v)) for v in (*m.ar, *m.x))
-        lines += [f"[motors.{motor}]", f"theta = [{theta}]", f"na = {len(m.ar)}",
-                  f"nb = {len(m.x)}", f"nk = {m.nk}", ""]  # fmt: skip
-    path.write_text("\n".join(lines), encoding="utf-8")
+def on_loop(model: ArxModel, delay: int) -> ArxModel:
+    """The model with the input delay of a loop of ``delay`` ticks: nk = delay + 1."""
+    return with_extra_delay(model, delay + 1 - model.nk)
 
 
 def measure(path: Path, out: Path, virtual: bool) -> tuple[list[dict[str, Any]], list[str]]:
@@ -142,7 +132,8 @@ def measure(path: Path, out: Path, virtual: bool) -> tuple[list[dict[str, Any]],
                        True))  # fmt: skip
     else:
         delayed = out / f"{path.stem}-model.toml"
-        write_model(delayed, {m: with_delay(models.motor(m), delay + 1) for m in ("a", "b")})
+        save_models(replace(models, motors={m: on_loop(models.motor(m), delay) for m in "ab"}),
+                    delayed)  # fmt: skip
         plants.append(("sim", ["--plant", "sim", "--model", str(delayed), "--fast"], True))
     if delay == 1:
         plants.append(("physics", ["--plant", "physics", "--fast"], True))
@@ -163,7 +154,7 @@ def measure(path: Path, out: Path, virtual: bool) -> tuple[list[dict[str, Any]],
             if square is None:
                 failures.append(f"{path.name} on {plant} (square): {problem}")
         for motor in ("a", "b"):
-            model = with_delay(models.motor(motor), delay + 1)
+            model = on_loop(models.motor(motor), delay)
             bound = settling_bound(model, STEP_RAD_S).settling_time_s
             numbers = step_numbers(step, motor)
             settle = numbers["settling_time_s"]
