@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from cartctl.design.controllerfile import ControllerFile
 from cartctl.design.kalman import KalmanDesign
-from cartctl.design.pi import PiDesign
+from cartctl.design.pi import PiDesign, pi_tf_coeffs
 from cartctl.design.poles import PolesDesign
 from cartctl.errors import DataFileError, InputError
 from cartctl.runtime.base import Controller
@@ -137,9 +137,10 @@ def expected_tf(
     ts = controller.period_s
     if controller.method == "pi":
         kp, ki = float(entry["kp"]), float(entry["ki"])
+        num, den = pi_tf_coeffs(kp, ki, ts)
         return (
-            np.array([kp + ki * ts, -kp]),
-            np.array([1.0, -1.0]),
+            num,
+            den,
             f"Kp = {kp:.10g}, Ki = {ki:.10g} and Ts = {ts:g} s give (C(z) = Kp + Ki·Ts·z/(z−1))",
         )
     from cartctl.design.loop import feedback_tf_coeffs

@@ -54,13 +54,20 @@ def _check_common(model: ArxModel, phase_margin_deg: float, extra_delay_ticks: i
         )
 
 
+def pi_tf_coeffs(
+    kp: float, ki: float, period_s: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """C(z) = Kp + Ki·Ts·z/(z − 1) from error to voltage: ``([Kp + Ki·Ts, −Kp], [1, −1])``."""
+    return np.array([kp + ki * period_s, -kp]), np.array([1.0, -1.0])
+
+
 def _loop_coeffs(
     model: ArxModel, kp: float, ki: float, extra: int
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Open loop C·G·z^−extra as (num, den), descending powers of z."""
-    ts = model.period_s
-    num = np.polymul([kp + ki * ts, -kp], model.num())
-    den = np.polymul(np.polymul([1.0, -1.0], model.den()), np.r_[1.0, np.zeros(extra)])
+    c_num, c_den = pi_tf_coeffs(kp, ki, model.period_s)
+    num = np.polymul(c_num, model.num())
+    den = np.polymul(np.polymul(c_den, model.den()), np.r_[1.0, np.zeros(extra)])
     return num, den
 
 
@@ -280,7 +287,7 @@ class PiDesign:
 
     def controller_tf_coeffs(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """C(z) from error (rad/s) to voltage (V): ``([Kp + Ki·Ts, −Kp], [1, −1])``, powers of z."""
-        return np.array([self.kp + self.ki * self.period_s, -self.kp]), np.array([1.0, -1.0])
+        return pi_tf_coeffs(self.kp, self.ki, self.period_s)
 
     def _loop(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         return _loop_coeffs(self.model, self.kp, self.ki, self.extra_delay_ticks)
