@@ -123,9 +123,9 @@ def measure(path: Path, out: Path, virtual: bool) -> tuple[list[dict[str, Any]],
     """Rows (one per plant and motor) for one controller file, and the failures."""
     controller = load_controller(path)
     models = load_models(controller.model_path)
-    extra = int(controller.request.get("extra_delay_ticks", 0))
     nk = {m: models.motor(m).nk for m in ("a", "b")}
-    delay = getattr(controller, "loop_delay_ticks", None) or nk["a"] - 1 + extra
+    delay = controller.loop_delay_ticks  # load_controller derives it for older files
+    assert delay is not None
     plants: list[tuple[str, list[str], bool]] = []
     if delay == nk["a"] - 1:
         plants.append(("sim", ["--plant", "sim", "--model", str(controller.model_path), "--fast"],
