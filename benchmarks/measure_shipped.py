@@ -48,7 +48,7 @@ ROOT = Path(__file__).resolve().parents[1]
 try:
     from cartctl.data import read_trace
     from cartctl.design.controllerfile import load_controller
-    from cartctl.design.limit import settling_bound, with_extra_delay
+    from cartctl.design.limit import settling_bound
     from cartctl.model import ArxModel
     from cartctl.modelfile import load_models, save_models
     from cartctl.stepinfo import encoder_quantum_rad_s, step_info
@@ -56,7 +56,7 @@ except ModuleNotFoundError:  # not installed: run from a checkout
     sys.path.insert(0, str(ROOT / "src"))
     from cartctl.data import read_trace
     from cartctl.design.controllerfile import load_controller
-    from cartctl.design.limit import settling_bound, with_extra_delay
+    from cartctl.design.limit import settling_bound
     from cartctl.model import ArxModel
     from cartctl.modelfile import load_models, save_models
     from cartctl.stepinfo import encoder_quantum_rad_s, step_info
@@ -116,7 +116,7 @@ def estimator_ratios(trace: dict[str, np.ndarray], motor: str) -> dict[str, Any]
 
 def on_loop(model: ArxModel, delay: int) -> ArxModel:
     """The model with the input delay of a loop of ``delay`` ticks: nk = delay + 1."""
-    return with_extra_delay(model, delay + 1 - model.nk)
+    return model.with_extra_delay(delay + 1 - model.nk)
 
 
 def measure(path: Path, out: Path, virtual: bool) -> tuple[list[dict[str, Any]], list[str]]:

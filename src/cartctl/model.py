@@ -33,6 +33,14 @@ RootKind = Literal["delay", "pole", "zero"]
 _ORIGIN_TOL = 1e-12
 
 
+def check_extra_delay_ticks(ticks: object, name: str = "extra delay") -> int:
+    """``ticks`` as a loop delay beyond a model's own: a whole number >= 0 (else InputError
+    naming it as ``name``)."""
+    if isinstance(ticks, bool) or not isinstance(ticks, int | np.integer) or ticks < 0:
+        raise InputError(f"{name} must be a whole number >= 0 ticks, got {ticks!r}")
+    return int(ticks)
+
+
 @dataclass(frozen=True, slots=True)
 class Root:
     """A pole or zero of a discrete model with its continuous-time equivalent.
@@ -144,6 +152,16 @@ class ArxModel:
             raise InputError(
                 f"sample period must be a positive number of seconds, got {self.period_s}"
             )
+
+    def with_extra_delay(self, ticks: int) -> ArxModel:
+        """This model with ``ticks`` more ticks of input delay (nk + d): a loop that much slower.
+
+        Raises
+        ------
+        InputError
+            ``ticks`` is not a whole number >= 0.
+        """
+        return ArxModel(self.ar, self.x, self.nk + check_extra_delay_ticks(ticks), self.period_s)
 
     # -- construction -------------------------------------------------------------------------
     @classmethod

@@ -13,7 +13,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.errors import InputError
 from cartctl.model import ArxModel
 from cartctl.plants.sim import ArxPlant
 from cartctl.runtime.base import Controller
@@ -81,9 +80,7 @@ def simulate_step(
     extra_delay_ticks : int
         Ticks of delay added to the model's, as a PC-side serial loop adds.
     """
-    if extra_delay_ticks < 0:
-        raise InputError(f"extra delay must be >= 0 ticks, got {extra_delay_ticks}")
-    plant_model = ArxModel(model.ar, model.x, model.nk + extra_delay_ticks, model.period_s)
+    plant_model = model.with_extra_delay(extra_delay_ticks)
     plant = ArxPlant(plant_model, plant_model)
     n = max(2, round(duration_s / model.period_s))
     ref = np.full(n, float(step_rad_s))

@@ -115,25 +115,6 @@ def in_settling_band(step: StepAnalysis, period_s: float) -> StepAnalysis:
     return replace(step, info=info)
 
 
-def with_extra_delay(model: ArxModel, extra_delay_ticks: int) -> ArxModel:
-    """The model with ``extra_delay_ticks`` more ticks of input delay (nk + d): the design's loop.
-
-    Raises
-    ------
-    InputError
-        ``extra_delay_ticks`` is not a whole number >= 0.
-    """
-    if (
-        isinstance(extra_delay_ticks, bool)
-        or not isinstance(extra_delay_ticks, int | np.integer)
-        or extra_delay_ticks < 0
-    ):
-        raise InputError(
-            f"extra delay must be a whole number >= 0 ticks, got {extra_delay_ticks!r}"
-        )
-    return replace(model, nk=model.nk + int(extra_delay_ticks))
-
-
 @dataclass(frozen=True)
 class SettlingBound:
     """The time-optimal settling bound of a step on a model (with the design's extra delay).
@@ -219,7 +200,7 @@ def settling_bound(
         limit), the step lies within its own band, the extra delay is not a whole number >= 0, or
         the model is unstable.
     """
-    plant = with_extra_delay(model, extra_delay_ticks)
+    plant = model.with_extra_delay(extra_delay_ticks)
     if not plant.is_stable():
         raise InputError("the settling bound needs a stable model")
     gain = plant.dc_gain()

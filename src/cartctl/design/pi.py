@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from scipy import optimize
 
 from cartctl.errors import InputError
-from cartctl.model import ArxModel
+from cartctl.model import ArxModel, check_extra_delay_ticks
 
 PM_RANGE_DEG = (0.0, 89.0)
 """Phase margins accepted: (0, 89] degrees."""
@@ -48,10 +48,7 @@ def _check_common(model: ArxModel, phase_margin_deg: float, extra_delay_ticks: i
         raise InputError(
             f"phase margin must be in (0, {PM_RANGE_DEG[1]:g}] degrees, got {phase_margin_deg}"
         )
-    if not isinstance(extra_delay_ticks, int | np.integer) or extra_delay_ticks < 0:
-        raise InputError(
-            f"extra delay must be a whole number of ticks >= 0, got {extra_delay_ticks!r}"
-        )
+    check_extra_delay_ticks(extra_delay_ticks)
 
 
 def pi_tf_coeffs(

@@ -38,7 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.errors import InputError
-from cartctl.model import ArxModel
+from cartctl.model import ArxModel, check_extra_delay_ticks
 
 __all__ = ["StateSpace", "realise", "uncontrollable_modes"]
 
@@ -152,16 +152,13 @@ def realise(model: ArxModel, *, extra_delay_ticks: int = 0) -> StateSpace:
     InputError
         nk = 0, or a negative or fractional extra delay.
     """
-    if not isinstance(extra_delay_ticks, int | np.integer) or extra_delay_ticks < 0:
-        raise InputError(
-            f"extra_delay_ticks must be a whole number of ticks >= 0, got {extra_delay_ticks!r}"
-        )
+    check_extra_delay_ticks(extra_delay_ticks, "extra_delay_ticks")
     if model.nk < 1:
         raise InputError(
             f"the model has no input delay (nk = {model.nk}); the controller needs nk >= 1 because "
             "it computes u[k] after measuring y[k]"
         )
-    delayed = ArxModel(model.ar, model.x, model.nk + int(extra_delay_ticks), model.period_s)
+    delayed = model.with_extra_delay(extra_delay_ticks)
     den = delayed.den()  # [1, α_1 … α_n]
     num = delayed.num()  # degree n − nk < n: strictly proper
     n = den.size - 1

@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.design.limit import with_extra_delay
 from cartctl.design.tune import TuneResult, design_argv
-from cartctl.errors import CartctlError, InputError, PlantError
+from cartctl.errors import CartctlError, PlantError
+from cartctl.model import check_extra_delay_ticks
 from cartctl.modelfile import ModelFile, load_models
 from cartctl.plants.base import Measurement, Plant
 from cartctl.plants.factory import make_plant
@@ -88,10 +88,8 @@ class DelayedPlant:
     """
 
     def __init__(self, plant: Plant, ticks: int) -> None:
-        if isinstance(ticks, bool) or not isinstance(ticks, int) or ticks < 0:
-            raise InputError(f"extra delay must be a whole number >= 0 ticks, got {ticks!r}")
         self.plant = plant
-        self.ticks = ticks
+        self.ticks = check_extra_delay_ticks(ticks)
         self.period_s = plant.period_s
         self._queue: deque[tuple[float, float]] = deque()
 
@@ -122,7 +120,7 @@ def scoring_plant(job: TuneJob) -> Plant:
     if d == 0:
         return plant
     if isinstance(plant, ArxPlant):
-        a, b = (with_extra_delay(m, d) for m in plant.models)
+        a, b = (m.with_extra_delay(d) for m in plant.models)
         return ArxPlant(a, b, noise_std_rad_s=plant.noise_std_rad_s, seed=plant.seed,
                         voltage_limit_v=plant.voltage_limit_v)  # fmt: skip
     return DelayedPlant(plant, d)
