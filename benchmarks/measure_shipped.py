@@ -12,8 +12,9 @@ trace it writes. For each controller file and each plant that has the controller
 - ``sim``: the ARX cart on the controller's own model, with the loop delay of the file (a model
   with nk = loop delay + 1 is written to a temporary file for a serial controller);
 - ``physics``: the physical simulator, loop delay 1 (on-board controllers only);
-- ``virtual``: the physical simulator behind the serial link, loop delay 4, in real time (serial
-  controllers only; the virtual cart hands the simulator's true speed to the trace as well).
+- ``virtual``: the physical simulator behind the serial link, in real time (serial controllers
+  only, loop delay 3 with the bridge sketch; the virtual cart hands the simulator's true speed to
+  the trace as well).
 
 Step (``--reference step:10``, 2 s): overshoot and settling of each motor's *true* speed where the
 plant gives one, in the band max(2 % of the step, one encoder count per tick = 0.3506 rad/s), and
@@ -137,7 +138,7 @@ def measure(path: Path, out: Path, virtual: bool) -> tuple[list[dict[str, Any]],
         plants.append(("sim", ["--plant", "sim", "--model", str(delayed), "--fast"], True))
     if delay == 1:
         plants.append(("physics", ["--plant", "physics", "--fast"], True))
-    if delay == 4 and virtual:
+    if controller.plant_kind == "serial" and virtual:
         plants.append(("virtual", ["--plant", "virtual"], True))
     rows, failures = [], []
     for plant, plant_args, has_true in plants:

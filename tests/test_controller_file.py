@@ -65,7 +65,7 @@ def test_a_file_without_loop_delay_gets_it_from_its_model(workdir: Path) -> None
     old = old.replace('path = "../models/ground.toml"', 'path = "models/ground.toml"')
     (workdir / "controllers" / "old.toml").write_text(old, encoding="utf-8")
     # an older cartctl wrote the model path from the working directory: still found from there
-    assert load_controller("controllers/old.toml").loop_delay_ticks == 2 - 1 + 3
+    assert load_controller("controllers/old.toml").loop_delay_ticks == 2 - 1 + 2  # nk − 1 + extra
 
 
 def test_a_file_without_loop_delay_and_without_its_model_is_refused(

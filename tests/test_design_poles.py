@@ -28,9 +28,9 @@ from cartctl.runtime.statefeedback import StateFeedbackController
 from cartctl.stepinfo import step_info
 
 # The designs of the shipped controllers/poles.toml (on board, loop delay 1) and
-# controllers/serial-poles.toml (through the PC serial loop, loop delay 4).
+# controllers/serial-poles.toml (through the PC serial loop, loop delay 3).
 RECOMMENDED = {"settling_time_s": 0.045, "overshoot_percent": 1.0}
-SERIAL = {"settling_time_s": 0.06, "overshoot_percent": 1.0, "extra_delay_ticks": 3}
+SERIAL = {"settling_time_s": 0.06, "overshoot_percent": 1.0, "extra_delay_ticks": 2}
 CONTROLLERS = Path(__file__).resolve().parents[1] / "controllers"
 QUANTUM_RAD_S = 2 * math.pi / 1792 / 0.01
 """One encoder count per tick (rad/s)."""
@@ -284,10 +284,10 @@ def _check_every_pole_is_placed(theta, nk, extra, K, Ki, Kr, est, placed, runtim
 def test_the_serial_design_places_every_closed_loop_pole(ground) -> None:
     model = ground[0]
     design = design_poles(model, **SERIAL)
-    assert design.plant.order == 6 and len(design.poles) == 6  # 3 + 3 delay states
+    assert design.plant.order == 5 and len(design.poles) == 5  # 3 + 2 delay states
     est = {k: getattr(design.estimator, k) for k in ("A", "B", "C", "L")}
     _check_every_pole_is_placed(
-        (*model.ar, *model.x), model.nk, 3, design.K, design.Ki, design.Kr, est,
+        (*model.ar, *model.x), model.nk, 2, design.K, design.Ki, design.Kr, est,
         list(design.poles), StateFeedbackController(design),
     )  # fmt: skip
 
@@ -302,7 +302,7 @@ def test_shipped_design_places_every_closed_loop_pole(ground_path, name: str) ->
     for motor, entry in raw["motors"].items():
         model = models.motor(motor)
         extra = controller.loop_delay_ticks - (model.nk - 1)
-        assert extra == (3 if name.startswith("serial") else 0)
+        assert extra == (2 if name.startswith("serial") else 0)
         _check_every_pole_is_placed(
             (*model.ar, *model.x), model.nk, extra, entry["K"], entry["Ki"], entry["Kr"],
             entry["estimator"], entry["closed_loop_poles"], runtime[motor],
@@ -356,9 +356,9 @@ def test_to_dict_is_json(ground) -> None:
     design = design_poles(ground[0], **SERIAL)
     out = json.loads(json.dumps(design.to_dict()))
     assert out["method"] == "poles" and out["integral_action"] == "disturbance"
-    assert len(out["closed_loop_poles"]) == 6
-    assert len(out["estimator_poles"]) == design.estimator.A.shape[0] == 7
-    assert out["Ki"] == 0.0 and len(out["K"]) == 7
+    assert len(out["closed_loop_poles"]) == 5
+    assert len(out["estimator_poles"]) == design.estimator.A.shape[0] == 6
+    assert out["Ki"] == 0.0 and len(out["K"]) == 6
 
 
 # -- closed loop -------------------------------------------------------------------------------
@@ -371,12 +371,12 @@ def settling_band(step_rad_s: float) -> float:
 
 @pytest.mark.parametrize(
     ("spec", "extra", "limit_s"),
-    [(RECOMMENDED, 0, 0.09), (SERIAL, 3, None)],
+    [(RECOMMENDED, 0, 0.09), (SERIAL, 2, None)],
     ids=["on-board", "serial"],
 )
 def test_ten_rad_s_step_on_the_loop_it_is_designed_for(ground, spec, extra, limit_s) -> None:
     """On board: ≤ 5 % and ≤ 90 ms; through the serial loop: ≤ 5 % and ≤ 3× the time-optimal
-    settling for the same loop delay (the model with nk + 3)."""
+    settling for the same loop delay (the model with nk + 2)."""
     designs = [design_poles(m, **spec) for m in ground]
     plant_models = [ArxModel(m.ar, m.x, m.nk + extra) for m in ground]
     t, y, u = run_step(designs, ArxPlant(*plant_models), 10.0)

@@ -206,7 +206,7 @@ def test_header_says_where_it_came_from_and_how_to_call_it() -> None:
         "+-12 V",
         "steady-state (fixed) gain",
         "nk = 2",
-        "--extra-delay 3",
+        "--extra-delay 2",
         "conservative",
         "readFloat(0)",
         "getSpeedMotorA()",

@@ -1,7 +1,8 @@
 """The bridge sketch (``firmware/cartctl_bridge``) against its Python twin, tick by tick.
 
 ``bridge_logic.h`` is compiled with g++ and a harness that replays a script of ticks (some with a
-GPIO frame from the host, each with what ``io()`` read); the same script runs through
+GPIO frame from the host received a few ms before, each with what ``io()`` read and the time in
+ms); the same script runs through
 :class:`~cartctl.plants.bridge_firmware.BridgeFirmware`, and every voltage and output channel
 must agree. The sketch's ``robot.cpp`` is compiled too, against a mock of the template's
 ``MECOtron`` helpers (``readFloat``, ``writeInt``, ``setVoltageMotorA``, …), to check its glue.
@@ -23,7 +24,7 @@ from cartctl.plants.bridge_firmware import (
     STATUS_DRIVING,
     STATUS_WATCHDOG,
     TICK_MODULO,
-    WATCHDOG_TICKS,
+    WATCHDOG_MS,
     BridgeFirmware,
     CartIO,
 )
@@ -47,12 +48,13 @@ static float next_float(void) {
   return strtof(word, NULL);
 }
 
-/* "F f0..f7 i0..i3": a frame from the host; "T sa sb va vb pa pb": one control() */
+/* "F ms f0..f7 i0..i3": a drain that found a frame; "T ms sa sb va vb pa pb": one control() */
 int main(void) {
   BridgeState s;
   char word[16];
+  unsigned long now_ms;
   bridge_reset(&s);
-  while (scanf("%15s", word) == 1) {
+  while (scanf("%15s %lu", word, &now_ms) == 2) {
     if (strcmp(word, "F") == 0) {
       float floats[BRIDGE_FLOATS];
       int32_t ints[BRIDGE_INTS];
@@ -62,7 +64,7 @@ int main(void) {
         if (scanf("%ld", &value) != 1) return 2;
         ints[k] = (int32_t)value;
       }
-      bridge_receive(&s, floats, ints);
+      bridge_receive(&s, floats, ints, (uint32_t)now_ms);
     } else {
       BridgeIO io;
       io.speed_a_rad_s = next_float();
@@ -71,7 +73,7 @@ int main(void) {
       io.applied_b_v = next_float();
       io.position_a_rad = next_float();
       io.position_b_rad = next_float();
-      BridgeVoltages v = bridge_control(&s, &io);
+      BridgeVoltages v = bridge_control(&s, &io, (uint32_t)now_ms);
       printf("%.9g %.9g", (double)v.a_v, (double)v.b_v);
       for (int k = 0; k < BRIDGE_FLOATS; ++k) printf(" %.9g", (double)s.out_floats[k]);
       for (int k = 0; k < BRIDGE_INTS; ++k) printf(" %ld", (long)s.out_ints[k]);
@@ -106,9 +108,19 @@ extern int32_t mock_gpout_int[4];
 extern float mock_sensor[6];  /* speed A, B, bridge voltage A, B, position A, B */
 extern float mock_hbridge[2];
 extern bool mock_led[2];
+extern unsigned long mock_now_ms;
+extern int mock_drains;
+
+inline unsigned long millis() { return mock_now_ms; }
+
+struct MockCommunicator {
+  void receive() { mock_drains += 1; }  /* the harness has put the frame's channels in place */
+};
 
 class MECOtron {
+  MockCommunicator communicator;
   public:
+    MockCommunicator* getCommunicator() { return &communicator; }
     virtual ~MECOtron() {}
     virtual bool init() { return true; }
     virtual void control() {}
@@ -146,6 +158,8 @@ int32_t mock_gpout_int[4];
 float mock_sensor[6];
 float mock_hbridge[2];
 bool mock_led[2];
+unsigned long mock_now_ms;
+int mock_drains;
 
 static float next_float(void) {
   char word[64];
@@ -158,7 +172,7 @@ int main(void) {
   Robot robot;
   char word[16];
   robot.init();
-  while (scanf("%15s", word) == 1) {
+  while (scanf("%15s %lu", word, &mock_now_ms) == 2) {
     if (strcmp(word, "F") == 0) {  /* microOS overwrites the held channels on receipt */
       for (int k = 0; k < 8; ++k) mock_gpin_float[k] = next_float();
       for (int k = 0; k < 4; ++k) {
@@ -166,13 +180,14 @@ int main(void) {
         if (scanf("%ld", &value) != 1) return 2;
         mock_gpin_int[k] = (int32_t)value;
       }
+      robot.receive();
     } else {
       for (int k = 0; k < 6; ++k) mock_sensor[k] = next_float();
       robot.control();
       printf("%.9g %.9g", (double)mock_hbridge[0], (double)mock_hbridge[1]);
       for (int k = 0; k < 8; ++k) printf(" %.9g", (double)mock_gpout_float[k]);
       for (int k = 0; k < 4; ++k) printf(" %ld", (long)mock_gpout_int[k]);
-      printf(" %d %d\n", (int)mock_led[0], (int)mock_led[1]);
+      printf(" %d %d %d\n", (int)mock_led[0], (int)mock_led[1], mock_drains);
     }
   }
   return 0;
@@ -180,17 +195,26 @@ int main(void) {
 """
 
 
+Frame = tuple[int, tuple[float, ...], tuple[int, int, int, int]]
+"""A drain that found a host frame: ms before the control(), float and int channels."""
+BASE_MS = 2**32 - 2000
+"""The clock of tick 0 (ms): millis() wraps 2 s into the script."""
+
+
 @dataclass(frozen=True)
 class Tick:
-    """One control() call, after an optional frame from the host."""
+    """One control() call, after the drains (with a frame each) of the tick before it."""
 
     io: tuple[float, float, float, float, float, float]
-    floats: tuple[float, ...] | None = None
-    ints: tuple[int, ...] | None = None
+    frames: tuple[Frame, ...] = ()
 
 
 def _f32(value: float) -> float:
     return float(np.float32(value))
+
+
+def _clock_ms(tick: int, before_ms: int = 0) -> int:
+    return (BASE_MS + 10 * tick - before_ms) % 2**32
 
 
 def _script(seed: int = 3) -> list[Tick]:
@@ -201,21 +225,28 @@ def _script(seed: int = 3) -> list[Tick]:
         sa, sb, va, vb, pa, pb = (_f32(v) for v in rng.uniform(-30.0, 30.0, 6))
         return (sa, sb, va, vb, pa, pb)
 
-    def frame(seq: int, drive: int, va: float, vb: float, i2: int = 0, i3: int = 0) -> Tick:
+    def channels(seq: int, drive: int, va: float, vb: float, i2: int = 0, i3: int = 0) -> Frame:
         floats = (_f32(va), _f32(vb), *(_f32(v) for v in rng.uniform(-5.0, 5.0, 6)))
-        return Tick(io(), floats, (seq, drive, i2, i3))
+        return (4, floats, (seq, drive, i2, i3))
+
+    def frame(seq: int, drive: int, va: float, vb: float, i2: int = 0, i3: int = 0) -> Tick:
+        return Tick(io(), (channels(seq, drive, va, vb, i2, i3),))
 
     script = [Tick(io()) for _ in range(5)]  # no frame yet: 0 V, watchdog bit
     script += [frame(seq, 1, rng.uniform(-12, 12), rng.uniform(-12, 12)) for seq in range(1, 21)]
-    script += [Tick(io()) for _ in range(15)]  # the host goes quiet: trips after 10 ticks
+    script += [Tick(io()) for _ in range(15)]  # the host goes quiet: trips 70 ms after the last
     script += [frame(21, 0, 6.0, -6.0)]  # a new frame, but drive = 0
-    script += [Tick(io()), frame(100, 2, 6.0, -6.0), Tick(io())]  # drive is 1, nothing else
+    script += [Tick(io()), frame(100, 2, 6.0, -6.0), Tick(io())]  # drive 2; 22..99 count as lost
     script += [frame(22, 1, math.nan, math.inf), frame(23, 1, -math.inf, 3.5)]  # not finite: 0 V
     script += [frame(24, 1, 40.0, -40.0)]  # beyond the supply: the logic passes it, robot clamps
     for seq in range(25, 45):  # a frame every other tick still drives
         script += [frame(seq, 1, 4.0, -4.0), Tick(io())]
-    script += [frame(45, 1, 5.0, 5.0, i2=7, i3=-9)] * 14  # the host stuck on one seq: trips
-    script += [frame(32767, 1, 2.0, 2.0), frame(0, 1, 3.0, 3.0), frame(1, 1, 1.0, 1.0)]  # seq wraps
+    script += [frame(45, 1, 5.0, 5.0, i2=7, i3=-9) for _ in range(14)]  # stuck on one seq: trips
+    script += [frame(32767, 1, 2.0, 2.0), frame(0, 1, 3.0, 3.0), frame(1, 1, 1.0, 1.0)]  # wraps
+    script += [frame(seq, 1, 1.0, 1.0) for seq in (2, 3, 6, 7, 11)]  # 4, 5, 8, 9, 10 lost
+    two = (channels(12, 1, 2.0, 2.0), channels(13, 1, 3.0, 3.0))
+    script += [Tick(io(), ((7, *two[0][1:]), (2, *two[1][1:])))]  # two in one tick: none lost
+    script += [Tick(io(), ((0, *channels(14, 1, 1.0, 1.0)[1:]),))]  # drained right at control()
     while len(script) < TICK_MODULO + 40:  # the tick counter wraps; a frame now and then
         n = len(script)
         script.append(frame(n % 32768, 1, 1.5, -1.5) if n % 7 == 0 else Tick(io()))
@@ -224,22 +255,23 @@ def _script(seed: int = 3) -> list[Tick]:
 
 def _stdin(script: list[Tick]) -> str:
     lines = []
-    for tick in script:
-        if tick.floats is not None and tick.ints is not None:
+    for k, tick in enumerate(script):
+        for before_ms, floats, ints in tick.frames:
             lines.append(
-                "F " + " ".join(map(repr, tick.floats)) + " " + " ".join(map(str, tick.ints))
-            )
-        lines.append("T " + " ".join(map(repr, tick.io)))
+                f"F {_clock_ms(k, before_ms)} "
+                + " ".join(map(repr, floats)) + " " + " ".join(map(str, ints))
+            )  # fmt: skip
+        lines.append(f"T {_clock_ms(k)} " + " ".join(map(repr, tick.io)))
     return "\n".join(lines) + "\n"
 
 
 def _python(script: list[Tick]) -> list[tuple[float, float, list[float], list[int]]]:
     fw = BridgeFirmware()
     out = []
-    for tick in script:
-        if tick.floats is not None and tick.ints is not None:
-            fw.receive(tick.floats, tick.ints)
-        va, vb = fw.control(CartIO(*tick.io))
+    for k, tick in enumerate(script):
+        for before_ms, floats, ints in tick.frames:
+            fw.receive(floats, ints, _clock_ms(k, before_ms))
+        va, vb = fw.control(CartIO(*tick.io), _clock_ms(k))
         out.append((va, vb, list(fw.out_floats), list(fw.out_ints)))
     return out
 
@@ -283,25 +315,33 @@ def test_the_script_exercises_every_rule(script: list[Tick], expected: list) -> 
     """The Python twin on the script does what the contract says (so the comparison means it)."""
     status = [row[3][2] for row in expected]
     volts = [(row[0], row[1]) for row in expected]
+    echo = [row[3][0] for row in expected]
+    lost = [row[3][3] for row in expected]
     assert status[:5] == [STATUS_WATCHDOG] * 5 and volts[:5] == [(0.0, 0.0)] * 5
     assert status[5:25] == [STATUS_DRIVING] * 20
-    assert [row[3][0] for row in expected[5:25]] == list(range(1, 21))  # the echo
-    first = script[5].floats
-    assert first is not None and volts[5] == (first[0], first[1])  # passed through
-    # the last frame at tick 24: driving through 24 + 9, tripped from the tenth quiet tick on
-    assert status[25 : 24 + WATCHDOG_TICKS] == [STATUS_DRIVING] * (WATCHDOG_TICKS - 1)
-    assert status[24 + WATCHDOG_TICKS] == STATUS_WATCHDOG
-    assert volts[24 + WATCHDOG_TICKS] == (0.0, 0.0)
+    assert echo[5:25] == list(range(1, 21))
+    first = script[5].frames[0][1]
+    assert volts[5] == (first[0], first[1])  # passed through
+    # the last new frame 4 ms before tick 24: at tick 30 it is 64 ms old, at tick 31 74 ms
+    assert WATCHDOG_MS == 70
+    assert status[25:31] == [STATUS_DRIVING] * 6
+    assert status[31:40] == [STATUS_WATCHDOG] * 9 and volts[31] == (0.0, 0.0)
     assert status[40] == 0 and volts[40] == (0.0, 0.0)  # drive = 0
     assert status[42] == 0 and volts[42] == (0.0, 0.0)  # drive = 2
+    assert lost[41] == 0 and lost[42] == 100 - 21 - 1  # 22..99 never arrived
     assert volts[44] == (0.0, 0.0) and volts[45] == (0.0, 3.5)  # NaN, ±inf requests
+    assert lost[44] == lost[42]  # back from 100 to 22: a new host, not 32690 lost frames
     assert volts[46] == (40.0, -40.0)
-    stuck = [row[3][2] for row in expected[87:101]]
-    assert stuck == [STATUS_DRIVING] * WATCHDOG_TICKS + [STATUS_WATCHDOG] * 4
-    assert [row[3][0] for row in expected[101:104]] == [32767, 0, 1]
-    assert status[101:104] == [STATUS_DRIVING] * 3
+    assert status[47:87] == [STATUS_DRIVING] * 40  # a frame every other tick
+    assert status[87:101] == [STATUS_DRIVING] * 7 + [STATUS_WATCHDOG] * 7  # stuck on seq 45
+    assert echo[101:104] == [32767, 0, 1] and status[101:104] == [STATUS_DRIVING] * 3
+    assert lost[103] == lost[42]
+    assert lost[104:109] == [78, 78, 80, 80, 83]  # 4, 5 and then 8, 9, 10 skipped
+    assert echo[109] == 13 and lost[109] == 83  # two frames drained within one tick
+    assert echo[110] == 14 and status[110] == STATUS_DRIVING  # drained right at control()
     ticks = [row[3][1] for row in expected]
     assert ticks[TICK_MODULO - 1] == TICK_MODULO - 1 and ticks[TICK_MODULO] == 0
+    assert _clock_ms(0) > _clock_ms(len(script) - 1)  # the ms clock wrapped on the way
 
 
 def test_bridge_logic_matches_the_python_twin_every_tick(
@@ -328,12 +368,15 @@ def test_robot_cpp_glue_on_a_mock_template(
     assert lines[0] == "MSG cartctl bridge ready"
     rows = lines[1:]
     assert len(rows) == len(short)
+    drains = 0
     for k, (row, (va, vb, floats, ints)) in enumerate(zip(rows, expected, strict=False)):
         words = row.split()
         clamped = (max(-12.0, min(12.0, va)), max(-12.0, min(12.0, vb)))
         assert _same(words[:14], (*clamped, floats, ints)), f"tick {k}: {row}"
         status = ints[2]
-        assert words[14:] == [str(int(status == STATUS_DRIVING)), str(status >> 1)], f"tick {k}"
+        drains += len(short[k].frames)  # robot.receive() drains through the communicator
+        expected_leds = [str(int(status == STATUS_DRIVING)), str(status >> 1), str(drains)]
+        assert words[14:] == expected_leds, f"tick {k}"
 
 
 def test_robot_h_says_when_mecotron_h_is_missing(tmp_path: Path) -> None:

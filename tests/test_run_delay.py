@@ -48,7 +48,7 @@ def test_serial_controller_on_a_simulator_stops_before_driving(
                           f"controllers/{given}", "--rerun", "off")  # fmt: skip
     assert code == 2
     assert out == ""
-    expected = MISMATCH.format(given=given, designed=4, plant=plant, delay=1, fit=fit)
+    expected = MISMATCH.format(given=given, designed=3, plant=plant, delay=1, fit=fit)
     assert err.strip().splitlines() == [expected]
     assert _nothing_written(workdir)
 
@@ -62,10 +62,10 @@ def test_allow_delay_mismatch_runs_with_one_warning(
     assert code == 0, err
     lines = err.strip().splitlines()
     assert len(lines) == 1
-    assert "warning" in lines[0] and "loop delay of 4 tick(s)" in lines[0] and "has 1" in lines[0]
+    assert "warning" in lines[0] and "loop delay of 3 tick(s)" in lines[0] and "has 1" in lines[0]
     summary = json.loads(out)
     assert summary["loop_delay_ticks"] == 1
-    assert summary["controller_loop_delay_ticks"] == 4
+    assert summary["controller_loop_delay_ticks"] == 3
 
 
 def test_sim_delay_comes_from_its_model(
@@ -103,8 +103,8 @@ def test_virtual_plant_takes_the_serial_controller(
     assert code == 0, err
     summary = json.loads(out)
     assert summary["controller"] == "controllers/serial-pi.toml"
-    assert summary["loop_delay_ticks"] == 4  # echo 3 + the cart's own tick
-    assert summary["controller_loop_delay_ticks"] == 4
+    assert summary["loop_delay_ticks"] == 3  # echo 2 + the cart's own tick
+    assert summary["controller_loop_delay_ticks"] == 3
 
 
 def test_onboard_controller_on_the_virtual_cart_stops_before_driving(
@@ -128,7 +128,7 @@ def test_onboard_controller_on_the_virtual_cart_stops_before_driving(
     code, _out, err = _run(capsys, "--plant", "virtual", "--controller", "controllers/pi.toml",
                           "--rerun", "off")  # fmt: skip
     assert code == 2
-    expected = MISMATCH.format(given="pi.toml", designed=1, plant="virtual", delay=4,
+    expected = MISMATCH.format(given="pi.toml", designed=1, plant="virtual", delay=3,
                                fit="serial-pi.toml")  # fmt: skip
     assert _errors(err) == [expected]
     assert sent, "the echo was measured by sending"

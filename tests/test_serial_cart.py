@@ -33,6 +33,7 @@ class ScriptedCart:
         self.voltage = (0.0, 0.0)
         self.outbox = bytearray(self.encoder.heartbeat(0) if heartbeat else b"")
         self.drop_ticks: set[int] = set()
+        self.lose_host_seqs: set[int] = set()
         self.garbage: dict[int, bytes] = {}
         self.silent_from: int | None = None
         self.vanish_from: int | None = None
@@ -80,13 +81,16 @@ class ScriptedCart:
         y = self.physics.step(*self.voltage) if j else self.physics.reset()
         applied = self.physics.applied_voltage_v
         io = CartIO(y.speed_a_rad_s, y.speed_b_rad_s, applied[0], applied[1], 0.0, 0.0)
-        self.voltage = self.firmware.control(io)
+        self.voltage = self.firmware.control(io, 10 * j)
         due = [d for t, d in self.in_flight if t <= j]
         self.in_flight = [(t, d) for t, d in self.in_flight if t > j]
         for message in self.framer.feed(b"".join(due)):
             if isinstance(message, Gpio):
-                self.firmware.receive(message.floats, message.ints)
-                self.received.append(HostCommand.from_channels(message.floats, message.ints))
+                command = HostCommand.from_channels(message.floats, message.ints)
+                if command.seq in self.lose_host_seqs:  # lost on the way in
+                    continue
+                self.firmware.receive(message.floats, message.ints, 10 * j + 2)
+                self.received.append(command)
         self.outbox += self.garbage.get(j, b"")
         if self.generation_b:
             frame = encode_gpiox_v2(j * 10, [0.0] * 12, seq=j % 256)
@@ -169,6 +173,25 @@ def test_missing_ticks_are_counted_and_the_tick_index_keeps_the_gap() -> None:
     assert plant.missed_ticks == 3
     assert plant.tick_index == 15 + 3
     assert plant.link.stats.lost_frames == 3  # the MAVLink sequence saw the same gaps
+
+
+def test_host_frames_the_cart_never_saw_are_reported_with_their_share() -> None:
+    """The bridge counts the host sequence numbers it skipped; the plant reports those of the run."""
+    cart = ScriptedCart(2)
+    plant = _plant(cart)
+    plant.reset()
+    first = plant._seq
+    cart.lose_host_seqs = {first + 5, first + 6, first + 20}
+    for _ in range(40):
+        plant.step(1.0, 1.0)
+    link = plant.link_summary()["link"]
+    assert (link["host_frames_lost"], link["host_frames_sent"]) == (3, 40)
+    assert link["host_frames_lost_percent"] == pytest.approx(100.0 * 3 / 40)
+    plant.reset()  # a new run counts from zero, and continues the host's sequence: none lost
+    for _ in range(10):
+        plant.step(1.0, 1.0)
+    assert plant.link_summary()["link"]["host_frames_lost"] == 0
+    assert plant.link_summary()["link"]["host_frames_sent"] == 10
 
 
 def test_garbage_between_frames_is_counted_and_skipped() -> None:

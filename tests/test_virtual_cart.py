@@ -32,7 +32,7 @@ def delay_controller(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """PI on the report's model, designed for the virtual loop's 4-tick delay (nk = 2 + 3)."""
     path = tmp_path_factory.mktemp("ctl") / "pi_serial.toml"
     code = main(["design", str(ROOT / "models/ground.toml"), "--method", "pi", "--phase-margin",
-                 "65", "--crossover-hz", "2", "--extra-delay", "3", "--out", str(path)])  # fmt: skip
+                 "65", "--crossover-hz", "2", "--extra-delay", "2", "--out", str(path)])  # fmt: skip
     assert code == 0
     return path
 
@@ -64,8 +64,8 @@ def test_closed_loop_tracks_8_rad_s_reports_the_delay_and_ends_at_zero_volts(
         assert cart.firmware.in_floats[:2] == [0.0, 0.0]
         assert cart.last_voltage_v == (0.0, 0.0)
     assert isinstance(summary, dict)
-    assert summary["loop_delay_ticks"] == 4  # echo 3 ticks + the cart's own 1
-    assert summary["link"]["echo_delay_ticks"] == 3
+    assert summary["loop_delay_ticks"] == 3  # echo 2 ticks + the cart's own 1
+    assert summary["link"]["echo_delay_ticks"] == 2
     assert summary["ticks"] == 200
     trace = read_trace(workdir / "logs/v.csv")
     for m in "ab":
@@ -87,7 +87,7 @@ def test_line_noise_is_counted_and_the_run_still_tracks(
     assert link["crc_errors"] > 0 and link["garbage_bytes"] > 0
     assert link["lost_frames"] >= link["crc_errors"] - 2  # a corrupted frame is a lost one
     assert summary["ticks"] == 200
-    assert summary["loop_delay_ticks"] == 4
+    assert summary["loop_delay_ticks"] == 3
     assert "cart: cartctl bridge ready" in err  # the cart's PRINT line, shown on stderr
     for m in "ab":
         assert abs(summary["motors"][m]["steady_state_error"]) < 0.5

@@ -1,19 +1,21 @@
 // cartctl bridge: the contract logic of the bridge sketch, as plain C++ with no Arduino dependency.
 //
-// The contract is docs/serial-protocol.md section 3 (the channel map is also in firmware/README.md).
-// Its Python twin is src/cartctl/plants/bridge_firmware.py (class BridgeFirmware), which the
-// virtual cart runs; tests/test_firmware.py compiles this file with g++ and compares both, tick by
-// tick. Change one, change the other.
+// The contract is docs/serial-protocol.md (the channel map is also in firmware/README.md). Its
+// Python twin is src/cartctl/plants/bridge_firmware.py (class BridgeFirmware), which the virtual
+// cart runs; tests/test_firmware.py compiles this file with g++ and compares both, tick by tick.
+// Change one, change the other.
 //
-// Per 10 ms tick, microOS runs io() (applies the voltage stored at the previous tick, reads the
-// encoders), then control(); the communication thread then receives every waiting GPIO (which
-// overwrites the held input channels) and sends one GPIO with the output channels. robot.cpp
-// calls bridge_receive() with the held input channels and bridge_control() once per control().
+// The sketch calls bridge_receive() whenever it has drained the serial port (every 1 ms from its
+// own thread, and right before each control()), with the channels microOS holds from the host's
+// last GPIO and the time in ms; and bridge_control() once per control(), after io().
 //
 // Rules: the requested voltages (float 0 and 1) pass while drive (int 1) is 1 and the host's
 // sequence number (int 0) keeps changing; a request that is not a finite number counts as 0 V.
-// After BRIDGE_WATCHDOG_TICKS ticks without a new sequence number the watchdog trips: 0 V until a
-// new one arrives. It starts tripped, so nothing moves before the host's first frame.
+// When no new sequence number has arrived for BRIDGE_WATCHDOG_MS at a control(), the watchdog
+// trips: 0 V until a new one arrives. The zero reaches the motor at the next io(), so the motors
+// stop at most BRIDGE_WATCHDOG_MS + 2 ticks (+ the drain period) after the host's last byte: 90 ms
+// plus at most a few ms. It starts tripped, so nothing moves before the host's first frame.
+// Sequence numbers the host skipped are counted (frames lost on the way) and sent back.
 
 #ifndef CARTCTL_BRIDGE_LOGIC_H
 #define CARTCTL_BRIDGE_LOGIC_H
@@ -23,7 +25,8 @@
 #define BRIDGE_FLOATS 8            // GPIO float channels, each way
 #define BRIDGE_INTS 4              // GPIO int channels, each way
 #define BRIDGE_TICK_MODULO 32768L  // tick counter and sequence numbers wrap here (int16 helpers)
-#define BRIDGE_WATCHDOG_TICKS 10   // ticks without a new sequence number before tripping (100 ms)
+#define BRIDGE_WATCHDOG_MS 70UL   // no new sequence number for this long at control(): trip
+#define BRIDGE_SEQ_WINDOW 256L     // a jump beyond this (or backwards) is a new host, not a loss
 #define BRIDGE_STATUS_DRIVING 1    // status bit 0: the requested voltages are applied
 #define BRIDGE_STATUS_WATCHDOG 2   // status bit 1: the watchdog has tripped
 
@@ -49,10 +52,12 @@ struct BridgeState {
   int32_t in_ints[BRIDGE_INTS];
   float out_floats[BRIDGE_FLOATS];
   int32_t out_ints[BRIDGE_INTS];
-  int32_t tick;         // 0 .. BRIDGE_TICK_MODULO - 1, +1 per control()
-  int32_t last_seq;     // the last host sequence number seen
-  int32_t stale_ticks;  // ticks since it last changed, up to BRIDGE_WATCHDOG_TICKS
-  bool driving;         // as decided at the last control()
+  int32_t tick;            // 0 .. BRIDGE_TICK_MODULO - 1, +1 per control()
+  int32_t last_seq;        // the last new host sequence number seen
+  uint32_t last_new_ms;    // when it was seen (the caller's ms clock)
+  int32_t frames_lost;     // host sequence numbers skipped, 0 .. BRIDGE_TICK_MODULO - 1
+  bool seen;               // a host frame has arrived since reset
+  bool driving;            // as decided at the last control()
   bool tripped;
 };
 
@@ -75,29 +80,38 @@ static inline void bridge_reset(BridgeState* s) {
   }
   s->tick = 0;
   s->last_seq = 0;
-  s->stale_ticks = BRIDGE_WATCHDOG_TICKS;
+  s->last_new_ms = 0;
+  s->frames_lost = 0;
+  s->seen = false;
   s->driving = false;
   s->tripped = true;
 }
 
-// A GPIO from the host: every input channel is overwritten, then held. On the cart microOS does
-// this on receipt; robot.cpp copies the held channels in before each control(), which is the same.
+// After a drain of the serial port: the channels microOS holds from the host's last GPIO (every
+// input channel overwritten), seen at now_ms. A sequence number that differs from the last one is a
+// new frame: it feeds the watchdog, and the numbers between the two were lost on the way (a jump
+// backwards or beyond BRIDGE_SEQ_WINDOW is a new host process, not a loss). At power-on the held
+// channels are 0, so a first host frame counts once its sequence number is not 0.
 static inline void bridge_receive(BridgeState* s, const float floats[BRIDGE_FLOATS],
-                                  const int32_t ints[BRIDGE_INTS]) {
+                                  const int32_t ints[BRIDGE_INTS], uint32_t now_ms) {
   for (int k = 0; k < BRIDGE_FLOATS; ++k) s->in_floats[k] = floats[k];
   for (int k = 0; k < BRIDGE_INTS; ++k) s->in_ints[k] = ints[k];
+  const int32_t seq = ints[0];
+  if (seq == s->last_seq) return;
+  const int32_t step = (int32_t)(((seq - s->last_seq) % BRIDGE_TICK_MODULO + BRIDGE_TICK_MODULO) %
+                                 BRIDGE_TICK_MODULO);
+  if (s->seen && step <= BRIDGE_SEQ_WINDOW) {
+    s->frames_lost = (int32_t)((s->frames_lost + step - 1) % BRIDGE_TICK_MODULO);
+  }
+  s->last_seq = seq;
+  s->last_new_ms = now_ms;
+  s->seen = true;
 }
 
-// One control(): fills out_floats / out_ints and returns the voltages for the next tick's io().
-static inline BridgeVoltages bridge_control(BridgeState* s, const BridgeIO* io) {
-  const int32_t seq = s->in_ints[0];
-  if (seq != s->last_seq) {
-    s->last_seq = seq;
-    s->stale_ticks = 0;
-  } else if (s->stale_ticks < BRIDGE_WATCHDOG_TICKS) {
-    s->stale_ticks += 1;
-  }
-  s->tripped = s->stale_ticks >= BRIDGE_WATCHDOG_TICKS;
+// One control() at now_ms: fills out_floats / out_ints and returns the voltages for the next
+// tick's io().
+static inline BridgeVoltages bridge_control(BridgeState* s, const BridgeIO* io, uint32_t now_ms) {
+  s->tripped = !s->seen || (uint32_t)(now_ms - s->last_new_ms) >= BRIDGE_WATCHDOG_MS;
   s->driving = s->in_ints[1] == 1 && !s->tripped;
 
   BridgeVoltages v;
@@ -112,10 +126,10 @@ static inline BridgeVoltages bridge_control(BridgeState* s, const BridgeIO* io) 
   s->out_floats[5] = io->position_b_rad;
   s->out_floats[6] = 0.0f;
   s->out_floats[7] = 0.0f;
-  s->out_ints[0] = seq;  // the echo: the sequence number held at this control()
+  s->out_ints[0] = s->in_ints[0];  // the echo: the sequence number held at this control()
   s->out_ints[1] = s->tick;
   s->out_ints[2] = (s->driving ? BRIDGE_STATUS_DRIVING : 0) | (s->tripped ? BRIDGE_STATUS_WATCHDOG : 0);
-  s->out_ints[3] = 0;
+  s->out_ints[3] = s->frames_lost;
   s->tick = (int32_t)((s->tick + 1) % BRIDGE_TICK_MODULO);
   return v;
 }

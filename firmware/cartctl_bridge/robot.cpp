@@ -1,7 +1,7 @@
 // cartctl bridge sketch: the cart runs no controller of its own; it applies the voltages the PC
 // sends and streams speeds, applied voltages and positions back at 100 Hz (firmware/README.md).
 //
-// Channel map (docs/serial-protocol.md section 3):
+// Channel map (docs/serial-protocol.md):
 //   PC -> cart  float 0, 1  requested voltage A, B (V)
 //               int 0       host sequence number, 0..32767, +1 per frame
 //               int 1       1 = drive, 0 = stop
@@ -11,6 +11,7 @@
 //               int 0       echo of the held host sequence number
 //               int 1       tick counter, 0..32767
 //               int 2       status: bit 0 driving, bit 1 watchdog tripped
+//               int 3       host sequence numbers the cart never saw (lost frames), 0..32767
 //
 // Motor A: the template's getSpeedMotorA() and getPositionMotorA() already carry motor A's sign
 // flip (a negative encoder scale in mecotron.h), so the bridge passes both motors through
@@ -36,15 +37,22 @@ static float clampToSupply(float volts) {
   return volts;
 }
 
-void Robot::control() {
-  // microOS overwrites the input channels when a GPIO arrives and holds them in between, so
-  // copying them in every tick is the Python twin's receive() on arrival.
+// Drains the serial port through microOS's communicator (which overwrites the held input channels
+// with every GPIO it decodes), then hands the held channels to the bridge with the time. Called
+// every 1 ms from its own thread, so the Mega's 63-byte receive ring holds at most what the line
+// carries while this thread waits: 12 bytes per ms, about 55 bytes even when io() + control()
+// (1.2 ms) and microOS's communication thread (up to 2.5 ms) run just before it. Called again
+// right before control(), so a command that has arrived by then acts at this tick.
+void Robot::receive() {
+  getCommunicator()->receive();
   float in_floats[BRIDGE_FLOATS];
   int32_t in_ints[BRIDGE_INTS];
   for (uint8_t k = 0; k < BRIDGE_FLOATS; ++k) in_floats[k] = readFloat(k);
   for (uint8_t k = 0; k < BRIDGE_INTS; ++k) in_ints[k] = readInt(k);
-  bridge_receive(&_bridge, in_floats, in_ints);
+  bridge_receive(&_bridge, in_floats, in_ints, (uint32_t)millis());
+}
 
+void Robot::control() {
   BridgeIO io;
   io.speed_a_rad_s = getSpeedMotorA();
   io.speed_b_rad_s = getSpeedMotorB();
@@ -53,7 +61,7 @@ void Robot::control() {
   io.position_a_rad = getPositionMotorA();
   io.position_b_rad = getPositionMotorB();
 
-  BridgeVoltages v = bridge_control(&_bridge, &io);
+  BridgeVoltages v = bridge_control(&_bridge, &io, (uint32_t)millis());
   setVoltageMotorA(clampToSupply(v.a_v));  // reaches the motor at the next tick's io()
   setVoltageMotorB(clampToSupply(v.b_v));
 

@@ -15,6 +15,7 @@ from cartctl.plants.factory import make_plant
 from cartctl.plants.sim import SUPPLY_V
 from cartctl.progress import ProgressBar
 from cartctl.signals import SIGNALS, make_signal
+from cartctl.sinks.summary import host_loss_text, warn_host_losses
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -97,8 +98,10 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"  loop delay {delay} ticks from the echo (the report's model structure for this "
             f"loop: nk = {None if delay is None else delay + 1}); {stats['crc_errors']} CRC errors, "
-            f"{stats['lost_frames']} frames lost, {stats['missed_ticks']} cart ticks missed"
+            f"{stats['lost_frames']} frames lost, {stats['missed_ticks']} cart ticks missed; "
+            + host_loss_text(stats)
         )
+        warn_host_losses(stats, "excite")
     if result.failure:
         print(f"cartctl excite: error: {result.failure}; the trace holds the ticks recorded so far",
               file=sys.stderr)  # fmt: skip

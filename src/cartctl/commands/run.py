@@ -20,7 +20,7 @@ from cartctl.plants.factory import is_serial, make_plant
 from cartctl.runtime.loop import ControlLoop, MemorySink
 from cartctl.runtime.reference import FORMS, reference_signal
 from cartctl.sinks.csv_sink import CsvSink
-from cartctl.sinks.summary import format_summary, trace_metrics
+from cartctl.sinks.summary import format_summary, trace_metrics, warn_host_losses
 
 DEFAULT_CONTROLLER = Path("controllers/pi.toml")
 DEFAULT_SERIAL_CONTROLLER = Path("controllers/serial-pi.toml")
@@ -316,6 +316,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"  plant {description}; controller {given}; {scheduling}")
     for problem in loop.state.sink_errors:
         print(f"cartctl run: warning: {problem}", file=sys.stderr)
+    warn_host_losses(summary.get("link"), "run")
     if loop.state.failure:
         print(f"cartctl run: error: {loop.state.failure}", file=sys.stderr)
         return 1

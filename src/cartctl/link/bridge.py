@@ -1,15 +1,16 @@
 """The bridge sketch's channel map: how GPIO channels carry commands and measurements.
 
-The PC drives the cart through GPIO frames in both directions (docs/serial-protocol.md §3):
+The PC drives the cart through GPIO frames in both directions (``docs/serial-protocol.md``):
 
 - PC → cart: floats 0, 1 are the requested voltages of motors A, B (V); int 0 is the host sequence
   number (0..32767, +1 per frame) and int 1 is 1 to drive, 0 to stop.
 - cart → PC: floats 0..5 are the measured speeds (rad/s), the voltages actually applied (V) and the
   wheel positions (rad) of A, B; int 0 echoes the last host sequence number, int 1 is the cart's
-  tick counter (0..32767) and int 2 holds status bits (driving, watchdog tripped).
+  tick counter (0..32767), int 2 holds status bits (driving, watchdog tripped) and int 3 counts the
+  host sequence numbers the cart never saw (frames lost on the way in, modulo 32768).
 
 The cart's template helpers are int16, hence the sequence modulo 32768. The cart applies zero volts
-once the host sequence number has not changed for :data:`WATCHDOG_TICKS` ticks.
+once no new host sequence number has arrived for :data:`WATCHDOG_MS` ms.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ __all__ = [
     "CH_APPLIED_B",
     "CH_DRIVE",
     "CH_ECHO",
+    "CH_HOST_LOST",
     "CH_POSITION_A",
     "CH_POSITION_B",
     "CH_SEQ",
@@ -34,10 +36,12 @@ __all__ = [
     "CH_TICK",
     "CH_VOLTAGE_A",
     "CH_VOLTAGE_B",
+    "HOST_LOSS_WARN_PERCENT",
     "SEQ_MODULO",
+    "SEQ_WINDOW",
     "STATUS_DRIVING",
     "STATUS_WATCHDOG",
-    "WATCHDOG_TICKS",
+    "WATCHDOG_MS",
     "CartSample",
     "HostCommand",
     "next_seq",
@@ -46,8 +50,13 @@ __all__ = [
 
 SEQ_MODULO = 32768
 """Host sequence numbers and cart ticks count modulo this (int16 helpers on the cart)."""
-WATCHDOG_TICKS = 10
-"""The cart stops after this many ticks (100 ms) without a new host sequence number."""
+HOST_LOSS_WARN_PERCENT = 1.0
+"""More of the host's frames than this (%) lost on the way to the cart is worth a warning."""
+SEQ_WINDOW = 256
+"""A host sequence number further ahead than this (or behind) is a new host, not lost frames."""
+WATCHDOG_MS = 70
+"""The cart trips at the first ``control()`` this long (ms) after the last new host sequence
+number: the motors are off at most 90 ms after the host's last frame (the next tick, then io())."""
 STATUS_DRIVING = 1
 """Status bit: the cart applies the requested voltages."""
 STATUS_WATCHDOG = 2
@@ -68,6 +77,7 @@ CH_POSITION_B = 5
 CH_ECHO = 0
 CH_TICK = 1
 CH_STATUS = 2
+CH_HOST_LOST = 3
 
 
 def _check_counts(floats: Sequence[float], ints: Sequence[int]) -> None:
@@ -149,6 +159,9 @@ class CartSample:
         The cart's tick counter, 0..32767.
     driving, watchdog_tripped
         The status bits.
+    host_frames_lost
+        Host sequence numbers the cart skipped since it booted (modulo 32768; 0 from a bridge
+        sketch that predates the count).
     """
 
     time_ms: int
@@ -162,6 +175,7 @@ class CartSample:
     cart_tick: int
     driving: bool
     watchdog_tripped: bool
+    host_frames_lost: int = 0
 
     @property
     def status(self) -> int:
@@ -183,6 +197,7 @@ class CartSample:
         ints[CH_ECHO] = self.echo_seq
         ints[CH_TICK] = self.cart_tick
         ints[CH_STATUS] = self.status
+        ints[CH_HOST_LOST] = self.host_frames_lost
         return tuple(floats), tuple(ints)
 
     @classmethod
@@ -203,4 +218,5 @@ class CartSample:
             cart_tick=ints[CH_TICK],
             driving=bool(status & STATUS_DRIVING),
             watchdog_tripped=bool(status & STATUS_WATCHDOG),
+            host_frames_lost=ints[CH_HOST_LOST] % SEQ_MODULO,
         )

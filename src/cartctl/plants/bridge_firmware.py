@@ -1,19 +1,21 @@
-"""The bridge sketch's per-tick logic (``firmware/cartctl_bridge``), in Python, for the virtual cart.
+"""The bridge sketch's logic (``firmware/cartctl_bridge/bridge_logic.h``), in Python, for the virtual cart.
 
-The sketch on the cart and this class implement one contract (``docs/serial-protocol.md`` §3), and
-a test runs both on the same input and compares them tick by tick, so keep them in sync.
+The sketch on the cart and this class implement one contract (``docs/serial-protocol.md``), and a
+test runs both on the same input and compares them tick by tick, so keep them in sync.
 
-microOS calls, every 10 ms: ``io()`` (writes the voltage stored at the previous tick, reads the
-encoders), then ``control()``; the communication thread then receives every waiting GPIO (which
-overwrites the held input channels) and sends one GPIO with the output channels ``control()`` wrote.
-This class is ``control()`` and the held input channels:
+The sketch drains the serial port every 1 ms from its own microOS thread and once more right
+before each ``control()``; after each drain it hands the channels microOS holds from the host's last
+GPIO to :meth:`BridgeFirmware.receive`, with the time. Every 10 ms microOS runs ``io()`` (writes
+the voltage stored at the previous tick, reads the encoders), then ``control()``, which is
+:meth:`BridgeFirmware.control`:
 
 - the requested voltages (float channels 0 and 1) are applied while drive (int channel 1) is 1 and
   the host sequence number (int channel 0) keeps changing (a request that is not a finite number
-  counts as 0 V); after :data:`WATCHDOG_TICKS` ticks
-  without a new one, the watchdog trips and the cart applies zero volts until a new frame arrives;
+  counts as 0 V); when no new sequence number has arrived for :data:`WATCHDOG_MS` at a
+  ``control()``, the watchdog trips and the cart applies zero volts until a new one arrives;
 - out go the measured speeds, the voltages on the H-bridges at this tick, the wheel positions, the
-  echo of the held sequence number, a tick counter and the status bits.
+  echo of the held sequence number, a tick counter, the status bits and the count of host
+  sequence numbers the cart never saw (frames lost on the way in).
 """
 
 from __future__ import annotations
@@ -23,9 +25,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from cartctl.link.bridge import SEQ_MODULO as TICK_MODULO
-from cartctl.link.bridge import STATUS_DRIVING, STATUS_WATCHDOG, WATCHDOG_TICKS
+from cartctl.link.bridge import SEQ_WINDOW, STATUS_DRIVING, STATUS_WATCHDOG, WATCHDOG_MS
 
-__all__ = ["STATUS_DRIVING", "STATUS_WATCHDOG", "TICK_MODULO", "WATCHDOG_TICKS", "BridgeFirmware",
+__all__ = ["STATUS_DRIVING", "STATUS_WATCHDOG", "TICK_MODULO", "WATCHDOG_MS", "BridgeFirmware",
            "CartIO"]  # fmt: skip
 
 
@@ -52,29 +54,41 @@ class BridgeFirmware:
         self.reset()
 
     def reset(self) -> None:
-        """Power-on state: every channel 0, so nothing drives until the host says so."""
+        """Power-on state: every channel 0, tripped until the host's first frame."""
         self.in_floats: list[float] = [0.0] * 8
         self.in_ints: list[int] = [0] * 4
         self.out_floats: list[float] = [0.0] * 8
         self.out_ints: list[int] = [0] * 4
         self.tick = 0
         self._last_seq = 0
-        self._stale_ticks = WATCHDOG_TICKS  # tripped until the host's first frame
+        self._last_new_ms = 0
+        self._seen = False
+        self.frames_lost = 0
+        """Host sequence numbers skipped since power-on (modulo 32768)."""
 
-    def receive(self, floats: Sequence[float], ints: Sequence[int]) -> None:
-        """A GPIO from the host: every input channel is overwritten and then held."""
+    def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int) -> None:
+        """After a drain: the held channels from the host's last GPIO, seen at ``now_ms``.
+
+        A sequence number that differs from the last one is a new frame: it feeds the watchdog,
+        and the numbers skipped in between count as lost, unless the jump is backwards or beyond
+        :data:`~cartctl.link.bridge.SEQ_WINDOW` (a new host process).
+        """
         self.in_floats = [float(v) for v in floats]
         self.in_ints = [int(v) for v in ints]
-
-    def control(self, io: CartIO) -> tuple[float, float]:
-        """One ``control()`` call: returns the voltages (V) for the next tick's ``io()``."""
         seq = self.in_ints[0]
-        if seq != self._last_seq:
-            self._last_seq = seq
-            self._stale_ticks = 0
-        elif self._stale_ticks < WATCHDOG_TICKS:
-            self._stale_ticks += 1
-        tripped = self._stale_ticks >= WATCHDOG_TICKS
+        if seq == self._last_seq:
+            return
+        step = (seq - self._last_seq) % TICK_MODULO
+        if self._seen and step <= SEQ_WINDOW:
+            self.frames_lost = (self.frames_lost + step - 1) % TICK_MODULO
+        self._last_seq = seq
+        self._last_new_ms = int(now_ms) & 0xFFFFFFFF
+        self._seen = True
+
+    def control(self, io: CartIO, now_ms: int) -> tuple[float, float]:
+        """One ``control()`` at ``now_ms``: returns the voltages (V) for the next tick's ``io()``."""
+        age_ms = ((int(now_ms) & 0xFFFFFFFF) - self._last_new_ms) & 0xFFFFFFFF
+        tripped = not self._seen or age_ms >= WATCHDOG_MS
         driving = self.in_ints[1] == 1 and not tripped
         voltage_a = _finite_or_zero(self.in_floats[0]) if driving else 0.0
         voltage_b = _finite_or_zero(self.in_floats[1]) if driving else 0.0
@@ -83,6 +97,6 @@ class BridgeFirmware:
             io.position_a_rad, io.position_b_rad, 0.0, 0.0,
         ]  # fmt: skip
         status = (STATUS_DRIVING if driving else 0) | (STATUS_WATCHDOG if tripped else 0)
-        self.out_ints = [seq, self.tick, status, 0]
+        self.out_ints = [self.in_ints[0], self.tick, status, self.frames_lost]
         self.tick = (self.tick + 1) % TICK_MODULO
         return voltage_a, voltage_b

@@ -131,7 +131,7 @@ class OnboardFirmware:
         for controller in self.controllers.values():
             controller.reset()
 
-    def receive(self, floats: Sequence[float], ints: Sequence[int]) -> None:
+    def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int = 0) -> None:
         """A GPIO from the host: every input channel is overwritten and then held."""
         self.in_floats = [float(v) for v in floats]
         self.in_ints = [int(v) for v in ints]
@@ -142,7 +142,7 @@ class OnboardFirmware:
             return self._schedules[motor].at(self.tick)
         return self.in_floats[IN_REFERENCE[motor]]
 
-    def control(self, io: CartIO) -> tuple[float, float]:
+    def control(self, io: CartIO, now_ms: int = 0) -> tuple[float, float]:
         """One ``control()`` call: returns the voltages (V) for the next tick's ``io()``."""
         measured = {"a": io.speed_a_rad_s, "b": io.speed_b_rad_s}
         out = [0.0] * 8

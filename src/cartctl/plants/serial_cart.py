@@ -1,7 +1,7 @@
 """The real cart over serial (``--plant serial:PORT``), running the bridge sketch of ``firmware/``.
 
 The loop is clocked by the cart: each GPIO the cart sends (every 10 ms) is one tick. The host
-answers each with the full channel vector of the bridge contract (``docs/serial-protocol.md`` §3):
+answers each with the full channel vector of the bridge contract (``docs/serial-protocol.md``):
 voltages A and B, drive = 1 and a sequence number that increases by one per frame. The cart echoes
 the last sequence number it received; from that echo the plant measures the loop delay::
 
@@ -11,11 +11,13 @@ the last sequence number it received; from that echo the plant measures the loop
     tick k+E+1  io() puts the voltage on the motor
 
 so the loop delay from measurement to applied voltage is E + 1 ticks (1 for the cart's on-board
-control, the report's "microOS delay"), and a model of the loop has an input delay of
-``nk = loop_delay_ticks + 1`` (2 on board, as in the report).
+control, the report's "microOS delay"; 3 for this loop with the bridge sketch of ``firmware/``),
+and a model of the loop has an input delay of ``nk = loop_delay_ticks + 1`` (2 on board, as in
+the report).
 
 Faults are counted, not fatal: CRC errors and garbage are skipped by the framer, missing cart ticks
-are counted. No GPIO for 100 ms, or a vanished port, raises :class:`~cartctl.errors.PlantError`.
+are counted, and so are the host's frames the cart never saw (the bridge counts the sequence
+numbers it skipped and sends the count back). No GPIO for 100 ms, or a vanished port, raises :class:`~cartctl.errors.PlantError`.
 :meth:`SerialCart.close` sends drive = 0 with zero volts whenever the port still works.
 """
 
@@ -88,6 +90,10 @@ class SerialCart:
         self.missed_ticks = 0
         self.skipped_ticks = 0
         self.watchdog_trips = 0
+        self.frames_sent = 0
+        """Frames sent since the last :meth:`reset` (the stop frames of :meth:`close` excluded)."""
+        self._lost_base = 0
+        self._sent_any = False
 
     # -- connecting -----------------------------------------------------------------------------
 
@@ -117,18 +123,26 @@ class SerialCart:
         gpio, arrival = self.link.next_gpio(max(self.link.silence_timeout_s, 0.5))
         sample = CartSample.from_gpio(gpio)
         self.sample, self.arrival_s, self.tick_index = sample, arrival, 0
-        self._seq = next_seq(sample.echo_seq)  # differs from what the cart holds: counts as new
+        if not self._sent_any:  # differs from what the cart holds: counts as new, none lost
+            self._seq = next_seq(sample.echo_seq)
         self._echo = sample.echo_seq
         self._sent_at.clear()
+        self._lost_base = sample.host_frames_lost
+        self.frames_sent = 0
         return Measurement(sample.speed_a_rad_s, sample.speed_b_rad_s)
 
     def send(self, voltage_a_v: float, voltage_b_v: float, *, drive: bool = True) -> None:
         """Send the channel vector for this tick (voltages, sequence number, drive)."""
+        self._send(voltage_a_v, voltage_b_v, drive)
+        self.frames_sent += 1
+
+    def _send(self, voltage_a_v: float, voltage_b_v: float, drive: bool) -> None:
         if self.link.vanished:
             raise PlantError(self.link.failure)
         command = HostCommand(float(voltage_a_v), float(voltage_b_v), self._seq, drive)
         floats, ints = command.to_channels()
         self.link.send(self.encoder.gpio(0, floats, ints))
+        self._sent_any = True
         self._sent_at[self._seq] = self.tick_index
         if len(self._sent_at) > 256:  # only the recent ones can still be echoed
             self._sent_at.pop(next(iter(self._sent_at)))
@@ -210,7 +224,7 @@ class SerialCart:
         if self.connected and not self.link.vanished:
             with contextlib.suppress(PlantError):
                 for _ in range(STOP_FRAMES):
-                    self.send(0.0, 0.0, drive=False)
+                    self._send(0.0, 0.0, drive=False)
         self.link.close()
         self.connected = False
 
@@ -229,10 +243,22 @@ class SerialCart:
         echo = self.echo_delay_ticks
         return None if echo is None else echo + 1
 
+    @property
+    def host_frames_lost(self) -> int:
+        """The host's frames the cart never saw since :meth:`reset` (from the cart's count).
+
+        The count comes with the cart's samples, so the last few frames of a run (those sent
+        after the last sample's tick) are not in it.
+        """
+        if self.sample is None:
+            return 0
+        return tick_difference(self._lost_base, self.sample.host_frames_lost)
+
     def link_summary(self) -> dict[str, Any]:
         """Link figures for the run summary (extends contract 3)."""
         stats = self.link.stats
         delays = list(self.echo_delays.elements())
+        lost, sent = self.host_frames_lost, self.frames_sent
         return {
             "loop_delay_ticks": self.loop_delay_ticks,
             "link": {
@@ -248,5 +274,8 @@ class SerialCart:
                 "missed_ticks": self.missed_ticks,
                 "skipped_ticks": self.skipped_ticks,
                 "watchdog_trips": self.watchdog_trips,
+                "host_frames_sent": sent,
+                "host_frames_lost": lost,
+                "host_frames_lost_percent": 100.0 * lost / sent if sent else 0.0,
             },
         }

@@ -4,23 +4,32 @@
 one inside the process and drives it through :class:`~cartctl.plants.serial_cart.SerialCart`, so the
 real serial code path (pyserial, framing, the bridge contract, the faults) runs with no hardware.
 
-It keeps the firmware's order within each 10 ms tick (``docs/serial-protocol.md`` §2)::
+It keeps the firmware's schedule within each 10 ms tick (``docs/serial-protocol.md``)::
 
-    io()       the physics advances one tick under the voltage stored at the previous tick,
-               and the encoders are read
-    control()  the bridge logic (:class:`~cartctl.plants.bridge_firmware.BridgeFirmware`)
-    receive    every GPIO whose last byte has arrived by now (on the cart's schedule: a tick
-               the host's load starts late looks as early as an on-time one would) overwrites
-               the held channels
-    send       one GPIO with what control() wrote (a HEARTBEAT every 1.1 s as well)
+    0 ms       io(): the physics advances one tick under the voltage stored at the previous
+               tick, and the encoders are read; the bridge drains the serial port and hands the
+               held channels over; then control(): the bridge logic
+               (:class:`~cartctl.plants.bridge_firmware.BridgeFirmware`)
+    1.2 ms     microOS's communication thread: drains the serial port, then sends one GPIO with
+               what control() wrote (a HEARTBEAT every 1.1 s as well)
+    every ms   the bridge's own thread drains the serial port and hands the held channels over
 
-and the line's speed: 115200 baud 8N1 is 86.8 µs per byte in each direction. A pseudo-terminal
+A drain finds what arrived since the previous one, up to the Mega's 63-byte receive ring; the
+rest is dropped, and microOS's parser loses the damaged frames (:mod:`cartctl.plants.cart_uart`).
+``receive=microos`` runs the sketch as it was before its own drains: microOS's communication
+thread alone drains the port, once per tick, and ``control()`` reads what it held. Then two replies
+that reach the cart a little closer together than the tick overflow the ring.
+
+The line's speed: 115200 baud 8N1 is 86.8 µs per byte in each direction. A pseudo-terminal
 delivers at once, so a writer thread releases outgoing bytes at that rate, and incoming bytes count
-as received only once the line could have carried them. Three threads: ticks, reader, writer.
+as received only once the line could have carried them. Three threads: ticks, reader, writer. The
+drains are computed on the cart's clock (tick k starts ``k × 10 ms`` after boot), whenever the
+tick thread gets to them, so a busy host machine delays the cart's replies but not its view of
+when bytes arrived.
 
 Faults (:class:`CartFaults`) are injected on the way out: garbage bursts between frames, corrupted
 frames, a stall (the cart stops ticking and sending, the port stays open) and a pulled cable (the
-port vanishes).
+port vanishes); and on the way in: replies held back by a random delay (``reply_jitter_ms``).
 """
 
 from __future__ import annotations
@@ -29,9 +38,7 @@ import collections
 import contextlib
 import math
 import os
-import queue
 import random
-import select
 import threading
 import time
 import tty
@@ -40,16 +47,20 @@ from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 from cartctl.errors import InputError
-from cartctl.link import Encoder, Framer, Gpio, encode_gpiox_v2
+from cartctl.link import Encoder, encode_gpiox_v2
 from cartctl.plants.base import Measurement
 from cartctl.plants.bridge_firmware import TICK_MODULO, BridgeFirmware, CartIO
+from cartctl.plants.cart_uart import LineReader, MicroosParser, PacedWriter, fill_ring
 from cartctl.plants.physics import PhysicsPlant
 from cartctl.plants.serial_cart import SerialCart
 
-BAUD = 115200
-BYTE_TIME_S = 10.0 / BAUD
-"""One byte of 8N1 on the line (s): 86.8 µs."""
 HEARTBEAT_PERIOD_S = 1.1
+COMM_PHASE_US = 1200
+"""microOS's communication thread runs this long (µs) after the tick starts: io() and control()
+take 1.2 ms on the Mega."""
+RECEIVE_SCHEDULES = {"bridge": 1000, "microos": None}
+"""Receive schedules: the bridge's drain period (µs), or None for microOS's communication thread
+alone (the bridge sketch before it drained the port itself, and a controller on the cart)."""
 READY_TEXT = "cartctl bridge ready"
 
 
@@ -71,6 +82,11 @@ class CartFaults:
     generation : str
         'a' (MAVLink 1, GPIO: what the bridge sketch speaks) or 'b' (MAVLink 2, GPIOX: the newer
         firmware, which cartctl refuses).
+    reply_jitter_ms : float
+        Each write of the host reaches the line a random 0 .. this many ms late.
+    receive : str
+        'bridge' (the bridge sketch drains the port every 1 ms and before control()) or
+        'microos' (microOS's communication thread alone, once per tick: the sketch before).
     """
 
     garbage: float = 0.0
@@ -78,8 +94,10 @@ class CartFaults:
     stall_after_s: float | None = None
     pull_after_s: float | None = None
     generation: str = "a"
+    reply_jitter_ms: float = 0.0
+    receive: str = "bridge"
 
-    KEYS = ("garbage", "corrupt", "stall", "pull", "generation")
+    KEYS = ("garbage", "corrupt", "stall", "pull", "generation", "reply_jitter_ms", "receive")
 
     def __post_init__(self) -> None:
         for name in ("garbage", "corrupt"):
@@ -92,10 +110,22 @@ class CartFaults:
                 raise InputError(f"fault time '{name}' must be >= 0 s, got {value}")
         if self.generation not in ("a", "b"):
             raise InputError(f"generation must be 'a' or 'b', got '{self.generation}'")
+        if not (math.isfinite(self.reply_jitter_ms) and 0.0 <= self.reply_jitter_ms <= 1000.0):
+            raise InputError(
+                f"fault 'reply_jitter_ms' must be in [0, 1000] ms, got {self.reply_jitter_ms}"
+            )
+        if self.receive not in RECEIVE_SCHEDULES:
+            raise InputError(
+                f"receive must be one of {', '.join(RECEIVE_SCHEDULES)}, got '{self.receive}'"
+            )
 
     @classmethod
     def parse(cls, text: str) -> CartFaults:
-        """Faults from ``key=value,...``: garbage=0.05, corrupt=0.05, stall=S, pull=S, generation=b."""
+        """Faults from ``key=value,...``.
+
+        Keys: garbage=0.05, corrupt=0.05, stall=S, pull=S, generation=b, reply_jitter_ms=3,
+        receive=microos.
+        """
         faults = cls()
         for item in filter(None, (part.strip() for part in text.split(","))):
             key, sep, value = item.partition("=")
@@ -104,8 +134,8 @@ class CartFaults:
                 raise InputError(
                     f"bad fault '{item}'; expected key=value with key in {', '.join(cls.KEYS)}"
                 )
-            if key == "generation":
-                faults = replace(faults, generation=value.strip().lower())
+            if key in ("generation", "receive"):
+                faults = replace(faults, **{key: value.strip().lower()})
                 continue
             try:
                 number = float(value)
@@ -122,88 +152,13 @@ class CartFirmware(Protocol):
     out_floats: list[float]
     out_ints: list[int]
 
-    def receive(self, floats: Sequence[float], ints: Sequence[int]) -> None:
-        """A GPIO from the host overwrites the held input channels."""
+    def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int) -> None:
+        """The channels held from the host's last GPIO, handed over at ``now_ms``."""
         ...
 
-    def control(self, io: CartIO) -> tuple[float, float]:
+    def control(self, io: CartIO, now_ms: int) -> tuple[float, float]:
         """One tick: returns the voltages (V) for the next ``io()``; fills the output channels."""
         ...
-
-
-class _PacedWriter(threading.Thread):
-    """Writes queued bytes to the pty master no faster than the line carries them."""
-
-    CHUNK_BYTES = 8  # ~0.7 ms of line time per write
-
-    def __init__(self, fd: int, stop: threading.Event) -> None:
-        super().__init__(name="virtual-cart-writer", daemon=True)
-        self.fd = fd
-        self.stop_event = stop
-        self.queue: queue.SimpleQueue[bytes] = queue.SimpleQueue()
-        self.dropped_bytes = 0
-        self._line_free_s = 0.0
-
-    def run(self) -> None:
-        while not self.stop_event.is_set():
-            try:
-                data = self.queue.get(timeout=0.05)
-            except queue.Empty:
-                continue
-            start = max(time.perf_counter(), self._line_free_s)
-            for offset in range(0, len(data), self.CHUNK_BYTES):
-                chunk = data[offset : offset + self.CHUNK_BYTES]
-                due = start + (offset + len(chunk)) * BYTE_TIME_S
-                delay = due - time.perf_counter()
-                if delay > 0:
-                    time.sleep(delay)
-                if self.stop_event.is_set():
-                    return
-                try:
-                    os.write(self.fd, chunk)
-                except BlockingIOError:  # nobody reads the port: the bytes are lost, as on a UART
-                    self.dropped_bytes += len(chunk)
-                except OSError:
-                    return
-            self._line_free_s = start + len(data) * BYTE_TIME_S
-
-
-class _LineReader(threading.Thread):
-    """Reads what the host writes and stamps each byte with when the line delivered it."""
-
-    def __init__(self, fd: int, stop: threading.Event) -> None:
-        super().__init__(name="virtual-cart-reader", daemon=True)
-        self.fd = fd
-        self.stop_event = stop
-        self._lock = threading.Lock()
-        self._arrived: collections.deque[tuple[float, bytes]] = collections.deque()
-        self._line_free_s = 0.0
-
-    def run(self) -> None:
-        while not self.stop_event.is_set():
-            try:
-                ready, _, _ = select.select([self.fd], [], [], 0.05)
-                if not ready:
-                    continue
-                data = os.read(self.fd, 4096)
-            except OSError:  # the pty went away (cable pulled, cart stopped)
-                return
-            if not data:
-                return
-            now = time.perf_counter()
-            start = max(now, self._line_free_s)
-            with self._lock:
-                for i in range(len(data)):
-                    self._arrived.append((start + (i + 1) * BYTE_TIME_S, data[i : i + 1]))
-            self._line_free_s = start + len(data) * BYTE_TIME_S
-
-    def take(self, now_s: float) -> bytes:
-        """Every byte whose last bit has arrived by ``now_s``."""
-        out = bytearray()
-        with self._lock:
-            while self._arrived and self._arrived[0][0] <= now_s:
-                out += self._arrived.popleft()[1]
-        return bytes(out)
 
 
 class VirtualCart:
@@ -222,7 +177,8 @@ class VirtualCart:
     period_s : float
         The tick (s), 0.01 as microOS.
     firmware : CartFirmware, optional
-        What runs in ``control()``: the bridge sketch (default), or a controller on the cart.
+        What runs in ``control()``: the bridge sketch (default), or a controller on the cart
+        (which reads the channels microOS's communication thread received: ``receive=microos``).
 
     Use as a context manager, or :meth:`start` and :meth:`stop`. :attr:`port` is the path to
     open (``/dev/pts/N``).
@@ -243,20 +199,35 @@ class VirtualCart:
         self.faults = faults or CartFaults()
         self.period_s = float(period_s)
         self.firmware: CartFirmware = firmware if firmware is not None else BridgeFirmware()
+        self.receive_schedule = self.faults.receive if firmware is None else "microos"
         self._rng = random.Random(seed)
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)  # no echo, no line editing before the host configures the port
         os.set_blocking(self._master, False)
         self.port = os.ttyname(self._slave)
         self._stop = threading.Event()
-        self._writer = _PacedWriter(self._master, self._stop)
-        self._reader = _LineReader(self._master, self._stop)
+        self._writer = PacedWriter(self._master, self._stop)
+        self._reader = LineReader(
+            self._master, self._stop, reply_jitter_s=self.faults.reply_jitter_ms / 1000.0,
+            seed=None if seed is None else seed + 1,
+        )  # fmt: skip
+        self._parser = MicroosParser()
+        self._held: tuple[list[float], list[int]] = ([0.0] * 8, [0] * 4)
+        self.boot_s = 0.0
+        """``time.perf_counter`` at boot: tick k starts ``k × period_s`` later."""
         self._ticker = threading.Thread(target=self._run, name="virtual-cart", daemon=True)
         self.ticks = 0
         self.true_speeds: dict[int, tuple[float, float]] = {}
         """True wheel speeds (rad/s) at each recent tick, by the tick counter the cart sends."""
         self.frames_received = 0
+        """GPIO frames microOS decoded from the host."""
+        self.ring_dropped_bytes = 0
+        """Bytes the receive ring dropped (it was full)."""
         self.last_voltage_v: tuple[float, float] = (0.0, 0.0)
+        self.applied_log: collections.deque[tuple[float, float, float]] = collections.deque(
+            maxlen=1024
+        )
+        """``(time.perf_counter, A, B)``: the voltages io() put on the motors at recent ticks."""
         self.state = "idle"
         self.first_frame_at_s: float | None = None
         """``time.perf_counter`` when the host's first GPIO arrived (faults count from there)."""
@@ -298,6 +269,11 @@ class VirtualCart:
         """Block for ``seconds`` or until the cart stops."""
         self._ticker.join(timeout=seconds)
 
+    @property
+    def last_host_byte_at_s(self) -> float | None:
+        """``time.perf_counter`` when the host's last byte was through the line (None: none yet)."""
+        return self._reader.last_byte_at_s
+
     def wait_ticks(self, n: int, timeout_s: float = 0.5) -> None:
         """Block until the cart has run ``n`` more ticks (or stopped, or ``timeout_s`` passed)."""
         target = self.ticks + n
@@ -315,42 +291,77 @@ class VirtualCart:
 
     # -- the firmware ---------------------------------------------------------------------------
 
-    def _send(self, frame: bytes) -> None:
+    def _send(self, frame: bytes, not_before_s: float) -> None:
         faults, rng = self.faults, self._rng
         if faults.garbage and rng.random() < faults.garbage:
-            self._writer.queue.put(bytes(rng.getrandbits(8) for _ in range(rng.randint(1, 16))))
+            burst = bytes(rng.getrandbits(8) for _ in range(rng.randint(1, 16)))
+            self._writer.put(burst, not_before_s)
         if faults.corrupt and rng.random() < faults.corrupt:
             data = bytearray(frame)
             i = rng.randrange(1, len(data))  # any byte after the start byte
             data[i] ^= rng.randint(1, 255)
             frame = bytes(data)
-        self._writer.queue.put(frame)
+        self._writer.put(frame, not_before_s)
+
+    def _drain(self, at_us: int, hand_over: bool) -> None:
+        """A call of microOS's receive at ``at_us`` after boot; ``hand_over``: the bridge's."""
+        kept, dropped = fill_ring(self._reader.take(self.boot_s + at_us * 1e-6))
+        self.ring_dropped_bytes += dropped
+        for gpio in self._parser.feed(kept):
+            self._held = (list(gpio.floats), list(gpio.ints))
+            self.frames_received += 1
+            if self.first_frame_at_s is None:
+                self.first_frame_at_s = self.boot_s + at_us * 1e-6
+        if hand_over:
+            self.firmware.receive(*self._held, at_us // 1000)
+
+    def receive_for_tick(self, j: int) -> None:
+        """Every drain from the previous tick's ``control()`` up to tick ``j``'s, in order.
+
+        microOS's communication thread drains :data:`COMM_PHASE_US` into each tick; the bridge
+        (``receive='bridge'``) drains every 1 ms and right before ``control()``, and hands the held
+        channels over each time; otherwise ``control()`` is handed what microOS holds.
+        """
+        period_us = round(self.period_s * 1e6)
+        tick_us = j * period_us
+        drain_us = RECEIVE_SCHEDULES[self.receive_schedule]
+        if j > 0:
+            start_us = tick_us - period_us
+            drains = [(start_us + COMM_PHASE_US, False)]
+            if drain_us is not None:  # its drain at start_us came before that tick's control()
+                drains += [(start_us + m * drain_us, True) for m in range(1, period_us // drain_us)]
+            for at_us, hand_over in sorted(drains):
+                self._drain(at_us, hand_over)
+        if drain_us is not None:
+            self._drain(tick_us, hand_over=True)
+        else:
+            self.firmware.receive(*self._held, tick_us // 1000)
 
     def _run(self) -> None:
         encoder = Encoder(sysid=0, compid=0)
-        framer = Framer()
         physics, firmware = self.physics, self.firmware
         rad_per_count = 2.0 * math.pi / physics.params.counts_per_rev
-        boot = time.perf_counter()
+        period_us = round(self.period_s * 1e6)
+        boot = self.boot_s = time.perf_counter()
         self.state = "running"
         generation_a = self.faults.generation == "a"
         if generation_a:  # a generation-B cart speaks MAVLink 2 only (its GPIOX frames, below)
-            self._writer.queue.put(encoder.heartbeat(0))
+            self._writer.put(encoder.heartbeat(0))
             ready = getattr(self.firmware, "ready_text", READY_TEXT)
             for frame in encoder.print_text(ready + "\r\n"):
-                self._writer.queue.put(frame)
+                self._writer.put(frame)
         next_heartbeat = boot + HEARTBEAT_PERIOD_S
         measurement = physics.reset()
         voltage = (0.0, 0.0)
         j = 0
         faults = self.faults
         while not self._stop.is_set():
-            deadline = boot + (j + 1) * self.period_s
+            tick_us = j * period_us
+            deadline = boot + tick_us * 1e-6
             delay = deadline - time.perf_counter()
             if delay > 0:
                 time.sleep(delay)
             now = time.perf_counter()
-            elapsed = now - boot
             driven = 0.0 if self.first_frame_at_s is None else now - self.first_frame_at_s
             if faults.pull_after_s is not None and driven >= faults.pull_after_s:
                 self.state = "cable pulled"
@@ -363,11 +374,13 @@ class VirtualCart:
                 self.fault_at_s = time.perf_counter()
                 self._stop.wait()
                 return
+            self.receive_for_tick(j)  # on the cart's clock, whenever this thread gets here
             # io(): the voltage stored at the previous tick drives this one; read the encoders
             if j > 0:
                 measurement = physics.step(*voltage)
             counts = physics.encoder_counts
             applied = physics.applied_voltage_v
+            self.applied_log.append((deadline, applied[0], applied[1]))
             io = CartIO(
                 measurement.speed_a_rad_s, measurement.speed_b_rad_s, applied[0], applied[1],
                 counts[0] * rad_per_count, counts[1] * rad_per_count,
@@ -378,26 +391,18 @@ class VirtualCart:
                 measurement.true_speed_b_rad_s or 0.0,
             )
             self.true_speeds.pop((tick_counter - 512) % TICK_MODULO, None)  # keep the recent ones
-            voltage = firmware.control(io)
+            voltage = firmware.control(io, tick_us // 1000)
             self.last_voltage_v = voltage
-            # the communication thread: receive everything that has arrived, then send. "By now"
-            # is on the cart's own schedule: a tick this thread starts late (a busy host) must not
-            # take in bytes that arrived after the moment an on-time cart would have looked.
-            receive_at = deadline + (time.perf_counter() - now)
-            for message in framer.feed(self._reader.take(receive_at)):
-                if isinstance(message, Gpio):
-                    firmware.receive(message.floats, message.ints)
-                    self.frames_received += 1
-                    if self.first_frame_at_s is None:
-                        self.first_frame_at_s = now
-            time_ms = int(elapsed * 1000.0) & 0xFFFFFFFF
+            # microOS's communication thread sends what control() wrote
+            send_at = deadline + COMM_PHASE_US * 1e-6
+            time_ms = (tick_us // 1000) & 0xFFFFFFFF
             if not generation_a:
                 floats12 = [*firmware.out_floats, *(float(v) for v in firmware.out_ints)]
-                self._send(encode_gpiox_v2(time_ms, floats12, seq=j % 256))
+                self._send(encode_gpiox_v2(time_ms, floats12, seq=j % 256), send_at)
             else:
-                self._send(encoder.gpio(time_ms, firmware.out_floats, firmware.out_ints))
+                self._send(encoder.gpio(time_ms, firmware.out_floats, firmware.out_ints), send_at)
             if generation_a and now >= next_heartbeat:
-                self._send(encoder.heartbeat(time_ms))
+                self._send(encoder.heartbeat(time_ms), send_at)
                 next_heartbeat += HEARTBEAT_PERIOD_S
             j += 1
             self.ticks = j

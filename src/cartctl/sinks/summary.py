@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -23,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.errors import InputError
+from cartctl.link.bridge import HOST_LOSS_WARN_PERCENT
 from cartctl.metrics import finite_or_none
 from cartctl.stepinfo import SETTLING_FRACTION, encoder_quantum_rad_s, step_info
 
@@ -190,10 +192,27 @@ def format_summary(summary: Mapping[str, Any]) -> str:
             f"{link['lost_frames']} frames lost, {link['missed_ticks']} cart ticks missed, "
             f"{link['skipped_ticks']} skipped by the host, {link['watchdog_trips']} watchdog trips"
         )
+        lines.append("  " + host_loss_text(link))
     for key in ("trace", "recording"):
         if summary.get(key):
             lines.append(f"  {key}: {summary[key]}")
     return "\n".join(lines)
+
+
+def host_loss_text(link: Mapping[str, Any]) -> str:
+    """``commands lost on the way to the cart: n of N (x %)``, marked when beyond 1 %."""
+    lost, sent = link.get("host_frames_lost", 0), link.get("host_frames_sent", 0)
+    percent = link.get("host_frames_lost_percent", 0.0)
+    text = f"commands lost on the way to the cart: {lost} of {sent} ({percent:.1f} %)"
+    if percent > HOST_LOSS_WARN_PERCENT:
+        text += " — more than 1 %: the cart held older voltages at those ticks"
+    return text
+
+
+def warn_host_losses(link: Mapping[str, Any] | None, command: str) -> None:
+    """One line on stderr when more than 1 % of the host's frames never reached the cart."""
+    if link and link.get("host_frames_lost_percent", 0.0) > HOST_LOSS_WARN_PERCENT:
+        print(f"cartctl {command}: warning: {host_loss_text(link)}", file=sys.stderr)
 
 
 def review_csv(args: argparse.Namespace) -> int:

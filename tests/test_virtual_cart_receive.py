@@ -1,0 +1,186 @@
+"""The cart's receive side in the virtual cart: ring, parser, drain schedule, losses, watchdog.
+
+The schedule tests drive one :class:`VirtualCart` by hand on its own clock (no threads, no real
+time): the host's replies are put on the line at chosen moments and the cart's drains and
+``control()`` run tick by tick. Expectations come from the line's arithmetic: a 60-byte frame is
+5.2 ms at 115200 baud, the ring holds 63 bytes, microOS's communication thread drains 1.2 ms into
+each tick. The last tests run the real thing (pseudo-terminal, threads, ``cartctl run``).
+"""
+
+from __future__ import annotations
+
+import json
+import random
+import time
+from pathlib import Path
+
+import pytest
+
+from cartctl.cli import main
+from cartctl.link import Encoder, Framer, Gpio, HostCommand
+from cartctl.plants.bridge_firmware import CartIO
+from cartctl.plants.cart_uart import BYTE_TIME_S, RX_RING_BYTES, MicroosParser, fill_ring
+from cartctl.plants.serial_cart import SerialCart
+from cartctl.plants.virtual_cart import CartFaults, VirtualCart
+
+FRAME_S = 60 * BYTE_TIME_S
+CART_SENDS_S = 0.0012  # the communication thread's send, into each tick
+IDLE_IO = CartIO(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+def host_frame(seq: int, volts: float = 1.0) -> bytes:
+    floats, ints = HostCommand(volts, volts, seq, True).to_channels()
+    return Encoder().gpio(0, floats, ints)
+
+
+def test_the_ring_keeps_63_bytes_and_drops_the_rest() -> None:
+    data = bytes(range(100))
+    kept, dropped = fill_ring(data)
+    assert (kept, dropped) == (data[:RX_RING_BYTES], 100 - 63)
+    assert fill_ring(data[:63]) == (data[:63], 0)
+    assert len(host_frame(1)) == 60 and RX_RING_BYTES < 2 * 60  # two frames never fit
+
+
+def test_the_parser_loses_a_damaged_frame_and_the_one_it_swallows() -> None:
+    f1, f2, f3 = host_frame(1), host_frame(2), host_frame(3)
+    damaged = f1[:40] + f1[47:]  # seven bytes dropped by a full ring
+    stream = damaged + f2 + f3
+    parser = MicroosParser()
+    seqs = [gpio.ints[0] for gpio in parser.feed(stream)]
+    assert seqs == [3]  # f1 is 7 bytes short, so it ends inside f2: both fail their checksum
+    assert parser.bad_frames == 1
+    # the host's resynchronising framer finds f2 in the same bytes: microOS's parser does not
+    host = [m.ints[0] for m in Framer().feed(stream) if isinstance(m, Gpio)]
+    assert host == [2, 3]
+
+
+def test_the_parser_takes_frames_split_at_any_byte() -> None:
+    stream = b"".join(host_frame(seq) for seq in (7, 8, 9))
+    parser = MicroosParser()
+    seqs = [gpio.ints[0] for byte in stream for gpio in parser.feed(bytes([byte]))]
+    assert seqs == [7, 8, 9] and parser.bad_frames == 0
+
+
+def replay(receive: str, reply_start_s: list[float]) -> tuple[VirtualCart, list[int]]:
+    """Tick a cart by hand while host frames 1, 2, … go on the line at ``reply_start_s``.
+
+    Returns the cart and the echo (int channel 0) of every ``control()``.
+    """
+    cart = VirtualCart(faults=CartFaults(receive=receive))
+    cart.boot_s = 0.0
+    try:
+        for seq, start_s in enumerate(reply_start_s, start=1):
+            cart._reader.deliver(host_frame(seq), start_s)
+        echoes = []
+        for j in range(int(max(reply_start_s) * 100) + 4):
+            cart.receive_for_tick(j)
+            cart.firmware.control(IDLE_IO, 10 * j)
+            echoes.append(cart.firmware.out_ints[0])
+    finally:
+        cart.stop()
+    return cart, echoes
+
+
+def answers(latency_s: list[float]) -> list[float]:
+    """When the host's reply to cart tick k goes on the line: the cart's frame is through at
+    k·10 ms + 1.2 ms + 5.2 ms, and the host answers after its latency."""
+    return [k * 0.01 + CART_SENDS_S + FRAME_S + lat for k, lat in enumerate(latency_s)]
+
+
+def jittery(n: int, seed: int = 4) -> list[float]:
+    """Replies 0.5 ms late, and up to 3 ms later at random (a busy host)."""
+    rng = random.Random(seed)
+    return [0.0005 + rng.uniform(0.0, 0.003) for _ in range(n)]
+
+
+def test_microos_alone_overflows_the_ring_when_replies_jitter() -> None:
+    """One drain per tick: a reply that straddles a drain leaves its tail in the ring, and the next
+    reply, a little earlier, brings 60 more bytes before the next drain."""
+    cart, _ = replay("microos", answers(jittery(300)))
+    assert cart.ring_dropped_bytes > 0
+    lost = cart.firmware.frames_lost
+    assert lost > 0.01 * 300
+    assert cart.frames_received + lost <= 300
+
+
+@pytest.mark.parametrize(
+    "starts",
+    [
+        answers(jittery(300)),
+        answers([0.0005] * 300),
+        # bursts: three frames back to back every 30 ms, 180 bytes on the line at once
+        [0.001 + 0.03 * (k // 3) for k in range(300)],
+    ],
+    ids=["jitter", "steady", "bursts"],
+)
+def test_the_bridge_drains_lose_nothing_whatever_the_reply_timing(starts: list[float]) -> None:
+    cart, _ = replay("bridge", starts)
+    assert cart.ring_dropped_bytes == 0
+    assert cart.firmware.frames_lost == 0
+    assert cart.frames_received == len(starts)
+
+
+def test_bursts_overflow_microos_alone() -> None:
+    cart, _ = replay("microos", [0.001 + 0.03 * (k // 3) for k in range(300)])
+    assert cart.ring_dropped_bytes > 0 and cart.firmware.frames_lost > 0
+
+
+@pytest.mark.parametrize(("receive", "echo_ticks"), [("bridge", 2), ("microos", 3)])
+def test_the_echo_delay_of_each_schedule(receive: str, echo_ticks: int) -> None:
+    """The reply to tick k is through at k·10 + 12.1 ms: after control() of tick k+1. The bridge
+    drains before control() of tick k+2 (echo 2, loop delay 3); microOS alone drains at
+    k·10 + 21.2 ms, which control() of tick k+3 reads (echo 3, loop delay 4)."""
+    _, echoes = replay(receive, answers([0.0005] * 100))
+    for k in range(50):  # the reply to tick k carries seq k + 1
+        assert echoes[k + echo_ticks] == k + 1
+        assert echoes[k + echo_ticks - 1] == k
+
+
+def test_the_watchdog_stops_the_motors_within_100_ms_of_the_last_byte() -> None:
+    """Real time: drive at 3 V, go quiet, and time the first tick with 0 V on the motors against
+    the moment the host's last byte was through the line."""
+    with VirtualCart(seed=2) as cart:
+        plant = SerialCart(cart.port, on_print=lambda line: None)
+        plant.reset()
+        for _ in range(40):
+            plant.step(3.0, -3.0)
+        stopped = time.perf_counter()
+        while time.perf_counter() - stopped < 0.3:  # the host is silent; the port stays open
+            time.sleep(0.01)
+        last_byte = cart.last_host_byte_at_s
+        log = list(cart.applied_log)
+        plant.link.close()
+    assert last_byte is not None
+    driving = [t for t, a, b in log if t <= last_byte and a > 2.5 and b < -2.5]
+    assert driving, "the motors were driven before the host went quiet"
+    off = next(t for t, a, b in log if t > last_byte and a == 0.0 and b == 0.0)
+    assert all(a > 2.5 for t, a, _ in log if driving[-1] <= t < off)  # on until the trip
+    # trips 70 ms after the frame was drained (≤ 1 ms after its last byte), lands at the next io()
+    assert 0.07 < off - last_byte <= 0.1
+
+
+@pytest.mark.filterwarnings("always::cartctl.errors.DataWarning")  # microos: loop delay 4
+@pytest.mark.parametrize(
+    ("plant", "lost"),
+    [("virtual:reply_jitter_ms=3", False), ("virtual:reply_jitter_ms=3,receive=microos", True)],
+)
+def test_run_reports_the_host_frames_the_cart_lost(
+    capsys: pytest.CaptureFixture[str], workdir: Path, plant: str, lost: bool
+) -> None:
+    code = main(["run", "--plant", plant, "--controller", "controllers/serial-pi.toml",
+                 "--allow-delay-mismatch", "--reference", "step:8", "--duration", "1",
+                 "--rerun", "off", "--json"])  # fmt: skip
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    link = json.loads(out)["link"]
+    assert link["host_frames_sent"] >= 100
+    warned = [line for line in err.splitlines() if "commands lost on the way" in line]
+    if lost:
+        assert link["host_frames_lost_percent"] > 1.0
+        assert link["host_frames_lost_percent"] == pytest.approx(
+            100.0 * link["host_frames_lost"] / link["host_frames_sent"]
+        )
+        assert len(warned) == 1 and warned[0].startswith("cartctl run: warning:")
+    else:
+        assert link["host_frames_lost"] == 0 and not warned
+        assert json.loads(out)["loop_delay_ticks"] == 3
