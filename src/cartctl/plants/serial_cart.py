@@ -17,8 +17,9 @@ the report).
 
 Faults are counted, not fatal: CRC errors and garbage are skipped by the framer, missing cart ticks
 are counted, and so are the host's frames the cart never saw (the bridge counts the sequence
-numbers it skipped and sends the count back). No GPIO for 100 ms, or a vanished port, raises :class:`~cartctl.errors.PlantError`.
-:meth:`SerialCart.close` sends drive = 0 with zero volts whenever the port still works.
+numbers it skipped and sends the count back). No GPIO for 100 ms, or a vanished port, raises
+:class:`~cartctl.errors.PlantError`. :meth:`SerialCart.close` sends drive = 0 with zero volts
+whenever the port still works.
 """
 
 from __future__ import annotations
