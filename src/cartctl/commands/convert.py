@@ -7,13 +7,13 @@ with ``--out`` writes it as a contract-1 CSV that every other command reads.
 from __future__ import annotations
 
 import argparse
-import json
 from typing import Any
 
 import numpy as np
 
 from cartctl.commands.options import add_map_option
 from cartctl.data import Trace, read_trace, write_trace
+from cartctl.jsonout import dumps
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         write_trace(trace, args.out)
         info["written"] = args.out
     if args.json:
-        print(json.dumps(info))
+        print(dumps(info))
         return 0
     print(
         f"{args.file}: {info['ticks']} ticks over {info['duration_s']:.3f} s "

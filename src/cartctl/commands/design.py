@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import shlex
 import sys
@@ -28,6 +27,7 @@ from cartctl.design.loop import feedback_tf_coeffs, loop_analysis
 from cartctl.design.pi import design_pi, design_pi_bandwidth
 from cartctl.design.poles import design_poles
 from cartctl.errors import InputError
+from cartctl.jsonout import dumps
 from cartctl.model import ArxModel
 from cartctl.modelfile import load_models
 from cartctl.runtime.base import Controller
@@ -326,7 +326,7 @@ def run(args: argparse.Namespace) -> int:
         write_design_report(args.report, args.method, {m: models.motor(m) for m in names}, motors_json, steps,
                             extra_delay_ticks=args.extra_delay, voltage_limit_v=args.voltage_limit)  # fmt: skip
     if args.json:
-        print(json.dumps({"method": args.method, "model": str(args.model), "Ts": models.period_s,
+        print(dumps({"method": args.method, "model": str(args.model), "Ts": models.period_s,
                           "motors": motors_json}))  # fmt: skip
         return 0
     print(_format(args.method, motors_json))

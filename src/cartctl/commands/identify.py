@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
 import sys
 from datetime import UTC, datetime
@@ -14,6 +13,7 @@ from cartctl.errors import InputError
 from cartctl.identify.arx import ArxFit
 from cartctl.identify.pipeline import IdentifyRequest, IdentifyResult, MotorIdentification, identify
 from cartctl.identify.prefilter import Prefilter
+from cartctl.jsonout import dumps
 from cartctl.modelfile import ModelFile, Provenance, load_models, save_models
 
 
@@ -217,7 +217,7 @@ def run(args: argparse.Namespace) -> int:
 
         write_identify_report(args.report, result, traces, request, compare)
     if args.json:
-        print(json.dumps(result.to_dict()))
+        print(dumps(result.to_dict()))
         return 0
     print(format_result(result, args.files, request))
     if args.out:

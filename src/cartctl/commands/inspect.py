@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from typing import Any
 
+from cartctl.jsonout import dumps
 from cartctl.metrics import finite_or_none
 from cartctl.model import ArxModel, Root
 from cartctl.modelfile import ModelFile, load_models
@@ -92,7 +92,7 @@ def format_table(models: ModelFile) -> str:
 def run(args: argparse.Namespace) -> int:
     models = load_models(args.model)
     if args.json:
-        print(json.dumps(inspect_dict(models)))
+        print(dumps(inspect_dict(models)))
     else:
         print(format_table(models))
     return 0

@@ -8,19 +8,18 @@ added against the summed step's response, the error beneath).
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from cartctl.commands.options import add_map_option
 from cartctl.commands.validate import (
     add_plot_option,
     check_plot_path,
-    json_safe,
     new_figure,
     save_png,
 )
 from cartctl.data import read_trace
 from cartctl.identify.linearity import LinearityResult, linearity
+from cartctl.jsonout import dumps
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -116,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     if plot is not None:
         plot_linearity(result, plot)
     if args.json:
-        print(json.dumps(json_safe(result.to_dict())))
+        print(dumps(result.to_dict()))
     else:
         print(format_text(result, files))
         if plot is not None:

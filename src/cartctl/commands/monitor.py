@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import math
 import signal
 import sys
@@ -22,6 +21,7 @@ from typing import Any
 
 from cartctl.commands.run import RERUN_MODES, _free_stem
 from cartctl.errors import InputError
+from cartctl.jsonout import dumps
 from cartctl.plants.cart_link import DEFAULT_CONNECT_TIMEOUT_S, print_to_stderr
 from cartctl.plants.cart_monitor import (
     FLOAT_CHANNELS,
@@ -187,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
             cart.stop()
     summary = _summary(result, link, args.plant, labels, csv_path,
                        rrd_path if rerun is not None else None)  # fmt: skip
-    print(json.dumps(summary) if args.json else _format(summary))
+    print(dumps(summary) if args.json else _format(summary))
     if result.failure:
         print(f"cartctl monitor: error: {result.failure}", file=sys.stderr)
         return 1

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import warnings
@@ -15,6 +14,7 @@ from cartctl.commands.options import add_plant_options
 from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.errors import CartctlError, DataWarning, InputError, PlantError
+from cartctl.jsonout import dumps
 from cartctl.plants.base import ClockedPlant, Plant
 from cartctl.plants.factory import is_serial, make_plant
 from cartctl.runtime.loop import ControlLoop, MemorySink
@@ -310,7 +310,7 @@ def run(args: argparse.Namespace) -> int:
         scheduling=scheduling,
     )
     if args.json:
-        print(json.dumps(summary))
+        print(dumps(summary))
     else:
         print(format_summary(summary))
         print(f"  plant {description}; controller {given}; {scheduling}")

@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
-import json
 import math
 import os
 import shlex
@@ -26,6 +25,7 @@ from typing import Any
 
 from cartctl.design import tune as tuning
 from cartctl.errors import InputError
+from cartctl.jsonout import dumps
 from cartctl.modelfile import load_models
 from cartctl.plants.factory import make_plant
 from cartctl.progress import ProgressBar
@@ -160,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
             return code
         chosen = {"index": args.choose, "out": args.out, "command": "cartctl " + shlex.join(argv)}
     if args.json:
-        print(json.dumps({"method": args.method, "model": str(args.model), "plant": args.plant,
+        print(dumps({"method": args.method, "model": str(args.model), "plant": args.plant,
                           "reference": args.reference, "duration_s": args.duration,
                           "extra_delay_ticks": args.extra_delay, "metrics_of": "worse of motors a and b",
                           "settings": [r.to_dict() for r in results], "chosen": chosen}))  # fmt: skip

@@ -9,7 +9,6 @@ simulated speed, the absolute error beneath). Also home of the ``--plot`` helper
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -18,6 +17,7 @@ from cartctl.commands.options import add_map_option
 from cartctl.data import MOTORS, read_trace
 from cartctl.errors import InputError
 from cartctl.identify.validate import ModelValidation, ValidationResult, validate_models
+from cartctl.jsonout import dumps
 from cartctl.modelfile import load_models
 from cartctl.stepinfo import StepInfo
 
@@ -190,20 +190,9 @@ def run(args: argparse.Namespace) -> int:
     if plot is not None:
         plot_validation(validation, plot)
     if args.json:
-        print(json.dumps(json_safe(validation.to_dict())))
+        print(dumps(validation.to_dict()))
     else:
         print(format_table(validation))
         if plot is not None:
             print(f"\nwrote {plot}")
     return 0
-
-
-def json_safe(value: Any) -> Any:
-    """NaN and infinities become null, so the output is strict JSON."""
-    if isinstance(value, float):
-        return value if value == value and abs(value) != float("inf") else None
-    if isinstance(value, dict):
-        return {k: json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_safe(v) for v in value]
-    return value

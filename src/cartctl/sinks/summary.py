@@ -15,7 +15,6 @@ count per tick = 2π/1792/Ts, 0.3506 rad/s at 10 ms): a measured speed cannot re
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -24,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.errors import InputError
+from cartctl.jsonout import dumps
 from cartctl.link.bridge import HOST_LOSS_WARN_PERCENT
 from cartctl.metrics import finite_or_none
 from cartctl.stepinfo import SETTLING_FRACTION, encoder_quantum_rad_s, step_info
@@ -229,7 +229,7 @@ def review_csv(args: argparse.Namespace) -> int:
         summary["trace"] = str(path)
         summaries.append(summary)
     if args.json:
-        print(json.dumps(summaries[0] if len(summaries) == 1 else {"runs": summaries}))
+        print(dumps(summaries[0] if len(summaries) == 1 else {"runs": summaries}))
         return 0
     print("\n\n".join(format_summary(s) for s in summaries))
     return 0

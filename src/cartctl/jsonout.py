@@ -1,0 +1,41 @@
+"""Strict JSON for every ``--json`` output: NaN and infinities become ``null``.
+
+Python's ``json`` writes ``NaN``, ``Infinity`` and ``-Infinity``, which are not JSON: strict parsers
+(JavaScript's ``JSON.parse``, Go, serde) reject the whole document. :func:`dumps` writes ``null``
+in their place, turns numpy scalars and arrays into plain numbers and lists, and refuses (with
+``allow_nan=False``) anything that would still slip through.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+__all__ = ["dumps", "strict"]
+
+
+def strict(value: Any) -> Any:
+    """``value`` with every non-finite float replaced by None and numpy types made plain."""
+    if isinstance(value, bool | None | str | int) and not isinstance(value, np.generic):
+        return value
+    if isinstance(value, float | np.floating):
+        number = float(value)
+        return number if math.isfinite(number) else None
+    if isinstance(value, np.integer | np.bool_):
+        return value.item()
+    if isinstance(value, Mapping):
+        return {str(k): strict(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        return strict(value.tolist())
+    if isinstance(value, list | tuple):
+        return [strict(v) for v in value]
+    return value
+
+
+def dumps(value: Any) -> str:
+    """Strict JSON text of ``value`` (see :func:`strict`)."""
+    return json.dumps(strict(value), allow_nan=False)
