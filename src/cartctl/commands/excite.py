@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 
-from cartctl.commands.options import add_plant_options
+from cartctl.commands.options import add_plant_options, check_duration
 from cartctl.data import write_trace
 from cartctl.errors import InputError
 from cartctl.experiment import run_experiment
@@ -63,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.duration is not None and args.signal == "square":
         raise InputError("--duration does not apply to the square signal; use --cycles (3 s each)")
+    if args.duration is not None:
+        check_duration(args.duration)
     volts = make_signal(args.signal, args.amplitude, cycles=args.cycles, duration_s=args.duration)
     zeros = np.zeros_like(volts)
     ua = volts if args.motor in ("a", "both") else zeros

@@ -19,6 +19,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from cartctl.commands.options import add_name_option, check_duration
 from cartctl.commands.run import RERUN_MODES, _free_stem
 from cartctl.errors import InputError
 from cartctl.jsonout import dumps
@@ -63,7 +64,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=float, metavar="S",
                    help="stop after S seconds of cart time (default: run until Ctrl-C)")  # fmt: skip
     p.add_argument("--out", default="logs", metavar="DIR", help="where the trace and recording go")
-    p.add_argument("--name", metavar="STEM", help="file name stem (default monitor-DATE-TIME)")
+    add_name_option(p, default="monitor-DATE-TIME")
     p.add_argument("--rerun", choices=RERUN_MODES, default="auto",
                    help="auto: record to --out and open the viewer where a display exists; spawn: "
                         "record and open the viewer; connect: record and stream to a running viewer; "
@@ -89,8 +90,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _check(args: argparse.Namespace) -> tuple[str, str]:
     """Validate the options; returns (kind, rest) of PLANT: ('serial', PORT) or ('virtual', FAULTS)."""
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        raise InputError(f"--duration must be a positive number of seconds, got {args.duration}")
+    if args.duration is not None:
+        check_duration(args.duration)
     if not (math.isfinite(args.connect_timeout) and args.connect_timeout > 0):
         raise InputError(f"--connect-timeout must be a positive number of seconds, got "
                          f"{args.connect_timeout}")  # fmt: skip

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from cartctl.data import parse_mapping
 from cartctl.errors import InputError
 from cartctl.plants.factory import DEFAULT_MODEL
+from cartctl.signals import MAX_DURATION_S
 
 
 def _mapping_arg(text: str) -> dict[str, str]:
@@ -14,6 +16,38 @@ def _mapping_arg(text: str) -> dict[str, str]:
         return parse_mapping(text)
     except InputError as exc:  # argparse shows an ArgumentTypeError's own message
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def check_duration(seconds: float, option: str = "--duration") -> float:
+    """``seconds`` if it is a positive number of seconds up to :data:`MAX_DURATION_S`.
+
+    Raises
+    ------
+    InputError
+        Otherwise, in one line naming ``option``.
+    """
+    if not (math.isfinite(seconds) and 0.0 < seconds <= MAX_DURATION_S):
+        raise InputError(
+            f"{option} must be a positive number of seconds up to {MAX_DURATION_S:g} (24 h), "
+            f"got {seconds:g}"
+        )
+    return seconds
+
+
+def file_stem(text: str) -> str:
+    """An output name that stays in its folder: no path separator, not '.' or '..', not empty."""
+    if not text or text in (".", "..") or "/" in text or "\\" in text or "\0" in text:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a file name: give a name without a folder (e.g. step8) and the "
+            "folder with --out"
+        )
+    return text
+
+
+def add_name_option(p: argparse.ArgumentParser, *, default: str) -> None:
+    """``--name``: the stem of the trace and recording written into ``--out``."""
+    p.add_argument("--name", type=file_stem, metavar="NAME",
+                   help=f"file name stem, without a folder (default {default})")  # fmt: skip
 
 
 def add_map_option(p: argparse.ArgumentParser) -> None:

@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import warnings
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from cartctl.commands.options import add_plant_options
+from cartctl.commands.options import (
+    add_name_option,
+    add_plant_options,
+    check_duration,
+)
 from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.errors import CartctlError, DataWarning, InputError, PlantError
@@ -79,7 +82,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "save: record only; off: no recording")  # fmt: skip
     p.add_argument("--connect-url", metavar="URL", help="viewer address for --rerun connect")
     p.add_argument("--out", default="logs", metavar="DIR", help="where the trace and recording go")
-    p.add_argument("--name", metavar="NAME", help="file name stem (default run-DATE-TIME)")
+    add_name_option(p, default="run-DATE-TIME")
     p.add_argument(
         "--voltage-limit",
         type=float,
@@ -186,8 +189,7 @@ def _measured_delay(plant: Plant) -> int | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if not (math.isfinite(args.duration) and args.duration > 0):
-        raise InputError(f"--duration must be a positive number of seconds, got {args.duration}")
+    check_duration(args.duration)
     if args.voltage_limit is not None and not 0.0 < args.voltage_limit <= 12.0:
         raise InputError(f"--voltage-limit must be in (0, 12] V, got {args.voltage_limit}")
     if args.fast and args.plant not in ("sim", "physics"):

@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
-import math
 import os
 import shlex
 import sys
@@ -23,6 +22,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from cartctl.commands.options import check_duration
 from cartctl.design import tune as tuning
 from cartctl.errors import InputError
 from cartctl.jsonout import dumps
@@ -68,8 +68,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _check(args: argparse.Namespace, n_settings: int) -> None:
-    if not (math.isfinite(args.duration) and args.duration > 0):
-        raise InputError(f"--duration must be a positive number of seconds, got {args.duration}")
+    check_duration(args.duration)
     if args.extra_delay < 0:
         raise InputError(f"--extra-delay must be >= 0 ticks, got {args.extra_delay}")
     if args.jobs is not None and args.jobs < 1:

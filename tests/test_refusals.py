@@ -1,0 +1,121 @@
+"""Absurd inputs get one line and exit 2, and nothing is written: output names, durations."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cartctl.cli import main
+from cartctl.commands.options import file_stem
+
+
+def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    try:
+        code = main(list(argv))
+    except SystemExit as exc:  # argparse's usage errors
+        code = int(exc.code or 0)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.mark.parametrize("name", ["../../x", "sub/x", "/tmp/x", "..", ".", ""])
+def test_a_name_with_a_folder_is_refused_before_anything_is_written(
+    capsys: pytest.CaptureFixture[str], workdir: Path, name: str
+) -> None:
+    code, out, err = _run(capsys, "run", "--fast", "--name", name, "--rerun", "off")
+    assert code == 2 and out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("cartctl run: error: argument --name")
+    assert "without a folder" in lines[0]
+    assert not (workdir / "logs").exists()
+    assert (
+        not (workdir.parent / "x.csv").exists() and not (workdir.parent.parent / "x.csv").exists()
+    )
+
+
+def test_monitor_refuses_the_same_names(capsys: pytest.CaptureFixture[str], workdir: Path) -> None:
+    code, _, err = _run(capsys, "monitor", "virtual", "--name", "../x", "--duration", "0.1")
+    assert code == 2 and "argument --name" in err and len(err.strip().splitlines()) == 1
+
+
+@given(st.text(max_size=40))
+@settings(max_examples=300, deadline=None)
+def test_a_name_is_either_refused_or_stays_in_its_folder(text: str) -> None:
+    folder = Path("/srv/logs")
+    try:
+        stem = file_stem(text)
+    except argparse.ArgumentTypeError as exc:
+        message = str(exc)
+        stem = None
+    if stem is None:
+        assert "\n" not in message  # one line, whatever the name holds
+        return
+    path = folder / f"{stem}.csv"
+    assert path.parent == folder and ".." not in path.relative_to(folder).parts
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ("run", "--fast", "--duration", "1e9"),
+        ("run", "--fast", "--duration", "86401"),
+        ("run", "--fast", "--duration", "nan"),
+        ("run", "--fast", "--duration", "-1"),
+        ("tune", "models/ground.toml", "--method", "pi", "--duration", "1e9"),
+        (
+            "excite",
+            "--plant",
+            "sim",
+            "--signal",
+            "prbs",
+            "--amplitude",
+            "5",
+            "--duration",
+            "1e9",
+            "--out",
+            "x.csv",
+        ),
+        (
+            "excite",
+            "--plant",
+            "sim",
+            "--signal",
+            "square",
+            "--amplitude",
+            "5",
+            "--cycles",
+            "100000000",
+            "--out",
+            "x.csv",
+        ),
+        (
+            "excite",
+            "--plant",
+            "sim",
+            "--signal",
+            "multisine",
+            "--amplitude",
+            "5",
+            "--cycles",
+            "100000000",
+            "--out",
+            "x.csv",
+        ),
+        ("monitor", "virtual", "--duration", "1e9"),
+    ],
+)
+def test_durations_beyond_a_day_are_refused_in_one_line(
+    capsys: pytest.CaptureFixture[str], workdir: Path, argv: tuple[str, ...]
+) -> None:
+    code, out, err = (
+        _run(capsys, *argv, "--rerun", "off") if argv[0] == "run" else _run(capsys, *argv)
+    )
+    assert code == 2 and out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"cartctl {argv[0]}: error:")
+    assert "24 h" in lines[0]
+    assert not (workdir / "logs").exists() and not (workdir / "x.csv").exists()
