@@ -67,9 +67,11 @@ def test_trace_rows_follow_contract_1(tmp_path: Path) -> None:
     plant = RecordingPlant()
     _run(_loop(plant, 200, [CsvSink(tmp_path / "t.csv", flush_every=7), memory]))
     trace = read_trace(tmp_path / "t.csv")
-    assert len(trace) == 200
+    assert len(trace) == 201  # 200 ticks and the stop row
     assert tuple(trace.columns())[: len(TRACE_COLUMNS)] == TRACE_COLUMNS
-    np.testing.assert_array_equal(trace.column("tick"), np.arange(200))
+    np.testing.assert_array_equal(trace.column("tick"), np.arange(201))
+    assert (trace.voltage_a[-1], trace.voltage_b[-1]) == (0.0, 0.0)  # the stop command, logged
+    assert trace.voltage_a[-2] != 0.0
     # row k: the voltage commanded at tick k and the speed measured at tick k
     np.testing.assert_allclose(trace.speed_a, MODEL.simulate(trace.voltage_a), atol=1e-12)
     cols = memory.arrays()
@@ -94,7 +96,9 @@ def test_faults_leave_zero_volts_and_valid_files(tmp_path: Path, fault: str) -> 
     assert plant.commands[-1] == (0.0, 0.0)
     assert plant.closed
     trace = read_trace(tmp_path / "t.csv")
-    assert len(trace) == 120  # every tick up to the fault, none lost
+    assert len(trace) == 121  # every tick up to the fault, none lost, then the stop row
+    assert loop.state.rows == 121
+    assert trace.column("tick")[-1] == 120 and trace.voltage_a[-1] == 0.0
 
 
 def test_summary_of_a_step() -> None:
@@ -102,7 +106,7 @@ def test_summary_of_a_step() -> None:
     _run(_loop(RecordingPlant(), 300, [memory]))
     summary = trace_metrics(memory.arrays(), 0.01)
     a = summary["motors"]["a"]
-    assert summary["ticks"] == 300
+    assert summary["ticks"] == 301  # and the stop row
     assert a["overshoot_percent"] < 5.0
     assert abs(a["steady_state_error"]) < 1e-3
     assert 0.0 < a["rise_time_s"] < a["settling_time_s"] < 1.0

@@ -47,15 +47,15 @@ def test_fast_run_records_trace_and_contract_4_recording(
     )
     assert code == 0, err
     assert isinstance(summary, dict)
-    assert summary["ticks"] == 300
+    assert summary["ticks"] == 301  # 300 ticks of control and the stop row
     assert summary["deadline_misses"] == 0
     assert summary["loop_delay_ticks"] == 1  # models/ground.toml: nk = 2, loop delay nk − 1
     trace = read_trace(summary["trace"])
-    assert len(trace) == 300
-    assert trace.column("tick")[-1] == 299
+    assert len(trace) == 301
+    assert trace.column("tick")[-1] == 300 and trace.voltage_a[-1] == 0.0
     rows = _rrd_rows(Path(summary["recording"]))
     for path in CONTRACT_PATHS:
-        assert rows[path] == 300, path
+        assert rows[path] == 301, path
     a = summary["motors"]["a"]
     assert a["overshoot_percent"] <= 5.0
     assert abs(a["steady_state_error"]) < 1e-6
@@ -101,9 +101,10 @@ def test_ctrl_c_leaves_zero_volts_and_readable_files(
     assert sent[-1] == (0.0, 0.0)
     assert max(abs(v) for v in sent[-2]) > 0.0  # it was driving when cut
     trace = read_trace(workdir / "logs" / "cut.csv")
-    assert len(trace) == 149
+    assert len(trace) == 150  # 149 ticks, then the stop row (tick 149's command was 0 V)
+    assert trace.voltage_a[-1] == 0.0 and trace.voltage_a[-2] != 0.0
     rows = _rrd_rows(workdir / "logs" / "cut.rrd")
-    assert rows["motor/a/speed"] == 149
+    assert rows["motor/a/speed"] == 150
     RrdReader(
         workdir / "logs" / "cut.rrd"
     ).store()  # needs the footer: the file was closed properly
@@ -113,7 +114,7 @@ def test_short_real_time_run(capsys: pytest.CaptureFixture[str], workdir: Path) 
     """Real time on a shared machine: generous bounds; the benchmarks measure the real figures."""
     code, summary, err = _run(capsys, "--duration", "1", "--rerun", "save", "--json")
     assert code == 0, err
-    assert summary["ticks"] == 100
+    assert summary["ticks"] == 101
     assert summary["deadline_misses"] <= 2
     assert summary["period_error_us"]["p50"] < 2000
     assert 0.9 < summary["duration_s"] < 1.5

@@ -66,7 +66,7 @@ def test_closed_loop_tracks_8_rad_s_reports_the_delay_and_ends_at_zero_volts(
     assert isinstance(summary, dict)
     assert summary["loop_delay_ticks"] == 3  # echo 2 ticks + the cart's own 1
     assert summary["link"]["echo_delay_ticks"] == 2
-    assert summary["ticks"] == 200
+    assert summary["ticks"] == 201  # and the stop row
     trace = read_trace(workdir / "logs/v.csv")
     for m in "ab":
         speed = trace.columns()[f"speed_{m}"]
@@ -86,7 +86,7 @@ def test_line_noise_is_counted_and_the_run_still_tracks(
     link = summary["link"]
     assert link["crc_errors"] > 0 and link["garbage_bytes"] > 0
     assert link["lost_frames"] >= link["crc_errors"] - 2  # a corrupted frame is a lost one
-    assert summary["ticks"] == 200
+    assert summary["ticks"] == 201  # and the stop row
     assert summary["loop_delay_ticks"] == 3
     assert "cart: cartctl bridge ready" in err  # the cart's PRINT line, shown on stderr
     for m in "ab":

@@ -14,8 +14,7 @@ import warnings
 from collections.abc import Sequence
 from typing import NoReturn
 
-from cartctl import __version__
-from cartctl.commands import COMMANDS
+from cartctl import __version__, stopping
 from cartctl.errors import CartctlError
 
 
@@ -38,6 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"cartctl {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
+    from cartctl.commands import COMMANDS  # the heavy imports, after the stop signals are routed
+
     for module in COMMANDS:
         module.add_parser(sub)
     return parser
@@ -48,8 +49,24 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the exit code (0 ok, 2 user mistake, 1 runtime failure)."""
-    parser = build_parser()
+    """Run the command line; returns the exit code (0 ok, 2 user mistake, 1 runtime failure).
+
+    SIGINT, SIGTERM and SIGHUP end a command through its shutdown path (exit 130, 143, 129); one
+    that arrives while cartctl starts ends it with one line.
+    """
+    handlers = stopping.install()
+    try:
+        return _main(argv)
+    finally:
+        stopping.restore(handlers)
+
+
+def _main(argv: Sequence[str] | None) -> int:
+    try:
+        parser = build_parser()
+    except KeyboardInterrupt:
+        print("cartctl: stopped while starting; nothing was done", file=sys.stderr)
+        return stopping.exit_code()
     args = parser.parse_args(argv)
     previous = warnings.showwarning
     warnings.showwarning = _show_warning
@@ -71,7 +88,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         print(f"cartctl {args.command}: interrupted", file=sys.stderr)
-        return 130
+        return stopping.exit_code()
     finally:
         warnings.showwarning = previous
 

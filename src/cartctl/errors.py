@@ -74,3 +74,21 @@ class PlantError(CartctlError, RuntimeError):
 
 class DataWarning(UserWarning):
     """Data that can be used but looks suspicious (uneven sample spacing, a clipped channel)."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """A stop signal (SIGINT, SIGTERM, SIGHUP) arrived: end through the shutdown path.
+
+    A :class:`KeyboardInterrupt`, so that every place that handles Ctrl-C handles the others too.
+    """
+
+    def __init__(self, signum: int) -> None:
+        import signal
+
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+    @property
+    def exit_code(self) -> int:
+        """128 + the signal's number: 130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP."""
+        return 128 + self.signum

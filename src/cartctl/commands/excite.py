@@ -7,6 +7,7 @@ import sys
 
 import numpy as np
 
+from cartctl import stopping
 from cartctl.commands.options import add_plant_options, check_duration
 from cartctl.data import write_trace
 from cartctl.errors import InputError
@@ -85,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     n = len(result.trace)
     if n == 0:
         print("cartctl excite: interrupted before the first tick; nothing written", file=sys.stderr)
-        return 130
+        return stopping.exit_code()
     write_trace(result.trace, args.out)
     path = args.out
     print(
@@ -113,5 +114,5 @@ def run(args: argparse.Namespace) -> int:
             "cartctl excite: interrupted; the trace holds the ticks recorded so far",
             file=sys.stderr,
         )
-        return 130
+        return stopping.exit_code()
     return 0

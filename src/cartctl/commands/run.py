@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import warnings
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from cartctl import stopping
 from cartctl.commands.options import (
     add_name_option,
     add_plant_options,
@@ -285,19 +287,23 @@ def run(args: argparse.Namespace) -> int:
             return loop.tick(k, executor.period_error_us, executor.start_s, time_s)
 
         stats = executor.run(tick)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # Ctrl-C, SIGTERM, SIGHUP (cartctl.stopping)
         loop.state.interrupted = True
     except PlantError as exc:
         loop.state.failure = str(exc)
+    except Exception as exc:  # a fault of cartctl itself: the motors still get zero volts
+        loop.state.failure = f"internal error: {type(exc).__name__}: {exc}"
     finally:
-        loop.finish()
-        sys.setswitchinterval(switch_interval)
-        if not args.fast:
-            from cartctl.runtime.realtime import restore
+        with stopping.deferred():  # a second signal must not cut the shutdown short
+            loop.finish()
+            sys.setswitchinterval(switch_interval)
+            if not args.fast:
+                from cartctl.runtime.realtime import restore
 
-            restore()
+                restore()
     summary = trace_metrics(memory.arrays(), period_s)
     summary.update((stats or executor.stats()).to_dict())
+    summary["ticks"] = loop.state.rows  # as the trace and the recording: the stop row included
     link_summary = getattr(plant, "link_summary", None)
     if link_summary is not None:
         summary.update(link_summary())
@@ -323,7 +329,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"cartctl run: error: {loop.state.failure}", file=sys.stderr)
         return 1
     if loop.state.interrupted:
-        print("cartctl run: interrupted; zero volts sent, the trace and recording hold the run so far",
+        signum = stopping.received()
+        why = "interrupted" if signum is None else f"stopped by {signal.Signals(signum).name}"
+        print(f"cartctl run: {why}; zero volts sent, the trace and recording hold the run so far",
               file=sys.stderr)  # fmt: skip
-        return 130
+        return stopping.exit_code()
     return 0

@@ -61,6 +61,8 @@ class LoopState:
     """What happened, for the summary and the exit code."""
 
     ticks: int = 0
+    rows: int = 0
+    """Rows written to the sinks: the ticks logged, and the stop row of :meth:`ControlLoop.finish`."""
     interrupted: bool = False
     failure: str | None = None
     sink_errors: list[str] = field(default_factory=list)
@@ -122,6 +124,7 @@ class ControlLoop:
         self._clocked = isinstance(plant, ClockedPlant)  # send, time the compute, then wait
         self.last_compute_us = 0.0
         self._true = False
+        self._last_time_s: float | None = None
         self.columns: tuple[str, ...] = TRACE_COLUMNS
 
     def start(self) -> None:
@@ -194,13 +197,36 @@ class ControlLoop:
             row += (y.true_speed_a_rad_s, y.true_speed_b_rad_s)  # type: ignore[operator]
         for s in self.sinks:
             s.write(row)
+        self.state.rows += 1
+        self._last_time_s = row[0]
 
     def finish(self) -> None:
-        """Zero volts, plant closed, sinks closed: on every exit path. Never raises."""
+        """Zero volts, plant closed, sinks closed: on every exit path. Never raises.
+
+        The zero-volt command is the trace's last row (the stop row): tick index = rows so far,
+        0 V on both motors, the measurement at hand, no compute. It is written only when the
+        command went out (not to a vanished port).
+        """
         try:
-            self.plant.step(0.0, 0.0)
+            if self._clocked:  # send only: the cart's next tick need not be waited for
+                self.plant.send(0.0, 0.0)  # type: ignore[attr-defined]
+            else:
+                self.plant.step(0.0, 0.0)
+            sent = True
         except Exception as exc:  # a vanished port: still close what can be closed
             self.state.failure = self.state.failure or f"could not send zero volts: {exc}"
+            sent = False
+        y = self._y
+        if sent and y is not None:
+            k = self.state.rows
+            time_s = 0.0 if self._last_time_s is None else self._last_time_s + self.period_s
+            last = min(k, self.n_ticks - 1)
+            ra, rb = (self.ref_a[last], self.ref_b[last]) if self.n_ticks else (0.0, 0.0)
+            try:
+                self._log(k, time_s, 0.0, 0.0, y, ra, rb, y.speed_a_rad_s, y.speed_b_rad_s, 0.0,
+                          self.now_s())  # fmt: skip
+            except Exception as exc:
+                self.state.sink_errors.append(f"the stop row: {exc}")
         try:
             self.plant.close()
         except Exception as exc:

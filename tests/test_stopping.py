@@ -1,0 +1,106 @@
+"""Every way a run ends is a safe exit: real subprocesses, real signals.
+
+``cartctl run`` on the physics simulator in real time gets SIGINT, SIGTERM or SIGHUP once it
+records (and once while it starts): it must send zero volts and log that command as the trace's
+last row, close the CSV and the recording with as many rows as the summary says, print the summary
+and exit 130, 143 or 129, with one line on stderr and no traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import pytest
+from rerun.chunk import RrdReader
+
+from cartctl.data import read_trace
+
+STARTED_TIMEOUT_S = 30.0
+
+
+def _rrd_rows(path: Path) -> Counter:
+    rows: Counter = Counter()
+    for chunk in RrdReader(path).stream():
+        if not chunk.is_static:
+            rows[chunk.entity_path.lstrip("/")] += chunk.num_rows
+    return rows
+
+
+def _start(workdir: Path, *argv: str) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "cartctl", *argv], cwd=workdir, text=True,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )  # fmt: skip
+
+
+def _wait_recording(process: subprocess.Popen[str], csv: Path) -> None:
+    """Until the run has written rows (the CSV has a data line), then a little more."""
+    deadline = time.monotonic() + STARTED_TIMEOUT_S
+    while time.monotonic() < deadline:
+        if process.poll() is not None:
+            pytest.fail(f"the run ended by itself: {process.communicate()}")
+        if csv.exists() and csv.read_text(encoding="utf-8").count("\n") > 2:
+            time.sleep(0.3)
+            return
+        time.sleep(0.05)
+    pytest.fail("the run did not start recording")
+
+
+def _check_stopped_run(workdir: Path, out: str, err: str, name: str) -> None:
+    assert "Traceback" not in err
+    lines = [line for line in err.splitlines() if line.startswith("cartctl")]
+    assert len(lines) == 1 and lines[0].startswith(f"cartctl run: stopped by SIG{name}"), err
+    summary = json.loads(out)
+    trace = read_trace(workdir / "logs" / "s.csv")
+    assert summary["ticks"] == len(trace) > 10
+    assert (trace.voltage_a[-1], trace.voltage_b[-1]) == (0.0, 0.0)  # the stop command, logged
+    assert abs(trace.voltage_a[:-1]).max() > 0.0  # it was driving before
+    rows = _rrd_rows(workdir / "logs" / "s.rrd")  # needs the footer: closed properly
+    assert rows["motor/a/voltage"] == rows["motor/b/speed"] == len(trace)
+
+
+@pytest.mark.parametrize(
+    ("signum", "code"),
+    [(signal.SIGINT, 130), (signal.SIGTERM, 143), (signal.SIGHUP, 129)],
+    ids=["SIGINT", "SIGTERM", "SIGHUP"],
+)
+def test_a_signal_mid_run_ends_it_safely(workdir: Path, signum: int, code: int) -> None:
+    process = _start(workdir, "run", "--plant", "physics", "--reference", "step:8",
+                     "--duration", "30", "--rerun", "save", "--name", "s", "--json")  # fmt: skip
+    _wait_recording(process, workdir / "logs" / "s.csv")
+    process.send_signal(signum)
+    out, err = process.communicate(timeout=30)
+    assert process.returncode == code, err
+    _check_stopped_run(workdir, out, err, signal.Signals(signum).name[3:])
+
+
+def test_a_second_signal_during_the_shutdown_does_not_cut_it_short(workdir: Path) -> None:
+    process = _start(workdir, "run", "--plant", "physics", "--reference", "step:8",
+                     "--duration", "30", "--rerun", "save", "--name", "s", "--json")  # fmt: skip
+    _wait_recording(process, workdir / "logs" / "s.csv")
+    process.send_signal(signal.SIGTERM)
+    time.sleep(0.005)
+    process.send_signal(signal.SIGINT)
+    time.sleep(0.005)
+    process.send_signal(signal.SIGINT)
+    out, err = process.communicate(timeout=30)
+    assert process.returncode == 143, err  # the first signal decides
+    _check_stopped_run(workdir, out, err, "TERM")
+
+
+@pytest.mark.parametrize(("signum", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_while_starting_ends_with_one_line(workdir: Path, signum: int, code: int) -> None:
+    process = _start(workdir, "run", "--plant", "physics", "--duration", "30", "--name", "s")
+    time.sleep(0.4)  # the interpreter is up, the command's imports are not done
+    process.send_signal(signum)
+    _, err = process.communicate(timeout=30)
+    assert process.returncode == code, err
+    assert "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1, err
+    assert not (workdir / "logs" / "s.csv").exists() or read_trace(workdir / "logs" / "s.csv")
