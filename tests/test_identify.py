@@ -236,7 +236,7 @@ def test_unused_motor_is_skipped_or_refused(
     code = main(["identify", str(path), "--motor", "b"])
     _, err = capsys.readouterr()
     assert code == 2
-    assert "motor b's voltage is zero" in err
+    assert "motor b has no excitation: its voltage is zero" in err
 
 
 def test_averaging_cycles_reduces_noise_bias() -> None:

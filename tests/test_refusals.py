@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 import pytest
@@ -119,3 +120,52 @@ def test_durations_beyond_a_day_are_refused_in_one_line(
     assert len(lines) == 1 and lines[0].startswith(f"cartctl {argv[0]}: error:")
     assert "24 h" in lines[0]
     assert not (workdir / "logs").exists() and not (workdir / "x.csv").exists()
+
+
+def _trace_file(path: Path, volts_a: float | None, volts_b: float | None) -> Path:
+    """500 ticks with constant voltages (None: a square wave) and some speed."""
+    import numpy as np
+
+    from cartctl.data import Trace, write_trace
+
+    n = 500
+    t = np.arange(n) * 0.01
+    square = np.where((np.arange(n) // 100) % 2 == 0, 6.0, -6.0)
+    columns = {
+        "time_s": t,
+        "voltage_a": square if volts_a is None else np.full(n, volts_a),
+        "voltage_b": square if volts_b is None else np.full(n, volts_b),
+        "speed_a": np.sin(t),
+        "speed_b": np.cos(t),
+    }
+    write_trace(Trace.from_columns(columns), path)
+    return path
+
+
+@pytest.mark.parametrize("output", [("--out", "m.toml"), ("--json",), ("--report", "rep")])
+@pytest.mark.parametrize(
+    ("volts", "says"),
+    [((0.0, 0.0), "motor a: its voltage is zero"), ((5.0, 0.0), "a constant 5 V")],
+)
+def test_identify_without_excitation_says_which_motor_and_writes_nothing(
+    capsys: pytest.CaptureFixture[str], workdir: Path, output: tuple[str, ...], volts, says: str
+) -> None:
+    data = _trace_file(workdir / "flat.csv", *volts)
+    code, out, err = _run(capsys, "identify", str(data), *output)
+    assert code == 2 and out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(
+        "cartctl identify: error: no motor has excitation"
+    )
+    assert says in lines[0] and "motor b: its voltage is zero" in lines[0]
+    assert not (workdir / "m.toml").exists() and not (workdir / "rep").exists()
+
+
+def test_identify_one_motor_never_driven(capsys: pytest.CaptureFixture[str], workdir: Path) -> None:
+    data = _trace_file(workdir / "a_only.csv", None, 0.0)
+    code, _, err = _run(capsys, "identify", str(data), "--motor", "b", "--out", "m.toml")
+    assert code == 2 and "motor b has no excitation" in err and len(err.strip().splitlines()) == 1
+    assert not (workdir / "m.toml").exists()
+    code, out, err = _run(capsys, "identify", str(data), "--json")  # both: a alone, b noted
+    assert code == 0 and "motor b skipped: no excitation" in err
+    assert list(json.loads(out)["motors"]) == ["a"]

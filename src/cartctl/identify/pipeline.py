@@ -132,6 +132,16 @@ class IdentifyResult:
         return {"Ts": self.period_s, "motors": {m: r.to_dict() for m, r in self.motors.items()}}
 
 
+def _no_excitation(traces: Sequence[Trace], motor: str) -> str | None:
+    """Why ``motor``'s voltage cannot identify anything (zero or one constant throughout), or None."""
+    volts = np.concatenate([t.voltage(motor) for t in traces])
+    if not np.any(volts != 0.0):
+        return "its voltage is zero throughout"
+    if np.ptp(volts) == 0.0:
+        return f"its voltage is a constant {float(volts[0]):g} V throughout"
+    return None
+
+
 def _segments(traces: Sequence[Trace], motor: str) -> list[Segment]:
     return [(t.speed(motor), t.voltage(motor)) for t in traces if np.any(t.voltage(motor) != 0.0)]
 
@@ -205,7 +215,8 @@ def identify(traces: Sequence[Trace], request: IdentifyRequest) -> IdentifyResul
     Raises
     ------
     InputError
-        Traces with different sample periods, or a motor named alone that no trace drives.
+        Traces with different sample periods, a motor named alone that no trace excites, or no
+        motor excited at all (a voltage that is zero, or one constant, throughout).
     """
     if not traces:
         raise InputError("no traces to identify from")
@@ -218,18 +229,26 @@ def identify(traces: Sequence[Trace], request: IdentifyRequest) -> IdentifyResul
             )
     results: dict[str, MotorIdentification] = {}
     notes: list[str] = []
+    problems: list[str] = []
+    names = ", ".join(str(t.source) for t in traces)
     for motor in request.motors:
-        segments = _segments(traces, motor)
-        if not segments:
-            names = ", ".join(str(t.source) for t in traces)
+        problem = _no_excitation(traces, motor)
+        if problem is not None:
             if len(request.motors) == 1:
                 raise InputError(
-                    f"motor {motor}'s voltage is zero throughout {names}; nothing to identify"
+                    f"motor {motor} has no excitation: {problem} in {names}; nothing to identify"
                 )
-            notes.append(f"motor {motor} skipped: its voltage is zero throughout {names}")
+            notes.append(f"motor {motor} skipped: no excitation ({problem})")
+            problems.append(f"motor {motor}: {problem}")
             continue
+        segments = _segments(traces, motor)
         sources = [str(t.source) for t in traces if np.any(t.voltage(motor) != 0.0)]
         results[motor] = identify_motor(
             motor, segments, request, period_s=period_s, sources=sources
+        )
+    if not results:
+        raise InputError(
+            f"no motor has excitation in {names} ({'; '.join(problems)}); record with a varying "
+            "voltage, e.g. cartctl excite --signal square"
         )
     return IdentifyResult(period_s, results, tuple(notes))
