@@ -169,3 +169,30 @@ def test_identify_one_motor_never_driven(capsys: pytest.CaptureFixture[str], wor
     code, out, err = _run(capsys, "identify", str(data), "--json")  # both: a alone, b noted
     assert code == 0 and "motor b skipped: no excitation" in err
     assert list(json.loads(out)["motors"]) == ["a"]
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [("run", "--plant", "serial:/dev/ttyNOPE", "--rerun", "off"),
+     ("monitor", "serial:/dev/ttyNOPE", "--duration", "1", "--rerun", "off")],
+)  # fmt: skip
+def test_a_port_that_does_not_exist_is_a_user_mistake(
+    capsys: pytest.CaptureFixture[str], workdir: Path, argv: tuple[str, ...]
+) -> None:
+    code, _, err = _run(capsys, *argv)
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "serial port /dev/ttyNOPE does not exist" in lines[0]
+    assert "serial ports present" in lines[0]
+    assert not (workdir / "logs").exists()
+
+
+def test_an_ill_conditioned_placement_is_one_readable_line(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    code, _, err = _run(capsys, "design", "models/ground.toml", "--method", "poles",
+                        "--settling-time", "1e6")  # fmt: skip
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "ill-conditioned" in lines[0]
+    assert "[" not in lines[0] and "array" not in lines[0]

@@ -275,6 +275,18 @@ def _check_poles(poles: Sequence[complex], count: int, what: str) -> list[comple
     return sorted(out, key=lambda v: (abs(v), v.imag))
 
 
+def _poles_text(poles: Sequence[complex] | NDArray[np.complex128]) -> str:
+    """Poles on one line: ``0.999998, 0.5±0.2j``."""
+    parts = []
+    for p in poles:
+        z = complex(p)
+        if abs(z.imag) < 1e-9:
+            parts.append(f"{z.real:.6g}")
+        elif z.imag > 0:
+            parts.append(f"{z.real:.6g}±{z.imag:.3g}j")
+    return ", ".join(parts)
+
+
 def _repeats(poles: Sequence[complex]) -> bool:
     return any(
         abs(a - b) <= _REPEAT_TOL * max(1.0, abs(a))
@@ -396,8 +408,9 @@ def design_poles(
     got, target = np.poly(A_cl), np.real(np.poly(placed))
     if not np.allclose(got, target, rtol=0.0, atol=_CHECK_TOL):
         raise InputError(
-            f"pole placement is numerically ill-conditioned for poles {placed}: the closed loop "
-            f"has {np.linalg.eigvals(A_cl)}; choose poles further apart or less extreme"
+            f"pole placement is numerically ill-conditioned for poles {_poles_text(placed)}: the "
+            f"closed loop would have {_poles_text(np.linalg.eigvals(A_cl))}; choose poles further "
+            "apart or less extreme (a shorter --settling-time)"
         )
     if integral == "disturbance":
         # u = Kr r − K x̂ − b̂: the model's closed loop C (I − A + B K)⁻¹ B Kr has unit DC gain

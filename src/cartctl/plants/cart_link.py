@@ -12,12 +12,13 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import os
 import sys
 import time
 from collections.abc import Callable
 from typing import Any
 
-from cartctl.errors import CartctlError, PlantError
+from cartctl.errors import CartctlError, InputError, PlantError
 from cartctl.link import (
     Framer,
     GenerationBFrame,
@@ -110,6 +111,8 @@ class CartLink:
         import serial
 
         factory = self._factory or serial.Serial
+        if self._factory is None and not os.path.exists(self.port):  # a typo, not a fault
+            raise InputError(f"serial port {self.port} does not exist; {_ports_hint()}")
         try:
             self._serial = factory(self.port, BAUD, timeout=READ_SLICE_S, write_timeout=0.5)
         except (OSError, serial.SerialException) as exc:
