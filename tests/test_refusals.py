@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -196,3 +198,104 @@ def test_an_ill_conditioned_placement_is_one_readable_line(
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "ill-conditioned" in lines[0]
     assert "[" not in lines[0] and "array" not in lines[0]
+
+
+# -- inputs outside physics ----------------------------------------------------------------------
+
+
+def test_data_with_voltages_beyond_the_supply_is_refused(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    import numpy as np
+
+    from cartctl.data import Trace, write_trace
+
+    n = 300
+    volts = np.where(np.arange(n) < 150, 6.0, 1e300)
+    write_trace(Trace.from_columns({"time_s": np.arange(n) * 0.01, "voltage_a": volts,
+                                    "voltage_b": np.zeros(n), "speed_a": np.zeros(n),
+                                    "speed_b": np.zeros(n)}), workdir / "mv.csv")  # fmt: skip
+    for command in (("identify", "mv.csv"), ("validate", "models/ground.toml", "mv.csv")):
+        code, out, err = _run(capsys, *command)
+        assert code == 2 and out == ""
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and "mv.csv, line 152" in lines[0]
+        assert "1e+300 V, beyond the cart's ±12 V supply" in lines[0]
+
+
+def _uncontrolled_reach() -> float:
+    """What motor a of the report's ground model reaches at 12 V: 12 (a + b) / (1 + c + d)."""
+    c, d, a, b = -0.9356, 0.2173, 0.6466, -0.07751
+    return 12.0 * (a + b) / (1.0 + c + d)
+
+
+@pytest.mark.filterwarnings("always::cartctl.errors.DataWarning")  # the CLI prints it
+def test_a_reference_beyond_reach_is_refused_and_one_near_it_flagged(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    reach = _uncontrolled_reach()  # 24.2 rad/s
+    code, _, err = _run(capsys, "run", "--fast", "--reference", "step:1e308", "--rerun", "off")
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert f"it reaches about {reach:.3g}" in err and not (workdir / "logs").exists()
+    code, _, err = _run(capsys, "run", "--fast", "--reference", f"step:{1.2 * reach:.1f}",
+                        "--duration", "1", "--rerun", "off")  # fmt: skip
+    warned = [line for line in err.splitlines() if "saturates" in line]
+    assert code == 0 and len(warned) == 1 and "motor a" in warned[0] and "motor b" in warned[0]
+    code, _, err = _run(capsys, "run", "--fast", "--reference", f"step:{0.9 * reach:.1f}",
+                        "--duration", "1", "--rerun", "off")  # fmt: skip
+    assert code == 0 and "saturates" not in err
+
+
+def test_a_gain_that_saturates_on_one_count_is_refused(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    text = (workdir / "controllers" / "pi.toml").read_text(encoding="utf-8")
+    (workdir / "controllers" / "huge.toml").write_text(
+        re.sub(r"^kp = .*$", "kp = 1e300", text, count=1, flags=re.M), encoding="utf-8"
+    )
+    code, _, err = _run(capsys, "run", "--fast", "--controller", "controllers/huge.toml")
+    assert code == 2
+    lines = err.strip().splitlines()
+    # one count per tick is 2π/1792/0.01 = 0.3506 rad/s: 12 V / 0.3506 rad/s = 34.2 V per rad/s
+    assert len(lines) == 1 and "kp = 1e+300" in lines[0] and "below 34.2" in lines[0]
+    assert not (workdir / "logs").exists()
+
+
+@pytest.fixture
+def unstable_model(workdir: Path) -> Path:
+    text = (workdir / "models" / "ground.toml").read_text(encoding="utf-8")
+    # motor a: z² − 2.1 z + 1.05 has roots 1.05 ± 0.224: outside the unit circle
+    path = workdir / "models" / "unstable.toml"
+    path.write_text(text.replace("[-0.9356, 0.2173,", "[-2.1, 1.05,"), encoding="utf-8")
+    return path
+
+
+def test_an_unstable_model_is_refused_by_run_unless_allowed(
+    capsys: pytest.CaptureFixture[str], workdir: Path, unstable_model: Path
+) -> None:
+    pole = max(abs(r) for r in np.roots([1.0, -2.1, 1.05]))
+    code, _, err = _run(capsys, "run", "--fast", "--model", str(unstable_model), "--rerun", "off")
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert f"motor a's model is unstable (pole at |z| = {pole:.4g})" in err
+    code, out, err = _run(capsys, "run", "--fast", "--model", str(unstable_model), "--rerun",
+                          "off", "--allow-unstable", "--duration", "30", "--json")  # fmt: skip
+    assert code == 1  # a plant fault: the simulation ran away, the files hold the run so far
+    assert "the simulated motor a ran away" in err
+    summary = json.loads(out)
+    assert summary["ticks"] < 3000
+
+
+def test_validate_says_the_model_is_unstable(
+    capsys: pytest.CaptureFixture[str], workdir: Path, unstable_model: Path
+) -> None:
+    data = _trace_file(workdir / "sq.csv", None, None)
+    code, out, err = _run(capsys, "validate", str(unstable_model), str(data), "--json")
+    assert code == 0
+    doc = json.loads(out)
+    assert (
+        doc["motors"]["a"]["stable"] is False
+        and doc["motors"]["a"]["fit_simulation_percent"] is None
+    )
+    assert doc["motors"]["b"]["stable"] is True
+    warned = [line for line in err.splitlines() if "unstable" in line]
+    assert len(warned) == 1 and warned[0].startswith("cartctl validate: warning:")

@@ -139,6 +139,7 @@ def test_onboard_controller_on_the_virtual_cart_stops_before_driving(
 # -- the voltage limit ------------------------------------------------------------------------
 
 
+@pytest.mark.filterwarnings("always::cartctl.errors.DataWarning")  # 10 rad/s is beyond 4 V's reach
 def test_voltage_limit_is_the_controllers_limit(
     capsys: pytest.CaptureFixture[str], workdir: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

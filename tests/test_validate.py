@@ -63,7 +63,8 @@ def test_physics_step_fits_plausibly(ground, physics_step: Trace) -> None:
     assert m.rise_time_s == pytest.approx(s.rise_time_s, abs=0.02)
     assert m.steady_state_value == pytest.approx(s.steady_state_value, rel=0.05)
     d = result.to_dict()
-    assert set(d) == {"fit_simulation_percent", "abs_error", "step"}
+    assert set(d) == {"fit_simulation_percent", "abs_error", "step", "stable"}
+    assert d["stable"] is True
     assert set(d["abs_error"]) == {"max", "mean", "rms"}
 
 

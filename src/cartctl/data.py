@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from cartctl import TS_S, qrc
+from cartctl.cart import SUPPLY_V
 from cartctl.errors import DataFileError, DataWarning, InputError, MissingFileError
 
 __all__ = [
@@ -348,6 +349,7 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
         expected = f"the log has {len(names)} columns (time and {len(log.labels)} channels)"
         table = _Table(path, names, _to_floats(where, log.rows, names, expected), where)
     _check_finite(table)
+    _check_voltages(table, plan)
     time = table.values[:, time_j]
     _check_increasing(table, time, table.names[time_j], "s" if kind == "csv" else "ms")
     columns = {
@@ -479,6 +481,27 @@ def _to_floats(where: _Where, rows: list[list[str]], names: list[str], expected:
                 value = repr(text.strip()) if text.strip() else "an empty field"
                 raise where.error(i, f"{value} is not a number", column=name)
     return np.array(rows, dtype=np.float64)
+
+
+VOLTAGE_READ_LIMIT_V = SUPPLY_V + 0.5
+"""A voltage in data beyond this (V) was never on a motor of the cart (its supply is ±12 V)."""
+
+
+def _check_voltages(table: _Table, plan: Mapping[str, int | None]) -> None:
+    """Refuse voltages beyond the supply: another unit (mV) or another channel, not a voltage."""
+    for name in ("voltage_a", "voltage_b"):
+        j = plan.get(name)
+        if j is None:
+            continue
+        volts = np.abs(table.values[:, j])
+        if volts.max(initial=0.0) > VOLTAGE_READ_LIMIT_V:
+            i = int(np.argmax(volts > VOLTAGE_READ_LIMIT_V))
+            raise table.where.error(
+                i,
+                f"{name} is {table.values[i, j]:g} V, beyond the cart's ±{SUPPLY_V:g} V supply: is "
+                "the column in mV, or another channel (see --map)?",
+                column=table.names[j],
+            )
 
 
 def _check_finite(table: _Table) -> None:

@@ -38,6 +38,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from cartctl.cart import ENCODER_COUNTS_PER_REV
 from cartctl.errors import InputError
 
 __all__ = [
@@ -67,9 +68,6 @@ RISE_LIMITS = (0.1, 0.9)
 
 SETTLING_FRACTION = 0.02
 """The settling band's half-width as a fraction of the step (the 2 % criterion)."""
-
-ENCODER_COUNTS_PER_REV = 1792
-"""Encoder counts per wheel revolution of the cart (the measured speed moves in whole counts)."""
 
 
 def encoder_quantum_rad_s(period_s: float, counts_per_rev: int = ENCODER_COUNTS_PER_REV) -> float:

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
 import warnings
 from datetime import datetime
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from cartctl import stopping
 from cartctl.commands.options import (
@@ -20,6 +23,8 @@ from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.errors import CartctlError, DataWarning, InputError, PlantError
 from cartctl.jsonout import dumps
+from cartctl.model import ArxModel
+from cartctl.modelfile import load_models
 from cartctl.plants.base import ClockedPlant, Plant
 from cartctl.plants.factory import is_serial, make_plant
 from cartctl.runtime.loop import ControlLoop, MemorySink
@@ -56,6 +61,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="run a controller designed for another loop delay than the plant's (a warning "
         "instead of an error)",
+    )
+    p.add_argument(
+        "--allow-unstable",
+        action="store_true",
+        help="run the sim plant on an unstable model (it stops once a speed runs away)",
     )
     p.add_argument(
         "--force",
@@ -96,6 +106,59 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--json", action="store_true", help="print the summary as one JSON object (contract 3)"
     )
     p.set_defaults(func=run)
+
+
+def _refuse_unstable(models: dict[str, ArxModel], path: str) -> None:
+    """An unstable model on the sim plant runs away: refuse it (``--allow-unstable`` overrides)."""
+    for motor, model in models.items():
+        if not model.is_stable():
+            worst = max((p for p in model.poles()), key=lambda p: abs(p.value))
+            raise InputError(
+                f"{path}: motor {motor}'s model is unstable (pole at |z| = {abs(worst.value):.4g}): "
+                "a simulation of it runs away whatever the controller does; identify it again, "
+                "or pass --allow-unstable"
+            )
+
+
+def _design_models(controller_file: ControllerFile) -> dict[str, ArxModel]:
+    """The models the controller was designed on; none when that file is gone or unreadable."""
+    try:
+        return dict(load_models(controller_file.model_path).motors)
+    except (CartctlError, OSError):
+        return {}
+
+
+REACH_REFUSE_FACTOR = 2.0
+"""A reference beyond this many times what a motor reaches at the voltage limit is refused."""
+
+
+def _check_reach(
+    references: dict[str, Any], models: dict[str, ArxModel], limit_v: float, where: str
+) -> None:
+    """Refuse a reference no motor can follow, warn (one line) about one reached only saturated.
+
+    What a motor reaches is its model's DC gain times the voltage limit (for a stable model).
+    """
+    beyond: list[str] = []
+    refuse = False
+    for motor, ref in references.items():
+        model = models.get(motor)
+        if model is None or not model.is_stable() or not len(ref):
+            continue
+        reach = abs(model.dc_gain()) * limit_v
+        peak = float(np.max(np.abs(ref)))
+        if math.isfinite(reach) and peak > reach:
+            beyond.append(f"motor {motor} {peak:.4g} rad/s (it reaches about {reach:.3g})")
+            refuse = refuse or peak > REACH_REFUSE_FACTOR * reach
+    if not beyond:
+        return
+    what = (
+        f"the reference asks for {', '.join(beyond)} at {limit_v:g} V, by the DC gains in {where}"
+    )
+    if refuse:
+        raise InputError(f"{what}; give a reference within that")
+    warnings.warn(f"{what}: the voltage saturates and the speed will not settle there",
+                  DataWarning, stacklevel=2)  # fmt: skip
 
 
 def _references(args: argparse.Namespace, n: int, period_s: float) -> dict[str, Any]:
@@ -236,6 +299,9 @@ def run(args: argparse.Namespace) -> int:
             f"the controller is for Ts = {controller_file.period_s} s but the plant ticks at {period_s} s"
         )
     clocked = isinstance(plant, ClockedPlant)
+    models = getattr(plant, "models", None)  # the sim plant's own
+    if models is not None and not args.allow_unstable:
+        _refuse_unstable(dict(zip("ab", models, strict=True)), args.model)
     try:  # before any file is opened and before driving: a missing cart, a wrong controller
         if clocked:
             plant.connect()
@@ -249,6 +315,17 @@ def run(args: argparse.Namespace) -> int:
         raise
     n = max(1, round(args.duration / period_s))
     references = _references(args, n, period_s)
+    try:
+        reach_models = (
+            dict(zip("ab", models, strict=True))
+            if models is not None
+            else _design_models(controller_file)
+        )
+        where = args.model if models is not None else controller_file.model_path
+        _check_reach(references, reach_models, limit, where)
+    except BaseException:
+        plant.close()
+        raise
     out = Path(args.out)
     stem = args.name or _free_stem(out, datetime.now().strftime("run-%Y%m%d-%H%M%S"))
     csv_path, rrd_path = out / f"{stem}.csv", out / f"{stem}.rrd"

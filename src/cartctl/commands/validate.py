@@ -135,6 +135,11 @@ def _step_rows(measured: StepInfo, simulated: StepInfo) -> list[tuple[str, str, 
 
 def format_result(r: ValidationResult) -> list[str]:
     """The lines of one motor's table."""
+    if r.unstable_pole is not None:
+        return [
+            f"motor {r.motor}: the model is unstable (pole at |z| = {r.unstable_pole:.4g}): its "
+            "simulation runs away from any input, so there is no fit to show"
+        ]
     e = r.error_summary()
     lines = [
         f"motor {r.motor}: fit {_num(r.fit_simulation_percent, '.2f')} % (simulation)",
@@ -187,6 +192,13 @@ def run(args: argparse.Namespace) -> int:
             "skipped",
             file=sys.stderr,
         )
+    for r in validation.results.values():
+        if r.unstable_pole is not None:
+            print(
+                f"cartctl validate: warning: {args.model}: motor {r.motor}'s model is unstable "
+                f"(pole at |z| = {r.unstable_pole:.4g}); identify it again",
+                file=sys.stderr,
+            )
     if plot is not None:
         plot_validation(validation, plot)
     if args.json:

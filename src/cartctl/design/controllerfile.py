@@ -25,7 +25,7 @@
     controller_den = [1.0, -1.0]
 
 The **loop delay** is the number of ticks from a measurement to the voltage it leads to being on
-the motor: 1 on board the cart and in the simulators, 4 over the PC serial loop. A design on an
+the motor: 1 on board the cart and in the simulators, 3 over the PC serial loop. A design on an
 ARX model with input delay nk and ``--extra-delay d`` is for a loop delay of nk − 1 + d.
 
 Loading checks the format and the keys, resolves the model path against the file's folder, and
@@ -39,6 +39,7 @@ older cartctl) gets it from its model's nk and ``request.extra_delay_ticks``.
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -48,6 +49,7 @@ from typing import Any
 import numpy as np
 import tomli_w
 
+from cartctl.cart import PERIOD_S, SPEED_QUANTUM_RAD_S
 from cartctl.errors import CartctlError, DataFileError
 from cartctl.tomlfile import read_toml, require
 
@@ -191,6 +193,37 @@ class ControllerFile:
         return not path.is_file() or file_sha256(path) != self.model_sha256
 
 
+def absurd_gain(controller: ControllerFile) -> str | None:
+    """The first gain that saturates the output at an error of one encoder count, or None.
+
+    A speed is measured in whole counts per tick (:data:`~cartctl.cart.SPEED_QUANTUM_RAD_S`,
+    0.35 rad/s at 10 ms): a proportional gain (``kp``, ``Kr``, an entry of ``K``) that turns one
+    count into the whole voltage limit, or an integral gain (``ki``) that does so in one tick, is
+    no controller but a switch, and a value that is not a finite number is no gain at all.
+    """
+    limit = controller.voltage_limit_v
+    q = SPEED_QUANTUM_RAD_S * PERIOD_S / controller.period_s
+    for motor, entry in controller.motors.items():
+        for key, per_error in (("kp", q), ("Kr", q), ("K", q), ("ki", q * controller.period_s)):
+            values = entry.get(key)
+            if values is None:
+                continue
+            for value in values if isinstance(values, list) else [values]:
+                if not isinstance(value, int | float) or isinstance(value, bool):
+                    continue  # build_controllers names a gain that is not a number
+                if not math.isfinite(value):
+                    return f"[motors.{motor}] {key} = {value} is not a finite number"
+                if abs(value) * per_error >= limit:
+                    unit = "V/rad" if key == "ki" else "V per rad/s"
+                    return (
+                        f"[motors.{motor}] {key} = {value:g} {unit} puts the whole {limit:g} V on "
+                        f"an error of one encoder count ({SPEED_QUANTUM_RAD_S:.3g} rad/s"
+                        f"{' for one tick' if key == 'ki' else ''}): that is a switch, not a "
+                        f"controller; keep |{key}| below {limit / per_error:.3g}"
+                    )
+    return None
+
+
 def _relative_to(model_path: str, folder: str | Path) -> str:
     """``model_path`` (from the working directory) as a path from ``folder`` (POSIX separators)."""
     try:
@@ -315,6 +348,9 @@ def load_controller(path: str | Path, *, force: bool = False) -> ControllerFile:
         path=path,
         loop_delay_ticks=delay,
     )
+    problem = absurd_gain(controller)
+    if problem is not None:
+        raise DataFileError(path, problem)
     from cartctl.design.build import consistency_problems  # build imports this module
 
     problems = consistency_problems(controller)

@@ -9,6 +9,7 @@ and simulated responses side by side. Pure numpy on a :class:`~cartctl.data.Trac
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -112,6 +113,9 @@ class ValidationResult:
         |measured − simulated| (rad/s).
     step : StepComparison or None
         Present when the input is a single step from 0 V.
+    unstable_pole : float or None
+        |z| of the model's largest pole when it is unstable (then the simulation runs away and
+        there is no fit: NaN, and no step comparison), else None.
     """
 
     motor: str
@@ -122,10 +126,13 @@ class ValidationResult:
     simulated_rad_s: np.ndarray = field(repr=False)
     abs_error_rad_s: np.ndarray = field(repr=False)
     step: StepComparison | None = None
+    unstable_pole: float | None = None
 
     def error_summary(self) -> dict[str, float]:
         """Max, mean and RMS of the absolute error (rad/s)."""
         e = self.abs_error_rad_s
+        if self.unstable_pole is not None:
+            return {"max": math.nan, "mean": math.nan, "rms": math.nan}
         return {
             "max": float(np.max(e)),
             "mean": float(np.mean(e)),
@@ -138,6 +145,7 @@ class ValidationResult:
             "fit_simulation_percent": finite_or_none(self.fit_simulation_percent),
             "abs_error": self.error_summary(),
             "step": None if self.step is None else self.step.to_dict(),
+            "stable": self.unstable_pole is None,
         }
 
 
@@ -173,7 +181,16 @@ def validate(model: ArxModel, trace: Trace, motor: str) -> ValidationResult:
             f"motor {motor}'s voltage is zero throughout {_where(trace)}; nothing to validate "
             f"— {hint}"
         )
-    simulated = model.simulate(voltage)
+    with np.errstate(over="ignore", invalid="ignore"):  # an unstable model may overflow
+        simulated = model.simulate(voltage)
+    if not model.is_stable():
+        pole = max(abs(p.value) for p in model.poles())
+        runaway = np.where(np.isfinite(simulated), simulated, np.nan)
+        return ValidationResult(
+            motor=motor, fit_simulation_percent=math.nan, time_s=trace.time_s,
+            voltage_v=voltage, measured_rad_s=measured, simulated_rad_s=runaway,
+            abs_error_rad_s=np.abs(measured - runaway), unstable_pole=pole,
+        )  # fmt: skip
     abs_error = np.abs(measured - simulated)
     return ValidationResult(
         motor=motor,

@@ -13,12 +13,13 @@ from collections import deque
 
 import numpy as np
 
-from cartctl.errors import InputError
+from cartctl.cart import SUPPLY_V
+from cartctl.errors import InputError, PlantError
 from cartctl.model import ArxModel
 from cartctl.plants.base import Measurement
 
-SUPPLY_V = 12.0
-"""The cart's supply voltage: the command saturates at ± this value (V)."""
+DIVERGED_RAD_S = 1e6
+"""A simulated speed beyond this (rad/s; the cart's motors reach about 25) has run away."""
 
 
 def saturate(voltage_v: float, limit_v: float = SUPPLY_V) -> float:
@@ -121,9 +122,21 @@ class ArxPlant:
         return self._measure(0.0, 0.0)
 
     def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
-        """Command voltages at tick k (saturated), advance, return the tick k+1 measurement."""
+        """Command voltages at tick k (saturated), advance, return the tick k+1 measurement.
+
+        Raises
+        ------
+        PlantError
+            A motor's speed left :data:`DIVERGED_RAD_S`: its model is unstable and the
+            simulation has run away (the run stops as on a plant fault).
+        """
         ya = self._motors[0].step(saturate(voltage_a_v, self.voltage_limit_v))
         yb = self._motors[1].step(saturate(voltage_b_v, self.voltage_limit_v))
+        for motor, y in (("a", ya), ("b", yb)):
+            if not abs(y) < DIVERGED_RAD_S:
+                raise PlantError(
+                    f"the simulated motor {motor} ran away ({y:.3g} rad/s): its model is unstable"
+                )
         return self._measure(ya, yb)
 
     def close(self) -> None:

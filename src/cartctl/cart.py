@@ -1,0 +1,16 @@
+"""Facts of the MECOtron cart that every layer uses, defined once.
+
+The supply and the encoder bound what any data, reference or controller can mean: a voltage beyond
+the supply was never on a motor, and a speed resolves to whole encoder counts per tick.
+"""
+
+from __future__ import annotations
+
+SUPPLY_V = 12.0
+"""The cart's supply voltage: every command saturates at ± this value (V)."""
+ENCODER_COUNTS_PER_REV = 1792
+"""Encoder counts per wheel revolution."""
+PERIOD_S = 0.01
+"""The control thread's period on the cart (s)."""
+SPEED_QUANTUM_RAD_S = 2.0 * 3.141592653589793 / ENCODER_COUNTS_PER_REV / PERIOD_S
+"""One encoder count per tick as a speed: the resolution of a measured speed (0.3506 rad/s)."""
