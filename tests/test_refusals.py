@@ -299,3 +299,77 @@ def test_validate_says_the_model_is_unstable(
     assert doc["motors"]["b"]["stable"] is True
     warned = [line for line in err.splitlines() if "unstable" in line]
     assert len(warned) == 1 and warned[0].startswith("cartctl validate: warning:")
+
+
+# -- messages that state facts ---------------------------------------------------------------------
+
+
+def _spaced_trace(path: Path, steps_s: np.ndarray) -> Path:
+    from cartctl.data import Trace, write_trace
+
+    t = np.concatenate([[0.0], np.cumsum(steps_s)])
+    n = t.size
+    volts = np.where((np.arange(n) // 50) % 2 == 0, 5.0, -5.0)
+    write_trace(Trace.from_columns({"time_s": t, "voltage_a": volts, "voltage_b": np.zeros(n),
+                                    "speed_a": volts * 2.0, "speed_b": np.zeros(n)}), path)  # fmt: skip
+    return path
+
+
+def test_spacing_warning_tells_jitter_from_missing_rows(tmp_path: Path) -> None:
+    from cartctl.data import read_trace
+    from cartctl.errors import DataWarning
+
+    jitter = np.full(300, 0.01)
+    jitter[100] = 0.012  # one 12 ms step: the clock, not a lost frame
+    with pytest.warns(DataWarning, match="no row is missing, but the sample clock jitters"):
+        read_trace(_spaced_trace(tmp_path / "j.csv", jitter))
+    gaps = np.full(300, 0.01)
+    gaps[[50, 200]] = 0.02  # two frames lost
+    gaps[120] = 0.03  # two more in a row
+    with pytest.warns(DataWarning, match=r"about 4 row\(s\) are missing"):
+        read_trace(_spaced_trace(tmp_path / "g.csv", gaps))
+
+
+def _qrc6(path: Path, labels: list[str]) -> Path:
+    head = "QGPIORecord, QRC v6.0.2, 14-03-2024 @ 10:05:31, Ubuntu, x86_64\n"
+    rows = [", ".join(["Time", *labels])]
+    for k in range(20):
+        rows.append(", ".join([str(5000 + 10 * k)] + [str(float(k % 3))] * len(labels)))
+    path.write_text(head + "\n".join(rows) + "\n", encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize(
+    ("labels", "hint"),
+    [
+        (["Error", "Ref", "voltA", "speedA"] + [f"FloatIn{i}" for i in range(4, 12)],
+         "--map voltage_a=voltA,speed_a=speedA"),
+        (["Error", "Ref", "x", "y"] + [f"FloatIn{i}" for i in range(4, 12)],
+         "--map voltage_a=<label>,speed_a=<label> (no label says which channel is which)"),
+    ],
+)  # fmt: skip
+def test_the_map_hint_never_guesses_by_position(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, labels: list[str], hint: str
+) -> None:
+    code, _, err = _run(capsys, "convert", str(_qrc6(tmp_path / "log.csv", labels)))
+    assert code == 2 and hint in err and "=Error" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_delay_auto_says_when_the_data_cannot_tell(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A speed that is noise, whatever the voltage: every delay explains it equally (badly)."""
+    from cartctl.data import Trace, write_trace
+
+    rng = np.random.default_rng(11)
+    n = 20000
+    volts = rng.choice([-6.0, 6.0], n)
+    speed = rng.normal(0.0, 1.0, n)
+    write_trace(Trace.from_columns({"time_s": np.arange(n) * 0.01, "voltage_a": volts,
+                                    "voltage_b": np.zeros(n), "speed_a": speed,
+                                    "speed_b": np.zeros(n)}), tmp_path / "noise.csv")  # fmt: skip
+    code, out, err = _run(capsys, "identify", str(tmp_path / "noise.csv"), "--delay", "auto",
+                          "--motor", "a")  # fmt: skip
+    assert code == 2 and out == ""
+    assert "--delay auto cannot tell" in err and "give --delay N" in err
+    assert len(err.strip().splitlines()) == 1

@@ -13,7 +13,7 @@ from __future__ import annotations
 import csv
 import difflib
 import warnings
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -589,9 +589,7 @@ def _plan(
                 f"map both of motor {motor}'s columns, or neither",
             )
     if not any(f"voltage_{motor}" in source for motor in MOTORS):
-        example = "voltage_a=<label>,speed_a=<label>"
-        if first and len(names) >= 4:
-            example = f"voltage_a={names[3]},speed_a={names[1]}"  # the bridge's channel map
+        example = _guess_mapping(names[first:])
         raise DataFileError(
             path,
             f"no mapping for voltage/speed columns; this {kind} file has {what}s {listing}; "
@@ -623,6 +621,26 @@ def _check_increasing(table: _Table, time: np.ndarray, label: str, unit: str) ->
         )
 
 
+_VOLTAGE_WORDS = ("volt", "voltage", "u_", "pwm")
+_SPEED_WORDS = ("speed", "omega", "vel", "rad_s", "rads")
+
+
+def _guess_mapping(labels: Sequence[str]) -> str:
+    """A ``--map`` example from labels that say what they are; placeholders when none do.
+
+    Only a label's own words count (``voltA``, ``speedA``): a guess by position would wire a
+    voltage to whatever channel sits there (an error, a reference).
+    """
+
+    def first(words: tuple[str, ...]) -> str | None:
+        return next((lab for lab in labels if any(w in lab.lower() for w in words)), None)
+
+    volt, speed = first(_VOLTAGE_WORDS), first(_SPEED_WORDS)
+    if volt is None or speed is None:
+        return "voltage_a=<label>,speed_a=<label> (no label says which channel is which)"
+    return f"voltage_a={volt},speed_a={speed}"
+
+
 def _warn_spacing(table: _Table, time_s: np.ndarray) -> None:
     """Warn once if time steps stray from the 10 ms tick by more than the tolerance."""
     steps = np.diff(time_s)
@@ -633,11 +651,22 @@ def _warn_spacing(table: _Table, time_s: np.ndarray) -> None:
     worst = int(stray[np.argmax(off[stray])])
     _, worst_at = table.where(worst + 1)
     _, first_at = table.where(int(stray[0]) + 1)
+    gaps = steps[steps > 1.5 * TS_S]
+    if gaps.size:  # a missing row leaves a step of about two ticks
+        missing = int(np.sum(np.round(gaps / TS_S) - 1))
+        what = (
+            f"about {missing} row(s) are missing (a lost frame leaves a step of about "
+            f"{2 * TS_S * 1000:g} ms); identification assumes one row per tick"
+        )
+    else:
+        what = (
+            "no row is missing, but the sample clock jitters; identification assumes one row "
+            f"per {TS_S * 1000:g} ms tick"
+        )
     warnings.warn(
         f"{table.path}: {stray.size} of {steps.size} time steps stray from the "
         f"{TS_S * 1000:g} ms tick by more than {SPACING_TOLERANCE_S * 1000:g} ms; the farthest "
-        f"is {steps[worst] * 1000:.4g} ms (at {worst_at}), the first at {first_at}. Rows may be "
-        "missing (lost frames); identification assumes one row per tick",
+        f"is {steps[worst] * 1000:.4g} ms (at {worst_at}), the first at {first_at}: {what}",
         DataWarning,
         stacklevel=3,
     )

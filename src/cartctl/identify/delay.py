@@ -8,6 +8,7 @@ evidence, reported to the user.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -38,7 +39,8 @@ class DelayEstimate:
     residual_rms : tuple of float
         Equation-error RMS (rad/s) of each candidate's ARX fit, on common equations.
     fit_prediction_percent, fit_simulation_percent : tuple of float
-        Each candidate's fits (%).
+        Each candidate's fits (%); the simulation fit is NaN (null in JSON) for a candidate whose
+        model is unstable, as its simulation runs away and the figure would mean nothing.
     """
 
     nk: int
@@ -69,6 +71,10 @@ class DelayEstimate:
         }
 
 
+INDISTINCT_FRACTION = 1e-3
+"""Candidates whose equation errors all lie within this fraction of the best cannot be told apart."""
+
+
 def estimate_delay(
     segments: Sequence[Segment],
     *,
@@ -97,6 +103,12 @@ def estimate_delay(
     -------
     DelayEstimate
         Ties (equal losses up to rounding, 1e-9 of the output's RMS) go to the smaller delay.
+
+    Raises
+    ------
+    IdentificationError
+        Every candidate's loss within :data:`INDISTINCT_FRACTION` of the best: the data cannot
+        tell the delays apart.
     """
     cands = tuple(int(c) for c in candidates)
     if not cands:
@@ -122,6 +134,13 @@ def estimate_delay(
         except IdentificationError as exc:
             raise IdentificationError(f"delay estimation, candidate nk = {c}: {exc}") from None
     rms = np.array([f.residual_rms for f in fits])
+    if len(cands) > 1 and rms.max() <= (1.0 + INDISTINCT_FRACTION) * rms.min():
+        raise IdentificationError(
+            f"--delay auto cannot tell: the equation errors of nk = "
+            f"{', '.join(map(str, cands))} are within {INDISTINCT_FRACTION:.1%} of each other "
+            f"({rms.min():.4g} rad/s); the data does not show when the motor answers, so give "
+            "--delay N (2 on board, loop delay + 1 over serial)"
+        )
     y_scale = float(np.sqrt(np.mean(np.concatenate([y for y, _ in data]) ** 2)))
     tie = rms.min() + 1e-9 * (rms.min() + y_scale)  # equal up to rounding: the smaller delay wins
     best = int(np.flatnonzero(rms <= tie)[0])
@@ -130,5 +149,7 @@ def estimate_delay(
         candidates=cands,
         residual_rms=tuple(float(r) for r in rms),
         fit_prediction_percent=tuple(f.fit_prediction_percent for f in fits),
-        fit_simulation_percent=tuple(f.fit_simulation_percent for f in fits),
+        fit_simulation_percent=tuple(
+            f.fit_simulation_percent if f.model.is_stable() else math.nan for f in fits
+        ),
     )
