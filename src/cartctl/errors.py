@@ -10,10 +10,24 @@ from __future__ import annotations
 from pathlib import Path
 
 
+def one_line(text: str) -> str:
+    """``text`` with line breaks and other control characters shown as escapes (``\\n``)."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 class CartctlError(Exception):
-    """Base of all errors that cartctl reports to the user."""
+    """Base of all errors that cartctl reports to the user.
+
+    Its message is always one line: a value the user gave that holds a line break or another
+    control character is shown escaped.
+    """
 
     exit_code: int = 2
+
+    def __str__(self) -> str:
+        return one_line(super().__str__())
 
 
 class InputError(CartctlError, ValueError):
@@ -28,7 +42,7 @@ class MissingFileError(CartctlError, FileNotFoundError):
         super().__init__(f"{what} not found: {self.path}")
 
     def __str__(self) -> str:  # FileNotFoundError would otherwise format (errno, strerror)
-        return self.args[0]
+        return one_line(self.args[0])
 
 
 class DataFileError(CartctlError, ValueError):

@@ -50,7 +50,53 @@ def kalman_from_entry(entry: Mapping[str, Any]) -> KalmanDesign:
             raise KeyError(f"estimator.{f.name}")
         value = entry[f.name]
         values[f.name] = np.asarray(value, dtype=float) if f.name in _KALMAN_ARRAYS else value
+    _check_estimator(values)
     return KalmanDesign(**values)
+
+
+COVARIANCE_BOUND = 1e6
+"""Largest covariance entry (rad²/s², V²) an estimator file may hold; the designs hold below 1."""
+
+
+def _check_estimator(values: Mapping[str, Any]) -> None:
+    """Shapes that fit together, finite numbers, and an estimator whose error decays.
+
+    Raises
+    ------
+    ValueError
+        Naming what is wrong (build_controllers reports it with the motor and the file).
+    """
+    A = values["A"]
+    m = A.shape[0] if A.ndim == 2 else -1
+    shapes = {"A": (m, m), "B": (m,), "C": (m,), "L": (m,), "Q": (m, m), "P": (m, m)}
+    for name, shape in shapes.items():
+        array = values[name]
+        if m < 1 or array.shape != shape:
+            raise ValueError(f"estimator.{name} has shape {array.shape}; expected {shape}")
+        if not np.all(np.isfinite(array)):
+            raise ValueError(f"estimator.{name} holds a value that is not a finite number")
+    r = float(values["R"])
+    if not (math.isfinite(r) and 0.0 < r <= COVARIANCE_BOUND):
+        raise ValueError(f"estimator.R must be a variance in (0, {COVARIANCE_BOUND:g}], got {r}")
+    for name in ("Q", "P"):
+        cov = values[name]
+        scale = max(1.0, float(np.max(np.abs(cov))))
+        if (
+            np.max(np.abs(cov)) > COVARIANCE_BOUND
+            or np.max(np.abs(cov - cov.T)) > 1e-9 * scale
+            or np.min(np.linalg.eigvalsh((cov + cov.T) / 2.0)) < -1e-9 * scale
+        ):
+            raise ValueError(
+                f"estimator.{name} must be a covariance: symmetric, positive semidefinite, "
+                f"entries up to {COVARIANCE_BOUND:g}"
+            )
+    error_dynamics = (np.eye(m) - np.outer(values["L"], values["C"])) @ A
+    radius = float(np.max(np.abs(np.linalg.eigvals(error_dynamics))))
+    if not radius < 1.0:
+        raise ValueError(
+            f"the estimator's error does not decay (its poles reach |z| = {radius:.4g}); "
+            "redesign the controller"
+        )
 
 
 def pi_entry(design: PiDesign, anti_windup: str, estimator: KalmanDesign | None) -> dict[str, Any]:
@@ -104,8 +150,16 @@ class _Gains:
     estimator: KalmanDesign
 
 
-def _coeffs(values: Sequence[float]) -> str:
-    return "[" + ", ".join(f"{v:.10g}" for v in values) + "]"
+def _coeffs(values: Sequence[Any]) -> str:
+    """Coefficients for a message; an entry that is not a number is shown as it is."""
+    return (
+        "["
+        + ", ".join(
+            f"{v:.10g}" if isinstance(v, int | float) and not isinstance(v, bool) else repr(v)
+            for v in values
+        )
+        + "]"
+    )
 
 
 def _disagrees(stored: Any, expected: NDArray[np.float64]) -> bool:

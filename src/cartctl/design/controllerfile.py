@@ -335,9 +335,12 @@ def load_controller(path: str | Path, *, force: bool = False) -> ControllerFile:
             f"plant_kind = {kind!r} contradicts loop_delay_ticks = {delay} ('onboard' is a loop "
             f"delay of {ONBOARD_LOOP_DELAY_TICKS} tick, 'serial' more)",
         )
+    period_s = float(require(doc, "period_s", (int, float), path, "the top level"))
+    if not (math.isfinite(period_s) and 0.0 < period_s <= 1.0):
+        raise DataFileError(path, f"period_s must be a sample period in (0, 1] s, got {period_s}")
     controller = ControllerFile(
         method=method,
-        period_s=float(require(doc, "period_s", (int, float), path, "the top level")),
+        period_s=period_s,
         voltage_limit_v=limit,
         model_path=model_path,
         model_sha256=str(require(model, "sha256", str, path, "[model]")),
