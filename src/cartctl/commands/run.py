@@ -28,7 +28,7 @@ from cartctl.modelfile import load_models
 from cartctl.plants.base import ClockedPlant, Plant
 from cartctl.plants.factory import is_serial, make_plant
 from cartctl.runtime.loop import ControlLoop, MemorySink
-from cartctl.runtime.reference import FORMS, reference_signal
+from cartctl.runtime.reference import FORMS, ReferenceSchedule
 from cartctl.sinks.csv_sink import CsvSink
 from cartctl.sinks.summary import format_summary, trace_metrics, warn_host_losses
 
@@ -146,7 +146,7 @@ def _check_reach(
         if model is None or not model.is_stable() or not len(ref):
             continue
         reach = abs(model.dc_gain()) * limit_v
-        peak = float(np.max(np.abs(ref)))
+        peak = ref.peak_abs() if isinstance(ref, ReferenceSchedule) else float(np.max(np.abs(ref)))
         if math.isfinite(reach) and peak > reach:
             beyond.append(f"motor {motor} {peak:.4g} rad/s (it reaches about {reach:.3g})")
             refuse = refuse or peak > REACH_REFUSE_FACTOR * reach
@@ -162,8 +162,8 @@ def _check_reach(
 
 
 def _references(args: argparse.Namespace, n: int, period_s: float) -> dict[str, Any]:
-    ref_a = reference_signal(args.reference, n, period_s, "a")
-    ref_b = reference_signal(args.reference_b or args.reference, n, period_s, "b")
+    ref_a = ReferenceSchedule(args.reference, n, period_s, "a")
+    ref_b = ReferenceSchedule(args.reference_b or args.reference, n, period_s, "b")
     return {"a": ref_a, "b": ref_b}
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,25 +35,40 @@ MAX_VOLTAGE_V = 12.0
 
 
 class MemorySink:
-    """Keeps every row in memory, for the run summary (same numbers as the CSV)."""
+    """Keeps every row in memory, for the run summary (same numbers as the CSV).
+
+    Rows are packed into float64 blocks of :attr:`BLOCK_ROWS` (112 bytes per row for the 14
+    columns of a simulated run: 1 GB for the longest run, 24 h), not kept as Python tuples.
+    """
+
+    BLOCK_ROWS = 1024
 
     def __init__(self) -> None:
         self.columns: tuple[str, ...] = ()
-        self.rows: list[Sequence[float]] = []
+        self._blocks: list[NDArray[np.float64]] = []
+        self._rows: list[Sequence[float]] = []
 
     def open(self, columns: Sequence[str]) -> None:
         self.columns = tuple(columns)
-        self.rows = []
+        self._blocks, self._rows = [], []
 
     def write(self, row: Sequence[float]) -> None:
-        self.rows.append(row)
+        self._rows.append(row)
+        if len(self._rows) >= self.BLOCK_ROWS:
+            self._blocks.append(np.array(self._rows, dtype=float))
+            self._rows = []
 
     def close(self) -> None:
         """Nothing to flush."""
 
+    def __len__(self) -> int:
+        return sum(len(b) for b in self._blocks) + len(self._rows)
+
     def arrays(self) -> dict[str, NDArray[np.float64]]:
         """The rows as one array per column."""
-        table = np.array(self.rows, dtype=float).reshape(-1, len(self.columns))
+        width = len(self.columns)
+        parts = [*self._blocks, np.array(self._rows, dtype=float).reshape(-1, width)]
+        table = np.concatenate([p.reshape(-1, width) for p in parts])
         return {name: table[:, i] for i, name in enumerate(self.columns)}
 
 
@@ -68,6 +84,16 @@ class LoopState:
     sink_errors: list[str] = field(default_factory=list)
 
 
+def _per_tick(reference: Any, n: int) -> Sequence[float]:
+    """A reference the tick can index fast: arrays become lists; a schedule computing its values
+    chunk by chunk (:class:`~cartctl.runtime.reference.ReferenceSchedule`) stays as it is."""
+    if reference is None:
+        return [0.0] * n
+    if isinstance(reference, np.ndarray | list | tuple):
+        return [float(v) for v in reference]
+    return reference
+
+
 class ControlLoop:
     """The per-tick body of the closed loop over both motors.
 
@@ -77,8 +103,9 @@ class ControlLoop:
         What is controlled; reset in :meth:`start`, closed in :meth:`finish`.
     controllers : mapping of {'a', 'b'} to Controller
         One per motor; a motor without a controller gets 0 V.
-    references : mapping of {'a', 'b'} to ndarray, shape (n,)
-        Reference speed per tick (rad/s); n is the number of ticks to run.
+    references : mapping of {'a', 'b'} to ndarray, shape (n,), or ReferenceSchedule
+        Reference speed per tick (rad/s); n is the number of ticks to run. A
+        :class:`~cartctl.runtime.reference.ReferenceSchedule` computes it chunk by chunk.
     sinks : sequence of Sink
         Receive one row per tick.
     now_s : callable
@@ -112,8 +139,8 @@ class ControlLoop:
         self.plant = plant
         self.controllers = dict(controllers)
         n = lengths.pop()
-        self.ref_a = [float(v) for v in references.get("a", np.zeros(n))]
-        self.ref_b = [float(v) for v in references.get("b", np.zeros(n))]
+        self.ref_a = _per_tick(references.get("a"), n)
+        self.ref_b = _per_tick(references.get("b"), n)
         self.n_ticks = n
         self.sinks = list(sinks)
         self.now_s = now_s

@@ -13,7 +13,9 @@ Specs (speeds in rad/s, times in s):
 from __future__ import annotations
 
 import csv
+import functools
 import math
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +44,16 @@ def _from_file(path_text: str, motor: str, time_s: NDArray[np.float64]) -> NDArr
     path = Path(path_text)
     if not path.is_file():
         raise MissingFileError(path, "reference file")
+    t, r = _read_reference_file(str(path), path.stat().st_mtime_ns, motor)
+    return np.interp(time_s, t, r)
+
+
+@functools.lru_cache(maxsize=8)
+def _read_reference_file(
+    path_text: str, mtime_ns: int, motor: str
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The (time, reference) points of a reference file, read once per file version."""
+    path = Path(path_text)
     with path.open(newline="", encoding="utf-8") as f:
         rows = list(csv.reader(f))
     if len(rows) < 2:
@@ -63,16 +75,19 @@ def _from_file(path_text: str, motor: str, time_s: NDArray[np.float64]) -> NDArr
         ) from None
     if not (np.isfinite(t).all() and np.isfinite(r).all()) or np.any(np.diff(t) <= 0):
         raise DataFileError(path, "time_s must increase and the values be finite")
-    return np.interp(time_s, t, r)
+    t.setflags(write=False)
+    r.setflags(write=False)
+    return t, r
 
 
 def reference_signal(
-    spec: str, n_ticks: int, period_s: float = 0.01, motor: str = "a"
+    spec: str, n_ticks: int, period_s: float = 0.01, motor: str = "a", *, start_tick: int = 0
 ) -> NDArray[np.float64]:
-    """The reference (rad/s) at each of ``n_ticks`` ticks for a spec (see the module docstring)."""
+    """The reference (rad/s) at ticks ``start_tick`` … ``start_tick + n_ticks − 1`` for a spec
+    (see the module docstring)."""
     kind, _, rest = spec.partition(":")
     parts = rest.split(":") if rest else []
-    t = np.arange(n_ticks) * period_s
+    t = (start_tick + np.arange(n_ticks)) * period_s
     if kind == "step":
         values = _numbers(spec, parts, 1, 2)
         amp, delay = values[0], (values[1] if len(values) == 2 else 0.5)
@@ -92,3 +107,67 @@ def reference_signal(
     if kind == "file":
         return _from_file(rest, motor, t)
     raise InputError(f"unknown reference '{spec}'; expected {FORMS}")
+
+
+class ReferenceSchedule:
+    """A reference spec evaluated on the tick grid one chunk at a time, not all at once.
+
+    Indexing (``schedule[k]``, k < ``len(schedule)``) computes the chunk that holds tick k when
+    the loop gets there, so a long run holds one chunk of its reference, not all of it. A bad spec
+    fails at construction (the first chunk is computed then).
+
+    Parameters
+    ----------
+    spec : str
+        A reference spec (see the module docstring).
+    n_ticks : int
+        Length of the run (ticks).
+    period_s : float
+        Tick period (s).
+    motor : {'a', 'b'}
+        For ``file:`` specs with per-motor columns.
+    chunk_ticks : int
+        Ticks per chunk (default 6000: one minute at 10 ms).
+    """
+
+    def __init__(
+        self, spec: str, n_ticks: int, period_s: float = 0.01, motor: str = "a", *,
+        chunk_ticks: int = 6000,
+    ) -> None:  # fmt: skip
+        if n_ticks < 0 or chunk_ticks < 1:
+            raise InputError(f"a reference needs n_ticks >= 0 and chunk_ticks >= 1, got "
+                             f"{n_ticks} and {chunk_ticks}")  # fmt: skip
+        self.spec, self.n_ticks, self.period_s, self.motor = spec, n_ticks, period_s, motor
+        self.chunk_ticks = chunk_ticks
+        self._start = -1
+        self._values: list[float] = []
+        if n_ticks:
+            self._load(0)
+
+    def _load(self, start: int) -> None:
+        n = min(self.chunk_ticks, self.n_ticks - start)
+        chunk = reference_signal(self.spec, n, self.period_s, self.motor, start_tick=start)
+        self._values = chunk.tolist()
+        self._start = start
+
+    def __len__(self) -> int:
+        return self.n_ticks
+
+    def __getitem__(self, k: int) -> float:
+        if not 0 <= k < self.n_ticks:
+            raise IndexError(f"tick {k} is outside the reference's {self.n_ticks} ticks")
+        offset = k - self._start
+        if not 0 <= offset < len(self._values):
+            self._load(k - k % self.chunk_ticks)
+            offset = k - self._start
+        return self._values[offset]
+
+    def chunks(self) -> Iterator[NDArray[np.float64]]:
+        """The whole reference, chunk by chunk (for checks over the run)."""
+        for start in range(0, self.n_ticks, self.chunk_ticks):
+            n = min(self.chunk_ticks, self.n_ticks - start)
+            yield reference_signal(self.spec, n, self.period_s, self.motor, start_tick=start)
+
+    def peak_abs(self) -> float:
+        """max |reference| over the run (rad/s), 0 for an empty one."""
+        return max((float(np.max(np.abs(c))) for c in self.chunks()), default=0.0)
