@@ -104,3 +104,16 @@ def test_a_signal_while_starting_ends_with_one_line(workdir: Path, signum: int, 
     assert "Traceback" not in err
     assert len(err.strip().splitlines()) == 1, err
     assert not (workdir / "logs" / "s.csv").exists() or read_trace(workdir / "logs" / "s.csv")
+
+
+def test_monitor_stops_after_its_frame_on_sigterm(workdir: Path) -> None:
+    """A monitor only listens: SIGTERM stops it as Ctrl-C does (files closed, summary), exit 143."""
+    process = _start(workdir, "monitor", "virtual", "--rerun", "off", "--name", "m")
+    csv = workdir / "logs" / "m.csv"
+    _wait_recording(process, csv)
+    process.send_signal(signal.SIGTERM)
+    out, err = process.communicate(timeout=30)
+    assert process.returncode == 143, err
+    assert "Traceback" not in err and "frames" in out
+    lines = csv.read_text(encoding="utf-8").splitlines()
+    assert len(lines) > 10 and len({len(line.split(",")) for line in lines}) == 1  # whole rows

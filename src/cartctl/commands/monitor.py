@@ -136,21 +136,26 @@ def _rerun_sink(args: argparse.Namespace, path: Path) -> Any:
 
 
 @contextlib.contextmanager
-def _stop_on_sigint(monitor: Monitor) -> Iterator[None]:
-    """Ctrl-C asks the monitor to stop after the current frame (a second one interrupts)."""
+def _stop_on_signals(monitor: Monitor, received: list[int]) -> Iterator[None]:
+    """SIGINT, SIGTERM and SIGHUP ask the monitor to stop after the current frame; a second
+    SIGINT interrupts. The signals received go into ``received``."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def handler(signum: int, frame: Any) -> None:
+        received.append(signum)
         monitor.stop_requested = True
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
-    previous = signal.signal(signal.SIGINT, handler)
+    previous = {
+        s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    }
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, old in previous.items():
+            signal.signal(signum, old)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -159,6 +164,7 @@ def run(args: argparse.Namespace) -> int:
     cart = _virtual_cart(rest, args) if kind == "virtual" else None
     port = cart.port if cart is not None else rest
     monitor = Monitor([], [], labels, echo=print_to_stderr)
+    received: list[int] = []
     link = MonitorLink(port, on_event=monitor.on_event, on_print=monitor.on_print)
     try:
         link.open()  # before the virtual cart boots: its first HEARTBEAT is not flushed away
@@ -177,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
             monitor.texts.append(rerun)
         try:
             monitor.open()
-            with _stop_on_sigint(monitor):
+            with _stop_on_signals(monitor, received):
                 result = monitor.run(link, args.duration)
         finally:
             for sink in monitor.rows:
@@ -192,6 +198,8 @@ def run(args: argparse.Namespace) -> int:
     if result.failure:
         print(f"cartctl monitor: error: {result.failure}", file=sys.stderr)
         return 1
+    if received and received[0] != signal.SIGINT:  # Ctrl-C is the normal way to stop a monitor
+        return 128 + received[0]
     return 0
 
 
