@@ -12,7 +12,7 @@ from cartctl.commands.options import add_plant_options, check_duration
 from cartctl.data import write_trace
 from cartctl.errors import InputError
 from cartctl.experiment import run_experiment
-from cartctl.plants.factory import make_plant
+from cartctl.plants.factory import is_serial, make_plant
 from cartctl.plants.sim import SUPPLY_V
 from cartctl.progress import ProgressBar
 from cartctl.signals import SIGNALS, make_signal
@@ -79,9 +79,13 @@ def run(args: argparse.Namespace) -> int:
         connect_timeout_s=args.connect_timeout,
     )
     bar = ProgressBar(volts.size, f"excite {args.signal}")
+    switch_interval = sys.getswitchinterval()
+    if is_serial(args.plant):  # answer each cart tick at once: threads hand the GIL back quickly
+        sys.setswitchinterval(1e-4)
     try:
         result = run_experiment(plant, ua, ub, on_tick=bar.update, source=description)
     finally:
+        sys.setswitchinterval(switch_interval)
         bar.close()
     n = len(result.trace)
     if n == 0:
