@@ -13,7 +13,7 @@ from cartctl.model import ArxModel
 from cartctl.plants.sim import ArxPlant
 from cartctl.runtime.loop import ControlLoop, MemorySink
 from cartctl.runtime.pi import PiController
-from cartctl.runtime.reference import reference_signal
+from cartctl.reference import reference_signal
 from cartctl.sinks.base import TRACE_COLUMNS
 from cartctl.sinks.csv_sink import CsvSink
 from cartctl.sinks.summary import trace_metrics

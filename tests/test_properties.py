@@ -26,7 +26,7 @@ from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import load_controller
 from cartctl.errors import CartctlError
 from cartctl.modelfile import load_models
-from cartctl.runtime.reference import reference_signal
+from cartctl.reference import reference_signal
 
 ROOT = Path(__file__).resolve().parents[1]
 SETTINGS = settings(

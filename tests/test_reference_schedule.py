@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cartctl.errors import InputError
-from cartctl.runtime.reference import ReferenceSchedule, reference_signal
+from cartctl.reference import ReferenceSchedule, reference_signal
 
 DAY_TICKS = 24 * 3600 * 100
 

@@ -32,7 +32,7 @@ from cartctl.plants.cart_monitor import (
     parse_labels,
     wait_started,
 )
-from cartctl.runtime.reference import FORMS
+from cartctl.reference import FORMS
 from cartctl.sinks.csv_sink import CsvSink
 
 DEFAULT_REFERENCE = "step:10"

@@ -30,7 +30,7 @@ from cartctl.modelfile import load_models
 from cartctl.plants.factory import make_plant
 from cartctl.progress import ProgressBar
 from cartctl.runtime import tune as engine
-from cartctl.runtime.reference import FORMS, reference_signal
+from cartctl.reference import FORMS, reference_signal
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

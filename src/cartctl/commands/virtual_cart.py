@@ -7,7 +7,7 @@ import sys
 
 from cartctl.errors import InputError
 from cartctl.plants.virtual_cart import CartFaults, VirtualCart
-from cartctl.runtime.reference import FORMS
+from cartctl.reference import FORMS
 
 
 def _faults(text: str) -> CartFaults:

@@ -15,7 +15,7 @@ Channels, as in the export snippet (:mod:`cartctl.export.arduino`):
 - out: float 0/1 = speed A/B (rad/s), 2/3 = voltage A/B computed at this tick (V, applied at
   the next tick), 4/5 = reference A/B (rad/s); the int channels stay 0.
 
-The reference comes from a reference spec (``step:8``, see :mod:`cartctl.runtime.reference`)
+The reference comes from a reference spec (``step:8``, see :mod:`cartctl.reference`)
 when one is given, with tick 0 at the cart's first ``control()``; otherwise from the held input
 float channels, exactly as the exported snippet reads them. The controllers run the fixed
 (steady-state) Kalman gain where they have an estimator, as the C does. The template's
@@ -37,7 +37,7 @@ from cartctl.errors import InputError
 from cartctl.export.arduino import as_steady_state
 from cartctl.plants.bridge_firmware import CartIO
 from cartctl.runtime.base import Controller
-from cartctl.runtime.reference import reference_signal
+from cartctl.reference import reference_signal
 
 CART_PERIOD_S = 0.01
 """The period of the cart's control thread (s)."""

@@ -21,15 +21,96 @@ A non-finite measurement is skipped (the prediction stands) and a non-finite vol
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
 from numpy.typing import ArrayLike, NDArray
 
-from cartctl.design.kalman import KalmanDesign
 from cartctl.errors import InputError
 from cartctl.runtime.base import SpeedEstimator
+
+
+@dataclass(frozen=True, eq=False)
+class KalmanDesign:
+    """A steady-state Kalman filter for the speed (names as in the literature and filterpy).
+
+    The state is x = [x_1 … x_n, b]: the n states of the realisation (rad/s; x_1 is the speed),
+    then, when ``has_bias``, the input disturbance b (V). m = n + 1 with the bias, else n.
+
+    Attributes
+    ----------
+    A : ndarray, shape (m, m)
+        State transition (filterpy's F).
+    B : ndarray, shape (m,)
+        Input vector (rad/s per V); 0 in the bias row.
+    C : ndarray, shape (m,)
+        Measurement row (filterpy's H), [1, 0, …, 0].
+    Q : ndarray, shape (m, m)
+        Process-noise covariance per tick: σ_w² B_x B_xᵀ on the realisation, σ_b² on the bias.
+    R : float
+        Measurement-noise variance ((rad/s)²).
+    P : ndarray, shape (m, m)
+        Steady-state a priori covariance (the DARE solution), P[k|k−1].
+    L : ndarray, shape (m,)
+        Steady-state filter gain, P Cᵀ (C P Cᵀ + R)⁻¹.
+    n_model_states : int
+        n, the realisation's order (the states a state-feedback gain acts on).
+    period_s : float
+        Ts (s).
+    process_noise_std_v, bias_drift_std_v, measurement_noise_std_rad_s : float
+        The noise levels the design used (σ_w in V, σ_b in V per tick, √R in rad/s).
+    """
+
+    A: NDArray[np.float64]
+    B: NDArray[np.float64]
+    C: NDArray[np.float64]
+    Q: NDArray[np.float64]
+    R: float
+    P: NDArray[np.float64]
+    L: NDArray[np.float64]
+    n_model_states: int
+    period_s: float
+    process_noise_std_v: float
+    bias_drift_std_v: float
+    measurement_noise_std_rad_s: float
+
+    @property
+    def has_bias(self) -> bool:
+        """True when the state ends with the input-disturbance state b."""
+        return self.A.shape[0] > self.n_model_states
+
+    def posterior_covariance(self) -> NDArray[np.float64]:
+        """Steady-state a posteriori covariance P[k|k] = (I − L C) P, shape (m, m)."""
+        m = self.A.shape[0]
+        return (np.eye(m) - np.outer(self.L, self.C)) @ self.P
+
+    def poles(self) -> NDArray[np.complex128]:
+        """Estimator poles: eigenvalues of (I − L C) A, shape (m,), sorted by magnitude."""
+        m = self.A.shape[0]
+        eig = np.linalg.eigvals((np.eye(m) - np.outer(self.L, self.C)) @ self.A)
+        return np.array(sorted(eig.astype(complex), key=lambda p: (abs(p), p.imag)))
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON form: the matrices as nested lists, the noise levels and ``estimator_poles``."""
+        return {
+            "A": self.A.tolist(),
+            "B": self.B.tolist(),
+            "C": self.C.tolist(),
+            "Q": self.Q.tolist(),
+            "R": self.R,
+            "P": self.P.tolist(),
+            "L": self.L.tolist(),
+            "n_model_states": self.n_model_states,
+            "has_bias": self.has_bias,
+            "period_s": self.period_s,
+            "process_noise_std_v": self.process_noise_std_v,
+            "bias_drift_std_v": self.bias_drift_std_v,
+            "measurement_noise_std_rad_s": self.measurement_noise_std_rad_s,
+            "estimator_poles": [[float(p.real), float(p.imag)] for p in self.poles()],
+        }
+
 
 __all__ = ["KalmanSpeedEstimator", "StateEstimator", "SteadyStateSpeedEstimator"]
 

@@ -86,7 +86,7 @@ class LoopState:
 
 def _per_tick(reference: Any, n: int) -> Sequence[float]:
     """A reference the tick can index fast: arrays become lists; a schedule computing its values
-    chunk by chunk (:class:`~cartctl.runtime.reference.ReferenceSchedule`) stays as it is."""
+    chunk by chunk (:class:`~cartctl.reference.ReferenceSchedule`) stays as it is."""
     if reference is None:
         return [0.0] * n
     if isinstance(reference, np.ndarray | list | tuple):
@@ -105,7 +105,7 @@ class ControlLoop:
         One per motor; a motor without a controller gets 0 V.
     references : mapping of {'a', 'b'} to ndarray, shape (n,), or ReferenceSchedule
         Reference speed per tick (rad/s); n is the number of ticks to run. A
-        :class:`~cartctl.runtime.reference.ReferenceSchedule` computes it chunk by chunk.
+        :class:`~cartctl.reference.ReferenceSchedule` computes it chunk by chunk.
     sinks : sequence of Sink
         Receive one row per tick.
     now_s : callable

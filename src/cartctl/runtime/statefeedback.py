@@ -33,9 +33,8 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.design.kalman import KalmanDesign
 from cartctl.errors import InputError
-from cartctl.runtime.kalman import StateEstimator, SteadyStateSpeedEstimator
+from cartctl.runtime.kalman import KalmanDesign, StateEstimator, SteadyStateSpeedEstimator
 
 __all__ = ["MAX_VOLTAGE_V", "StateFeedbackController"]
 

@@ -38,7 +38,7 @@ from cartctl.runtime.base import Controller
 from cartctl.runtime.clock import VirtualClock
 from cartctl.runtime.executor import PeriodicExecutor
 from cartctl.runtime.loop import ControlLoop, MemorySink
-from cartctl.runtime.reference import reference_signal
+from cartctl.reference import reference_signal
 from cartctl.sinks.summary import trace_metrics
 
 
@@ -54,7 +54,7 @@ class TuneJob:
     plant, preset : str
         Plant name ('sim' or 'physics') and physics preset, as for ``make_plant``.
     reference : str
-        Reference spec of both motors (rad/s; see :mod:`cartctl.runtime.reference`).
+        Reference spec of both motors (rad/s; see :mod:`cartctl.reference`).
     duration_s : float
         Run time per setting (s).
     extra_delay_ticks : int
