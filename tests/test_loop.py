@@ -11,9 +11,9 @@ from cartctl.data import read_trace
 from cartctl.errors import CartctlError, PlantError
 from cartctl.model import ArxModel
 from cartctl.plants.sim import ArxPlant
+from cartctl.reference import reference_signal
 from cartctl.runtime.loop import ControlLoop, MemorySink
 from cartctl.runtime.pi import PiController
-from cartctl.reference import reference_signal
 from cartctl.sinks.base import TRACE_COLUMNS
 from cartctl.sinks.csv_sink import CsvSink
 from cartctl.sinks.summary import trace_metrics

@@ -24,6 +24,7 @@ from rerun.chunk import RrdReader
 from cartctl.cli import main
 from cartctl.design.controllerfile import load_controller
 from cartctl.errors import InputError, PlantError
+from cartctl.export.arduino import onboard_controllers
 from cartctl.link import Event, Gpio
 from cartctl.plants.bridge_firmware import CartIO
 from cartctl.plants.cart_monitor import (
@@ -274,7 +275,7 @@ def test_onboard_reference_beyond_the_first_block() -> None:
 
 
 def test_onboard_from_file(tmp_path: Path) -> None:
-    firmware = OnboardFirmware.from_file(PI, reference="const:8")
+    firmware = OnboardFirmware(onboard_controllers(PI), reference="const:8")
     assert set(firmware.controllers) == {"a", "b"}
     assert firmware.control(_io(0.0, 0.0))[0] > 0.0
     slow = tmp_path / "slow.toml"  # a consistent 20 ms file: C(z) = Kp + Ki·Ts·z/(z−1) at 0.02 s
@@ -287,9 +288,9 @@ def test_onboard_from_file(tmp_path: Path) -> None:
         )
     slow.write_text(text)
     with pytest.raises(InputError, match=r"every 0\.01 s"):
-        OnboardFirmware.from_file(slow)
+        onboard_controllers(slow)
     with pytest.raises(InputError, match="unknown reference"):
-        OnboardFirmware.from_file(PI, reference="sine:3")
+        OnboardFirmware(onboard_controllers(PI), reference="sine:3")
 
 
 # -- real time, through the pseudo-terminal ------------------------------------------------------

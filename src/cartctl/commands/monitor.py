@@ -111,14 +111,15 @@ def _check(args: argparse.Namespace) -> tuple[str, str]:
 
 
 def _virtual_cart(faults_text: str, args: argparse.Namespace) -> Any:
+    from cartctl.export.arduino import onboard_controllers
     from cartctl.plants.onboard_firmware import OnboardFirmware
     from cartctl.plants.virtual_cart import CartFaults, VirtualCart
 
     faults = CartFaults.parse(faults_text)
     firmware = None
     if args.onboard:
-        firmware = OnboardFirmware.from_file(
-            args.onboard, reference=args.reference or DEFAULT_REFERENCE
+        firmware = OnboardFirmware(
+            onboard_controllers(args.onboard), reference=args.reference or DEFAULT_REFERENCE
         )
     return VirtualCart(faults=faults, firmware=firmware)
 

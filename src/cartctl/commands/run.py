@@ -27,8 +27,8 @@ from cartctl.model import ArxModel
 from cartctl.modelfile import load_models
 from cartctl.plants.base import ClockedPlant, Plant
 from cartctl.plants.factory import is_serial, make_plant
-from cartctl.runtime.loop import ControlLoop, MemorySink
 from cartctl.reference import FORMS, ReferenceSchedule
+from cartctl.runtime.loop import ControlLoop, MemorySink
 from cartctl.sinks.csv_sink import CsvSink
 from cartctl.sinks.summary import format_summary, trace_metrics, warn_host_losses
 

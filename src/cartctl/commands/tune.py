@@ -29,8 +29,8 @@ from cartctl.jsonout import dumps
 from cartctl.modelfile import load_models
 from cartctl.plants.factory import make_plant
 from cartctl.progress import ProgressBar
-from cartctl.runtime import tune as engine
 from cartctl.reference import FORMS, reference_signal
+from cartctl.runtime import tune as engine
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

@@ -63,9 +63,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--reference needs --onboard CONTROLLER.toml")
     firmware = None
     if args.onboard:
+        from cartctl.export.arduino import onboard_controllers
         from cartctl.plants.onboard_firmware import OnboardFirmware
 
-        firmware = OnboardFirmware.from_file(args.onboard, reference=args.reference)
+        firmware = OnboardFirmware(onboard_controllers(args.onboard), reference=args.reference)
     cart = VirtualCart(args.preset, noise_std_rad_s=args.noise, seed=args.seed, faults=args.faults,
                        firmware=firmware)  # fmt: skip
     print(cart.port, flush=True)

@@ -22,15 +22,18 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from cartctl import __version__
+from cartctl.cart import PERIOD_S
 from cartctl.design.build import build_controllers, kalman_from_entry
-from cartctl.design.controllerfile import ControllerFile
+from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.design.kalman import KalmanDesign
 from cartctl.errors import DataFileError, InputError
+from cartctl.runtime.base import Controller
 
 __all__ = ["CART_PERIOD_S", "arduino_source", "as_steady_state", "c_float"]
 
@@ -65,6 +68,25 @@ def as_steady_state(controller: ControllerFile) -> ControllerFile:
     return dataclasses.replace(
         controller, request={**controller.request, "estimator_gain": "steady-state"}
     )
+
+
+def onboard_controllers(path: str | Path) -> dict[str, Controller]:
+    """The controllers of a controller file as the exported C runs them (fixed-gain estimator).
+
+    Raises
+    ------
+    InputError
+        The file was designed for another period than the cart's 10 ms.
+    MissingFileError, DataFileError
+        The file is missing or does not hold a controller.
+    """
+    controller = load_controller(path)
+    if not math.isclose(controller.period_s, PERIOD_S, rel_tol=1e-9):
+        raise InputError(
+            f"{path} was designed for a period of {controller.period_s:g} s; the cart's "
+            f"control() runs every {PERIOD_S:g} s"
+        )
+    return build_controllers(as_steady_state(controller))
 
 
 def _where(controller: ControllerFile) -> str:

@@ -24,20 +24,13 @@ float channels, exactly as the exported snippet reads them. The controllers run 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
-from pathlib import Path
+from typing import Protocol
 
-import numpy as np
-from numpy.typing import NDArray
-
-from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import load_controller
 from cartctl.errors import InputError
-from cartctl.export.arduino import as_steady_state
 from cartctl.plants.bridge_firmware import CartIO
-from cartctl.runtime.base import Controller
-from cartctl.reference import reference_signal
+from cartctl.reference import ReferenceSchedule
+from cartctl.signals import MAX_DURATION_S
 
 CART_PERIOD_S = 0.01
 """The period of the cart's control thread (s)."""
@@ -46,24 +39,16 @@ IN_REFERENCE = {"a": 0, "b": 1}
 OUT_SPEED, OUT_VOLTAGE, OUT_REFERENCE = 0, 2, 4
 """First output float channel of the speeds, voltages and references (A, then B)."""
 MOTORS = ("a", "b")
-_FIRST_BLOCK_TICKS = 6000  # 60 s of reference; doubled whenever a run goes beyond it
+MAX_TICKS = round(MAX_DURATION_S / CART_PERIOD_S)
+"""A reference spec is evaluated over the longest run cartctl takes (24 h), then held."""
 
 
-class _Schedule:
-    """A reference spec evaluated on the tick grid, extended on demand (specs are open-ended)."""
+class _Controller(Protocol):
+    """What the cart's control() calls per motor (a runtime controller, structurally)."""
 
-    def __init__(self, spec: str, period_s: float, motor: str) -> None:
-        self.spec, self.period_s, self.motor = spec, period_s, motor
-        self._values: NDArray[np.float64] = reference_signal(
-            spec, _FIRST_BLOCK_TICKS, period_s, motor
-        )
+    def reset(self) -> None: ...
 
-    def at(self, tick: int) -> float:
-        """The reference (rad/s) at ``tick`` (0-based)."""
-        if tick >= len(self._values):
-            n = max(2 * len(self._values), tick + 1)
-            self._values = reference_signal(self.spec, n, self.period_s, self.motor)
-        return float(self._values[tick])
+    def step(self, reference_rad_s: float, measured_rad_s: float) -> float: ...
 
 
 class OnboardFirmware:
@@ -83,7 +68,7 @@ class OnboardFirmware:
 
     def __init__(
         self,
-        controllers: Mapping[str, Controller],
+        controllers: Mapping[str, _Controller],
         *,
         reference: str | None = None,
         period_s: float = CART_PERIOD_S,
@@ -97,29 +82,12 @@ class OnboardFirmware:
         self._schedules = (
             None
             if reference is None
-            else {m: _Schedule(reference, self.period_s, m) for m in self.controllers}
+            else {
+                m: ReferenceSchedule(reference, MAX_TICKS, self.period_s, m)
+                for m in self.controllers
+            }
         )
         self.reset()
-
-    @classmethod
-    def from_file(cls, path: str | Path, *, reference: str | None = None) -> OnboardFirmware:
-        """The controllers of a controller file, as the exported C runs them.
-
-        Raises
-        ------
-        InputError
-            The file was designed for another period than the cart's 10 ms, or a bad reference.
-        MissingFileError, DataFileError
-            The file is missing or does not hold a controller.
-        """
-        controller = load_controller(path)
-        if not math.isclose(controller.period_s, CART_PERIOD_S, rel_tol=1e-9):
-            raise InputError(
-                f"{path} was designed for a period of {controller.period_s:g} s; the cart's "
-                f"control() runs every {CART_PERIOD_S:g} s"
-            )
-        controllers = build_controllers(as_steady_state(controller))
-        return cls(controllers, reference=reference, period_s=controller.period_s)
 
     def reset(self) -> None:
         """Power-on state: channels 0, controllers at rest, tick 0."""
@@ -139,7 +107,7 @@ class OnboardFirmware:
     def reference_at(self, motor: str) -> float:
         """The reference (rad/s) of ``motor`` at the current tick."""
         if self._schedules is not None:
-            return self._schedules[motor].at(self.tick)
+            return self._schedules[motor][min(self.tick, MAX_TICKS - 1)]
         return self.in_floats[IN_REFERENCE[motor]]
 
     def control(self, io: CartIO, now_ms: int = 0) -> tuple[float, float]:

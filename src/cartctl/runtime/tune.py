@@ -34,11 +34,11 @@ from cartctl.modelfile import ModelFile, load_models
 from cartctl.plants.base import Measurement, Plant
 from cartctl.plants.factory import make_plant
 from cartctl.plants.sim import ArxPlant
+from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller
 from cartctl.runtime.clock import VirtualClock
 from cartctl.runtime.executor import PeriodicExecutor
 from cartctl.runtime.loop import ControlLoop, MemorySink
-from cartctl.reference import reference_signal
 from cartctl.sinks.summary import trace_metrics
 
 
