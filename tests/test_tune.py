@@ -14,23 +14,26 @@ from typing import Any
 import numpy as np
 import pytest
 
+from cartctl.cli import build_parser as main_parser
 from cartctl.cli import main
+from cartctl.commands.design import request_from_args
 from cartctl.data import read_trace
 from cartctl.design.analysis import simulate_step
 from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import load_controller
-from cartctl.design.tune import (
+from cartctl.errors import InputError
+from cartctl.modelfile import load_models
+from cartctl.stepinfo import step_info
+from cartctl.tune.engine import TuneJob, scoring_plant
+from cartctl.tune.grid import (
     TuneResult,
-    design_argv,
+    design_request,
     grid_settings,
     mark_pareto,
     pareto_front,
     parse_grid,
+    request_axes,
 )
-from cartctl.errors import InputError
-from cartctl.modelfile import load_models
-from cartctl.runtime.tune import TuneJob, scoring_plant
-from cartctl.stepinfo import step_info
 
 GROUND = Path(__file__).resolve().parents[1] / "models" / "ground.toml"
 # 60° at 2 Hz needs Kp < 0 on the ground model (infeasible); 4 Hz works for both margins.
@@ -123,10 +126,19 @@ def test_bad_grid_spec_on_the_command_line_is_one_line_and_exit_2(
     assert err.startswith("cartctl tune: error: --grid") and "START:STOP:STEP" in err
 
 
-def test_design_argv_is_the_design_command() -> None:
-    argv = design_argv("m.toml", "pi", {"phase_margin": 65.0, "crossover_hz": 3.5}, 1)
+def test_a_setting_is_a_design_request_and_its_design_command() -> None:
+    request = design_request("pi", {"phase_margin": 65.0, "crossover_hz": 3.5}, 1)
+    assert (request.phase_margin_deg, request.crossover_hz, request.extra_delay_ticks) == (
+        65,
+        3.5,
+        1,
+    )
+    argv = request.to_argv("m.toml", always=request_axes("pi"))
     assert argv == ["m.toml", "--method", "pi", "--phase-margin", "65", "--crossover-hz", "3.5",
                     "--extra-delay", "1"]  # fmt: skip
+    # the command parses back to the same request
+    parsed = main_parser().parse_args(["design", *argv])
+    assert request_from_args(parsed) == request
 
 
 @pytest.fixture(scope="module")

@@ -1,7 +1,7 @@
 """``cartctl tune MODEL.toml --method pi|poles``: a grid of designs, each run in the simulated loop.
 
-Between ``design`` and ``run``. The grid and the Pareto front are :mod:`cartctl.design.tune`;
-designing and running the settings on worker processes is :mod:`cartctl.runtime.tune`. Here: the
+Between ``design`` and ``run``. The grid and the Pareto front are :mod:`cartctl.tune.grid`;
+designing and running the settings on worker processes is :mod:`cartctl.tune.engine`. Here: the
 options, the table or JSON, the plot, and ``--choose N --out FILE``, which writes setting N's
 controller file through ``cartctl design`` itself.
 
@@ -13,24 +13,23 @@ settling bound, max(2 %, one encoder count per tick).
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import os
 import shlex
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from cartctl.commands.options import check_duration
-from cartctl.design import tune as tuning
+from cartctl.design.controllerfile import save_controller
+from cartctl.design.make import controller_file, design_models
 from cartctl.errors import InputError
 from cartctl.jsonout import dumps
 from cartctl.modelfile import load_models
 from cartctl.plants.factory import make_plant
 from cartctl.progress import ProgressBar
 from cartctl.reference import FORMS, reference_signal
-from cartctl.runtime import tune as engine
+from cartctl.tune import engine
+from cartctl.tune import grid as tuning
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -114,27 +113,22 @@ def plot_tuning(path: str, method: str, results: Sequence[tuning.TuneResult]) ->
     fig.savefig(path)
 
 
-def choose(args: argparse.Namespace, result: tuning.TuneResult) -> tuple[list[str], int]:
-    """Write the chosen setting's controller file with ``cartctl design`` in this process.
+def choose(args: argparse.Namespace, result: tuning.TuneResult) -> list[str]:
+    """Write the chosen setting's controller file, as ``cartctl design`` would.
 
-    Returns the design arguments used and the design command's exit code. Its report is kept off
-    stdout; ``sys.argv`` is set to the design command meanwhile, so the file's ``command`` is the
-    design command, exactly as ``cartctl design`` would record it.
+    Returns the design command's arguments (recorded in the file as its ``command``).
     """
-    from cartctl.cli import main as cli_main
-
     if not result.feasible:
         raise InputError(f"--choose {result.index}: that setting is infeasible ({result.reason})")
-    argv = ["design", *tuning.design_argv(args.model, args.method, result.settings, args.extra_delay),
+    request = tuning.design_request(args.method, result.settings, args.extra_delay)
+    argv = ["design", *request.to_argv(str(args.model), always=tuning.request_axes(args.method)),
             "--out", args.out]  # fmt: skip
-    saved = sys.argv
-    sys.argv = ["cartctl", *argv]
-    try:
-        with contextlib.redirect_stdout(io.StringIO()):
-            code = cli_main(argv)
-    finally:
-        sys.argv = saved
-    return argv, code
+    models = load_models(args.model)
+    designs = design_models(request, models, ("a", "b"))
+    command = "cartctl " + shlex.join(argv)
+    save_controller(controller_file(designs, args.model, command=command,
+                                    period_s=models.period_s), args.out)  # fmt: skip
+    return argv
 
 
 def run(args: argparse.Namespace) -> int:
@@ -154,9 +148,7 @@ def run(args: argparse.Namespace) -> int:
         plot_tuning(args.plot, args.method, results)
     chosen: dict[str, Any] | None = None
     if args.choose is not None:
-        argv, code = choose(args, next(r for r in results if r.index == args.choose))
-        if code:
-            return code
+        argv = choose(args, next(r for r in results if r.index == args.choose))
         chosen = {"index": args.choose, "out": args.out, "command": "cartctl " + shlex.join(argv)}
     if args.json:
         print(dumps({"method": args.method, "model": str(args.model), "plant": args.plant,

@@ -1,8 +1,9 @@
 """Running a tuning grid: each setting designed, then run in the loop of ``cartctl run --fast``.
 
 The execution part of ``cartctl tune`` (:mod:`cartctl.commands.tune`); the grid, the result rows
-and the Pareto front are in :mod:`cartctl.design.tune`. A setting is designed per motor by the
-design command's own ``_design_motor`` (from its ``cartctl design`` arguments), run by
+and the Pareto front are in :mod:`cartctl.tune.grid`. A setting is designed per motor by
+:func:`cartctl.design.make.design_motor` (the design command's own path, from the setting's
+:class:`~cartctl.design.request.DesignRequest`), run by
 :func:`simulate` (ControlLoop, PeriodicExecutor, VirtualClock and a MemorySink: the loop of
 ``run --fast`` without files) and summarised by the run summary's ``trace_metrics`` (settling in
 the band of the design's settling bound, max(2 %, one encoder count per tick)). The settings are
@@ -15,7 +16,6 @@ nk + d as in ``cartctl design``'s simulated step.
 
 from __future__ import annotations
 
-import argparse
 import ctypes
 import math
 from collections import deque
@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.design.tune import TuneResult, design_argv
+from cartctl.design.make import design_motor
 from cartctl.errors import CartctlError, PlantError
 from cartctl.model import check_extra_delay_ticks
 from cartctl.modelfile import ModelFile, load_models
@@ -40,6 +40,7 @@ from cartctl.runtime.clock import VirtualClock
 from cartctl.runtime.executor import PeriodicExecutor
 from cartctl.runtime.loop import ControlLoop, MemorySink
 from cartctl.sinks.summary import trace_metrics
+from cartctl.tune.grid import TuneResult, design_request
 
 
 @dataclass(frozen=True)
@@ -158,22 +159,20 @@ def simulate(
     return trace_metrics(memory.arrays(), period_s), loop.state.failure
 
 
-def _evaluate(job: TuneJob, models: ModelFile, parser: argparse.ArgumentParser,
-              index: int, settings: dict[str, float]) -> TuneResult:  # fmt: skip
-    from cartctl.commands.design import _design_motor
-
-    args = parser.parse_args(design_argv(job.model, job.method, settings, job.extra_delay_ticks))
+def _evaluate(job: TuneJob, models: ModelFile, index: int,
+              settings: dict[str, float]) -> TuneResult:  # fmt: skip
+    request = design_request(job.method, settings, job.extra_delay_ticks)
     controllers: dict[str, Controller] = {}
     for m in ("a", "b"):
         try:
-            controllers[m] = _design_motor(args, models.motor(m))[0]
+            controllers[m] = design_motor(request, models.motor(m)).controller
         except (CartctlError, np.linalg.LinAlgError) as exc:
             return TuneResult(index, settings, False, f"motor {m}: {exc}")
     plant = scoring_plant(job)
     n = max(1, round(job.duration_s / plant.period_s))
     refs = {m: reference_signal(job.reference, n, plant.period_s, m) for m in ("a", "b")}
     summary, failure = simulate(plant, controllers, refs, period_s=plant.period_s,
-                                voltage_limit_v=min(12.0, args.voltage_limit))  # fmt: skip
+                                voltage_limit_v=request.voltage_limit_v)  # fmt: skip
     if failure:
         return TuneResult(index, settings, False, f"the run failed: {failure}")
     return TuneResult(index, settings, True, motors=summary["motors"])
@@ -181,13 +180,8 @@ def _evaluate(job: TuneJob, models: ModelFile, parser: argparse.ArgumentParser,
 
 def evaluate_chunk(job: TuneJob) -> list[TuneResult]:
     """Design and run every setting of a chunk (the worker function of the process pool)."""
-    from cartctl.commands import design
-
-    sub = argparse.ArgumentParser(prog="cartctl").add_subparsers()
-    design.add_parser(sub)
-    parser = sub.choices["design"]  # the design command's own options and defaults
     models = load_models(job.model)
-    return [_evaluate(job, models, parser, i, s) for i, s in job.items]
+    return [_evaluate(job, models, i, s) for i, s in job.items]
 
 
 def one_blas_thread() -> None:

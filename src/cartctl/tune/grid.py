@@ -1,4 +1,4 @@
-"""Grid tuning, the pure part: grid specs, the design command of a setting, results, Pareto front.
+"""Grid tuning, the pure part: grid specs, the design request of a setting, results, Pareto front.
 
 Pipeline: between ``design`` and ``run``. ``cartctl tune`` (:mod:`cartctl.commands.tune`) designs
 one controller per grid setting, runs it in the simulated loop and compares the run metrics; this
@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from cartctl.design.request import DesignRequest
 from cartctl.errors import InputError
 
 MAX_SETTINGS = 10_000
@@ -124,25 +125,27 @@ def grid_settings(axes: Mapping[str, Sequence[float]]) -> list[dict[str, float]]
     return settings
 
 
-def _number(value: float) -> str:
-    text = repr(float(value))
-    return text[:-2] if text.endswith(".0") else text
+FIELDS = {"phase_margin": "phase_margin_deg", "crossover_hz": "crossover_hz",
+          "settling_time": "settling_time_s", "overshoot": "overshoot_percent"}  # fmt: skip
+"""The design request field of each grid axis."""
 
 
-def design_argv(
-    model: str, method: str, settings: Mapping[str, float], extra_delay_ticks: int = 0
-) -> list[str]:
-    """The ``cartctl design`` arguments (without the command name) that design a setting.
+def design_request(
+    method: str, settings: Mapping[str, float], extra_delay_ticks: int = 0
+) -> DesignRequest:
+    """The design request of one setting: the design command's defaults, the setting's axes.
 
-    The tuning run parses these with the design command's own parser, and ``--choose`` passes
-    them to it, so both get the very same controller.
+    The tuning run designs with it and ``--choose`` writes its file with it, so both get the
+    very same controller; :meth:`~cartctl.design.request.DesignRequest.to_argv` gives the
+    ``cartctl design`` command that makes it.
     """
-    argv = [model, "--method", method]
-    for axis in AXES[method]:
-        argv += [axis.option, _number(settings[axis.name])]
-    if extra_delay_ticks:
-        argv += ["--extra-delay", str(extra_delay_ticks)]
-    return argv
+    axes = {FIELDS[a.name]: float(settings[a.name]) for a in AXES[method]}
+    return DesignRequest(method=method, extra_delay_ticks=extra_delay_ticks, **axes)
+
+
+def request_axes(method: str) -> tuple[str, ...]:
+    """The request fields of a method's axes (always written in the design command)."""
+    return tuple(FIELDS[a.name] for a in AXES[method])
 
 
 def worst_metrics(motors: Mapping[str, Mapping[str, Any]]) -> dict[str, float | None]:

@@ -1,0 +1,199 @@
+"""Designs from a request: the controller of each motor, its analysis, and its controller file.
+
+One path for ``cartctl design``, ``cartctl tune`` and the Python API: :func:`design_motor` makes
+one motor's runtime controller with its JSON and file entries; :func:`design_models` adds the
+simulated step against the time-optimal bound for every motor asked for; :func:`controller_file`
+makes the file to save.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from cartctl.design.analysis import StepAnalysis, simulate_step
+from cartctl.design.build import make_estimator, pi_entry, poles_entry
+from cartctl.design.controllerfile import ControllerFile, common_loop_delay, file_sha256
+from cartctl.design.kalman import design_kalman
+from cartctl.design.limit import in_settling_band, settling_bound
+from cartctl.design.loop import feedback_tf_coeffs, loop_analysis
+from cartctl.design.pi import design_pi, design_pi_bandwidth
+from cartctl.design.poles import design_poles
+from cartctl.design.request import DesignRequest
+from cartctl.errors import InputError
+from cartctl.model import ArxModel
+from cartctl.modelfile import ModelFile
+from cartctl.runtime.base import Controller
+from cartctl.runtime.pi import PiController
+from cartctl.runtime.statefeedback import StateFeedbackController
+
+ANALYSIS_KEYS = (
+    "phase_margin_deg", "gain_margin_db", "crossover_hz", "sensitivity_peak", "closed_loop_poles",
+    "estimator_poles", "step", "settling_bound_s", "settling_ratio",
+    "settling_bound_loop_delay_ticks",
+)  # fmt: skip
+"""The entries of a motor's design that its controller file keeps under ``analysis``."""
+
+
+@dataclass(frozen=True)
+class MotorDesign:
+    """One motor's design.
+
+    Attributes
+    ----------
+    controller : Controller
+        The runtime controller, as ``cartctl run`` builds it from the file.
+    entry : dict
+        The design's figures (gains, margins, poles; contract 3's ``design --json`` entry).
+    file_entry : dict
+        The ``[motors.X]`` table of the controller file (without ``analysis``).
+    """
+
+    controller: Controller
+    entry: dict[str, Any]
+    file_entry: dict[str, Any]
+
+
+def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
+    """Design one motor's controller as ``request`` asks."""
+    extra = request.extra_delay_ticks
+    gain = request.estimator_gain
+    if request.method == "pi":
+        if request.bandwidth_hz is not None:
+            d = design_pi_bandwidth(model, bandwidth_hz=request.bandwidth_hz,
+                                    phase_margin_deg=request.phase_margin_deg,
+                                    extra_delay_ticks=extra)  # fmt: skip
+        else:
+            d = design_pi(model, phase_margin_deg=request.phase_margin_deg,
+                          crossover_hz=request.crossover_hz, extra_delay_ticks=extra)  # fmt: skip
+        kalman = None
+        if request.estimator == "kalman":
+            kalman = design_kalman(model, process_noise_std_v=request.process_noise_std_v,
+                                   bias_drift_std_v=request.bias_drift_std_v,
+                                   extra_noise_std_rad_s=request.measurement_noise_std_rad_s,
+                                   extra_delay_ticks=extra)  # fmt: skip
+        ctrl = PiController(d.kp, d.ki, model.period_s, voltage_limit_v=request.voltage_limit_v,
+                            anti_windup=request.anti_windup,
+                            estimator=None if kalman is None else make_estimator(kalman, gain))  # fmt: skip
+        entry = {**d.to_dict(), **d.analysis()}
+        if kalman is not None:
+            entry["estimator_poles"] = [[p.real, p.imag] for p in kalman.poles()]
+        return MotorDesign(ctrl, entry, pi_entry(d, request.anti_windup, kalman))
+    poles = request.pole_list()
+    d = design_poles(
+        model,
+        poles=poles,
+        settling_time_s=None if poles else request.settling_time_s,
+        overshoot_percent=None if poles else request.overshoot_percent,
+        extra_delay_ticks=extra,
+        process_noise_std_v=request.process_noise_std_v,
+        bias_drift_std_v=request.bias_drift_std_v,
+        extra_noise_std_rad_s=request.measurement_noise_std_rad_s,
+    )
+    ctrl = StateFeedbackController(d, estimator=make_estimator(d.estimator, gain),
+                                   voltage_limit_v=request.voltage_limit_v)  # fmt: skip
+    num, den = feedback_tf_coeffs(d)
+    loop = loop_analysis(num, den, model, extra)
+    entry = {
+        **{k: v for k, v in d.to_dict().items() if k != "estimator"},
+        "phase_margin_deg": loop["phase_margin_deg"],
+        "gain_margin_db": loop["gain_margin_db"],
+        "crossover_hz": loop["crossover_hz"],
+        "sensitivity_peak": loop["sensitivity_peak"],
+        "sensitivity_peak_db": loop["sensitivity_peak_db"],
+        "controller_num": num.tolist(),
+        "controller_den": den.tolist(),
+    }
+    return MotorDesign(ctrl, entry, poles_entry(d, num, den))
+
+
+@dataclass(frozen=True)
+class Designs:
+    """The designs of the motors asked for, each with its simulated step.
+
+    Attributes
+    ----------
+    request : DesignRequest
+    models : dict of str to ArxModel
+        The model each motor was designed on.
+    motors : dict of str to MotorDesign
+        With ``entry`` holding the step and the settling bound as well.
+    steps : dict of str to StepAnalysis
+        The simulated step of each motor, in the bound's settling band.
+    loop_delay_ticks : int or None
+        The loop delay the designs are for (None when the motors' model delays differ).
+    """
+
+    request: DesignRequest
+    models: dict[str, ArxModel]
+    motors: dict[str, MotorDesign]
+    steps: dict[str, StepAnalysis] = field(default_factory=dict)
+    loop_delay_ticks: int | None = None
+
+    def entries(self) -> dict[str, dict[str, Any]]:
+        """Per motor, the figures of ``design --json``."""
+        return {m: d.entry for m, d in self.motors.items()}
+
+
+def design_models(
+    request: DesignRequest, models: ModelFile | dict[str, ArxModel], motors: tuple[str, ...]
+) -> Designs:
+    """Design every motor of ``motors`` on its model, with the simulated step and its bound."""
+    request.check()
+    by_motor = {
+        m: (models.motor(m) if isinstance(models, ModelFile) else models[m]) for m in motors
+    }
+    try:
+        loop_delay = common_loop_delay({m: mod.nk for m, mod in by_motor.items()},
+                                       request.extra_delay_ticks)  # fmt: skip
+    except ValueError:
+        loop_delay = None
+    designs: dict[str, MotorDesign] = {}
+    steps: dict[str, StepAnalysis] = {}
+    for m, model in by_motor.items():
+        made = design_motor(request, model)
+        step = simulate_step(made.controller, model, step_rad_s=request.step_rad_s,
+                             extra_delay_ticks=request.extra_delay_ticks)  # fmt: skip
+        bound = settling_bound(model, request.step_rad_s, voltage_limit_v=request.voltage_limit_v,
+                               extra_delay_ticks=request.extra_delay_ticks)  # fmt: skip
+        step = in_settling_band(step, model.period_s)  # the bound's band: max(2 %, one count)
+        settle = step.info.settling_time_s
+        entry = made.entry
+        entry["step"] = step.to_dict()
+        entry["settling_bound_s"] = bound.settling_time_s
+        entry["settling_ratio"] = None if settle is None else settle / bound.settling_time_s
+        entry["settling_bound_loop_delay_ticks"] = bound.loop_delay_ticks
+        designs[m] = made
+        steps[m] = step
+    return Designs(request, by_motor, designs, steps, loop_delay)
+
+
+def controller_file(
+    designs: Designs, model_path: str | Path, *, command: str, period_s: float
+) -> ControllerFile:
+    """The controller file of ``designs`` (designed on ``model_path``), ready to save.
+
+    Raises
+    ------
+    InputError
+        The motors' models have different input delays: one file is for one loop.
+    """
+    try:
+        loop_delay = common_loop_delay({m: mod.nk for m, mod in designs.models.items()},
+                                       designs.request.extra_delay_ticks)  # fmt: skip
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    motors = {
+        m: {**d.file_entry, "analysis": {k: v for k, v in d.entry.items() if k in ANALYSIS_KEYS}}
+        for m, d in designs.motors.items()
+    }
+    request = designs.request
+    return ControllerFile(
+        method=request.method, period_s=period_s, voltage_limit_v=request.voltage_limit_v,
+        model_path=str(model_path), model_sha256=file_sha256(model_path),
+        request=request.file_request(), motors=motors,
+        created=datetime.now(UTC).isoformat(timespec="seconds"), command=command,
+        loop_delay_ticks=loop_delay,
+    )  # fmt: skip
