@@ -8,8 +8,7 @@ is installed (``apt-get install mesa-vulkan-drivers libvulkan1``).
 
 from __future__ import annotations
 
-import sys
-import types
+import json
 import urllib.request
 from collections import defaultdict
 from collections.abc import Iterator
@@ -347,15 +346,32 @@ def test_review_without_display_says_what_to_do(
     assert "--screenshot" in err
 
 
-def test_review_csv_goes_to_the_trace_metrics(
-    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+def test_review_csv_gives_the_metrics_of_a_known_response(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
-    seen = []
-    fake = types.ModuleType("cartctl.sinks.summary")
-    fake.review_csv = lambda args: seen.append(args.recording) or 0  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, "cartctl.sinks.summary", fake)
-    assert main(["review", str(tmp_path / "run.csv"), "--json"]) == 0
-    assert seen == [str(tmp_path / "run.csv")]
+    """A first-order step of 10 rad/s at 0.5 s with τ = 50 ms, at 2 V: no overshoot, settled
+    in the band max(2 %, 0.3506 rad/s) after τ·ln(10 / 0.3506) = 167.5 ms, i.e. at the 17th tick."""
+    import csv
+
+    t = np.arange(200) * 0.01
+    onset = t >= 0.5
+    speed = np.where(onset, 10.0 * (1.0 - np.exp(-(t - 0.5) / 0.05)), 0.0)
+    path = tmp_path / "run.csv"
+    with path.open("w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f)
+        w.writerow(["time_s", "voltage_a", "voltage_b", "speed_a", "speed_b", "reference_a",
+                    "period_error_us", "compute_us"])  # fmt: skip
+        for k in range(t.size):
+            w.writerow([repr(float(t[k])), 2.0 if onset[k] else 0.0, 0.0, repr(float(speed[k])), 0.0,
+                        10.0 if onset[k] else 0.0, 0.0, 0.0])  # fmt: skip
+    assert main(["review", str(path), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    a = summary["motors"]["a"]
+    assert summary["ticks"] == 200
+    assert a["overshoot_percent"] == pytest.approx(0.0, abs=1e-9)
+    assert a["max_abs_voltage"] == 2.0
+    assert a["settling_time_s"] == pytest.approx(0.17, abs=0.0101)
+    assert a["steady_state_error"] == pytest.approx(10.0 * np.exp(-1.49 / 0.05), abs=1e-6)
 
 
 def test_review_web_serves_the_viewer(

@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import glob
-import importlib
 import os
 import signal
 import socket
@@ -27,6 +26,7 @@ from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 from cartctl.errors import CartctlError, DataFileError, InputError, MissingFileError
+from cartctl.jsonout import dumps
 
 if TYPE_CHECKING:  # rerun takes ~0.6 s to import: only the review itself loads it
     import rerun as rr
@@ -102,21 +102,24 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _review_csv(args: argparse.Namespace) -> int:
+    """``cartctl review RUN.csv [--compare OTHER.csv] [--json]``: the run metrics from traces."""
     if args.web or args.screenshot:
         raise InputError("--web and --screenshot apply to .rrd recordings, not to CSV traces")
-    try:
-        summary = importlib.import_module("cartctl.sinks.summary")
-    except ModuleNotFoundError as exc:
-        if exc.name != "cartctl.sinks.summary":
-            raise
-        raise InputError("review of CSV traces is not built yet") from None
-    review_csv: Callable[[argparse.Namespace], int] | None = getattr(summary, "review_csv", None)
-    if review_csv is None:
-        raise InputError("review of CSV traces is not built yet")
-    return int(review_csv(args))
+    from cartctl.data import read_trace
+    from cartctl.sinks.summary import format_summary, trace_metrics
 
-
-# -- reading the recording -----------------------------------------------------------------
+    paths = [args.recording] + ([args.compare] if getattr(args, "compare", None) else [])
+    summaries = []
+    for path in paths:
+        trace = read_trace(path)
+        summary = trace_metrics(trace.columns(), trace.period_s)
+        summary["trace"] = str(path)
+        summaries.append(summary)
+    if args.json:
+        print(dumps(summaries[0] if len(summaries) == 1 else {"runs": summaries}))
+        return 0
+    print("\n\n".join(format_summary(s) for s in summaries))
+    return 0
 
 
 def read_recording(path: Path) -> tuple[RrdReader, StoreEntry]:

@@ -14,16 +14,14 @@ count per tick = 2π/1792/Ts, 0.3506 rad/s at 10 ms): a measured speed cannot re
 
 from __future__ import annotations
 
-import argparse
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.errors import InputError
-from cartctl.jsonout import dumps
 from cartctl.link.bridge import HOST_LOSS_WARN_PERCENT
 from cartctl.metrics import finite_or_none
 from cartctl.stepinfo import SETTLING_FRACTION, encoder_quantum_rad_s, step_info
@@ -213,23 +211,3 @@ def warn_host_losses(link: Mapping[str, Any] | None, command: str) -> None:
     """One line on stderr when more than 1 % of the host's frames never reached the cart."""
     if link and link.get("host_frames_lost_percent", 0.0) > HOST_LOSS_WARN_PERCENT:
         print(f"cartctl {command}: warning: {host_loss_text(link)}", file=sys.stderr)
-
-
-def review_csv(args: argparse.Namespace) -> int:
-    """``cartctl review RUN.csv [--compare OTHER.csv] [--json]``: the run metrics from traces."""
-    from cartctl.data import read_trace
-
-    paths: Sequence[str] = [args.recording] + (
-        [args.compare] if getattr(args, "compare", None) else []
-    )
-    summaries = []
-    for path in paths:
-        trace = read_trace(path)
-        summary = trace_metrics(trace.columns(), trace.period_s)
-        summary["trace"] = str(path)
-        summaries.append(summary)
-    if args.json:
-        print(dumps(summaries[0] if len(summaries) == 1 else {"runs": summaries}))
-        return 0
-    print("\n\n".join(format_summary(s) for s in summaries))
-    return 0
