@@ -50,6 +50,7 @@ import numpy as np
 import tomli_w
 
 from cartctl.cart import PERIOD_S, SPEED_QUANTUM_RAD_S
+from cartctl.design.entries import consistency_problems
 from cartctl.errors import CartctlError, DataFileError
 from cartctl.tomlfile import read_toml, require
 
@@ -354,8 +355,6 @@ def load_controller(path: str | Path, *, force: bool = False) -> ControllerFile:
     problem = absurd_gain(controller)
     if problem is not None:
         raise DataFileError(path, problem)
-    from cartctl.design.build import consistency_problems  # build imports this module
-
     problems = consistency_problems(controller)
     if problems and not force:
         more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""

@@ -29,8 +29,9 @@ import numpy as np
 
 from cartctl import __version__
 from cartctl.cart import PERIOD_S
-from cartctl.design.build import build_controllers, kalman_from_entry
+from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import ControllerFile, load_controller
+from cartctl.design.entries import kalman_from_entry
 from cartctl.design.kalman import KalmanDesign
 from cartctl.errors import DataFileError, InputError
 from cartctl.runtime.base import Controller

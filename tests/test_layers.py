@@ -1,0 +1,89 @@
+"""The import graph of ``src/cartctl``: one-way layers and no circles.
+
+Layers, from the bottom: the core (facts, errors, model, data, signals, metrics, the link's
+framing), then what runs (runtime, plants, sinks), then what makes things (identify, design,
+tune, export), then the commands and the CLI. A module imports from its own layer or below, with
+two more rules: runtime consumes plain data and imports nothing from design, and nothing imports
+the CLI but ``__main__``. Function-level imports count as much as top-level ones.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+SRC = Path(__file__).resolve().parents[1] / "src"
+CORE = {"cartctl", "cart", "errors", "model", "modelfile", "tomlfile", "data", "qrc", "signals",
+        "metrics", "stepinfo", "jsonout", "stopping", "progress", "reference", "link", "api"}  # fmt: skip
+RUNS = {"runtime", "plants", "sinks", "experiment"}
+MAKES = {"identify", "design", "tune", "export"}
+LAYER = {**dict.fromkeys(CORE, 0), **dict.fromkeys(RUNS, 1), **dict.fromkeys(MAKES, 2),
+         "commands": 3, "cli": 4, "__main__": 5}  # fmt: skip
+# Within the makers: tune and export build on design; identify stands alone.
+MAKERS_MAY_IMPORT = {"tune": {"design"}, "export": {"design"}, "design": set(), "identify": set()}
+
+
+def _module(path: Path) -> str:
+    parts = list(path.relative_to(SRC).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def _graph() -> dict[str, set[str]]:
+    modules = {_module(p): p for p in (SRC / "cartctl").rglob("*.py")}
+    graph: dict[str, set[str]] = {m: set() for m in modules}
+    for name, path in modules.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            targets: list[str] = []
+            if isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1]
+                                    + ([base] if base else []))  # fmt: skip
+                targets = [base] + [f"{base}.{a.name}" for a in node.names]
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            graph[name] |= {t for t in targets if t in modules and t != name}
+    return graph
+
+
+def _group(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "cartctl"
+
+
+def test_every_module_has_a_layer() -> None:
+    assert {_group(m) for m in _graph()} <= set(LAYER)
+
+
+def test_imports_go_down_or_sideways_only() -> None:
+    wrong = []
+    for module, targets in _graph().items():
+        g = _group(module)
+        for target in targets:
+            t = _group(target)
+            if LAYER[t] > LAYER[g] or (g in MAKES and t in MAKES and t != g and t not in MAKERS_MAY_IMPORT[g]) or (g == "runtime" and t == "design") or (t == "cli" and module != "cartctl.__main__"):
+                wrong.append(f"{module} -> {target}")
+    assert wrong == []
+
+
+def test_no_circles() -> None:
+    graph = _graph()
+    state: dict[str, int] = {}
+    cycles: list[list[str]] = []
+
+    def visit(node: str, path: list[str]) -> None:
+        state[node] = 1
+        for target in sorted(graph[node]):
+            if state.get(target) == 1:
+                cycles.append([*path[path.index(target) :], target] if target in path else [target])
+            elif target not in state:
+                visit(target, [*path, target])
+        state[node] = 2
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [node])
+    assert cycles == []
