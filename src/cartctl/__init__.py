@@ -4,7 +4,8 @@ Pipeline: ``data`` → ``identify`` → ``models/`` → ``design`` → ``control
 ``runtime`` (plant, estimator, controller, sinks) → ``logs/`` → review.
 """
 
+from cartctl.cart import PERIOD_S as TS_S
+
 __version__ = "0.1.0"
 
-TS_S: float = 0.01
-"""The cart's control period in seconds (microOS runs its control thread every 10 ms)."""
+__all__ = ["TS_S", "__version__"]

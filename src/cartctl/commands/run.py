@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from cartctl import stopping
+from cartctl.cart import SUPPLY_V
 from cartctl.commands.options import (
     add_name_option,
     add_plant_options,
@@ -255,7 +256,7 @@ def _measured_delay(plant: Plant) -> int | None:
 
 def run(args: argparse.Namespace) -> int:
     check_duration(args.duration)
-    if args.voltage_limit is not None and not 0.0 < args.voltage_limit <= 12.0:
+    if args.voltage_limit is not None and not 0.0 < args.voltage_limit <= SUPPLY_V:
         raise InputError(f"--voltage-limit must be in (0, 12] V, got {args.voltage_limit}")
     if args.fast and args.plant not in ("sim", "physics"):
         raise InputError(f"--fast needs a simulated plant (sim or physics), not '{args.plant}'")

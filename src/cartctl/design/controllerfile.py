@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from cartctl.cart import PERIOD_S, SPEED_QUANTUM_RAD_S
+from cartctl.cart import PERIOD_S, SPEED_QUANTUM_RAD_S, SUPPLY_V
 from cartctl.design.entries import consistency_problems
 from cartctl.errors import CartctlError, DataFileError
 from cartctl.tomlfile import read_toml, require
@@ -316,7 +316,7 @@ def load_controller(path: str | Path, *, force: bool = False) -> ControllerFile:
     if not motors or set(motors) - {"a", "b"}:
         raise DataFileError(path, f"[motors] must hold 'a' and/or 'b', got {sorted(motors)}")
     limit = float(require(doc, "voltage_limit_v", (int, float), path, "the top level"))
-    if not 0.0 < limit <= 12.0:
+    if not 0.0 < limit <= SUPPLY_V:
         raise DataFileError(path, f"voltage_limit_v must be in (0, 12] V, got {limit}")
     legacy = "loop_delay_ticks" not in doc
     model_path = _resolve_model(

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from scipy import optimize
 from scipy.linalg import toeplitz
 
+from cartctl.cart import SUPPLY_V
 from cartctl.design.analysis import StepAnalysis
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
@@ -160,7 +161,7 @@ def settling_bound(
     model: ArxModel,
     step_rad_s: float,
     *,
-    voltage_limit_v: float = 12.0,
+    voltage_limit_v: float = SUPPLY_V,
     extra_delay_ticks: int = 0,
     band: float = SETTLING_FRACTION,
     quantum_rad_s: float | None = None,

@@ -38,7 +38,7 @@ from cartctl.runtime.base import Controller
 
 __all__ = ["CART_PERIOD_S", "arduino_source", "as_steady_state", "c_float"]
 
-CART_PERIOD_S = 0.01
+CART_PERIOD_S = PERIOD_S
 """The period of the template's control thread (s): ``control()`` runs every 10 ms."""
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)

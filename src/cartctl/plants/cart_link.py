@@ -18,6 +18,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from cartctl.cart import BAUD
 from cartctl.errors import CartctlError, InputError, PlantError
 from cartctl.link import (
     Framer,
@@ -29,7 +30,6 @@ from cartctl.link import (
     PrintText,
 )
 
-BAUD = 115200
 DEFAULT_CONNECT_TIMEOUT_S = 5.0
 """Opening the port resets the Mega (DTR); its bootloader takes 1-2 s before the first HEARTBEAT."""
 DEFAULT_SILENCE_TIMEOUT_S = 0.1

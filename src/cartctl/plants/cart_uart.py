@@ -27,10 +27,10 @@ import select
 import threading
 import time
 
+from cartctl.cart import BAUD
 from cartctl.link import Framer, Gpio
 from cartctl.link.dialect import STX_V1
 
-BAUD = 115200
 BYTE_TIME_S = 10.0 / BAUD
 """One byte of 8N1 on the line (s): 86.8 µs."""
 RX_RING_BYTES = 63

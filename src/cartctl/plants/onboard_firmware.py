@@ -27,12 +27,13 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Protocol
 
+from cartctl.cart import PERIOD_S
 from cartctl.errors import InputError
 from cartctl.plants.bridge_firmware import CartIO
 from cartctl.reference import ReferenceSchedule
 from cartctl.signals import MAX_DURATION_S
 
-CART_PERIOD_S = 0.01
+CART_PERIOD_S = PERIOD_S
 """The period of the cart's control thread (s)."""
 IN_REFERENCE = {"a": 0, "b": 1}
 """Input float channel of each motor's reference (rad/s)."""

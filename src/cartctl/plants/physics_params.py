@@ -59,6 +59,7 @@ from dataclasses import asdict, dataclass, replace
 from types import MappingProxyType
 from typing import Any
 
+from cartctl.cart import ENCODER_COUNTS_PER_REV, PERIOD_S, PWM_STEP_V, SUPPLY_V
 from cartctl.errors import InputError
 
 __all__ = ["PRESETS", "CartParams", "MotorParams", "preset"]
@@ -151,10 +152,10 @@ class CartParams:
     motor_b: MotorParams
     added_inertia_kg_m2: float = 0.0
     rolling_n_m: float = 0.0
-    supply_v: float = 12.0
-    pwm_step_v: float = 12.0 / 255.0
-    counts_per_rev: int = 1792
-    period_s: float = 0.01
+    supply_v: float = SUPPLY_V
+    pwm_step_v: float = PWM_STEP_V
+    counts_per_rev: int = ENCODER_COUNTS_PER_REV
+    period_s: float = PERIOD_S
     substeps: int = 10
     noise_std_rad_s: float = 0.0
     actuation_delay_s: float | None = None

@@ -26,12 +26,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from cartctl.cart import SUPPLY_V
 from cartctl.errors import InputError
 from cartctl.plants.base import ClockedPlant, Measurement, Plant
 from cartctl.runtime.base import Controller
 from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS, Sink
 
-MAX_VOLTAGE_V = 12.0
+MAX_VOLTAGE_V = SUPPLY_V
 
 
 class MemorySink:

@@ -29,13 +29,14 @@ from __future__ import annotations
 import math
 from typing import Literal
 
+from cartctl.cart import SUPPLY_V
 from cartctl.errors import InputError
 from cartctl.runtime.base import SpeedEstimator
 
 AntiWindup = Literal["conditional", "back-calculation", "none"]
 ANTI_WINDUP: tuple[str, ...] = ("conditional", "back-calculation", "none")
 
-MAX_VOLTAGE_V = 12.0
+MAX_VOLTAGE_V = SUPPLY_V
 """The cart's supply: no controller may command more (V)."""
 
 

@@ -33,12 +33,13 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from cartctl.cart import SUPPLY_V
 from cartctl.errors import InputError
 from cartctl.runtime.kalman import KalmanDesign, StateEstimator, SteadyStateSpeedEstimator
 
 __all__ = ["MAX_VOLTAGE_V", "StateFeedbackController"]
 
-MAX_VOLTAGE_V = 12.0
+MAX_VOLTAGE_V = SUPPLY_V
 """The cart's supply: no voltage limit may exceed it (V)."""
 
 
