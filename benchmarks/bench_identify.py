@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from cartctl.identify.arx import fit_arx
+from cartctl.identification.arx import fit_arx
 from cartctl.model import ArxModel
 from cartctl.signals import square
 

@@ -1,4 +1,4 @@
-"""Cycle detection and averaging (cartctl.identify.cycles)."""
+"""Cycle detection and averaging (cartctl.identification.cycles)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cartctl.errors import InputError
-from cartctl.identify.cycles import (
+from cartctl.identification.cycles import (
     average_cycles,
     find_period,
     periodic_regression_pad,

@@ -1,4 +1,4 @@
-"""Empirical transfer function (cartctl.identify.etfe)."""
+"""Empirical transfer function (cartctl.identification.etfe)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cartctl.errors import InputError
-from cartctl.identify.etfe import Etfe, etfe, model_response
+from cartctl.identification.etfe import Etfe, etfe, model_response
 from cartctl.model import ArxModel
 from cartctl.signals import multisine, prbs, square
 

@@ -13,10 +13,10 @@ from cartctl.cli import main
 from cartctl.data import Trace, write_trace
 from cartctl.errors import InputError
 from cartctl.experiment import run_experiment
-from cartctl.identify.arx import IdentificationError, fit_arx
-from cartctl.identify.delay import estimate_delay
-from cartctl.identify.oe import fit_oe
-from cartctl.identify.prefilter import Prefilter
+from cartctl.identification.arx import IdentificationError, fit_arx
+from cartctl.identification.delay import estimate_delay
+from cartctl.identification.oe import fit_oe
+from cartctl.identification.prefilter import Prefilter
 from cartctl.model import ArxModel
 from cartctl.plants.physics import PhysicsPlant
 from cartctl.signals import prbs, square
@@ -244,7 +244,7 @@ def test_averaging_cycles_reduces_noise_bias() -> None:
     model = ArxModel.from_theta(THETA_A)
     u = square(10.0, cycles=12)
     y = model.simulate(u) + rng.normal(0.0, 0.1, u.size)
-    from cartctl.identify.pipeline import IdentifyRequest, identify
+    from cartctl.identification.pipeline import IdentifyRequest, identify
 
     trace = Trace(np.arange(u.size) * 0.01, u, np.zeros_like(u), y, np.zeros_like(u), source="x")
     plain = identify([trace], IdentifyRequest(motors=("a",))).motors["a"]

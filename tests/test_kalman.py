@@ -25,8 +25,8 @@ from cartctl.design.poles import design_poles
 from cartctl.design.statespace import realise
 from cartctl.errors import InputError
 from cartctl.experiment import run_experiment
-from cartctl.identify.arx import fit_arx
-from cartctl.identify.oe import fit_oe
+from cartctl.identification.arx import fit_arx
+from cartctl.identification.oe import fit_oe
 from cartctl.model import ArxModel
 from cartctl.modelfile import load_models
 from cartctl.plants.physics import PhysicsPlant

@@ -1,4 +1,4 @@
-"""Identification figures and summary (cartctl.identify.report)."""
+"""Identification figures and summary (cartctl.identification.report)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import pytest
 
 from cartctl.data import Trace
 from cartctl.errors import InputError
-from cartctl.identify.etfe import etfe
-from cartctl.identify.report import (
+from cartctl.identification.etfe import etfe
+from cartctl.identification.report import (
     ReportSection,
     plot_etfe,
     plot_io,

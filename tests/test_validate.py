@@ -12,7 +12,7 @@ from cartctl.cli import main
 from cartctl.data import Trace, write_trace
 from cartctl.errors import InputError
 from cartctl.experiment import run_experiment
-from cartctl.identify.validate import validate, validate_models
+from cartctl.identification.validate import validate, validate_models
 from cartctl.modelfile import load_models
 from cartctl.plants.physics import PhysicsPlant
 from cartctl.plants.sim import ArxPlant

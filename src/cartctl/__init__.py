@@ -2,10 +2,26 @@
 
 Pipeline: ``data`` → ``identify`` → ``models/`` → ``design`` → ``controllers/`` →
 ``runtime`` (plant, estimator, controller, sinks) → ``logs/`` → review.
+
+From Python: ``cartctl.load_trace``, ``identify``, ``load_model``, ``save_model``, ``design_pi``,
+``design_poles`` and ``simulate`` (see :mod:`cartctl.api`).
 """
 
 from cartctl.cart import PERIOD_S as TS_S
 
 __version__ = "0.1.0"
 
-__all__ = ["TS_S", "__version__"]
+_API = ("load_trace", "identify", "load_model", "save_model", "design_pi", "design_poles",
+        "simulate")  # fmt: skip
+
+__all__ = ["TS_S", "__version__", *_API]
+
+
+def __getattr__(name: str) -> object:
+    """The Python API (:mod:`cartctl.api`), imported on first use: ``import cartctl`` stays light,
+    so the command line starts (and routes its stop signals) before numpy and friends load."""
+    if name in _API:
+        from cartctl import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module 'cartctl' has no attribute {name!r}")

@@ -5,16 +5,21 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
-from datetime import UTC, datetime
 
 from cartctl.commands.options import add_map_option
 from cartctl.data import read_trace
 from cartctl.errors import InputError
-from cartctl.identify.arx import ArxFit
-from cartctl.identify.pipeline import IdentifyRequest, IdentifyResult, MotorIdentification, identify
-from cartctl.identify.prefilter import Prefilter
+from cartctl.identification.arx import ArxFit
+from cartctl.identification.pipeline import (
+    IdentifyRequest,
+    IdentifyResult,
+    MotorIdentification,
+    identify,
+    model_file,
+)
+from cartctl.identification.prefilter import Prefilter
 from cartctl.jsonout import dumps
-from cartctl.modelfile import ModelFile, Provenance, load_models, save_models
+from cartctl.modelfile import load_models, save_models
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -174,35 +179,6 @@ def format_result(result: IdentifyResult, files: list[str], request: IdentifyReq
     return "\n".join(lines)
 
 
-def model_file(result: IdentifyResult, files: list[str], request: IdentifyRequest) -> ModelFile:
-    """The chosen models with their provenance and figures, for ``--out``."""
-    notes = []
-    for m, r in result.motors.items():
-        if r.delay is not None:
-            notes.append(
-                f"motor {m}: delay nk = {r.delay.nk} estimated over {list(r.delay.candidates)}"
-            )
-        if r.cycles_averaged:
-            notes.append(f"motor {m}: {r.cycles_averaged} cycles averaged")
-    provenance = Provenance(
-        source="cartctl " + shlex.join(sys.argv[1:]) if sys.argv[1:] else "cartctl identify",
-        created=datetime.now(UTC).isoformat(timespec="seconds"),
-        data=tuple(files),
-        method=request.method,
-        prefilter=request.prefilter.describe() if request.prefilter else "none",
-        notes="; ".join(notes),
-    )
-    stats = {}
-    for m, r in result.motors.items():
-        d = r.chosen.to_dict()
-        stats[m] = {
-            k: d[k]
-            for k in ("theta_std", "fit_simulation_percent", "fit_prediction_percent")
-            if d[k] is not None
-        }
-    return ModelFile({m: r.chosen.model for m, r in result.motors.items()}, provenance, stats)
-
-
 def run(args: argparse.Namespace) -> int:
     request = request_from_args(args)
     compare = {path: load_models(path) for path in args.compare}  # fail early on a bad file
@@ -211,9 +187,10 @@ def run(args: argparse.Namespace) -> int:
     for note in result.notes:
         print(f"cartctl identify: note: {note}", file=sys.stderr)
     if args.out:
-        save_models(model_file(result, args.files, request), args.out)
+        source = "cartctl " + shlex.join(sys.argv[1:]) if sys.argv[1:] else "cartctl identify"
+        save_models(model_file(result, args.files, request, source=source), args.out)
     if args.report:
-        from cartctl.identify.summary import write_identify_report
+        from cartctl.identification.summary import write_identify_report
 
         write_identify_report(args.report, result, traces, request, compare)
     if args.json:

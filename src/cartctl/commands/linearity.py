@@ -1,6 +1,6 @@
 """``cartctl linearity STEP_SMALL.csv STEP_LARGE.csv STEP_SUM.csv``: the superposition test.
 
-The shell around :mod:`cartctl.identify.linearity`: reads the three step traces, prints the error
+The shell around :mod:`cartctl.identification.linearity`: reads the three step traces, prints the error
 summary or the JSON object, and with ``--plot`` draws the report's figure 8 (the two responses
 added against the summed step's response, the error beneath).
 """
@@ -18,7 +18,7 @@ from cartctl.commands.validate import (
     save_png,
 )
 from cartctl.data import read_trace
-from cartctl.identify.linearity import LinearityResult, linearity
+from cartctl.identification.linearity import LinearityResult, linearity
 from cartctl.jsonout import dumps
 
 

@@ -1,6 +1,6 @@
 """``cartctl validate MODEL.toml FILE.csv``: a model simulated on recorded input against the measured speed.
 
-The shell around :mod:`cartctl.identify.validate`: reads the model file and the trace, prints a
+The shell around :mod:`cartctl.identification.validate`: reads the model file and the trace, prints a
 table or the JSON object, and with ``--plot`` draws the report's figures 6 and 7 (measured and
 simulated speed, the absolute error beneath). Also home of the ``--plot`` helpers that
 ``cartctl linearity`` shares.
@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 from cartctl.commands.options import add_map_option
 from cartctl.data import MOTORS, read_trace
 from cartctl.errors import InputError
-from cartctl.identify.validate import ModelValidation, ValidationResult, validate_models
+from cartctl.identification.validate import ModelValidation, ValidationResult, validate_models
 from cartctl.jsonout import dumps
 from cartctl.modelfile import load_models
 from cartctl.stepinfo import StepInfo

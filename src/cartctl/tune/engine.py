@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.design.make import design_motor
-from cartctl.errors import CartctlError, PlantError
+from cartctl.errors import CartctlError
 from cartctl.model import check_extra_delay_ticks
 from cartctl.modelfile import ModelFile, load_models
 from cartctl.plants.base import Measurement, Plant
@@ -36,9 +36,7 @@ from cartctl.plants.factory import make_plant
 from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller
-from cartctl.runtime.clock import VirtualClock
-from cartctl.runtime.executor import PeriodicExecutor
-from cartctl.runtime.loop import ControlLoop, MemorySink
+from cartctl.runtime.fast import run_in_memory
 from cartctl.sinks.summary import trace_metrics
 from cartctl.tune.grid import TuneResult, design_request
 
@@ -135,28 +133,10 @@ def simulate(
     period_s: float,
     voltage_limit_v: float,
 ) -> tuple[dict[str, Any], str | None]:
-    """The loop of ``cartctl run --fast`` kept in memory: (``trace_metrics`` summary, failure).
-
-    ``plant``, ``controllers`` and ``references`` (rad/s per tick) are as for
-    :class:`~cartctl.runtime.loop.ControlLoop`; ``period_s`` is the tick (s), ``voltage_limit_v``
-    the clamp (V). The failure is the plant's error message, or None.
-    """
-    clock, memory = VirtualClock(), MemorySink()
-    loop = ControlLoop(plant, controllers, references, [memory], now_s=clock.now_s,
-                       voltage_limit_v=voltage_limit_v, period_s=period_s)  # fmt: skip
-    executor = PeriodicExecutor(period_s, clock, max_ticks=len(references["a"]))
-    try:
-        loop.start()
-
-        def tick(k: int) -> bool:
-            return loop.tick(k, executor.period_error_us, executor.start_s, executor.grid_index * period_s)  # fmt: skip
-
-        executor.run(tick)
-    except PlantError as exc:
-        loop.state.failure = str(exc)
-    finally:
-        loop.finish()
-    return trace_metrics(memory.arrays(), period_s), loop.state.failure
+    """The loop of ``cartctl run --fast`` kept in memory: (``trace_metrics`` summary, failure)."""
+    columns, state = run_in_memory(plant, controllers, references, period_s=period_s,
+                                   voltage_limit_v=voltage_limit_v)  # fmt: skip
+    return trace_metrics(columns, period_s), state.failure
 
 
 def _evaluate(job: TuneJob, models: ModelFile, index: int,

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from cartctl.errors import InputError
-from cartctl.identify.arx import (
+from cartctl.identification.arx import (
     IdentificationError,
     Segment,
     as_segments,

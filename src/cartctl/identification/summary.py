@@ -13,10 +13,10 @@ from pathlib import Path
 from typing import Any
 
 from cartctl.data import Trace
-from cartctl.identify.cycles import find_period
-from cartctl.identify.etfe import etfe
-from cartctl.identify.pipeline import IdentifyRequest, IdentifyResult, MotorIdentification
-from cartctl.identify.report import (
+from cartctl.identification.cycles import find_period
+from cartctl.identification.etfe import etfe
+from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, MotorIdentification
+from cartctl.identification.report import (
     ReportSection,
     plot_etfe,
     plot_io,

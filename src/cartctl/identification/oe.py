@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from scipy import optimize, signal
 
 from cartctl.errors import InputError
-from cartctl.identify.arx import (
+from cartctl.identification.arx import (
     ArxFit,
     IdentificationError,
     Segment,

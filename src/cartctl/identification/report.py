@@ -1,6 +1,6 @@
 """Figures and a markdown summary of an identification (``cartctl identify --report``).
 
-Identification stage, at its edge: the numeric work is done elsewhere (:mod:`~cartctl.identify.etfe`,
+Identification stage, at its edge: the numeric work is done elsewhere (:mod:`~cartctl.identification.etfe`,
 the fits, validation); this module draws what a person looks at, after the report's figures:
 the experiment's input and output (figures 3, 11), the ETFE with the models' Bode plots
 (figure 4), the pole-zero map (figures 5, 12) and the step validation (figures 6, 7), and writes
@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike
 
 from cartctl.data import Trace
 from cartctl.errors import InputError
-from cartctl.identify.etfe import Etfe, model_response
+from cartctl.identification.etfe import Etfe, model_response
 from cartctl.metrics import fit_percent
 from cartctl.model import ArxModel
 

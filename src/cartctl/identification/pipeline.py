@@ -10,17 +10,19 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
 
 from cartctl.data import Trace
 from cartctl.errors import InputError
-from cartctl.identify.arx import ArxFit, Segment, first_row, fit_arx
-from cartctl.identify.cycles import average_cycles, find_period, periodic_regression_pad
-from cartctl.identify.delay import DelayEstimate, estimate_delay
-from cartctl.identify.oe import fit_oe
-from cartctl.identify.prefilter import Prefilter
+from cartctl.identification.arx import ArxFit, Segment, first_row, fit_arx
+from cartctl.identification.cycles import average_cycles, find_period, periodic_regression_pad
+from cartctl.identification.delay import DelayEstimate, estimate_delay
+from cartctl.identification.oe import fit_oe
+from cartctl.identification.prefilter import Prefilter
+from cartctl.modelfile import ModelFile, Provenance
 
 METHODS = ("arx", "oe")
 
@@ -252,3 +254,41 @@ def identify(traces: Sequence[Trace], request: IdentifyRequest) -> IdentifyResul
             "voltage, e.g. cartctl excite --signal square"
         )
     return IdentifyResult(period_s, results, tuple(notes))
+
+
+def model_file(
+    result: IdentifyResult,
+    files: Sequence[str],
+    request: IdentifyRequest,
+    *,
+    source: str = "cartctl identify",
+) -> ModelFile:
+    """The chosen models with their provenance and figures, ready to save (``identify --out``).
+
+    ``source`` is what made them (the command line, or the Python call).
+    """
+    notes = []
+    for m, r in result.motors.items():
+        if r.delay is not None:
+            notes.append(
+                f"motor {m}: delay nk = {r.delay.nk} estimated over {list(r.delay.candidates)}"
+            )
+        if r.cycles_averaged:
+            notes.append(f"motor {m}: {r.cycles_averaged} cycles averaged")
+    provenance = Provenance(
+        source=source,
+        created=datetime.now(UTC).isoformat(timespec="seconds"),
+        data=tuple(files),
+        method=request.method,
+        prefilter=request.prefilter.describe() if request.prefilter else "none",
+        notes="; ".join(notes),
+    )
+    stats = {}
+    for m, r in result.motors.items():
+        d = r.chosen.to_dict()
+        stats[m] = {
+            k: d[k]
+            for k in ("theta_std", "fit_simulation_percent", "fit_prediction_percent")
+            if d[k] is not None
+        }
+    return ModelFile({m: r.chosen.model for m, r in result.motors.items()}, provenance, stats)

@@ -2,7 +2,7 @@
 
 Identification stage, beside the parametric fits: the report compares its ARX models with the
 ETFE of the square-wave experiment (its figure 4). With a periodic input (whole cycles, see
-:mod:`cartctl.identify.cycles`) the estimate is exact at the excited harmonics on noise-free
+:mod:`cartctl.identification.cycles`) the estimate is exact at the excited harmonics on noise-free
 data: no leakage and no transient. Without one, the whole record's spectra (or Hann-windowed
 segment averages) give an approximation. :func:`model_response` evaluates a model at the same
 frequencies. Pure numpy; no I/O.
@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cartctl.errors import InputError
-from cartctl.identify.cycles import as_sequence, split_cycles
+from cartctl.identification.cycles import as_sequence, split_cycles
 from cartctl.model import ArxModel
 
 __all__ = ["MIN_INPUT_FRACTION", "Etfe", "etfe", "model_response"]
@@ -134,7 +134,7 @@ def etfe(
     period_s : float
         Sample period Ts (s).
     period_ticks : int, optional
-        Period of the input (ticks), e.g. from :func:`~cartctl.identify.cycles.find_period`.
+        Period of the input (ticks), e.g. from :func:`~cartctl.identification.cycles.find_period`.
     skip_first : bool, default True
         Periodic case: drop the first period.
     segments : int, default 1

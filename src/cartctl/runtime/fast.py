@@ -1,0 +1,54 @@
+"""The loop of ``cartctl run --fast`` kept in memory: for tune and the Python API.
+
+The same :class:`~cartctl.runtime.loop.ControlLoop` on a :class:`~cartctl.runtime.clock.VirtualClock`
+and a :class:`~cartctl.runtime.executor.PeriodicExecutor`, with a
+:class:`~cartctl.runtime.loop.MemorySink` instead of files: as fast as the CPU allows, and
+ending, like every run, with the zero-volt stop row.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cartctl.errors import PlantError
+from cartctl.plants.base import Plant
+from cartctl.runtime.base import Controller
+from cartctl.runtime.clock import VirtualClock
+from cartctl.runtime.executor import PeriodicExecutor
+from cartctl.runtime.loop import ControlLoop, LoopState, MemorySink
+
+
+def run_in_memory(
+    plant: Plant,
+    controllers: Mapping[str, Controller],
+    references: Mapping[str, Sequence[float] | NDArray[np.float64] | Any],
+    *,
+    period_s: float,
+    voltage_limit_v: float,
+) -> tuple[dict[str, NDArray[np.float64]], LoopState]:
+    """Run the loop on a virtual clock; returns the trace columns and what happened.
+
+    ``plant``, ``controllers`` and ``references`` (rad/s per tick) are as for
+    :class:`~cartctl.runtime.loop.ControlLoop`; ``period_s`` is the tick (s), ``voltage_limit_v``
+    the clamp (V). A plant fault ends the run early and is in ``state.failure``.
+    """
+    clock, memory = VirtualClock(), MemorySink()
+    loop = ControlLoop(plant, controllers, references, [memory], now_s=clock.now_s,
+                       voltage_limit_v=voltage_limit_v, period_s=period_s)  # fmt: skip
+    executor = PeriodicExecutor(period_s, clock, max_ticks=loop.n_ticks)
+    try:
+        loop.start()
+
+        def tick(k: int) -> bool:
+            return loop.tick(k, executor.period_error_us, executor.start_s, executor.grid_index * period_s)  # fmt: skip
+
+        executor.run(tick)
+    except PlantError as exc:
+        loop.state.failure = str(exc)
+    finally:
+        loop.finish()
+    return memory.arrays(), loop.state

@@ -1,0 +1,106 @@
+"""The Python API: the README's example runs as written, and each function agrees with the CLI."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import control
+import matplotlib
+import numpy as np
+import pytest
+
+import cartctl
+from cartctl.cli import main
+
+matplotlib.use("Agg")
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _readme_example() -> str:
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    match = re.search(r"<!-- api-example[^>]*-->\s*```python\n(.*?)```", text, flags=re.S)
+    assert match, "the README has no API example"
+    return match.group(1)
+
+
+@pytest.fixture
+def square(capsys: pytest.CaptureFixture[str], workdir: Path) -> Path:
+    code = main(["excite", "--plant", "physics", "--signal", "square", "--amplitude", "10",
+                 "--cycles", "3", "--out", "logs/square.csv"])  # fmt: skip
+    capsys.readouterr()
+    assert code == 0
+    return workdir / "logs" / "square.csv"
+
+
+def test_the_readme_example_runs(square: Path, workdir: Path) -> None:
+    namespace: dict[str, object] = {}
+    exec(compile(_readme_example(), "README.md", "exec"), namespace)
+    assert (workdir / "models" / "mine.toml").is_file()
+    assert (workdir / "controllers" / "mine.toml").is_file()
+    assert (workdir / "step.png").stat().st_size > 10_000
+    run = namespace["run"]
+    a = run.summary["motors"]["a"]  # type: ignore[attr-defined]
+    assert a["overshoot_percent"] < 10.0 and a["settling_time_s"] is not None
+
+
+def test_identify_gives_the_cli_theta_and_a_python_control_tf(
+    capsys: pytest.CaptureFixture[str], square: Path
+) -> None:
+    ident = cartctl.identify(square)
+    assert main(["identify", str(square), "--json"]) == 0
+    cli = json.loads(capsys.readouterr().out)["motors"]
+    for m in "ab":
+        np.testing.assert_allclose(ident[m].theta, cli[m]["theta"], rtol=1e-12)
+        np.testing.assert_allclose(ident[m].theta_std, cli[m]["theta_std"], rtol=1e-12)
+        tf = ident[m].tf
+        assert isinstance(tf, control.TransferFunction) and tf.dt == pytest.approx(0.01)
+        c, d, a, b = ident[m].theta
+        # the report's H(z) = (a z + b) / (z³ + c z² + d z): compare the frequency responses
+        z = np.exp(1j * 2 * np.pi * np.array([0.5, 3.0, 20.0]) * 0.01)
+        expected = (a * z + b) / (z**3 + c * z**2 + d * z)
+        np.testing.assert_allclose(tf(z), expected, rtol=1e-9)
+
+
+def test_design_and_simulate_agree_with_design_and_run(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    design = cartctl.design_poles("models/ground.toml", settling_time_s=0.045,
+                                  process_noise_std_v=0.05, bias_drift_std_v=0.06)  # fmt: skip
+    assert main(["design", "models/ground.toml", "--method", "poles", "--settling-time", "0.045",
+                 "--process-noise-v", "0.05", "--bias-drift-v", "0.06", "--json"]) == 0  # fmt: skip
+    cli = json.loads(capsys.readouterr().out)["motors"]
+    for m in "ab":
+        np.testing.assert_allclose(design[m]["K"], cli[m]["K"], rtol=1e-12)
+    path = design.save(workdir / "controllers" / "api-poles.toml")
+    run = cartctl.simulate(design, plant="sim", reference="step:8", duration_s=1.5)
+    assert main(["run", "--fast", "--controller", str(path), "--reference", "step:8",
+                 "--duration", "1.5", "--rerun", "off", "--json", "--name", "api"]) == 0  # fmt: skip
+    summary = json.loads(capsys.readouterr().out)
+    trace = cartctl.load_trace(summary["trace"])
+    np.testing.assert_allclose(run.columns["voltage_a"], trace.voltage_a, rtol=0, atol=1e-9)
+    assert run.summary["ticks"] == summary["ticks"] == len(trace)
+    assert run.failure is None
+
+
+def test_to_dataframe_needs_pandas_or_gives_one(workdir: Path) -> None:
+    run = cartctl.simulate("controllers/pi.toml", duration_s=0.3)
+    try:
+        import pandas  # noqa: F401
+    except ImportError:
+        with pytest.raises(cartctl.errors.InputError, match="pandas"):
+            run.to_dataframe()
+    else:
+        frame = run.to_dataframe()
+        assert list(frame.columns) == list(run.columns) and len(frame) == 31
+
+
+def test_import_cartctl_stays_light() -> None:
+    """The API loads on first use: ``import cartctl`` (the CLI's first import) pulls no numpy."""
+    import subprocess
+    import sys
+
+    code = "import sys, cartctl; print('numpy' in sys.modules)"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "False"
