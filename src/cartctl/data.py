@@ -22,7 +22,8 @@ from typing import TextIO
 import numpy as np
 from numpy.typing import ArrayLike
 
-from cartctl import TS_S, qrc
+from cartctl import qrc
+from cartctl.cart import PERIOD_S as TS_S
 from cartctl.cart import SUPPLY_V
 from cartctl.errors import DataFileError, DataWarning, InputError, MissingFileError
 

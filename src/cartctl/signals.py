@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal as sps
 
-from cartctl import TS_S
+from cartctl.cart import PERIOD_S as TS_S
 from cartctl.errors import InputError
 
 SIGNALS = ("square", "step", "prbs", "multisine", "chirp")
