@@ -296,3 +296,15 @@ def test_tuning_with_extra_delay_scores_the_designs_own_loop(
         assert tuned["settling_time_s"] > rows[0]["motors"][m]["settling_time_s"] + 0.03
         assert tuned["settling_time_s"] >= 0.06
     assert rows[3]["settling_time_s"] > rows[0]["settling_time_s"]
+
+
+def test_a_worker_runs_one_blas_thread() -> None:
+    """The pool's initializer, checked with threadpoolctl's own view of the BLAS pools."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from cartctl.tune.engine import one_blas_thread
+
+    with threadpool_limits(limits=None):  # restores the pools afterwards
+        one_blas_thread()
+        blas = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+    assert blas and set(blas) == {1}

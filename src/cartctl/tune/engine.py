@@ -16,7 +16,6 @@ nk + d as in ``cartctl design``'s simulated step.
 
 from __future__ import annotations
 
-import ctypes
 import math
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -26,6 +25,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from threadpoolctl import threadpool_limits
 
 from cartctl.design.make import design_motor
 from cartctl.errors import CartctlError
@@ -165,28 +165,13 @@ def evaluate_chunk(job: TuneJob) -> list[TuneResult]:
 
 
 def one_blas_thread() -> None:
-    """Worker initializer: one OpenBLAS thread in this process (best effort, Linux).
+    """Worker initializer: one BLAS thread in this process (threadpoolctl).
 
-    A forked worker keeps the parent's OpenBLAS thread pool (as many threads as cores); two
-    workers on two cores then compete with each other's BLAS threads and the grid runs no faster
-    than in one process. The libraries loaded (numpy's and scipy's) are found in
-    ``/proc/self/maps``; elsewhere, or without the setter, nothing changes.
+    A forked worker keeps the parent's BLAS thread pool (as many threads as cores); two workers
+    on two cores then compete with each other's BLAS threads and the grid runs no faster than in
+    one process.
     """
-    try:
-        with open("/proc/self/maps", encoding="utf-8") as f:
-            paths = {line.split()[-1] for line in f if "openblas" in line.lower() and "/" in line}
-    except OSError:
-        return
-    names = ("openblas_set_num_threads", "scipy_openblas_set_num_threads64_",
-             "scipy_openblas_set_num_threads")  # fmt: skip
-    for path in sorted(paths):
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        setter = next((getattr(lib, n) for n in names if hasattr(lib, n)), None)
-        if setter is not None:
-            setter(1)
+    threadpool_limits(limits=1, user_api="blas")
 
 
 def run_grid(
