@@ -35,6 +35,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.signal
 from numpy.typing import NDArray
 
 from cartctl.errors import InputError
@@ -82,14 +83,20 @@ class StateSpace:
         )
 
     def simulate(self, voltage_v: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Output y[k] (rad/s) for the input u[k] (V), shape (N,), from x[0] = 0."""
+        """Output y[k] (rad/s) for the input u[k] (V), shape (N,), from x[0] = 0 (scipy's dlsim)."""
         u = np.asarray(voltage_v, dtype=float)
-        x = np.zeros(self.order)
-        y = np.empty(u.size)
-        for k, uk in enumerate(u):
-            y[k] = self.C @ x
-            x = self.A @ x + self.B * uk
-        return y
+        if u.size == 0:
+            return np.empty(0)
+        n = self.order
+        system = (
+            self.A,
+            self.B.reshape(n, 1),
+            self.C.reshape(1, n),
+            np.zeros((1, 1)),
+            self.period_s,
+        )
+        _, y, _ = scipy.signal.dlsim(system, u)
+        return np.asarray(y, dtype=float).ravel()
 
     def is_controllable(self) -> bool:
         """True when every mode can be moved by u (PBH test: rank [λI − A, B] = n for each λ)."""
