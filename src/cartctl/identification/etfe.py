@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
 from cartctl.errors import InputError
@@ -118,7 +119,8 @@ def etfe(
 
     Otherwise (``period_ticks`` None): with ``segments`` = 1, the ratio of the FFTs of the whole
     record, without window; with ``segments`` > 1, the record is cut into that many
-    Hann-windowed, half-overlapping segments and H = Σ Y U* / Σ |U|² (the H1 estimate, which
+    Hann-windowed, half-overlapping segments and H = Σ Y U* / Σ |U|² (scipy.signal.csd over
+    scipy.signal.welch: the H1 estimate, which
     averages out output noise). Both suffer leakage and the transient from rest, so they are an
     approximation, best where the input is strong.
 
@@ -227,14 +229,11 @@ def _segment_average(
             "use fewer segments (each needs at least 8)"
         )
     hop = length // 2
-    window = np.hanning(length)
-    starts = hop * np.arange(segments)
-    Ys = np.fft.rfft(window * np.stack([y[s : s + length] for s in starts]), axis=1)
-    Us = np.fft.rfft(window * np.stack([u[s : s + length] for s in starts]), axis=1)
-    cross = np.sum(Ys * np.conj(Us), axis=0)
-    power = np.sum(np.abs(Us) ** 2, axis=0)
+    spectra = {"fs": 1.0 / period_s, "window": "hann", "nperseg": length, "noverlap": length - hop,
+               "detrend": False}  # fmt: skip
+    freq, cross = scipy.signal.csd(u, y, **spectra)  # Σ conj(U) Y: the H1 numerator
+    _, power = scipy.signal.welch(u, **spectra)  # Σ |U|²
     keep = _excited(np.sqrt(power), fraction)
-    freq = np.fft.rfftfreq(length, d=period_s)
     return Etfe(freq[keep], cross[keep] / power[keep], False, segments, float(period_s), None)
 
 
