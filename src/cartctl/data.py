@@ -437,14 +437,15 @@ def _read_csv_rows(path: Path, names: list[str], header_line: int) -> _Table:
 
 
 def _data_lines(path: Path, header_line: int) -> tuple[list[list[str]], list[int]]:
-    """The non-blank lines after the header, split at commas, and their line numbers."""
+    """The non-blank rows after the header (read with :mod:`csv`) and their line numbers."""
     rows: list[list[str]] = []
     lines: list[int] = []
     with _open_text(path) as file:
-        for number, line in enumerate(file, start=1):
-            if number > header_line and line.strip():
-                rows.append(line.split(","))
-                lines.append(number)
+        reader = csv.reader(file)
+        for row in reader:
+            if reader.line_num > header_line and any(cell.strip() for cell in row):
+                rows.append(row)
+                lines.append(reader.line_num)
     return rows, lines
 
 
