@@ -73,7 +73,21 @@ def test_summary_step_metrics_equal_review_of_the_csv(
     assert summary["recording"] is None
     assert main(["review", summary["trace"], "--json"]) == 0
     review = json.loads(capsys.readouterr().out)
-    assert review["motors"] == summary["motors"]
+    # by hand from the trace's columns (csv module, numpy): the error, the peak, the overshoot
+    import csv
+
+    with open(summary["trace"], newline="", encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    col = {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
+    for m in "ab":
+        ref, true = col[f"reference_{m}"], col[f"true_speed_{m}"]
+        entry = review["motors"][m]
+        assert entry["rms_error"] == pytest.approx(np.sqrt(np.mean((ref - true) ** 2)), rel=1e-9)
+        assert entry["max_abs_voltage"] == pytest.approx(np.max(np.abs(col[f"voltage_{m}"])))
+        step = ref > 0
+        peak = np.max(true[step])
+        assert entry["overshoot_percent"] == pytest.approx(max(0.0, (peak - 10.0) / 10.0 * 100))
+        assert summary["motors"][m]["rms_error"] == pytest.approx(entry["rms_error"], rel=1e-12)
 
 
 def test_ctrl_c_leaves_zero_volts_and_readable_files(
