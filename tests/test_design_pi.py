@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from pathlib import Path
 
@@ -142,9 +143,9 @@ def test_open_and_closed_loop_agree() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "expected"),
     [
-        ({"phase_margin_deg": 60.0, "crossover_hz": 2.0}, r"Kp = -.* < 0.*2\.69 Hz and 10\.49 Hz"),
-        ({"phase_margin_deg": 60.0, "crossover_hz": 12.0}, r"Ki = .*10\.49 Hz"),
-        ({"phase_margin_deg": 45.0, "crossover_hz": 3.0}, r"45° .* 3 Hz.*4\.11 Hz"),
+        ({"phase_margin_deg": 60.0, "crossover_hz": 2.0}, r"Kp = -.* < 0.*crossover must lie"),
+        ({"phase_margin_deg": 60.0, "crossover_hz": 12.0}, r"Ki = .* <= 0.*crossover must lie"),
+        ({"phase_margin_deg": 45.0, "crossover_hz": 3.0}, r"45° .* 3 Hz.*crossover must lie"),
         ({"phase_margin_deg": 0.0, "crossover_hz": 4.0}, r"phase margin .*\(0, 89\].* 0\.0"),
         ({"phase_margin_deg": 90.0, "crossover_hz": 4.0}, r"phase margin .*got 90"),
         ({"phase_margin_deg": math.nan, "crossover_hz": 4.0}, r"phase margin .*nan"),
@@ -159,6 +160,33 @@ def test_impossible_requests_are_refused_with_useful_text(
 ) -> None:
     with pytest.raises(InputError, match=expected):
         design_pi(MOTORS["a"], **kwargs)  # type: ignore[arg-type]
+
+
+def _feasible_band_hz(model: ArxModel, pm_deg: float) -> tuple[float, float]:
+    """Where a PI can give ``pm_deg``, from python-control's frequency response of the model.
+
+    The PI C = Kp + Ki·Ts·z/(z − 1) has a phase between its integral part's, −90° + ωTs/2, and
+    0°; at the crossover it must supply −180° + PM − ∠G. Both ends of the band, on a fine grid.
+    """
+    f = np.linspace(0.2, 49.0, 200_001)
+    z = np.exp(1j * 2 * np.pi * f * model.period_s)
+    plant_deg = np.degrees(np.unwrap(np.angle(model.to_tf()(z))))
+    integral_deg = np.degrees(np.angle(z / (z - 1.0)))
+    needed = -180.0 + pm_deg - plant_deg
+    ok = np.flatnonzero((needed < 0.0) & (needed > integral_deg))
+    return float(f[ok[0]]), float(f[ok[-1]])
+
+
+@pytest.mark.parametrize(("pm", "fc"), [(60.0, 2.0), (60.0, 12.0), (45.0, 3.0)])
+def test_a_refusal_states_the_band_python_control_finds(pm: float, fc: float) -> None:
+    lo, hi = _feasible_band_hz(MOTORS["a"], pm)
+    with pytest.raises(InputError) as refused:
+        design_pi(MOTORS["a"], phase_margin_deg=pm, crossover_hz=fc)
+    stated = [
+        float(x) for x in re.findall(r"between ([\d.]+) Hz and ([\d.]+) Hz", str(refused.value))[0]
+    ]
+    assert stated == pytest.approx([lo, hi], abs=0.011)
+    assert not lo <= fc <= hi
 
 
 def test_unstable_model_is_refused() -> None:

@@ -67,6 +67,29 @@ def check_png(path: Path, written: Path) -> None:
     width, height = image_size(path)
     assert 700 <= width <= 1600
     assert 450 <= height <= 1100
+    assert_drawn(path)
+
+
+def assert_drawn(path: Path) -> None:
+    """Something is drawn: a blank or nearly blank figure fails (a property of the pixels)."""
+    import matplotlib.image
+
+    pixels = matplotlib.image.imread(path)[..., :3].reshape(-1, 3)
+    background = np.median(pixels, axis=0)
+    inked = np.any(np.abs(pixels - background) > 0.1, axis=1).mean()
+    colours = len(np.unique(np.round(pixels * 8), axis=0))
+    assert inked > 0.02, f"{path.name}: only {inked:.1%} of the pixels are drawn"
+    assert colours >= 6, f"{path.name}: {colours} colours"
+
+
+def test_a_blank_figure_fails_the_check(tmp_path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(8, 5))
+    fig.savefig(tmp_path / "blank.png")
+    plt.close(fig)
+    with pytest.raises(AssertionError, match="drawn"):
+        assert_drawn(tmp_path / "blank.png")
 
 
 def test_plot_io(tmp_path: Path, trace: Trace) -> None:
