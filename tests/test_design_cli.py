@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from pathlib import Path
 
 import control
@@ -94,23 +95,42 @@ def test_shipped_controllers_take_a_good_10_rad_s_step(name: str, ground_path: P
         assert shipped.motors[motor]["analysis"]["settling_ratio"] >= 1.0
 
 
-@pytest.mark.parametrize("name", ["pi.toml", "poles.toml"])
-def test_shipped_controllers_regenerate_from_their_command(
-    capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, name: str
-) -> None:
+@pytest.mark.parametrize("name", ["pi.toml", "serial-pi.toml"])
+def test_shipped_pi_files_meet_their_request_by_python_control(name: str) -> None:
+    """The file's Kp, Ki on its model (with its loop's delay): python-control's margins give the
+    phase margin and crossover the file's request names."""
+    import control
+
     shipped = load_controller(CONTROLLERS / name)
-    argv = shipped.command.split()[1:]  # drop 'cartctl'
-    out = tmp_path / name
-    argv[argv.index("--out") + 1] = str(out)
-    monkeypatch.chdir(ROOT)
-    assert main(argv) == 0
-    capsys.readouterr()
-    again = load_controller(out)
-    assert again.request == shipped.request
+    models = load_models(Path(shipped.model_path))
+    request = shipped.request
     for motor, entry in shipped.motors.items():
-        for key in ("kp", "ki", "K", "Ki", "Kr"):
-            if key in entry:
-                np.testing.assert_allclose(again.motors[motor][key], entry[key], rtol=1e-9)
+        model = models.motor(motor)
+        extra = shipped.loop_delay_ticks - (model.nk - 1)
+        plant = model.with_extra_delay(extra).to_tf()
+        ts = shipped.period_s
+        z = control.tf([1.0, 0.0], [1.0], ts)
+        pi = entry["kp"] + entry["ki"] * ts * z / (z - 1)
+        with warnings.catch_warnings():  # the integrator's pole at z = 1 on the way
+            warnings.simplefilter("ignore", RuntimeWarning)
+            _, pm, _, wc = control.margin(pi * plant)
+        assert pm == pytest.approx(request["phase_margin_deg"], abs=0.05)
+        assert wc / (2 * np.pi) == pytest.approx(request["crossover_hz"], rel=1e-3)
+
+
+@pytest.mark.parametrize("name", ["poles.toml", "serial-poles.toml"])
+def test_shipped_pole_placement_closes_the_loop_on_its_stored_poles(name: str) -> None:
+    """The stored C(z) on the model (with the loop's delay), as a polynomial computation with
+    numpy: the closed loop's roots include every stored pole of the state feedback."""
+    shipped = load_controller(CONTROLLERS / name)
+    models = load_models(Path(shipped.model_path))
+    for motor, entry in shipped.motors.items():
+        model = models.motor(motor)
+        plant = model.with_extra_delay(shipped.loop_delay_ticks - (model.nk - 1))
+        num, den = entry["controller_num"], entry["controller_den"]
+        roots = np.roots(np.polyadd(np.polymul(den, plant.den()), np.polymul(num, plant.num())))
+        for re_, im in entry["closed_loop_poles"]:
+            assert np.min(np.abs(roots - complex(re_, im))) < 1e-5
 
 
 def test_controller_file_runs_what_was_designed(
