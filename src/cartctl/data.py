@@ -2,7 +2,7 @@
 
 The first stage of the pipeline (data → identify → models/ → design → controllers/ → runtime →
 logs/). A trace holds, per 10 ms tick k, the voltage *commanded* at tick k (V) and the speed
-*measured* at tick k (rad/s) of both motors: contract 1 in docs/architecture.md.
+*measured* at tick k (rad/s) of both motors (the CSV columns are in the README, "Traces").
 :func:`read_trace` reads contract-1 CSV files and QRoboticsCenter logs (whose layout
 :mod:`cartctl.qrc` parses), optionally mapping QRC labels or foreign CSV headers onto trace
 columns. :func:`write_trace` writes contract-1 CSV that reads back bit for bit.
