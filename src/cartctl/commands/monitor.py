@@ -128,12 +128,10 @@ def _rerun_sink(args: argparse.Namespace, path: Path) -> Any:
     if args.rerun == "off":
         return None
     from cartctl.sinks.channels_rerun import ChannelsRerunSink
-    from cartctl.sinks.rerun_sink import display_available
+    from cartctl.sinks.rerun_sink import resolve_mode
 
-    mode = args.rerun
-    if mode == "auto":
-        mode = "spawn" if display_available() else "save"
-    return ChannelsRerunSink(mode, path, float_count=FLOAT_CHANNELS, connect_url=args.connect_url)
+    return ChannelsRerunSink(resolve_mode(args.rerun), path, float_count=FLOAT_CHANNELS,
+                             connect_url=args.connect_url)  # fmt: skip
 
 
 @contextlib.contextmanager

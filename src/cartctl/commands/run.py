@@ -171,11 +171,9 @@ def _references(args: argparse.Namespace, n: int, period_s: float) -> dict[str, 
 def _rerun_sink(args: argparse.Namespace, path: Path) -> Any:
     if args.rerun == "off":
         return None
-    from cartctl.sinks.rerun_sink import RerunSink, display_available
+    from cartctl.sinks.rerun_sink import RerunSink, resolve_mode
 
-    mode = args.rerun
-    if mode == "auto":
-        mode = "spawn" if display_available() else "save"
+    mode = resolve_mode(args.rerun)
     # one send_columns costs ~170 µs whatever its length: batch 20 ticks live (the SDK flushes
     # every 200 ms anyway), 1000 on the virtual clock
     return RerunSink(mode, path, connect_url=args.connect_url,

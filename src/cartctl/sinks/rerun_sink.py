@@ -116,6 +116,13 @@ def display_available() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
+def resolve_mode(mode: str) -> str:
+    """``--rerun auto`` as it applies here: open a viewer where a display exists, else save."""
+    if mode == "auto":
+        return "spawn" if display_available() else "save"
+    return mode
+
+
 def viewer_executable() -> str | None:
     """The ``rerun`` viewer next to the running interpreter (the venv's ``bin``), else on PATH."""
     name = "rerun.exe" if sys.platform == "win32" else "rerun"
