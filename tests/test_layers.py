@@ -14,7 +14,7 @@ from pathlib import Path
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 CORE = {"cartctl", "cart", "errors", "model", "modelfile", "tomlfile", "data", "qrc", "signals",
-        "metrics", "stepinfo", "jsonout", "stopping", "progress", "reference", "link"}  # fmt: skip
+        "metrics", "stepinfo", "jsonout", "stopping", "progress", "reference", "link", "trace"}  # fmt: skip
 RUNS = {"runtime", "plants", "sinks", "experiment"}
 MAKES = {"identification", "design", "tune", "export"}
 LAYER = {**dict.fromkeys(CORE, 0), **dict.fromkeys(RUNS, 1), **dict.fromkeys(MAKES, 2),
