@@ -1,7 +1,7 @@
 """``cartctl review FILE.rrd [--web] [--screenshot FILE.png]``: a recorded run in the Rerun viewer.
 
 The last stage of the pipeline (run → logs/ → review). The recording is streamed into a viewer
-together with the project's layout (:func:`cartctl.sinks.rerun_sink.blueprint`), so recordings
+together with the project's layout (:func:`cartctl.sinks.rerun_layout.blueprint`), so recordings
 made without a layout, or with an older one, show the same plots. ``review RUN.csv [--json]
 [--compare OTHER.csv]`` recomputes the run metrics from CSV traces instead (see
 :mod:`cartctl.sinks.summary`).
@@ -157,7 +157,7 @@ def _stream(reader: RrdReader, entry: StoreEntry, rec: rr.RecordingStream) -> di
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    from cartctl.sinks.rerun_sink import blueprint
+    from cartctl.sinks.rerun_layout import blueprint
 
     ends: dict[str, int] = {}
     chunks = list(reader.stream(store=entry))
@@ -198,7 +198,7 @@ def open_in_viewer(path: Path) -> str:
     """
     import rerun as rr
 
-    from cartctl.sinks.rerun_sink import VIEWER_PORT, display_available, viewer_reachable
+    from cartctl.sinks.viewer import VIEWER_PORT, display_available, viewer_reachable
 
     reader, entry = read_recording(path)
     if not display_available():
@@ -359,7 +359,7 @@ def vulkan_available() -> bool:
 
 
 def _executable() -> str:
-    from cartctl.sinks.rerun_sink import viewer_executable
+    from cartctl.sinks.viewer import viewer_executable
 
     executable = viewer_executable()
     if executable is None:

@@ -171,7 +171,8 @@ def _references(args: argparse.Namespace, n: int, period_s: float) -> dict[str, 
 def _rerun_sink(args: argparse.Namespace, path: Path) -> Any:
     if args.rerun == "off":
         return None
-    from cartctl.sinks.rerun_sink import RerunSink, resolve_mode
+    from cartctl.sinks.rerun_sink import RerunSink
+    from cartctl.sinks.viewer import resolve_mode
 
     mode = resolve_mode(args.rerun)
     # one send_columns costs ~170 µs whatever its length: batch 20 ticks live (the SDK flushes

@@ -15,11 +15,8 @@ from pathlib import Path
 import rerun as rr
 import rerun.blueprint as rrb
 
-from cartctl.sinks.rerun_sink import (
-    TICK_COLUMN,
-    TIME_COLUMN,
-    RerunSink,
-)
+from cartctl.sinks.rerun_layout import TICK_COLUMN, TIME_COLUMN
+from cartctl.sinks.rerun_sink import RerunSink
 
 GPIO_ROOT = "gpio"
 CART_ROOT = "cart"

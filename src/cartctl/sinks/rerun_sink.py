@@ -13,25 +13,21 @@ from __future__ import annotations
 import contextlib
 import os
 import queue
-import shutil
-import socket
-import sys
 import threading
 import uuid
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Final
-from urllib.parse import urlsplit
 
 import numpy as np
 import rerun as rr
-import rerun.blueprint as rrb
 from numpy.typing import NDArray
 
 from cartctl.errors import CartctlError, InputError
+from cartctl.sinks.rerun_layout import ENTITY_PATHS, STYLES, TICK_COLUMN, TIME_COLUMN, blueprint
+from cartctl.sinks.viewer import VIEWER_PORT, display_available, viewer_executable, viewer_reachable
 
 RERUN_MODES: Final[tuple[str, ...]] = ("save", "spawn", "connect", "off")
 """``save``: the ``.rrd`` file only; ``spawn``: the file (if a path is given) and a viewer started
@@ -40,60 +36,6 @@ for the run; ``connect``: the file (if a path is given) and a viewer already run
 
 APPLICATION_ID: Final[str] = "cartctl"
 DEFAULT_CONNECT_URL: Final[str] = "rerun+http://127.0.0.1:9876/proxy"
-VIEWER_PORT: Final[int] = 9876
-
-ENTITY_PATHS: Final[dict[str, str]] = {
-    "reference_a": "motor/a/reference",
-    "speed_a": "motor/a/speed",
-    "estimate_a": "motor/a/estimate",
-    "voltage_a": "motor/a/voltage",
-    "reference_b": "motor/b/reference",
-    "speed_b": "motor/b/speed",
-    "estimate_b": "motor/b/estimate",
-    "voltage_b": "motor/b/voltage",
-    "period_error_us": "loop/period_error_us",
-    "compute_us": "loop/compute_us",
-    "true_speed_a": "motor/a/true_speed",
-    "true_speed_b": "motor/b/true_speed",
-}
-"""Trace column → entity path. The first ten are contract 4; ``true_speed_*`` (simulated plants
-only) is an extension."""
-
-TIME_COLUMN: Final[str] = "time_s"
-TICK_COLUMN: Final[str] = "tick"
-
-
-@dataclass(frozen=True)
-class SeriesStyle:
-    """How one entity's line is drawn: legend label, colour (RGB, 0–255) and width (UI points)."""
-
-    name: str
-    color: tuple[int, int, int]
-    width: float = 1.5
-
-
-# The viewer draws a plot's series in entity-path order (estimate, reference, speed, true_speed),
-# so the estimate is drawn wider to stay visible under a noisy measured speed.
-_REFERENCE = SeriesStyle("reference (rad/s)", (150, 150, 150), 1.5)
-_SPEED = SeriesStyle("measured speed (rad/s)", (31, 119, 180), 1.0)
-_ESTIMATE = SeriesStyle("estimate (rad/s)", (255, 127, 14), 2.5)
-_TRUE = SeriesStyle("true speed (rad/s)", (44, 160, 44), 1.0)
-_VOLTAGE = SeriesStyle("voltage (V)", (148, 103, 189), 1.5)
-
-STYLES: Final[dict[str, SeriesStyle]] = {
-    "motor/a/reference": _REFERENCE,
-    "motor/a/speed": _SPEED,
-    "motor/a/estimate": _ESTIMATE,
-    "motor/a/true_speed": _TRUE,
-    "motor/a/voltage": _VOLTAGE,
-    "motor/b/reference": _REFERENCE,
-    "motor/b/speed": _SPEED,
-    "motor/b/estimate": _ESTIMATE,
-    "motor/b/true_speed": _TRUE,
-    "motor/b/voltage": _VOLTAGE,
-    "loop/period_error_us": SeriesStyle("period error (µs)", (214, 39, 40), 1.0),
-    "loop/compute_us": SeriesStyle("compute time (µs)", (23, 190, 207), 1.0),
-}
 
 _MAX_PROBLEMS = 10  # messages kept; further problems are only counted
 _MAX_COALESCED_ROWS = 100_000  # rows the thread merges into one send when it falls behind
@@ -109,70 +51,6 @@ class RecordingError(CartctlError, RuntimeError):
 
 class RecordingWarning(UserWarning):
     """The Rerun recording had problems; the run itself went on."""
-
-
-def display_available() -> bool:
-    """Whether a native viewer window can open here (``DISPLAY`` or ``WAYLAND_DISPLAY`` is set)."""
-    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-
-
-def resolve_mode(mode: str) -> str:
-    """``--rerun auto`` as it applies here: open a viewer where a display exists, else save."""
-    if mode == "auto":
-        return "spawn" if display_available() else "save"
-    return mode
-
-
-def viewer_executable() -> str | None:
-    """The ``rerun`` viewer next to the running interpreter (the venv's ``bin``), else on PATH."""
-    name = "rerun.exe" if sys.platform == "win32" else "rerun"
-    beside = Path(sys.executable).parent / name
-    if beside.is_file():
-        return str(beside)
-    return shutil.which("rerun")
-
-
-def blueprint(motors: Sequence[str] = ("a", "b")) -> rrb.Blueprint:
-    """The project's default layout.
-
-    The motors side by side; for each, speed with its reference and estimate (and the true speed of
-    a simulated plant) above the voltage. The loop timing (period error and compute time) spans the
-    bottom. Side panels start collapsed and the plots follow the ``time`` timeline.
-
-    Parameters
-    ----------
-    motors : sequence of str
-        Motor names, as in the entity paths ``motor/<name>/...``.
-
-    Returns
-    -------
-    rerun.blueprint.Blueprint
-    """
-    columns = []
-    for m in motors:
-        speed = rrb.TimeSeriesView(
-            name=f"Motor {m.upper()}: speed (rad/s)",
-            origin=f"/motor/{m}",
-            contents=["$origin/**", "- $origin/voltage"],
-            plot_legend=rrb.PlotLegend(corner="RightBottom", visible=True),
-        )
-        voltage = rrb.TimeSeriesView(
-            name=f"Motor {m.upper()}: voltage (V)",
-            origin=f"/motor/{m}/voltage",
-            plot_legend=rrb.PlotLegend(visible=False),
-        )
-        columns.append(rrb.Vertical(speed, voltage, row_shares=[3, 2]))
-    timing = rrb.TimeSeriesView(
-        name="Loop timing (µs)",
-        origin="/loop",
-        plot_legend=rrb.PlotLegend(corner="RightTop", visible=True),
-    )
-    return rrb.Blueprint(
-        rrb.Vertical(rrb.Horizontal(*columns), timing, row_shares=[3, 1]),
-        rrb.BlueprintPanel(state="collapsed"),
-        rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(state="collapsed", timeline="time"),
-    )
 
 
 class RerunSink:
@@ -479,17 +357,6 @@ class RerunSink:
         if self.strict:
             raise RecordingError(text)
         warnings.warn(text, RecordingWarning, stacklevel=3)
-
-
-def viewer_reachable(url: str, timeout_s: float = 0.5) -> bool:
-    """Whether something accepts TCP connections at a viewer's ``rerun+http://host:port/proxy``."""
-    parts = urlsplit(url.replace("rerun+", "", 1))
-    try:
-        port = parts.port or (80 if parts.scheme == "http" else 443)
-        with socket.create_connection((parts.hostname or "127.0.0.1", port), timeout=timeout_s):
-            return True
-    except (OSError, ValueError):
-        return False
 
 
 def _drop_realtime_priority() -> None:
