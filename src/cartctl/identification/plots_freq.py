@@ -1,0 +1,252 @@
+"""The frequency-domain figures of an identification: the ETFE with the models' Bode plots
+(the report's figure 4) and the pole-zero map (figures 5, 12)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cartctl.errors import InputError
+from cartctl.identification.etfe import Etfe, model_response
+from cartctl.identification.figure_base import color as _color
+from cartctl.identification.figure_base import figure as _figure
+from cartctl.identification.figure_base import save as _save
+from cartctl.model import ArxModel
+
+__all__ = ["plot_etfe", "plot_pzmap"]
+
+
+def plot_etfe(etfe: Etfe, models: Mapping[str, ArxModel], path: Path, *, title: str) -> Path:
+    """ETFE as dots and each model's Bode plot as a line (report, figure 4).
+
+    Magnitude (dB re 1 rad/s per V) above, phase (degrees) below, on a logarithmic frequency
+    axis up to the Nyquist frequency 1 / (2 Ts). Model phases are unwrapped from low
+    frequency; each ETFE phase is shifted by a whole number of turns to the branch of the first
+    model's phase (to the unwrapped ETFE itself when there is no model), so measurement and
+    models are drawn on the same branch.
+
+    Parameters
+    ----------
+    etfe : Etfe
+        The empirical estimate (one motor).
+    models : mapping of str to ArxModel
+        Label → model of the same motor; may be empty.
+    path : Path
+        PNG file to write.
+    title : str
+        Figure title.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    InputError
+        An ETFE with no frequency above 0 Hz.
+    """
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    positive = etfe.freq_hz > 0.0
+    if not np.any(positive):
+        raise InputError("the ETFE has no frequency above 0 Hz to draw on a logarithmic axis")
+    f_e = etfe.freq_hz[positive]
+    h_e = etfe.response[positive]
+    nyquist_hz = 0.5 / etfe.period_s
+    f_lo = float(f_e[0]) / 1.5
+    f_grid = np.geomspace(f_lo, nyquist_hz, 800)
+    curves = []
+    for label, model in models.items():
+        h = model_response(model, f_grid)
+        curves.append((label, 20.0 * np.log10(np.abs(h)), np.degrees(np.unwrap(np.angle(h)))))
+    phase_e = np.degrees(np.angle(h_e))
+    if curves:
+        ref = np.interp(np.log(f_e), np.log(f_grid), curves[0][2])
+        phase_e += 360.0 * np.round((ref - phase_e) / 360.0)
+    else:
+        phase_e = np.degrees(np.unwrap(np.angle(h_e)))
+    n = etfe.n_segments
+    kind = f"{n} period{'s' if n != 1 else ''} averaged" if etfe.periodic else "whole record"
+    if not etfe.periodic and etfe.n_segments > 1:
+        kind = f"{etfe.n_segments} Hann segments"
+    with _figure(10.0, 7.0) as fig:
+        ax_m, ax_p = fig.subplots(2, 1, sharex=True)
+        style = {"linestyle": "none", "marker": "o", "markersize": 3.5, "color": "0.15"}
+        ax_m.plot(f_e, 20.0 * np.log10(np.abs(h_e)), label=f"ETFE ({kind})", **style)
+        ax_p.plot(f_e, phase_e, **style)
+        for i, (label, mag_db, phase_deg) in enumerate(curves):
+            ax_m.plot(f_grid, mag_db, color=_color(i), label=label, linewidth=1.8)
+            ax_p.plot(f_grid, phase_deg, color=_color(i), linewidth=1.8)
+        ax_m.set_xscale("log")
+        ax_m.set_xlim(f_lo, nyquist_hz)
+        ax_p.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax_p.xaxis.set_major_formatter(FuncFormatter(lambda x, _pos: f"{x:g}"))
+        ax_p.xaxis.set_minor_formatter(NullFormatter())
+        ax_m.set_ylabel("magnitude (dB re 1 rad/s/V)")
+        ax_p.set_ylabel("phase (deg)")
+        ax_p.set_xlabel(f"frequency (Hz), up to the Nyquist frequency {nyquist_hz:g} Hz")
+        _phase_ticks(ax_p, [phase_e, *(c[2] for c in curves)])
+        ax_m.grid(True, which="minor", alpha=0.12)
+        ax_p.grid(True, which="minor", alpha=0.12)
+        ax_m.legend(loc="lower left")
+        fig.suptitle(title)
+        return _save(fig, path)
+
+
+def _phase_ticks(ax: Any, phases: Sequence[np.ndarray]) -> None:
+    """Phase ticks every 90° (every 180° when the phases span more than 540°)."""
+    from matplotlib.ticker import MultipleLocator
+
+    values = np.concatenate([np.ravel(p) for p in phases])
+    span = float(np.ptp(values)) if values.size else 0.0
+    ax.yaxis.set_major_locator(MultipleLocator(90.0 if span <= 540.0 else 180.0))
+
+
+def plot_pzmap(models: Mapping[str, ArxModel], path: Path, *, title: str) -> Path:
+    """Pole-zero map of one or more models (report, figures 5 and 12).
+
+    Poles ×, zeros ○, one colour per model. Poles at z = 0 (pure delays) are drawn as a black
+    square at the origin with their count per model. Each other pole is labelled with its
+    continuous-equivalent frequency (Hz); a conjugate pair once. The left panel shows the whole
+    unit circle (and any root outside it) with the zoomed region boxed; the right panel zooms on
+    the roots inside the circle. When those spread over most of the circle, one panel is drawn,
+    or, with roots outside, the right panel shows the unit circle.
+
+    Parameters
+    ----------
+    models : mapping of str to ArxModel
+        Label → model; at least one.
+    path : Path
+        PNG file to write.
+    title : str
+        Figure title.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    InputError
+        No models.
+    """
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Circle, Rectangle
+
+    if not models:
+        raise InputError("plot_pzmap needs at least one model")
+    roots = {label: (m.poles(), m.zeros()) for label, m in models.items()}
+    values = np.array([r.value for pz in roots.values() for r in (*pz[0], *pz[1])] + [0j])
+    reach = max(1.15, 1.1 * float(np.max(np.abs(values))))
+    zoom = _zoom_window(values[np.abs(values) <= 1.05])
+    if zoom[1] - zoom[0] >= 1.6:  # the roots inside fill the circle: show all of it
+        zoom = (-1.15, 1.15, -1.15, 1.15)
+    zoomed = zoom[1] - zoom[0] < 1.6 or reach > 1.2
+    with _figure(11.0, 5.8 if zoomed else 6.5) as fig:
+        if zoomed:
+            ax_full, ax_zoom = fig.subplots(1, 2, width_ratios=[1.0, 1.5])
+            panels = [ax_full, ax_zoom]
+        else:
+            ax_full = ax_zoom = fig.subplots(1, 1)
+            panels = [ax_full]
+        for ax in panels:
+            ax.add_patch(Circle((0, 0), 1.0, fill=False, color="0.4", linestyle="--", lw=1.0))
+            ax.axhline(0.0, color="0.5", lw=0.8)
+            ax.axvline(0.0, color="0.5", lw=0.8)
+            ax.set_aspect("equal", adjustable="box")
+            ax.set_xlabel("real part")
+            ax.set_ylabel("imaginary part")
+        ax_full.set_xlim(-reach, reach)
+        ax_full.set_ylim(-reach, reach)
+        ax_full.set_title("unit circle" if reach < 1.2 else "all roots (unit circle dashed)")
+        if zoomed:
+            ax_zoom.set_xlim(zoom[0], zoom[1])
+            ax_zoom.set_ylim(zoom[2], zoom[3])
+            ax_zoom.set_title("unit circle" if zoom[1] - zoom[0] > 2.0 else "zoom")
+            box = Rectangle((zoom[0], zoom[2]), zoom[1] - zoom[0], zoom[3] - zoom[2], fill=False)
+            ax_full.add_patch(box)
+        delays: dict[str, int] = {}
+        labels: list[tuple[complex, str, str]] = []
+        handles = []
+        for i, (label, (poles, zeros)) in enumerate(roots.items()):
+            color = _color(i)
+            p = np.array([r.value for r in poles if r.kind != "delay"], dtype=complex)
+            z = np.array([r.value for r in zeros], dtype=complex)
+            delays[label] = sum(r.kind == "delay" for r in poles)
+            for ax in panels:
+                ax.plot(p.real, p.imag, "x", color=color, markersize=10, mew=2.2)
+                ax.plot(z.real, z.imag, "o", mfc="none", color=color, markersize=9, mew=1.8)
+            handles.append(Line2D([], [], color=color, lw=5, label=label))
+            for r in poles:
+                if r.kind != "delay" and r.value.imag >= 0.0 and r.freq_hz is not None:
+                    labels.append((r.value, f"{r.freq_hz:.1f} Hz", color))
+        if any(delays.values()):
+            for ax in panels:
+                ax.plot(0.0, 0.0, "s", color="black", markersize=7, zorder=5)
+            counts = sorted(set(delays.values()))
+            text = (
+                f"{counts[0]} per model"
+                if len(counts) == 1
+                else ", ".join(f"{k}: {n}" for k, n in delays.items())
+            )
+            ax_zoom.annotate(
+                f"delay poles at z = 0\n({text})",
+                (0.0, 0.0),
+                xytext=(14, -52),
+                textcoords="offset points",
+                ha="left",
+                va="top",
+                fontsize=8.5,
+                arrowprops={"arrowstyle": "-", "color": "0.3", "lw": 0.8},
+            )
+        _label_poles(ax_zoom, labels, zoom[1] - zoom[0] if zoomed else 2.0 * reach)
+        handles += [
+            Line2D([], [], ls="none", marker="x", color="black", markersize=9, mew=2, label="pole"),
+            Line2D([], [], ls="none", marker="o", mfc="none", color="black", label="zero"),
+            Line2D([], [], ls="none", marker="s", color="black", label="delay pole (z = 0)"),
+        ]
+        fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4))
+        fig.suptitle(title)
+        return _save(fig, path)
+
+
+def _zoom_window(values: np.ndarray) -> tuple[float, float, float, float]:
+    """(x_lo, x_hi, y_lo, y_hi) around the roots and the origin, padded, about 5:3 wide."""
+    re = np.append(values.real, 0.0)
+    im_max = float(np.max(np.abs(values.imag))) if values.size else 0.0
+    x_lo, x_hi = float(re.min()), float(re.max())
+    width = max(x_hi - x_lo, 2.0 * im_max, 0.2)
+    pad = 0.12 * width
+    half_h = max(im_max + pad, 0.3 * (x_hi - x_lo + 2 * pad))
+    return x_lo - pad, x_hi + pad, -half_h, half_h
+
+
+def _label_poles(ax: Any, labels: list[tuple[complex, str, str]], view_width: float) -> None:
+    """Write each pole's frequency beside it, alternating above and below to avoid overlaps."""
+    offsets = [(0, 14), (0, -22), (0, 28), (0, -36), (0, 42), (0, -50)]
+    min_dx = 0.14 * view_width
+    last_x = [-math.inf] * len(offsets)
+    for value, text, color in sorted(labels, key=lambda item: item[0].real):
+        level = next(
+            (k for k in range(len(offsets)) if value.real - last_x[k] >= min_dx),
+            int(np.argmin(last_x)),
+        )
+        last_x[level] = value.real
+        ax.annotate(
+            text,
+            (value.real, value.imag),
+            xytext=offsets[level],
+            textcoords="offset points",
+            ha="center",
+            va="center",
+            color=color,
+            fontsize=9,
+            fontweight="bold",
+            arrowprops={"arrowstyle": "-", "color": color, "lw": 0.7, "shrinkA": 0, "shrinkB": 5},
+        )
