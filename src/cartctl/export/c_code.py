@@ -1,0 +1,333 @@
+"""C for one motor's controller: the PI or the state feedback, with its fixed-gain estimator.
+
+The per-controller part of ``cartctl export --arduino`` (:mod:`cartctl.export.arduino` writes the
+file around it): float-only C99, valid Arduino C++, that runs as the runtime controllers of
+:mod:`cartctl.runtime` do, checked against them with gcc by the tests.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from cartctl.design.controllerfile import ControllerFile
+from cartctl.design.entries import kalman_from_entry
+from cartctl.design.kalman import KalmanDesign
+from cartctl.errors import DataFileError, InputError
+
+__all__ = ["c_float", "pi_code", "poles_code", "where"]
+
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def c_float(value: float) -> str:
+    """A C ``float`` literal that parses to exactly ``float32(value)``.
+
+    Nine significant digits identify a float32 uniquely; negative literals are parenthesised so
+    they are safe inside macros.
+
+    Raises
+    ------
+    InputError
+        ``value`` is not finite or does not fit in a float32.
+    """
+    value = float(value)
+    if not math.isfinite(value) or abs(value) > _FLOAT32_MAX:
+        raise InputError(f"{value!r} does not fit in a C float (finite, |x| <= {_FLOAT32_MAX:g})")
+    text = f"{float(np.float32(value)):.9g}"
+    if not any(ch in text for ch in ".e"):
+        text += ".0"
+    return f"({text}f)" if text.startswith("-") else f"{text}f"
+
+
+def where(controller: ControllerFile) -> str:
+    """The controller file's path for messages."""
+    return str(controller.path) if controller.path is not None else "controller file"
+
+
+def _estimator(controller: ControllerFile, motor: str, entry: Mapping[str, Any]) -> KalmanDesign:
+    """The estimator of one motor, its arrays checked for the shapes the C code indexes."""
+    path = controller.path or "controller file"
+    try:
+        design = kalman_from_entry(entry)
+    except KeyError as exc:
+        raise DataFileError(path, f"[motors.{motor}] misses {exc.args[0]}") from None
+    except (TypeError, ValueError) as exc:
+        raise DataFileError(path, f"[motors.{motor}.estimator]: {exc}") from None
+    m = design.A.shape[0] if design.A.ndim == 2 else -1
+    shapes = {"A": (m, m), "B": (m,), "C": (m,), "L": (m,)}
+    for name, shape in shapes.items():
+        array = getattr(design, name)
+        if m < 1 or array.shape != shape or not np.all(np.isfinite(array)):
+            raise DataFileError(
+                path,
+                f"[motors.{motor}.estimator] {name} must be a finite array of shape {shape} "
+                f"(m = the number of states), got shape {array.shape}",
+            )
+    return design
+
+
+def _c_array(values: Sequence[float]) -> str:
+    return "{" + ", ".join(c_float(v) for v in values) + "}"
+
+
+def _c_matrix(rows: np.ndarray, indent: str) -> str:
+    inner = f",\n{indent}    ".join(_c_array(row) for row in rows)
+    return "{\n" + f"{indent}    {inner}\n{indent}}}"
+
+
+def _clamp(dest: str, value: str) -> str:
+    lim = "CARTCTL_VOLTAGE_LIMIT_V"
+    return f"{dest} = {value} > {lim} ? {lim} : ({value} < -{lim} ? -{lim} : {value});"
+
+
+def _estimator_code(motor: str, design: KalmanDesign) -> list[str]:
+    """Constants, correct() and predict() of the fixed-gain Kalman estimator of one motor."""
+    up = motor.upper()
+    m = design.A.shape[0]
+    state = f"cartctl_state_{motor}"
+    return [
+        f"/* Kalman speed estimator, motor {motor}: {m} states, x[0] the speed (rad/s)"
+        + (", the last one an input disturbance (V)" if design.has_bias else "")
+        + ". */",
+        f"#define CARTCTL_{up}_STATES {m}",
+        f"static const float CARTCTL_{up}_EST_A[{m}][{m}] = "
+        f"{_c_matrix(design.A, '')};  /* state transition, per tick */",
+        f"static const float CARTCTL_{up}_EST_B_RAD_S_PER_V[{m}] = {_c_array(design.B)};",
+        f"static const float CARTCTL_{up}_EST_C[{m}] = {_c_array(design.C)};  /* y = C x */",
+        f"static const float CARTCTL_{up}_EST_L[{m}] = "
+        f"{_c_array(design.L)};  /* steady-state filter gain */",
+        "",
+        "/* x += L (y - C x) with the speed measured at this tick (skipped when not finite);",
+        " * returns the speed estimate x[0] (rad/s). */",
+        f"static float cartctl_correct_{motor}(float measured_rad_s) {{",
+        f"  float *x = {state}.x;",
+        "  int i;",
+        "  if (isfinite(measured_rad_s)) {",
+        "    float innovation = measured_rad_s;",
+        f"    for (i = 0; i < CARTCTL_{up}_STATES; ++i) {{",
+        f"      innovation -= CARTCTL_{up}_EST_C[i] * x[i];",
+        "    }",
+        f"    for (i = 0; i < CARTCTL_{up}_STATES; ++i) {{",
+        f"      x[i] = x[i] + CARTCTL_{up}_EST_L[i] * innovation;",
+        "    }",
+        "  }",
+        "  return x[0];",
+        "}",
+        "",
+        "/* x <- A x + B u with the voltage sent at this tick (V; not finite counts as 0 V). */",
+        f"static void cartctl_predict_{motor}(float voltage_v) {{",
+        "  float u = isfinite(voltage_v) ? voltage_v : 0.0f;",
+        f"  float next[CARTCTL_{up}_STATES];",
+        "  int i, j;",
+        f"  for (i = 0; i < CARTCTL_{up}_STATES; ++i) {{",
+        "    float sum = 0.0f;",
+        f"    for (j = 0; j < CARTCTL_{up}_STATES; ++j) {{",
+        f"      sum += CARTCTL_{up}_EST_A[i][j] * {state}.x[j];",
+        "    }",
+        f"    next[i] = sum + CARTCTL_{up}_EST_B_RAD_S_PER_V[i] * u;",
+        "  }",
+        f"  for (i = 0; i < CARTCTL_{up}_STATES; ++i) {{",
+        f"    {state}.x[i] = next[i];",
+        "  }",
+        "}",
+        "",
+    ]
+
+
+def pi_code(controller: ControllerFile, motor: str, entry: Mapping[str, Any]) -> list[str]:
+    """One motor's PI: the equations and anti-windup of :class:`PiController`."""
+    up = motor.upper()
+    kp, ki = float(entry["kp"]), float(entry["ki"])
+    mode = str(entry.get("anti_windup", "conditional"))
+    period_s = controller.period_s
+    # the same defaults as PiController: Ki·Ts per tick, tracking gain min(1, Ts·Ki/Kp)
+    ki_ts = ki * period_s
+    kt = min(1.0, period_s * ki / kp) if kp > 0.0 else 1.0
+    est = entry.get("estimator")
+    design = _estimator(controller, motor, est) if est is not None else None
+    state = f"cartctl_state_{motor}"
+    lines = [
+        f"/* ---- motor {motor}: PI, anti-windup {mode}"
+        + (", on a Kalman speed estimate" if design else "")
+        + " ---- */",
+        f"#define CARTCTL_{up}_KP_V_PER_RAD_S {c_float(kp)}",
+        f"#define CARTCTL_{up}_KI_TS_V_PER_RAD_S {c_float(ki_ts)}  "
+        f"/* Ki*Ts, Ki = {ki:.6g} V/rad: the integral's gain per tick */",
+    ]
+    if mode == "back-calculation":
+        lines.append(
+            f"#define CARTCTL_{up}_KT {c_float(kt)}  /* tracking gain per tick: the fraction of "
+            "the excess over the limit taken off the integral */"
+        )
+    lines += [
+        "",
+        "typedef struct {",
+        "  float integral_v;      /* I, the integral term (V) */",
+        "  float estimate_rad_s;  /* the speed the PI acted on at the last tick (rad/s) */",
+    ]
+    if design is not None:
+        lines.append(f"  float x[{design.A.shape[0]}];            /* the estimator's state */")
+    lines += [
+        f"}} cartctl_state_{motor}_t;",
+        "",
+        f"cartctl_state_{motor}_t {state};",
+        "",
+    ]
+    if design is not None:
+        lines += _estimator_code(motor, design)
+    lines += [
+        f"/* Back to rest: integral 0{', estimator at rest' if design else ''}. */",
+        f"void cartctl_reset_{motor}(void) {{",
+        f"  {state}.integral_v = 0.0f;",
+        f"  {state}.estimate_rad_s = 0.0f;",
+    ]
+    if design is not None:
+        lines += [
+            "  {",
+            "    int i;",
+            f"    for (i = 0; i < CARTCTL_{up}_STATES; ++i) {{",
+            f"      {state}.x[i] = 0.0f;",
+            "    }",
+            "  }",
+        ]
+    lines += [
+        "}",
+        "",
+        "/* One tick: the voltage (V) to set for motor "
+        f"{motor.upper()}, within +-CARTCTL_VOLTAGE_LIMIT_V.",
+        " * 0 V, with the integral unchanged, when the reference or the measurement is not finite. */",
+        f"float cartctl_step_{motor}(float reference_rad_s, float measured_rad_s) {{",
+        f"  cartctl_state_{motor}_t *s = &{state};",
+        "  float y = measured_rad_s;",
+        "  float e, integral, p, u, u_sat;",
+    ]
+    if design is not None:
+        lines += ["  if (isfinite(y)) {", f"    y = cartctl_correct_{motor}(y);", "  }"]
+    lines += [
+        "  s->estimate_rad_s = y;",
+        "  e = reference_rad_s - y;",
+        f"  integral = s->integral_v + CARTCTL_{up}_KI_TS_V_PER_RAD_S * e;",
+        f"  p = CARTCTL_{up}_KP_V_PER_RAD_S * e;",
+        "  u = p + integral;",
+        "  u_sat = 0.0f;",
+        "  if (isfinite(u)) {  /* not finite: a NaN/inf input, or an overflow -> 0 V */",
+        "    " + _clamp("u_sat", "u"),
+    ]
+    if mode == "conditional":
+        lines += [
+            "    if (u_sat != u && e * u > 0.0f) {",
+            "      /* conditional integration: the integral moves at most up to the value that",
+            "       * puts the output on the limit, and never back */",
+            "      float old = s->integral_v;",
+            "      float edge = u_sat - p;",
+            "      if (e > 0.0f) {",
+            "        float lower = edge < integral ? edge : integral;",
+            "        integral = lower > old ? lower : old;",
+            "      } else {",
+            "        float upper = edge > integral ? edge : integral;",
+            "        integral = upper < old ? upper : old;",
+            "      }",
+            "      u = p + integral;",
+            "      " + _clamp("u_sat", "u"),
+            "    }",
+        ]
+    elif mode == "back-calculation":
+        lines += [
+            "    if (u_sat != u) {  /* back-calculation: take the fraction Kt of the excess off */",
+            f"      integral += CARTCTL_{up}_KT * (u_sat - u);",
+            "    }",
+        ]
+    lines += ["    s->integral_v = integral;", "  }"]
+    if design is not None:
+        lines.append(f"  cartctl_predict_{motor}(u_sat);")
+    lines += ["  return u_sat;", "}", ""]
+    return lines
+
+
+def poles_code(controller: ControllerFile, motor: str, entry: Mapping[str, Any]) -> list[str]:
+    """One motor's state feedback: the equations of :class:`StateFeedbackController`."""
+    up = motor.upper()
+    path = controller.path or "controller file"
+    design = _estimator(controller, motor, entry["estimator"])
+    gains = np.asarray(entry["K"], dtype=float).ravel()
+    n, m = gains.size, design.A.shape[0]
+    if not 1 <= n <= m or not np.all(np.isfinite(gains)):
+        raise DataFileError(
+            path, f"[motors.{motor}] K must hold 1..{m} finite gains (one per model state), got {n}"
+        )
+    state = f"cartctl_state_{motor}"
+    lines = [
+        f"/* ---- motor {motor}: pole placement, state feedback with integral action on a "
+        "Kalman estimate ---- */",
+        f"#define CARTCTL_{up}_FEEDBACK_STATES {n}",
+        f"static const float CARTCTL_{up}_K[{n}] = {_c_array(gains)};  "
+        "/* V per unit of each model state (rad/s) */",
+        f"#define CARTCTL_{up}_KI_V_PER_RAD {c_float(float(entry['Ki']))}  "
+        "/* on the integral of (r - y) */",
+        f"#define CARTCTL_{up}_KR_V_PER_RAD_S {c_float(float(entry['Kr']))}  "
+        "/* reference feedforward */",
+        "",
+        "typedef struct {",
+        f"  float x[{m}];            /* the estimator's state: x[0] the speed (rad/s) */",
+        "  float integral_rad;    /* x_i, the integral of (r - y) (rad) */",
+        "  float estimate_rad_s;  /* the speed estimate the last step acted on (rad/s) */",
+        "  int saturated;         /* whether the last command hit the limit */",
+        f"}} cartctl_state_{motor}_t;",
+        "",
+        f"cartctl_state_{motor}_t {state};",
+        "",
+        *_estimator_code(motor, design),
+        "/* Integrator cleared, estimator at rest. */",
+        f"void cartctl_reset_{motor}(void) {{",
+        "  int i;",
+        f"  for (i = 0; i < CARTCTL_{up}_STATES; ++i) {{",
+        f"    {state}.x[i] = 0.0f;",
+        "  }",
+        f"  {state}.integral_rad = 0.0f;",
+        f"  {state}.estimate_rad_s = 0.0f;",
+        f"  {state}.saturated = 0;",
+        "}",
+        "",
+        f"/* One tick: the voltage (V) to set for motor {motor.upper()}, within "
+        "+-CARTCTL_VOLTAGE_LIMIT_V.",
+        " * 0 V when the reference or the measurement is not finite (the integrator holds), and",
+        " * 0 V plus a reset when the command overflows. */",
+        f"float cartctl_step_{motor}(float reference_rad_s, float measured_rad_s) {{",
+        f"  cartctl_state_{motor}_t *s = &{state};",
+        "  float u_raw, u, error;",
+        "  int j;",
+        "  if (!isfinite(measured_rad_s) || !isfinite(reference_rad_s)) {",
+        f"    s->estimate_rad_s = cartctl_correct_{motor}(measured_rad_s);"
+        "  /* skips a non-finite y */",
+        "    s->saturated = 0;",
+        f"    cartctl_predict_{motor}(0.0f);",
+        "    return 0.0f;",
+        "  }",
+        f"  s->estimate_rad_s = cartctl_correct_{motor}(measured_rad_s);",
+        f"  u_raw = CARTCTL_{up}_KR_V_PER_RAD_S * reference_rad_s"
+        f" - CARTCTL_{up}_KI_V_PER_RAD * s->integral_rad;",
+        f"  for (j = 0; j < CARTCTL_{up}_FEEDBACK_STATES; ++j) {{",
+        f"    u_raw -= CARTCTL_{up}_K[j] * s->x[j];",
+        "  }",
+        "  if (!isfinite(u_raw)) {  /* overflowed on an absurd value: 0 V and start afresh */",
+        f"    cartctl_reset_{motor}();",
+        f"    cartctl_predict_{motor}(0.0f);",
+        "    return 0.0f;",
+        "  }",
+        "  " + _clamp("u", "u_raw"),
+        "  s->saturated = u != u_raw;",
+        "  error = reference_rad_s - measured_rad_s;",
+        "  /* the integrator moves u by -Ki*Ts*error next tick: hold it if that deepens saturation */",
+        f"  if (!s->saturated || ((u_raw > u) != (-CARTCTL_{up}_KI_V_PER_RAD * error > 0.0f))) {{",
+        "    s->integral_rad += CARTCTL_PERIOD_S * error;",
+        "  }",
+        f"  cartctl_predict_{motor}(u);",
+        "  return u;",
+        "}",
+        "",
+    ]
+    return lines
