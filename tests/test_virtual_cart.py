@@ -37,6 +37,10 @@ def delay_controller(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+# Real time on a shared machine: a skipped cart tick leaves a gap that read_trace warns about.
+pytestmark = pytest.mark.filterwarnings("ignore::cartctl.errors.DataWarning")
+
+
 def _cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, dict | str, str]:
     code = main(list(argv))
     out, err = capsys.readouterr()
