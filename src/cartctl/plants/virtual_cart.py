@@ -43,107 +43,21 @@ import threading
 import time
 import tty
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
-from cartctl.errors import InputError
 from cartctl.link import Encoder, encode_gpiox_v2
 from cartctl.plants.base import Measurement
 from cartctl.plants.bridge_firmware import TICK_MODULO, BridgeFirmware, CartIO
+from cartctl.plants.cart_faults import RECEIVE_SCHEDULES, CartFaults
 from cartctl.plants.cart_uart import LineReader, MicroosParser, PacedWriter, fill_ring
 from cartctl.plants.physics import PhysicsPlant
 from cartctl.plants.serial_cart import SerialCart
 
 HEARTBEAT_PERIOD_S = 1.1
+READY_TEXT = "cartctl bridge ready"
 COMM_PHASE_US = 1200
 """microOS's communication thread runs this long (µs) after the tick starts: io() and control()
 take 1.2 ms on the Mega."""
-RECEIVE_SCHEDULES = {"bridge": 1000, "microos": None}
-"""Receive schedules: the bridge's drain period (µs), or None for microOS's communication thread
-alone (the bridge sketch before it drained the port itself, and a controller on the cart)."""
-READY_TEXT = "cartctl bridge ready"
-
-
-@dataclass(frozen=True)
-class CartFaults:
-    """Faults the virtual cart injects.
-
-    Attributes
-    ----------
-    garbage : float
-        Fraction of outgoing frames preceded by a burst of 1-16 random bytes.
-    corrupt : float
-        Fraction of outgoing frames with one byte changed (their CRC fails).
-    stall_after_s : float or None
-        This long (s) after the host's first frame, the cart stops: no ticks, nothing sent, port
-        open.
-    pull_after_s : float or None
-        This long (s) after the host's first frame, the cable is pulled: the port vanishes.
-    generation : str
-        'a' (MAVLink 1, GPIO: what the bridge sketch speaks) or 'b' (MAVLink 2, GPIOX: the newer
-        firmware, which cartctl refuses).
-    reply_jitter_ms : float
-        Each write of the host reaches the line a random 0 .. this many ms late.
-    receive : str
-        'bridge' (the bridge sketch drains the port every 1 ms and before control()) or
-        'microos' (microOS's communication thread alone, once per tick: the sketch before).
-    """
-
-    garbage: float = 0.0
-    corrupt: float = 0.0
-    stall_after_s: float | None = None
-    pull_after_s: float | None = None
-    generation: str = "a"
-    reply_jitter_ms: float = 0.0
-    receive: str = "bridge"
-
-    KEYS = ("garbage", "corrupt", "stall", "pull", "generation", "reply_jitter_ms", "receive")
-
-    def __post_init__(self) -> None:
-        for name in ("garbage", "corrupt"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and 0.0 <= value <= 1.0):
-                raise InputError(f"fault '{name}' must be a fraction in [0, 1], got {value}")
-        for name in ("stall_after_s", "pull_after_s"):
-            value = getattr(self, name)
-            if value is not None and not (math.isfinite(value) and value >= 0.0):
-                raise InputError(f"fault time '{name}' must be >= 0 s, got {value}")
-        if self.generation not in ("a", "b"):
-            raise InputError(f"generation must be 'a' or 'b', got '{self.generation}'")
-        if not (math.isfinite(self.reply_jitter_ms) and 0.0 <= self.reply_jitter_ms <= 1000.0):
-            raise InputError(
-                f"fault 'reply_jitter_ms' must be in [0, 1000] ms, got {self.reply_jitter_ms}"
-            )
-        if self.receive not in RECEIVE_SCHEDULES:
-            raise InputError(
-                f"receive must be one of {', '.join(RECEIVE_SCHEDULES)}, got '{self.receive}'"
-            )
-
-    @classmethod
-    def parse(cls, text: str) -> CartFaults:
-        """Faults from ``key=value,...``.
-
-        Keys: garbage=0.05, corrupt=0.05, stall=S, pull=S, generation=b, reply_jitter_ms=3,
-        receive=microos.
-        """
-        faults = cls()
-        for item in filter(None, (part.strip() for part in text.split(","))):
-            key, sep, value = item.partition("=")
-            key = key.strip()
-            if not sep or key not in cls.KEYS:
-                raise InputError(
-                    f"bad fault '{item}'; expected key=value with key in {', '.join(cls.KEYS)}"
-                )
-            if key in ("generation", "receive"):
-                faults = replace(faults, **{key: value.strip().lower()})
-                continue
-            try:
-                number = float(value)
-            except ValueError:
-                raise InputError(f"fault '{key}' needs a number, got '{value}'") from None
-            field = {"stall": "stall_after_s", "pull": "pull_after_s"}.get(key, key)
-            faults = replace(faults, **{field: number})
-        return faults
 
 
 class CartFirmware(Protocol):

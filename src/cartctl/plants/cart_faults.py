@@ -1,0 +1,100 @@
+"""The faults a virtual cart can inject, and the receive schedules its firmware can follow.
+
+``--plant virtual:KEY=VALUE,...`` and ``cartctl virtual-cart --faults`` parse into
+:class:`CartFaults`; :class:`~cartctl.plants.virtual_cart.VirtualCart` injects them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+from cartctl.errors import InputError
+
+__all__ = ["RECEIVE_SCHEDULES", "CartFaults"]
+
+RECEIVE_SCHEDULES = {"bridge": 1000, "microos": None}
+"""Receive schedules: the bridge's drain period (µs), or None for microOS's communication thread
+alone (the bridge sketch before it drained the port itself, and a controller on the cart)."""
+
+
+@dataclass(frozen=True)
+class CartFaults:
+    """Faults the virtual cart injects.
+
+    Attributes
+    ----------
+    garbage : float
+        Fraction of outgoing frames preceded by a burst of 1-16 random bytes.
+    corrupt : float
+        Fraction of outgoing frames with one byte changed (their CRC fails).
+    stall_after_s : float or None
+        This long (s) after the host's first frame, the cart stops: no ticks, nothing sent, port
+        open.
+    pull_after_s : float or None
+        This long (s) after the host's first frame, the cable is pulled: the port vanishes.
+    generation : str
+        'a' (MAVLink 1, GPIO: what the bridge sketch speaks) or 'b' (MAVLink 2, GPIOX: the newer
+        firmware, which cartctl refuses).
+    reply_jitter_ms : float
+        Each write of the host reaches the line a random 0 .. this many ms late.
+    receive : str
+        'bridge' (the bridge sketch drains the port every 1 ms and before control()) or
+        'microos' (microOS's communication thread alone, once per tick: the sketch before).
+    """
+
+    garbage: float = 0.0
+    corrupt: float = 0.0
+    stall_after_s: float | None = None
+    pull_after_s: float | None = None
+    generation: str = "a"
+    reply_jitter_ms: float = 0.0
+    receive: str = "bridge"
+
+    KEYS = ("garbage", "corrupt", "stall", "pull", "generation", "reply_jitter_ms", "receive")
+
+    def __post_init__(self) -> None:
+        for name in ("garbage", "corrupt"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+                raise InputError(f"fault '{name}' must be a fraction in [0, 1], got {value}")
+        for name in ("stall_after_s", "pull_after_s"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value >= 0.0):
+                raise InputError(f"fault time '{name}' must be >= 0 s, got {value}")
+        if self.generation not in ("a", "b"):
+            raise InputError(f"generation must be 'a' or 'b', got '{self.generation}'")
+        if not (math.isfinite(self.reply_jitter_ms) and 0.0 <= self.reply_jitter_ms <= 1000.0):
+            raise InputError(
+                f"fault 'reply_jitter_ms' must be in [0, 1000] ms, got {self.reply_jitter_ms}"
+            )
+        if self.receive not in RECEIVE_SCHEDULES:
+            raise InputError(
+                f"receive must be one of {', '.join(RECEIVE_SCHEDULES)}, got '{self.receive}'"
+            )
+
+    @classmethod
+    def parse(cls, text: str) -> CartFaults:
+        """Faults from ``key=value,...``.
+
+        Keys: garbage=0.05, corrupt=0.05, stall=S, pull=S, generation=b, reply_jitter_ms=3,
+        receive=microos.
+        """
+        faults = cls()
+        for item in filter(None, (part.strip() for part in text.split(","))):
+            key, sep, value = item.partition("=")
+            key = key.strip()
+            if not sep or key not in cls.KEYS:
+                raise InputError(
+                    f"bad fault '{item}'; expected key=value with key in {', '.join(cls.KEYS)}"
+                )
+            if key in ("generation", "receive"):
+                faults = replace(faults, **{key: value.strip().lower()})
+                continue
+            try:
+                number = float(value)
+            except ValueError:
+                raise InputError(f"fault '{key}' needs a number, got '{value}'") from None
+            field = {"stall": "stall_after_s", "pull": "pull_after_s"}.get(key, key)
+            faults = replace(faults, **{field: number})
+        return faults
