@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import math
 import signal
 import sys
 import warnings
 from datetime import datetime
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from cartctl import stopping
 from cartctl.cart import SUPPLY_V
@@ -20,12 +17,18 @@ from cartctl.commands.options import (
     add_plant_options,
     check_duration,
 )
+from cartctl.commands.run_checks import (
+    DEFAULT_CONTROLLER,
+    DEFAULT_SERIAL_CONTROLLER,
+    check_loop_delay,
+    check_reach,
+    design_models,
+    refuse_unstable,
+)
 from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import ControllerFile, load_controller
-from cartctl.errors import CartctlError, DataWarning, InputError, PlantError
+from cartctl.design.controllerfile import load_controller
+from cartctl.errors import DataWarning, InputError, PlantError
 from cartctl.jsonout import dumps
-from cartctl.model import ArxModel
-from cartctl.modelfile import load_models
 from cartctl.plants.base import ClockedPlant, Plant
 from cartctl.plants.factory import is_serial, make_plant
 from cartctl.reference import FORMS, ReferenceSchedule
@@ -33,10 +36,6 @@ from cartctl.runtime.loop import ControlLoop, MemorySink
 from cartctl.sinks.csv_sink import CsvSink
 from cartctl.sinks.summary import format_summary, trace_metrics, warn_host_losses
 
-DEFAULT_CONTROLLER = Path("controllers/pi.toml")
-DEFAULT_SERIAL_CONTROLLER = Path("controllers/serial-pi.toml")
-SHIPPED_CONTROLLERS = ("pi.toml", "poles.toml", "serial-pi.toml", "serial-poles.toml")
-"""The shipped controller files (in ``controllers/``), offered when a file does not fit a plant."""
 RERUN_MODES = ("auto", "spawn", "connect", "save", "off")
 
 
@@ -109,59 +108,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _refuse_unstable(models: dict[str, ArxModel], path: str) -> None:
-    """An unstable model on the sim plant runs away: refuse it (``--allow-unstable`` overrides)."""
-    for motor, model in models.items():
-        if not model.is_stable():
-            worst = max((p for p in model.poles()), key=lambda p: abs(p.value))
-            raise InputError(
-                f"{path}: motor {motor}'s model is unstable (pole at |z| = {abs(worst.value):.4g}): "
-                "a simulation of it runs away whatever the controller does; identify it again, "
-                "or pass --allow-unstable"
-            )
-
-
-def _design_models(controller_file: ControllerFile) -> dict[str, ArxModel]:
-    """The models the controller was designed on; none when that file is gone or unreadable."""
-    try:
-        return dict(load_models(controller_file.model_path).motors)
-    except (CartctlError, OSError):
-        return {}
-
-
-REACH_REFUSE_FACTOR = 2.0
-"""A reference beyond this many times what a motor reaches at the voltage limit is refused."""
-
-
-def _check_reach(
-    references: dict[str, Any], models: dict[str, ArxModel], limit_v: float, where: str
-) -> None:
-    """Refuse a reference no motor can follow, warn (one line) about one reached only saturated.
-
-    What a motor reaches is its model's DC gain times the voltage limit (for a stable model).
-    """
-    beyond: list[str] = []
-    refuse = False
-    for motor, ref in references.items():
-        model = models.get(motor)
-        if model is None or not model.is_stable() or not len(ref):
-            continue
-        reach = abs(model.dc_gain()) * limit_v
-        peak = ref.peak_abs() if isinstance(ref, ReferenceSchedule) else float(np.max(np.abs(ref)))
-        if math.isfinite(reach) and peak > reach:
-            beyond.append(f"motor {motor} {peak:.4g} rad/s (it reaches about {reach:.3g})")
-            refuse = refuse or peak > REACH_REFUSE_FACTOR * reach
-    if not beyond:
-        return
-    what = (
-        f"the reference asks for {', '.join(beyond)} at {limit_v:g} V, by the DC gains in {where}"
-    )
-    if refuse:
-        raise InputError(f"{what}; give a reference within that")
-    warnings.warn(f"{what}: the voltage saturates and the speed will not settle there",
-                  DataWarning, stacklevel=2)  # fmt: skip
-
-
 def _references(args: argparse.Namespace, n: int, period_s: float) -> dict[str, Any]:
     ref_a = ReferenceSchedule(args.reference, n, period_s, "a")
     ref_b = ReferenceSchedule(args.reference_b or args.reference, n, period_s, "b")
@@ -193,58 +139,6 @@ def _free_stem(out: Path, stem: str) -> str:
 def default_controller(plant: str) -> Path:
     """The shipped controller for a plant: the serial one over the serial line, else the PI."""
     return DEFAULT_SERIAL_CONTROLLER if is_serial(plant) else DEFAULT_CONTROLLER
-
-
-def _fitting_controller(controller: ControllerFile, given: str, delay: int) -> str | None:
-    """A shipped controller file designed for ``delay``, the same method first (or None)."""
-    folders = dict.fromkeys([DEFAULT_CONTROLLER.parent, Path(given).parent])
-
-    def other_method(name: str) -> bool:
-        return name.removeprefix("serial-").removesuffix(".toml") != controller.method
-
-    names = sorted(SHIPPED_CONTROLLERS, key=other_method)
-    for name in names:
-        for folder in folders:
-            path = folder / name
-            if not path.is_file() or path.resolve() == Path(given).resolve():
-                continue
-            try:
-                if load_controller(path).loop_delay_ticks == delay:
-                    return str(path)
-            except CartctlError:
-                continue
-    return None
-
-
-def check_loop_delay(
-    controller: ControllerFile, given: str, plant: str, delay: int | None, *, allow: bool
-) -> None:
-    """Refuse (InputError) a controller designed for another loop delay than the plant's.
-
-    With ``allow`` the mismatch is a warning; an unknown plant delay (None) is not checked.
-    """
-    designed = controller.loop_delay_ticks
-    if delay is None or designed is None or designed == delay:
-        return
-    problem = (
-        f"{given} is designed for a loop delay of {designed} tick(s) but the plant '{plant}' has "
-        f"{delay}"
-    )
-    if allow:
-        warnings.warn(f"{problem}; running it anyway (--allow-delay-mismatch)", DataWarning,
-                      stacklevel=2)  # fmt: skip
-        return
-    fit = _fitting_controller(controller, given, delay)
-    if fit is not None:
-        hint = f"use {fit} (designed for {delay})"
-    else:
-        extra = int(controller.request.get("extra_delay_ticks", 0)) + delay - designed
-        hint = (
-            f"redesign it with --extra-delay {extra}"
-            if extra >= 0
-            else "redesign it on a model of this loop"
-        )
-    raise InputError(f"{problem}; {hint} or pass --allow-delay-mismatch")
 
 
 def _measured_delay(plant: Plant) -> int | None:
@@ -301,7 +195,7 @@ def run(args: argparse.Namespace) -> int:
     clocked = isinstance(plant, ClockedPlant)
     models = getattr(plant, "models", None)  # the sim plant's own
     if models is not None and not args.allow_unstable:
-        _refuse_unstable(dict(zip("ab", models, strict=True)), args.model)
+        refuse_unstable(dict(zip("ab", models, strict=True)), args.model)
     try:  # before any file is opened and before driving: a missing cart, a wrong controller
         if clocked:
             plant.connect()
@@ -319,10 +213,10 @@ def run(args: argparse.Namespace) -> int:
         reach_models = (
             dict(zip("ab", models, strict=True))
             if models is not None
-            else _design_models(controller_file)
+            else design_models(controller_file)
         )
         where = args.model if models is not None else controller_file.model_path
-        _check_reach(references, reach_models, limit, where)
+        check_reach(references, reach_models, limit, where)
     except BaseException:
         plant.close()
         raise
