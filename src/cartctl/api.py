@@ -19,6 +19,7 @@ Every function is the path the command line takes (``cartctl identify``, ``desig
 
 from __future__ import annotations
 
+import shlex
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -222,7 +223,7 @@ class Design:
 
     def controller_file(self) -> ControllerFile:
         """The controller file, as ``cartctl design --out`` writes it."""
-        command = "cartctl " + " ".join(["design", *self.request.to_argv(str(self.model_path))])
+        command = "cartctl " + shlex.join(["design", *self.request.to_argv(str(self.model_path))])
         return controller_file(self.designs, self.model_path, command=command,
                                period_s=self.period_s)  # fmt: skip
 

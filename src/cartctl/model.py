@@ -263,9 +263,13 @@ class ArxModel:
             return math.inf if b_sum != 0.0 else math.nan
         return b_sum / a_sum
 
+    def pole_radius(self) -> float:
+        """The largest pole magnitude |z| (0 for a model without poles)."""
+        return max((abs(r.value) for r in self.poles()), default=0.0)
+
     def is_stable(self) -> bool:
         """True when every pole lies strictly inside the unit circle."""
-        return all(abs(r.value) < 1.0 for r in self.poles())
+        return self.pole_radius() < 1.0
 
     # -- time domain --------------------------------------------------------------------------
     def simulate(self, voltage_v: ArrayLike) -> NDArray[np.float64]:

@@ -22,7 +22,7 @@ from cartctl.commands.run_checks import (
     DEFAULT_SERIAL_CONTROLLER,
     check_loop_delay,
     check_reach,
-    design_models,
+    models_designed_on,
     refuse_unstable,
 )
 from cartctl.design.build import build_controllers
@@ -213,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
         reach_models = (
             dict(zip("ab", models, strict=True))
             if models is not None
-            else design_models(controller_file)
+            else models_designed_on(controller_file)
         )
         where = args.model if models is not None else controller_file.model_path
         check_reach(references, reach_models, limit, where)

@@ -6,9 +6,6 @@ from __future__ import annotations
 import math
 import warnings
 from pathlib import Path
-from typing import Any
-
-import numpy as np
 
 from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.errors import CartctlError, DataWarning, InputError
@@ -27,7 +24,7 @@ __all__ = [
     "REACH_REFUSE_FACTOR",
     "check_loop_delay",
     "check_reach",
-    "design_models",
+    "models_designed_on",
     "refuse_unstable",
 ]
 
@@ -36,15 +33,14 @@ def refuse_unstable(models: dict[str, ArxModel], path: str) -> None:
     """An unstable model on the sim plant runs away: refuse it (``--allow-unstable`` overrides)."""
     for motor, model in models.items():
         if not model.is_stable():
-            worst = max((p for p in model.poles()), key=lambda p: abs(p.value))
             raise InputError(
-                f"{path}: motor {motor}'s model is unstable (pole at |z| = {abs(worst.value):.4g}): "
+                f"{path}: motor {motor}'s model is unstable (pole at |z| = {model.pole_radius():.4g}): "
                 "a simulation of it runs away whatever the controller does; identify it again, "
                 "or pass --allow-unstable"
             )
 
 
-def design_models(controller_file: ControllerFile) -> dict[str, ArxModel]:
+def models_designed_on(controller_file: ControllerFile) -> dict[str, ArxModel]:
     """The models the controller was designed on; none when that file is gone or unreadable."""
     try:
         return dict(load_models(controller_file.model_path).motors)
@@ -57,7 +53,10 @@ REACH_REFUSE_FACTOR = 2.0
 
 
 def check_reach(
-    references: dict[str, Any], models: dict[str, ArxModel], limit_v: float, where: str
+    references: dict[str, ReferenceSchedule],
+    models: dict[str, ArxModel],
+    limit_v: float,
+    where: str,
 ) -> None:
     """Refuse a reference no motor can follow, warn (one line) about one reached only saturated.
 
@@ -70,7 +69,7 @@ def check_reach(
         if model is None or not model.is_stable() or not len(ref):
             continue
         reach = abs(model.dc_gain()) * limit_v
-        peak = ref.peak_abs() if isinstance(ref, ReferenceSchedule) else float(np.max(np.abs(ref)))
+        peak = ref.peak_abs()
         if math.isfinite(reach) and peak > reach:
             beyond.append(f"motor {motor} {peak:.4g} rad/s (it reaches about {reach:.3g})")
             refuse = refuse or peak > REACH_REFUSE_FACTOR * reach

@@ -184,7 +184,7 @@ def validate(model: ArxModel, trace: Trace, motor: str) -> ValidationResult:
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model may overflow
         simulated = model.simulate(voltage)
     if not model.is_stable():
-        pole = max(abs(p.value) for p in model.poles())
+        pole = model.pole_radius()
         runaway = np.where(np.isfinite(simulated), simulated, np.nan)
         return ValidationResult(
             motor=motor, fit_simulation_percent=math.nan, time_s=trace.time_s,

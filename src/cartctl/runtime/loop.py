@@ -62,9 +62,6 @@ class MemorySink:
     def close(self) -> None:
         """Nothing to flush."""
 
-    def __len__(self) -> int:
-        return sum(len(b) for b in self._blocks) + len(self._rows)
-
     def arrays(self) -> dict[str, NDArray[np.float64]]:
         """The rows as one array per column."""
         width = len(self.columns)
