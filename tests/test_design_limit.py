@@ -70,7 +70,7 @@ def test_extra_delay_adds_exactly_its_ticks(extra: int) -> None:
         assert delayed.settling_time_s == pytest.approx(base.settling_time_s + extra * 0.01)
         assert (base.loop_delay_ticks, delayed.loop_delay_ticks) == (1, 1 + extra)  # nk − 1 + d
         # the delayed plant's own simulation (scipy, numerator shifted by nk + d) of the sequence
-        num = np.r_[np.zeros(model.nk + extra), model.x]
+        num = np.r_[np.zeros(model.nk + extra), model.b]
         y = signal.lfilter(num, np.r_[1.0, model.ar], delayed.voltage_v)
         np.testing.assert_allclose(delayed.speed_rad_s, y, atol=1e-9)
         assert np.all(y[: model.nk + extra] == 0.0)

@@ -90,7 +90,7 @@ def match(expected, actual) -> float:
 @pytest.mark.parametrize("extra", [0, 2])
 def test_realisation_has_the_models_transfer_function(model: ArxModel, extra: int) -> None:
     plant = realise(model, extra_delay_ticks=extra)
-    delayed = ArxModel(model.ar, model.x, model.nk + extra, model.period_s)
+    delayed = ArxModel(model.ar, model.b, model.nk + extra, model.period_s)
     assert plant.order == delayed.order >= model.order
     u = np.random.default_rng(7).normal(size=300)
     np.testing.assert_allclose(plant.simulate(u), delayed.simulate(u), rtol=0, atol=1e-10)
@@ -104,7 +104,7 @@ def test_realisation_has_the_models_transfer_function(model: ArxModel, extra: in
 def test_realisation_state_means_speed_and_predictions(ground) -> None:
     """x_1 = y, x_2 = y[k+1] + c y[k], x_3 = b u[k−1] for (a z + b) / (z³ + c z² + d z)."""
     model = ground[0]
-    (c, d), (a, b) = model.ar, model.x
+    (c, d), (a, b) = model.ar, model.b
     plant = realise(model)
     assert plant.order == 3
     np.testing.assert_array_equal(plant.C, [1.0, 0.0, 0.0])
@@ -287,7 +287,7 @@ def test_the_serial_design_places_every_closed_loop_pole(ground) -> None:
     assert design.plant.order == 5 and len(design.poles) == 5  # 3 + 2 delay states
     est = {k: getattr(design.estimator, k) for k in ("A", "B", "C", "L")}
     _check_every_pole_is_placed(
-        (*model.ar, *model.x), model.nk, 2, design.K, design.Ki, design.Kr, est,
+        (*model.ar, *model.b), model.nk, 2, design.K, design.Ki, design.Kr, est,
         list(design.poles), StateFeedbackController(design),
     )  # fmt: skip
 
@@ -304,7 +304,7 @@ def test_shipped_design_places_every_closed_loop_pole(ground_path, name: str) ->
         extra = controller.loop_delay_ticks - (model.nk - 1)
         assert extra == (2 if name.startswith("serial") else 0)
         _check_every_pole_is_placed(
-            (*model.ar, *model.x), model.nk, extra, entry["K"], entry["Ki"], entry["Kr"],
+            (*model.ar, *model.b), model.nk, extra, entry["K"], entry["Ki"], entry["Kr"],
             entry["estimator"], entry["closed_loop_poles"], runtime[motor],
         )  # fmt: skip
 
@@ -378,7 +378,7 @@ def test_ten_rad_s_step_on_the_loop_it_is_designed_for(ground, spec, extra, limi
     """On board: ≤ 5 % and ≤ 90 ms; through the serial loop: ≤ 5 % and ≤ 3× the time-optimal
     settling for the same loop delay (the model with nk + 2)."""
     designs = [design_poles(m, **spec) for m in ground]
-    plant_models = [ArxModel(m.ar, m.x, m.nk + extra) for m in ground]
+    plant_models = [ArxModel(m.ar, m.b, m.nk + extra) for m in ground]
     t, y, u = run_step(designs, ArxPlant(*plant_models), 10.0)
     info = step_info(t, y, reference=10.0, settling_band=settling_band(10.0))
     if limit_s is None:
@@ -392,7 +392,7 @@ def test_ten_rad_s_step_on_the_loop_it_is_designed_for(ground, spec, extra, limi
 def test_a_plant_a_tick_late_stays_tame(ground) -> None:
     """The disturbance estimate as integral action keeps the margins of the model-based loop:
     one tick more delay than designed overshoots half as much as with the error integrator."""
-    late = ArxPlant(*(ArxModel(m.ar, m.x, m.nk + 1) for m in ground))
+    late = ArxPlant(*(ArxModel(m.ar, m.b, m.nk + 1) for m in ground))
     overshoot = {}
     for bias in (0.03, 0.0):
         designs = [design_poles(m, **RECOMMENDED, bias_drift_std_v=bias) for m in ground]
@@ -429,7 +429,7 @@ class OffsetPlant(ArxPlant):
 @pytest.mark.parametrize("bias", [0.03, 0.0])
 def test_integral_action_removes_the_static_error_of_a_wrong_model(ground, bias) -> None:
     model = ground[0]
-    slower = ArxModel(model.ar, tuple(0.8 * v for v in model.x), model.nk)  # 20 % less gain
+    slower = ArxModel(model.ar, tuple(0.8 * v for v in model.b), model.nk)  # 20 % less gain
     designs = [design_poles(model, **RECOMMENDED, bias_drift_std_v=bias)] * 2
     _, y, _ = run_step(designs, ArxPlant(slower, slower), 10.0, ticks=300)
     assert abs(y[-20:] - 10.0).max() < 1e-6

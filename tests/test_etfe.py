@@ -18,7 +18,7 @@ SLOW = ArxModel((-1.6, 0.68), (0.3, 0.1, -0.05), nk=1, period_s=TS)  # complex p
 def response_from_theta(model: ArxModel, freq_hz: np.ndarray) -> np.ndarray:
     """H = q^-nk B(q^-1) / A(q^-1) at q = e^{jωTs}, written from θ (independent of num/den)."""
     w = np.exp(-2j * np.pi * freq_hz * model.period_s)  # q^-1
-    b = sum(c * w ** (model.nk + i) for i, c in enumerate(model.x))
+    b = sum(c * w ** (model.nk + i) for i, c in enumerate(model.b))
     a = 1.0 + sum(c * w ** (i + 1) for i, c in enumerate(model.ar))
     return b / a
 

@@ -176,7 +176,7 @@ def test_any_model_file_loads_or_is_refused_in_one_line(tmp_path: Path, text: st
     models = _refused_in_one_line(load_models, path)
     if models is not None:
         for model in models.motors.values():
-            assert all(math.isfinite(v) for v in (*model.ar, *model.x))
+            assert all(math.isfinite(v) for v in (*model.ar, *model.b))
             assert model.nk >= 0
 
 

@@ -122,7 +122,7 @@ class ArxModel:
     ar : tuple of float
         a_1 … a_na, the output (denominator) coefficients after the leading 1. For the report's
         structure this is (c, d).
-    x : tuple of float
+    b : tuple of float
         b_0 … b_{nb−1}, the input (numerator) coefficients. For the report's structure (a, b).
     nk : int
         Input delay in samples (≥ 0). The report's structure has nk = 2: one sample from the
@@ -134,17 +134,17 @@ class ArxModel:
     """
 
     ar: tuple[float, ...]
-    x: tuple[float, ...]
+    b: tuple[float, ...]
     nk: int = 2
     period_s: float = 0.01
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "ar", tuple(float(v) for v in self.ar))
-        object.__setattr__(self, "x", tuple(float(v) for v in self.x))
-        if not self.x:
+        object.__setattr__(self, "b", tuple(float(v) for v in self.b))
+        if not self.b:
             raise InputError("an ARX model needs at least one input coefficient (nb >= 1)")
-        if not all(math.isfinite(v) for v in (*self.ar, *self.x)):
-            raise InputError(f"ARX coefficients must be finite, got ar={self.ar}, x={self.x}")
+        if not all(math.isfinite(v) for v in (*self.ar, *self.b)):
+            raise InputError(f"ARX coefficients must be finite, got ar={self.ar}, b={self.b}")
         if not isinstance(self.nk, int | np.integer) or self.nk < 0:
             raise InputError(f"input delay nk must be a whole number >= 0, got {self.nk!r}")
         object.__setattr__(self, "nk", int(self.nk))
@@ -161,7 +161,7 @@ class ArxModel:
         InputError
             ``ticks`` is not a whole number >= 0.
         """
-        return ArxModel(self.ar, self.x, self.nk + check_extra_delay_ticks(ticks), self.period_s)
+        return ArxModel(self.ar, self.b, self.nk + check_extra_delay_ticks(ticks), self.period_s)
 
     # -- construction -------------------------------------------------------------------------
     @classmethod
@@ -208,12 +208,12 @@ class ArxModel:
     @property
     def nb(self) -> int:
         """Number of input (numerator) coefficients."""
-        return len(self.x)
+        return len(self.b)
 
     @property
     def theta(self) -> NDArray[np.float64]:
         """θ = [a_1 … a_na, b_0 … b_{nb−1}], shape (na + nb,)."""
-        return np.array((*self.ar, *self.x), dtype=float)
+        return np.array((*self.ar, *self.b), dtype=float)
 
     @property
     def order(self) -> int:
@@ -225,7 +225,7 @@ class ArxModel:
 
         It is z^(n − nk) B(z⁻¹): trailing zeros appear when na > nk + nb − 1.
         """
-        return np.concatenate([self.x, np.zeros(self.order - self.nk - self.nb + 1)])
+        return np.concatenate([self.b, np.zeros(self.order - self.nk - self.nb + 1)])
 
     def den(self) -> NDArray[np.float64]:
         """Denominator in descending powers of z (``[1, c, d, 0]`` for the report's structure)."""
@@ -235,8 +235,8 @@ class ArxModel:
         return den
 
     def lfilter_coeffs(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """(b, a) in powers of q⁻¹ for :func:`scipy.signal.lfilter`: b = [0]*nk + x, a = [1, ar]."""
-        b = np.concatenate([np.zeros(self.nk), self.x])
+        """(b, a) in powers of q⁻¹ for :func:`scipy.signal.lfilter`: b = [0]*nk + b, a = [1, ar]."""
+        b = np.concatenate([np.zeros(self.nk), self.b])
         a = np.concatenate([[1.0], self.ar])
         return b, a
 
@@ -258,7 +258,7 @@ class ArxModel:
     def dc_gain(self) -> float:
         """Static gain B(1) / A(1) in output units per input unit (rad/s/V); inf at an integrator."""
         a_sum = 1.0 + sum(self.ar)
-        b_sum = sum(self.x)
+        b_sum = sum(self.b)
         if a_sum == 0.0:
             return math.inf if b_sum != 0.0 else math.nan
         return b_sum / a_sum

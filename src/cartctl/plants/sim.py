@@ -34,22 +34,22 @@ class _ArxMotor:
 
     def __init__(self, model: ArxModel) -> None:
         self.ar = model.ar
-        self.x = model.x
+        self.b = model.b
         self.nk = model.nk
         self.reset()
 
     def reset(self) -> None:
         self.y: deque[float] = deque([0.0] * len(self.ar), maxlen=len(self.ar) or None)
-        n_u = self.nk + len(self.x)
+        n_u = self.nk + len(self.b)
         self.u: deque[float] = deque([0.0] * n_u, maxlen=n_u)
 
     def step(self, voltage_v: float) -> float:
-        """Take v[k] (V) and return y[k+1]: y[k+1] = Σ x_i v[k+1−nk−i] − Σ a_j y[k+1−j]."""
+        """Take v[k] (V) and return y[k+1]: y[k+1] = Σ b_i v[k+1−nk−i] − Σ a_j y[k+1−j]."""
         self.u.appendleft(voltage_v)  # u[0] = v[k], u[1] = v[k-1], ...
         u, y = self.u, self.y  # y[0] = y[k], y[1] = y[k-1], ...
         y_next = 0.0
-        for i, xi in enumerate(self.x):
-            y_next += xi * u[self.nk - 1 + i]
+        for i, b_i in enumerate(self.b):
+            y_next += b_i * u[self.nk - 1 + i]
         for j, aj in enumerate(self.ar):
             y_next -= aj * y[j]
         if self.ar:
