@@ -1,0 +1,141 @@
+"""Which column of a file becomes which trace column: the contract's names or a ``--map``.
+
+A contract-1 CSV file names its columns as the trace does. A foreign CSV file or a QRC log needs a
+mapping (trace column → file column or QRC label); where the mapping is silent, a column named
+like a trace column is taken. :func:`plan_columns` makes that decision, or says in one line what is
+missing and how to map it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from cartctl import qrc
+from cartctl.errors import DataFileError, InputError
+from cartctl.trace import _MAP_FORM, MOTORS, REQUIRED_COLUMNS, _check_name
+
+__all__ = ["check_mapping", "plan_columns"]
+
+
+def check_mapping(mapping: Mapping[str, str]) -> dict[str, str]:
+    checked: dict[str, str] = {}
+    for name, label in mapping.items():
+        _check_name(name)
+        if not isinstance(label, str) or not label.strip():
+            raise InputError(f"the mapping gives {name} no label ({label!r}); expected {_MAP_FORM}")
+        checked[name] = label.strip()
+    return checked
+
+
+def plan_columns(
+    path: Path, kind: str, names: list[str], mapping: dict[str, str] | None, header_line: int | None
+) -> tuple[int, dict[str, int | None]]:
+    """Decide where each trace column comes from: a file column's index, or None for zeros.
+
+    For QRC logs ``names`` starts with the time column, which always gives time_s. Returns the
+    time column's index and the plan, in trace column order.
+    """
+    if kind == "CSV" and mapping is None:
+        missing = [name for name in REQUIRED_COLUMNS if name not in names]
+        if missing:
+            hint = ""
+            if len(names) == 1 and (";" in names[0] or "\t" in names[0]):
+                hint = "; the columns seem separated by ';' or tabs, but trace files use ','"
+            raise DataFileError(
+                path,
+                f"missing required column(s) {', '.join(missing)}; the header has "
+                f"{', '.join(names)}; a trace needs {', '.join(REQUIRED_COLUMNS)}{hint}",
+                line=header_line,
+            )
+        plan: dict[str, int | None] = {name: names.index(name) for name in REQUIRED_COLUMNS}
+        plan |= {n: j for j, n in enumerate(names) if n not in REQUIRED_COLUMNS}
+        return names.index("time_s"), plan
+    mapping = mapping or {}
+    first = 0 if kind == "CSV" else 1  # QRC: names[0] is the time column
+    what = "column" if kind == "CSV" else "channel"
+    listing = ", ".join(names[first:])
+    if first and "time_s" in mapping:
+        raise DataFileError(
+            path,
+            f"a {kind} log carries its own time (ms), which becomes time_s; "
+            f"drop time_s={mapping['time_s']} from the mapping",
+        )
+    auto = [n if not first else qrc.column_name(n, j - 1, kind) for j, n in enumerate(names)]
+    source = {"time_s": 0} if first else {}
+    for name, label in mapping.items():
+        hits = [j for j, n in enumerate(names) if n == label and j >= first]
+        if len(hits) != 1:
+            problem = "lacks" if not hits else f"has {len(hits)} times"
+            raise DataFileError(
+                path,
+                f"the mapping {name}={label} names {what} {label!r}, which this {kind} file "
+                f"{problem}; its {what}s are {listing}",
+            )
+        source[name] = hits[0]
+    # Where the mapping is silent, take a column named like the trace column; but a motor's
+    # voltage or speed only if its partner is mapped or named too (else it half-maps a motor).
+    explicit = set(source.values())
+    partners = {f"voltage_{m}": f"speed_{m}" for m in MOTORS}
+    partners |= {speed: voltage for voltage, speed in partners.items()}
+    for name in REQUIRED_COLUMNS:
+        if name in source or name not in auto[first:] or auto.index(name) in explicit:
+            continue
+        partner = partners.get(name)
+        if partner is None or partner in source or partner in auto[first:]:
+            source[name] = auto.index(name)
+    if "time_s" not in source:
+        raise DataFileError(
+            path,
+            f"no time column: the header has {listing}; say which column holds the time (s) "
+            "with --map time_s=<column>",
+            line=header_line,
+        )
+    for motor in MOTORS:
+        pair = [f"voltage_{motor}", f"speed_{motor}"]
+        have = [name for name in pair if name in source]
+        if len(have) == 1:
+            lack = pair[1 - pair.index(have[0])]
+            raise DataFileError(
+                path,
+                f"{have[0]} comes from {what} {names[source[have[0]]]!r} but {lack} from none; "
+                f"map both of motor {motor}'s columns, or neither",
+            )
+    if not any(f"voltage_{motor}" in source for motor in MOTORS):
+        example = _guess_mapping(names[first:])
+        raise DataFileError(
+            path,
+            f"no mapping for voltage/speed columns; this {kind} file has {what}s {listing}; "
+            f"say which is which with --map {example}",
+        )
+    plan = {name: source.get(name) for name in REQUIRED_COLUMNS}
+    taken = set(REQUIRED_COLUMNS) | set(source)
+    used = set(source.values())
+    for j in range(first, len(names)):  # extras, in file order
+        plan |= {name: k for name, k in source.items() if k == j and name not in plan}
+        if j not in used and auto[j] not in taken:
+            name, suffix = auto[j], 2
+            while name in plan:
+                name, suffix = f"{auto[j]}_{suffix}", suffix + 1
+            plan[name] = j
+    return source["time_s"], plan
+
+
+_VOLTAGE_WORDS = ("volt", "voltage", "u_", "pwm")
+_SPEED_WORDS = ("speed", "omega", "vel", "rad_s", "rads")
+
+
+def _guess_mapping(labels: Sequence[str]) -> str:
+    """A ``--map`` example from labels that say what they are; placeholders when none do.
+
+    Only a label's own words count (``voltA``, ``speedA``): a guess by position would wire a
+    voltage to whatever channel sits there (an error, a reference).
+    """
+
+    def first(words: tuple[str, ...]) -> str | None:
+        return next((lab for lab in labels if any(w in lab.lower() for w in words)), None)
+
+    volt, speed = first(_VOLTAGE_WORDS), first(_SPEED_WORDS)
+    if volt is None or speed is None:
+        return "voltage_a=<label>,speed_a=<label> (no label says which channel is which)"
+    return f"voltage_a={volt},speed_a={speed}"
