@@ -68,12 +68,12 @@ Poles from a specification: ζ from the overshoot, ζ = −ln(OS) / √(π² + l
 settling time, T_s ≈ 4 / (ζ ω_n); the dominant pair s = −ζ ω_n ± j ω_n √(1 − ζ²) maps to
 z = exp(s Ts). The other poles are real and fast, distinct so that ``control.place`` applies:
 z_j = exp(−(ratio + j) ζ ω_n Ts), j = 0, 1, …, with ratio = ``fast_pole_ratio``. Given poles
-that repeat are placed with Ackermann's formula (``control.acker``).
+that repeat are placed with Ackermann's formula (``control.acker``). The choice and the checks of the
+poles are in :mod:`cartctl.design.pole_choice`.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -86,14 +86,12 @@ from cartctl.design.kalman import (
     KalmanDesign,
     design_kalman,
 )
+from cartctl.design.pole_choice import check_poles, has_repeats, poles_text, spec_poles
 from cartctl.design.statespace import StateSpace, realise, uncontrollable_modes
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 
 __all__ = ["PolesDesign", "augment", "design_poles", "spec_poles"]
-
-_REPEAT_TOL = 1e-8
-"""Poles closer than this (relative) count as repeated: ``place`` cannot take them."""
 
 _CHECK_TOL = 1e-6
 """The placed characteristic polynomial must match the requested one to this (coefficients)."""
@@ -206,95 +204,6 @@ class PolesDesign:
         }
 
 
-def spec_poles(
-    count: int,
-    period_s: float,
-    settling_time_s: float,
-    overshoot_percent: float,
-    fast_pole_ratio: float,
-) -> list[complex]:
-    """The dominant pair for a settling time and overshoot, then ``count − 2`` fast real poles.
-
-    See the module docstring for the rule. Raises InputError for an overshoot outside (0, 100) %,
-    a settling time shorter than ``count`` ticks (deadbeat, the fastest a discrete loop of this
-    order settles), a pair oscillating beyond Nyquist, or a ratio below 1.
-    """
-    os_ = float(overshoot_percent)
-    if not (math.isfinite(os_) and 0.0 < os_ < 100.0):
-        raise InputError(f"overshoot_percent must lie strictly between 0 and 100, got {os_}")
-    ts = float(settling_time_s)
-    if not (math.isfinite(ts) and ts >= count * period_s):
-        raise InputError(
-            f"settling_time_s must be at least {count} ticks ({count * period_s:g} s), the "
-            f"deadbeat time of a loop with {count} poles; got {settling_time_s}"
-        )
-    ratio = float(fast_pole_ratio)
-    if not (math.isfinite(ratio) and ratio >= 1.0):
-        raise InputError(f"fast_pole_ratio must be a number >= 1, got {fast_pole_ratio}")
-    log_os = math.log(os_ / 100.0)
-    zeta = -log_os / math.hypot(math.pi, log_os)
-    sigma = 4.0 / ts  # ζ ω_n (1/s)
-    omega_d = sigma / zeta * math.sqrt(1.0 - zeta * zeta)
-    if omega_d * period_s >= math.pi:
-        raise InputError(
-            f"{os_:g} % overshoot with a {ts:g} s settling time oscillates beyond the Nyquist "
-            "frequency; ask for less overshoot or a longer settling time"
-        )
-    pair = complex(math.exp(-sigma * period_s), 0.0) * complex(
-        math.cos(omega_d * period_s), math.sin(omega_d * period_s)
-    )
-    fast = [complex(math.exp(-(ratio + j) * sigma * period_s)) for j in range(count - 2)]
-    return [pair, pair.conjugate(), *fast]
-
-
-def _check_poles(poles: Sequence[complex], count: int, what: str) -> list[complex]:
-    """Validate the requested poles; return them with exact conjugate pairs."""
-    p = [complex(v) for v in poles]
-    p = [complex(v.real, 0.0) if abs(v.imag) <= 1e-12 * max(1.0, abs(v)) else v for v in p]
-    if len(p) != count:
-        raise InputError(f"{what} needs {count} closed-loop poles, got {len(p)}")
-    for v in p:
-        if not (math.isfinite(v.real) and math.isfinite(v.imag)):
-            raise InputError(f"poles must be finite, got {v}")
-        if abs(v) >= 1.0:
-            raise InputError(
-                f"pole {v:.6g} lies on or outside the unit circle (|z| = {abs(v):.6g}); a stable "
-                "discrete loop needs |z| < 1"
-            )
-    upper = sorted((v for v in p if v.imag > 0.0), key=lambda v: (v.real, v.imag))
-    lower = sorted((v.conjugate() for v in p if v.imag < 0.0), key=lambda v: (v.real, v.imag))
-    if len(upper) != len(lower) or any(
-        abs(a - b) > 1e-9 * max(1.0, abs(a)) for a, b in zip(upper, lower, strict=True)
-    ):
-        raise InputError(
-            f"complex poles must come in conjugate pairs, got {[f'{v:.6g}' for v in p]}"
-        )
-    out = [v for v in p if v.imag == 0.0]
-    for v in upper:
-        out += [v, v.conjugate()]
-    return sorted(out, key=lambda v: (abs(v), v.imag))
-
-
-def _poles_text(poles: Sequence[complex] | NDArray[np.complex128]) -> str:
-    """Poles on one line: ``0.999998, 0.5±0.2j``."""
-    parts = []
-    for p in poles:
-        z = complex(p)
-        if abs(z.imag) < 1e-9:
-            parts.append(f"{z.real:.6g}")
-        elif z.imag > 0:
-            parts.append(f"{z.real:.6g}±{z.imag:.3g}j")
-    return ", ".join(parts)
-
-
-def _repeats(poles: Sequence[complex]) -> bool:
-    return any(
-        abs(a - b) <= _REPEAT_TOL * max(1.0, abs(a))
-        for i, a in enumerate(poles)
-        for b in poles[i + 1 :]
-    )
-
-
 def design_poles(
     model: ArxModel,
     *,
@@ -394,11 +303,11 @@ def design_poles(
         )
     else:
         wanted = list(poles)
-    placed = _check_poles(wanted, count, what)
+    placed = check_poles(wanted, count, what)
 
     A_p, B_p = (plant.A, plant.B) if integral == "disturbance" else (A_a, B_a)
     B_col = B_p.reshape(count, 1)
-    if _repeats(placed):
+    if has_repeats(placed):
         method = "acker"
         gains = np.asarray(control.acker(A_p, B_col, placed), dtype=float).ravel()
     else:
@@ -408,8 +317,8 @@ def design_poles(
     got, target = np.poly(A_cl), np.real(np.poly(placed))
     if not np.allclose(got, target, rtol=0.0, atol=_CHECK_TOL):
         raise InputError(
-            f"pole placement is numerically ill-conditioned for poles {_poles_text(placed)}: the "
-            f"closed loop would have {_poles_text(np.linalg.eigvals(A_cl))}; choose poles further "
+            f"pole placement is numerically ill-conditioned for poles {poles_text(placed)}: the "
+            f"closed loop would have {poles_text(np.linalg.eigvals(A_cl))}; choose poles further "
             "apart or less extreme (a shorter --settling-time)"
         )
     if integral == "disturbance":
