@@ -88,7 +88,7 @@ class _Gains:
     """A :class:`~cartctl.runtime.statefeedback.FeedbackGains` rebuilt from a controller file."""
 
     K: NDArray[np.float64]
-    Ki: float
+    K_xi: float
     Kr: float
     period_s: float
     estimator: KalmanDesign

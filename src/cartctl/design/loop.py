@@ -5,9 +5,9 @@ is the predicted estimate x̂[k|k−1] (m states) and the error integral x_i; pe
 :class:`~cartctl.runtime.statefeedback.StateFeedbackController`)::
 
     x̂c     = x̂ + L (y − C x̂)
-    u      = −K x̂c − Ki x_i + Kr r          (K on the first K.size states: with the input-
+    u      = −K x̂c − K_xi x_i + Kr r          (K on the first K.size states: with the input-
     x̂⁺     = A x̂c + B u                      disturbance state it ends with 1 on b̂)
-    x_i⁺   = x_i + Ts (r − y)               (left out when Ki = 0: it does not reach u)
+    x_i⁺   = x_i + Ts (r − y)               (left out when K_xi = 0: it does not reach u)
 
 The loop is broken at the measurement: C_fb(z) = −U(z)/Y(z) with r = 0, so that the open loop is
 C_fb(z) G(z) z^(−extra) with negative feedback, as for the PI.
@@ -36,10 +36,10 @@ def feedback_tf_coeffs(design: PolesDesign) -> tuple[NDArray[np.float64], NDArra
     k_full = np.zeros(m)
     k_full[:n] = design.K
     lc = np.eye(m) - np.outer(est.L, est.C)
-    # state s = [x̂ (m), x_i], input y, output u; without Ki (integral action from the
+    # state s = [x̂ (m), x_i], input y, output u; without K_xi (integral action from the
     # disturbance estimate) x_i does not reach u and is left out: its pole at z = 1 would meet
     # the estimator's own there and not cancel cleanly
-    i = m + 1 if design.Ki != 0.0 else m
+    i = m + 1 if design.K_xi != 0.0 else m
     a = np.zeros((i, i))
     a[:m, :m] = est.A @ lc - np.outer(est.B, k_full @ lc)
     b = np.zeros((i, 1))
@@ -47,10 +47,10 @@ def feedback_tf_coeffs(design: PolesDesign) -> tuple[NDArray[np.float64], NDArra
     c = np.zeros((1, i))
     c[0, :m] = -(k_full @ lc)
     if i > m:
-        a[:m, m] = -est.B * design.Ki
+        a[:m, m] = -est.B * design.K_xi
         a[m, m] = 1.0
         b[m, 0] = -design.period_s
-        c[0, m] = -design.Ki
+        c[0, m] = -design.K_xi
     d = np.array([[-float(k_full @ est.L)]])
     # ss2tf then a transfer-function minreal: the state-space minreal needs slycot
     tf = control.ss2tf(control.ss(a, b, -c, -d, design.period_s)).minreal(tol=1e-9)

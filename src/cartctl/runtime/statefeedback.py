@@ -4,14 +4,14 @@ Where it sits: the runtime, one object per motor, stepped once per tick by the l
 :class:`~cartctl.design.poles.PolesDesign`. Per tick, in the order of :mod:`cartctl.runtime.base`::
 
     x̂      = estimator.correct(y[k])                      # x̂[k|k]
-    u_raw  = Kr r[k] − K x̂ − Ki x_i                        (V)
+    u_raw  = Kr r[k] − K x̂ − K_xi x_i                        (V)
     u      = clamp(u_raw, ±voltage_limit_v)
     x_i   += Ts (r[k] − y[k])    unless u is saturated and the error would drive it further
     estimator.predict(u)                                   # x̂[k+1|k], with the clamped voltage
     estimate = (x̂_1[k|k] + x̂_1[k+1|k]) / 2                 # the true speed now (rad/s)
 
 K covers the whole estimator state: with the input-disturbance state its last entry is 1, so
-u carries −b̂, the integral action, and Ki is 0 (see :mod:`cartctl.design.poles`). The estimate
+u carries −b̂, the integral action, and K_xi is 0 (see :mod:`cartctl.design.poles`). The estimate
 reported is the true speed at tick k: the measured speed is the average over the last tick, which
 x̂_1[k|k] estimates, and the true speed now lies half-way to the next tick's average, which the
 prediction gives (see :mod:`cartctl.design.kalman`). On ``--plant sim`` the "true" speed is the
@@ -48,7 +48,7 @@ class FeedbackGains(Protocol):
     the same numbers read back from a controller file."""
 
     K: NDArray[np.float64]
-    Ki: float
+    K_xi: float
     Kr: float
     estimator: KalmanDesign
 
@@ -62,7 +62,7 @@ class StateFeedbackController:
     Parameters
     ----------
     design : FeedbackGains
-        K (one gain per estimator state fed back), Ki, Kr and Ts come from here.
+        K (one gain per estimator state fed back), K_xi, Kr and Ts come from here.
     estimator : StateEstimator, optional
         Owned by the controller (reset with it). Its state must start with the states K acts
         on; default a :class:`SteadyStateSpeedEstimator` on ``design.estimator``.
@@ -76,7 +76,7 @@ class StateFeedbackController:
         (rad/s).
     integral_rad : float
         The integrator state x_i, the integral of (r − y) (rad of wheel angle); it acts only
-        when Ki ≠ 0.
+        when K_xi ≠ 0.
     saturated : bool
         Whether the last command hit the limit.
     """
@@ -105,7 +105,7 @@ class StateFeedbackController:
         self.estimator = estimator
         self.voltage_limit_v = limit
         self._K = tuple(float(k) for k in design.K)
-        self._Ki = float(design.Ki)
+        self._Ki = float(design.K_xi)
         self._Kr = float(design.Kr)
         self._Ts = float(design.period_s)
         self.reset()
@@ -139,7 +139,7 @@ class StateFeedbackController:
         u = min(limit, max(-limit, u_raw))
         self.saturated = u != u_raw
         error = reference_rad_s - measured_rad_s
-        # the integrator moves u by −Ki·Ts·error next tick: hold it if that deepens saturation
+        # the integrator moves u by −K_xi·Ts·error next tick: hold it if that deepens saturation
         if not self.saturated or (u_raw > u) != (-self._Ki * error > 0.0):
             self.integral_rad += self._Ts * error
         self._predict_and_estimate(x1, u)
