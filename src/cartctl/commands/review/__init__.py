@@ -1,0 +1,117 @@
+"""``cartctl review FILE.rrd [--web] [--screenshot FILE.png]``: a recorded run in the Rerun viewer.
+
+The last stage of the pipeline (run → logs/ → review). The recording is streamed into a viewer
+together with the project's layout (:func:`cartctl.sinks.rerun_layout.blueprint`), so recordings
+made without a layout, or with an older one, show the same plots. ``review RUN.csv [--json]
+[--compare OTHER.csv]`` recomputes the run metrics from CSV traces instead (see
+:mod:`cartctl.sinks.summary`).
+
+Here: the options, the dispatch on the file's suffix and the CSV metrics. The recording read back
+and streamed with the layout is :mod:`~cartctl.commands.review.recording`; the native and web
+viewers are :mod:`~cartctl.commands.review.viewer`; the headless ``--screenshot`` is
+:mod:`~cartctl.commands.review.screenshot`.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from cartctl.commands.review.recording import read_recording
+from cartctl.commands.review.screenshot import (
+    SCREENSHOT_WINDOW,
+    VULKAN_HINT,
+    screenshot,
+    vulkan_available,
+)
+from cartctl.commands.review.viewer import ViewerError, open_in_viewer, serve_web
+from cartctl.errors import InputError
+from cartctl.jsonout import dumps
+
+__all__ = [
+    "SCREENSHOT_WINDOW",
+    "VULKAN_HINT",
+    "ViewerError",
+    "add_parser",
+    "open_in_viewer",
+    "read_recording",
+    "run",
+    "screenshot",
+    "serve_web",
+    "vulkan_available",
+]
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "review",
+        help="open a recorded run in the Rerun viewer (or the metrics of a CSV trace)",
+        description=(
+            "Open a Rerun recording (.rrd) in the viewer with the project's layout: per motor, "
+            "speed with reference and estimate above the voltage, then the loop timing. --web "
+            "serves the web viewer instead, --screenshot renders the layout headless to a PNG. "
+            "Given a CSV trace, print its run metrics instead (--json, --compare)."
+        ),
+    )
+    p.add_argument("recording", metavar="FILE.rrd|RUN.csv", help="a recording or a CSV trace")
+    view = p.add_mutually_exclusive_group()
+    view.add_argument(
+        "--web",
+        action="store_true",
+        help="serve the web viewer and print its URL; runs until Ctrl-C",
+    )
+    view.add_argument(
+        "--screenshot",
+        metavar="FILE.png",
+        help=f"render the layout headless and save a picture (needs Vulkan: {VULKAN_HINT})",
+    )
+    p.add_argument(
+        "--json", action="store_true", help="CSV traces: print one JSON object instead of a table"
+    )
+    p.add_argument("--compare", metavar="OTHER.csv", help="CSV traces: a second run to set beside")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Dispatch on the file's suffix: ``.rrd`` to the viewer, ``.csv`` to the trace metrics."""
+    path = Path(args.recording)
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        return _review_csv(args)
+    if suffix != ".rrd":
+        raise InputError(
+            f"review takes a Rerun recording (.rrd) or a CSV trace (.csv), got '{path}'"
+        )
+    if args.json or args.compare:
+        raise InputError("--json and --compare apply to CSV traces, not to .rrd recordings")
+    if args.screenshot:
+        out = screenshot(path, Path(args.screenshot))
+        print(f"saved {out}")
+        return 0
+    if args.web:
+        serve_web(path)
+        return 0
+    url = open_in_viewer(path)
+    print(f"opened {path} in the Rerun viewer ({url})")
+    return 0
+
+
+def _review_csv(args: argparse.Namespace) -> int:
+    """``cartctl review RUN.csv [--compare OTHER.csv] [--json]``: the run metrics from traces."""
+    if args.web or args.screenshot:
+        raise InputError("--web and --screenshot apply to .rrd recordings, not to CSV traces")
+    from cartctl.data import read_trace
+    from cartctl.sinks.summary import format_summary, trace_metrics
+
+    paths = [args.recording] + ([args.compare] if getattr(args, "compare", None) else [])
+    summaries = []
+    for path in paths:
+        trace = read_trace(path)
+        summary = trace_metrics(trace.columns(), trace.period_s)
+        summary["trace"] = str(path)
+        summaries.append(summary)
+    if args.json:
+        print(dumps(summaries[0] if len(summaries) == 1 else {"runs": summaries}))
+        return 0
+    print("\n\n".join(format_summary(s) for s in summaries))
+    return 0
