@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from cartctl.errors import InputError
+from cartctl.identification._checks import as_pair, is_whole
 from cartctl.identification.cycles import (
     average_cycles,
     find_period,
@@ -170,3 +171,29 @@ def test_periodic_regression_pad_zero_lags_and_errors() -> None:
         periodic_regression_pad(y, u, 6)
     with pytest.raises(InputError, match="equally long"):
         periodic_regression_pad(y, u[:4], 1)
+
+
+@pytest.mark.parametrize(("value", "whole"), [(3, True), (np.int64(3), True), (0, True),
+    (True, False), (np.bool_(True), False), (3.0, False), ("3", False), (None, False)])  # fmt: skip
+def test_is_whole(value: object, whole: bool) -> None:
+    assert is_whole(value) is whole
+
+
+def test_as_pair_names_what_it_refuses() -> None:
+    y, u = as_pair([1, 2, 3], (0.0, 1.0, 0.5))
+    assert y.dtype == u.dtype == np.float64
+    np.testing.assert_array_equal(y, [1.0, 2.0, 3.0])
+    with pytest.raises(InputError, match=r"^output and input must be equally long, got 3 and 2"):
+        as_pair([1, 2, 3], [0, 1])
+    with pytest.raises(InputError, match=r"^averaged input u_avg holds NaN"):
+        as_pair([1.0], [np.nan], names=("averaged output y_avg", "averaged input u_avg"))
+    with pytest.raises(InputError, match=r"^input sequence u must be 1-D"):
+        as_pair([1.0], [[1.0]])
+
+
+def test_period_and_lags_refuse_booleans() -> None:
+    u = square(10.0, cycles=4)
+    with pytest.raises(InputError, match="period_ticks"):
+        split_cycles(u, u, True)  # type: ignore[arg-type]
+    with pytest.raises(InputError, match="lags"):
+        periodic_regression_pad(np.zeros(5), np.zeros(5), True)  # type: ignore[arg-type]

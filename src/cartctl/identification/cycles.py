@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cartctl.errors import InputError
+from cartctl.identification._checks import as_pair, as_sequence, is_whole
 
 __all__ = ["average_cycles", "find_period", "periodic_regression_pad", "split_cycles"]
 
@@ -23,19 +24,6 @@ PERIOD_RTOL: float = 1e-9
 """Relative tolerance (of max |u|) within which two input samples count as equal."""
 
 _FIRST_BLOCK = 64
-
-
-def as_sequence(values: ArrayLike, name: str) -> NDArray[np.float64]:
-    """A finite 1-D float64 array, or an InputError naming the parameter."""
-    try:
-        array = np.asarray(values, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise InputError(f"{name} must be a sequence of numbers ({err})") from err
-    if array.ndim != 1:
-        raise InputError(f"{name} must be 1-D (one value per tick), got shape {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise InputError(f"{name} holds NaN or infinite values; expected finite numbers")
-    return array
 
 
 def _repeats(u: NDArray[np.float64], p: int, tol: float) -> bool:
@@ -78,7 +66,7 @@ def find_period(u: ArrayLike, *, min_ticks: int = 10) -> int | None:
         ``u`` is not a finite 1-D sequence, or ``min_ticks`` < 1.
     """
     u = as_sequence(u, "input sequence u")
-    if isinstance(min_ticks, bool) or not isinstance(min_ticks, int | np.integer) or min_ticks < 1:
+    if not is_whole(min_ticks) or min_ticks < 1:
         raise InputError(f"min_ticks must be a whole number >= 1, got {min_ticks!r}")
     if u.size < 2 * min_ticks:
         return None
@@ -131,17 +119,8 @@ def split_cycles(
         ``min_cycles`` usable cycles, or an input whose cycles differ by more than
         :data:`PERIOD_RTOL` of max |u|.
     """
-    y = as_sequence(y, "output sequence y")
-    u = as_sequence(u, "input sequence u")
-    if y.size != u.size:
-        raise InputError(
-            f"output and input must be equally long, got {y.size} and {u.size} samples"
-        )
-    if (
-        isinstance(period_ticks, bool)
-        or not isinstance(period_ticks, int | np.integer)
-        or period_ticks < 1
-    ):
+    y, u = as_pair(y, u)
+    if not is_whole(period_ticks) or period_ticks < 1:
         raise InputError(f"period_ticks must be a whole number >= 1, got {period_ticks!r}")
     p = int(period_ticks)
     first = 1 if skip_first else 0
@@ -180,14 +159,9 @@ def average_cycles(
 
     Parameters
     ----------
-    y : array_like, shape (n,)
-        Measured output per tick (rad/s).
-    u : array_like, shape (n,)
-        Input per tick (V); it must repeat every ``period_ticks`` ticks.
-    period_ticks : int
-        Cycle length P (ticks), e.g. from :func:`find_period`.
-    skip_first : bool, default True
-        Drop the first cycle (transient from rest). With it, three whole cycles are needed.
+    y, u, period_ticks, skip_first
+        As for :func:`split_cycles` (the period e.g. from :func:`find_period`). With
+        ``skip_first``, three whole cycles are needed.
 
     Returns
     -------
@@ -239,13 +213,13 @@ def periodic_regression_pad(
     InputError
         Sequences of different lengths or not finite and 1-D, or ``lags`` outside 0 … P.
     """
-    y = as_sequence(y_avg, "averaged output y_avg")
-    u = as_sequence(u_avg, "averaged input u_avg")
-    if y.size != u.size:
-        raise InputError(
-            f"averaged output and input must be equally long, got {y.size} and {u.size} samples"
-        )
-    if isinstance(lags, bool) or not isinstance(lags, int | np.integer) or not 0 <= lags <= y.size:
+    y, u = as_pair(
+        y_avg,
+        u_avg,
+        names=("averaged output y_avg", "averaged input u_avg"),
+        pair="averaged output and input",
+    )
+    if not is_whole(lags) or not 0 <= lags <= y.size:
         raise InputError(f"lags must be a whole number in 0..{y.size} (the cycle), got {lags!r}")
     n = int(lags)
     return np.concatenate([y[y.size - n :], y]), np.concatenate([u[u.size - n :], u])

@@ -19,7 +19,8 @@ import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
 from cartctl.errors import InputError
-from cartctl.identification.cycles import as_sequence, split_cycles
+from cartctl.identification._checks import as_pair, is_whole
+from cartctl.identification.cycles import split_cycles
 from cartctl.model import ArxModel
 
 __all__ = ["MIN_INPUT_FRACTION", "Etfe", "etfe", "model_response"]
@@ -158,15 +159,10 @@ def etfe(
         raise InputError(f"period_s must be a positive number of seconds, got {period_s!r}")
     if not 0.0 < min_input_fraction < 1.0:
         raise InputError(f"min_input_fraction must lie in (0, 1), got {min_input_fraction!r}")
-    y_arr = as_sequence(y, "output sequence y")
-    u_arr = as_sequence(u, "input sequence u")
-    if y_arr.size != u_arr.size:
-        raise InputError(
-            f"output and input must be equally long, got {y_arr.size} and {u_arr.size} samples"
-        )
+    y_arr, u_arr = as_pair(y, u)
     if period_ticks is not None:
         return _periodic(y_arr, u_arr, period_s, period_ticks, skip_first, min_input_fraction)
-    if isinstance(segments, bool) or not isinstance(segments, int | np.integer) or segments < 1:
+    if not is_whole(segments) or segments < 1:
         raise InputError(f"segments must be a whole number >= 1, got {segments!r}")
     if segments == 1:
         return _whole_record(y_arr, u_arr, period_s, min_input_fraction)
