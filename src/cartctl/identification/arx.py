@@ -124,10 +124,12 @@ def regression(
     na: int,
     nb: int,
     nk: int,
-    start: int | None = None,
+    start: int,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Regressor matrix Φ, shape (n − start, na + nb), and target y[start:], for one experiment."""
-    start = first_row(na, nb, nk) if start is None else start
+    """Regressor matrix Φ, shape (n − start, na + nb), and target y[start:], for one experiment.
+
+    ``start`` is at least :func:`first_row` (:func:`stacked_regression` chooses it).
+    """
     n = y.size
     cols = [-y[start - i : n - i] for i in range(1, na + 1)]
     cols += [u[start - nk - j : n - nk - j] for j in range(nb)]
