@@ -15,12 +15,15 @@ import signal
 import sys
 import threading
 from collections.abc import Iterator
-from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from cartctl.commands.options import add_name_option, check_duration
-from cartctl.commands.run import RERUN_MODES, _free_stem
+from cartctl.commands.options import (
+    add_output_options,
+    add_rerun_options,
+    check_duration,
+    output_paths,
+)
 from cartctl.errors import InputError
 from cartctl.jsonout import dumps
 from cartctl.plants.cart_link import DEFAULT_CONNECT_TIMEOUT_S, print_to_stderr
@@ -63,13 +66,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--duration", type=float, metavar="S",
                    help="stop after S seconds of cart time (default: run until Ctrl-C)")  # fmt: skip
-    p.add_argument("--out", default="logs", metavar="DIR", help="where the trace and recording go")
-    add_name_option(p, default="monitor-DATE-TIME")
-    p.add_argument("--rerun", choices=RERUN_MODES, default="auto",
-                   help="auto: record to --out and open the viewer where a display exists; spawn: "
-                        "record and open the viewer; connect: record and stream to a running viewer; "
-                        "save: record only; off: no recording")  # fmt: skip
-    p.add_argument("--connect-url", metavar="URL", help="viewer address for --rerun connect")
+    add_output_options(p, name_default="monitor-DATE-TIME")
+    add_rerun_options(p)
     p.add_argument(
         "--connect-timeout", type=float, default=DEFAULT_CONNECT_TIMEOUT_S, metavar="S",
         help=f"longest wait for the cart's HEARTBEAT (default {DEFAULT_CONNECT_TIMEOUT_S:g} s)",
@@ -172,9 +170,7 @@ def run(args: argparse.Namespace) -> int:
         wait_started(link, args.connect_timeout)  # no file is opened for a cart that is not there
         if cart is not None:  # its faults count from the host's first frame; a monitor sends none
             cart.arm_faults()
-        out = Path(args.out)
-        stem = args.name or _free_stem(out, datetime.now().strftime("monitor-%Y%m%d-%H%M%S"))
-        csv_path, rrd_path = out / f"{stem}.csv", out / f"{stem}.rrd"
+        csv_path, rrd_path = output_paths(args, "monitor")
         rerun = _rerun_sink(args, rrd_path)
         monitor.rows.append(CsvSink(csv_path))
         if rerun is not None:

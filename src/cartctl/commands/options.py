@@ -4,11 +4,16 @@ from __future__ import annotations
 
 import argparse
 import math
+from datetime import datetime
+from pathlib import Path
 
 from cartctl.data import parse_mapping
 from cartctl.errors import InputError
 from cartctl.plants.factory import DEFAULT_MODEL
 from cartctl.signals import MAX_DURATION_S
+
+RERUN_MODES = ("auto", "spawn", "connect", "save", "off")
+"""The choices of ``--rerun``."""
 
 
 def _mapping_arg(text: str) -> dict[str, str]:
@@ -48,6 +53,51 @@ def add_name_option(p: argparse.ArgumentParser, *, default: str) -> None:
     """``--name``: the stem of the trace and recording written into ``--out``."""
     p.add_argument("--name", type=file_stem, metavar="NAME",
                    help=f"file name stem, without a folder (default {default})")  # fmt: skip
+
+
+def add_output_options(p: argparse.ArgumentParser, *, name_default: str) -> None:
+    """``--out DIR`` and ``--name``: where the trace and the recording go, under which name."""
+    p.add_argument("--out", default="logs", metavar="DIR", help="where the trace and recording go")
+    add_name_option(p, default=name_default)
+
+
+def add_rerun_options(p: argparse.ArgumentParser) -> None:
+    """``--rerun MODE`` and ``--connect-url``: the Rerun recording, and the viewer it goes to."""
+    p.add_argument("--rerun", choices=RERUN_MODES, default="auto",
+                   help="auto: record to --out and open the viewer where a display exists; spawn: "
+                        "record and open the viewer; connect: record and stream to a running viewer; "
+                        "save: record only; off: no recording")  # fmt: skip
+    p.add_argument("--connect-url", metavar="URL", help="viewer address for --rerun connect")
+
+
+def output_paths(args: argparse.Namespace, prefix: str) -> tuple[Path, Path]:
+    """The trace (``.csv``) and recording (``.rrd``) paths that ``--out`` and ``--name`` ask for.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``out`` and ``name`` (:func:`add_output_options`).
+    prefix : str
+        Without ``--name`` the files are named ``PREFIX-YYYYmmdd-HHMMSS``, with ``-2``, ``-3`` …
+        added when a trace or recording of that name is already in ``--out``.
+
+    Returns
+    -------
+    tuple of Path
+        The trace and the recording.
+    """
+    out = Path(args.out)
+    stem = args.name or _free_stem(out, datetime.now().strftime(f"{prefix}-%Y%m%d-%H%M%S"))
+    return out / f"{stem}.csv", out / f"{stem}.rrd"
+
+
+def _free_stem(out: Path, stem: str) -> str:
+    """``stem``, or ``stem-2``, ``stem-3`` … when a run of that name is already in ``out``."""
+    candidate, n = stem, 1
+    while (out / f"{candidate}.csv").exists() or (out / f"{candidate}.rrd").exists():
+        n += 1
+        candidate = f"{stem}-{n}"
+    return candidate
 
 
 def add_map_option(p: argparse.ArgumentParser) -> None:

@@ -6,16 +6,17 @@ import argparse
 import signal
 import sys
 import warnings
-from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 from cartctl import stopping
 from cartctl.cart import SUPPLY_V
 from cartctl.commands.options import (
-    add_name_option,
+    add_output_options,
     add_plant_options,
+    add_rerun_options,
     check_duration,
+    output_paths,
 )
 from cartctl.commands.run_checks import (
     DEFAULT_CONTROLLER,
@@ -35,8 +36,6 @@ from cartctl.reference import FORMS, ReferenceSchedule
 from cartctl.runtime.loop import ControlLoop, MemorySink
 from cartctl.sinks.csv_sink import CsvSink
 from cartctl.sinks.summary import format_summary, trace_metrics, warn_host_losses
-
-RERUN_MODES = ("auto", "spawn", "connect", "save", "off")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -88,13 +87,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="simulate on a virtual clock as fast as the CPU allows (simulated plants)",
     )
-    p.add_argument("--rerun", choices=RERUN_MODES, default="auto",
-                   help="auto: record to --out and open the viewer where a display exists; spawn: "
-                        "record and open the viewer; connect: record and stream to a running viewer; "
-                        "save: record only; off: no recording")  # fmt: skip
-    p.add_argument("--connect-url", metavar="URL", help="viewer address for --rerun connect")
-    p.add_argument("--out", default="logs", metavar="DIR", help="where the trace and recording go")
-    add_name_option(p, default="run-DATE-TIME")
+    add_rerun_options(p)
+    add_output_options(p, name_default="run-DATE-TIME")
     p.add_argument(
         "--voltage-limit",
         type=float,
@@ -125,15 +119,6 @@ def _rerun_sink(args: argparse.Namespace, path: Path) -> Any:
     # every 200 ms anyway), 1000 on the virtual clock
     return RerunSink(mode, path, connect_url=args.connect_url,
                      batch_ticks=1000 if args.fast else 20)  # fmt: skip
-
-
-def _free_stem(out: Path, stem: str) -> str:
-    """``stem``, or ``stem-2``, ``stem-3`` … when a run of that name is already in ``out``."""
-    candidate, n = stem, 1
-    while (out / f"{candidate}.csv").exists() or (out / f"{candidate}.rrd").exists():
-        n += 1
-        candidate = f"{stem}-{n}"
-    return candidate
 
 
 def default_controller(plant: str) -> Path:
@@ -220,9 +205,7 @@ def run(args: argparse.Namespace) -> int:
     except BaseException:
         plant.close()
         raise
-    out = Path(args.out)
-    stem = args.name or _free_stem(out, datetime.now().strftime("run-%Y%m%d-%H%M%S"))
-    csv_path, rrd_path = out / f"{stem}.csv", out / f"{stem}.rrd"
+    csv_path, rrd_path = output_paths(args, "run")
     memory = MemorySink()
     sinks: list[Any] = [CsvSink(csv_path), memory]
     rerun = _rerun_sink(args, rrd_path)
