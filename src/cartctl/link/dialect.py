@@ -1,38 +1,31 @@
 """The microOS MAVLink dialect: message ids, CRC_EXTRA values and frame encoding.
 
-The cart's "generation A" firmware speaks MAVLink 1.0 (start byte 0xFE) with a custom dialect,
-``microos.xml`` next to this module. pymavlink's parser derives each message's CRC_EXTRA and payload
-length from that XML, and pymavlink's generator turns it into a Python module that packs and unpacks
-the payloads (:func:`generated_module`). THREAD_INFO (id 1) is not in the XML because its fields are
-not known; only its length and CRC_EXTRA are, as constants.
+The dialect is ``microos.xml`` next to this module. pymavlink's generator (mavgen) has turned it
+into the Python module :mod:`cartctl.link.vendor.microos_mavlink`, which cartctl ships and imports:
+its message classes pack and unpack the payloads and carry each message's CRC_EXTRA and payload
+length. It is regenerated with ``tools/regenerate_dialect.py`` whenever the XML changes (a test
+fails until it is). It was generated for wire protocol 2.0, so it writes both generations:
 
-"Generation B" firmware speaks MAVLink 2 (start byte 0xFD) and sends GPIOX (id 14) instead of GPIO.
-:func:`encode_gpiox_v2` builds such a frame by hand, so that a virtual cart can impersonate a
-generation-B cart.
+- "generation A" firmware speaks MAVLink 1 (start byte 0xFE): HEARTBEAT, THREAD_INFO, GPIO, EVENT
+  and PRINT. The :class:`Encoder` packs them with ``force_mavlink1=True``. THREAD_INFO (id 1) is not
+  in the XML because its fields are not known; only its length and CRC_EXTRA are, as constants.
+- "generation B" firmware speaks MAVLink 2 (start byte 0xFD) and sends GPIOX (id 14) instead of
+  GPIO. :func:`encode_gpiox_v2` packs one (pymavlink's MAVLink 2 framing, trailing zero bytes of
+  the payload truncated), so that a virtual cart can impersonate a generation-B cart.
 """
 
 from __future__ import annotations
 
-import contextlib
-import functools
-import importlib.util
-import io
 import struct
-import tempfile
-import threading
-from collections.abc import Sequence
-from importlib import resources
-from pathlib import Path
-from types import ModuleType
-from typing import Any
+from collections.abc import Callable, Sequence
 
-from pymavlink.generator import mavgen, mavparse
-from pymavlink.generator.mavcrc import x25crc
+from cartctl.link.vendor import microos_mavlink as mavlink
 
 __all__ = [
     "CRC_EXTRA",
     "GPIOX_CRC_EXTRA",
     "GPIOX_FLOAT_COUNT",
+    "GPIOX_PAYLOAD_LENGTH",
     "GPIO_FLOAT_COUNT",
     "GPIO_INT_COUNT",
     "MAV_TYPE_CAR",
@@ -48,21 +41,20 @@ __all__ = [
     "STX_V2",
     "Encoder",
     "encode_gpiox_v2",
-    "generated_module",
 ]
 
-MSG_HEARTBEAT = 0
+MSG_HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
 MSG_THREAD_INFO = 1
-MSG_GPIO = 3
-MSG_EVENT = 4
-MSG_PRINT = 5
-MSG_GPIOX = 14
-"""Message ids; GPIOX is generation B (MAVLink 2) only."""
+MSG_GPIO = mavlink.MAVLINK_MSG_ID_GPIO
+MSG_EVENT = mavlink.MAVLINK_MSG_ID_EVENT
+MSG_PRINT = mavlink.MAVLINK_MSG_ID_PRINT
+MSG_GPIOX = mavlink.MAVLINK_MSG_ID_GPIOX
+"""Message ids (0, 1, 3, 4, 5 and 14); GPIOX is generation B (MAVLink 2) only."""
 
-STX_V1 = 0xFE
-"""Start byte of a MAVLink 1 frame (generation A)."""
-STX_V2 = 0xFD
-"""Start byte of a MAVLink 2 frame (generation B)."""
+STX_V1 = mavlink.PROTOCOL_MARKER_V1
+"""Start byte of a MAVLink 1 frame (generation A), 0xFE."""
+STX_V2 = mavlink.PROTOCOL_MARKER_V2
+"""Start byte of a MAVLink 2 frame (generation B), 0xFD."""
 
 MAV_TYPE_CAR = 20
 """HEARTBEAT ``type`` sent by the cart."""
@@ -73,85 +65,49 @@ GPIOX_FLOAT_COUNT = 12
 PRINT_TEXT_BYTES = 32
 """Capacity of one PRINT frame's text field, in bytes."""
 
-GPIOX_CRC_EXTRA = 221
 _THREAD_INFO_PAYLOAD_LENGTH = 22
 _THREAD_INFO_CRC_EXTRA = 215
 _MAVLINK_VERSION = 2
 _SEQ_MODULO = 256
+_UINT8_MAX = 0xFF
 _UINT32_MAX = 0xFFFF_FFFF
-_GENERATED_NAME = "cartctl_link_microos_generated"
 
 
-def _dialect_xml() -> resources.abc.Traversable:
-    return resources.files(__package__) / "microos.xml"
+def _generation_a(
+    value: Callable[[type[mavlink.MAVLink_message]], int], thread_info: int
+) -> dict[int, int]:
+    """``value`` of each generation-A message class, by id, with THREAD_INFO's ``thread_info``."""
+    table = {i: value(cls) for i, cls in mavlink.mavlink_map.items() if i != MSG_GPIOX}
+    table[MSG_THREAD_INFO] = thread_info
+    return dict(sorted(table.items()))
 
 
-def _parse_dialect() -> tuple[dict[int, int], dict[int, int]]:
-    """CRC_EXTRA and payload length per message id, from the XML (plus THREAD_INFO's constants)."""
-    with resources.as_file(_dialect_xml()) as path, contextlib.redirect_stdout(io.StringIO()):
-        xml = mavparse.MAVXML(str(path), "1.0")
-    crc_extra = {m.id: m.crc_extra for m in xml.message}
-    length = {m.id: m.wire_length for m in xml.message}
-    crc_extra[MSG_THREAD_INFO] = _THREAD_INFO_CRC_EXTRA
-    length[MSG_THREAD_INFO] = _THREAD_INFO_PAYLOAD_LENGTH
-    return dict(sorted(crc_extra.items())), dict(sorted(length.items()))
+CRC_EXTRA: dict[int, int] = _generation_a(lambda cls: cls.crc_extra, _THREAD_INFO_CRC_EXTRA)
+"""CRC_EXTRA of each generation-A (MAVLink 1) message, by id."""
+PAYLOAD_LENGTH: dict[int, int] = _generation_a(
+    lambda cls: cls.unpacker.size, _THREAD_INFO_PAYLOAD_LENGTH
+)
+"""Payload length (bytes) of each generation-A (MAVLink 1) message, by id."""
+GPIOX_CRC_EXTRA = mavlink.MAVLink_gpiox_message.crc_extra
+"""CRC_EXTRA of GPIOX (221)."""
+GPIOX_PAYLOAD_LENGTH = mavlink.MAVLink_gpiox_message.unpacker.size
+"""GPIOX's full payload (52 bytes); a MAVLink 2 frame truncates its trailing zero bytes."""
 
 
-CRC_EXTRA: dict[int, int]
-PAYLOAD_LENGTH: dict[int, int]
-CRC_EXTRA, PAYLOAD_LENGTH = _parse_dialect()
+def _check_range(name: str, value: int, maximum: int) -> None:
+    if not 0 <= value <= maximum:
+        raise ValueError(f"{name} must be in 0..{maximum}, got {value}")
 
 
-_GENERATE_LOCK = threading.Lock()
+def _pack(message: mavlink.MAVLink_message, mav: mavlink.MAVLink, error: str, v1: bool) -> bytes:
+    """``message`` as a frame with ``mav``'s header fields, MAVLink 1 if ``v1`` else MAVLink 2.
 
-
-def generated_module() -> ModuleType:
-    """The pymavlink-generated Python module of the microOS dialect, built once per process.
-
-    mavgen writes the module into a temporary directory, from which it is imported; its progress
-    output is swallowed so that nothing reaches stdout. Swallowing it swaps ``sys.stdout`` for the
-    whole process, so the module is built once, at import of this module (normally in the main
-    thread, before any thread of the serial path prints), under a lock.
-
-    Returns
-    -------
-    ModuleType
-        The module, with ``MAVLink``, ``MAVLink_gpio_message`` and so on.
-
-    Raises
-    ------
-    RuntimeError
-        If pymavlink fails to generate the module.
+    A field value that does not fit its wire type raises ValueError, ``error`` in front.
     """
-    with _GENERATE_LOCK:
-        return _generate()
-
-
-@functools.cache
-def _generate() -> ModuleType:
-    sink = io.StringIO()
-    with (
-        resources.as_file(_dialect_xml()) as xml_path,
-        tempfile.TemporaryDirectory(prefix="cartctl-mavgen-") as tmp,
-        contextlib.redirect_stdout(sink),
-    ):
-        out = Path(tmp) / f"{_GENERATED_NAME}.py"
-        opts = mavgen.Opts(output=str(out), wire_protocol="1.0", language="Python3", validate=True)
-        if not mavgen.mavgen(opts, [str(xml_path)]):
-            raise RuntimeError(
-                f"pymavlink could not generate the microOS dialect:\n{sink.getvalue()}"
-            )
-        spec = importlib.util.spec_from_file_location(_GENERATED_NAME, out)
-        if spec is None or spec.loader is None:
-            raise RuntimeError(f"cannot import the generated dialect module {out}")
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-    return module
-
-
-def _check_uint32(name: str, value: int) -> None:
-    if not 0 <= value <= _UINT32_MAX:
-        raise ValueError(f"{name} must be in 0..{_UINT32_MAX}, got {value}")
+    try:
+        return message.pack(mav, force_mavlink1=v1)
+    except (struct.error, OverflowError) as exc:
+        raise ValueError(f"{error}: {exc}") from exc
 
 
 def _utf8_chunks(text: str, size: int) -> list[bytes]:
@@ -187,11 +143,11 @@ class Encoder:
         self.sysid = sysid
         self.compid = compid
         self.seq = 0
-        self._mav: Any = generated_module().MAVLink(None, srcSystem=sysid, srcComponent=compid)
+        self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
 
-    def _pack(self, message: Any) -> bytes:
+    def _pack(self, message: mavlink.MAVLink_message, error: str) -> bytes:
         self._mav.seq = self.seq
-        frame = bytes(message.pack(self._mav))
+        frame = _pack(message, self._mav, error, v1=True)
         self.seq = (self.seq + 1) % _SEQ_MODULO
         return frame
 
@@ -222,14 +178,11 @@ class Encoder:
                 f"GPIO needs {GPIO_FLOAT_COUNT} floats and {GPIO_INT_COUNT} ints, "
                 f"got {len(floats)} and {len(ints)}"
             )
-        _check_uint32("time_ms", time_ms)
-        message = generated_module().MAVLink_gpio_message(
+        _check_range("time_ms", time_ms, _UINT32_MAX)
+        message = mavlink.MAVLink_gpio_message(
             time_ms, [float(x) for x in floats], [int(i) for i in ints]
         )
-        try:
-            return self._pack(message)
-        except (struct.error, OverflowError) as exc:
-            raise ValueError(f"GPIO channel value does not fit its wire type: {exc}") from exc
+        return self._pack(message, "GPIO channel value does not fit its wire type")
 
     def heartbeat(self, time_ms: int, type: int = MAV_TYPE_CAR, data: bytes = bytes(8)) -> bytes:
         """One HEARTBEAT frame (``mavlink_version`` 2).
@@ -250,20 +203,14 @@ class Encoder:
         """
         if len(data) != 8:
             raise ValueError(f"HEARTBEAT data must be 8 bytes, got {len(data)}")
-        _check_uint32("time_ms", time_ms)
-        message = generated_module().MAVLink_heartbeat_message(
-            time_ms, type, list(data), _MAVLINK_VERSION
-        )
-        try:
-            return self._pack(message)
-        except struct.error as exc:
-            raise ValueError(f"HEARTBEAT field out of range: {exc}") from exc
+        _check_range("time_ms", time_ms, _UINT32_MAX)
+        message = mavlink.MAVLink_heartbeat_message(time_ms, type, list(data), _MAVLINK_VERSION)
+        return self._pack(message, "HEARTBEAT field out of range")
 
     def event(self, type: int) -> bytes:
         """One EVENT frame (``type`` 1000..1007 are QRC's buttons 0..7)."""
-        if not 0 <= type <= 0xFFFF:
-            raise ValueError(f"EVENT type must be in 0..65535, got {type}")
-        return self._pack(generated_module().MAVLink_event_message(type))
+        _check_range("EVENT type", type, 0xFFFF)
+        return self._pack(mavlink.MAVLink_event_message(type), "EVENT type out of range")
 
     def print_text(self, text: str) -> list[bytes]:
         """PRINT frames carrying ``text`` (UTF-8), split into chunks of at most 32 bytes.
@@ -277,9 +224,8 @@ class Encoder:
         """
         if "\x00" in text:
             raise ValueError("PRINT text must not contain NUL characters")
-        module = generated_module()
         return [
-            self._pack(module.MAVLink_print_message(chunk))
+            self._pack(mavlink.MAVLink_print_message(chunk), "PRINT text does not fit")
             for chunk in _utf8_chunks(text, PRINT_TEXT_BYTES)
         ]
 
@@ -294,8 +240,8 @@ def encode_gpiox_v2(
 ) -> bytes:
     """A generation-B GPIOX frame (MAVLink 2, id 14): time and 12 float channels.
 
-    Trailing zero bytes of the 52-byte payload are truncated, as MAVLink 2 does (at least one byte
-    stays). The frame is unsigned (incompat flags 0).
+    pymavlink's MAVLink 2 framing truncates trailing zero bytes of the 52-byte payload (at least
+    one byte stays). The frame is unsigned (incompat flags 0).
 
     Parameters
     ----------
@@ -310,19 +256,18 @@ def encode_gpiox_v2(
     -------
     bytes
         The frame, 13 to 64 bytes long.
+
+    Raises
+    ------
+    ValueError
+        On a wrong number of channels or a value that does not fit its wire type.
     """
     if len(floats) != GPIOX_FLOAT_COUNT:
         raise ValueError(f"GPIOX needs {GPIOX_FLOAT_COUNT} floats, got {len(floats)}")
-    _check_uint32("time_ms", time_ms)
-    try:
-        payload = struct.pack(f"<I{GPIOX_FLOAT_COUNT}f", time_ms, *floats).rstrip(b"\x00")
-    except (struct.error, OverflowError) as exc:
-        raise ValueError(f"GPIOX channel value does not fit float32: {exc}") from exc
-    payload = payload or b"\x00"
-    header = bytes([len(payload), 0, 0, seq, sysid, compid]) + MSG_GPIOX.to_bytes(3, "little")
-    crc = x25crc(header + payload)
-    crc.accumulate(bytes([GPIOX_CRC_EXTRA]))
-    return bytes([STX_V2]) + header + payload + crc.crc.to_bytes(2, "little")
-
-
-generated_module()  # built now, at import, before any thread of the serial path runs
+    _check_range("time_ms", time_ms, _UINT32_MAX)
+    for name, value in (("seq", seq), ("sysid", sysid), ("compid", compid)):
+        _check_range(name, value, _UINT8_MAX)
+    mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+    mav.seq = seq
+    message = mavlink.MAVLink_gpiox_message(time_ms, floats)
+    return _pack(message, mav, "GPIOX channel value does not fit float32", v1=False)

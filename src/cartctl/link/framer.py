@@ -11,6 +11,11 @@ On a header that does not fit a known message, or a CRC mismatch, only the start
 the scan resumes at the next byte, so a false start in line noise never swallows the real frame that
 follows (pymavlink's own parser can). Every byte that is not part of a valid frame is counted once
 in :attr:`LinkStats.garbage_bytes`.
+
+The framer finds and checks frames itself (header lengths, X.25 CRC and CRC_EXTRA come from the
+generated dialect module, :mod:`cartctl.link.vendor.microos_mavlink`, through
+:mod:`~cartctl.link.dialect`); that module's ``MAVLink.decode`` then unpacks the payload of each
+valid generation-A frame.
 """
 
 from __future__ import annotations
@@ -19,11 +24,10 @@ import re
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from pymavlink.generator.mavcrc import x25crc
-
 from cartctl.link.dialect import (
     CRC_EXTRA,
     GPIOX_CRC_EXTRA,
+    GPIOX_PAYLOAD_LENGTH,
     MSG_EVENT,
     MSG_GPIO,
     MSG_GPIOX,
@@ -32,7 +36,6 @@ from cartctl.link.dialect import (
     MSG_THREAD_INFO,
     PAYLOAD_LENGTH,
     STX_V1,
-    generated_module,
 )
 from cartctl.link.messages import (
     Event,
@@ -43,16 +46,16 @@ from cartctl.link.messages import (
     PrintText,
     ThreadInfo,
 )
+from cartctl.link.vendor import microos_mavlink as mavlink
 
 __all__ = ["Framer", "LinkStats"]
 
 _START = re.compile(rb"[\xfd\xfe]")
-_V1_HEADER = 6
-_V2_HEADER = 10
+_V1_HEADER = mavlink.HEADER_LEN_V1
+_V2_HEADER = mavlink.HEADER_LEN_V2
 _CRC_BYTES = 2
-_V2_SIGNATURE = 13
-_V2_SIGNED = 0x01
-_GPIOX_MAX_PAYLOAD = 52
+_V2_SIGNATURE = mavlink.MAVLINK_SIGNATURE_BLOCK_LEN
+_V2_SIGNED = mavlink.MAVLINK_IFLAG_SIGNED
 _SEQ_MODULO = 256
 
 _WAIT = 0
@@ -98,15 +101,17 @@ class LinkStats:
 
 def _crc_ok(buf: bytearray, start: int, crc_at: int, extra: bytes) -> bool:
     """Whether the CRC at ``buf[crc_at:crc_at + 2]`` matches ``buf[start:crc_at]`` + ``extra``."""
-    crc = x25crc(bytes(buf[start:crc_at]) + extra).crc
+    crc = mavlink.x25crc(bytes(buf[start:crc_at]) + extra).crc
     return crc == buf[crc_at] | (buf[crc_at + 1] << 8)
 
 
-def _convert(msgid: int, frame: bytes, mav: Any, seq: int, sysid: int, compid: int) -> Message:
+def _convert(
+    msgid: int, frame: bytes, mav: mavlink.MAVLink, seq: int, sysid: int, compid: int
+) -> Message:
     """The message of a checked generation-A frame; pymavlink's module unpacks the payload."""
     if msgid == MSG_THREAD_INFO:
         return ThreadInfo(frame[_V1_HEADER:-_CRC_BYTES], seq, sysid, compid)
-    decoded = mav.decode(bytearray(frame))
+    decoded: Any = mav.decode(bytearray(frame))
     if msgid == MSG_GPIO:
         return Gpio(
             decoded.time, tuple(decoded.gpio_float), tuple(decoded.gpio_int), seq, sysid, compid
@@ -140,7 +145,7 @@ class Framer:
     def __init__(self) -> None:
         self.stats = LinkStats()
         self._buf = bytearray()
-        self._mav: Any = generated_module().MAVLink(None, srcSystem=0, srcComponent=0)
+        self._mav = mavlink.MAVLink(None, srcSystem=0, srcComponent=0)
         self._last_seq: dict[tuple[int, int], int] = {}
 
     @property
@@ -217,7 +222,7 @@ class Framer:
         length = buf[pos + 1]
         incompat = buf[pos + 2]
         msgid = buf[pos + 7] | (buf[pos + 8] << 8) | (buf[pos + 9] << 16)
-        if msgid != MSG_GPIOX or length > _GPIOX_MAX_PAYLOAD or incompat & ~_V2_SIGNED:
+        if msgid != MSG_GPIOX or length > GPIOX_PAYLOAD_LENGTH or incompat & ~_V2_SIGNED:
             return _REJECT
         size = _V2_HEADER + length + _CRC_BYTES + (_V2_SIGNATURE if incompat & _V2_SIGNED else 0)
         if len(buf) - pos < size:
