@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import shlex
-import sys
 from typing import Any
 
+from cartctl.commands.options import command_line
 from cartctl.design.build import ESTIMATOR_GAINS
 from cartctl.design.controllerfile import common_loop_delay, save_controller
 from cartctl.design.kalman import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOISE_STD_V
@@ -188,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
     designs = design_models(request, models, names)
     motors_json = designs.entries()
     if args.out:
-        command = "cartctl " + shlex.join(sys.argv[1:]) if sys.argv[1:] else "cartctl design"
+        command = command_line("design")
         save_controller(
             controller_file(designs, args.model, command=command, period_s=models.period_s),
             args.out,

@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import shlex
 import sys
 
-from cartctl.commands.options import add_map_option
+from cartctl.commands.options import add_map_option, command_line
 from cartctl.data import read_trace
 from cartctl.errors import InputError
 from cartctl.identification.arx import ArxFit
@@ -187,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
     for note in result.notes:
         print(f"cartctl identify: note: {note}", file=sys.stderr)
     if args.out:
-        source = "cartctl " + shlex.join(sys.argv[1:]) if sys.argv[1:] else "cartctl identify"
+        source = command_line("identify")
         save_models(model_file(result, args.files, request, source=source), args.out)
     if args.report:
         from cartctl.identification.summary import write_identify_report

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import math
+import shlex
+import sys
 from datetime import datetime
 from pathlib import Path
 
@@ -98,6 +100,15 @@ def _free_stem(out: Path, stem: str) -> str:
         n += 1
         candidate = f"{stem}-{n}"
     return candidate
+
+
+def command_line(command: str) -> str:
+    """The command line being run, as the files it writes record it (their provenance).
+
+    ``cartctl`` and the process's arguments, quoted for a shell; ``cartctl COMMAND`` when the
+    process has no arguments (a call from Python).
+    """
+    return "cartctl " + shlex.join(sys.argv[1:]) if sys.argv[1:] else f"cartctl {command}"
 
 
 def add_map_option(p: argparse.ArgumentParser) -> None:

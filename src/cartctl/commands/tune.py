@@ -113,10 +113,10 @@ def plot_tuning(path: str, method: str, results: Sequence[tuning.TuneResult]) ->
     fig.savefig(path)
 
 
-def choose(args: argparse.Namespace, result: tuning.TuneResult) -> list[str]:
+def choose(args: argparse.Namespace, result: tuning.TuneResult) -> str:
     """Write the chosen setting's controller file, as ``cartctl design`` would.
 
-    Returns the design command's arguments (recorded in the file as its ``command``).
+    Returns the design command (``cartctl design ...``), as the file records it.
     """
     if not result.feasible:
         raise InputError(f"--choose {result.index}: that setting is infeasible ({result.reason})")
@@ -128,7 +128,7 @@ def choose(args: argparse.Namespace, result: tuning.TuneResult) -> list[str]:
     command = "cartctl " + shlex.join(argv)
     save_controller(controller_file(designs, args.model, command=command,
                                     period_s=models.period_s), args.out)  # fmt: skip
-    return argv
+    return command
 
 
 def run(args: argparse.Namespace) -> int:
@@ -148,8 +148,8 @@ def run(args: argparse.Namespace) -> int:
         plot_tuning(args.plot, args.method, results)
     chosen: dict[str, Any] | None = None
     if args.choose is not None:
-        argv = choose(args, next(r for r in results if r.index == args.choose))
-        chosen = {"index": args.choose, "out": args.out, "command": "cartctl " + shlex.join(argv)}
+        command = choose(args, next(r for r in results if r.index == args.choose))
+        chosen = {"index": args.choose, "out": args.out, "command": command}
     if args.json:
         print(dumps({"method": args.method, "model": str(args.model), "plant": args.plant,
                           "reference": args.reference, "duration_s": args.duration,
