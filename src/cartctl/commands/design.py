@@ -10,7 +10,7 @@ from cartctl.design.build import ESTIMATOR_GAINS
 from cartctl.design.controllerfile import common_loop_delay, save_controller
 from cartctl.design.kalman import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOISE_STD_V
 from cartctl.design.make import controller_file, design_models
-from cartctl.design.request import ANTI_WINDUP, PI_ESTIMATORS, DesignRequest
+from cartctl.design.request import ANTI_WINDUP, OPTIONS, PI_ESTIMATORS, DesignRequest
 from cartctl.errors import InputError
 from cartctl.jsonout import dumps
 from cartctl.modelfile import load_models
@@ -134,16 +134,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def request_from_args(args: argparse.Namespace) -> DesignRequest:
-    """The design request the options ask for (checked)."""
-    return DesignRequest(
-        method=args.method, phase_margin_deg=args.phase_margin, crossover_hz=args.crossover_hz,
-        bandwidth_hz=args.bandwidth_hz, anti_windup=args.anti_windup, estimator=args.estimator,
-        poles=args.poles, settling_time_s=args.settling_time, overshoot_percent=args.overshoot,
-        estimator_gain=args.estimator_gain, process_noise_std_v=args.process_noise_v,
-        bias_drift_std_v=args.bias_drift_v, measurement_noise_std_rad_s=args.measurement_noise,
-        extra_delay_ticks=args.extra_delay, voltage_limit_v=args.voltage_limit,
-        step_rad_s=args.step,
-    ).check()  # fmt: skip
+    """The design request the options ask for (checked).
+
+    Each request field takes the value of its option in :data:`~cartctl.design.request.OPTIONS`,
+    the table :meth:`~cartctl.design.request.DesignRequest.to_argv` writes design commands from,
+    so a written command parses back to its request.
+    """
+    # argparse's attribute for an option: '--phase-margin' -> phase_margin
+    values = {field: getattr(args, flag[2:].replace("-", "_")) for field, flag in OPTIONS.items()}
+    return DesignRequest(method=args.method, **values).check()
 
 
 def _format(method: str, motors: dict[str, dict[str, Any]]) -> str:
