@@ -26,9 +26,10 @@ from dataclasses import dataclass
 
 from cartctl.link.bridge import SEQ_MODULO as TICK_MODULO
 from cartctl.link.bridge import SEQ_WINDOW, STATUS_DRIVING, STATUS_WATCHDOG, WATCHDOG_MS
+from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT
 
 __all__ = ["STATUS_DRIVING", "STATUS_WATCHDOG", "TICK_MODULO", "WATCHDOG_MS", "BridgeFirmware",
-           "CartIO"]  # fmt: skip
+           "CartIO", "HeldChannels"]  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,7 +48,34 @@ def _finite_or_zero(value: float) -> float:
     return value if math.isfinite(value) else 0.0
 
 
-class BridgeFirmware:
+class HeldChannels:
+    """The GPIO channels a cart firmware holds, as microOS keeps them for ``control()``.
+
+    Attributes
+    ----------
+    in_floats, in_ints
+        The channels of the host's last GPIO, held until the next one arrives.
+    out_floats, out_ints
+        The channels the last ``control()`` wrote, which microOS sends to the host.
+    tick
+        The firmware's tick counter.
+    """
+
+    def reset_channels(self) -> None:
+        """Power-on state of the channels: every one 0, and the tick 0."""
+        self.in_floats: list[float] = [0.0] * GPIO_FLOAT_COUNT
+        self.in_ints: list[int] = [0] * GPIO_INT_COUNT
+        self.out_floats: list[float] = [0.0] * GPIO_FLOAT_COUNT
+        self.out_ints: list[int] = [0] * GPIO_INT_COUNT
+        self.tick = 0
+
+    def hold(self, floats: Sequence[float], ints: Sequence[int]) -> None:
+        """Overwrite every input channel with those of a GPIO from the host."""
+        self.in_floats = [float(v) for v in floats]
+        self.in_ints = [int(v) for v in ints]
+
+
+class BridgeFirmware(HeldChannels):
     """``control()`` of the bridge sketch and the GPIO channels it holds (pure, no I/O)."""
 
     def __init__(self) -> None:
@@ -55,11 +83,7 @@ class BridgeFirmware:
 
     def reset(self) -> None:
         """Power-on state: every channel 0, tripped until the host's first frame."""
-        self.in_floats: list[float] = [0.0] * 8
-        self.in_ints: list[int] = [0] * 4
-        self.out_floats: list[float] = [0.0] * 8
-        self.out_ints: list[int] = [0] * 4
-        self.tick = 0
+        self.reset_channels()
         self._last_seq = 0
         self._last_new_ms = 0
         self._seen = False
@@ -73,8 +97,7 @@ class BridgeFirmware:
         and the numbers skipped in between count as lost, unless the jump is backwards or beyond
         :data:`~cartctl.link.bridge.SEQ_WINDOW` (a new host process).
         """
-        self.in_floats = [float(v) for v in floats]
-        self.in_ints = [int(v) for v in ints]
+        self.hold(floats, ints)
         seq = self.in_ints[0]
         if seq == self._last_seq:
             return

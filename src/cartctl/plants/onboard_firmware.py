@@ -29,7 +29,7 @@ from typing import Protocol
 
 from cartctl.cart import PERIOD_S
 from cartctl.errors import InputError
-from cartctl.plants.bridge_firmware import CartIO
+from cartctl.plants.bridge_firmware import CartIO, HeldChannels
 from cartctl.reference import ReferenceSchedule
 from cartctl.signals import MAX_DURATION_S
 
@@ -52,7 +52,7 @@ class _Controller(Protocol):
     def step(self, reference_rad_s: float, measured_rad_s: float) -> float: ...
 
 
-class OnboardFirmware:
+class OnboardFirmware(HeldChannels):
     """``control()`` running one controller per motor on the cart (a ``CartFirmware``).
 
     Parameters
@@ -92,18 +92,13 @@ class OnboardFirmware:
 
     def reset(self) -> None:
         """Power-on state: channels 0, controllers at rest, tick 0."""
-        self.in_floats: list[float] = [0.0] * 8
-        self.in_ints: list[int] = [0] * 4
-        self.out_floats: list[float] = [0.0] * 8
-        self.out_ints: list[int] = [0] * 4
-        self.tick = 0
+        self.reset_channels()
         for controller in self.controllers.values():
             controller.reset()
 
     def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int = 0) -> None:
         """A GPIO from the host: every input channel is overwritten and then held."""
-        self.in_floats = [float(v) for v in floats]
-        self.in_ints = [int(v) for v in ints]
+        self.hold(floats, ints)
 
     def reference_at(self, motor: str) -> float:
         """The reference (rad/s) of ``motor`` at the current tick."""
