@@ -4,9 +4,10 @@ The regression of the report (equation 6, table 1), for general orders::
 
     y[k] = φ(k)ᵀ θ + e[k],   φ(k) = [−y[k−1] … −y[k−na], u[k−nk] … u[k−nk−nb+1]]
 
-θ is the least-squares solution, computed from a QR factorisation of the regressor matrix (not the
-normal equations). Several experiments (segments) are stacked without regressors across their
-boundaries. Pure numpy/scipy: arrays in, frozen results out.
+θ is the least-squares solution from one Householder QR factorisation of the regressor matrix with
+the target appended, [Φ | y] (not the normal equations): the same triangular factor gives θ, the
+residual norm and the θ covariance. Several experiments (segments) are stacked without regressors
+across their boundaries. Pure numpy/scipy: arrays in, frozen results out.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.linalg import solve_triangular
+from scipy.linalg import qr, solve_triangular
 
 from cartctl.errors import InputError
 from cartctl.metrics import finite_or_none, fit_percent
@@ -118,6 +119,74 @@ def first_row(na: int, nb: int, nk: int) -> int:
     return max(na, nk + nb - 1)
 
 
+def _fill_regression(
+    out: NDArray[np.float64],
+    y: NDArray[np.float64],
+    u: NDArray[np.float64],
+    na: int,
+    nb: int,
+    nk: int,
+    start: int,
+) -> None:
+    """Write the rows k = start … n − 1 of one experiment's [Φ | y] into ``out``.
+
+    ``out`` has shape (n − start, na + nb + 1); each column is filled from a shifted view of
+    ``y`` or ``u``, without intermediate arrays.
+    """
+    n = y.size
+    for i in range(1, na + 1):
+        np.negative(y[start - i : n - i], out=out[:, i - 1])
+    for j in range(nb):
+        out[:, na + j] = u[start - nk - j : n - nk - j]
+    out[:, na + nb] = y[start:]
+
+
+def augmented_regression(
+    segments: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    na: int,
+    nb: int,
+    nk: int,
+    start: int | None = None,
+) -> NDArray[np.float64]:
+    """Regressor matrix and target of all experiments as one array [Φ | y], column-major.
+
+    Parameters
+    ----------
+    segments : sequence of (y, u)
+        Experiments as float arrays (see :func:`as_segments`).
+    na, nb, nk : int
+        Orders and input delay.
+    start : int, optional
+        First regression row of each experiment (default :func:`first_row`); experiments not
+        longer than ``start`` give no rows. No regressor crosses an experiment's boundary.
+
+    Returns
+    -------
+    ndarray, shape (rows, na + nb + 1), Fortran order
+        Columns −y[k−1] … −y[k−na], u[k−nk] … u[k−nk−nb+1], then the target y[k]. The array is
+        allocated once and filled in place, ready for an in-place QR factorisation.
+
+    Raises
+    ------
+    IdentificationError
+        No experiment is longer than ``start``.
+    """
+    start = first_row(na, nb, nk) if start is None else start
+    used = [(y, u) for y, u in segments if y.size > start]
+    if not used:
+        raise IdentificationError(
+            f"too few samples: the model needs more than {start} samples per experiment"
+        )
+    rows = sum(y.size - start for y, _ in used)
+    out = np.empty((rows, na + nb + 1), order="F")
+    row = 0
+    for y, u in used:
+        m = y.size - start
+        _fill_regression(out[row : row + m], y, u, na, nb, nk, start)
+        row += m
+    return out
+
+
 def regression(
     y: NDArray[np.float64],
     u: NDArray[np.float64],
@@ -128,12 +197,10 @@ def regression(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Regressor matrix Φ, shape (n − start, na + nb), and target y[start:], for one experiment.
 
-    ``start`` is at least :func:`first_row` (:func:`stacked_regression` chooses it).
+    ``start`` is at least :func:`first_row`. Both are views of one array from
+    :func:`augmented_regression`.
     """
-    n = y.size
-    cols = [-y[start - i : n - i] for i in range(1, na + 1)]
-    cols += [u[start - nk - j : n - nk - j] for j in range(nb)]
-    return np.column_stack(cols) if cols else np.empty((n - start, 0)), y[start:]
+    return stacked_regression([(y, u)], na, nb, nk, start)
 
 
 def stacked_regression(
@@ -143,16 +210,12 @@ def stacked_regression(
     nk: int,
     start: int | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Φ and target of several experiments, stacked (no regressor crosses a boundary)."""
-    start = first_row(na, nb, nk) if start is None else start
-    parts = [regression(y, u, na, nb, nk, start) for y, u in segments if y.size > start]
-    if not parts:
-        raise IdentificationError(
-            f"too few samples: the model needs more than {start} samples per experiment"
-        )
-    phi = np.concatenate([p[0] for p in parts]) if len(parts) > 1 else parts[0][0]
-    target = np.concatenate([p[1] for p in parts]) if len(parts) > 1 else parts[0][1]
-    return phi, target
+    """Φ and target of several experiments, stacked (no regressor crosses a boundary).
+
+    Views of the one array built by :func:`augmented_regression` (no copies).
+    """
+    phi_y = augmented_regression(segments, na, nb, nk, start)
+    return phi_y[:, :-1], phi_y[:, -1]
 
 
 def check_orders(na: int, nb: int, nk: int) -> None:
@@ -163,23 +226,43 @@ def check_orders(na: int, nb: int, nk: int) -> None:
 
 
 def least_squares(
-    phi: NDArray[np.float64], target: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Solve min ‖Φθ − y‖ by QR; return θ, the residuals and the θ standard deviations.
+    phi_y: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], float, NDArray[np.float64]]:
+    """Solve min ‖Φθ − y‖ from one QR factorisation of [Φ | y], overwriting ``phi_y``.
+
+    With [Φ | y] = Q [[R, z], [0, ρ]] (Householder QR, Q never formed): θ = R⁻¹ z, the
+    residual norm is ‖y − Φθ‖ = |ρ|, and the θ covariance σ̂² (ΦᵀΦ)⁻¹ = σ̂² R⁻¹ R⁻ᵀ with
+    σ̂² = ρ² / (rows − parameters), so the standard deviations are σ̂ times the row norms of R⁻¹.
+
+    Parameters
+    ----------
+    phi_y : ndarray, shape (rows, parameters + 1)
+        Regressor matrix with the target as its last column (:func:`augmented_regression`);
+        Fortran order lets the factorisation work in place. Its contents are destroyed.
+
+    Returns
+    -------
+    theta : ndarray, shape (parameters,)
+    residual_norm : float
+        ‖y − Φθ‖ (2-norm of the equation errors).
+    theta_std : ndarray, shape (parameters,)
+        Standard deviation of each θ entry, σ̂ √diag((ΦᵀΦ)⁻¹).
 
     Raises
     ------
     IdentificationError
-        Fewer equations than parameters + 1, or a rank-deficient Φ (the data does not excite
-        the model).
+        Fewer than :data:`MIN_ROWS_PER_PARAMETER` equations per parameter, or a rank-deficient
+        Φ (the data does not excite the model).
     """
-    n, p = phi.shape
+    n, p = phi_y.shape[0], phi_y.shape[1] - 1
     if n < MIN_ROWS_PER_PARAMETER * p:
         raise IdentificationError(
             f"too few samples for this model: {n} equations for {p} parameters; "
             f"record at least {MIN_ROWS_PER_PARAMETER * p} samples beyond the first few"
         )
-    q, r = np.linalg.qr(phi, mode="reduced")
+    # mode="raw" returns the triangular factor without forming Q (mode="r" would copy all rows)
+    _, r_aug = qr(phi_y, mode="raw", overwrite_a=True, check_finite=False)
+    r, z, rho = r_aug[:p, :p], r_aug[:p, p], float(abs(r_aug[p, p]))
     sv = np.linalg.svd(r, compute_uv=False)
     if sv[0] == 0.0 or sv[-1] <= RCOND * sv[0]:
         cond = np.inf if sv[-1] == 0.0 else sv[0] / sv[-1]
@@ -187,31 +270,75 @@ def least_squares(
             f"the regression is rank deficient (condition number {cond:.3g}): the data does not "
             "excite this model; use a richer excitation (square, prbs, multisine) or lower orders"
         )
-    theta = solve_triangular(r, q.T @ target)
-    residual = target - phi @ theta
-    sigma2 = float(residual @ residual) / (n - p)
-    r_inv = solve_triangular(r, np.eye(p))
-    theta_std = np.sqrt(sigma2 * np.sum(r_inv**2, axis=1))
-    return theta, residual, theta_std
+    theta = solve_triangular(r, z, check_finite=False)
+    r_inv = solve_triangular(r, np.eye(p), check_finite=False)
+    theta_std = rho / np.sqrt(n - p) * np.sqrt(np.sum(r_inv**2, axis=1))
+    return theta, rho, theta_std
+
+
+def _sum_squares(x: NDArray[np.float64]) -> float:
+    """Σ x², without BLAS.
+
+    numpy and scipy each bring their own multithreaded OpenBLAS; a numpy dot product between
+    scipy's QR calls leaves one library's threads spinning while the other's wait for the cores
+    (on 2 cores, fits of 10⁵ samples took about three times as long). einsum sums in numpy's own
+    loops.
+    """
+    return float(np.einsum("i,i->", x, x))
+
+
+def _fit_from_norms(error_norm: float, spread: float) -> float:
+    """NRMSE fit (%) 100 · (1 − ‖y − ŷ‖ / ‖y − mean(y)‖) from the two norms; NaN for no spread.
+
+    The same figure as :func:`cartctl.metrics.fit_percent`, for callers that have the norms.
+    """
+    if spread == 0.0:
+        return float("nan")
+    return float(100.0 * (1.0 - error_norm / spread))
+
+
+def _simulation_fit(
+    model: ArxModel, data: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]]
+) -> float:
+    """:func:`simulation_fit` of already checked experiments, without concatenating them."""
+    with np.errstate(over="ignore", invalid="ignore"):  # an unstable model may diverge
+        sims = [model.simulate(u) for _, u in data]
+        if not all(np.isfinite(sim).all() for sim in sims):
+            return float("-inf")
+        count = sum(y.size for y, _ in data)
+        mean = sum(float(y.sum()) for y, _ in data) / count if count else float("nan")
+        error2 = spread2 = 0.0
+        for (y, _), work in zip(data, sims, strict=True):  # each simulation is reused as work space
+            np.subtract(y, work, out=work)
+            error2 += _sum_squares(work)
+            np.subtract(y, mean, out=work)
+            spread2 += _sum_squares(work)
+        return _fit_from_norms(np.sqrt(error2), np.sqrt(spread2))
 
 
 def simulation_fit(model: ArxModel, segments: Sequence[Segment]) -> float:
-    """NRMSE fit (%) of the model simulated from rest on each experiment's input, all samples."""
-    ys, sims = [], []
-    with np.errstate(over="ignore", invalid="ignore"):  # an unstable model may diverge
-        for y, u in as_segments(segments):
-            ys.append(y)
-            sims.append(model.simulate(u))
-        sim = np.concatenate(sims)
-        if not np.isfinite(sim).all():
-            return float("-inf")
-        return fit_percent(np.concatenate(ys), sim)
+    """NRMSE fit (%) of the model simulated from rest on each experiment's input, all samples.
+
+    One figure over all experiments together (as if concatenated); −inf when the simulation
+    diverges, NaN when the measured output is constant.
+    """
+    return _simulation_fit(model, as_segments(segments))
 
 
 def prediction_fit(model: ArxModel, segments: Sequence[Segment]) -> float:
     """NRMSE fit (%) of the one-step-ahead prediction φ(k)ᵀθ on the experiments."""
     phi, target = stacked_regression(as_segments(segments), model.na, model.nb, model.nk)
     return fit_percent(target, phi @ model.theta)
+
+
+def _check_excited(data: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]]) -> None:
+    """Refuse an input voltage that is constant over all experiments (it excites nothing)."""
+    inputs = [u for _, u in data if u.size]
+    if inputs and min(float(u.min()) for u in inputs) == max(float(u.max()) for u in inputs):
+        raise IdentificationError(
+            f"the input voltage is constant ({inputs[0][0]:g} V) throughout: it does not excite "
+            "the motor; record an excitation experiment (cartctl excite --signal square)"
+        )
 
 
 def fit_arx(
@@ -247,21 +374,21 @@ def fit_arx(
     """
     check_orders(na, nb, nk)
     data = as_segments(segments)
-    u_all = np.concatenate([u for _, u in data])
-    if np.ptp(u_all) == 0.0:
-        raise IdentificationError(
-            f"the input voltage is constant ({u_all[0]:g} V) throughout: it does not excite the "
-            "motor; record an excitation experiment (cartctl excite --signal square)"
-        )
-    phi, target = stacked_regression(data, na, nb, nk, start)
-    theta, residual, theta_std = least_squares(phi, target)
+    _check_excited(data)
+    phi_y = augmented_regression(data, na, nb, nk, start)
+    rows = phi_y.shape[0]
+    target = phi_y[:, -1]
+    spread = float(np.sqrt(_sum_squares(target - target.mean())))  # before the QR overwrites phi_y
+    theta, residual_norm, theta_std = least_squares(phi_y)
     model = ArxModel.from_theta(theta, na=na, nb=nb, nk=nk, period_s=period_s)
     return ArxFit(
         model=model,
         theta_std=theta_std,
-        fit_simulation_percent=simulation_fit(model, eval_segments or data),
-        fit_prediction_percent=fit_percent(target, phi @ theta),
-        residual_rms=float(np.sqrt(np.mean(residual**2))),
-        n_samples=int(target.size),
+        fit_simulation_percent=(
+            simulation_fit(model, eval_segments) if eval_segments else _simulation_fit(model, data)
+        ),
+        fit_prediction_percent=_fit_from_norms(residual_norm, spread),
+        residual_rms=float(residual_norm / np.sqrt(rows)),
+        n_samples=int(rows),
         method="arx",
     )
