@@ -1,5 +1,5 @@
 """Allow ``python -m cartctl``."""
 
-from cartctl.cli import main
+from cartctl.cli import console_main
 
-raise SystemExit(main())
+raise SystemExit(console_main())

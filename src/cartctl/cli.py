@@ -61,10 +61,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         stopping.restore(handlers)
 
 
+def console_main() -> int:
+    """The ``cartctl`` program: :func:`main`, then the exit.
+
+    After a stop signal the stop signals are ignored until the process ends: a second one,
+    arriving while the interpreter shuts down (the Rerun SDK flushes at exit), must not cut the
+    exit short.
+    """
+    code = main()
+    if stopping.received() is not None:
+        stopping.ignore()
+    return code
+
+
 def _main(argv: Sequence[str] | None) -> int:
     try:
         parser = build_parser()
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ImportError):
+        # A signal inside an extension module's initialisation surfaces as its ImportError.
+        if stopping.received() is None and not isinstance(sys.exc_info()[1], KeyboardInterrupt):
+            raise
         print("cartctl: stopped while starting; nothing was done", file=sys.stderr)
         return stopping.exit_code()
     args = parser.parse_args(argv)
@@ -94,4 +110,4 @@ def _main(argv: Sequence[str] | None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(console_main())

@@ -20,7 +20,7 @@ from typing import Any
 
 from cartctl.errors import Interrupted
 
-__all__ = ["STOP_SIGNALS", "deferred", "exit_code", "install", "received", "restore"]
+__all__ = ["STOP_SIGNALS", "deferred", "exit_code", "ignore", "install", "received", "restore"]
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
@@ -54,6 +54,17 @@ def restore(previous: dict[int, Any]) -> None:
     """Put back the handlers :func:`install` replaced."""
     for signum, handler in previous.items():
         signal.signal(signum, handler)
+
+
+def ignore() -> None:
+    """Ignore the stop signals from now on: for the exit after a stop signal.
+
+    An ignored signal stays ignored while the interpreter finalises (a handler of ours would be
+    reset to the default there, and a late second signal would then kill the process).
+    """
+    if threading.current_thread() is threading.main_thread():
+        for signum in STOP_SIGNALS:
+            signal.signal(signum, signal.SIG_IGN)
 
 
 def received() -> int | None:

@@ -6,11 +6,17 @@ import argparse
 from typing import Any
 
 from cartctl.commands.options import command_line
-from cartctl.design.build import ESTIMATOR_GAINS
 from cartctl.design.controllerfile import common_loop_delay, save_controller
 from cartctl.design.kalman import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOISE_STD_V
 from cartctl.design.make import controller_file, design_models
-from cartctl.design.request import ANTI_WINDUP, OPTIONS, PI_ESTIMATORS, DesignRequest
+from cartctl.design.request import (
+    ANTI_WINDUP,
+    ESTIMATOR_GAINS,
+    OPTIONS,
+    PI_ESTIMATORS,
+    DesignRequest,
+    estimator_gain_name,
+)
 from cartctl.errors import InputError
 from cartctl.jsonout import dumps
 from cartctl.modelfile import load_models
@@ -80,8 +86,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     est.add_argument(
         "--estimator-gain",
         choices=ESTIMATOR_GAINS,
+        type=estimator_gain_name,
         default=_DEFAULT.estimator_gain,
-        help="kalman: filterpy's filter (time-varying gain); steady-state: fixed gain",
+        help="time-varying: filterpy's Kalman filter, its gain converging from the initial "
+        "covariance; steady-state: the fixed gain it converges to (kalman: old name of "
+        "time-varying)",
     )
     est.add_argument(
         "--process-noise-v",
@@ -102,7 +111,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     est.add_argument(
         "--measurement-noise",
         type=float,
-        default=_DEFAULT.measurement_noise_std_rad_s,
+        default=_DEFAULT.extra_noise_std_rad_s,
         metavar="RAD_S",
         help="measurement noise beyond encoder quantisation, std in rad/s (default 0)",
     )

@@ -21,14 +21,12 @@ from cartctl.design.entries import _Gains, kalman_from_entry
 from cartctl.design.kalman import KalmanDesign
 from cartctl.design.pi import PiDesign
 from cartctl.design.poles import PolesDesign
+from cartctl.design.request import ESTIMATOR_GAINS, estimator_gain_name
 from cartctl.errors import DataFileError, InputError
 from cartctl.runtime.base import Controller
 from cartctl.runtime.kalman import KalmanSpeedEstimator, SteadyStateSpeedEstimator
 from cartctl.runtime.pi import PiController
 from cartctl.runtime.statefeedback import StateFeedbackController
-
-ESTIMATOR_GAINS = ("kalman", "steady-state")
-"""'kalman': filterpy's KalmanFilter (time-varying gain); 'steady-state': the fixed DARE gain."""
 
 
 def kalman_entry(design: KalmanDesign) -> dict[str, Any]:
@@ -79,8 +77,11 @@ def poles_entry(
 def make_estimator(
     design: KalmanDesign, gain: str
 ) -> KalmanSpeedEstimator | SteadyStateSpeedEstimator:
-    """The runtime estimator for a design: filterpy ('kalman') or fixed gain ('steady-state')."""
-    if gain == "kalman":
+    """The runtime estimator for a design: filterpy ('time-varying') or fixed ('steady-state').
+
+    ``'kalman'``, the old name of ``'time-varying'``, is read as it.
+    """
+    if estimator_gain_name(gain) == "time-varying":
         return KalmanSpeedEstimator(design)
     return SteadyStateSpeedEstimator(design)
 
@@ -112,7 +113,7 @@ def build_controllers(
                 f"{voltage_limit_v}"
             )
         limit = float(voltage_limit_v)
-    gain = str(controller.request.get("estimator_gain", "kalman"))
+    gain = estimator_gain_name(str(controller.request.get("estimator_gain", "time-varying")))
     if gain not in ESTIMATOR_GAINS:
         raise DataFileError(
             controller.path or "controller file", f"unknown estimator_gain {gain!r}"

@@ -72,7 +72,7 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
         if request.estimator == "kalman":
             kalman = design_kalman(model, process_noise_std_v=request.process_noise_std_v,
                                    bias_drift_std_v=request.bias_drift_std_v,
-                                   extra_noise_std_rad_s=request.measurement_noise_std_rad_s,
+                                   extra_noise_std_rad_s=request.extra_noise_std_rad_s,
                                    extra_delay_ticks=extra)  # fmt: skip
         ctrl = PiController(d.kp, d.ki, model.period_s, voltage_limit_v=request.voltage_limit_v,
                             anti_windup=request.anti_windup,
@@ -90,7 +90,7 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
         extra_delay_ticks=extra,
         process_noise_std_v=request.process_noise_std_v,
         bias_drift_std_v=request.bias_drift_std_v,
-        extra_noise_std_rad_s=request.measurement_noise_std_rad_s,
+        extra_noise_std_rad_s=request.extra_noise_std_rad_s,
     )
     ctrl = StateFeedbackController(d, estimator=make_estimator(d.estimator, gain),
                                    voltage_limit_v=request.voltage_limit_v)  # fmt: skip

@@ -18,6 +18,15 @@ from cartctl.errors import InputError
 METHODS = ("pi", "poles")
 ANTI_WINDUP = ("conditional", "back-calculation", "none")
 PI_ESTIMATORS = ("none", "kalman")
+ESTIMATOR_GAINS = ("time-varying", "steady-state")
+"""The estimator's gain: filterpy's KalmanFilter (time-varying) or the fixed DARE gain."""
+_OLD_GAIN_NAMES = {"kalman": "time-varying"}
+
+
+def estimator_gain_name(name: str) -> str:
+    """The current name of an estimator gain: ``'kalman'``, its old name, is ``'time-varying'``."""
+    return _OLD_GAIN_NAMES.get(name, name)
+
 
 OPTIONS: dict[str, str] = {
     "phase_margin_deg": "--phase-margin",
@@ -31,7 +40,7 @@ OPTIONS: dict[str, str] = {
     "estimator_gain": "--estimator-gain",
     "process_noise_std_v": "--process-noise-v",
     "bias_drift_std_v": "--bias-drift-v",
-    "measurement_noise_std_rad_s": "--measurement-noise",
+    "extra_noise_std_rad_s": "--measurement-noise",
     "extra_delay_ticks": "--extra-delay",
     "voltage_limit_v": "--voltage-limit",
     "step_rad_s": "--step",
@@ -58,10 +67,14 @@ class DesignRequest:
         Pole placement: closed-loop poles as given (``0.8,0.7+0.1j,0.7-0.1j``).
     settling_time_s, overshoot_percent : float
         Pole placement: the dominant poles' 2 % settling time (s) and overshoot (%).
-    estimator_gain : {'kalman', 'steady-state'}
-        filterpy's time-varying filter, or the fixed steady-state gain.
-    process_noise_std_v, bias_drift_std_v, measurement_noise_std_rad_s : float
-        The estimator's noise levels (V, V per tick, rad/s).
+    estimator_gain : {'time-varying', 'steady-state'}
+        filterpy's filter with its time-varying gain, or the fixed steady-state gain. ``'kalman'``,
+        the old name of ``'time-varying'`` (both are Kalman gains), is read as it.
+    process_noise_std_v, bias_drift_std_v : float
+        The estimator's process noise (V) and its disturbance state's random walk (V per tick).
+    extra_noise_std_rad_s : float
+        Measurement noise beyond the encoder's quantisation (rad/s); the estimator's √R is this
+        and the quantisation noise together.
     extra_delay_ticks : int
         Ticks of loop delay beyond the model's (a PC-side loop over serial).
     voltage_limit_v : float
@@ -79,16 +92,24 @@ class DesignRequest:
     poles: str | None = None
     settling_time_s: float = 0.06
     overshoot_percent: float = 1.0
-    estimator_gain: str = "kalman"
+    estimator_gain: str = "time-varying"
     process_noise_std_v: float = DEFAULT_PROCESS_NOISE_STD_V
     bias_drift_std_v: float = DEFAULT_BIAS_DRIFT_STD_V
-    measurement_noise_std_rad_s: float = 0.0
+    extra_noise_std_rad_s: float = 0.0
     extra_delay_ticks: int = 0
     voltage_limit_v: float = SUPPLY_V
     step_rad_s: float = 10.0
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "estimator_gain", estimator_gain_name(self.estimator_gain))
+
     def check(self) -> DesignRequest:
         """This request, if its options are in range (one-line :class:`InputError` otherwise)."""
+        if self.estimator_gain not in ESTIMATOR_GAINS:
+            raise InputError(
+                f"estimator gain must be one of {', '.join(ESTIMATOR_GAINS)}, got "
+                f"'{self.estimator_gain}'"
+            )
         if self.method not in METHODS:
             raise InputError(f"method must be one of {', '.join(METHODS)}, got '{self.method}'")
         if not 0.0 < self.voltage_limit_v <= SUPPLY_V:
@@ -111,7 +132,7 @@ class DesignRequest:
             "extra_delay_ticks": self.extra_delay_ticks, "step_rad_s": self.step_rad_s,
             "estimator_gain": self.estimator_gain, "process_noise_std_v": self.process_noise_std_v,
             "bias_drift_std_v": self.bias_drift_std_v,
-            "measurement_noise_std_rad_s": self.measurement_noise_std_rad_s,
+            "extra_noise_std_rad_s": self.extra_noise_std_rad_s,
         }  # fmt: skip
         if self.method == "pi":
             req.update(phase_margin_deg=self.phase_margin_deg, anti_windup=self.anti_windup,
