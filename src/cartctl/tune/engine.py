@@ -21,7 +21,7 @@ from collections import deque
 from collections.abc import Callable, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -174,14 +174,27 @@ def one_blas_thread() -> None:
     threadpool_limits(limits=1, user_api="blas")
 
 
+class GridJob(Protocol):
+    """A job :func:`run_grid` can split: a dataclass with the settings as ``items``."""
+
+    items: tuple[tuple[int, dict[str, float]], ...]
+
+
+Job = TypeVar("Job", bound=GridJob)
+Row = TypeVar("Row")
+
+
 def run_grid(
-    job: TuneJob, jobs: int, progress: Callable[[int], None] | None = None
-) -> list[TuneResult]:
+    job: Job,
+    jobs: int,
+    progress: Callable[[int], None] | None = None,
+    evaluate: Callable[[Job], list[Row]] = evaluate_chunk,  # type: ignore[assignment]
+) -> list[Row]:
     """Every setting of ``job``, in grid order, on ``jobs`` processes.
 
     Parameters
     ----------
-    job : TuneJob
+    job : TuneJob or another dataclass with ``items``
         All the settings.
     jobs : int
         Processes (>= 1). With 1 everything runs in this process. Otherwise the first setting
@@ -189,23 +202,26 @@ def run_grid(
         not once per worker) and the rest in chunks of about a quarter of a worker's share.
     progress : callable, optional
         Called with the number of settings done so far as results arrive.
+    evaluate : callable
+        The worker function: a chunk (``job`` with some of its items) to its rows, each with an
+        ``index`` (default :func:`evaluate_chunk`; ``--robust`` passes its own).
     """
     items = job.items
-    results: list[TuneResult] = []
+    results: list[Row] = []
     for item in items if jobs == 1 else items[:1]:
-        results += evaluate_chunk(replace(job, items=(item,)))
+        results += evaluate(replace(job, items=(item,)))  # type: ignore[type-var]
         if progress is not None:
             progress(len(results))
     rest = items[1:] if jobs > 1 else ()
     if rest:
         size = max(1, math.ceil(len(rest) / (4 * jobs)))
-        chunks = [replace(job, items=rest[i : i + size]) for i in range(0, len(rest), size)]
+        chunks = [replace(job, items=rest[i : i + size]) for i in range(0, len(rest), size)]  # type: ignore[type-var]
         pool = ProcessPoolExecutor(max_workers=min(jobs, len(chunks)), initializer=one_blas_thread)
         try:
-            for future in as_completed([pool.submit(evaluate_chunk, c) for c in chunks]):
+            for future in as_completed([pool.submit(evaluate, c) for c in chunks]):
                 results += future.result()
                 if progress is not None:
                     progress(len(results))
         finally:
             pool.shutdown(cancel_futures=True)
-    return sorted(results, key=lambda r: r.index)
+    return sorted(results, key=lambda r: r.index)  # type: ignore[attr-defined]

@@ -1,0 +1,443 @@
+"""``cartctl tune --robust``: every design scored on the nominal model, on plants drawn from the
+model's uncertainty, and on the physics preset.
+
+Per grid setting (:func:`evaluate_robust_chunk`, in the worker processes of
+:func:`cartctl.tune.engine.run_grid`):
+
+1. the design of each motor, as plain ``tune`` makes it (:func:`cartctl.design.make.design_motor`);
+2. **nominal**: the real loop (``run_in_memory``) on the model, as plain ``tune`` scores it: these
+   are the row's usual figures;
+3. **sampled plants**: the same controllers against the nominal model and the N plants of
+   :mod:`cartctl.tune.uncertainty` at once (:func:`cartctl.tune.batch.simulate_batch`), measured
+   per plant by :func:`step_metrics` (the run summary's definitions, vectorised);
+4. **physics**: the real loop on ``make_plant('physics', preset)`` (with ``--extra-delay`` ticks of
+   delay). It is reported beside the rest but enters neither the worst case nor the choice: it is
+   the check that a design chosen on the model's uncertainty also does well on a plant it was not
+   chosen on.
+
+Per plant, each metric is the worse of motors a and b. Over the plants: the **worst case** is the
+maximum over the nominal model and the N sampled plants (a plant on which the loop never settles,
+or runs away, makes worst-case settling infinite; JSON ``null``, with the counts beside it); the
+**spread** is the 5th, 50th and 95th percentile over the N sampled plants, each the value of a
+sampled plant (numpy's ``inverted_cdf``: no interpolation, so infinities stay meaningful).
+
+The **robust Pareto front** is over (nominal settling time, worst-case overshoot), both to be
+minimised, among the feasible settings where both are finite. ``--choose best`` takes, among the
+feasible settings that settle on every plant (nominal and sampled), the one with the lowest
+worst-case overshoot, overshoots equal to 0.01 % (the table's resolution) counting as equal, then
+the fastest nominal settling, then the lowest index. Without ``--robust`` the same rule runs on the
+row's figures (:func:`choose_best_nominal`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cartctl.design.make import design_motor
+from cartctl.errors import CartctlError, InputError
+from cartctl.modelfile import ModelFile, load_models
+from cartctl.reference import reference_signal
+from cartctl.runtime.base import Controller
+from cartctl.stepinfo import SETTLING_FRACTION, encoder_quantum_rad_s
+from cartctl.tune.batch import ArxBatch, BatchTrace, simulate_batch
+from cartctl.tune.engine import TuneJob, scoring_plant, simulate
+from cartctl.tune.grid import AXES, TuneResult, design_request, pareto_front, worst_metrics
+from cartctl.tune.uncertainty import PlantSample
+
+FloatArray = NDArray[np.float64]
+
+ROBUST_METRICS = ("overshoot_percent", "settling_time_s", "rms_error", "peak_voltage_v")
+"""The figures reported per plant (%, s, rad/s, V), the worse of motors a and b."""
+
+PERCENTILES = (5, 50, 95)
+"""The spread: these percentiles over the sampled plants."""
+
+CHOICE_RESOLUTION_PERCENT = 0.01
+"""Overshoots that round to the same multiple of this (%) tie in ``--choose best``."""
+
+CHOICE_RULE = (
+    "lowest worst-case overshoot (to 0.01 %) among the feasible settings that settle on every "
+    "plant, then the fastest nominal settling, then the lowest index"
+)
+CHOICE_RULE_NOMINAL = (
+    "lowest overshoot (to 0.01 %) among the feasible settings that settle, then the fastest "
+    "settling, then the lowest index (worse of motors a and b)"
+)
+_SUMMARY_KEYS = {"overshoot_percent": "overshoot_percent", "settling_time_s": "settling_time_s",
+                 "rms_error": "rms_error", "peak_voltage_v": "max_abs_voltage"}  # fmt: skip
+
+
+# -- metrics over many plants --------------------------------------------------------------------
+
+
+def step_metrics(trace: BatchTrace, settling_floor: float) -> dict[str, FloatArray]:
+    """Per plant, the run summary's figures of one motor (``sinks.summary.motor_metrics``).
+
+    The first reference step from rest, from its first non-zero level until its next change:
+    overshoot (% of the step), settling time from the onset in the band max(2 % of the step,
+    ``settling_floor``) with the crossing interpolated linearly; over the whole trace, the RMS
+    tracking error and the largest |voltage|. Where the summary has None: ``inf`` settling for a
+    run that never settles, NaN for a figure that is undefined (no step in the reference, or a
+    step within its own settling band). Rows that ran away get ``inf`` for overshoot, settling
+    and RMS error.
+
+    Returns
+    -------
+    dict of str to ndarray, shape (N,)
+        ``overshoot_percent`` (%), ``settling_time_s`` (s), ``rms_error`` (rad/s),
+        ``peak_voltage_v`` (V).
+    """
+    t, ref, y = trace.time_s, trace.reference, trace.speed
+    n = y.shape[0]
+    with np.errstate(all="ignore"):
+        out = {
+            "overshoot_percent": np.full(n, np.nan),
+            "settling_time_s": np.full(n, np.nan),
+            "rms_error": np.sqrt(np.mean((ref - y) ** 2, axis=1)),
+            "peak_voltage_v": np.max(np.abs(trace.voltage), axis=1),
+        }
+    moved = np.flatnonzero(np.abs(ref) > 1e-9)
+    if moved.size:
+        start = int(moved[0])
+        changes = np.flatnonzero(np.abs(np.diff(ref[start:])) > 1e-9)
+        end = start + int(changes[0]) + 1 if changes.size else ref.size
+        if end - start >= 5:
+            size = float(ref[start])
+            ts = t[start:end]
+            onset = float(t[start])
+            with np.errstate(all="ignore"):
+                z = y[:, start:end] / size
+            excess = np.max(z, axis=1) - 1.0
+            out["overshoot_percent"] = np.where(excess <= 1e-12, 0.0, excess) * 100.0
+            band = max(SETTLING_FRACTION, settling_floor / abs(size))
+            if band < 1.0:
+                outside = np.abs(z - 1.0) > band
+                last = z.shape[1] - 1 - np.argmax(outside[:, ::-1], axis=1)
+                any_out = outside.any(axis=1)
+                j = np.minimum(last, z.shape[1] - 2)
+                rows = np.arange(n)
+                zj, zi = z[rows, j], z[rows, j + 1]
+                edge = np.where(zj > 1.0, 1.0 + band, 1.0 - band)
+                with np.errstate(all="ignore"):
+                    frac = (edge - zj) / (zi - zj)
+                settled = ts[j] + frac * (ts[j + 1] - ts[j]) - onset
+                settling = np.where(any_out, settled, ts[0] - onset)
+                out["settling_time_s"] = np.where(any_out & (last == z.shape[1] - 1), np.inf,
+                                                  settling)  # fmt: skip
+    for key in ("overshoot_percent", "settling_time_s", "rms_error"):
+        out[key] = np.where(trace.diverged, np.inf, out[key])
+    return out
+
+
+@dataclass(frozen=True)
+class RobustScore:
+    """One design over the plants: nominal, worst case, spread, and the physics preset.
+
+    Attributes
+    ----------
+    figures : dict of str to dict
+        Per metric of :data:`ROBUST_METRICS`: ``nominal`` (the real loop on the model: the row's
+        usual figure), ``worst`` (maximum over the nominal and the sampled plants; ``inf`` when a
+        plant never settles or runs away) and ``p5``, ``p50``, ``p95`` over the sampled plants.
+    plants : int
+        Sampled plants (the nominal model not counted).
+    unsettled : int
+        Plants (nominal and sampled) on which a motor never enters the settling band for good.
+    diverged : int
+        Plants on which the loop ran away (speed beyond 10⁶ rad/s).
+    physics : dict
+        The worse of motors a and b on the physics preset (``overshoot_percent``,
+        ``settling_time_s``, ``rms_error``, ``peak_voltage_v``), its ``motors`` entries as
+        ``cartctl run --json`` gives them, and ``failure`` (None, or what stopped the run).
+    """
+
+    figures: dict[str, dict[str, float | None]]
+    plants: int
+    unsettled: int
+    diverged: int
+    physics: dict[str, Any] = field(default_factory=dict)
+
+    def value(self, metric: str, which: str) -> float:
+        """A figure as a float: NaN where undefined (``worst`` may be ``inf``)."""
+        v = self.figures[metric][which]
+        return math.nan if v is None else float(v)
+
+    @property
+    def settles_everywhere(self) -> bool:
+        """Every plant, nominal and sampled, settles and none ran away."""
+        return math.isfinite(self.value("settling_time_s", "worst"))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (infinities become ``null`` in ``--json``; the counts say why)."""
+        return {"nominal": {k: self.figures[k]["nominal"] for k in ROBUST_METRICS},
+                "worst": {k: self.figures[k]["worst"] for k in ROBUST_METRICS},
+                **{f"p{p}": {k: self.figures[k][f"p{p}"] for k in ROBUST_METRICS}
+                   for p in PERCENTILES},
+                "plants": self.plants, "plants_unsettled": self.unsettled,
+                "plants_diverged": self.diverged, "settles_on_every_plant": self.settles_everywhere,
+                "physics": self.physics}  # fmt: skip
+
+
+def _worse_of_motors(per_motor: Sequence[dict[str, FloatArray]]) -> dict[str, FloatArray]:
+    """Per plant and metric, the larger of the motors; NaN (undefined) wins, then inf."""
+    out = {}
+    for key in ROBUST_METRICS:
+        stack = np.vstack([m[key] for m in per_motor])
+        out[key] = np.where(np.isnan(stack).any(axis=0), np.nan, np.max(stack, axis=0))
+    return out
+
+
+def score_plants(
+    per_motor: Sequence[dict[str, FloatArray]],
+    diverged: NDArray[np.bool_],
+    nominal: dict[str, float | None],
+    physics: dict[str, Any],
+) -> RobustScore:
+    """Aggregate :func:`step_metrics` of the motors (row 0 the nominal model, then the samples)
+    with the nominal figures of the real loop and the physics entry (see :class:`RobustScore`)."""
+    worse = _worse_of_motors(per_motor)
+    unsettled_rows = np.isinf(worse["settling_time_s"]) & ~diverged
+    figures: dict[str, dict[str, float | None]] = {}
+    for key in ROBUST_METRICS:
+        values = worse[key]
+        row: dict[str, float | None] = {"nominal": nominal.get(key)}
+        row["worst"] = None if np.isnan(values).any() else float(np.max(values))
+        sampled = values[1:]
+        for p in PERCENTILES:
+            v = (math.nan if not sampled.size or np.isnan(sampled).any()
+                 else float(np.percentile(sampled, p, method="inverted_cdf")))  # fmt: skip
+            row[f"p{p}"] = None if math.isnan(v) else v
+        figures[key] = row
+    return RobustScore(figures, int(diverged.size - 1), int(np.count_nonzero(unsettled_rows)),
+                       int(np.count_nonzero(diverged)), physics)  # fmt: skip
+
+
+# -- the grid ------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class RobustJob:
+    """A chunk of settings for the workers, with the plants (picklable).
+
+    Attributes
+    ----------
+    tune : TuneJob
+        Model, method, reference, duration, extra delay and physics preset, as plain ``tune``'s
+        job (its ``plant`` is 'sim': the nominal model; its own ``items`` unused).
+    sample : PlantSample
+        The sampled plants.
+    items : tuple of (int, dict)
+        The settings: (1-based grid index, axis values).
+    """
+
+    tune: TuneJob
+    sample: PlantSample
+    items: tuple[tuple[int, dict[str, float]], ...]
+
+
+@dataclass(frozen=True)
+class RobustRow:
+    """A setting's plain ``tune`` result (nominal) with its robust score and front mark."""
+
+    result: TuneResult
+    score: RobustScore | None = None
+    pareto: bool = False
+
+    @property
+    def index(self) -> int:
+        """The setting's 1-based grid index."""
+        return self.result.index
+
+    def to_dict(self) -> dict[str, Any]:
+        """The plain row (its keys unchanged) with ``robust``: :meth:`RobustScore.to_dict` and
+        ``pareto`` (the robust front), or None when infeasible."""
+        row = self.result.to_dict()
+        row["robust"] = (None if self.score is None
+                         else {**self.score.to_dict(), "pareto": self.pareto})  # fmt: skip
+        return row
+
+
+def _batch_plants(models: ModelFile, sample: PlantSample, motor: str, extra: int) -> ArxBatch:
+    nominal = models.motor(motor).with_extra_delay(extra)
+    s = sample.motors[motor]
+    return ArxBatch.from_arrays(np.vstack([np.asarray(nominal.ar, float)[None, :], s.ar]),
+                                np.vstack([np.asarray(nominal.b, float)[None, :], s.b]),
+                                np.concatenate([[nominal.nk], s.nk]),
+                                period_s=models.period_s)  # fmt: skip
+
+
+def _physics(job: TuneJob, controllers: dict[str, Controller], limit_v: float) -> dict[str, Any]:
+    plant = scoring_plant(replace(job, plant="physics"))
+    n = max(1, round(job.duration_s / plant.period_s))
+    refs = {m: reference_signal(job.reference, n, plant.period_s, m) for m in ("a", "b")}
+    summary, failure = simulate(plant, controllers, refs, period_s=plant.period_s,
+                                voltage_limit_v=limit_v)  # fmt: skip
+    worst = (
+        worst_metrics(summary["motors"]) if not failure else dict.fromkeys(_SUMMARY_KEYS.values())
+    )
+    return {"preset": job.preset, **{k: worst[v] for k, v in _SUMMARY_KEYS.items()},
+            "failure": failure, "motors": summary["motors"]}  # fmt: skip
+
+
+def evaluate_robust(job: RobustJob, models: ModelFile, index: int,
+                    settings: dict[str, float]) -> RobustRow:  # fmt: skip
+    """One setting: designed, run on the nominal model, the sampled plants and the physics preset."""
+    tj = job.tune
+    request = design_request(tj.method, settings, tj.extra_delay_ticks)
+    controllers: dict[str, Controller] = {}
+    for m in ("a", "b"):
+        try:
+            controllers[m] = design_motor(request, models.motor(m)).controller
+        except (CartctlError, np.linalg.LinAlgError) as exc:
+            return RobustRow(TuneResult(index, settings, False, f"motor {m}: {exc}"))
+    plant = scoring_plant(tj)
+    n = max(1, round(tj.duration_s / plant.period_s))
+    refs = {m: reference_signal(tj.reference, n, plant.period_s, m) for m in ("a", "b")}
+    summary, failure = simulate(plant, controllers, refs, period_s=plant.period_s,
+                                voltage_limit_v=request.voltage_limit_v)  # fmt: skip
+    if failure:
+        return RobustRow(TuneResult(index, settings, False, f"the run failed: {failure}"))
+    result = TuneResult(index, settings, True, motors=summary["motors"])
+    floor = encoder_quantum_rad_s(plant.period_s)
+    per_motor, diverged = [], np.zeros(job.sample.size + 1, dtype=bool)
+    for m in ("a", "b"):
+        trace = simulate_batch(controllers[m],
+                               _batch_plants(models, job.sample, m, tj.extra_delay_ticks),
+                               refs[m], voltage_limit_v=request.voltage_limit_v)  # fmt: skip
+        per_motor.append(step_metrics(trace, floor))
+        diverged |= trace.diverged
+    nominal = {k: result.worst[v] for k, v in _SUMMARY_KEYS.items()}
+    physics = _physics(tj, controllers, request.voltage_limit_v)
+    return RobustRow(result, score_plants(per_motor, diverged, nominal, physics))
+
+
+def evaluate_robust_chunk(job: RobustJob) -> list[RobustRow]:
+    """Every setting of a chunk (the worker function of the process pool)."""
+    models = load_models(job.tune.model)
+    return [evaluate_robust(job, models, i, s) for i, s in job.items]
+
+
+def mark_robust_pareto(rows: Sequence[RobustRow]) -> list[RobustRow]:
+    """The rows with ``pareto`` set: non-dominated in (nominal settling, worst-case overshoot)."""
+    points = []
+    for r in rows:
+        if r.score is None:
+            points.append([math.nan, math.nan])
+            continue
+        x = r.score.value("settling_time_s", "nominal")
+        y = r.score.value("overshoot_percent", "worst")
+        points.append([x if math.isfinite(x) else math.nan, y if math.isfinite(y) else math.nan])
+    front = pareto_front(np.reshape(points, (len(rows), 2)))
+    return [replace(r, pareto=bool(f)) for r, f in zip(rows, front, strict=True)]
+
+
+def _rounded(overshoot: float) -> float:
+    return round(overshoot / CHOICE_RESOLUTION_PERCENT)
+
+
+def choose_best_robust(rows: Sequence[RobustRow]) -> RobustRow:
+    """The setting ``--choose best`` takes with ``--robust`` (:data:`CHOICE_RULE`).
+
+    Raises
+    ------
+    InputError
+        No feasible setting settles on every plant.
+    """
+    candidates = [r for r in rows if r.score is not None and r.score.settles_everywhere
+                  and math.isfinite(r.score.value("overshoot_percent", "worst"))]  # fmt: skip
+    if not candidates:
+        raise InputError("--choose best: no feasible setting settles on every sampled plant; "
+                         "widen the grid or pick one with --choose N")  # fmt: skip
+
+    def key(r: RobustRow) -> tuple[float, float, int]:
+        assert r.score is not None
+        settling = r.score.value("settling_time_s", "nominal")
+        return (_rounded(r.score.value("overshoot_percent", "worst")),
+                settling if math.isfinite(settling) else math.inf, r.index)  # fmt: skip
+
+    return min(candidates, key=key)
+
+
+def choose_best_nominal(results: Sequence[TuneResult]) -> TuneResult:
+    """The setting ``--choose best`` takes without ``--robust`` (:data:`CHOICE_RULE_NOMINAL`).
+
+    Raises
+    ------
+    InputError
+        No feasible setting settles.
+    """
+    candidates = [r for r in results if r.feasible and r.worst["settling_time_s"] is not None
+                  and r.worst["overshoot_percent"] is not None]  # fmt: skip
+    if not candidates:
+        raise InputError("--choose best: no feasible setting settles; widen the grid or pick one "
+                         "with --choose N")  # fmt: skip
+    return min(candidates, key=lambda r: (_rounded(r.worst["overshoot_percent"]),  # type: ignore[arg-type]
+                                          r.worst["settling_time_s"], r.index))  # fmt: skip
+
+
+def sort_robust(rows: Sequence[RobustRow]) -> list[RobustRow]:
+    """Robust front first (by nominal settling), then the other scored settings by worst-case
+    overshoot, then the infeasible (by index)."""
+
+    def key(r: RobustRow) -> tuple[int, float, float, int]:
+        if r.score is None:
+            return (3, 0.0, 0.0, r.index)
+        settling = r.score.value("settling_time_s", "nominal")
+        worst = r.score.value("overshoot_percent", "worst")
+        settling = settling if not math.isnan(settling) else math.inf
+        worst = worst if not math.isnan(worst) else math.inf
+        if r.pareto:
+            return (0, settling, worst, r.index)
+        return (1, worst, settling, r.index)
+
+    return sorted(rows, key=key)
+
+
+def _num(x: float | None, fmt: str, scale: float = 1.0) -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "—"
+    if math.isinf(x):
+        return "∞"
+    return format(x * scale, fmt)
+
+
+def _span(lo: float | None, hi: float | None, fmt: str, scale: float = 1.0) -> str:
+    return f"{_num(lo, fmt, scale)}–{_num(hi, fmt, scale)}"
+
+
+def format_robust_table(method: str, rows: Sequence[RobustRow]) -> str:
+    """One row per setting; ``*`` marks the robust Pareto front; infeasible reasons below."""
+    axes = AXES[method]
+    heads = [f"{a.name} ({a.unit})" for a in axes]
+    lines = [
+        " " * 6 + " " * (19 * len(axes)) + f"{'overshoot %':^27}  {'settling ms':^25}  "
+        f"{'physics':^13}",
+        "   #  " + "".join(f"{h:>19}" for h in heads)
+        + f"{'nominal':>8}{'worst':>8}{'p5–p95':>11}  {'nominal':>7}{'worst':>7}{'p5–p95':>11}"
+        f"  {'os %':>6}{'ms':>6}  {'peak V':>6}  feasible",
+    ]  # fmt: skip
+    for r in rows:
+        settings = "".join(f"{r.result.settings[a.name]:>19g}" for a in axes)
+        s = r.score
+        if s is None:
+            lines.append(f" {r.index:>3}  {settings}" + " " * 75 + "no")
+            continue
+        f, ph = s.figures, s.physics
+        os_, st = f["overshoot_percent"], f["settling_time_s"]
+        lines.append(
+            f"{'*' if r.pareto else ' '}{r.index:>3}  {settings}"
+            f"{_num(os_['nominal'], '.2f'):>8}{_num(os_['worst'], '.2f'):>8}"
+            f"{_span(os_['p5'], os_['p95'], '.1f'):>11}  "
+            f"{_num(st['nominal'], '.0f', 1e3):>7}{_num(st['worst'], '.0f', 1e3):>7}"
+            f"{_span(st['p5'], st['p95'], '.0f', 1e3):>11}  "
+            f"{_num(ph.get('overshoot_percent'), '.2f'):>6}{_num(ph.get('settling_time_s'), '.0f', 1e3):>6}"
+            f"  {_num(f['peak_voltage_v']['worst'], '.2f'):>6}  yes"
+        )  # fmt: skip
+    lines += [f"  #{r.index}: {r.result.reason}" for r in rows if r.score is None]
+    return "\n".join(lines)
