@@ -46,6 +46,15 @@ PLANTS = 30
 METRICS = ("overshoot_percent", "settling_time_s", "rms_error", "peak_voltage_v")
 
 
+def _strict(text: str) -> Any:
+    """JSON that rejects NaN and infinities (as strict parsers do)."""
+
+    def reject(constant: str) -> None:
+        raise AssertionError(f"not strict JSON: {constant}")
+
+    return json.loads(text, parse_constant=reject)
+
+
 def _cli(*argv: str) -> tuple[int, str, str]:
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
@@ -66,7 +75,7 @@ def tuned(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
                                   "--jobs", "1", "--json", "--choose", "best", "--out",
                                   str(nominal))  # fmt: skip
     assert code == 0, err
-    return {"doc": json.loads(out), "nominal_doc": json.loads(out_nominal), "robust": robust,
+    return {"doc": _strict(out), "nominal_doc": _strict(out_nominal), "robust": robust,
             "nominal": nominal, "plot": plot, "tmp": tmp}  # fmt: skip
 
 
@@ -266,13 +275,26 @@ def test_theta_std_from_the_file_is_used_and_the_result_is_the_same_on_one_worke
                               "settling_time=0.06:0.1:0.04,overshoot=1", "--robust", "--plants",
                               "12", "--seed", "9", "--duration", "1", "--jobs", jobs, "--json")  # fmt: skip
         assert code == 0, err
-        docs.append(json.loads(out))
+        docs.append(_strict(out))
     assert docs[0] == docs[1]
     meta = docs[0]["robust"]
     assert meta["theta_std_available"] == {"a": True, "b": True}
     assert meta["theta_std"]["b"] == std and "theta_std_notes" in meta
     assert meta["theta_std_notes"] == {}
     assert all(r["robust"] is not None for r in docs[0]["settings"])
+
+
+def test_plants_that_never_settle_give_a_null_worst_case_and_say_so() -> None:
+    """A 0.6 s run: the step at 0.5 s leaves 10 ticks, too few for the slow plants to settle."""
+    code, out, err = _cli("tune", str(GROUND), "--method", "pi", "--grid",
+                          "phase_margin=65,crossover_hz=4", "--robust", "--plants", "10",
+                          "--duration", "0.6", "--jobs", "1", "--json")  # fmt: skip
+    assert code == 0, err
+    robust = _strict(out)["settings"][0]["robust"]
+    assert robust["worst"]["settling_time_s"] is None
+    assert robust["plants_unsettled"] > 0 and robust["plants_diverged"] == 0
+    assert robust["settles_on_every_plant"] is False and robust["pareto"] is True
+    assert robust["worst"]["overshoot_percent"] >= robust["nominal"]["overshoot_percent"]
 
 
 @pytest.mark.parametrize(

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from cartctl.cart import PERIOD_S
 from cartctl.commands.options import check_duration
 from cartctl.design.controllerfile import save_controller
 from cartctl.design.make import controller_file, design_models
@@ -125,7 +126,7 @@ def _check_robust(args: argparse.Namespace) -> None:
     plants = DEFAULT_PLANTS if args.plants is None else args.plants
     if not 1 <= plants <= MAX_PLANTS:
         raise InputError(f"--plants must be a number of plants in 1..{MAX_PLANTS}, got {plants}")
-    ticks = max(1, round(args.duration / 0.01))
+    ticks = max(1, round(args.duration / PERIOD_S))
     if (plants + 1) * ticks > MAX_PLANT_TICKS:
         raise InputError(
             f"--robust with {plants} plants and --duration {args.duration:g} s simulates "
@@ -184,6 +185,7 @@ def plot_tuning(path: str, method: str, results: Sequence[tuning.TuneResult]) ->
 def plot_robust(path: str, method: str, rows: Sequence[robustness.RobustRow], plants: int) -> None:
     """Nominal settling (ms) against overshoot (%): worst case (colour: p95 settling), nominal
     (grey, joined to it) and physics (x); the robust Pareto front ringed and numbered."""
+    from matplotlib import colormaps
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -202,10 +204,13 @@ def plot_robust(path: str, method: str, rows: Sequence[robustness.RobustRow], pl
     for x, y, s, _ in shown:
         ax.plot([x, x], [s.value("overshoot_percent", "nominal"), y], color="0.8", lw=1, zorder=1)
     xs = [x for x, *_ in shown]
-    worst = ax.scatter(xs, [y for _, y, *_ in shown], s=36, zorder=3, cmap="viridis",
-                       c=[min(s.value("settling_time_s", "p95"), 1e9) * 1e3 for *_, s, _ in shown],
+    p95 = [s.value("settling_time_s", "p95") * 1e3 for *_, s, _ in shown]
+    worst = ax.scatter(xs, [y for _, y, *_ in shown], s=36, zorder=3, plotnonfinite=True,
+                       cmap=colormaps["viridis"].with_extremes(bad="black"),
+                       c=[v if np.isfinite(v) else np.nan for v in p95],
                        label=f"worst case over the model and {plants} sampled plants")  # fmt: skip
-    fig.colorbar(worst, ax=ax, label="settling time, 95th percentile of the plants (ms)")
+    fig.colorbar(worst, ax=ax, label="settling time, 95th percentile of the plants (ms); "
+                 "black: more than 5 % never settle")  # fmt: skip
     ax.scatter(xs, [s.value("overshoot_percent", "nominal") for *_, s, _ in shown], s=12,
                color="0.5", zorder=2, label="nominal (the model)")  # fmt: skip
     phys = [(x, s.physics.get("overshoot_percent")) for x, _, s, _ in shown]
@@ -224,7 +229,7 @@ def plot_robust(path: str, method: str, rows: Sequence[robustness.RobustRow], pl
     ax.set_title(f"cartctl tune --method {method} --robust: {len(shown)} of {len(rows)} settings, "
                  "worse of motors a, b;\nringed: Pareto front of nominal settling against worst-case "
                  "overshoot", fontsize=10)  # fmt: skip
-    ax.legend(fontsize=8, loc="upper right")
+    ax.legend(fontsize=8, loc="best")
     ax.grid(True, color="0.9")
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
