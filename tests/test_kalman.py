@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import control
 import numpy as np
@@ -36,6 +37,7 @@ from cartctl.runtime.kalman import KalmanSpeedEstimator, SteadyStateSpeedEstimat
 from cartctl.runtime.pi import PiController
 from cartctl.runtime.statefeedback import StateFeedbackController
 
+ROOT = Path(__file__).resolve().parents[1]
 REPORT_A = ArxModel((-0.9356, 0.2173), (0.6466, -0.07751))
 
 
@@ -139,6 +141,47 @@ def test_filterpy_from_the_steady_state_covariance_is_the_fixed_filter() -> None
     varying, fixed = KalmanSpeedEstimator(design), SteadyStateSpeedEstimator(design)
     drive([varying, fixed], 50)
     np.testing.assert_allclose(varying.state, fixed.state, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["poles.toml", "serial-poles.toml"])
+def test_shipped_time_varying_estimators_run_the_fixed_gain_and_match_filterpy(name: str) -> None:
+    from filterpy.kalman import KalmanFilter
+
+    from cartctl.design.build import build_controllers
+    from cartctl.design.controllerfile import load_controller
+    from cartctl.design.entries import kalman_from_entry
+
+    controller = load_controller(ROOT / "controllers" / name)
+    assert controller.request["estimator_gain"] == "time-varying"
+    for motor, ctrl in build_controllers(controller).items():
+        assert isinstance(ctrl.estimator, SteadyStateSpeedEstimator)
+        design = kalman_from_entry(controller.motors[motor]["estimator"])
+        m = design.A.shape[0]
+        kf = KalmanFilter(dim_x=m, dim_z=1, dim_u=1)  # filterpy itself, from the file's matrices
+        kf.F, kf.B, kf.H = design.A.copy(), design.B.reshape(m, 1), design.C.reshape(1, m)
+        kf.Q, kf.R, kf.P = design.Q.copy(), np.array([[design.R]]), design.P.copy()
+        rng = np.random.default_rng(7)
+        fixed = ctrl.estimator
+        for y, u in zip(rng.normal(8.0, 2.0, 500), rng.normal(3.0, 2.0, 500), strict=True):
+            kf.update(float(y))
+            assert fixed.correct(float(y)) == pytest.approx(kf.x[0, 0], abs=1e-9)
+            kf.predict(u=float(u))
+            fixed.predict(float(u))
+
+
+def test_a_covariance_that_is_not_stationary_runs_filterpy() -> None:
+    import dataclasses
+
+    from cartctl.design.build import make_estimator
+
+    design = design_kalman(REPORT_A)
+    assert design.is_stationary()
+    assert isinstance(make_estimator(design, "time-varying"), SteadyStateSpeedEstimator)
+    assert isinstance(make_estimator(design, "steady-state"), SteadyStateSpeedEstimator)
+    moved = dataclasses.replace(design, P=design.P * 10.0)  # the gain would still change
+    assert not moved.is_stationary()
+    assert isinstance(make_estimator(moved, "time-varying"), KalmanSpeedEstimator)
+    assert isinstance(make_estimator(moved, "kalman"), KalmanSpeedEstimator)
 
 
 @pytest.mark.parametrize("kind", [KalmanSpeedEstimator, SteadyStateSpeedEstimator])

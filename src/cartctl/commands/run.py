@@ -215,6 +215,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.runtime.cartclock import CartClockedExecutor
     from cartctl.runtime.clock import MonotonicClock, VirtualClock
     from cartctl.runtime.executor import PeriodicExecutor
+    from cartctl.runtime.gcpause import gc_paused
 
     clock = VirtualClock() if args.fast else MonotonicClock()
     loop = ControlLoop(plant, controllers, references, sinks, now_s=clock.now_s,
@@ -234,13 +235,14 @@ def run(args: argparse.Namespace) -> int:
 
             scheduling = enable_realtime()
             sys.setswitchinterval(1e-4)  # a sink's thread must hand the GIL back within 0.1 ms
-        loop.start()
 
         def tick(k: int) -> bool:
             time_s = executor.time_s if clocked else executor.grid_index * period_s
             return loop.tick(k, executor.period_error_us, executor.start_s, time_s)
 
-        stats = executor.run(tick)
+        with gc_paused():  # no collector pass at a random tick (runtime.gcpause)
+            loop.start()  # after the one collection: a cart ticks on from its reset
+            stats = executor.run(tick)
     except KeyboardInterrupt:  # Ctrl-C, SIGTERM, SIGHUP (cartctl.stopping)
         loop.state.interrupted = True
     except PlantError as exc:

@@ -86,6 +86,23 @@ class KalmanDesign:
         m = self.A.shape[0]
         return (np.eye(m) - np.outer(self.L, self.C)) @ self.P
 
+    def is_stationary(self, rtol: float = 1e-9) -> bool:
+        """Whether a Kalman filter started from P keeps the gain L at every tick.
+
+        True when L = P Cᵀ / (C P Cᵀ + R) and one correct-and-predict step gives P back,
+        A (I − L C) P Aᵀ + Q = P, both to ``rtol`` (relative to the largest entry): then filterpy's
+        time-varying filter and the fixed-gain one compute the same estimates.
+        """
+        P, C = self.P, self.C
+        gain = P @ C / float(C @ P @ C + self.R)
+        again = self.A @ self.posterior_covariance() @ self.A.T + self.Q
+        scale_l = max(float(np.max(np.abs(self.L))), 1e-300)
+        scale_p = max(float(np.max(np.abs(P))), 1e-300)
+        return bool(
+            np.max(np.abs(gain - self.L)) <= rtol * scale_l
+            and np.max(np.abs(again - P)) <= rtol * scale_p
+        )
+
     def poles(self) -> NDArray[np.complex128]:
         """Estimator poles: eigenvalues of (I − L C) A, shape (m,), sorted by magnitude."""
         m = self.A.shape[0]

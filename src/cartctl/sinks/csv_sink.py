@@ -1,9 +1,11 @@
 """The CSV trace sink: contract 1 plus the closed-loop columns, flushed at least once a second.
 
-Rows are kept in memory and written in blocks of ``flush_every`` ticks (default 50: twice a second
-at 10 ms), each block followed by a flush, so a crash loses at most the last block. Writing happens
-in the loop's thread after the tick's command has gone out (a writer thread would compete for the
-GIL and add wake-up jitter); a block of 50 rows takes well under a millisecond.
+Each row is formatted as it comes (a few µs, the same every tick) and the lines are written in
+blocks of ``flush_every`` ticks (default 50: twice a second at 10 ms), each block followed by a
+flush, so a crash loses at most the last block. Writing happens in the loop's thread after the
+tick's command has gone out (a writer thread would compete for the GIL and add wake-up jitter).
+Formatting a whole block at its flush instead would put 50 rows' formatting, some 300 µs, into
+every 50th tick: 2 % of the ticks, the loop's 99th percentile.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ class CsvSink:
         self.path = Path(path)
         self.flush_every = max(1, int(flush_every))
         self._file: TextIO | None = None
-        self._rows: list[Sequence[float]] = []
+        self._lines: list[str] = []
         self.rows_written = 0
 
     def open(self, columns: Sequence[str]) -> None:
@@ -38,20 +40,18 @@ class CsvSink:
         self._file.flush()
 
     def write(self, row: Sequence[float]) -> None:
-        self._rows.append(row)
-        if len(self._rows) >= self.flush_every:
+        lines = self._lines
+        lines.append(",".join(map(str, row)))  # str: exact for floats (numpy ones too), whole ticks
+        if len(lines) >= self.flush_every:
             self._flush()
 
     def _flush(self) -> None:
-        if self._file is None or not self._rows:
+        if self._file is None or not self._lines:
             return
-        lines = [
-            ",".join(map(str, row)) for row in self._rows
-        ]  # str: exact for floats (numpy ones too), whole ticks
-        self._file.write("\n".join(lines) + "\n")
+        self._file.write("\n".join(self._lines) + "\n")
         self._file.flush()
-        self.rows_written += len(self._rows)
-        self._rows = []
+        self.rows_written += len(self._lines)
+        self._lines = []
 
     def close(self) -> None:
         if self._file is None:
