@@ -2,8 +2,8 @@
 
 ``cartctl tune --robust`` scores every design on a few hundred plants
 (:mod:`cartctl.tune.uncertainty`). Running :func:`cartctl.runtime.fast.run_in_memory` once per
-plant costs a Python loop per plant (1.7 ms per 2 s run for the PI, 13 ms for pole placement with
-filterpy's Kalman filter); here one Python loop over the ticks steps all N plants together, each
+plant costs a Python loop per plant (a few ms per 2 s run; ``benchmarks/bench_tune.py`` measures
+it); here one Python loop over the ticks steps all N plants together, each
 quantity an array of shape (N,) (or (N, m) for an estimator state).
 
 Per tick k it does, for every plant, exactly what one tick of ``cartctl run --fast`` does with one
