@@ -252,4 +252,4 @@ def describe_line(sample: PlantSample, model_path: str) -> str:
     lo, hi = GAIN_RANGE
     return (f"{sample.size} plants drawn around {model_path} (seed {sample.seed}): "
             + "; ".join(theta) + f"; DC gain × uniform[{lo:g}, {hi:g}] per motor; loop delay "
-            "nk − 1, nk or nk + 1 ticks (at least 1)")  # fmt: skip
+            "moved by −1, 0 or +1 tick per plant (nk at least 1)")  # fmt: skip
