@@ -131,7 +131,7 @@ def measure(
         try:
             with gc_paused():
                 loop.start()
-                executor.run(tick)
+                executor.run(tick, loop.idle)
         finally:
             loop.finish()
             sys.setswitchinterval(old)

@@ -261,6 +261,9 @@ class PhysicsPlant:
         self._speed_per_count = self._rad_per_count / params.period_s
         self._delay_substeps = round(params.actuation_delay() / h)
         self._rng = np.random.default_rng(seed) if params.noise_std_rad_s > 0.0 else None
+        limit, step = params.supply_v, params.pwm_step_v
+        top = math.floor(limit / step + 1e-9)  # the last whole PWM step within the supply
+        self._pwm = (limit, step, top)
         self.reset()
 
     # -- the Plant protocol -------------------------------------------------------------------
@@ -335,8 +338,7 @@ class PhysicsPlant:
         v = float(voltage_v)
         if not math.isfinite(v):
             return 0.0
-        limit, step = self.params.supply_v, self.params.pwm_step_v
-        top = math.floor(limit / step + 1e-9)  # the last whole step within the supply
+        limit, step, top = self._pwm
         return min(max(round(min(max(v, -limit), limit) / step), -top), top) * step
 
     @property

@@ -230,7 +230,9 @@ class PeriodicExecutor:
         self._skipped = 0
         self._end_s = math.nan
 
-    def run(self, tick: Callable[[int], bool]) -> TimingStats:
+    def run(
+        self, tick: Callable[[int], bool], idle: Callable[[], None] | None = None
+    ) -> TimingStats:
         """Call ``tick(k)`` on the deadline grid until it returns False or ``max_ticks`` ran.
 
         Parameters
@@ -239,6 +241,10 @@ class PeriodicExecutor:
             ``tick(k) -> bool`` with k the tick index (0, 1, ...); a false return value stops
             the run after this tick. An exception from it ends the run and propagates;
             :meth:`stats` still gives the ticks completed so far.
+        idle : callable, optional
+            Called after each tick, once its compute time is taken, before the wait for the next
+            deadline: work that must not count as the tick's (it shows as the next tick's period
+            error if it runs past the deadline).
 
         Returns
         -------
@@ -275,6 +281,8 @@ class PeriodicExecutor:
                 err_append(err)
                 comp_append(end - start)
                 self.last_compute_us = (end - start) * 1e6
+                if idle is not None:
+                    idle()
                 k += 1
                 if not keep_going or k == limit:  # the last tick: no next deadline to check
                     break

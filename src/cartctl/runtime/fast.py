@@ -46,7 +46,7 @@ def run_in_memory(
         def tick(k: int) -> bool:
             return loop.tick(k, executor.period_error_us, executor.start_s, executor.grid_index * period_s)  # fmt: skip
 
-        executor.run(tick)
+        executor.run(tick, loop.idle)
     except PlantError as exc:
         loop.state.failure = str(exc)
     finally:

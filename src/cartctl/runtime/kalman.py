@@ -199,6 +199,10 @@ class KalmanSpeedEstimator:
         """x̂, shape (m,) (a copy)."""
         return self.filter.x[:, 0].copy()
 
+    def state_values(self) -> list[float]:
+        """x̂ as a list of floats (a copy), for the per-tick arithmetic of state feedback."""
+        return self.filter.x[:, 0].tolist()
+
     @property
     def gain(self) -> NDArray[np.float64]:
         """The latest gain L[k], shape (m,)."""
@@ -223,6 +227,7 @@ class SteadyStateSpeedEstimator:
         # each row of A as its non-zero entries: the observer form has at most three per row
         self._A = [[(j, float(a)) for j, a in enumerate(design.A[i]) if a != 0.0] for i in range(m)]
         self._B = [float(b) for b in design.B]
+        self._AB = tuple(zip(self._A, self._B, strict=True))
         self.reset()
 
     def reset(self) -> None:
@@ -243,11 +248,20 @@ class SteadyStateSpeedEstimator:
         """x̂ ← A x̂ + B u with the voltage applied at this tick (V; non-finite counts as 0)."""
         u = float(voltage_v) if math.isfinite(voltage_v) else 0.0
         x = self._x
-        self._x = [
-            sum(a * x[j] for j, a in row) + b * u for row, b in zip(self._A, self._B, strict=True)
-        ]
+        new = []
+        for row, b in self._AB:  # plain loops: a generator per row costs more than the sums
+            acc = b * u
+            for j, a in row:
+                acc += a * x[j]
+            new.append(acc)
+        self._x = new
 
     @property
     def state(self) -> NDArray[np.float64]:
         """x̂, shape (m,) (a copy)."""
         return np.array(self._x)
+
+    def state_values(self) -> list[float]:
+        """x̂ as a list of floats, without a numpy array: the estimator's own list, not a copy
+        (each step replaces it, so it holds the values of the moment it was taken)."""
+        return self._x

@@ -38,9 +38,10 @@ MAX_VOLTAGE_V = SUPPLY_V
 class MemorySink:
     """Keeps every row in memory, for the run summary (same numbers as the CSV).
 
-    Each row is stored into a preallocated float64 block of :attr:`BLOCK_ROWS` rows (112 bytes per
-    row for the 14 columns of a simulated run: 1 GB for the longest run, 24 h), so a tick costs
-    the same small copy every time and no Python tuple is kept.
+    ``write`` keeps the row as it is; ``idle`` (after the tick's compute time is taken) copies the
+    rows kept into a preallocated float64 block of :attr:`BLOCK_ROWS` rows, so no Python tuple
+    is kept for long (112 bytes per row for the 14 columns of a simulated run: 1 GB for the longest
+    run, 24 h).
     """
 
     BLOCK_ROWS = 1024
@@ -50,26 +51,37 @@ class MemorySink:
         self._blocks: list[NDArray[np.float64]] = []
         self._block: NDArray[np.float64] = np.empty((self.BLOCK_ROWS, 0))
         self._filled = 0
+        self._rows: list[Sequence[float]] = []
 
     def open(self, columns: Sequence[str]) -> None:
         self.columns = tuple(columns)
-        self._blocks = []
+        self._blocks, self._rows = [], []
         self._block = np.empty((self.BLOCK_ROWS, len(self.columns)))
         self._filled = 0
 
     def write(self, row: Sequence[float]) -> None:
-        self._block[self._filled] = row
-        self._filled += 1
-        if self._filled == self.BLOCK_ROWS:
-            self._blocks.append(self._block)
-            self._block = np.empty_like(self._block)
-            self._filled = 0
+        rows = self._rows
+        rows.append(row)
+        if len(rows) >= self.BLOCK_ROWS:  # nobody calls idle(): pack from here
+            self.idle()
+
+    def idle(self) -> None:
+        """Copy the rows kept so far into the blocks."""
+        for row in self._rows:
+            self._block[self._filled] = row
+            self._filled += 1
+            if self._filled == self.BLOCK_ROWS:
+                self._blocks.append(self._block)
+                self._block = np.empty_like(self._block)
+                self._filled = 0
+        self._rows = []
 
     def close(self) -> None:
         """Nothing to flush."""
 
     def arrays(self) -> dict[str, NDArray[np.float64]]:
         """The rows as one array per column."""
+        self.idle()
         table = np.concatenate([*self._blocks, self._block[: self._filled]])
         return {name: table[:, i] for i, name in enumerate(self.columns)}
 
@@ -145,6 +157,7 @@ class ControlLoop:
         self.ref_b = _per_tick(references.get("b"), n)
         self.n_ticks = n
         self.sinks = list(sinks)
+        self._idlers = [s.idle for s in self.sinks if callable(getattr(s, "idle", None))]
         self.now_s = now_s
         self.limit = float(voltage_limit_v)
         self.period_s = float(period_s)
@@ -204,6 +217,7 @@ class ControlLoop:
         if self._clocked:  # send, then log the tick, then wait for the cart's next one
             self.plant.send(ua, ub)  # type: ignore[attr-defined]
             self._log(k, time_s, ua, ub, y, ra, rb, ea, eb, period_error_us, start_s)
+            self.idle()  # the cart's frame waits in the port meanwhile
             y_next = self.plant.receive()  # type: ignore[attr-defined]
         else:
             y_next = self.plant.step(ua, ub)
@@ -228,6 +242,15 @@ class ControlLoop:
             s.write(row)
         self.state.rows += 1
         self._last_time_s = row[0]
+
+    def idle(self) -> None:
+        """The sinks' work that need not delay a command (their ``idle``), after a tick.
+
+        An executor calls it once the tick's compute time is taken; on a cart-clocked plant the
+        tick itself calls it, between logging and waiting for the cart's next frame.
+        """
+        for idle in self._idlers:
+            idle()
 
     def finish(self) -> None:
         """Zero volts, plant closed, sinks closed: on every exit path. Never raises.

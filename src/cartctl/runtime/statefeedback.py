@@ -103,6 +103,8 @@ class StateFeedbackController:
             )
         self.design = design
         self.estimator = estimator
+        values = getattr(estimator, "state_values", None)  # a list, without a numpy array
+        self._state_values = values if callable(values) else lambda: estimator.state.tolist()
         self.voltage_limit_v = limit
         self._K = tuple(float(k) for k in design.K)
         self._Ki = float(design.K_xi)
@@ -127,7 +129,7 @@ class StateFeedbackController:
             self.saturated = False
             return 0.0
         x1 = est.correct(measured_rad_s)
-        state = est.state.tolist()
+        state = self._state_values()
         u_raw = self._Kr * reference_rad_s - self._Ki * self.integral_rad
         for k, xk in zip(self._K, state, strict=False):  # plain floats: no warnings
             u_raw -= k * xk
@@ -147,6 +149,5 @@ class StateFeedbackController:
 
     def _predict_and_estimate(self, filtered_rad_s: float, voltage_v: float) -> None:
         """Predict with the voltage sent; the estimate is the mean of x̂_1[k|k] and x̂_1[k+1|k]."""
-        est = self.estimator
-        est.predict(voltage_v)
-        self.estimate_rad_s = 0.5 * (filtered_rad_s + float(est.state[0]))
+        self.estimator.predict(voltage_v)
+        self.estimate_rad_s = 0.5 * (filtered_rad_s + self._state_values()[0])

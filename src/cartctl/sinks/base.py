@@ -1,9 +1,12 @@
 """The sink interface and the closed-loop trace columns (contract 1 plus the closed-loop columns).
 
 The loop opens every sink with the column names, writes one row of floats per tick in that order,
-and closes every sink on every exit path. ``write`` runs inside the 10 ms tick: it must never
-block (buffer, hand off to a thread) and must never raise into the loop for an I/O problem; it
-records the problem and reports it at ``close``.
+and closes every sink on every exit path. ``write`` runs inside the 10 ms tick, before the tick's
+compute time is taken: it must never block (buffer, hand off to a thread) and must never raise
+into the loop for an I/O problem; it records the problem and reports it at ``close``. A sink may
+also have ``idle()``, which the loop calls after each tick's compute time is taken and before it
+waits for the next deadline (or the cart's next frame): work that need not delay the command
+(formatting, handing a block to a thread) belongs there.
 """
 
 from __future__ import annotations

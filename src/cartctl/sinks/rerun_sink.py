@@ -1,7 +1,8 @@
 """The Rerun sink: the loop's rows as a ``.rrd`` recording and/or a live viewer (contract 4).
 
 Sits at the end of the run stage (runtime loop → sinks → logs/ → review). ``write`` only copies the
-row into a preallocated numpy block. Every ``batch_ticks`` rows the block goes through a queue to a
+row; ``idle`` (called by the loop after the tick's compute time is taken) copies the rows into a
+preallocated numpy block, and every ``batch_ticks`` rows hands the full block through a queue to a
 background thread, which sends one column per entity with ``send_columns`` on the ``time``
 (duration, s) and ``tick`` (sequence) timelines. The recording stream is the sink's own, never the
 global one. Logging problems never raise into the loop: they are recorded and reported as one
@@ -112,6 +113,7 @@ class RerunSink:
         self._block: NDArray[np.float64] | None = None
         self._filled = 0
         self._queue: queue.SimpleQueue[NDArray[np.float64] | None] = queue.SimpleQueue()
+        self._rows: list[Sequence[float]] = []  # written, not yet in a block (see idle())
         self._thread: threading.Thread | None = None
         self._time_index = 0
         self._tick_index: int | None = None
@@ -184,24 +186,40 @@ class RerunSink:
             )
 
     def write(self, row: Sequence[float]) -> None:
-        """Buffer one tick's values (in column order); hands a full block to the sending thread.
+        """Keep one tick's values (in column order) for :meth:`idle`.
 
-        Never calls Rerun and never raises (unless ``strict``): a bad row is recorded and skipped.
+        Never calls Rerun and never raises (unless ``strict``): a bad row is recorded and skipped
+        at ``idle``.
+        """
+        if self._block is None:
+            return
+        rows = self._rows
+        rows.append(row)
+        if self.strict or len(rows) >= 2 * self.batch_ticks:  # strict: a bad row raises here;
+            self.idle()  # else nobody calls idle(): pack and hand over from here
+
+    def idle(self) -> None:
+        """Copy the kept rows into the block; hand full blocks to the sending thread.
+
+        Called by the loop after the tick's compute time is taken (waking the thread costs µs).
+        Raises only with ``strict`` (a bad row).
         """
         block = self._block
-        if block is None:
+        if block is None or not self._rows:
             return
-        try:
-            block[self._filled] = row
-        except (ValueError, TypeError) as exc:
-            self._problem(f"row {self.rows_written}: {exc}", raise_now=True)
-            return
-        self._filled += 1
-        self.rows_written += 1
-        if self._filled == self.batch_ticks:
-            self._queue.put(block)
-            self._block = np.empty_like(block)
-            self._filled = 0
+        rows, self._rows = self._rows, []
+        for row in rows:
+            try:
+                block[self._filled] = row
+            except (ValueError, TypeError) as exc:
+                self._problem(f"row {self.rows_written}: {exc}", raise_now=True)
+                continue
+            self._filled += 1
+            self.rows_written += 1
+            if self._filled == self.batch_ticks:
+                self._queue.put(block)
+                self._block = block = np.empty_like(block)
+                self._filled = 0
 
     def close(self) -> None:
         """Send the remaining rows, stop the thread, and finish the file (footer written).
@@ -217,6 +235,7 @@ class RerunSink:
             return
         self._closed = True
         if self._thread is not None:
+            self.idle()  # the rows kept, and the full blocks first, in order
             if self._block is not None and self._filled:
                 self._queue.put(self._block[: self._filled].copy())
             self._block = None
