@@ -273,3 +273,36 @@ def test_realtime_rejects_a_bad_priority() -> None:
         pytest.skip("no sched_setscheduler on this platform")
     with pytest.raises(InputError, match="priority"):
         realtime.enable_realtime(1000)
+
+
+def test_idle_runs_after_each_tick_outside_its_compute_time() -> None:
+    clock = VirtualClock()
+    calls: list[tuple[str, int]] = []
+    ex = PeriodicExecutor(0.01, clock, max_ticks=5)
+
+    def tick(k: int) -> bool:
+        calls.append(("tick", k))
+        clock.advance(0.002)  # 2 ms of work
+        return True
+
+    def idle() -> None:
+        calls.append(("idle", ex.tick_index))
+        clock.advance(0.003)  # 3 ms more that must not count as the tick's
+
+    stats = ex.run(tick, idle)
+    assert calls == [(what, k) for k in range(5) for what in ("tick", "idle")]
+    assert stats.compute_us_max == pytest.approx(2000.0)
+    assert stats.misses == 0 and stats.period_error_us_max == 0.0  # 5 ms < the 10 ms period
+
+
+def test_gc_paused_freezes_and_restores() -> None:
+    import gc
+
+    from cartctl.runtime.gcpause import gc_paused
+
+    assert gc.isenabled()
+    with pytest.raises(RuntimeError), gc_paused():
+        assert not gc.isenabled()
+        assert gc.get_freeze_count() > 0  # the heap from before: no collection walks it
+        raise RuntimeError("a fault inside the run")
+    assert gc.isenabled() and gc.get_freeze_count() == 0
