@@ -14,8 +14,8 @@ from the model's uncertainty (:mod:`cartctl.tune.uncertainty`, ``--seed``), simu
 (:mod:`cartctl.tune.batch`), and on the physics preset; the table, ``--json`` (key ``robust``,
 added to each row and at the top) and the plot then show nominal, worst case, spread and physics,
 and the front of nominal settling against worst-case overshoot. ``--choose best`` picks by
-:data:`cartctl.tune.robust.CHOICE_RULE` (with ``--robust``) or
-:data:`~cartctl.tune.robust.CHOICE_RULE_NOMINAL` (without).
+:data:`cartctl.tune.robust_choice.CHOICE_RULE` (with ``--robust``) or
+:data:`~cartctl.tune.robust_choice.CHOICE_RULE_NOMINAL` (without).
 """
 
 from __future__ import annotations
@@ -43,6 +43,7 @@ from cartctl.reference import FORMS, reference_signal
 from cartctl.tune import engine
 from cartctl.tune import grid as tuning
 from cartctl.tune import robust as robustness
+from cartctl.tune import robust_choice as choice
 from cartctl.tune.uncertainty import describe_line, sample_plants
 
 DEFAULT_PLANTS = 200
@@ -276,20 +277,20 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
         bar.close()
     marked = tuning.mark_pareto([r.result for r in rows])  # the plain front, for the JSON rows
     rows = [replace(r, result=m) for r, m in zip(rows, marked, strict=True)]
-    rows = robustness.sort_robust(robustness.mark_robust_pareto(rows))
+    rows = choice.sort_robust(choice.mark_robust_pareto(rows))
     if args.plot:
         plot_robust(args.plot, args.method, rows, plants)
     chosen: dict[str, Any] | None = None
     if args.choose == "best":
-        best = robustness.choose_best_robust(rows)
-        chosen = _chosen(args, best.result, robustness.CHOICE_RULE)
+        best = choice.choose_best_robust(rows)
+        chosen = _chosen(args, best.result, choice.CHOICE_RULE)
     elif args.choose is not None:
         chosen = _chosen(args, next(r.result for r in rows if r.index == args.choose), None)
     meta = {**sample.describe(), "nominal": f"the model ({args.model}), as without --robust",
             "worst_over": "the nominal model and the sampled plants",
             "spread_over": "the sampled plants (percentiles: values of sampled plants)",
             "physics_preset": args.preset, "pareto_of": "nominal settling_time_s against worst-case "
-            "overshoot_percent", "choice_rule": robustness.CHOICE_RULE}  # fmt: skip
+            "overshoot_percent", "choice_rule": choice.CHOICE_RULE}  # fmt: skip
     if args.json:
         print(dumps({"method": args.method, "model": str(args.model), "plant": args.plant,
                      "reference": args.reference, "duration_s": args.duration,
@@ -307,7 +308,7 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
     print(f"nominal: the model; worst: over the model and the {plants} plants (∞: a plant never "
           f"settles); p5–p95: over the plants; physics: preset {args.preset}, not in the worst "
           "case")  # fmt: skip
-    print(robustness.format_robust_table(args.method, rows))
+    print(choice.format_robust_table(args.method, rows))
     if args.plot:
         print(f"wrote {args.plot}")
     if chosen is not None:
@@ -334,8 +335,8 @@ def run(args: argparse.Namespace) -> int:
         plot_tuning(args.plot, args.method, results)
     chosen: dict[str, Any] | None = None
     if args.choose == "best":
-        chosen = _chosen(args, robustness.choose_best_nominal(results),
-                         robustness.CHOICE_RULE_NOMINAL)  # fmt: skip
+        chosen = _chosen(args, choice.choose_best_nominal(results),
+                         choice.CHOICE_RULE_NOMINAL)  # fmt: skip
     elif args.choose is not None:
         chosen = _chosen(args, next(r for r in results if r.index == args.choose), None)
     if args.json:

@@ -20,7 +20,7 @@ import math
 from collections import deque
 from collections.abc import Callable, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol, TypeVar
 
 import numpy as np
@@ -139,23 +139,54 @@ def simulate(
     return trace_metrics(columns, period_s), state.failure
 
 
-def _evaluate(job: TuneJob, models: ModelFile, index: int,
-              settings: dict[str, float]) -> TuneResult:  # fmt: skip
+def design_setting(
+    job: TuneJob, models: ModelFile, settings: dict[str, float]
+) -> tuple[dict[str, Controller], float] | str:
+    """One grid setting's runtime controller per motor and its voltage limit (V), or why a motor's
+    design was refused."""
     request = design_request(job.method, settings, job.extra_delay_ticks)
     controllers: dict[str, Controller] = {}
     for m in ("a", "b"):
         try:
             controllers[m] = design_motor(request, models.motor(m)).controller
         except (CartctlError, np.linalg.LinAlgError) as exc:
-            return TuneResult(index, settings, False, f"motor {m}: {exc}")
+            return f"motor {m}: {exc}"
+    return controllers, request.voltage_limit_v
+
+
+@dataclass(frozen=True)
+class Nominal:
+    """A setting scored on its nominal plant, with what it was run with (for more plants)."""
+
+    result: TuneResult
+    controllers: dict[str, Controller] = field(default_factory=dict)
+    references: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    voltage_limit_v: float = 0.0
+    period_s: float = 0.0
+
+
+def evaluate_nominal(
+    job: TuneJob, models: ModelFile, index: int, settings: dict[str, float]
+) -> Nominal:
+    """Design one setting and run it on the scoring plant (:func:`scoring_plant`)."""
+    designed = design_setting(job, models, settings)
+    if isinstance(designed, str):
+        return Nominal(TuneResult(index, settings, False, designed))
+    controllers, limit_v = designed
     plant = scoring_plant(job)
     n = max(1, round(job.duration_s / plant.period_s))
     refs = {m: reference_signal(job.reference, n, plant.period_s, m) for m in ("a", "b")}
     summary, failure = simulate(plant, controllers, refs, period_s=plant.period_s,
-                                voltage_limit_v=request.voltage_limit_v)  # fmt: skip
+                                voltage_limit_v=limit_v)  # fmt: skip
     if failure:
-        return TuneResult(index, settings, False, f"the run failed: {failure}")
-    return TuneResult(index, settings, True, motors=summary["motors"])
+        return Nominal(TuneResult(index, settings, False, f"the run failed: {failure}"))
+    result = TuneResult(index, settings, True, motors=summary["motors"])
+    return Nominal(result, controllers, refs, limit_v, plant.period_s)
+
+
+def _evaluate(job: TuneJob, models: ModelFile, index: int,
+              settings: dict[str, float]) -> TuneResult:  # fmt: skip
+    return evaluate_nominal(job, models, index, settings).result
 
 
 def evaluate_chunk(job: TuneJob) -> list[TuneResult]:

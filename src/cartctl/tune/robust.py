@@ -39,15 +39,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.design.make import design_motor
-from cartctl.errors import CartctlError, InputError
 from cartctl.modelfile import ModelFile, load_models
 from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller
 from cartctl.stepinfo import SETTLING_FRACTION, encoder_quantum_rad_s
 from cartctl.tune.batch import ArxBatch, BatchTrace, simulate_batch
-from cartctl.tune.engine import TuneJob, scoring_plant, simulate
-from cartctl.tune.grid import AXES, TuneResult, design_request, pareto_front, worst_metrics
+from cartctl.tune.engine import TuneJob, evaluate_nominal, scoring_plant, simulate
+from cartctl.tune.grid import TuneResult, worst_metrics
 from cartctl.tune.uncertainty import PlantSample
 
 FloatArray = NDArray[np.float64]
@@ -58,17 +56,6 @@ ROBUST_METRICS = ("overshoot_percent", "settling_time_s", "rms_error", "peak_vol
 PERCENTILES = (5, 50, 95)
 """The spread: these percentiles over the sampled plants."""
 
-CHOICE_RESOLUTION_PERCENT = 0.01
-"""Overshoots that round to the same multiple of this (%) tie in ``--choose best``."""
-
-CHOICE_RULE = (
-    "lowest worst-case overshoot (to 0.01 %) among the feasible settings that settle on every "
-    "plant, then the fastest nominal settling, then the lowest index"
-)
-CHOICE_RULE_NOMINAL = (
-    "lowest overshoot (to 0.01 %) among the feasible settings that settle, then the fastest "
-    "settling, then the lowest index (worse of motors a and b)"
-)
 _SUMMARY_KEYS = {"overshoot_percent": "overshoot_percent", "settling_time_s": "settling_time_s",
                  "rms_error": "rms_error", "peak_voltage_v": "max_abs_voltage"}  # fmt: skip
 
@@ -289,31 +276,22 @@ def evaluate_robust(job: RobustJob, models: ModelFile, index: int,
                     settings: dict[str, float]) -> RobustRow:  # fmt: skip
     """One setting: designed, run on the nominal model, the sampled plants and the physics preset."""
     tj = job.tune
-    request = design_request(tj.method, settings, tj.extra_delay_ticks)
-    controllers: dict[str, Controller] = {}
-    for m in ("a", "b"):
-        try:
-            controllers[m] = design_motor(request, models.motor(m)).controller
-        except (CartctlError, np.linalg.LinAlgError) as exc:
-            return RobustRow(TuneResult(index, settings, False, f"motor {m}: {exc}"))
-    plant = scoring_plant(tj)
-    n = max(1, round(tj.duration_s / plant.period_s))
-    refs = {m: reference_signal(tj.reference, n, plant.period_s, m) for m in ("a", "b")}
-    summary, failure = simulate(plant, controllers, refs, period_s=plant.period_s,
-                                voltage_limit_v=request.voltage_limit_v)  # fmt: skip
-    if failure:
-        return RobustRow(TuneResult(index, settings, False, f"the run failed: {failure}"))
-    result = TuneResult(index, settings, True, motors=summary["motors"])
-    floor = encoder_quantum_rad_s(plant.period_s)
+    nominal_run = evaluate_nominal(tj, models, index, settings)
+    result = nominal_run.result
+    if not result.feasible:
+        return RobustRow(result)
+    controllers, refs, limit_v = (nominal_run.controllers, nominal_run.references,
+                                  nominal_run.voltage_limit_v)  # fmt: skip
+    floor = encoder_quantum_rad_s(nominal_run.period_s)
     per_motor, diverged = [], np.zeros(job.sample.size + 1, dtype=bool)
     for m in ("a", "b"):
         trace = simulate_batch(controllers[m],
                                _batch_plants(models, job.sample, m, tj.extra_delay_ticks),
-                               refs[m], voltage_limit_v=request.voltage_limit_v)  # fmt: skip
+                               refs[m], voltage_limit_v=limit_v)  # fmt: skip
         per_motor.append(step_metrics(trace, floor))
         diverged |= trace.diverged
     nominal = {k: result.worst[v] for k, v in _SUMMARY_KEYS.items()}
-    physics = _physics(tj, controllers, request.voltage_limit_v)
+    physics = _physics(tj, controllers, limit_v)
     return RobustRow(result, score_plants(per_motor, diverged, nominal, physics))
 
 
@@ -321,123 +299,3 @@ def evaluate_robust_chunk(job: RobustJob) -> list[RobustRow]:
     """Every setting of a chunk (the worker function of the process pool)."""
     models = load_models(job.tune.model)
     return [evaluate_robust(job, models, i, s) for i, s in job.items]
-
-
-def mark_robust_pareto(rows: Sequence[RobustRow]) -> list[RobustRow]:
-    """The rows with ``pareto`` set: non-dominated in (nominal settling, worst-case overshoot)."""
-    points = []
-    for r in rows:
-        if r.score is None:
-            points.append([math.nan, math.nan])
-            continue
-        x = r.score.value("settling_time_s", "nominal")
-        y = r.score.value("overshoot_percent", "worst")
-        points.append([x if math.isfinite(x) else math.nan, y if math.isfinite(y) else math.nan])
-    front = pareto_front(np.reshape(points, (len(rows), 2)))
-    return [replace(r, pareto=bool(f)) for r, f in zip(rows, front, strict=True)]
-
-
-def _rounded(overshoot: float) -> float:
-    return round(overshoot / CHOICE_RESOLUTION_PERCENT)
-
-
-def choose_best_robust(rows: Sequence[RobustRow]) -> RobustRow:
-    """The setting ``--choose best`` takes with ``--robust`` (:data:`CHOICE_RULE`).
-
-    Raises
-    ------
-    InputError
-        No feasible setting settles on every plant.
-    """
-    candidates = [r for r in rows if r.score is not None and r.score.settles_everywhere
-                  and math.isfinite(r.score.value("overshoot_percent", "worst"))]  # fmt: skip
-    if not candidates:
-        raise InputError("--choose best: no feasible setting settles on every sampled plant; "
-                         "widen the grid or pick one with --choose N")  # fmt: skip
-
-    def key(r: RobustRow) -> tuple[float, float, int]:
-        assert r.score is not None
-        settling = r.score.value("settling_time_s", "nominal")
-        return (_rounded(r.score.value("overshoot_percent", "worst")),
-                settling if math.isfinite(settling) else math.inf, r.index)  # fmt: skip
-
-    return min(candidates, key=key)
-
-
-def choose_best_nominal(results: Sequence[TuneResult]) -> TuneResult:
-    """The setting ``--choose best`` takes without ``--robust`` (:data:`CHOICE_RULE_NOMINAL`).
-
-    Raises
-    ------
-    InputError
-        No feasible setting settles.
-    """
-    candidates = [r for r in results if r.feasible and r.worst["settling_time_s"] is not None
-                  and r.worst["overshoot_percent"] is not None]  # fmt: skip
-    if not candidates:
-        raise InputError("--choose best: no feasible setting settles; widen the grid or pick one "
-                         "with --choose N")  # fmt: skip
-    return min(candidates, key=lambda r: (_rounded(r.worst["overshoot_percent"]),  # type: ignore[arg-type]
-                                          r.worst["settling_time_s"], r.index))  # fmt: skip
-
-
-def sort_robust(rows: Sequence[RobustRow]) -> list[RobustRow]:
-    """Robust front first (by nominal settling), then the other scored settings by worst-case
-    overshoot, then the infeasible (by index)."""
-
-    def key(r: RobustRow) -> tuple[int, float, float, int]:
-        if r.score is None:
-            return (3, 0.0, 0.0, r.index)
-        settling = r.score.value("settling_time_s", "nominal")
-        worst = r.score.value("overshoot_percent", "worst")
-        settling = settling if not math.isnan(settling) else math.inf
-        worst = worst if not math.isnan(worst) else math.inf
-        if r.pareto:
-            return (0, settling, worst, r.index)
-        return (1, worst, settling, r.index)
-
-    return sorted(rows, key=key)
-
-
-def _num(x: float | None, fmt: str, scale: float = 1.0) -> str:
-    if x is None or (isinstance(x, float) and math.isnan(x)):
-        return "—"
-    if math.isinf(x):
-        return "∞"
-    return format(x * scale, fmt)
-
-
-def _span(lo: float | None, hi: float | None, fmt: str, scale: float = 1.0) -> str:
-    return f"{_num(lo, fmt, scale)}–{_num(hi, fmt, scale)}"
-
-
-def format_robust_table(method: str, rows: Sequence[RobustRow]) -> str:
-    """One row per setting; ``*`` marks the robust Pareto front; infeasible reasons below."""
-    axes = AXES[method]
-    heads = [f"{a.name} ({a.unit})" for a in axes]
-    lines = [
-        " " * 6 + " " * (19 * len(axes)) + f"{'overshoot %':^27}  {'settling ms':^25}  "
-        f"{'physics':^13}",
-        "   #  " + "".join(f"{h:>19}" for h in heads)
-        + f"{'nominal':>8}{'worst':>8}{'p5–p95':>11}  {'nominal':>7}{'worst':>7}{'p5–p95':>11}"
-        f"  {'os %':>6}{'ms':>6}  {'peak V':>6}  feasible",
-    ]  # fmt: skip
-    for r in rows:
-        settings = "".join(f"{r.result.settings[a.name]:>19g}" for a in axes)
-        s = r.score
-        if s is None:
-            lines.append(f" {r.index:>3}  {settings}" + " " * 75 + "no")
-            continue
-        f, ph = s.figures, s.physics
-        os_, st = f["overshoot_percent"], f["settling_time_s"]
-        lines.append(
-            f"{'*' if r.pareto else ' '}{r.index:>3}  {settings}"
-            f"{_num(os_['nominal'], '.2f'):>8}{_num(os_['worst'], '.2f'):>8}"
-            f"{_span(os_['p5'], os_['p95'], '.1f'):>11}  "
-            f"{_num(st['nominal'], '.0f', 1e3):>7}{_num(st['worst'], '.0f', 1e3):>7}"
-            f"{_span(st['p5'], st['p95'], '.0f', 1e3):>11}  "
-            f"{_num(ph.get('overshoot_percent'), '.2f'):>6}{_num(ph.get('settling_time_s'), '.0f', 1e3):>6}"
-            f"  {_num(f['peak_voltage_v']['worst'], '.2f'):>6}  yes"
-        )  # fmt: skip
-    lines += [f"  #{r.index}: {r.result.reason}" for r in rows if r.score is None]
-    return "\n".join(lines)

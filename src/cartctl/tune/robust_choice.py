@@ -1,0 +1,151 @@
+"""``cartctl tune --robust``, after the scoring: the robust Pareto front, the choice, the table.
+
+The rows come from :func:`cartctl.tune.robust.evaluate_robust_chunk`. The front is over (nominal
+settling time, worst-case overshoot), both minimised, among the feasible settings where both are
+finite; :func:`choose_best_robust` and :func:`choose_best_nominal` apply :data:`CHOICE_RULE` and
+:data:`CHOICE_RULE_NOMINAL`; :func:`format_robust_table` is the terminal table.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from cartctl.errors import InputError
+from cartctl.tune.grid import AXES, TuneResult, pareto_front
+from cartctl.tune.robust import RobustRow
+
+CHOICE_RESOLUTION_PERCENT = 0.01
+"""Overshoots that round to the same multiple of this (%) tie in ``--choose best``."""
+
+CHOICE_RULE = (
+    "lowest worst-case overshoot (to 0.01 %) among the feasible settings that settle on every "
+    "plant, then the fastest nominal settling, then the lowest index"
+)
+CHOICE_RULE_NOMINAL = (
+    "lowest overshoot (to 0.01 %) among the feasible settings that settle, then the fastest "
+    "settling, then the lowest index (worse of motors a and b)"
+)
+
+
+def mark_robust_pareto(rows: Sequence[RobustRow]) -> list[RobustRow]:
+    """The rows with ``pareto`` set: non-dominated in (nominal settling, worst-case overshoot)."""
+    points = []
+    for r in rows:
+        if r.score is None:
+            points.append([math.nan, math.nan])
+            continue
+        x = r.score.value("settling_time_s", "nominal")
+        y = r.score.value("overshoot_percent", "worst")
+        points.append([x if math.isfinite(x) else math.nan, y if math.isfinite(y) else math.nan])
+    front = pareto_front(np.reshape(points, (len(rows), 2)))
+    return [replace(r, pareto=bool(f)) for r, f in zip(rows, front, strict=True)]
+
+
+def _rounded(overshoot: float) -> float:
+    return round(overshoot / CHOICE_RESOLUTION_PERCENT)
+
+
+def choose_best_robust(rows: Sequence[RobustRow]) -> RobustRow:
+    """The setting ``--choose best`` takes with ``--robust`` (:data:`CHOICE_RULE`).
+
+    Raises
+    ------
+    InputError
+        No feasible setting settles on every plant.
+    """
+    candidates = [r for r in rows if r.score is not None and r.score.settles_everywhere
+                  and math.isfinite(r.score.value("overshoot_percent", "worst"))]  # fmt: skip
+    if not candidates:
+        raise InputError("--choose best: no feasible setting settles on every sampled plant; "
+                         "widen the grid or pick one with --choose N")  # fmt: skip
+
+    def key(r: RobustRow) -> tuple[float, float, int]:
+        assert r.score is not None
+        settling = r.score.value("settling_time_s", "nominal")
+        return (_rounded(r.score.value("overshoot_percent", "worst")),
+                settling if math.isfinite(settling) else math.inf, r.index)  # fmt: skip
+
+    return min(candidates, key=key)
+
+
+def choose_best_nominal(results: Sequence[TuneResult]) -> TuneResult:
+    """The setting ``--choose best`` takes without ``--robust`` (:data:`CHOICE_RULE_NOMINAL`).
+
+    Raises
+    ------
+    InputError
+        No feasible setting settles.
+    """
+    candidates = [r for r in results if r.feasible and r.worst["settling_time_s"] is not None
+                  and r.worst["overshoot_percent"] is not None]  # fmt: skip
+    if not candidates:
+        raise InputError("--choose best: no feasible setting settles; widen the grid or pick one "
+                         "with --choose N")  # fmt: skip
+    return min(candidates, key=lambda r: (_rounded(r.worst["overshoot_percent"]),  # type: ignore[arg-type]
+                                          r.worst["settling_time_s"], r.index))  # fmt: skip
+
+
+def sort_robust(rows: Sequence[RobustRow]) -> list[RobustRow]:
+    """Robust front first (by nominal settling), then the other scored settings by worst-case
+    overshoot, then the infeasible (by index)."""
+
+    def key(r: RobustRow) -> tuple[int, float, float, int]:
+        if r.score is None:
+            return (3, 0.0, 0.0, r.index)
+        settling = r.score.value("settling_time_s", "nominal")
+        worst = r.score.value("overshoot_percent", "worst")
+        settling = settling if not math.isnan(settling) else math.inf
+        worst = worst if not math.isnan(worst) else math.inf
+        if r.pareto:
+            return (0, settling, worst, r.index)
+        return (1, worst, settling, r.index)
+
+    return sorted(rows, key=key)
+
+
+def _num(x: float | None, fmt: str, scale: float = 1.0) -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "—"
+    if math.isinf(x):
+        return "∞"
+    return format(x * scale, fmt)
+
+
+def _span(lo: float | None, hi: float | None, fmt: str, scale: float = 1.0) -> str:
+    return f"{_num(lo, fmt, scale)}–{_num(hi, fmt, scale)}"
+
+
+def format_robust_table(method: str, rows: Sequence[RobustRow]) -> str:
+    """One row per setting; ``*`` marks the robust Pareto front; infeasible reasons below."""
+    axes = AXES[method]
+    heads = [f"{a.name} ({a.unit})" for a in axes]
+    lines = [
+        " " * 6 + " " * (19 * len(axes)) + f"{'overshoot %':^27}  {'settling ms':^25}  "
+        f"{'physics':^13}",
+        "   #  " + "".join(f"{h:>19}" for h in heads)
+        + f"{'nominal':>8}{'worst':>8}{'p5–p95':>11}  {'nominal':>7}{'worst':>7}{'p5–p95':>11}"
+        f"  {'os %':>6}{'ms':>6}  {'peak V':>6}  feasible",
+    ]  # fmt: skip
+    for r in rows:
+        settings = "".join(f"{r.result.settings[a.name]:>19g}" for a in axes)
+        s = r.score
+        if s is None:
+            lines.append(f" {r.index:>3}  {settings}" + " " * 75 + "no")
+            continue
+        f, ph = s.figures, s.physics
+        os_, st = f["overshoot_percent"], f["settling_time_s"]
+        lines.append(
+            f"{'*' if r.pareto else ' '}{r.index:>3}  {settings}"
+            f"{_num(os_['nominal'], '.2f'):>8}{_num(os_['worst'], '.2f'):>8}"
+            f"{_span(os_['p5'], os_['p95'], '.1f'):>11}  "
+            f"{_num(st['nominal'], '.0f', 1e3):>7}{_num(st['worst'], '.0f', 1e3):>7}"
+            f"{_span(st['p5'], st['p95'], '.0f', 1e3):>11}  "
+            f"{_num(ph.get('overshoot_percent'), '.2f'):>6}{_num(ph.get('settling_time_s'), '.0f', 1e3):>6}"
+            f"  {_num(f['peak_voltage_v']['worst'], '.2f'):>6}  yes"
+        )  # fmt: skip
+    lines += [f"  #{r.index}: {r.result.reason}" for r in rows if r.score is None]
+    return "\n".join(lines)
