@@ -235,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
             from cartctl.runtime.realtime import enable_realtime
 
             scheduling = enable_realtime()
-            sys.setswitchinterval(1e-4)  # a sink's thread must hand the GIL back within 0.1 ms
+            sys.setswitchinterval(1e-4)  # any other thread must hand the GIL back within 0.1 ms
 
         def tick(k: int) -> bool:
             time_s = executor.time_s if clocked else executor.grid_index * period_s
