@@ -300,9 +300,16 @@ def test_gc_paused_freezes_and_restores() -> None:
 
     from cartctl.runtime.gcpause import gc_paused
 
+    seen: list[tuple[bool, int]] = []
+
+    def fault_inside_the_run() -> None:
+        with gc_paused():
+            seen.append((gc.isenabled(), gc.get_freeze_count()))
+            raise RuntimeError("a fault inside the run")
+
     assert gc.isenabled()
-    with pytest.raises(RuntimeError), gc_paused():
-        assert not gc.isenabled()
-        assert gc.get_freeze_count() > 0  # the heap from before: no collection walks it
-        raise RuntimeError("a fault inside the run")
+    with pytest.raises(RuntimeError):
+        fault_inside_the_run()
+    ((enabled, frozen),) = seen
+    assert not enabled and frozen > 0  # the heap from before: no collection walks it
     assert gc.isenabled() and gc.get_freeze_count() == 0
