@@ -7,13 +7,12 @@ with ``--out`` writes it as a contract-1 CSV that every other command reads.
 from __future__ import annotations
 
 import argparse
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from cartctl.commands.options import add_map_option
-from cartctl.data import Trace, read_trace, write_trace
-from cartctl.jsonout import dumps
+
+if TYPE_CHECKING:
+    from cartctl.data import Trace
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -35,6 +34,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def summary(trace: Trace) -> dict[str, Any]:
     """Ticks, duration, period and the range of every column."""
+    import numpy as np
+
     return {
         "source": trace.source,
         "ticks": len(trace),
@@ -48,6 +49,9 @@ def summary(trace: Trace) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from cartctl.data import read_trace, write_trace
+    from cartctl.jsonout import dumps
+
     trace = read_trace(args.file, args.map)
     info = summary(trace)
     if args.out:

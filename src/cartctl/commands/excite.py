@@ -5,18 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-import numpy as np
-
 from cartctl import stopping
-from cartctl.commands.options import add_plant_options, check_duration
-from cartctl.data import write_trace
+from cartctl.commands.options import SIGNALS, add_plant_options, check_duration
 from cartctl.errors import InputError
-from cartctl.experiment import run_experiment
-from cartctl.plants.factory import is_serial, make_plant
-from cartctl.plants.sim import SUPPLY_V
-from cartctl.progress import ProgressBar
-from cartctl.signals import SIGNALS, make_signal
-from cartctl.sinks.summary import host_loss_text, warn_host_losses
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -58,6 +49,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from cartctl.data import write_trace
+    from cartctl.experiment import run_experiment
+    from cartctl.plants.factory import is_serial, make_plant
+    from cartctl.plants.sim import SUPPLY_V
+    from cartctl.progress import ProgressBar
+    from cartctl.signals import make_signal
+    from cartctl.sinks.summary import host_loss_text, warn_host_losses
+
     if not args.amplitude <= SUPPLY_V:
         raise InputError(
             f"--amplitude {args.amplitude} V is beyond the cart's ±{SUPPLY_V:g} V supply"

@@ -10,9 +10,7 @@ import argparse
 import shlex
 from pathlib import Path
 
-from cartctl.design.controllerfile import load_controller
 from cartctl.errors import InputError
-from cartctl.export.arduino import arduino_source
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -48,6 +46,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(
             "no target given; add --arduino (C for the cart's control(), the only target for now)"
         )
+    from cartctl.design.controllerfile import load_controller
+    from cartctl.export.arduino import arduino_source
+
     source = arduino_source(load_controller(args.controller), command=_command(args))
     if args.out:
         path = Path(args.out)

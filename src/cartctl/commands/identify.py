@@ -4,21 +4,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 from cartctl.commands.options import add_map_option, command_line
-from cartctl.data import read_trace
 from cartctl.errors import InputError
-from cartctl.identification.arx import ArxFit
-from cartctl.identification.pipeline import (
-    IdentifyRequest,
-    IdentifyResult,
-    MotorIdentification,
-    identify,
-    model_file,
-)
-from cartctl.identification.prefilter import Prefilter
-from cartctl.jsonout import dumps
-from cartctl.modelfile import load_models, save_models
+
+if TYPE_CHECKING:
+    from cartctl.identification.arx import ArxFit
+    from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, MotorIdentification
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -108,6 +101,9 @@ def parse_delay(text: str) -> int | None:
 
 def request_from_args(args: argparse.Namespace) -> IdentifyRequest:
     """Turn the command-line options into an :class:`IdentifyRequest`."""
+    from cartctl.identification.pipeline import IdentifyRequest
+    from cartctl.identification.prefilter import Prefilter
+
     prefilter = None
     if args.prefilter == "butter":
         prefilter = Prefilter(
@@ -179,6 +175,11 @@ def format_result(result: IdentifyResult, files: list[str], request: IdentifyReq
 
 
 def run(args: argparse.Namespace) -> int:
+    from cartctl.data import read_trace
+    from cartctl.identification.pipeline import identify, model_file
+    from cartctl.jsonout import dumps
+    from cartctl.modelfile import load_models, save_models
+
     request = request_from_args(args)
     compare = {path: load_models(path) for path in args.compare}  # fail early on a bad file
     traces = [read_trace(path, args.map) for path in args.files]

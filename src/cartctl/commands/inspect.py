@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from cartctl.jsonout import dumps
-from cartctl.metrics import finite_or_none
-from cartctl.model import ArxModel, Root
-from cartctl.modelfile import ModelFile, load_models
+if TYPE_CHECKING:
+    from cartctl.model import ArxModel, Root
+    from cartctl.modelfile import ModelFile
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -31,6 +30,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def model_summary(model: ArxModel) -> dict[str, Any]:
     """Contract-3 ``inspect`` entry of one motor (plus nk, num and den)."""
+    from cartctl.metrics import finite_or_none
+
     return {
         "poles": [r.to_dict() for r in model.poles()],
         "zeros": [r.to_dict() for r in model.zeros()],
@@ -90,6 +91,9 @@ def format_table(models: ModelFile) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from cartctl.jsonout import dumps
+    from cartctl.modelfile import load_models
+
     models = load_models(args.model)
     if args.json:
         print(dumps(inspect_dict(models)))

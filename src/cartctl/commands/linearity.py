@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from cartctl.commands.options import add_map_option
 from cartctl.commands.validate import (
@@ -17,9 +18,9 @@ from cartctl.commands.validate import (
     new_figure,
     save_png,
 )
-from cartctl.data import read_trace
-from cartctl.identification.linearity import LinearityResult, linearity
-from cartctl.jsonout import dumps
+
+if TYPE_CHECKING:
+    from cartctl.identification.linearity import LinearityResult
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -108,6 +109,10 @@ def format_text(result: LinearityResult, files: tuple[str, str, str]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from cartctl.data import read_trace
+    from cartctl.identification.linearity import linearity
+    from cartctl.jsonout import dumps
+
     plot = check_plot_path(args.plot)
     files = (args.small, args.large, args.sum)
     small, large, total = (read_trace(path, args.map) for path in files)

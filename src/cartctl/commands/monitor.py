@@ -16,27 +16,20 @@ import sys
 import threading
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from cartctl.commands.options import (
+    DEFAULT_CONNECT_TIMEOUT_S,
+    FORMS,
     add_output_options,
     add_rerun_options,
     check_duration,
     output_paths,
 )
 from cartctl.errors import InputError
-from cartctl.jsonout import dumps
-from cartctl.plants.cart_link import DEFAULT_CONNECT_TIMEOUT_S, print_to_stderr
-from cartctl.plants.cart_monitor import (
-    FLOAT_CHANNELS,
-    Monitor,
-    MonitorLink,
-    MonitorResult,
-    parse_labels,
-    wait_started,
-)
-from cartctl.reference import FORMS
-from cartctl.sinks.csv_sink import CsvSink
+
+if TYPE_CHECKING:  # cartctl.plants loads numpy and scipy: imported where used, not for --help
+    from cartctl.plants.cart_monitor import Monitor, MonitorLink, MonitorResult
 
 DEFAULT_REFERENCE = "step:10"
 _STOPPED = {"duration": "after --duration", "interrupted": "by Ctrl-C", "fault": "by a line fault"}
@@ -123,6 +116,8 @@ def _virtual_cart(faults_text: str, args: argparse.Namespace) -> Any:
 
 
 def _rerun_sink(args: argparse.Namespace, path: Path) -> Any:
+    from cartctl.plants.cart_monitor import FLOAT_CHANNELS
+
     if args.rerun == "off":
         return None
     from cartctl.sinks.channels_rerun import ChannelsRerunSink
@@ -156,6 +151,11 @@ def _stop_on_signals(monitor: Monitor, received: list[int]) -> Iterator[None]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from cartctl.jsonout import dumps
+    from cartctl.plants.cart_link import print_to_stderr
+    from cartctl.plants.cart_monitor import Monitor, MonitorLink, parse_labels, wait_started
+    from cartctl.sinks.csv_sink import CsvSink
+
     kind, rest = _check(args)
     labels = parse_labels(args.labels)
     cart = _virtual_cart(rest, args) if kind == "virtual" else None

@@ -1,4 +1,10 @@
-"""Command-line options shared by several subcommands (one definition each)."""
+"""Command-line options shared by several subcommands (one definition each).
+
+This module is imported to build the parser, before any command runs: it imports no numpy, scipy
+or module that does (``cartctl --help`` stays fast). The few constants the options show, whose
+home module is heavy, are repeated here; ``tests/test_startup.py`` checks each copy against its
+home.
+"""
 
 from __future__ import annotations
 
@@ -9,16 +15,26 @@ import sys
 from datetime import datetime
 from pathlib import Path
 
-from cartctl.data import parse_mapping
 from cartctl.errors import InputError
-from cartctl.plants.factory import DEFAULT_MODEL
-from cartctl.signals import MAX_DURATION_S
+
+DEFAULT_MODEL = Path("models/ground.toml")
+"""The sim plant's model file: :data:`cartctl.plants.factory.DEFAULT_MODEL`."""
+MAX_DURATION_S = 24 * 3600.0
+"""The longest run or recording: :data:`cartctl.signals.MAX_DURATION_S`."""
+FORMS = "step:A[:DELAY_S], square:A:PERIOD_S, ramp:SLOPE[:LIMIT], const:A or file:PATH"
+"""The reference specifications, for help texts: :data:`cartctl.reference.FORMS`."""
+SIGNALS = ("square", "step", "prbs", "multisine", "chirp")
+"""The excitation signals: :data:`cartctl.signals.SIGNALS`."""
+DEFAULT_CONNECT_TIMEOUT_S = 5.0
+"""The wait for a cart's first HEARTBEAT: :data:`cartctl.plants.cart_link.DEFAULT_CONNECT_TIMEOUT_S`."""
 
 RERUN_MODES = ("auto", "spawn", "connect", "save", "off")
 """The choices of ``--rerun``."""
 
 
 def _mapping_arg(text: str) -> dict[str, str]:
+    from cartctl.data import parse_mapping
+
     try:
         return parse_mapping(text)
     except InputError as exc:  # argparse shows an ArgumentTypeError's own message

@@ -7,11 +7,12 @@ import signal
 import sys
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from cartctl import stopping
 from cartctl.cart import SUPPLY_V
 from cartctl.commands.options import (
+    FORMS,
     add_output_options,
     add_plant_options,
     add_rerun_options,
@@ -26,16 +27,27 @@ from cartctl.commands.run_checks import (
     models_designed_on,
     refuse_unstable,
 )
-from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import load_controller
 from cartctl.errors import DataWarning, InputError, PlantError
-from cartctl.jsonout import dumps
-from cartctl.plants.base import ClockedPlant, Plant
-from cartctl.plants.factory import is_serial, make_plant
-from cartctl.reference import FORMS, ReferenceSchedule
-from cartctl.runtime.loop import ControlLoop, MemorySink
-from cartctl.sinks.csv_sink import CsvSink
-from cartctl.sinks.summary import format_summary, trace_metrics, warn_host_losses
+
+if TYPE_CHECKING:
+    from cartctl.plants.base import Plant
+
+# numpy, scipy and the rest load when the command runs (in run() and the two functions below),
+# not when the parser is built: cartctl --help stays fast.
+
+
+def make_plant(*args: Any, **kwargs: Any) -> Any:
+    """:func:`cartctl.plants.factory.make_plant`, imported on the first call."""
+    from cartctl.plants.factory import make_plant
+
+    return make_plant(*args, **kwargs)
+
+
+def build_controllers(*args: Any, **kwargs: Any) -> Any:
+    """:func:`cartctl.design.build.build_controllers`, imported on the first call."""
+    from cartctl.design.build import build_controllers
+
+    return build_controllers(*args, **kwargs)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -103,6 +115,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _references(args: argparse.Namespace, n: int, period_s: float) -> dict[str, Any]:
+    from cartctl.reference import ReferenceSchedule
+
     ref_a = ReferenceSchedule(args.reference, n, period_s, "a")
     ref_b = ReferenceSchedule(args.reference_b or args.reference, n, period_s, "b")
     return {"a": ref_a, "b": ref_b}
@@ -123,6 +137,8 @@ def _rerun_sink(args: argparse.Namespace, path: Path) -> Any:
 
 def default_controller(plant: str) -> Path:
     """The shipped controller for a plant: the serial one over the serial line, else the PI."""
+    from cartctl.plants.factory import is_serial
+
     return DEFAULT_SERIAL_CONTROLLER if is_serial(plant) else DEFAULT_CONTROLLER
 
 
@@ -133,6 +149,13 @@ def _measured_delay(plant: Plant) -> int | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from cartctl.design.controllerfile import load_controller
+    from cartctl.jsonout import dumps
+    from cartctl.plants.base import ClockedPlant
+    from cartctl.runtime.loop import ControlLoop, MemorySink
+    from cartctl.sinks.csv_sink import CsvSink
+    from cartctl.sinks.summary import format_summary, trace_metrics, warn_host_losses
+
     check_duration(args.duration)
     if args.voltage_limit is not None and not 0.0 < args.voltage_limit <= SUPPLY_V:
         raise InputError(f"--voltage-limit must be in (0, 12] V, got {args.voltage_limit}")

@@ -6,12 +6,14 @@ from __future__ import annotations
 import math
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.errors import CartctlError, DataWarning, InputError
-from cartctl.model import ArxModel
-from cartctl.modelfile import load_models
-from cartctl.reference import ReferenceSchedule
+
+if TYPE_CHECKING:  # imported where used: the parser takes this module's defaults (light)
+    from cartctl.design.controllerfile import ControllerFile
+    from cartctl.model import ArxModel
+    from cartctl.reference import ReferenceSchedule
 
 DEFAULT_CONTROLLER = Path("controllers/pi.toml")
 DEFAULT_SERIAL_CONTROLLER = Path("controllers/serial-pi.toml")
@@ -42,6 +44,8 @@ def refuse_unstable(models: dict[str, ArxModel], path: str) -> None:
 
 def models_designed_on(controller_file: ControllerFile) -> dict[str, ArxModel]:
     """The models the controller was designed on; none when that file is gone or unreadable."""
+    from cartctl.modelfile import load_models
+
     try:
         return dict(load_models(controller_file.model_path).motors)
     except (CartctlError, OSError):
@@ -86,6 +90,8 @@ def check_reach(
 
 def _fitting_controller(controller: ControllerFile, given: str, delay: int) -> str | None:
     """A shipped controller file designed for ``delay``, the same method first (or None)."""
+    from cartctl.design.controllerfile import load_controller
+
     folders = dict.fromkeys([DEFAULT_CONTROLLER.parent, Path(given).parent])
 
     def other_method(name: str) -> bool:

@@ -26,25 +26,19 @@ import shlex
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from cartctl.cart import PERIOD_S
-from cartctl.commands.options import check_duration
-from cartctl.design.controllerfile import save_controller
-from cartctl.design.make import controller_file, design_models
+from cartctl.commands.options import FORMS, check_duration
 from cartctl.errors import InputError
-from cartctl.jsonout import dumps
-from cartctl.modelfile import load_models
-from cartctl.plants.factory import make_plant
-from cartctl.progress import ProgressBar
-from cartctl.reference import FORMS, reference_signal
-from cartctl.tune import engine
-from cartctl.tune import grid as tuning
-from cartctl.tune import robust as robustness
-from cartctl.tune import robust_choice as choice
-from cartctl.tune.uncertainty import describe_line, sample_plants
+
+if TYPE_CHECKING:  # the tuning modules load numpy and scipy: imported where used, not for --help
+    from cartctl.tune import engine
+    from cartctl.tune import grid as tuning
+    from cartctl.tune import robust as robustness
+
+METHODS = ("pi", "poles")
+"""The tunable methods (``--method``): the keys of :data:`cartctl.tune.grid.AXES`."""
 
 DEFAULT_PLANTS = 200
 """Sampled plants of ``--robust`` by default."""
@@ -73,7 +67,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("model", metavar="MODEL.toml", help="model to design on (and of the sim plant)")
-    p.add_argument("--method", choices=tuple(tuning.AXES), required=True)
+    p.add_argument("--method", choices=METHODS, required=True)
     p.add_argument("--grid", metavar="SPEC", help="e.g. 'phase_margin=50:75:5,crossover_hz=2:5:0.5'")  # fmt: skip
     p.add_argument("--plant", default="sim", choices=("sim", "physics"), help="default sim (MODEL)")
     p.add_argument("--preset", choices=("air", "ground"), default="ground", help="physics preset")
@@ -137,6 +131,10 @@ def _check_robust(args: argparse.Namespace) -> None:
 
 
 def _check(args: argparse.Namespace, n_settings: int) -> None:
+    from cartctl.modelfile import load_models
+    from cartctl.plants.factory import make_plant
+    from cartctl.reference import reference_signal
+
     check_duration(args.duration)
     _check_robust(args)
     if args.extra_delay < 0:
@@ -186,6 +184,7 @@ def plot_tuning(path: str, method: str, results: Sequence[tuning.TuneResult]) ->
 def plot_robust(path: str, method: str, rows: Sequence[robustness.RobustRow], plants: int) -> None:
     """Nominal settling (ms) against overshoot (%): worst case (colour: p95 settling), nominal
     (grey, joined to it) and physics (x); the robust Pareto front ringed and numbered."""
+    import numpy as np
     from matplotlib import colormaps
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -241,6 +240,11 @@ def choose(args: argparse.Namespace, result: tuning.TuneResult) -> str:
 
     Returns the design command (``cartctl design ...``), as the file records it.
     """
+    from cartctl.design.controllerfile import save_controller
+    from cartctl.design.make import controller_file, design_models
+    from cartctl.modelfile import load_models
+    from cartctl.tune import grid as tuning
+
     if not result.feasible:
         raise InputError(f"--choose {result.index}: that setting is infeasible ({result.reason})")
     request = tuning.design_request(args.method, result.settings, args.extra_delay)
@@ -264,6 +268,15 @@ def _chosen(args: argparse.Namespace, result: tuning.TuneResult, rule: str | Non
 
 def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
     """``tune --robust``: the grid on the nominal model, the sampled plants and the physics preset."""
+    from cartctl.jsonout import dumps
+    from cartctl.modelfile import load_models
+    from cartctl.progress import ProgressBar
+    from cartctl.tune import engine
+    from cartctl.tune import grid as tuning
+    from cartctl.tune import robust as robustness
+    from cartctl.tune import robust_choice as choice
+    from cartctl.tune.uncertainty import describe_line, sample_plants
+
     plants = DEFAULT_PLANTS if args.plants is None else args.plants
     seed = 1 if args.seed is None else args.seed
     sample = sample_plants(load_models(args.model), plants, seed,
@@ -317,6 +330,12 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    from cartctl.jsonout import dumps
+    from cartctl.progress import ProgressBar
+    from cartctl.tune import engine
+    from cartctl.tune import grid as tuning
+    from cartctl.tune import robust_choice as choice
+
     axes = tuning.parse_grid(args.grid, args.method)
     settings = tuning.grid_settings(axes)
     _check(args, len(settings))

@@ -14,15 +14,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cartctl.commands.options import add_map_option
-from cartctl.data import MOTORS, read_trace
 from cartctl.errors import InputError
-from cartctl.identification.validate import ModelValidation, ValidationResult, validate_models
-from cartctl.jsonout import dumps
-from cartctl.modelfile import load_models
-from cartctl.stepinfo import StepInfo
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
+
+    from cartctl.identification.validate import ModelValidation, ValidationResult
+    from cartctl.stepinfo import StepInfo
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -174,6 +172,11 @@ def format_table(validation: ModelValidation) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from cartctl.data import MOTORS, read_trace
+    from cartctl.identification.validate import validate_models
+    from cartctl.jsonout import dumps
+    from cartctl.modelfile import load_models
+
     plot = check_plot_path(args.plot)
     models = load_models(args.model)
     trace = read_trace(args.data, args.map)

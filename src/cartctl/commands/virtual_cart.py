@@ -4,13 +4,23 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
+from cartctl.commands.options import FORMS
 from cartctl.errors import InputError
-from cartctl.plants.virtual_cart import CartFaults, VirtualCart
-from cartctl.reference import FORMS
+
+if TYPE_CHECKING:
+    from cartctl.plants.cart_faults import CartFaults
+
+
+_NO_FAULTS = ""
+"""``--faults`` by default: argparse passes a string default through ``type`` when it parses, so
+the parser is built without cartctl.plants (numpy, scipy) and the default is still ``CartFaults()``."""
 
 
 def _faults(text: str) -> CartFaults:
+    from cartctl.plants.cart_faults import CartFaults
+
     try:
         return CartFaults.parse(text)
     except ValueError as exc:  # InputError: argparse shows the message as one line
@@ -36,7 +46,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="extra measurement noise, standard deviation in rad/s (default 0)")  # fmt: skip
     p.add_argument("--seed", type=int, default=None, help="seed of the noise and the faults")
     p.add_argument(
-        "--faults", type=_faults, default=CartFaults(), metavar="KEY=VALUE,...",
+        "--faults", type=_faults, default=_NO_FAULTS, metavar="KEY=VALUE,...",
         help="inject faults: garbage=FRACTION (bursts of random bytes before that fraction of "
         "frames), corrupt=FRACTION (frames with a changed byte), stall=S (stop ticking S seconds "
         "after the host's first frame, port open), pull=S (the port vanishes S seconds after the "
@@ -59,6 +69,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from cartctl.plants.virtual_cart import VirtualCart
+
     if args.reference and not args.onboard:
         raise InputError("--reference needs --onboard CONTROLLER.toml")
     firmware = None

@@ -26,7 +26,6 @@ from cartctl.commands.review.screenshot import (
 )
 from cartctl.commands.review.viewer import ViewerError, open_in_viewer, serve_web
 from cartctl.errors import InputError
-from cartctl.jsonout import dumps
 
 __all__ = [
     "SCREENSHOT_WINDOW",
@@ -101,6 +100,7 @@ def _review_csv(args: argparse.Namespace) -> int:
     if args.web or args.screenshot:
         raise InputError("--web and --screenshot apply to .rrd recordings, not to CSV traces")
     from cartctl.data import read_trace
+    from cartctl.jsonout import dumps
     from cartctl.sinks.summary import format_summary, trace_metrics
 
     paths = [args.recording] + ([args.compare] if getattr(args, "compare", None) else [])

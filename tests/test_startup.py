@@ -1,0 +1,125 @@
+"""Start-up: building the parser loads no numerical or plotting library, and the parser is the same.
+
+The commands import numpy, scipy, filterpy, matplotlib, Rerun and the serial stack when they run,
+not when ``cartctl`` parses its arguments (``cartctl --help`` stays fast; the timing is in
+``benchmarks/bench_startup.py``). The few constants the parser shows whose home module is heavy are
+repeated in the command modules; each copy is checked against its home here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+
+import pytest
+
+from cartctl.cli import build_parser
+
+HEAVY = ("numpy", "scipy", "control", "matplotlib", "rerun", "filterpy", "pymavlink", "serial",
+         "pyarrow")  # fmt: skip
+COMMANDS = ("excite", "identify", "inspect", "validate", "linearity", "design", "run", "review",
+            "tune", "convert", "export", "virtual-cart", "monitor")  # fmt: skip
+
+# The option strings of every command, as the parser had them before the imports became lazy.
+OPTIONS = {
+    "convert": ["--help", "--json", "--map", "--out", "-h"],
+    "design": ["--anti-windup", "--bandwidth-hz", "--bias-drift-v", "--crossover-hz", "--estimator", "--estimator-gain", "--extra-delay", "--help", "--json", "--measurement-noise", "--method", "--motor", "--out", "--overshoot", "--phase-margin", "--poles", "--process-noise-v", "--report", "--settling-time", "--step", "--voltage-limit", "-h"],
+    "excite": ["--amplitude", "--connect-timeout", "--cycles", "--duration", "--help", "--model", "--motor", "--noise", "--out", "--plant", "--preset", "--seed", "--signal", "-h"],
+    "export": ["--arduino", "--help", "--out", "-h"],
+    "identify": ["--average", "--compare", "--cutoff-hz", "--delay", "--help", "--json", "--map", "--method", "--motor", "--na", "--nb", "--order", "--out", "--prefilter", "--report", "--zero-phase", "-h"],
+    "inspect": ["--help", "--json", "-h"],
+    "linearity": ["--help", "--json", "--map", "--motor", "--plot", "-h"],
+    "monitor": ["--connect-timeout", "--connect-url", "--duration", "--help", "--json", "--labels", "--name", "--onboard", "--out", "--reference", "--rerun", "-h"],
+    "review": ["--compare", "--help", "--json", "--screenshot", "--web", "-h"],
+    "run": ["--allow-delay-mismatch", "--allow-unstable", "--connect-timeout", "--connect-url", "--controller", "--duration", "--fast", "--force", "--help", "--json", "--model", "--name", "--noise", "--out", "--plant", "--preset", "--reference", "--reference-b", "--rerun", "--seed", "--voltage-limit", "-h"],
+    "tune": ["--choose", "--duration", "--extra-delay", "--grid", "--help", "--jobs", "--json", "--method", "--out", "--plant", "--plants", "--plot", "--preset", "--reference", "--robust", "--seed", "-h"],
+    "validate": ["--help", "--json", "--map", "--motor", "--plot", "-h"],
+    "virtual-cart": ["--duration", "--faults", "--help", "--noise", "--onboard", "--preset", "--reference", "--seed", "-h"],
+}  # fmt: skip
+
+
+def _child(code: str) -> str:
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return proc.stdout.strip()
+
+
+def test_building_the_parser_loads_no_heavy_library() -> None:
+    code = (
+        "import sys; from cartctl.cli import build_parser; build_parser(); "
+        f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))"
+    )
+    assert _child(code) == "[]"
+
+
+def test_help_loads_no_heavy_library() -> None:
+    code = (
+        "import sys, contextlib, io\n"
+        "from cartctl.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        "    for argv in [['--help']] + [[c, '--help'] for c in sys.argv[1:]]:\n"
+        "        try:\n"
+        "            main(argv)\n"
+        "        except SystemExit as exc:\n"
+        "            assert exc.code == 0, (argv, exc.code)\n"
+        f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))"
+    )
+    proc = subprocess.run([sys.executable, "-c", code, *COMMANDS], capture_output=True,
+                          text=True, check=True)  # fmt: skip
+    assert proc.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize("command", [None, *COMMANDS])
+def test_help_exits_0_with_the_usage(command: str | None) -> None:
+    argv = ["--help"] if command is None else [command, "--help"]
+    proc = subprocess.run([sys.executable, "-m", "cartctl", *argv], capture_output=True,
+                          text=True, check=False)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("usage: cartctl" + ("" if command is None else f" {command}"))
+    assert proc.stderr == ""
+
+
+def _subparsers() -> dict:
+    parser = build_parser()
+    (action,) = [a for a in parser._actions if a.dest == "command"]
+    return dict(action.choices)
+
+
+def test_every_command_is_there_with_its_options() -> None:
+    subs = _subparsers()
+    assert tuple(subs) == COMMANDS
+    for command, options in OPTIONS.items():
+        have = [o for a in subs[command]._actions for o in a.option_strings]
+        assert sorted(have) == sorted(options), command
+
+
+def test_the_repeated_constants_match_their_home() -> None:
+    from cartctl.commands import design, options, tune
+    from cartctl.design import kalman, request
+    from cartctl.plants import cart_link, factory
+    from cartctl.reference import FORMS
+    from cartctl.signals import MAX_DURATION_S, SIGNALS
+    from cartctl.tune.grid import AXES
+
+    assert options.DEFAULT_MODEL == factory.DEFAULT_MODEL
+    assert options.MAX_DURATION_S == MAX_DURATION_S
+    assert options.FORMS == FORMS
+    assert options.SIGNALS == SIGNALS
+    assert options.DEFAULT_CONNECT_TIMEOUT_S == cart_link.DEFAULT_CONNECT_TIMEOUT_S
+    assert design.ANTI_WINDUP == request.ANTI_WINDUP
+    assert design.PI_ESTIMATORS == request.PI_ESTIMATORS
+    assert design.ESTIMATOR_GAINS == request.ESTIMATOR_GAINS
+    assert design.DEFAULT_PROCESS_NOISE_STD_V == kalman.DEFAULT_PROCESS_NOISE_STD_V
+    assert design.DEFAULT_BIAS_DRIFT_STD_V == kalman.DEFAULT_BIAS_DRIFT_STD_V
+    home = dataclasses.asdict(request.DesignRequest(method="pi"))
+    assert {k: home[k] for k in vars(design._DEFAULT)} == vars(design._DEFAULT)
+    assert tuple(AXES) == tune.METHODS
+
+
+def test_parsed_defaults_are_the_home_values() -> None:
+    from cartctl.plants.cart_faults import CartFaults
+
+    parser = build_parser()
+    assert parser.parse_args(["virtual-cart"]).faults == CartFaults()
+    args = parser.parse_args(["design", "m.toml", "--method", "pi", "--estimator-gain", "kalman"])
+    assert args.estimator_gain == "time-varying"
