@@ -37,7 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"cartctl {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
-    from cartctl.commands import COMMANDS  # the heavy imports, after the stop signals are routed
+    from cartctl.commands import COMMANDS  # light: each command loads numpy & co. when it runs
 
     for module in COMMANDS:
         module.add_parser(sub)
@@ -91,6 +91,13 @@ def _main(argv: Sequence[str] | None) -> int:
     except CartctlError as exc:
         print(f"cartctl {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except ImportError:
+        # The command's heavy imports come first in its run(): a stop signal inside an extension
+        # module's initialisation surfaces as its ImportError, before anything was done.
+        if stopping.received() is None:
+            raise
+        print("cartctl: stopped while starting; nothing was done", file=sys.stderr)
+        return stopping.exit_code()
     except BrokenPipeError:  # output piped into a command that stopped reading (| head)
         sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - keeps the interpreter's flush quiet
         return 0

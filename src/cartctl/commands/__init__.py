@@ -1,7 +1,9 @@
 """The ``cartctl`` subcommands, in the order of the workflow.
 
 Each entry has ``add_parser(subparsers)``; the parser it adds sets ``func`` to a handler
-``run(args) -> int``.
+``run(args) -> int``. Building the parser imports every command module, so their top level and
+``add_parser`` import no numpy, scipy, filterpy, matplotlib, Rerun or serial stack (nor a cartctl
+module that does): ``run`` imports those when the command starts (``tests/test_startup.py``).
 """
 
 from cartctl.commands import (
