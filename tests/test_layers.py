@@ -13,7 +13,7 @@ import ast
 from pathlib import Path
 
 SRC = Path(__file__).resolve().parents[1] / "src"
-CORE = {"cartctl", "cart", "errors", "model", "modelfile", "tomlfile", "data", "qrc", "signals",
+CORE = {"cartctl", "cart", "choices", "errors", "model", "modelfile", "tomlfile", "data", "qrc", "signals",
         "metrics", "stepinfo", "jsonout", "stopping", "progress", "reference", "link", "trace"}  # fmt: skip
 RUNS = {"runtime", "plants", "sinks", "experiment"}
 MAKES = {"identification", "design", "tune", "export"}

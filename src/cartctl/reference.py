@@ -21,9 +21,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from cartctl.choices import FORMS
 from cartctl.errors import DataFileError, InputError, MissingFileError
-
-FORMS = "step:A[:DELAY_S], square:A:PERIOD_S, ramp:SLOPE[:LIMIT], const:A or file:PATH"
 
 
 def _numbers(spec: str, parts: list[str], low: int, high: int) -> list[float]:

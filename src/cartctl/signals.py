@@ -15,10 +15,8 @@ from numpy.typing import NDArray
 from scipy import signal as sps
 
 from cartctl.cart import PERIOD_S as TS_S
+from cartctl.choices import MAX_DURATION_S, SIGNALS
 from cartctl.errors import InputError
-
-SIGNALS = ("square", "step", "prbs", "multisine", "chirp")
-"""Names accepted by :func:`make_signal` (and ``cartctl excite --signal``)."""
 
 
 def _ticks(duration_s: float, period_s: float, what: str) -> int:
@@ -183,10 +181,6 @@ def ramp(
     if limit is not None:
         out = np.clip(out, -abs(limit), abs(limit))
     return out
-
-
-MAX_DURATION_S = 24 * 3600.0
-"""The longest signal, run or recording cartctl takes: 24 h (8.64 million ticks of 10 ms)."""
 
 
 def make_signal(

@@ -3,45 +3,22 @@
 from __future__ import annotations
 
 import argparse
-from types import SimpleNamespace
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from cartctl.commands.options import command_line
+from cartctl.design.request import (  # light: the parser's choices and defaults
+    ANTI_WINDUP,
+    DEFAULT_BIAS_DRIFT_STD_V,
+    DEFAULT_PROCESS_NOISE_STD_V,
+    ESTIMATOR_GAINS,
+    OPTIONS,
+    PI_ESTIMATORS,
+    DesignRequest,
+    estimator_gain_name,
+)
 from cartctl.errors import InputError
 
-if TYPE_CHECKING:
-    from cartctl.design.request import DesignRequest
-
-# The parser is built without cartctl.design (it loads filterpy and scipy): the choices and defaults
-# it shows are repeated here from cartctl.design.request and cartctl.design.kalman, and
-# tests/test_startup.py checks each against its home.
-ANTI_WINDUP = ("conditional", "back-calculation", "none")
-PI_ESTIMATORS = ("none", "kalman")
-ESTIMATOR_GAINS = ("time-varying", "steady-state")
-DEFAULT_PROCESS_NOISE_STD_V = 0.1
-DEFAULT_BIAS_DRIFT_STD_V = 0.03
-_DEFAULT = SimpleNamespace(  # the fields of DesignRequest(method="pi") the options default to
-    phase_margin_deg=65.0,
-    crossover_hz=3.0,
-    anti_windup="conditional",
-    estimator="none",
-    settling_time_s=0.06,
-    overshoot_percent=1.0,
-    estimator_gain="time-varying",
-    process_noise_std_v=DEFAULT_PROCESS_NOISE_STD_V,
-    bias_drift_std_v=DEFAULT_BIAS_DRIFT_STD_V,
-    extra_noise_std_rad_s=0.0,
-    extra_delay_ticks=0,
-    voltage_limit_v=12.0,
-    step_rad_s=10.0,
-)
-
-
-def estimator_gain_name(name: str) -> str:
-    """:func:`cartctl.design.request.estimator_gain_name` (``--estimator-gain``), loaded on use."""
-    from cartctl.design.request import estimator_gain_name
-
-    return estimator_gain_name(name)
+_DEFAULT = DesignRequest(method="pi")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -169,8 +146,6 @@ def request_from_args(args: argparse.Namespace) -> DesignRequest:
     the table :meth:`~cartctl.design.request.DesignRequest.to_argv` writes design commands from,
     so a written command parses back to its request.
     """
-    from cartctl.design.request import OPTIONS, DesignRequest
-
     # argparse's attribute for an option: '--phase-margin' -> phase_margin
     values = {field: getattr(args, flag[2:].replace("-", "_")) for field, flag in OPTIONS.items()}
     return DesignRequest(method=args.method, **values).check()

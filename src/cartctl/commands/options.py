@@ -1,9 +1,8 @@
 """Command-line options shared by several subcommands (one definition each).
 
 This module is imported to build the parser, before any command runs: it imports no numpy, scipy
-or module that does (``cartctl --help`` stays fast). The few constants the options show, whose
-home module is heavy, are repeated here; ``tests/test_startup.py`` checks each copy against its
-home.
+or module that does (``cartctl --help`` stays fast). The names, limits and defaults the options
+show come from :mod:`cartctl.choices`, where the modules that implement them take them too.
 """
 
 from __future__ import annotations
@@ -15,18 +14,16 @@ import sys
 from datetime import datetime
 from pathlib import Path
 
+from cartctl.choices import (
+    DEFAULT_CONNECT_TIMEOUT_S,
+    DEFAULT_MODEL,
+    FORMS,
+    MAX_DURATION_S,
+    SIGNALS,
+)
 from cartctl.errors import InputError
 
-DEFAULT_MODEL = Path("models/ground.toml")
-"""The sim plant's model file: :data:`cartctl.plants.factory.DEFAULT_MODEL`."""
-MAX_DURATION_S = 24 * 3600.0
-"""The longest run or recording: :data:`cartctl.signals.MAX_DURATION_S`."""
-FORMS = "step:A[:DELAY_S], square:A:PERIOD_S, ramp:SLOPE[:LIMIT], const:A or file:PATH"
-"""The reference specifications, for help texts: :data:`cartctl.reference.FORMS`."""
-SIGNALS = ("square", "step", "prbs", "multisine", "chirp")
-"""The excitation signals: :data:`cartctl.signals.SIGNALS`."""
-DEFAULT_CONNECT_TIMEOUT_S = 5.0
-"""The wait for a cart's first HEARTBEAT: :data:`cartctl.plants.cart_link.DEFAULT_CONNECT_TIMEOUT_S`."""
+__all__ = ["DEFAULT_CONNECT_TIMEOUT_S", "DEFAULT_MODEL", "FORMS", "MAX_DURATION_S", "SIGNALS"]
 
 RERUN_MODES = ("auto", "spawn", "connect", "save", "off")
 """The choices of ``--rerun``."""

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 from cartctl.cart import PERIOD_S
 from cartctl.commands.options import FORMS, check_duration
+from cartctl.design.request import METHODS  # light; tune.grid.AXES has one entry per method
 from cartctl.errors import InputError
 
 if TYPE_CHECKING:  # the tuning modules load numpy and scipy: imported where used, not for --help
@@ -37,8 +38,6 @@ if TYPE_CHECKING:  # the tuning modules load numpy and scipy: imported where use
     from cartctl.tune import grid as tuning
     from cartctl.tune import robust as robustness
 
-METHODS = ("pi", "poles")
-"""The tunable methods (``--method``): the keys of :data:`cartctl.tune.grid.AXES`."""
 
 DEFAULT_PLANTS = 200
 """Sampled plants of ``--robust`` by default."""

@@ -63,6 +63,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from cartctl.cart import ENCODER_COUNTS_PER_REV
+from cartctl.design.request import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOISE_STD_V
 from cartctl.design.statespace import StateSpace, realise
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
@@ -76,11 +77,6 @@ __all__ = [
     "quantisation_std_rad_s",
 ]
 
-DEFAULT_PROCESS_NOISE_STD_V = 0.1
-"""Input-equivalent white voltage disturbance (V std per tick); see the module docstring."""
-
-DEFAULT_BIAS_DRIFT_STD_V = 0.03
-"""Random-walk step of the input-disturbance state (V std per tick); see the module docstring."""
 
 COUNTS_PER_REV = ENCODER_COUNTS_PER_REV
 """Encoder counts per wheel revolution on the cart."""

@@ -12,10 +12,15 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 from cartctl.cart import SUPPLY_V
-from cartctl.design.kalman import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOISE_STD_V
 from cartctl.errors import InputError
 
 METHODS = ("pi", "poles")
+DEFAULT_PROCESS_NOISE_STD_V = 0.1
+"""The estimator's input-equivalent white voltage disturbance (V std per tick); see
+:mod:`cartctl.design.kalman`."""
+DEFAULT_BIAS_DRIFT_STD_V = 0.03
+"""Random-walk step of the estimator's input-disturbance state (V std per tick); see
+:mod:`cartctl.design.kalman`."""
 ANTI_WINDUP = ("conditional", "back-calculation", "none")
 PI_ESTIMATORS = ("none", "kalman")
 ESTIMATOR_GAINS = ("time-varying", "steady-state")

@@ -19,6 +19,7 @@ from collections.abc import Callable
 from typing import Any
 
 from cartctl.cart import BAUD
+from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import CartctlError, InputError, PlantError
 from cartctl.link import (
     Framer,
@@ -30,8 +31,6 @@ from cartctl.link import (
     PrintText,
 )
 
-DEFAULT_CONNECT_TIMEOUT_S = 5.0
-"""Opening the port resets the Mega (DTR); its bootloader takes 1-2 s before the first HEARTBEAT."""
 DEFAULT_SILENCE_TIMEOUT_S = 0.1
 """No GPIO for this long (10 ticks) ends a run: the cart's own watchdog trips at the same age."""
 READ_SLICE_S = 0.005

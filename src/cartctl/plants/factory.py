@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from cartctl.choices import DEFAULT_MODEL
 from cartctl.errors import InputError
 from cartctl.modelfile import load_models
 from cartctl.plants.base import Plant
 
 PLANT_NAMES = ("sim", "physics", "virtual", "virtual:FAULTS", "serial:PORT")
-DEFAULT_MODEL = Path("models/ground.toml")
 
 
 def is_serial(spec: str) -> bool:

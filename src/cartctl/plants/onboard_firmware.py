@@ -28,10 +28,10 @@ from collections.abc import Mapping, Sequence
 from typing import Protocol
 
 from cartctl.cart import PERIOD_S
+from cartctl.choices import MAX_DURATION_S
 from cartctl.errors import InputError
 from cartctl.plants.bridge_firmware import CartIO, HeldChannels
 from cartctl.reference import ReferenceSchedule
-from cartctl.signals import MAX_DURATION_S
 
 CART_PERIOD_S = PERIOD_S
 """The period of the cart's control thread (s)."""

@@ -31,10 +31,11 @@ from collections.abc import Callable
 from typing import Any
 
 from cartctl.cart import PERIOD_S
+from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import PlantError
 from cartctl.link import CartSample, Encoder, Gpio, HostCommand, next_seq, tick_difference
 from cartctl.plants.base import Measurement
-from cartctl.plants.cart_link import DEFAULT_CONNECT_TIMEOUT_S, DEFAULT_SILENCE_TIMEOUT_S, CartLink
+from cartctl.plants.cart_link import DEFAULT_SILENCE_TIMEOUT_S, CartLink
 
 STOP_FRAMES = 3
 """drive = 0 frames sent on close (one may be lost to line noise)."""
