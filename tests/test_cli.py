@@ -163,6 +163,21 @@ def test_user_mistakes_give_one_line_and_exit_2(
     assert "Traceback" not in err
 
 
+@pytest.mark.parametrize(
+    ("argv", "prog"),
+    [(["run", "--bogus"], "cartctl run"), (["design", "m.toml", "--method", "pi", "x"],
+      "cartctl design"), (["review", "a.csv", "--nope", "1"], "cartctl review")],
+)  # fmt: skip
+def test_unrecognised_arguments_name_their_subcommand(
+    capsys: pytest.CaptureFixture[str], argv: list[str], prog: str
+) -> None:
+    code, out, err = _run(capsys, *argv)
+    assert code == 2 and out == ""
+    (line,) = err.strip().splitlines()
+    assert line.startswith(f"{prog}: error: unrecognized arguments: ")
+    assert line.endswith(f"(see '{prog} --help')")
+
+
 @pytest.mark.skipif(shutil.which("cartctl") is None, reason="console script not installed")
 def test_console_script_end_to_end(tmp_path: Path) -> None:
     proc = subprocess.run(

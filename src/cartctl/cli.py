@@ -19,10 +19,23 @@ from cartctl.errors import CartctlError
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse, but a usage mistake is one line (plus where to look) and exit code 2."""
+    """argparse, but a usage mistake is one line (plus where to look) and exit code 2.
+
+    Arguments no option takes are reported by the subcommand they were given to (``cartctl run:
+    error: unrecognized arguments: …``), not by ``cartctl`` (argparse's own way).
+    """
+
+    subcommands: dict[str, argparse.ArgumentParser] = {}  # noqa: RUF012 - set per instance
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+    def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+        parsed, extra = self.parse_known_args(args, namespace)
+        if extra:
+            owner = self.subcommands.get(getattr(parsed, "command", None) or "", self)
+            owner.error(f"unrecognized arguments: {' '.join(extra)}")
+        return parsed
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -41,6 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     for module in COMMANDS:
         module.add_parser(sub)
+    parser.subcommands = dict(sub.choices)
     return parser
 
 
