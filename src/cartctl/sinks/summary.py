@@ -80,7 +80,7 @@ def timing_metrics(
     """Percentiles of the period error and compute time (µs), and the deadline misses."""
     if period_error_us.size == 0:
         return {"deadline_misses": 0, "period_error_us": {"p50": None, "p99": None, "max": None},
-                "compute_us": {"p50": None, "p99": None}}  # fmt: skip
+                "compute_us": {"p50": None, "p99": None, "max": None}}  # fmt: skip
     misses = int(np.count_nonzero(period_error_us + compute_us > period_s * 1e6))
     return {
         "deadline_misses": misses,
@@ -92,6 +92,7 @@ def timing_metrics(
         "compute_us": {
             "p50": float(np.percentile(compute_us, 50)),
             "p99": float(np.percentile(compute_us, 99)),
+            "max": float(np.max(compute_us)),
         },
     }
 
@@ -105,6 +106,15 @@ def metrics_signal(columns: Mapping[str, NDArray[np.float64]]) -> str:
     return "speed"
 
 
+def trace_duration_s(time_s: NDArray[np.float64]) -> float:
+    """A trace's duration (s): from its first row's time to its last's.
+
+    A run of N ticks ends with its stop row at N·Ts, so this is the duration asked for; ``run``
+    and ``review`` report the same figure for the same trace.
+    """
+    return float(time_s[-1] - time_s[0]) if time_s.size else 0.0
+
+
 def trace_metrics(columns: Mapping[str, NDArray[np.float64]], period_s: float) -> dict[str, Any]:
     """The whole summary (without file names) from trace columns (contract 1 + closed loop)."""
     for name in ("time_s", "reference_a", "speed_a", "voltage_a", "period_error_us", "compute_us"):
@@ -115,7 +125,7 @@ def trace_metrics(columns: Mapping[str, NDArray[np.float64]], period_s: float) -
     quantum = encoder_quantum_rad_s(period_s)
     out = {
         "ticks": int(t.size),
-        "duration_s": float(t.size * period_s),
+        "duration_s": trace_duration_s(t),
         **timing_metrics(columns["period_error_us"], columns["compute_us"], period_s),
         "metrics_signal": signal,
         "settling_band": {"fraction": SETTLING_FRACTION, "floor_rad_s": quantum},
@@ -144,10 +154,17 @@ def format_summary(summary: Mapping[str, Any]) -> str:
         return "—" if x is None else format(x, fmt).replace("-0.000", "0.000")
 
     pe, cu = summary["period_error_us"], summary["compute_us"]
+    if pe.get("max") == 0.0 and cu.get("p99") == 0.0:  # a virtual clock: no time passed
+        timing = "timing: virtual clock, no real-time figures"
+    else:
+        timing = (
+            f"period error p50/p99/max {num(pe['p50'], '.0f')}/{num(pe['p99'], '.0f')}/"
+            f"{num(pe['max'], '.0f')} µs; compute p50/p99/max {num(cu['p50'], '.0f')}/"
+            f"{num(cu['p99'], '.0f')}/{num(cu.get('max'), '.0f')} µs"
+        )
     lines = [
-        f"{summary['ticks']} ticks, {summary['duration_s']:.2f} s; deadline misses {summary['deadline_misses']}; "
-        f"period error p50/p99/max {num(pe['p50'], '.0f')}/{num(pe['p99'], '.0f')}/{num(pe['max'], '.0f')} µs; "
-        f"compute p50/p99 {num(cu['p50'], '.0f')}/{num(cu['p99'], '.0f')} µs",
+        f"{summary['ticks']} ticks, {summary['duration_s']:.2f} s; deadline misses "
+        f"{summary['deadline_misses']}; {timing}",
     ]
     signal = summary.get("metrics_signal")
     if signal in SIGNALS:
