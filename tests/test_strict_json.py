@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
+from cartctl.data import read_trace
 from cartctl.jsonout import dumps, strict
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -89,6 +90,12 @@ def test_every_json_command_prints_strict_json(
           "phase_margin=60:65:5,crossover_hz=3:4:1", "--duration", "0.5", "--json")  # fmt: skip
     _json(capsys, "convert", str(DATA / "qrc6_sample.csv"), "--map",
           "voltage_a=voltA,speed_a=speedA", "--out", "q.csv", "--json")  # fmt: skip
+    excited = _json(capsys, "excite", "--plant", "physics", "--signal", "prbs", "--amplitude",
+                    "5", "--duration", "1", "--motor", "a", "--out", "p.csv", "--json")  # fmt: skip
+    trace = read_trace(workdir / "p.csv")
+    assert excited["ticks"] == len(trace) == 100 and excited["duration_s"] == pytest.approx(1.0)
+    assert excited["loop_delay_ticks"] == 1 and excited["stopped"] is None  # physics: on board
+    assert excited["trace"] == "p.csv" and not trace.voltage_b.any()  # motor a only
 
 
 def test_linearity_json_is_strict(capsys: pytest.CaptureFixture[str], workdir: Path) -> None:

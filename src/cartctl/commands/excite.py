@@ -45,6 +45,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="which motor gets the signal; the other stays at 0 V (default both)",
     )
     p.add_argument("--out", required=True, metavar="FILE.csv", help="where to write the trace")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.set_defaults(func=run)
 
 
@@ -53,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
 
     from cartctl.data import write_trace
     from cartctl.experiment import run_experiment
+    from cartctl.jsonout import dumps
     from cartctl.plants.factory import is_serial, make_plant
     from cartctl.plants.sim import SUPPLY_V
     from cartctl.progress import ProgressBar
@@ -94,21 +96,34 @@ def run(args: argparse.Namespace) -> int:
         return stopping.exit_code()
     write_trace(result.trace, args.out)
     path = args.out
-    print(
-        f"wrote {path}: {n} ticks ({n * plant.period_s:.2f} s), {args.signal} {args.amplitude:g} V "
-        f"on motor {args.motor}, plant {description}"
-    )
     link_summary = getattr(plant, "link_summary", None)
-    if link_summary is not None:
-        link = link_summary()
+    link = link_summary() if link_summary is not None else None
+    if args.json:
+        print(dumps({
+            "trace": str(path), "ticks": n, "duration_s": n * plant.period_s,
+            "signal": args.signal, "amplitude_v": args.amplitude, "motor": args.motor,
+            "plant": description,
+            "loop_delay_ticks": (getattr(plant, "loop_delay_ticks", None) if link is None
+                                 else link["loop_delay_ticks"]),
+            "link": None if link is None else link["link"],
+            "stopped": "failure" if result.failure else "interrupted" if result.interrupted else None,
+            "failure": result.failure or None,
+        }))  # fmt: skip
+    else:
+        print(
+            f"wrote {path}: {n} ticks ({n * plant.period_s:.2f} s), {args.signal} "
+            f"{args.amplitude:g} V on motor {args.motor}, plant {description}"
+        )
+    if link is not None:
         delay = link["loop_delay_ticks"]
         stats = link["link"]
-        print(
-            f"  loop delay {delay} ticks from the echo (the report's model structure for this "
-            f"loop: nk = {None if delay is None else delay + 1}); {stats['crc_errors']} CRC errors, "
-            f"{stats['lost_frames']} frames lost, {stats['missed_ticks']} cart ticks missed; "
-            + host_loss_text(stats)
-        )
+        if not args.json:
+            print(
+                f"  loop delay {delay} ticks from the echo (the report's model structure for "
+                f"this loop: nk = {None if delay is None else delay + 1}); "
+                f"{stats['crc_errors']} CRC errors, {stats['lost_frames']} frames lost, "
+                f"{stats['missed_ticks']} cart ticks missed; " + host_loss_text(stats)
+            )
         warn_host_losses(stats, "excite")
     if result.failure:
         print(f"cartctl excite: error: {result.failure}; the trace holds the ticks recorded so far",
