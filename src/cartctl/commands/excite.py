@@ -58,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.plants.factory import is_serial, make_plant
     from cartctl.plants.sim import SUPPLY_V
     from cartctl.progress import ProgressBar
+    from cartctl.runtime.gcpause import gc_paused
     from cartctl.signals import make_signal
     from cartctl.sinks.summary import host_loss_text, warn_host_losses
 
@@ -86,7 +87,8 @@ def run(args: argparse.Namespace) -> int:
     if is_serial(args.plant):  # answer each cart tick at once: threads hand the GIL back quickly
         sys.setswitchinterval(1e-4)
     try:
-        result = run_experiment(plant, ua, ub, on_tick=bar.update, source=description)
+        with gc_paused():  # no collector pass at a random tick: a late answer raises the echo
+            result = run_experiment(plant, ua, ub, on_tick=bar.update, source=description)
     finally:
         sys.setswitchinterval(switch_interval)
         bar.close()
