@@ -5,13 +5,26 @@ The parser is built from these before any command runs, so this module imports n
 here: :mod:`cartctl.signals` (the excitation signals, the longest run), :mod:`cartctl.reference`
 (the reference specifications), :mod:`cartctl.plants.factory` (the sim plant's model) and
 :mod:`cartctl.plants.cart_link` (the wait for a cart).
+
+The shipped model and controller files (``models/``, ``controllers/``) are found by
+:func:`find_file` from any folder: the working folder first, then the copies installed with the
+package (``cartctl/shipped/``, put there when the wheel is built), then the source checkout the
+package runs from (an editable install).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["DEFAULT_CONNECT_TIMEOUT_S", "DEFAULT_MODEL", "FORMS", "MAX_DURATION_S", "SIGNALS"]
+__all__ = [
+    "DEFAULT_CONNECT_TIMEOUT_S",
+    "DEFAULT_MODEL",
+    "FORMS",
+    "MAX_DURATION_S",
+    "SHIPPED_FOLDERS",
+    "SIGNALS",
+    "find_file",
+]
 
 MAX_DURATION_S = 24 * 3600.0
 """The longest signal, run or recording cartctl takes: 24 h (8.64 million ticks of 10 ms)."""
@@ -28,3 +41,34 @@ DEFAULT_MODEL = Path("models/ground.toml")
 DEFAULT_CONNECT_TIMEOUT_S = 5.0
 """The wait for a cart's first HEARTBEAT (s). Opening the port resets the Mega (DTR); its
 bootloader takes 1-2 s before the first HEARTBEAT."""
+
+SHIPPED_FOLDERS = ("models", "controllers")
+"""The folders of files shipped with cartctl, as named in the repository and the package."""
+
+
+def _shipped_roots() -> tuple[Path, ...]:
+    package = Path(__file__).resolve().parent
+    roots = [package / "shipped"]  # an installed wheel
+    checkout = package.parents[1]  # src/cartctl/ -> the repository (an editable install)
+    if (checkout / "pyproject.toml").is_file() and (checkout / "src" / "cartctl").is_dir():
+        roots.append(checkout)
+    return tuple(roots)
+
+
+def find_file(path: str | Path) -> Path:
+    """``path`` if it exists; else, for a relative path into a shipped folder, the shipped file.
+
+    ``controllers/pi.toml`` names the file in the working folder when there is one, and the
+    controller shipped with cartctl otherwise. Other paths are returned as given (a missing one
+    is reported by whoever opens it).
+    """
+    given = Path(path)
+    if given.exists() or given.is_absolute() or not given.parts:
+        return given
+    if given.parts[0] not in SHIPPED_FOLDERS:
+        return given
+    for root in _shipped_roots():
+        candidate = root / given
+        if candidate.is_file():
+            return candidate
+    return given

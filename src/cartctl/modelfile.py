@@ -31,6 +31,7 @@ from typing import Any
 
 import tomli_w
 
+from cartctl.choices import find_file
 from cartctl.errors import CartctlError, DataFileError, InputError
 from cartctl.model import ArxModel
 from cartctl.tomlfile import read_toml, require
@@ -154,7 +155,7 @@ def load_models(path: str | Path) -> ModelFile:
     DataFileError
         The file is not valid TOML or misses a required key; the message names the key.
     """
-    path = Path(path)
+    path = find_file(path)  # the working folder's, else the shipped one
     doc = read_toml(path, "model file")
     try:
         return _parse(doc, path)

@@ -50,6 +50,7 @@ import numpy as np
 import tomli_w
 
 from cartctl.cart import PERIOD_S, SPEED_QUANTUM_RAD_S, SUPPLY_V
+from cartctl.choices import find_file
 from cartctl.design.entries import consistency_problems
 from cartctl.errors import CartctlError, DataFileError
 from cartctl.tomlfile import read_toml, require
@@ -302,7 +303,7 @@ def load_controller(path: str | Path, *, force: bool = False) -> ControllerFile:
         against ``loop_delay_ticks``; without ``force``, a ``controller_num``/``controller_den``
         that the gains do not give (relative tolerance 1e-6).
     """
-    path = Path(path)
+    path = find_file(path)  # the working folder's, else the shipped one
     doc = read_toml(path, "controller file")
     if doc.get("format") != FORMAT:
         raise DataFileError(path, f"unknown format {doc.get('format')!r}; expected {FORMAT!r}")
