@@ -235,6 +235,10 @@ def run(args: argparse.Namespace) -> int:
     rerun = _rerun_sink(args, rrd_path)
     if rerun is not None:
         sinks.append(rerun)
+    if not args.fast and sys.stderr.isatty():  # a live line on a terminal, refreshed after ticks
+        from cartctl.sinks.status import StatusLine
+
+        sinks.append(StatusLine(sys.stderr, period_s=period_s))
 
     from cartctl.runtime.cartclock import CartClockedExecutor
     from cartctl.runtime.clock import MonotonicClock, VirtualClock
