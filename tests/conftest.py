@@ -1,8 +1,11 @@
-"""Shared fixtures: paths to the shipped files, the report's models, and a checkout-like folder."""
+"""Shared fixtures: paths to the shipped files, the report's models, a checkout-like folder, and
+the rows of a Rerun recording."""
 
 from __future__ import annotations
 
 import shutil
+from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -28,3 +31,21 @@ def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     shutil.copytree(ROOT / "controllers", tmp_path / "controllers")
     monkeypatch.chdir(tmp_path)
     return tmp_path
+
+
+@pytest.fixture
+def rrd_rows() -> Callable[[str | Path], Counter]:
+    """Rows per entity path (without the leading ``/``) of a recording's non-static chunks.
+
+    Reading the stream needs the file's footer: a recording not closed properly fails here.
+    """
+    from rerun.chunk import RrdReader
+
+    def count(path: str | Path) -> Counter:
+        rows: Counter = Counter()
+        for chunk in RrdReader(path).stream():
+            if not chunk.is_static:
+                rows[chunk.entity_path.lstrip("/")] += chunk.num_rows
+        return rows
+
+    return count

@@ -19,7 +19,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rerun.chunk import RrdReader
 
 from cartctl.cli import main
 from cartctl.design.controllerfile import load_controller
@@ -56,16 +55,6 @@ def _read_csv(path: str | Path) -> tuple[list[str], np.ndarray]:
         rows = list(csv.reader(f))
     assert all(len(r) == len(rows[0]) for r in rows), "every row complete"
     return rows[0], np.array(rows[1:], dtype=float).reshape(-1, len(rows[0]))
-
-
-def _rrd_entities(path: str | Path) -> dict[str, int]:
-    """Rows per entity of the non-static chunks of a recording."""
-    rows: dict[str, int] = {}
-    for chunk in RrdReader(path).stream():
-        if not chunk.is_static:
-            entity = chunk.entity_path.lstrip("/")
-            rows[entity] = rows.get(entity, 0) + chunk.num_rows
-    return rows
 
 
 # -- labels ------------------------------------------------------------------------------------
@@ -296,7 +285,7 @@ def test_onboard_from_file(tmp_path: Path) -> None:
 # -- real time, through the pseudo-terminal ------------------------------------------------------
 
 
-def test_monitor_onboard_pi(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+def test_monitor_onboard_pi(capsys: pytest.CaptureFixture[str], tmp_path: Path, rrd_rows) -> None:
     labels = "f0=speed_a,f1=speed_b,f2=voltage_a,f3=voltage_b,f4=reference_a,f5=reference_b"
     code, out, err = _cli(capsys, "monitor", "virtual", "--onboard", str(PI), "--reference",
                           "step:8", "--duration", "1.5", "--labels", labels, "--rerun", "save",
@@ -318,14 +307,14 @@ def test_monitor_onboard_pi(capsys: pytest.CaptureFixture[str], tmp_path: Path) 
     assert np.all(table[late, 6:8] == 8.0)
     assert np.abs(table[late, 2:4].mean(axis=0) - 8.0).max() < 0.5  # speeds reach 8 rad/s
     assert np.all(np.abs(table[:, 4:6]) <= 12.0)
-    entities = _rrd_entities(summary["recording"])
+    entities = rrd_rows(summary["recording"])
     for label in (*header[2:],):
         assert entities[f"gpio/{label}"] == len(table)
     assert entities.get("cart/print") == 1  # the cart's boot line
 
 
 def test_pulled_cable_is_one_error_and_valid_files(
-    capsys: pytest.CaptureFixture[str], tmp_path: Path
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, rrd_rows
 ) -> None:
     started = time.perf_counter()
     code, out, err = _cli(capsys, "monitor", "virtual:pull=0.5", "--duration", "5", "--rerun",
@@ -338,7 +327,7 @@ def test_pulled_cable_is_one_error_and_valid_files(
     assert summary["stopped"] == "fault"
     _, table = _read_csv(tmp_path / "f.csv")
     assert 30 <= len(table) == summary["frames"] <= 55
-    assert _rrd_entities(tmp_path / "f.rrd")["gpio/FloatIn0"] == len(table)
+    assert rrd_rows(tmp_path / "f.rrd")["gpio/FloatIn0"] == len(table)
 
 
 def test_silent_port_times_out(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:

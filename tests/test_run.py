@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -31,16 +30,8 @@ def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, dict | st
         return code, out, err
 
 
-def _rrd_rows(path: Path) -> Counter:
-    rows: Counter = Counter()
-    for chunk in RrdReader(path).stream():
-        if not chunk.is_static:
-            rows[chunk.entity_path.lstrip("/")] += chunk.num_rows
-    return rows
-
-
 def test_fast_run_records_trace_and_contract_4_recording(
-    capsys: pytest.CaptureFixture[str], workdir: Path
+    capsys: pytest.CaptureFixture[str], workdir: Path, rrd_rows
 ) -> None:
     code, summary, err = _run(
         capsys, "--fast", "--duration", "3", "--rerun", "save", "--json", "--name", "r"
@@ -53,7 +44,7 @@ def test_fast_run_records_trace_and_contract_4_recording(
     trace = read_trace(summary["trace"])
     assert len(trace) == 301
     assert trace.column("tick")[-1] == 300 and trace.voltage_a[-1] == 0.0
-    rows = _rrd_rows(Path(summary["recording"]))
+    rows = rrd_rows(Path(summary["recording"]))
     for path in CONTRACT_PATHS:
         assert rows[path] == 301, path
     a = summary["motors"]["a"]
@@ -91,7 +82,7 @@ def test_summary_step_metrics_equal_review_of_the_csv(
 
 
 def test_ctrl_c_leaves_zero_volts_and_readable_files(
-    capsys: pytest.CaptureFixture[str], workdir: Path, monkeypatch: pytest.MonkeyPatch
+    capsys: pytest.CaptureFixture[str], workdir: Path, monkeypatch: pytest.MonkeyPatch, rrd_rows
 ) -> None:
     sent: list[tuple[float, float]] = []
 
@@ -117,7 +108,7 @@ def test_ctrl_c_leaves_zero_volts_and_readable_files(
     trace = read_trace(workdir / "logs" / "cut.csv")
     assert len(trace) == 150  # 149 ticks, then the stop row (tick 149's command was 0 V)
     assert trace.voltage_a[-1] == 0.0 and trace.voltage_a[-2] != 0.0
-    rows = _rrd_rows(workdir / "logs" / "cut.rrd")
+    rows = rrd_rows(workdir / "logs" / "cut.rrd")
     assert rows["motor/a/speed"] == 150
     RrdReader(
         workdir / "logs" / "cut.rrd"

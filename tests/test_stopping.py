@@ -13,11 +13,9 @@ import signal
 import subprocess
 import sys
 import time
-from collections import Counter
 from pathlib import Path
 
 import pytest
-from rerun.chunk import RrdReader
 
 from cartctl.data import read_trace
 
@@ -26,14 +24,6 @@ STARTED_TIMEOUT_S = 30.0
 # A busy machine may make a real-time run skip a deadline: the trace then has a gap, which
 # read_trace reports as a DataWarning. That is not what these tests are about.
 pytestmark = pytest.mark.filterwarnings("ignore::cartctl.errors.DataWarning")
-
-
-def _rrd_rows(path: Path) -> Counter:
-    rows: Counter = Counter()
-    for chunk in RrdReader(path).stream():
-        if not chunk.is_static:
-            rows[chunk.entity_path.lstrip("/")] += chunk.num_rows
-    return rows
 
 
 def _start(workdir: Path, *argv: str) -> subprocess.Popen[str]:
@@ -56,7 +46,7 @@ def _wait_recording(process: subprocess.Popen[str], csv: Path) -> None:
     pytest.fail("the run did not start recording")
 
 
-def _check_stopped_run(workdir: Path, out: str, err: str, name: str) -> None:
+def _check_stopped_run(workdir: Path, out: str, err: str, name: str, rrd_rows) -> None:
     assert "Traceback" not in err
     lines = [line for line in err.splitlines() if line.startswith("cartctl")]
     assert len(lines) == 1 and lines[0].startswith(f"cartctl run: stopped by SIG{name}"), err
@@ -65,7 +55,7 @@ def _check_stopped_run(workdir: Path, out: str, err: str, name: str) -> None:
     assert summary["ticks"] == len(trace) > 10
     assert (trace.voltage_a[-1], trace.voltage_b[-1]) == (0.0, 0.0)  # the stop command, logged
     assert abs(trace.voltage_a[:-1]).max() > 0.0  # it was driving before
-    rows = _rrd_rows(workdir / "logs" / "s.rrd")  # needs the footer: closed properly
+    rows = rrd_rows(workdir / "logs" / "s.rrd")  # needs the footer: closed properly
     assert rows["motor/a/voltage"] == rows["motor/b/speed"] == len(trace)
 
 
@@ -74,17 +64,17 @@ def _check_stopped_run(workdir: Path, out: str, err: str, name: str) -> None:
     [(signal.SIGINT, 130), (signal.SIGTERM, 143), (signal.SIGHUP, 129)],
     ids=["SIGINT", "SIGTERM", "SIGHUP"],
 )
-def test_a_signal_mid_run_ends_it_safely(workdir: Path, signum: int, code: int) -> None:
+def test_a_signal_mid_run_ends_it_safely(workdir: Path, signum: int, code: int, rrd_rows) -> None:
     process = _start(workdir, "run", "--plant", "physics", "--reference", "step:8",
                      "--duration", "30", "--rerun", "save", "--name", "s", "--json")  # fmt: skip
     _wait_recording(process, workdir / "logs" / "s.csv")
     process.send_signal(signum)
     out, err = process.communicate(timeout=30)
     assert process.returncode == code, err
-    _check_stopped_run(workdir, out, err, signal.Signals(signum).name[3:])
+    _check_stopped_run(workdir, out, err, signal.Signals(signum).name[3:], rrd_rows)
 
 
-def test_a_second_signal_during_the_shutdown_does_not_cut_it_short(workdir: Path) -> None:
+def test_a_second_signal_during_the_shutdown_does_not_cut_it_short(workdir: Path, rrd_rows) -> None:
     process = _start(workdir, "run", "--plant", "physics", "--reference", "step:8",
                      "--duration", "30", "--rerun", "save", "--name", "s", "--json")  # fmt: skip
     _wait_recording(process, workdir / "logs" / "s.csv")
@@ -95,7 +85,7 @@ def test_a_second_signal_during_the_shutdown_does_not_cut_it_short(workdir: Path
     process.send_signal(signal.SIGINT)
     out, err = process.communicate(timeout=30)
     assert process.returncode == 143, err  # the first signal decides
-    _check_stopped_run(workdir, out, err, "TERM")
+    _check_stopped_run(workdir, out, err, "TERM", rrd_rows)
 
 
 @pytest.mark.parametrize(("signum", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
