@@ -49,17 +49,18 @@ class CsvSink:
 
     def idle(self) -> None:
         """Format the rows kept so far; write and flush once a block is complete."""
+        self._format()
+        if len(self._lines) >= self.flush_every:
+            self._flush()
+
+    def _format(self) -> None:
         lines = self._lines
         for row in self._rows:
             lines.append(",".join(map(str, row)))  # str: exact floats (numpy's too), whole ticks
         self._rows = []
-        if len(lines) >= self.flush_every:
-            self._flush()
 
     def _flush(self) -> None:
-        for row in self._rows:
-            self._lines.append(",".join(map(str, row)))
-        self._rows = []
+        self._format()
         if self._file is None or not self._lines:
             return
         self._file.write("\n".join(self._lines) + "\n")
