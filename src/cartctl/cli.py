@@ -90,11 +90,8 @@ def console_main() -> int:
 
 def _main(argv: Sequence[str] | None) -> int:
     try:
-        parser = build_parser()
-    except (KeyboardInterrupt, ImportError):
-        # A signal inside an extension module's initialisation surfaces as its ImportError.
-        if stopping.received() is None and not isinstance(sys.exc_info()[1], KeyboardInterrupt):
-            raise
+        parser = build_parser()  # light modules only: a stop signal here is Interrupted
+    except KeyboardInterrupt:
         print("cartctl: stopped while starting; nothing was done", file=sys.stderr)
         return stopping.exit_code()
     args = parser.parse_args(argv)
