@@ -1,7 +1,7 @@
 """The loop of ``cartctl run --fast`` kept in memory: for tune and the Python API.
 
 The same :class:`~cartctl.runtime.loop.ControlLoop` on a :class:`~cartctl.runtime.clock.VirtualClock`
-and a :class:`~cartctl.runtime.executor.PeriodicExecutor`, with a
+and a :class:`~cartctl.runtime.virtual.VirtualExecutor` (ticks back to back), with a
 :class:`~cartctl.runtime.loop.MemorySink` instead of files: as fast as the CPU allows, and
 ending, like every run, with the zero-volt stop row.
 """
@@ -18,8 +18,8 @@ from cartctl.errors import PlantError
 from cartctl.plants.base import Plant
 from cartctl.runtime.base import Controller
 from cartctl.runtime.clock import VirtualClock
-from cartctl.runtime.executor import PeriodicExecutor
 from cartctl.runtime.loop import ControlLoop, LoopState, MemorySink
+from cartctl.runtime.virtual import VirtualExecutor
 
 
 def run_in_memory(
@@ -39,12 +39,13 @@ def run_in_memory(
     clock, memory = VirtualClock(), MemorySink()
     loop = ControlLoop(plant, controllers, references, [memory], now_s=clock.now_s,
                        voltage_limit_v=voltage_limit_v, period_s=period_s)  # fmt: skip
-    executor = PeriodicExecutor(period_s, clock, max_ticks=loop.n_ticks)
+    executor = VirtualExecutor(period_s, max_ticks=loop.n_ticks)
+    loop_tick = loop.tick
     try:
         loop.start()
 
         def tick(k: int) -> bool:
-            return loop.tick(k, executor.period_error_us, executor.start_s, executor.grid_index * period_s)  # fmt: skip
+            return loop_tick(k, 0.0, 0.0, k * period_s)
 
         executor.run(tick, loop.idle)
     except PlantError as exc:

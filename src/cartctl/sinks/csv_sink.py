@@ -33,12 +33,14 @@ class CsvSink:
         self._file: TextIO | None = None
         self._rows: list[Sequence[float]] = []
         self._lines: list[str] = []
+        self._template = ""
         self.rows_written = 0
 
     def open(self, columns: Sequence[str]) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = self.path.open("w", encoding="utf-8", newline="")
         self._file.write(",".join(columns) + "\n")
+        self._template = ",".join(["%s"] * len(columns))  # %s is str(): 10 % under a join
         self._file.flush()
 
     def write(self, row: Sequence[float]) -> None:
@@ -54,9 +56,12 @@ class CsvSink:
             self._flush()
 
     def _format(self) -> None:
-        lines = self._lines
-        for row in self._rows:
-            lines.append(",".join(map(str, row)))  # str: exact floats (numpy's too), whole ticks
+        lines, template = self._lines, self._template
+        for row in self._rows:  # str: exact floats (numpy's too), whole ticks
+            try:
+                lines.append(template % tuple(row))
+            except TypeError:  # a row of another length than the header's
+                lines.append(",".join(map(str, row)))
         self._rows = []
 
     def _flush(self) -> None:
