@@ -14,7 +14,7 @@ per-tick compute time; then where a tick's time goes, part by part (``tick_break
 both shipped on-board controllers on the physics plant; then the ``--fast`` speed-up over real
 time for both controllers on both simulators, measured from outside as the wall-time difference
 between a 600 s and a 6 s simulated run (which removes start-up costs), against the goal of
-2000×.
+2000×; and, in this process, the fast loop alone and with each sink (``fast_parts.py``).
 
 ``python benchmarks/bench_run.py --soak MINUTES`` runs the long test instead: ``poles.toml`` on the
 physics plant for MINUTES in real time with Rerun recording and one other core busy, and prints
@@ -34,6 +34,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_loop import make_work, run_naive, steal_ms
+from fast_parts import report as fast_parts_report
 from tick_breakdown import measure, print_breakdown
 
 
@@ -157,6 +158,10 @@ def main() -> int:
                 f"  {controller + '.toml':<12}{plant:<9}{short:6.2f} s {long:6.2f} s  "
                 f"{ratio:6.0f}× real time  ({ratio / 2000:.2f} of the goal)"
             )
+    print(
+        "\n--fast, where a tick's time goes: the loop alone, with each sink, with all (fast_parts.py)"
+    )
+    fast_parts_report(120.0)
     return 0
 
 
