@@ -3,15 +3,19 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+from collections.abc import Mapping
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from cartctl.commands.options import add_map_option, command_line
 from cartctl.errors import InputError
 
 if TYPE_CHECKING:
-    from cartctl.identification.arx import ArxFit
     from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, MotorIdentification
+    from cartctl.model import ArxModel
+    from cartctl.modelfile import ModelFile
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -78,7 +82,37 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         nargs="+",
         default=[],
         metavar="MODEL.toml",
-        help="model files to draw on the report's pole-zero map too (e.g. models/air.toml)",
+        help=(
+            "model files to compare with (e.g. models/air.toml): their fits in the table and JSON, "
+            "their Bode plots against the empirical transfer function and their poles and zeros "
+            "in the report"
+        ),
+    )
+    p.add_argument(
+        "--orders",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="SPEC",
+        help=(
+            "fit ARX for every na, nb, nk of a grid and print loss, AIC, FPE and the fit on the "
+            "validation data, marking the best; SPEC like na=1:3,nb=1:3,nk=1:4 (ranges inclusive, "
+            "keys left out keep these defaults)"
+        ),
+    )
+    val = p.add_mutually_exclusive_group()
+    val.add_argument(
+        "--validate-on",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="an independent experiment to validate on: fits and residual tests are on it (repeatable)",
+    )
+    val.add_argument(
+        "--split",
+        type=float,
+        metavar="F",
+        help="estimate on the first fraction F of each experiment (e.g. 0.7), validate on the rest",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object (contract 3)")
     p.set_defaults(func=run)
@@ -109,7 +143,11 @@ def request_from_args(args: argparse.Namespace) -> IdentifyRequest:
         prefilter = Prefilter(
             order=args.order, cutoff_hz=args.cutoff_hz, zero_phase=args.zero_phase
         )
+    from cartctl.identification.orders import parse_grid
+
     return IdentifyRequest(
+        orders=None if args.orders is None else parse_grid(args.orders),
+        split=args.split,
         motors=("a", "b") if args.motor == "both" else (args.motor,),
         na=args.na,
         nb=args.nb,
@@ -120,9 +158,9 @@ def request_from_args(args: argparse.Namespace) -> IdentifyRequest:
     )
 
 
-def _poles_hz(fit: ArxFit) -> str:
+def _poles_hz(model: ArxModel) -> str:
     parts = []
-    for r in fit.model.poles():
+    for r in model.poles():
         if r.kind == "delay":
             continue
         mark = "" if abs(r.value) < 1.0 else "!"
@@ -130,46 +168,105 @@ def _poles_hz(fit: ArxFit) -> str:
     return ", ".join(parts) or "—"
 
 
-def format_motor(res: MotorIdentification) -> str:
-    """The human-readable block of one motor."""
+def _fit_cell(value: float | None) -> str:
+    if value is None or not math.isfinite(value):
+        return "diverges"
+    return f"{value:.2f}"
+
+
+def format_motor(res: MotorIdentification, compared: Mapping[str, ArxModel] | None = None) -> str:
+    """The human-readable block of one motor, with the ``--compare`` models' rows."""
     first = res.chosen
     names = first.theta_names()
+    na = first.model.na
     lines = [
         f"motor {res.motor}:  nk = {first.model.nk}"
         + (" (estimated)" if res.delay is not None else "")
     ]
     if res.cycles_averaged:
         lines[0] += f", {res.cycles_averaged} cycles averaged"
-    head = f"    {'':<18}" + "".join(f"{n:>20}" for n in names)
-    head += f"{'fit sim %':>11}{'fit pred %':>11}{'DC gain':>9}  poles (Hz)"
+    units = ["–" if i < na else "rad/s/V" for i in range(len(names))]
+    head = f"    {'':<18}" + "".join(
+        f"{f'{n} ({u})':>20}" for n, u in zip(names, units, strict=True)
+    )
+    head += f"{'fit sim (%)':>13}{'fit pred (%)':>13}{'DC gain (rad/s/V)':>19}  poles (Hz)"
     lines.append(head)
     for label, fit in res.variants().items():
         cells = "".join(
-            f"{v:>11.5g} ±{s:<7.2g}" for v, s in zip(fit.model.theta, fit.theta_std, strict=True)
+            f"{v:>11.4g} ±{s:<7.2g}" for v, s in zip(fit.model.theta, fit.theta_std, strict=True)
         )
         lines.append(
-            f"    {label:<18}{cells}{fit.fit_simulation_percent:>11.2f}{fit.fit_prediction_percent:>11.2f}"
-            f"{fit.model.dc_gain():>9.4g}  {_poles_hz(fit)}"
+            f"    {label:<18}{cells}{_fit_cell(fit.fit_simulation_percent):>13}"
+            f"{_fit_cell(fit.fit_prediction_percent):>13}{fit.model.dc_gain():>19.4g}  "
+            f"{_poles_hz(fit.model)}"
         )
+    diag = res.diagnostics
+    if compared and diag is not None:
+        fits = diag.compared_fits(compared)
+        for label, model in compared.items():
+            f = fits[label]
+            theta = model.theta
+            cells = (
+                "".join(f"{v:>11.4g}{'':9}" for v in theta)
+                if theta.size == len(names)
+                else (
+                    f"{'(other orders: ' + str(model.na) + ', ' + str(model.nb) + ')':<{20 * len(names)}}"
+                )
+            )
+            lines.append(
+                f"    {label:<18}{cells}{_fit_cell(f['fit_simulation_percent']):>13}"
+                f"{_fit_cell(f['fit_prediction_percent']):>13}{model.dc_gain():>19.4g}  "
+                f"{_poles_hz(model)}  (nk = {model.nk})"
+            )
     if res.delay is not None:
         d = res.delay
         evidence = ", ".join(
-            f"nk={nk}: {rms:.4g}" for nk, rms in zip(d.candidates, d.residual_rms, strict=True)
+            f"nk={nk}: {rms:.3g}" for nk, rms in zip(d.candidates, d.residual_rms, strict=True)
         )
         lines.append(f"    delay evidence (equation-error RMS, rad/s): {evidence}")
+    if diag is not None:
+        lines.append(f"    {diag.residuals.summary()}")
+        if diag.orders is not None:
+            lines.append(f"    orders (ARX; fits on the {diag.orders.fit_on} data):")
+            lines.append(diag.orders.format())
     return "\n".join(lines)
 
 
-def format_result(result: IdentifyResult, files: list[str], request: IdentifyRequest) -> str:
+def _compared_labels(compare: Mapping[str, ModelFile], motor: str) -> dict[str, ArxModel]:
+    return {
+        f"{Path(path).stem} (file)": mf.motors[motor]
+        for path, mf in compare.items()
+        if motor in mf.motors
+    }
+
+
+def format_result(
+    result: IdentifyResult,
+    files: list[str],
+    request: IdentifyRequest,
+    compare: Mapping[str, ModelFile] | None = None,
+) -> str:
     """The whole human-readable output."""
     what = f"{request.method.upper()}, na={request.na} nb={request.nb}"
     if request.prefilter:
         what += f", prefilter {request.prefilter.describe()}"
     lines = [f"identify {' '.join(files)}: {what}, Ts = {result.period_s * 1e3:g} ms", ""]
-    lines += [format_motor(r) + "\n" for r in result.motors.values()]
+    lines += [
+        format_motor(r, _compared_labels(compare or {}, m)) + "\n" for m, r in result.motors.items()
+    ]
+    on = next((r.diagnostics.fit_on for r in result.motors.values() if r.diagnostics), "estimation")
+    if on == "validation":
+        where = "fit sim and fit pred (%): on the validation data, simulated from its input and "
+        where += "predicted one step ahead. "
+    else:
+        where = (
+            "fit sim (%): simulated from the input alone on the raw data; fit pred (%): "
+            "one-step-ahead prediction on the fitted data. "
+        )
     lines.append(
-        "fit sim %: simulated from the input alone on the raw data; fit pred %: one-step-ahead "
-        "prediction on the fitted data. ± is one standard deviation; '!' marks an unstable pole."
+        where + "± is one standard deviation; θ's first na entries are output coefficients "
+        "(–), the rest input coefficients (rad/s/V); '!' marks an unstable pole. Residual "
+        f"tests on the {on} data."
     )
     return "\n".join(lines)
 
@@ -183,7 +280,8 @@ def run(args: argparse.Namespace) -> int:
     request = request_from_args(args)
     compare = {path: load_models(path) for path in args.compare}  # fail early on a bad file
     traces = [read_trace(path, args.map) for path in args.files]
-    result = identify(traces, request)
+    validation = [read_trace(path, args.map) for path in args.validate_on]
+    result = identify(traces, request, validation)
     for note in result.notes:
         print(f"cartctl identify: note: {note}", file=sys.stderr)
     if args.out:
@@ -194,9 +292,14 @@ def run(args: argparse.Namespace) -> int:
 
         write_identify_report(args.report, result, traces, request, compare)
     if args.json:
-        print(dumps(result.to_dict()))
+        doc = result.to_dict()
+        for motor, res in result.motors.items():
+            labels = {path: mf.motors[motor] for path, mf in compare.items() if motor in mf.motors}
+            if res.diagnostics is not None and labels:
+                doc["motors"][motor]["compared"] = res.diagnostics.compared_fits(labels)
+        print(dumps(doc))
         return 0
-    print(format_result(result, args.files, request))
+    print(format_result(result, args.files, request, compare))
     if args.out:
         print(f"wrote {args.out}")
     if args.report:

@@ -20,6 +20,7 @@ from cartctl.errors import InputError
 from cartctl.identification.arx import ArxFit, Segment, first_row, fit_arx
 from cartctl.identification.cycles import average_cycles, find_period, periodic_regression_pad
 from cartctl.identification.delay import DelayEstimate, estimate_delay
+from cartctl.identification.diagnostics import Diagnostics, diagnose, on_validation, split_segments
 from cartctl.identification.oe import fit_oe
 from cartctl.identification.prefilter import Prefilter
 from cartctl.modelfile import ModelFile, Provenance
@@ -48,6 +49,10 @@ class IdentifyRequest:
         Average whole excitation cycles before the ARX fit (the input must be periodic).
     delay_candidates : tuple of int
         Delays tried when ``delay`` is None.
+    orders : dict or None
+        The grid of the order table (``--orders``), ``na``/``nb``/``nk`` → values; None for none.
+    split : float or None
+        Estimate on the first fraction of each experiment, validate on the rest (``--split``).
     """
 
     motors: tuple[str, ...] = ("a", "b")
@@ -58,6 +63,8 @@ class IdentifyRequest:
     method: str = "arx"
     average: bool = False
     delay_candidates: tuple[int, ...] = (1, 2, 3, 4, 5, 6)
+    orders: dict[str, tuple[int, ...]] | None = None
+    split: float | None = None
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -86,6 +93,8 @@ class MotorIdentification:
         The delay evidence, when the delay was estimated.
     cycles_averaged : int or None
         Number of cycles averaged, when averaging was used.
+    diagnostics : Diagnostics or None
+        Residual tests, θ's covariance and Bode band, the order table; fits on validation data.
     """
 
     motor: str
@@ -95,6 +104,7 @@ class MotorIdentification:
     unfiltered: ArxFit | None = None
     delay: DelayEstimate | None = None
     cycles_averaged: int | None = None
+    diagnostics: Diagnostics | None = None
 
     def variants(self) -> dict[str, ArxFit]:
         """Every fit made, by label, for tables and plots."""
@@ -118,6 +128,8 @@ class MotorIdentification:
             out["unfiltered"] = self.unfiltered.to_dict()
         out["delay_estimate"] = None if self.delay is None else self.delay.to_dict()
         out["cycles_averaged"] = self.cycles_averaged
+        if self.diagnostics is not None:
+            out |= self.diagnostics.to_dict()
         return out
 
 
@@ -172,8 +184,12 @@ def identify_motor(
     *,
     period_s: float,
     sources: Sequence[str],
+    validation: Sequence[Segment] = (),
 ) -> MotorIdentification:
-    """Run the pipeline on one motor's experiments (raw (y, u) pairs, rad/s and V)."""
+    """Run the pipeline on one motor's experiments (raw (y, u) pairs, rad/s and V).
+
+    With ``validation`` data the fits are recomputed on it (:mod:`.diagnostics`).
+    """
     raw = list(segments)
     pf = request.prefilter
     work = [(pf.apply(y, period_s), pf.apply(u, period_s)) for y, u in raw] if pf else raw
@@ -200,6 +216,14 @@ def identify_motor(
     if pf is not None:
         unfiltered = arx(_averaged(raw, start, sources)[0] if request.average else raw)
     oe_fit = fit_oe(work, arx_fit.model, eval_segments=raw) if request.method == "oe" else None
+    diagnostics = diagnose(
+        oe_fit or arx_fit, work if oe_fit else fit_data, start=start, raw=raw,
+        validation=validation, period_s=period_s, orders_grid=request.orders, order_data=work,
+    )  # fmt: skip
+    if validation:
+        arx_fit = on_validation(arx_fit, validation)
+        oe_fit = on_validation(oe_fit, validation) if oe_fit else None
+        unfiltered = on_validation(unfiltered, validation) if unfiltered else None
     return MotorIdentification(
         motor=motor,
         chosen=oe_fit or arx_fit,
@@ -208,11 +232,14 @@ def identify_motor(
         unfiltered=unfiltered,
         delay=delay_est,
         cycles_averaged=cycles,
+        diagnostics=diagnostics,
     )
 
 
-def identify(traces: Sequence[Trace], request: IdentifyRequest) -> IdentifyResult:
-    """Identify the requested motors from the traces.
+def identify(
+    traces: Sequence[Trace], request: IdentifyRequest, validation: Sequence[Trace] = ()
+) -> IdentifyResult:
+    """Identify the requested motors from the traces (validated on ``validation``, if any).
 
     Raises
     ------
@@ -223,7 +250,7 @@ def identify(traces: Sequence[Trace], request: IdentifyRequest) -> IdentifyResul
     if not traces:
         raise InputError("no traces to identify from")
     period_s = round(traces[0].period_s, 9)
-    for t in traces[1:]:
+    for t in [*traces[1:], *validation]:
         if abs(t.period_s - period_s) > 1e-6:
             raise InputError(
                 f"traces have different sample periods: {period_s} s ({traces[0].source}) and "
@@ -245,8 +272,16 @@ def identify(traces: Sequence[Trace], request: IdentifyRequest) -> IdentifyResul
             continue
         segments = _segments(traces, motor)
         sources = [str(t.source) for t in traces if np.any(t.voltage(motor) != 0.0)]
+        val = _segments(validation, motor)
+        if validation and not val:
+            raise InputError(
+                f"the validation data ({', '.join(str(t.source) for t in validation)}) has no "
+                f"excitation on motor {motor}; validate on an experiment that drives it"
+            )
+        if request.split is not None:
+            segments, val = split_segments(segments, request.split)
         results[motor] = identify_motor(
-            motor, segments, request, period_s=period_s, sources=sources
+            motor, segments, request, period_s=period_s, sources=sources, validation=val
         )
     if not results:
         raise InputError(

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -17,10 +17,20 @@ from cartctl.identification.figure_base import figure as _figure
 from cartctl.identification.figure_base import save as _save
 from cartctl.model import ArxModel
 
+if TYPE_CHECKING:
+    from cartctl.identification.bands import BodeBand
+
 __all__ = ["plot_etfe", "plot_pzmap"]
 
 
-def plot_etfe(etfe: Etfe, models: Mapping[str, ArxModel], path: Path, *, title: str) -> Path:
+def plot_etfe(
+    etfe: Etfe,
+    models: Mapping[str, ArxModel],
+    path: Path,
+    *,
+    title: str,
+    band: BodeBand | None = None,
+) -> Path:
     """ETFE as dots and each model's Bode plot as a line (report, figure 4).
 
     Magnitude (dB re 1 rad/s per V) above, phase (degrees) below, on a logarithmic frequency
@@ -39,6 +49,9 @@ def plot_etfe(etfe: Etfe, models: Mapping[str, ArxModel], path: Path, *, title: 
         PNG file to write.
     title : str
         Figure title.
+    band : BodeBand, optional
+        1σ and 2σ bands of the first model, shaded in its colour
+        (:mod:`~cartctl.identification.bands`).
 
     Returns
     -------
@@ -79,6 +92,8 @@ def plot_etfe(etfe: Etfe, models: Mapping[str, ArxModel], path: Path, *, title: 
         style = {"linestyle": "none", "marker": "o", "markersize": 3.5, "color": "0.15"}
         ax_m.plot(f_e, 20.0 * np.log10(np.abs(h_e)), label=f"ETFE ({kind})", **style)
         ax_p.plot(f_e, phase_e, **style)
+        if band is not None and curves:
+            _draw_band(ax_m, ax_p, band, f_lo, curves[0][0])
         for i, (label, mag_db, phase_deg) in enumerate(curves):
             ax_m.plot(f_grid, mag_db, color=_color(i), label=label, linewidth=1.8)
             ax_p.plot(f_grid, phase_deg, color=_color(i), linewidth=1.8)
@@ -96,6 +111,17 @@ def plot_etfe(etfe: Etfe, models: Mapping[str, ArxModel], path: Path, *, title: 
         ax_m.legend(loc="lower left")
         fig.suptitle(title)
         return _save(fig, path)
+
+
+def _draw_band(ax_m: Any, ax_p: Any, band: BodeBand, f_lo: float, label: str) -> None:
+    """Shade the 2σ (light) and 1σ (darker) bands of the first model on both panels."""
+    keep = band.freq_hz >= f_lo
+    f = band.freq_hz[keep]
+    for row, alpha, name in ((1, 0.15, "2σ"), (0, 0.3, "1σ")):
+        ax_m.fill_between(f, band.mag_db_lo[row][keep], band.mag_db_hi[row][keep], lw=0,
+                          color=_color(0), alpha=alpha, label=f"{label}: {name} band")  # fmt: skip
+        ax_p.fill_between(f, band.phase_deg_lo[row][keep], band.phase_deg_hi[row][keep], lw=0,
+                          color=_color(0), alpha=alpha)  # fmt: skip
 
 
 def _phase_ticks(ax: Any, phases: Sequence[np.ndarray]) -> None:

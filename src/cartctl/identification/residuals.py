@@ -1,0 +1,284 @@
+"""Residual tests of an identified model, as MATLAB's ``resid``: whiteness and independence.
+
+The one-step prediction residuals ε(k) = y(k) − ŷ(k | k−1) of a good model are white (nothing
+left to predict from past outputs) and independent of past inputs (nothing left to explain by
+the input). For the ARX structure the predictor is φ(k)ᵀθ, so ε is the equation error; an
+output-error model's noise model is 1, so its predictor is the simulation from rest and ε is the
+simulation error.
+
+Estimates, per experiment with its mean removed and summed over experiments (N samples in all):
+
+    r_ε(τ)  = Σ ε(k) ε(k+τ) / Σ ε(k)²,                        τ = 1 … M
+    r_εu(τ) = Σ ε(k+τ) u(k) / √(Σ ε(k)² Σ u(k)²),              τ = −M … M
+
+A positive τ pairs the residual with an earlier input (what the model failed to explain); a
+negative τ pairs it with a later input (feedback). The 99 % bound of r_ε for white ε is
+2.58 / √N. The bound of r_εu is Ljung's, which accounts for the input's own correlation r_u:
+under independence √N r_εu(τ) is asymptotically N(0, P), P = Σ_{|τ| ≤ M} r_ε(τ) r_u(τ), so the
+bound is 2.58 √(P / N) (with white ε, P = 1 and both bounds agree).
+
+A test passes when no more lags fall outside the bounds than a white, independent residual
+would exceed with 5 % probability, treating the L lags as L independent 1 % chances
+(binomial): at most 1 of 25 lags, at most 2 of 51.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from cartctl.errors import InputError
+from cartctl.identification.arx import Segment, as_segments, first_row, regression
+from cartctl.identification.figure_base import figure as _figure
+from cartctl.identification.figure_base import save as _save
+from cartctl.model import ArxModel
+
+__all__ = ["Z_99", "ResidualTest", "plot_residuals", "prediction_residuals", "residual_test"]
+
+Z_99 = 2.576
+"""Two-sided 99 % point of the standard normal distribution."""
+
+MAX_LAGS = 25
+"""Lags of the autocorrelation (1 … 25) and cross-correlation (−25 … 25), as ``resid``."""
+
+FALSE_ALARM = 0.05
+"""Probability with which a white, independent residual may still fail a test."""
+
+
+def prediction_residuals(
+    model: ArxModel, segments: Sequence[Segment], method: str = "arx"
+) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """One-step prediction residuals ε (rad/s) and the matching inputs u (V), per experiment.
+
+    Parameters
+    ----------
+    model : ArxModel
+        The identified model.
+    segments : sequence of (y, u)
+        Experiments (rad/s, V), raw.
+    method : {'arx', 'oe'}
+        'arx': ε(k) = y(k) − φ(k)ᵀθ for k from the first row with all regressors in the data;
+        'oe': ε = y − (simulation from rest), all samples.
+
+    Returns
+    -------
+    list of (ε, u)
+        Per experiment; experiments too short for one regression row are left out.
+    """
+    out = []
+    for y, u in as_segments(segments):
+        if method == "oe":
+            out.append((y - model.simulate(u), u))
+            continue
+        start = first_row(model.na, model.nb, model.nk)
+        if y.size <= start:
+            continue
+        phi, target = regression(y, u, model.na, model.nb, model.nk, start)
+        out.append((target - phi @ model.theta, u[start:].copy()))
+    return out
+
+
+@dataclass(frozen=True)
+class ResidualTest:
+    """Auto- and cross-correlation of the residuals with their 99 % bounds and verdicts.
+
+    Attributes
+    ----------
+    auto_lags : ndarray of int, shape (M,)
+        1 … M.
+    auto : ndarray, shape (M,)
+        r_ε(τ).
+    cross_lags : ndarray of int, shape (2M + 1,)
+        −M … M.
+    cross : ndarray, shape (2M + 1,)
+        r_εu(τ).
+    bound_99 : float
+        2.58 / √N, the whiteness bound.
+    cross_bound_99 : float
+        2.58 √(P / N), the independence bound.
+    n_samples : int
+        N.
+    auto_allowed, cross_allowed : int
+        Most lags outside the bounds that still pass.
+    """
+
+    auto_lags: NDArray[np.int_]
+    auto: NDArray[np.float64]
+    cross_lags: NDArray[np.int_]
+    cross: NDArray[np.float64]
+    bound_99: float
+    cross_bound_99: float
+    n_samples: int
+    auto_allowed: int
+    cross_allowed: int
+
+    @property
+    def auto_outside(self) -> int:
+        return int(np.count_nonzero(np.abs(self.auto) > self.bound_99))
+
+    @property
+    def cross_outside(self) -> int:
+        return int(np.count_nonzero(np.abs(self.cross) > self.cross_bound_99))
+
+    @property
+    def white(self) -> bool:
+        return self.auto_outside <= self.auto_allowed
+
+    @property
+    def independent(self) -> bool:
+        return self.cross_outside <= self.cross_allowed
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``residuals`` entry of ``identify --json``."""
+        return {
+            "auto_outside": self.auto_outside,
+            "auto_lags": int(self.auto_lags.size),
+            "auto_allowed": self.auto_allowed,
+            "auto_max_abs": float(np.max(np.abs(self.auto))),
+            "cross_outside": self.cross_outside,
+            "cross_lags": int(self.cross_lags.size),
+            "cross_allowed": self.cross_allowed,
+            "cross_max_abs": float(np.max(np.abs(self.cross))),
+            "bound_99": self.bound_99,
+            "cross_bound_99": self.cross_bound_99,
+            "n_samples": self.n_samples,
+            "white": self.white,
+            "independent": self.independent,
+            "auto": self.auto.tolist(),
+            "cross": self.cross.tolist(),
+        }
+
+    def summary(self) -> str:
+        """One line for the terminal."""
+        auto = "white" if self.white else "NOT white"
+        cross = "independent of the input" if self.independent else "CORRELATED with the input"
+        return (
+            f"residuals (99 % bounds, N = {self.n_samples}): autocorrelation "
+            f"{self.auto_outside}/{self.auto_lags.size} lags outside ±{self.bound_99:.3f}, "
+            f"max |r| {np.max(np.abs(self.auto)):.3f}: {auto}; cross-correlation "
+            f"{self.cross_outside}/{self.cross_lags.size} outside ±{self.cross_bound_99:.3f}, "
+            f"max |r| {np.max(np.abs(self.cross)):.3f}: {cross}"
+        )
+
+
+def _lagged_sum(a: NDArray[np.float64], b: NDArray[np.float64], lag: int) -> float:
+    """Σ_k a(k + lag) b(k) over the samples where both exist (einsum: no BLAS threads)."""
+    n = a.size
+    if abs(lag) >= n:
+        return 0.0
+    if lag >= 0:
+        return float(np.einsum("i,i->", a[lag:], b[: n - lag]))
+    return float(np.einsum("i,i->", a[: n + lag], b[-lag:]))
+
+
+def _correlation(
+    pairs: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]], lags: NDArray[np.int_]
+) -> NDArray[np.float64]:
+    """Σ over experiments of Σ_k a(k+τ) b(k), normalised by √(Σ a² Σ b²)."""
+    num = np.array([sum(_lagged_sum(a, b, int(t)) for a, b in pairs) for t in lags])
+    energy_a = sum(float(np.einsum("i,i->", a, a)) for a, _ in pairs)
+    energy_b = sum(float(np.einsum("i,i->", b, b)) for _, b in pairs)
+    if energy_a == 0.0 or energy_b == 0.0:
+        return np.zeros(lags.size)
+    return num / np.sqrt(energy_a * energy_b)
+
+
+def residual_test(
+    residuals: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    max_lags: int = MAX_LAGS,
+) -> ResidualTest:
+    """Whiteness and independence tests of residuals (see the module's docstring for the maths).
+
+    Parameters
+    ----------
+    residuals : sequence of (ε, u)
+        Residuals (rad/s) and inputs (V) per experiment (:func:`prediction_residuals`).
+    max_lags : int
+        M; lowered to a quarter of the samples for short data.
+
+    Returns
+    -------
+    ResidualTest
+
+    Raises
+    ------
+    InputError
+        Fewer than 20 residual samples.
+    """
+    centred = [(e - e.mean(), u - u.mean()) for e, u in residuals if e.size]
+    n = sum(e.size for e, _ in centred)
+    if n < 20:
+        raise InputError(f"too few residual samples for the residual tests: {n}, need at least 20")
+    m = max(1, min(int(max_lags), n // 4))
+    auto_lags = np.arange(1, m + 1)
+    cross_lags = np.arange(-m, m + 1)
+    auto = _correlation([(e, e) for e, _ in centred], auto_lags)
+    cross = _correlation(centred, cross_lags)
+    r_e = np.concatenate([[1.0], auto])
+    r_u = _correlation([(u, u) for _, u in centred], np.arange(0, m + 1))
+    p = float(r_e[0] * r_u[0] + 2.0 * np.sum(r_e[1:] * r_u[1:]))
+    p = max(p, 1e-12)
+    return ResidualTest(
+        auto_lags=auto_lags,
+        auto=auto,
+        cross_lags=cross_lags,
+        cross=cross,
+        bound_99=Z_99 / np.sqrt(n),
+        cross_bound_99=Z_99 * np.sqrt(p / n),
+        n_samples=n,
+        auto_allowed=int(stats.binom.ppf(1.0 - FALSE_ALARM, auto_lags.size, 0.01)),
+        cross_allowed=int(stats.binom.ppf(1.0 - FALSE_ALARM, cross_lags.size, 0.01)),
+    )
+
+
+def plot_residuals(test: ResidualTest, path: Path, *, title: str) -> Path:
+    """Autocorrelation (above) and cross-correlation with the input (below), 99 % bounds shaded.
+
+    Parameters
+    ----------
+    test : ResidualTest
+    path : Path
+        PNG file to write.
+    title : str
+        Figure title.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    with _figure(9.0, 6.2) as fig:
+        ax_a, ax_c = fig.subplots(2, 1)
+        panels = (
+            (ax_a, test.auto_lags, test.auto, test.bound_99, test.white, "white",
+             "autocorrelation of the residuals r_ε(τ)", test.auto_outside),
+            (ax_c, test.cross_lags, test.cross, test.cross_bound_99, test.independent,
+             "independent", "cross-correlation with the input r_εu(τ)", test.cross_outside),
+        )  # fmt: skip
+        for ax, lags, r, bound, ok, word, what, outside in panels:
+            ax.axhspan(-bound, bound, color="tab:blue", alpha=0.15, lw=0, label="99 % bound")
+            ax.axhline(0.0, color="0.3", lw=0.8)
+            inside = np.abs(r) <= bound
+            ax.vlines(lags, 0.0, r, color="0.25", lw=1.2)
+            ax.plot(lags[inside], r[inside], "o", color="0.25", markersize=4)
+            ax.plot(lags[~inside], r[~inside], "o", color="tab:red", markersize=5)
+            reach = max(1.6 * bound, 1.15 * float(np.max(np.abs(r))))
+            ax.set_ylim(-reach, reach)
+            ax.set_xlim(lags[0] - 0.8, lags[-1] + 0.8)
+            ax.set_ylabel("correlation (–)")
+            verdict = word if ok else f"not {word}"
+            ax.set_title(
+                f"{what}: {outside} of {lags.size} lags outside ±{bound:.3f} ({verdict})",
+                fontsize=10,
+            )
+        ax_a.set_xlabel("lag τ (ticks)")
+        ax_c.set_xlabel("lag τ (ticks); τ > 0: input before the residual")
+        ax_a.legend(loc="upper right")
+        fig.suptitle(title)
+        return _save(fig, path)
