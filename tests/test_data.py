@@ -243,7 +243,7 @@ def test_qrc5_with_mapping() -> None:
     assert trace.voltage_a[:4].tolist() == [0, 0, 6, 6]
     assert trace.voltage_b[4] == -3.0
     assert trace.speed_b[-1] == -7.03747
-    extras = ["posa", "posb", "floatin6", "floatin7", "echo", "tick", "intin2", "intin3"]
+    extras = ["posA", "posB", "FloatIn6", "FloatIn7", "echo", "tick", "IntIn2", "IntIn3"]
     assert list(trace.extra) == extras
     assert trace.extra["tick"][:2].tolist() == [5000, 5001]
 
@@ -256,9 +256,10 @@ def test_qrc6_with_mapping_for_one_motor() -> None:
     assert trace.time_s[0] == 0.0
     assert trace.voltage_a[:3].tolist() == [0.0, -4.5, -4.5]
     assert trace.speed_a[2:4].tolist() == [-1.575, -2.9925]
-    assert not trace.voltage_b.any() and not trace.speed_b.any()  # unmapped motor: zeros
-    assert trace.extra["voltb"][3] == 2.0  # unmapped channels kept under their labels
-    assert trace.extra["floatin10"][:3].tolist() == [0, 1, 2]
+    # motor b from its own channels: voltB and speedB, the counterparts of the mapped voltA, speedA
+    assert trace.voltage_b[3] == 2.0 and "voltB" not in trace.extra
+    assert trace.speed_b.any() and "speedB" not in trace.extra
+    assert trace.extra["FloatIn10"][:3].tolist() == [0, 1, 2]  # other channels keep their case
 
 
 def test_qrc_labels_named_like_columns_need_no_mapping(tmp_path: Path) -> None:
@@ -300,15 +301,17 @@ def test_qrc6_in_latin1_and_its_labels_as_column_names(tmp_path: Path) -> None:
     path = tmp_path / "windows.csv"
     path.write_bytes(text.encode("latin-1"))
     trace = read_trace(path, MAP_AB)
-    assert {"geschw_r_d_rad_s", "ch_2nd"} <= set(trace.extra)
+    assert {"Geschw_R_d_rad_s", "ch_2nd"} <= set(trace.extra)
 
 
 def test_qrc_extra_mapping_and_repeated_labels(tmp_path: Path) -> None:
     text = QRC6.read_text().replace("FloatIn8", "x").replace("FloatIn9", "X")
+    text = text.replace("FloatIn6", "p q").replace("FloatIn7", "p-q")
     trace = read_trace(write(tmp_path, text), {**MAP_AB, "reference_a": "FloatIn10"})
     assert trace.extra["reference_a"][:3].tolist() == [0, 1, 2]
-    assert "floatin10" not in trace.extra
-    assert {"x", "x_2"} <= set(trace.extra)
+    assert "FloatIn10" not in trace.extra
+    assert {"x", "X"} <= set(trace.extra)  # case kept: two names
+    assert {"p_q", "p_q_2"} <= set(trace.extra)  # one name twice: numbered
 
 
 def qrc5_variant(tmp_path: Path, old: str, new: str, count: int = 1) -> Path:
@@ -369,7 +372,7 @@ def test_qrc5_default_labels_when_none_given(tmp_path: Path) -> None:
     path = write(tmp_path, text, "plain.xml")
     trace = read_trace(path, {"voltage_a": "FloatIn2", "speed_a": "FloatIn0"})
     assert trace.voltage_a[2] == 6.0
-    assert "intin1" in trace.extra
+    assert "IntIn1" in trace.extra
 
 
 @pytest.mark.parametrize(

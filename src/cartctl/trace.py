@@ -9,7 +9,7 @@ columns. :mod:`cartctl.data` reads traces (contract-1 CSV and QRoboticsCenter lo
 from __future__ import annotations
 
 import difflib
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -233,11 +233,13 @@ def _check_name(name: object) -> None:
         )
 
 
-def write_trace(trace: Trace, path: str | Path) -> None:
+def write_trace(trace: Trace, path: str | Path, *, integer_columns: Collection[str] = ()) -> None:
     """Write a trace as contract-1 CSV, creating parent directories.
 
     The header row names the required columns then the extras; each value is written as the
-    shortest text that reads back to the same float64, so a round trip is bit-exact.
+    shortest text that reads back to the same float64, so a round trip is bit-exact. The columns
+    named in ``integer_columns`` (whole numbers, e.g. a log's int channels) are written without a
+    fraction: ``100``, not ``100.0``.
 
     Parameters
     ----------
@@ -246,12 +248,14 @@ def write_trace(trace: Trace, path: str | Path) -> None:
         accepts.
     path : str or Path
         The ``.csv`` file to write (overwritten if it exists).
+    integer_columns : collection of str
+        Columns to write as integers; each must hold whole numbers only.
 
     Raises
     ------
     InputError
-        An empty trace, a column name that CSV cannot carry, a value that is not finite, or
-        time that does not increase.
+        An empty trace, a column name that CSV cannot carry, a value that is not finite, time
+        that does not increase, or a fraction in an integer column.
     """
     path = Path(path)
     columns = trace.columns()
@@ -277,9 +281,19 @@ def write_trace(trace: Trace, path: str | Path) -> None:
             f"cannot write {path}: time_s does not increase at tick {back[0] + 1} "
             f"({float(trace.time_s[back[0]])!r} s, then {float(trace.time_s[back[0] + 1])!r} s)"
         )
+    whole = [j for j, name in enumerate(columns) if name in integer_columns]
+    for j in whole:
+        if np.any(data[:, j] != np.round(data[:, j])) or np.any(np.abs(data[:, j]) > 2.0**53):
+            raise InputError(
+                f"cannot write column {list(columns)[j]!r} as integers: it has fractions"
+            )
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", encoding="utf-8", newline="\n") as file:
         file.write(",".join(columns) + "\n")
         for start in range(0, len(data), _WRITE_CHUNK_ROWS):
             block = data[start : start + _WRITE_CHUNK_ROWS].tolist()
+            if whole:
+                for row in block:
+                    for j in whole:
+                        row[j] = int(row[j])
             file.write("".join(",".join(map(repr, row)) + "\n" for row in block))

@@ -8,6 +8,7 @@ missing and how to map it.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -36,8 +37,11 @@ def plan_columns(
     For QRC logs ``names`` starts with the time column, which always gives time_s. Returns the
     time column's index and the plan, in trace column order.
     """
+    monitor = kind == "CSV" and names[:2] == list(MONITOR_FIRST_COLUMNS)
     if kind == "CSV" and mapping is None:
         missing = [name for name in REQUIRED_COLUMNS if name not in names]
+        if missing and monitor:
+            return plan_columns(path, "CSV", names, monitor_mapping(names[2:]), header_line)
         if missing:
             hint = ""
             if len(names) == 1 and (";" in names[0] or "\t" in names[0]):
@@ -62,6 +66,7 @@ def plan_columns(
             f"drop time_s={mapping['time_s']} from the mapping",
         )
     auto = [n if not first else qrc.column_name(n, j - 1, kind) for j, n in enumerate(names)]
+    kept = [n if not first else _extra_name(n, j - 1, kind) for j, n in enumerate(names)]
     source = {"time_s": 0} if first else {}
     for name, label in mapping.items():
         hits = [j for j, n in enumerate(names) if n == label and j >= first]
@@ -84,6 +89,7 @@ def plan_columns(
         partner = partners.get(name)
         if partner is None or partner in source or partner in auto[first:]:
             source[name] = auto.index(name)
+    _counterparts(names, first, mapping, source)
     if "time_s" not in source:
         raise DataFileError(
             path,
@@ -103,6 +109,14 @@ def plan_columns(
             )
     if not any(f"voltage_{motor}" in source for motor in MOTORS):
         example = _guess_mapping(names[first:])
+        if monitor:
+            missing = ", ".join(n for n in REQUIRED_COLUMNS[1:] if n not in source)
+            raise DataFileError(
+                path,
+                f"a 'cartctl monitor' trace whose labels name none of {missing}; its channels "
+                f"are {', '.join(names[2:])}; record with {MONITOR_LABELS_HINT}, or say which "
+                f"is which with --map {example}",
+            )
         raise DataFileError(
             path,
             f"no mapping for voltage/speed columns; this {kind} file has {what}s {listing}; "
@@ -114,11 +128,100 @@ def plan_columns(
     for j in range(first, len(names)):  # extras, in file order
         plan |= {name: k for name, k in source.items() if k == j and name not in plan}
         if j not in used and auto[j] not in taken:
-            name, suffix = auto[j], 2
+            name, suffix = kept[j], 2
             while name in plan:
-                name, suffix = f"{auto[j]}_{suffix}", suffix + 1
+                name, suffix = f"{kept[j]}_{suffix}", suffix + 1
             plan[name] = j
     return source["time_s"], plan
+
+
+MONITOR_FIRST_COLUMNS = ("time_s", "tick")
+"""The first columns of a ``cartctl monitor`` trace; its labelled channels follow."""
+MONITOR_LABELS_HINT = (
+    "--labels f0=speed_a,f1=speed_b,f2=voltage_a,f3=voltage_b,f4=reference_a,f5=reference_b "
+    "(the out channels of 'cartctl export --arduino')"
+)
+MONITOR_NAMES = (*REQUIRED_COLUMNS[1:], *(f"{k}_{m}" for k in ("reference", "estimate")
+                                          for m in MOTORS))  # fmt: skip
+"""Trace columns a monitor label can name (``speed_a``, ``speedA``, ``Speed_A``, ...)."""
+
+
+def _normal(label: str) -> str:
+    """A label without case and separators: ``speedA``, ``speed_a`` and ``Speed-A`` agree."""
+    return re.sub(r"[^0-9a-z]", "", label.lower())
+
+
+def monitor_mapping(labels: Sequence[str]) -> dict[str, str]:
+    """Trace column → monitor label, for the labels that name a trace column.
+
+    A label names a column when it equals the column's name but for case and separators
+    (``speedA`` is ``speed_a``); a column two labels would name is left out.
+    """
+    mapping: dict[str, str] = {}
+    for name in MONITOR_NAMES:
+        hits = [label for label in labels if _normal(label) == _normal(name)]
+        if len(hits) == 1:
+            mapping[name] = hits[0]
+    return mapping
+
+
+_MOTOR_LETTER = {m: re.compile(rf"(?:(?<![A-Za-z])[{m}{m.upper()}]|(?<=[a-z]){m.upper()})(?![a-z])")
+                 for m in MOTORS}  # fmt: skip
+"""The motor's letter in a label: ``voltA``, ``volt_a``, ``voltage A [V]``, ``motorA_speed``."""
+
+
+def counterpart_label(label: str, motor: str, other: str) -> str | None:
+    """The label of the other motor's channel, by the motor letter in ``label``, or None.
+
+    ``voltA`` → ``voltB``, ``speed_a`` → ``speed_b``, ``voltage A [V]`` → ``voltage B [V]``; the
+    last letter that stands apart (or ends a camelCase word) is the motor's.
+    """
+    hits = list(_MOTOR_LETTER[motor].finditer(label))
+    if not hits:
+        return None
+    at = hits[-1].start()
+    letter = other.upper() if label[at].isupper() else other
+    return label[:at] + letter + label[at + 1 :]
+
+
+def _counterparts(
+    names: list[str], first: int, mapping: Mapping[str, str], source: dict[str, int]
+) -> None:
+    """A partial mapping of one motor also maps the other's same-named channels, when both exist.
+
+    ``--map voltage_a=voltA,speed_a=speedA`` on a log that also has ``voltB`` and ``speedB``
+    takes them for motor b (instead of zeros); an explicit or same-named column wins.
+    """
+    used = set(source.values())
+    for motor, other in (("a", "b"), ("b", "a")):
+        pair = (f"voltage_{motor}", f"speed_{motor}")
+        wanted = (f"voltage_{other}", f"speed_{other}")
+        if not all(n in mapping for n in pair) or any(n in source for n in wanted):
+            continue
+        found: dict[str, int] = {}
+        for name, want in zip(pair, wanted, strict=True):
+            label = counterpart_label(mapping[name], motor, other)
+            hits = [j for j, n in enumerate(names) if n == label and j >= first]
+            if len(hits) == 1 and hits[0] not in used:
+                found[want] = hits[0]
+        if len(found) == 2:
+            source.update(found)
+            used.update(found.values())
+
+
+def _extra_name(label: str, index: int, kind: str) -> str:
+    """A QRC channel's name as an extra trace column: its label with case kept.
+
+    As :func:`cartctl.qrc.column_name` (runs of other characters become one ``_``, ``ch_``
+    before a leading digit, the default label of an empty one) but without lower-casing:
+    ``speedB`` stays ``speedB``.
+    """
+    name = re.sub(r"[^0-9A-Za-z]+", "_", label).strip("_")
+    if not name:
+        if kind.startswith("QRC 5") and index < len(qrc.QRC5_DEFAULT_LABELS):
+            return qrc.QRC5_DEFAULT_LABELS[index]
+        return f"channel{index}"
+    return f"ch_{name}" if name[0].isdigit() else name
 
 
 _VOLTAGE_WORDS = ("volt", "voltage", "u_", "pwm")

@@ -5,8 +5,16 @@ never sends anything to the cart. It reads the cart's stream through
 :class:`~cartctl.plants.cart_link.CartLink` (same framing, silence timeout and port errors as the
 serial plant) and turns each GPIO into one row::
 
-    time_s   cart time since the first GPIO (s), from the GPIO's time field (ms)
+    time_s   cart time since the first GPIO (s): k · Ts, k the cart's tick since the first GPIO
     tick     0, 1, 2, ...: one per GPIO received (a lost frame shows as a gap in time_s)
+
+The cart sends one GPIO per 10 ms tick, stamped with its ``millis()`` (the GPIO's u32 time field,
+which wraps after 49.7 days). Those stamps jitter by a millisecond, and a firmware that stamps the
+frame when its communication thread sends it can give several frames one stamp and then jump. The
+tick k of each frame is therefore counted, not read: k = max(k_prev + 1, round(Δms / 10 ms)) with
+Δms the stamps' distance from the first's (followed modulo 2³²). Time is strictly increasing and a multiple of
+Ts; a lost frame (a step of about 20 ms in the stamps) leaves a step of two ticks, and a burst of
+equal stamps advances one tick per frame until the stamps catch up.
     f0..f7, i0..i3 under their labels (QRoboticsCenter's FloatIn0..7, IntIn0..3 by default)
 
 PRINT lines and EVENT messages (QRC's buttons) are stamped with the time and tick of the last GPIO
@@ -22,6 +30,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from cartctl.cart import PERIOD_S
 from cartctl.errors import InputError, PlantError
 from cartctl.link import Event, Gpio, Message
 from cartctl.plants.cart_link import CartLink
@@ -41,6 +50,8 @@ DEFAULT_LABELS: tuple[str, ...] = (
 TIME_COLUMN, TICK_COLUMN = "time_s", "tick"
 _LABEL = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 _TIME_MODULO_MS = 1 << 32  # the GPIO's time field is a u32 of milliseconds
+_PERIOD_MS = PERIOD_S * 1000.0
+_TICKS_PER_S = round(1.0 / PERIOD_S)
 
 
 def parse_labels(text: str | None) -> tuple[str, ...]:
@@ -159,7 +170,9 @@ class Monitor:
         self.columns = (TIME_COLUMN, TICK_COLUMN, *labels)
         self.result = MonitorResult()
         self.stop_requested = False
-        self._first_ms: int | None = None
+        self._last_ms: int | None = None  # the previous GPIO's stamp (ms)
+        self._elapsed_ms = 0  # the stamps' distance from the first GPIO's (ms)
+        self._cart_tick = -1  # the cart's tick of the last row, since the first GPIO
         self._time_s = 0.0
         self._texts: list[tuple[str, str, str]] = []  # (entity, text, level) to stamp and record
 
@@ -210,13 +223,23 @@ class Monitor:
         return result
 
     def _cart_time_s(self, time_ms: int) -> float:
-        """Cart time since the first GPIO (s); the u32 millisecond counter may wrap."""
-        if self._first_ms is None:
-            self._first_ms = time_ms
-        return ((time_ms - self._first_ms) % _TIME_MODULO_MS) / 1000.0
+        """Cart time of this GPIO since the first (s): its tick (see the module) times Ts.
+
+        The stamps are followed by their signed difference modulo 2³² from the previous one, so
+        the u32 counter's wrap is a step like any other and a stamp a little behind its
+        predecessor is not read as 49 days ahead. Does not advance the tick: :meth:`_record`
+        does, for the rows it keeps.
+        """
+        if self._last_ms is not None:
+            half = _TIME_MODULO_MS // 2
+            self._elapsed_ms += (time_ms - self._last_ms + half) % _TIME_MODULO_MS - half
+        self._last_ms = time_ms
+        tick = max(self._cart_tick + 1, round(self._elapsed_ms / _PERIOD_MS))
+        return tick / _TICKS_PER_S  # a division: 0.03, not 3 × 0.01 = 0.030000000000000002
 
     def _record(self, gpio: Gpio, time_s: float) -> None:
         # float32 values: their shortest text in the CSV is the float32's own
+        self._cart_tick = round(time_s * _TICKS_PER_S)
         row = [time_s, self.result.frames, *np.asarray(gpio.floats, np.float32), *gpio.ints]
         for sink in self.rows:
             sink.write(row)
