@@ -18,7 +18,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description=(
             "Show each motor's transfer function, its poles and zeros with their continuous-equivalent "
             "frequencies f = |ln z| / (2π Ts) and damping, and its DC gain. A pole at z = 0 is a pure "
-            "delay and has no frequency."
+            "delay and has no frequency. Zeros outside the unit circle (|z| > 1) are flagged: such "
+            "a model is not minimum phase, and a controller must not cancel those zeros."
         ),
     )
     p.add_argument("model", metavar="MODEL.toml", help="model file, e.g. models/ground.toml")
@@ -28,11 +29,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def outside_zeros(model: ArxModel) -> list[complex]:
+    """The zeros with |z| > 1 (non-minimum-phase), in the order of :meth:`ArxModel.zeros`."""
+    return [r.value for r in model.zeros() if abs(r.value) > 1.0]
+
+
 def model_summary(model: ArxModel) -> dict[str, Any]:
-    """Contract-3 ``inspect`` entry of one motor (plus nk, num and den)."""
+    """Contract-3 ``inspect`` entry of one motor (plus nk, num, den and minimum_phase: no zero
+    with |z| > 1)."""
     from cartctl.metrics import finite_or_none
 
     return {
+        "minimum_phase": not outside_zeros(model),
         "poles": [r.to_dict() for r in model.poles()],
         "zeros": [r.to_dict() for r in model.zeros()],
         "dc_gain": finite_or_none(model.dc_gain()),
@@ -60,8 +68,10 @@ def _fmt_z(z: complex) -> str:
 def _row(root: Root) -> str:
     freq = "—" if root.freq_hz is None else f"{root.freq_hz:.2f}"
     damp = "—" if root.damping is None else f"{root.damping:.3f}"
+    flag = "  non-minimum-phase" if root.kind == "zero" and abs(root.value) > 1.0 else ""
     return (
-        f"    {root.kind:<6} {_fmt_z(root.value):>22} {abs(root.value):>8.4f} {freq:>8} {damp:>7}"
+        f"    {root.kind:<6} {_fmt_z(root.value):>22} {abs(root.value):>8.4f} {freq:>8} "
+        f"{damp:>7}{flag}"
     )
 
 
@@ -78,14 +88,25 @@ def format_table(models: ModelFile) -> str:
         lines += [
             "",
             f"  motor {name}:  H(z) = {m.describe()}    (input delay nk = {m.nk})",
-            f"    {'kind':<6} {'z':>22} {'|z|':>8} {'f (Hz)':>8} {'ζ':>7}",
+            f"    {'kind':<6} {'z (–)':>22} {'|z| (–)':>8} {'f (Hz)':>8} {'ζ (–)':>7}",
         ]
         lines += [_row(r) for r in (*m.poles(), *m.zeros())]
         gain_txt = f"{gain:.4g} rad/s/V" if math.isfinite(gain) else "unbounded (integrator)"
-        lines.append(f"    DC gain {gain_txt}, {'stable' if m.is_stable() else 'UNSTABLE'}")
+        outside = outside_zeros(m)
+        phase = "minimum phase"
+        if outside:
+            where = ", ".join(f"z = {_fmt_z(z)}" for z in outside)
+            phase = (
+                f"NOT minimum phase: zero{'s' if len(outside) > 1 else ''} outside the unit "
+                f"circle at {where} (a controller must not cancel {'them' if len(outside) > 1 else 'it'})"
+            )
+        lines.append(
+            f"    DC gain {gain_txt}, {'stable' if m.is_stable() else 'UNSTABLE'}, {phase}"
+        )
     lines.append("")
     lines.append(
-        "  f = |ln z| / (2π Ts); a delay pole (z = 0) has no frequency; ζ is the damping ratio."
+        "  f = |ln z| / (2π Ts); a delay pole (z = 0) has no frequency; ζ is the damping ratio; "
+        "a zero with |z| > 1 is non-minimum-phase."
     )
     return "\n".join(lines)
 

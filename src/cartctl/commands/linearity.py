@@ -20,6 +20,8 @@ from cartctl.commands.validate import (
 )
 
 if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
     from cartctl.identification.linearity import LinearityResult
 
 
@@ -48,8 +50,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def plot_linearity(result: LinearityResult, path: Path) -> None:
     """Figure 8 of the report: the responses above, the superposition error beneath."""
+    save_png(linearity_figure(result), path)
+
+
+def linearity_figure(result: LinearityResult) -> Figure:
+    """The figure of :func:`plot_linearity`; each legend sits right of its panel, off the data."""
     small_v, large_v, sum_v = result.amplitudes_v
-    fig, axes = new_figure(2, 1, width_in=8.0, height_in=6.0)
+    fig, axes = new_figure(2, 1, width_in=10.0, height_in=6.0)
     top, bottom = axes[0, 0], axes[1, 0]
     t = result.time_s
     top.plot(t, result.speed_small_rad_s, color="0.6", lw=1.0, ls=":", label=f"{small_v:g} V step")
@@ -64,7 +71,7 @@ def plot_linearity(result: LinearityResult, path: Path) -> None:
     top.set_ylabel("speed (rad/s)")
     top.set_title(f"motor {result.motor}: responses aligned at their step onsets")
     top.grid(True, alpha=0.3)
-    top.legend(loc="best")
+    top.legend(**_BESIDE)
     bottom.plot(t, result.error_rad_s, color="tab:red", label="error (sum step − added)")
     bottom.axhline(0.0, color="0.3", lw=0.8)
     bottom.axhline(
@@ -77,9 +84,13 @@ def plot_linearity(result: LinearityResult, path: Path) -> None:
     bottom.set_ylabel("error (rad/s)")
     bottom.set_xlabel("time since the step (s)")
     bottom.grid(True, alpha=0.3)
-    bottom.legend(loc="best")
+    bottom.legend(**_BESIDE)
     fig.suptitle("Superposition test")
-    save_png(fig, path)
+    return fig
+
+
+_BESIDE = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "borderaxespad": 0.0}
+"""Legend placement outside the axes, to their right (constrained layout makes room)."""
 
 
 def _pct(value: float | None) -> str:
