@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any
 
 from cartctl.commands.options import command_line
@@ -133,8 +134,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="RAD_S",
         help="reference step for the simulated response (default 10 rad/s)",
     )
+    p.add_argument(
+        "--disturbance-v",
+        type=float,
+        default=1.0,
+        metavar="V",
+        help="load-disturbance step added at the plant input for the simulated rejection "
+        "(default 1 V)",
+    )
     p.add_argument("--out", metavar="CONTROLLER.toml", help="write the controller file")
-    p.add_argument("--report", metavar="DIR", help="write Bode and step PNGs")
+    p.add_argument(
+        "--report",
+        metavar="DIR",
+        help="write PNGs per motor: design_X.png (Bode, step) and analysis_X.png (S and T, "
+        "Nyquist, load disturbance)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object (contract 3)")
     p.set_defaults(func=run)
 
@@ -151,27 +165,77 @@ def request_from_args(args: argparse.Namespace) -> DesignRequest:
     return DesignRequest(method=args.method, **values).check()
 
 
+def _gains_line(method: str, e: dict[str, Any]) -> str:
+    from cartctl.design.numbers import sig, sig_list
+
+    if method == "pi":
+        return f"Kp = {sig(e['kp'])} V/(rad/s), Ki = {sig(e['ki'])} V/rad"
+    k = list(e["K"])
+    # with the input-disturbance estimate K ends with its gain 1 (V/V) and Ki is 0: u carries −b̂
+    bias = len(k) > 1 and e["Ki"] == 0.0 and abs(k[-1] - 1.0) < 1e-12
+    states = k[:-1] if bias else k
+    text = f"K = [{sig_list(states)}] V/(rad/s)"
+    if bias:
+        text += " and 1 on the disturbance estimate"
+    return f"{text}, Ki = {sig(e['Ki'])} V/rad, Kr = {sig(e['Kr'])} V/(rad/s)"
+
+
+def _pole_lines(e: dict[str, Any]) -> list[str]:
+    from cartctl.design.numbers import sig
+
+    rows = e.get("closed_loop_pole_table")
+    if rows is None:
+        return ["  closed-loop poles: " + ", ".join(
+            f"{complex(*p):.3g}".strip("()") for p in e["closed_loop_poles"])]  # fmt: skip
+    lines = [f"  {'closed-loop pole z':<22}{'damping ζ':>10}{'natural frequency (Hz)':>24}"]
+    for r in rows:
+        z = sig(r["re"]) + (
+            f" {'-' if r['im'] < 0 else '+'} {sig(abs(r['im']))}j" if r["im"] != 0.0 else ""
+        )
+        lines.append(f"    {z:<20}{sig(r['damping']):>10}{sig(r['freq_hz'], none='∞'):>24}")
+    return lines
+
+
+def _analysis_lines(e: dict[str, Any]) -> list[str]:
+    from cartctl.design.numbers import db, sig
+
+    if "sensitivity_peak_hz" not in e:
+        return []
+    d = e["disturbance"]
+    rec = d["recovery_time_s"]
+    ms_db, mt_db = e["sensitivity_peak_db"], e["complementary_peak_db"]
+    return [
+        f"  sensitivity peak Ms = {sig(e['sensitivity_peak'])} ({db(ms_db)} dB) at "
+        f"{sig(e['sensitivity_peak_hz'])} Hz; complementary peak Mt = "
+        f"{sig(e['complementary_peak'])} ({db(mt_db)} dB) at "
+        f"{sig(e['complementary_peak_hz'])} Hz",
+        f"  {sig(d['step_v'])} V load step at the plant input: peak {sig(d['peak_deviation_rad_s'])} "
+        f"rad/s at {d['peak_time_s'] * 1e3:.0f} ms, recovered (within 2 % of the peak) "
+        + ("never" if rec is None else f"after {rec * 1e3:.0f} ms")
+        + f", final {sig(d['final_deviation_rad_s'], scale=d['peak_deviation_rad_s'])} rad/s",
+    ]
+
+
 def _format(method: str, motors: dict[str, dict[str, Any]]) -> str:
+    from cartctl.design.numbers import sig
+
     lines = []
     for m, e in motors.items():
         step, bound = e["step"], e["settling_bound_s"]
-        if method == "pi":
-            gains = f"Kp = {e['kp']:.4g} V/(rad/s), Ki = {e['ki']:.4g} V/rad"
-        else:
-            gains = f"K = [{', '.join(f'{v:.4g}' for v in e['K'])}], Ki = {e['Ki']:.4g}, Kr = {e['Kr']:.4g}"
         pm, gm, fc = e.get("phase_margin_deg"), e.get("gain_margin_db"), e.get("crossover_hz")
         settle = step["settling_time_s"]
         lines += [
-            f"motor {m}: {gains}",
+            f"motor {m}: {_gains_line(method, e)}",
             f"  margins: phase {pm:.1f}°, gain {'∞' if gm is None else f'{gm:.1f} dB'}, "
-            f"crossover {fc:.2f} Hz, sensitivity peak {e['sensitivity_peak']:.2f}"
+            f"crossover {fc:.2f} Hz"
             if pm is not None and fc is not None else "  margins: —",
-            "  closed-loop poles: " + ", ".join(
-                f"{complex(*p):.4f}".strip("()") for p in e["closed_loop_poles"]),
+            *_analysis_lines(e),
+            *_pole_lines(e),
             f"  {step['step_rad_s']:g} rad/s step: overshoot {step['overshoot_percent']:.2f} %, "
             f"rise {step['rise_time_s'] * 1e3:.0f} ms, settling "
             + ("—" if settle is None else f"{settle * 1e3:.0f} ms")
-            + f", peak {step['peak_voltage_v']:.2f} V, steady-state error {step['steady_state_error']:.2g} rad/s",
+            + f", peak {step['peak_voltage_v']:.2f} V, steady-state error "
+            + f"{sig(step['steady_state_error'], scale=step['step_rad_s'])} rad/s",
             f"  fastest settling within the voltage limit for a loop delay of "
             f"{e['settling_bound_loop_delay_ticks']} tick(s): {bound * 1e3:.0f} ms"
             + ("" if settle is None else f" (this controller: {settle / bound:.1f}× that)"),
@@ -180,8 +244,20 @@ def _format(method: str, motors: dict[str, dict[str, Any]]) -> str:
     return "\n".join(lines).rstrip()
 
 
+def _disturbance_v(args: argparse.Namespace) -> float:
+    import math
+
+    d = float(args.disturbance_v)
+    if not (math.isfinite(d) and d != 0.0 and abs(d) <= 12.0):
+        raise InputError(
+            f"--disturbance-v must be a non-zero voltage within ±12 V, got {args.disturbance_v}"
+        )
+    return d
+
+
 def run(args: argparse.Namespace) -> int:
     from cartctl.design.controllerfile import common_loop_delay, save_controller
+    from cartctl.design.loop_report import analyse_designs
     from cartctl.design.make import controller_file, design_models
     from cartctl.jsonout import dumps
     from cartctl.modelfile import load_models
@@ -195,7 +271,10 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             raise InputError(f"--out: {exc}") from None
     designs = design_models(request, models, names)
+    analyses = analyse_designs(designs, disturbance_v=_disturbance_v(args))
     motors_json = designs.entries()
+    for m, analysis in analyses.items():  # before the file: its analysis keeps the loop's Ms
+        motors_json[m].update(analysis.entry())
     if args.out:
         command = command_line("design")
         save_controller(
@@ -203,11 +282,14 @@ def run(args: argparse.Namespace) -> int:
             args.out,
         )
     if args.report:
+        from cartctl.design.analysis_plots import plot_analysis
         from cartctl.design.plots import write_design_report
 
         write_design_report(args.report, args.method, designs.models, motors_json, designs.steps,
                             extra_delay_ticks=request.extra_delay_ticks,
                             voltage_limit_v=request.voltage_limit_v)  # fmt: skip
+        for m, analysis in analyses.items():
+            plot_analysis(Path(args.report) / f"analysis_{m}.png", m, args.method, analysis)
     if args.json:
         print(dumps({"method": args.method, "model": str(args.model), "Ts": models.period_s,
                      "motors": motors_json}))  # fmt: skip

@@ -61,10 +61,12 @@ def plot_design(
     if fc:
         for ax in (mag_ax, ph_ax):
             ax.axvline(fc, color="tab:red", ls="--", lw=0.9)
-        ph_ax.annotate(f"phase margin {pm:.1f}° at {fc:.2f} Hz", (fc, -180 + pm), xytext=(8, 8),
-                       textcoords="offset points", color="tab:red")  # fmt: skip
+        ph_ax.plot([fc, fc], [-180.0, -180.0 + pm], color="tab:red", lw=2.5)
+        # the note in axes coordinates, lower left, where the phase curve never is
+        ph_ax.text(0.03, 0.05, f"phase margin {pm:.1f}° at {fc:.2f} Hz", color="tab:red",
+                   transform=ph_ax.transAxes, ha="left", va="bottom")  # fmt: skip
     mag_ax.set_title(
-        f"open loop C·G (gain margin {'∞' if gm is None else f'{gm:.1f} dB'})", fontsize=10
+        f"open loop L = C·G (gain margin {'∞' if gm is None else f'{gm:.1f} dB'})", fontsize=10
     )
     mag_ax.set_ylabel("magnitude (dB)")
     ph_ax.set_ylabel("phase (deg)")
