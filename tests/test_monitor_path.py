@@ -117,3 +117,115 @@ def test_monitor_time_with_lost_frames(capsys: pytest.CaptureFixture[str], tmp_p
     assert np.any(steps_ticks > 1.5)  # 1 − 0.8⁶⁰ ≈ 1 − 2e-6: some GPIO was lost
     # every tick of the cart is a row or a gap: rows + missing ticks = the ticks spanned
     assert len(table) + int(np.sum(np.round(steps_ticks) - 1)) == round(table[-1, 0] / 0.01) + 1
+
+
+# -- monitor traces read by review, validate and convert -----------------------------------------
+
+
+def _quiet_cli(*argv: str) -> tuple[int, str, str]:
+    """``main`` with stdout and stderr captured, for module-scoped fixtures (no capsys there)."""
+    import contextlib
+    import io
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(list(argv))
+    return code, out.getvalue(), err.getvalue()
+
+
+@pytest.fixture(scope="module")
+def monitor_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """A 1.2 s monitor of the on-board PI (the export's labels, saved .rrd) and a 0.3 s one
+    with the default labels (FloatIn0..)."""
+    out = tmp_path_factory.mktemp("monitor")
+    code, _, err = _quiet_cli("monitor", "virtual", "--onboard", str(PI), "--reference",
+                              "step:8:0.1", "--duration", "1.2", "--labels", EXPORT_LABELS,
+                              "--rerun", "save", "--out", str(out), "--name", "pi")  # fmt: skip
+    assert code == 0, err
+    code, _, err = _quiet_cli("monitor", "virtual", "--onboard", str(PI), "--duration", "0.3",
+                              "--rerun", "off", "--out", str(out), "--name", "plain")  # fmt: skip
+    assert code == 0, err
+    return {"labelled": out / "pi.csv", "rrd": out / "pi.rrd", "plain": out / "plain.csv"}
+
+
+def test_monitor_trace_time_is_whole_ticks(monitor_files: dict[str, Path]) -> None:
+    _, table = _read_csv(monitor_files["labelled"])
+    steps = np.diff(table[:, 0])
+    assert np.all(steps > 0)
+    np.testing.assert_allclose(steps / 0.01, np.round(steps / 0.01), atol=1e-9)
+
+
+def test_review_reads_a_monitor_trace(
+    monitor_files: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = monitor_files["labelled"]
+    code, out, err = _cli(capsys, "review", str(path), "--json")
+    assert code == 0, err
+    summary = json.loads(out)
+    header, table = _read_csv(path)
+    t = table[:, 0]
+    assert summary["ticks"] == len(table) and summary["duration_s"] == pytest.approx(t[-1] - t[0])
+    assert summary["trace_kind"] == "monitor" and summary["metrics_signal"] == "speed"
+    assert summary["deadline_misses"] is None and summary["compute_us"]["p99"] is None
+    for m in "ab":
+        r, y = table[:, header.index(f"reference_{m}")], table[:, header.index(f"speed_{m}")]
+        u = table[:, header.index(f"voltage_{m}")]
+        entry = summary["motors"][m]
+        # independent figures from the file: rms tracking error and the largest |voltage|
+        assert entry["rms_error"] == pytest.approx(np.sqrt(np.mean((r - y) ** 2)), rel=1e-9)
+        assert entry["max_abs_voltage"] == pytest.approx(np.max(np.abs(u)), rel=1e-9)
+        # the 10-90 % rise of the 8 rad/s step lies between the samples around its crossings
+        k10, k90 = int(np.argmax(y >= 0.8)), int(np.argmax(y >= 7.2))
+        assert t[k90 - 1] - t[k10] - 1e-9 <= entry["rise_time_s"] <= t[k90] - t[k10 - 1] + 1e-9
+    code, out, err = _cli(capsys, "review", str(path))
+    assert code == 0, err
+    assert "no loop timing" in out.splitlines()[0]
+
+
+def test_validate_and_convert_read_a_monitor_trace(
+    monitor_files: dict[str, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    path = monitor_files["labelled"]
+    code, out, err = _cli(capsys, "validate", str(MODEL), str(path), "--json")
+    assert code == 0, err
+    result = json.loads(out)
+    assert set(result["motors"]) == {"a", "b"} and result["data"] == str(path)
+    # the on-board PI's voltages drive the ground model close to the measured speeds
+    assert all(30.0 < result["motors"][m]["fit_simulation_percent"] <= 100.0 for m in "ab")
+    converted = tmp_path / "c.csv"
+    code, out, err = _cli(capsys, "convert", str(path), "--out", str(converted), "--json")
+    assert code == 0, err
+    header, table = _read_csv(path)
+    new_header, new_table = _read_csv(converted)
+    assert new_header[:5] == ["time_s", "voltage_a", "voltage_b", "speed_a", "speed_b"]
+    for name in header:
+        np.testing.assert_array_equal(new_table[:, new_header.index(name)],
+                                      table[:, header.index(name)])  # fmt: skip
+    assert json.loads(out)["ticks"] == len(table)
+
+
+@pytest.mark.parametrize("command", ["review", "validate", "convert"])
+def test_unlabelled_monitor_trace_is_one_line_naming_the_columns(
+    command: str, monitor_files: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = str(monitor_files["plain"])
+    argv = [command, str(MODEL), path] if command == "validate" else [command, path]
+    code, out, err = _cli(capsys, *argv)
+    assert code == 2 and out == ""
+    (line,) = err.strip().splitlines()
+    assert "monitor" in line and "voltage_a, voltage_b, speed_a, speed_b" in line
+    assert "--labels f0=speed_a" in line and "FloatIn0" in line
+
+
+def test_unlabelled_monitor_trace_with_a_map(
+    monitor_files: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = str(monitor_files["plain"])
+    code, out, err = _cli(capsys, "review", path, "--json", "--map",
+                          "voltage_a=FloatIn2,speed_a=FloatIn0,reference_a=FloatIn4")  # fmt: skip
+    assert code == 0, err
+    assert list(json.loads(out)["motors"]) == ["a"]
+    code, out, err = _cli(capsys, "review", path, "--map", "voltage_a=FloatIn2,speed_a=FloatIn0")
+    assert code == 2
+    (line,) = err.strip().splitlines()
+    assert "missing reference_a" in line

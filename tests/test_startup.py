@@ -30,7 +30,7 @@ OPTIONS = {
     "inspect": ["--help", "--json", "-h"],
     "linearity": ["--help", "--json", "--map", "--motor", "--plot", "-h"],
     "monitor": ["--connect-timeout", "--connect-url", "--duration", "--help", "--json", "--labels", "--name", "--onboard", "--out", "--reference", "--rerun", "-h"],
-    "review": ["--compare", "--help", "--json", "--screenshot", "--web", "-h"],
+    "review": ["--compare", "--help", "--json", "--map", "--screenshot", "--web", "-h"],
     "run": ["--allow-delay-mismatch", "--allow-unstable", "--connect-timeout", "--connect-url", "--controller", "--duration", "--fast", "--force", "--help", "--json", "--model", "--name", "--noise", "--out", "--plant", "--preset", "--reference", "--reference-b", "--rerun", "--seed", "--voltage-limit", "-h"],
     "tune": ["--choose", "--duration", "--extra-delay", "--grid", "--help", "--jobs", "--json", "--method", "--out", "--plant", "--plants", "--plot", "--preset", "--reference", "--robust", "--seed", "-h"],
     "validate": ["--help", "--json", "--map", "--motor", "--plot", "-h"],

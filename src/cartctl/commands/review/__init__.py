@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from cartctl.commands.options import add_map_option
 from cartctl.commands.review.recording import read_recording
 from cartctl.commands.review.screenshot import (
     SCREENSHOT_WINDOW,
@@ -67,7 +68,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--json", action="store_true", help="CSV traces: print one JSON object instead of a table"
     )
-    p.add_argument("--compare", metavar="OTHER.csv", help="CSV traces: a second run to set beside")
+    p.add_argument(
+        "--compare",
+        metavar="OTHER.csv",
+        help="CSV traces: a second run (B) beside this one (A): one table of A, B, B − A and "
+        "(B − A)/|A| per metric and motor",
+    )
+    add_map_option(p)
     p.set_defaults(func=run)
 
 
@@ -81,8 +88,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(
             f"review takes a Rerun recording (.rrd) or a CSV trace (.csv), got '{path}'"
         )
-    if args.json or args.compare:
-        raise InputError("--json and --compare apply to CSV traces, not to .rrd recordings")
+    if args.json or args.compare or args.map:
+        raise InputError("--json, --compare and --map apply to CSV traces, not to .rrd recordings")
     if args.screenshot:
         out = screenshot(path, Path(args.screenshot))
         print(f"saved {out}")
@@ -99,19 +106,20 @@ def _review_csv(args: argparse.Namespace) -> int:
     """``cartctl review RUN.csv [--compare OTHER.csv] [--json]``: the run metrics from traces."""
     if args.web or args.screenshot:
         raise InputError("--web and --screenshot apply to .rrd recordings, not to CSV traces")
-    from cartctl.data import read_trace
+    from cartctl.commands.review.metrics import (
+        compare,
+        csv_summary,
+        format_compare,
+        format_csv_summary,
+    )
     from cartctl.jsonout import dumps
-    from cartctl.sinks.summary import format_summary, trace_metrics
 
-    paths = [args.recording] + ([args.compare] if getattr(args, "compare", None) else [])
-    summaries = []
-    for path in paths:
-        trace = read_trace(path)
-        summary = trace_metrics(trace.columns(), trace.period_s)
-        summary["trace"] = str(path)
-        summaries.append(summary)
-    if args.json:
-        print(dumps(summaries[0] if len(summaries) == 1 else {"runs": summaries}))
+    summary = csv_summary(args.recording, args.map)
+    if not args.compare:
+        print(dumps(summary) if args.json else format_csv_summary(summary))
         return 0
-    print("\n\n".join(format_summary(s) for s in summaries))
+    if Path(args.compare).suffix.lower() != ".csv":
+        raise InputError(f"--compare takes a second CSV trace, got '{args.compare}'")
+    other = csv_summary(args.compare, args.map)
+    print(dumps(compare(summary, other)) if args.json else format_compare(summary, other))
     return 0
