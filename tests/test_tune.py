@@ -230,21 +230,30 @@ def test_poles_table_has_one_row_per_setting(capsys: pytest.CaptureFixture[str])
                  "settling_time=0.02:0.06:0.04,overshoot=1", "--duration", "1", "--jobs", "1"])  # fmt: skip
     out, _ = capsys.readouterr()
     assert code == 0
-    rows = [line for line in out.splitlines() if line[:4].strip().lstrip("*").strip().isdigit()]
+    rows = [line for line in out.splitlines() if line[5:9].strip().isdigit()]
     assert len(rows) == 2
-    assert rows[0].startswith("*") and rows[0].endswith("yes")  # the only feasible one
-    assert rows[1].endswith("no")
+    assert rows[0].startswith("*o") and rows[0].endswith("settled")  # the only one that ran
+    assert rows[1].endswith("infeasible")
     assert "#1: motor a: settling_time_s must be at least" in out
+    assert "2 settings: 1 infeasible request (the design refused it), 0 ran but did not settle, 1 settled" in out  # fmt: skip
 
 
-def test_choosing_an_infeasible_setting_is_a_clear_error(
+def test_choosing_an_infeasible_setting_prints_the_table_then_one_error_line(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
-    code = main(["tune", str(GROUND), "--method", "pi", "--grid", "phase_margin=60,crossover_hz=2",
-                 "--duration", "0.5", "--jobs", "1", "--choose", "1", "--out", str(tmp_path / "c.toml")])  # fmt: skip
-    _, err = capsys.readouterr()
+    """On PI_GRID, 60° and 65° at 2 Hz need Kp < 0 (a 65° crossover must lie above 2.24 Hz):
+    settings #1 and #3 are infeasible requests, #2 and #4 can be chosen."""
+    code = main(["tune", str(GROUND), "--method", "pi", "--grid", PI_GRID, "--duration", "0.6",
+                 "--jobs", "1", "--choose", "1", "--out", str(tmp_path / "c.toml")])  # fmt: skip
+    out, err = capsys.readouterr()
     assert code == 2
-    assert "--choose 1: that setting is infeasible" in err and err.count("\n") == 1
+    assert err.count("\n") == 1 and err.startswith("cartctl tune: error: --choose 1: ")
+    assert "infeasible request" in err and err.rstrip().endswith(
+        "settings that can be chosen: 2, 4"
+    )
+    table = [line for line in out.splitlines() if line[5:9].strip().isdigit()]
+    assert sorted(int(line[5:9]) for line in table) == [1, 2, 3, 4]  # the whole table, first
+    assert "#1: motor a: a PI cannot give 60° phase margin at 2 Hz" in out
     assert not (tmp_path / "c.toml").exists()
 
 

@@ -257,9 +257,10 @@ def test_the_table_and_the_plot(tuned: dict[str, Any]) -> None:
                           "--plants", "8", "--jobs", "1")  # fmt: skip
     assert code == 0, err
     assert "8 plants drawn" in out and "no theta_std in the model file" in out
-    assert "overshoot %" in out and "settling ms" in out and "physics" in out
-    rows = [line for line in out.splitlines() if line[:4].lstrip("*").strip().isdigit()]
-    assert len(rows) == 9 and all(line.endswith("yes") for line in rows)
+    assert "run overshoot (%)" in out and "run settling (ms)" in out and "physics run" in out
+    rows = [line for line in out.splitlines() if line[5:9].strip().isdigit()]
+    assert len(rows) == 9 and all(line.endswith(("settled on all", "settled on some")) for line in rows)  # fmt: skip
+    assert "9 settings: 0 infeasible requests (the design refused them), 0 ran but did not" in out
 
 
 def test_theta_std_from_the_file_is_used_and_the_result_is_the_same_on_one_worker(
@@ -319,6 +320,9 @@ def test_bad_robust_input_is_one_line_and_exit_2(
     code, out, err = _cli("tune", str(GROUND), "--method", "pi", "--jobs", "1", "--duration",
                           "0.6", *grid, *argv)  # fmt: skip
     assert code == 2
-    assert out == ""
+    if "best" in argv:  # the results were computed: the table, then the error
+        assert "1 setting: 1 infeasible request (the design refused it)" in out
+    else:
+        assert out == ""
     assert err.count("\n") == 1 and message in err, err
     assert not (tmp_path / "x.toml").exists()

@@ -23,9 +23,8 @@ from __future__ import annotations
 import argparse
 import os
 import shlex
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cartctl.cart import PERIOD_S
@@ -36,7 +35,6 @@ from cartctl.errors import InputError
 if TYPE_CHECKING:  # the tuning modules load numpy and scipy: imported where used, not for --help
     from cartctl.tune import engine
     from cartctl.tune import grid as tuning
-    from cartctl.tune import robust as robustness
 
 
 DEFAULT_PLANTS = 200
@@ -153,91 +151,34 @@ def _check(args: argparse.Namespace, n_settings: int) -> None:
     reference_signal(args.reference, 1, plant.period_s)  # a bad spec fails here, once
 
 
-def plot_tuning(path: str, method: str, results: Sequence[tuning.TuneResult]) -> None:
-    """Scatter of settling time (ms) vs overshoot (%), colour = peak voltage (V), Pareto ringed."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    shown = [r for r in results if None not in r.worst.values()]
-    fig = Figure(figsize=(8, 6), dpi=110, layout="constrained")
-    FigureCanvasAgg(fig)
-    ax = fig.subplots()
-    x = [r.worst["settling_time_s"] * 1e3 for r in shown]  # type: ignore[operator]
-    y = [r.worst["overshoot_percent"] for r in shown]
-    points = ax.scatter(x, y, c=[r.worst["max_abs_voltage"] for r in shown], cmap="viridis", s=36)
-    fig.colorbar(points, ax=ax, label="peak |voltage| (V)")
-    front = sorted((xi, yi, r.index) for xi, yi, r in zip(x, y, shown, strict=True) if r.pareto)
-    for n, (xi, yi, index) in enumerate(front):  # labels alternately above and below
-        ax.scatter([xi], [yi], s=150, facecolors="none", edgecolors="tab:red", linewidths=1.5)
-        ax.annotate(str(index), (xi, yi), xytext=(6, 6 if n % 2 == 0 else -14),
-                    textcoords="offset points", color="tab:red", fontsize=9)  # fmt: skip
-    ax.set_xlabel("settling time, band max(2 %, one encoder count) (ms)")
-    ax.set_ylabel("overshoot (%)")
-    ax.set_title(f"cartctl tune --method {method}: {len(shown)} of {len(results)} settings settled; "
-                 "worse of motors a, b; ringed: Pareto front", fontsize=10)  # fmt: skip
-    ax.grid(True, color="0.9")
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
+def choosable_text(results: Sequence[tuning.TuneResult]) -> str:
+    """The settings ``--choose N`` accepts (those designed and run), as ranges: '5-7, 11-14'."""
+    indices = sorted(r.index for r in results if r.feasible)
+    if not indices:
+        return "none: no setting of the grid could be designed and run; widen the grid"
+    spans: list[list[int]] = []
+    for i in indices:
+        if spans and i == spans[-1][1] + 1:
+            spans[-1][1] = i
+        else:
+            spans.append([i, i])
+    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in spans)
 
 
-def plot_robust(path: str, method: str, rows: Sequence[robustness.RobustRow], plants: int) -> None:
-    """Nominal settling (ms) against overshoot (%): worst case (colour: p95 settling), nominal
-    (grey, joined to it) and physics (x); the robust Pareto front ringed and numbered."""
-    import numpy as np
-    from matplotlib import colormaps
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    shown = []
-    for r in rows:
-        s = r.score
-        if s is None:
-            continue
-        x = s.value("settling_time_s", "nominal")
-        y = s.value("overshoot_percent", "worst")
-        if np.isfinite(x) and np.isfinite(y):
-            shown.append((x * 1e3, y, s, r))
-    fig = Figure(figsize=(8, 6), dpi=110, layout="constrained")
-    FigureCanvasAgg(fig)
-    ax = fig.subplots()
-    for x, y, s, _ in shown:
-        ax.plot([x, x], [s.value("overshoot_percent", "nominal"), y], color="0.8", lw=1, zorder=1)
-    xs = [x for x, *_ in shown]
-    p95 = [s.value("settling_time_s", "p95") * 1e3 for *_, s, _ in shown]
-    worst = ax.scatter(xs, [y for _, y, *_ in shown], s=36, zorder=3, plotnonfinite=True,
-                       cmap=colormaps["viridis"].with_extremes(bad="black"),
-                       c=[v if np.isfinite(v) else np.nan for v in p95],
-                       label=f"worst case over the model and {plants} sampled plants")  # fmt: skip
-    fig.colorbar(worst, ax=ax, label="settling time, 95th percentile of the plants (ms); "
-                 "black: more than 5 % never settle")  # fmt: skip
-    ax.scatter(xs, [s.value("overshoot_percent", "nominal") for *_, s, _ in shown], s=12,
-               color="0.5", zorder=2, label="nominal (the model)")  # fmt: skip
-    phys = [(x, s.physics.get("overshoot_percent")) for x, _, s, _ in shown]
-    ax.scatter([x for x, v in phys if v is not None], [v for _, v in phys if v is not None],
-               marker="x", color="tab:orange", s=30, zorder=2,
-               label=f"physics preset {shown[0][2].physics.get('preset') if shown else ''}")  # fmt: skip
-    front = sorted((x, y, r.index) for x, y, _, r in shown if r.pareto)
-    for n, (x, y, index) in enumerate(front):
-        ax.scatter(
-            [x], [y], s=150, facecolors="none", edgecolors="tab:red", linewidths=1.5, zorder=4
-        )
-        ax.annotate(str(index), (x, y), xytext=(6, 6 if n % 2 == 0 else -14),
-                    textcoords="offset points", color="tab:red", fontsize=9)  # fmt: skip
-    ax.set_xlabel("nominal settling time, band max(2 %, one encoder count) (ms)")
-    ax.set_ylabel("overshoot (%)")
-    ax.set_title(f"cartctl tune --method {method} --robust: {len(shown)} of {len(rows)} settings, "
-                 "worse of motors a, b;\nringed: Pareto front of nominal settling against worst-case "
-                 "overshoot", fontsize=10)  # fmt: skip
-    ax.legend(fontsize=8, loc="best")
-    ax.grid(True, color="0.9")
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-
-
-def choose(args: argparse.Namespace, result: tuning.TuneResult) -> str:
+def choose(
+    args: argparse.Namespace,
+    result: tuning.TuneResult,
+    results: Sequence[tuning.TuneResult] = (),
+) -> str:
     """Write the chosen setting's controller file, as ``cartctl design`` would.
 
     Returns the design command (``cartctl design ...``), as the file records it.
+
+    Raises
+    ------
+    InputError
+        The setting did not run (an infeasible request, or its run failed); the message names
+        the settings of ``results`` that can be chosen.
     """
     from cartctl.design.controllerfile import save_controller
     from cartctl.design.make import controller_file, design_models
@@ -245,7 +186,13 @@ def choose(args: argparse.Namespace, result: tuning.TuneResult) -> str:
     from cartctl.tune import grid as tuning
 
     if not result.feasible:
-        raise InputError(f"--choose {result.index}: that setting is infeasible ({result.reason})")
+        what = ("its run failed" if result.status == "run failed"
+                else "it is an infeasible request: the design refused it")  # fmt: skip
+        raise InputError(
+            f"--choose {result.index}: setting #{result.index} cannot be chosen, {what} (the "
+            f"reason is listed as #{result.index} with the results); settings that can be "
+            f"chosen: {choosable_text(results or [result])}"
+        )
     request = tuning.design_request(args.method, result.settings, args.extra_delay)
     argv = ["design", *request.to_argv(str(args.model), always=tuning.request_axes(args.method)),
             "--out", args.out]  # fmt: skip
@@ -257,12 +204,29 @@ def choose(args: argparse.Namespace, result: tuning.TuneResult) -> str:
     return command
 
 
-def _chosen(args: argparse.Namespace, result: tuning.TuneResult, rule: str | None) -> dict[str, Any]:  # fmt: skip
-    command = choose(args, result)
+def _chosen(args: argparse.Namespace, result: tuning.TuneResult, rule: str | None,
+            results: Sequence[tuning.TuneResult]) -> dict[str, Any]:  # fmt: skip
+    command = choose(args, result, results)
     out: dict[str, Any] = {"index": result.index, "out": args.out, "command": command}
     if rule is not None:
         out["rule"] = rule
     return out
+
+
+def _choice_or_refusal(
+    args: argparse.Namespace, make: Callable[[], dict[str, Any]]
+) -> tuple[dict[str, Any] | None, InputError | None]:
+    """``--choose``'s entry, or the refusal to raise once the results are printed."""
+    if args.choose is None:
+        return None, None
+    try:
+        return make(), None
+    except InputError as exc:
+        return None, exc
+
+
+def _delay_text(args: argparse.Namespace) -> str:
+    return f", {args.extra_delay} extra tick(s) of loop delay" if args.extra_delay else ""
 
 
 def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
@@ -270,10 +234,11 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
     from cartctl.jsonout import dumps
     from cartctl.modelfile import load_models
     from cartctl.progress import ProgressBar
-    from cartctl.tune import engine
+    from cartctl.tune import engine, table
     from cartctl.tune import grid as tuning
     from cartctl.tune import robust as robustness
     from cartctl.tune import robust_choice as choice
+    from cartctl.tune.plot import plot_robust
     from cartctl.tune.uncertainty import describe_line, sample_plants
 
     plants = DEFAULT_PLANTS if args.plants is None else args.plants
@@ -292,48 +257,57 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
     rows = choice.sort_robust(choice.mark_robust_pareto(rows))
     if args.plot:
         plot_robust(args.plot, args.method, rows, plants)
-    chosen: dict[str, Any] | None = None
-    if args.choose == "best":
-        best = choice.choose_best_robust(rows)
-        chosen = _chosen(args, best.result, choice.CHOICE_RULE)
-    elif args.choose is not None:
-        chosen = _chosen(args, next(r.result for r in rows if r.index == args.choose), None)
+    results = [r.result for r in rows]
+
+    def make() -> dict[str, Any]:
+        if args.choose == "best":
+            return _chosen(args, choice.choose_best_robust(rows).result, choice.CHOICE_RULE,
+                           results)  # fmt: skip
+        return _chosen(args, next(r for r in results if r.index == args.choose), None, results)
+
+    chosen, refusal = _choice_or_refusal(args, make)
     meta = {**sample.describe(), "nominal": f"the model ({args.model}), as without --robust",
             "worst_over": "the nominal model and the sampled plants",
             "spread_over": "the sampled plants (percentiles: values of sampled plants)",
             "physics_preset": args.preset, "pareto_of": "nominal settling_time_s against worst-case "
-            "overshoot_percent", "choice_rule": choice.CHOICE_RULE}  # fmt: skip
+            "overshoot_percent", "choice_rule": choice.CHOICE_RULE,
+            "counts": {k.replace(" ", "_"): v for k, v in table.robust_counts(rows).items()},
+            "statuses": table.ROBUST_STATUSES}  # fmt: skip
     if args.json:
         print(dumps({"method": args.method, "model": str(args.model), "plant": args.plant,
                      "reference": args.reference, "duration_s": args.duration,
                      "extra_delay_ticks": args.extra_delay, "metrics_of": "worse of motors a and b",
                      "settings": [r.to_dict() for r in rows], "chosen": chosen,
                      "robust": meta}))  # fmt: skip
-        return 0
-    front = sum(r.pareto for r in rows)
-    feasible = sum(r.score is not None for r in rows)
-    delay = f", {args.extra_delay} extra tick(s) of loop delay" if args.extra_delay else ""
-    print(f"{args.method} on {args.model}{delay}, {args.reference}, {args.duration:g} s, --robust: "
-          f"{len(rows)} settings, {feasible} feasible, {front} on the robust Pareto front (*: "
-          "nominal settling vs worst-case overshoot); the worse of motors a and b")  # fmt: skip
-    print(describe_line(sample, str(args.model)))
-    print(f"nominal: the model; worst: over the model and the {plants} plants (∞: a plant never "
-          f"settles); p5–p95: over the plants; physics: preset {args.preset}, not in the worst "
-          "case")  # fmt: skip
-    print(choice.format_robust_table(args.method, rows))
-    if args.plot:
-        print(f"wrote {args.plot}")
-    if chosen is not None:
-        print(f"wrote {args.out} (setting #{chosen['index']}): {chosen['command']}")
+    else:
+        print(f"{args.method} on {args.model}{_delay_text(args)}, {args.reference}, "
+              f"{args.duration:g} s, --robust: {table.robust_counts_text(rows)}; the worse of "
+              "motors a and b")  # fmt: skip
+        print(describe_line(sample, str(args.model)))
+        print(f"nominal: the model; worst: over the model and the {plants} plants (∞: a plant "
+              f"never settles); p5–p95: over the plants; physics: preset {args.preset}, not in "
+              "the worst case")  # fmt: skip
+        print(table.LEGEND)
+        print(f"*: on the robust Pareto front, nominal settling against worst-case overshoot, the "
+              f"axes of --plot, which rings them "
+              f"({table.plural(sum(r.pareto for r in rows), 'setting', 'settings')})")  # fmt: skip
+        print(table.format_robust_table(args.method, rows))
+        if args.plot:
+            print(f"wrote {args.plot}")
+        if chosen is not None:
+            print(f"wrote {args.out} (setting #{chosen['index']}): {chosen['command']}")
+    if refusal is not None:
+        raise refusal
     return 0
 
 
 def run(args: argparse.Namespace) -> int:
     from cartctl.jsonout import dumps
     from cartctl.progress import ProgressBar
-    from cartctl.tune import engine
+    from cartctl.tune import engine, table
     from cartctl.tune import grid as tuning
     from cartctl.tune import robust_choice as choice
+    from cartctl.tune.plot import plot_tuning
 
     axes = tuning.parse_grid(args.grid, args.method)
     settings = tuning.grid_settings(axes)
@@ -351,27 +325,40 @@ def run(args: argparse.Namespace) -> int:
     results = tuning.sort_results(tuning.mark_pareto(results))
     if args.plot:
         plot_tuning(args.plot, args.method, results)
-    chosen: dict[str, Any] | None = None
-    if args.choose == "best":
-        chosen = _chosen(args, choice.choose_best_nominal(results),
-                         choice.CHOICE_RULE_NOMINAL)  # fmt: skip
-    elif args.choose is not None:
-        chosen = _chosen(args, next(r for r in results if r.index == args.choose), None)
+
+    def make() -> dict[str, Any]:
+        if args.choose == "best":
+            return _chosen(args, choice.choose_best_nominal(results), choice.CHOICE_RULE_NOMINAL,
+                           results)  # fmt: skip
+        return _chosen(args, next(r for r in results if r.index == args.choose), None, results)
+
+    chosen, refusal = _choice_or_refusal(args, make)
+    front, plotted = sum(r.pareto for r in results), sum(r.pareto_plot for r in results)
     if args.json:
+        counts = {k.replace(" ", "_"): v for k, v in tuning.status_counts(results).items()}
         print(dumps({"method": args.method, "model": str(args.model), "plant": args.plant,
-                          "reference": args.reference, "duration_s": args.duration,
-                          "extra_delay_ticks": args.extra_delay, "metrics_of": "worse of motors a and b",
-                          "settings": [r.to_dict() for r in results], "chosen": chosen}))  # fmt: skip
-        return 0
-    front, feasible = sum(r.pareto for r in results), sum(r.feasible for r in results)
-    delay = f", {args.extra_delay} extra tick(s) of loop delay" if args.extra_delay else ""
-    print(f"{args.method} on {args.model}, {args.plant} plant{delay}, {args.reference}, {args.duration:g} s: "
-          f"{len(results)} settings, {feasible} feasible, {front} on the Pareto front (*); "
-          "metrics: the worse of motors a and b")  # fmt: skip
-    print(tuning.format_table(args.method, results))
-    if args.plot:
-        print(f"wrote {args.plot}")
-    if chosen is not None:
-        which = f" (setting #{chosen['index']})" if "rule" in chosen else ""
-        print(f"wrote {args.out}{which}: {chosen['command']}")
+                     "reference": args.reference, "duration_s": args.duration,
+                     "extra_delay_ticks": args.extra_delay, "metrics_of": "worse of motors a and b",
+                     "settings": [r.to_dict() for r in results], "chosen": chosen,
+                     "counts": {"settings": len(results), **counts, "pareto": front,
+                                "pareto_plot": plotted},
+                     "statuses": tuning.STATUSES,
+                     "pareto_of": list(tuning.METRICS),
+                     "pareto_plot_of": list(tuning.PLOT_METRICS)}))  # fmt: skip
+    else:
+        print(f"{args.method} on {args.model}, {args.plant} plant{_delay_text(args)}, "
+              f"{args.reference}, {args.duration:g} s: {table.counts_text(results)}")  # fmt: skip
+        print(table.LEGEND)
+        print(f"*: on the Pareto front over the four run metrics "
+              f"({table.plural(front, 'setting', 'settings')}); o: on the front of run settling "
+              f"against run overshoot, the axes of --plot, which rings them "
+              f"({table.plural(plotted, 'setting', 'settings')})")  # fmt: skip
+        print(table.format_table(args.method, results))
+        if args.plot:
+            print(f"wrote {args.plot}")
+        if chosen is not None:
+            which = f" (setting #{chosen['index']})" if "rule" in chosen else ""
+            print(f"wrote {args.out}{which}: {chosen['command']}")
+    if refusal is not None:
+        raise refusal
     return 0

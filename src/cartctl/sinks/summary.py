@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 from cartctl.errors import InputError
 from cartctl.link.bridge import HOST_LOSS_WARN_PERCENT
 from cartctl.metrics import finite_or_none
+from cartctl.numfmt import column_decimals, format_column, format_fixed, render_table
 from cartctl.stepinfo import SETTLING_FRACTION, encoder_quantum_rad_s, step_info
 
 SIGNALS = {"true_speed": "the true speed", "speed": "the measured speed"}
@@ -144,27 +145,54 @@ def trace_metrics(columns: Mapping[str, NDArray[np.float64]], period_s: float) -
     return out
 
 
-def format_summary(summary: Mapping[str, Any]) -> str:
-    """A short table for the terminal."""
+SUMMARY_COLUMNS = (
+    ("overshoot (%)", "overshoot_percent", 1.0),
+    ("rise (ms)", "rise_time_s", 1e3),
+    ("settling (ms)", "settling_time_s", 1e3),
+    ("ss error (rad/s)", "steady_state_error", 1.0),
+    ("rms error (rad/s)", "rms_error", 1.0),
+    ("max |V| (V)", "max_abs_voltage", 1.0),
+)
+"""The motor table of the summary: header (with its unit), summary key, factor to the unit."""
 
-    def ms(x: float | None) -> str:
-        return "—" if x is None else f"{x * 1e3:.0f} ms"
 
-    def num(x: float | None, fmt: str) -> str:
-        return "—" if x is None else format(x, fmt).replace("-0.000", "0.000")
+def motor_table(motors: Mapping[str, Mapping[str, Any]], indent: str = "  ") -> list[str]:
+    """The per-motor table of a summary: units in the headers, one rounding per column.
 
+    Each column has :data:`cartctl.numfmt.SIG_FIGS` significant figures of its largest value;
+    the steady-state error is rounded like the RMS error (its scale), so a numerical zero such as
+    3.6e-15 rad/s prints as 0 (0.000 beside 0.791).
+    """
+    names = list(motors)
+    errors = ("steady_state_error", "rms_error")
+    error_decimals = column_decimals(motors[m].get(k) for m in names for k in errors)
+    cells: list[list[str]] = []
+    for _, key, factor in SUMMARY_COLUMNS:
+        values = [motors[m].get(key) for m in names]
+        if key in errors:  # one precision for the two errors, both in rad/s
+            cells.append([format_fixed(v, error_decimals) for v in values])
+        else:
+            cells.append(format_column(values, factor=factor))
+    rows = [[m, *(c[i] for c in cells)] for i, m in enumerate(names)]
+    return render_table(["motor", *(h for h, _, _ in SUMMARY_COLUMNS)], rows, indent=indent)
+
+
+def timing_text(summary: Mapping[str, Any]) -> str:
+    """The loop timing of a summary: percentiles of period error and compute time (µs), each
+    triple with one rounding, or that the clock was virtual."""
     pe, cu = summary["period_error_us"], summary["compute_us"]
     if pe.get("max") == 0.0 and cu.get("p99") == 0.0:  # a virtual clock: no time passed
-        timing = "timing: virtual clock, no real-time figures"
-    else:
-        timing = (
-            f"period error p50/p99/max {num(pe['p50'], '.0f')}/{num(pe['p99'], '.0f')}/"
-            f"{num(pe['max'], '.0f')} µs; compute p50/p99/max {num(cu['p50'], '.0f')}/"
-            f"{num(cu['p99'], '.0f')}/{num(cu.get('max'), '.0f')} µs"
-        )
+        return "timing: virtual clock, no real-time figures"
+    period = "/".join(format_column([pe.get("p50"), pe.get("p99"), pe.get("max")]))
+    compute = "/".join(format_column([cu.get("p50"), cu.get("p99"), cu.get("max")]))
+    return f"period error p50/p99/max {period} µs; compute p50/p99/max {compute} µs"
+
+
+def format_summary(summary: Mapping[str, Any]) -> str:
+    """A short table for the terminal (units in every header, one rounding per column)."""
     lines = [
         f"{summary['ticks']} ticks, {summary['duration_s']:.2f} s; deadline misses "
-        f"{summary['deadline_misses']}; {timing}",
+        f"{summary['deadline_misses']}; {timing_text(summary)}",
     ]
     signal = summary.get("metrics_signal")
     if signal in SIGNALS:
@@ -173,18 +201,10 @@ def format_summary(summary: Mapping[str, Any]) -> str:
         shown = (
             ""
             if floor is None
-            else f", settling band max({band['fraction']:.0%}, {floor:.4f} rad/s)"
+            else f", settling band max({band['fraction'] * 100:g} %, {floor:.3g} rad/s)"
         )
         lines.append(f"  tracking on {SIGNALS[signal]}{shown}")
-    lines += [
-        f"  {'motor':<6}{'overshoot':>11}{'rise':>9}{'settling':>10}{'ss error':>10}{'rms error':>11}{'max |V|':>9}",
-    ]
-    for m, e in summary["motors"].items():
-        lines.append(
-            f"  {m:<6}{num(e['overshoot_percent'], '.2f') + ' %':>11}{ms(e['rise_time_s']):>9}"
-            f"{ms(e['settling_time_s']):>10}{num(e['steady_state_error'], '.3f'):>10}"
-            f"{num(e['rms_error'], '.3f'):>11}{num(e['max_abs_voltage'], '.2f'):>9}"
-        )
+    lines += motor_table(summary["motors"])
     link = summary.get("link")
     delay, designed = summary.get("loop_delay_ticks"), summary.get("controller_loop_delay_ticks")
     if not link and (delay is not None or designed is not None):

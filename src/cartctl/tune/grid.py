@@ -32,6 +32,20 @@ MAX_SETTINGS = 10_000
 METRICS = ("overshoot_percent", "settling_time_s", "rms_error", "max_abs_voltage")
 """The per-motor run metrics compared (%, s, rad/s, V), all to be minimised."""
 
+PLOT_METRICS = ("settling_time_s", "overshoot_percent")
+"""The two metrics ``--plot`` draws (x, y); ``pareto_plot`` is the front over these alone."""
+
+STATUSES = {
+    "infeasible": "infeasible request (the design refused it)",
+    "run failed": "designed, but its run failed",
+    "not settled": "ran, but did not settle",
+    "settled": "ran and settled",
+}
+"""A setting's ``status`` and what it means (the worse of motors a and b)."""
+
+RUN_FAILED = "the run failed: "
+"""How the reason of a setting whose run failed begins (:mod:`cartctl.tune.engine`)."""
+
 
 @dataclass(frozen=True)
 class Axis:
@@ -174,7 +188,10 @@ class TuneResult:
     motors : dict
         The run summary entry of each motor (as ``cartctl run --json`` gives it).
     pareto : bool
-        On the non-dominated front (see :func:`mark_pareto`).
+        On the non-dominated front over the four :data:`METRICS` (see :func:`mark_pareto`).
+    pareto_plot : bool
+        On the non-dominated front over the two :data:`PLOT_METRICS` alone (what ``--plot``
+        rings).
     """
 
     index: int
@@ -183,6 +200,14 @@ class TuneResult:
     reason: str | None = None
     motors: dict[str, dict[str, Any]] = field(default_factory=dict)
     pareto: bool = False
+    pareto_plot: bool = False
+
+    @property
+    def status(self) -> str:
+        """One of :data:`STATUSES`: 'infeasible', 'run failed', 'not settled' or 'settled'."""
+        if not self.feasible:
+            return "run failed" if (self.reason or "").startswith(RUN_FAILED) else "infeasible"
+        return "not settled" if self.worst["settling_time_s"] is None else "settled"
 
     @property
     def worst(self) -> dict[str, float | None]:
@@ -192,13 +217,15 @@ class TuneResult:
         return worst_metrics(self.motors)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON row: index, settings, feasible, reason, worst-of-motors metrics, pareto, motors."""
+        """JSON row: index, settings, feasible, reason, worst-of-motors metrics, pareto, motors;
+        added: status (:data:`STATUSES`) and pareto_plot."""
         worst = self.worst
         return {"index": self.index, "settings": dict(self.settings), "feasible": self.feasible,
                 "reason": self.reason, "overshoot_percent": worst["overshoot_percent"],
                 "settling_time_s": worst["settling_time_s"], "rms_error": worst["rms_error"],
                 "peak_voltage_v": worst["max_abs_voltage"], "pareto": self.pareto,
-                "motors": self.motors}  # fmt: skip
+                "motors": self.motors, "status": self.status,
+                "pareto_plot": self.pareto_plot}  # fmt: skip
 
 
 def pareto_front(points: ArrayLike) -> NDArray[np.bool_]:
@@ -227,12 +254,27 @@ def pareto_front(points: ArrayLike) -> NDArray[np.bool_]:
     return front
 
 
+def _front_over(results: Sequence[TuneResult], metrics: Sequence[str]) -> NDArray[np.bool_]:
+    rows = [[math.nan if r.worst[k] is None else r.worst[k] for k in metrics] for r in results]
+    return pareto_front(np.reshape(rows, (len(results), len(metrics))))
+
+
 def mark_pareto(results: Sequence[TuneResult]) -> list[TuneResult]:
-    """The results with ``pareto`` set: the front over :data:`METRICS` (worse motor), among
+    """The results with ``pareto`` set (the front over :data:`METRICS`, worse motor) and
+    ``pareto_plot`` (the front over :data:`PLOT_METRICS`, the axes of ``--plot``), both among
     feasible settings whose metrics (settling in particular) are all defined."""
-    rows = [[math.nan if v is None else v for v in r.worst.values()] for r in results]
-    front = pareto_front(np.reshape(rows, (len(results), len(METRICS))))
-    return [replace(r, pareto=bool(f)) for r, f in zip(results, front, strict=True)]
+    front = _front_over(results, METRICS)
+    plotted = _front_over(results, PLOT_METRICS)
+    return [replace(r, pareto=bool(f), pareto_plot=bool(p))
+            for r, f, p in zip(results, front, plotted, strict=True)]  # fmt: skip
+
+
+def status_counts(results: Sequence[TuneResult]) -> dict[str, int]:
+    """How many settings have each status of :data:`STATUSES` (all four keys)."""
+    counts = dict.fromkeys(STATUSES, 0)
+    for r in results:
+        counts[r.status] += 1
+    return counts
 
 
 def sort_results(results: Sequence[TuneResult]) -> list[TuneResult]:
@@ -249,24 +291,3 @@ def sort_results(results: Sequence[TuneResult]) -> list[TuneResult]:
         return (0 if r.pareto else 1, w["settling_time_s"], overshoot, r.index)
 
     return sorted(results, key=key)
-
-
-def _num(x: float | None, fmt: str, scale: float = 1.0) -> str:
-    return "—" if x is None else format(x * scale, fmt)
-
-
-def format_table(method: str, results: Sequence[TuneResult]) -> str:
-    """One row per setting; ``*`` marks the Pareto front; infeasible reasons below the table."""
-    axes = AXES[method]
-    heads = [f"{a.name} ({a.unit})" for a in axes]
-    lines = ["   #  " + "".join(f"{h:>19}" for h in heads)
-             + f"{'overshoot %':>13}{'settling ms':>13}{'rms error':>11}{'peak V':>8}  feasible"]  # fmt: skip
-    for r in results:
-        w = r.worst
-        lines.append(
-            f"{'*' if r.pareto else ' '}{r.index:>3}  " + "".join(f"{r.settings[a.name]:>19g}" for a in axes)
-            + f"{_num(w['overshoot_percent'], '.2f'):>13}{_num(w['settling_time_s'], '.0f', 1e3):>13}"
-            f"{_num(w['rms_error'], '.3f'):>11}{_num(w['max_abs_voltage'], '.2f'):>8}  {'yes' if r.feasible else 'no'}"
-        )  # fmt: skip
-    lines += [f"  #{r.index}: {r.reason}" for r in results if not r.feasible]
-    return "\n".join(lines)

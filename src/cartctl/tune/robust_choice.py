@@ -3,7 +3,7 @@
 The rows come from :func:`cartctl.tune.robust.evaluate_robust_chunk`. The front is over (nominal
 settling time, worst-case overshoot), both minimised, among the feasible settings where both are
 finite; :func:`choose_best_robust` and :func:`choose_best_nominal` apply :data:`CHOICE_RULE` and
-:data:`CHOICE_RULE_NOMINAL`; :func:`format_robust_table` is the terminal table.
+:data:`CHOICE_RULE_NOMINAL`; the terminal table is :func:`cartctl.tune.table.format_robust_table`.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from dataclasses import replace
 import numpy as np
 
 from cartctl.errors import InputError
-from cartctl.tune.grid import AXES, TuneResult, pareto_front
+from cartctl.tune.grid import TuneResult, pareto_front
 from cartctl.tune.robust import RobustRow
 
 CHOICE_RESOLUTION_PERCENT = 0.01
@@ -105,47 +105,3 @@ def sort_robust(rows: Sequence[RobustRow]) -> list[RobustRow]:
         return (1, worst, settling, r.index)
 
     return sorted(rows, key=key)
-
-
-def _num(x: float | None, fmt: str, scale: float = 1.0) -> str:
-    if x is None or (isinstance(x, float) and math.isnan(x)):
-        return "—"
-    if math.isinf(x):
-        return "∞"
-    return format(x * scale, fmt)
-
-
-def _span(lo: float | None, hi: float | None, fmt: str, scale: float = 1.0) -> str:
-    return f"{_num(lo, fmt, scale)}–{_num(hi, fmt, scale)}"
-
-
-def format_robust_table(method: str, rows: Sequence[RobustRow]) -> str:
-    """One row per setting; ``*`` marks the robust Pareto front; infeasible reasons below."""
-    axes = AXES[method]
-    heads = [f"{a.name} ({a.unit})" for a in axes]
-    lines = [
-        " " * 6 + " " * (19 * len(axes)) + f"{'overshoot %':^27}  {'settling ms':^25}  "
-        f"{'physics':^13}",
-        "   #  " + "".join(f"{h:>19}" for h in heads)
-        + f"{'nominal':>8}{'worst':>8}{'p5–p95':>11}  {'nominal':>7}{'worst':>7}{'p5–p95':>11}"
-        f"  {'os %':>6}{'ms':>6}  {'peak V':>6}  feasible",
-    ]  # fmt: skip
-    for r in rows:
-        settings = "".join(f"{r.result.settings[a.name]:>19g}" for a in axes)
-        s = r.score
-        if s is None:
-            lines.append(f" {r.index:>3}  {settings}" + " " * 75 + "no")
-            continue
-        f, ph = s.figures, s.physics
-        os_, st = f["overshoot_percent"], f["settling_time_s"]
-        lines.append(
-            f"{'*' if r.pareto else ' '}{r.index:>3}  {settings}"
-            f"{_num(os_['nominal'], '.2f'):>8}{_num(os_['worst'], '.2f'):>8}"
-            f"{_span(os_['p5'], os_['p95'], '.1f'):>11}  "
-            f"{_num(st['nominal'], '.0f', 1e3):>7}{_num(st['worst'], '.0f', 1e3):>7}"
-            f"{_span(st['p5'], st['p95'], '.0f', 1e3):>11}  "
-            f"{_num(ph.get('overshoot_percent'), '.2f'):>6}{_num(ph.get('settling_time_s'), '.0f', 1e3):>6}"
-            f"  {_num(f['peak_voltage_v']['worst'], '.2f'):>6}  yes"
-        )  # fmt: skip
-    lines += [f"  #{r.index}: {r.result.reason}" for r in rows if r.score is None]
-    return "\n".join(lines)

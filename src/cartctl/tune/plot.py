@@ -1,0 +1,227 @@
+"""``cartctl tune --plot``: settling time against overshoot, the front ringed and numbered.
+
+The ringed points are the Pareto front **over the two plotted metrics** (plain ``tune``:
+``pareto_plot``, run settling against run overshoot; ``--robust``: the robust front, nominal
+settling against worst-case overshoot), so none is dominated in the plot's own axes. Each ringed
+point carries its setting number (the table's ``#``), placed by :func:`place_labels` where it
+overlaps no other label, no point and no ring, inside the axes; a point left without a room for
+its number is named in a note under the axes instead. The legend and notes sit under the axes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from cartctl.tune.grid import TuneResult
+from cartctl.tune.robust import RobustRow
+
+RING_AREA_PT2 = 150.0
+"""Marker area of the rings (pt²)."""
+
+POINT_AREA_PT2 = 36.0
+"""Marker area of the points (pt²)."""
+
+TITLE_CHARS = 90
+"""The longest title line (characters): 9-point text across the axes of the 8-inch figure."""
+
+_DISTANCES_PT = (7.0, 12.0, 18.0, 26.0, 36.0, 48.0, 62.0)
+_ANGLES_DEG = (45.0, -45.0, 135.0, -135.0, 90.0, -90.0, 0.0, 180.0, 20.0, -20.0, 160.0, -160.0,
+               65.0, -65.0, 115.0, -115.0)  # fmt: skip
+
+
+def _figure() -> tuple[Any, Any]:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8, 6.4), dpi=110, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig, fig.subplots()
+
+
+def _title(ax: Any, *parts: str) -> None:
+    """A title of short lines (wrapped at :data:`TITLE_CHARS`), inside the figure."""
+    import textwrap
+
+    lines = [line for part in parts for line in textwrap.wrap(part, TITLE_CHARS)]
+    ax.set_title("\n".join(lines), fontsize=9)
+
+
+def _hits_circle(box: Any, cx: float, cy: float, r: float) -> bool:
+    nx = min(max(cx, box.x0), box.x1)
+    ny = min(max(cy, box.y0), box.y1)
+    return math.hypot(nx - cx, ny - cy) < r
+
+
+def place_labels(
+    fig: Any,
+    ax: Any,
+    points: Sequence[tuple[float, float, str]],
+    obstacles: Sequence[tuple[float, float, float]],
+    color: str = "tab:red",
+) -> list[str]:
+    """Annotate each point (x, y, text; data coordinates) where its text overlaps nothing.
+
+    Candidates: offsets of 7 to 62 pt in 16 directions, the first free one taken (a thin line to
+    the point when it is 18 pt or more away). Free: inside the axes, clear of the labels placed
+    so far and of every obstacle (x, y, radius in pt; data coordinates). Draws the figure once
+    to fix its layout; the annotations are kept out of the layout.
+
+    Returns
+    -------
+    list of str
+        The texts left without a place (no candidate was free).
+    """
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    px_per_pt = fig.dpi / 72.0
+    frame = ax.get_window_extent(renderer)
+    circles = [(*ax.transData.transform((x, y)), r * px_per_pt) for x, y, r in obstacles]
+    taken: list[Any] = []
+    left: list[str] = []
+    for x, y, text in sorted(points):
+        placed = False
+        for dist in _DISTANCES_PT:
+            for angle in _ANGLES_DEG:
+                dx, dy = dist * math.cos(math.radians(angle)), dist * math.sin(math.radians(angle))
+                ha = "left" if dx > 0.5 else "right" if dx < -0.5 else "center"
+                va = "bottom" if dy > 0.5 else "top" if dy < -0.5 else "center"
+                arrow = {"arrowstyle": "-", "color": color, "lw": 0.6} if dist >= 18 else None
+                note = ax.annotate(text, (x, y), xytext=(dx, dy), textcoords="offset points",
+                                   ha=ha, va=va, color=color, fontsize=9, arrowprops=arrow,
+                                   annotation_clip=False)  # fmt: skip
+                note.set_in_layout(False)
+                box = note.get_window_extent(renderer).expanded(1.0, 1.0).padded(1.0)
+                free = (frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0
+                        and box.y1 <= frame.y1 and not any(box.overlaps(b) for b in taken)
+                        and not any(_hits_circle(box, *c) for c in circles))  # fmt: skip
+                if free:
+                    taken.append(box)
+                    placed = True
+                    break
+                note.remove()
+            if placed:
+                break
+        if not placed:
+            left.append(text)
+    return left
+
+
+def _ring_radius_pt() -> float:
+    return math.sqrt(RING_AREA_PT2) / 2.0
+
+
+def _point_radius_pt() -> float:
+    return math.sqrt(POINT_AREA_PT2) / 2.0
+
+
+def _unplaced_note(texts: Sequence[str]) -> str:
+    return f"ringed without a number (no room for it): #{', #'.join(sorted(texts, key=int))}"
+
+
+def _finish(fig: Any, ax: Any, front: Sequence[tuple[float, float, int]],
+            everything: Sequence[tuple[float, float]], path: str, notes: Sequence[str]) -> None:  # fmt: skip
+    """Ring and number the front, put the legend and notes under the axes, and save.
+
+    The labels are placed once the legend is in place (it moves the axes). When some find no
+    room, a legend line names them and they are placed again (the new line moves the axes once
+    more); its text then lists the final ones: one line either way, so the layout holds.
+    """
+    if front:
+        ax.scatter([x for x, _, _ in front], [y for _, y, _ in front], s=RING_AREA_PT2,
+                   facecolors="none", edgecolors="tab:red", linewidths=1.5, zorder=4,
+                   gid="front", label="ringed, with its #: on the front of the two plotted "
+                   "metrics")  # fmt: skip
+    for note in notes:  # legend entries without a marker
+        ax.plot([], [], " ", label=note)
+    fig.legend(loc="outside lower center", ncols=1, fontsize=8)
+    obstacles = [(x, y, _point_radius_pt()) for x, y in everything]
+    obstacles += [(x, y, _ring_radius_pt()) for x, y, _ in front]
+    labels = [(x, y, str(i)) for x, y, i in front]
+    unplaced = place_labels(fig, ax, labels, obstacles)
+    if unplaced:
+        for text in list(ax.texts):
+            text.remove()
+        for legend in list(fig.legends):
+            legend.remove()
+        ax.plot([], [], " ", label=_unplaced_note(unplaced))
+        legend = fig.legend(loc="outside lower center", ncols=1, fontsize=8)
+        unplaced = place_labels(fig, ax, labels, obstacles)
+        legend.get_texts()[-1].set_text(_unplaced_note(unplaced) if unplaced
+                                        else "every ringed point has its #")  # fmt: skip
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+
+
+def plot_tuning(path: str, method: str, results: Sequence[TuneResult]) -> None:
+    """Run settling (ms) against run overshoot (%) of the settings that settled (colour: run peak
+    |voltage|); the front over these two metrics ringed and numbered."""
+    from cartctl.tune.table import counts_text
+
+    shown = [r for r in results if r.status == "settled" and r.worst["overshoot_percent"] is not None]  # fmt: skip
+    fig, ax = _figure()
+    x = [r.worst["settling_time_s"] * 1e3 for r in shown]  # type: ignore[operator]
+    y = [r.worst["overshoot_percent"] for r in shown]
+    points = ax.scatter(x, y, c=[r.worst["max_abs_voltage"] for r in shown], cmap="viridis",
+                        s=POINT_AREA_PT2, zorder=3, gid="settings",
+                        label="settings that settled (colour: run peak |V|)")  # fmt: skip
+    fig.colorbar(points, ax=ax, label="run peak |voltage| (V)")
+    front = [(xi, yi, r.index) for xi, yi, r in zip(x, y, shown, strict=True) if r.pareto_plot]
+    ax.set_xlabel("run settling time, band max(2 %, one encoder count) (ms)")
+    ax.set_ylabel("run overshoot (%)")
+    _title(ax, f"cartctl tune --method {method}, the worse of motors a and b", counts_text(results))
+    ax.grid(True, color="0.9")
+    notes = ["the table's *: the front over all four run metrics (RMS error and peak |V| too), "
+             "which may hold points not ringed here"]  # fmt: skip
+    _finish(fig, ax, front, list(zip(x, y, strict=True)), path, notes)
+
+
+def plot_robust(path: str, method: str, rows: Sequence[RobustRow], plants: int) -> None:
+    """Nominal settling (ms) against overshoot (%): worst case (colour: p95 settling), nominal
+    (grey, joined to it) and physics (x); the robust Pareto front ringed and numbered."""
+    import numpy as np
+    from matplotlib import colormaps
+
+    from cartctl.tune.table import robust_counts_text
+
+    shown = []
+    for r in rows:
+        s = r.score
+        if s is None:
+            continue
+        x = s.value("settling_time_s", "nominal")
+        y = s.value("overshoot_percent", "worst")
+        if np.isfinite(x) and np.isfinite(y):
+            shown.append((x * 1e3, y, s, r))
+    fig, ax = _figure()
+    for x, y, s, _ in shown:
+        ax.plot([x, x], [s.value("overshoot_percent", "nominal"), y], color="0.8", lw=1, zorder=1)
+    xs = [x for x, *_ in shown]
+    p95 = [s.value("settling_time_s", "p95") * 1e3 for *_, s, _ in shown]
+    worst = ax.scatter(xs, [y for _, y, *_ in shown], s=POINT_AREA_PT2, zorder=3, gid="settings",
+                       plotnonfinite=True, cmap=colormaps["viridis"].with_extremes(bad="black"),
+                       c=[v if np.isfinite(v) else np.nan for v in p95],
+                       label=f"worst case over the model and {plants} sampled plants")  # fmt: skip
+    fig.colorbar(worst, ax=ax, label="settling time, p95 of the plants (ms); "
+                 "black: > 5 % never settle")  # fmt: skip
+    nominal = [(x, s.value("overshoot_percent", "nominal")) for x, _, s, _ in shown]
+    ax.scatter([x for x, _ in nominal], [v for _, v in nominal], s=12, color="0.5", zorder=2,
+               label="nominal (the model)")  # fmt: skip
+    phys = [(x, s.physics.get("overshoot_percent")) for x, _, s, _ in shown]
+    phys = [(x, v) for x, v in phys if v is not None]
+    ax.scatter([x for x, _ in phys], [v for _, v in phys], marker="x", color="tab:orange", s=30,
+               zorder=2, label=f"physics preset {shown[0][2].physics.get('preset') if shown else ''}")  # fmt: skip
+    front = sorted((x, y, r.index) for x, y, _, r in shown if r.pareto)
+    ax.set_xlabel("nominal settling time, band max(2 %, one encoder count) (ms)")
+    ax.set_ylabel("run overshoot (%)")
+    _title(
+        ax,
+        f"cartctl tune --method {method} --robust, the worse of motors a and b; ringed: "
+        "the front of nominal settling against worst-case overshoot",
+        robust_counts_text(rows),
+    )
+    ax.grid(True, color="0.9")
+    everything = [(x, y) for x, y, *_ in shown] + nominal + phys
+    _finish(fig, ax, front, everything, path, [])
