@@ -27,7 +27,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "recorded experiments by least squares, with parameter standard deviations and fits "
             "(simulation and one-step prediction). Optionally: a Butterworth prefilter (the fit "
             "without it is shown beside), delay estimation, cycle averaging, and an output-error "
-            "refinement (shown beside the ARX fit)."
+            "refinement (shown beside the ARX fit). Every chosen model gets residual tests (the "
+            "one-step prediction errors' autocorrelation and cross-correlation with the input "
+            "against 99 % bounds) and, in the report, 1σ/2σ bands on its Bode plot from θ's "
+            "covariance."
         ),
     )
     p.add_argument("files", nargs="+", metavar="FILE", help="experiment traces (CSV or QRC logs)")
@@ -95,8 +98,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         metavar="SPEC",
         help=(
-            "fit ARX for every na, nb, nk of a grid and print loss, AIC, FPE and the fit on the "
-            "validation data, marking the best; SPEC like na=1:3,nb=1:3,nk=1:4 (ranges inclusive, "
+            "fit ARX for every na, nb, nk of a grid and print loss, AIC, FPE and the simulation "
+            "fit (on the validation data, if any), marking the best; SPEC like na=1:3,nb=1:3,nk=1:4 (ranges inclusive, "
             "keys left out keep these defaults)"
         ),
     )

@@ -310,6 +310,8 @@ def model_file(
             )
         if r.cycles_averaged:
             notes.append(f"motor {m}: {r.cycles_averaged} cycles averaged")
+        if r.diagnostics is not None and r.diagnostics.fit_on == "validation":
+            notes.append(f"motor {m}: fits on validation data")
     provenance = Provenance(
         source=source,
         created=datetime.now(UTC).isoformat(timespec="seconds"),
