@@ -26,7 +26,7 @@ OPTIONS = {
     "design": ["--anti-windup", "--bandwidth-hz", "--bias-drift-v", "--crossover-hz", "--disturbance-v", "--estimator", "--estimator-gain", "--extra-delay", "--help", "--json", "--measurement-noise", "--method", "--motor", "--out", "--overshoot", "--phase-margin", "--poles", "--process-noise-v", "--report", "--settling-time", "--step", "--voltage-limit", "-h"],
     "excite": ["--amplitude", "--connect-timeout", "--cycles", "--duration", "--help", "--json", "--model", "--motor", "--noise", "--out", "--plant", "--preset", "--seed", "--signal", "-h"],
     "export": ["--arduino", "--help", "--mat", "--out", "-h"],
-    "identify": ["--average", "--compare", "--cutoff-hz", "--delay", "--help", "--json", "--map", "--method", "--motor", "--na", "--nb", "--order", "--out", "--prefilter", "--report", "--zero-phase", "-h"],
+    "identify": ["--average", "--compare", "--cutoff-hz", "--delay", "--help", "--json", "--map", "--method", "--motor", "--na", "--nb", "--order", "--orders", "--out", "--prefilter", "--report", "--split", "--validate-on", "--zero-phase", "-h"],
     "inspect": ["--help", "--json", "-h"],
     "linearity": ["--help", "--json", "--map", "--motor", "--plot", "-h"],
     "monitor": ["--connect-timeout", "--connect-url", "--duration", "--help", "--json", "--labels", "--name", "--onboard", "--out", "--reference", "--rerun", "-h"],
