@@ -9,11 +9,15 @@ controller's voltage answering it. matplotlib's Agg canvas, every label inside i
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from cartctl.design.loop_report import MotorAnalysis
 from cartctl.design.numbers import db, sig
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def _db(value: float) -> str:
@@ -21,7 +25,15 @@ def _db(value: float) -> str:
 
 
 def plot_analysis(path: Path, motor: str, method: str, analysis: MotorAnalysis) -> Path:
-    """One motor's analysis figure (see the module docstring); returns ``path``."""
+    """Write one motor's analysis figure (see the module docstring) as PNG; returns ``path``."""
+    fig = analysis_figure(motor, method, analysis)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path
+
+
+def analysis_figure(motor: str, method: str, analysis: MotorAnalysis) -> Figure:
+    """One motor's analysis figure (see the module docstring)."""
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle
 
@@ -98,6 +110,4 @@ def plot_analysis(path: Path, motor: str, method: str, analysis: MotorAnalysis) 
     for ax in (st_ax, ny_ax, dy_ax, du_ax):
         ax.grid(True, which="both", alpha=0.3)
     fig.suptitle(f"Motor {motor}: {method} design, loop analysis")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    return path
+    return fig

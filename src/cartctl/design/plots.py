@@ -9,13 +9,16 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from cartctl.design.analysis import StepAnalysis
 from cartctl.design.limit import in_settling_band, settling_bound
 from cartctl.model import ArxModel
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def _loop_response(
@@ -37,6 +40,23 @@ def plot_design(
     extra_delay_ticks: int,
     voltage_limit_v: float,
 ) -> Path:
+    """Write one motor's figure (:func:`design_figure`) as PNG; returns ``path``."""
+    fig = design_figure(motor, model, entry, step, extra_delay_ticks=extra_delay_ticks,
+                        voltage_limit_v=voltage_limit_v)  # fmt: skip
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path
+
+
+def design_figure(
+    motor: str,
+    model: ArxModel,
+    entry: Mapping[str, Any],
+    step: StepAnalysis,
+    *,
+    extra_delay_ticks: int,
+    voltage_limit_v: float,
+) -> Figure:
     """One motor's figure: |L| and ∠L with the margins, then speed and voltage of the step.
 
     The step is drawn beside the time-optimal one on the same loop (``extra_delay_ticks`` beyond
@@ -113,9 +133,7 @@ def plot_design(
     for ax in axes.flat:
         ax.grid(True, which="both", alpha=0.3)
     fig.suptitle(f"Motor {motor}: {entry.get('method', 'controller')} design")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    return path
+    return fig
 
 
 def write_design_report(

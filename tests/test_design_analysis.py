@@ -1,0 +1,276 @@
+"""``cartctl design``'s loop analysis, through the CLI on the shipped model and the shipped
+controllers' own design commands: S and T peaks, the load-disturbance step, damping and natural
+frequency per closed-loop pole, the terminal text and the figures.
+
+Expectations are independent of cartctl's analysis code: python-control's ``feedback`` and
+``step_response`` on a C(z) built here from Kp and Ki, ``control.damp``, and, for the controllers
+with an estimator, the input sensitivity measured on cartctl's runtime controller (what the loop
+runs) from its impulse response in closed loop.
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import tomllib
+import warnings
+from pathlib import Path
+
+import control
+import numpy as np
+import pytest
+
+from cartctl.cli import main
+from cartctl.design.build import build_controllers
+from cartctl.design.controllerfile import load_controller
+from cartctl.modelfile import load_models
+
+ROOT = Path(__file__).resolve().parents[1]
+CONTROLLERS = ROOT / "controllers"
+TS = 0.01
+
+
+def _shipped_argv(name: str) -> list[str]:
+    """The design options that made ``controllers/<name>.toml`` (from its ``command``), without
+    ``--out``, on the shipped model."""
+    doc = tomllib.loads((CONTROLLERS / f"{name}.toml").read_text(encoding="utf-8"))
+    words = shlex.split(doc["command"])[2:]  # after 'cartctl design'
+    i = words.index("--out")
+    del words[i : i + 2]
+    words[0] = str(ROOT / "models" / "ground.toml")
+    return words
+
+
+def _design(capsys: pytest.CaptureFixture[str], *argv: str) -> dict:
+    code = main(["design", *argv, "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    return json.loads(out)
+
+
+def _pc_loop(kp: float, ki: float, motor: str, extra: int) -> control.TransferFunction:
+    """L = C·G·z^−extra with C(z) = Kp + Ki·Ts·z/(z − 1), built here by hand."""
+    model = load_models(ROOT / "models" / "ground.toml").motor(motor)
+    c = control.tf([kp + ki * TS, -kp], [1.0, -1.0], TS)
+    g = control.tf(model.num(), model.den(), TS)
+    return c * g * control.tf([1.0], [1.0] + [0.0] * extra, TS)
+
+
+def _grid_peak(values: np.ndarray, freq_hz: np.ndarray) -> tuple[float, float]:
+    i = int(np.argmax(values))
+    return float(values[i]), float(freq_hz[i])
+
+
+@pytest.mark.parametrize(("name", "extra"), [("pi", 0), ("serial-pi", 2)])
+def test_pi_sensitivity_peaks_match_python_control(
+    capsys: pytest.CaptureFixture[str], name: str, extra: int
+) -> None:
+    doc = _design(capsys, *_shipped_argv(name))
+    shipped = load_controller(CONTROLLERS / f"{name}.toml")
+    freq = np.linspace(0.005, 50.0, 40000)
+    z = np.exp(2j * np.pi * freq * TS)
+    for motor, e in doc["motors"].items():
+        assert e["kp"] == pytest.approx(shipped.motors[motor]["kp"], rel=1e-9)
+        loop = _pc_loop(e["kp"], e["ki"], motor, extra)
+        s = control.feedback(1, loop)
+        t = control.feedback(loop, 1)
+        ms, ms_hz = _grid_peak(np.abs(s(z)), freq)
+        mt, mt_hz = _grid_peak(np.abs(t(z)), freq)
+        assert e["sensitivity_peak"] == pytest.approx(ms, rel=1e-5)
+        assert e["sensitivity_peak_db"] == pytest.approx(20 * np.log10(ms), abs=1e-4)
+        assert e["sensitivity_peak_hz"] == pytest.approx(ms_hz, abs=0.01)
+        # the PI's integral action: |T| is largest, 1, at 0 Hz
+        assert mt == pytest.approx(1.0, abs=1e-6) and mt_hz == pytest.approx(0.0, abs=0.01)
+        assert e["complementary_peak"] == pytest.approx(1.0, abs=1e-6)
+        assert e["complementary_peak_hz"] == 0.0
+        assert e["complementary_peak_db"] == pytest.approx(0.0, abs=1e-4)
+        assert e["sensitivity_distance"] == pytest.approx(1.0 / ms, rel=1e-5)
+        # Ms is the inverse of the distance from L to −1 (python-control's own stability margin)
+        with warnings.catch_warnings():  # its frequency grid meets the integrator at z = 1
+            warnings.simplefilter("ignore", RuntimeWarning)
+            _, _, sm, _, _, _ = control.stability_margins(loop)
+        assert e["sensitivity_distance"] == pytest.approx(sm, rel=1e-3)
+
+
+def _closed_loop_impulse(name: str, motor: str, n: int = 4096) -> np.ndarray:
+    """The plant input u_p = d + z^−extra·u_c for a unit impulse d at the plant input (r = 0),
+    the runtime controller of ``controllers/<name>.toml`` closing the loop on the model: its
+    spectrum is the input sensitivity S = 1/(1 + L), and 1 − S is T."""
+    shipped = load_controller(CONTROLLERS / f"{name}.toml")
+    extra = int(shipped.request["extra_delay_ticks"])
+    ctrl = build_controllers(shipped)[motor]
+    model = load_models(ROOT / "models" / "ground.toml").motor(motor)
+    b, a = model.lfilter_coeffs()
+    ctrl.reset()
+    u_c, u_p, y = np.zeros(n), np.zeros(n), np.zeros(n)
+    for k in range(n):
+        # the ARX difference equation: y[k] = Σ b_i u_p[k−i] − Σ a_j y[k−j]
+        y[k] = sum(b[i] * u_p[k - i] for i in range(1, b.size) if k - i >= 0) - sum(
+            a[j] * y[k - j] for j in range(1, a.size) if k - j >= 0
+        )
+        u_c[k] = ctrl.step(0.0, y[k])
+        u_p[k] = (1.0 if k == 0 else 0.0) + (u_c[k - extra] if k >= extra else 0.0)
+    assert abs(u_p[-1]) < 1e-12  # decayed: the spectrum is the whole response
+    return u_p
+
+
+@pytest.mark.parametrize("name", ["poles", "serial-poles"])
+def test_pole_placement_sensitivity_matches_the_runtime_controller_in_closed_loop(
+    capsys: pytest.CaptureFixture[str], name: str
+) -> None:
+    doc = _design(capsys, *_shipped_argv(name))
+    for motor, e in doc["motors"].items():
+        u_p = _closed_loop_impulse(name, motor)
+        n_fft = 64 * u_p.size
+        freq = np.fft.rfftfreq(n_fft, TS)
+        s = np.fft.rfft(u_p, n_fft)
+        ms, ms_hz = _grid_peak(np.abs(s), freq)
+        mt, mt_hz = _grid_peak(np.abs(1.0 - s), freq)
+        assert e["sensitivity_peak"] == pytest.approx(ms, rel=1e-4)
+        assert e["sensitivity_peak_hz"] == pytest.approx(ms_hz, abs=0.01)
+        assert e["complementary_peak"] == pytest.approx(mt, rel=1e-4)
+        assert e["complementary_peak_hz"] == pytest.approx(mt_hz, abs=0.05)
+
+
+@pytest.mark.parametrize(("name", "extra"), [("pi", 0), ("serial-pi", 2)])
+def test_pi_rejects_a_load_step_as_python_control_simulates_it(
+    capsys: pytest.CaptureFixture[str], name: str, extra: int
+) -> None:
+    d_v = 0.5
+    doc = _design(capsys, *_shipped_argv(name), "--disturbance-v", str(d_v))
+    model_file = load_models(ROOT / "models" / "ground.toml")
+    for motor, e in doc["motors"].items():
+        dist = e["disturbance"]
+        model = model_file.motor(motor)
+        g = control.tf(model.num(), model.den(), TS)
+        c = control.tf([e["kp"] + e["ki"] * TS, -e["kp"]], [1.0, -1.0], TS)
+        delay = control.tf([1.0], [1.0] + [0.0] * extra, TS)
+        # d enters at the plant input, the command reaches it after the extra delay
+        t, y = control.step_response(control.feedback(g, c * delay), T=np.arange(200) * TS)
+        y = d_v * np.squeeze(y)
+        i = int(np.argmax(np.abs(y)))
+        assert dist["step_v"] == d_v
+        assert dist["peak_deviation_rad_s"] == pytest.approx(y[i], rel=1e-9)
+        assert dist["peak_time_s"] == pytest.approx(t[i], abs=1e-12)
+        band = 0.02 * abs(y[i])
+        outside = np.flatnonzero(np.abs(y) > band)
+        assert dist["recovery_time_s"] == pytest.approx(t[outside[-1] + 1], abs=1e-12)
+        # integral action: no steady-state deviation (final-value theorem), u settles at −d
+        assert abs(dist["final_deviation_rad_s"]) < 1e-9
+        assert dist["final_voltage_v"] == pytest.approx(-d_v, abs=1e-9)
+        # and the deviation is the open loop's static one reduced by the loop
+        assert abs(dist["peak_deviation_rad_s"]) < d_v * model.dc_gain()
+
+
+@pytest.mark.parametrize("name", ["pi", "poles", "serial-poles"])
+def test_damping_and_frequency_of_each_closed_loop_pole_as_control_damp(
+    capsys: pytest.CaptureFixture[str], name: str
+) -> None:
+    doc = _design(capsys, *_shipped_argv(name))
+    for e in doc["motors"].values():
+        table = e["closed_loop_pole_table"]
+        poles = np.array([complex(re, im) for re, im in e["closed_loop_poles"]])
+        assert [complex(r["re"], r["im"]) for r in table] == list(poles)  # same poles, same order
+        # control.damp on a system with exactly these poles: s = ln z / Ts
+        system = control.tf([1.0], np.real(np.poly(poles)), TS)
+        wn, zeta, p = control.damp(system, doprint=False)
+        for row in table:
+            j = int(np.argmin(np.abs(p - complex(row["re"], row["im"]))))
+            assert row["damping"] == pytest.approx(zeta[j], abs=1e-9)
+            assert row["freq_hz"] == pytest.approx(wn[j] / (2 * np.pi), rel=1e-9)
+        # a hand check of one pole: ζ = −ln|z| / |ln z|
+        z = poles[-1]
+        s = np.log(z) / TS
+        assert table[-1]["damping"] == pytest.approx(-s.real / abs(s), rel=1e-12)
+
+
+def test_text_shows_the_analysis_with_units_and_3_significant_figures(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["design", *_shipped_argv("pi")]) == 0
+    text = capsys.readouterr().out
+    assert "Kp = 0.178 V/(rad/s), Ki = 12.4 V/rad" in text
+    assert "sensitivity peak Ms = 1.49 (3.44 dB) at 9.55 Hz" in text
+    assert "complementary peak Mt = 1.00 (0.00 dB) at 0 Hz" in text
+    assert "1.00 V load step at the plant input: peak 1.40 rad/s at 40 ms" in text
+    assert "natural frequency (Hz)" in text and "damping ζ" in text
+    assert "steady-state error 0 rad/s" in text  # 1.8e-15 rad/s of floating-point noise
+    assert "e-1" not in text  # no raw tiny numbers
+    assert main(["design", *_shipped_argv("poles")]) == 0
+    text = capsys.readouterr().out
+    assert "V/(rad/s) and 1 on the disturbance estimate, Ki = 0 V/rad, Kr = " in text
+    k_line = next(line for line in text.splitlines() if line.startswith("motor a: K = ["))
+    gains = k_line.split("[")[1].split("]")[0].split(", ")
+    assert all(len(g.lstrip("-0.")) == 3 for g in gains), k_line  # 3 significant figures each
+
+
+def test_json_keeps_the_contract_and_adds_the_analysis(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    doc = _design(capsys, *_shipped_argv("poles"))
+    for e in doc["motors"].values():
+        assert {"closed_loop_poles", "phase_margin_deg", "sensitivity_peak", "step"} <= set(e)
+        assert all(len(p) == 2 for p in e["closed_loop_poles"])
+        added = {"sensitivity_peak_db", "sensitivity_peak_hz", "complementary_peak",
+                 "complementary_peak_db", "complementary_peak_hz", "disturbance",
+                 "closed_loop_pole_table"}  # fmt: skip
+        assert added <= set(e)
+        assert set(e["closed_loop_pole_table"][0]) == {"re", "im", "damping", "freq_hz"}
+
+
+def _texts_inside(fig) -> None:
+    """Everything drawn lies inside the figure, and each axes' own notes inside that axes."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    tight = fig.get_tightbbox(renderer)  # inches, what is drawn
+    width, height = fig.get_size_inches()
+    assert tight.x0 >= -0.01 and tight.y0 >= -0.01, tight
+    assert tight.x1 <= width + 0.01 and tight.y1 <= height + 0.01, tight
+    for ax in fig.axes:
+        for text in ax.texts:
+            ext, box = text.get_window_extent(renderer), ax.bbox
+            assert box.x0 <= ext.x0 and ext.x1 <= box.x1, text.get_text()
+            assert box.y0 <= ext.y0 and ext.y1 <= box.y1, text.get_text()
+        legend = ax.get_legend()
+        if legend is not None:
+            ext, box = legend.get_window_extent(renderer), ax.bbox
+            assert box.x0 <= ext.x0 and ext.x1 <= box.x1 and box.y0 <= ext.y0 and ext.y1 <= box.y1
+
+
+def test_report_writes_both_figures_with_all_text_inside(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from cartctl.design.analysis_plots import analysis_figure
+    from cartctl.design.loop_report import analyse_designs
+    from cartctl.design.make import design_models
+    from cartctl.design.plots import design_figure
+    from cartctl.design.request import DesignRequest
+
+    out = tmp_path / "report"
+    assert main(["design", *_shipped_argv("pi"), "--report", str(out)]) == 0
+    capsys.readouterr()
+    for m in "ab":
+        for stem in ("design", "analysis"):
+            png = out / f"{stem}_{m}.png"
+            assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+            assert png.stat().st_size < 200_000
+    request = DesignRequest(method="pi", phase_margin_deg=65.0, crossover_hz=4.0).check()
+    designs = design_models(request, load_models(ROOT / "models" / "ground.toml"), ("a",))
+    entry = {**designs.entries()["a"], "method": "pi"}
+    fig = design_figure("a", designs.models["a"], entry, designs.steps["a"],
+                        extra_delay_ticks=0, voltage_limit_v=12.0)  # fmt: skip
+    FigureCanvasAgg(fig)
+    _texts_inside(fig)
+    fig = analysis_figure("a", "pi", analyse_designs(designs)["a"])
+    FigureCanvasAgg(fig)
+    _texts_inside(fig)
+
+
+@pytest.mark.parametrize("value", ["0", "13", "nan"])
+def test_a_bad_disturbance_is_one_line(capsys: pytest.CaptureFixture[str], value: str) -> None:
+    code = main(["design", *_shipped_argv("pi"), "--disturbance-v", value])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1 and "--disturbance-v" in err
