@@ -133,6 +133,17 @@ def test_residuals_of_a_wrong_structure_fail(
     assert "NOT white" in out and "CORRELATED with the input" in out
 
 
+def test_exact_data_gives_negligible_residuals_and_no_verdict(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    path, _, _ = _data(tmp_path, noise=0.0)
+    res = _json(capsys, "identify", str(path), "--motor", "a")["motors"]["a"]["residuals"]
+    assert res["negligible"] and res["rms_rad_s"] < 1e-9
+    code, out, _ = _run(capsys, "identify", str(path), "--motor", "a")
+    assert code == 0 and "the residual tests say nothing" in out
+    assert "e-1" not in out  # standard deviations at rounding level print as 0, not 1e-16
+
+
 def test_report_has_the_residual_figure(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     path, _, _ = _data(tmp_path)
     code, _, err = _run(

@@ -171,6 +171,11 @@ def _poles_hz(model: ArxModel) -> str:
     return ", ".join(parts) or "—"
 
 
+def std_text(std: float, value: float) -> str:
+    """A standard deviation with 2 significant figures; 0 below 1e-9 of its value (rounding)."""
+    return "0" if abs(std) < 1e-9 * abs(value) else f"{std:.2g}"
+
+
 def _fit_cell(value: float | None) -> str:
     if value is None or not math.isfinite(value):
         return "diverges"
@@ -196,7 +201,8 @@ def format_motor(res: MotorIdentification, compared: Mapping[str, ArxModel] | No
     lines.append(head)
     for label, fit in res.variants().items():
         cells = "".join(
-            f"{v:>11.4g} ±{s:<7.2g}" for v, s in zip(fit.model.theta, fit.theta_std, strict=True)
+            f"{v:>11.4g} ±{std_text(s, v):<7}"
+            for v, s in zip(fit.model.theta, fit.theta_std, strict=True)
         )
         lines.append(
             f"    {label:<18}{cells}{_fit_cell(fit.fit_simulation_percent):>13}"

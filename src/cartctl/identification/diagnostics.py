@@ -163,7 +163,11 @@ def diagnose(
         Data for the order table's fits (default ``fitted``).
     """
     data = list(validation) or list(raw)
-    residuals = residual_test(prediction_residuals(chosen.model, data, chosen.method))
+    y_all = np.concatenate([np.asarray(y, dtype=float) for y, _ in data])
+    residuals = residual_test(
+        prediction_residuals(chosen.model, data, chosen.method),
+        output_rms=float(np.sqrt(np.mean(y_all**2))),
+    )
     cov = theta_covariance(chosen, fitted, start if chosen.method == "arx" else None)
     band = bode_band(chosen.model, cov, band_frequencies(period_s))
     orders = None

@@ -106,6 +106,10 @@ class ResidualTest:
         N.
     auto_allowed, cross_allowed : int
         Most lags outside the bounds that still pass.
+    rms_rad_s : float
+        RMS of the residuals (after their mean is removed).
+    negligible : bool
+        Residuals below 1e-6 of the output's RMS: rounding, about which the tests say nothing.
     """
 
     auto_lags: NDArray[np.int_]
@@ -117,6 +121,8 @@ class ResidualTest:
     n_samples: int
     auto_allowed: int
     cross_allowed: int
+    rms_rad_s: float = 0.0
+    negligible: bool = False
 
     @property
     def auto_outside(self) -> int:
@@ -148,6 +154,8 @@ class ResidualTest:
             "bound_99": self.bound_99,
             "cross_bound_99": self.cross_bound_99,
             "n_samples": self.n_samples,
+            "rms_rad_s": self.rms_rad_s,
+            "negligible": self.negligible,
             "white": self.white,
             "independent": self.independent,
             "auto": self.auto.tolist(),
@@ -158,6 +166,11 @@ class ResidualTest:
         """One line for the terminal."""
         auto = "white" if self.white else "NOT white"
         cross = "independent of the input" if self.independent else "CORRELATED with the input"
+        if self.negligible:
+            return (
+                f"residuals: rms {self.rms_rad_s:.2g} rad/s, below 1e-6 of the output's: rounding "
+                "of an exact fit, about which the residual tests say nothing"
+            )
         return (
             f"residuals (99 % bounds, N = {self.n_samples}): autocorrelation "
             f"{self.auto_outside}/{self.auto_lags.size} lags outside ±{self.bound_99:.3f}, "
@@ -192,6 +205,7 @@ def _correlation(
 def residual_test(
     residuals: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
     max_lags: int = MAX_LAGS,
+    output_rms: float | None = None,
 ) -> ResidualTest:
     """Whiteness and independence tests of residuals (see the module's docstring for the maths).
 
@@ -201,6 +215,8 @@ def residual_test(
         Residuals (rad/s) and inputs (V) per experiment (:func:`prediction_residuals`).
     max_lags : int
         M; lowered to a quarter of the samples for short data.
+    output_rms : float, optional
+        RMS of the measured output (rad/s): residuals below 1e-6 of it are marked negligible.
 
     Returns
     -------
@@ -224,6 +240,7 @@ def residual_test(
     r_u = _correlation([(u, u) for _, u in centred], np.arange(0, m + 1))
     p = float(r_e[0] * r_u[0] + 2.0 * np.sum(r_e[1:] * r_u[1:]))
     p = max(p, 1e-12)
+    rms = float(np.sqrt(sum(float(np.einsum("i,i->", e, e)) for e, _ in centred) / n))
     return ResidualTest(
         auto_lags=auto_lags,
         auto=auto,
@@ -234,6 +251,8 @@ def residual_test(
         n_samples=n,
         auto_allowed=int(stats.binom.ppf(1.0 - FALSE_ALARM, auto_lags.size, 0.01)),
         cross_allowed=int(stats.binom.ppf(1.0 - FALSE_ALARM, cross_lags.size, 0.01)),
+        rms_rad_s=rms,
+        negligible=output_rms is not None and rms < 1e-6 * output_rms,
     )
 
 
@@ -280,5 +299,7 @@ def plot_residuals(test: ResidualTest, path: Path, *, title: str) -> Path:
         ax_a.set_xlabel("lag τ (ticks)")
         ax_c.set_xlabel("lag τ (ticks); τ > 0: input before the residual")
         ax_a.legend(loc="upper right")
+        if test.negligible:
+            title += f"\nresiduals at rounding level ({test.rms_rad_s:.2g} rad/s rms): no test"
         fig.suptitle(title)
         return _save(fig, path)

@@ -34,12 +34,18 @@ def _fit_text(value: float | None) -> str:
     return "diverges" if value is None or not math.isfinite(value) else f"{value:.2f}"
 
 
+def _std(std: float, value: float) -> str:
+    return "0" if abs(std) < 1e-9 * abs(value) else f"{std:.2g}"
+
+
 def _row(label: str, model: ArxModel, names: list[str], std: Any, sim: Any, pred: Any) -> dict:
     row: dict[str, Any] = {"model": label, "nk": model.nk}
     na = model.na
     for i, (name, value) in enumerate(zip(names, model.theta, strict=False)):
         unit = "–" if i < na else "rad/s/V"
-        row[f"{name} ({unit})"] = f"{value:.4g}" + ("" if std is None else f" ± {std[i]:.2g}")
+        row[f"{name} ({unit})"] = f"{value:.4g}" + (
+            "" if std is None else f" ± {_std(std[i], value)}"
+        )
     row["fit sim (%)"] = _fit_text(sim)
     row["fit pred (%)"] = _fit_text(pred)
     row["DC gain (rad/s/V)"] = f"{model.dc_gain():.4g}"
