@@ -24,10 +24,10 @@ RING_AREA_PT2 = 150.0
 POINT_AREA_PT2 = 36.0
 """Marker area of the points (pt²)."""
 
-TITLE_CHARS = 90
+TITLE_CHARS = 100
 """The longest title line (characters): 9-point text across the axes of the 8-inch figure."""
 
-_DISTANCES_PT = (7.0, 12.0, 18.0, 26.0, 36.0, 48.0, 62.0)
+_DISTANCES_PT = (7.0, 12.0, 18.0, 26.0, 36.0, 48.0, 62.0, 76.0, 90.0)
 _ANGLES_DEG = (45.0, -45.0, 135.0, -135.0, 90.0, -90.0, 0.0, 180.0, 20.0, -20.0, 160.0, -160.0,
                65.0, -65.0, 115.0, -115.0)  # fmt: skip
 
@@ -64,7 +64,7 @@ def place_labels(
 ) -> list[str]:
     """Annotate each point (x, y, text; data coordinates) where its text overlaps nothing.
 
-    Candidates: offsets of 7 to 62 pt in 16 directions, the first free one taken (a thin line to
+    Candidates: offsets of 7 to 90 pt in 16 directions, the first free one taken (a thin line to
     the point when it is 18 pt or more away). Free: inside the axes, clear of the labels placed
     so far and of every obstacle (x, y, radius in pt; data coordinates). Draws the figure once
     to fix its layout; the annotations are kept out of the layout.
@@ -74,6 +74,8 @@ def place_labels(
     list of str
         The texts left without a place (no candidate was free).
     """
+    from matplotlib.transforms import Bbox
+
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
     px_per_pt = fig.dpi / 72.0
@@ -82,30 +84,37 @@ def place_labels(
     taken: list[Any] = []
     left: list[str] = []
     for x, y, text in sorted(points):
-        placed = False
+        probe = ax.text(0.0, 0.0, text, fontsize=9)
+        size = probe.get_window_extent(renderer)
+        probe.remove()
+        w, h = size.width + 2.0, size.height + 2.0  # a pixel of margin all round
+        px, py = ax.transData.transform((x, y))
+        place = None
         for dist in _DISTANCES_PT:
             for angle in _ANGLES_DEG:
-                dx, dy = dist * math.cos(math.radians(angle)), dist * math.sin(math.radians(angle))
-                ha = "left" if dx > 0.5 else "right" if dx < -0.5 else "center"
-                va = "bottom" if dy > 0.5 else "top" if dy < -0.5 else "center"
-                arrow = {"arrowstyle": "-", "color": color, "lw": 0.6} if dist >= 18 else None
-                note = ax.annotate(text, (x, y), xytext=(dx, dy), textcoords="offset points",
-                                   ha=ha, va=va, color=color, fontsize=9, arrowprops=arrow,
-                                   annotation_clip=False)  # fmt: skip
-                note.set_in_layout(False)
-                box = note.get_window_extent(renderer).expanded(1.0, 1.0).padded(1.0)
-                free = (frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0
+                dx = dist * math.cos(math.radians(angle))
+                dy = dist * math.sin(math.radians(angle))
+                ox = px + dx * px_per_pt - (0.0 if dx > 0.5 else w if dx < -0.5 else w / 2)
+                oy = py + dy * px_per_pt - (0.0 if dy > 0.5 else h if dy < -0.5 else h / 2)
+                box = Bbox.from_bounds(ox - 1.0, oy - 1.0, w, h)
+                if (frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0
                         and box.y1 <= frame.y1 and not any(box.overlaps(b) for b in taken)
-                        and not any(_hits_circle(box, *c) for c in circles))  # fmt: skip
-                if free:
-                    taken.append(box)
-                    placed = True
+                        and not any(_hits_circle(box, *c) for c in circles)):  # fmt: skip
+                    place = (dist, dx, dy, box)
                     break
-                note.remove()
-            if placed:
+            if place is not None:
                 break
-        if not placed:
+        if place is None:
             left.append(text)
+            continue
+        dist, dx, dy, box = place
+        taken.append(box)
+        ha = "left" if dx > 0.5 else "right" if dx < -0.5 else "center"
+        va = "bottom" if dy > 0.5 else "top" if dy < -0.5 else "center"
+        arrow = {"arrowstyle": "-", "color": color, "lw": 0.6} if dist >= 18 else None
+        note = ax.annotate(text, (x, y), xytext=(dx, dy), textcoords="offset points", ha=ha,
+                           va=va, color=color, fontsize=9, arrowprops=arrow)  # fmt: skip
+        note.set_in_layout(False)
     return left
 
 
