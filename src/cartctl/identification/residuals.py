@@ -168,8 +168,8 @@ class ResidualTest:
         cross = "independent of the input" if self.independent else "CORRELATED with the input"
         if self.negligible:
             return (
-                f"residuals: rms {self.rms_rad_s:.2g} rad/s, below 1e-6 of the output's: rounding "
-                "of an exact fit, about which the residual tests say nothing"
+                "residuals: RMS below 1e-6 of the output's, the rounding of an exact fit, about "
+                "which the residual tests say nothing"
             )
         return (
             f"residuals (99 % bounds, N = {self.n_samples}): autocorrelation "
@@ -300,6 +300,6 @@ def plot_residuals(test: ResidualTest, path: Path, *, title: str) -> Path:
         ax_c.set_xlabel("lag τ (ticks); τ > 0: input before the residual")
         ax_a.legend(loc="upper right")
         if test.negligible:
-            title += f"\nresiduals at rounding level ({test.rms_rad_s:.2g} rad/s rms): no test"
+            title += "\nresiduals at rounding level (RMS below 1e-6 of the output's): no test"
         fig.suptitle(title)
         return _save(fig, path)
