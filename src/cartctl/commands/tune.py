@@ -181,6 +181,7 @@ def choose(
         the settings of ``results`` that can be chosen.
     """
     from cartctl.design.controllerfile import save_controller
+    from cartctl.design.loop_report import analyse_designs
     from cartctl.design.make import controller_file, design_models
     from cartctl.modelfile import load_models
     from cartctl.tune import grid as tuning
@@ -198,6 +199,9 @@ def choose(
             "--out", args.out]  # fmt: skip
     models = load_models(args.model)
     designs = design_models(request, models, ("a", "b"))
+    entries = designs.entries()  # as cartctl design: the file keeps the loop's refined analysis
+    for m, analysis in analyse_designs(designs).items():
+        entries[m].update(analysis.entry())
     command = "cartctl " + shlex.join(argv)
     save_controller(controller_file(designs, args.model, command=command,
                                     period_s=models.period_s), args.out)  # fmt: skip
