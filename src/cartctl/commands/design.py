@@ -181,26 +181,27 @@ def _gains_line(method: str, e: dict[str, Any]) -> str:
 
 
 def _pole_lines(e: dict[str, Any]) -> list[str]:
-    from cartctl.design.numbers import sig
+    from cartctl.numfmt import format_column, format_fixed, render_table
 
-    rows = e.get("closed_loop_pole_table")
-    if rows is None:
-        return ["  closed-loop poles: " + ", ".join(
-            f"{complex(*p):.3g}".strip("()") for p in e["closed_loop_poles"])]  # fmt: skip
-    lines = [f"  {'closed-loop pole z':<22}{'damping ζ':>10}{'natural frequency (Hz)':>24}"]
-    for r in rows:
-        z = sig(r["re"]) + (
-            f" {'-' if r['im'] < 0 else '+'} {sig(abs(r['im']))}j" if r["im"] != 0.0 else ""
-        )
-        lines.append(f"    {z:<20}{sig(r['damping']):>10}{sig(r['freq_hz'], none='∞'):>24}")
-    return lines
+    rows = e["closed_loop_pole_table"]
+    inf = float("inf")
+    cols = (  # z to 4 decimals: how close to the unit circle matters
+        [format_fixed(r["re"], 4) for r in rows],
+        [format_fixed(abs(r["im"]), 4) for r in rows],
+        format_column([r["damping"] for r in rows]),
+        format_column([inf if r["freq_hz"] is None else r["freq_hz"] for r in rows]),
+    )
+    cells = [
+        (re_ + ("" if r["im"] == 0.0 else f" {'-' if r['im'] < 0 else '+'} {im}j"), zeta, f_hz)
+        for r, re_, im, zeta, f_hz in zip(rows, *cols, strict=True)
+    ]
+    header = ("closed-loop pole z", "damping ζ", "natural frequency (Hz)")
+    return render_table(header, cells, indent="  ")
 
 
 def _analysis_lines(e: dict[str, Any]) -> list[str]:
     from cartctl.design.numbers import db, sig
 
-    if "sensitivity_peak_hz" not in e:
-        return []
     d = e["disturbance"]
     rec = d["recovery_time_s"]
     ms_db, mt_db = e["sensitivity_peak_db"], e["complementary_peak_db"]

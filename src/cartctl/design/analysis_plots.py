@@ -48,11 +48,11 @@ def analysis_figure(motor: str, method: str, analysis: MotorAnalysis) -> Figure:
     ms, ms_hz = shape.sensitivity_peak, shape.sensitivity_peak_hz
     mt, mt_hz = shape.complementary_peak, shape.complementary_peak_hz
     st_ax.plot([ms_hz], [20 * np.log10(ms)], "o", color="tab:blue",
-               label=f"Ms = {sig(ms, 3)} ({_db(ms)} dB) at {sig(ms_hz, 3)} Hz")  # fmt: skip
+               label=f"Ms = {sig(ms)} ({_db(ms)} dB) at {sig(ms_hz)} Hz")  # fmt: skip
     f_low = 0.1  # Hz: the left edge; a peak at 0 Hz (integral action: T = 1) is drawn there
     mt_at = max(mt_hz, f_low)
     st_ax.plot([mt_at], [20 * np.log10(mt)], "s", color="tab:orange",
-               label=f"Mt = {sig(mt, 3)} ({_db(mt)} dB) at {sig(mt_hz, 3)} Hz")  # fmt: skip
+               label=f"Mt = {sig(mt)} ({_db(mt)} dB) at {sig(mt_hz)} Hz")  # fmt: skip
     st_ax.axhline(0.0, color="0.4", lw=0.8)
     st_ax.set_ylim(max(-60.0, float(np.min(20 * np.log10(shape.sensitivity))) - 3.0), 12.0)
     st_ax.set_xlim(f_low, f[-1])
@@ -68,7 +68,7 @@ def analysis_figure(motor: str, method: str, analysis: MotorAnalysis) -> Figure:
     ny_ax.plot(loop.real, -loop.imag, color="tab:blue", ls="--", lw=0.8, label="mirror (ω < 0)")
     ny_ax.plot([-1.0], [0.0], "+", color="tab:red", ms=12, mew=2, label="−1")
     ny_ax.add_patch(Circle((-1.0, 0.0), 1.0 / ms, fill=False, color="tab:red", ls=":",
-                           label=f"radius 1/Ms = {sig(1.0 / ms, 3)}"))  # fmt: skip
+                           label=f"radius 1/Ms = {sig(1.0 / ms)}"))  # fmt: skip
     ny_ax.add_patch(Circle((0.0, 0.0), 1.0, fill=False, color="0.6", lw=0.8, label="|L| = 1"))
     ny_ax.set_xlim(-3.0, 1.5)
     ny_ax.set_ylim(-2.25, 2.25)
@@ -88,7 +88,7 @@ def analysis_figure(motor: str, method: str, analysis: MotorAnalysis) -> Figure:
                        label=f"recovered: within ±{sig(band, 2)} rad/s (2 % of the peak)")  # fmt: skip
     dy_ax.plot(t_ms, dist.speed_rad_s, color="tab:blue", label="speed deviation")
     dy_ax.plot([t_ms[i]], [peak], "o", color="tab:red",
-               label=f"peak {sig(peak, 3)} rad/s at {t_ms[i]:.0f} ms")  # fmt: skip
+               label=f"peak {sig(peak)} rad/s at {t_ms[i]:.0f} ms")  # fmt: skip
     if recovery is not None:
         dy_ax.axvline(recovery * 1e3, color="tab:green", ls="--", lw=0.9,
                       label=f"recovery {recovery * 1e3:.0f} ms")  # fmt: skip
@@ -96,7 +96,7 @@ def analysis_figure(motor: str, method: str, analysis: MotorAnalysis) -> Figure:
     dy_ax.set_xlim(0.0, max(end_ms, 100.0))
     dy_ax.set_xlabel("time since the step (ms)")
     dy_ax.set_ylabel("speed (rad/s)")
-    dy_ax.set_title(f"load disturbance: {sig(dist.disturbance_v, 3)} V step at the plant input",
+    dy_ax.set_title(f"load disturbance: {sig(dist.disturbance_v)} V step at the plant input",
                     fontsize=10)  # fmt: skip
     dy_ax.legend(loc="upper right", fontsize=8)
 
