@@ -49,3 +49,36 @@ def rrd_rows() -> Callable[[str | Path], Counter]:
         return rows
 
     return count
+
+
+@pytest.fixture
+def blueprint_views() -> Callable[[str | Path], dict[str, dict]]:
+    """The views of the (first) blueprint stored in a file (.rrd or .rbl), by name: each with
+    its ``origin``, ``contents`` (the query lines) and y ``range`` ((lo, hi) or None)."""
+    from rerun.chunk import RrdReader
+
+    def views(path: str | Path) -> dict[str, dict]:
+        reader = RrdReader(path)
+        (entry,) = reader.blueprints()[:1]
+        fields: dict[str, dict] = {}
+        for chunk in reader.stream(store=entry):
+            batch = chunk.to_record_batch()
+            parts = chunk.entity_path.strip("/").split("/")
+            if parts[0] != "view" or len(parts) < 2:
+                continue
+            view = fields.setdefault(parts[1], {"range": None, "contents": []})
+            for name in batch.schema.names:
+                if ":" not in name:  # row ids and timelines
+                    continue
+                value = batch.column(name).to_pylist()[-1]
+                if name == "ViewBlueprint:display_name":
+                    view["name"] = value[0]
+                elif name == "ViewBlueprint:space_origin":
+                    view["origin"] = value[0]
+                elif name == "ViewContents:query":
+                    view["contents"] = list(value)
+                elif name == "ScalarAxis:range":
+                    view["range"] = tuple(value[0])
+        return {view["name"]: view for view in fields.values() if "name" in view}
+
+    return views

@@ -229,3 +229,68 @@ def test_unlabelled_monitor_trace_with_a_map(
     assert code == 2
     (line,) = err.strip().splitlines()
     assert "missing reference_a" in line
+
+
+# -- the review layout of a monitor recording ----------------------------------------------------
+
+
+def test_review_layout_of_a_monitor_is_built_from_its_labels(
+    monitor_files: dict[str, Path], tmp_path: Path, blueprint_views, rrd_rows
+) -> None:
+    from rerun.chunk import RrdReader
+
+    from cartctl.commands.review.recording import layout
+
+    reader = RrdReader(monitor_files["rrd"])
+    chunks = list(reader.stream(store=reader.recordings()[0]))
+    saved = tmp_path / "review.rbl"
+    layout(chunks).save("cartctl", saved)
+    views = blueprint_views(saved)
+    header, table = _read_csv(monitor_files["labelled"])
+    column = {name: table[:, j] for j, name in enumerate(header)}
+    for m in "ab":
+        speed = views[f"Motor {m.upper()}: speed (rad/s)"]
+        assert speed["origin"] == "/gpio"
+        assert sorted(speed["contents"]) == [f"$origin/reference_{m}", f"$origin/speed_{m}"]
+        both = np.concatenate([column[f"reference_{m}"], column[f"speed_{m}"]])
+        lo, hi = speed["range"]
+        assert lo < min(both.min(), 0.0) and max(both.max(), 0.0) < hi  # the step to 8 rad/s
+        voltage = views[f"Motor {m.upper()}: voltage (V)"]
+        assert voltage["contents"] == [f"$origin/voltage_{m}"]
+        lo, hi = voltage["range"]
+        assert lo < column[f"voltage_{m}"].min() and column[f"voltage_{m}"].max() < hi
+    # every recorded channel is in one view; nothing refers to the run's motor/... entities
+    recorded = {e for e in rrd_rows(monitor_files["rrd"]) if e.startswith("gpio/")}
+    shown = [c.replace("$origin", v["origin"].strip("/")) for v in views.values()
+             for c in v["contents"]]  # fmt: skip
+    assert sorted(shown) == sorted([*recorded, "cart/**"])  # and the cart's messages
+    assert all(not v["origin"].startswith("/motor") for v in views.values())
+    assert views["Whole-number channels"]["contents"][-4:] == [
+        f"$origin/IntIn{i}" for i in range(4)
+    ]
+
+
+def test_review_screenshot_of_a_monitor_shows_the_lines(
+    monitor_files: dict[str, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    from cartctl.commands.review import vulkan_available
+    from cartctl.sinks.rerun_layout import STYLES
+
+    if not vulkan_available():
+        pytest.skip("no Vulkan driver (apt-get install mesa-vulkan-drivers libvulkan1)")
+    from PIL import Image  # a dependency of rerun-sdk
+
+    out = tmp_path / "monitor.png"
+    code, _, err = _cli(capsys, "review", str(monitor_files["rrd"]), "--screenshot", str(out))
+    assert code == 0, err
+    image = np.asarray(Image.open(out).convert("RGB")).astype(int)
+    height = image.shape[0]
+    plots = image[height // 20 : height - height // 20]
+
+    def pixels_near(entity: str) -> int:
+        colour = np.array(STYLES[entity].color)
+        return int((np.abs(plots - colour).sum(axis=2) < 40).sum())
+
+    # the monitor's speed and voltage lines, drawn in the run's colours (empty panels before)
+    for entity in ("motor/a/speed", "motor/a/reference", "motor/a/voltage"):
+        assert pixels_near(entity) > 300, entity

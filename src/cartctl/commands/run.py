@@ -122,17 +122,26 @@ def _references(args: argparse.Namespace, n: int, period_s: float) -> dict[str, 
     return {"a": ref_a, "b": ref_b}
 
 
-def _rerun_sink(args: argparse.Namespace, path: Path) -> Any:
+def _rerun_sink(
+    args: argparse.Namespace, path: Path, references: dict[str, Any], limit_v: float
+) -> Any:
     if args.rerun == "off":
         return None
+    from cartctl.sinks.rerun_layout import run_ranges
     from cartctl.sinks.rerun_sink import RerunSink
     from cartctl.sinks.viewer import resolve_mode
 
     mode = resolve_mode(args.rerun)
+    extremes = {}  # each reference's lowest and highest value: the speed plots' ranges
+    for m, ref in references.items():
+        spans = [(float(c.min()), float(c.max())) for c in ref.chunks() if c.size]
+        extremes[m] = (min((lo for lo, _ in spans), default=0.0),
+                       max((hi for _, hi in spans), default=0.0))  # fmt: skip
     # one send_columns costs ~170 µs whatever its length: batch 20 ticks live (the SDK flushes
     # every 200 ms anyway), 1000 on the virtual clock
     return RerunSink(mode, path, connect_url=args.connect_url,
-                     batch_ticks=1000 if args.fast else 20)  # fmt: skip
+                     batch_ticks=1000 if args.fast else 20,
+                     ranges=run_ranges(extremes, limit_v))  # fmt: skip
 
 
 def default_controller(plant: str) -> Path:
@@ -232,7 +241,7 @@ def run(args: argparse.Namespace) -> int:
     memory = MemorySink()
     # on the virtual clock a second of trace takes milliseconds: write it in bigger blocks
     sinks: list[Any] = [CsvSink(csv_path, flush_every=1000 if args.fast else 50), memory]
-    rerun = _rerun_sink(args, rrd_path)
+    rerun = _rerun_sink(args, rrd_path, references, limit)
     if rerun is not None:
         sinks.append(rerun)
     if not args.fast and sys.stderr.isatty():  # a live line on a terminal, refreshed after ticks

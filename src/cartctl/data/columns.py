@@ -146,7 +146,7 @@ MONITOR_NAMES = (*REQUIRED_COLUMNS[1:], *(f"{k}_{m}" for k in ("reference", "est
 """Trace columns a monitor label can name (``speed_a``, ``speedA``, ``Speed_A``, ...)."""
 
 
-def _normal(label: str) -> str:
+def label_key(label: str) -> str:
     """A label without case and separators: ``speedA``, ``speed_a`` and ``Speed-A`` agree."""
     return re.sub(r"[^0-9a-z]", "", label.lower())
 
@@ -159,7 +159,7 @@ def monitor_mapping(labels: Sequence[str]) -> dict[str, str]:
     """
     mapping: dict[str, str] = {}
     for name in MONITOR_NAMES:
-        hits = [label for label in labels if _normal(label) == _normal(name)]
+        hits = [label for label in labels if label_key(label) == label_key(name)]
         if len(hits) == 1:
             mapping[name] = hits[0]
     return mapping

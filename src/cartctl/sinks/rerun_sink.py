@@ -28,7 +28,14 @@ import rerun as rr
 from numpy.typing import NDArray
 
 from cartctl.errors import CartctlError, InputError
-from cartctl.sinks.rerun_layout import ENTITY_PATHS, STYLES, TICK_COLUMN, TIME_COLUMN, blueprint
+from cartctl.sinks.rerun_layout import (
+    ENTITY_PATHS,
+    STYLES,
+    TICK_COLUMN,
+    TIME_COLUMN,
+    PlotRanges,
+    blueprint,
+)
 from cartctl.sinks.viewer import VIEWER_PORT, display_available, viewer_executable, viewer_reachable
 
 RERUN_MODES: Final[tuple[str, ...]] = ("save", "spawn", "connect", "off")
@@ -74,6 +81,9 @@ class RerunSink:
         ``idle`` call.
     strict : bool
         Raise on the first problem (in ``write``) or at ``close`` instead of warning. For tests.
+    ranges : PlotRanges, optional
+        The layout's y ranges (:func:`~cartctl.sinks.rerun_layout.run_ranges`); without, the
+        viewer fits them.
 
     Notes
     -----
@@ -92,6 +102,7 @@ class RerunSink:
         connect_url: str | None = None,
         batch_ticks: int = 10,
         strict: bool = False,
+        ranges: PlotRanges | None = None,
     ) -> None:
         if mode not in RERUN_MODES:
             raise InputError(f"rerun mode must be one of {', '.join(RERUN_MODES)}, got '{mode}'")
@@ -106,6 +117,7 @@ class RerunSink:
         self.connect_url = connect_url or DEFAULT_CONNECT_URL
         self.batch_ticks = int(batch_ticks)
         self.strict = strict
+        self.ranges = ranges
         self.rows_written = 0
         self._problems: list[str] = []
         self._problem_count = 0
@@ -174,7 +186,7 @@ class RerunSink:
 
     def _describe(self, rec: rr.RecordingStream) -> None:
         """Send the layout and the static series styles (before any value)."""
-        rec.send_blueprint(blueprint(_motors(self._signals)))
+        rec.send_blueprint(blueprint(_motors(self._signals), self.ranges))
         for _, entity in self._signals:
             style = STYLES[entity]
             rec.log(

@@ -8,6 +8,7 @@ the layout and the data with :func:`stream`.
 from __future__ import annotations
 
 import uuid
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -15,7 +16,8 @@ from cartctl.errors import DataFileError, MissingFileError
 
 if TYPE_CHECKING:  # rerun takes ~0.6 s to import: only the review itself loads it
     import rerun as rr
-    from rerun.chunk import RrdReader, StoreEntry
+    import rerun.blueprint as rrb
+    from rerun.chunk import Chunk, RrdReader, StoreEntry
 
 LOAD_TIMEOUT_S = 30.0
 """Longest wait for a viewer to take in (or show) the whole recording."""
@@ -48,6 +50,9 @@ def read_recording(path: Path) -> tuple[RrdReader, StoreEntry]:
 def stream(reader: RrdReader, entry: StoreEntry, rec: rr.RecordingStream) -> dict[str, int]:
     """Send the layout, then every chunk of the recording, into ``rec``; waits until sent.
 
+    The layout fits the recording (:func:`layout`): the run's for ``motor/...`` entities, one built
+    from the labels for a monitor's ``gpio/...``, with y ranges from the recorded values.
+
     Returns
     -------
     dict of str to int
@@ -55,8 +60,6 @@ def stream(reader: RrdReader, entry: StoreEntry, rec: rr.RecordingStream) -> dic
     """
     import pyarrow as pa
     import pyarrow.compute as pc
-
-    from cartctl.sinks.rerun_layout import blueprint
 
     ends: dict[str, int] = {}
     chunks = list(reader.stream(store=entry))
@@ -68,10 +71,74 @@ def stream(reader: RrdReader, entry: StoreEntry, rec: rr.RecordingStream) -> dic
             last = pc.max(batch.column(name).cast(pa.int64())).as_py()
             if last is not None:
                 ends[name] = max(ends.get(name, last), last)
-    rec.send_blueprint(blueprint())
+    rec.send_blueprint(layout(chunks))
     rec.send_chunks(chunks)
+    _restyle(chunks, rec)
     rec.flush(timeout_sec=LOAD_TIMEOUT_S)
     return ends
+
+
+SCALARS = "Scalars:scalars"
+
+
+def scalar_stats(chunks: Iterable[Chunk]) -> tuple[dict[str, tuple[float, float]], set[str]]:
+    """Per entity path of scalar series: the lowest and highest finite value, and the set of
+    paths whose values are all whole numbers."""
+    import numpy as np
+    import pyarrow.compute as pc
+
+    extremes: dict[str, tuple[float, float]] = {}
+    fractional: set[str] = set()
+    for chunk in chunks:
+        if chunk.is_static or chunk.is_empty:
+            continue
+        batch = chunk.to_record_batch()
+        if SCALARS not in batch.schema.names:
+            continue
+        values = pc.list_flatten(batch.column(SCALARS)).to_numpy(zero_copy_only=False)
+        values = values[np.isfinite(values)]
+        if not values.size:
+            continue
+        path = chunk.entity_path.lstrip("/")
+        lo, hi = float(values.min()), float(values.max())
+        old = extremes.get(path, (lo, hi))
+        extremes[path] = (min(old[0], lo), max(old[1], hi))
+        if np.any(values != np.round(values)):
+            fractional.add(path)
+    return extremes, set(extremes) - fractional
+
+
+def _restyle(chunks: Sequence[Chunk], rec: rr.RecordingStream) -> None:
+    """A monitor's motor signals drawn in the run's colours (the review's stream only)."""
+    import rerun as rr
+
+    from cartctl.sinks.channels_rerun import GPIO_ROOT, review_styles
+
+    prefix = f"{GPIO_ROOT}/"
+    labels = sorted({c.entity_path.lstrip("/").removeprefix(prefix) for c in chunks
+                     if c.entity_path.lstrip("/").startswith(prefix)})  # fmt: skip
+    for entity, style in review_styles(labels).items():
+        rec.log(entity, rr.SeriesLines(colors=[style.color], widths=[style.width]), static=True)
+
+
+def layout(chunks: Sequence[Chunk]) -> rrb.Blueprint:
+    """The layout of a recording: the run's (``motor/...``), the monitor's built from its labels
+    (``gpio/...``), each with y ranges from the values; the run's plain layout otherwise."""
+    from cartctl.sinks.rerun_layout import blueprint, data_ranges
+
+    extremes, whole = scalar_stats(chunks)
+    paths = {chunk.entity_path.lstrip("/") for chunk in chunks}
+    motors = sorted(
+        {p.split("/")[1] for p in paths if p.startswith("motor/") and p.count("/") >= 2}
+    )
+    if motors:
+        return blueprint(motors, data_ranges(extremes, motors))
+    if any(p.startswith("gpio/") for p in extremes):
+        from cartctl.sinks.channels_rerun import CART_ROOT, review_blueprint
+
+        texts = any(p.startswith(f"{CART_ROOT}/") for p in paths)
+        return review_blueprint(extremes, whole, texts=texts)
+    return blueprint()
 
 
 def new_stream(entry: StoreEntry) -> rr.RecordingStream:
