@@ -50,10 +50,15 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
     mapping : mapping of str to str, optional
         Trace column name → QRC label or CSV header name (see :func:`parse_mapping`). Without
         one, a CSV must have the contract's columns, and a QRC log's labels that equal trace
-        column names are used (compared in lower case, with other characters read as ``_``). With one, or for any QRC log, a motor whose
-        voltage and speed are both unmapped is filled with zeros, but at least one motor must
-        have both. Unmapped channels and columns are kept as extras (QRC labels made into names
-        such as ``floatin3``) unless their name is taken.
+        column names are used (compared in lower case, with other characters read as ``_``).
+        A ``cartctl monitor`` trace (``time_s, tick`` and its labels) is read by its labels:
+        ``speed_a``, ``speedA`` or ``Speed_A`` is speed_a (see
+        :func:`~cartctl.data.columns.monitor_mapping`). With a mapping, or for any QRC log, a
+        motor whose voltage and speed are both unmapped takes the channels named like the other
+        motor's mapped ones with its own letter (``voltA`` → ``voltB``) when the file has both,
+        else it is filled with zeros; at least one motor must have both. Unmapped channels and
+        columns are kept as extras under their labels, case kept (QRC labels made into names
+        such as ``FloatIn3`` or ``voltage_B_V``), unless their name is taken.
 
     Returns
     -------
