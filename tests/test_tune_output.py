@@ -258,3 +258,56 @@ def test_choose_on_an_infeasible_row_with_json_prints_the_json_then_one_line(
     choosable = sorted(r["index"] for r in doc["settings"] if r["feasible"])
     assert err.count("\n") == 1
     assert err.rstrip().endswith(f"settings that can be chosen: {', '.join(map(str, choosable))}")
+
+
+def _captured_plot(monkeypatch: pytest.MonkeyPatch, *argv: str) -> tuple[dict[str, Any], Figure]:
+    figures: list[Figure] = []
+    original = Figure.savefig
+
+    def keep(self: Figure, *args: Any, **kwargs: Any) -> None:
+        figures.append(self)
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    code, out, err = _cli(*argv)
+    assert code == 0, err
+    return json.loads(out), figures[0]
+
+
+def test_robust_plot_front_labels_and_counts(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    doc, fig = _captured_plot(monkeypatch, "tune", str(GROUND), "--method", "pi", "--grid",
+                              "phase_margin=60:75:5,crossover_hz=3:5:1", "--robust", "--plants",
+                              "8", "--duration", "1", "--jobs", "1", "--plot",
+                              str(tmp_path / "r.png"), "--json")  # fmt: skip
+    ax = fig.axes[0]
+    plotted = np.asarray(next(c for c in ax.collections if c.get_gid() == "settings").get_offsets())
+    ringed = np.asarray(next(c for c in ax.collections if c.get_gid() == "front").get_offsets())
+    for p in ringed:  # nominal settling (ms) against worst-case overshoot (%): the plotted axes
+        assert not _dominated(plotted, p)
+    rows = doc["settings"]
+    expected = {(r["robust"]["nominal"]["settling_time_s"] * 1e3, r["robust"]["worst"]["overshoot_percent"])
+                for r in rows if r["robust"] is not None and r["robust"]["pareto"]}  # fmt: skip
+    assert expected == {tuple(p) for p in ringed}
+    renderer = fig.canvas.get_renderer()
+    boxes = [Text.get_window_extent(t, renderer) for t in ax.texts]
+    assert sorted(int(t.get_text()) for t in ax.texts) == sorted(
+        r["index"] for r in rows if r["robust"] is not None and r["robust"]["pareto"]
+    )
+    for i, a in enumerate(boxes):
+        assert all(not a.overlaps(b) for b in boxes[i + 1 :])
+    for text in fig.findobj(Text):
+        if text.get_visible() and text.get_text().strip():
+            box = text.get_window_extent(renderer)
+            assert fig.bbox.x0 - 1 <= box.x0 and box.x1 <= fig.bbox.x1 + 1, text.get_text()
+            assert fig.bbox.y0 - 1 <= box.y0 and box.y1 <= fig.bbox.y1 + 1, text.get_text()
+    # the counts, recounted from the rows
+    robust = [r["robust"] for r in rows]
+    everywhere = sum(r is not None and r["settles_on_every_plant"] for r in robust)
+    nominal_settled = sum(r["settling_time_s"] is not None for r in rows)
+    assert doc["robust"]["counts"] == {
+        "infeasible": sum(not r["feasible"] for r in rows), "run_failed": 0,
+        "not_settled": sum(r["feasible"] and r["settling_time_s"] is None for r in rows),
+        "settled_on_some": nominal_settled - everywhere, "settled_on_all": everywhere,
+    }  # fmt: skip
