@@ -92,11 +92,11 @@ def test_pi_sensitivity_peaks_match_python_control(
         assert e["sensitivity_distance"] == pytest.approx(sm, rel=1e-3)
 
 
-def _closed_loop_impulse(name: str, motor: str, n: int = 4096) -> np.ndarray:
+def _closed_loop_impulse(path: Path, motor: str, n: int = 4096) -> np.ndarray:
     """The plant input u_p = d + z^−extra·u_c for a unit impulse d at the plant input (r = 0),
-    the runtime controller of ``controllers/<name>.toml`` closing the loop on the model: its
+    the runtime controller of the controller file ``path`` closing the loop on the model: its
     spectrum is the input sensitivity S = 1/(1 + L), and 1 − S is T."""
-    shipped = load_controller(CONTROLLERS / f"{name}.toml")
+    shipped = load_controller(path)
     extra = int(shipped.request["extra_delay_ticks"])
     ctrl = build_controllers(shipped)[motor]
     model = load_models(ROOT / "models" / "ground.toml").motor(motor)
@@ -114,13 +114,9 @@ def _closed_loop_impulse(name: str, motor: str, n: int = 4096) -> np.ndarray:
     return u_p
 
 
-@pytest.mark.parametrize("name", ["poles", "serial-poles"])
-def test_pole_placement_sensitivity_matches_the_runtime_controller_in_closed_loop(
-    capsys: pytest.CaptureFixture[str], name: str
-) -> None:
-    doc = _design(capsys, *_shipped_argv(name))
+def _check_against_runtime(doc: dict, path: Path) -> None:
     for motor, e in doc["motors"].items():
-        u_p = _closed_loop_impulse(name, motor)
+        u_p = _closed_loop_impulse(path, motor)
         n_fft = 64 * u_p.size
         freq = np.fft.rfftfreq(n_fft, TS)
         s = np.fft.rfft(u_p, n_fft)
@@ -130,6 +126,29 @@ def test_pole_placement_sensitivity_matches_the_runtime_controller_in_closed_loo
         assert e["sensitivity_peak_hz"] == pytest.approx(ms_hz, abs=0.01)
         assert e["complementary_peak"] == pytest.approx(mt, rel=1e-4)
         assert e["complementary_peak_hz"] == pytest.approx(mt_hz, abs=0.05)
+
+
+@pytest.mark.parametrize("name", ["poles", "serial-poles"])
+def test_pole_placement_sensitivity_matches_the_runtime_controller_in_closed_loop(
+    capsys: pytest.CaptureFixture[str], name: str
+) -> None:
+    _check_against_runtime(_design(capsys, *_shipped_argv(name)), CONTROLLERS / f"{name}.toml")
+
+
+def test_pi_on_its_estimate_is_analysed_with_the_estimator_in_the_loop(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    path = tmp_path / "pi-kalman.toml"
+    argv = [*_shipped_argv("pi"), "--estimator", "kalman", "--out", str(path)]
+    assert main(["design", *argv]) == 0
+    capsys.readouterr()
+    doc = _design(capsys, *argv[:-2])
+    _check_against_runtime(doc, path)
+    # the estimator changes the loop: Ms is not the bare PI's C·G one
+    for motor, e in doc["motors"].items():
+        bare = control.feedback(1, _pc_loop(e["kp"], e["ki"], motor, 0))
+        z = np.exp(2j * np.pi * np.linspace(0.005, 50.0, 20000) * TS)
+        assert abs(e["sensitivity_peak"] - np.max(np.abs(bare(z)))) > 1e-3
 
 
 @pytest.mark.parametrize(("name", "extra"), [("pi", 0), ("serial-pi", 2)])

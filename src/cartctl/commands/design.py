@@ -29,8 +29,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description=(
             "Design a discrete speed controller per motor on a model file: a PI from a phase margin "
             "and crossover (or a bandwidth), or pole placement with integral action and a Kalman "
-            "speed estimator. Reports margins, closed-loop poles, a simulated step with the "
-            "voltage limit, and the settling time against the fastest that ±12 V allows."
+            "speed estimator. Reports margins, the peaks of the sensitivity S and the "
+            "complementary sensitivity T of the loop as it runs (estimator and loop delay "
+            "included), closed-loop poles with damping and natural frequency, a simulated step "
+            "with the voltage limit, the settling time against the fastest that ±12 V allows, and "
+            "the rejection of a load step at the plant input."
         ),
     )
     p.add_argument("model", metavar="MODEL.toml", help="model file, e.g. models/ground.toml")
