@@ -51,7 +51,7 @@ def analysis_figure(motor: str, method: str, analysis: MotorAnalysis) -> Figure:
                label=f"Ms = {sig(ms)} ({_db(ms)} dB) at {sig(ms_hz)} Hz")  # fmt: skip
     f_low = 0.1  # Hz: the left edge; a peak at 0 Hz (integral action: T = 1) is drawn there
     mt_at = max(mt_hz, f_low)
-    st_ax.plot([mt_at], [20 * np.log10(mt)], "s", color="tab:orange",
+    st_ax.plot([mt_at], [20 * np.log10(mt)], "s", color="tab:orange", clip_on=False,
                label=f"Mt = {sig(mt)} ({_db(mt)} dB) at {sig(mt_hz)} Hz")  # fmt: skip
     st_ax.axhline(0.0, color="0.4", lw=0.8)
     st_ax.set_ylim(max(-60.0, float(np.min(20 * np.log10(shape.sensitivity))) - 3.0), 12.0)
