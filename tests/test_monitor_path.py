@@ -36,6 +36,11 @@ def _read_csv(path: str | Path) -> tuple[list[str], np.ndarray]:
     return rows[0], np.array(rows[1:], dtype=float).reshape(-1, len(rows[0]))
 
 
+def _lines(path: str | Path) -> list[list[str]]:
+    with open(path, newline="", encoding="utf-8") as f:
+        return list(csv.reader(f))
+
+
 # -- time from the cart's ticks, on a scripted link ---------------------------------------------
 
 
@@ -202,6 +207,12 @@ def test_validate_and_convert_read_a_monitor_trace(
         np.testing.assert_array_equal(new_table[:, new_header.index(name)],
                                       table[:, header.index(name)])  # fmt: skip
     assert json.loads(out)["ticks"] == len(table)
+    # channels keep the form the monitor wrote them in: float channels as floats, ints as ints
+    first = {name: text for name, text in zip(new_header, _lines(converted)[1], strict=True)}
+    source = {name: text for name, text in zip(header, _lines(path)[1], strict=True)}
+    for name in ("tick", "IntIn0", "IntIn3", "reference_a", "FloatIn6"):
+        assert first[name] == source[name], name
+    assert first["tick"] == "0" and first["reference_a"] == "0.0"
 
 
 @pytest.mark.parametrize("command", ["review", "validate", "convert"])

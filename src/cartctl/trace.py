@@ -49,6 +49,10 @@ class Trace:
         Further columns in file order (``true_speed_a``, ``tick``, ``reference_a``, ...).
     source : str or None
         The file the trace came from, for messages and provenance.
+    integer_columns : frozenset of str
+        Extra columns the file held as integers (a log's int channels, a tick counter), which
+        :func:`write_trace` writes as such (``100``, not ``100.0``); names not among the extras
+        are dropped.
 
     Raises
     ------
@@ -64,6 +68,7 @@ class Trace:
     speed_b: np.ndarray
     extra: dict[str, np.ndarray] = field(default_factory=dict)
     source: str | None = None
+    integer_columns: frozenset[str] = frozenset()
 
     def __post_init__(self) -> None:
         for name in REQUIRED_COLUMNS:
@@ -76,6 +81,7 @@ class Trace:
                 raise InputError(f"extra column {name!r} repeats a required column; drop it")
             extra[name] = _as_column(name, values)
         object.__setattr__(self, "extra", extra)
+        object.__setattr__(self, "integer_columns", frozenset(self.integer_columns) & set(extra))
         if self.source is not None:
             object.__setattr__(self, "source", str(self.source))
         n = len(self.time_s)
@@ -133,7 +139,12 @@ class Trace:
         return float(np.median(np.diff(self.time_s)))
 
     @classmethod
-    def from_columns(cls, columns: Mapping[str, ArrayLike], source: str | None = None) -> Trace:
+    def from_columns(
+        cls,
+        columns: Mapping[str, ArrayLike],
+        source: str | None = None,
+        integer_columns: Collection[str] = (),
+    ) -> Trace:
         """Build a trace from named columns.
 
         Parameters
@@ -142,6 +153,8 @@ class Trace:
             All of :data:`REQUIRED_COLUMNS`, plus any extras (kept in the mapping's order).
         source : str, optional
             Where the columns came from.
+        integer_columns : collection of str
+            Extra columns held as integers (see :class:`Trace`).
 
         Raises
         ------
@@ -156,7 +169,8 @@ class Trace:
             )
         extra = {name: values for name, values in columns.items() if name not in REQUIRED_COLUMNS}
         required = {name: columns[name] for name in REQUIRED_COLUMNS}
-        return cls(**required, extra=extra, source=source)
+        return cls(**required, extra=extra, source=source,
+                   integer_columns=frozenset(integer_columns))  # fmt: skip
 
 
 def _as_column(name: str, values: ArrayLike) -> np.ndarray:
@@ -233,13 +247,15 @@ def _check_name(name: object) -> None:
         )
 
 
-def write_trace(trace: Trace, path: str | Path, *, integer_columns: Collection[str] = ()) -> None:
+def write_trace(
+    trace: Trace, path: str | Path, *, integer_columns: Collection[str] | None = None
+) -> None:
     """Write a trace as contract-1 CSV, creating parent directories.
 
     The header row names the required columns then the extras; each value is written as the
-    shortest text that reads back to the same float64, so a round trip is bit-exact. The columns
-    named in ``integer_columns`` (whole numbers, e.g. a log's int channels) are written without a
-    fraction: ``100``, not ``100.0``.
+    shortest text that reads back to the same float64, so a round trip is bit-exact. Integer
+    columns (``trace.integer_columns`` unless given: a log's int channels, a tick counter) are
+    written without a fraction: ``100``, not ``100.0``.
 
     Parameters
     ----------
@@ -248,8 +264,9 @@ def write_trace(trace: Trace, path: str | Path, *, integer_columns: Collection[s
         accepts.
     path : str or Path
         The ``.csv`` file to write (overwritten if it exists).
-    integer_columns : collection of str
-        Columns to write as integers; each must hold whole numbers only.
+    integer_columns : collection of str, optional
+        Columns to write as integers, each of whole numbers only; default
+        ``trace.integer_columns``.
 
     Raises
     ------
@@ -281,7 +298,8 @@ def write_trace(trace: Trace, path: str | Path, *, integer_columns: Collection[s
             f"cannot write {path}: time_s does not increase at tick {back[0] + 1} "
             f"({float(trace.time_s[back[0]])!r} s, then {float(trace.time_s[back[0] + 1])!r} s)"
         )
-    whole = [j for j, name in enumerate(columns) if name in integer_columns]
+    integers = trace.integer_columns if integer_columns is None else integer_columns
+    whole = [j for j, name in enumerate(columns) if name in integers]
     for j in whole:
         if np.any(data[:, j] != np.round(data[:, j])) or np.any(np.abs(data[:, j]) > 2.0**53):
             raise InputError(

@@ -48,20 +48,6 @@ def summary(trace: Trace) -> dict[str, Any]:
     }
 
 
-def integer_columns(trace: Trace) -> list[str]:
-    """The extra columns that hold whole numbers only (int channels, tick counters, echoes).
-
-    Written as integers (``100``, not ``100.0``); the contract's columns stay floats.
-    """
-    import numpy as np
-
-    return [
-        name
-        for name, values in trace.extra.items()
-        if np.all(values == np.round(values)) and np.all(np.abs(values) <= 2.0**53)
-    ]
-
-
 def run(args: argparse.Namespace) -> int:
     from cartctl.data import read_trace, write_trace
     from cartctl.jsonout import dumps
@@ -69,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     trace = read_trace(args.file, args.map)
     info = summary(trace)
     if args.out:
-        write_trace(trace, args.out, integer_columns=integer_columns(trace))
+        write_trace(trace, args.out)  # integer channels as integers
         info["written"] = args.out
     if args.json:
         print(dumps(info))

@@ -12,8 +12,9 @@ within the supply, 10 ms spacing) are here.
 
 from __future__ import annotations
 
+import re
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,14 @@ from cartctl import qrc
 from cartctl.cart import PERIOD_S as TS_S
 from cartctl.cart import SUPPLY_V
 from cartctl.data.columns import check_mapping, plan_columns
-from cartctl.data.table import Table, Where, read_csv_header, read_csv_rows, to_floats
+from cartctl.data.table import (
+    Table,
+    Where,
+    _data_lines,
+    read_csv_header,
+    read_csv_rows,
+    to_floats,
+)
 from cartctl.errors import DataFileError, DataWarning, MissingFileError
 from cartctl.trace import REQUIRED_COLUMNS, Trace
 
@@ -105,7 +113,35 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
     if kind != "csv":
         columns["time_s"] = (time - time[0]) / 1000.0
     _warn_spacing(table, columns["time_s"])
-    return Trace.from_columns(columns, source=str(path))
+    if kind == "qrc5":  # 8 float then 4 int channels after the time
+        integers = {name for name, j in plan.items() if j is not None and j > QRC5_FLOATS}
+    else:  # the columns whose every field is written as an integer
+        text = (lambda: _data_lines(path, header_line)[0]) if kind == "csv" else (lambda: log.rows)
+        integers = _integer_text(table, plan, text)
+    integers -= set(REQUIRED_COLUMNS)
+    return Trace.from_columns(columns, source=str(path), integer_columns=integers)
+
+
+QRC5_FLOATS = 8
+"""A QRC 5 log's float channels come first (after the time), its int channels after them."""
+_INTEGER = re.compile(r"\s*[+-]?\d+\s*\Z")
+
+
+def _integer_text(
+    table: Table, plan: Mapping[str, int | None], text: Callable[[], list[list[str]]]
+) -> set[str]:
+    """The extra columns of whole numbers whose every field is written without '.' or exponent.
+
+    ``text`` gives the rows' fields; it is called only when some extra column holds whole
+    numbers only.
+    """
+    values = table.values
+    whole = {name: j for name, j in plan.items() if j is not None and name not in REQUIRED_COLUMNS
+             and np.all(values[:, j] == np.round(values[:, j]))}  # fmt: skip
+    if not whole:
+        return set()
+    rows = text()
+    return {name for name, j in whole.items() if all(_INTEGER.match(row[j]) for row in rows)}
 
 
 def _sniff(path: Path) -> str:
