@@ -14,7 +14,8 @@ from pathlib import Path
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 CORE = {"cartctl", "cart", "choices", "errors", "model", "modelfile", "tomlfile", "data", "qrc", "signals",
-        "metrics", "stepinfo", "jsonout", "stopping", "progress", "reference", "link", "trace"}  # fmt: skip
+        "metrics", "stepinfo", "jsonout", "numfmt", "stopping", "progress", "reference", "link",
+        "trace"}  # fmt: skip
 RUNS = {"runtime", "plants", "sinks", "experiment"}
 MAKES = {"identification", "design", "tune", "export"}
 LAYER = {**dict.fromkeys(CORE, 0), **dict.fromkeys(RUNS, 1), **dict.fromkeys(MAKES, 2),
