@@ -151,10 +151,10 @@ def review_blueprint(
     for name, chosen in (("Channels", fractions), ("Whole-number channels", counts)):
         if chosen:
             rows.append(view(name, chosen))
-            shares.append(2)
+            shares.append(2 if name == "Channels" else 1.5)
     if texts:
         rows.append(rrb.TextLogView(name="Cart messages", origin=f"/{CART_ROOT}"))
-        shares.append(1)
+        shares.append(1.5)
     return rrb.Blueprint(
         rrb.Vertical(*rows, row_shares=shares),
         rrb.BlueprintPanel(state="collapsed"),
