@@ -75,7 +75,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="ticks of loop delay beyond the model's, designed for and simulated "
                         "(a PC-side loop over serial)")  # fmt: skip
     p.add_argument("--jobs", type=int, metavar="N", help="worker processes (default: all cores)")
-    p.add_argument("--plot", metavar="FILE.png", help="settling time vs overshoot scatter")
+    p.add_argument("--plot", metavar="FILE.png",
+                   help="run settling time vs run overshoot; the front of these two ringed and "
+                        "numbered")  # fmt: skip
     p.add_argument("--choose", metavar="N|best",
                    help="write setting #N's controller (with --out); 'best': the lowest "
                         "(worst-case, with --robust) overshoot among the settings that settle "
