@@ -220,8 +220,8 @@ def test_settings_are_counted_by_what_happened_to_them() -> None:
     unsettled = sum(r["feasible"] and r["settling_time_s"] is None for r in rows)
     settled = sum(r["settling_time_s"] is not None for r in rows)
     assert (infeasible, unsettled, settled) == (2, 1, 1)  # the three kinds, on this grid
-    assert doc["counts"] == {"settings": 4, "infeasible": 2, "run_failed": 0, "not_settled": 1,
-                             "settled": 1, "pareto": 1, "pareto_plot": 1}  # fmt: skip
+    assert doc["counts"] == {"settings": 4, "infeasible": 2, "run_failed": 0, "no_step": 0,
+                             "not_settled": 1, "settled": 1, "pareto": 1, "pareto_plot": 1}  # fmt: skip
     code, text, err = _cli("tune", str(GROUND), *SMALL, "--jobs", "1")
     assert code == 0, err
     assert text.splitlines()[0].endswith(
@@ -307,7 +307,26 @@ def test_robust_plot_front_labels_and_counts(
     everywhere = sum(r is not None and r["settles_on_every_plant"] for r in robust)
     nominal_settled = sum(r["settling_time_s"] is not None for r in rows)
     assert doc["robust"]["counts"] == {
-        "infeasible": sum(not r["feasible"] for r in rows), "run_failed": 0,
+        "infeasible": sum(not r["feasible"] for r in rows), "run_failed": 0, "no_step": 0,
         "not_settled": sum(r["feasible"] and r["settling_time_s"] is None for r in rows),
         "settled_on_some": nominal_settled - everywhere, "settled_on_all": everywhere,
     }  # fmt: skip
+
+
+def test_a_reference_without_a_step_is_said_so_not_called_unsettled() -> None:
+    """A ramp has no step: overshoot and settling are undefined, not 'did not settle'."""
+    code, out, err = _cli("tune", str(GROUND), "--method", "pi", "--grid",
+                          "phase_margin=65,crossover_hz=3:4:1", "--duration", "1", "--jobs", "1",
+                          "--reference", "ramp:10", "--json")  # fmt: skip
+    assert code == 0, err
+    rows = json.loads(out)["settings"]
+    assert all(r["feasible"] and r["overshoot_percent"] is None for r in rows)
+    assert {r["status"] for r in rows} == {"no step"}
+    code, out, err = _cli("tune", str(GROUND), "--method", "pi", "--grid",
+                          "phase_margin=65,crossover_hz=3:4:1", "--duration", "1", "--jobs", "1",
+                          "--reference", "ramp:10")  # fmt: skip
+    assert code == 0, err
+    assert out.splitlines()[0].endswith(
+        "2 settings: 0 infeasible requests (the design refused them), 2 ran without a step in "
+        "the reference to measure, 0 ran but did not settle, 0 settled"
+    )

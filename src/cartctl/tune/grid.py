@@ -38,6 +38,7 @@ PLOT_METRICS = ("settling_time_s", "overshoot_percent")
 STATUSES = {
     "infeasible": "infeasible request (the design refused it)",
     "run failed": "designed, but its run failed",
+    "no step": "ran, but its reference has no step to measure (overshoot, settling undefined)",
     "not settled": "ran, but did not settle",
     "settled": "ran and settled",
 }
@@ -204,10 +205,14 @@ class TuneResult:
 
     @property
     def status(self) -> str:
-        """One of :data:`STATUSES`: 'infeasible', 'run failed', 'not settled' or 'settled'."""
+        """One of :data:`STATUSES`: 'infeasible', 'run failed', 'no step', 'not settled' or
+        'settled'."""
         if not self.feasible:
             return "run failed" if (self.reason or "").startswith(RUN_FAILED) else "infeasible"
-        return "not settled" if self.worst["settling_time_s"] is None else "settled"
+        worst = self.worst
+        if worst["settling_time_s"] is not None:
+            return "settled"
+        return "no step" if worst["overshoot_percent"] is None else "not settled"
 
     @property
     def worst(self) -> dict[str, float | None]:

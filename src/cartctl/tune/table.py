@@ -20,6 +20,7 @@ from cartctl.tune.robust import RobustRow
 ROBUST_STATUSES = {
     "infeasible": STATUSES["infeasible"],
     "run failed": STATUSES["run failed"],
+    "no step": STATUSES["no step"],
     "not settled": "ran, but did not settle on the model",
     "settled on some": "settled on the model, not on every sampled plant",
     "settled on all": "settled on the model and every sampled plant",
@@ -45,7 +46,7 @@ def _infeasible(n: int) -> str:
 
 def counts_text(results: Sequence[TuneResult]) -> str:
     """'42 settings: 10 infeasible requests (the design refused them), 0 ran but did not settle,
-    32 settled' (runs that failed, if any, counted apart)."""
+    32 settled' (runs that failed and runs without a step to measure, if any, counted apart)."""
     c = status_counts(results)
     parts = [
         _infeasible(c["infeasible"]),
@@ -54,6 +55,8 @@ def counts_text(results: Sequence[TuneResult]) -> str:
     ]
     if c["run failed"]:
         parts.insert(1, plural(c["run failed"], "run failed", "runs failed"))
+    if c["no step"]:
+        parts.insert(-2, f"{c['no step']} ran without a step in the reference to measure")
     return f"{plural(len(results), 'setting', 'settings')}: " + ", ".join(parts)
 
 
@@ -84,6 +87,8 @@ def robust_counts_text(rows: Sequence[RobustRow]) -> str:
     ]
     if c["run failed"]:
         parts.insert(1, plural(c["run failed"], "run failed", "runs failed"))
+    if c["no step"]:
+        parts.insert(-3, f"{c['no step']} ran without a step in the reference to measure")
     return f"{plural(len(rows), 'setting', 'settings')}: " + ", ".join(parts)
 
 
