@@ -9,8 +9,9 @@ as the best of ``--repeat`` fresh processes (wall time, measured from this proce
   from the command (the ``Popen`` call) to the loop's first tick, against the goal of 1 s.
 
 The first tick is seen from outside the package: the child is ``python -c`` with a few lines that
-wrap :meth:`PeriodicExecutor.run <cartctl.runtime.executor.PeriodicExecutor.run>` (in the child
-only; nothing in the package is changed) so that the first call of the tick function prints
+wrap :meth:`PeriodicExecutor.run <cartctl.runtime.executor.PeriodicExecutor.run>` and
+:meth:`VirtualExecutor.run <cartctl.runtime.virtual.VirtualExecutor.run>` (``--fast``), in the
+child only (nothing in the package is changed), so that the first call of the tick function prints
 ``time.perf_counter()``, then call :func:`cartctl.cli.main` with the command's arguments.
 ``perf_counter`` is the system's monotonic clock on Linux, the same in both processes.
 """
@@ -29,17 +30,20 @@ FIRST_TICK_GOAL_S = 1.0
 # The child of a first-tick measurement: the wrapper first, then the command line as usual.
 _CHILD = """
 import sys, time
-from cartctl.runtime import executor as _ex
-_orig = _ex.PeriodicExecutor.run
-def _run(self, tick, idle=None):
-    seen = []
-    def wrapped(k):
-        if not seen:
-            seen.append(time.perf_counter())
-            print(f"FIRST_TICK {seen[0]!r}", file=sys.stderr, flush=True)
-        return tick(k)
-    return _orig(self, wrapped, idle)
-_ex.PeriodicExecutor.run = _run
+from cartctl.runtime import executor as _ex, virtual as _vx
+def _wrap(cls):
+    orig = cls.run
+    def _run(self, tick, idle=None):
+        seen = []
+        def wrapped(k):
+            if not seen:
+                seen.append(time.perf_counter())
+                print(f"FIRST_TICK {seen[0]!r}", file=sys.stderr, flush=True)
+            return tick(k)
+        return orig(self, wrapped, idle)
+    cls.run = _run
+_wrap(_ex.PeriodicExecutor)
+_wrap(_vx.VirtualExecutor)
 from cartctl.cli import main
 raise SystemExit(main(sys.argv[1:]))
 """
