@@ -19,7 +19,11 @@ between a 600 s and a 6 s simulated run (which removes start-up costs), against 
 ``python benchmarks/bench_run.py --soak MINUTES`` runs the long test instead: ``poles.toml`` on the
 physics plant for MINUTES in real time with Rerun recording and one other core busy, and prints
 its deadline misses, period error and compute time, with the CPU time the hypervisor stole
-meanwhile (on a virtual machine: outliers no guest can prevent).
+meanwhile (on a virtual machine: outliers no guest can prevent). A thread of this process reads
+the steal counter of each CPU every 20 ms and the trace file's growth meanwhile; the growth puts
+the trace's ticks on this process's clock, so the soak lists each step of steal on the trace's
+time axis and, for every tick that started more than 1 ms late, the steal around it, with the
+chance that a window placed at random would have held a step.
 """
 
 from __future__ import annotations
@@ -35,24 +39,15 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_loop import make_work, run_naive, steal_ms
 from fast_parts import report as fast_parts_report
+from soak_watch import Cyclictest, StealWatch, late_ticks_and_steal, report_cyclictest
 from tick_breakdown import measure, print_breakdown
 
 
-def cartctl_run(seconds: float, *extra: str) -> dict:
-    """One ``cartctl run --json`` in a subprocess; its summary."""
-    with tempfile.TemporaryDirectory() as out:
-        cmd = [
-            sys.executable,
-            "-m",
-            "cartctl",
-            "run",
-            "--duration",
-            str(seconds),
-            "--out",
-            out,
-            "--json",
-            *extra,
-        ]
+def cartctl_run(seconds: float, *extra: str, out: str | None = None) -> dict:
+    """One ``cartctl run --json`` in a subprocess (files to ``out``, else a scratch folder)."""
+    with tempfile.TemporaryDirectory() as scratch:
+        cmd = [sys.executable, "-m", "cartctl", "run", "--duration", str(seconds),
+               "--out", out or scratch, "--json", *extra]  # fmt: skip
         proc = subprocess.run(cmd, capture_output=True, text=True, check=True)
     return json.loads(proc.stdout)
 
@@ -88,26 +83,33 @@ def soak(minutes: float) -> int:
           "one other core busy")  # fmt: skip
     stolen = steal_ms()
     busy = busy_core()
-    try:
-        s = cartctl_run(seconds, "--plant", "physics", "--controller", "controllers/poles.toml",
-                        "--rerun", "save")  # fmt: skip
-    finally:
-        busy.kill()
-    stolen = steal_ms() - stolen
-    pe, cu = s["period_error_us"], s["compute_us"]
-    print(
-        f"  ticks {s['ticks']}, deadline misses {s['deadline_misses']} (goal 0), skipped "
-        f"deadlines {s['skipped_deadlines']}, miss ticks {s['miss_ticks'][:10]}"
-    )
-    print(
-        f"  period error p50/p99/max {pe['p50']:.1f}/{pe['p99']:.1f}/{pe['max']:.1f} µs "
-        f"(goal max <= 1000 µs: {'met' if pe['max'] <= 1000 else 'missed'})"
-    )
-    print(
-        f"  compute p50/p99/max {cu['p50']:.1f}/{cu['p99']:.1f}/{cu['max']:.1f} µs "
-        f"(goal p99 <= 200 µs: {'met' if cu['p99'] <= 200 else 'missed'})"
-    )
-    print(f"  CPU time stolen by the hypervisor meanwhile: {stolen:.0f} ms  [{s['scheduling']}]")
+    with tempfile.TemporaryDirectory() as out:
+        try:
+            with Cyclictest() as cyc, StealWatch(Path(out) / "soak.csv") as watch:
+                s = cartctl_run(seconds, "--plant", "physics", "--controller",
+                                "controllers/poles.toml", "--rerun", "save", "--name", "soak",
+                                out=out)  # fmt: skip
+        finally:
+            busy.kill()
+        stolen = steal_ms() - stolen
+        pe, cu = s["period_error_us"], s["compute_us"]
+        print(
+            f"  ticks {s['ticks']}, deadline misses {s['deadline_misses']} (goal 0), skipped "
+            f"deadlines {s['skipped_deadlines']}, miss ticks {s['miss_ticks'][:10]}"
+        )
+        print(
+            f"  period error p50/p99/max {pe['p50']:.1f}/{pe['p99']:.1f}/{pe['max']:.1f} µs "
+            f"(goal max <= 1000 µs: {'met' if pe['max'] <= 1000 else 'missed'})"
+        )
+        print(
+            f"  compute p50/p99/max {cu['p50']:.1f}/{cu['p99']:.1f}/{cu['max']:.1f} µs "
+            f"(goal p99 <= 200 µs: {'met' if cu['p99'] <= 200 else 'missed'})"
+        )
+        print(
+            f"  CPU time stolen by the hypervisor meanwhile: {stolen:.0f} ms  [{s['scheduling']}]"
+        )
+        tick0, late_at_s = late_ticks_and_steal(Path(out) / "soak.csv", watch)
+        report_cyclictest(cyc, tick0, late_at_s)
     return 0
 
 

@@ -1,7 +1,7 @@
 """Where one tick of ``cartctl run`` spends its time: plant, estimator, controller, each sink, loop.
 
 Run: ``python benchmarks/tick_breakdown.py [--seconds 20] [--plant physics] [--controller
-controllers/poles.toml] [--rerun save|off] [--fast]``, or through ``bench_run.py``.
+controllers/poles.toml] [--rerun save|off] [--fast] [--busy]``, or through ``bench_run.py``.
 
 It builds the loop as ``cartctl run`` does (the shipped controller file, the plant, the CSV, memory
 and Rerun sinks, the periodic executor on the monotonic clock with SCHED_FIFO where permitted, the
@@ -20,12 +20,15 @@ collector paused), then wraps each part's per-tick call with a timer:
 
 Each timer costs about 0.1 µs, so the parts add up to a little more than an untimed tick. The
 table gives p50, p99 and max per part (µs), and, for the ticks above the tick's p99, which part
-took the most time in them: the answer to "where do the outliers come from".
+took the most time in them: the answer to "where do the outliers come from". Then each tick that
+started more than 1 ms late, with the tick and the idle work before it: whether the process ran
+late or woke late. ``--busy`` keeps one other core busy meanwhile (as ``bench_run.py --soak``).
 """
 
 from __future__ import annotations
 
 import argparse
+import subprocess
 import sys
 import tempfile
 import time
@@ -158,6 +161,9 @@ def measure(
     samples["loop"] = whole_loop - sum(samples[p] for p in inside)
     samples["controller"] = samples["controller"] - samples["estimator"]
     samples["executor"] = samples["tick"] - whole_loop  # with this script's bookkeeping
+    samples["period error"] = (np.frombuffer(executor._period_error_s, dtype=np.float64) * 1e6)[
+        : whole_loop.size
+    ]
     print(f"  ({scheduling}; {stats.ticks} ticks, {stats.misses} deadline misses)")
     return samples
 
@@ -180,6 +186,25 @@ def print_breakdown(samples: dict[str, np.ndarray]) -> None:
         print(f"  the {slow.size} ticks above the tick's p99: the largest part was {text}")
 
 
+def print_late(samples: dict[str, np.ndarray], late_us: float = 1000.0) -> None:
+    """Each tick that started more than ``late_us`` late, with what ran before it.
+
+    A tick starts late either because the work before it (the previous tick, then the sinks'
+    ``idle``) ran past its deadline, or because the thread woke late from its wait: the first is
+    this process's doing, the second the operating system's or the hypervisor's.
+    """
+    err = samples["period error"]
+    late = np.flatnonzero(err > late_us)
+    if not late.size:
+        print(f"  no tick started more than {late_us / 1e3:g} ms late")
+        return
+    for i in late[:20]:
+        before = samples["tick"][i - 1] + samples["idle"][i] if i else 0.0
+        cause = "the work before it ran late" if before > 1e4 else "it woke late from its wait"
+        print(f"  tick {i} started {err[i] / 1e3:.2f} ms late; before it: the tick {samples['tick'][i - 1]:.0f} µs"
+              f" and idle {samples['idle'][i]:.0f} µs, so {cause}")  # fmt: skip
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
@@ -188,10 +213,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--controller", default="controllers/poles.toml")
     parser.add_argument("--rerun", default="save", choices=("save", "off"))
     parser.add_argument("--fast", action="store_true", help="on a virtual clock")
+    parser.add_argument("--busy", action="store_true", help="keep one other core busy meanwhile")
     args = parser.parse_args(argv)
     print(f"tick breakdown: {args.controller} on {args.plant}, Rerun {args.rerun}, "
           f"{args.seconds:g} s {'virtual' if args.fast else 'real time'}")  # fmt: skip
-    print_breakdown(measure(args.seconds, args.plant, args.controller, args.rerun, args.fast))
+    busy = (
+        subprocess.Popen([sys.executable, "-c", "while True: pass"]) if args.busy else None
+    )  # one other core kept busy, as in bench_run.py --soak
+    try:
+        samples = measure(args.seconds, args.plant, args.controller, args.rerun, args.fast)
+    finally:
+        if busy is not None:
+            busy.kill()
+    print_breakdown(samples)
+    print_late(samples)
     return 0
 
 
