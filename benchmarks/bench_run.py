@@ -23,7 +23,9 @@ meanwhile (on a virtual machine: outliers no guest can prevent). A thread of thi
 the steal counter of each CPU every 20 ms and the trace file's growth meanwhile; the growth puts
 the trace's ticks on this process's clock, so the soak lists each step of steal on the trace's
 time axis and, for every tick that started more than 1 ms late, the steal around it, with the
-chance that a window placed at random would have held a step.
+chance that a window placed at random would have held a step; where ``cyclictest`` is installed
+it runs alongside, and its thread on the other CPU says whether the machine stalled at the same
+moment (``soak_watch.py``).
 """
 
 from __future__ import annotations
