@@ -186,7 +186,9 @@ def print_breakdown(samples: dict[str, np.ndarray]) -> None:
         print(f"  the {slow.size} ticks above the tick's p99: the largest part was {text}")
 
 
-def print_late(samples: dict[str, np.ndarray], late_us: float = 1000.0) -> None:
+def print_late(
+    samples: dict[str, np.ndarray], late_us: float = 1000.0, period_us: float = 1e4
+) -> None:
     """Each tick that started more than ``late_us`` late, with what ran before it.
 
     A tick starts late either because the work before it (the previous tick, then the sinks'
@@ -199,8 +201,11 @@ def print_late(samples: dict[str, np.ndarray], late_us: float = 1000.0) -> None:
         print(f"  no tick started more than {late_us / 1e3:g} ms late")
         return
     for i in late[:20]:
-        before = samples["tick"][i - 1] + samples["idle"][i] if i else 0.0
-        cause = "the work before it ran late" if before > 1e4 else "it woke late from its wait"
+        # the previous tick's start (after its deadline), its compute, the idle work after it
+        done_us = err[i - 1] + samples["tick"][i - 1] + samples["idle"][i] if i else 0.0
+        cause = (
+            "the work before it ran late" if done_us >= period_us else "it woke late from its wait"
+        )
         print(f"  tick {i} started {err[i] / 1e3:.2f} ms late; before it: the tick {samples['tick'][i - 1]:.0f} µs"
               f" and idle {samples['idle'][i]:.0f} µs, so {cause}")  # fmt: skip
 
