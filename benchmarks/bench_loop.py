@@ -48,14 +48,26 @@ class Row:
     steal_ms: float = float("nan")  # time the hypervisor took the CPUs away meanwhile (ms)
 
 
+def steal_ms_by_cpu() -> dict[str, float]:
+    """CPU steal time so far (ms) from /proc/stat (Linux, 10 ms steps): ``"cpu"`` for all CPUs,
+    ``"cpu0"``, ``"cpu1"`` ... for each; empty elsewhere."""
+    try:
+        tick_ms = 1e3 / os.sysconf("SC_CLK_TCK")
+        with open("/proc/stat") as f:
+            rows = [line.split() for line in f if line.startswith("cpu")]
+        return {row[0]: float(row[8]) * tick_ms for row in rows}
+    except (OSError, IndexError, ValueError):
+        return {}
+
+
 def steal_ms() -> float:
     """Total CPU steal time so far (ms) from /proc/stat (Linux, 10 ms steps); NaN elsewhere."""
-    try:
-        with open("/proc/stat") as f:
-            fields = f.readline().split()
-        return float(fields[8]) * 1e3 / os.sysconf("SC_CLK_TCK")
-    except (OSError, IndexError, ValueError):
-        return float("nan")
+    return steal_ms_by_cpu().get("cpu", float("nan"))
+
+
+def busy_core() -> subprocess.Popen[bytes]:
+    """A process spinning on one core, until killed."""
+    return subprocess.Popen([sys.executable, "-c", "while True: pass"])
 
 
 def measured(run: Callable[[], Row]) -> Row:
@@ -208,9 +220,7 @@ def main(argv: list[str] | None = None) -> int:
     spin_s = args.spin_ms / 1e3
     work = make_work(args.work_us)
 
-    spinners = [
-        subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)
-    ]
+    spinners = [busy_core() for _ in range(args.busy)]
     rows: list[Row] = []
     try:
         print(

@@ -39,7 +39,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_loop import make_work, run_naive, steal_ms
+from bench_loop import busy_core, make_work, run_naive
 from fast_parts import report as fast_parts_report
 from soak_watch import Cyclictest, StealWatch, late_ticks_and_steal, report_cyclictest
 from tick_breakdown import measure, print_breakdown
@@ -73,17 +73,11 @@ def row(name: str, s: dict) -> str:
     )
 
 
-def busy_core() -> subprocess.Popen[bytes]:
-    """A process spinning on one core, until killed."""
-    return subprocess.Popen([sys.executable, "-c", "while True: pass"])
-
-
 def soak(minutes: float) -> int:
     """The long real-time run: poles.toml on physics, Rerun recording, one other core busy."""
     seconds = minutes * 60.0
     print(f"soak: controllers/poles.toml on physics, {minutes:g} min real time, Rerun recording, "
           "one other core busy")  # fmt: skip
-    stolen = steal_ms()
     busy = busy_core()
     with tempfile.TemporaryDirectory() as out:
         try:
@@ -93,7 +87,7 @@ def soak(minutes: float) -> int:
                                 out=out)  # fmt: skip
         finally:
             busy.kill()
-        stolen = steal_ms() - stolen
+        stolen = watch.steal_between(float("-inf"), float("inf")).sum()
         pe, cu = s["period_error_us"], s["compute_us"]
         print(
             f"  ticks {s['ticks']}, deadline misses {s['deadline_misses']} (goal 0), skipped "

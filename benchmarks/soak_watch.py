@@ -11,7 +11,6 @@ thread on the other CPU shares nothing with the loop.
 
 from __future__ import annotations
 
-import os
 import shutil
 import signal
 import subprocess
@@ -21,6 +20,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from bench_loop import steal_ms_by_cpu
 
 
 class StealWatch:
@@ -51,15 +52,11 @@ class StealWatch:
         self._thread.join()
 
     def _run(self) -> None:
-        tck = os.sysconf("SC_CLK_TCK")
         last = -1
         while not self._stop.wait(self.every_s):
             t = time.perf_counter()
-            with open("/proc/stat") as f:
-                cpus = [
-                    ln.split() for ln in f if ln.startswith("cpu") and not ln.startswith("cpu ")
-                ]
-            self.steal.append((t, [float(c[8]) * 1e3 / tck for c in cpus]))
+            by_cpu = steal_ms_by_cpu()
+            self.steal.append((t, [ms for cpu, ms in by_cpu.items() if cpu != "cpu"]))
             try:
                 size = self.trace.stat().st_size
             except OSError:
@@ -97,10 +94,7 @@ def late_ticks_and_steal(
     times = np.array([t for t, _ in watch.steal])
     counts = np.array([c for _, c in watch.steal])
     steps = np.flatnonzero(np.diff(counts.sum(axis=1)) > 0) + 1
-    print(
-        f"  steal seen every {watch.every_s * 1e3:.0f} ms: {counts[-1].sum() - counts[0].sum():.0f} "
-        f"ms in {len(steps)} steps"
-    )
+    print(f"  steal, read every {watch.every_s * 1e3:.0f} ms: {len(steps)} steps")
     last_s = tick0 + table["tick"][-1] * period_s
     print(f"  the trace tied to this clock by its growth ({len(watch.sizes)} samples): tick 0 "
           f"{tick0 - watch.started_s:.2f} s after the command started, the last tick "

@@ -28,7 +28,6 @@ late or woke late. ``--busy`` keeps one other core busy meanwhile (as ``bench_ru
 from __future__ import annotations
 
 import argparse
-import subprocess
 import sys
 import tempfile
 import time
@@ -39,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from bench_loop import busy_core
 from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import load_controller
 from cartctl.plants.factory import make_plant
@@ -222,9 +222,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     print(f"tick breakdown: {args.controller} on {args.plant}, Rerun {args.rerun}, "
           f"{args.seconds:g} s {'virtual' if args.fast else 'real time'}")  # fmt: skip
-    busy = (
-        subprocess.Popen([sys.executable, "-c", "while True: pass"]) if args.busy else None
-    )  # one other core kept busy, as in bench_run.py --soak
+    busy = busy_core() if args.busy else None  # one other core busy, as bench_run.py --soak
     try:
         samples = measure(args.seconds, args.plant, args.controller, args.rerun, args.fast)
     finally:
