@@ -328,15 +328,17 @@ def simulate(
     Parameters
     ----------
     controller : Design, controller file path or ControllerFile
-    plant : {'sim', 'physics'}
+    plant : {'sim', 'physics', 'physics:actuation_ms=X'}
         The ARX models of ``model`` (default: the model the controller was designed on), or the
-        physical simulator with ``preset``.
+        physical simulator with ``preset`` (and the actuation timing, ms).
     reference : str
         A reference spec (``step:10``, ``square:8:2``, ``file:ref.csv`` …).
     duration_s : float
     """
-    if plant not in ("sim", "physics"):
-        raise InputError(f"simulate runs on 'sim' or 'physics', not '{plant}'")
+    from cartctl.plants.factory import SIMULATED, plant_kind
+
+    if plant_kind(plant) not in SIMULATED:
+        raise InputError(f"simulate runs on 'sim' or 'physics[:actuation_ms=X]', not '{plant}'")
     if isinstance(controller, Design):
         file = replace(controller.controller_file(), path=None)
     elif isinstance(controller, ControllerFile):

@@ -168,7 +168,9 @@ def run(args: argparse.Namespace) -> int:
     check_duration(args.duration)
     if args.voltage_limit is not None and not 0.0 < args.voltage_limit <= SUPPLY_V:
         raise InputError(f"--voltage-limit must be in (0, 12] V, got {args.voltage_limit}")
-    if args.fast and args.plant not in ("sim", "physics"):
+    from cartctl.plants.factory import SIMULATED, plant_kind
+
+    if args.fast and plant_kind(args.plant) not in SIMULATED:
         raise InputError(f"--fast needs a simulated plant (sim or physics), not '{args.plant}'")
     given = args.controller or str(default_controller(args.plant))
     controller_file = load_controller(given, force=args.force)

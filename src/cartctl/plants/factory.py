@@ -9,7 +9,37 @@ from cartctl.errors import InputError
 from cartctl.modelfile import load_models
 from cartctl.plants.base import Plant
 
-PLANT_NAMES = ("sim", "physics", "virtual", "virtual:FAULTS", "serial:PORT")
+PLANT_NAMES = (
+    "sim",
+    "physics",
+    "physics:actuation_ms=X",
+    "virtual",
+    "virtual:OPTIONS",
+    "serial:PORT",
+)
+SIMULATED = ("sim", "physics")
+"""Plant kinds that run in this process on a virtual clock (``--fast``)."""
+
+
+def plant_kind(spec: str) -> str:
+    """The kind of a plant name: 'sim', 'physics', 'virtual', 'serial', or the name as given."""
+    kind = spec.partition(":")[0]
+    return kind if kind in ("physics", "virtual", "serial") else spec
+
+
+def physics_options(text: str) -> dict[str, float]:
+    """The options of ``physics:KEY=VALUE,...``: only ``actuation_ms`` (see ``check_actuation_ms``)."""
+    from cartctl.plants.physics_params import check_actuation_ms
+
+    options: dict[str, float] = {}
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        key, sep, value = (part.strip() for part in item.partition("="))
+        if not sep or key != "actuation_ms":
+            raise InputError(
+                f"bad physics option '{item}'; expected actuation_ms=X (ms in (0, 10])"
+            )
+        options["actuation_ms"] = check_actuation_ms(value)
+    return options
 
 
 def is_serial(spec: str) -> bool:
@@ -35,7 +65,8 @@ def make_plant(
     ----------
     spec : str
         'sim' (the ARX models of ``model_path``), 'physics' (the physical simulator with
-        ``preset``), 'virtual' (that simulator behind a pseudo-terminal, through the serial
+        ``preset``; 'physics:actuation_ms=10' lands each command 10 ms after its tick instead of
+        the calibrated 3), 'virtual' (that simulator behind a pseudo-terminal, through the serial
         path; 'virtual:garbage=0.05,corrupt=0.05,stall=S,pull=S,generation=b' injects faults)
         or 'serial:PORT' (the cart on that port).
     model_path : str or Path
@@ -68,13 +99,13 @@ def make_plant(
             models.motors["a"], models.motors["b"], noise_std_rad_s=noise_std_rad_s, seed=seed
         )
         return plant, f"sim ({model_path})"
-    if spec == "physics":
+    if spec == "physics" or spec.startswith("physics:"):
         from cartctl.plants.physics import PhysicsPlant
 
-        return (
-            PhysicsPlant(preset, noise_std_rad_s=noise_std_rad_s, seed=seed),
-            f"physics (preset {preset})",
-        )
+        options = physics_options(spec.partition(":")[2])
+        plant = PhysicsPlant(preset, noise_std_rad_s=noise_std_rad_s, seed=seed, **options)
+        timing = f", command lands {options['actuation_ms']:g} ms after its tick" if options else ""
+        return plant, f"physics (preset {preset}{timing})"
     if spec == "virtual" or spec.startswith("virtual:"):
         from cartctl.plants.virtual_cart import CartFaults, VirtualCart, VirtualSerialCart
 

@@ -233,6 +233,9 @@ class PhysicsPlant:
         Seed of the numpy Generator that draws the noise. The noise stream is not restarted by
         :meth:`reset`, so repeated experiments see fresh noise; the same seed and the same calls
         reproduce the same measurements.
+    actuation_ms : float, optional
+        When a command lands after its tick (ms, in (0, 10]); overrides the cart's
+        ``actuation_delay_s`` (3 ms in the presets; 10 is microOS's next ``io()``).
 
     Raises
     ------
@@ -246,12 +249,15 @@ class PhysicsPlant:
         *,
         noise_std_rad_s: float | None = None,
         seed: int | None = None,
+        actuation_ms: float | None = None,
     ) -> None:
         params = preset(cart) if isinstance(cart, str) else cart
         if not isinstance(params, CartParams):
             raise InputError(f"cart must be a preset name or CartParams, got {type(cart).__name__}")
         if noise_std_rad_s is not None:
             params = params.with_noise(float(noise_std_rad_s))
+        if actuation_ms is not None:
+            params = params.with_actuation_ms(actuation_ms)
         self.params: CartParams = params
         self.period_s: float = params.period_s
         h = params.period_s / params.substeps

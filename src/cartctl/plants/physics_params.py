@@ -62,7 +62,14 @@ from typing import Any
 from cartctl.cart import ENCODER_COUNTS_PER_REV, PERIOD_S, PWM_STEP_V, SUPPLY_V
 from cartctl.errors import InputError
 
-__all__ = ["PRESETS", "CartParams", "MotorParams", "preset"]
+__all__ = [
+    "ACTUATION_MS_RANGE",
+    "PRESETS",
+    "CartParams",
+    "MotorParams",
+    "check_actuation_ms",
+    "preset",
+]
 
 
 def _require_positive(owner: str, name: str, value: float, *, allow_zero: bool = False) -> None:
@@ -188,6 +195,20 @@ class CartParams:
         """The parameters as plain JSON-ready values (motors as nested dicts)."""
         return asdict(self)
 
+    def with_actuation_ms(self, actuation_ms: float) -> CartParams:
+        """Return a copy whose commands land ``actuation_ms`` after their tick (see :func:`check_actuation_ms`).
+
+        The substeps are refined (to 0.1 ms) when the delay is not a whole number of them.
+        """
+        delay_s = check_actuation_ms(actuation_ms) / 1000.0
+        substeps = self.substeps
+        for candidate in (self.substeps, 2 * self.substeps, 5 * self.substeps, 10 * self.substeps):
+            n = delay_s / self.period_s * candidate
+            if abs(n - round(n)) < 1e-6:
+                substeps = candidate
+                break
+        return replace(self, actuation_delay_s=delay_s, substeps=substeps)
+
     def with_noise(self, noise_std_rad_s: float) -> CartParams:
         """Return a copy with another measurement noise level (rad/s standard deviation)."""
         return replace(self, noise_std_rad_s=noise_std_rad_s)
@@ -210,6 +231,34 @@ PRESETS: MappingProxyType[str, CartParams] = MappingProxyType(
     }
 )
 """The shipped presets by name (read-only): ``air`` (cart held up) and ``ground`` (driving)."""
+
+
+ACTUATION_MS_RANGE = (0.0, 10.0)
+"""``actuation_ms`` lies in (0, 10] ms: after its tick, within the tick (10: the next ``io()``)."""
+ACTUATION_MS_STEP = 0.1
+"""``actuation_ms`` is given to this resolution (ms)."""
+
+
+def check_actuation_ms(value: float) -> float:
+    """``value`` (ms) if it is a valid actuation timing; else a one-line :class:`InputError`.
+
+    A command lands ``actuation_ms`` after the tick it was given at: 3 is the presets' calibrated
+    timing (the report's cart), 10 microOS's documented order (the next tick's ``io()``).
+    """
+    low, high = ACTUATION_MS_RANGE
+    try:
+        ms = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"actuation_ms needs a number of ms in (0, 10], got {value!r}") from None
+    if not (math.isfinite(ms) and low < ms <= high):
+        raise InputError(
+            f"actuation_ms must be in (0, 10] ms (3: the calibrated timing, 10: the next io()), "
+            f"got {value}"
+        )
+    steps = ms / ACTUATION_MS_STEP
+    if abs(steps - round(steps)) > 1e-6:
+        raise InputError(f"actuation_ms is taken to 0.1 ms, got {value}")
+    return ms
 
 
 def preset(name: str) -> CartParams:
