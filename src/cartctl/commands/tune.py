@@ -11,9 +11,11 @@ settling bound, max(2 %, one encoder count per tick).
 
 ``--robust`` (:mod:`cartctl.tune.robust`) also scores every setting on ``--plants N`` plants drawn
 from the model's uncertainty (:mod:`cartctl.tune.uncertainty`, ``--seed``), simulated all at once
-(:mod:`cartctl.tune.batch`), and on the physics preset; the table, ``--json`` (key ``robust``,
-added to each row and at the top) and the plot then show nominal, worst case, spread and physics,
-and the front of nominal settling against worst-case overshoot. ``--choose best`` picks by
+(:mod:`cartctl.tune.batch`), and on the physics preset, as it is and at each ``--actuation-ms``
+timing (default 3 and 10 ms: when a command lands after its tick, a property of the cart); the
+physics runs at those timings enter the worst case beside the sampled plants. The table,
+``--json`` (key ``robust``, added to each row and at the top) and the plot then show nominal,
+worst case, spread and physics, and the front of nominal settling against worst-case overshoot. ``--choose best`` picks by
 :data:`cartctl.tune.robust_choice.CHOICE_RULE` (with ``--robust``) or
 :data:`~cartctl.tune.robust_choice.CHOICE_RULE_NOMINAL` (without).
 """
@@ -43,6 +45,13 @@ DEFAULT_PLANTS = 200
 MAX_PLANTS = 10_000
 """The most ``--plants`` accepted."""
 
+DEFAULT_ACTUATION_MS = (3.0, 10.0)
+"""``--actuation-ms`` by default with ``--robust``: the presets' calibrated timing and microOS's
+documented order (the next tick's ``io()``)."""
+
+MAX_ACTUATION_TIMINGS = 20
+"""The most ``--actuation-ms`` timings accepted."""
+
 MAX_PLANT_TICKS = 2_000_000
 """(plants + 1) × ticks per motor beyond which ``--robust`` is refused (memory: four float64
 arrays of that size per motor in each worker, 64 MB each)."""
@@ -66,7 +75,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("model", metavar="MODEL.toml", help="model to design on (and of the sim plant)")
     p.add_argument("--method", choices=METHODS, required=True)
     p.add_argument("--grid", metavar="SPEC", help="e.g. 'phase_margin=50:75:5,crossover_hz=2:5:0.5'")  # fmt: skip
-    p.add_argument("--plant", default="sim", choices=("sim", "physics"), help="default sim (MODEL)")
+    p.add_argument("--plant", default="sim", metavar="PLANT",
+                   help="sim (MODEL, the default), physics or physics:actuation_ms=X (the "
+                        "physics --preset with each command landing X ms after its tick, "
+                        "0 < X <= 10 to 0.1 ms)")  # fmt: skip
     p.add_argument("--preset", choices=("air", "ground"), default="ground", help="physics preset")
     p.add_argument("--reference", default="step:10", metavar="SPEC",
                    help=f"speed reference of both motors (default step:10): {FORMS}")  # fmt: skip
@@ -85,11 +97,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--robust", action="store_true",
                    help="also score every setting on --plants plants drawn from the model's "
                         "uncertainty (θ ± its theta_std, uniform; DC gain ±10 %%; loop delay ±1 "
-                        "tick) and on the physics --preset; report nominal, worst case, spread "
-                        "and the front of nominal settling against worst-case overshoot")  # fmt: skip
+                        "tick) and on the physics --preset (also at each --actuation-ms); report "
+                        "nominal, worst case, spread and the front of nominal settling against "
+                        "worst-case overshoot")  # fmt: skip
     p.add_argument("--plants", type=int, metavar="N",
                    help=f"plants drawn for --robust (default {DEFAULT_PLANTS})")  # fmt: skip
     p.add_argument("--seed", type=int, metavar="S", help="seed of the plants drawn for --robust (default 1)")  # fmt: skip
+    p.add_argument("--actuation-ms", metavar="X,Y,...",
+                   help="with --robust: also run every setting on the physics --preset with each "
+                        "command landing X ms after its tick (0 < X <= 10, to 0.1 ms; 3: the "
+                        "presets' calibrated timing, 10: the next tick's io()), one run per "
+                        "timing; these runs enter the worst case and --choose best like the "
+                        "sampled plants (default 3,10; 'none': only the physics preset as it is, "
+                        "reported beside the worst case)")  # fmt: skip
     p.add_argument("--out", metavar="CONTROLLER.toml", help="where --choose writes the controller")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
@@ -108,15 +128,52 @@ def _choice(text: str | None, n_settings: int) -> int | str | None:
     return number
 
 
+def actuation_timings(text: str | None) -> tuple[float, ...]:
+    """``--actuation-ms``: the timings (ms) in the order given; () for 'none'; the default when
+    None. Each checked by ``check_actuation_ms`` (0 < X <= 10, to 0.1 ms); repeats refused."""
+    from cartctl.plants.physics_params import check_actuation_ms
+
+    if text is None:
+        return DEFAULT_ACTUATION_MS
+    if text.strip() == "none":
+        return ()
+    timings: list[float] = []
+    for item in text.split(","):
+        try:
+            ms = check_actuation_ms(item.strip())
+        except InputError as exc:
+            raise InputError(f"--actuation-ms: {exc}") from None
+        if ms in timings:
+            raise InputError(f"--actuation-ms lists {ms:g} ms twice")
+        timings.append(ms)
+    if len(timings) > MAX_ACTUATION_TIMINGS:
+        raise InputError(f"--actuation-ms takes at most {MAX_ACTUATION_TIMINGS} timings, got "
+                         f"{len(timings)}")  # fmt: skip
+    return tuple(timings)
+
+
+def _check_plant(args: argparse.Namespace) -> None:
+    """``--plant``: sim, physics or physics:actuation_ms=X (one line otherwise)."""
+    from cartctl.plants.factory import SIMULATED, physics_options, plant_kind
+
+    if plant_kind(args.plant) not in SIMULATED:
+        raise InputError(f"--plant must be sim, physics or physics:actuation_ms=X, got "
+                         f"'{args.plant}'")  # fmt: skip
+    if args.plant.startswith("physics:"):
+        physics_options(args.plant.partition(":")[2])
+
+
 def _check_robust(args: argparse.Namespace) -> None:
     if not args.robust:
-        given = [o for o, v in (("--plants", args.plants), ("--seed", args.seed)) if v is not None]
+        given = [o for o, v in (("--plants", args.plants), ("--seed", args.seed),
+                                ("--actuation-ms", args.actuation_ms)) if v is not None]  # fmt: skip
         if given:
             raise InputError(f"{' and '.join(given)} only apply to --robust")
         return
     if args.plant != "sim":
-        raise InputError("--robust scores on the model (sim) and the physics --preset; leave out "
-                         "--plant physics")  # fmt: skip
+        raise InputError("--robust scores on the model (sim) and the physics --preset (at each "
+                         "--actuation-ms); leave out --plant physics")  # fmt: skip
+    actuation_timings(args.actuation_ms)  # a bad list fails here, before the grid runs
     plants = DEFAULT_PLANTS if args.plants is None else args.plants
     if not 1 <= plants <= MAX_PLANTS:
         raise InputError(f"--plants must be a number of plants in 1..{MAX_PLANTS}, got {plants}")
@@ -135,6 +192,7 @@ def _check(args: argparse.Namespace, n_settings: int) -> None:
     from cartctl.reference import reference_signal
 
     check_duration(args.duration)
+    _check_plant(args)
     _check_robust(args)
     if args.extra_delay < 0:
         raise InputError(f"--extra-delay must be >= 0 ticks, got {args.extra_delay}")
@@ -251,7 +309,8 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
     seed = 1 if args.seed is None else args.seed
     sample = sample_plants(load_models(args.model), plants, seed,
                            extra_delay_ticks=args.extra_delay)  # fmt: skip
-    rjob = robustness.RobustJob(job, sample, job.items)
+    timings = actuation_timings(args.actuation_ms)
+    rjob = robustness.RobustJob(job, sample, job.items, timings)
     bar = ProgressBar(len(job.items), "cartctl tune --robust")
     try:
         rows = engine.run_grid(rjob, args.jobs or os.cpu_count() or 1, bar.update,
@@ -272,8 +331,14 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
         return _chosen(args, next(r for r in results if r.index == args.choose), None, results)
 
     chosen, refusal = _choice_or_refusal(args, make)
+    timed = ", ".join(f"{ms:g}" for ms in timings)
+    worst_over = "the nominal model and the sampled plants" + (
+        f" and the physics preset with commands landing {timed} ms after their tick"
+        if timings else "")  # fmt: skip
     meta = {**sample.describe(), "nominal": f"the model ({args.model}), as without --robust",
-            "worst_over": "the nominal model and the sampled plants",
+            "worst_over": worst_over,
+            "worst_sampled_over": "the nominal model and the sampled plants",
+            "actuation_ms": list(timings),
             "spread_over": "the sampled plants (percentiles: values of sampled plants)",
             "physics_preset": args.preset, "pareto_of": "nominal settling_time_s against worst-case "
             "overshoot_percent", "choice_rule": choice.CHOICE_RULE,
@@ -290,9 +355,15 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
               f"{args.duration:g} s, --robust: {table.robust_counts_text(rows)}; the worse of "
               "motors a and b")  # fmt: skip
         print(describe_line(sample, str(args.model)))
-        print(f"nominal: the model; worst: over the model and the {plants} plants (∞: a plant "
-              f"never settles); p5–p95: over the plants; physics: preset {args.preset}, not in "
-              "the worst case")  # fmt: skip
+        if timings:
+            print(f"nominal: the model; worst: over the model, the {plants} plants and physics "
+                  f"preset {args.preset} with commands landing {timed} ms after their tick (∞: a "
+                  "plant never settles); p5–p95: over the plants; physics run, X ms: those "
+                  "runs")  # fmt: skip
+        else:
+            print(f"nominal: the model; worst: over the model and the {plants} plants (∞: a "
+                  f"plant never settles); p5–p95: over the plants; physics: preset "
+                  f"{args.preset}, not in the worst case")  # fmt: skip
         print(table.LEGEND)
         print(f"*: on the robust Pareto front, nominal settling against worst-case overshoot, the "
               f"axes of --plot, which rings them "

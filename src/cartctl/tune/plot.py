@@ -204,6 +204,7 @@ def plot_robust(path: str, method: str, rows: Sequence[RobustRow], plants: int) 
         y = s.value("overshoot_percent", "worst")
         if np.isfinite(x) and np.isfinite(y):
             shown.append((x * 1e3, y, s, r))
+    timed = ", ".join(f"{e['actuation_ms']:g}" for e in shown[0][2].actuation) if shown else ""
     fig, ax = _figure()
     for x, y, s, _ in shown:
         ax.plot([x, x], [s.value("overshoot_percent", "nominal"), y], color="0.8", lw=1, zorder=1)
@@ -212,7 +213,8 @@ def plot_robust(path: str, method: str, rows: Sequence[RobustRow], plants: int) 
     worst = ax.scatter(xs, [y for _, y, *_ in shown], s=POINT_AREA_PT2, zorder=3, gid="settings",
                        plotnonfinite=True, cmap=colormaps["viridis"].with_extremes(bad="black"),
                        c=[v if np.isfinite(v) else np.nan for v in p95],
-                       label=f"worst case over the model and {plants} sampled plants")  # fmt: skip
+                       label=f"worst case over the model and {plants} sampled plants"
+                             + (f" and physics at {timed} ms" if timed else ""))  # fmt: skip
     fig.colorbar(worst, ax=ax, label="settling time, p95 of the plants (ms); "
                  "black: > 5 % never settle")  # fmt: skip
     nominal = [(x, s.value("overshoot_percent", "nominal")) for x, _, s, _ in shown]

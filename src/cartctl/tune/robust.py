@@ -11,21 +11,30 @@ Per grid setting (:func:`evaluate_robust_chunk`, in the worker processes of
    :mod:`cartctl.tune.uncertainty` at once (:func:`cartctl.tune.batch.simulate_batch`), measured
    per plant by :func:`step_metrics` (the run summary's definitions, vectorised);
 4. **physics**: the real loop on ``make_plant('physics', preset)`` (with ``--extra-delay`` ticks of
-   delay). It is reported beside the rest but enters neither the worst case nor the choice: it is
-   the check that a design chosen on the model's uncertainty also does well on a plant it was not
-   chosen on.
+   delay), the preset as it is (its calibrated actuation timing): reported beside the rest, the
+   check that a design chosen on the model's uncertainty also does well on a plant it was not
+   chosen on;
+5. **actuation timing** (``--actuation-ms``, default 3 and 10 ms: the presets' calibrated timing
+   and microOS's documented order, the next tick's ``io()``): the real loop on
+   ``make_plant('physics:actuation_ms=X', preset)`` at each listed X. When a command lands after
+   its tick is a property of the cart that the ARX plants cannot express (their delay is whole
+   ticks), so these runs are further plants of the uncertainty: they enter the worst case and the
+   choice.
 
 Per plant, each metric is the worse of motors a and b. Over the plants: the **worst case** is the
-maximum over the nominal model and the N sampled plants (a plant on which the loop never settles,
-or runs away, makes worst-case settling infinite; JSON ``null``, with the counts beside it); the
-**spread** is the 5th, 50th and 95th percentile over the N sampled plants, each the value of a
-sampled plant (numpy's ``inverted_cdf``: no interpolation, so infinities stay meaningful).
+maximum over the nominal model, the N sampled plants and the physics runs at each actuation
+timing (a plant on which the loop never settles, or runs away, or a physics run that fails, makes
+worst-case settling infinite; JSON ``null``, with the counts beside it); ``worst_sampled`` is the
+same over the nominal model and the sampled plants alone (the worst case without
+``--actuation-ms``); the **spread** is the 5th, 50th and 95th percentile over the N sampled
+plants, each the value of a sampled plant (numpy's ``inverted_cdf``: no interpolation, so
+infinities stay meaningful).
 
 The **robust Pareto front** is over (nominal settling time, worst-case overshoot), both to be
 minimised, among the feasible settings where both are finite. ``--choose best`` takes, among the
-feasible settings that settle on every plant (nominal and sampled), the one with the lowest
-worst-case overshoot, overshoots equal to 0.01 % (the table's resolution) counting as equal, then
-the fastest nominal settling, then the lowest index. Without ``--robust`` the same rule runs on the
+feasible settings that settle on every plant (nominal, sampled and physics at each actuation
+timing), the one with the lowest worst-case overshoot, overshoots equal to 0.01 % (the table's
+resolution) counting as equal, then the fastest nominal settling, then the lowest index. Without ``--robust`` the same rule runs on the
 row's figures (:func:`choose_best_nominal`).
 """
 
@@ -124,14 +133,17 @@ def step_metrics(trace: BatchTrace, settling_floor: float) -> dict[str, FloatArr
 
 @dataclass(frozen=True)
 class RobustScore:
-    """One design over the plants: nominal, worst case, spread, and the physics preset.
+    """One design over the plants: nominal, worst case, spread, the physics preset and the physics
+    runs at each actuation timing.
 
     Attributes
     ----------
     figures : dict of str to dict
         Per metric of :data:`ROBUST_METRICS`: ``nominal`` (the real loop on the model: the row's
-        usual figure), ``worst`` (maximum over the nominal and the sampled plants; ``inf`` when a
-        plant never settles or runs away) and ``p5``, ``p50``, ``p95`` over the sampled plants.
+        usual figure), ``worst`` (maximum over the nominal and the sampled plants and the physics
+        runs of ``actuation``; ``inf`` when a plant never settles or runs away, or a physics run
+        fails), ``worst_sampled`` (the same over the nominal and the sampled plants alone) and
+        ``p5``, ``p50``, ``p95`` over the sampled plants.
     plants : int
         Sampled plants (the nominal model not counted).
     unsettled : int
@@ -142,6 +154,9 @@ class RobustScore:
         The worse of motors a and b on the physics preset (``overshoot_percent``,
         ``settling_time_s``, ``rms_error``, ``peak_voltage_v``), its ``motors`` entries as
         ``cartctl run --json`` gives them, and ``failure`` (None, or what stopped the run).
+    actuation : tuple of dict
+        The physics runs at each actuation timing, as ``physics`` with ``actuation_ms`` (ms after
+        its tick that a command lands) and ``settled`` (both motors settled, the run did not fail).
     """
 
     figures: dict[str, dict[str, float | None]]
@@ -149,6 +164,12 @@ class RobustScore:
     unsettled: int
     diverged: int
     physics: dict[str, Any] = field(default_factory=dict)
+    actuation: tuple[dict[str, Any], ...] = ()
+
+    @property
+    def actuation_unsettled(self) -> int:
+        """Physics runs of ``actuation`` that did not settle or failed."""
+        return sum(not entry["settled"] for entry in self.actuation)
 
     def value(self, metric: str, which: str) -> float:
         """A figure as a float: NaN where undefined (``worst`` may be ``inf``)."""
@@ -157,18 +178,20 @@ class RobustScore:
 
     @property
     def settles_everywhere(self) -> bool:
-        """Every plant, nominal and sampled, settles and none ran away."""
+        """Every plant (nominal, sampled, physics at each actuation timing) settles; none ran away."""
         return math.isfinite(self.value("settling_time_s", "worst"))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form (infinities become ``null`` in ``--json``; the counts say why)."""
         return {"nominal": {k: self.figures[k]["nominal"] for k in ROBUST_METRICS},
                 "worst": {k: self.figures[k]["worst"] for k in ROBUST_METRICS},
+                "worst_sampled": {k: self.figures[k]["worst_sampled"] for k in ROBUST_METRICS},
                 **{f"p{p}": {k: self.figures[k][f"p{p}"] for k in ROBUST_METRICS}
                    for p in PERCENTILES},
                 "plants": self.plants, "plants_unsettled": self.unsettled,
                 "plants_diverged": self.diverged, "settles_on_every_plant": self.settles_everywhere,
-                "physics": self.physics}  # fmt: skip
+                "physics": self.physics, "actuation": list(self.actuation),
+                "actuation_unsettled": self.actuation_unsettled}  # fmt: skip
 
 
 def _worse_of_motors(per_motor: Sequence[dict[str, FloatArray]]) -> dict[str, FloatArray]:
@@ -180,21 +203,37 @@ def _worse_of_motors(per_motor: Sequence[dict[str, FloatArray]]) -> dict[str, Fl
     return out
 
 
+def _timing_value(entry: dict[str, Any], key: str) -> float:
+    """A physics run's figure for the worst case: ``inf`` for a failed or unsettled run's
+    overshoot, settling and RMS error (as a sampled plant that ran away), NaN where undefined."""
+    value = entry.get(key)
+    if entry.get("failure") and key != "peak_voltage_v":
+        return math.inf
+    if value is None:
+        return math.inf if key == "settling_time_s" else math.nan
+    return float(value)
+
+
 def score_plants(
     per_motor: Sequence[dict[str, FloatArray]],
     diverged: NDArray[np.bool_],
     nominal: dict[str, float | None],
     physics: dict[str, Any],
+    actuation: Sequence[dict[str, Any]] = (),
 ) -> RobustScore:
     """Aggregate :func:`step_metrics` of the motors (row 0 the nominal model, then the samples)
-    with the nominal figures of the real loop and the physics entry (see :class:`RobustScore`)."""
+    with the nominal figures of the real loop, the physics entry and the physics runs at each
+    actuation timing, which enter the worst case (see :class:`RobustScore`)."""
     worse = _worse_of_motors(per_motor)
     unsettled_rows = np.isinf(worse["settling_time_s"]) & ~diverged
     figures: dict[str, dict[str, float | None]] = {}
     for key in ROBUST_METRICS:
         values = worse[key]
         row: dict[str, float | None] = {"nominal": nominal.get(key)}
-        row["worst"] = None if np.isnan(values).any() else float(np.max(values))
+        row["worst_sampled"] = None if np.isnan(values).any() else float(np.max(values))
+        timed = [_timing_value(entry, key) for entry in actuation]
+        everything = np.concatenate([values, timed])
+        row["worst"] = None if np.isnan(everything).any() else float(np.max(everything))
         sampled = values[1:]
         for p in PERCENTILES:
             v = (math.nan if not sampled.size or np.isnan(sampled).any()
@@ -202,7 +241,7 @@ def score_plants(
             row[f"p{p}"] = None if math.isnan(v) else v
         figures[key] = row
     return RobustScore(figures, int(diverged.size - 1), int(np.count_nonzero(unsettled_rows)),
-                       int(np.count_nonzero(diverged)), physics)  # fmt: skip
+                       int(np.count_nonzero(diverged)), physics, tuple(actuation))  # fmt: skip
 
 
 # -- the grid ------------------------------------------------------------------------------------
@@ -221,11 +260,16 @@ class RobustJob:
         The sampled plants.
     items : tuple of (int, dict)
         The settings: (1-based grid index, axis values).
+    actuation_ms : tuple of float
+        The actuation timings (ms after its tick that a command lands, each in (0, 10]) at which
+        every setting also runs on the physics preset; these runs enter the worst case. Empty:
+        none (the physics preset is then only reported).
     """
 
     tune: TuneJob
     sample: PlantSample
     items: tuple[tuple[int, dict[str, float]], ...]
+    actuation_ms: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -259,8 +303,14 @@ def _batch_plants(models: ModelFile, sample: PlantSample, motor: str, extra: int
                                 period_s=models.period_s)  # fmt: skip
 
 
-def _physics(job: TuneJob, controllers: dict[str, Controller], limit_v: float) -> dict[str, Any]:
-    plant = scoring_plant(replace(job, plant="physics"))
+def physics_spec(actuation_ms: float | None = None) -> str:
+    """The plant name of the physics simulator, at ``actuation_ms`` (None: the preset's own)."""
+    return "physics" if actuation_ms is None else f"physics:actuation_ms={actuation_ms:g}"
+
+
+def _physics(job: TuneJob, controllers: dict[str, Controller], limit_v: float,
+             actuation_ms: float | None = None) -> dict[str, Any]:  # fmt: skip
+    plant = scoring_plant(replace(job, plant=physics_spec(actuation_ms)))
     n = max(1, round(job.duration_s / plant.period_s))
     refs = {m: reference_signal(job.reference, n, plant.period_s, m) for m in ("a", "b")}
     summary, failure = simulate(plant, controllers, refs, period_s=plant.period_s,
@@ -268,13 +318,19 @@ def _physics(job: TuneJob, controllers: dict[str, Controller], limit_v: float) -
     worst = (
         worst_metrics(summary["motors"]) if not failure else dict.fromkeys(_SUMMARY_KEYS.values())
     )
-    return {"preset": job.preset, **{k: worst[v] for k, v in _SUMMARY_KEYS.items()},
-            "failure": failure, "motors": summary["motors"]}  # fmt: skip
+    entry = {"preset": job.preset, **{k: worst[v] for k, v in _SUMMARY_KEYS.items()},
+             "failure": failure, "motors": summary["motors"]}  # fmt: skip
+    if actuation_ms is None:
+        return entry
+    settled = not failure and all(m.get("settling_time_s") is not None
+                                  for m in summary["motors"].values())  # fmt: skip
+    return {"actuation_ms": actuation_ms, **entry, "settled": settled}
 
 
 def evaluate_robust(job: RobustJob, models: ModelFile, index: int,
                     settings: dict[str, float]) -> RobustRow:  # fmt: skip
-    """One setting: designed, run on the nominal model, the sampled plants and the physics preset."""
+    """One setting: designed, run on the nominal model, the sampled plants, the physics preset and
+    the physics preset at each of ``job.actuation_ms``."""
     tj = job.tune
     nominal_run = evaluate_nominal(tj, models, index, settings)
     result = nominal_run.result
@@ -292,7 +348,8 @@ def evaluate_robust(job: RobustJob, models: ModelFile, index: int,
         diverged |= trace.diverged
     nominal = {k: result.worst[v] for k, v in _SUMMARY_KEYS.items()}
     physics = _physics(tj, controllers, limit_v)
-    return RobustRow(result, score_plants(per_motor, diverged, nominal, physics))
+    actuation = [_physics(tj, controllers, limit_v, ms) for ms in job.actuation_ms]
+    return RobustRow(result, score_plants(per_motor, diverged, nominal, physics, actuation))
 
 
 def evaluate_robust_chunk(job: RobustJob) -> list[RobustRow]:

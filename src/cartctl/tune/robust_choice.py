@@ -23,7 +23,8 @@ CHOICE_RESOLUTION_PERCENT = 0.01
 
 CHOICE_RULE = (
     "lowest worst-case overshoot (to 0.01 %) among the feasible settings that settle on every "
-    "plant, then the fastest nominal settling, then the lowest index"
+    "plant (the model, the sampled plants and the physics preset at each --actuation-ms), then "
+    "the fastest nominal settling, then the lowest index"
 )
 CHOICE_RULE_NOMINAL = (
     "lowest overshoot (to 0.01 %) among the feasible settings that settle, then the fastest "
@@ -60,8 +61,8 @@ def choose_best_robust(rows: Sequence[RobustRow]) -> RobustRow:
     candidates = [r for r in rows if r.score is not None and r.score.settles_everywhere
                   and math.isfinite(r.score.value("overshoot_percent", "worst"))]  # fmt: skip
     if not candidates:
-        raise InputError("--choose best: no feasible setting settles on every sampled plant; "
-                         "widen the grid or pick one with --choose N")  # fmt: skip
+        raise InputError("--choose best: no feasible setting settles on every sampled plant "
+                         "and physics run; widen the grid or pick one with --choose N")  # fmt: skip
 
     def key(r: RobustRow) -> tuple[float, float, int]:
         assert r.score is not None
