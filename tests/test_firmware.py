@@ -110,12 +110,20 @@ extern float mock_hbridge[2];
 extern bool mock_led[2];
 extern unsigned long mock_now_ms;
 extern int mock_drains;
+extern int mock_transmits;
 
 inline unsigned long millis() { return mock_now_ms; }
 
 struct MockCommunicator {
   void receive() { mock_drains += 1; }  /* the harness has put the frame's channels in place */
+  void transmit() { mock_transmits += 1; }
 };
+
+struct MockSerial {
+  unsigned long baud;
+  void begin(unsigned long rate) { baud = rate; }
+};
+extern MockSerial Serial;
 
 class MECOtron {
   MockCommunicator communicator;
@@ -160,6 +168,8 @@ float mock_hbridge[2];
 bool mock_led[2];
 unsigned long mock_now_ms;
 int mock_drains;
+int mock_transmits;
+MockSerial Serial;
 
 static float next_float(void) {
   char word[64];
@@ -172,6 +182,7 @@ int main(void) {
   Robot robot;
   char word[16];
   robot.init();
+  printf("BAUD %lu\n", Serial.baud);
   while (scanf("%15s %lu", word, &mock_now_ms) == 2) {
     if (strcmp(word, "F") == 0) {  /* microOS overwrites the held channels on receipt */
       for (int k = 0; k < 8; ++k) mock_gpin_float[k] = next_float();
@@ -366,7 +377,8 @@ def test_robot_cpp_glue_on_a_mock_template(
         [tmp_path / "harness.cpp", tmp_path / "robot.cpp"], tmp_path, _stdin(short)
     )
     assert lines[0] == "MSG cartctl bridge ready"
-    rows = lines[1:]
+    assert lines[1] == "BAUD 1000000"  # the template's 115200, raised to the bridge's line rate
+    rows = lines[2:]
     assert len(rows) == len(short)
     drains = 0
     for k, (row, (va, vb, floats, ints)) in enumerate(zip(rows, expected, strict=False)):

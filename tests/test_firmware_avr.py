@@ -48,6 +48,7 @@ MCU = [
     "-DARDUINO=10807",
     "-DARDUINO_AVR_MEGA2560",
     "-DARDUINO_ARCH_AVR",
+    "-DSERIAL_RX_BUFFER_SIZE=256",  # the bridge needs it at 1 Mbaud (firmware/README.md)
 ]
 COMMON = ["-Os", "-ffunction-sections", "-fdata-sections", *MCU]
 CXX_ONLY = ["-fno-exceptions", "-fno-threadsafe-statics"]  # as the Arduino builder
@@ -225,3 +226,11 @@ def test_a_void_thread_function_does_not_compile(tmp_path: Path) -> None:
     assert "invalid conversion" in done.stderr, done.stderr
     assert "int (*)()" in done.stderr, done.stderr
     assert "addThread" in done.stderr, done.stderr
+
+
+def test_the_sketch_needs_the_larger_receive_ring(tmp_path: Path) -> None:
+    """Built without -DSERIAL_RX_BUFFER_SIZE=256 the sketch stops with a line saying so."""
+    command = _strict_compile(SKETCH / "cartctl_bridge.ino", tmp_path / "small.o")
+    done = _run([word for word in command if word != "-DSERIAL_RX_BUFFER_SIZE=256"])
+    assert done.returncode != 0
+    assert "-DSERIAL_RX_BUFFER_SIZE=256" in done.stderr, done.stderr

@@ -83,6 +83,16 @@ def test_cart_sample_channel_layout() -> None:
     assert Encoder().gpio(sample.time_ms, floats, ints)[-2:] == bytes.fromhex("9d ea")
 
 
+@pytest.mark.parametrize(
+    ("channel", "version"),
+    [(0.0, 0), (2.0, 2), (float("nan"), 0), (-1.0, 0), (2.5, 0), (1e9, 0), (float("inf"), 0)],
+)
+def test_bridge_version_from_float_channel_6(channel: float, version: int) -> None:
+    """A bridge before version 2 sends 0 in float 6; anything not a small whole number is 0."""
+    floats = (0.0,) * 6 + (channel, 0.0)
+    assert CartSample.from_gpio(Gpio(0, floats, (0, 0, 0, 0))).bridge_version == version
+
+
 def test_sequence_wraps() -> None:
     assert next_seq(0) == 1
     assert next_seq(SEQ_MODULO - 1) == 0

@@ -1,31 +1,44 @@
-// cartctl bridge sketch for the MECOtron cart (Arduino Mega 2560, microOS, the course template).
-// Start-up as in the course template: the robot is microOS's hardware layer and communicator,
-// and one 10 ms thread runs io() then control(). microOS adds its own threads for the serial link
-// (receive, then one GPIO out per 10 ms) and the heartbeat. The bridge adds a 1 ms thread that
-// drains the serial port, and drains it once more right before control(): microOS's own receive,
-// once per 10 ms, lets the Mega's 63-byte receive ring overflow whenever two of the PC's 60-byte
-// frames arrive between two of its drains. See firmware/README.md and docs/serial-protocol.md.
+// cartctl bridge sketch (version 2) for the MECOtron cart (Arduino Mega 2560, microOS, the course
+// template). The robot is microOS's hardware layer and communicator, as in the template. The
+// bridge runs its own tick instead of microOS's communication thread, so that the PC's command
+// for a measurement acts at the next io(), one tick later, as on-board control does:
+//
+//   every 10 ms: drain the serial port (the newest command becomes the next io()'s voltage),
+//                io() (apply it, read the encoders), control() (measurements out), send one GPIO
+//   every 1 ms:  drain the serial port (the newest command replaces the stored voltage)
+//
+// The line runs at 1 Mbaud (BRIDGE_BAUD): a 60-byte frame takes 0.6 ms each way, so the cart's
+// frame and the PC's reply both fit in the tick, with the Mega's USB bridge's latency counted.
+// See firmware/README.md and docs/serial-protocol.md for the tick budget.
 
 #include "robot.h"
+
+// The Arduino core's receive ring must hold what 1 Mbaud carries while the 10 ms thread runs
+// (100 bytes a ms, ~1.2 ms): build with -DSERIAL_RX_BUFFER_SIZE=256 (firmware/README.md).
+#if !defined(SERIAL_RX_BUFFER_SIZE) || SERIAL_RX_BUFFER_SIZE < 256
+#error "build with -DSERIAL_RX_BUFFER_SIZE=256: at 1 Mbaud the 64-byte receive ring overflows (see firmware/README.md)"
+#endif
 
 static Robot robot;
 
 // microOS threads return int (0: done for this period).
 int update() {
-  robot.io();       // apply the voltage stored at the previous tick, read the encoders
-  robot.receive();  // the freshest command: one that has arrived by now acts at this tick
-  robot.control();  // the bridge: held PC channels in, voltages and measurements out
+  robot.receive();   // the freshest command: one that has arrived by now acts at this io()
+  robot.io();        // apply the stored voltage, read the encoders
+  robot.control();   // measurements and the echo out, the watchdog checked
+  robot.transmit();  // one GPIO with what control() wrote
   return 0;
 }
 
 int drainSerial() {
-  robot.receive();  // the 63-byte receive ring never fills between two drains
+  robot.receive();  // a command that arrives mid-tick is stored for the next io() at once
   return 0;
 }
 
 void setup() {
   System.setHAL(&robot);  // System.start() calls robot.init()
   System.setCommunicator(robot.getCommunicator());
+  System.configure(MICROOS_FAST_DISABLE);  // the bridge receives and sends in its own tick
   System.addThread(ABOVENORMAL, 10000, &update, false);  // period in microseconds
   System.addThread(NORMAL, 1000, &drainSerial, false);
   System.start(SEQUENTIAL);

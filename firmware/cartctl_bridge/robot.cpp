@@ -8,7 +8,8 @@
 //   cart -> PC  float 0, 1  speed A, B (rad/s)
 //               float 2, 3  voltage A, B on the H-bridges at this tick (V)
 //               float 4, 5  wheel position A, B (rad)
-//               int 0       echo of the held host sequence number
+//               float 6     bridge version (2)
+//               int 0       echo: the host sequence number of the command io() applied at this tick
 //               int 1       tick counter, 0..32767
 //               int 2       status: bit 0 driving, bit 1 watchdog tripped
 //               int 3       host sequence numbers the cart never saw (lost frames), 0..32767
@@ -21,7 +22,8 @@
 #include "robot.h"
 
 bool Robot::init() {
-  MECOtron::init();  // serial, PWM timer, encoders, LEDs
+  MECOtron::init();            // serial, PWM timer, encoders, LEDs
+  Serial.begin(BRIDGE_BAUD);   // the template opens 115200; the bridge runs the line at 1 Mbaud
   bridge_reset(&_bridge);
   setVoltageMotorA(0.0f);
   setVoltageMotorB(0.0f);
@@ -38,11 +40,9 @@ static float clampToSupply(float volts) {
 }
 
 // Drains the serial port through microOS's communicator (which overwrites the held input channels
-// with every GPIO it decodes), then hands the held channels to the bridge with the time. Called
-// every 1 ms from its own thread, so the Mega's 63-byte receive ring holds at most what the line
-// carries while this thread waits: 12 bytes per ms, about 55 bytes even when io() + control()
-// (1.2 ms) and microOS's communication thread (up to 2.5 ms) run just before it. Called again
-// right before control(), so a command that has arrived by then acts at this tick.
+// with every GPIO it decodes), hands the held channels to the bridge with the time, and stores the
+// voltages the bridge decided for the next io(): the newest command acts there. Called every 1 ms
+// from its own thread and at the start of each tick, right before io().
 void Robot::receive() {
   getCommunicator()->receive();
   float in_floats[BRIDGE_FLOATS];
@@ -50,6 +50,8 @@ void Robot::receive() {
   for (uint8_t k = 0; k < BRIDGE_FLOATS; ++k) in_floats[k] = readFloat(k);
   for (uint8_t k = 0; k < BRIDGE_INTS; ++k) in_ints[k] = readInt(k);
   bridge_receive(&_bridge, in_floats, in_ints, (uint32_t)millis());
+  setVoltageMotorA(clampToSupply(_bridge.command_a_v));  // written to the H-bridge by io()
+  setVoltageMotorB(clampToSupply(_bridge.command_b_v));
 }
 
 void Robot::control() {
@@ -62,7 +64,7 @@ void Robot::control() {
   io.position_b_rad = getPositionMotorB();
 
   BridgeVoltages v = bridge_control(&_bridge, &io, (uint32_t)millis());
-  setVoltageMotorA(clampToSupply(v.a_v));  // reaches the motor at the next tick's io()
+  setVoltageMotorA(clampToSupply(v.a_v));  // the next io(), unless a newer command comes first
   setVoltageMotorB(clampToSupply(v.b_v));
 
   for (uint8_t k = 0; k < BRIDGE_FLOATS; ++k) writeFloat(k, _bridge.out_floats[k]);
@@ -70,6 +72,10 @@ void Robot::control() {
 
   LED1(_bridge.driving ? ON : OFF);  // LED 1: the PC's voltages are applied
   LED2(_bridge.tripped ? ON : OFF);  // LED 2: watchdog tripped (no PC, or it stopped sending)
+}
+
+void Robot::transmit() {
+  getCommunicator()->transmit();  // microOS's GPIO out: the channels control() wrote
 }
 
 void Robot::button0callback() {

@@ -23,8 +23,9 @@ class Robot : public MECOtron {
     Robot() { bridge_reset(&_bridge); }
 
     bool init();     // the template's set-up, then the bridge at power-on state
-    void receive();  // drain the serial port, then hand the held PC channels to the bridge
-    void control();  // every 10 ms, after io() and receive()
+    void receive();   // drain the serial port, hand the held PC channels over, store the voltages
+    void control();   // every 10 ms, after receive() and io()
+    void transmit();  // one GPIO with what control() wrote
 
     void button0callback();  // QRC button 0: says that the PC drives (no local enable)
     void button1callback();  // QRC button 1: reset, as in the template

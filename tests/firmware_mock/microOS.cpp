@@ -111,7 +111,9 @@ static int heartbeatThread() {  // the board's LED blinks while the scheduler ru
   return 0;
 }
 
-MicroOS::MicroOS() : _count(0), _hal(0), _communicator(0) {}
+MicroOS::MicroOS() : _count(0), _config(0), _hal(0), _communicator(0) {}
+
+void MicroOS::configure(uint8_t config) { _config = config; }
 
 void MicroOS::setHAL(HAL* hal) { _hal = hal; }
 
@@ -148,7 +150,7 @@ void MicroOS::stopThread(int8_t id) {
 void MicroOS::start(StartMode mode) {
   if (_hal != 0) _hal->init();
   pinMode(LED_BUILTIN, OUTPUT);
-  addThread(NORMAL, 10000UL, &communicationThread, false);
+  if ((_config & MICROOS_FAST_DISABLE) == 0) addThread(NORMAL, 10000UL, &communicationThread, false);
   addThread(BELOWNORMAL, 500000UL, &heartbeatThread, false);
   const uint32_t now = micros();
   for (uint8_t k = 0; k < _count; ++k) {

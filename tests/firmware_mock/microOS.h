@@ -90,12 +90,14 @@ class SerialCommunicator : public CommunicatorInterface {
 };
 
 #define MICROOS_MAX_THREADS 6
+#define MICROOS_FAST_DISABLE (1 << 3)  // configure(): no communication thread of the system's own
 
 class MicroOS {
   public:
     MicroOS();
     void setHAL(HAL* hal);
     void setCommunicator(CommunicatorInterface* communicator);
+    void configure(uint8_t config);  // MICROOS_FAST_DISABLE: the sketch receives and sends itself
     HAL* hal() const;
     CommunicatorInterface* communicator() const;
 
@@ -119,6 +121,7 @@ class MicroOS {
 
     Thread _threads[MICROOS_MAX_THREADS];
     uint8_t _count;
+    uint8_t _config;
     HAL* _hal;
     CommunicatorInterface* _communicator;
 };

@@ -21,7 +21,6 @@ from cartctl.commands.options import (
 )
 from cartctl.commands.run_checks import (
     DEFAULT_CONTROLLER,
-    DEFAULT_SERIAL_CONTROLLER,
     check_loop_delay,
     check_reach,
     models_designed_on,
@@ -64,8 +63,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--controller",
         metavar="CONTROLLER.toml",
-        help=f"controller file (default {DEFAULT_CONTROLLER}, or {DEFAULT_SERIAL_CONTROLLER} for "
-        "the virtual and serial plants)",
+        help=f"controller file (default {DEFAULT_CONTROLLER}, on every plant: the serial loop "
+        "has the on-board loop delay of 1 tick)",
     )
     p.add_argument(
         "--allow-delay-mismatch",
@@ -145,10 +144,9 @@ def _rerun_sink(
 
 
 def default_controller(plant: str) -> Path:
-    """The shipped controller for a plant: the serial one over the serial line, else the PI."""
-    from cartctl.plants.factory import is_serial
-
-    return DEFAULT_SERIAL_CONTROLLER if is_serial(plant) else DEFAULT_CONTROLLER
+    """The shipped controller for a plant: the PI, on every plant (one loop delay, 1 tick)."""
+    del plant  # the bridge gives the serial loop the on-board delay: one file serves all
+    return DEFAULT_CONTROLLER
 
 
 def _measured_delay(plant: Plant) -> int | None:

@@ -16,13 +16,14 @@ if TYPE_CHECKING:  # imported where used: the parser takes this module's default
     from cartctl.reference import ReferenceSchedule
 
 DEFAULT_CONTROLLER = Path("controllers/pi.toml")
-DEFAULT_SERIAL_CONTROLLER = Path("controllers/serial-pi.toml")
+"""The default on every plant: the simulators and the bridge (version 2) all have loop delay 1."""
 SHIPPED_CONTROLLERS = ("pi.toml", "poles.toml", "serial-pi.toml", "serial-poles.toml")
-"""The shipped controller files (in ``controllers/``), offered when a file does not fit a plant."""
+"""The shipped controller files (in ``controllers/``), offered when a file does not fit a plant.
+``serial-*.toml`` are the fallback for a serial loop of 3 ticks (a PC whose replies keep missing
+the cart's tick)."""
 
 __all__ = [
     "DEFAULT_CONTROLLER",
-    "DEFAULT_SERIAL_CONTROLLER",
     "REACH_REFUSE_FACTOR",
     "check_loop_delay",
     "check_reach",

@@ -23,6 +23,7 @@ worst case, spread and physics, and the front of nominal settling against worst-
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import shlex
 from collections.abc import Callable, Sequence
@@ -110,6 +111,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "timing; these runs enter the worst case and --choose best like the "
                         "sampled plants (default 3,10; 'none': only the physics preset as it is, "
                         "reported beside the worst case)")  # fmt: skip
+    p.add_argument("--max-overshoot", type=float, metavar="PERCENT",
+                   help="--choose best only among the settings whose overshoot is at most this "
+                        "on the plant (with --robust: on the model and on the physics --preset "
+                        "at each --actuation-ms)")  # fmt: skip
+    p.add_argument("--max-settling", type=float, metavar="S",
+                   help="--choose best only among the settings whose settling time is at most "
+                        "this (s), where --max-overshoot applies")  # fmt: skip
+    p.add_argument("--process-noise-v", type=float, metavar="V",
+                   help="the estimator's process noise of every setting, as cartctl design's "
+                        "(default: design's)")  # fmt: skip
+    p.add_argument("--bias-drift-v", type=float, metavar="V",
+                   help="the estimator's disturbance random walk of every setting, as cartctl "
+                        "design's (default: design's)")  # fmt: skip
     p.add_argument("--out", metavar="CONTROLLER.toml", help="where --choose writes the controller")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
@@ -150,6 +164,34 @@ def actuation_timings(text: str | None) -> tuple[float, ...]:
         raise InputError(f"--actuation-ms takes at most {MAX_ACTUATION_TIMINGS} timings, got "
                          f"{len(timings)}")  # fmt: skip
     return tuple(timings)
+
+
+def design_fixed(args: argparse.Namespace) -> dict[str, float]:
+    """The design request fields every setting shares (``--process-noise-v``, ``--bias-drift-v``)."""
+    fixed = {}
+    for option, field, value in (("--process-noise-v", "process_noise_std_v", args.process_noise_v),
+                                 ("--bias-drift-v", "bias_drift_std_v", args.bias_drift_v)):  # fmt: skip
+        if value is None:
+            continue
+        if not (math.isfinite(value) and value >= 0.0):
+            raise InputError(f"{option} must be a number of volts >= 0, got {value}")
+        fixed[field] = float(value)
+    return fixed
+
+
+def choice_limits(args: argparse.Namespace) -> Any:
+    """``--max-overshoot`` and ``--max-settling`` as :class:`~cartctl.tune.robust_choice.Limits`."""
+    from cartctl.tune.robust_choice import Limits
+
+    for option, value in (("--max-overshoot", args.max_overshoot),
+                          ("--max-settling", args.max_settling)):  # fmt: skip
+        if value is None:
+            continue
+        if args.choose != "best":
+            raise InputError(f"{option} only applies to --choose best")
+        if not (math.isfinite(value) and value > 0.0):
+            raise InputError(f"{option} must be a number > 0, got {value}")
+    return Limits(args.max_overshoot, args.max_settling)
 
 
 def _check_plant(args: argparse.Namespace) -> None:
@@ -201,6 +243,8 @@ def _check(args: argparse.Namespace, n_settings: int) -> None:
     if (args.choose is None) != (args.out is None):
         raise InputError("--choose N and --out CONTROLLER.toml go together; give both or neither")
     args.choose = _choice(args.choose, n_settings)
+    choice_limits(args)
+    design_fixed(args)
     models = load_models(args.model)
     plant, _ = make_plant(args.plant, model_path=args.model, preset=args.preset)
     plant.close()
@@ -254,7 +298,8 @@ def choose(
             f"reason is listed as #{result.index} with the results); settings that can be "
             f"chosen: {choosable_text(results or [result])}"
         )
-    request = tuning.design_request(args.method, result.settings, args.extra_delay)
+    request = tuning.design_request(args.method, result.settings, args.extra_delay,
+                                    design_fixed(args))  # fmt: skip
     argv = ["design", *request.to_argv(str(args.model), always=tuning.request_axes(args.method)),
             "--out", args.out]  # fmt: skip
     models = load_models(args.model)
@@ -324,9 +369,12 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
         plot_robust(args.plot, args.method, rows, plants)
     results = [r.result for r in rows]
 
+    limits = choice_limits(args)
+
     def make() -> dict[str, Any]:
         if args.choose == "best":
-            return _chosen(args, choice.choose_best_robust(rows).result, choice.CHOICE_RULE,
+            rule = choice.rule_text(choice.CHOICE_RULE, limits, choice.LIMITS_WHERE)
+            return _chosen(args, choice.choose_best_robust(rows, limits).result, rule,
                            results)  # fmt: skip
         return _chosen(args, next(r for r in results if r.index == args.choose), None, results)
 
@@ -341,7 +389,7 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
             "actuation_ms": list(timings),
             "spread_over": "the sampled plants (percentiles: values of sampled plants)",
             "physics_preset": args.preset, "pareto_of": "nominal settling_time_s against worst-case "
-            "overshoot_percent", "choice_rule": choice.CHOICE_RULE,
+            "overshoot_percent", "choice_rule": choice.rule_text(choice.CHOICE_RULE, limits, choice.LIMITS_WHERE),
             "counts": {k.replace(" ", "_"): v for k, v in table.robust_counts(rows).items()},
             "statuses": table.ROBUST_STATUSES}  # fmt: skip
     if args.json:
@@ -391,7 +439,8 @@ def run(args: argparse.Namespace) -> int:
     _check(args, len(settings))
     job = engine.TuneJob(str(args.model), args.method, args.plant, args.preset, args.reference,
                          float(args.duration), args.extra_delay,
-                         tuple(enumerate(settings, start=1)))  # fmt: skip
+                         tuple(enumerate(settings, start=1)),
+                         tuple(design_fixed(args).items()))  # fmt: skip
     if args.robust:
         return run_robust(args, job)
     bar = ProgressBar(len(settings), "cartctl tune")
@@ -403,9 +452,12 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         plot_tuning(args.plot, args.method, results)
 
+    limits = choice_limits(args)
+
     def make() -> dict[str, Any]:
         if args.choose == "best":
-            return _chosen(args, choice.choose_best_nominal(results), choice.CHOICE_RULE_NOMINAL,
+            rule = choice.rule_text(choice.CHOICE_RULE_NOMINAL, limits, choice.LIMITS_WHERE_NOMINAL)
+            return _chosen(args, choice.choose_best_nominal(results, limits), rule,
                            results)  # fmt: skip
         return _chosen(args, next(r for r in results if r.index == args.choose), None, results)
 

@@ -22,8 +22,11 @@ from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT
 from cartctl.link.messages import Gpio
 
 __all__ = [
+    "BRIDGE_BAUD",
+    "BRIDGE_VERSION",
     "CH_APPLIED_A",
     "CH_APPLIED_B",
+    "CH_BRIDGE_VERSION",
     "CH_DRIVE",
     "CH_ECHO",
     "CH_HOST_LOST",
@@ -37,6 +40,7 @@ __all__ = [
     "CH_VOLTAGE_A",
     "CH_VOLTAGE_B",
     "HOST_LOSS_WARN_PERCENT",
+    "LEGACY_BAUD",
     "SEQ_MODULO",
     "SEQ_WINDOW",
     "STATUS_DRIVING",
@@ -57,6 +61,12 @@ SEQ_WINDOW = 256
 WATCHDOG_MS = 70
 """The cart trips at the first ``control()`` this long (ms) after the last new host sequence
 number: the motors are off at most 90 ms after the host's last frame (the next tick, then io())."""
+BRIDGE_VERSION = 2
+"""The bridge sketch's version, sent in float channel :data:`CH_BRIDGE_VERSION` (0 before 2)."""
+BRIDGE_BAUD = 1_000_000
+"""The line's rate with bridge version 2 (8N1): a 60-byte GPIO frame takes 0.6 ms."""
+LEGACY_BAUD = 115_200
+"""The line's rate of the course's firmware and of bridges before version 2."""
 STATUS_DRIVING = 1
 """Status bit: the cart applies the requested voltages."""
 STATUS_WATCHDOG = 2
@@ -74,6 +84,7 @@ CH_APPLIED_A = 2
 CH_APPLIED_B = 3
 CH_POSITION_A = 4
 CH_POSITION_B = 5
+CH_BRIDGE_VERSION = 6
 CH_ECHO = 0
 CH_TICK = 1
 CH_STATUS = 2
@@ -86,6 +97,13 @@ def _check_counts(floats: Sequence[float], ints: Sequence[int]) -> None:
             f"GPIO has {GPIO_FLOAT_COUNT} floats and {GPIO_INT_COUNT} ints, "
             f"got {len(floats)} and {len(ints)}"
         )
+
+
+def _version(value: float) -> int:
+    """A version number from its float channel (0 for anything that is not a small whole number)."""
+    if value == value and 0.0 <= value < 1000.0 and float(int(value)) == value:
+        return int(value)
+    return 0
 
 
 def next_seq(seq: int) -> int:
@@ -162,6 +180,8 @@ class CartSample:
     host_frames_lost
         Host sequence numbers the cart skipped since it booted (modulo 32768; 0 from a bridge
         sketch that predates the count).
+    bridge_version
+        The bridge sketch's version (float 6): :data:`BRIDGE_VERSION`, or 0 from an older one.
     """
 
     time_ms: int
@@ -176,6 +196,7 @@ class CartSample:
     driving: bool
     watchdog_tripped: bool
     host_frames_lost: int = 0
+    bridge_version: int = 0
 
     @property
     def status(self) -> int:
@@ -194,6 +215,7 @@ class CartSample:
         floats[CH_APPLIED_B] = float(self.applied_b_v)
         floats[CH_POSITION_A] = float(self.position_a_rad)
         floats[CH_POSITION_B] = float(self.position_b_rad)
+        floats[CH_BRIDGE_VERSION] = float(self.bridge_version)
         ints[CH_ECHO] = self.echo_seq
         ints[CH_TICK] = self.cart_tick
         ints[CH_STATUS] = self.status
@@ -219,4 +241,5 @@ class CartSample:
             driving=bool(status & STATUS_DRIVING),
             watchdog_tripped=bool(status & STATUS_WATCHDOG),
             host_frames_lost=ints[CH_HOST_LOST] % SEQ_MODULO,
+            bridge_version=_version(floats[CH_BRIDGE_VERSION]),
         )

@@ -3,19 +3,22 @@
 The sketch on the cart and this class implement one contract (``docs/serial-protocol.md``), and a
 test runs both on the same input and compares them tick by tick, so keep them in sync.
 
-The sketch drains the serial port every 1 ms from its own microOS thread and once more right
-before each ``control()``; after each drain it hands the channels microOS holds from the host's last
-GPIO to :meth:`BridgeFirmware.receive`, with the time. Every 10 ms microOS runs ``io()`` (writes
-the voltage stored at the previous tick, reads the encoders), then ``control()``, which is
-:meth:`BridgeFirmware.control`:
+Bridge version 2. The sketch's 10 ms thread drains the serial port, runs ``io()`` (writes the
+stored voltage, reads the encoders), then ``control()``, which is :meth:`BridgeFirmware.control`,
+and sends one GPIO; its 1 ms thread drains as well. After each drain the sketch hands the channels
+microOS holds from the host's last GPIO to :meth:`BridgeFirmware.receive`, with the time, and
+stores :attr:`BridgeFirmware.command_v` as the voltage of the next ``io()``: the host's newest
+command acts there, one tick after the measurement it answers.
 
 - the requested voltages (float channels 0 and 1) are applied while drive (int channel 1) is 1 and
   the host sequence number (int channel 0) keeps changing (a request that is not a finite number
-  counts as 0 V); when no new sequence number has arrived for :data:`WATCHDOG_MS` at a
-  ``control()``, the watchdog trips and the cart applies zero volts until a new one arrives;
+  counts as 0 V); when no new sequence number has arrived for :data:`WATCHDOG_MS` (checked at
+  every drain and every ``control()``), the watchdog trips and the cart applies zero volts until a
+  new one arrives;
 - out go the measured speeds, the voltages on the H-bridges at this tick, the wheel positions, the
-  echo of the held sequence number, a tick counter, the status bits and the count of host
-  sequence numbers the cart never saw (frames lost on the way in).
+  bridge's version (float 6), the echo (the sequence number of the command ``io()`` applied at
+  this tick), a tick counter, the status bits and the count of host sequence numbers the cart
+  never saw (frames lost on the way in).
 """
 
 from __future__ import annotations
@@ -24,8 +27,15 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from cartctl.link.bridge import (
+    BRIDGE_VERSION,
+    CH_BRIDGE_VERSION,
+    SEQ_WINDOW,
+    STATUS_DRIVING,
+    STATUS_WATCHDOG,
+    WATCHDOG_MS,
+)
 from cartctl.link.bridge import SEQ_MODULO as TICK_MODULO
-from cartctl.link.bridge import SEQ_WINDOW, STATUS_DRIVING, STATUS_WATCHDOG, WATCHDOG_MS
 from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT
 
 __all__ = ["STATUS_DRIVING", "STATUS_WATCHDOG", "TICK_MODULO", "WATCHDOG_MS", "BridgeFirmware",
@@ -89,6 +99,26 @@ class BridgeFirmware(HeldChannels):
         self._seen = False
         self.frames_lost = 0
         """Host sequence numbers skipped since power-on (modulo 32768)."""
+        self.driving = False
+        self.tripped = True
+        self.command_v: tuple[float, float] = (0.0, 0.0)
+        """What the next ``io()`` applies (V), as decided at the last drain or ``control()``."""
+        self.command_seq = 0
+        """The host sequence number :attr:`command_v` came with."""
+
+    def _decide(self, now_ms: int) -> None:
+        """What the next ``io()`` applies, from the held channels and the watchdog at ``now_ms``."""
+        age_ms = ((int(now_ms) & 0xFFFFFFFF) - self._last_new_ms) & 0xFFFFFFFF
+        self.tripped = not self._seen or age_ms >= WATCHDOG_MS
+        self.driving = self.in_ints[1] == 1 and not self.tripped
+        if self.driving:
+            self.command_v = (
+                _finite_or_zero(self.in_floats[0]),
+                _finite_or_zero(self.in_floats[1]),
+            )
+        else:
+            self.command_v = (0.0, 0.0)
+        self.command_seq = self.in_ints[0]
 
     def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int) -> None:
         """After a drain: the held channels from the host's last GPIO, seen at ``now_ms``.
@@ -99,27 +129,30 @@ class BridgeFirmware(HeldChannels):
         """
         self.hold(floats, ints)
         seq = self.in_ints[0]
-        if seq == self._last_seq:
-            return
-        step = (seq - self._last_seq) % TICK_MODULO
-        if self._seen and step <= SEQ_WINDOW:
-            self.frames_lost = (self.frames_lost + step - 1) % TICK_MODULO
-        self._last_seq = seq
-        self._last_new_ms = int(now_ms) & 0xFFFFFFFF
-        self._seen = True
+        if seq != self._last_seq:
+            step = (seq - self._last_seq) % TICK_MODULO
+            if self._seen and step <= SEQ_WINDOW:
+                self.frames_lost = (self.frames_lost + step - 1) % TICK_MODULO
+            self._last_seq = seq
+            self._last_new_ms = int(now_ms) & 0xFFFFFFFF
+            self._seen = True
+        self._decide(now_ms)
 
     def control(self, io: CartIO, now_ms: int) -> tuple[float, float]:
-        """One ``control()`` at ``now_ms``: returns the voltages (V) for the next tick's ``io()``."""
-        age_ms = ((int(now_ms) & 0xFFFFFFFF) - self._last_new_ms) & 0xFFFFFFFF
-        tripped = not self._seen or age_ms >= WATCHDOG_MS
-        driving = self.in_ints[1] == 1 and not tripped
-        voltage_a = _finite_or_zero(self.in_floats[0]) if driving else 0.0
-        voltage_b = _finite_or_zero(self.in_floats[1]) if driving else 0.0
+        """One ``control()`` at ``now_ms``, after ``io()`` applied :attr:`command_v`.
+
+        Fills the output channels (the echo is the applied command's sequence number), checks the
+        watchdog again, and returns the voltages (V) for the next ``io()`` (a later drain may
+        replace them with a newer command's).
+        """
+        applied_seq = self.command_seq  # nothing drains between io() and control()
+        self._decide(now_ms)
         self.out_floats = [
             io.speed_a_rad_s, io.speed_b_rad_s, io.applied_a_v, io.applied_b_v,
             io.position_a_rad, io.position_b_rad, 0.0, 0.0,
         ]  # fmt: skip
-        status = (STATUS_DRIVING if driving else 0) | (STATUS_WATCHDOG if tripped else 0)
-        self.out_ints = [self.in_ints[0], self.tick, status, self.frames_lost]
+        self.out_floats[CH_BRIDGE_VERSION] = float(BRIDGE_VERSION)
+        status = (STATUS_DRIVING if self.driving else 0) | (STATUS_WATCHDOG if self.tripped else 0)
+        self.out_ints = [applied_seq, self.tick, status, self.frames_lost]
         self.tick = (self.tick + 1) % TICK_MODULO
-        return voltage_a, voltage_b
+        return self.command_v

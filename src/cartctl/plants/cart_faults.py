@@ -1,7 +1,7 @@
-"""The faults a virtual cart can inject, and the receive schedules its firmware can follow.
+"""The options of a virtual cart: its firmware, its timing, and the faults it can inject.
 
 ``--plant virtual:KEY=VALUE,...`` and ``cartctl virtual-cart --faults`` parse into
-:class:`CartFaults`; :class:`~cartctl.plants.virtual_cart.VirtualCart` injects them.
+:class:`CartFaults`; :class:`~cartctl.plants.virtual_cart.VirtualCart` follows them.
 """
 
 from __future__ import annotations
@@ -39,8 +39,18 @@ class CartFaults:
     reply_jitter_ms : float
         Each write of the host reaches the line a random 0 .. this many ms late.
     receive : str
-        'bridge' (the bridge sketch drains the port every 1 ms and before control()) or
+        'bridge' (the bridge sketch drains the port every 1 ms and before io()) or
         'microos' (microOS's communication thread alone, once per tick: the sketch before).
+    bridge : int
+        The bridge sketch's version: 2 (1 Mbaud, the newest command at the next io(): loop delay
+        1) or 1 (115200 baud, the voltage stored at control(): loop delay 3), to see how cartctl
+        meets a cart that still runs the older sketch.
+    usb : bool
+        Model the Mega's ATmega16U2 USB bridge (the cart's frames reach the PC up to ~5 ms late,
+        the PC's within 1 ms); ``usb=off`` is a bare pseudo-terminal.
+    actuation_ms : float or None
+        When a command lands after its tick in the simulated wheels (ms, (0, 10]); None: the
+        preset's calibrated 3 ms.
     """
 
     garbage: float = 0.0
@@ -50,8 +60,12 @@ class CartFaults:
     generation: str = "a"
     reply_jitter_ms: float = 0.0
     receive: str = "bridge"
+    bridge: int = 2
+    usb: bool = True
+    actuation_ms: float | None = None
 
-    KEYS = ("garbage", "corrupt", "stall", "pull", "generation", "reply_jitter_ms", "receive")
+    KEYS = ("garbage", "corrupt", "stall", "pull", "generation", "reply_jitter_ms", "receive",
+            "bridge", "usb", "actuation_ms")  # fmt: skip
 
     def __post_init__(self) -> None:
         for name in ("garbage", "corrupt"):
@@ -68,6 +82,12 @@ class CartFaults:
             raise InputError(
                 f"fault 'reply_jitter_ms' must be in [0, 1000] ms, got {self.reply_jitter_ms}"
             )
+        if self.bridge not in (1, 2):
+            raise InputError(f"virtual cart option 'bridge' must be 1 or 2, got {self.bridge}")
+        if self.actuation_ms is not None:
+            from cartctl.plants.physics_params import check_actuation_ms
+
+            check_actuation_ms(self.actuation_ms)
         if self.receive not in RECEIVE_SCHEDULES:
             raise InputError(
                 f"receive must be one of {', '.join(RECEIVE_SCHEDULES)}, got '{self.receive}'"
@@ -78,7 +98,7 @@ class CartFaults:
         """Faults from ``key=value,...``.
 
         Keys: garbage=0.05, corrupt=0.05, stall=S, pull=S, generation=b, reply_jitter_ms=3,
-        receive=microos.
+        receive=microos, bridge=1, usb=off, actuation_ms=10.
         """
         faults = cls()
         for item in filter(None, (part.strip() for part in text.split(","))):
@@ -86,14 +106,30 @@ class CartFaults:
             key = key.strip()
             if not sep or key not in cls.KEYS:
                 raise InputError(
-                    f"bad fault '{item}'; expected key=value with key in {', '.join(cls.KEYS)}"
+                    f"bad virtual cart option '{item}'; expected key=value with key in "
+                    f"{', '.join(cls.KEYS)}"
                 )
             if key in ("generation", "receive"):
                 faults = replace(faults, **{key: value.strip().lower()})
                 continue
+            if key == "usb":
+                flag = value.strip().lower()
+                if flag not in ("on", "off"):
+                    raise InputError(f"virtual cart option 'usb' must be on or off, got '{value}'")
+                faults = replace(faults, usb=flag == "on")
+                continue
+            if key == "bridge":
+                if value.strip() not in ("1", "2"):
+                    raise InputError(f"virtual cart option 'bridge' must be 1 or 2, got '{value}'")
+                faults = replace(faults, bridge=int(value))
+                continue
             try:
                 number = float(value)
             except ValueError:
+                if key == "actuation_ms":
+                    raise InputError(
+                        f"actuation_ms needs a number of ms in (0, 10], got '{value}'"
+                    ) from None
                 raise InputError(f"fault '{key}' needs a number, got '{value}'") from None
             field = {"stall": "stall_after_s", "pull": "pull_after_s"}.get(key, key)
             faults = replace(faults, **{field: number})

@@ -18,10 +18,11 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from cartctl.cart import BAUD
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import CartctlError, InputError, PlantError
 from cartctl.link import (
+    BRIDGE_BAUD,
+    LEGACY_BAUD,
     Framer,
     GenerationBFrame,
     Gpio,
@@ -35,6 +36,9 @@ DEFAULT_SILENCE_TIMEOUT_S = 0.1
 """No GPIO for this long (10 ticks) ends a run: the cart's own watchdog trips at the same age."""
 READ_SLICE_S = 0.005
 """A read returns after the first byte, or after this long without one."""
+LEGACY_LISTEN_S = 1.5
+"""After no HEARTBEAT at the bridge's rate: how long to listen at 115200 baud (a HEARTBEAT every
+1.1 s, a GPIO every 10 ms) to tell an older firmware from no cart at all."""
 
 
 class UnsupportedCartError(CartctlError):
@@ -62,7 +66,7 @@ def print_to_stderr(line: str) -> None:
 
 
 class CartLink:
-    """A serial connection to a microOS cart (generation A, 115200 baud).
+    """A serial connection to a microOS cart (generation A; 1 Mbaud for the bridge, 115200 before).
 
     Parameters
     ----------
@@ -74,6 +78,8 @@ class CartLink:
         Receives each PRINT line of the cart (default: :func:`print_to_stderr`).
     serial_factory : callable, optional
         Opens the port (default ``serial.Serial``); for tests.
+    baud : int
+        The line's rate: the bridge's 1 Mbaud by default.
     """
 
     def __init__(
@@ -83,8 +89,10 @@ class CartLink:
         silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
         on_print: Callable[[str], None] | None = None,
         serial_factory: Callable[..., Any] | None = None,
+        baud: int = BRIDGE_BAUD,
     ) -> None:
         self.port = port
+        self.baud = int(baud)
         self.silence_timeout_s = float(silence_timeout_s)
         self.on_print = on_print or print_to_stderr
         self._factory = serial_factory
@@ -106,14 +114,14 @@ class CartLink:
     # -- opening -------------------------------------------------------------------------------
 
     def open(self) -> None:
-        """Open the port at 115200 8N1, no flow control."""
+        """Open the port at :attr:`baud` 8N1, no flow control."""
         import serial
 
         factory = self._factory or serial.Serial
         if self._factory is None and not os.path.exists(self.port):  # a typo, not a fault
             raise InputError(f"serial port {self.port} does not exist; {_ports_hint()}")
         try:
-            self._serial = factory(self.port, BAUD, timeout=READ_SLICE_S, write_timeout=0.5)
+            self._serial = factory(self.port, self.baud, timeout=READ_SLICE_S, write_timeout=0.5)
         except (OSError, serial.SerialException) as exc:
             reason = getattr(exc, "strerror", None) or str(exc)
             raise PlantError(
@@ -146,6 +154,39 @@ class CartLink:
                 self.heartbeat = message
                 return message
 
+    def wait_heartbeat_any_rate(self, timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> int:
+        """:meth:`wait_heartbeat` at :attr:`baud`; failing that, listen at 115200 baud.
+
+        Returns the rate the cart answered at (:attr:`baud` then holds it). The port stays open
+        across the change, so a real Mega is not reset again.
+
+        Raises
+        ------
+        PlantError
+            Nothing at either rate (the error of the first wait).
+        """
+        try:
+            self.wait_heartbeat(timeout_s)
+            return self.baud
+        except PlantError as first:
+            if self.baud == LEGACY_BAUD or self._serial is None:
+                raise
+            try:
+                self._serial.baudrate = LEGACY_BAUD
+                self.framer = Framer()
+                self._pending.clear()
+                deadline = time.perf_counter() + LEGACY_LISTEN_S
+                while (remaining := deadline - time.perf_counter()) > 0:
+                    message = self._next_message(remaining)
+                    if isinstance(message, (Heartbeat, Gpio)):
+                        if isinstance(message, Heartbeat):
+                            self.heartbeat = message
+                        self.baud = LEGACY_BAUD
+                        return LEGACY_BAUD
+            except (OSError, ValueError, AttributeError):
+                pass
+            raise first from None
+
     # -- the stream -----------------------------------------------------------------------------
 
     def next_gpio(self, timeout_s: float | None = None) -> tuple[Gpio, float]:
@@ -172,10 +213,17 @@ class CartLink:
             if isinstance(message, Gpio):
                 return message, time.perf_counter()
 
-    def gpio_waiting(self) -> bool:
-        """Whether another complete GPIO is already buffered (the host is behind the cart)."""
+    def gpio_waiting(self, wait_s: float = 0.0) -> bool:
+        """Whether another complete GPIO is buffered (the host is behind the cart), or arrives
+        within ``wait_s``."""
+        deadline = time.perf_counter() + wait_s
         self._poll(0.0)
-        return any(isinstance(m, Gpio) for m in self._pending)
+        while not any(isinstance(m, Gpio) for m in self._pending):
+            remaining = deadline - time.perf_counter()
+            if remaining <= 0:
+                return False
+            self._poll(remaining)
+        return True
 
     def _next_message(self, timeout_s: float) -> Message | None:
         """One decoded message, or None when ``timeout_s`` passed without one."""

@@ -1,47 +1,121 @@
-"""The cart's end of the serial line, as the virtual cart models it: line speed, receive ring, parser.
+"""The cart's end of the serial line, as the virtual cart models it: line speed, USB bridge, ring, parser.
 
-Three facts of the real cart decide whether a command from the PC arrives:
+Four facts of the real cart decide when and whether a frame arrives:
 
-- **the line**: 115200 baud 8N1 carries one byte per :data:`BYTE_TIME_S` (86.8 µs), so a 60-byte
-  GPIO frame takes 5.2 ms;
-- **the receive ring**: the Arduino core keeps what the UART received in a 64-byte ring that holds
-  :data:`RX_RING_BYTES` (63) bytes; a byte that arrives while it is full is dropped. Nothing
-  empties it but a *drain*: a call of microOS's communicator ``receive()``, which reads every
-  waiting byte;
+- **the line**: 8N1 carries one byte per ten bit times: 10 µs at the bridge's 1 Mbaud (a 60-byte
+  GPIO frame in 0.6 ms), 86.8 µs at the course firmware's 115200 baud (5.2 ms);
+- **the Mega's USB bridge** (an ATmega16U2 running Arduino's usbserial firmware): bytes the cart
+  sends wait in its buffer until its 4.096 ms flush timer (Timer0 at 16 MHz / 256 / 256)
+  overflows, or until more than 96 of them wait; the PC then collects them in the next 1 ms USB
+  frame. So a cart frame reaches the PC up to about 5 ms after its last byte left the AVR
+  (:class:`UsbBridge`). The PC's bytes reach the line at the next USB frame (within 1 ms). A
+  pseudo-terminal shows none of this;
+- **the receive ring**: the Arduino core keeps what the UART received in a ring that holds one
+  byte less than its size (63 bytes by default; the bridge is built with 256, so 255); a byte
+  that arrives while it is full is dropped. Nothing empties it but a *drain*: a call of
+  microOS's communicator ``receive()``, which reads every waiting byte;
 - **the parser**: microOS's MAVLink parser reads a frame by its length byte. A frame with bytes
   missing swallows the start of the next one, fails its checksum and is dropped whole; the
   parser does not go back to look for a frame inside it.
 
 :class:`LineReader` and :class:`PacedWriter` are the pseudo-terminal's two directions at line speed
-(a pseudo-terminal delivers at once); :func:`fill_ring` and :class:`MicroosParser` are the pure
-part, used at each drain.
+(a pseudo-terminal delivers at once); :func:`fill_ring`, :class:`UsbBridge` and
+:class:`MicroosParser` are the pure part.
 """
 
 from __future__ import annotations
 
 import collections
+import math
 import os
 import queue
 import random
 import select
 import threading
 import time
+from collections.abc import Iterable
 
-from cartctl.cart import BAUD
 from cartctl.link import Framer, Gpio
+from cartctl.link.bridge import LEGACY_BAUD
 from cartctl.link.dialect import STX_V1
 
-BYTE_TIME_S = 10.0 / BAUD
-"""One byte of 8N1 on the line (s): 86.8 µs."""
+BYTE_TIME_S = 10.0 / LEGACY_BAUD
+"""One byte of 8N1 at 115200 baud (s): 86.8 µs."""
 RX_RING_BYTES = 63
-"""What the ATmega2560's serial receive ring holds (the Arduino core's 64-byte buffer)."""
+"""What the ATmega2560's serial receive ring holds with the Arduino core's 64-byte buffer."""
+BRIDGE_RX_RING_BYTES = 255
+"""What it holds in the bridge, built with ``-DSERIAL_RX_BUFFER_SIZE=256``."""
+USB_FLUSH_PERIOD_S = 256 * 256 / 16e6
+"""The ATmega16U2's flush timer: Timer0 overflows every 4.096 ms."""
+USB_FLUSH_BYTES = 96
+"""The ATmega16U2 also flushes once more than this many bytes wait (3/4 of its 128-byte ring)."""
+USB_FRAME_S = 0.001
+"""A full-speed USB frame: the PC collects the bridge's bytes at the next one."""
+
+
+def byte_time_s(baud: int) -> float:
+    """One byte of 8N1 at ``baud`` (s)."""
+    return 10.0 / float(baud)
+
+
+class UsbBridge:
+    """When the cart's bytes reach the PC through the Mega's ATmega16U2 (pure; times in s).
+
+    Parameters
+    ----------
+    flush_phase_s, frame_phase_s : float
+        Where the 16U2's flush timer and the PC's USB frames fall on the time axis (a real board
+        has some fixed offset; the virtual cart draws one at random).
+    """
+
+    def __init__(self, flush_phase_s: float = 0.0, frame_phase_s: float = 0.0) -> None:
+        self.flush_phase_s = float(flush_phase_s)
+        self.frame_phase_s = float(frame_phase_s)
+        self._waiting: list[tuple[float, int]] = []  # (through the AVR's UART, byte)
+
+    def _next_flush(self, t: float) -> float:
+        n = math.ceil((t - self.flush_phase_s) / USB_FLUSH_PERIOD_S - 1e-12)
+        return self.flush_phase_s + n * USB_FLUSH_PERIOD_S
+
+    def _collected(self, t: float) -> float:
+        n = math.ceil((t - self.frame_phase_s) / USB_FRAME_S - 1e-12)
+        return self.frame_phase_s + n * USB_FRAME_S
+
+    def feed(self, byte_times: Iterable[tuple[float, int]]) -> list[tuple[float, bytes]]:
+        """Bytes through the AVR's UART at the given times, in order; returns ``(at_pc_s, data)``
+        for every flush they complete (the rest wait for :meth:`flush_due`)."""
+        out: list[tuple[float, bytes]] = []
+        for t, byte in byte_times:
+            if self._waiting and self._next_flush(self._waiting[0][0]) <= t:
+                out.append(self._flush(self._next_flush(self._waiting[0][0])))
+            self._waiting.append((t, byte))
+            if len(self._waiting) > USB_FLUSH_BYTES:
+                out.append(self._flush(t))
+        return out
+
+    @property
+    def pending_flush_s(self) -> float | None:
+        """When the bytes waiting now go out (their timer overflow), None when none wait."""
+        return self._next_flush(self._waiting[0][0]) if self._waiting else None
+
+    def flush_due(self, now_s: float) -> list[tuple[float, bytes]]:
+        """The waiting bytes, if their flush is due by ``now_s``."""
+        due = self.pending_flush_s
+        return [self._flush(due)] if due is not None and due <= now_s else []
+
+    def _flush(self, at_s: float) -> tuple[float, bytes]:
+        data = bytes(byte for _, byte in self._waiting)
+        self._waiting = []
+        return self._collected(at_s), data
+
+
 _V1_OVERHEAD_AFTER_LEN = 4 + 2  # SEQ SYSID COMPID MSGID, then the two CRC bytes
 
 
-def fill_ring(arrived: bytes) -> tuple[bytes, int]:
+def fill_ring(arrived: bytes, capacity: int = RX_RING_BYTES) -> tuple[bytes, int]:
     """What a drain finds of the bytes that arrived since the previous drain.
 
-    The ring keeps the first :data:`RX_RING_BYTES`; later ones are dropped, as the Arduino core
+    The ring keeps the first ``capacity`` bytes; later ones are dropped, as the Arduino core
     drops a byte that finds the ring full.
 
     Returns
@@ -50,9 +124,9 @@ def fill_ring(arrived: bytes) -> tuple[bytes, int]:
     dropped : int
         How many bytes were dropped.
     """
-    if len(arrived) <= RX_RING_BYTES:
+    if len(arrived) <= capacity:
         return arrived, 0
-    return arrived[:RX_RING_BYTES], len(arrived) - RX_RING_BYTES
+    return arrived[:capacity], len(arrived) - capacity
 
 
 class MicroosParser:
@@ -103,48 +177,90 @@ class MicroosParser:
 
 
 class PacedWriter(threading.Thread):
-    """Writes queued bytes to the pty master no faster than the line carries them.
+    """Writes queued bytes to the pty master when the line (and the USB bridge) would deliver them.
 
-    Each item is ``(not_before_s, data)``: the bytes leave at ``time.perf_counter()`` no earlier
-    than ``not_before_s`` (when the cart's communication thread sends them).
+    Each item is ``(not_before_s, data)``: the bytes go on the line at ``time.perf_counter()`` no
+    earlier than ``not_before_s`` (when the cart sends them), one per ``byte_s``. Without ``usb``
+    each item reaches the pty once its last byte is through; with it, :class:`UsbBridge` decides.
+
+    Attributes
+    ----------
+    deliveries : collections.deque
+        ``(through_uart_s, at_pc_s)`` of recent items' last bytes: how late the PC got them.
     """
 
-    CHUNK_BYTES = 8  # ~0.7 ms of line time per write
-
-    def __init__(self, fd: int, stop: threading.Event) -> None:
+    def __init__(
+        self,
+        fd: int,
+        stop: threading.Event,
+        *,
+        byte_s: float = BYTE_TIME_S,
+        usb: UsbBridge | None = None,
+    ) -> None:
         super().__init__(name="virtual-cart-writer", daemon=True)
         self.fd = fd
         self.stop_event = stop
+        self.byte_s = float(byte_s)
+        self.usb = usb
         self.queue: queue.SimpleQueue[tuple[float, bytes]] = queue.SimpleQueue()
         self.dropped_bytes = 0
+        self.deliveries: collections.deque[tuple[float, float]] = collections.deque(maxlen=4096)
         self._line_free_s = 0.0
+        self._out: collections.deque[tuple[float, bytes]] = collections.deque()
+        self.garble = False
+        """True while the host's port runs at another rate: the PC reads noise, not frames."""
 
     def put(self, data: bytes, not_before_s: float = 0.0) -> None:
         """Queue ``data`` to leave no earlier than ``not_before_s``."""
         self.queue.put((not_before_s, data))
 
+    def _take(self, not_before_s: float, data: bytes) -> None:
+        start = max(not_before_s, self._line_free_s)
+        end = start + len(data) * self.byte_s
+        self._line_free_s = end
+        if self.usb is None:
+            self._out.append((end, data))
+            self.deliveries.append((end, end))
+            return
+        times = [(start + (i + 1) * self.byte_s, b) for i, b in enumerate(data)]
+        for at_s, chunk in self.usb.feed(times):
+            self._out.append((at_s, chunk))
+        if self.usb.pending_flush_s is None:
+            self.deliveries.append((end, self._out[-1][0]))
+        else:
+            self.deliveries.append((end, self.usb._collected(self.usb.pending_flush_s)))
+
     def run(self) -> None:
         while not self.stop_event.is_set():
-            try:
-                not_before_s, data = self.queue.get(timeout=0.05)
-            except queue.Empty:
-                continue
-            start = max(time.perf_counter(), self._line_free_s, not_before_s)
-            for offset in range(0, len(data), self.CHUNK_BYTES):
-                chunk = data[offset : offset + self.CHUNK_BYTES]
-                due = start + (offset + len(chunk)) * BYTE_TIME_S
-                delay = due - time.perf_counter()
-                if delay > 0:
-                    time.sleep(delay)
-                if self.stop_event.is_set():
-                    return
+            now = time.perf_counter()
+            if self.usb is not None:
+                self._out.extend(self.usb.flush_due(now))
+            while self._out and self._out[0][0] <= now:
+                _, data = self._out.popleft()
+                if self.garble:
+                    data = bytes(random.getrandbits(8) for _ in data)
                 try:
-                    os.write(self.fd, chunk)
+                    os.write(self.fd, data)
                 except BlockingIOError:  # nobody reads the port: the bytes are lost, as on a UART
-                    self.dropped_bytes += len(chunk)
+                    self.dropped_bytes += len(data)
                 except OSError:
                     return
-            self._line_free_s = start + len(data) * BYTE_TIME_S
+            wake = [
+                t
+                for t in (
+                    self._out[0][0] if self._out else None,
+                    self.usb.pending_flush_s if self.usb else None,
+                )
+                if t is not None
+            ]
+            wait = min(0.05, *(t - now for t in wake)) if wake else 0.05
+            try:
+                item = (
+                    self.queue.get(timeout=max(wait, 0.0)) if wait > 0 else self.queue.get_nowait()
+                )
+            except queue.Empty:
+                continue
+            self._take(*item)
 
 
 class LineReader(threading.Thread):
@@ -160,6 +276,11 @@ class LineReader(threading.Thread):
         the line: a host whose replies come late by varying amounts.
     seed : int, optional
         Seeds the jitter.
+    byte_s : float
+        One byte on the line (s).
+    usb_frame_phase_s : float or None
+        With the Mega's USB bridge: a write goes on the line at the next 1 ms USB frame (on this
+        phase); None: at once (a pseudo-terminal).
     """
 
     def __init__(
@@ -169,8 +290,14 @@ class LineReader(threading.Thread):
         *,
         reply_jitter_s: float = 0.0,
         seed: int | None = None,
+        byte_s: float = BYTE_TIME_S,
+        usb_frame_phase_s: float | None = None,
     ) -> None:
         super().__init__(name="virtual-cart-reader", daemon=True)
+        self.byte_s = float(byte_s)
+        self.usb_frame_phase_s = usb_frame_phase_s
+        self.garble = False
+        """True while the host's port runs at another rate: the cart parses noise, not frames."""
         self.fd = fd
         self.stop_event = stop
         self.reply_jitter_s = float(reply_jitter_s)
@@ -195,6 +322,11 @@ class LineReader(threading.Thread):
             now = time.perf_counter()
             if self.reply_jitter_s > 0.0:
                 now += self._rng.uniform(0.0, self.reply_jitter_s)
+            if self.usb_frame_phase_s is not None:
+                phase = self.usb_frame_phase_s
+                now = phase + math.ceil((now - phase) / USB_FRAME_S) * USB_FRAME_S
+            if self.garble:
+                data = bytes(self._rng.getrandbits(8) for _ in data)
             self.deliver(data, now)
 
     def deliver(self, data: bytes, written_s: float) -> None:
@@ -202,8 +334,8 @@ class LineReader(threading.Thread):
         start = max(written_s, self._line_free_s)
         with self._lock:
             for i, byte in enumerate(data):
-                self._arrived.append((start + (i + 1) * BYTE_TIME_S, byte))
-            self._line_free_s = start + len(data) * BYTE_TIME_S
+                self._arrived.append((start + (i + 1) * self.byte_s, byte))
+            self._line_free_s = start + len(data) * self.byte_s
             self.last_byte_at_s = self._line_free_s
 
     def take(self, until_s: float) -> bytes:

@@ -2,18 +2,21 @@
 
 The loop is clocked by the cart: each GPIO the cart sends (every 10 ms) is one tick. The host
 answers each with the full channel vector of the bridge contract (``docs/serial-protocol.md``):
-voltages A and B, drive = 1 and a sequence number that increases by one per frame. The cart echoes
-the last sequence number it received; from that echo the plant measures the loop delay::
+voltages A and B, drive = 1 and a sequence number that increases by one per frame. The bridge
+(version 2) writes the newest command as the voltage of its next ``io()`` and echoes the sequence
+number of the command each ``io()`` applied; from that echo the plant measures the loop delay::
 
-    tick k      the cart measures, sends GPIO k (5.2 ms on the line)
-    host        computes from GPIO k, sends command s (5.2 ms on the line)
-    tick k+E    the first GPIO echoing s: control() of that tick read s and stored its voltage
-    tick k+E+1  io() puts the voltage on the motor
+    tick k      the cart measures, sends GPIO k (0.6 ms on the line at 1 Mbaud, then the USB bridge)
+    host        computes from GPIO k, sends command s
+    tick k+E    io() put s's voltage on the motor: the first GPIO that echoes s
 
-so the loop delay from measurement to applied voltage is E + 1 ticks (1 for the cart's on-board
-control, the report's "microOS delay"; 3 for this loop with the bridge sketch of ``firmware/``),
-and a model of the loop has an input delay of ``nk = loop_delay_ticks + 1`` (2 on board, as in
-the report).
+so the loop delay from measurement to applied voltage is E ticks: 1 when the reply reaches the cart
+within the tick, as on-board control (the report's "microOS delay"). A model of the loop has an
+input delay of ``nk = loop_delay_ticks + 1`` (2, as in the report).
+
+The port opens at 1 Mbaud. A cart that answers only at 115200 baud (the course's firmware, or a
+bridge before version 2), or that sends another bridge version, is refused with one line naming
+the sketch to flash (:class:`~cartctl.plants.cart_link.UnsupportedCartError`).
 
 Faults are counted, not fatal: CRC errors and garbage are skipped by the framer, missing cart ticks
 are counted, and so are the host's frames the cart never saw (the bridge counts the sequence
@@ -27,22 +30,43 @@ from __future__ import annotations
 import collections
 import contextlib
 import statistics
+import time
 from collections.abc import Callable
 from typing import Any
 
 from cartctl.cart import PERIOD_S
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import PlantError
-from cartctl.link import CartSample, Encoder, Gpio, HostCommand, next_seq, tick_difference
+from cartctl.link import (
+    BRIDGE_BAUD,
+    BRIDGE_VERSION,
+    CartSample,
+    Encoder,
+    Gpio,
+    HostCommand,
+    next_seq,
+    tick_difference,
+)
 from cartctl.plants.base import Measurement
-from cartctl.plants.cart_link import DEFAULT_SILENCE_TIMEOUT_S, CartLink
+from cartctl.plants.cart_link import (
+    DEFAULT_SILENCE_TIMEOUT_S,
+    CartLink,
+    UnsupportedCartError,
+)
 
 STOP_FRAMES = 3
 """drive = 0 frames sent on close (one may be lost to line noise)."""
-PROBE_ECHOES = 3
+PROBE_ECHOES = 20
 """Echoes :meth:`SerialCart.measure_loop_delay` waits for (the most frequent delay counts)."""
-PROBE_MAX_TICKS = 50
-"""Longest :meth:`SerialCart.measure_loop_delay` waits for them (ticks, 0.5 s)."""
+PROBE_MAX_TICKS = 100
+"""Longest :meth:`SerialCart.measure_loop_delay` waits for them (ticks, 1 s)."""
+BACKLOG_WAIT_S = 0.006
+"""A GPIO that follows the one :meth:`SerialCart.reset` took within this long is a backlog (the
+cart's frames come 10 ms apart, give or take the USB bridge's 5 ms), not the next tick."""
+FLASH_HINT = (
+    f"flash firmware/cartctl_bridge (bridge version {BRIDGE_VERSION}, 1 Mbaud; see "
+    "firmware/README.md)"
+)
 
 
 class SerialCart:
@@ -96,6 +120,9 @@ class SerialCart:
         """Frames sent since the last :meth:`reset` (the stop frames of :meth:`close` excluded)."""
         self._lost_base = 0
         self._sent_any = False
+        self.reply_latency_s: collections.deque[float] = collections.deque(maxlen=1 << 20)
+        """Per tick of the run: from the cart's frame decoded to the host's reply written (s)."""
+        self.time_source: Callable[[], float] = time.perf_counter
 
     # -- connecting -----------------------------------------------------------------------------
 
@@ -106,7 +133,13 @@ class SerialCart:
         self.link.open()
         self._port_opened()
         try:
-            self.link.wait_heartbeat(self.connect_timeout_s)
+            baud = self.link.wait_heartbeat_any_rate(self.connect_timeout_s)
+            if baud != BRIDGE_BAUD:
+                raise UnsupportedCartError(
+                    f"the cart on {self.port} answers at {baud} baud: it runs the course's "
+                    f"firmware or a cartctl bridge older than version {BRIDGE_VERSION}; "
+                    f"{FLASH_HINT}"
+                )
         except BaseException:
             self.link.close()
             raise
@@ -123,7 +156,16 @@ class SerialCart:
         while self.link.gpio_waiting():  # stale ticks from before the run
             self.link.next_gpio()
         gpio, arrival = self.link.next_gpio(max(self.link.silence_timeout_s, 0.5))
+        # a backlog still coming in (the port's reader was held up) is not a fresh tick: answering
+        # it would put two replies into one tick of the cart, and one of them would be lost
+        while self.link.gpio_waiting(wait_s=BACKLOG_WAIT_S):
+            gpio, arrival = self.link.next_gpio()
         sample = CartSample.from_gpio(gpio)
+        if sample.bridge_version != BRIDGE_VERSION:
+            raise UnsupportedCartError(
+                f"the cart on {self.port} runs bridge version {sample.bridge_version or 'before 2'}"
+                f", cartctl needs {BRIDGE_VERSION}; {FLASH_HINT}"
+            )
         self.sample, self.arrival_s, self.tick_index = sample, arrival, 0
         if not self._sent_any:  # differs from what the cart holds: counts as new, none lost
             self._seq = next_seq(sample.echo_seq)
@@ -131,12 +173,14 @@ class SerialCart:
         self._sent_at.clear()
         self._lost_base = sample.host_frames_lost
         self.frames_sent = 0
+        self.reply_latency_s.clear()
         return Measurement(sample.speed_a_rad_s, sample.speed_b_rad_s)
 
     def send(self, voltage_a_v: float, voltage_b_v: float, *, drive: bool = True) -> None:
         """Send the channel vector for this tick (voltages, sequence number, drive)."""
         self._send(voltage_a_v, voltage_b_v, drive)
         self.frames_sent += 1
+        self.reply_latency_s.append(self.time_source() - self.arrival_s)
 
     def _send(self, voltage_a_v: float, voltage_b_v: float, drive: bool) -> None:
         if self.link.vanished:
@@ -241,9 +285,9 @@ class SerialCart:
 
     @property
     def loop_delay_ticks(self) -> int | None:
-        """Ticks from a measurement to the tick its voltage is on the motor: E + 1."""
-        echo = self.echo_delay_ticks
-        return None if echo is None else echo + 1
+        """Ticks from a measurement to the tick its voltage is on the motor: E (the bridge echoes
+        what ``io()`` applied)."""
+        return self.echo_delay_ticks
 
     @property
     def host_frames_lost(self) -> int:
@@ -261,6 +305,15 @@ class SerialCart:
         stats = self.link.stats
         delays = list(self.echo_delays.elements())
         lost, sent = self.host_frames_lost, self.frames_sent
+        latency_us = sorted(1e6 * v for v in self.reply_latency_s)
+
+        def pick(q: float) -> float | None:
+            return (
+                latency_us[min(len(latency_us) - 1, int(q * len(latency_us)))]
+                if latency_us
+                else None
+            )
+
         return {
             "loop_delay_ticks": self.loop_delay_ticks,
             "link": {
@@ -279,5 +332,10 @@ class SerialCart:
                 "host_frames_sent": sent,
                 "host_frames_lost": lost,
                 "host_frames_lost_percent": 100.0 * lost / sent if sent else 0.0,
+                "reply_latency_us": {
+                    "p50": pick(0.5),
+                    "p99": pick(0.99),
+                    "max": latency_us[-1] if latency_us else None,
+                },
             },
         }

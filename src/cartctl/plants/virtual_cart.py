@@ -4,28 +4,33 @@
 one inside the process and drives it through :class:`~cartctl.plants.serial_cart.SerialCart`, so the
 real serial code path (pyserial, framing, the bridge contract, the faults) runs with no hardware.
 
-It keeps the firmware's schedule within each 10 ms tick (``docs/serial-protocol.md``)::
+It keeps the firmware's schedule within each 10 ms tick (``docs/serial-protocol.md``). The bridge
+sketch (version 2, the default)::
 
-    0 ms       io(): the physics advances one tick under the voltage stored at the previous
-               tick, and the encoders are read; the bridge drains the serial port and hands the
-               held channels over; then control(): the bridge logic
+    0 ms       drain the serial port: the host's newest command becomes the stored voltage;
+               io(): the physics advances one tick with that command landing ``actuation_ms``
+               after the previous tick, and the encoders are read; control(): the bridge logic
                (:class:`~cartctl.plants.bridge_firmware.BridgeFirmware`)
-    1.2 ms     microOS's communication thread: drains the serial port, then sends one GPIO with
-               what control() wrote (a HEARTBEAT every 1.1 s as well)
-    every ms   the bridge's own thread drains the serial port and hands the held channels over
+    1.2 ms     one GPIO out with what control() wrote (a HEARTBEAT every 1.1 s as well)
+    every ms   the bridge's own thread drains the serial port: a newer command replaces the
+               stored voltage
 
-A drain finds what arrived since the previous one, up to the Mega's 63-byte receive ring; the
-rest is dropped, and microOS's parser loses the damaged frames (:mod:`cartctl.plants.cart_uart`).
-``receive=microos`` runs the sketch as it was before its own drains: microOS's communication
-thread alone drains the port, once per tick, and ``control()`` reads what it held. Then two replies
-that reach the cart a little closer together than the tick overflow the ring.
+The line runs at 1 Mbaud and the receive ring holds 255 bytes (the sketch's build flag). The
+Mega's USB bridge is modelled (``usb=off`` turns it off): the cart's bytes reach the PC at the
+ATmega16U2's next 4.096 ms flush and the USB frame after it, the PC's at the next 1 ms USB frame
+(:mod:`cartctl.plants.cart_uart`). ``bridge=1`` runs the sketch before version 2: 115200 baud, a
+63-byte ring, microOS's communication thread 1.2 ms into the tick, a drain every 1 ms and right
+before ``control()``, and the voltage stored at ``control()`` (loop delay 3); it sends 0 as its
+version. ``receive=microos`` runs the sketch as it was before its own drains: microOS's
+communication thread alone drains the port, once per tick, and ``control()`` reads what it held.
+Then two replies that reach the cart a little closer together than the tick overflow the ring.
 
-The line's speed: 115200 baud 8N1 is 86.8 µs per byte in each direction. A pseudo-terminal
-delivers at once, so a writer thread releases outgoing bytes at that rate, and incoming bytes count
-as received only once the line could have carried them. Three threads: ticks, reader, writer. The
-drains are computed on the cart's clock (tick k starts ``k × 10 ms`` after boot), whenever the
-tick thread gets to them, so a busy host machine delays the cart's replies but not its view of
-when bytes arrived.
+A pseudo-terminal ignores the baud rate, so the writer thread releases outgoing bytes at the line's
+rate, and incoming bytes count as received only once the line could have carried them. When the
+host opens the port at another rate than the cart's, both sides read noise, as on a real line.
+Three threads: ticks, reader, writer. The drains are computed on the cart's clock (tick k starts
+``k × 10 ms`` after boot), whenever the tick thread gets to them, so a busy host machine delays
+the cart's replies but not its view of when bytes arrived.
 
 Faults (:class:`CartFaults`) are injected on the way out: garbage bursts between frames, corrupted
 frames, a stall (the cart stops ticking and sending, the port stays open) and a pulled cable (the
@@ -39,6 +44,7 @@ import contextlib
 import math
 import os
 import random
+import termios
 import threading
 import time
 import tty
@@ -46,18 +52,33 @@ from collections.abc import Sequence
 from typing import Any, Protocol
 
 from cartctl.link import Encoder, encode_gpiox_v2
+from cartctl.link.bridge import BRIDGE_BAUD, CH_BRIDGE_VERSION, LEGACY_BAUD
 from cartctl.plants.base import Measurement
 from cartctl.plants.bridge_firmware import TICK_MODULO, BridgeFirmware, CartIO
 from cartctl.plants.cart_faults import RECEIVE_SCHEDULES, CartFaults
-from cartctl.plants.cart_uart import LineReader, MicroosParser, PacedWriter, fill_ring
+from cartctl.plants.cart_uart import (
+    BRIDGE_RX_RING_BYTES,
+    RX_RING_BYTES,
+    USB_FLUSH_PERIOD_S,
+    USB_FRAME_S,
+    LineReader,
+    MicroosParser,
+    PacedWriter,
+    UsbBridge,
+    byte_time_s,
+    fill_ring,
+)
 from cartctl.plants.physics import PhysicsPlant
 from cartctl.plants.serial_cart import SerialCart
 
 HEARTBEAT_PERIOD_S = 1.1
 READY_TEXT = "cartctl bridge ready"
 COMM_PHASE_US = 1200
-"""microOS's communication thread runs this long (µs) after the tick starts: io() and control()
-take 1.2 ms on the Mega."""
+"""The cart's GPIO goes out this long (µs) after the tick starts: io() and control() take 1.2 ms
+on the Mega (then the bridge sends it; before version 2, microOS's communication thread did)."""
+_TERMIOS_SPEED = {getattr(termios, f"B{rate}"): rate for rate in (9600, 19200, 38400, 57600,
+                  115200, 230400, 250000, 460800, 500000, 576000, 921600, 1000000, 2000000)
+                  if hasattr(termios, f"B{rate}")}  # fmt: skip
 
 
 class CartFirmware(Protocol):
@@ -108,22 +129,34 @@ class VirtualCart:
         period_s: float = 0.01,
         firmware: CartFirmware | None = None,
     ) -> None:
-        self.physics = PhysicsPlant(preset, noise_std_rad_s=noise_std_rad_s, seed=seed)
-        self.preset = preset
         self.faults = faults or CartFaults()
+        self.physics = PhysicsPlant(preset, noise_std_rad_s=noise_std_rad_s, seed=seed,
+                                    actuation_ms=self.faults.actuation_ms)  # fmt: skip
+        self.preset = preset
         self.period_s = float(period_s)
         self.firmware: CartFirmware = firmware if firmware is not None else BridgeFirmware()
         self.receive_schedule = self.faults.receive if firmware is None else "microos"
+        self.bridge_version = self.faults.bridge if firmware is None else 0
+        if self.receive_schedule == "microos" and self.bridge_version == 2:
+            self.bridge_version = 1  # microOS's thread alone: the sketch before its own drains
+        """2: the bridge sketch of ``firmware/``; 1: the one before; 0: not the bridge."""
+        self.baud = BRIDGE_BAUD if self.bridge_version == 2 else LEGACY_BAUD
+        self.ring_bytes = BRIDGE_RX_RING_BYTES if self.bridge_version == 2 else RX_RING_BYTES
         self._rng = random.Random(seed)
+        usb = (UsbBridge(self._rng.uniform(0.0, USB_FLUSH_PERIOD_S),
+                         self._rng.uniform(0.0, USB_FRAME_S))
+               if self.faults.usb else None)  # fmt: skip
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)  # no echo, no line editing before the host configures the port
         os.set_blocking(self._master, False)
         self.port = os.ttyname(self._slave)
         self._stop = threading.Event()
-        self._writer = PacedWriter(self._master, self._stop)
+        self._writer = PacedWriter(self._master, self._stop, byte_s=byte_time_s(self.baud),
+                                   usb=usb)  # fmt: skip
         self._reader = LineReader(
             self._master, self._stop, reply_jitter_s=self.faults.reply_jitter_ms / 1000.0,
-            seed=None if seed is None else seed + 1,
+            seed=None if seed is None else seed + 1, byte_s=byte_time_s(self.baud),
+            usb_frame_phase_s=None if usb is None else usb.frame_phase_s,
         )  # fmt: skip
         self._parser = MicroosParser()
         self._held: tuple[list[float], list[int]] = ([0.0] * 8, [0] * 4)
@@ -219,7 +252,7 @@ class VirtualCart:
 
     def _drain(self, at_us: int, hand_over: bool) -> None:
         """A call of microOS's receive at ``at_us`` after boot; ``hand_over``: the bridge's."""
-        kept, dropped = fill_ring(self._reader.take(self.boot_s + at_us * 1e-6))
+        kept, dropped = fill_ring(self._reader.take(self.boot_s + at_us * 1e-6), self.ring_bytes)
         self.ring_dropped_bytes += dropped
         for gpio in self._parser.feed(kept):
             self._held = (list(gpio.floats), list(gpio.ints))
@@ -230,19 +263,21 @@ class VirtualCart:
             self.firmware.receive(*self._held, at_us // 1000)
 
     def receive_for_tick(self, j: int) -> None:
-        """Every drain from the previous tick's ``control()`` up to tick ``j``'s, in order.
+        """Every drain from the previous tick's ``io()`` up to tick ``j``'s, in order.
 
-        microOS's communication thread drains :data:`COMM_PHASE_US` into each tick; the bridge
-        (``receive='bridge'``) drains every 1 ms and right before ``control()``, and hands the held
-        channels over each time; otherwise ``control()`` is handed what microOS holds.
+        Bridge 2: a drain every 1 ms and one at the tick's start, right before ``io()``, each
+        handing the held channels over (the newest command becomes the stored voltage). Bridge 1:
+        microOS's communication thread drains :data:`COMM_PHASE_US` into each tick and the bridge
+        every 1 ms and right before ``control()``. ``receive='microos'``: the communication
+        thread alone, and ``control()`` is handed what microOS holds.
         """
         period_us = round(self.period_s * 1e6)
         tick_us = j * period_us
         drain_us = RECEIVE_SCHEDULES[self.receive_schedule]
         if j > 0:
             start_us = tick_us - period_us
-            drains = [(start_us + COMM_PHASE_US, False)]
-            if drain_us is not None:  # its drain at start_us came before that tick's control()
+            drains = [] if self.bridge_version == 2 else [(start_us + COMM_PHASE_US, False)]
+            if drain_us is not None:  # its drain at start_us came before that tick's io()
                 drains += [(start_us + m * drain_us, True) for m in range(1, period_us // drain_us)]
             for at_us, hand_over in sorted(drains):
                 self._drain(at_us, hand_over)
@@ -250,6 +285,15 @@ class VirtualCart:
             self._drain(tick_us, hand_over=True)
         else:
             self.firmware.receive(*self._held, tick_us // 1000)
+
+    def _host_rate_matches(self) -> bool:
+        """Whether the host opened the port at the cart's rate (else both sides read noise)."""
+        try:
+            speed = termios.tcgetattr(self._slave)[5]
+        except (OSError, termios.error):
+            return True
+        rate = _TERMIOS_SPEED.get(speed)
+        return rate is None or rate == self.baud
 
     def _run(self) -> None:
         encoder = Encoder(sysid=0, compid=0)
@@ -288,8 +332,12 @@ class VirtualCart:
                 self.fault_at_s = time.perf_counter()
                 self._stop.wait()
                 return
+            mismatch = not self._host_rate_matches()
+            self._reader.garble = self._writer.garble = mismatch
             self.receive_for_tick(j)  # on the cart's clock, whenever this thread gets here
-            # io(): the voltage stored at the previous tick drives this one; read the encoders
+            if self.bridge_version == 2:  # the newest command the drains stored
+                voltage = firmware.command_v  # type: ignore[attr-defined]
+            # io(): the stored voltage drives from actuation_ms after the previous tick; encoders
             if j > 0:
                 measurement = physics.step(*voltage)
             counts = physics.encoder_counts
@@ -306,6 +354,8 @@ class VirtualCart:
             )
             self.true_speeds.pop((tick_counter - 512) % TICK_MODULO, None)  # keep the recent ones
             voltage = firmware.control(io, tick_us // 1000)
+            if self.bridge_version == 1:  # the sketch before version 2 sends 0 there
+                firmware.out_floats[CH_BRIDGE_VERSION] = 0.0
             self.last_voltage_v = voltage
             # microOS's communication thread sends what control() wrote
             send_at = deadline + COMM_PHASE_US * 1e-6

@@ -61,6 +61,9 @@ class TuneJob:
         it (:func:`scoring_plant`).
     items : tuple of (int, dict)
         The settings: (1-based grid index, axis values).
+    design : tuple of (str, float)
+        Design request fields every setting shares (``process_noise_std_v``,
+        ``bias_drift_std_v``), beside the design command's defaults; empty: the defaults.
     """
 
     model: str
@@ -71,6 +74,7 @@ class TuneJob:
     duration_s: float
     extra_delay_ticks: int
     items: tuple[tuple[int, dict[str, float]], ...]
+    design: tuple[tuple[str, float], ...] = ()
 
 
 class DelayedPlant:
@@ -144,7 +148,7 @@ def design_setting(
 ) -> tuple[dict[str, Controller], float] | str:
     """One grid setting's runtime controller per motor and its voltage limit (V), or why a motor's
     design was refused."""
-    request = design_request(job.method, settings, job.extra_delay_ticks)
+    request = design_request(job.method, settings, job.extra_delay_ticks, dict(job.design))
     controllers: dict[str, Controller] = {}
     for m in ("a", "b"):
         try:

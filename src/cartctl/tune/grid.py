@@ -146,16 +146,21 @@ FIELDS = {"phase_margin": "phase_margin_deg", "crossover_hz": "crossover_hz",
 
 
 def design_request(
-    method: str, settings: Mapping[str, float], extra_delay_ticks: int = 0
+    method: str,
+    settings: Mapping[str, float],
+    extra_delay_ticks: int = 0,
+    fixed: Mapping[str, float] | None = None,
 ) -> DesignRequest:
-    """The design request of one setting: the design command's defaults, the setting's axes.
+    """The design request of one setting: the design command's defaults, ``fixed`` (request
+    fields every setting shares, such as ``process_noise_std_v``), the setting's axes.
 
     The tuning run designs with it and ``--choose`` writes its file with it, so both get the
     very same controller; :meth:`~cartctl.design.request.DesignRequest.to_argv` gives the
     ``cartctl design`` command that makes it.
     """
     axes = {FIELDS[a.name]: float(settings[a.name]) for a in AXES[method]}
-    return DesignRequest(method=method, extra_delay_ticks=extra_delay_ticks, **axes)
+    return DesignRequest(method=method, extra_delay_ticks=extra_delay_ticks, **dict(fixed or {}),
+                         **axes)  # fmt: skip
 
 
 def request_axes(method: str) -> tuple[str, ...]:

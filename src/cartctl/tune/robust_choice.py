@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -46,23 +46,79 @@ def mark_robust_pareto(rows: Sequence[RobustRow]) -> list[RobustRow]:
     return [replace(r, pareto=bool(f)) for r, f in zip(rows, front, strict=True)]
 
 
+@dataclass(frozen=True)
+class Limits:
+    """``--max-overshoot`` and ``--max-settling``: bounds a setting must meet to be chosen by
+    ``--choose best``, on the nominal run and (with ``--robust``) on the physics runs at every
+    actuation timing; None: no bound. The sampled plants are not bounded (their worst case ranks
+    the settings)."""
+
+    overshoot_percent: float | None = None
+    settling_time_s: float | None = None
+
+    def __bool__(self) -> bool:
+        return self.overshoot_percent is not None or self.settling_time_s is not None
+
+    def text(self) -> str:
+        """'overshoot <= 5 %, settling <= 120 ms' (the bounds given)."""
+        parts = []
+        if self.overshoot_percent is not None:
+            parts.append(f"overshoot <= {self.overshoot_percent:g} %")
+        if self.settling_time_s is not None:
+            parts.append(f"settling <= {self.settling_time_s * 1e3:g} ms")
+        return ", ".join(parts)
+
+    def met(self, figures: Sequence[tuple[float | None, float | None]]) -> bool:
+        """Every (overshoot %, settling s) within the bounds (None: not met where bounded)."""
+        for overshoot, settling in figures:
+            bounds = ((overshoot, self.overshoot_percent), (settling, self.settling_time_s))
+            for value, bound in bounds:
+                if bound is not None and (value is None or not value <= bound):
+                    return False
+        return True
+
+
+def rule_text(rule: str, limits: Limits, where: str) -> str:
+    """``rule`` with the bounds of ``limits`` (where they apply) in front of it."""
+    if not limits:
+        return rule
+    return f"among the settings with {limits.text()} {where}: {rule}"
+
+
+LIMITS_WHERE = "on the model and on the physics preset at each --actuation-ms"
+LIMITS_WHERE_NOMINAL = "on the plant (worse of motors a and b)"
+
+
 def _rounded(overshoot: float) -> float:
     return round(overshoot / CHOICE_RESOLUTION_PERCENT)
 
 
-def choose_best_robust(rows: Sequence[RobustRow]) -> RobustRow:
-    """The setting ``--choose best`` takes with ``--robust`` (:data:`CHOICE_RULE`).
+def _bounded_figures(r: RobustRow) -> list[tuple[float | None, float | None]]:
+    assert r.score is not None
+    nominal = r.score.figures
+    figures = [(nominal["overshoot_percent"]["nominal"], nominal["settling_time_s"]["nominal"])]
+    figures += [(e.get("overshoot_percent"), e.get("settling_time_s")) for e in r.score.actuation]
+    return figures
+
+
+def choose_best_robust(rows: Sequence[RobustRow], limits: Limits = Limits()) -> RobustRow:
+    """The setting ``--choose best`` takes with ``--robust`` (:data:`CHOICE_RULE`), among those
+    within ``limits`` on the model and the physics runs at each actuation timing.
 
     Raises
     ------
     InputError
-        No feasible setting settles on every plant.
+        No feasible setting settles on every plant (or none is within the limits).
     """
     candidates = [r for r in rows if r.score is not None and r.score.settles_everywhere
                   and math.isfinite(r.score.value("overshoot_percent", "worst"))]  # fmt: skip
     if not candidates:
         raise InputError("--choose best: no feasible setting settles on every sampled plant "
                          "and physics run; widen the grid or pick one with --choose N")  # fmt: skip
+    candidates = [r for r in candidates if limits.met(_bounded_figures(r))]
+    if not candidates:
+        raise InputError(f"--choose best: no setting that settles everywhere has "
+                         f"{limits.text()} {LIMITS_WHERE}; widen the grid or the limits")  # fmt: skip
 
     def key(r: RobustRow) -> tuple[float, float, int]:
         assert r.score is not None
@@ -73,19 +129,25 @@ def choose_best_robust(rows: Sequence[RobustRow]) -> RobustRow:
     return min(candidates, key=key)
 
 
-def choose_best_nominal(results: Sequence[TuneResult]) -> TuneResult:
-    """The setting ``--choose best`` takes without ``--robust`` (:data:`CHOICE_RULE_NOMINAL`).
+def choose_best_nominal(results: Sequence[TuneResult], limits: Limits = Limits()) -> TuneResult:
+    """The setting ``--choose best`` takes without ``--robust`` (:data:`CHOICE_RULE_NOMINAL`),
+    among those within ``limits`` on the plant.
 
     Raises
     ------
     InputError
-        No feasible setting settles.
+        No feasible setting settles (or none is within the limits).
     """
     candidates = [r for r in results if r.feasible and r.worst["settling_time_s"] is not None
                   and r.worst["overshoot_percent"] is not None]  # fmt: skip
     if not candidates:
         raise InputError("--choose best: no feasible setting settles; widen the grid or pick one "
                          "with --choose N")  # fmt: skip
+    candidates = [r for r in candidates
+                  if limits.met([(r.worst["overshoot_percent"], r.worst["settling_time_s"])])]  # fmt: skip
+    if not candidates:
+        raise InputError(f"--choose best: no setting that settles has {limits.text()} "
+                         f"{LIMITS_WHERE_NOMINAL}; widen the grid or the limits")  # fmt: skip
     return min(candidates, key=lambda r: (_rounded(r.worst["overshoot_percent"]),  # type: ignore[arg-type]
                                           r.worst["settling_time_s"], r.index))  # fmt: skip
 
