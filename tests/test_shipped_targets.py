@@ -2,16 +2,23 @@
 
 - A 10 rad/s step with the ±12 V limit, judged on the true speed in the band max(2 %, one encoder
   count per tick = 0.3506 rad/s): on board (loop delay 1, ``--plant sim`` on the report's model
-  and ``--plant physics``) at most 5 % overshoot and 90 ms (poles.toml) or 120 ms (pi.toml)
-  settling; through the serial loop (loop delay 3, ``--plant sim`` on the report's model with
+  and ``--plant physics`` with each command landing 3 ms after its tick, the presets' calibrated
+  timing, and 10 ms, microOS's documented order: ``physics:actuation_ms=10``) at most 5 %
+  overshoot and 90 ms (poles.toml) or 120 ms (pi.toml) settling; through the serial loop (loop delay 3, ``--plant sim`` on the report's model with
   nk = 4, and ``--plant virtual``, the physics simulator behind the serial link in real time) at
   most 5 % and three times the time-optimal settling for that delay.
 - The Kalman estimate of poles.toml on the physics simulator (square 8 rad/s, 2 s period): its
   RMS error against the true speed at most half the encoder's, over the whole run and over the
   steady windows alone (the last 0.5 s of each 1 s level), with no offset that follows the sign
-  of the friction.
+  of the friction; and over the 10 rad/s step run. At 3 ms all of these hold. At 10 ms the steady
+  windows hold, the whole runs do not (expected failures, strict): the estimator's model has the
+  report's timing, so at each jump of the command its estimate of the speed *now* already moves
+  by about half the model's first-tick response, while on the 10 ms cart the command has not yet
+  landed (about 0.75–0.80 of the encoder's error over the step run and the square).
 
-The physics targets assume the simulator calibrated to answer like the report's model.
+The physics targets assume the simulator calibrated to answer like the report's model; the
+actuation timing of a real cart is unknown, hence both ends. The ratios are computed here from
+the trace's columns (``true_speed_X``, ``estimate_X``, ``speed_X``).
 """
 
 from __future__ import annotations
@@ -62,8 +69,20 @@ def serial_model(workdir: Path) -> Path:
     return path
 
 
+ON_BOARD_PLANTS = ["sim", "physics", "physics:actuation_ms=3", "physics:actuation_ms=10"]
+"""The on-board plants: the model, and the physics cart at the two ends of the actuation timing
+(``physics`` itself is 3 ms)."""
+
+TEN_MS_WHOLE_RUN = pytest.mark.xfail(
+    strict=True,
+    reason="at 10 ms actuation the estimate leads the true speed for a tick at each command jump "
+    "(the estimator's model has the report's timing): about 0.75-0.80 of the encoder's RMS "
+    "error over the whole run, against the target 0.5",
+)
+
+
 @pytest.mark.parametrize(("name", "limit_s"), [("poles", 0.09), ("pi", 0.12)])
-@pytest.mark.parametrize("plant", ["sim", "physics"])
+@pytest.mark.parametrize("plant", ON_BOARD_PLANTS)
 def test_on_board_step(capsys, workdir: Path, name: str, limit_s: float, plant: str) -> None:
     assert load_controller(f"controllers/{name}.toml").loop_delay_ticks == 1
     columns = cartctl_run(capsys, "--plant", plant, "--controller", f"controllers/{name}.toml",
@@ -134,11 +153,13 @@ def rms(error: np.ndarray, index: np.ndarray | slice = slice(None)) -> float:
     return float(np.sqrt(np.mean(error[index] ** 2)))
 
 
-@pytest.fixture
-def poles_square(capsys, workdir: Path) -> dict[str, np.ndarray]:
-    """poles.toml on the physics cart, square 8 rad/s with a 2 s period, 10 s."""
-    return cartctl_run(capsys, "--plant", "physics", "--controller", "controllers/poles.toml",
-                       "--reference", "square:8:2", "--duration", "10")  # fmt: skip
+@pytest.fixture(params=["physics", "physics:actuation_ms=10"])
+def poles_square(request, capsys, workdir: Path) -> dict[str, np.ndarray]:
+    """poles.toml on the physics cart (3 ms and 10 ms actuation), square 8 rad/s with a 2 s
+    period, 10 s."""
+    return cartctl_run(capsys, "--plant", request.param, "--controller",
+                       "controllers/poles.toml", "--reference", "square:8:2",
+                       "--duration", "10")  # fmt: skip
 
 
 def test_pole_placement_estimate_beats_the_encoder_in_steady_state(poles_square) -> None:
@@ -153,10 +174,28 @@ def test_pole_placement_estimate_beats_the_encoder_in_steady_state(poles_square)
         assert rms(est) < rms(meas), motor
 
 
-def test_pole_placement_estimate_halves_the_encoder_error_over_the_whole_run(poles_square) -> None:
+@pytest.mark.parametrize(
+    "plant", ["physics", pytest.param("physics:actuation_ms=10", marks=TEN_MS_WHOLE_RUN)]
+)
+@pytest.mark.parametrize("reference", ["square:8:2", "step:10"])
+def test_pole_placement_estimate_halves_the_encoder_error_over_the_whole_run(
+    capsys, workdir: Path, plant: str, reference: str
+) -> None:
+    columns = cartctl_run(capsys, "--plant", plant, "--controller", "controllers/poles.toml",
+                          "--reference", reference, "--duration", "10" if "square" in reference
+                          else "2")  # fmt: skip
     for motor in ("a", "b"):
-        est, meas, _ = estimator_errors(poles_square, motor)
+        est, meas, _ = estimator_errors(columns, motor)
         assert rms(est) <= 0.5 * rms(meas), motor
+
+
+def test_the_pi_runs_on_the_encoder(capsys, workdir: Path) -> None:
+    """pi.toml has no estimator: the estimate it logs is the measured speed (ratio 1)."""
+    assert load_controller("controllers/pi.toml").request["estimator"] == "none"
+    columns = cartctl_run(capsys, "--plant", "physics:actuation_ms=10", "--controller",
+                          "controllers/pi.toml", "--reference", "step:10", "--duration", "1")  # fmt: skip
+    for motor in ("a", "b"):
+        np.testing.assert_array_equal(columns[f"estimate_{motor}"], columns[f"speed_{motor}"])
 
 
 @pytest.mark.parametrize(("name", "delay"), [("poles", 1), ("serial-poles", 3)])

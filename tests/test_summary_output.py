@@ -125,9 +125,11 @@ def test_summary_columns_have_units_and_one_rounding_and_a_numerical_zero_prints
 def test_a_negative_steady_state_error_keeps_its_sign_and_the_errors_rounding(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
-    """Pole placement on the physics preset leaves a few mrad/s of error, of both signs."""
+    """Pole placement on the physics preset leaves a few mrad/s of error, of both signs (a 5 rad/s
+    step)."""
     _, out = _cli(capsys, "run", "--fast", "--plant", "physics", "--controller",
-                  "controllers/poles.toml", "--duration", "2", "--out", str(tmp_path), "--name",
+                  "controllers/poles.toml", "--reference", "step:5", "--duration", "2", "--out",
+                  str(tmp_path), "--name",
                   "p", "--rerun", "off")  # fmt: skip
     _, doc = _cli(capsys, "review", str(tmp_path / "p.csv"), "--json")
     motors = json.loads(doc)["motors"]

@@ -57,6 +57,7 @@
 #include "sim_avr.h"
 #include "sim_cycle_timers.h"
 #include "sim_elf.h"
+#include "sim_interrupts.h"
 #include "sim_irq.h"
 
 DEFINE_FIFO(uint16_t, uart_fifo); /* the accessors of the UART's input FIFO (simavr's header) */
@@ -354,6 +355,24 @@ static uint64_t rx_next_end(void) {
   return start + byte_cycles;
 }
 
+/* The ATmega's RXC interrupt is a level: it stays requested while unread bytes wait. simavr 1.6
+ * requests it once per byte time from its own timer and drops the request when the handler
+ * starts, so after a late handler the waiting bytes trickle in one per byte time and the next
+ * ones overrun, which the ATmega does not do. Request it again when a byte completes, and at the
+ * end of each handler while bytes wait (its limit on reading "faster than the line" kept off:
+ * the line's pace is this harness's). */
+static void rxc_request(void) {
+  uart0->rxc_raise_time = 0;
+  avr_raise_interrupt(avr, &uart0->rxc);
+}
+
+static void rxc_running_cb(avr_irq_t *irq, uint32_t value, void *param) {
+  (void)irq;
+  (void)param;
+  if (value == 0 && avr_regbit_get(avr, uart0->rxen) && !uart_fifo_isempty(&uart0->input))
+    rxc_request();
+}
+
 static avr_cycle_count_t rx_line_cb(avr_t *a, avr_cycle_count_t when, void *param) {
   (void)param;
   if (to_avr.head == to_avr.tail) {
@@ -364,17 +383,19 @@ static avr_cycle_count_t rx_line_cb(avr_t *a, avr_cycle_count_t when, void *para
   to_avr.head++;
   rx_line_free = when;
   st.last_host_byte_cycle = (int64_t)when;
-  /* The receiver holds two bytes; simavr presents each one byte time after it gets it, so one
-   * more waits in its FIFO at any moment: three unread bytes mean the ATmega's would overrun. */
+  /* The ATmega's receiver holds two bytes: one that completes while two wait unread is lost
+   * (data overrun). */
   if (!(avr_regbit_get(a, uart0->rxen))) {
     st.rx_disabled_drops++;
-  } else if (uart_xoff || uart_fifo_get_read_size(&uart0->input) >= 3) {
+  } else if (uart_xoff || uart_fifo_get_read_size(&uart0->input) >= 2) {
     st.rx_overruns++;
     if (getenv("CART_SIM_DEBUG"))
-      fprintf(stderr, "overrun at %.6f s: pc 0x%x I=%d fifo %d\n", (double)when / F_CPU,
+      fprintf(stderr, "overrun at %.6f s: pc 0x%x I=%d unread %d\n", (double)when / F_CPU,
               (unsigned)a->pc, a->sreg[S_I], uart_fifo_get_read_size(&uart0->input));
   } else {
     avr_raise_irq(avr_io_getirq(a, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT), e->byte);
+    /* simavr 1.6 would show the byte one byte time later: it is complete now, so RXC now */
+    rxc_request();
     st.host_bytes_to_avr++;
   }
   if (to_avr.head == to_avr.tail) {
@@ -674,6 +695,7 @@ int main(int argc, char **argv) {
   }
   avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
                           uart_out_cb, NULL);
+  avr_irq_register_notify(uart0->rxc.irq + AVR_INT_IRQ_RUNNING, rxc_running_cb, NULL);
   avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON),
                           uart_xon_cb, NULL);
   avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF),

@@ -163,6 +163,8 @@ def run(args: argparse.Namespace) -> int:
     monitor = Monitor([], [], labels, echo=print_to_stderr)
     received: list[int] = []
     link = MonitorLink(port, on_event=monitor.on_event, on_print=monitor.on_print)
+    if cart is not None:  # the virtual cart's rate is known: the bridge's, or the course's
+        link.baud = cart.baud
     try:
         link.open()  # before the virtual cart boots: its first HEARTBEAT is not flushed away
         if cart is not None:
