@@ -49,6 +49,8 @@ USB_FLUSH_PERIOD_S = 256 * 256 / 16e6
 """The ATmega16U2's flush timer: Timer0 overflows every 4.096 ms."""
 USB_FLUSH_BYTES = 96
 """The ATmega16U2 also flushes once more than this many bytes wait (3/4 of its 128-byte ring)."""
+GPIO_FRAME_BYTES = 60
+"""A GPIO frame on the line: 52 bytes of payload and 8 of MAVLink 1."""
 USB_FRAME_S = 0.001
 """A full-speed USB frame: the PC collects the bridge's bytes at the next one."""
 
@@ -307,6 +309,9 @@ class LineReader(threading.Thread):
         self._line_free_s = 0.0
         self.last_byte_at_s: float | None = None
         """``time.perf_counter`` when the last byte the host wrote is (or will be) through."""
+        self.through_s: collections.deque[float] = collections.deque(maxlen=1 << 16)
+        """When each recent 60-byte frame of the host was through the line (its last byte)."""
+        self._count = 0
 
     def run(self) -> None:
         while not self.stop_event.is_set():
@@ -337,6 +342,10 @@ class LineReader(threading.Thread):
                 self._arrived.append((start + (i + 1) * self.byte_s, byte))
             self._line_free_s = start + len(data) * self.byte_s
             self.last_byte_at_s = self._line_free_s
+            self._count += len(data)
+            while self._count >= GPIO_FRAME_BYTES:  # the host writes whole 60-byte GPIO frames
+                self._count -= GPIO_FRAME_BYTES
+                self.through_s.append(self._line_free_s - self._count * self.byte_s)
 
     def take(self, until_s: float) -> bytes:
         """Every byte whose last bit has arrived by ``until_s``, in order."""
