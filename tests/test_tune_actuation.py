@@ -22,6 +22,7 @@ from typing import Any
 import pytest
 
 from cartctl.cli import main
+from cartctl.design.controllerfile import load_controller
 
 GROUND = Path(__file__).resolve().parents[1] / "models" / "ground.toml"
 GRID = "phase_margin=70:75:5,crossover_hz=3.5"
@@ -142,9 +143,69 @@ def test_plain_tune_on_the_physics_cart_at_a_timing(tmp_path: Path) -> None:
     assert expected > 5.0  # the 65°, 4 Hz design overshoots the 10 ms cart
 
 
+def test_limits_bound_the_choice_on_the_model_and_the_physics_runs(tmp_path: Path) -> None:
+    """``--max-settling 0.12``: the 75° design settles in about 136 ms on the 3 ms cart, so the
+    70° one is chosen despite its higher worst-case overshoot; the rule says so."""
+    doc = _tune(tmp_path, "limited", "--max-settling", "0.12", "--max-overshoot", "5")
+    assert doc["chosen"]["index"] == 1
+    assert doc["chosen"]["rule"].startswith("among the settings with overshoot <= 5 %, settling "
+                                            "<= 120 ms on the model and on the physics preset")  # fmt: skip
+    rows = _by_index(doc)
+    assert rows[1]["worst"]["overshoot_percent"] > rows[2]["worst"]["overshoot_percent"]
+    assert rows[2]["actuation"][0]["settling_time_s"] > 0.12
+    for figures in (rows[1]["nominal"], *rows[1]["actuation"]):
+        assert figures["settling_time_s"] <= 0.12 and figures["overshoot_percent"] <= 5.0
+    # without --robust the limits apply to the plant's figures
+    code, out, err = _cli("tune", str(GROUND), "--method", "pi", "--grid", GRID, "--plant",
+                          "physics:actuation_ms=10", "--jobs", "1", "--json", "--choose", "best",
+                          "--max-overshoot", "2", "--out", str(tmp_path / "p.toml"))  # fmt: skip
+    assert code == 0, err
+    plain = json.loads(out)
+    assert plain["chosen"]["index"] == 2 and "overshoot <= 2 %" in plain["chosen"]["rule"]
+    # no setting within the limits: the results, then one error line, and no file
+    code, out, err = _cli("tune", str(GROUND), "--method", "pi", "--grid", GRID, "--robust",
+                          "--plants", "1", "--seed", "1", "--jobs", "1", "--choose", "best",
+                          "--max-overshoot", "0.1", "--out", str(tmp_path / "none.toml"))  # fmt: skip
+    assert code == 2 and "settled on all" in out
+    assert (
+        err.count("\n") == 1 and "no setting that settles everywhere has overshoot <= 0.1 %" in err
+    )
+    assert not (tmp_path / "none.toml").exists()
+
+
+def test_the_estimator_noise_of_every_setting_reaches_the_written_file(tmp_path: Path) -> None:
+    out = tmp_path / "poles.toml"
+    code, text, err = _cli("tune", str(GROUND), "--method", "poles", "--grid",
+                           "settling_time=0.05,overshoot=0.75", "--process-noise-v", "0.15",
+                           "--bias-drift-v", "0.035", "--jobs", "1", "--duration", "1",
+                           "--choose", "1", "--out", str(out))  # fmt: skip
+    assert code == 0, err
+    assert "--process-noise-v 0.15 --bias-drift-v 0.035" in text
+    request = load_controller(out).request
+    assert (request["process_noise_std_v"], request["bias_drift_std_v"]) == (0.15, 0.035)
+    # the figures tune reports are those of that very design
+    code, tuned, err = _cli("tune", str(GROUND), "--method", "poles", "--grid",
+                            "settling_time=0.05,overshoot=0.75", "--process-noise-v", "0.15",
+                            "--bias-drift-v", "0.035", "--jobs", "1", "--duration", "1",
+                            "--json")  # fmt: skip
+    assert code == 0, err
+    code, run, err = _cli("run", "--plant", "sim", "--controller", str(out), "--fast",
+                          "--duration", "1", "--rerun", "off", "--out", str(tmp_path), "--json")  # fmt: skip
+    assert code == 0, err
+    expected = max(m["rms_error"] for m in json.loads(run)["motors"].values())
+    assert json.loads(tuned)["settings"][0]["rms_error"] == pytest.approx(expected, abs=1e-9)
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
-    [(["--robust", "--actuation-ms", "0"], "--actuation-ms: actuation_ms must be in (0, 10]"),
+    [(["--choose", "1", "--out", "x.toml", "--max-settling", "0.1"],
+      "--max-settling only applies to --choose best"),
+     (["--max-overshoot", "5"], "--max-overshoot only applies to --choose best"),
+     (["--choose", "best", "--out", "x.toml", "--max-overshoot", "-1"],
+      "--max-overshoot must be a number > 0"),
+     (["--process-noise-v", "-0.1"], "--process-noise-v must be a number of volts >= 0"),
+     (["--bias-drift-v", "nan"], "--bias-drift-v must be a number of volts >= 0"),
+     (["--robust", "--actuation-ms", "0"], "--actuation-ms: actuation_ms must be in (0, 10]"),
      (["--robust", "--actuation-ms", "3,12"], "--actuation-ms: actuation_ms must be in (0, 10]"),
      (["--robust", "--actuation-ms", "3,3.05"], "actuation_ms is taken to 0.1 ms"),
      (["--robust", "--actuation-ms", "3,x"], "--actuation-ms: actuation_ms needs a number"),
