@@ -11,7 +11,10 @@ trace it writes. For each controller file and each plant that has the controller
 
 - ``sim``: the ARX cart on the controller's own model, with the loop delay of the file (a model
   with nk = loop delay + 1 is written to a temporary file for a serial controller);
-- ``physics``: the physical simulator, loop delay 1 (on-board controllers only);
+- ``physics`` and ``physics:actuation_ms=10``: the physical simulator, loop delay 1 (on-board
+  controllers only), with each command landing 3 ms after its tick (the presets' calibrated
+  timing) and 10 ms after it (microOS's documented order, the next tick's ``io()``): a real cart's
+  timing is unknown, so the on-board files are measured at both ends;
 - ``virtual``: the physical simulator behind the serial link, in real time (serial controllers
   only, loop delay 3 with the bridge sketch; the virtual cart hands the simulator's true speed to
   the trace as well).
@@ -63,6 +66,9 @@ except ModuleNotFoundError:  # not installed: run from a checkout
     from cartctl.stepinfo import encoder_quantum_rad_s, step_info
 
 SHIPPED = ("pi", "poles", "serial-pi", "serial-poles")
+PHYSICS_TIMINGS = ("physics", "physics:actuation_ms=10")
+"""The physics plants of the on-board files: the command landing 3 ms (the preset) and 10 ms
+after its tick."""
 STEP_RAD_S = 10.0
 STEP_AT_S = 0.5
 QUANTUM_RAD_S = encoder_quantum_rad_s(0.01)
@@ -115,6 +121,12 @@ def estimator_ratios(trace: dict[str, np.ndarray], motor: str) -> dict[str, Any]
     return {"whole": ratio(np.ones(true.size, dtype=bool)), "steady": ratio(steady)}
 
 
+def _file_name(plant: str) -> str:
+    """A plant name as part of a trace's file name ('physics:actuation_ms=10' -> 'physics-10ms')."""
+    kind, _, options = plant.partition(":")
+    return kind if not options else f"{kind}-{options.partition('=')[2]}ms"
+
+
 def on_loop(model: ArxModel, delay: int) -> ArxModel:
     """The model with the input delay of a loop of ``delay`` ticks: nk = delay + 1."""
     return model.with_extra_delay(delay + 1 - model.nk)
@@ -137,21 +149,22 @@ def measure(path: Path, out: Path, virtual: bool) -> tuple[list[dict[str, Any]],
                     delayed)  # fmt: skip
         plants.append(("sim", ["--plant", "sim", "--model", str(delayed), "--fast"], True))
     if delay == 1:
-        plants.append(("physics", ["--plant", "physics", "--fast"], True))
+        for spec in PHYSICS_TIMINGS:
+            plants.append((spec, ["--plant", spec, "--fast"], True))
     if controller.plant_kind == "serial" and virtual:
         plants.append(("virtual", ["--plant", "virtual"], True))
     rows, failures = [], []
     for plant, plant_args, has_true in plants:
         common = ["--controller", str(path), *plant_args]
         step, problem = run([*common, "--reference", f"step:{STEP_RAD_S:g}", "--duration", "2"],
-                            out, f"{path.stem}-{plant}-step")  # fmt: skip
+                            out, f"{path.stem}-{_file_name(plant)}-step")  # fmt: skip
         if step is None:
             failures.append(f"{path.name} on {plant}: {problem}")
             continue
         square = None
         if has_true:
             square, problem = run([*common, "--reference", "square:8:2", "--duration", "10"],
-                                  out, f"{path.stem}-{plant}-square")  # fmt: skip
+                                  out, f"{path.stem}-{_file_name(plant)}-square")  # fmt: skip
             if square is None:
                 failures.append(f"{path.name} on {plant} (square): {problem}")
         for motor in ("a", "b"):
@@ -173,14 +186,15 @@ def table(rows: list[dict[str, Any]]) -> str:
     def num(x: float | None, fmt: str) -> str:
         return "—" if x is None else format(x, fmt)
 
-    head = (f"{'controller':<19}{'plant':<9}{'m':<3}{'delay':>6}{'overshoot':>11}{'settling':>10}"
-            f"{'bound':>8}{'ratio':>7}{'est/enc':>9}{'steady':>8}  on")  # fmt: skip
+    width = max([len("plant"), *(len(r["plant"]) for r in rows)]) + 2
+    head = (f"{'controller':<19}{'plant':<{width}}{'m':<3}{'delay':>6}{'overshoot':>11}"
+            f"{'settling':>10}{'bound':>8}{'ratio':>7}{'est/enc':>9}{'steady':>8}  on")  # fmt: skip
     lines = [head, "-" * len(head)]
     for r in rows:
         settle = r["settling_time_s"]
         est = r["estimator_rms_ratio"]
         lines.append(
-            f"{r['controller']:<19}{r['plant']:<9}{r['motor']:<3}{r['loop_delay_ticks']:>6}"
+            f"{r['controller']:<19}{r['plant']:<{width}}{r['motor']:<3}{r['loop_delay_ticks']:>6}"
             f"{num(r['overshoot_percent'], '.1f') + ' %':>11}"
             f"{('—' if settle is None else f'{settle * 1e3:.0f} ms'):>10}"
             f"{r['bound_s'] * 1e3:>6.0f}ms{num(r['ratio_to_bound'], '.2f'):>7}"
