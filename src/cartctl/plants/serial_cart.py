@@ -155,11 +155,13 @@ class SerialCart:
         self.connect()
         while self.link.gpio_waiting():  # stale ticks from before the run
             self.link.next_gpio()
-        gpio, arrival = self.link.next_gpio(max(self.link.silence_timeout_s, 0.5))
+        self.link.next_gpio(max(self.link.silence_timeout_s, 0.5))
         # a backlog still coming in (the port's reader was held up) is not a fresh tick: answering
-        # it would put two replies into one tick of the cart, and one of them would be lost
+        # it would put two replies into one tick of the cart, and one of them would be lost. Let
+        # it pass, then take the next frame as it arrives: tick 0 is answered while it is fresh.
         while self.link.gpio_waiting(wait_s=BACKLOG_WAIT_S):
-            gpio, arrival = self.link.next_gpio()
+            self.link.next_gpio()
+        gpio, arrival = self.link.next_gpio(max(self.link.silence_timeout_s, 0.5))
         sample = CartSample.from_gpio(gpio)
         if sample.bridge_version != BRIDGE_VERSION:
             raise UnsupportedCartError(
