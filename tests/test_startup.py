@@ -32,7 +32,7 @@ OPTIONS = {
     "monitor": ["--connect-timeout", "--connect-url", "--duration", "--help", "--json", "--labels", "--name", "--onboard", "--out", "--reference", "--rerun", "-h"],
     "review": ["--compare", "--help", "--json", "--map", "--screenshot", "--web", "-h"],
     "run": ["--allow-delay-mismatch", "--allow-unstable", "--connect-timeout", "--connect-url", "--controller", "--duration", "--fast", "--force", "--help", "--json", "--model", "--name", "--noise", "--out", "--plant", "--preset", "--reference", "--reference-b", "--rerun", "--seed", "--voltage-limit", "-h"],
-    "tune": ["--choose", "--duration", "--extra-delay", "--grid", "--help", "--jobs", "--json", "--method", "--out", "--plant", "--plants", "--plot", "--preset", "--reference", "--robust", "--seed", "-h"],
+    "tune": ["--actuation-ms", "--bias-drift-v", "--choose", "--duration", "--extra-delay", "--grid", "--help", "--jobs", "--json", "--max-overshoot", "--max-settling", "--method", "--out", "--plant", "--plants", "--plot", "--preset", "--process-noise-v", "--reference", "--robust", "--seed", "-h"],
     "validate": ["--help", "--json", "--map", "--motor", "--plot", "-h"],
     "virtual-cart": ["--duration", "--faults", "--help", "--noise", "--onboard", "--preset", "--reference", "--seed", "-h"],
 }  # fmt: skip
