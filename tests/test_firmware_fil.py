@@ -265,7 +265,7 @@ class Harness:
         self.report_path = folder / "cart_sim.json"
         self.log_path = folder / "cart_sim.csv"
         command = [str(binary), str(elf), "--baud", str(baud), "--report",
-                   str(self.report_path), "--log", str(self.log_path)]  # fmt: skip
+                   str(self.report_path), "--log", str(self.log_path), "--realtime"]  # fmt: skip
         if usb:
             command.append("--usb-latency")
         self.proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -382,15 +382,21 @@ def test_cartctl_drives_the_real_firmware_in_real_time(
         f"last byte"
         f"\n  overshoot of the 10 rad/s step: A {overshoot['a']:.1f} %, B {overshoot['b']:.1f} %"
         f"\n  real-time factor {report['realtime_factor']:.4f} (AVR {report['avr_seconds']:.2f} s "
-        f"in {report['wall_seconds']:.2f} s wall, max lag {report['max_lag_ms']:.1f} ms)"
+        f"in {report['wall_seconds']:.2f} s wall; behind the clock by up to "
+        f"{report['max_lag_ms']:.1f} ms, more than 1 ms for {report['lag_over_1ms_s']:.2f} s; "
+        f"SCHED_FIFO {'yes' if report['sched_fifo'] else 'no'})"
     )
     for line in firmware.sketch_warnings:
         print(f"  sketch warning: {line}")
 
     assert report["firmware_uart_baud"] == pytest.approx(report["baud"], rel=0.01)
     assert summary["loop_delay_ticks"] == _expected_loop_delay()
+    assert report["bytes_dropped"] == 0, (
+        f"the AVR's UART lost {report['bytes_dropped']} of the host's bytes to data overruns: "
+        "its receive interrupt ran later than two byte times (CART_SIM_DEBUG=1 shows which "
+        "interrupts ran before)"
+    )
     assert link["host_frames_lost"] == 0
-    assert report["bytes_dropped"] == 0
     assert report["watchdog_ms"] is not None, "the motors still had a voltage at the end"
     assert 0.0 < report["watchdog_ms"] <= WATCHDOG_BOUND_MS
     for motor, value in overshoot.items():

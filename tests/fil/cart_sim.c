@@ -8,20 +8,29 @@
  * says by how much). Around it:
  *
  *   - UART0 <-> a pseudo-terminal. The slave's path is the first line on stdout. Bytes from the
- *     PC enter the AVR's receiver one byte time apart at the line's baud rate (10 bits a byte), as
- *     on a wire; a byte that completes while the receiver still holds two unread ones is dropped,
- *     as the ATmega's data overrun does. Bytes the AVR sends reach the PC when their stop bit has
- *     gone out. --usb-latency adds the Mega's ATmega16U2 USB bridge: cart -> PC bytes wait in it
- *     until its 4.096 ms timer overflows or more than 96 wait, then go out in the next 1 ms USB
- *     frame; PC -> cart bytes leave in the next 1 ms frame.
+ *     PC reach the AVR's receiver one byte time apart at the line's baud rate (--baud, 10 bits a
+ *     byte), as on a wire. The receiver is the ATmega's: a two-byte buffer and the shift register;
+ *     a byte is lost (data overrun, counted) when the next start bit comes while the buffer is
+ *     still full. simavr 1.6 does not model this: it counts a parity bit in every byte time, shows
+ *     a byte one byte time late, and raises the receive interrupt once per byte time however many
+ *     wait; the harness corrects the byte time and requests the interrupt itself (see
+ *     rxc_request). Bytes the AVR sends reach the PC when their stop bit has gone out.
+ *     --usb-latency adds the Mega's ATmega16U2 USB bridge: cart -> PC bytes wait in it until its
+ *     4.096 ms timer overflows or more than 96 wait, then go out in the next 1 ms USB frame;
+ *     PC -> cart bytes leave in the next 1 ms frame.
  *   - Two DC motors with wheels (the cartctl "ground" preset: electrical and mechanical equation,
  *     viscous and Coulomb friction, the cart's inertia and rolling friction), driven through a
  *     model of the TB6612FNG H-bridge from the pins of the course template: PWM duty from Timer4
  *     (OC4B pin 7 for motor A, OC4C pin 8 for motor B), direction IN1/IN2 on pins 4/5 (A) and
  *     9/10 (B), standby on pin 6 (OC4A). The average voltage over a PWM period drives the motor.
  *   - Quadrature encoders on pins 2/11 (A) and 3/12 (B): 448 cycles, 1792 edges, per wheel
- *     revolution. Motor A is mounted mirrored: a positive voltage turns it forward, and its
- *     encoder counts down (the template's scale for A is negative).
+ *     revolution, each edge at the cycle the wheel passes it. Motor A is mounted mirrored: a
+ *     positive voltage turns it forward, and its encoder counts down (the template's scale for A
+ *     is negative). Encoder B starts --encoder-phase counts (default 0.5) from A, so that two
+ *     wheels turning alike do not interrupt at the same instants all the time.
+ *
+ * --realtime asks for SCHED_FIFO priority 20 (below cartctl's loop), so that a busy machine
+ * delays the simulation less; the report says whether it was granted.
  *
  * At exit (SIGINT, SIGTERM or --seconds), and on SIGUSR1 without stopping, it writes a JSON report
  * (--report, default stdout):
@@ -29,6 +38,8 @@
  * the host's last byte and of the moment both motors lost their voltage after it, and more. Each
  * time the motors get a voltage after both had none, a line "drive T" (AVR seconds) goes to
  * stdout. --log writes the true wheel speeds, voltages and currents every ms as CSV.
+ * CART_SIM_DEBUG=1 prints the interrupts and bytes before each overrun to stderr; 2 also every
+ * GPIO frame each way.
  *
  * Build: gcc -O2 -I/usr/include/simavr cart_sim.c -lsimavr -lm -lutil (Debian: libsimavr-dev)
  * All of it is cartctl's own code; it uses simavr (GPL-3) as a library.
@@ -40,6 +51,7 @@
 #include <getopt.h>
 #include <math.h>
 #include <pty.h>
+#include <sched.h>
 #include <signal.h>
 #include <stdarg.h>
 #include <stdint.h>
@@ -90,6 +102,8 @@ static long opt_baud = 1000000;
 static int opt_usb = 0;
 static const char *opt_report = NULL;
 static const char *opt_log = NULL;
+static double opt_phase_b = 0.5;
+static int opt_realtime = 0, realtime_granted = 0;
 
 static volatile sig_atomic_t stop_requested = 0;
 static volatile sig_atomic_t snapshot_requested = 0;
@@ -118,7 +132,7 @@ static uint32_t usb_next; /* to_pc: next byte the 16U2 model has not taken in */
 static struct {
   uint64_t host_bytes_read;      /* from the pty */
   uint64_t host_bytes_to_avr;    /* through the line into the AVR's receiver */
-  uint64_t rx_overruns;          /* dropped: completed while the receiver held two unread */
+  uint64_t rx_overruns;          /* dropped: the receiver's data overrun */
   uint64_t rx_disabled_drops;    /* dropped: the AVR's receiver was off */
   uint64_t cart_bytes;           /* written by the AVR */
   uint64_t pc_bytes_written;     /* into the pty */
@@ -130,6 +144,8 @@ static struct {
   int64_t zero_since_cycle;      /* first step with both at 0 V after it */
   uint64_t drive_episodes;       /* times the motors got a voltage after both had none */
   double max_lag_s;              /* how far the AVR fell behind the wall clock */
+  double max_lag_at_s;           /* when (AVR time) */
+  double lag_over_1ms_s;         /* AVR time spent more than 1 ms behind */
   uint64_t usb_flushes_timer, usb_flushes_full;
 } st = {.last_host_read_cycle = -1, .last_host_byte_cycle = -1, .last_nonzero_cycle = -1};
 
@@ -150,6 +166,11 @@ typedef struct {
   int coast;         /* both bridge outputs off (standby, or IN1 = IN2 = low) */
   int enc_sign;      /* encoder counts per forward count: -1 for the mirrored motor A */
   int64_t enc_count; /* edges the encoder has produced (signed) */
+  double enc_phase;  /* the encoder's offset from the wheel's zero, in counts */
+  int64_t enc_scheduled; /* the count after the edges already scheduled */
+  struct { uint64_t at; int64_t count; } edges[256]; /* scheduled edges, in time order */
+  unsigned edge_head, edge_tail;
+  int edge_timer_on;
   /* pins: encoder channels (port letter, bit) */
   char enc_a_port, enc_b_port;
   int enc_a_bit, enc_b_bit;
@@ -281,14 +302,37 @@ static void encoder_emit(motor_t *m, int64_t count) {
   encoder_set_pins(m, a, b);
 }
 
-static void motor_step(motor_t *m, double dt) {
+static avr_cycle_count_t edge_cb(avr_t *a, avr_cycle_count_t when, void *param) {
+  (void)a;
+  motor_t *m = (motor_t *)param;
+  while (m->edge_head != m->edge_tail && m->edges[m->edge_head % 256].at <= when) {
+    m->enc_count = m->edges[m->edge_head % 256].count;
+    encoder_emit(m, m->enc_count);
+    m->edge_head++;
+  }
+  if (m->edge_head == m->edge_tail) {
+    m->edge_timer_on = 0;
+    return 0;
+  }
+  return m->edges[m->edge_head % 256].at;
+}
+
+/* The encoder's position in counts (fractional) for a wheel angle. */
+static double encoder_position(const motor_t *m, double theta) {
+  return m->enc_sign * theta * 1792.0 / TWO_PI + m->enc_phase;
+}
+
+/* Advances one motor from `when` by one step of dt, with the voltage the bridge has now, and
+ * schedules the encoder edges at the cycles the wheel passes them (the angle taken as linear in
+ * time over the step). */
+static void motor_step(motor_t *m, double dt, uint64_t when) {
   if (m->coast) {
     m->i = 0.0; /* bridge outputs off: no current (the flyback through the diodes ignored) */
   } else {
     m->i += dt * (m->v - m->R * m->i - m->K * m->w) / m->L;
   }
   double torque = m->K * m->i - m->b * m->w;
-  double w0 = m->w;
+  double w0 = m->w, theta0 = m->theta;
   if (m->w == 0.0) {
     if (fabs(torque) > m->tc) m->w = dt * (torque - copysign(m->tc, torque)) / m->J;
   } else {
@@ -297,10 +341,27 @@ static void motor_step(motor_t *m, double dt) {
   }
   m->theta += 0.5 * (w0 + m->w) * dt;
   if (fabs(m->w) > m->max_abs_w) m->max_abs_w = fabs(m->w);
-  int64_t target = (int64_t)floor(m->enc_sign * m->theta * 1792.0 / TWO_PI);
-  while (m->enc_count != target) {
-    m->enc_count += (target > m->enc_count) ? 1 : -1;
-    encoder_emit(m, m->enc_count);
+  double x0 = encoder_position(m, theta0), x1 = encoder_position(m, m->theta);
+  int64_t target = (int64_t)floor(x1);
+  while (m->enc_scheduled != target && m->edge_tail - m->edge_head < 256) {
+    int up = target > m->enc_scheduled;
+    int64_t next = m->enc_scheduled + (up ? 1 : -1);
+    double boundary = (double)(up ? next : m->enc_scheduled); /* the count changes there */
+    double f = x1 != x0 ? (boundary - x0) / (x1 - x0) : 1.0;
+    if (f < 0.0) f = 0.0;
+    if (f > 1.0) f = 1.0;
+    uint64_t at = when + (uint64_t)(f * PHYS_STEP_CYCLES);
+    if (m->edge_tail != m->edge_head && at < m->edges[(m->edge_tail - 1) % 256].at)
+      at = m->edges[(m->edge_tail - 1) % 256].at;
+    m->edges[m->edge_tail % 256].at = at;
+    m->edges[m->edge_tail % 256].count = next;
+    m->edge_tail++;
+    m->enc_scheduled = next;
+  }
+  if (!m->edge_timer_on && m->edge_head != m->edge_tail) {
+    uint64_t at = m->edges[m->edge_head % 256].at, now = avr->cycle;
+    avr_cycle_timer_register(avr, at > now ? at - now : 1, edge_cb, m);
+    m->edge_timer_on = 1;
   }
 }
 
@@ -322,7 +383,7 @@ static avr_cycle_count_t physics_cb(avr_t *a, avr_cycle_count_t when, void *para
   } else if (st.last_nonzero_cycle >= 0 && st.zero_since_cycle <= st.last_nonzero_cycle) {
     st.zero_since_cycle = (int64_t)when;
   }
-  for (int k = 0; k < 2; ++k) motor_step(&motors[k], dt);
+  for (int k = 0; k < 2; ++k) motor_step(&motors[k], dt, when);
   if (log_file && phys_steps % LOG_EVERY_STEPS == 0) {
     fprintf(log_file, "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f\n", (double)when / F_CPU, motors[0].w,
             motors[1].w, motors[0].v, motors[1].v, motors[0].i, motors[1].i);
@@ -349,11 +410,12 @@ static int queue_push(queue_t *q, uint8_t byte, uint64_t at) {
 
 /* The cycle at which the next waiting byte's stop bit is in (its start: when it is ready and
  * the line is free). */
-static uint64_t rx_next_end(void) {
+static uint64_t rx_next_start(void) {
   qbyte_t *e = &to_avr.q[to_avr.head % QSIZE];
-  uint64_t start = e->at > rx_line_free ? e->at : rx_line_free;
-  return start + byte_cycles;
+  return e->at > rx_line_free ? e->at : rx_line_free;
 }
+
+static uint64_t rx_next_end(void) { return rx_next_start() + byte_cycles; }
 
 /* The ATmega's RXC interrupt is a level: it stays requested while unread bytes wait. simavr 1.6
  * requests it once per byte time from its own timer and drops the request when the handler
@@ -361,18 +423,111 @@ static uint64_t rx_next_end(void) {
  * ones overrun, which the ATmega does not do. Request it again when a byte completes, and at the
  * end of each handler while bytes wait (its limit on reading "faster than the line" kept off:
  * the line's pace is this harness's). */
+/* CART_SIM_DEBUG=1: the interrupts and bytes before each overrun go to stderr */
+static int debug = 0; /* 1: overruns, 2: and every GPIO frame */
+static struct {
+  uint64_t cycle;
+  uint32_t value; /* the vector starting (0: a handler returned), or the byte completing */
+  uint32_t pc;
+  int kind; /* 1 interrupt, 2 byte into the receiver */
+} trace[64];
+static unsigned trace_count;
+
+static void trace_add(int kind, uint32_t value) {
+  unsigned k = trace_count++ % 64;
+  trace[k].cycle = avr->cycle;
+  trace[k].kind = kind;
+  trace[k].value = value;
+  trace[k].pc = avr->pc;
+}
+
+static void trace_interrupt_cb(avr_irq_t *irq, uint32_t value, void *param) {
+  (void)irq;
+  (void)param;
+  trace_add(1, value);
+}
+
+static void trace_dump(void) {
+  for (unsigned k = trace_count > 64 ? trace_count - 64 : 0; k < trace_count; ++k) {
+    unsigned j = k % 64;
+    fprintf(stderr, "  %llu %s %u pc 0x%x\n", (unsigned long long)trace[j].cycle,
+            trace[j].kind == 1 ? "vector" : "byte", trace[j].value, trace[j].pc);
+  }
+}
+
 static void rxc_request(void) {
   uart0->rxc_raise_time = 0;
   avr_raise_interrupt(avr, &uart0->rxc);
 }
 
+static int shift_held;
+static uint8_t shift_byte;
+static uint64_t rx_next_start(void);
+static void rx_deliver(uint8_t byte);
+static void rx_overrun(const char *why);
+
+/* At the end of each receive handler: the byte in the shift register moves into the buffer if
+ * the handler made room before the next byte's start bit, and RXC is requested again while bytes
+ * wait. */
 static void rxc_running_cb(avr_irq_t *irq, uint32_t value, void *param) {
   (void)irq;
   (void)param;
-  if (value == 0 && avr_regbit_get(avr, uart0->rxen) && !uart_fifo_isempty(&uart0->input))
-    rxc_request();
+  if (value != 0 || !avr_regbit_get(avr, uart0->rxen)) return;
+  if (shift_held && uart_fifo_get_read_size(&uart0->input) < 2) {
+    shift_held = 0;
+    if (to_avr.head != to_avr.tail && rx_next_start() <= avr->cycle) rx_overrun("late handler");
+    else rx_deliver(shift_byte);
+  }
+  if (!uart_fifo_isempty(&uart0->input)) rxc_request();
 }
 
+/* shift_held, shift_byte: the byte the receiver's shift register holds because its two-byte
+ * buffer was full, if any. */
+
+/* CART_SIM_DEBUG: a MAVLink 1 GPIO frame's ints, each way, with the time, to stderr */
+typedef struct {
+  uint8_t buf[64];
+  int n;
+} sniffer_t;
+static sniffer_t sniff_in, sniff_out;
+
+static void sniff(sniffer_t *s, uint8_t byte, const char *who) {
+  if (s->n == 0 && byte != 0xFE) return;
+  s->buf[s->n++] = byte;
+  if (s->n >= 2 && s->n == s->buf[1] + 8) {
+    if (s->buf[5] == 3 && s->buf[1] == 52) {
+      int32_t ints[4];
+      memcpy(ints, s->buf + 6 + 4 + 32, sizeof ints);
+      fprintf(stderr, "%s %.6f gpio ints %d %d %d %d\n", who, (double)avr->cycle / F_CPU,
+              ints[0], ints[1], ints[2], ints[3]);
+    }
+    s->n = 0;
+  } else if (s->n >= 64) {
+    s->n = 0;
+  }
+}
+
+static void rx_deliver(uint8_t byte) {
+  if (debug > 1) sniff(&sniff_in, byte, "host");
+  avr_raise_irq(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT), byte);
+  /* simavr 1.6 would show the byte one byte time later: it is complete now, so RXC now */
+  rxc_request();
+  if (debug) trace_add(2, byte);
+  st.host_bytes_to_avr++;
+}
+
+static void rx_overrun(const char *why) {
+  st.rx_overruns++;
+  if (debug) {
+    fprintf(stderr, "overrun (%s) at cycle %llu: pc 0x%x, I %d\n", why,
+            (unsigned long long)avr->cycle, (unsigned)avr->pc, avr->sreg[S_I]);
+    trace_dump();
+  }
+}
+
+/* The ATmega's receiver: a completed byte goes into the two-byte buffer; when that is full it
+ * waits in the shift register, and is lost (data overrun) when the next byte's start bit comes
+ * before the buffer has room. */
 static avr_cycle_count_t rx_line_cb(avr_t *a, avr_cycle_count_t when, void *param) {
   (void)param;
   if (to_avr.head == to_avr.tail) {
@@ -383,20 +538,17 @@ static avr_cycle_count_t rx_line_cb(avr_t *a, avr_cycle_count_t when, void *para
   to_avr.head++;
   rx_line_free = when;
   st.last_host_byte_cycle = (int64_t)when;
-  /* The ATmega's receiver holds two bytes: one that completes while two wait unread is lost
-   * (data overrun). */
+  if (shift_held) { /* this byte's start bit came while the one before still waited */
+    shift_held = 0;
+    rx_overrun("start bit");
+  }
   if (!(avr_regbit_get(a, uart0->rxen))) {
     st.rx_disabled_drops++;
   } else if (uart_xoff || uart_fifo_get_read_size(&uart0->input) >= 2) {
-    st.rx_overruns++;
-    if (getenv("CART_SIM_DEBUG"))
-      fprintf(stderr, "overrun at %.6f s: pc 0x%x I=%d unread %d\n", (double)when / F_CPU,
-              (unsigned)a->pc, a->sreg[S_I], uart_fifo_get_read_size(&uart0->input));
+    shift_held = 1;
+    shift_byte = e->byte;
   } else {
-    avr_raise_irq(avr_io_getirq(a, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT), e->byte);
-    /* simavr 1.6 would show the byte one byte time later: it is complete now, so RXC now */
-    rxc_request();
-    st.host_bytes_to_avr++;
+    rx_deliver(e->byte);
   }
   if (to_avr.head == to_avr.tail) {
     rx_line_busy = 0;
@@ -437,6 +589,7 @@ static void uart_out_cb(avr_irq_t *irq, uint32_t value, void *param) {
   uint64_t start = now > tx_line_free ? now : tx_line_free;
   tx_line_free = start + byte_cycles;
   st.cart_bytes++;
+  if (debug > 1) sniff(&sniff_out, (uint8_t)value, "cart");
   if (queue_push(&to_pc, (uint8_t)value, tx_line_free) && !opt_usb)
     to_pc.q[(to_pc.tail - 1) % QSIZE].deliver = tx_line_free;
 }
@@ -570,10 +723,14 @@ static void write_report(double wall_s) {
   fprintf(f, "{\n  \"report\": %u,\n", ++report_seq);
   fprintf(f, "  \"baud\": %ld,\n  \"firmware_uart_baud\": %.1f,\n", opt_baud, uart_baud);
   fprintf(f, "  \"usb_latency\": %s,\n", opt_usb ? "true" : "false");
+  fprintf(f, "  \"sched_fifo\": %s,\n", realtime_granted ? "true" : "false");
+  fprintf(f, "  \"encoder_phase_b\": %.3f,\n", opt_phase_b);
   fprintf(f, "  \"avr_cycles\": %llu,\n", (unsigned long long)avr->cycle);
   fprintf(f, "  \"avr_seconds\": %.6f,\n  \"wall_seconds\": %.6f,\n", avr_s, wall_s);
   fprintf(f, "  \"realtime_factor\": %.6f,\n", wall_s > 0 ? avr_s / wall_s : 0.0);
-  fprintf(f, "  \"max_lag_ms\": %.3f,\n", st.max_lag_s * 1e3);
+  fprintf(f, "  \"max_lag_ms\": %.3f,\n  \"max_lag_at_s\": %.3f,\n", st.max_lag_s * 1e3,
+          st.max_lag_at_s);
+  fprintf(f, "  \"lag_over_1ms_s\": %.3f,\n", st.lag_over_1ms_s);
   fprintf(f, "  \"avr_state\": %d,\n  \"avr_pc\": %u,\n", avr->state, (unsigned)avr->pc);
   fprintf(f, "  \"host_bytes_read\": %llu,\n", (unsigned long long)st.host_bytes_read);
   fprintf(f, "  \"host_bytes_to_avr\": %llu,\n", (unsigned long long)st.host_bytes_to_avr);
@@ -629,7 +786,7 @@ static void on_signal(int sig) {
 static void usage(const char *argv0) {
   fprintf(stderr,
           "usage: %s FIRMWARE.elf [--baud N] [--seconds S] [--usb-latency] [--report PATH] "
-          "[--log PATH]\n",
+          "[--log PATH] [--encoder-phase COUNTS] [--realtime]\n",
           argv0);
 }
 
@@ -648,6 +805,8 @@ int main(int argc, char **argv) {
       {"baud", required_argument, NULL, 'b'},   {"seconds", required_argument, NULL, 's'},
       {"usb-latency", no_argument, NULL, 'u'},  {"report", required_argument, NULL, 'r'},
       {"log", required_argument, NULL, 'l'},    {"help", no_argument, NULL, 'h'},
+      {"encoder-phase", required_argument, NULL, 'p'},
+      {"realtime", no_argument, NULL, 't'},
       {NULL, 0, NULL, 0}};
   int c;
   while ((c = getopt_long(argc, argv, "", options, NULL)) != -1) {
@@ -657,6 +816,8 @@ int main(int argc, char **argv) {
       case 'u': opt_usb = 1; break;
       case 'r': opt_report = optarg; break;
       case 'l': opt_log = optarg; break;
+      case 'p': opt_phase_b = strtod(optarg, NULL); break;
+      case 't': opt_realtime = 1; break;
       default: usage(argv[0]); return 2;
     }
   }
@@ -696,6 +857,8 @@ int main(int argc, char **argv) {
   avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
                           uart_out_cb, NULL);
   avr_irq_register_notify(uart0->rxc.irq + AVR_INT_IRQ_RUNNING, rxc_running_cb, NULL);
+  debug = getenv("CART_SIM_DEBUG") ? atoi(getenv("CART_SIM_DEBUG")) : 0;
+  if (debug) avr_irq_register_notify(avr->interrupts.irq + AVR_INT_IRQ_RUNNING, trace_interrupt_cb, NULL);
   avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON),
                           uart_xon_cb, NULL);
   avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF),
@@ -705,6 +868,7 @@ int main(int argc, char **argv) {
    *         B = IN1 9 (PH6), IN2 10 (PB4), PWM 8 (OC4C), encoder 3 (PE5) / 12 (PB6) */
   motor_init(&motors[0], -1);
   motor_init(&motors[1], +1);
+  motors[1].enc_phase = opt_phase_b;
   motors[0].in1_port = 'G'; motors[0].in1_bit = 5;
   motors[0].in2_port = 'E'; motors[0].in2_bit = 3;
   motors[0].ocr_channel = 1;
@@ -723,7 +887,8 @@ int main(int argc, char **argv) {
   for (int k = 0; k < 2; ++k) {
     motors[k].enc_a_irq = pin_irq(motors[k].enc_a_port, motors[k].enc_a_bit);
     motors[k].enc_b_irq = pin_irq(motors[k].enc_b_port, motors[k].enc_b_bit);
-    encoder_emit(&motors[k], 0);
+    motors[k].enc_count = motors[k].enc_scheduled = (int64_t)floor(motors[k].enc_phase);
+    encoder_emit(&motors[k], motors[k].enc_count);
   }
 
   if (opt_log) {
@@ -758,6 +923,11 @@ int main(int argc, char **argv) {
 
   avr_cycle_timer_register(avr, PHYS_STEP_CYCLES, physics_cb, NULL);
 
+  if (opt_realtime) { /* SCHED_FIFO below cartctl's own loop (50), when the system allows it */
+    struct sched_param param = {.sched_priority = 20};
+    realtime_granted = sched_setscheduler(0, SCHED_FIFO, &param) == 0;
+  }
+
   double t0 = wall_now();
   uint64_t next_slice = IO_SLICE_CYCLES;
   int state = cpu_Running;
@@ -776,7 +946,11 @@ int main(int argc, char **argv) {
     double avr_s = (double)avr->cycle / F_CPU;
     double wall_s = wall_now() - t0;
     double ahead = avr_s - wall_s;
-    if (-ahead > st.max_lag_s) st.max_lag_s = -ahead;
+    if (-ahead > st.max_lag_s) {
+      st.max_lag_s = -ahead;
+      st.max_lag_at_s = avr_s;
+    }
+    if (-ahead > 1e-3) st.lag_over_1ms_s += (double)IO_SLICE_CYCLES / F_CPU;
     if (ahead > 50e-6) {
       struct timespec ts = {.tv_sec = (time_t)ahead, .tv_nsec = (long)((ahead - floor(ahead)) * 1e9)};
       nanosleep(&ts, NULL);
