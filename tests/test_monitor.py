@@ -105,7 +105,7 @@ def test_bad_labels(text: str, match: str) -> None:
         (["serial:"], "unknown plant"),
         (["virtual", "--duration", "0"], "--duration"),
         (["virtual", "--connect-timeout", "nan"], "--connect-timeout"),
-        (["virtual:bogus=1"], "bad fault"),
+        (["virtual:bogus=1"], "bad virtual cart option 'bogus=1'"),
         (["virtual", "--onboard", "missing.toml"], "not found"),
     ],
 )

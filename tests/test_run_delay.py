@@ -95,19 +95,21 @@ def test_summary_has_the_loop_delay_of_simulators(
     assert "controller controllers/pi.toml" in out
 
 
-def test_virtual_plant_takes_the_serial_controller(
+def test_virtual_plant_takes_the_pi_controller(
     capsys: pytest.CaptureFixture[str], workdir: Path
 ) -> None:
     code, out, err = _run(capsys, "--plant", "virtual", "--reference", "step:8", "--duration",
                           "0.5", "--rerun", "off", "--json")  # fmt: skip
     assert code == 0, err
     summary = json.loads(out)
-    assert summary["controller"] == "controllers/serial-pi.toml"
-    assert summary["loop_delay_ticks"] == 3  # echo 2 + the cart's own tick
-    assert summary["controller_loop_delay_ticks"] == 3
+    assert summary["controller"] == "controllers/pi.toml"
+    # bridge 2: the reply reaches the cart within the tick and io() applies it at the next one,
+    # which echoes it: the on-board loop's delay
+    assert summary["loop_delay_ticks"] == 1
+    assert summary["controller_loop_delay_ticks"] == 1
 
 
-def test_onboard_controller_on_the_virtual_cart_stops_before_driving(
+def test_serial_controller_on_the_virtual_cart_stops_before_driving(
     capsys: pytest.CaptureFixture[str], workdir: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     sent: list[tuple[float, float, bool]] = []
@@ -125,11 +127,12 @@ def test_onboard_controller_on_the_virtual_cart_stops_before_driving(
         return plant, description
 
     monkeypatch.setattr(run_command, "make_plant", recording_make_plant)
-    code, _out, err = _run(capsys, "--plant", "virtual", "--controller", "controllers/pi.toml",
-                          "--rerun", "off")  # fmt: skip
+    code, _out, err = _run(capsys, "--plant", "virtual", "--controller",
+                          "controllers/serial-pi.toml", "--rerun", "off")  # fmt: skip
     assert code == 2
-    expected = MISMATCH.format(given="pi.toml", designed=1, plant="virtual", delay=3,
-                               fit="serial-pi.toml")  # fmt: skip
+    # serial-pi.toml is the fallback for a serial loop of 3 ticks; the bridge's loop has 1
+    expected = MISMATCH.format(given="serial-pi.toml", designed=3, plant="virtual", delay=1,
+                               fit="pi.toml")  # fmt: skip
     assert _errors(err) == [expected]
     assert sent, "the echo was measured by sending"
     assert all(not drive and a == 0.0 and b == 0.0 for a, b, drive in sent)

@@ -1,13 +1,17 @@
-"""The serial plant against a scripted cart (no pty, no clock): echo, loop delay, faults, stop."""
+"""The serial plant against a scripted cart (no pty): echo, loop delay, faults, stop."""
 
 from __future__ import annotations
 
 import itertools
+import math
+import time
 
 import pytest
 
+from cartctl.cart import PERIOD_S
 from cartctl.errors import PlantError
 from cartctl.link import Encoder, Framer, Gpio, HostCommand, encode_gpiox_v2
+from cartctl.link.bridge import CH_BRIDGE_VERSION
 from cartctl.plants.bridge_firmware import BridgeFirmware, CartIO
 from cartctl.plants.cart_link import UnsupportedCartError
 from cartctl.plants.physics import PhysicsPlant
@@ -15,10 +19,15 @@ from cartctl.plants.serial_cart import SerialCart
 
 
 class ScriptedCart:
-    """A cart in discrete time behind a fake pyserial port: one read() = one cart tick.
+    """A cart in discrete time behind a fake pyserial port: a read() that finds nothing runs a tick.
 
-    The host's frames reach the bridge logic ``line_ticks`` ticks after they were written (the
-    receive slot after control(), as on the cart). The physics is the real simulator.
+    The cart waits for the host: its next tick runs as soon as the host has answered the last one,
+    else a period after it (the host sent nothing: a dropped tick, or :meth:`SerialCart.reset`
+    listening for a backlog, which must not see the next tick that soon). Each tick keeps the
+    bridge's (version 2) order: drain (the host's frames that reached the cart), ``io()`` (the
+    stored command drives, the encoders are read), ``control()``, one GPIO out. A frame written
+    after GPIO t reaches the drain of tick ``t + line_ticks`` (1: within the tick, as at 1 Mbaud).
+    The physics is the real simulator.
     """
 
     def __init__(self, line_ticks: int = 2, *, heartbeat: bool = True) -> None:
@@ -38,7 +47,10 @@ class ScriptedCart:
         self.silent_from: int | None = None
         self.vanish_from: int | None = None
         self.generation_b = False
+        self.bridge_version: float | None = None  # None: the firmware's own (2)
         self.timeout = 0.005
+        self.replied = False
+        self.last_tick_s = -math.inf
 
     # -- pyserial's surface -------------------------------------------------------------------
 
@@ -54,8 +66,11 @@ class ScriptedCart:
     def read(self, size: int = 1) -> bytes:
         if self.vanish_from is not None and self.tick >= self.vanish_from:
             raise OSError(5, "Input/output error")
-        if not self.outbox:
+        if not self.outbox and (self.replied or time.perf_counter() - self.last_tick_s >= PERIOD_S):
             self._tick()
+        if not self.outbox:  # pyserial's read timeout: nothing came
+            time.sleep(self.timeout)
+            return b""
         data = bytes(self.outbox[:size])
         del self.outbox[:size]
         return data
@@ -64,6 +79,7 @@ class ScriptedCart:
         if self.vanish_from is not None and self.tick >= self.vanish_from:
             raise OSError(5, "Input/output error")
         self.in_flight.append((self.tick + self.line_ticks - 1, bytes(data)))
+        self.replied = True
         return len(data)
 
     def flush(self) -> None:
@@ -78,24 +94,29 @@ class ScriptedCart:
         if self.silent_from is not None and self.tick >= self.silent_from:
             return
         j = self.tick
-        y = self.physics.step(*self.voltage) if j else self.physics.reset()
-        applied = self.physics.applied_voltage_v
-        io = CartIO(y.speed_a_rad_s, y.speed_b_rad_s, applied[0], applied[1], 0.0, 0.0)
-        self.voltage = self.firmware.control(io, 10 * j)
-        due = [d for t, d in self.in_flight if t <= j]
+        self.replied, self.last_tick_s = False, time.perf_counter()
+        due = [d for t, d in self.in_flight if t <= j]  # the drain before io()
         self.in_flight = [(t, d) for t, d in self.in_flight if t > j]
         for message in self.framer.feed(b"".join(due)):
             if isinstance(message, Gpio):
                 command = HostCommand.from_channels(message.floats, message.ints)
                 if command.seq in self.lose_host_seqs:  # lost on the way in
                     continue
-                self.firmware.receive(message.floats, message.ints, 10 * j + 2)
+                self.firmware.receive(message.floats, message.ints, 10 * j)
                 self.received.append(command)
+        self.voltage = self.firmware.command_v  # io(): the newest command drives from this tick
+        y = self.physics.step(*self.voltage) if j else self.physics.reset()
+        applied = self.physics.applied_voltage_v
+        io = CartIO(y.speed_a_rad_s, y.speed_b_rad_s, applied[0], applied[1], 0.0, 0.0)
+        self.firmware.control(io, 10 * j)
         self.outbox += self.garbage.get(j, b"")
         if self.generation_b:
             frame = encode_gpiox_v2(j * 10, [0.0] * 12, seq=j % 256)
         else:
-            frame = self.encoder.gpio(j * 10, self.firmware.out_floats, self.firmware.out_ints)
+            floats = list(self.firmware.out_floats)
+            if self.bridge_version is not None:
+                floats[CH_BRIDGE_VERSION] = self.bridge_version
+            frame = self.encoder.gpio(j * 10, floats, self.firmware.out_ints)
         if j not in self.drop_ticks:  # a lost frame still used its sequence number
             self.outbox += frame
         self.tick += 1
@@ -119,9 +140,10 @@ def test_loop_delay_from_the_echo_is_when_the_voltage_is_applied(line_ticks: int
         sent_tick = plant.tick_index
         plant.receive()
         applied_at[sent_tick] = volts  # type: ignore[assignment]
-    # the echo says E = line_ticks + 1; the voltage is on the motor one tick later
-    assert plant.echo_delay_ticks == line_ticks + 1
-    assert plant.loop_delay_ticks == line_ticks + 2
+    # the reply to GPIO t reaches the drain of tick t + line_ticks, right before that tick's io()
+    # puts it on the motor, and that tick's GPIO echoes it: the loop delay is the echo delay
+    assert plant.echo_delay_ticks == line_ticks
+    assert plant.loop_delay_ticks == line_ticks
     plant.close()
 
 
@@ -134,8 +156,10 @@ def test_applied_voltage_channel_confirms_the_loop_delay() -> None:
         plant.step(6.0 if k >= 10 else 0.0, 0.0)
         samples.append((plant.tick_index, plant.sample.applied_a_v))  # type: ignore[union-attr]
     first_on = next(t for t, v in samples if v > 5.0)
-    # the command computed from tick 10's measurement is on the motor at tick 10 + loop delay
-    assert first_on == 10 + plant.loop_delay_ticks  # type: ignore[operator]
+    # the command computed from tick 10's measurement reaches the drain of tick 12 and io() puts
+    # it on the motor there: the H-bridge channel and the echo agree on a loop delay of 2
+    assert first_on == 10 + 2
+    assert plant.loop_delay_ticks == 2
 
 
 def test_close_sends_drive_zero_with_zero_volts() -> None:
@@ -248,3 +272,23 @@ def test_generation_b_is_refused_by_name() -> None:
     plant = _plant(cart, connect_timeout_s=0.5)
     with pytest.raises(UnsupportedCartError, match="generation B"):
         plant.reset()
+
+
+@pytest.mark.parametrize("version", [0.0, 1.0, 3.0])
+def test_another_bridge_version_is_refused_naming_the_sketch(version: float) -> None:
+    """A cart at 1 Mbaud whose GPIO carries another bridge version than 2 (float 6) is refused."""
+    cart = ScriptedCart(1)
+    cart.bridge_version = version
+    plant = _plant(cart)
+    with pytest.raises(UnsupportedCartError, match=r"bridge version.*firmware/cartctl_bridge"):
+        plant.reset()
+    plant.close()
+    assert not [c for c in cart.received if c.drive]  # it never drove
+
+
+def test_the_bridge_sends_version_2_in_float_6() -> None:
+    cart = ScriptedCart(1)
+    plant = _plant(cart)
+    plant.reset()
+    assert plant.sample.bridge_version == 2  # type: ignore[union-attr]
+    plant.close()

@@ -113,7 +113,7 @@ def make_plant(
         cart = VirtualCart(preset, noise_std_rad_s=noise_std_rad_s, seed=seed, faults=faults)
         shown = f", faults {spec.partition(':')[2]}" if faults != CartFaults() else ""
         return VirtualSerialCart(
-            cart
+            cart, connect_timeout_s=connect_timeout_s
         ), f"virtual cart on {cart.port} (physics preset {preset}{shown})"
     if spec.startswith("serial:"):
         port = spec.partition(":")[2]
