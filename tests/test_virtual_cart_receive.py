@@ -136,7 +136,10 @@ def test_the_bridge_drains_lose_nothing_whatever_the_reply_timing(starts: list[f
 @pytest.mark.parametrize(
     "starts",
     [
-        [k * 0.01 + 0.0012 + 0.0006 + 0.0005 + random.Random(k).uniform(0, 0.006) for k in range(300)],
+        [
+            k * 0.01 + 0.0012 + 0.0006 + 0.0005 + random.Random(k).uniform(0, 0.006)
+            for k in range(300)
+        ],
         [0.001 + 0.03 * (k // 3) for k in range(300)],
     ],
     ids=["jitter", "bursts"],
