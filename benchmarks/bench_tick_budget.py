@@ -1,17 +1,17 @@
 """The PC loop's tick budget on the virtual cart: where the 10 ms of a serial tick go.
 
-Drives the virtual cart (bridge version 2, 1 Mbaud) through the real serial path for a number of
+Drives the virtual cart (bridge version 2, 500 kbaud) through the real serial path for a number of
 ticks with a simple proportional law (the timing, not the control, is measured here), and prints,
 per variant, percentiles (p50 / p99 / max, ms) of each leg of one tick, from the start of the
 cart's tick:
 
 - ``cart frame out``: the cart's GPIO through the AVR's UART (io() and control() take 1.2 ms, then
-  60 bytes at 1 Mbaud);
+  60 bytes at 500 kbaud);
 - ``at the PC``: when the PC's port has it (the ATmega16U2 holds it until its next 4.096 ms flush,
   then the next 1 ms USB frame; ``usb=off``: a bare pseudo-terminal);
 - ``host reply``: from the frame's arrival to the reply written (the host's own latency);
 - ``reply at the cart``: the reply's last byte through the cart's UART (the next USB frame, then
-  60 bytes at 1 Mbaud);
+  60 bytes at 500 kbaud);
 - ``margin``: what is left of the tick before the drain that precedes the next ``io()``; a
   negative margin is a reply that misses its tick (it acts one tick later).
 

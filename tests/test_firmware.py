@@ -377,7 +377,7 @@ def test_robot_cpp_glue_on_a_mock_template(
         [tmp_path / "harness.cpp", tmp_path / "robot.cpp"], tmp_path, _stdin(short)
     )
     assert lines[0] == "MSG cartctl bridge ready"
-    assert lines[1] == "BAUD 1000000"  # the template's 115200, raised to the bridge's line rate
+    assert lines[1] == "BAUD 500000"  # the template's 115200, raised to the bridge's line rate
     rows = lines[2:]
     assert len(rows) == len(short)
     drains = 0

@@ -48,7 +48,7 @@ MCU = [
     "-DARDUINO=10807",
     "-DARDUINO_AVR_MEGA2560",
     "-DARDUINO_ARCH_AVR",
-    "-DSERIAL_RX_BUFFER_SIZE=256",  # the bridge needs it at 1 Mbaud (firmware/README.md)
+    "-DSERIAL_RX_BUFFER_SIZE=256",  # the bridge needs it at 500 kbaud (firmware/README.md)
 ]
 COMMON = ["-Os", "-ffunction-sections", "-fdata-sections", *MCU]
 CXX_ONLY = ["-fno-exceptions", "-fno-threadsafe-statics"]  # as the Arduino builder

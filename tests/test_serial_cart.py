@@ -26,7 +26,7 @@ class ScriptedCart:
     listening for a backlog, which must not see the next tick that soon). Each tick keeps the
     bridge's (version 2) order: drain (the host's frames that reached the cart), ``io()`` (the
     stored command drives, the encoders are read), ``control()``, one GPIO out. A frame written
-    after GPIO t reaches the drain of tick ``t + line_ticks`` (1: within the tick, as at 1 Mbaud).
+    after GPIO t reaches the drain of tick ``t + line_ticks`` (1: within the tick, as at 500 kbaud).
     The physics is the real simulator.
     """
 
@@ -276,7 +276,7 @@ def test_generation_b_is_refused_by_name() -> None:
 
 @pytest.mark.parametrize("version", [0.0, 1.0, 3.0])
 def test_another_bridge_version_is_refused_naming_the_sketch(version: float) -> None:
-    """A cart at 1 Mbaud whose GPIO carries another bridge version than 2 (float 6) is refused."""
+    """A cart at 500 kbaud whose GPIO carries another bridge version than 2 (float 6) is refused."""
     cart = ScriptedCart(1)
     cart.bridge_version = version
     plant = _plant(cart)

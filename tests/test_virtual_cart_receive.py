@@ -4,7 +4,7 @@ The schedule tests drive one :class:`VirtualCart` by hand on its own clock (no t
 time): the host's replies are put on the line at chosen moments and the cart's drains and
 ``control()`` run tick by tick. Expectations come from the line's arithmetic. The bridge before
 version 2 (``bridge=1``): a 60-byte frame is 5.2 ms at 115200 baud, the ring holds 63 bytes,
-microOS's communication thread drains 1.2 ms into each tick. Version 2: 0.6 ms at 1 Mbaud, a
+microOS's communication thread drains 1.2 ms into each tick. Version 2: 1.2 ms at 500 kbaud, a
 255-byte ring, a drain every 1 ms and one right before ``io()``. The last tests run the real thing
 (pseudo-terminal, threads, ``cartctl run``).
 """
@@ -137,7 +137,7 @@ def test_the_bridge_drains_lose_nothing_whatever_the_reply_timing(starts: list[f
     "starts",
     [
         [
-            k * 0.01 + 0.0012 + 0.0006 + 0.0005 + random.Random(k).uniform(0, 0.006)
+            k * 0.01 + 0.0012 + 0.0012 + 0.0005 + random.Random(k).uniform(0, 0.006)
             for k in range(300)
         ],
         [0.001 + 0.03 * (k // 3) for k in range(300)],
@@ -153,10 +153,12 @@ def test_bridge_2_ring_never_overflows_at_1_mbaud(starts: list[float]) -> None:
 
 
 def test_bridge_2_echoes_the_reply_at_the_next_tick() -> None:
-    """The reply to tick k is through at k·10 + 1.2 + 0.6 + 0.5 ms and up to 8 ms later: the drain
+    """The reply to tick k goes on the line at k·10 + 1.2 + 1.2 + 0.5 ms, or up to 5.5 ms later, and is
+    through 1.2 ms after that (by k·10 + 9.6 ms at the latest): the drain
     before io() of tick k+1 stores it, so control() of tick k+1 echoes it (loop delay 1)."""
-    latency = [0.0005 + random.Random(5).uniform(0.0, 0.0075) for _ in range(100)]
-    starts = [k * 0.01 + 0.0012 + 0.0006 + lat for k, lat in enumerate(latency)]
+    rng = random.Random(5)
+    latency = [0.0005 + rng.uniform(0.0, 0.0055) for _ in range(100)]
+    starts = [k * 0.01 + 0.0012 + 0.0012 + lat for k, lat in enumerate(latency)]
     _, echoes = replay("bridge", starts, bridge=2)
     for k in range(90):  # the reply to tick k carries seq k + 1
         assert echoes[k + 1] == k + 1, k

@@ -35,7 +35,7 @@
 #define BRIDGE_STATUS_WATCHDOG 2   // status bit 1: the watchdog has tripped
 #define BRIDGE_VERSION 2           // sent in float channel 6; bridges before version 2 send 0
 #define BRIDGE_VERSION_CHANNEL 6
-#define BRIDGE_BAUD 1000000UL      // the line: 1 Mbaud 8N1, exact on a 16 MHz AVR (0.6 ms a frame)
+#define BRIDGE_BAUD 500000UL       // the line: 500 kbaud 8N1, exact on a 16 MHz AVR (1.2 ms a frame)
 
 // What io() read at this tick and what it wrote to the H-bridges.
 struct BridgeIO {

@@ -7,16 +7,19 @@
 //                io() (apply it, read the encoders), control() (measurements out), send one GPIO
 //   every 1 ms:  drain the serial port (the newest command replaces the stored voltage)
 //
-// The line runs at 1 Mbaud (BRIDGE_BAUD): a 60-byte frame takes 0.6 ms each way, so the cart's
+// The line runs at 500 kbaud (BRIDGE_BAUD): a 60-byte frame takes 1.2 ms each way, so the cart's
 // frame and the PC's reply both fit in the tick, with the Mega's USB bridge's latency counted.
+// (1 Mbaud would be faster still, but the receive interrupt then has 20 us to take each byte,
+// and the course's encoder interrupts, 152 cycles each, delay it past that: bytes are lost.)
 // See firmware/README.md and docs/serial-protocol.md for the tick budget.
 
 #include "robot.h"
 
-// The Arduino core's receive ring must hold what 1 Mbaud carries while the 10 ms thread runs
-// (100 bytes a ms, ~1.2 ms): build with -DSERIAL_RX_BUFFER_SIZE=256 (firmware/README.md).
+// The Arduino core's receive ring must hold what the line carries while the 10 ms thread runs
+// (50 bytes a ms at 500 kbaud, ~1.2 ms, and more when two replies come together): build with
+// -DSERIAL_RX_BUFFER_SIZE=256 (firmware/README.md).
 #if !defined(SERIAL_RX_BUFFER_SIZE) || SERIAL_RX_BUFFER_SIZE < 256
-#error "build with -DSERIAL_RX_BUFFER_SIZE=256: at 1 Mbaud the 64-byte receive ring overflows (see firmware/README.md)"
+#error "build with -DSERIAL_RX_BUFFER_SIZE=256: at 500 kbaud the 64-byte receive ring overflows (see firmware/README.md)"
 #endif
 
 static Robot robot;

@@ -23,7 +23,7 @@
 
 bool Robot::init() {
   MECOtron::init();            // serial, PWM timer, encoders, LEDs
-  Serial.begin(BRIDGE_BAUD);   // the template opens 115200; the bridge runs the line at 1 Mbaud
+  Serial.begin(BRIDGE_BAUD);   // the template opens 115200; the bridge runs the line at 500 kbaud
   bridge_reset(&_bridge);
   setVoltageMotorA(0.0f);
   setVoltageMotorB(0.0f);

@@ -98,7 +98,7 @@ DEFINE_FIFO(uint16_t, uart_fifo); /* the accessors of the UART's input FIFO (sim
 /* options and state                                                                           */
 
 static double opt_seconds = 0.0; /* 0: until a signal */
-static long opt_baud = 1000000;
+static long opt_baud = 500000;
 static int opt_usb = 0;
 static const char *opt_report = NULL;
 static const char *opt_log = NULL;

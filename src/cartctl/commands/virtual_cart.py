@@ -34,7 +34,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description=(
             "Run the physical simulator behind a pseudo-terminal that speaks the cart's microOS "
             "MAVLink protocol and the bridge contract (firmware/): 100 GPIO frames per second at "
-            "1 Mbaud (115200 with --onboard or --faults bridge=1), a HEARTBEAT every 1.1 s, the "
+            "500 kbaud (115200 with --onboard or --faults bridge=1), a HEARTBEAT every 1.1 s, the "
             "watchdog. Prints the port; point "
             "'cartctl run --plant serial:PORT', 'excite' or 'monitor' at it. Ctrl-C stops it."
         ),

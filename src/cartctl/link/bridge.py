@@ -63,8 +63,8 @@ WATCHDOG_MS = 70
 number: the motors are off at most 90 ms after the host's last frame (the next tick, then io())."""
 BRIDGE_VERSION = 2
 """The bridge sketch's version, sent in float channel :data:`CH_BRIDGE_VERSION` (0 before 2)."""
-BRIDGE_BAUD = 1_000_000
-"""The line's rate with bridge version 2 (8N1): a 60-byte GPIO frame takes 0.6 ms."""
+BRIDGE_BAUD = 500_000
+"""The line's rate with bridge version 2 (8N1): a 60-byte GPIO frame takes 1.2 ms."""
 LEGACY_BAUD = 115_200
 """The line's rate of the course's firmware and of bridges before version 2."""
 STATUS_DRIVING = 1

@@ -42,7 +42,7 @@ class CartFaults:
         'bridge' (the bridge sketch drains the port every 1 ms and before io()) or
         'microos' (microOS's communication thread alone, once per tick: the sketch before).
     bridge : int
-        The bridge sketch's version: 2 (1 Mbaud, the newest command at the next io(): loop delay
+        The bridge sketch's version: 2 (500 kbaud, the newest command at the next io(): loop delay
         1) or 1 (115200 baud, the voltage stored at control(): loop delay 3), to see how cartctl
         meets a cart that still runs the older sketch.
     usb : bool

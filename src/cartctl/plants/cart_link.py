@@ -66,7 +66,7 @@ def print_to_stderr(line: str) -> None:
 
 
 class CartLink:
-    """A serial connection to a microOS cart (generation A; 1 Mbaud for the bridge, 115200 before).
+    """A serial connection to a microOS cart (generation A; 500 kbaud for the bridge, 115200 before).
 
     Parameters
     ----------
@@ -79,7 +79,7 @@ class CartLink:
     serial_factory : callable, optional
         Opens the port (default ``serial.Serial``); for tests.
     baud : int
-        The line's rate: the bridge's 1 Mbaud by default.
+        The line's rate: the bridge's 500 kbaud by default.
     """
 
     def __init__(

@@ -259,7 +259,7 @@ class Monitor:
 
 
 def wait_started(link: CartLink, timeout_s: float) -> None:
-    """Wait for the cart's HEARTBEAT at the bridge's 1 Mbaud or the course firmware's 115200
+    """Wait for the cart's HEARTBEAT at the bridge's 500 kbaud or the course firmware's 115200
     (:meth:`CartLink.wait_heartbeat_any_rate`), closing the link on failure."""
     try:
         link.wait_heartbeat_any_rate(timeout_s)

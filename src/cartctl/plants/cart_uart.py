@@ -2,8 +2,8 @@
 
 Four facts of the real cart decide when and whether a frame arrives:
 
-- **the line**: 8N1 carries one byte per ten bit times: 10 µs at the bridge's 1 Mbaud (a 60-byte
-  GPIO frame in 0.6 ms), 86.8 µs at the course firmware's 115200 baud (5.2 ms);
+- **the line**: 8N1 carries one byte per ten bit times: 20 µs at the bridge's 500 kbaud (a 60-byte
+  GPIO frame in 1.2 ms), 86.8 µs at the course firmware's 115200 baud (5.2 ms);
 - **the Mega's USB bridge** (an ATmega16U2 running Arduino's usbserial firmware): bytes the cart
   sends wait in its buffer until its 4.096 ms flush timer (Timer0 at 16 MHz / 256 / 256)
   overflows, or until more than 96 of them wait; the PC then collects them in the next 1 ms USB
@@ -33,7 +33,7 @@ import random
 import select
 import threading
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 from cartctl.link import Framer, Gpio
 from cartctl.link.bridge import LEGACY_BAUD
@@ -209,8 +209,8 @@ class PacedWriter(threading.Thread):
         self.deliveries: collections.deque[tuple[float, float]] = collections.deque(maxlen=4096)
         self._line_free_s = 0.0
         self._out: collections.deque[tuple[float, bytes]] = collections.deque()
-        self.garble = False
-        """True while the host's port runs at another rate: the PC reads noise, not frames."""
+        self.rate_ok: Callable[[], bool] = lambda: True
+        """Whether the host's port runs at the cart's rate now (else the PC reads noise)."""
 
     def put(self, data: bytes, not_before_s: float = 0.0) -> None:
         """Queue ``data`` to leave no earlier than ``not_before_s``."""
@@ -239,7 +239,7 @@ class PacedWriter(threading.Thread):
                 self._out.extend(self.usb.flush_due(now))
             while self._out and self._out[0][0] <= now:
                 _, data = self._out.popleft()
-                if self.garble:
+                if not self.rate_ok():
                     data = bytes(random.getrandbits(8) for _ in data)
                 try:
                     os.write(self.fd, data)
@@ -298,8 +298,8 @@ class LineReader(threading.Thread):
         super().__init__(name="virtual-cart-reader", daemon=True)
         self.byte_s = float(byte_s)
         self.usb_frame_phase_s = usb_frame_phase_s
-        self.garble = False
-        """True while the host's port runs at another rate: the cart parses noise, not frames."""
+        self.rate_ok: Callable[[], bool] = lambda: True
+        """Whether the host's port runs at the cart's rate now (else the cart parses noise)."""
         self.fd = fd
         self.stop_event = stop
         self.reply_jitter_s = float(reply_jitter_s)
@@ -330,7 +330,7 @@ class LineReader(threading.Thread):
             if self.usb_frame_phase_s is not None:
                 phase = self.usb_frame_phase_s
                 now = phase + math.ceil((now - phase) / USB_FRAME_S) * USB_FRAME_S
-            if self.garble:
+            if not self.rate_ok():
                 data = bytes(self._rng.getrandbits(8) for _ in data)
             self.deliver(data, now)
 

@@ -6,7 +6,7 @@ voltages A and B, drive = 1 and a sequence number that increases by one per fram
 (version 2) writes the newest command as the voltage of its next ``io()`` and echoes the sequence
 number of the command each ``io()`` applied; from that echo the plant measures the loop delay::
 
-    tick k      the cart measures, sends GPIO k (0.6 ms on the line at 1 Mbaud, then the USB bridge)
+    tick k      the cart measures, sends GPIO k (1.2 ms on the line at 500 kbaud, then the USB bridge)
     host        computes from GPIO k, sends command s
     tick k+E    io() put s's voltage on the motor: the first GPIO that echoes s
 
@@ -14,7 +14,7 @@ so the loop delay from measurement to applied voltage is E ticks: 1 when the rep
 within the tick, as on-board control (the report's "microOS delay"). A model of the loop has an
 input delay of ``nk = loop_delay_ticks + 1`` (2, as in the report).
 
-The port opens at 1 Mbaud. A cart that answers only at 115200 baud (the course's firmware, or a
+The port opens at 500 kbaud. A cart that answers only at 115200 baud (the course's firmware, or a
 bridge before version 2), or that sends another bridge version, is refused with one line naming
 the sketch to flash (:class:`~cartctl.plants.cart_link.UnsupportedCartError`).
 
@@ -64,7 +64,7 @@ BACKLOG_WAIT_S = 0.006
 """A GPIO that follows the one :meth:`SerialCart.reset` took within this long is a backlog (the
 cart's frames come 10 ms apart, give or take the USB bridge's 5 ms), not the next tick."""
 FLASH_HINT = (
-    f"flash firmware/cartctl_bridge (bridge version {BRIDGE_VERSION}, 1 Mbaud; see "
+    f"flash firmware/cartctl_bridge (bridge version {BRIDGE_VERSION}, 500 kbaud; see "
     "firmware/README.md)"
 )
 

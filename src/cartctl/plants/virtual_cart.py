@@ -15,7 +15,7 @@ sketch (version 2, the default)::
     every ms   the bridge's own thread drains the serial port: a newer command replaces the
                stored voltage
 
-The line runs at 1 Mbaud and the receive ring holds 255 bytes (the sketch's build flag). The
+The line runs at 500 kbaud and the receive ring holds 255 bytes (the sketch's build flag). The
 Mega's USB bridge is modelled (``usb=off`` turns it off): the cart's bytes reach the PC at the
 ATmega16U2's next 4.096 ms flush and the USB frame after it, the PC's at the next 1 ms USB frame
 (:mod:`cartctl.plants.cart_uart`). ``bridge=1`` runs the sketch before version 2: 115200 baud, a
@@ -158,6 +158,7 @@ class VirtualCart:
             seed=None if seed is None else seed + 1, byte_s=byte_time_s(self.baud),
             usb_frame_phase_s=None if usb is None else usb.frame_phase_s,
         )  # fmt: skip
+        self._reader.rate_ok = self._writer.rate_ok = self._host_rate_matches
         self._parser = MicroosParser()
         self._held: tuple[list[float], list[int]] = ([0.0] * 8, [0] * 4)
         self.boot_s = 0.0
@@ -332,8 +333,6 @@ class VirtualCart:
                 self.fault_at_s = time.perf_counter()
                 self._stop.wait()
                 return
-            mismatch = not self._host_rate_matches()
-            self._reader.garble = self._writer.garble = mismatch
             self.receive_for_tick(j)  # on the cart's clock, whenever this thread gets here
             if self.bridge_version == 2:  # the newest command the drains stored
                 voltage = firmware.command_v  # type: ignore[attr-defined]
