@@ -4,9 +4,10 @@
   count per tick = 0.3506 rad/s): on board (loop delay 1, ``--plant sim`` on the report's model
   and ``--plant physics`` with each command landing 3 ms after its tick, the presets' calibrated
   timing, and 10 ms, microOS's documented order: ``physics:actuation_ms=10``) at most 5 %
-  overshoot and 90 ms (poles.toml) or 120 ms (pi.toml) settling; through the serial loop (loop delay 3, ``--plant sim`` on the report's model with
-  nk = 4, and ``--plant virtual``, the physics simulator behind the serial link in real time) at
-  most 5 % and three times the time-optimal settling for that delay.
+  overshoot and 90 ms (poles.toml) or 120 ms (pi.toml) settling, and the same through the bridge
+  (``--plant virtual``, the physics simulator behind the serial link in real time: loop delay 1
+  too); the fallback files for a serial loop of 3 ticks (``--plant sim`` on the report's model
+  with nk = 4) at most 5 % and three times the time-optimal settling for that delay.
 - The Kalman estimate of poles.toml on the physics simulator (square 8 rad/s, 2 s period): its
   RMS error against the true speed at most half the encoder's, over the whole run and over the
   steady windows alone (the last 0.5 s of each 1 s level), with no offset that follows the sign
@@ -110,29 +111,30 @@ def test_serial_step(capsys, workdir: Path, name: str) -> None:
 
 
 @pytest.mark.filterwarnings("ignore::cartctl.errors.DataWarning")  # a busy machine may skip a tick
-@pytest.mark.parametrize("controller", [None, "controllers/serial-poles.toml"])
-def test_serial_step_on_the_virtual_cart(capsys, workdir: Path, controller: str | None) -> None:
-    """Through the serial path in real time (the virtual cart: the physics simulator behind a
-    pseudo-terminal, loop delay 3 measured from the echo): ``run --plant virtual`` takes
-    serial-pi.toml by itself; both serial files meet the target on the simulator's true speed."""
+@pytest.mark.parametrize(
+    ("controller", "limit_s"), [(None, 0.12), ("controllers/poles.toml", 0.09)]
+)
+def test_step_on_the_virtual_cart(
+    capsys, workdir: Path, controller: str | None, limit_s: float
+) -> None:
+    """Through the serial path in real time (the virtual cart: the physics simulator behind the
+    bridge, loop delay 1 measured from the echo, as on board): ``run --plant virtual`` takes
+    pi.toml by itself; both on-board files meet their on-board targets on the true speed."""
     given = [] if controller is None else ["--controller", controller]
     code = main(["run", "--plant", "virtual", "--rerun", "off", "--json", *given,
                  "--reference", f"step:{STEP_RAD_S:g}", "--duration", "2"])  # fmt: skip
     out, err = capsys.readouterr()
     assert code == 0, err
     summary = json.loads(out)
-    assert summary["controller"] == (controller or "controllers/serial-pi.toml")
-    assert summary["loop_delay_ticks"] == 3
+    assert summary["controller"] == (controller or "controllers/pi.toml")
+    assert summary["loop_delay_ticks"] == 1
     link = summary["link"]
     assert link["host_frames_lost"] == 0 and link["host_frames_sent"] >= 200
     columns = read_trace(summary["trace"]).columns()
-    models = load_models(serial_model(workdir))
     for motor in ("a", "b"):
-        bound_s = settling_bound(models.motor(motor), STEP_RAD_S).settling_time_s
-        assert bound_s == pytest.approx(0.05)
         overshoot, settling = step_of(columns, motor)
         assert overshoot <= 5.0, motor
-        assert settling is not None and settling <= 3.0 * bound_s, motor
+        assert settling is not None and settling <= limit_s, motor
 
 
 def steady_windows(reference: np.ndarray) -> list[slice]:
