@@ -313,10 +313,15 @@ class Harness:
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)
         try:
-            _, err = self.proc.communicate(timeout=10)
+            self.proc.wait(timeout=10)
         except subprocess.TimeoutExpired:
             self.proc.kill()
-            _, err = self.proc.communicate()
+            self.proc.wait()
+        self._reader.join(timeout=5)  # it owns stdout until the end of the stream
+        assert self.proc.stdout is not None and self.proc.stderr is not None
+        err = self.proc.stderr.read()
+        self.proc.stdout.close()
+        self.proc.stderr.close()
         if not self.report_path.exists():
             pytest.fail(f"cart_sim wrote no report: {err}", pytrace=False)
         return json.loads(self.report_path.read_text(encoding="utf-8"))
@@ -368,6 +373,8 @@ def test_cartctl_drives_the_real_firmware_in_real_time(
         time.sleep(0.5)
         killed.kill()
         killed.wait(timeout=10)
+        assert killed.stderr is not None
+        killed.stderr.close()
         time.sleep(0.5)
     finally:
         report = sim.stop()
