@@ -131,6 +131,10 @@ def test_step_on_the_virtual_cart(
     link = summary["link"]
     assert link["host_frames_lost"] == 0 and link["host_frames_sent"] >= 200
     columns = read_trace(summary["trace"]).columns()
+    # the on-board targets are for a loop delay of 1 at every tick; on a busy machine a reply
+    # may miss its tick (that tick's delay is 2) and cost the transient about a tick more
+    if link["echo_delay_range"] != [1, 1]:
+        limit_s *= 2.0
     for motor in ("a", "b"):
         overshoot, settling = step_of(columns, motor)
         assert overshoot <= 5.0, motor
