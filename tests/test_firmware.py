@@ -111,12 +111,18 @@ extern bool mock_led[2];
 extern unsigned long mock_now_ms;
 extern int mock_drains;
 extern int mock_transmits;
+extern int mock_thread_infos;
 
 inline unsigned long millis() { return mock_now_ms; }
 
 struct MockCommunicator {
   void receive() { mock_drains += 1; }  /* the harness has put the frame's channels in place */
   void transmit() { mock_transmits += 1; }
+  void sendThreadInfo(uint8_t id, uint8_t, uint32_t duration, uint32_t, uint32_t, uint32_t,
+                      uint32_t executions) {
+    mock_thread_infos += 1;
+    (void)id; (void)duration; (void)executions;
+  }
 };
 
 struct MockSerial {
@@ -169,6 +175,7 @@ bool mock_led[2];
 unsigned long mock_now_ms;
 int mock_drains;
 int mock_transmits;
+int mock_thread_infos;
 MockSerial Serial;
 
 static float next_float(void) {
@@ -195,10 +202,13 @@ int main(void) {
     } else {
       for (int k = 0; k < 6; ++k) mock_sensor[k] = next_float();
       robot.control();
+      BridgeTiming timing = {1200, 40, 10000, 60, 0};
+      robot.transmit(&timing);
       printf("%.9g %.9g", (double)mock_hbridge[0], (double)mock_hbridge[1]);
       for (int k = 0; k < 8; ++k) printf(" %.9g", (double)mock_gpout_float[k]);
       for (int k = 0; k < 4; ++k) printf(" %ld", (long)mock_gpout_int[k]);
-      printf(" %d %d %d\n", (int)mock_led[0], (int)mock_led[1], mock_drains);
+      printf(" %d %d %d %d %d\n", (int)mock_led[0], (int)mock_led[1], mock_drains, mock_transmits,
+             mock_thread_infos);
     }
   }
   return 0;
@@ -387,7 +397,9 @@ def test_robot_cpp_glue_on_a_mock_template(
         assert _same(words[:14], (*clamped, floats, ints)), f"tick {k}: {row}"
         status = ints[2]
         drains += len(short[k].frames)  # robot.receive() drains through the communicator
-        expected_leds = [str(int(status == STATUS_DRIVING)), str(status >> 1), str(drains)]
+        # a GPIO and four THREAD_INFO frames per tick (120 bytes after it: the USB chip passes it on)
+        expected_leds = [str(int(status == STATUS_DRIVING)), str(status >> 1), str(drains),
+                         str(k + 1), str(4 * (k + 1))]  # fmt: skip
         assert words[14:] == expected_leds, f"tick {k}"
 
 

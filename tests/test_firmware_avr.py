@@ -48,7 +48,8 @@ MCU = [
     "-DARDUINO=10807",
     "-DARDUINO_AVR_MEGA2560",
     "-DARDUINO_ARCH_AVR",
-    "-DSERIAL_RX_BUFFER_SIZE=256",  # the bridge needs it at 500 kbaud (firmware/README.md)
+    "-DSERIAL_RX_BUFFER_SIZE=256",  # the bridge needs both at 500 kbaud (firmware/README.md)
+    "-DSERIAL_TX_BUFFER_SIZE=256",
 ]
 COMMON = ["-Os", "-ffunction-sections", "-fdata-sections", *MCU]
 CXX_ONLY = ["-fno-exceptions", "-fno-threadsafe-statics"]  # as the Arduino builder
@@ -228,9 +229,10 @@ def test_a_void_thread_function_does_not_compile(tmp_path: Path) -> None:
     assert "addThread" in done.stderr, done.stderr
 
 
-def test_the_sketch_needs_the_larger_receive_ring(tmp_path: Path) -> None:
-    """Built without -DSERIAL_RX_BUFFER_SIZE=256 the sketch stops with a line saying so."""
+@pytest.mark.parametrize("flag", ["-DSERIAL_RX_BUFFER_SIZE=256", "-DSERIAL_TX_BUFFER_SIZE=256"])
+def test_the_sketch_needs_the_larger_serial_rings(tmp_path: Path, flag: str) -> None:
+    """Built without either 256-byte ring the sketch stops with a line naming both flags."""
     command = _strict_compile(SKETCH / "cartctl_bridge.ino", tmp_path / "small.o")
-    done = _run([word for word in command if word != "-DSERIAL_RX_BUFFER_SIZE=256"])
+    done = _run([word for word in command if word != flag])
     assert done.returncode != 0
-    assert "-DSERIAL_RX_BUFFER_SIZE=256" in done.stderr, done.stderr
+    assert "-DSERIAL_RX_BUFFER_SIZE=256 -DSERIAL_TX_BUFFER_SIZE=256" in done.stderr, done.stderr

@@ -59,7 +59,7 @@ COURSE_DEFAULT = CACHE / "mecotron"
 BUILD_CACHE = CACHE / "fil-build"
 ARDUINO_IN_CHECKOUT = Path("software") / "Arduino"
 
-RX_BUFFER = "-DSERIAL_RX_BUFFER_SIZE=256"  # the sketch refuses to build with less
+SERIAL_BUFFERS = ["-DSERIAL_RX_BUFFER_SIZE=256", "-DSERIAL_TX_BUFFER_SIZE=256"]  # or no build
 WATCHDOG_BOUND_MS = 100.0
 OVERSHOOT_BOUND_PERCENT = 15.0
 
@@ -189,7 +189,7 @@ def _build_firmware(arduino: Path, course: str) -> Firmware:
         *sorted(p for p in microos.rglob("*") if p.suffix in (".h", ".hpp", ".cpp")),
         *sorted(p for p in components.rglob("*") if p.suffix in (".h", ".cpp")),
     ]
-    defines = [RX_BUFFER]
+    defines = list(SERIAL_BUFFERS)
     key = avr_build.fingerprint(
         [*avr_build.core_sources(), *avr_build.VARIANT.glob("*.h"), *course_files,
          *sketch_files, STANDBY_SOURCE],
@@ -390,7 +390,8 @@ def test_cartctl_drives_the_real_firmware_in_real_time(
         f"\n  loop delay {summary['loop_delay_ticks']} ticks (echo {link['echo_delay_ticks']}, "
         f"range {link['echo_delay_range']}), host frames lost {link['host_frames_lost']} of "
         f"{link['host_frames_sent']}, cart frames lost {link['lost_frames']}, "
-        f"watchdog trips {link['watchdog_trips']}"
+        f"watchdog trips {link['watchdog_trips']}, CRC errors {link['crc_errors']}"
+        f"\n  the bridge's own reports (THREAD_INFO 200..203, maxima): {link.get('cart_timing')}"
         f"\n  UART bytes dropped {report['bytes_dropped']} of {report['host_bytes_read']}"
         f"\n  after the normal run: motors at 0 V {_ms(after_run['watchdog_ms'])} after the "
         "host's last byte (its stop frames)"
@@ -413,6 +414,14 @@ def test_cartctl_drives_the_real_firmware_in_real_time(
         "interrupts ran before)"
     )
     assert link["host_frames_lost"] == 0
+    # the real microOS packs the bridge's THREAD_INFO frames: cartctl's framer takes every one
+    assert link["crc_errors"] == 0
+    if _expected_loop_delay() == 1:
+        timing = link["cart_timing"]
+        assert timing is not None, "no THREAD_INFO 200..203 from the bridge"
+        assert 0 < timing["tick_busy_us_max"] < 10_000
+        assert 9_000 < timing["tick_interval_us_max"] < 30_000
+        assert 0 < timing["rx_ring_high_water_bytes"] < 255  # the ring never filled
     assert report["watchdog_ms"] is not None, "the motors still had a voltage at the end"
     assert 0.0 < report["watchdog_ms"] <= WATCHDOG_BOUND_MS
     for motor, value in overshoot.items():

@@ -26,6 +26,7 @@ from cartctl.plants.cart_uart import (
     BYTE_TIME_S,
     RX_RING_BYTES,
     MicroosParser,
+    UsbBridge,
     fill_ring,
 )
 from cartctl.plants.serial_cart import SerialCart
@@ -219,3 +220,47 @@ def test_run_over_the_bridge_has_loop_delay_1_and_loses_nothing_to_the_ring(
     assert summary["loop_delay_ticks"] == 1
     assert link["host_frames_lost_percent"] <= 1.0
     assert link["reply_latency_us"]["p50"] < 10_000
+
+
+def _bytes_at(start_s: float, count: int, byte_s: float = 20e-6) -> list[tuple[float, int]]:
+    return [(start_s + (i + 1) * byte_s, 0x55) for i in range(count)]
+
+
+def test_the_usb_bridge_holds_a_lone_frame_until_its_timer() -> None:
+    """60 bytes through the UART from 1.2 ms (last at 2.4 ms) with the 16U2's timer overflowing at
+    0.5 ms + n·4.096 ms: they go out at the 4.596 ms overflow, and the PC has them at the next
+    1 ms USB frame (phase 0.25 ms): 5.25 ms."""
+    usb = UsbBridge(flush_phase_s=0.0005, frame_phase_s=0.00025)
+    assert usb.feed(_bytes_at(0.0012, 60)) == []
+    assert usb.pending_flush_s == pytest.approx(0.0005 + 0.004096)
+    assert usb.flush_due(0.004) == []
+    ((at_s, data),) = usb.flush_due(0.005)
+    assert at_s == pytest.approx(0.00525) and len(data) == 60
+
+
+def test_more_than_96_waiting_bytes_go_out_at_once() -> None:
+    """The bridge's 60-byte GPIO and four 30-byte reports: the 97th byte (at 1.2 + 97 × 0.02 ms)
+    flushes at once, so the GPIO reaches the PC at the next USB frame, 4 ms before the timer."""
+    usb = UsbBridge(flush_phase_s=0.0005, frame_phase_s=0.0)
+    out = usb.feed(_bytes_at(0.0012, 180))
+    at_s, data = out[0]
+    assert len(data) == 97
+    assert at_s == pytest.approx(0.004)  # 3.14 ms, collected in the USB frame at 4 ms
+    # the bytes after it wait for the timer (4.596 ms), the last of them (4.8 ms) for the next
+    assert [len(d) for _, d in out[1:]] == [int((0.004596 - 0.00314) / 20e-6 + 1e-9)]
+
+
+def test_the_bridge_reports_its_timing_in_thread_info_frames() -> None:
+    """THREAD_INFO 200..203 (microOS's layout: the duration as uint16 at payload byte 16, the id
+    at 20) are framed, checked and kept as maxima by the host's link; GPIOs pass as before."""
+    encoder = Encoder()
+    stream = encoder.gpio(0, [0.0] * 8, [0] * 4)
+    for thread, value in ((200, 1628), (201, 1736), (202, 10044), (203, 60), (203, 41)):
+        frame = encoder.thread_info(10, thread, value, executions=1)
+        assert len(frame) == 30 and frame[5] == 1  # MAVLink 1, message id 1
+        assert int.from_bytes(frame[6 + 16 : 6 + 18], "little") == value
+        assert frame[6 + 20] == thread
+        stream += frame
+    messages = Framer().feed(stream)
+    assert Framer().stats.crc_errors == 0
+    assert [type(m).__name__ for m in messages] == ["Gpio"] + ["ThreadInfo"] * 5

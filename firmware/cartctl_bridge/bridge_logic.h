@@ -35,6 +35,8 @@
 #define BRIDGE_STATUS_WATCHDOG 2   // status bit 1: the watchdog has tripped
 #define BRIDGE_VERSION 2           // sent in float channel 6; bridges before version 2 send 0
 #define BRIDGE_VERSION_CHANNEL 6
+#define BRIDGE_TIMING_FIRST_ID 200 // THREAD_INFO ids 200..203 after each GPIO (BridgeTiming)
+#define BRIDGE_TIMING_REPORTS 4
 #define BRIDGE_BAUD 500000UL       // the line: 500 kbaud 8N1, exact on a 16 MHz AVR (1.2 ms a frame)
 
 // What io() read at this tick and what it wrote to the H-bridges.
@@ -45,6 +47,18 @@ struct BridgeIO {
   float applied_b_v;
   float position_a_rad;
   float position_b_rad;
+};
+
+// What the sketch reports after each GPIO, one THREAD_INFO each (the value in its duration field):
+// 200 the 10 ms thread's drain + io() + control() (us), 201 the longest 1 ms drain since the
+// previous tick (us), 202 the time since the previous tick started (us), 203 the most bytes a drain
+// found waiting in the receive ring since the previous tick.
+struct BridgeTiming {
+  uint32_t tick_busy_us;
+  uint32_t longest_drain_us;
+  uint32_t tick_interval_us;
+  uint32_t ring_high_water_bytes;
+  uint32_t last_start_us;
 };
 
 // The voltages control() stores for the next tick's io().

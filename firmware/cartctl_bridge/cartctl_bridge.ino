@@ -18,23 +18,39 @@
 // The Arduino core's receive ring must hold what the line carries while the 10 ms thread runs
 // (50 bytes a ms at 500 kbaud, ~1.2 ms, and more when two replies come together): build with
 // -DSERIAL_RX_BUFFER_SIZE=256 (firmware/README.md).
-#if !defined(SERIAL_RX_BUFFER_SIZE) || SERIAL_RX_BUFFER_SIZE < 256
-#error "build with -DSERIAL_RX_BUFFER_SIZE=256: at 500 kbaud the 64-byte receive ring overflows (see firmware/README.md)"
+// Its transmit buffer must hold the 180 bytes sent per tick, so that io() and the drains never
+// wait for the line: -DSERIAL_TX_BUFFER_SIZE=256.
+#if !defined(SERIAL_RX_BUFFER_SIZE) || SERIAL_RX_BUFFER_SIZE < 256 || !defined(SERIAL_TX_BUFFER_SIZE) || SERIAL_TX_BUFFER_SIZE < 256
+#error "build with -DSERIAL_RX_BUFFER_SIZE=256 -DSERIAL_TX_BUFFER_SIZE=256: at 500 kbaud the 64-byte rings are too small (see firmware/README.md)"
 #endif
 
 static Robot robot;
+static BridgeTiming timing;  // what the THREAD_INFO frames after each GPIO report
+
+static void drainAndWatch() {
+  const uint16_t waiting = (uint16_t)Serial.available();  // the receive ring before this drain
+  if (waiting > timing.ring_high_water_bytes) timing.ring_high_water_bytes = waiting;
+  robot.receive();
+}
 
 // microOS threads return int (0: done for this period).
 int update() {
-  robot.receive();   // the freshest command: one that has arrived by now acts at this io()
+  const uint32_t startUs = micros();
+  timing.tick_interval_us = startUs - timing.last_start_us;
+  timing.last_start_us = startUs;
+  drainAndWatch();   // the freshest command: one that has arrived by now acts at this io()
   robot.io();        // apply the stored voltage, read the encoders
   robot.control();   // measurements and the echo out, the watchdog checked
-  robot.transmit();  // one GPIO with what control() wrote
+  timing.tick_busy_us = micros() - startUs;
+  robot.transmit(&timing);  // one GPIO, then the tick's timing (resets the maxima)
   return 0;
 }
 
 int drainSerial() {
-  robot.receive();  // a command that arrives mid-tick is stored for the next io() at once
+  const uint32_t startUs = micros();
+  drainAndWatch();  // a command that arrives mid-tick is stored for the next io() at once
+  const uint32_t tookUs = micros() - startUs;
+  if (tookUs > timing.longest_drain_us) timing.longest_drain_us = tookUs;
   return 0;
 }
 

@@ -74,8 +74,25 @@ void Robot::control() {
   LED2(_bridge.tripped ? ON : OFF);  // LED 2: watchdog tripped (no PC, or it stopped sending)
 }
 
-void Robot::transmit() {
+// The GPIO (60 bytes), then four THREAD_INFO frames (30 bytes each, ids 200..203): how long this
+// tick's drain, io() and control() took, the longest 1 ms drain, the time since the previous tick
+// started (all in us) and the most bytes a drain found waiting in the receive ring, since the
+// previous tick. They are worth reading, and they make the cart send 120 bytes after its GPIO: the
+// Mega's USB chip (an ATmega16U2) holds the cart's bytes until its 4.096 ms timer runs out or more
+// than 96 are waiting, so the GPIO reaches the PC within 2 ms of its last byte instead of up to
+// 4 ms (docs/serial-protocol.md). The transmit buffer is built 256 bytes long, so this does not
+// wait for the line.
+void Robot::transmit(BridgeTiming* timing) {
   getCommunicator()->transmit();  // microOS's GPIO out: the channels control() wrote
+  _ticks += 1;
+  const uint32_t values[BRIDGE_TIMING_REPORTS] = {timing->tick_busy_us, timing->longest_drain_us,
+                                                  timing->tick_interval_us,
+                                                  timing->ring_high_water_bytes};
+  for (uint8_t k = 0; k < BRIDGE_TIMING_REPORTS; ++k) {
+    getCommunicator()->sendThreadInfo(BRIDGE_TIMING_FIRST_ID + k, 0, values[k], 0, 0, 0, _ticks);
+  }
+  timing->longest_drain_us = 0;
+  timing->ring_high_water_bytes = 0;
 }
 
 void Robot::button0callback() {

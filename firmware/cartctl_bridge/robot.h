@@ -18,6 +18,7 @@
 class Robot : public MECOtron {
   private:
     BridgeState _bridge;  // held channels, outputs, tick counter, watchdog
+    uint32_t _ticks = 0;  // ticks since power-on
 
   public:
     Robot() { bridge_reset(&_bridge); }
@@ -25,7 +26,8 @@ class Robot : public MECOtron {
     bool init();     // the template's set-up, then the bridge at power-on state
     void receive();   // drain the serial port, hand the held PC channels over, store the voltages
     void control();   // every 10 ms, after receive() and io()
-    void transmit();  // one GPIO with what control() wrote
+    // One GPIO with what control() wrote, then four THREAD_INFO frames with the tick's timing.
+    void transmit(BridgeTiming* timing);
 
     void button0callback();  // QRC button 0: says that the PC drives (no local enable)
     void button1callback();  // QRC button 1: reset, as in the template

@@ -64,6 +64,20 @@ void SerialCommunicator::writeFrame(uint8_t type, const uint8_t* payload, uint8_
   Serial.write(sum);
 }
 
+void SerialCommunicator::sendThreadInfo(uint8_t id, uint8_t priority, uint32_t duration,
+                                        uint32_t latency, uint32_t total_duration,
+                                        uint32_t total_latency, uint32_t executions) {
+  // 'T': id, priority, then five uint32 (22 bytes): the mock's own frame, as long as microOS's
+  uint8_t payload[22];
+  const uint32_t words[5] = {duration, latency, total_duration, total_latency, executions};
+  payload[0] = id;
+  payload[1] = priority;
+  for (uint8_t k = 0; k < 5; ++k) {
+    for (uint8_t b = 0; b < 4; ++b) payload[2 + 4 * k + b] = (uint8_t)(words[k] >> (8 * b));
+  }
+  writeFrame('T', payload, sizeof(payload));
+}
+
 void SerialCommunicator::transmit() {
   uint8_t frame[GPIO_BYTES];
   memcpy(frame, _out_floats, sizeof(_out_floats));

@@ -39,11 +39,15 @@ class HAL {
     ~HAL() {}
 };
 
-// The serial link: receive() drains the port, transmit() sends the output channels.
+// The serial link: receive() drains the port, transmit() sends the output channels,
+// sendThreadInfo() a thread's timing (as the course's communicator interface has them).
 class CommunicatorInterface {
   public:
     virtual void receive() = 0;
     virtual void transmit() = 0;
+    virtual void sendThreadInfo(uint8_t id, uint8_t priority, uint32_t duration, uint32_t latency,
+                                uint32_t total_duration, uint32_t total_latency,
+                                uint32_t executions) = 0;
 
   protected:
     ~CommunicatorInterface() {}
@@ -62,6 +66,9 @@ class SerialCommunicator : public CommunicatorInterface {
     void begin(unsigned long baud);
     virtual void receive();
     virtual void transmit();
+    virtual void sendThreadInfo(uint8_t id, uint8_t priority, uint32_t duration, uint32_t latency,
+                                uint32_t total_duration, uint32_t total_latency,
+                                uint32_t executions);
     void sendMessage(const String& text);
 
     float inFloat(uint8_t channel) const;

@@ -184,6 +184,35 @@ class Encoder:
         )
         return self._pack(message, "GPIO channel value does not fit its wire type")
 
+    def thread_info(
+        self,
+        time_ms: int,
+        thread_id: int,
+        duration_us: int,
+        *,
+        latency_us: int = 0,
+        total_duration_us: int = 0,
+        total_latency_us: int = 0,
+        executions: int = 0,
+        priority: int = 0,
+    ) -> bytes:
+        """One THREAD_INFO frame (30 bytes): a firmware thread's timing, as microOS packs it.
+
+        The payload, in wire order (fields sorted by size): time, total duration, total latency
+        and executions (uint32), the last duration and latency (µs, uint16), the thread's id and
+        priority (uint8).
+        """
+        values = (time_ms, total_duration_us, total_latency_us, executions, duration_us,
+                  latency_us, thread_id, priority)  # fmt: skip
+        try:
+            payload = struct.pack("<IIIIHHBB", *values)
+        except struct.error as exc:
+            raise ValueError(f"THREAD_INFO field does not fit its wire type: {exc}") from exc
+        header = bytes((STX_V1, len(payload), self.seq, self.sysid, self.compid, MSG_THREAD_INFO))
+        crc = mavlink.x25crc(header[1:] + payload + bytes((_THREAD_INFO_CRC_EXTRA,))).crc
+        self.seq = (self.seq + 1) % _SEQ_MODULO
+        return header + payload + struct.pack("<H", crc)
+
     def heartbeat(self, time_ms: int, type: int = MAV_TYPE_CAR, data: bytes = bytes(8)) -> bytes:
         """One HEARTBEAT frame (``mavlink_version`` 2).
 

@@ -30,12 +30,16 @@ from cartctl.link import (
     LineAssembler,
     Message,
     PrintText,
+    ThreadInfo,
 )
 
 DEFAULT_SILENCE_TIMEOUT_S = 0.1
 """No GPIO for this long (10 ticks) ends a run: the cart's own watchdog trips at the same age."""
 READ_SLICE_S = 0.005
 """A read returns after the first byte, or after this long without one."""
+THREAD_INFO_BYTES = 22
+"""THREAD_INFO's payload: time, total duration, total latency, executions (uint32), the last
+duration and latency (uint16), id and priority (uint8), in that order on the wire."""
 LEGACY_LISTEN_S = 1.5
 """After no HEARTBEAT at the bridge's rate: how long to listen at 115200 baud (a HEARTBEAT every
 1.1 s, a GPIO every 10 ms) to tell an older firmware from no cart at all."""
@@ -105,6 +109,9 @@ class CartLink:
         """Why the stream stopped (silence or a vanished port); None while it flows."""
         self.vanished = False
         """True once the port itself is gone (nothing can be sent any more)."""
+        self.thread_maxima: dict[int, int] = {}
+        """Per THREAD_INFO id, the largest duration field seen since :meth:`clear_thread_maxima`
+        (the bridge reports its tick's timing and its receive ring this way)."""
 
     @property
     def stats(self) -> Any:
@@ -251,6 +258,11 @@ class CartLink:
             if isinstance(message, PrintText):
                 for line in self.lines.feed(message.text):
                     self.on_print(line)
+            elif isinstance(message, ThreadInfo):
+                if len(message.payload) == THREAD_INFO_BYTES:  # duration: uint16 at 16, id at 20
+                    duration = message.payload[16] | (message.payload[17] << 8)
+                    thread = message.payload[20]
+                    self.thread_maxima[thread] = max(self.thread_maxima.get(thread, 0), duration)
             elif isinstance(message, GenerationBFrame):
                 raise UnsupportedCartError(
                     f"the cart on {self.port} speaks microOS generation B (MAVLink 2, GPIOX "

@@ -204,7 +204,9 @@ class PacedWriter(threading.Thread):
         self.stop_event = stop
         self.byte_s = float(byte_s)
         self.usb = usb
-        self.queue: queue.SimpleQueue[tuple[float, bytes]] = queue.SimpleQueue()
+        self.queue: queue.SimpleQueue[tuple[float, bytes, bool]] = queue.SimpleQueue()
+        self._tracked: list[tuple[int, float]] = []  # (byte count at its end, its end), in the USB
+        self._fed = self._passed = 0  # bytes into the USB bridge, and out of it
         self.dropped_bytes = 0
         self.deliveries: collections.deque[tuple[float, float]] = collections.deque(maxlen=4096)
         self._line_free_s = 0.0
@@ -212,31 +214,40 @@ class PacedWriter(threading.Thread):
         self.rate_ok: Callable[[], bool] = lambda: True
         """Whether the host's port runs at the cart's rate now (else the PC reads noise)."""
 
-    def put(self, data: bytes, not_before_s: float = 0.0) -> None:
-        """Queue ``data`` to leave no earlier than ``not_before_s``."""
-        self.queue.put((not_before_s, data))
+    def put(self, data: bytes, not_before_s: float = 0.0, *, track: bool = False) -> None:
+        """Queue ``data`` to leave no earlier than ``not_before_s``; ``track``: note in
+        :attr:`deliveries` when its last byte reaches the PC."""
+        self.queue.put((not_before_s, data, track))
 
-    def _take(self, not_before_s: float, data: bytes) -> None:
+    def _take(self, not_before_s: float, data: bytes, track: bool) -> None:
         start = max(not_before_s, self._line_free_s)
         end = start + len(data) * self.byte_s
         self._line_free_s = end
         if self.usb is None:
             self._out.append((end, data))
-            self.deliveries.append((end, end))
+            if track:
+                self.deliveries.append((end, end))
             return
         times = [(start + (i + 1) * self.byte_s, b) for i, b in enumerate(data)]
+        self._fed += len(data)
+        if track:
+            self._tracked.append((self._fed, end))
         for at_s, chunk in self.usb.feed(times):
-            self._out.append((at_s, chunk))
-        if self.usb.pending_flush_s is None:
-            self.deliveries.append((end, self._out[-1][0]))
-        else:
-            self.deliveries.append((end, self.usb._collected(self.usb.pending_flush_s)))
+            self._deliver(at_s, chunk)
+
+    def _deliver(self, at_s: float, chunk: bytes) -> None:
+        """A flush of the USB bridge: it reaches the PC at ``at_s`` with every tracked item in it."""
+        self._out.append((at_s, chunk))
+        self._passed += len(chunk)
+        while self._tracked and self._tracked[0][0] <= self._passed:
+            self.deliveries.append((self._tracked.pop(0)[1], at_s))
 
     def run(self) -> None:
         while not self.stop_event.is_set():
             now = time.perf_counter()
             if self.usb is not None:
-                self._out.extend(self.usb.flush_due(now))
+                for at_s, chunk in self.usb.flush_due(now):
+                    self._deliver(at_s, chunk)
             while self._out and self._out[0][0] <= now:
                 _, data = self._out.popleft()
                 if not self.rate_ok():

@@ -176,6 +176,7 @@ class SerialCart:
         self._lost_base = sample.host_frames_lost
         self.frames_sent = 0
         self.reply_latency_s.clear()
+        self.link.thread_maxima.clear()
         return Measurement(sample.speed_a_rad_s, sample.speed_b_rad_s)
 
     def send(self, voltage_a_v: float, voltage_b_v: float, *, drive: bool = True) -> None:
@@ -302,6 +303,19 @@ class SerialCart:
             return 0
         return tick_difference(self._lost_base, self.sample.host_frames_lost)
 
+    def _cart_timing(self) -> dict[str, int] | None:
+        """The bridge's own reports over the run (its THREAD_INFO 200..203), None without any."""
+        maxima = self.link.thread_maxima
+        names = (
+            "tick_busy_us_max",
+            "drain_us_max",
+            "tick_interval_us_max",
+            "rx_ring_high_water_bytes",
+        )
+        if not any(200 + k in maxima for k in range(len(names))):
+            return None
+        return {name: maxima.get(200 + k, 0) for k, name in enumerate(names)}
+
     def link_summary(self) -> dict[str, Any]:
         """Link figures for the run summary (extends contract 3)."""
         stats = self.link.stats
@@ -339,5 +353,6 @@ class SerialCart:
                     "p99": pick(0.99),
                     "max": latency_us[-1] if latency_us else None,
                 },
+                "cart_timing": self._cart_timing(),
             },
         }

@@ -76,6 +76,13 @@ READY_TEXT = "cartctl bridge ready"
 COMM_PHASE_US = 1200
 """The cart's GPIO goes out this long (µs) after the tick starts: io() and control() take 1.2 ms
 on the Mega (then the bridge sends it; before version 2, microOS's communication thread did)."""
+TIMING_FIRST_ID = 200
+"""The bridge's THREAD_INFO ids after each GPIO: 200 its 10 ms thread's run (µs), 201 its longest
+1 ms drain (µs), 202 the time since the previous tick started (µs), 203 the most bytes a drain found
+waiting in the receive ring."""
+TICK_BUSY_US, DRAIN_BUSY_US = COMM_PHASE_US, 60
+"""What the virtual cart reports as 200 and 201 (µs): fixed figures, it has no AVR to time; 202
+is the tick on its clock and 203 its model of the ring."""
 _TERMIOS_SPEED = {getattr(termios, f"B{rate}"): rate for rate in (9600, 19200, 38400, 57600,
                   115200, 230400, 250000, 460800, 500000, 576000, 921600, 1000000, 2000000)
                   if hasattr(termios, f"B{rate}")}  # fmt: skip
@@ -160,6 +167,7 @@ class VirtualCart:
         )  # fmt: skip
         self._reader.rate_ok = self._writer.rate_ok = self._host_rate_matches
         self._parser = MicroosParser()
+        self._ring_high = 0
         self._held: tuple[list[float], list[int]] = ([0.0] * 8, [0] * 4)
         self.boot_s = 0.0
         """``time.perf_counter`` at boot: tick k starts ``k × period_s`` later."""
@@ -239,7 +247,7 @@ class VirtualCart:
 
     # -- the firmware ---------------------------------------------------------------------------
 
-    def _send(self, frame: bytes, not_before_s: float) -> None:
+    def _send(self, frame: bytes, not_before_s: float, *, track: bool = False) -> None:
         faults, rng = self.faults, self._rng
         if faults.garbage and rng.random() < faults.garbage:
             burst = bytes(rng.getrandbits(8) for _ in range(rng.randint(1, 16)))
@@ -249,11 +257,12 @@ class VirtualCart:
             i = rng.randrange(1, len(data))  # any byte after the start byte
             data[i] ^= rng.randint(1, 255)
             frame = bytes(data)
-        self._writer.put(frame, not_before_s)
+        self._writer.put(frame, not_before_s, track=track)
 
     def _drain(self, at_us: int, hand_over: bool) -> None:
         """A call of microOS's receive at ``at_us`` after boot; ``hand_over``: the bridge's."""
         kept, dropped = fill_ring(self._reader.take(self.boot_s + at_us * 1e-6), self.ring_bytes)
+        self._ring_high = max(self._ring_high, len(kept))
         self.ring_dropped_bytes += dropped
         for gpio in self._parser.feed(kept):
             self._held = (list(gpio.floats), list(gpio.ints))
@@ -363,7 +372,14 @@ class VirtualCart:
                 floats12 = [*firmware.out_floats, *(float(v) for v in firmware.out_ints)]
                 self._send(encode_gpiox_v2(time_ms, floats12, seq=j % 256), send_at)
             else:
-                self._send(encoder.gpio(time_ms, firmware.out_floats, firmware.out_ints), send_at)
+                self._send(encoder.gpio(time_ms, firmware.out_floats, firmware.out_ints), send_at,
+                           track=True)  # fmt: skip
+                if self.bridge_version == 2:  # its tick's timing: 120 bytes, a USB flush at once
+                    reports = (TICK_BUSY_US, DRAIN_BUSY_US, period_us, self._ring_high)
+                    self._ring_high = 0
+                    for k, value in enumerate(reports):
+                        self._writer.put(encoder.thread_info(time_ms, TIMING_FIRST_ID + k, value,
+                                                             executions=j + 1), send_at)  # fmt: skip
             if generation_a and now >= next_heartbeat:
                 self._send(encoder.heartbeat(time_ms), send_at)
                 next_heartbeat += HEARTBEAT_PERIOD_S
