@@ -258,15 +258,10 @@ class PacedWriter(threading.Thread):
                     self.dropped_bytes += len(data)
                 except OSError:
                     return
-            wake = [
-                t
-                for t in (
-                    self._out[0][0] if self._out else None,
-                    self.usb.pending_flush_s if self.usb else None,
-                )
-                if t is not None
-            ]
-            wait = min(0.05, *(t - now for t in wake)) if wake else 0.05
+            next_out = self._out[0][0] if self._out else None
+            next_flush = self.usb.pending_flush_s if self.usb is not None else None
+            due = [t - now for t in (next_out, next_flush) if t is not None]
+            wait = min([0.05, *due])  # until something is due, or a new item comes
             try:
                 item = (
                     self.queue.get(timeout=max(wait, 0.0)) if wait > 0 else self.queue.get_nowait()
