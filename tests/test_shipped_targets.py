@@ -111,17 +111,19 @@ def test_serial_step(capsys, workdir: Path, name: str) -> None:
 
 
 @pytest.mark.filterwarnings("ignore::cartctl.errors.DataWarning")  # a busy machine may skip a tick
+@pytest.mark.parametrize("plant", ["virtual", "virtual:actuation_ms=10"])
 @pytest.mark.parametrize(
     ("controller", "limit_s"), [(None, 0.12), ("controllers/poles.toml", 0.09)]
 )
 def test_step_on_the_virtual_cart(
-    capsys, workdir: Path, controller: str | None, limit_s: float
+    capsys, workdir: Path, controller: str | None, limit_s: float, plant: str
 ) -> None:
     """Through the serial path in real time (the virtual cart: the physics simulator behind the
-    bridge, loop delay 1 measured from the echo, as on board): ``run --plant virtual`` takes
-    pi.toml by itself; both on-board files meet their on-board targets on the true speed."""
+    bridge, loop delay 1 measured from the echo, as on board), at both actuation timings:
+    ``run --plant virtual`` takes pi.toml by itself; both on-board files meet their on-board
+    targets on the true speed."""
     given = [] if controller is None else ["--controller", controller]
-    code = main(["run", "--plant", "virtual", "--rerun", "off", "--json", *given,
+    code = main(["run", "--plant", plant, "--rerun", "off", "--json", *given,
                  "--reference", f"step:{STEP_RAD_S:g}", "--duration", "2"])  # fmt: skip
     out, err = capsys.readouterr()
     assert code == 0, err
