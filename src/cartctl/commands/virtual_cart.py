@@ -83,7 +83,14 @@ def run(args: argparse.Namespace) -> int:
     cart = VirtualCart(args.preset, noise_std_rad_s=args.noise, seed=args.seed, faults=args.faults,
                        firmware=firmware)  # fmt: skip
     print(cart.port, flush=True)
-    running = f"controller {args.onboard} on board" if args.onboard else "the bridge sketch"
+    running = (
+        f"controller {args.onboard} on board"
+        if args.onboard
+        else f"the bridge sketch version {cart.bridge_version}"
+    )
+    running += f", {cart.baud} baud, USB chip {'modelled' if cart.faults.usb else 'off'}"
+    timing = cart.physics.params.actuation_delay() * 1000.0
+    running += f", commands land {timing:g} ms after their tick"
     example = "monitor serial:" if args.onboard else "run --plant serial:"
     print(
         f"virtual cart (physics preset {args.preset}, {running}) on {cart.port}; "
