@@ -51,9 +51,16 @@ def test_shipped_files_say_the_loop_they_are_for(name: str, ground_path: Path) -
     nk = {m.nk for m in load_models(ground_path).motors.values()}
     assert nk == {2}  # the report's ground model
     expected = 2 - 1 + _extra_delay(raw["command"])  # nk − 1 + extra delay
+    if name == "poles.toml":  # the timing model, nk = 1, for the same loop: --loop-delay 1
+        timing = {
+            m.nk for m in load_models(ground_path.parent / "ground-timing.toml").motors.values()
+        }
+        assert timing == {1} and "--loop-delay 1" in raw["command"]
+        assert raw["model"]["path"] == "../models/ground-timing.toml"
+    else:
+        assert raw["model"]["path"] == "../models/ground.toml"  # from controllers/
     assert raw["loop_delay_ticks"] == expected
     assert raw["plant_kind"] == ("onboard" if expected == 1 else "serial")
-    assert raw["model"]["path"] == "../models/ground.toml"  # from controllers/
     loaded = load_controller(CONTROLLERS / name)
     assert loaded.loop_delay_ticks == expected
     assert name.startswith("serial-") == (loaded.plant_kind == "serial")
@@ -151,9 +158,10 @@ def test_shipped_poles_num_den_close_the_loop_on_the_placed_poles(
     name: str, ground_path: Path
 ) -> None:
     raw = tomllib.loads((CONTROLLERS / name).read_text(encoding="utf-8"))
-    extra = raw["loop_delay_ticks"] - 1  # on the ground model, nk = 2
+    extra = raw["request"]["extra_delay_ticks"]
+    models = load_models(load_controller(CONTROLLERS / name).model_path)  # the one designed on
     for motor, entry in raw["motors"].items():
-        model = load_models(ground_path).motor(motor)
+        model = models.motor(motor)
         plant_den = np.polymul(model.den(), [1.0] + [0.0] * extra)  # z^d more delay
         # feedback C = −U/Y = num/den: the loop's characteristic polynomial
         char = np.polyadd(np.polymul(entry["controller_den"], plant_den),

@@ -32,12 +32,12 @@ TS = 0.01
 
 def _shipped_argv(name: str) -> list[str]:
     """The design options that made ``controllers/<name>.toml`` (from its ``command``), without
-    ``--out``, on the shipped model."""
+    ``--out``, on the shipped model it was designed on."""
     doc = tomllib.loads((CONTROLLERS / f"{name}.toml").read_text(encoding="utf-8"))
     words = shlex.split(doc["command"])[2:]  # after 'cartctl design'
     i = words.index("--out")
     del words[i : i + 2]
-    words[0] = str(ROOT / "models" / "ground.toml")
+    words[0] = str((CONTROLLERS / doc["model"]["path"]).resolve())  # the model it names
     return words
 
 
@@ -98,8 +98,14 @@ def _closed_loop_impulse(path: Path, motor: str, n: int = 4096) -> np.ndarray:
     spectrum is the input sensitivity S = 1/(1 + L), and 1 − S is T."""
     shipped = load_controller(path)
     extra = int(shipped.request["extra_delay_ticks"])
+    if shipped.request.get("timing_noise_std_ticks"):
+        # the analysis is of the loop with the steady-state gain, which the time-varying one
+        # (its process noise moved by every command change) returns to while the command holds
+        from cartctl.export.arduino import as_steady_state
+
+        shipped = as_steady_state(shipped)
     ctrl = build_controllers(shipped)[motor]
-    model = load_models(ROOT / "models" / "ground.toml").motor(motor)
+    model = load_models(shipped.model_path).motor(motor)  # the model it was designed on
     b, a = model.lfilter_coeffs()
     ctrl.reset()
     u_c, u_p, y = np.zeros(n), np.zeros(n), np.zeros(n)

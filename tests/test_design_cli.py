@@ -81,12 +81,14 @@ def test_poles_are_placed_where_asked(
 @pytest.mark.parametrize("name", ["pi.toml", "poles.toml", "serial-pi.toml", "serial-poles.toml"])
 def test_shipped_controllers_take_a_good_10_rad_s_step(name: str, ground_path: Path) -> None:
     shipped = load_controller(CONTROLLERS / name)
-    assert Path(shipped.model_path).resolve() == ground_path.resolve()
+    timing = ground_path.parent / "ground-timing.toml"  # poles.toml's model
+    model_path = timing if name == "poles.toml" else ground_path
+    assert Path(shipped.model_path).resolve() == model_path.resolve()
     assert not shipped.model_changed()
-    models = load_models(ground_path)
+    models = load_models(model_path)
     for motor, ctrl in build_controllers(shipped).items():
-        # on the loop it is designed for: loop delay = nk − 1 + extra delay
-        extra = shipped.loop_delay_ticks - (models.motor(motor).nk - 1)
+        # on the model and the extra delay it is designed for
+        extra = int(shipped.request["extra_delay_ticks"])
         step = simulate_step(ctrl, models.motor(motor), step_rad_s=10.0, extra_delay_ticks=extra)
         assert step.info.overshoot_percent <= 5.0
         assert abs(step.info.steady_state_error) < 1e-6
@@ -126,7 +128,7 @@ def test_shipped_pole_placement_closes_the_loop_on_its_stored_poles(name: str) -
     models = load_models(Path(shipped.model_path))
     for motor, entry in shipped.motors.items():
         model = models.motor(motor)
-        plant = model.with_extra_delay(shipped.loop_delay_ticks - (model.nk - 1))
+        plant = model.with_extra_delay(int(shipped.request["extra_delay_ticks"]))
         num, den = entry["controller_num"], entry["controller_den"]
         roots = np.roots(np.polyadd(np.polymul(den, plant.den()), np.polymul(num, plant.num())))
         for re_, im in entry["closed_loop_poles"]:

@@ -85,4 +85,4 @@ def test_the_wheel_ships_the_models_and_controllers(tmp_path: Path) -> None:
     names = set(zipfile.ZipFile(wheel).namelist())
     shipped = [f"cartctl/shipped/{folder}/{path.name}" for folder in ("models", "controllers")
                for path in sorted((ROOT / folder).glob("*.toml"))]  # fmt: skip
-    assert len(shipped) == 6 and set(shipped) <= names
+    assert len(shipped) == 7 and set(shipped) <= names

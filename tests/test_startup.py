@@ -23,7 +23,7 @@ COMMANDS = ("excite", "identify", "inspect", "validate", "linearity", "design", 
 # The option strings of every command, as the parser had them before the imports became lazy.
 OPTIONS = {
     "convert": ["--help", "--json", "--map", "--out", "-h"],
-    "design": ["--anti-windup", "--bandwidth-hz", "--bias-drift-v", "--crossover-hz", "--disturbance-v", "--estimator", "--estimator-gain", "--extra-delay", "--help", "--json", "--measurement-noise", "--method", "--motor", "--out", "--overshoot", "--phase-margin", "--poles", "--process-noise-v", "--report", "--settling-time", "--step", "--voltage-limit", "-h"],
+    "design": ["--anti-windup", "--bandwidth-hz", "--bias-drift-v", "--crossover-hz", "--disturbance-v", "--estimator", "--estimator-gain", "--extra-delay", "--help", "--json", "--loop-delay", "--measurement-noise", "--method", "--motor", "--out", "--overshoot", "--phase-margin", "--poles", "--process-noise-v", "--report", "--settling-time", "--step", "--timing-noise-ticks", "--voltage-limit", "-h"],
     "excite": ["--amplitude", "--connect-timeout", "--cycles", "--duration", "--help", "--json", "--model", "--motor", "--noise", "--out", "--plant", "--preset", "--seed", "--signal", "-h"],
     "export": ["--arduino", "--help", "--mat", "--out", "-h"],
     "identify": ["--average", "--compare", "--cutoff-hz", "--delay", "--help", "--json", "--map", "--method", "--motor", "--na", "--nb", "--order", "--orders", "--out", "--prefilter", "--report", "--split", "--validate-on", "--zero-phase", "-h"],

@@ -126,8 +126,8 @@ def test_a_negative_steady_state_error_keeps_its_sign_and_the_errors_rounding(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
     """Pole placement on the physics preset leaves a few mrad/s of error, of both signs (a 5 rad/s
-    step)."""
-    _, out = _cli(capsys, "run", "--fast", "--plant", "physics", "--controller",
+    step; negative with the command landing 10 ms after its tick)."""
+    _, out = _cli(capsys, "run", "--fast", "--plant", "physics:actuation_ms=10", "--controller",
                   "controllers/poles.toml", "--reference", "step:5", "--duration", "2", "--out",
                   str(tmp_path), "--name",
                   "p", "--rerun", "off")  # fmt: skip

@@ -116,6 +116,24 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="RAD_S",
         help="measurement noise beyond encoder quantisation, std in rad/s (default 0)",
     )
+    est.add_argument(
+        "--timing-noise-ticks",
+        type=float,
+        default=_DEFAULT.timing_noise_std_ticks,
+        metavar="TICKS",
+        help="how uncertain the moment a command lands is (std in ticks): after each command "
+        "change Δu the time-varying estimator adds (TICKS·Δu)²·B·Bᵀ to its process noise "
+        "(default 0)",
+    )
+    p.add_argument(
+        "--loop-delay",
+        type=int,
+        default=_DEFAULT.loop_delay_ticks,
+        metavar="N",
+        help="the loop delay the controller is for (ticks from a measurement to its voltage on "
+        "the motor; default the model's nk - 1 + extra delay); nk + extra delay for a model "
+        "whose next measurement already sees part of a command that lands within the tick",
+    )
     p.add_argument(
         "--extra-delay",
         type=int,
@@ -269,7 +287,8 @@ def run(args: argparse.Namespace) -> int:
     request = request_from_args(args)
     models = load_models(args.model)
     names = ("a", "b") if args.motor == "both" else (args.motor,)
-    if args.out:  # a file is for one loop: refuse before designing when the motors' nk differ
+    if args.out and request.loop_delay_ticks is None:
+        # a file is for one loop: refuse before designing when the motors' nk differ
         try:
             common_loop_delay({m: models.motor(m).nk for m in names}, request.extra_delay_ticks)
         except ValueError as exc:

@@ -127,10 +127,16 @@ def _write_mat(kind: str, found: Path, args: argparse.Namespace, *, to_stderr: b
 
 
 def _write_arduino(args: argparse.Namespace) -> None:
-    from cartctl.design.controllerfile import load_controller
-    from cartctl.export.arduino import arduino_source
+    import sys
 
-    source = arduino_source(load_controller(args.file), command=_command(args))
+    from cartctl.design.controllerfile import load_controller
+    from cartctl.export.arduino import arduino_source, timing_noise_note
+
+    controller = load_controller(args.file)
+    note = timing_noise_note(controller)
+    if note is not None:
+        print(f"warning: {note}", file=sys.stderr)
+    source = arduino_source(controller, command=_command(args))
     if args.out:
         path = Path(args.out)
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -30,8 +30,15 @@ from cartctl.runtime.statefeedback import StateFeedbackController
 
 
 def kalman_entry(design: KalmanDesign) -> dict[str, Any]:
-    """The estimator's matrices and noise levels, as stored in a controller file."""
-    return {f.name: getattr(design, f.name) for f in fields(design)}
+    """The estimator's matrices and noise levels, as stored in a controller file.
+
+    ``timing_noise_std_ticks`` only when it is not 0, so a design without it writes the same
+    file as before it existed (and a file without it loads with 0).
+    """
+    entry = {f.name: getattr(design, f.name) for f in fields(design)}
+    if not entry["timing_noise_std_ticks"]:
+        del entry["timing_noise_std_ticks"]
+    return entry
 
 
 def pi_entry(design: PiDesign, anti_windup: str, estimator: KalmanDesign | None) -> dict[str, Any]:
@@ -84,8 +91,12 @@ def make_estimator(
     (:meth:`~cartctl.runtime.kalman.KalmanDesign.is_stationary`, as the designs cartctl writes
     are): then the filter's gain is L at every tick, the two compute the same estimates, and the
     fixed gain runs, in a few µs instead of some 100 µs of filterpy's matrix algebra per tick.
+    With timing noise (``timing_noise_std_ticks`` > 0) the gain moves at every change of the
+    command, so ``'time-varying'`` is always filterpy's filter.
     """
-    if estimator_gain_name(gain) == "time-varying" and not design.is_stationary():
+    if estimator_gain_name(gain) == "time-varying" and (
+        design.timing_noise_std_ticks > 0.0 or not design.is_stationary()
+    ):
         return KalmanSpeedEstimator(design)
     return SteadyStateSpeedEstimator(design)
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import MISSING, dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -31,6 +31,8 @@ def kalman_from_entry(entry: Mapping[str, Any]) -> KalmanDesign:
     values = {}
     for f in fields(KalmanDesign):
         if f.name not in entry:
+            if f.default is not MISSING:  # a newer field (timing_noise_std_ticks): its default
+                continue
             raise KeyError(f"estimator.{f.name}")
         value = entry[f.name]
         values[f.name] = np.asarray(value, dtype=float) if f.name in _KALMAN_ARRAYS else value
@@ -74,6 +76,15 @@ def _check_estimator(values: Mapping[str, Any]) -> None:
                 f"estimator.{name} must be a covariance: symmetric, positive semidefinite, "
                 f"entries up to {COVARIANCE_BOUND:g}"
             )
+    timing = values.get("timing_noise_std_ticks", 0.0)
+    if (
+        isinstance(timing, bool)
+        or not isinstance(timing, int | float)
+        or not (math.isfinite(timing) and 0.0 <= timing <= 10.0)
+    ):
+        raise ValueError(
+            f"estimator.timing_noise_std_ticks must be a number of ticks in [0, 10], got {timing!r}"
+        )
     error_dynamics = (np.eye(m) - np.outer(values["L"], values["C"])) @ A
     radius = float(np.max(np.abs(np.linalg.eigvals(error_dynamics))))
     if not radius < 1.0:

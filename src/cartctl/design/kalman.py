@@ -113,6 +113,7 @@ def design_kalman(
     extra_noise_std_rad_s: float = 0.0,
     counts_per_rev: int = COUNTS_PER_REV,
     extra_delay_ticks: int = 0,
+    timing_noise_std_ticks: float = 0.0,
 ) -> KalmanDesign:
     """Design the steady-state Kalman filter (see the module docstring for the model).
 
@@ -131,6 +132,10 @@ def design_kalman(
     extra_delay_ticks : int
         With an ArxModel: extra ticks of input delay to realise (see ``realise``). Must be 0 with
         a StateSpace (which has its delay built in).
+    timing_noise_std_ticks : float
+        σ_ε, the uncertainty (std, ticks) of when a command lands, for the time-varying filter's
+        Q[k] = Q + (σ_ε Δu[k])² B Bᵀ (see :class:`~cartctl.runtime.kalman.KalmanDesign`); it
+        does not change the steady-state P and L, which hold while the command is constant.
 
     Returns
     -------
@@ -149,6 +154,7 @@ def design_kalman(
     sw = _nonnegative("process_noise_std_v", process_noise_std_v, positive=True)
     sb = _nonnegative("bias_drift_std_v", bias_drift_std_v)
     extra = _nonnegative("extra_noise_std_rad_s", extra_noise_std_rad_s)
+    timing = _nonnegative("timing_noise_std_ticks", timing_noise_std_ticks)
     if not isinstance(counts_per_rev, int | np.integer) or counts_per_rev < 1:
         raise InputError(f"counts_per_rev must be a whole number >= 1, got {counts_per_rev!r}")
     R = quantisation_std_rad_s(plant.period_s, int(counts_per_rev)) ** 2 + extra**2
@@ -185,4 +191,5 @@ def design_kalman(
         process_noise_std_v=sw,
         bias_drift_std_v=sb,
         measurement_noise_std_rad_s=math.sqrt(R),
+        timing_noise_std_ticks=timing,
     )

@@ -21,7 +21,7 @@ from cartctl.design.limit import in_settling_band, settling_bound
 from cartctl.design.loop import feedback_tf_coeffs, loop_analysis
 from cartctl.design.pi import design_pi, design_pi_bandwidth
 from cartctl.design.poles import design_poles
-from cartctl.design.request import DesignRequest
+from cartctl.design.request import DesignRequest, check_loop_delay
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 from cartctl.modelfile import ModelFile
@@ -73,7 +73,8 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
             kalman = design_kalman(model, process_noise_std_v=request.process_noise_std_v,
                                    bias_drift_std_v=request.bias_drift_std_v,
                                    extra_noise_std_rad_s=request.extra_noise_std_rad_s,
-                                   extra_delay_ticks=extra)  # fmt: skip
+                                   extra_delay_ticks=extra,
+                                   timing_noise_std_ticks=request.timing_noise_std_ticks)  # fmt: skip
         ctrl = PiController(d.kp, d.ki, model.period_s, voltage_limit_v=request.voltage_limit_v,
                             anti_windup=request.anti_windup,
                             estimator=None if kalman is None else make_estimator(kalman, gain))  # fmt: skip
@@ -91,6 +92,7 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
         process_noise_std_v=request.process_noise_std_v,
         bias_drift_std_v=request.bias_drift_std_v,
         extra_noise_std_rad_s=request.extra_noise_std_rad_s,
+        timing_noise_std_ticks=request.timing_noise_std_ticks,
     )
     ctrl = StateFeedbackController(d, estimator=make_estimator(d.estimator, gain),
                                    voltage_limit_v=request.voltage_limit_v)  # fmt: skip
@@ -107,6 +109,23 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
         "controller_den": den.tolist(),
     }
     return MotorDesign(ctrl, entry, poles_entry(d, num, den))
+
+
+def _loop_delay(request: DesignRequest, models: dict[str, ArxModel], *, strict: bool) -> int | None:
+    """The loop delay of a design: ``request.loop_delay_ticks`` if it fits every model
+    (:func:`~cartctl.design.request.check_loop_delay`; InputError otherwise), else the models'
+    common nk − 1 + extra delay; when they differ, None, or with ``strict`` an InputError."""
+    extra = request.extra_delay_ticks
+    if request.loop_delay_ticks is not None:
+        for model in models.values():
+            check_loop_delay(request.loop_delay_ticks, model.nk, extra)
+        return request.loop_delay_ticks
+    try:
+        return common_loop_delay({m: mod.nk for m, mod in models.items()}, extra)
+    except ValueError as exc:
+        if strict:
+            raise InputError(str(exc)) from None
+        return None
 
 
 @dataclass(frozen=True)
@@ -145,11 +164,7 @@ def design_models(
     by_motor = {
         m: (models.motor(m) if isinstance(models, ModelFile) else models[m]) for m in motors
     }
-    try:
-        loop_delay = common_loop_delay({m: mod.nk for m, mod in by_motor.items()},
-                                       request.extra_delay_ticks)  # fmt: skip
-    except ValueError:
-        loop_delay = None
+    loop_delay = _loop_delay(request, by_motor, strict=False)
     designs: dict[str, MotorDesign] = {}
     steps: dict[str, StepAnalysis] = {}
     for m, model in by_motor.items():
@@ -180,11 +195,7 @@ def controller_file(
     InputError
         The motors' models have different input delays: one file is for one loop.
     """
-    try:
-        loop_delay = common_loop_delay({m: mod.nk for m, mod in designs.models.items()},
-                                       designs.request.extra_delay_ticks)  # fmt: skip
-    except ValueError as exc:
-        raise InputError(str(exc)) from None
+    loop_delay = _loop_delay(designs.request, designs.models, strict=True)
     motors = {
         m: {**d.file_entry, "analysis": {k: v for k, v in d.entry.items() if k in ANALYSIS_KEYS}}
         for m, d in designs.motors.items()

@@ -217,6 +217,7 @@ def design_poles(
     process_noise_std_v: float = DEFAULT_PROCESS_NOISE_STD_V,
     bias_drift_std_v: float = DEFAULT_BIAS_DRIFT_STD_V,
     extra_noise_std_rad_s: float = 0.0,
+    timing_noise_std_ticks: float = 0.0,
 ) -> PolesDesign:
     """Place the closed-loop poles of a speed loop with integral action (module docstring).
 
@@ -247,7 +248,7 @@ def design_poles(
     reference_feedforward : bool
         Error integrator only: Kr = −K_xi Ts (True: the response one tick sooner) or Kr = 0 (r
         through the integrator only). With the disturbance estimate Kr is always the static gain.
-    process_noise_std_v, bias_drift_std_v, extra_noise_std_rad_s : float
+    process_noise_std_v, bias_drift_std_v, extra_noise_std_rad_s, timing_noise_std_ticks : float
         The estimator's noise levels (see :func:`~cartctl.design.kalman.design_kalman`);
         ``bias_drift_std_v`` also chooses the integral action (see above).
 
@@ -288,6 +289,7 @@ def design_poles(
         process_noise_std_v=process_noise_std_v,
         bias_drift_std_v=bias_drift_std_v,
         extra_noise_std_rad_s=extra_noise_std_rad_s,
+        timing_noise_std_ticks=timing_noise_std_ticks,
     )
     integral = "disturbance" if estimator.has_bias else "error"
     n = plant.order

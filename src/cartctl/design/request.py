@@ -46,7 +46,9 @@ OPTIONS: dict[str, str] = {
     "process_noise_std_v": "--process-noise-v",
     "bias_drift_std_v": "--bias-drift-v",
     "extra_noise_std_rad_s": "--measurement-noise",
+    "timing_noise_std_ticks": "--timing-noise-ticks",
     "extra_delay_ticks": "--extra-delay",
+    "loop_delay_ticks": "--loop-delay",
     "voltage_limit_v": "--voltage-limit",
     "step_rad_s": "--step",
 }
@@ -80,8 +82,17 @@ class DesignRequest:
     extra_noise_std_rad_s : float
         Measurement noise beyond the encoder's quantisation (rad/s); the estimator's √R is this
         and the quantisation noise together.
+    timing_noise_std_ticks : float
+        σ_ε, how uncertain (std, ticks) the moment a command lands is: the time-varying
+        estimator adds (σ_ε Δu)² B Bᵀ to its process noise after each command change Δu (see
+        :class:`~cartctl.runtime.kalman.KalmanDesign`); 0 leaves Q fixed.
     extra_delay_ticks : int
         Ticks of loop delay beyond the model's (a PC-side loop over serial).
+    loop_delay_ticks : int or None
+        The loop delay the controller is for (ticks from a measurement to its voltage on the
+        motor), when it is not the model's nk − 1 + extra delay: nk + extra delay is allowed too,
+        for a model whose next measurement already sees part of a command (it lands within the
+        tick; :func:`check_loop_delay`). None: nk − 1 + extra delay.
     voltage_limit_v : float
         Command saturation (V), at most the 12 V supply.
     step_rad_s : float
@@ -101,7 +112,9 @@ class DesignRequest:
     process_noise_std_v: float = DEFAULT_PROCESS_NOISE_STD_V
     bias_drift_std_v: float = DEFAULT_BIAS_DRIFT_STD_V
     extra_noise_std_rad_s: float = 0.0
+    timing_noise_std_ticks: float = 0.0
     extra_delay_ticks: int = 0
+    loop_delay_ticks: int | None = None
     voltage_limit_v: float = SUPPLY_V
     step_rad_s: float = 10.0
 
@@ -123,6 +136,19 @@ class DesignRequest:
             )
         if self.extra_delay_ticks < 0:
             raise InputError(f"--extra-delay must be >= 0 ticks, got {self.extra_delay_ticks}")
+        if self.loop_delay_ticks is not None and self.loop_delay_ticks < 0:
+            raise InputError(f"--loop-delay must be >= 0 ticks, got {self.loop_delay_ticks}")
+        timing = self.timing_noise_std_ticks
+        if not (math.isfinite(timing) and 0.0 <= timing <= 10.0):
+            raise InputError(f"--timing-noise-ticks must be in [0, 10] ticks, got {timing}")
+        if timing > 0.0 and self.estimator_gain != "time-varying":
+            raise InputError(
+                "--timing-noise-ticks needs --estimator-gain time-varying (a fixed gain cannot "
+                "follow the command's changes)"
+            )
+        if timing > 0.0 and self.method == "pi" and self.estimator != "kalman":
+            raise InputError("--timing-noise-ticks is for an estimator; the PI runs without one "
+                             "unless --estimator kalman")  # fmt: skip
         if not (math.isfinite(self.step_rad_s) and self.step_rad_s != 0.0):
             raise InputError(f"--step must be a non-zero speed in rad/s, got {self.step_rad_s}")
         return self
@@ -139,6 +165,10 @@ class DesignRequest:
             "bias_drift_std_v": self.bias_drift_std_v,
             "extra_noise_std_rad_s": self.extra_noise_std_rad_s,
         }  # fmt: skip
+        if self.timing_noise_std_ticks:  # only when used: older files stay as they were
+            req["timing_noise_std_ticks"] = self.timing_noise_std_ticks
+        if self.loop_delay_ticks is not None:
+            req["loop_delay_ticks"] = self.loop_delay_ticks
         if self.method == "pi":
             req.update(phase_margin_deg=self.phase_margin_deg, anti_windup=self.anti_windup,
                        estimator=self.estimator)  # fmt: skip
@@ -169,6 +199,27 @@ class DesignRequest:
                 continue
             argv += [OPTIONS[f.name], _text(value)]
         return argv
+
+
+def check_loop_delay(loop_delay_ticks: int | None, nk: int, extra_delay_ticks: int) -> int:
+    """The loop delay of a design on a model with input delay ``nk`` and ``extra_delay_ticks``.
+
+    None gives nk − 1 + extra (the report's timing: a command lands at the tick after the
+    measurement it answers, and shows in the measurement after that). A given loop delay may
+    also be nk + extra: the model's next measurement already sees part of a command that lands
+    within the tick (the measured speed is the tick's average), as a model identified on a cart
+    whose commands land a few ms after the tick has it. Anything else is refused (one line).
+    """
+    derived = int(nk) - 1 + int(extra_delay_ticks)
+    if loop_delay_ticks is None:
+        return derived
+    if loop_delay_ticks not in (derived, derived + 1):
+        raise InputError(
+            f"--loop-delay {loop_delay_ticks} does not fit a model with input delay nk = {nk} and "
+            f"{extra_delay_ticks} extra tick(s): the loop delay is nk - 1 + extra ({derived}) or, "
+            f"for a command that lands within the tick, nk + extra ({derived + 1})"
+        )
+    return int(loop_delay_ticks)
 
 
 def _text(value: Any) -> str:

@@ -9,6 +9,10 @@ as the runtime controllers (:class:`~cartctl.runtime.pi.PiController`,
 - the Kalman estimator always runs its steady-state (fixed) gain L, as
   :class:`~cartctl.runtime.kalman.SteadyStateSpeedEstimator` does; compare it with the runtime
   controller of :func:`as_steady_state`;
+- a file whose estimator has timing noise (``timing_noise_std_ticks`` > 0, a gain that moves
+  after each command change in cartctl's loop) runs without it: the C keeps the fixed L, which
+  the time-varying gain returns to while the command holds; the header says so and
+  ``cartctl export`` warns (:func:`timing_noise_note`);
 - float32 arithmetic: the voltages agree with the runtime's to within 1e-4 of the voltage range
   (a few µV for the PI; up to 0.2 mV for state feedback, which sums terms of tens of volts), and
   values beyond 3.4e38 overflow sooner (a command that overflows gives 0 V on both).
@@ -32,10 +36,25 @@ from cartctl.errors import InputError
 from cartctl.export.c_code import c_float, pi_code, poles_code, where
 from cartctl.runtime.base import Controller
 
-__all__ = ["CART_PERIOD_S", "arduino_source", "as_steady_state", "c_float"]
+__all__ = ["CART_PERIOD_S", "arduino_source", "as_steady_state", "c_float", "timing_noise_note"]
 
 CART_PERIOD_S = PERIOD_S
 """The period of the template's control thread (s): ``control()`` runs every 10 ms."""
+
+
+def timing_noise_note(controller: ControllerFile) -> str | None:
+    """One line when the file's estimator has timing noise, which the C does not run; else None."""
+    sigma = max(
+        (float(e.get("estimator", {}).get("timing_noise_std_ticks", 0.0))
+         for e in controller.motors.values()),
+        default=0.0,
+    )  # fmt: skip
+    if sigma <= 0.0:
+        return None
+    return (
+        f"the estimator's timing noise ({sigma:g} ticks) is not in the C, which runs the fixed "
+        "steady-state gain L (cartctl's loop runs the time-varying gain)"
+    )
 
 
 def as_steady_state(controller: ControllerFile) -> ControllerFile:
@@ -128,6 +147,9 @@ def _header(controller: ControllerFile, command: str) -> list[str]:
             "// '--estimator-gain steady-state'; cartctl's default filterpy filter converges to the "
             "same L.",
         ]
+        note = timing_noise_note(controller)
+        if note is not None:
+            lines.append(f"// Note: {note}.")
     lines += [
         "//",
         "// Delay: here the controller runs with one tick of delay (the voltage set at tick k "

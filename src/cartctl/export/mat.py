@@ -54,7 +54,7 @@ from cartctl.modelfile import ModelFile
 
 __all__ = ["controller_mat", "model_mat", "write_mat"]
 
-_KALMAN_KEYS = ("A", "B", "C", "Q", "R", "P", "L")
+_KALMAN_KEYS = ("A", "B", "C", "Q", "R", "P", "L", "timing_noise_std_ticks")
 
 
 def model_mat(models: ModelFile, source: str = "") -> dict[str, Any]:

@@ -61,6 +61,12 @@ class KalmanDesign:
         Ts (s).
     process_noise_std_v, bias_drift_std_v, measurement_noise_std_rad_s : float
         The noise levels the design used (σ_w in V, σ_b in V per tick, √R in rad/s).
+    timing_noise_std_ticks : float
+        σ_ε, the uncertainty of when a command lands (ticks); 0 (the default, and what a file
+        without it gets): Q is fixed. Above 0 the time-varying filter adds, at each prediction, the
+        process noise of a command change Δu[k] = u[k] − u[k−1] landing ε ticks early or late, which
+        acts as an extra input −ε Δu: Q[k] = Q + (σ_ε Δu[k])² B Bᵀ (:class:`KalmanSpeedEstimator`).
+        P and L stay those of Q (between command changes the gain returns to L).
     """
 
     A: NDArray[np.float64]
@@ -75,6 +81,13 @@ class KalmanDesign:
     process_noise_std_v: float
     bias_drift_std_v: float
     measurement_noise_std_rad_s: float
+    timing_noise_std_ticks: float = 0.0
+
+    def timing_covariance(self, change_v: float) -> NDArray[np.float64]:
+        """Q[k] = Q + (σ_ε Δu)² B Bᵀ, the process noise of a prediction after a command change of
+        ``change_v`` (V); Q itself when σ_ε = 0."""
+        extra = (self.timing_noise_std_ticks * change_v) ** 2
+        return self.Q + extra * np.outer(self.B, self.B) if extra > 0.0 else np.array(self.Q)
 
     @property
     def has_bias(self) -> bool:
@@ -125,6 +138,7 @@ class KalmanDesign:
             "process_noise_std_v": self.process_noise_std_v,
             "bias_drift_std_v": self.bias_drift_std_v,
             "measurement_noise_std_rad_s": self.measurement_noise_std_rad_s,
+            "timing_noise_std_ticks": self.timing_noise_std_ticks,
             "estimator_poles": [[float(p.real), float(p.imag)] for p in self.poles()],
         }
 
@@ -152,6 +166,11 @@ class KalmanSpeedEstimator:
     initial_covariance : array_like, shape (m, m), optional
         P[0|−1], the covariance at reset; default the design's steady-state P (then the gain
         starts at its steady-state value). The state starts at rest, x̂ = 0.
+
+    With the design's ``timing_noise_std_ticks`` σ_ε > 0, each ``predict(u[k])`` propagates the
+    covariance with Q[k] = Q + (σ_ε (u[k] − u[k−1]))² B Bᵀ (u[−1] = 0 after a reset): the command
+    just sent may land up to a fraction of a tick earlier or later than the model says, so the
+    prediction after a jump is trusted less and the next measurement counts more.
 
     Attributes
     ----------
@@ -183,6 +202,8 @@ class KalmanSpeedEstimator:
         """State at rest (x̂ = 0), covariance back to ``initial_covariance``."""
         self.filter.x = np.zeros((self.design.A.shape[0], 1))
         self.filter.P = self._P0.copy()
+        self.filter.Q = np.array(self.design.Q)
+        self._last_voltage_v = 0.0
 
     def correct(self, measured_rad_s: float) -> float:
         """Update with the speed measured at this tick (rad/s); return x̂_1[k|k] (rad/s)."""
@@ -192,7 +213,11 @@ class KalmanSpeedEstimator:
 
     def predict(self, voltage_v: float) -> None:
         """Propagate state and covariance with the voltage applied at this tick (V)."""
-        self.filter.predict(u=float(voltage_v) if math.isfinite(voltage_v) else 0.0)
+        u = float(voltage_v) if math.isfinite(voltage_v) else 0.0
+        if self.design.timing_noise_std_ticks > 0.0:
+            self.filter.Q = self.design.timing_covariance(u - self._last_voltage_v)
+            self._last_voltage_v = u
+        self.filter.predict(u=u)
 
     @property
     def state(self) -> NDArray[np.float64]:

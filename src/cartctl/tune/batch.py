@@ -227,6 +227,11 @@ def _estimator(est: object, n: int, ticks: int) -> _SteadyBatch | _TimeVaryingBa
     if isinstance(est, SteadyStateSpeedEstimator):
         return _SteadyBatch(est, n)
     if isinstance(est, KalmanSpeedEstimator):
+        if est.design.timing_noise_std_ticks > 0.0:  # its gains follow the commands it is given
+            raise InputError(
+                "the batch loop cannot run an estimator with timing noise "
+                "(timing_noise_std_ticks > 0): its gain depends on the commands"
+            )
         return _TimeVaryingBatch(est, n, ticks)
     raise InputError(f"the batch loop does not know the estimator {type(est).__name__}")
 
