@@ -16,7 +16,5 @@ PERIOD_S = 0.01
 """The control thread's period on the cart (s)."""
 PWM_STEP_V = SUPPLY_V / 255.0
 """One step of the H-bridges' 8-bit PWM (V): 47 mV."""
-BAUD = 115200
-"""The serial line's speed (8N1: 10 bits per byte)."""
 SPEED_QUANTUM_RAD_S = 2.0 * math.pi / ENCODER_COUNTS_PER_REV / PERIOD_S
 """One encoder count per tick as a speed: the resolution of a measured speed (0.3506 rad/s)."""

@@ -45,6 +45,8 @@ __all__ = [
     "SEQ_WINDOW",
     "STATUS_DRIVING",
     "STATUS_WATCHDOG",
+    "TIMING_FIRST_ID",
+    "TIMING_REPORTS",
     "WATCHDOG_MS",
     "CartSample",
     "HostCommand",
@@ -67,6 +69,15 @@ BRIDGE_BAUD = 500_000
 """The line's rate with bridge version 2 (8N1): a 60-byte GPIO frame takes 1.2 ms."""
 LEGACY_BAUD = 115_200
 """The line's rate of the course's firmware and of bridges before version 2."""
+TIMING_FIRST_ID = 200
+"""The bridge's THREAD_INFO reports after each GPIO have ids 200 onwards, one per
+:data:`TIMING_REPORTS` entry (the figure in the frame's duration field)."""
+TIMING_REPORTS = ("tick_busy_us_max", "drain_us_max", "tick_interval_us_max",
+                  "rx_ring_high_water_bytes")  # fmt: skip
+"""What they report, named as their maxima over a run are (``link.cart_timing`` of ``run
+--json``): the 10 ms thread's drain + io() + control() (µs), the longest 1 ms drain since the
+previous tick (µs), the time since the previous tick started (µs), the most bytes a drain found
+waiting in the receive ring since the previous tick."""
 STATUS_DRIVING = 1
 """Status bit: the cart applies the requested voltages."""
 STATUS_WATCHDOG = 2

@@ -110,8 +110,8 @@ class CartLink:
         self.vanished = False
         """True once the port itself is gone (nothing can be sent any more)."""
         self.thread_maxima: dict[int, int] = {}
-        """Per THREAD_INFO id, the largest duration field seen since :meth:`clear_thread_maxima`
-        (the bridge reports its tick's timing and its receive ring this way)."""
+        """Per THREAD_INFO id, the largest duration field seen (cleared by whoever starts counting;
+        the bridge reports its tick's timing and its receive ring this way)."""
 
     @property
     def stats(self) -> Any:

@@ -55,6 +55,11 @@ USB_FRAME_S = 0.001
 """A full-speed USB frame: the PC collects the bridge's bytes at the next one."""
 
 
+def next_on_grid(t: float, phase_s: float, period_s: float) -> float:
+    """The first instant of the grid ``phase_s + n·period_s`` at or after ``t`` (s)."""
+    return phase_s + math.ceil((t - phase_s) / period_s - 1e-12) * period_s
+
+
 def byte_time_s(baud: int) -> float:
     """One byte of 8N1 at ``baud`` (s)."""
     return 10.0 / float(baud)
@@ -76,12 +81,10 @@ class UsbBridge:
         self._waiting: list[tuple[float, int]] = []  # (through the AVR's UART, byte)
 
     def _next_flush(self, t: float) -> float:
-        n = math.ceil((t - self.flush_phase_s) / USB_FLUSH_PERIOD_S - 1e-12)
-        return self.flush_phase_s + n * USB_FLUSH_PERIOD_S
+        return next_on_grid(t, self.flush_phase_s, USB_FLUSH_PERIOD_S)
 
     def _collected(self, t: float) -> float:
-        n = math.ceil((t - self.frame_phase_s) / USB_FRAME_S - 1e-12)
-        return self.frame_phase_s + n * USB_FRAME_S
+        return next_on_grid(t, self.frame_phase_s, USB_FRAME_S)
 
     def feed(self, byte_times: Iterable[tuple[float, int]]) -> list[tuple[float, bytes]]:
         """Bytes through the AVR's UART at the given times, in order; returns ``(at_pc_s, data)``
@@ -333,9 +336,8 @@ class LineReader(threading.Thread):
             now = time.perf_counter()
             if self.reply_jitter_s > 0.0:
                 now += self._rng.uniform(0.0, self.reply_jitter_s)
-            if self.usb_frame_phase_s is not None:
-                phase = self.usb_frame_phase_s
-                now = phase + math.ceil((now - phase) / USB_FRAME_S) * USB_FRAME_S
+            if self.usb_frame_phase_s is not None:  # out at the next USB frame
+                now = next_on_grid(now, self.usb_frame_phase_s, USB_FRAME_S)
             if not self.rate_ok():
                 data = bytes(self._rng.getrandbits(8) for _ in data)
             self.deliver(data, now)

@@ -34,12 +34,16 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from cartctl.cart import PERIOD_S
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import PlantError
 from cartctl.link import (
     BRIDGE_BAUD,
     BRIDGE_VERSION,
+    TIMING_FIRST_ID,
+    TIMING_REPORTS,
     CartSample,
     Encoder,
     Gpio,
@@ -122,7 +126,6 @@ class SerialCart:
         self._sent_any = False
         self.reply_latency_s: collections.deque[float] = collections.deque(maxlen=1 << 20)
         """Per tick of the run: from the cart's frame decoded to the host's reply written (s)."""
-        self.time_source: Callable[[], float] = time.perf_counter
 
     # -- connecting -----------------------------------------------------------------------------
 
@@ -183,7 +186,7 @@ class SerialCart:
         """Send the channel vector for this tick (voltages, sequence number, drive)."""
         self._send(voltage_a_v, voltage_b_v, drive)
         self.frames_sent += 1
-        self.reply_latency_s.append(self.time_source() - self.arrival_s)
+        self.reply_latency_s.append(time.perf_counter() - self.arrival_s)
 
     def _send(self, voltage_a_v: float, voltage_b_v: float, drive: bool) -> None:
         if self.link.vanished:
@@ -304,31 +307,24 @@ class SerialCart:
         return tick_difference(self._lost_base, self.sample.host_frames_lost)
 
     def _cart_timing(self) -> dict[str, int] | None:
-        """The bridge's own reports over the run (its THREAD_INFO 200..203), None without any."""
+        """The maxima of the bridge's own reports over the run, None without any."""
         maxima = self.link.thread_maxima
-        names = (
-            "tick_busy_us_max",
-            "drain_us_max",
-            "tick_interval_us_max",
-            "rx_ring_high_water_bytes",
-        )
-        if not any(200 + k in maxima for k in range(len(names))):
+        ids = [TIMING_FIRST_ID + k for k in range(len(TIMING_REPORTS))]
+        if not any(i in maxima for i in ids):
             return None
-        return {name: maxima.get(200 + k, 0) for k, name in enumerate(names)}
+        return {name: maxima.get(i, 0) for i, name in zip(ids, TIMING_REPORTS, strict=True)}
 
     def link_summary(self) -> dict[str, Any]:
         """Link figures for the run summary (extends contract 3)."""
         stats = self.link.stats
         delays = list(self.echo_delays.elements())
         lost, sent = self.host_frames_lost, self.frames_sent
-        latency_us = sorted(1e6 * v for v in self.reply_latency_s)
-
-        def pick(q: float) -> float | None:
-            return (
-                latency_us[min(len(latency_us) - 1, int(q * len(latency_us)))]
-                if latency_us
-                else None
-            )
+        latency_us = 1e6 * np.array(self.reply_latency_s)
+        p50, p99, top = (
+            (float(v) for v in (*np.percentile(latency_us, [50.0, 99.0]), latency_us.max()))
+            if latency_us.size
+            else (None, None, None)
+        )  # as the executor's timing figures
 
         return {
             "loop_delay_ticks": self.loop_delay_ticks,
@@ -348,11 +344,7 @@ class SerialCart:
                 "host_frames_sent": sent,
                 "host_frames_lost": lost,
                 "host_frames_lost_percent": 100.0 * lost / sent if sent else 0.0,
-                "reply_latency_us": {
-                    "p50": pick(0.5),
-                    "p99": pick(0.99),
-                    "max": latency_us[-1] if latency_us else None,
-                },
+                "reply_latency_us": {"p50": p50, "p99": p99, "max": top},
                 "cart_timing": self._cart_timing(),
             },
         }

@@ -52,7 +52,7 @@ from collections.abc import Sequence
 from typing import Any, Protocol
 
 from cartctl.link import Encoder, encode_gpiox_v2
-from cartctl.link.bridge import BRIDGE_BAUD, CH_BRIDGE_VERSION, LEGACY_BAUD
+from cartctl.link.bridge import BRIDGE_BAUD, CH_BRIDGE_VERSION, LEGACY_BAUD, TIMING_FIRST_ID
 from cartctl.plants.base import Measurement
 from cartctl.plants.bridge_firmware import TICK_MODULO, BridgeFirmware, CartIO
 from cartctl.plants.cart_faults import RECEIVE_SCHEDULES, CartFaults
@@ -76,10 +76,6 @@ READY_TEXT = "cartctl bridge ready"
 COMM_PHASE_US = 1200
 """The cart's GPIO goes out this long (µs) after the tick starts: io() and control() take 1.2 ms
 on the Mega (then the bridge sends it; before version 2, microOS's communication thread did)."""
-TIMING_FIRST_ID = 200
-"""The bridge's THREAD_INFO ids after each GPIO: 200 its 10 ms thread's run (µs), 201 its longest
-1 ms drain (µs), 202 the time since the previous tick started (µs), 203 the most bytes a drain found
-waiting in the receive ring."""
 TICK_BUSY_US, DRAIN_BUSY_US = COMM_PHASE_US, 60
 """What the virtual cart reports as 200 and 201 (µs): fixed figures, it has no AVR to time; 202
 is the tick on its clock and 203 its model of the ring."""
