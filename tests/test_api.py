@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+import sys
 from pathlib import Path
 
 import control
@@ -18,11 +19,13 @@ matplotlib.use("Agg")
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _readme_example() -> str:
+def _readme_blocks() -> tuple[str, str]:
+    """The README's API example and the printed summary shown after it."""
     text = (ROOT / "README.md").read_text(encoding="utf-8")
-    match = re.search(r"<!-- api-example[^>]*-->\s*```python\n(.*?)```", text, flags=re.S)
+    match = re.search(r"<!-- api-example[^>]*-->\s*```python\n(.*?)```.*?```\n(.*?)```",
+                      text, flags=re.S)  # fmt: skip
     assert match, "the README has no API example"
-    return match.group(1)
+    return match.group(1), match.group(2)
 
 
 @pytest.fixture
@@ -34,15 +37,51 @@ def square(capsys: pytest.CaptureFixture[str], workdir: Path) -> Path:
     return workdir / "logs" / "square.csv"
 
 
-def test_the_readme_example_runs(square: Path, workdir: Path) -> None:
+def test_the_readme_example_runs_in_an_empty_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The example makes its own data: nothing in the folder before, the files after."""
+    monkeypatch.chdir(tmp_path)
+    assert not any(tmp_path.iterdir())
+    code, shown = _readme_blocks()
     namespace: dict[str, object] = {}
-    exec(compile(_readme_example(), "README.md", "exec"), namespace)
-    assert (workdir / "models" / "mine.toml").is_file()
-    assert (workdir / "controllers" / "mine.toml").is_file()
-    assert (workdir / "step.png").stat().st_size > 10_000
+    exec(compile(code, "README.md", "exec"), namespace)
+    printed = capsys.readouterr().out
+    assert (tmp_path / "models" / "mine.toml").is_file()
+    assert (tmp_path / "controllers" / "mine.toml").is_file()
+    assert (tmp_path / "step.png").stat().st_size > 10_000
     run = namespace["run"]
     a = run.summary["motors"]["a"]  # type: ignore[attr-defined]
     assert a["overshoot_percent"] < 10.0 and a["settling_time_s"] is not None
+    # the summary the README shows has the layout print(run) gives: its title and its columns
+    title, headers = shown.splitlines()[:2]
+    assert title.split(", plant")[0] in printed and headers in printed.splitlines()
+    assert len(printed) < 3 * 2_000  # three short summaries and a transfer function
+
+
+def test_excite_records_what_the_cli_records(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    assert main(["excite", "--plant", "physics", "--signal", "prbs", "--amplitude", "6",
+                 "--duration", "2", "--motor", "b", "--out", "logs/prbs.csv"]) == 0  # fmt: skip
+    capsys.readouterr()
+    cli = cartctl.load_trace("logs/prbs.csv")
+    api = cartctl.excite(plant="physics", signal="prbs", amplitude_v=6, duration_s=2, motor="b")
+    assert len(api) == len(cli) == 200
+    np.testing.assert_allclose(api.voltage_b, cli.voltage_b, atol=1e-9)
+    np.testing.assert_allclose(api.speed_b, cli.speed_b, atol=1e-6)
+    assert not np.any(api.voltage_a) and np.max(np.abs(api.voltage_b)) == pytest.approx(6.0)
+
+
+@pytest.mark.parametrize(
+    ("options", "named"),
+    [({"plant": "virtual"}, "virtual"), ({"amplitude_v": 13.0}, "amplitude_v"),
+     ({"motor": "c"}, "motor"), ({"duration_s": 2.0}, "duration_s")],
+)  # fmt: skip
+def test_excite_refuses_in_one_line(options: dict, named: str) -> None:
+    with pytest.raises(cartctl.errors.InputError, match=named) as refused:
+        cartctl.excite(**options)
+    assert "\n" not in str(refused.value)
 
 
 def test_identify_gives_the_cli_theta_and_a_python_control_tf(
@@ -84,22 +123,28 @@ def test_design_and_simulate_agree_with_design_and_run(
     assert run.failure is None
 
 
-def test_to_dataframe_needs_pandas_or_gives_one(workdir: Path) -> None:
+def test_to_dataframe_gives_the_columns(workdir: Path) -> None:
+    pd = pytest.importorskip("pandas")  # the dev extra installs it
     run = cartctl.simulate("controllers/pi.toml", duration_s=0.3)
-    try:
-        import pandas  # noqa: F401
-    except ImportError:
-        with pytest.raises(cartctl.errors.InputError, match="pandas"):
-            run.to_dataframe()
-    else:
-        frame = run.to_dataframe()
-        assert list(frame.columns) == list(run.columns) and len(frame) == 31
+    frame = run.to_dataframe()
+    assert isinstance(frame, pd.DataFrame) and list(frame.columns) == list(run.columns)
+    assert len(frame) == 31  # 30 ticks and the stop row
+    np.testing.assert_array_equal(frame["voltage_a"].to_numpy(), run.columns["voltage_a"])
+
+
+def test_to_dataframe_without_pandas_says_how_to_get_it(
+    workdir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    run = cartctl.simulate("controllers/pi.toml", duration_s=0.3)
+    monkeypatch.setitem(sys.modules, "pandas", None)  # as if not installed: import fails
+    with pytest.raises(cartctl.errors.InputError, match=r"cartctl\[pandas\]") as refused:
+        run.to_dataframe()
+    assert "\n" not in str(refused.value)
 
 
 def test_import_cartctl_stays_light() -> None:
     """The API loads on first use: ``import cartctl`` (the CLI's first import) pulls no numpy."""
     import subprocess
-    import sys
 
     code = "import sys, cartctl; print('numpy' in sys.modules)"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -3,16 +3,16 @@
 Pipeline: ``data`` → ``identify`` → ``models/`` → ``design`` → ``controllers/`` →
 ``runtime`` (plant, estimator, controller, sinks) → ``logs/`` → review.
 
-From Python: ``cartctl.load_trace``, ``identify``, ``load_model``, ``save_model``, ``design_pi``,
-``design_poles`` and ``simulate`` (see :mod:`cartctl.api`).
+From Python: ``cartctl.load_trace``, ``excite``, ``identify``, ``load_model``, ``save_model``,
+``design_pi``, ``design_poles`` and ``simulate`` (see :mod:`cartctl.api`).
 """
 
 from cartctl.cart import PERIOD_S as TS_S
 
 __version__ = "0.1.0"
 
-_API = ("load_trace", "identify", "load_model", "save_model", "design_pi", "design_poles",
-        "simulate")  # fmt: skip
+_API = ("load_trace", "excite", "identify", "load_model", "save_model", "design_pi",
+        "design_poles", "simulate")  # fmt: skip
 
 __all__ = ["TS_S", "__version__", *_API]
 

@@ -1,50 +1,45 @@
 """cartctl from Python: the functions behind the commands, for notebooks and scripts.
 
-From a recorded experiment to a closed-loop step::
+From an experiment to a closed-loop step, with no cart::
 
     import cartctl
 
-    trace = cartctl.load_trace("logs/square.csv")
+    trace = cartctl.excite(plant="physics", signal="square", amplitude_v=10, cycles=3)
     ident = cartctl.identify(trace)                    # the report's ARX, nk = 2
-    print(ident["a"].theta, ident["a"].tf)             # θ and a python-control TransferFunction
+    print(ident)                                       # θ and the fits, one line per motor
     ident.save("models/mine.toml")
     design = cartctl.design_pi("models/mine.toml", phase_margin_deg=65, crossover_hz=4)
     run = cartctl.simulate(design, plant="physics", reference="step:10", duration_s=2)
     run.plot()                                         # speed, reference and voltage (matplotlib)
 
-Every function is the path the command line takes (``cartctl identify``, ``design``,
+Every function is the path the command line takes (``cartctl excite``, ``identify``, ``design``,
 ``run --fast``), so a notebook and a shell give the same numbers. Errors are
-:class:`~cartctl.errors.CartctlError` with the one-line messages of the CLI.
+:class:`~cartctl.errors.CartctlError` with the one-line messages of the CLI. The results
+(:mod:`cartctl.api.results`) print as a few lines and show as small tables in Jupyter.
 """
 
 from __future__ import annotations
 
-import shlex
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from cartctl.api.results import Design, Identification, MotorResult, SimulationResult
+from cartctl.choices import DEFAULT_MODEL
 from cartctl.data import Trace, parse_mapping, read_trace
 from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import ControllerFile, load_controller, save_controller
-from cartctl.design.make import Designs, controller_file, design_models
+from cartctl.design.controllerfile import ControllerFile, load_controller
+from cartctl.design.make import design_models
 from cartctl.design.request import DesignRequest
-from cartctl.errors import InputError
-from cartctl.identification.pipeline import (
-    IdentifyRequest,
-    IdentifyResult,
-    MotorIdentification,
-    model_file,
-)
+from cartctl.errors import InputError, PlantError
+from cartctl.identification.pipeline import IdentifyRequest
 from cartctl.identification.pipeline import identify as identify_traces
 from cartctl.identification.prefilter import Prefilter
-from cartctl.model import ArxModel
 from cartctl.modelfile import ModelFile, load_models, save_models
-from cartctl.plants.factory import make_plant
+from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
 from cartctl.reference import ReferenceSchedule
 from cartctl.runtime.fast import run_in_memory
 from cartctl.sinks.summary import trace_metrics
@@ -56,6 +51,7 @@ __all__ = [
     "SimulationResult",
     "design_pi",
     "design_poles",
+    "excite",
     "identify",
     "load_model",
     "load_trace",
@@ -79,53 +75,70 @@ def load_trace(path: str | Path, map: str | Mapping[str, str] | None = None) -> 
     return read_trace(path, mapping)
 
 
-@dataclass(frozen=True)
-class MotorResult:
-    """One motor's identified model.
+def _check_simulated(plant: str, what: str) -> None:
+    if plant_kind(plant) not in SIMULATED:
+        raise InputError(f"{what} runs on 'sim' or 'physics[:actuation_ms=X]', not '{plant}'")
 
-    Attributes
+
+def excite(
+    *,
+    plant: str = "physics",
+    signal: str = "square",
+    amplitude_v: float = 10.0,
+    cycles: int | None = None,
+    duration_s: float | None = None,
+    motor: str = "both",
+    model: str | Path | None = None,
+    preset: str = "ground",
+    noise_std_rad_s: float = 0.0,
+    seed: int | None = None,
+) -> Trace:
+    """Record an excitation experiment on a simulated plant, as ``cartctl excite`` does.
+
+    Parameters
     ----------
-    model : ArxModel
-    theta, theta_std : ndarray
-        The report's θ = [c, d, a, b] (for na = nb = 2) and its standard deviations.
-    fit_simulation_percent, fit_prediction_percent : float
-    tf : control.TransferFunction
-        The model as python-control's discrete transfer function (dt = Ts).
-    details : MotorIdentification
-        Everything ``identify`` computed (ARX, OE, the delay estimate…).
+    plant : {'physics', 'physics:actuation_ms=X', 'sim'}
+        The physical simulator (with ``preset``) or the ARX models of ``model``.
+    signal : {'square', 'step', 'prbs', 'multisine', 'chirp'}
+    amplitude_v : float
+        Peak voltage (V), at most the supply's 12 V.
+    cycles : int, optional
+        Repetitions of the square cycle (3 s each; default 5) or of the multisine period.
+    duration_s : float, optional
+        Length of the step, prbs, chirp or multisine (s).
+    motor : {'both', 'a', 'b'}
+        Which motor gets the signal; the other stays at 0 V.
+    noise_std_rad_s, seed
+        Speed measurement noise (rad/s) and its seed.
+
+    Returns
+    -------
+    Trace
+        Contract-1 columns, with ``true_speed_a``/``true_speed_b`` from the simulator.
     """
+    from cartctl.experiment import run_experiment
+    from cartctl.plants.sim import SUPPLY_V
+    from cartctl.signals import make_signal
 
-    model: ArxModel
-    theta: NDArray[np.float64]
-    theta_std: NDArray[np.float64]
-    fit_simulation_percent: float
-    fit_prediction_percent: float
-    tf: Any
-    details: MotorIdentification
-
-
-@dataclass(frozen=True)
-class Identification:
-    """Per-motor results of :func:`identify` (``result["a"]``), saveable as a model file."""
-
-    motors: dict[str, MotorResult]
-    result: IdentifyResult
-    request: IdentifyRequest
-    sources: tuple[str, ...]
-
-    def __getitem__(self, motor: str) -> MotorResult:
-        return self.motors[motor]
-
-    def model_file(self) -> ModelFile:
-        """The models with their provenance, as ``identify --out`` writes them."""
-        return model_file(
-            self.result, list(self.sources), self.request, source="cartctl.identify()"
-        )
-
-    def save(self, path: str | Path) -> Path:
-        """Write the model file; returns its path."""
-        save_models(self.model_file(), path)
-        return Path(path)
+    _check_simulated(plant, "excite")
+    if motor not in ("a", "b", "both"):
+        raise InputError(f"motor must be 'a', 'b' or 'both', got {motor!r}")
+    if not amplitude_v <= SUPPLY_V:
+        raise InputError(f"amplitude_v {amplitude_v} V is beyond the cart's ±{SUPPLY_V:g} V supply")
+    if duration_s is not None and signal == "square":
+        raise InputError("duration_s does not apply to the square signal; use cycles (3 s each)")
+    volts = make_signal(signal, amplitude_v, cycles=cycles, duration_s=duration_s)
+    zeros = np.zeros_like(volts)
+    the_plant, description = make_plant(plant, model_path=model or DEFAULT_MODEL, preset=preset,
+                                        noise_std_rad_s=noise_std_rad_s, seed=seed)  # fmt: skip
+    result = run_experiment(the_plant, volts if motor in ("a", "both") else zeros,
+                            volts if motor in ("b", "both") else zeros,
+                            source=description)  # fmt: skip
+    if result.interrupted:  # a notebook's interrupt stops the cell, not just the experiment
+        raise KeyboardInterrupt
+    if result.failure:
+        raise PlantError(result.failure)
+    return result.trace
 
 
 def identify(
@@ -196,43 +209,6 @@ def save_model(models: ModelFile | Identification, path: str | Path) -> Path:
     return Path(path)
 
 
-@dataclass(frozen=True)
-class Design:
-    """Controllers designed on a model file, as ``cartctl design`` makes them.
-
-    Attributes
-    ----------
-    designs : Designs
-        Per motor: the runtime controller, its figures (``entry``) and its simulated step.
-    model_path : Path
-        The model file designed on (recorded in the controller file).
-    period_s : float
-    """
-
-    designs: Designs
-    model_path: Path
-    period_s: float
-
-    @property
-    def request(self) -> DesignRequest:
-        return self.designs.request
-
-    def __getitem__(self, motor: str) -> dict[str, Any]:
-        """One motor's figures: gains, margins, closed-loop poles, the simulated step."""
-        return self.designs.motors[motor].entry
-
-    def controller_file(self) -> ControllerFile:
-        """The controller file, as ``cartctl design --out`` writes it."""
-        command = "cartctl " + shlex.join(["design", *self.request.to_argv(str(self.model_path))])
-        return controller_file(self.designs, self.model_path, command=command,
-                               period_s=self.period_s)  # fmt: skip
-
-    def save(self, path: str | Path) -> Path:
-        """Write the controller file; ``cartctl run --controller PATH`` runs it."""
-        save_controller(self.controller_file(), path)
-        return Path(path)
-
-
 def _design(model: str | Path | ModelFile, request: DesignRequest, motors: Sequence[str]) -> Design:
     if isinstance(model, ModelFile):
         if model.path is None:
@@ -266,52 +242,6 @@ def design_poles(
     return _design(model, DesignRequest(method="poles", **options), motors)
 
 
-@dataclass(frozen=True)
-class SimulationResult:
-    """A simulated closed-loop run.
-
-    Attributes
-    ----------
-    columns : dict of str to ndarray
-        The trace's columns (contract 1 and the loop's: ``time_s``, ``voltage_a``, ``speed_a``,
-        ``reference_a``, ``estimate_a``, ``true_speed_a`` …); the last row is the stop row.
-    summary : dict
-        The run summary of ``cartctl run --json`` (overshoot, settling, errors per motor).
-    failure : str or None
-    """
-
-    columns: dict[str, NDArray[np.float64]]
-    summary: dict[str, Any]
-    failure: str | None = None
-
-    def to_dataframe(self) -> Any:
-        """The columns as a pandas DataFrame (needs pandas)."""
-        try:
-            import pandas as pd
-        except ImportError:
-            raise InputError("to_dataframe needs pandas: pip install pandas") from None
-        return pd.DataFrame(self.columns)
-
-    def plot(self, motor: str = "a", ax: Any = None) -> Any:
-        """Speed, reference and voltage of one motor over time (matplotlib); returns the figure."""
-        import matplotlib.pyplot as plt
-
-        c = self.columns
-        fig, (top, bottom) = (
-            plt.subplots(2, 1, sharex=True, figsize=(8, 5)) if ax is None else (ax.figure, ax)
-        )
-        top.plot(c["time_s"], c[f"reference_{motor}"], "k--", label="reference")
-        top.plot(c["time_s"], c[f"speed_{motor}"], label="measured speed")
-        if f"true_speed_{motor}" in c:
-            top.plot(c["time_s"], c[f"true_speed_{motor}"], label="true speed")
-        top.set_ylabel("rad/s")
-        top.legend(loc="lower right")
-        bottom.step(c["time_s"], c[f"voltage_{motor}"], where="post")
-        bottom.set_ylabel("V")
-        bottom.set_xlabel("time (s)")
-        return fig
-
-
 def simulate(
     controller: Design | str | Path | ControllerFile,
     *,
@@ -335,16 +265,16 @@ def simulate(
         A reference spec (``step:10``, ``square:8:2``, ``file:ref.csv`` …).
     duration_s : float
     """
-    from cartctl.plants.factory import SIMULATED, plant_kind
-
-    if plant_kind(plant) not in SIMULATED:
-        raise InputError(f"simulate runs on 'sim' or 'physics[:actuation_ms=X]', not '{plant}'")
+    _check_simulated(plant, "simulate")
     if isinstance(controller, Design):
         file = replace(controller.controller_file(), path=None)
+        name = f"{controller.request.method.upper()} designed on {controller.model_path}"
     elif isinstance(controller, ControllerFile):
         file = controller
+        name = str(file.path) if file.path else f"{file.method.upper()} controller"
     else:
         file = load_controller(controller)
+        name = str(controller)
     built = build_controllers(file)
     the_plant, _ = make_plant(plant, model_path=model or file.model_path, preset=preset,
                               noise_std_rad_s=noise_std_rad_s, seed=seed)  # fmt: skip
@@ -353,4 +283,5 @@ def simulate(
     refs = {m: ReferenceSchedule(reference, n, period_s, m) for m in MOTORS}
     columns, state = run_in_memory(the_plant, built, refs, period_s=period_s,
                                    voltage_limit_v=file.voltage_limit_v)  # fmt: skip
-    return SimulationResult(columns, trace_metrics(columns, period_s), state.failure)
+    return SimulationResult(columns, trace_metrics(columns, period_s), state.failure,
+                            controller=name, plant=plant, reference=reference)  # fmt: skip

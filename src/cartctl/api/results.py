@@ -1,0 +1,253 @@
+"""The results the Python API returns: identified models, designs and simulated runs.
+
+Each prints as a few lines (``print(ident)``) and shows as a small table in Jupyter; the arrays
+and the full results stay in their attributes. :mod:`cartctl.api` makes them.
+"""
+
+from __future__ import annotations
+
+import shlex
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cartctl.api.display import Summary, number, numbers, plot_run
+from cartctl.design.controllerfile import ControllerFile, save_controller
+from cartctl.design.make import Designs, controller_file
+from cartctl.design.request import DesignRequest
+from cartctl.errors import InputError
+from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, MotorIdentification
+from cartctl.identification.pipeline import model_file as identified_model_file
+from cartctl.model import ArxModel
+from cartctl.modelfile import ModelFile, save_models
+
+__all__ = ["Design", "Identification", "MotorResult", "SimulationResult"]
+
+MOTORS = ("a", "b")
+
+_METHODS = {"pi": "PI", "poles": "pole placement"}
+_IDENT_HEADERS = ("motor", "nk", "θ", "θ std", "fit sim (%)", "fit pred (%)", "max |pole|")
+
+
+class _Shown:
+    """``repr()`` and Jupyter's display from the class's ``_summary()``."""
+
+    def _summary(self) -> Summary:
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        return self._summary().text()
+
+    def _repr_html_(self) -> str:
+        return self._summary().html()
+
+
+@dataclass(frozen=True, repr=False, eq=False)
+class MotorResult(_Shown):
+    """One motor's identified model.
+
+    Attributes
+    ----------
+    model : ArxModel
+    theta, theta_std : ndarray
+        The report's θ = [c, d, a, b] (for na = nb = 2) and its standard deviations.
+    fit_simulation_percent, fit_prediction_percent : float
+    tf : control.TransferFunction
+        The model as python-control's discrete transfer function (dt = Ts).
+    details : MotorIdentification
+        Everything ``identify`` computed (ARX, OE, the delay estimate…).
+    """
+
+    model: ArxModel
+    theta: NDArray[np.float64]
+    theta_std: NDArray[np.float64]
+    fit_simulation_percent: float
+    fit_prediction_percent: float
+    tf: Any
+    details: MotorIdentification
+
+    def row(self, motor: str) -> tuple[str, ...]:
+        """This motor's cells under the identification table's headers."""
+        return (motor, str(self.model.nk), numbers(self.theta), numbers(self.theta_std, 2),
+                number(self.fit_simulation_percent), number(self.fit_prediction_percent),
+                number(self.model.pole_radius()))  # fmt: skip
+
+    def _summary(self) -> Summary:
+        m = self.model
+        title = (f"MotorResult: {self.details.chosen.method.upper()} model of motor "
+                 f"{self.details.motor}, na = {len(m.ar)}, nb = {len(m.b)}, "
+                 f"Ts = {number(m.period_s)} s")  # fmt: skip
+        return Summary(title, _IDENT_HEADERS, (self.row(self.details.motor),),
+                       ".model, .tf (python-control), .theta, .details")  # fmt: skip
+
+
+@dataclass(frozen=True, repr=False, eq=False)
+class Identification(_Shown):
+    """Per-motor results of :func:`~cartctl.api.identify` (``result["a"]``), saveable as a
+    model file."""
+
+    motors: dict[str, MotorResult]
+    result: IdentifyResult
+    request: IdentifyRequest
+    sources: tuple[str, ...]
+
+    def __getitem__(self, motor: str) -> MotorResult:
+        return self.motors[motor]
+
+    def model_file(self) -> ModelFile:
+        """The models with their provenance, as ``identify --out`` writes them."""
+        return identified_model_file(
+            self.result, list(self.sources), self.request, source="cartctl.identify()"
+        )
+
+    def save(self, path: str | Path) -> Path:
+        """Write the model file; returns its path."""
+        save_models(self.model_file(), path)
+        return Path(path)
+
+    def _summary(self) -> Summary:
+        r = self.request
+        shown = ", ".join(self.sources[:2]) + (f" and {len(self.sources) - 2} more"
+                                               if len(self.sources) > 2 else "")  # fmt: skip
+        prefilter = "" if r.prefilter is None else f", prefilter {number(r.prefilter.cutoff_hz)} Hz"
+        period = next(iter(self.motors.values())).model.period_s if self.motors else None
+        title = (f"Identification: {r.method.upper()}, na = {r.na}, nb = {r.nb}{prefilter}, "
+                 f"Ts = {number(period)} s, from {shown}")  # fmt: skip
+        rows = tuple(result.row(m) for m, result in self.motors.items())
+        return Summary(title, _IDENT_HEADERS, rows,
+                       "ident['a'] for one motor (.tf, .model); .save('models/mine.toml')")  # fmt: skip
+
+
+def _gains(entry: dict[str, Any]) -> str:
+    if "kp" in entry:
+        return f"kp {number(entry['kp'])}, ki {number(entry['ki'])}"
+    return f"K {numbers(entry.get('K', ()), 3)}, Kr {number(entry.get('Kr'))}"
+
+
+@dataclass(frozen=True, repr=False, eq=False)
+class Design(_Shown):
+    """Controllers designed on a model file, as ``cartctl design`` makes them.
+
+    Attributes
+    ----------
+    designs : Designs
+        Per motor: the runtime controller, its figures (``entry``) and its simulated step.
+    model_path : Path
+        The model file designed on (recorded in the controller file).
+    period_s : float
+    """
+
+    designs: Designs
+    model_path: Path
+    period_s: float
+
+    @property
+    def request(self) -> DesignRequest:
+        return self.designs.request
+
+    def __getitem__(self, motor: str) -> dict[str, Any]:
+        """One motor's figures: gains, margins, closed-loop poles, the simulated step."""
+        return self.designs.motors[motor].entry
+
+    def command(self) -> str:
+        """The ``cartctl design`` command that makes this design."""
+        return "cartctl " + shlex.join(["design", *self.request.to_argv(str(self.model_path))])
+
+    def controller_file(self) -> ControllerFile:
+        """The controller file, as ``cartctl design --out`` writes it."""
+        return controller_file(self.designs, self.model_path, command=self.command(),
+                               period_s=self.period_s)  # fmt: skip
+
+    def save(self, path: str | Path) -> Path:
+        """Write the controller file; ``cartctl run --controller PATH`` runs it."""
+        save_controller(self.controller_file(), path)
+        return Path(path)
+
+    def _summary(self) -> Summary:
+        headers = ("motor", "gains", "phase margin (°)", "gain margin (dB)", "crossover (Hz)",
+                   "overshoot (%)", "settling (s)")  # fmt: skip
+        rows = []
+        for m, motor in self.designs.motors.items():
+            e, step = motor.entry, motor.entry.get("step", {})
+            rows.append((m, _gains(e), number(e.get("phase_margin_deg"), 3),
+                         number(e.get("gain_margin_db"), 3), number(e.get("crossover_hz"), 3),
+                         number(step.get("overshoot_percent"), 3),
+                         number(step.get("settling_time_s"), 3)))  # fmt: skip
+        method = _METHODS.get(self.request.method, self.request.method)
+        title = (f"Design: {method} on {self.model_path}, "
+                 f"Ts = {number(self.period_s)} s (step {number(self.request.step_rad_s)} rad/s "
+                 f"on the model)")  # fmt: skip
+        return Summary(title, tuple(headers), tuple(rows),
+                       f"as `{self.command()}`; design['a'] has every figure; .save(path)")  # fmt: skip
+
+
+@dataclass(frozen=True, repr=False, eq=False)
+class SimulationResult(_Shown):
+    """A simulated closed-loop run.
+
+    Attributes
+    ----------
+    columns : dict of str to ndarray
+        The trace's columns (contract 1 and the loop's: ``time_s``, ``voltage_a``, ``speed_a``,
+        ``reference_a``, ``estimate_a``, ``true_speed_a`` …); the last row is the stop row.
+    summary : dict
+        The run summary of ``cartctl run --json`` (overshoot, settling, errors per motor).
+    failure : str or None
+    controller, plant, reference : str
+        What ran, on which plant, following which reference (for titles).
+    """
+
+    columns: dict[str, NDArray[np.float64]]
+    summary: dict[str, Any]
+    failure: str | None = None
+    controller: str = ""
+    plant: str = ""
+    reference: str = ""
+    motors: tuple[str, ...] = field(default=MOTORS)
+
+    def what(self, sep: str = ", ") -> str:
+        """What ran, on which plant, following which reference (``sep`` after what ran)."""
+        where = [f"plant {self.plant}" if self.plant else "",
+                 f"reference {self.reference}" if self.reference else ""]  # fmt: skip
+        return (self.controller or "a controller") + sep + ", ".join(p for p in where if p)
+
+    def _summary(self) -> Summary:
+        s = self.summary
+        headers = ("motor", "overshoot (%)", "settling (s)", "rise (s)",
+                   "steady-state error (rad/s)", "RMS error (rad/s)", "max |V| (V)")  # fmt: skip
+        keys = ("overshoot_percent", "settling_time_s", "rise_time_s", "steady_state_error",
+                "rms_error", "max_abs_voltage")  # fmt: skip
+        rows = tuple((m, *(number(s["motors"][m].get(k), 3) for k in keys))
+                     for m in self.motors if m in s.get("motors", {}))  # fmt: skip
+        failed = f"; stopped early: {self.failure}" if self.failure else ""
+        title = (f"SimulationResult: {self.what()}, {s.get('ticks')} ticks "
+                 f"({number(s.get('duration_s'))} s){failed}")  # fmt: skip
+        on = s.get("metrics_signal", "speed").replace("_", " ")
+        return Summary(title, headers, rows,
+                       f"metrics on the {on}; .plot(), .columns, .to_dataframe()")  # fmt: skip
+
+    def to_dataframe(self) -> Any:
+        """The columns as a pandas DataFrame (``pip install "cartctl[pandas]"``)."""
+        try:
+            import pandas as pd
+        except ImportError:
+            raise InputError('to_dataframe needs pandas: pip install "cartctl[pandas]"') from None
+        return pd.DataFrame(self.columns)
+
+    def plot(self, motor: str = "both", ax: Any = None) -> Any:
+        """Speed, reference and voltage over time (matplotlib); returns the figure.
+
+        Parameters
+        ----------
+        motor : {'both', 'a', 'b'}
+            One column of axes per motor.
+        ax : (Axes, Axes), optional
+            For one motor: the speed axes and the voltage axes to draw in.
+        """
+        motors = self.motors if motor == "both" else (motor,)
+        if any(m not in self.motors for m in motors):
+            raise InputError(f"motor must be 'a', 'b' or 'both', got {motor!r}")
+        return plot_run(self.columns, motors, "Closed-loop run: " + self.what(sep="\n"), ax)
