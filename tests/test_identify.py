@@ -15,7 +15,6 @@ from cartctl.errors import InputError
 from cartctl.experiment import run_experiment
 from cartctl.identification.arx import IdentificationError, fit_arx
 from cartctl.identification.delay import estimate_delay
-from cartctl.identification.oe import fit_oe
 from cartctl.identification.prefilter import Prefilter
 from cartctl.model import ArxModel
 from cartctl.plants.physics import PhysicsPlant
@@ -253,11 +252,6 @@ def test_averaging_cycles_reduces_noise_bias() -> None:
     err_plain = np.linalg.norm(plain.chosen.model.theta - model.theta)
     err_avg = np.linalg.norm(averaged.chosen.model.theta - model.theta)
     assert err_avg < err_plain / 3
-
-
-def test_oe_refuses_unstable_start() -> None:
-    with pytest.raises(IdentificationError, match="unstable"):
-        fit_oe([(np.ones(100), np.ones(100))], ArxModel.from_theta([-2.5, 1.2, 1.0, 0.0]))
 
 
 def test_prefilter_checks() -> None:

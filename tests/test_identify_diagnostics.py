@@ -90,7 +90,7 @@ def _expected_residual_test(y, u, na, nb, nk, lags=25):
     r_u = full_u[n - 1 : n + lags] / full_u[n - 1]
     r_e = np.concatenate([[1.0], auto])
     p = 1.0 + 2.0 * np.sum(r_e[1:] * r_u[1:])
-    return auto, cross, Z99 / np.sqrt(n), Z99 * np.sqrt(p / n), n
+    return auto, cross, Z99 / np.sqrt(n), Z99 * np.sqrt(max(p, 1.0) / n), n  # floored at white
 
 
 def test_residuals_of_the_right_structure_pass_and_match_numpy(

@@ -32,6 +32,11 @@ RootKind = Literal["delay", "pole", "zero"]
 
 _ORIGIN_TOL = 1e-12
 
+MARGINAL_POLE_RADIUS = 0.99
+"""A pole with |z| above this is slow or marginally stable (a time constant over 100 ticks, or
+an oscillation that barely decays): ``inspect`` flags it and output-error refinement keeps its
+poles within it."""
+
 
 def check_extra_delay_ticks(ticks: object, name: str = "extra delay") -> int:
     """``ticks`` as a loop delay beyond a model's own: a whole number >= 0 (else InputError

@@ -29,19 +29,41 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def marginal_poles(model: ArxModel) -> list[complex]:
+    """The poles with |z| above :data:`~cartctl.model.MARGINAL_POLE_RADIUS` (slow or marginal)."""
+    from cartctl.model import MARGINAL_POLE_RADIUS
+
+    return [r.value for r in model.poles() if abs(r.value) > MARGINAL_POLE_RADIUS]
+
+
+def _pole_dict(root: Root) -> dict[str, Any]:
+    """Contract-3 P of a pole, plus ``magnitude`` |z| and ``slow_or_marginal`` (|z| > 0.99)."""
+    from cartctl.model import MARGINAL_POLE_RADIUS
+
+    return root.to_dict() | {
+        "magnitude": abs(root.value),
+        "slow_or_marginal": abs(root.value) > MARGINAL_POLE_RADIUS,
+    }
+
+
 def outside_zeros(model: ArxModel) -> list[complex]:
     """The zeros with |z| > 1 (non-minimum-phase), in the order of :meth:`ArxModel.zeros`."""
     return [r.value for r in model.zeros() if abs(r.value) > 1.0]
 
 
 def model_summary(model: ArxModel) -> dict[str, Any]:
-    """Contract-3 ``inspect`` entry of one motor (plus nk, num, den and minimum_phase: no zero
-    with |z| > 1)."""
+    """Contract-3 ``inspect`` entry of one motor (plus nk, num, den, minimum_phase: no zero
+    with |z| > 1, and slow_or_marginal: a pole with |z| > 0.99, with ``flags`` naming both)."""
     from cartctl.metrics import finite_or_none
 
+    marginal = marginal_poles(model)
+    flags = ["slow_or_marginal"] if marginal else []
+    flags += ["non_minimum_phase"] if outside_zeros(model) else []
     return {
         "minimum_phase": not outside_zeros(model),
-        "poles": [r.to_dict() for r in model.poles()],
+        "slow_or_marginal": bool(marginal),
+        "flags": flags,
+        "poles": [_pole_dict(r) for r in model.poles()],
         "zeros": [r.to_dict() for r in model.zeros()],
         "dc_gain": finite_or_none(model.dc_gain()),
         "stable": model.is_stable(),
@@ -69,6 +91,8 @@ def _row(root: Root) -> str:
     freq = "—" if root.freq_hz is None else f"{root.freq_hz:.2f}"
     damp = "—" if root.damping is None else f"{root.damping:.3f}"
     flag = "  non-minimum-phase" if root.kind == "zero" and abs(root.value) > 1.0 else ""
+    if root.kind == "pole" and _pole_dict(root)["slow_or_marginal"]:
+        flag = "  slow or marginal (|z| > 0.99)"
     return (
         f"    {root.kind:<6} {_fmt_z(root.value):>22} {abs(root.value):>8.4f} {freq:>8} "
         f"{damp:>7}{flag}"
@@ -100,13 +124,19 @@ def format_table(models: ModelFile) -> str:
                 f"NOT minimum phase: zero{'s' if len(outside) > 1 else ''} outside the unit "
                 f"circle at {where} (a controller must not cancel {'them' if len(outside) > 1 else 'it'})"
             )
-        lines.append(
-            f"    DC gain {gain_txt}, {'stable' if m.is_stable() else 'UNSTABLE'}, {phase}"
-        )
+        stability = "stable" if m.is_stable() else "UNSTABLE"
+        marginal = marginal_poles(m)
+        if marginal and m.is_stable():
+            radius = max(abs(z) for z in marginal)
+            stability += (
+                f" but SLOW OR MARGINAL: a pole at |z| = {radius:.4f} > 0.99 (it decays by "
+                f"{100.0 * (1.0 - radius):.2g} % a tick)"
+            )
+        lines.append(f"    DC gain {gain_txt}, {stability}, {phase}")
     lines.append("")
     lines.append(
         "  f = |ln z| / (2π Ts); a delay pole (z = 0) has no frequency; ζ is the damping ratio; "
-        "a zero with |z| > 1 is non-minimum-phase."
+        "a zero with |z| > 1 is non-minimum-phase; a pole with |z| > 0.99 is slow or marginal."
     )
     return "\n".join(lines)
 

@@ -23,7 +23,39 @@ from cartctl.design.disturbance import (
 from cartctl.design.make import Designs
 from cartctl.design.sensitivity import LoopShape, loop_shape
 
-__all__ = ["MotorAnalysis", "analyse_designs"]
+__all__ = ["LIGHT_DAMPING", "MotorAnalysis", "analyse_designs", "damping_warning"]
+
+LIGHT_DAMPING = 0.1
+"""A closed-loop pole with a damping ratio ζ below this rings for many periods: a warning."""
+
+
+def damping_warning(pole_table: list[dict[str, Any]], motor: str) -> str | None:
+    """One line naming the least damped closed-loop pole when its ζ is below ``LIGHT_DAMPING``.
+
+    Parameters
+    ----------
+    pole_table : list of dict
+        ``{"re", "im", "damping", "freq_hz"}`` per pole (:func:`cartctl.design.damping.pole_table`).
+    motor : str
+        The motor, named in the line.
+
+    Returns
+    -------
+    str or None
+        None when every ζ is at least ``LIGHT_DAMPING`` (or undefined, at z = 1).
+    """
+    light = [r for r in pole_table if r["damping"] is not None and r["damping"] < LIGHT_DAMPING]
+    if not light:
+        return None
+    worst = min(light, key=lambda r: r["damping"])
+    z = f"{worst['re']:.4f}" + ("" if worst["im"] == 0.0 else f" ± {abs(worst['im']):.4f}j")
+    freq = "" if worst["freq_hz"] is None else f" at {worst['freq_hz']:.2f} Hz"
+    others = len({(r["re"], abs(r["im"])) for r in light}) - 1
+    more = f" ({others} more pole(s) below {LIGHT_DAMPING:g})" if others else ""
+    return (
+        f"motor {motor}: closed-loop pole z = {z} has damping ζ = {worst['damping']:.3f} < "
+        f"{LIGHT_DAMPING:g}{more}: the loop rings{freq} for many periods"
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -40,12 +72,15 @@ class MotorAnalysis:
         The simulated load-disturbance step.
     pole_table : list of dict
         Per closed-loop pole ``{"re", "im", "damping", "freq_hz"}``.
+    motor : str
+        The motor ('a' or 'b'), for the warnings.
     """
 
     controller: ControllerStateSpace
     shape: LoopShape
     disturbance: DisturbanceResponse
     pole_table: list[dict[str, Any]]
+    motor: str = "a"
 
     def entry(self) -> dict[str, Any]:
         """The keys this analysis adds to (or refines in) a motor's ``design --json`` entry.
@@ -59,7 +94,14 @@ class MotorAnalysis:
             **self.shape.to_dict(),
             "disturbance": self.disturbance.to_dict(),
             "closed_loop_pole_table": self.pole_table,
+            "warnings": self.warnings,
         }
+
+    @property
+    def warnings(self) -> list[str]:
+        """Warnings about this loop (a closed-loop pole with ζ < ``LIGHT_DAMPING``), one line each."""
+        line = damping_warning(self.pole_table, self.motor)
+        return [] if line is None else [line]
 
 
 def analyse_designs(
@@ -84,5 +126,5 @@ def analyse_designs(
             made.controller, model, disturbance_v=disturbance_v, extra_delay_ticks=extra
         )
         table = pole_table(made.entry["closed_loop_poles"], model.period_s)
-        out[m] = MotorAnalysis(ss, loop_shape(ss, model, extra), dist, table)
+        out[m] = MotorAnalysis(ss, loop_shape(ss, model, extra), dist, table, m)
     return out

@@ -9,11 +9,31 @@ is unbiased for white measurement noise. It is solved with scipy.optimize.least_
 exact Jacobian, itself obtained by filtering:
 
     ∂ŷ/∂a_i = −q⁻ⁱ ŷ / A(q),      ∂ŷ/∂b_j = q⁻⁽ⁿᵏ⁺ʲ⁾ u / A(q).
+
+Two guarantees make the refinement safe to ask for:
+
+* **Poles inside |z| ≤ ρ** (``POLE_BOUND``, 0.99). A(q) is not searched directly but through its
+  reflection coefficients k_i = tanh(η_i) ∈ (−1, 1) (Schur–Cohn): the Levinson step-up recursion
+  turns any real η into a polynomial Ã with every root inside the unit circle, and
+  a_i = ã_i ρⁱ scales those roots by ρ. Every η the optimiser tries is a model whose poles lie
+  inside ρ, so the simulation cannot diverge and no pole can drift onto z = −1. The Jacobian in
+  η is the one in θ times ∂a/∂η, the latter by a complex step (exact to rounding). An ARX start
+  with a pole beyond ρ (or outside the unit circle) is projected inside first: its poles are
+  pulled in to radius ρ − 0.01 and B refitted by linear least squares (ŷ is linear in B).
+* **Never worse than the start.** The fit that decides is the simulation fit on ``eval_segments``
+  (the unfiltered data the model will meet, when the criterion is on prefiltered data). The
+  candidates are the start, its refinement on the criterion data and, when the two differ, its
+  refinement on the evaluation data; the best wins, and the start is returned (and said so) when
+  no refinement beats it.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,7 +48,61 @@ from cartctl.identification.arx import (
     prediction_fit,
     simulation_fit,
 )
-from cartctl.model import ArxModel
+from cartctl.model import MARGINAL_POLE_RADIUS, ArxModel
+
+__all__ = ["POLE_BOUND", "OeFit", "fit_oe", "project_poles"]
+
+POLE_BOUND = MARGINAL_POLE_RADIUS
+"""Largest pole magnitude |z| an output-error model may have (ρ, 0.99): beyond it is marginal."""
+
+_PROJECT_MARGIN = 0.01
+"""A start's poles beyond ρ are pulled in to ρ − this: inside, where tanh is not saturated."""
+
+_ACTIVE_TOL = 1e-3
+"""The bound counts as active when the largest pole is within this of ρ."""
+
+_COMPLEX_STEP = 1e-20
+
+
+@dataclass(frozen=True)
+class OeFit(ArxFit):
+    """An output-error fit with what the safeguards did.
+
+    Attributes
+    ----------
+    pole_bound : float
+        ρ, the bound on every pole's magnitude.
+    pole_bound_active : bool
+        The largest pole sits on the bound: the data pull a pole further out.
+    start_kept : bool
+        No refinement beat the start's simulation fit; the start is returned.
+    start_projected : bool
+        The ARX start had a pole beyond ρ and was projected inside before refining.
+    start_fit_simulation_percent : float
+        The ARX start's simulation fit (%) on the evaluation data.
+    notes : tuple of str
+        One line per safeguard that acted, for the user.
+    """
+
+    pole_bound: float = POLE_BOUND
+    pole_bound_active: bool = False
+    start_kept: bool = False
+    start_projected: bool = False
+    start_fit_simulation_percent: float = math.nan
+    notes: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ArxFit entry plus the safeguards' outcome."""
+        from cartctl.metrics import finite_or_none
+
+        return super().to_dict() | {
+            "pole_bound": self.pole_bound,
+            "pole_bound_active": self.pole_bound_active,
+            "start_kept": self.start_kept,
+            "start_projected": self.start_projected,
+            "start_fit_simulation_percent": finite_or_none(self.start_fit_simulation_percent),
+            "notes": list(self.notes),
+        }
 
 
 def _shift(x: NDArray[np.float64], lag: int) -> NDArray[np.float64]:
@@ -53,76 +127,231 @@ def _simulate_with_jacobian(
     return y_hat, jac
 
 
+def _same(
+    one: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    other: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
+) -> bool:
+    """Whether two lists of experiments hold the same samples."""
+    return len(one) == len(other) and all(
+        np.array_equal(y1, y2) and np.array_equal(u1, u2)
+        for (y1, u1), (y2, u2) in zip(one, other, strict=True)
+    )
+
+
+def _step_up(eta: NDArray[Any], rho: float) -> NDArray[Any]:
+    """a_1 … a_na with every root inside |z| < ρ, from unconstrained η (real or complex-stepped)."""
+    poly = np.ones(1, dtype=eta.dtype)
+    for k in np.tanh(eta):
+        poly = np.concatenate([poly, [0.0]]) + k * np.concatenate([[0.0], poly[::-1]])
+    return poly[1:] * rho ** np.arange(1, eta.size + 1)
+
+
+def _step_down(ar: NDArray[np.float64], rho: float) -> NDArray[np.float64] | None:
+    """η of a_1 … a_na (the inverse of :func:`_step_up`); None when a root is not inside ρ."""
+    poly = np.concatenate([[1.0], ar / rho ** np.arange(1, ar.size + 1)])
+    eta = np.empty(ar.size)
+    for m in range(ar.size, 0, -1):
+        k = poly[m]
+        if not abs(k) < 1.0 - 1e-12:
+            return None
+        eta[m - 1] = np.arctanh(k)
+        poly = (poly[:m] - k * poly[m:0:-1]) / (1.0 - k * k)
+    return eta
+
+
+def _d_ar_d_eta(eta: NDArray[np.float64], rho: float) -> NDArray[np.float64]:
+    """∂(a_1 … a_na)/∂η, shape (na, na), by a complex step."""
+    cols = []
+    for j in range(eta.size):
+        step = eta.astype(complex)
+        step[j] += 1j * _COMPLEX_STEP
+        cols.append(_step_up(step, rho).imag / _COMPLEX_STEP)
+    return np.array(cols).T.reshape(eta.size, eta.size)
+
+
+def project_poles(ar: Sequence[float], radius: float) -> NDArray[np.float64]:
+    """a_1 … a_na with every root of magnitude above ``radius`` pulled in to ``radius``.
+
+    Conjugate pairs move together, so the coefficients stay real; the angles are kept.
+    """
+    roots = np.roots(np.concatenate([[1.0], np.asarray(ar, dtype=float)]))
+    mags = np.abs(roots)
+    scale = np.where(mags > radius, radius / np.maximum(mags, 1e-300), 1.0)
+    return np.real(np.poly(roots * scale))[1:]
+
+
+def _refit_b(
+    ar: NDArray[np.float64], data: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    nb: int, nk: int,
+) -> NDArray[np.float64]:  # fmt: skip
+    """B minimising the simulation error with A fixed (ŷ is linear in B)."""
+    a = np.concatenate([[1.0], ar])
+    cols, target = [], []
+    for y, u in data:
+        v = signal.lfilter([1.0], a, u)
+        cols.append(np.column_stack([_shift(v, nk + j) for j in range(nb)]))
+        target.append(y)
+    return np.linalg.lstsq(np.vstack(cols), np.concatenate(target), rcond=None)[0]
+
+
+def _refine(
+    start: NDArray[np.float64],
+    data: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    na: int, nb: int, nk: int, rho: float, max_evaluations: int,
+) -> NDArray[np.float64]:  # fmt: skip
+    """θ minimising the simulation error on ``data`` over poles inside ρ, from θ ``start``."""
+    eta0 = _step_down(start[:na], rho)
+    if eta0 is None:  # a start on the bound itself: from just inside
+        eta0 = _step_down(project_poles(start[:na], rho - _PROJECT_MARGIN), rho)
+    if eta0 is None:
+        raise IdentificationError(f"cannot start the output-error search from a = {start[:na]}")
+    y_all = np.concatenate([y for y, _ in data])
+
+    def theta_of(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.concatenate([_step_up(x[:na], rho), x[na:]])
+
+    def residual(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        theta = theta_of(x)
+        return y_all - np.concatenate(
+            [_simulate_with_jacobian(theta, u, na, nb, nk)[0] for _, u in data]
+        )
+
+    def jacobian(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        theta = theta_of(x)
+        jac = -np.concatenate([_simulate_with_jacobian(theta, u, na, nb, nk)[1] for _, u in data])
+        jac[:, :na] = jac[:, :na] @ _d_ar_d_eta(x[:na], rho)
+        return jac
+
+    x0 = np.concatenate([eta0, start[na:]])
+    result = optimize.least_squares(
+        residual, x0, jac=jacobian, method="trf", x_scale="jac", max_nfev=max_evaluations
+    )
+    return theta_of(result.x)
+
+
 def fit_oe(
     segments: Sequence[Segment],
     initial: ArxModel,
     *,
     max_evaluations: int = 200,
     eval_segments: Sequence[Segment] | None = None,
-) -> ArxFit:
+    pole_bound: float = POLE_BOUND,
+) -> OeFit:
     """Refine a model by output-error least squares (simulation error), from ``initial``.
 
     Parameters
     ----------
     segments : sequence of (y, u)
-        Experiments (rad/s, V), each simulated from rest.
+        Experiments (rad/s, V) for the criterion, each simulated from rest (prefiltered, when a
+        prefilter is used).
     initial : ArxModel
-        Starting point, usually the ARX estimate; its orders and delay are kept.
+        Starting point, usually the ARX estimate; its orders and delay are kept. A pole beyond
+        ``pole_bound`` (even an unstable one) is projected inside first.
     max_evaluations : int
-        Limit on function evaluations.
+        Limit on function evaluations of each refinement.
     eval_segments : sequence of (y, u), optional
-        Data for the reported simulation fit (default ``segments``).
+        The data whose simulation fit decides and is reported: the unfiltered data the model
+        will meet (default ``segments``). When they differ from ``segments``, the start is
+        also refined on them.
+    pole_bound : float
+        ρ in (0, 1]: every pole of the result has |z| ≤ ρ.
 
     Returns
     -------
-    ArxFit
-        ``method='oe'``; ``theta_std`` from the Jacobian at the optimum, σ̂ √diag((JᵀJ)⁻¹).
+    OeFit
+        ``method='oe'``; the best of the start and its refinements by the simulation fit on
+        ``eval_segments``, never below the start's; ``theta_std`` from the Jacobian in θ on the
+        criterion data, σ̂ √diag((JᵀJ)⁻¹).
+
+    Raises
+    ------
+    InputError
+        ``max_evaluations`` below 1 or ``pole_bound`` outside (0, 1].
     """
-    if not initial.is_stable():
-        raise IdentificationError(
-            "the ARX starting point is unstable, so the output-error simulation diverges; "
-            "check the data or the orders"
-        )
-    data = as_segments(segments)
-    na, nb, nk = initial.na, initial.nb, initial.nk
-    y_all = np.concatenate([y for y, _ in data])
-
-    def unstable(theta: NDArray[np.float64]) -> bool:
-        return na > 0 and bool(np.max(np.abs(np.roots(np.concatenate([[1.0], theta[:na]])))) >= 1.0)
-
-    def residual(theta: NDArray[np.float64]) -> NDArray[np.float64]:
-        if unstable(theta):  # a large finite cost: the trust region rejects the step and shrinks
-            return np.full_like(y_all, 1e6)
-        return y_all - np.concatenate(
-            [_simulate_with_jacobian(theta, u, na, nb, nk)[0] for _, u in data]
-        )
-
-    def jacobian(theta: NDArray[np.float64]) -> NDArray[np.float64]:
-        if unstable(theta):
-            return np.zeros((y_all.size, na + nb))
-        return -np.concatenate([_simulate_with_jacobian(theta, u, na, nb, nk)[1] for _, u in data])
-
     if max_evaluations < 1:
         raise InputError(f"max_evaluations must be at least 1, got {max_evaluations}")
-    result = optimize.least_squares(
-        residual, initial.theta, jac=jacobian, method="trf", x_scale="jac", max_nfev=max_evaluations
-    )
-    theta = result.x
-    model = ArxModel.from_theta(theta, na=na, nb=nb, nk=nk, period_s=initial.period_s)
-    err = result.fun
-    n, p = result.jac.shape
+    if not 0.0 < pole_bound <= 1.0:
+        raise InputError(f"pole_bound must be in (0, 1], got {pole_bound}")
+    data = as_segments(segments)
+    evaluation = data if eval_segments is None else as_segments(eval_segments)
+    na, nb, nk, ts = initial.na, initial.nb, initial.nk, initial.period_s
+    rho = float(pole_bound)
+
+    def model_of(theta: NDArray[np.float64]) -> ArxModel:
+        return ArxModel.from_theta(theta, na=na, nb=nb, nk=nk, period_s=ts)
+
+    def fit_of(theta: NDArray[np.float64]) -> float:
+        value = simulation_fit(model_of(theta), evaluation)
+        return value if math.isfinite(value) else -math.inf
+
+    start = np.asarray(initial.theta, dtype=float)
+    start_fit = fit_of(start)
+    notes = []
+    projected = na > 0 and initial.pole_radius() > rho
+    if projected:
+        ar = project_poles(start[:na], rho - _PROJECT_MARGIN)
+        start = np.concatenate([ar, _refit_b(ar, data, nb, nk)])
+        notes.append(
+            f"the ARX start has a pole at |z| = {initial.pole_radius():.4f}, beyond the bound "
+            f"{rho:g}: projected inside (|z| ≤ {rho - _PROJECT_MARGIN:g}) before refining"
+        )
+    candidates = [("start", start)]
+    if na == 0:  # an FIR model: ŷ is linear in B, its least squares is the optimum
+        candidates.append(("refined", _refit_b(start[:0], data, nb, nk)))
+    else:
+        candidates.append(("refined", _refine(start, data, na, nb, nk, rho, max_evaluations)))
+        if not _same(evaluation, data):
+            candidates.append(
+                ("refined on eval", _refine(start, evaluation, na, nb, nk, rho, max_evaluations))
+            )
+    fits = [fit_of(theta) for _, theta in candidates]
+    best = max(range(len(candidates)), key=lambda i: (fits[i], i > 0))
+    label, theta = candidates[best]
+    kept = label == "start"
+    if kept:
+        notes.append(
+            f"no refinement improved the start's simulation fit ({fits[0]:.2f} %, refined "
+            f"{max(fits[1:]):.2f} %): the start is returned"
+        )
+    elif label == "refined on eval":
+        notes.append(
+            f"refined on the unfiltered data ({fits[best]:.2f} %): the prefiltered criterion's "
+            f"optimum fits it less ({fits[1]:.2f} %)"
+        )
+    model = model_of(theta)
+    radius = model.pole_radius()
+    active = na > 0 and radius >= rho - _ACTIVE_TOL
+    if active:
+        notes.append(
+            f"the pole bound |z| ≤ {rho:g} is active (largest pole |z| = {radius:.4f}): the "
+            "data pull a pole further out"
+        )
+    fit_data = evaluation if label == "refined on eval" else data
+    y_all = np.concatenate([y for y, _ in fit_data])
+    sims = [_simulate_with_jacobian(theta, u, na, nb, nk) for _, u in fit_data]
+    err = y_all - np.concatenate([s[0] for s in sims])
+    jac = np.concatenate([s[1] for s in sims])
+    n, p = jac.shape
     sigma2 = float(err @ err) / max(n - p, 1)
     try:
-        cov = sigma2 * np.linalg.inv(result.jac.T @ result.jac)
-        theta_std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        theta_std = np.sqrt(np.clip(np.diag(sigma2 * np.linalg.inv(jac.T @ jac)), 0.0, None))
     except np.linalg.LinAlgError:
         theta_std = np.full(p, np.nan)
-    return ArxFit(
+    base = ArxFit(
         model=model,
         theta_std=theta_std,
-        fit_simulation_percent=simulation_fit(model, eval_segments or data),
+        fit_simulation_percent=simulation_fit(model, evaluation),
         fit_prediction_percent=prediction_fit(model, data),
         residual_rms=float(np.sqrt(np.mean(err**2))),
         n_samples=int(n),
         method="oe",
+    )
+    return OeFit(
+        **{f.name: getattr(base, f.name) for f in dataclasses.fields(ArxFit)},
+        pole_bound=rho,
+        pole_bound_active=bool(active),
+        start_kept=kept,
+        start_projected=bool(projected),
+        start_fit_simulation_percent=start_fit,
+        notes=tuple(notes),
     )

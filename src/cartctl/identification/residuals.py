@@ -17,6 +17,14 @@ negative τ pairs it with a later input (feedback). The 99 % bound of r_ε for w
 under independence √N r_εu(τ) is asymptotically N(0, P), P = Σ_{|τ| ≤ M} r_ε(τ) r_u(τ), so the
 bound is 2.58 √(P / N) (with white ε, P = 1 and both bounds agree).
 
+P is estimated from M lags of two estimated correlations, and that truncated sum is not
+guaranteed positive: when the residual's spectrum and the input's barely overlap (a prefiltered
+input, a periodic one, a residual oscillating near Nyquist) it comes out near zero or negative,
+the bound collapses to ±0.000 and every lag counts as "outside". The bound used is therefore
+2.58 √(max(P, 1) / N): never narrower than the white-residual bound 2.58 / √N, the value P takes
+when ε is white, so a lag is called correlated only against at least the bound a white residual
+would get.
+
 A test passes when no more lags fall outside the bounds than a white, independent residual
 would exceed with 5 % probability, treating the L lags as L independent 1 % chances
 (binomial): at most 1 of 25 lags, at most 2 of 51.
@@ -101,7 +109,9 @@ class ResidualTest:
     bound_99 : float
         2.58 / √N, the whiteness bound.
     cross_bound_99 : float
-        2.58 √(P / N), the independence bound.
+        2.58 √(max(P, 1) / N), the independence bound (never below ``bound_99``).
+    cross_variance : float
+        P = Σ r_ε(τ) r_u(τ) as estimated, before the floor (it may be ≤ 0).
     n_samples : int
         N.
     auto_allowed, cross_allowed : int
@@ -123,6 +133,7 @@ class ResidualTest:
     cross_allowed: int
     rms_rad_s: float = 0.0
     negligible: bool = False
+    cross_variance: float = 1.0
 
     @property
     def auto_outside(self) -> int:
@@ -153,6 +164,7 @@ class ResidualTest:
             "cross_max_abs": float(np.max(np.abs(self.cross))),
             "bound_99": self.bound_99,
             "cross_bound_99": self.cross_bound_99,
+            "cross_variance": self.cross_variance,
             "n_samples": self.n_samples,
             "rms_rad_s": self.rms_rad_s,
             "negligible": self.negligible,
@@ -239,7 +251,6 @@ def residual_test(
     r_e = np.concatenate([[1.0], auto])
     r_u = _correlation([(u, u) for _, u in centred], np.arange(0, m + 1))
     p = float(r_e[0] * r_u[0] + 2.0 * np.sum(r_e[1:] * r_u[1:]))
-    p = max(p, 1e-12)
     rms = float(np.sqrt(sum(float(np.einsum("i,i->", e, e)) for e, _ in centred) / n))
     return ResidualTest(
         auto_lags=auto_lags,
@@ -247,12 +258,13 @@ def residual_test(
         cross_lags=cross_lags,
         cross=cross,
         bound_99=Z_99 / np.sqrt(n),
-        cross_bound_99=Z_99 * np.sqrt(p / n),
+        cross_bound_99=Z_99 * np.sqrt(max(p, 1.0) / n),
         n_samples=n,
         auto_allowed=int(stats.binom.ppf(1.0 - FALSE_ALARM, auto_lags.size, 0.01)),
         cross_allowed=int(stats.binom.ppf(1.0 - FALSE_ALARM, cross_lags.size, 0.01)),
         rms_rad_s=rms,
         negligible=output_rms is not None and rms < 1e-6 * output_rms,
+        cross_variance=p,
     )
 
 
