@@ -6,21 +6,24 @@ here: :mod:`cartctl.signals` (the excitation signals, the longest run), :mod:`ca
 (the reference specifications), :mod:`cartctl.plants.factory` (the sim plant's model) and
 :mod:`cartctl.plants.cart_link` (the wait for a cart).
 
-The shipped model and controller files (``models/``, ``controllers/``) are found by
+The shipped model and controller files, :data:`SHIPPED_FILES` by name, are found by
 :func:`find_file` from any folder: the working folder first, then the copies installed with the
-package (``cartctl/shipped/``, put there when the wheel is built), then the source checkout the
-package runs from (an editable install).
+package (``cartctl/shipped/``, put there by ``setup.py`` when the wheel is built), then the source
+checkout the package runs from (an editable install). Other files in ``models/`` and
+``controllers/`` are the user's: never packed, and found only where they are.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from types import MappingProxyType
 
 __all__ = [
     "DEFAULT_CONNECT_TIMEOUT_S",
     "DEFAULT_MODEL",
     "FORMS",
     "MAX_DURATION_S",
+    "SHIPPED_FILES",
     "SHIPPED_FOLDERS",
     "SIGNALS",
     "find_file",
@@ -42,7 +45,15 @@ DEFAULT_CONNECT_TIMEOUT_S = 5.0
 """The wait for a cart's first HEARTBEAT (s). Opening the port resets the Mega (DTR); its
 bootloader takes 1-2 s before the first HEARTBEAT."""
 
-SHIPPED_FOLDERS = ("models", "controllers")
+SHIPPED_FILES = MappingProxyType({
+    "models": ("air.toml", "ground-timing.toml", "ground.toml"),
+    "controllers": ("pi.toml", "poles.toml", "serial-pi.toml", "serial-poles.toml"),
+})  # fmt: skip
+"""The files shipped with cartctl, by folder: the only ones the wheel packs (``setup.py`` reads
+this list) and :func:`find_file` finds outside the working folder. A new shipped file is added
+here (tests/test_shipped_files.py checks the list against the files git tracks)."""
+
+SHIPPED_FOLDERS = tuple(SHIPPED_FILES)
 """The folders of files shipped with cartctl, as named in the repository and the package."""
 
 
@@ -56,16 +67,18 @@ def _shipped_roots() -> tuple[Path, ...]:
 
 
 def find_file(path: str | Path) -> Path:
-    """``path`` if it exists; else, for a relative path into a shipped folder, the shipped file.
+    """``path`` if it exists; else, for a shipped file's relative path, the shipped file.
 
     ``controllers/pi.toml`` names the file in the working folder when there is one, and the
-    controller shipped with cartctl otherwise. Other paths are returned as given (a missing one
-    is reported by whoever opens it).
+    controller shipped with cartctl otherwise. Other paths (a user's ``models/mine.toml``) are
+    returned as given, in a wheel and an editable install alike (a missing one is reported by
+    whoever opens it).
     """
     given = Path(path)
-    if given.exists() or given.is_absolute() or not given.parts:
+    if given.exists() or given.is_absolute() or len(given.parts) != 2:
         return given
-    if given.parts[0] not in SHIPPED_FOLDERS:
+    folder, name = given.parts
+    if name not in SHIPPED_FILES.get(folder, ()):
         return given
     for root in _shipped_roots():
         candidate = root / given
