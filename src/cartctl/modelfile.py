@@ -5,6 +5,7 @@ read them. A file holds one model per motor and says where the models came from:
 
     format = "cartctl-model/1"
     period_s = 0.01
+    loop_delay_ticks = 1        # optional: the loop the data was recorded in
 
     [provenance]
     source = "report, equation 12 (cart on the ground)"
@@ -20,6 +21,11 @@ read them. A file holds one model per motor and says where the models came from:
     nk = 2
 
 Extra keys in ``[motors.X]`` (``theta_std``, fit percentages …) are kept as ``stats``.
+
+``loop_delay_ticks`` is the loop delay of the cart the models describe: ticks from a measurement to
+the voltage it leads to being on the motor (1 on board and in the simulators). ``identify`` takes
+it from its traces' meta files (:mod:`cartctl.data.tracemeta`) or ``--loop-delay``; ``design``
+designs for it. A file without it (an older one) leaves ``design`` to assume nk − 1.
 """
 
 from __future__ import annotations
@@ -94,12 +100,15 @@ class ModelFile:
         Per motor, extra figures from identification (theta_std, fits …), kept as written.
     path : Path or None
         The file it was read from.
+    loop_delay_ticks : int or None
+        The loop delay of the cart the models describe (ticks), None when unknown.
     """
 
     motors: dict[str, ArxModel]
     provenance: Provenance
     stats: dict[str, dict[str, Any]] = field(default_factory=dict)
     path: Path | None = None
+    loop_delay_ticks: int | None = None
 
     def motor(self, name: str) -> ArxModel:
         """The model of motor ``name``, with an error naming the motors present."""
@@ -128,12 +137,10 @@ class ModelFile:
             }
             entry.update(self.stats.get(name, {}))
             motors[name] = entry
-        return {
-            "format": FORMAT,
-            "period_s": self.period_s,
-            "provenance": self.provenance.to_dict(),
-            "motors": motors,
-        }
+        doc: dict[str, Any] = {"format": FORMAT, "period_s": self.period_s}
+        if self.loop_delay_ticks is not None:
+            doc["loop_delay_ticks"] = int(self.loop_delay_ticks)
+        return doc | {"provenance": self.provenance.to_dict(), "motors": motors}
 
 
 def save_models(models: ModelFile, path: str | Path) -> Path:
@@ -170,6 +177,11 @@ def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
     if fmt != FORMAT:
         raise DataFileError(path, f"unknown format {fmt!r}; expected {FORMAT!r}")
     period_s = float(require(doc, "period_s", (int, float), path, "the top level"))
+    loop_delay = None
+    if "loop_delay_ticks" in doc:
+        loop_delay = require(doc, "loop_delay_ticks", int, path, "the top level")
+        if loop_delay < 0:
+            raise DataFileError(path, f"loop_delay_ticks must be >= 0 ticks, got {loop_delay}")
     prov_tab = doc.get("provenance", {})
     provenance = Provenance(
         source=str(prov_tab.get("source", "unknown")),
@@ -200,4 +212,4 @@ def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
             raise DataFileError(path, f"theta in {where} must be a list of numbers, got {theta!r}")
         motors[name] = ArxModel.from_theta(theta, na=na, nb=nb, nk=nk, period_s=period_s)
         stats[name] = {k: v for k, v in entry.items() if k not in ("theta", "na", "nb", "nk")}
-    return ModelFile(motors, provenance, stats, path)
+    return ModelFile(motors, provenance, stats, path, loop_delay)

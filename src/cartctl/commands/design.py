@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -131,8 +132,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=_DEFAULT.loop_delay_ticks,
         metavar="N",
         help="the loop delay the controller is for (ticks from a measurement to its voltage on "
-        "the motor; default the model's nk - 1 + extra delay); nk + extra delay for a model "
-        "whose next measurement already sees part of a command that lands within the tick",
+        "the motor; default the model file's loop_delay_ticks + extra delay, else its nk - 1 + "
+        "extra delay); nk + extra delay for a model whose next measurement already sees part of "
+        "a command that lands within the tick",
     )
     p.add_argument(
         "--extra-delay",
@@ -278,26 +280,29 @@ def _disturbance_v(args: argparse.Namespace) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cartctl.design.controllerfile import common_loop_delay, save_controller
+    from cartctl.design.controllerfile import save_controller
     from cartctl.design.loop_report import analyse_designs
-    from cartctl.design.make import controller_file, design_models
+    from cartctl.design.make import controller_file, design_models, loop_delay_for
     from cartctl.jsonout import dumps
     from cartctl.modelfile import load_models
 
     request = request_from_args(args)
     models = load_models(args.model)
     names = ("a", "b") if args.motor == "both" else (args.motor,)
-    if args.out and request.loop_delay_ticks is None:
-        # a file is for one loop: refuse before designing when the motors' nk differ
+    if args.out:  # a file is for one loop: refuse before designing when there is none
         try:
-            common_loop_delay({m: models.motor(m).nk for m in names}, request.extra_delay_ticks)
-        except ValueError as exc:
+            loop_delay_for(request, {m: models.motor(m) for m in names}, models.loop_delay_ticks)
+        except InputError as exc:
             raise InputError(f"--out: {exc}") from None
     designs = design_models(request, models, names)
+    if designs.loop_delay_note is not None:
+        print(f"cartctl design: note: {designs.loop_delay_note}", file=sys.stderr)
     analyses = analyse_designs(designs, disturbance_v=_disturbance_v(args))
     motors_json = designs.entries()
     for m, analysis in analyses.items():  # before the file: its analysis keeps the loop's Ms
         motors_json[m].update(analysis.entry())
+        for warning in analysis.warnings:
+            print(f"cartctl design: warning: {warning}", file=sys.stderr)
     if args.out:
         command = command_line("design")
         save_controller(
@@ -315,7 +320,8 @@ def run(args: argparse.Namespace) -> int:
             plot_analysis(Path(args.report) / f"analysis_{m}.png", m, args.method, analysis)
     if args.json:
         print(dumps({"method": args.method, "model": str(args.model), "Ts": models.period_s,
-                     "motors": motors_json}))  # fmt: skip
+                     "loop_delay_ticks": designs.loop_delay_ticks,
+                     "loop_delay_note": designs.loop_delay_note, "motors": motors_json}))  # fmt: skip
         return 0
     print(_format(args.method, motors_json))
     if args.out:

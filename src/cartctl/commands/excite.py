@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from cartctl import stopping
-from cartctl.commands.options import SIGNALS, add_plant_options, check_duration
+from cartctl.commands.options import SIGNALS, add_plant_options, check_duration, command_line
 from cartctl.errors import InputError
 
 
@@ -53,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from cartctl.data import write_trace
+    from cartctl.data.tracemeta import write_trace_meta
     from cartctl.experiment import run_experiment
     from cartctl.jsonout import dumps
     from cartctl.plants.factory import is_serial, make_plant
@@ -100,13 +101,16 @@ def run(args: argparse.Namespace) -> int:
     path = args.out
     link_summary = getattr(plant, "link_summary", None)
     link = link_summary() if link_summary is not None else None
+    loop_delay = (
+        getattr(plant, "loop_delay_ticks", None) if link is None else link["loop_delay_ticks"]
+    )  # the simulators know theirs; over serial, the echo's
+    meta = write_trace_meta(path, plant=description, loop_delay_ticks=loop_delay,
+                            command=command_line("excite"))  # fmt: skip
     if args.json:
         print(dumps({
             "trace": str(path), "ticks": n, "duration_s": n * plant.period_s,
             "signal": args.signal, "amplitude_v": args.amplitude, "motor": args.motor,
-            "plant": description,
-            "loop_delay_ticks": (getattr(plant, "loop_delay_ticks", None) if link is None
-                                 else link["loop_delay_ticks"]),
+            "plant": description, "loop_delay_ticks": loop_delay, "meta": str(meta),
             "link": None if link is None else link["link"],
             "stopped": "failure" if result.failure else "interrupted" if result.interrupted else None,
             "failure": result.failure or None,
@@ -116,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
             f"wrote {path}: {n} ticks ({n * plant.period_s:.2f} s), {args.signal} "
             f"{args.amplitude:g} V on motor {args.motor}, plant {description}"
         )
+        ticks = "unknown" if loop_delay is None else f"{loop_delay} tick(s)"
+        print(f"wrote {meta}: the plant and its loop delay ({ticks}), for identify")
     if link is not None:
         delay = link["loop_delay_ticks"]
         stats = link["link"]

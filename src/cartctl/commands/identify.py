@@ -59,7 +59,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--delay",
         default="2",
         metavar="auto|N",
-        help="input delay nk in ticks, or 'auto' to estimate it over 1..6 (default 2)",
+        help="input delay nk in ticks, or 'auto' to estimate one for both motors over 1..6 "
+        "(default 2)",
+    )
+    p.add_argument(
+        "--loop-delay",
+        type=int,
+        metavar="N",
+        help="the loop delay the data was recorded in (ticks from a measurement to its voltage on "
+        "the motor), written into the model for design; default: from the traces' .meta.toml "
+        "files (excite and run write them), else unknown",
     )
     p.add_argument(
         "--na", type=int, default=2, metavar="N", help="number of output lags (default 2)"
@@ -136,8 +145,16 @@ def parse_delay(text: str) -> int | None:
     return value
 
 
-def request_from_args(args: argparse.Namespace) -> IdentifyRequest:
-    """Turn the command-line options into an :class:`IdentifyRequest`."""
+def request_from_args(
+    args: argparse.Namespace, loop_delay_ticks: int | None = None
+) -> IdentifyRequest:
+    """Turn the command-line options into an :class:`IdentifyRequest`.
+
+    ``loop_delay_ticks`` is the traces' loop delay (their meta files), used when ``--loop-delay``
+    is not given.
+    """
+    if args.loop_delay is not None:
+        loop_delay_ticks = args.loop_delay
     from cartctl.identification.pipeline import IdentifyRequest
     from cartctl.identification.prefilter import Prefilter
 
@@ -158,6 +175,7 @@ def request_from_args(args: argparse.Namespace) -> IdentifyRequest:
         prefilter=prefilter,
         method=args.method,
         average=args.average,
+        loop_delay_ticks=loop_delay_ticks,
     )
 
 
@@ -209,6 +227,7 @@ def format_motor(res: MotorIdentification, compared: Mapping[str, ArxModel] | No
             f"{_fit_cell(fit.fit_prediction_percent):>13}{fit.model.dc_gain():>19.4g}  "
             f"{_poles_hz(fit.model)}"
         )
+    lines += [f"    OE: {note}" for note in getattr(res.oe, "notes", ())]
     diag = res.diagnostics
     if compared and diag is not None:
         fits = diag.compared_fits(compared)
@@ -232,13 +251,21 @@ def format_motor(res: MotorIdentification, compared: Mapping[str, ArxModel] | No
         evidence = ", ".join(
             f"nk={nk}: {rms:.3g}" for nk, rms in zip(d.candidates, d.residual_rms, strict=True)
         )
-        lines.append(f"    delay evidence (equation-error RMS, rad/s): {evidence}")
+        alone = "" if d.nk_alone is None else f" (on its own: nk = {d.nk_alone})"
+        lines.append(f"    delay evidence (equation-error RMS, rad/s): {evidence}{alone}")
     if diag is not None:
         lines.append(f"    {diag.residuals.summary()}")
         if diag.orders is not None:
             lines.append(f"    orders (ARX; fits on the {diag.orders.fit_on} data):")
             lines.append(diag.orders.format())
     return "\n".join(lines)
+
+
+def _nk_remark(result: IdentifyResult, delay: int) -> str:
+    nks = sorted({r.chosen.model.nk for r in result.motors.values()})
+    if nks == [delay + 1]:
+        return f" (nk = {delay + 1} = loop delay + 1: the report's timing)"
+    return f" (nk = {', '.join(map(str, nks))}; design explains how it treats that)"
 
 
 def _compared_labels(compare: Mapping[str, ModelFile], motor: str) -> dict[str, ArxModel]:
@@ -263,6 +290,23 @@ def format_result(
     lines += [
         format_motor(r, _compared_labels(compare or {}, m)) + "\n" for m, r in result.motors.items()
     ]
+    if result.delay is not None:
+        j = result.delay
+        evidence = ", ".join(
+            f"nk={c}: {e:.4g}" for c, e in zip(j.candidates, j.evidence_rad_s, strict=True)
+        )
+        lines.append(
+            f"delay nk = {j.nk} for both motors (one loop), from the joint evidence (weighted "
+            f"geometric mean of the motors' equation-error RMS, rad/s): {evidence}"
+        )
+    delay = result.loop_delay_ticks
+    lines.append(
+        "loop delay: unknown (no .meta.toml beside the data; --loop-delay N states it)"
+        if delay is None
+        else f"loop delay: {delay} tick(s), written into the model for design"
+        + ("" if not result.motors else _nk_remark(result, delay))
+    )
+    lines.append("")
     on = next((r.diagnostics.fit_on for r in result.motors.values() if r.diagnostics), "estimation")
     if on == "validation":
         where = "fit sim and fit pred (%): on the validation data, simulated from its input and "
@@ -282,11 +326,19 @@ def format_result(
 
 def run(args: argparse.Namespace) -> int:
     from cartctl.data import read_trace
+    from cartctl.data.tracemeta import loop_delay_of
     from cartctl.identification.pipeline import identify, model_file
     from cartctl.jsonout import dumps
     from cartctl.modelfile import load_models, save_models
 
-    request = request_from_args(args)
+    recorded = loop_delay_of(args.files)  # the traces' meta files; they must agree
+    if args.loop_delay is not None and recorded is not None and recorded != args.loop_delay:
+        print(
+            f"cartctl identify: warning: --loop-delay {args.loop_delay} overrides the loop delay "
+            f"{recorded} recorded with the data",
+            file=sys.stderr,
+        )
+    request = request_from_args(args, recorded)
     compare = {path: load_models(path) for path in args.compare}  # fail early on a bad file
     traces = [read_trace(path, args.map) for path in args.files]
     validation = [read_trace(path, args.map) for path in args.validate_on]

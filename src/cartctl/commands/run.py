@@ -17,6 +17,7 @@ from cartctl.commands.options import (
     add_plant_options,
     add_rerun_options,
     check_duration,
+    command_line,
     output_paths,
 )
 from cartctl.commands.run_checks import (
@@ -238,11 +239,17 @@ def run(args: argparse.Namespace) -> int:
         plant.close()
         raise
     csv_path, rrd_path = output_paths(args, "run")
+    from cartctl.data.tracemeta import write_trace_meta
+
+    # the trace's loop beside it, for identify (before the loop: an interrupted run has it too)
+    write_trace_meta(csv_path, plant=description, loop_delay_ticks=delay,
+                     command=command_line("run"))  # fmt: skip
     memory = MemorySink()
     # on the virtual clock a second of trace takes milliseconds: write it in bigger blocks
     sinks: list[Any] = [CsvSink(csv_path, flush_every=1000 if args.fast else 50), memory]
     rerun = _rerun_sink(args, rrd_path, references, limit)
     if rerun is not None:
+        rerun.hold()  # open after the loop for the smoothed speed (smooth_run releases it)
         sinks.append(rerun)
     if not args.fast and sys.stderr.isatty():  # a live line on a terminal, refreshed after ticks
         from cartctl.sinks.status import StatusLine
@@ -320,6 +327,9 @@ def run(args: argparse.Namespace) -> int:
         controller=given,
         scheduling=scheduling,
     )
+    from cartctl.commands.review.smoothed import smooth_run
+
+    smooth_run(summary, memory.arrays(), period_s, controller_file.model_path, rerun)
     if args.json:
         print(dumps(summary))
     else:

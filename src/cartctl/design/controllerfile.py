@@ -6,7 +6,7 @@
     method = "pi"                      # or "poles"
     period_s = 0.01
     voltage_limit_v = 12.0
-    loop_delay_ticks = 1               # the loop it is designed for: model nk − 1 + extra delay
+    loop_delay_ticks = 1               # the loop it is designed for (see below)
     plant_kind = "onboard"             # loop delay 1 (on the cart, simulators); "serial": more
     created = "2026-11-22T15:00:00+00:00"
     command = "cartctl design models/ground.toml --method pi ..."
@@ -25,8 +25,9 @@
     controller_den = [1.0, -1.0]
 
 The **loop delay** is the number of ticks from a measurement to the voltage it leads to being on
-the motor: 1 on board the cart and in the simulators, 3 over the PC serial loop. A design on an
-ARX model with input delay nk and ``--extra-delay d`` is for a loop delay of nk − 1 + d.
+the motor: 1 on board the cart and in the simulators, 3 over the PC serial loop. A design with
+``--extra-delay d`` on a model file that records the loop delay L its data came from is for L + d;
+on an older model file with input delay nk, for nk − 1 + d (:func:`cartctl.design.make.loop_delay_for`).
 
 Loading checks the format and the keys, resolves the model path against the file's folder, and
 checks that the file does not contradict itself: ``plant_kind`` against ``loop_delay_ticks``, and

@@ -8,6 +8,7 @@ makes the file to save.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -111,21 +112,70 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
     return MotorDesign(ctrl, entry, poles_entry(d, num, den))
 
 
-def _loop_delay(request: DesignRequest, models: dict[str, ArxModel], *, strict: bool) -> int | None:
-    """The loop delay of a design: ``request.loop_delay_ticks`` if it fits every model
-    (:func:`~cartctl.design.request.check_loop_delay`; InputError otherwise), else the models'
-    common nk − 1 + extra delay; when they differ, None, or with ``strict`` an InputError."""
+def nk_note(nk: Mapping[str, int], loop_delay_ticks: int) -> str | None:
+    """One line on models whose input delay is not the loop delay + 1 (the report's timing), or
+    None when every motor's is. ``loop_delay_ticks`` is the loop the data was recorded in."""
+    odd = sorted({n for n in nk.values() if n != loop_delay_ticks + 1})
+    if not odd:
+        return None
+    n = odd[0]
+    if n == loop_delay_ticks:
+        return (
+            f"nk = {n} with loop delay {loop_delay_ticks}: the command lands within the tick, so "
+            "the next measurement already sees part of it; the model's first input term covers "
+            f"that, and the design is for loop delay {loop_delay_ticks}"
+        )
+    if n > loop_delay_ticks + 1:
+        return (
+            f"nk = {n} with loop delay {loop_delay_ticks}: the motor answers {n - 1 - loop_delay_ticks}"
+            " tick(s) later than the loop alone explains (a slow start, a dead zone or a given "
+            "--delay); the model carries that lag"
+        )
+    return (
+        f"nk = {n} with loop delay {loop_delay_ticks}: the model answers sooner than the loop "
+        "lets a command land; the recorded loop delay or the identified delay is wrong"
+    )
+
+
+def loop_delay_for(
+    request: DesignRequest,
+    models: Mapping[str, ArxModel],
+    recorded: int | None = None,
+    *,
+    strict: bool = True,
+) -> tuple[int | None, str | None]:
+    """The loop delay a design is for, and a line explaining it where nk and it disagree.
+
+    In order: ``request.loop_delay_ticks`` (``--loop-delay``) if it fits every model
+    (:func:`~cartctl.design.request.check_loop_delay`, InputError otherwise); the loop delay the
+    models' data was recorded in (``recorded``, the model file's ``loop_delay_ticks``) plus the
+    extra delay, when every model's nk is that loop delay or one more (the checks of
+    ``--loop-delay``); else the models' common nk − 1 + extra delay, as for a model file without
+    a loop delay. Motors whose nk differ then give None, or with ``strict`` an InputError: a
+    controller file is for one loop.
+    """
     extra = request.extra_delay_ticks
+    nks = {m: mod.nk for m, mod in models.items()}
     if request.loop_delay_ticks is not None:
         for model in models.values():
             check_loop_delay(request.loop_delay_ticks, model.nk, extra)
-        return request.loop_delay_ticks
+        return request.loop_delay_ticks, nk_note(nks, request.loop_delay_ticks - extra)
+    note = None
+    if recorded is not None:
+        if all(n in (recorded, recorded + 1) for n in nks.values()):
+            return recorded + extra, nk_note(nks, recorded)
+        shown = ", ".join(f"nk = {n}" for n in sorted(set(nks.values())))
+        note = (
+            f"the model's {shown} does not fit the loop delay {recorded} it was recorded in "
+            f"(nk = {recorded} or {recorded + 1} would): designing for nk - 1 + extra delay, as "
+            "for a model without a loop delay; --loop-delay N states another"
+        )
     try:
-        return common_loop_delay({m: mod.nk for m, mod in models.items()}, extra)
+        return common_loop_delay(nks, extra), note
     except ValueError as exc:
         if strict:
             raise InputError(str(exc)) from None
-        return None
+        return None, note
 
 
 @dataclass(frozen=True)
@@ -143,6 +193,10 @@ class Designs:
         The simulated step of each motor, in the bound's settling band.
     loop_delay_ticks : int or None
         The loop delay the designs are for (None when the motors' model delays differ).
+    recorded_loop_delay_ticks : int or None
+        The loop delay the models' data was recorded in (their model file's), when known.
+    loop_delay_note : str or None
+        One line where the models' nk and the loop delay disagree (:func:`loop_delay_for`).
     """
 
     request: DesignRequest
@@ -150,6 +204,8 @@ class Designs:
     motors: dict[str, MotorDesign]
     steps: dict[str, StepAnalysis] = field(default_factory=dict)
     loop_delay_ticks: int | None = None
+    recorded_loop_delay_ticks: int | None = None
+    loop_delay_note: str | None = None
 
     def entries(self) -> dict[str, dict[str, Any]]:
         """Per motor, the figures of ``design --json``."""
@@ -164,7 +220,8 @@ def design_models(
     by_motor = {
         m: (models.motor(m) if isinstance(models, ModelFile) else models[m]) for m in motors
     }
-    loop_delay = _loop_delay(request, by_motor, strict=False)
+    recorded = models.loop_delay_ticks if isinstance(models, ModelFile) else None
+    loop_delay, note = loop_delay_for(request, by_motor, recorded, strict=False)
     designs: dict[str, MotorDesign] = {}
     steps: dict[str, StepAnalysis] = {}
     for m, model in by_motor.items():
@@ -182,7 +239,7 @@ def design_models(
         entry["settling_bound_loop_delay_ticks"] = bound.loop_delay_ticks
         designs[m] = made
         steps[m] = step
-    return Designs(request, by_motor, designs, steps, loop_delay)
+    return Designs(request, by_motor, designs, steps, loop_delay, recorded, note)
 
 
 def controller_file(
@@ -193,9 +250,11 @@ def controller_file(
     Raises
     ------
     InputError
-        The motors' models have different input delays: one file is for one loop.
+        The motors' models have different input delays and no recorded loop delay they both
+        fit: one file is for one loop.
     """
-    loop_delay = _loop_delay(designs.request, designs.models, strict=True)
+    loop_delay, _ = loop_delay_for(designs.request, designs.models,
+                                   designs.recorded_loop_delay_ticks, strict=True)  # fmt: skip
     motors = {
         m: {**d.file_entry, "analysis": {k: v for k, v in d.entry.items() if k in ANALYSIS_KEYS}}
         for m, d in designs.motors.items()

@@ -19,7 +19,7 @@ from cartctl.data import Trace
 from cartctl.errors import InputError
 from cartctl.identification.arx import ArxFit, Segment, first_row, fit_arx
 from cartctl.identification.cycles import average_cycles, find_period, periodic_regression_pad
-from cartctl.identification.delay import DelayEstimate, estimate_delay
+from cartctl.identification.delay import DelayEstimate, JointDelay, delay_evidence, joint_delay
 from cartctl.identification.diagnostics import Diagnostics, diagnose, on_validation, split_segments
 from cartctl.identification.oe import fit_oe
 from cartctl.identification.prefilter import Prefilter
@@ -53,6 +53,10 @@ class IdentifyRequest:
         The grid of the order table (``--orders``), ``na``/``nb``/``nk`` → values; None for none.
     split : float or None
         Estimate on the first fraction of each experiment, validate on the rest (``--split``).
+    loop_delay_ticks : int or None
+        The loop delay the data was recorded in (ticks from a measurement to its voltage on the
+        motor; the traces' meta files or ``--loop-delay``), written into the model file; None when
+        unknown.
     """
 
     motors: tuple[str, ...] = ("a", "b")
@@ -65,8 +69,11 @@ class IdentifyRequest:
     delay_candidates: tuple[int, ...] = (1, 2, 3, 4, 5, 6)
     orders: dict[str, tuple[int, ...]] | None = None
     split: float | None = None
+    loop_delay_ticks: int | None = None
 
     def __post_init__(self) -> None:
+        if self.loop_delay_ticks is not None and not 0 <= self.loop_delay_ticks <= 50:
+            raise InputError(f"--loop-delay must be in 0..50 ticks, got {self.loop_delay_ticks}")
         if self.method not in METHODS:
             raise InputError(f"unknown method '{self.method}'; choose one of {', '.join(METHODS)}")
         bad = [m for m in self.motors if m not in ("a", "b")]
@@ -90,7 +97,8 @@ class MotorIdentification:
     unfiltered : ArxFit or None
         ARX without the prefilter, when a prefilter was used: the filter's effect.
     delay : DelayEstimate or None
-        The delay evidence, when the delay was estimated.
+        This motor's delay evidence, when the delay was estimated (``delay.nk`` is the delay
+        chosen for both motors, ``delay.nk_alone`` this motor's own best where it differs).
     cycles_averaged : int or None
         Number of cycles averaged, when averaging was used.
     diagnostics : Diagnostics or None
@@ -135,15 +143,33 @@ class MotorIdentification:
 
 @dataclass(frozen=True)
 class IdentifyResult:
-    """Per motor results, and notes for the user (skipped motors)."""
+    """Per motor results, and notes for the user (skipped motors, a close delay call).
+
+    Attributes
+    ----------
+    period_s : float
+    motors : dict of str to MotorIdentification
+    notes : tuple of str
+    delay : JointDelay or None
+        The one delay chosen for every motor and its joint evidence, when it was estimated.
+    loop_delay_ticks : int or None
+        The loop delay the data was recorded in, when known.
+    """
 
     period_s: float
     motors: dict[str, MotorIdentification]
     notes: tuple[str, ...] = field(default=())
+    delay: JointDelay | None = None
+    loop_delay_ticks: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """The ``identify --json`` object (contract 3)."""
-        return {"Ts": self.period_s, "motors": {m: r.to_dict() for m, r in self.motors.items()}}
+        """The ``identify --json`` object (contract 3, plus ``delay`` and ``loop_delay_ticks``)."""
+        return {
+            "Ts": self.period_s,
+            "motors": {m: r.to_dict() for m, r in self.motors.items()},
+            "delay": None if self.delay is None else self.delay.to_dict(),
+            "loop_delay_ticks": self.loop_delay_ticks,
+        }
 
 
 def _no_excitation(traces: Sequence[Trace], motor: str) -> str | None:
@@ -177,6 +203,24 @@ def _averaged(
     return out, total
 
 
+def _prefiltered(
+    raw: Sequence[Segment], request: IdentifyRequest, period_s: float
+) -> list[Segment]:
+    pf = request.prefilter
+    return [(pf.apply(y, period_s), pf.apply(u, period_s)) for y, u in raw] if pf else list(raw)
+
+
+def motor_delay_evidence(
+    segments: Sequence[Segment], request: IdentifyRequest, *, period_s: float
+) -> DelayEstimate:
+    """One motor's delay evidence over ``request.delay_candidates``, on the data the fit uses."""
+    raw = list(segments)
+    return delay_evidence(
+        _prefiltered(raw, request, period_s), na=request.na, nb=request.nb,
+        candidates=request.delay_candidates, period_s=period_s, eval_segments=raw,
+    )  # fmt: skip
+
+
 def identify_motor(
     motor: str,
     segments: Sequence[Segment],
@@ -185,21 +229,25 @@ def identify_motor(
     period_s: float,
     sources: Sequence[str],
     validation: Sequence[Segment] = (),
+    delay: DelayEstimate | None = None,
 ) -> MotorIdentification:
     """Run the pipeline on one motor's experiments (raw (y, u) pairs, rad/s and V).
 
-    With ``validation`` data the fits are recomputed on it (:mod:`.diagnostics`).
+    With ``validation`` data the fits are recomputed on it (:mod:`.diagnostics`). ``delay`` is the
+    delay evidence with the delay chosen (for both motors, :func:`identify`); without it, a
+    request for an estimated delay estimates this motor's alone.
     """
     raw = list(segments)
-    pf = request.prefilter
-    work = [(pf.apply(y, period_s), pf.apply(u, period_s)) for y, u in raw] if pf else raw
+    work = _prefiltered(raw, request, period_s)
     delay_est = None
     nk = request.delay
     if nk is None:
-        delay_est = estimate_delay(
-            work, na=request.na, nb=request.nb, candidates=request.delay_candidates,
-            period_s=period_s, eval_segments=raw,
-        )  # fmt: skip
+        delay_est = (
+            delay
+            or joint_delay({motor: motor_delay_evidence(raw, request, period_s=period_s)}).motors[
+                motor
+            ]
+        )
         nk = delay_est.nk
     cycles = None
     fit_data, start = work, None
@@ -213,7 +261,7 @@ def identify_motor(
 
     arx_fit = arx(fit_data)
     unfiltered = None
-    if pf is not None:
+    if request.prefilter is not None:
         unfiltered = arx(_averaged(raw, start, sources)[0] if request.average else raw)
     oe_fit = fit_oe(work, arx_fit.model, eval_segments=raw) if request.method == "oe" else None
     diagnostics = diagnose(
@@ -256,7 +304,7 @@ def identify(
                 f"traces have different sample periods: {period_s} s ({traces[0].source}) and "
                 f"{t.period_s} s ({t.source})"
             )
-    results: dict[str, MotorIdentification] = {}
+    data: dict[str, tuple[list[Segment], list[str], list[Segment]]] = {}
     notes: list[str] = []
     problems: list[str] = []
     names = ", ".join(str(t.source) for t in traces)
@@ -280,15 +328,26 @@ def identify(
             )
         if request.split is not None:
             segments, val = split_segments(segments, request.split)
-        results[motor] = identify_motor(
-            motor, segments, request, period_s=period_s, sources=sources, validation=val
-        )
-    if not results:
+        data[motor] = (segments, sources, val)
+    if not data:
         raise InputError(
             f"no motor has excitation in {names} ({'; '.join(problems)}); record with a varying "
             "voltage, e.g. cartctl excite --signal square"
         )
-    return IdentifyResult(period_s, results, tuple(notes))
+    joint = None
+    if request.delay is None:  # one loop, one delay: chosen from both motors' evidence
+        joint = joint_delay(
+            {m: motor_delay_evidence(d[0], request, period_s=period_s) for m, d in data.items()}
+        )
+        note = joint.note()
+        if note is not None:
+            notes.append(note)
+    results = {
+        m: identify_motor(m, segments, request, period_s=period_s, sources=sources,
+                          validation=val, delay=None if joint is None else joint.motors[m])
+        for m, (segments, sources, val) in data.items()
+    }  # fmt: skip
+    return IdentifyResult(period_s, results, tuple(notes), joint, request.loop_delay_ticks)
 
 
 def model_file(
@@ -303,11 +362,12 @@ def model_file(
     ``source`` is what made them (the command line, or the Python call).
     """
     notes = []
+    if result.delay is not None:
+        j = result.delay
+        joint = " for both motors, from their joint evidence" if len(j.motors) > 1 else ""
+        close = f" (too close to call: {', '.join(map(str, j.close))})" if j.too_close else ""
+        notes.append(f"delay nk = {j.nk} estimated over {list(j.candidates)}{joint}{close}")
     for m, r in result.motors.items():
-        if r.delay is not None:
-            notes.append(
-                f"motor {m}: delay nk = {r.delay.nk} estimated over {list(r.delay.candidates)}"
-            )
         if r.cycles_averaged:
             notes.append(f"motor {m}: {r.cycles_averaged} cycles averaged")
         if r.diagnostics is not None and r.diagnostics.fit_on == "validation":
@@ -328,4 +388,5 @@ def model_file(
             for k in ("theta_std", "fit_simulation_percent", "fit_prediction_percent")
             if d[k] is not None
         }
-    return ModelFile({m: r.chosen.model for m, r in result.motors.items()}, provenance, stats)
+    return ModelFile({m: r.chosen.model for m, r in result.motors.items()}, provenance, stats,
+                     loop_delay_ticks=result.loop_delay_ticks)  # fmt: skip
