@@ -245,7 +245,7 @@ def test_onboard_channels_follow_the_export_layout() -> None:
     firmware.control(_io(0.0, 0.0))
     voltages = firmware.control(_io(1.0, 0.5))
     assert voltages == (4.0, 9.0)
-    assert firmware.out_floats == [1.0, 0.5, 4.0, 9.0, 5.0, 5.0, 0.0, 0.0]
+    assert firmware.out_floats == [1.0, 0.5, 4.0, 9.0, 5.0, 5.0, 1001.0, 0.0]  # 6: the marker
     assert firmware.out_ints == [0, 0, 0, 0]
 
 
@@ -327,7 +327,7 @@ def test_pulled_cable_is_one_error_and_valid_files(
     assert summary["stopped"] == "fault"
     _, table = _read_csv(tmp_path / "f.csv")
     assert 30 <= len(table) == summary["frames"] <= 55
-    assert rrd_rows(tmp_path / "f.rrd")["gpio/FloatIn0"] == len(table)
+    assert rrd_rows(tmp_path / "f.rrd")["gpio/speed_a"] == len(table)  # the bridge's labels
 
 
 def test_silent_port_times_out(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:

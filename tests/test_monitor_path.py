@@ -21,7 +21,6 @@ from cartctl.plants.cart_monitor import Monitor, parse_labels
 ROOT = Path(__file__).resolve().parents[1]
 PI = ROOT / "controllers" / "pi.toml"
 MODEL = ROOT / "models" / "ground.toml"
-EXPORT_LABELS = "f0=speed_a,f1=speed_b,f2=voltage_a,f3=voltage_b,f4=reference_a,f5=reference_b"
 
 
 def _cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
@@ -140,17 +139,36 @@ def _quiet_cli(*argv: str) -> tuple[int, str, str]:
 
 @pytest.fixture(scope="module")
 def monitor_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """A 1.2 s monitor of the on-board PI (the export's labels, saved .rrd) and a 0.3 s one
-    with the default labels (FloatIn0..)."""
+    """A 1.2 s monitor of the on-board PI with no options but the reference (saved .rrd): the
+    firmware's marker names its channels; and the same trace with QRoboticsCenter's default
+    labels (FloatIn0..), as a firmware without the marker gives it."""
     out = tmp_path_factory.mktemp("monitor")
     code, _, err = _quiet_cli("monitor", "virtual", "--onboard", str(PI), "--reference",
-                              "step:8:0.1", "--duration", "1.2", "--labels", EXPORT_LABELS,
-                              "--rerun", "save", "--out", str(out), "--name", "pi")  # fmt: skip
+                              "step:8:0.1", "--duration", "1.2", "--rerun", "save", "--out",
+                              str(out), "--name", "pi")  # fmt: skip
     assert code == 0, err
-    code, _, err = _quiet_cli("monitor", "virtual", "--onboard", str(PI), "--duration", "0.3",
-                              "--rerun", "off", "--out", str(out), "--name", "plain")  # fmt: skip
-    assert code == 0, err
-    return {"labelled": out / "pi.csv", "rrd": out / "pi.rrd", "plain": out / "plain.csv"}
+    (out / "pi.stderr").write_text(err, encoding="utf-8")
+    lines = _lines(out / "pi.csv")
+    defaults = [*(f"FloatIn{i}" for i in range(8)), *(f"IntIn{i}" for i in range(4))]
+    with open(out / "plain.csv", "w", newline="", encoding="utf-8") as f:
+        csv.writer(f).writerows([["time_s", "tick", *defaults], *lines[1:]])
+    return {"labelled": out / "pi.csv", "rrd": out / "pi.rrd", "plain": out / "plain.csv",
+            "stderr": out / "pi.stderr"}  # fmt: skip
+
+
+def test_monitor_names_the_onboard_firmwares_channels(monitor_files: dict[str, Path]) -> None:
+    """Contract 1's columns from the export's layout (floats 0-5), told by float 6 = 1001."""
+    header, table = _read_csv(monitor_files["labelled"])
+    assert header[:9] == ["time_s", "tick", "speed_a", "speed_b", "voltage_a", "voltage_b",
+                          "reference_a", "reference_b", "firmware_id"]  # fmt: skip
+    assert np.all(table[:, header.index("firmware_id")] == 1001.0)
+    late = table[:, 0] > 0.8  # the step to 8 rad/s at 0.1 s is tracked
+    assert np.all(table[late, header.index("reference_a")] == 8.0)
+    assert abs(np.mean(table[late, header.index("speed_a")]) - 8.0) < 0.5
+    (line,) = [x for x in monitor_files["stderr"].read_text().splitlines()
+               if x.startswith("firmware:")]  # fmt: skip
+    assert "on-board controller" in line and "float 6 = 1001" in line
+    assert "f0=speed_a" in line and "f5=reference_b" in line
 
 
 def test_monitor_trace_time_is_whole_ticks(monitor_files: dict[str, Path]) -> None:
@@ -210,7 +228,7 @@ def test_validate_and_convert_read_a_monitor_trace(
     # channels keep the form the monitor wrote them in: float channels as floats, ints as ints
     first = {name: text for name, text in zip(new_header, _lines(converted)[1], strict=True)}
     source = {name: text for name, text in zip(header, _lines(path)[1], strict=True)}
-    for name in ("tick", "IntIn0", "IntIn3", "reference_a", "FloatIn6"):
+    for name in ("tick", "IntIn0", "IntIn3", "reference_a", "FloatIn7"):
         assert first[name] == source[name], name
     assert first["tick"] == "0" and first["reference_a"] == "0.0"
 

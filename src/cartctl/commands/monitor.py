@@ -41,8 +41,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="record and stream the GPIO channels a cart sends (a cart running its own controller)",
         description=(
             "Record every GPIO frame a cart sends to a CSV trace and a Rerun recording (live in "
-            "the viewer), with your channel labels, as QRoboticsCenter does. Passive: nothing is "
-            "sent to the cart. Stops after --duration, on Ctrl-C (exit 0) or on a line fault "
+            "the viewer), with your channel labels, as QRoboticsCenter does. cartctl's own "
+            "firmware (the bridge sketch, a controller of 'cartctl export --arduino') says so in "
+            "float 6, and its channels are then named as trace columns (speed_a, voltage_a, "
+            "reference_a, ...) without --labels. Passive: nothing is sent to the cart. Stops after --duration, on Ctrl-C (exit 0) or on a line fault "
             "(100 ms without data, the port gone: exit 1, the files hold what came before)."
         ),
     )
@@ -55,7 +57,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--labels", metavar="KEY=LABEL,...",
         help="channel labels (CSV columns, Rerun entities gpio/LABEL), KEY f0..f7 or i0..i3, e.g. "
-        "f0=speed_a,f1=speed_b,i0=echo; default FloatIn0..7, IntIn0..3 (QRoboticsCenter's)",
+        "f0=speed_a,f1=speed_b,i0=echo; default: those of cartctl's firmware when the cart's "
+        "frames say it runs the bridge or an exported controller (float 6), else FloatIn0..7, "
+        "IntIn0..3 (QRoboticsCenter's)",
     )  # fmt: skip
     p.add_argument("--duration", type=float, metavar="S",
                    help="stop after S seconds of cart time (default: run until Ctrl-C)")  # fmt: skip
@@ -157,10 +161,10 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.sinks.csv_sink import CsvSink
 
     kind, rest = _check(args)
-    labels = parse_labels(args.labels)
+    labels = parse_labels(args.labels) if args.labels is not None else None
     cart = _virtual_cart(rest, args) if kind == "virtual" else None
     port = cart.port if cart is not None else rest
-    monitor = Monitor([], [], labels, echo=print_to_stderr)
+    monitor = Monitor([], [], labels, echo=print_to_stderr, announce=_to_stderr)
     received: list[int] = []
     link = MonitorLink(port, on_event=monitor.on_event, on_print=monitor.on_print)
     if cart is not None:  # the virtual cart's rate is known: the bridge's, or the course's
@@ -179,8 +183,7 @@ def run(args: argparse.Namespace) -> int:
             monitor.rows.append(rerun)
             monitor.texts.append(rerun)
         try:
-            monitor.open()
-            with _stop_on_signals(monitor, received):
+            with _stop_on_signals(monitor, received):  # the sinks open at the first frames
                 result = monitor.run(link, args.duration)
         finally:
             for sink in monitor.rows:
@@ -189,7 +192,7 @@ def run(args: argparse.Namespace) -> int:
         link.close()
         if cart is not None:
             cart.stop()
-    summary = _summary(result, link, args.plant, labels, csv_path,
+    summary = _summary(result, link, args.plant, monitor, csv_path,
                        rrd_path if rerun is not None else None)  # fmt: skip
     print(dumps(summary) if args.json else _format(summary))
     if result.failure:
@@ -200,11 +203,15 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _to_stderr(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
 def _summary(
     result: MonitorResult,
     link: MonitorLink,
     plant: str,
-    labels: tuple[str, ...],
+    monitor: Monitor,
     csv_path: Path,
     rrd_path: Path | None,
 ) -> dict[str, Any]:
@@ -217,7 +224,8 @@ def _summary(
         "failure": result.failure,
         "plant": plant,
         "port": link.port,
-        "labels": list(labels),
+        "firmware": monitor.firmware.name if monitor.firmware is not None else None,
+        "labels": list(monitor.labels or ()),
         "print_lines": result.print_lines,
         "events": result.events,
         "link": stats,

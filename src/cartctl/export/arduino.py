@@ -34,6 +34,15 @@ from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.errors import InputError
 from cartctl.export.c_code import c_float, pi_code, poles_code, where
+from cartctl.link.firmware_id import (
+    CH_FIRMWARE_ID,
+    IN_REFERENCE,
+    ONBOARD_ID,
+    ONBOARD_LAYOUT,
+    OUT_REFERENCE,
+    OUT_SPEED,
+    OUT_VOLTAGE,
+)
 from cartctl.runtime.base import Controller
 
 __all__ = ["CART_PERIOD_S", "arduino_source", "as_steady_state", "c_float", "timing_noise_note"]
@@ -86,7 +95,7 @@ def onboard_controllers(path: str | Path) -> dict[str, Controller]:
 def _usage(motors: Sequence[str]) -> list[str]:
     """The header's example of ``Robot::control()`` for the motors present."""
     lines = ["  void Robot::control() {"]
-    channel = {"a": 0, "b": 1}
+    channel = IN_REFERENCE
     for m in motors:
         lines.append(
             f"    float reference_{m}_rad_s = readFloat({channel[m]});  "
@@ -106,11 +115,16 @@ def _usage(motors: Sequence[str]) -> list[str]:
     lines.append("    }")
     for m in motors:
         lines.append(f"    setVoltageMotor{m.upper()}(voltage_{m}_v);")
-    outputs = (("speed_{}_rad_s", 0), ("voltage_{}_v", 2), ("reference_{}_rad_s", 4))
+    outputs = (("speed_{}_rad_s", OUT_SPEED), ("voltage_{}_v", OUT_VOLTAGE),
+               ("reference_{}_rad_s", OUT_REFERENCE))  # fmt: skip
     for name, first in outputs:
         for m in motors:
             lines.append(f"    writeFloat({first + channel[m]}, {name.format(m)});")
     lines[-len(outputs) * len(motors)] += "  // out to the PC: cartctl monitor, QRC"
+    lines.append(
+        "    writeFloat(CARTCTL_FIRMWARE_ID_CHANNEL, CARTCTL_FIRMWARE_ID);  "
+        "// the layout, for cartctl monitor"
+    )
     lines.append("  }")
     return ["//" + (" " + line if line else "") for line in lines]
 
@@ -174,9 +188,12 @@ def _header(controller: ControllerFile, command: str) -> list[str]:
         "//",
         *_usage(motors),
         "//",
-        "// Out channels: float 0/1 speed A/B (rad/s) and 2/3 voltage A/B (V), as in the bridge "
-        "sketch",
-        "// (firmware/cartctl_bridge), and 4/5 reference A/B (rad/s).",
+        "// Out channels: float 0/1 speed A/B (rad/s), 2/3 voltage A/B (V) as in the bridge sketch",
+        f"// (firmware/cartctl_bridge), 4/5 reference A/B (rad/s), and {CH_FIRMWARE_ID} = "
+        f"{ONBOARD_ID}, cartctl's on-board layout {ONBOARD_LAYOUT}:",
+        "// by it 'cartctl monitor' names the channels (speed_a, voltage_a, reference_a, ...) "
+        "itself, so",
+        "// 'cartctl review', 'validate' and 'convert' read its CSV without --labels or --map.",
         "",
         "#ifndef CARTCTL_CONTROLLER_H",
         "#define CARTCTL_CONTROLLER_H",
@@ -186,6 +203,9 @@ def _header(controller: ControllerFile, command: str) -> list[str]:
         f"#define CARTCTL_PERIOD_S {c_float(controller.period_s)}  /* tick period (s) */",
         f"#define CARTCTL_VOLTAGE_LIMIT_V {c_float(controller.voltage_limit_v)}  "
         "/* command saturation (V) */",
+        f"#define CARTCTL_FIRMWARE_ID_CHANNEL {CH_FIRMWARE_ID}  /* out float channel of the id */",
+        f"#define CARTCTL_FIRMWARE_ID {c_float(ONBOARD_ID)}  "
+        f"/* cartctl's on-board channel layout {ONBOARD_LAYOUT} */",
         "",
     ]
     return lines

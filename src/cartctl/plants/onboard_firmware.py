@@ -13,7 +13,11 @@ Channels, as in the export snippet (:mod:`cartctl.export.arduino`):
 
 - in: float 0 = reference A, float 1 = reference B (rad/s), held from the host's last GPIO;
 - out: float 0/1 = speed A/B (rad/s), 2/3 = voltage A/B computed at this tick (V, applied at
-  the next tick), 4/5 = reference A/B (rad/s); the int channels stay 0.
+  the next tick), 4/5 = reference A/B (rad/s), 6 = :data:`~cartctl.link.firmware_id.ONBOARD_ID`
+  (1001: cartctl's on-board layout 1, by which ``cartctl monitor`` names the channels itself);
+  the int channels stay 0.
+
+The layout is :mod:`cartctl.link.firmware_id`'s, which the export and the monitor read too.
 
 The reference comes from a reference spec (``step:8``, see :mod:`cartctl.reference`)
 when one is given, with tick 0 at the cart's first ``control()``; otherwise from the held input
@@ -30,16 +34,20 @@ from typing import Protocol
 from cartctl.cart import PERIOD_S
 from cartctl.choices import MAX_DURATION_S
 from cartctl.errors import InputError
+from cartctl.link.firmware_id import (
+    CH_FIRMWARE_ID,
+    IN_REFERENCE,
+    ONBOARD_ID,
+    OUT_REFERENCE,
+    OUT_SPEED,
+    OUT_VOLTAGE,
+)
 from cartctl.plants.bridge_firmware import CartIO, HeldChannels
 from cartctl.reference import ReferenceSchedule
 
 CART_PERIOD_S = PERIOD_S
 """The period of the cart's control thread (s)."""
-IN_REFERENCE = {"a": 0, "b": 1}
-"""Input float channel of each motor's reference (rad/s)."""
-OUT_SPEED, OUT_VOLTAGE, OUT_REFERENCE = 0, 2, 4
-"""First output float channel of the speeds, voltages and references (A, then B)."""
-MOTORS = ("a", "b")
+MOTORS = tuple(IN_REFERENCE)
 MAX_TICKS = round(MAX_DURATION_S / CART_PERIOD_S)
 """A reference spec is evaluated over the longest run cartctl takes (24 h), then held."""
 
@@ -110,6 +118,7 @@ class OnboardFirmware(HeldChannels):
         """One ``control()`` call: returns the voltages (V) for the next tick's ``io()``."""
         measured = {"a": io.speed_a_rad_s, "b": io.speed_b_rad_s}
         out = [0.0] * 8
+        out[CH_FIRMWARE_ID] = float(ONBOARD_ID)
         voltage = {"a": 0.0, "b": 0.0}
         for i, motor in enumerate(MOTORS):
             controller = self.controllers.get(motor)
