@@ -7,6 +7,7 @@ module that does): ``run`` imports those when the command starts (``tests/test_s
 """
 
 from cartctl.commands import (
+    commission,
     convert,
     design,
     excite,
@@ -23,4 +24,4 @@ from cartctl.commands import (
 )
 
 COMMANDS = (excite, identify, inspect, validate, linearity, design, run, review, tune, convert,
-            export, virtual_cart, monitor)  # fmt: skip
+            export, virtual_cart, monitor, commission)  # fmt: skip

@@ -51,6 +51,9 @@ class CartFaults:
     actuation_ms : float or None
         When a command lands after its tick in the simulated wheels (ms, (0, 10]); None: the
         preset's calibrated 3 ms.
+    reverse_a, reverse_b : bool
+        That motor's leads swapped: a positive command turns its wheel (and encoder) backwards
+        (``reverse_b=1``), a wiring fault for ``cartctl commission`` to find.
     """
 
     garbage: float = 0.0
@@ -63,9 +66,16 @@ class CartFaults:
     bridge: int = 2
     usb: bool = True
     actuation_ms: float | None = None
+    reverse_a: bool = False
+    reverse_b: bool = False
 
     KEYS = ("garbage", "corrupt", "stall", "pull", "generation", "reply_jitter_ms", "receive",
-            "bridge", "usb", "actuation_ms")  # fmt: skip
+            "bridge", "usb", "actuation_ms", "reverse_a", "reverse_b")  # fmt: skip
+
+    @property
+    def reversed_motors(self) -> str:
+        """The motors wired backwards ('', 'a', 'b' or 'ab')."""
+        return ("a" if self.reverse_a else "") + ("b" if self.reverse_b else "")
 
     def __post_init__(self) -> None:
         for name in ("garbage", "corrupt"):
@@ -98,7 +108,7 @@ class CartFaults:
         """Faults from ``key=value,...``.
 
         Keys: garbage=0.05, corrupt=0.05, stall=S, pull=S, generation=b, reply_jitter_ms=3,
-        receive=microos, bridge=1, usb=off, actuation_ms=10.
+        receive=microos, bridge=1, usb=off, actuation_ms=10, reverse_b=1.
         """
         faults = cls()
         for item in filter(None, (part.strip() for part in text.split(","))):
@@ -117,6 +127,11 @@ class CartFaults:
                 if flag not in ("on", "off"):
                     raise InputError(f"virtual cart option 'usb' must be on or off, got '{value}'")
                 faults = replace(faults, usb=flag == "on")
+                continue
+            if key in ("reverse_a", "reverse_b"):
+                if value.strip() not in ("0", "1"):
+                    raise InputError(f"virtual cart option '{key}' must be 0 or 1, got '{value}'")
+                faults = replace(faults, **{key: value.strip() == "1"})
                 continue
             if key == "bridge":
                 if value.strip() not in ("1", "2"):

@@ -27,16 +27,24 @@ def plant_kind(spec: str) -> str:
     return kind if kind in ("physics", "virtual", "serial") else spec
 
 
-def physics_options(text: str) -> dict[str, float]:
-    """The options of ``physics:KEY=VALUE,...``: only ``actuation_ms`` (see ``check_actuation_ms``)."""
+def physics_options(text: str) -> dict[str, float | str]:
+    """The options of ``physics:KEY=VALUE,...``: ``actuation_ms`` (see ``check_actuation_ms``) and
+    ``reverse_a=1`` / ``reverse_b=1`` (that motor's leads swapped: it runs backwards)."""
     from cartctl.plants.physics_params import check_actuation_ms
 
-    options: dict[str, float] = {}
+    options: dict[str, float | str] = {}
     for item in filter(None, (part.strip() for part in text.split(","))):
         key, sep, value = (part.strip() for part in item.partition("="))
+        if sep and key in ("reverse_a", "reverse_b"):
+            if value not in ("0", "1"):
+                raise InputError(f"physics option {key} must be 0 or 1, got '{value}'")
+            motors = str(options.get("reversed_motors", "")).replace(key[-1], "")
+            options["reversed_motors"] = motors + (key[-1] if value == "1" else "")
+            continue
         if not sep or key != "actuation_ms":
             raise InputError(
-                f"bad physics option '{item}'; expected actuation_ms=X (ms in (0, 10])"
+                f"bad physics option '{item}'; expected actuation_ms=X (ms in (0, 10]), "
+                "reverse_a=1 or reverse_b=1"
             )
         options["actuation_ms"] = check_actuation_ms(value)
     return options
@@ -66,7 +74,7 @@ def make_plant(
     spec : str
         'sim' (the ARX models of ``model_path``), 'physics' (the physical simulator with
         ``preset``; 'physics:actuation_ms=10' lands each command 10 ms after its tick instead of
-        the calibrated 3), 'virtual' (that simulator behind a pseudo-terminal, through the serial
+        the calibrated 3; 'physics:reverse_b=1' wires motor b backwards), 'virtual' (that simulator behind a pseudo-terminal, through the serial
         path; 'virtual:garbage=0.05,corrupt=0.05,stall=S,pull=S,generation=b' injects faults)
         or 'serial:PORT' (the cart on that port).
     model_path : str or Path
@@ -103,8 +111,11 @@ def make_plant(
         from cartctl.plants.physics import PhysicsPlant
 
         options = physics_options(spec.partition(":")[2])
-        plant = PhysicsPlant(preset, noise_std_rad_s=noise_std_rad_s, seed=seed, **options)
-        timing = f", command lands {options['actuation_ms']:g} ms after its tick" if options else ""
+        plant = PhysicsPlant(preset, noise_std_rad_s=noise_std_rad_s, seed=seed, **options)  # type: ignore[arg-type]
+        timing = (f", command lands {options['actuation_ms']:g} ms after its tick"
+                  if "actuation_ms" in options else "")  # fmt: skip
+        if options.get("reversed_motors"):
+            timing += f", motor(s) {options['reversed_motors']} wired backwards"
         return plant, f"physics (preset {preset}{timing})"
     if spec == "virtual" or spec.startswith("virtual:"):
         from cartctl.plants.virtual_cart import CartFaults, VirtualCart, VirtualSerialCart

@@ -236,6 +236,10 @@ class PhysicsPlant:
     actuation_ms : float, optional
         When a command lands after its tick (ms, in (0, 10]); overrides the cart's
         ``actuation_delay_s`` (3 ms in the presets; 10 is microOS's next ``io()``).
+    reversed_motors : str, optional
+        Motors wired backwards, e.g. ``"b"``: their leads swapped, so a positive command turns
+        the wheel (and its encoder) the negative way. A fault to commission against; "" (none)
+        by default.
 
     Raises
     ------
@@ -250,7 +254,11 @@ class PhysicsPlant:
         noise_std_rad_s: float | None = None,
         seed: int | None = None,
         actuation_ms: float | None = None,
+        reversed_motors: str = "",
     ) -> None:
+        if set(reversed_motors) - {"a", "b"}:
+            raise InputError(f"reversed_motors names motors a and b, got '{reversed_motors}'")
+        self._sign = tuple(-1.0 if m in reversed_motors else 1.0 for m in ("a", "b"))
         params = preset(cart) if isinstance(cart, str) else cart
         if not isinstance(params, CartParams):
             raise InputError(f"cart must be a preset name or CartParams, got {type(cart).__name__}")
@@ -307,11 +315,12 @@ class PhysicsPlant:
         n, nd = self.params.substeps, self._delay_substeps
         va, vb = self._applied  # on the bridges since the previous command landed
         ca, cb = self.condition_voltage(voltage_a_v), self.condition_voltage(voltage_b_v)
-        ia, wa, tha = _advance(self._wheel_a, self._ia, self._wa, self._tha, va, nd)
-        ib, wb, thb = _advance(self._wheel_b, self._ib, self._wb, self._thb, vb, nd)
+        sa, sb = self._sign  # -1 for a motor whose leads are swapped
+        ia, wa, tha = _advance(self._wheel_a, self._ia, self._wa, self._tha, sa * va, nd)
+        ib, wb, thb = _advance(self._wheel_b, self._ib, self._wb, self._thb, sb * vb, nd)
         if nd < n:  # the new command lands inside this tick
-            ia, wa, tha = _advance(self._wheel_a, ia, wa, tha, ca, n - nd)
-            ib, wb, thb = _advance(self._wheel_b, ib, wb, thb, cb, n - nd)
+            ia, wa, tha = _advance(self._wheel_a, ia, wa, tha, sa * ca, n - nd)
+            ib, wb, thb = _advance(self._wheel_b, ib, wb, thb, sb * cb, n - nd)
         self._ia, self._wa, self._tha = ia, wa, tha
         self._ib, self._wb, self._thb = ib, wb, thb
         self._driving = (va, vb)

@@ -134,7 +134,8 @@ class VirtualCart:
     ) -> None:
         self.faults = faults or CartFaults()
         self.physics = PhysicsPlant(preset, noise_std_rad_s=noise_std_rad_s, seed=seed,
-                                    actuation_ms=self.faults.actuation_ms)  # fmt: skip
+                                    actuation_ms=self.faults.actuation_ms,
+                                    reversed_motors=self.faults.reversed_motors)  # fmt: skip
         self.preset = preset
         self.period_s = float(period_s)
         self.firmware: CartFirmware = firmware if firmware is not None else BridgeFirmware()

@@ -1,0 +1,252 @@
+"""Commissioning, stage 1: is the cart wired the way the controller will assume?
+
+One short open-loop experiment (:func:`checks_sequence`, 5.5 s) drives each motor in turn:
+
+- a **pulse** of :data:`PULSE_V` for 0.2 s: the wheel must turn, and turn so that the measured
+  speed has the voltage's sign. A wheel whose speed goes negative for a positive voltage has its
+  motor leads or its encoder channels the wrong way round; a pulse on one motor that moves only
+  the other motor's encoder means the two motors' connections are crossed. Either stops
+  commissioning (the loop would push the wrong way) with one line saying what to swap.
+- a slow **ramp** from 0 to :data:`RAMP_MAX_V` at 4 V/s: the **breakaway voltage** is where the
+  wheel starts to turn (the first of three ticks in a row with at least one encoder count, less
+  the loop delay and the one tick the speed needs to show it), and the speed at the ramp's end
+  gives a rough gain (rad/s per V above breakaway).
+
+:func:`choose_amplitude` turns these into the excitation amplitude. Everything here but
+:func:`run_checks` is pure: traces in, figures out.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cartctl.cart import SPEED_QUANTUM_RAD_S, SUPPLY_V
+from cartctl.commission import StageError
+from cartctl.data import Trace
+
+MOTORS = ("a", "b")
+PULSE_V = 4.0
+"""The direction pulse (V): above a cart's breakaway (about 1–2 V), a third of the supply."""
+PULSE_S = 0.2
+RAMP_MAX_V = 6.0
+"""Where the breakaway ramp ends (V): a wheel that has not turned by then is not working."""
+RAMP_RATE_V_S = 4.0
+"""The ramp's slope (V/s): slow against the motors' time constants (tens of ms)."""
+REST_S = 0.4
+MIN_COUNTS = 3
+"""Encoder counts a pulse must turn a wheel by to count as a motion (a noise-free tick is one)."""
+
+FULL_SCALE_FRACTION = 0.9
+"""The excitation stays within this fraction of the supply (the controller keeps the rest)."""
+REPORT_AMPLITUDE_V = 10.0
+"""The report's square-wave amplitude (V): the starting point of the amplitude rule."""
+FRICTION_MARGIN = 3.0
+"""The excitation is at least this many times the larger breakaway voltage (friction small)."""
+SPEED_SPAN = 2.0
+"""The excitation's estimated steady speed is at most this many times the verification step."""
+
+
+@dataclass(frozen=True)
+class Window:
+    """A stretch of the check experiment: which motor, what kind, ticks [start, stop)."""
+
+    motor: str
+    kind: str
+    start: int
+    stop: int
+
+
+@dataclass(frozen=True)
+class MotorCheck:
+    """One motor's figures from the checks.
+
+    Attributes
+    ----------
+    motor : str
+    pulse_turn_rad : float
+        The wheel's rotation during its pulse (measured speed × Ts summed; rad).
+    other_turn_rad : float
+        The other wheel's rotation during this motor's pulse (rad).
+    direction : str
+        'forward' (voltage + gives speed +), 'backward', 'crossed' (the pulse moved only the
+        other encoder), or 'still' (no motion).
+    breakaway_v : float or None
+        The voltage at which the wheel started to turn on the ramp (V); None if it never did.
+    gain_rad_s_v : float or None
+        The ramp's end speed over its voltage above breakaway (rad/s per V), quasi-static.
+    """
+
+    motor: str
+    pulse_turn_rad: float
+    other_turn_rad: float
+    direction: str
+    breakaway_v: float | None
+    gain_rad_s_v: float | None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        return {"pulse_turn_rad": self.pulse_turn_rad, "other_turn_rad": self.other_turn_rad,
+                "direction": self.direction, "breakaway_v": self.breakaway_v,
+                "gain_rad_s_v": self.gain_rad_s_v}  # fmt: skip
+
+
+def checks_sequence(
+    period_s: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], tuple[Window, ...]]:
+    """The check experiment's voltages (V) per motor and its windows.
+
+    Rest, pulse a, rest, pulse b, rest, ramp a, rest, ramp b, rest.
+    """
+    rest = round(REST_S / period_s)
+    pulse = np.full(round(PULSE_S / period_s), PULSE_V)
+    ramp = np.arange(1, round(RAMP_MAX_V / RAMP_RATE_V_S / period_s) + 1) * (
+        RAMP_RATE_V_S * period_s
+    )
+    parts: list[tuple[str, str, NDArray[np.float64]]] = [("", "rest", np.zeros(rest))]
+    for kind, shape in (("pulse", pulse), ("ramp", ramp)):
+        for m in MOTORS:
+            parts += [(m, kind, shape), ("", "rest", np.zeros(rest))]
+    ua, ub, windows, k = [], [], [], 0
+    for m, kind, volts in parts:
+        zeros = np.zeros_like(volts)
+        ua.append(volts if m == "a" else zeros)
+        ub.append(volts if m == "b" else zeros)
+        if m:
+            windows.append(Window(m, kind, k, k + volts.size))
+        k += volts.size
+    return np.concatenate(ua), np.concatenate(ub), tuple(windows)
+
+
+def _turn_rad(speed: NDArray[np.float64], start: int, stop: int, period_s: float) -> float:
+    return float(np.sum(speed[start:stop]) * period_s)
+
+
+def _breakaway(
+    speed: NDArray[np.float64], volts: NDArray[np.float64], w: Window, loop_delay_ticks: int
+) -> tuple[float | None, float | None]:
+    """(breakaway V, gain rad/s/V) of one motor's ramp; (None, None) if the wheel never turned."""
+    moving = np.abs(speed[w.start : w.stop]) >= 0.5 * SPEED_QUANTUM_RAD_S
+    runs = moving[:-2] & moving[1:-1] & moving[2:]
+    if not runs.any():
+        return None, None
+    first = w.start + int(np.argmax(runs))
+    at = max(w.start, first - loop_delay_ticks - 1)
+    breakaway = float(volts[at])
+    tail = slice(max(w.start, w.stop - 10), w.stop)
+    end_v = float(np.mean(volts[tail]))
+    end_speed = float(np.mean(np.abs(speed[tail])))
+    gain = end_speed / (end_v - breakaway) if end_v - breakaway > 0.1 else None
+    return breakaway, gain
+
+
+def analyse_checks(
+    trace: Trace, windows: tuple[Window, ...], loop_delay_ticks: int
+) -> dict[str, MotorCheck]:
+    """Each motor's direction, breakaway and rough gain from the check experiment.
+
+    The speed of a pulse is counted up to ``loop_delay_ticks + 10`` ticks after the pulse ends
+    (the wheel runs down and the last ticks reach the host late).
+    """
+    period_s = trace.period_s
+    n = len(trace)
+    quantum_rad = SPEED_QUANTUM_RAD_S * period_s
+    out: dict[str, MotorCheck] = {}
+    for m in MOTORS:
+        other = "b" if m == "a" else "a"
+        pulse = next(w for w in windows if w.motor == m and w.kind == "pulse")
+        stop = min(n, pulse.stop + loop_delay_ticks + 10)
+        own = _turn_rad(trace.speed(m), pulse.start, stop, period_s)
+        cross = _turn_rad(trace.speed(other), pulse.start, stop, period_s)
+        moved, moved_other = (abs(x) >= MIN_COUNTS * quantum_rad for x in (own, cross))
+        if moved:
+            direction = "forward" if own > 0 else "backward"
+        else:
+            direction = "crossed" if moved_other else "still"
+        ramp = next(w for w in windows if w.motor == m and w.kind == "ramp")
+        if ramp.stop <= n:
+            breakaway, gain = _breakaway(trace.speed(m), trace.voltage(m), ramp, loop_delay_ticks)
+        else:
+            breakaway, gain = None, None
+        out[m] = MotorCheck(m, own, cross, direction, breakaway, gain)
+    return out
+
+
+def verdict(checks: dict[str, MotorCheck]) -> None:
+    """Raise :class:`StageError` (one line, what to swap) unless both motors run the right way."""
+    for m, c in checks.items():
+        other = "b" if m == "a" else "a"
+        if c.direction == "backward":
+            raise StageError(
+                f"checks: motor {m} runs backwards (+{PULSE_V:g} V turned its encoder by "
+                f"{c.pulse_turn_rad:+.2f} rad): if wheel {m} turned forwards, swap its encoder "
+                f"channels A and B; if it turned backwards, swap motor {m}'s two leads"
+            )
+        if c.direction == "crossed":
+            raise StageError(
+                f"checks: a pulse on motor {m} moved only encoder {other} ({c.other_turn_rad:+.2f} "
+                f"rad): the motors' (or the encoders') connections a and b are crossed; swap them"
+            )
+        if c.direction == "still":
+            raise StageError(
+                f"checks: motor {m} did not turn at +{PULSE_V:g} V (its encoder moved "
+                f"{c.pulse_turn_rad:+.3f} rad): check its supply, leads and encoder cable"
+            )
+        if c.breakaway_v is None:
+            raise StageError(
+                f"checks: motor {m} did not keep turning on a ramp up to {RAMP_MAX_V:g} V: check "
+                "for a blocked wheel or a loose encoder"
+            )
+
+
+@dataclass(frozen=True)
+class Amplitude:
+    """The excitation amplitude and how the rule reached it.
+
+    Attributes
+    ----------
+    voltage_v : float
+        The square wave's amplitude (V).
+    floor_v, ceiling_v : float
+        The rule's bounds: friction and supply; and the speed's.
+    rule : str
+        The rule, in words, with its numbers.
+    """
+
+    voltage_v: float
+    floor_v: float
+    ceiling_v: float
+    rule: str
+
+
+def choose_amplitude(checks: dict[str, MotorCheck], step_rad_s: float) -> Amplitude:
+    """The square excitation's amplitude (V) from the checks (the rule in ``rule``).
+
+    Start from the report's 10 V; no more than the voltage at which the faster motor's estimated
+    steady speed reaches :data:`SPEED_SPAN` × the verification step (the model is identified over
+    the speeds the controller will meet, and not far beyond, where the cart's nonlinearities are
+    not those of the step), and never beyond :data:`FULL_SCALE_FRACTION` of the supply; at least
+    :data:`FRICTION_MARGIN` × the larger breakaway voltage, so friction stays a small part of the
+    drive. Where the two conflict the friction floor wins (within the supply bound).
+    """
+    breakaway = max(c.breakaway_v or 0.0 for c in checks.values())
+    gains = [c.gain_rad_s_v for c in checks.values() if c.gain_rad_s_v]
+    supply_cap = FULL_SCALE_FRACTION * SUPPLY_V
+    speed_cap = (breakaway + SPEED_SPAN * step_rad_s / max(gains)) if gains else supply_cap
+    ceiling = min(supply_cap, speed_cap)
+    floor = min(supply_cap, FRICTION_MARGIN * breakaway)
+    voltage = max(floor, min(REPORT_AMPLITUDE_V, ceiling))
+    voltage = math.floor(voltage * 10.0) / 10.0  # to 0.1 V: a number a person can repeat
+    rule = (
+        f"the report's {REPORT_AMPLITUDE_V:g} V, at most {ceiling:.1f} V (the lower of "
+        f"{FULL_SCALE_FRACTION:.0%} of the {SUPPLY_V:g} V supply and the voltage whose estimated "
+        f"steady speed is {SPEED_SPAN:g} × the {step_rad_s:g} rad/s step: breakaway "
+        f"{breakaway:.2f} V + {SPEED_SPAN * step_rad_s:g} rad/s ÷ "
+        f"{max(gains) if gains else math.nan:.2f} rad/s/V), at least {floor:.1f} V "
+        f"({FRICTION_MARGIN:g} × the larger breakaway voltage)"
+    )
+    return Amplitude(voltage, floor, ceiling, rule)

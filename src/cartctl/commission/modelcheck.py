@@ -1,0 +1,118 @@
+"""Commissioning, stage 3: identify both motors with a validation split, and judge the models.
+
+The excitation is split in time (:data:`SPLIT`: the first 70 % estimates, the last 30 % — one
+whole square cycle and a half of the report's five — validates), and the model structure is the
+one that holds whatever the cart's actuation timing: ARX with na = 2, nb = 3 and nk equal to the
+loop delay the checks measured (the measurement right after a command already sees part of it
+when it lands within the tick; ``models/ground-timing.toml`` has the same structure).
+
+A model passes (:func:`judge`) when, on the validation part:
+
+- its **simulation fit** is at least :data:`MIN_FIT_PERCENT` (the NRMSE fit of the model run from
+  the voltages alone, as ``cartctl validate``): below, the cart's speed is not what the model
+  says, and a loop tuned on the model meets another cart;
+- it is **stable** with every pole inside :data:`MAX_POLE_RADIUS` (a motor's speed settles; a pole
+  nearer the unit circle is a drift or an integrator the data cannot pin down);
+- its residuals are **not clearly correlated with the input**: at most :data:`MAX_CROSS_FRACTION`
+  of the cross-correlation lags outside their 99 % bound (the residual test allows 2 of 51 for a
+  perfect model; a quarter means input-driven behaviour the model misses, such as a wrong delay).
+
+Whiteness of the residuals is reported but does not fail a model: quantised encoder speeds and
+friction leave coloured residuals on any real cart, and the loop is tuned on θ's uncertainty.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from cartctl.commission import StageError
+from cartctl.data import Trace
+from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, identify
+
+SPLIT = 0.7
+NA, NB = 2, 3
+MIN_FIT_PERCENT = 80.0
+MAX_POLE_RADIUS = 0.99
+MAX_CROSS_FRACTION = 0.25
+
+
+def request_for(loop_delay_ticks: int) -> IdentifyRequest:
+    """The identification request for a loop of ``loop_delay_ticks`` (nk = that, at least 1)."""
+    return IdentifyRequest(motors=("a", "b"), na=NA, nb=NB, delay=max(1, int(loop_delay_ticks)),
+                           split=SPLIT)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class MotorVerdict:
+    """One motor's validation figures and whether they pass.
+
+    Attributes
+    ----------
+    fit_percent : float
+        Simulation fit on the validation part (%).
+    pole_radius : float
+        The largest pole's |z|.
+    cross_outside, cross_lags : int
+        Cross-correlation lags outside the 99 % bound, of all lags.
+    white : bool
+        The whiteness test's result (reported only).
+    problems : tuple of str
+        Why the model fails; empty when it passes.
+    """
+
+    fit_percent: float
+    pole_radius: float
+    cross_outside: int
+    cross_lags: int
+    white: bool
+    problems: tuple[str, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        return {"validation_fit_percent": self.fit_percent, "pole_radius": self.pole_radius,
+                "cross_outside": self.cross_outside, "cross_lags": self.cross_lags,
+                "white": self.white, "passed": not self.problems,
+                "problems": list(self.problems)}  # fmt: skip
+
+
+def judge(result: IdentifyResult) -> dict[str, MotorVerdict]:
+    """Each motor's verdict (see the module docstring for the rules)."""
+    out = {}
+    for m, r in result.motors.items():
+        fit = float(r.chosen.fit_simulation_percent)
+        radius = float(r.chosen.model.pole_radius())
+        d = r.diagnostics
+        cross_out = d.residuals.cross_outside if d is not None else 0
+        lags = len(d.residuals.to_dict()["cross"]) if d is not None else 0
+        white = bool(d.residuals.white) if d is not None else False
+        problems = []
+        if not fit >= MIN_FIT_PERCENT:
+            problems.append(f"validation fit {fit:.1f} % < {MIN_FIT_PERCENT:g} %")
+        if not radius < MAX_POLE_RADIUS:
+            problems.append(f"a pole at |z| = {radius:.3f} (stable needs < {MAX_POLE_RADIUS:g})")
+        if lags and cross_out > MAX_CROSS_FRACTION * lags:
+            problems.append(f"residuals correlated with the input ({cross_out}/{lags} lags "
+                            "outside the 99 % bound)")  # fmt: skip
+        out[m] = MotorVerdict(fit, radius, int(cross_out), int(lags), white, tuple(problems))
+    return out
+
+
+def identify_and_judge(
+    trace: Trace, loop_delay_ticks: int
+) -> tuple[IdentifyResult, IdentifyRequest, dict[str, MotorVerdict]]:
+    """Identify both motors from the excitation and judge them (no exception for a failure)."""
+    request = request_for(loop_delay_ticks)
+    result = identify([trace], request)
+    return result, request, judge(result)
+
+
+def verdict(verdicts: dict[str, MotorVerdict], excitation_v: float) -> None:
+    """Raise :class:`StageError` naming the first failing motor and why (one line)."""
+    for m, v in verdicts.items():
+        if v.problems:
+            raise StageError(
+                f"identification: motor {m}'s model fails validation ({'; '.join(v.problems)}); "
+                f"the {excitation_v:g} V excitation does not give a model to tune on: check the "
+                "encoder (noise, loose cable) and that nothing touches the wheels"
+            )

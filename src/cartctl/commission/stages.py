@@ -1,0 +1,282 @@
+"""The commissioning stages that drive the plant or write files: the shell around the pure parts.
+
+:class:`Commission` holds what the stages share (the plant name and options, the output folder,
+the report, the results so far) and runs one stage per method. Each stage makes its own plant
+from the name (:func:`cartctl.plants.factory.make_plant`), so a serial cart is connected for its
+experiment and closed (zero volts) at its end; an experiment stopped by Ctrl-C or a plant fault
+keeps its ticks and the plant closed (:func:`cartctl.experiment.run_experiment`).
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cartctl.commission import StageError, checks, modelcheck, report, tuning, verify
+from cartctl.commission.recording import record_stage, trace_series
+from cartctl.commission.timing import later_command
+from cartctl.data import Trace, write_trace
+from cartctl.errors import CartctlError
+from cartctl.experiment import ExperimentResult, run_experiment
+from cartctl.plants.base import ClockedPlant
+from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
+from cartctl.progress import ProgressBar
+
+STAGES = ("checks", "excitation", "identification", "tuning", "verification")
+
+
+class StageStoppedError(Exception):
+    """An experiment ended early (Ctrl-C or a plant fault); what was recorded is kept."""
+
+    def __init__(self, stage: str, failure: str | None) -> None:
+        super().__init__(stage)
+        self.stage, self.failure = stage, failure
+
+
+@dataclass
+class Commission:
+    """Commissioning of one plant into ``out`` (see :mod:`cartctl.commission` for the stages).
+
+    Attributes
+    ----------
+    spec : str
+        The plant name (``virtual``, ``physics``, ``serial:PORT`` …).
+    out : Path
+    plant_options : dict
+        ``preset``, ``noise_std_rad_s``, ``seed``, ``connect_timeout_s`` for ``make_plant``.
+    jobs : int or None
+        Worker processes of the tuning.
+    results : dict
+        Each finished stage's figures (for ``--json``).
+    """
+
+    spec: str
+    out: Path
+    plant_options: dict[str, Any]
+    jobs: int | None = None
+    results: dict[str, Any] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.report = report.Report(self.out / "summary.md", f"cartctl commission {self.spec}")
+        self.description = self.spec
+        self.loop_delay_ticks = 1
+        self.amplitude: checks.Amplitude | None = None
+        self.excitation: Trace | None = None
+        self.model_path = self.out / "model.toml"
+        self.controller_path = self.out / "controller.toml"
+        self.tuned: tuning.TuningResult | None = None
+        self.current = STAGES[0]
+
+    # -- helpers --------------------------------------------------------------------------------
+
+    def say(self, stage: str, text: str) -> None:
+        """Progress on stderr: '[2/5] excitation: …'."""
+        print(f"cartctl commission [{STAGES.index(stage) + 1}/{len(STAGES)}] {stage}: {text}",
+              file=sys.stderr, flush=True)  # fmt: skip
+
+    def _record(self, name: str, series: Any, note: str, *, layout: bool = False) -> None:
+        problem = record_stage(self.out / f"{name}.rrd", series, note, name, layout=layout)
+        if problem:
+            self.problems.append(problem)
+
+    def _experiment(self, stage: str, ua: np.ndarray, ub: np.ndarray,
+                    probe: bool = False) -> ExperimentResult:  # fmt: skip
+        plant, self.description = make_plant(self.spec, **self.plant_options)
+        try:
+            if isinstance(plant, ClockedPlant):
+                plant.connect()  # the port and the cart's HEARTBEAT, or one clear line
+                if probe:
+                    self.loop_delay_ticks = int(plant.measure_loop_delay())  # type: ignore[attr-defined]
+            elif probe:
+                self.loop_delay_ticks = int(getattr(plant, "loop_delay_ticks", 1) or 1)
+        except BaseException:
+            plant.close()
+            raise
+        bar = ProgressBar(ua.size, f"cartctl commission {stage}")
+        try:
+            return run_experiment(plant, ua, ub, on_tick=bar.update, source=self.description)
+        finally:
+            bar.close()
+
+    def _keep(self, stage: str, result: ExperimentResult) -> Trace:
+        if len(result.trace):
+            write_trace(result.trace, self.out / f"{stage}.csv")
+        if result.interrupted or result.failure:
+            self.report.add(stage, f"StageStoppedError after {len(result.trace)} ticks: "
+                                   f"{result.failure or 'interrupted'}; {stage}.csv holds them.")  # fmt: skip
+            raise StageStoppedError(stage, result.failure)
+        return result.trace
+
+    # -- the stages -----------------------------------------------------------------------------
+
+    def run_checks(self) -> None:
+        """Stage 1: port, heartbeat, loop delay; direction, encoder sign, breakaway; amplitude."""
+        self.say("checks", "connecting, then a pulse and a slow ramp on each motor (5.5 s)")
+        ua, ub, windows = checks.checks_sequence(0.01)
+        trace = self._keep("checks", self._experiment("checks", ua, ub, probe=True))
+        found = checks.analyse_checks(trace, windows, self.loop_delay_ticks)
+        failure = None
+        try:
+            checks.verdict(found)
+            self.amplitude = checks.choose_amplitude(found, verify.STEP_RAD_S)
+        except StageError as exc:
+            failure = exc
+        body = report.checks_body(self.loop_delay_ticks, found, self.description, self.amplitude)
+        report.plot_lines(self.out / "checks.png", "Checks: pulses, then ramps", [
+            ("voltage (V)", {f"motor {m}": (trace.time_s, trace.voltage(m)) for m in "ab"}),
+            ("speed (rad/s)", {f"motor {m}": (trace.time_s, trace.speed(m)) for m in "ab"})])  # fmt: skip
+        self._record("checks", trace_series(trace), body, layout=True)
+        self.results["checks"] = {"plant": self.description,
+                                  "loop_delay_ticks": self.loop_delay_ticks,
+                                  "motors": {m: c.to_dict() for m, c in found.items()},
+                                  "amplitude_v": None if self.amplitude is None
+                                  else self.amplitude.voltage_v}  # fmt: skip
+        if failure is not None:
+            self.report.add("checks", body + f"\n\n**StageStoppedError:** {failure}")
+            raise failure
+        self.report.add("checks", body)
+        self.say("checks", f"loop delay {self.loop_delay_ticks} tick(s); breakaway "
+                 + ", ".join(f"{m} {c.breakaway_v:.2f} V" for m, c in found.items())
+                 + f"; excitation {self.amplitude.voltage_v:g} V")  # type: ignore[union-attr]  # fmt: skip
+
+    def run_excitation(self) -> None:
+        """Stage 2: the report's square wave at the chosen amplitude on both motors."""
+        from cartctl.signals import make_signal
+
+        assert self.amplitude is not None
+        volts = make_signal("square", self.amplitude.voltage_v)
+        self.say("excitation", f"square ±{self.amplitude.voltage_v:g} V, {volts.size / 100:g} s")
+        self.excitation = self._keep("excitation", self._experiment("excitation", volts, volts))
+        trace = self.excitation
+        body = (f"The report's square wave (+A, 0, −A for 1 s each, 5 cycles) at A = "
+                f"{self.amplitude.voltage_v:g} V on both motors; peak speeds "
+                + ", ".join(f"{m} {np.max(np.abs(trace.speed(m))):.1f} rad/s" for m in "ab")
+                + ".\n\nFiles: excitation.csv, excitation.rrd.")  # fmt: skip
+        self._record("excitation", trace_series(trace), body, layout=True)
+        self.results["excitation"] = {"amplitude_v": self.amplitude.voltage_v, "ticks": len(trace),
+                                      "trace": str(self.out / "excitation.csv")}  # fmt: skip
+        self.report.add("excitation", body)
+
+    def run_identification(self) -> None:
+        """Stage 3: ARX with a validation split; the verdict; model.toml (model-failed.toml)."""
+        from cartctl.identification.pipeline import model_file
+        from cartctl.modelfile import save_models
+
+        assert self.excitation is not None and self.amplitude is not None
+        self.say("identification", f"ARX na={modelcheck.NA} nb={modelcheck.NB} "
+                 f"nk={max(1, self.loop_delay_ticks)}, validated on the last "
+                 f"{1 - modelcheck.SPLIT:.0%}")  # fmt: skip
+        result, request, verdicts = modelcheck.identify_and_judge(self.excitation,
+                                                                  self.loop_delay_ticks)  # fmt: skip
+        passed = not any(v.problems for v in verdicts.values())
+        if not passed:
+            self.model_path = self.out / "model-failed.toml"
+        files = [str(self.out / "excitation.csv")]
+        save_models(model_file(result, files, request, source=f"cartctl commission {self.spec}"),
+                    self.model_path)  # fmt: skip
+        body = report.model_body(result, verdicts, self.model_path.name)
+        series, panels = {}, []
+        for m, r in result.motors.items():
+            d = r.diagnostics
+            if d is None or not d.validation:
+                continue
+            y, u = d.validation[0]
+            t = np.arange(y.size) * result.period_s
+            sim = r.chosen.model.simulate(u)
+            series[f"identification/{m}/measured"] = (t, y)
+            series[f"identification/{m}/simulated"] = (t, sim)
+            panels.append((f"motor {m} (rad/s)", {"measured": (t, y), "model": (t, sim)}))
+        if panels:
+            report.plot_lines(self.out / "identification.png",
+                              "Validation: measured speed and the model's simulation", panels)  # fmt: skip
+        self._record("identification", series, body)
+        self.results["model"] = {
+            "path": str(self.model_path), "passed": passed, "loop_delay_ticks": self.loop_delay_ticks,
+            "motors": {m: {"theta": list(r.chosen.model.theta), "nk": r.chosen.model.nk,
+                           "dc_gain": r.chosen.model.dc_gain(), **verdicts[m].to_dict()}
+                       for m, r in result.motors.items()}}  # fmt: skip
+        try:
+            modelcheck.verdict(verdicts, self.amplitude.voltage_v)
+        except StageError as exc:
+            self.report.add("identification", body + f"\n\n**StageStoppedError:** {exc}")
+            raise
+        self.report.add("identification", body)
+
+    def run_tuning(self) -> None:
+        """Stage 4: the robust grid on the model; controller.toml."""
+        self.say("tuning", f"{tuning.GRID}: each on the model, {tuning.PLANTS} plants of its "
+                 "uncertainty and commands landing 3 and 7 ms later")  # fmt: skip
+        from cartctl.tune.grid import grid_settings, parse_grid
+
+        n = len(grid_settings(parse_grid(tuning.GRID, tuning.METHOD)))
+        bar = ProgressBar(n, "cartctl commission tuning")
+        try:
+            self.tuned = tuning.run_tuning(self.model_path, self.loop_delay_ticks, bar.update,
+                                           self.jobs)  # fmt: skip
+        except StageError as exc:
+            self.report.add("tuning", f"**StageStoppedError:** {exc}")
+            raise
+        finally:
+            bar.close()
+        command = tuning.save_chosen(self.tuned, self.model_path, self.controller_path)
+        from cartctl.commission.tuning_report import tuning_body, tuning_steps
+
+        chosen = tuning.row_summary(self.tuned.chosen)
+        body = tuning_body(self.tuned, command)
+        series = tuning_steps(self.controller_path, self.model_path, later_command,
+                              self.out / "tuning.png")  # fmt: skip
+        self._record("tuning", series, body)
+        self.results["controller"] = {"path": str(self.controller_path), "command": command,
+                                      "settings": chosen["settings"],
+                                      "predicted": tuning.replace_none(self.tuned.predicted()),
+                                      "timing_plants": chosen.get("timing")}  # fmt: skip
+        self.report.add("tuning", body)
+
+    def run_verification(self) -> None:
+        """Stage 5: ``cartctl run`` of the controller on the plant; measured against predicted."""
+        assert self.tuned is not None
+        fast = plant_kind(self.spec) in SIMULATED
+        self.say("verification", f"{verify.REFERENCE} for {verify.DURATION_S:g} s with "
+                 f"controller.toml{' (--fast)' if fast else ''}")  # fmt: skip
+        opts = self.plant_options
+        argv = verify.run_argv(self.spec, self.controller_path, self.out, fast=fast,
+                               plant_options=["--preset", opts["preset"], "--noise",
+                                              str(opts["noise_std_rad_s"]), "--connect-timeout",
+                                              str(opts["connect_timeout_s"])]
+                               + ([] if opts["seed"] is None else ["--seed", str(opts["seed"])]))  # fmt: skip
+        code, summary = verify.run_step(argv)
+        if summary is None or code not in (0,):
+            self.report.add("verification", f"`cartctl {' '.join(argv)}` ended with code {code}.")
+            if code >= 128:
+                raise StageStoppedError("verification", None)
+            raise StageError(f"verification: the closed-loop run ended with code {code}; see "
+                              f"{self.out / 'verification.csv'}")  # fmt: skip
+        from cartctl.commission.tuning_report import verification_body
+
+        checked = verify.compare(summary, tuning.replace_none(self.tuned.predicted()))
+        self.results["verification"] = {**checked.to_dict(), "trace": summary.get("trace"),
+                                         "recording": summary.get("recording"),
+                                         "command": "cartctl " + " ".join(argv)}  # fmt: skip
+        body = verification_body(checked, summary, argv)
+        self.report.add("verification", body)
+        if not checked.passed:
+            raise StageError(
+                f"verification: the step on the cart gave overshoot "
+                f"{report.fmt(checked.measured['overshoot_percent'], 1)} % and settling "
+                f"{report.fmt(checked.measured['settling_time_s'], 0, 1e3)} ms, beyond "
+                f"{checked.limits['overshoot_percent']:.1f} % / "
+                f"{checked.limits['settling_time_s'] * 1e3:.0f} ms; see summary.md")  # fmt: skip
+
+    def run_all(self) -> None:
+        """Every stage in order (raises :class:`StageError`, :class:`StageStoppedError`, CartctlError)."""
+        for stage in STAGES:
+            self.current = stage
+            getattr(self, f"run_{stage}")()
+
+
+__all__ = ["STAGES", "CartctlError", "Commission", "StageStoppedError"]

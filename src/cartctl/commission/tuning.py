@@ -1,0 +1,231 @@
+"""Commissioning, stage 4: robust tuning on the identified model, and the controller chosen.
+
+``cartctl tune --robust``'s machinery (:mod:`cartctl.tune`) over a small pole-placement grid
+(:data:`GRID`: 5 settling times × 4 overshoots). Each setting is designed on the identified model
+(with the loop delay the checks measured), run in the simulated loop on that model (nominal), and
+scored at once on :data:`PLANTS` plants drawn from the model's own uncertainty
+(:mod:`cartctl.tune.uncertainty`: θ ± its standard deviation, DC gain ±10 %, loop delay ±1 tick)
+and, in the real loop, on the model with its commands landing 3 and 7 ms later
+(:mod:`cartctl.commission.timing`). The physics preset of ``tune --robust`` is left out: it is
+the course's cart, not the one being commissioned.
+
+The choice is ``tune --choose best --max-overshoot 5``'s (:func:`cartctl.tune.robust_choice.
+choose_best_robust`): among the settings that settle on every plant, with overshoot ≤ 5 % on the
+model and on both timing plants and a nominal settling time ≤ :data:`MAX_SETTLING_S`, the lowest
+worst-case overshoot, then the fastest nominal settling.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cartctl.commission import StageError
+from cartctl.commission.timing import LATER_FRACTIONS, later_command
+from cartctl.errors import InputError
+from cartctl.modelfile import ModelFile, load_models
+from cartctl.plants.sim import ArxPlant
+from cartctl.stepinfo import encoder_quantum_rad_s
+from cartctl.tune import engine
+from cartctl.tune import grid as tuning
+from cartctl.tune import robust as robustness
+from cartctl.tune import robust_choice as choice
+from cartctl.tune.batch import ArxBatch, simulate_batch
+from cartctl.tune.uncertainty import PlantSample, sample_plants
+
+METHOD = "poles"
+GRID = "settling_time=0.08:0.16:0.02,overshoot=0.5:5:1.5"
+"""The grid: settling-time targets 80–160 ms × overshoot targets 0.5–5 % (20 settings)."""
+PLANTS = 48
+"""Plants drawn from the model's uncertainty (with the nominal model and 2 timing plants: 51)."""
+SEED = 1
+MAX_OVERSHOOT_PERCENT = 5.0
+MAX_SETTLING_S = 0.13
+"""The chosen setting's nominal settling bound (s): 20 ms below the 150 ms a commissioned loop
+must meet, left for the cart's difference from its model."""
+DESIGN_FIXED = {"process_noise_std_v": 0.05, "bias_drift_std_v": 0.06}
+"""The estimator noise of the shipped ``controllers/poles.toml``: every setting shares it (not its
+timing noise, which the batch loop of the sampled plants cannot run)."""
+REFERENCE = "step:10"
+DURATION_S = 1.0
+_KEYS = {"overshoot_percent": "overshoot_percent", "settling_time_s": "settling_time_s",
+         "rms_error": "rms_error", "peak_voltage_v": "max_abs_voltage"}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class CommissionJob:
+    """The grid for :func:`cartctl.tune.engine.run_grid` (picklable).
+
+    Attributes
+    ----------
+    tune : TuneJob
+        Model file, method, reference, duration, the shared design fields (loop delay included).
+    sample : PlantSample
+    items : tuple of (int, dict)
+        The settings.
+    fractions : tuple of float
+        The timing plants' later landing (ticks).
+    """
+
+    tune: engine.TuneJob
+    sample: PlantSample
+    items: tuple[tuple[int, dict[str, float]], ...]
+    fractions: tuple[float, ...] = LATER_FRACTIONS
+
+
+def _timing_entry(job: CommissionJob, models: ModelFile, fraction: float,
+                  nominal: engine.Nominal) -> dict[str, Any]:  # fmt: skip
+    """One timing plant's real-loop run, as ``tune --robust``'s physics entries."""
+    plant = ArxPlant(*(later_command(models.motor(m), fraction) for m in ("a", "b")))
+    summary, failure = engine.simulate(plant, nominal.controllers, nominal.references,
+                                       period_s=nominal.period_s,
+                                       voltage_limit_v=nominal.voltage_limit_v)  # fmt: skip
+    worst = (
+        tuning.worst_metrics(summary["motors"]) if not failure else dict.fromkeys(_KEYS.values())
+    )
+    settled = not failure and all(m.get("settling_time_s") is not None
+                                  for m in summary["motors"].values())  # fmt: skip
+    return {"later_ms": round(fraction * models.period_s * 1e3, 3),
+            **{k: worst[v] for k, v in _KEYS.items()}, "failure": failure,
+            "motors": summary["motors"], "settled": settled}  # fmt: skip
+
+
+def evaluate(job: CommissionJob, models: ModelFile, index: int,
+             settings: dict[str, float]) -> robustness.RobustRow:  # fmt: skip
+    """One setting on the nominal model, the sampled plants and the timing plants."""
+    nominal = engine.evaluate_nominal(job.tune, models, index, settings)
+    if not nominal.result.feasible:
+        return robustness.RobustRow(nominal.result)
+    floor = encoder_quantum_rad_s(nominal.period_s)
+    per_motor, diverged = [], np.zeros(job.sample.size + 1, dtype=bool)
+    for m in ("a", "b"):
+        s = job.sample.motors[m]
+        plants = ArxBatch.from_models(
+            [models.motor(m)] + [s.model(i, models.period_s) for i in range(job.sample.size)]
+        )
+        trace = simulate_batch(nominal.controllers[m], plants, nominal.references[m],
+                               voltage_limit_v=nominal.voltage_limit_v)  # fmt: skip
+        per_motor.append(robustness.step_metrics(trace, floor))
+        diverged |= trace.diverged
+    figures = {k: nominal.result.worst[v] for k, v in _KEYS.items()}
+    timing = [_timing_entry(job, models, f, nominal) for f in job.fractions]
+    score = robustness.score_plants(per_motor, diverged, figures, {}, timing)
+    return robustness.RobustRow(nominal.result, score)
+
+
+def evaluate_chunk(job: CommissionJob) -> list[robustness.RobustRow]:
+    """Every setting of a chunk (the worker function)."""
+    models = load_models(job.tune.model)
+    return [evaluate(job, models, i, s) for i, s in job.items]
+
+
+@dataclass(frozen=True)
+class TuningResult:
+    """The grid's rows and the chosen one.
+
+    Attributes
+    ----------
+    rows : list of RobustRow
+        Every setting, sorted as ``tune --robust`` sorts them.
+    chosen : RobustRow
+    request_argv : list of str
+        The ``cartctl design`` arguments that make the chosen controller.
+    """
+
+    rows: list[robustness.RobustRow]
+    chosen: robustness.RobustRow
+    design_fixed: dict[str, float]
+
+    def predicted(self) -> dict[str, float | None]:
+        """The chosen setting's nominal and worst-case overshoot (%) and settling (s)."""
+        score = self.chosen.score
+        assert score is not None
+        return {f"{which}_{k}": score.figures[k][which]
+                for which in ("nominal", "worst") for k in ("overshoot_percent",
+                                                            "settling_time_s")}  # fmt: skip
+
+
+def run_tuning(model_path: Path, loop_delay_ticks: int,
+               progress: Callable[[int], None] | None = None,
+               jobs: int | None = None) -> TuningResult:  # fmt: skip
+    """Tune the grid on ``model_path`` and choose (raises :class:`StageError` if none fits)."""
+    models = load_models(model_path)
+    fixed = {**DESIGN_FIXED, "loop_delay_ticks": loop_delay_ticks}
+    settings = tuning.grid_settings(tuning.parse_grid(GRID, METHOD))
+    tune_job = engine.TuneJob(str(model_path), METHOD, "sim", "ground", REFERENCE, DURATION_S, 0,
+                              (), tuple(fixed.items()))  # fmt: skip
+    try:
+        sample = sample_plants(models, PLANTS, SEED)
+    except InputError as exc:
+        raise StageError(f"tuning: {exc}") from None
+    job = CommissionJob(tune_job, sample, tuple(enumerate(settings, start=1)))
+    rows = engine.run_grid(job, jobs or min(2, os.cpu_count() or 1), progress, evaluate_chunk)
+    rows = choice.sort_robust(choice.mark_robust_pareto(rows))
+    limits = choice.Limits(MAX_OVERSHOOT_PERCENT)
+    fast = [r for r in rows if r.score is not None
+            and r.score.value("settling_time_s", "nominal") <= MAX_SETTLING_S]  # fmt: skip
+    try:
+        chosen = choice.choose_best_robust(fast, limits)
+    except InputError:
+        raise StageError(
+            f"tuning: none of the {len(rows)} pole-placement settings settles on every plant "
+            f"with overshoot <= {MAX_OVERSHOOT_PERCENT:g} % on the model and the later-command "
+            f"plants and settling <= {MAX_SETTLING_S * 1e3:g} ms on the model; the model "
+            "may be too uncertain (see identification in summary.md)"
+        ) from None
+    return TuningResult(rows, chosen, fixed)
+
+
+def save_chosen(result: TuningResult, model_path: Path, out: Path) -> str:
+    """Write the chosen setting's controller file, as ``cartctl design`` would; its command."""
+    from cartctl.design.controllerfile import save_controller
+    from cartctl.design.loop_report import analyse_designs
+    from cartctl.design.make import controller_file, design_models
+
+    models = load_models(model_path)
+    request = tuning.design_request(METHOD, result.chosen.result.settings, 0,
+                                    result.design_fixed)  # fmt: skip
+    designs = design_models(request, models, ("a", "b"))
+    entries = designs.entries()
+    for m, analysis in analyse_designs(designs).items():
+        entries[m].update(analysis.entry())
+    argv = ["design", *request.to_argv(str(model_path), always=tuning.request_axes(METHOD)),
+            "--out", str(out)]  # fmt: skip
+    command = "cartctl " + shlex.join(argv)
+    save_controller(controller_file(designs, model_path, command=command,
+                                    period_s=models.period_s), out)  # fmt: skip
+    return command
+
+
+def row_summary(row: robustness.RobustRow) -> dict[str, Any]:
+    """A row for the summary table and the JSON: settings, nominal, worst, timing plants."""
+    out: dict[str, Any] = {"index": row.index, "settings": dict(row.result.settings),
+                           "status": row.result.status}  # fmt: skip
+    if row.score is not None:
+        out |= {"nominal": {k: row.score.figures[k]["nominal"] for k in _KEYS},
+                "worst": {k: row.score.figures[k]["worst"] for k in _KEYS},
+                "timing": [{k: e[k] for k in ("later_ms", *_KEYS, "settled")}
+                           for e in row.score.actuation],
+                "pareto": row.pareto}  # fmt: skip
+    return replace_none(out)
+
+
+def replace_none(value: Any) -> Any:
+    """Infinite floats as None (JSON), recursively."""
+    if isinstance(value, dict):
+        return {k: replace_none(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [replace_none(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+__all__ = ["CommissionJob", "TuningResult", "evaluate_chunk", "row_summary", "run_tuning",
+           "save_chosen"]  # fmt: skip

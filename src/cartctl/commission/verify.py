@@ -1,0 +1,109 @@
+"""Commissioning, stage 5: a closed-loop step on the cart, measured against the prediction.
+
+The step is ``cartctl run`` itself (:func:`run_step`: the chosen controller, ``step:10`` for 2 s,
+the same plant; ``--fast`` where the plant is simulated), so what commissioning verified is what
+the user will run. :func:`compare` judges it (pure): the worse of motors a and b must have
+
+- overshoot ≤ max(:data:`TARGET_OVERSHOOT_PERCENT`, the predicted nominal overshoot) + the
+  tolerance: one encoder count per tick as a share of the step (3.5 % of 10 rad/s) when the run
+  measured the encoder's speed, whose overshoot is blurred by a whole count, and
+  :data:`TRUE_SPEED_TOLERANCE_PP` where the plant gives the true speed;
+- settling ≤ max(:data:`TARGET_SETTLING_S`, the predicted nominal settling + two ticks).
+
+The predicted figures are the tuning's for the chosen setting (nominal: the loop on the model;
+worst: over its sampled and timing plants), shown beside the measured ones.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from cartctl.cart import SPEED_QUANTUM_RAD_S
+
+STEP_RAD_S = 10.0
+REFERENCE = f"step:{STEP_RAD_S:g}"
+DURATION_S = 2.0
+TARGET_OVERSHOOT_PERCENT = 5.0
+TARGET_SETTLING_S = 0.15
+TRUE_SPEED_TOLERANCE_PP = 1.0
+"""Overshoot tolerance (percentage points) on a true speed: the loop's own tick-to-tick spread."""
+
+
+def run_argv(plant: str, controller: Path, out: Path, *, fast: bool,
+             plant_options: Sequence[str] = ()) -> list[str]:  # fmt: skip
+    """The ``cartctl run`` arguments of the verification step."""
+    argv = ["run", "--plant", plant, "--controller", str(controller), "--reference", REFERENCE,
+            "--duration", f"{DURATION_S:g}", "--rerun", "save", "--out", str(out),
+            "--name", "verification", "--json", *plant_options]  # fmt: skip
+    return argv + (["--fast"] if fast else [])
+
+
+def run_step(argv: list[str]) -> tuple[int, dict[str, Any] | None]:
+    """Run ``cartctl run`` in this process; its exit code and its ``--json`` summary."""
+    from cartctl.cli import build_parser
+
+    args = build_parser().parse_args(argv)
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = int(args.func(args))
+    try:
+        return code, json.loads(out.getvalue())
+    except json.JSONDecodeError:
+        return code, None
+
+
+@dataclass(frozen=True)
+class Verification:
+    """Measured against predicted, and the verdict.
+
+    Attributes
+    ----------
+    measured : dict
+        ``overshoot_percent`` and ``settling_time_s``, the worse of motors a and b (None: did not
+        settle).
+    predicted : dict
+        The tuning's ``nominal_…`` and ``worst_…`` figures of the chosen setting.
+    limits : dict
+        The pass bounds (``overshoot_percent``, ``settling_time_s``) and the ``speed`` measured on.
+    passed : bool
+    """
+
+    measured: dict[str, float | None]
+    predicted: dict[str, float | None]
+    limits: dict[str, Any]
+    passed: bool
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        return {"measured": self.measured, "predicted": self.predicted, "limits": self.limits,
+                "pass": self.passed}  # fmt: skip
+
+
+def _worse(motors: dict[str, dict[str, Any]], key: str) -> float | None:
+    values = [m.get(key) for m in motors.values()]
+    if any(v is None for v in values):
+        return None
+    return max(float(v) for v in values)  # type: ignore[arg-type]
+
+
+def compare(summary: dict[str, Any], predicted: dict[str, float | None]) -> Verification:
+    """Judge a ``cartctl run --json`` summary against the tuning's prediction (module docstring)."""
+    motors = summary.get("motors") or {}
+    measured = {k: _worse(motors, k) for k in ("overshoot_percent", "settling_time_s")}
+    on_true = summary.get("metrics_signal") == "true_speed"
+    tol = TRUE_SPEED_TOLERANCE_PP if on_true else 100.0 * SPEED_QUANTUM_RAD_S / STEP_RAD_S
+    nominal_os = predicted.get("nominal_overshoot_percent") or 0.0
+    nominal_ts = predicted.get("nominal_settling_time_s") or 0.0
+    limits = {"overshoot_percent": max(TARGET_OVERSHOOT_PERCENT, nominal_os) + tol,
+              "settling_time_s": max(TARGET_SETTLING_S, nominal_ts + 0.02),
+              "speed": "true" if on_true else "encoder"}  # fmt: skip
+    os_, ts = measured["overshoot_percent"], measured["settling_time_s"]
+    passed = (os_ is not None and ts is not None and os_ <= limits["overshoot_percent"]
+              and ts <= limits["settling_time_s"])  # fmt: skip
+    return Verification(measured, dict(predicted), limits, bool(passed))
