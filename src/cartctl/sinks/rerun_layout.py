@@ -26,9 +26,12 @@ ENTITY_PATHS: Final[dict[str, str]] = {
     "compute_us": "loop/compute_us",
     "true_speed_a": "motor/a/true_speed",
     "true_speed_b": "motor/b/true_speed",
+    "smoothed_speed_a": "motor/a/smoothed_speed",
+    "smoothed_speed_b": "motor/b/smoothed_speed",
 }
 """Trace column → entity path. The first ten are contract 4; ``true_speed_*`` (simulated plants
-only) is an extension."""
+only) and ``smoothed_speed_*`` (the Kalman RTS smoothed speed, computed after a run from the whole
+trace, :mod:`cartctl.design.smoother`; not a column the loop writes) are extensions."""
 
 TIME_COLUMN: Final[str] = "time_s"
 TICK_COLUMN: Final[str] = "tick"
@@ -43,12 +46,13 @@ class SeriesStyle:
     width: float = 1.5
 
 
-# The viewer draws a plot's series in entity-path order (estimate, reference, speed, true_speed),
-# so the estimate is drawn wider to stay visible under a noisy measured speed.
+# The viewer draws a plot's series in entity-path order (estimate, reference, smoothed_speed,
+# speed, true_speed), so the estimate is drawn wider to stay visible under a noisy measured speed.
 _REFERENCE = SeriesStyle("reference (rad/s)", (150, 150, 150), 1.5)
 _SPEED = SeriesStyle("measured speed (rad/s)", (31, 119, 180), 1.0)
 _ESTIMATE = SeriesStyle("estimate (rad/s)", (255, 127, 14), 2.5)
 _TRUE = SeriesStyle("true speed (rad/s)", (44, 160, 44), 1.0)
+_SMOOTHED = SeriesStyle("smoothed speed (rad/s)", (227, 119, 194), 1.5)
 _VOLTAGE = SeriesStyle("voltage (V)", (148, 103, 189), 1.5)
 
 STYLES: Final[dict[str, SeriesStyle]] = {
@@ -56,11 +60,13 @@ STYLES: Final[dict[str, SeriesStyle]] = {
     "motor/a/speed": _SPEED,
     "motor/a/estimate": _ESTIMATE,
     "motor/a/true_speed": _TRUE,
+    "motor/a/smoothed_speed": _SMOOTHED,
     "motor/a/voltage": _VOLTAGE,
     "motor/b/reference": _REFERENCE,
     "motor/b/speed": _SPEED,
     "motor/b/estimate": _ESTIMATE,
     "motor/b/true_speed": _TRUE,
+    "motor/b/smoothed_speed": _SMOOTHED,
     "motor/b/voltage": _VOLTAGE,
     "loop/period_error_us": SeriesStyle("period error (µs)", (214, 39, 40), 1.0),
     "loop/compute_us": SeriesStyle("compute time (µs)", (23, 190, 207), 1.0),
@@ -138,7 +144,7 @@ def blueprint(
     """The project's default layout.
 
     The motors side by side; for each, speed with its reference and estimate (and the true speed of
-    a simulated plant) above the voltage. The loop timing (period error and compute time) spans the
+    a simulated plant, the smoothed speed where a run or review made one) above the voltage. The loop timing (period error and compute time) spans the
     bottom. Side panels start collapsed and the plots follow the ``time`` timeline.
 
     Parameters
@@ -195,7 +201,7 @@ def data_ranges(extremes: dict[str, Range], motors: Sequence[str]) -> PlotRanges
             return None
         return padded_range(min(lo for lo, _ in seen), max(hi for _, hi in seen), **kwargs)
 
-    speeds = ("reference", "speed", "estimate", "true_speed")
+    speeds = ("reference", "speed", "estimate", "true_speed", "smoothed_speed")
     return PlotRanges(
         speed_rad_s={
             m: r for m in motors if (r := over([f"motor/{m}/{s}" for s in speeds])) is not None

@@ -10,6 +10,12 @@ The tracking metrics are measured on the **true speed** (the ``true_speed_a/b`` 
 the plant gives one (the simulators), else on the measured speed; ``metrics_signal`` says which
 ('true_speed' or 'speed'). Settling is judged in a band of max(2 % of the step, one encoder
 count per tick = 2π/1792/Ts, 0.3506 rad/s at 10 ms): a measured speed cannot resolve less.
+
+A trace without a true speed (a real cart), or one that came through the serial path, also gets
+the metrics on a *smoothed* speed (:func:`add_smoothed_metrics`; the Kalman RTS smoother of
+:mod:`cartctl.design.smoother`, run by the commands, which know the model): ``motors.<m>.smoothed``
+holds the same keys, judged in the same settling band, and ``smoothed`` says from which model
+(or, with ``model`` None, why there are none). The table shows both, labelled.
 """
 
 from __future__ import annotations
@@ -29,6 +35,9 @@ from cartctl.stepinfo import SETTLING_FRACTION, encoder_quantum_rad_s, step_info
 
 SIGNALS = {"true_speed": "the true speed", "speed": "the measured speed"}
 """``metrics_signal`` values and how the summary text names them."""
+
+ROW_LABELS = {"true_speed": "true", "speed": "encoder", "smoothed": "smoothed"}
+"""How the table labels a motor's rows when the smoothed metrics stand beside the others."""
 
 
 def motor_metrics(
@@ -145,6 +154,37 @@ def trace_metrics(columns: Mapping[str, NDArray[np.float64]], period_s: float) -
     return out
 
 
+def add_smoothed_metrics(
+    summary: dict[str, Any],
+    columns: Mapping[str, NDArray[np.float64]],
+    speeds_rad_s: Mapping[str, NDArray[np.float64]],
+    period_s: float,
+) -> None:
+    """Add each motor's metrics on its smoothed speed to a summary, as ``motors.<m>.smoothed``.
+
+    Parameters
+    ----------
+    summary : dict
+        A summary from :func:`trace_metrics` (changed in place).
+    columns : mapping of str to ndarray
+        The trace's columns it was made from.
+    speeds_rad_s : mapping of str to ndarray
+        Per motor, the smoothed speed at each row (rad/s), shape (N,).
+    period_s : float
+        Ts (s): the settling band's floor, as for the other metrics.
+    """
+    quantum = encoder_quantum_rad_s(period_s)
+    for m, speed in speeds_rad_s.items():
+        if m in summary["motors"]:
+            summary["motors"][m]["smoothed"] = motor_metrics(
+                columns["time_s"],
+                columns[f"reference_{m}"],
+                np.asarray(speed, dtype=float),
+                columns[f"voltage_{m}"],
+                settling_floor=quantum,
+            )
+
+
 SUMMARY_COLUMNS = (
     ("overshoot (%)", "overshoot_percent", 1.0),
     ("rise (ms)", "rise_time_s", 1e3),
@@ -204,7 +244,7 @@ def format_summary(summary: Mapping[str, Any]) -> str:
             else f", settling band max({band['fraction'] * 100:g} %, {floor:.3g} rad/s)"
         )
         lines.append(f"  tracking on {SIGNALS[signal]}{shown}")
-    lines += motor_table(summary["motors"])
+    lines += smoothed_lines(summary)
     link = summary.get("link")
     delay, designed = summary.get("loop_delay_ticks"), summary.get("controller_loop_delay_ticks")
     if not link and (delay is not None or designed is not None):
@@ -232,6 +272,27 @@ def format_summary(summary: Mapping[str, Any]) -> str:
         if summary.get(key):
             lines.append(f"  {key}: {summary[key]}")
     return "\n".join(lines)
+
+
+def smoothed_lines(summary: Mapping[str, Any]) -> list[str]:
+    """The motor table; with smoothed metrics, each motor's two rows labelled, and a line on the
+    smoothed speed (its model, or why there is none)."""
+    motors = summary["motors"]
+    smoothed = summary.get("smoothed") or {}
+    if not any("smoothed" in e for e in motors.values()):
+        note = smoothed.get("note")
+        return [*motor_table(motors), *([f"  {note}"] if note else [])]
+    label = ROW_LABELS.get(summary.get("metrics_signal", "speed"), "encoder")
+    rows: dict[str, Mapping[str, Any]] = {}
+    for m, entry in motors.items():
+        rows[f"{m} {label}"] = entry
+        if "smoothed" in entry:
+            rows[f"{m} {ROW_LABELS['smoothed']}"] = entry["smoothed"]
+    return [
+        f"  smoothed: the speed by a Kalman RTS smoother over the trace with the model "
+        f"{smoothed.get('model')} and the recorded voltages",
+        *motor_table(rows),
+    ]
 
 
 def host_loss_text(link: Mapping[str, Any]) -> str:

@@ -74,6 +74,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="CSV traces: a second run (B) beside this one (A): one table of A, B, B − A and "
         "(B − A)/|A| per metric and motor",
     )
+    p.add_argument(
+        "--model",
+        metavar="MODEL.toml",
+        help="the motor model for the smoothed speed (Kalman RTS over the trace with the recorded "
+        "voltages), whose metrics stand beside the encoder's; default: the model a run named in "
+        "its recording (RUN.rrd, also beside RUN.csv)",
+    )
     add_map_option(p)
     p.set_defaults(func=run)
 
@@ -90,14 +97,19 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.json or args.compare or args.map:
         raise InputError("--json, --compare and --map apply to CSV traces, not to .rrd recordings")
+    from cartctl.commands.review.recorded import recording_summary
+
+    text, extra = recording_summary(path, args.model)
+    if text:
+        print(text)
     if args.screenshot:
-        out = screenshot(path, Path(args.screenshot))
+        out = screenshot(path, Path(args.screenshot), extra=extra)
         print(f"saved {out}")
         return 0
     if args.web:
-        serve_web(path)
+        serve_web(path, extra=extra)
         return 0
-    url = open_in_viewer(path)
+    url = open_in_viewer(path, extra=extra)
     print(f"opened {path} in the Rerun viewer ({url})")
     return 0
 
@@ -112,14 +124,16 @@ def _review_csv(args: argparse.Namespace) -> int:
         format_compare,
         format_csv_summary,
     )
+    from cartctl.commands.review.recorded import smooth_csv
     from cartctl.jsonout import dumps
 
-    summary = csv_summary(args.recording, args.map)
+    summary = smooth_csv(csv_summary(args.recording, args.map), args.recording, args.map,
+                         args.model)  # fmt: skip
     if not args.compare:
         print(dumps(summary) if args.json else format_csv_summary(summary))
         return 0
     if Path(args.compare).suffix.lower() != ".csv":
         raise InputError(f"--compare takes a second CSV trace, got '{args.compare}'")
-    other = csv_summary(args.compare, args.map)
+    other = smooth_csv(csv_summary(args.compare, args.map), args.compare, args.map, args.model)
     print(dumps(compare(summary, other)) if args.json else format_compare(summary, other))
     return 0

@@ -8,19 +8,24 @@ the layout and the data with :func:`stream`.
 from __future__ import annotations
 
 import uuid
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from cartctl.errors import DataFileError, MissingFileError
 
 if TYPE_CHECKING:  # rerun takes ~0.6 s to import: only the review itself loads it
+    import numpy as np
     import rerun as rr
     import rerun.blueprint as rrb
+    from numpy.typing import NDArray
     from rerun.chunk import Chunk, RrdReader, StoreEntry
 
 LOAD_TIMEOUT_S = 30.0
 """Longest wait for a viewer to take in (or show) the whole recording."""
+
+Series = Mapping[str, tuple["NDArray[np.float64]", "NDArray[np.float64]", "NDArray[np.float64]"]]
+"""Series made from a recording, to stream with it: entity path → (time (s), tick, values)."""
 
 
 def read_recording(path: Path) -> tuple[RrdReader, StoreEntry]:
@@ -47,8 +52,13 @@ def read_recording(path: Path) -> tuple[RrdReader, StoreEntry]:
     return reader, entries[0]
 
 
-def stream(reader: RrdReader, entry: StoreEntry, rec: rr.RecordingStream) -> dict[str, int]:
+def stream(
+    reader: RrdReader, entry: StoreEntry, rec: rr.RecordingStream, *, extra: Series | None = None
+) -> dict[str, int]:
     """Send the layout, then every chunk of the recording, into ``rec``; waits until sent.
+
+    ``extra`` series (made from the recording: the smoothed speed) follow the chunks, each with
+    its style from :data:`cartctl.sinks.rerun_layout.STYLES`.
 
     The layout fits the recording (:func:`layout`): the run's for ``motor/...`` entities, one built
     from the labels for a monitor's ``gpio/...``, with y ranges from the recorded values.
@@ -74,6 +84,7 @@ def stream(reader: RrdReader, entry: StoreEntry, rec: rr.RecordingStream) -> dic
     rec.send_blueprint(layout(chunks))
     rec.send_chunks(chunks)
     _restyle(chunks, rec)
+    _send_extra(extra or {}, rec)
     rec.flush(timeout_sec=LOAD_TIMEOUT_S)
     return ends
 
@@ -106,6 +117,28 @@ def scalar_stats(chunks: Iterable[Chunk]) -> tuple[dict[str, tuple[float, float]
         if np.any(values != np.round(values)):
             fractional.add(path)
     return extremes, set(extremes) - fractional
+
+
+def _send_extra(extra: Series, rec: rr.RecordingStream) -> None:
+    """Series made from the recording, on its ``time`` and ``tick`` timelines, with their style."""
+    import numpy as np
+    import rerun as rr
+
+    from cartctl.sinks.rerun_layout import STYLES
+
+    for entity, (time_s, tick, values) in extra.items():
+        style = STYLES.get(entity)
+        if style is not None:
+            rec.log(entity, rr.SeriesLines(colors=[style.color], names=[style.name],
+                                           widths=[style.width]), static=True)  # fmt: skip
+        rec.send_columns(
+            entity,
+            indexes=[
+                rr.TimeColumn("time", duration=np.asarray(time_s, dtype=float)),
+                rr.TimeColumn("tick", sequence=np.asarray(tick).astype(np.int64)),
+            ],
+            columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=float)),
+        )
 
 
 def _restyle(chunks: Sequence[Chunk], rec: rr.RecordingStream) -> None:

@@ -18,7 +18,13 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from cartctl.commands.review.recording import LOAD_TIMEOUT_S, new_stream, read_recording, stream
+from cartctl.commands.review.recording import (
+    LOAD_TIMEOUT_S,
+    Series,
+    new_stream,
+    read_recording,
+    stream,
+)
 from cartctl.commands.review.viewer import ViewerError, free_port, require_viewer
 from cartctl.errors import InputError
 
@@ -39,7 +45,9 @@ _ICD_DIRS = (
 )
 
 
-def screenshot(path: Path, out: Path, *, window: str = SCREENSHOT_WINDOW) -> Path:
+def screenshot(
+    path: Path, out: Path, *, window: str = SCREENSHOT_WINDOW, extra: Series | None = None
+) -> Path:
     """Render the recording with the layout in a headless viewer and save a PNG.
 
     The time cursor is put at the end of the ``time`` timeline, paused, before the picture is
@@ -54,6 +62,8 @@ def screenshot(path: Path, out: Path, *, window: str = SCREENSHOT_WINDOW) -> Pat
         The picture (``.png``); parent folders are created.
     window : str
         Viewer window size, ``WIDTHxHEIGHT`` in logical points.
+    extra : mapping, optional
+        Series made from the recording (the smoothed speed), streamed after it.
 
     Returns
     -------
@@ -89,7 +99,7 @@ def screenshot(path: Path, out: Path, *, window: str = SCREENSHOT_WINDOW) -> Pat
         try:
             client = _wait_for_viewer(url, port, viewer, log_path)
             rec.connect_grpc(url)
-            ends = stream(reader, entry, rec)
+            ends = stream(reader, entry, rec, extra=extra)
             _pause_at_end(client, ends)
             client.save_screenshot(str(out))
         except ViewerError:

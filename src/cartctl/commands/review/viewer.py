@@ -13,7 +13,12 @@ from collections.abc import Callable
 from pathlib import Path
 from urllib.parse import quote
 
-from cartctl.commands.review.recording import new_stream, read_recording, stream
+from cartctl.commands.review.recording import (
+    Series,
+    new_stream,
+    read_recording,
+    stream,
+)
 from cartctl.errors import CartctlError
 
 
@@ -47,8 +52,10 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def open_in_viewer(path: Path) -> str:
+def open_in_viewer(path: Path, *, extra: Series | None = None) -> str:
     """Stream the recording and the layout into the native viewer (spawned if none is running).
+
+    ``extra``: series made from the recording (the smoothed speed), streamed after it.
 
     Returns
     -------
@@ -74,7 +81,7 @@ def open_in_viewer(path: Path) -> str:
         if not viewer_reachable(url):
             raise ViewerError(f"the viewer ({executable}) did not start on this display")
         rec.connect_grpc(url)
-        stream(reader, entry, rec)
+        stream(reader, entry, rec, extra=extra)
     except ViewerError:
         raise
     except (RuntimeError, ConnectionError, OSError) as exc:
@@ -84,7 +91,9 @@ def open_in_viewer(path: Path) -> str:
     return url
 
 
-def serve_web(path: Path, *, wait: Callable[[str], None] | None = None) -> str:
+def serve_web(
+    path: Path, *, wait: Callable[[str], None] | None = None, extra: Series | None = None
+) -> str:
     """Serve the recording and the layout to the web viewer, print its URL, and block.
 
     Parameters
@@ -93,6 +102,8 @@ def serve_web(path: Path, *, wait: Callable[[str], None] | None = None) -> str:
         The ``.rrd`` file.
     wait : callable, optional
         Called with the URL while serving; returning stops the servers. Default: until Ctrl-C.
+    extra : mapping, optional
+        Series made from the recording (the smoothed speed), streamed after it.
 
     Returns
     -------
@@ -105,7 +116,7 @@ def serve_web(path: Path, *, wait: Callable[[str], None] | None = None) -> str:
     rec = new_stream(entry)
     try:
         grpc_url = rec.serve_grpc(grpc_port=free_port(), server_memory_limit="25%")
-        stream(reader, entry, rec)
+        stream(reader, entry, rec, extra=extra)
         web_port = free_port()
         rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=grpc_url)
         url = f"http://127.0.0.1:{web_port}/?url={quote(grpc_url, safe='')}"
