@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import cartctl
+from cartctl.design.controllerfile import load_controller
 
 matplotlib.use("Agg")
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,6 +38,10 @@ def results(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         "model file": cartctl.load_model(ROOT / "models" / "ground.toml"),
         "design (pi)": pi,
         "design (poles)": poles,
+        "controller file (designed)": pi.controller_file(),
+        "controller file (serial-poles.toml)": load_controller(
+            ROOT / "controllers" / "serial-poles.toml"
+        ),
         "run (pi, physics)": cartctl.simulate(pi, plant="physics", duration_s=1.5),
         "run (poles.toml, sim)": cartctl.simulate(
             ROOT / "controllers" / "poles.toml", plant="sim", reference="square:8:1", duration_s=2.0
@@ -45,9 +50,12 @@ def results(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
 
 
 KINDS = ["trace", "identification", "identification (OE, one motor)", "motor result",
-         "model file", "design (pi)", "design (poles)", "run (pi, physics)",
+         "model file", "design (pi)", "design (poles)", "controller file (designed)",
+         "controller file (serial-poles.toml)", "run (pi, physics)",
          "run (poles.toml, sim)"]  # fmt: skip
-SHOWN = [k for k in KINDS if k not in ("trace", "model file")]  # the API's own result classes
+SHOWN = [
+    k for k in KINDS if not k.startswith(("trace", "model file", "controller file"))
+]  # the API's own result classes
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -157,3 +165,22 @@ def test_plot_draws_into_given_axes(results: dict[str, Any]) -> None:
             results["run (pi, physics)"].plot("c")
     finally:
         plt.close(fig)
+
+
+def _listed(text: str, name: str) -> list[float]:
+    found = re.search(rf"{name} \[([^\]]*)\]", text)
+    assert found, text
+    return [float(v) for v in found.group(1).split(",")]
+
+
+def test_file_summaries_hold_the_gains_and_theta(results: dict[str, Any]) -> None:
+    controller = results["controller file (serial-poles.toml)"]
+    lines = repr(controller).splitlines()
+    assert len(lines) == 3 and "loop delay 3 ticks" in lines[0] and "poles" in lines[0]
+    for motor, line in zip("ab", lines[1:], strict=True):
+        np.testing.assert_allclose(_listed(line, "K"), controller.motors[motor]["K"], rtol=1e-3)
+    models = results["model file"]
+    lines = repr(models).splitlines()
+    assert len(lines) == 3 and str(ROOT / "models" / "ground.toml") in lines[0]
+    for motor, line in zip("ab", lines[1:], strict=True):
+        np.testing.assert_allclose(_listed(line, "θ ="), models.motor(motor).theta, rtol=1e-3)

@@ -120,6 +120,20 @@ class ModelFile:
                 f"no model for motor '{name}'{where}; it has motor(s) {', '.join(self.motors)}"
             ) from None
 
+    def __repr__(self) -> str:
+        """A few lines (not the whole provenance and statistics): where from, each motor's θ."""
+        where = f" {self.path}" if self.path else ""
+        ticks = self.loop_delay_ticks
+        delay = "" if ticks is None else f", loop delay {ticks} tick{'s' * (ticks != 1)}"
+        source = self.provenance.source
+        source = source if len(source) <= 100 else source[:99] + "…"
+        lines = [f"ModelFile{where}: Ts = {self.period_s:g} s{delay}, {self.provenance.method} "
+                 f"({source})"]  # fmt: skip
+        for name, m in self.motors.items():
+            theta = ", ".join(f"{v:.4g}" for v in m.theta)
+            lines.append(f"  motor {name}: na = {m.na}, nb = {m.nb}, nk = {m.nk}, θ = [{theta}]")
+        return "\n".join(lines)
+
     @property
     def period_s(self) -> float:
         """The common sample period of the models (s)."""

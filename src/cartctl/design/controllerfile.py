@@ -111,6 +111,13 @@ def _plain(value: Any) -> Any:
     return value
 
 
+def _short(value: Any) -> str:
+    """A gain or a list of gains with 4 significant figures."""
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_short(v) for v in value) + "]"
+    return f"{value:.4g}" if isinstance(value, float | int) else str(value)
+
+
 @dataclass(frozen=True)
 class ControllerFile:
     """A designed controller for both motors.
@@ -156,6 +163,22 @@ class ControllerFile:
     path: Path | None = field(default=None, compare=False)
     loop_delay_ticks: int | None = None
     ignored: tuple[str, ...] = field(default=(), compare=False)
+
+    def __repr__(self) -> str:
+        """A few lines (not the estimator's matrices): what, for which loop, each motor's gains."""
+        where = f" {self.path}" if self.path else ""
+        ticks = self.loop_delay_ticks
+        delay = "" if ticks is None else f", loop delay {ticks} tick{'s' * (ticks != 1)}"
+        lines = [f"ControllerFile{where}: {self.method}, Ts = {self.period_s:g} s{delay}, "
+                 f"limit {self.voltage_limit_v:g} V, on {self.model_path}"]  # fmt: skip
+        for name, entry in self.motors.items():
+            gains = [f"{k} {_short(entry[k])}" for k in ("kp", "ki", "K", "Ki", "Kr") if k in entry]
+            figures = entry.get("analysis", {})
+            margins = [f"{label} {figures[k]:.3g}{unit}" for k, label, unit in (
+                ("phase_margin_deg", "phase margin", "°"), ("gain_margin_db", "gain margin", " dB"))
+                if isinstance(figures.get(k), float)]  # fmt: skip
+            lines.append(f"  motor {name}: " + ", ".join(gains + margins))
+        return "\n".join(lines)
 
     @property
     def plant_kind(self) -> str | None:
