@@ -1,0 +1,161 @@
+"""The smoothed speed through the CLI: a physics run (which knows the true speed) reviewed as a
+real cart's trace would be (its true-speed columns dropped), the model from --model or from the
+run's recording, the note without a model, and the recording's smoothed series.
+
+Expectations come from the simulator's true speed, not from the smoother's own output.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections import Counter
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cartctl.cli import main
+from cartctl.data import read_trace
+from cartctl.design.smoother import smooth_speed
+from cartctl.modelfile import load_models
+
+ROOT = Path(__file__).resolve().parents[1]
+GROUND = str(ROOT / "models" / "ground.toml")
+
+
+def _cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _without_true_speed(src: Path, dst: Path) -> Path:
+    """A copy of a run trace as a real cart's: the ``true_speed_*`` columns dropped."""
+    with src.open(newline="") as f:
+        rows = list(csv.reader(f))
+    keep = [i for i, name in enumerate(rows[0]) if not name.startswith("true_speed")]
+    with dst.open("w", newline="") as f:
+        csv.writer(f).writerows([[row[i] for i in keep] for row in rows])
+    return dst
+
+
+@pytest.fixture(scope="module")
+def physics_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 3 s physics run (square reference: reversals, where the encoder lags most) with its
+    recording, on the virtual clock."""
+    out = tmp_path_factory.mktemp("smoothed")
+    code = main(["run", "--plant", "physics", "--fast", "--duration", "3", "--reference",
+                 "square:8:0.5", "--out", str(out), "--name", "p", "--rerun", "save",
+                 "--json"])  # fmt: skip
+    assert code == 0
+    return out
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(x**2)))
+
+
+def test_smoothed_speed_of_a_physics_run_halves_the_encoders_rms_error(physics_run: Path) -> None:
+    cols = read_trace(physics_run / "p.csv").columns()
+    models = load_models(GROUND)
+    for m in "ab":
+        true, encoder = cols[f"true_speed_{m}"], cols[f"speed_{m}"]
+        smoothed = smooth_speed(models.motor(m), cols[f"voltage_{m}"], encoder).speed_rad_s
+        assert _rms(smoothed - true) <= 0.5 * _rms(encoder - true), m
+
+
+def test_review_without_true_speed_gives_both_metrics_and_smoothed_is_truer(
+    capsys: pytest.CaptureFixture[str], physics_run: Path, tmp_path: Path
+) -> None:
+    code, out, err = _cli(capsys, "review", str(physics_run / "p.csv"), "--json")
+    assert code == 0, err
+    true = json.loads(out)  # the simulator's true speed: the reference for both
+    assert true["metrics_signal"] == "true_speed" and "smoothed" not in true["motors"]["a"]
+    cart = _without_true_speed(physics_run / "p.csv", tmp_path / "cart.csv")
+    code, out, err = _cli(capsys, "review", str(cart), "--json", "--model", GROUND)
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["metrics_signal"] == "speed"
+    assert doc["smoothed"]["model"] == GROUND and doc["smoothed"]["method"] == "kalman-rts"
+    for m in "ab":
+        encoder, smoothed = doc["motors"][m], doc["motors"][m]["smoothed"]
+        assert set(smoothed) == set(encoder) - {"smoothed"}  # the same contract-3 keys
+        for key in ("overshoot_percent", "rms_error"):
+            truth = true["motors"][m][key]
+            assert abs(smoothed[key] - truth) < abs(encoder[key] - truth), (m, key)
+    code, out, _ = _cli(capsys, "review", str(cart), "--model", GROUND)
+    lines = out.splitlines()
+    assert any(line.split()[:2] == ["a", "encoder"] for line in lines)
+    assert any(line.split()[:2] == ["a", "smoothed"] for line in lines)
+    assert any("Kalman RTS" in line and GROUND in line for line in lines)
+
+
+def test_review_takes_the_model_from_the_runs_recording(
+    capsys: pytest.CaptureFixture[str], physics_run: Path, tmp_path: Path
+) -> None:
+    cart = _without_true_speed(physics_run / "p.csv", tmp_path / "p.csv")
+    (tmp_path / "p.rrd").write_bytes((physics_run / "p.rrd").read_bytes())
+    code, out, err = _cli(capsys, "review", str(cart), "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert Path(doc["smoothed"]["model"]).resolve() == Path(GROUND).resolve()
+    assert "smoothed" in doc["motors"]["a"]
+
+
+def test_without_a_model_one_line_says_so_and_the_encoder_metrics_stand(
+    capsys: pytest.CaptureFixture[str], physics_run: Path, tmp_path: Path
+) -> None:
+    cart = _without_true_speed(physics_run / "p.csv", tmp_path / "alone.csv")
+    code, out, err = _cli(capsys, "review", str(cart))
+    assert code == 0 and err == ""
+    notes = [line for line in out.splitlines() if "need a model" in line]
+    assert len(notes) == 1 and "--model" in notes[0]
+    code, out, _ = _cli(capsys, "review", str(cart), "--json")
+    doc = json.loads(out)
+    assert doc["smoothed"]["model"] is None and "smoothed" not in doc["motors"]["a"]
+    assert doc["motors"]["a"]["overshoot_percent"] is not None
+
+
+def test_a_missing_model_is_one_line_and_exit_2(
+    capsys: pytest.CaptureFixture[str], physics_run: Path, tmp_path: Path
+) -> None:
+    cart = _without_true_speed(physics_run / "p.csv", tmp_path / "c.csv")
+    code, out, err = _cli(capsys, "review", str(cart), "--model", str(tmp_path / "none.toml"))
+    assert code == 2 and out == ""
+    assert "none.toml" in err and len(err.strip().splitlines()) == 1
+
+
+def test_review_of_a_recording_adds_the_smoothed_series(physics_run: Path) -> None:
+    from cartctl.commands.review.recorded import recording_summary
+
+    text, extra = recording_summary(physics_run / "p.rrd", GROUND)
+    n = len(read_trace(physics_run / "p.csv"))
+    assert extra is not None and set(extra) == {"motor/a/smoothed_speed", "motor/b/smoothed_speed"}
+    assert all(len(values) == n for _, _, values in extra.values())
+    assert "a smoothed" in text and "a true" in text
+
+
+def test_the_runs_recording_holds_the_smoothed_speed(
+    tmp_path: Path, physics_run: Path, rrd_rows: Callable[[str | Path], Counter]
+) -> None:
+    from cartctl.commands.review.smoothed import smooth_run
+    from cartctl.sinks.rerun_sink import RerunSink
+    from cartctl.sinks.summary import trace_metrics
+
+    cart = _without_true_speed(physics_run / "p.csv", tmp_path / "cart.csv")
+    trace = read_trace(cart)
+    cols = trace.columns()
+    sink = RerunSink("save", tmp_path / "cart.rrd", strict=True)
+    sink.hold()
+    sink.open(list(cols))
+    for row in zip(*cols.values(), strict=True):
+        sink.write(row)
+    sink.close()  # the loop's close: the rows go, the recording stays open
+    summary = trace_metrics(cols, trace.period_s)
+    smooth_run(summary, cols, trace.period_s, GROUND, sink)
+    rows = rrd_rows(tmp_path / "cart.rrd")
+    assert rows["motor/a/smoothed_speed"] == rows["motor/a/speed"] == len(trace)
+    assert rows["motor/b/smoothed_speed"] == len(trace)
+    assert "smoothed" in summary["motors"]["a"]
