@@ -9,6 +9,8 @@
 - :mod:`~cartctl.link.bridge`: the GPIO channel map of the bridge sketch, both directions.
 
 The package re-exports the public names (``__all__``) of these five modules.
+:mod:`~cartctl.link.firmware_id` (which of cartctl's firmwares sent a frame, by its float 6, and
+the names of its channels) is imported from where it is.
 
 See docs/serial-protocol.md for the wire protocol.
 """
