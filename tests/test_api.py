@@ -89,7 +89,11 @@ def test_identify_gives_the_cli_theta_and_a_python_control_tf(
 ) -> None:
     ident = cartctl.identify(square)
     assert main(["identify", str(square), "--json"]) == 0
-    cli = json.loads(capsys.readouterr().out)["motors"]
+    printed = json.loads(capsys.readouterr().out)
+    # the loop the trace was recorded in (its .meta.toml, written by excite) goes into the model
+    assert ident.result.loop_delay_ticks == printed["loop_delay_ticks"] == 1
+    assert "loop delay 1 tick," in repr(ident)
+    cli = printed["motors"]
     for m in "ab":
         np.testing.assert_allclose(ident[m].theta, cli[m]["theta"], rtol=1e-12)
         np.testing.assert_allclose(ident[m].theta_std, cli[m]["theta_std"], rtol=1e-12)

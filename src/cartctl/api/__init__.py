@@ -153,6 +153,7 @@ def identify(
     prefilter_order: int = 6,
     zero_phase: bool = False,
     average: bool = False,
+    loop_delay_ticks: int | None = None,
 ) -> Identification:
     """Fit the motors' ARX models from experiments, as ``cartctl identify`` does.
 
@@ -171,16 +172,24 @@ def identify(
     zero_phase : bool
     average : bool
         Average whole excitation cycles before the fit.
+    loop_delay_ticks : int, optional
+        The loop the data was recorded in (ticks from a measurement to the voltage it leads to
+        being on the motor), written into the model for design. Default: from the ``.meta.toml``
+        files beside traces given by path (``cartctl excite`` writes them), else unknown.
     """
+    from cartctl.data.tracemeta import loop_delay_of
+
     items = [traces] if isinstance(traces, Trace | str | Path) else list(traces)
     loaded = [t if isinstance(t, Trace) else read_trace(t) for t in items]
+    if loop_delay_ticks is None:
+        loop_delay_ticks = loop_delay_of([t for t in items if not isinstance(t, Trace)])
     if delay != "auto" and not isinstance(delay, int):
         raise InputError(f"delay must be a whole number of ticks or 'auto', got {delay!r}")
     request = IdentifyRequest(
         motors=tuple(motors), na=na, nb=nb, delay=None if delay == "auto" else int(delay),
         prefilter=None if prefilter_hz is None else Prefilter(
             order=prefilter_order, cutoff_hz=prefilter_hz, zero_phase=zero_phase),
-        method=method, average=average,
+        method=method, average=average, loop_delay_ticks=loop_delay_ticks,
     )  # fmt: skip
     result = identify_traces(loaded, request)
     out = {}

@@ -114,8 +114,10 @@ class Identification(_Shown):
                                                if len(self.sources) > 2 else "")  # fmt: skip
         prefilter = "" if r.prefilter is None else f", prefilter {number(r.prefilter.cutoff_hz)} Hz"
         period = next(iter(self.motors.values())).model.period_s if self.motors else None
+        ticks = self.result.loop_delay_ticks
+        loop = "" if ticks is None else f", loop delay {ticks} tick{'s' * (ticks != 1)}"
         title = (f"Identification: {r.method.upper()}, na = {r.na}, nb = {r.nb}{prefilter}, "
-                 f"Ts = {number(period)} s, from {shown}")  # fmt: skip
+                 f"Ts = {number(period)} s{loop}, from {shown}")  # fmt: skip
         rows = tuple(result.row(m) for m, result in self.motors.items())
         return Summary(title, _IDENT_HEADERS, rows,
                        "ident['a'] for one motor (.tf, .model); .save('models/mine.toml')")  # fmt: skip
