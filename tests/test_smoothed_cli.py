@@ -159,3 +159,22 @@ def test_the_runs_recording_holds_the_smoothed_speed(
     assert rows["motor/a/smoothed_speed"] == rows["motor/a/speed"] == len(trace)
     assert rows["motor/b/smoothed_speed"] == len(trace)
     assert "smoothed" in summary["motors"]["a"]
+
+
+def test_a_held_recording_is_readable_when_the_process_ends_before_its_release(
+    tmp_path: Path, rrd_rows: Callable[[str | Path], Counter]
+) -> None:
+    import subprocess
+    import sys
+
+    path = tmp_path / "held.rrd"
+    script = (
+        "from cartctl.sinks.rerun_sink import RerunSink\n"
+        f"s = RerunSink('save', {str(path)!r}); s.hold(); s.open(['time_s', 'tick', 'speed_a'])\n"
+        "for k in range(30): s.write((k * 0.01, k, 1.0))\n"
+        "s.close()\n"
+        "raise SystemExit(3)  # a failure after the loop, before the smoothed speed\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, timeout=60)
+    assert done.returncode == 3, done.stderr
+    assert rrd_rows(path)["motor/a/speed"] == 30

@@ -15,6 +15,7 @@ warning at ``close`` (or raised there with ``strict=True``).
 
 from __future__ import annotations
 
+import atexit
 import uuid
 import warnings
 from collections import deque
@@ -276,11 +277,14 @@ class RerunSink:
     def hold(self) -> None:
         """Make :meth:`close` (the loop's) send the rows but keep the recording open, so that
         series computed from the whole run (:meth:`send_series`) can follow; :meth:`release`
-        closes it."""
+        closes it, and so does the interpreter's exit should the caller never get there (the file
+        stays readable)."""
         self._held = True
+        atexit.register(self.release)
 
     def release(self) -> None:
         """Close a recording kept open by :meth:`hold` (as :meth:`close`)."""
+        atexit.unregister(self.release)
         self._held = False
         self.close()
 

@@ -8,6 +8,7 @@ are then taken from it, unless ``--model`` asks for another model.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -20,10 +21,12 @@ from cartctl.commands.review.smoothed import (
     recorded_model,
     recorded_model_of,
     recording_columns,
+    trace_hints,
     wanted,
 )
 from cartctl.data import read_trace
 from cartctl.design.smoother import METHOD
+from cartctl.errors import DataWarning
 from cartctl.sinks.summary import add_smoothed_metrics, format_summary, trace_metrics
 
 TIMING_COLUMNS = ("period_error_us", "compute_us")
@@ -38,13 +41,22 @@ def smooth_csv(
     """A CSV trace's summary with the smoothed metrics, where wanted (changed and returned).
 
     The model: ``model`` (``--model``; a problem with it is an error), else the one named in
-    the run's recording beside the trace (``RUN.rrd``), else none (a note says so).
+    the run's recording beside the trace (``RUN.rrd``), else that of the controller its meta file's
+    command ran, else none (a note says so). A trace of the serial path (its meta file says) gets
+    them beside the true speed too.
     """
-    if not wanted(summary, asked=model is not None):
+    serial, run_model, extra = trace_hints(path)
+    if not wanted(summary, serial_path=serial, asked=model is not None):
         return summary
-    model_path = model if model is not None else recorded_model_of(Path(path).with_suffix(".rrd"))
-    trace = read_trace(path, mapping)
-    add_smoothed(summary, trace.columns(), trace.period_s, model_path, strict=model is not None)
+    if model is None:
+        model_path = recorded_model_of(Path(path).with_suffix(".rrd")) or run_model
+    else:
+        model_path, extra = model, 0
+    with warnings.catch_warnings():  # csv_summary has read it once and said what it found
+        warnings.simplefilter("ignore", DataWarning)
+        trace = read_trace(path, mapping)
+    add_smoothed(summary, trace.columns(), trace.period_s, model_path,
+                 extra_delay_ticks=extra, strict=model is not None)  # fmt: skip
     return summary
 
 
