@@ -178,3 +178,25 @@ def test_a_held_recording_is_readable_when_the_process_ends_before_its_release(
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, timeout=60)
     assert done.returncode == 3, done.stderr
     assert rrd_rows(path)["motor/a/speed"] == 30
+
+
+def test_a_serial_path_trace_gets_both_with_the_model_of_the_controller_it_ran(
+    capsys: pytest.CaptureFixture[str], physics_run: Path, tmp_path: Path
+) -> None:
+    trace = tmp_path / "v.csv"
+    trace.write_bytes((physics_run / "p.csv").read_bytes())  # true speed kept, as virtual's
+    controller = ROOT / "controllers" / "pi.toml"
+    (tmp_path / "v.meta.toml").write_text(
+        'format = "cartctl-trace-meta/1"\n'
+        'plant = "virtual cart on /dev/pts/9 (physics preset ground)"\n'
+        "loop_delay_ticks = 1\n"
+        f'command = "cartctl run --plant virtual --controller {controller}"\n'
+    )
+    code, out, err = _cli(capsys, "review", str(trace), "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["metrics_signal"] == "true_speed"  # motors.a stays the true speed's
+    assert Path(doc["smoothed"]["model"]).resolve() == Path(GROUND).resolve()
+    assert doc["smoothed"]["extra_delay_ticks"] == 0
+    true, smoothed = doc["motors"]["a"], doc["motors"]["a"]["smoothed"]
+    assert smoothed["rms_error"] == pytest.approx(true["rms_error"], rel=0.05)

@@ -50,7 +50,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "Open a Rerun recording (.rrd) in the viewer with the project's layout: per motor, "
             "speed with reference and estimate above the voltage, then the loop timing. --web "
             "serves the web viewer instead, --screenshot renders the layout headless to a PNG. "
-            "Given a CSV trace, print its run metrics instead (--json, --compare)."
+            "Given a CSV trace, print its run metrics instead (--json, --compare). Where the "
+            "trace has no true speed (a real cart) or came through the serial path, the metrics "
+            "on a Kalman RTS smoothed speed stand beside the encoder's (a recording's are printed "
+            "before the viewer opens, its smoothed speed drawn with the speed)."
         ),
     )
     p.add_argument("recording", metavar="FILE.rrd|RUN.csv", help="a recording or a CSV trace")
@@ -79,7 +82,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="MODEL.toml",
         help="the motor model for the smoothed speed (Kalman RTS over the trace with the recorded "
         "voltages), whose metrics stand beside the encoder's; default: the model a run named in "
-        "its recording (RUN.rrd, also beside RUN.csv)",
+        "its recording (RUN.rrd, also beside RUN.csv), else that of the controller its "
+        "RUN.meta.toml's command ran",
     )
     add_map_option(p)
     p.set_defaults(func=run)
