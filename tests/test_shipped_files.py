@@ -123,7 +123,8 @@ def _source_copy(tmp_path: Path) -> Path:
 EXPECTED = {f"{folder}/{name}" for folder, names in SHIPPED_FILES.items() for name in names}
 
 
-def test_the_wheel_ships_only_cartctl_files_and_finds_them_installed(tmp_path: Path) -> None:
+def test_the_wheel_ships_only_cartctl_files(tmp_path: Path) -> None:
+    """pip's own build of a wheel, with a user's model and controller beside the shipped ones."""
     source = _source_copy(tmp_path)
     out = tmp_path / "wheel"
     built = subprocess.run(
@@ -135,11 +136,20 @@ def test_the_wheel_ships_only_cartctl_files_and_finds_them_installed(tmp_path: P
     prefix = "cartctl/shipped/"
     with zipfile.ZipFile(wheel) as archive:
         names = archive.namelist()
-        shipped = {n.removeprefix(prefix) for n in names if n.startswith(prefix)}
-        assert shipped == EXPECTED  # not models/mine.toml nor controllers/mine2.toml
-        assert not [n for n in names if "mine" in n]
-        archive.extractall(tmp_path / "site")  # a pure-Python wheel installs by unpacking
-    # the installed package (first on the path) finds its shipped files from any folder
+    assert {n.removeprefix(prefix) for n in names if n.startswith(prefix)} == EXPECTED
+    assert not [n for n in names if "mine" in n]  # not models/mine.toml nor controllers/mine2.toml
+
+
+def test_the_built_package_finds_its_shipped_files_from_any_folder(tmp_path: Path) -> None:
+    """The wheel's build step (``build_py``) into a folder, then that folder used as installed:
+    first on the path, from a folder without models/ or controllers/."""
+    source = _source_copy(tmp_path)
+    site = tmp_path / "site"
+    built = subprocess.run([sys.executable, "setup.py", "-q", "build_py", "--build-lib", str(site)],
+                           capture_output=True, text=True, cwd=source)  # fmt: skip
+    assert built.returncode == 0, built.stderr
+    shipped = site / "cartctl" / "shipped"
+    assert {p.relative_to(shipped).as_posix() for p in shipped.rglob("*.toml")} == EXPECTED
     code = (
         "import cartctl, json; from cartctl.choices import find_file; "
         "from cartctl.design.controllerfile import load_controller; "
@@ -147,14 +157,13 @@ def test_the_wheel_ships_only_cartctl_files_and_finds_them_installed(tmp_path: P
         "print(json.dumps([cartctl.__file__, str(find_file('models/ground.toml')), "
         "str(c.path), c.model_path, str(find_file('models/mine.toml'))]))"
     )
-    env = {**os.environ, "PYTHONPATH": str(tmp_path / "site")}
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     ran = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         cwd=elsewhere, env=env)  # fmt: skip
+                         cwd=elsewhere, env={**os.environ, "PYTHONPATH": str(site)})  # fmt: skip
     assert ran.returncode == 0, ran.stderr
     package, ground, poles, poles_model, mine = json.loads(ran.stdout)
-    site = (tmp_path / "site").resolve()
+    site = site.resolve()
     assert Path(package).resolve().is_relative_to(site)
     assert Path(ground).resolve() == site / "cartctl" / "shipped" / "models" / "ground.toml"
     assert Path(poles).resolve() == site / "cartctl" / "shipped" / "controllers" / "poles.toml"
