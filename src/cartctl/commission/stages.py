@@ -137,7 +137,7 @@ class Commission:
                                   "amplitude_v": None if self.amplitude is None
                                   else self.amplitude.voltage_v}  # fmt: skip
         if failure is not None:
-            self.report.add("checks", body + f"\n\n**StageStoppedError:** {failure}")
+            self.report.add("checks", body + f"\n\n**Stopped:** {failure}")
             raise failure
         self.report.add("checks", body)
         self.say("checks", f"loop delay {self.loop_delay_ticks} tick(s); breakaway "
@@ -203,14 +203,14 @@ class Commission:
         try:
             modelcheck.verdict(verdicts, self.amplitude.voltage_v)
         except StageError as exc:
-            self.report.add("identification", body + f"\n\n**StageStoppedError:** {exc}")
+            self.report.add("identification", body + f"\n\n**Stopped:** {exc}")
             raise
         self.report.add("identification", body)
 
     def run_tuning(self) -> None:
         """Stage 4: the robust grid on the model; controller.toml."""
         self.say("tuning", f"{tuning.GRID}: each on the model, {tuning.PLANTS} plants of its "
-                 "uncertainty and commands landing 3 and 7 ms later")  # fmt: skip
+                 "uncertainty and commands landing 2 and 4 ms later")  # fmt: skip
         from cartctl.tune.grid import grid_settings, parse_grid
 
         n = len(grid_settings(parse_grid(tuning.GRID, tuning.METHOD)))
@@ -219,7 +219,7 @@ class Commission:
             self.tuned = tuning.run_tuning(self.model_path, self.loop_delay_ticks, bar.update,
                                            self.jobs)  # fmt: skip
         except StageError as exc:
-            self.report.add("tuning", f"**StageStoppedError:** {exc}")
+            self.report.add("tuning", f"**Stopped:** {exc}")
             raise
         finally:
             bar.close()

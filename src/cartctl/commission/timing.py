@@ -7,8 +7,11 @@ the identified model itself:
 - whole ticks: the sampled plants of :mod:`cartctl.tune.uncertainty` already shift the loop delay
   by −1, 0 or +1 tick;
 - within a tick: :func:`later_command` lands every command a fraction f of a tick later than on
-  the day the model was identified (:data:`LATER_FRACTIONS`: 3 and 7 ms at 10 ms), as a busier
-  host or a slower USB chip would.
+  the day the model was identified (:data:`LATER_FRACTIONS`: 2 and 4 ms at 10 ms). The bridge
+  applies the newest command at the cart's next ``io()``, so on one cart where a command lands
+  within the tick is fixed by its firmware; what moves it is when the host's reply gets through,
+  and the Mega's USB chip passes a reply on at its 4.096 ms timer at the latest. A reply later
+  than that misses its tick: a whole tick, which the sampled plants cover.
 
 A command landing f·Ts late means that over each tick the motor sees the previous command for a
 fraction f and the new one for 1 − f. To first order in the tick (the motor's dynamics slow
@@ -25,8 +28,8 @@ import numpy as np
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 
-LATER_FRACTIONS = (0.3, 0.7)
-"""Fractions of a tick (3 and 7 ms at 10 ms) by which the commands land later in the timing plants."""
+LATER_FRACTIONS = (0.2, 0.4)
+"""Fractions of a tick (2 and 4 ms at 10 ms) by which the commands land later in the timing plants."""
 
 
 def later_command(model: ArxModel, fraction: float) -> ArxModel:

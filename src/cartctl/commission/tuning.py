@@ -5,7 +5,7 @@
 (with the loop delay the checks measured), run in the simulated loop on that model (nominal), and
 scored at once on :data:`PLANTS` plants drawn from the model's own uncertainty
 (:mod:`cartctl.tune.uncertainty`: θ ± its standard deviation, DC gain ±10 %, loop delay ±1 tick)
-and, in the real loop, on the model with its commands landing 3 and 7 ms later
+and, in the real loop, on the model with its commands landing 2 and 4 ms later
 (:mod:`cartctl.commission.timing`). The physics preset of ``tune --robust`` is left out: it is
 the course's cart, not the one being commissioned.
 
@@ -153,7 +153,8 @@ class TuningResult:
 
 def run_tuning(model_path: Path, loop_delay_ticks: int,
                progress: Callable[[int], None] | None = None,
-               jobs: int | None = None) -> TuningResult:  # fmt: skip
+               jobs: int | None = None,
+               fractions: tuple[float, ...] = LATER_FRACTIONS) -> TuningResult:  # fmt: skip
     """Tune the grid on ``model_path`` and choose (raises :class:`StageError` if none fits)."""
     models = load_models(model_path)
     fixed = {**DESIGN_FIXED, "loop_delay_ticks": loop_delay_ticks}
@@ -164,7 +165,7 @@ def run_tuning(model_path: Path, loop_delay_ticks: int,
         sample = sample_plants(models, PLANTS, SEED)
     except InputError as exc:
         raise StageError(f"tuning: {exc}") from None
-    job = CommissionJob(tune_job, sample, tuple(enumerate(settings, start=1)))
+    job = CommissionJob(tune_job, sample, tuple(enumerate(settings, start=1)), fractions)
     rows = engine.run_grid(job, jobs or min(2, os.cpu_count() or 1), progress, evaluate_chunk)
     rows = choice.sort_robust(choice.mark_robust_pareto(rows))
     limits = choice.Limits(MAX_OVERSHOOT_PERCENT)
