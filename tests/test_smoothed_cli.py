@@ -141,14 +141,13 @@ def test_the_runs_recording_holds_the_smoothed_speed(
     tmp_path: Path, physics_run: Path, rrd_rows: Callable[[str | Path], Counter]
 ) -> None:
     from cartctl.commands.review.smoothed import smooth_run
-    from cartctl.sinks.rerun_sink import RerunSink
+    from cartctl.sinks.rerun_series import HeldRerunSink
     from cartctl.sinks.summary import trace_metrics
 
     cart = _without_true_speed(physics_run / "p.csv", tmp_path / "cart.csv")
     trace = read_trace(cart)
     cols = trace.columns()
-    sink = RerunSink("save", tmp_path / "cart.rrd", strict=True)
-    sink.hold()
+    sink = HeldRerunSink("save", tmp_path / "cart.rrd", strict=True)
     sink.open(list(cols))
     for row in zip(*cols.values(), strict=True):
         sink.write(row)
@@ -169,8 +168,8 @@ def test_a_held_recording_is_readable_when_the_process_ends_before_its_release(
 
     path = tmp_path / "held.rrd"
     script = (
-        "from cartctl.sinks.rerun_sink import RerunSink\n"
-        f"s = RerunSink('save', {str(path)!r}); s.hold(); s.open(['time_s', 'tick', 'speed_a'])\n"
+        "from cartctl.sinks.rerun_series import HeldRerunSink\n"
+        f"s = HeldRerunSink('save', {str(path)!r}); s.open(['time_s', 'tick', 'speed_a'])\n"
         "for k in range(30): s.write((k * 0.01, k, 1.0))\n"
         "s.close()\n"
         "raise SystemExit(3)  # a failure after the loop, before the smoothed speed\n"

@@ -128,7 +128,7 @@ def _rerun_sink(
     if args.rerun == "off":
         return None
     from cartctl.sinks.rerun_layout import run_ranges
-    from cartctl.sinks.rerun_sink import RerunSink
+    from cartctl.sinks.rerun_series import HeldRerunSink  # open for the smoothed speed
     from cartctl.sinks.viewer import resolve_mode
 
     mode = resolve_mode(args.rerun)
@@ -139,9 +139,9 @@ def _rerun_sink(
                        max((hi for _, hi in spans), default=0.0))  # fmt: skip
     # one send_columns costs ~170 µs whatever its length: batch 20 ticks live (the SDK flushes
     # every 200 ms anyway), 1000 on the virtual clock
-    return RerunSink(mode, path, connect_url=args.connect_url,
-                     batch_ticks=1000 if args.fast else 20,
-                     ranges=run_ranges(extremes, limit_v))  # fmt: skip
+    return HeldRerunSink(mode, path, connect_url=args.connect_url,
+                         batch_ticks=1000 if args.fast else 20,
+                         ranges=run_ranges(extremes, limit_v))  # fmt: skip
 
 
 def default_controller(plant: str) -> Path:
@@ -249,7 +249,6 @@ def run(args: argparse.Namespace) -> int:
     sinks: list[Any] = [CsvSink(csv_path, flush_every=1000 if args.fast else 50), memory]
     rerun = _rerun_sink(args, rrd_path, references, limit)
     if rerun is not None:
-        rerun.hold()  # open after the loop for the smoothed speed (smooth_run releases it)
         sinks.append(rerun)
     if not args.fast and sys.stderr.isatty():  # a live line on a terminal, refreshed after ticks
         from cartctl.sinks.status import StatusLine

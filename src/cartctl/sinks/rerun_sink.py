@@ -15,7 +15,6 @@ warning at ``close`` (or raised there with ``strict=True``).
 
 from __future__ import annotations
 
-import atexit
 import uuid
 import warnings
 from collections import deque
@@ -133,7 +132,6 @@ class RerunSink:
         self._signals: tuple[tuple[int, str], ...] = ()
         self._sent_rows = 0
         self._closed = False
-        self._held = False
 
     # -- the Sink protocol ------------------------------------------------------------------
 
@@ -249,16 +247,7 @@ class RerunSink:
         """
         if self._closed:
             return
-        if self._block is not None:
-            self.idle()  # the rows kept, into the blocks
-            if self._filled:
-                rest = self._block[: self._filled].copy()
-                self._full.append((rest, self._indexes(rest)))
-            while self._full:
-                self._send_next()
-        self._block = None
-        if self._held:  # see hold(): the rows are in, the recording stays open
-            return
+        self._send_rows()
         self._closed = True
         if self._recording is not None:
             try:
@@ -273,64 +262,6 @@ class RerunSink:
         self._report()
 
     # -- extras -----------------------------------------------------------------------------
-
-    def hold(self) -> None:
-        """Make :meth:`close` (the loop's) send the rows but keep the recording open, so that
-        series computed from the whole run (:meth:`send_series`) can follow; :meth:`release`
-        closes it, and so does the interpreter's exit should the caller never get there (the file
-        stays readable)."""
-        self._held = True
-        atexit.register(self.release)
-
-    def release(self) -> None:
-        """Close a recording kept open by :meth:`hold` (as :meth:`close`)."""
-        atexit.unregister(self.release)
-        self._held = False
-        self.close()
-
-    def send_series(
-        self,
-        entity: str,
-        time_s: NDArray[np.float64],
-        tick: NDArray[np.float64] | None,
-        values: NDArray[np.float64],
-    ) -> None:
-        """Send one whole series on the ``time`` (s) and ``tick`` timelines, with its style.
-
-        For a series made after the run from all its rows (the smoothed speed); ``tick`` None
-        numbers the rows. A problem is recorded (and raised only with ``strict``).
-        """
-        rec = self._recording
-        if rec is None or self._closed:
-            return
-        values = np.asarray(values, dtype=float)
-        ticks = np.arange(values.size) if tick is None else np.asarray(tick)
-        try:
-            style = STYLES.get(entity)
-            if style is not None:
-                rec.log(entity, rr.SeriesLines(colors=[style.color], names=[style.name],
-                                               widths=[style.width]), static=True)  # fmt: skip
-            rec.send_columns(
-                entity,
-                indexes=[
-                    rr.TimeColumn("time", duration=np.asarray(time_s, dtype=float)),
-                    rr.TimeColumn("tick", sequence=ticks.astype(np.int64)),
-                ],
-                columns=rr.Scalars.columns(scalars=values),
-                strict=True,
-            )
-        except Exception as exc:
-            self._problem(f"sending {entity} failed: {exc}", raise_now=True)
-
-    def send_text(self, entity: str, text: str) -> None:
-        """Log a static text (what a series was made from) under ``entity``."""
-        rec = self._recording
-        if rec is None or self._closed:
-            return
-        try:
-            rec.log(entity, rr.TextDocument(text), static=True)
-        except Exception as exc:
-            self._problem(f"sending {entity} failed: {exc}", raise_now=True)
 
     @property
     def problems(self) -> tuple[str, ...]:
@@ -349,6 +280,17 @@ class RerunSink:
         self.close()
 
     # -- internals --------------------------------------------------------------------------
+
+    def _send_rows(self) -> None:
+        """Send every row kept (the first part of :meth:`close`)."""
+        if self._block is not None:
+            self.idle()  # the rows kept, into the blocks
+            if self._filled:
+                rest = self._block[: self._filled].copy()
+                self._full.append((rest, self._indexes(rest)))
+            while self._full:
+                self._send_next()
+        self._block = None
 
     def _viewer_url(self, rec: rr.RecordingStream) -> str | None:
         """Start the viewer for ``spawn``; the gRPC address to stream to, or None."""

@@ -121,24 +121,10 @@ def scalar_stats(chunks: Iterable[Chunk]) -> tuple[dict[str, tuple[float, float]
 
 def _send_extra(extra: Series, rec: rr.RecordingStream) -> None:
     """Series made from the recording, on its ``time`` and ``tick`` timelines, with their style."""
-    import numpy as np
-    import rerun as rr
-
-    from cartctl.sinks.rerun_layout import STYLES
+    from cartctl.sinks.rerun_series import send_series
 
     for entity, (time_s, tick, values) in extra.items():
-        style = STYLES.get(entity)
-        if style is not None:
-            rec.log(entity, rr.SeriesLines(colors=[style.color], names=[style.name],
-                                           widths=[style.width]), static=True)  # fmt: skip
-        rec.send_columns(
-            entity,
-            indexes=[
-                rr.TimeColumn("time", duration=np.asarray(time_s, dtype=float)),
-                rr.TimeColumn("tick", sequence=np.asarray(tick).astype(np.int64)),
-            ],
-            columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=float)),
-        )
+        send_series(rec, entity, time_s, tick, values)
 
 
 def _restyle(chunks: Sequence[Chunk], rec: rr.RecordingStream) -> None:

@@ -133,8 +133,7 @@ def smooth_run(
 
     ``summary`` must be complete (``link``, ``loop_delay_ticks``,
     ``controller_loop_delay_ticks``). ``recording`` is the run's
-    :class:`~cartctl.sinks.rerun_sink.RerunSink` (or None), held open
-    (:meth:`~cartctl.sinks.rerun_sink.RerunSink.hold`): it gets the series
+    :class:`~cartctl.sinks.rerun_series.HeldRerunSink` (or None), still open: it gets the series
     ``motor/<m>/smoothed_speed`` and the model's name, and is released here whatever happens.
     """
     try:
@@ -146,11 +145,10 @@ def smooth_run(
             speeds = add_smoothed(summary, columns, period_s, model_path, extra_delay_ticks=extra)
         if recording is not None:
             tick = columns.get("tick")
-            for m, speed in speeds.items():
-                recording.send_series(f"motor/{m}/smoothed_speed", columns["time_s"],
-                                      tick, speed)  # fmt: skip
-            if model_path is not None:
-                recording.send_text(MODEL_ENTITY, str(model_path))
+            series = {f"motor/{m}/smoothed_speed": (columns["time_s"], tick, speed)
+                      for m, speed in speeds.items()}  # fmt: skip
+            texts = {} if model_path is None else {MODEL_ENTITY: str(model_path)}
+            recording.send_extra(series, texts)
     finally:
         if recording is not None:
             recording.release()
