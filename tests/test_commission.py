@@ -1,0 +1,220 @@
+"""``cartctl commission``: through the command line on the physics simulator (not real time), and
+its pure parts against hand calculations and invariants."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from cartctl.cli import main
+from cartctl.commission import checks, timing, verify
+from cartctl.data import Trace
+from cartctl.model import ArxModel
+from cartctl.plants.physics_params import preset
+
+STAGE_FILES = ("checks", "excitation", "identification", "tuning", "verification")
+
+
+def _ground_motor() -> tuple[float, float]:
+    """The ground preset's steady gain K/(K² + R b) (rad/s/V) and breakaway τ_c R / K (V)."""
+    p = preset("ground")
+    m = p.motor_a
+    k, r, b = m.torque_constant_n_m_a, m.resistance_ohm, m.viscous_n_m_s
+    return k / (k * k + r * b), (m.coulomb_n_m + p.rolling_n_m) * r / k
+
+
+@pytest.fixture(scope="module")
+def commissioned(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, dict, object]:
+    out = tmp_path_factory.mktemp("commission") / "cart"
+    import contextlib
+    import io
+
+    stdout = io.StringIO()
+    with contextlib.redirect_stdout(stdout):
+        code = main(["commission", "physics", "--out", str(out), "--json", "--jobs", "1"])
+    return code, json.loads(stdout.getvalue()), out
+
+
+def test_commission_physics_writes_every_file(commissioned) -> None:
+    code, result, out = commissioned
+    assert code == 0
+    for name in ("model.toml", "controller.toml", "summary.md", "checks.csv", "excitation.csv"):
+        assert (out / name).is_file(), name
+    for stage in STAGE_FILES:
+        assert (out / f"{stage}.rrd").stat().st_size > 0, stage
+        assert f"## {stage}" in (out / "summary.md").read_text(encoding="utf-8")
+    assert sorted(result["recordings"]) == sorted(str(out / f"{s}.rrd") for s in STAGE_FILES)
+
+
+def test_commission_json_keys_and_figures(commissioned) -> None:
+    _, result, out = commissioned
+    assert result["model"]["path"] == str(out / "model.toml")
+    assert result["controller"]["path"] == str(out / "controller.toml")
+    assert result["verification"]["pass"] is True
+    for m in ("a", "b"):
+        model = result["model"]["motors"][m]
+        assert model["validation_fit_percent"] > 90.0
+        assert model["pole_radius"] < 0.99
+    predicted = result["controller"]["predicted"]
+    assert predicted["nominal_overshoot_percent"] <= 5.0
+    assert predicted["nominal_settling_time_s"] <= 0.13
+
+
+def test_commission_checks_match_the_preset_by_hand(commissioned) -> None:
+    _, result, _ = commissioned
+    gain, breakaway = _ground_motor()
+    for m in ("a", "b"):
+        c = result["checks"]["motors"][m]
+        assert c["direction"] == "forward"
+        # the ramp sees the wheel move within a few ticks (4 V/s) of τ_c R / K
+        assert breakaway - 0.05 <= c["breakaway_v"] <= breakaway + 0.25
+        assert c["gain_rad_s_v"] == pytest.approx(gain, rel=0.05)
+    # the model's DC gain: the preset's steady speed at the amplitude over the amplitude
+    amplitude = result["excitation"]["amplitude_v"]
+    steady = gain * (amplitude - breakaway)
+    assert result["model"]["motors"]["a"]["dc_gain"] * amplitude == pytest.approx(steady, rel=0.03)
+
+
+def test_commission_verification_matches_an_independent_run(commissioned, tmp_path, capsys) -> None:
+    _, result, out = commissioned
+    capsys.readouterr()
+    code = main(["run", "--plant", "physics", "--controller", str(out / "controller.toml"),
+                 "--fast", "--duration", "2", "--rerun", "off", "--out", str(tmp_path),
+                 "--json"])  # fmt: skip
+    assert code == 0
+    run = json.loads(capsys.readouterr().out)
+    worst_os = max(run["motors"][m]["overshoot_percent"] for m in ("a", "b"))
+    worst_ts = max(run["motors"][m]["settling_time_s"] for m in ("a", "b"))
+    measured = result["verification"]["measured"]
+    assert measured["overshoot_percent"] == pytest.approx(worst_os, abs=1e-9)
+    assert measured["settling_time_s"] == pytest.approx(worst_ts, abs=1e-9)
+    assert worst_os <= 5.0 and worst_ts <= 0.15  # the issue's acceptance figures
+
+
+def test_commission_refuses_a_backwards_motor(tmp_path, capsys) -> None:
+    out = tmp_path / "c"
+    code = main(["commission", "physics:reverse_b=1", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1
+    assert len(err) >= 1 and "motor b runs backwards" in err[-1] and "swap" in err[-1]
+    assert (out / "checks.csv").is_file() and (out / "summary.md").is_file()
+    assert not (out / "model.toml").exists() and not (out / "controller.toml").exists()
+
+
+def test_commission_stops_on_a_model_that_fails_validation(tmp_path, capsys) -> None:
+    out = tmp_path / "c"
+    code = main(["commission", "physics", "--noise", "10", "--seed", "3", "--out", str(out),
+                 "--jobs", "1"])  # fmt: skip
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert code == 1
+    assert "identification" in err and "fails validation" in err and "validation fit" in err
+    assert (out / "model-failed.toml").is_file() and (out / "excitation.csv").is_file()
+    assert not (out / "controller.toml").exists()
+    assert "**Stopped:**" in (out / "summary.md").read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["commission", "sim"], "PLANT must be"),
+        (["commission", "physics:reverse_c=1"], "bad physics option"),
+        (["commission", "virtual:reverse_b=2"], "reverse_b"),
+        (["commission", "physics", "--noise", "-1"], "--noise"),
+    ],
+)
+def test_commission_bad_input_is_one_line(argv, words, tmp_path, capsys) -> None:
+    code = main([*argv, "--out", str(tmp_path / "c")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and words in err[0]
+    assert not (tmp_path / "c").exists()
+
+
+# -- the pure parts --------------------------------------------------------------------------------
+
+
+def _model() -> ArxModel:
+    return ArxModel((-0.9, 0.2), (0.13, 0.54, -0.1), 1, 0.01)
+
+
+def test_later_command_keeps_gain_and_poles() -> None:
+    model = _model()
+    later = timing.later_command(model, 0.4)
+    assert later.dc_gain() == pytest.approx(model.dc_gain(), rel=1e-12)
+    assert later.ar == model.ar and later.nk == model.nk and later.nb == model.nb + 1
+
+
+def test_later_command_by_a_whole_tick_is_one_tick_of_delay() -> None:
+    model = _model()
+    u = np.random.default_rng(5).standard_normal(200)
+    whole = timing.later_command(model, 1.0).simulate(u)
+    assert np.allclose(whole, model.with_extra_delay(1).simulate(u), atol=1e-12)
+    assert np.allclose(timing.later_command(model, 0.0).simulate(u), model.simulate(u))
+
+
+def _trace(speed_a: np.ndarray, speed_b: np.ndarray, ua: np.ndarray, ub: np.ndarray) -> Trace:
+    n = ua.size
+    return Trace.from_columns({"time_s": np.arange(n) * 0.01, "voltage_a": ua, "voltage_b": ub,
+                               "speed_a": speed_a, "speed_b": speed_b})  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("wiring", "direction_a"),
+    [("straight", "forward"), ("reversed", "backward"), ("crossed", "crossed"), ("dead", "still")],
+)
+def test_checks_read_the_wiring(wiring, direction_a) -> None:
+    ua, ub, windows = checks.checks_sequence(0.01)
+    gain, breakaway = 2.0, 1.0
+    # a static motor with a one-tick lag and dead zone below the breakaway voltage
+    drive = {m: np.roll(np.where(np.abs(u) > breakaway, gain * (u - breakaway), 0.0), 1)
+             for m, u in (("a", ua), ("b", ub))}  # fmt: skip
+    sa, sb = drive["a"], drive["b"]
+    if wiring == "reversed":
+        sa = -sa
+    elif wiring == "crossed":
+        sa, sb = sb, sa
+    elif wiring == "dead":
+        sa = np.zeros_like(sa)
+    found = checks.analyse_checks(_trace(sa, sb, ua, ub), windows, loop_delay_ticks=0)
+    assert found["a"].direction == direction_a
+    if wiring == "straight":
+        assert found["a"].breakaway_v == pytest.approx(breakaway, abs=0.15)  # a half count to see
+        assert found["a"].gain_rad_s_v == pytest.approx(gain, rel=0.02)
+        checks.verdict(found)
+    else:
+        with pytest.raises(checks.StageError, match="motor a"):
+            checks.verdict(found)
+
+
+def test_amplitude_rule_by_hand() -> None:
+    def motor(breakaway: float, gain: float) -> checks.MotorCheck:
+        return checks.MotorCheck("a", 1.0, 0.0, "forward", breakaway, gain)
+
+    # report's 10 V when the speed allows it: 1 + 20 / 2 = 11 V ceiling
+    assert checks.choose_amplitude({"a": motor(1.0, 2.0)}, 10.0).voltage_v == 10.0
+    # a fast motor: 0.5 + 20 / 4 = 5.5 V
+    assert checks.choose_amplitude({"a": motor(0.5, 4.0)}, 10.0).voltage_v == 5.5
+    # much friction: at least 3 × 3 V, within 90 % of 12 V
+    assert checks.choose_amplitude({"a": motor(3.0, 4.0)}, 10.0).voltage_v == 9.0
+    assert checks.choose_amplitude({"a": motor(5.0, 4.0)}, 10.0).voltage_v == 10.8
+
+
+@pytest.mark.parametrize(
+    ("speed", "overshoot", "settling", "passed"),
+    [("true_speed", 5.9, 0.149, True), ("true_speed", 6.1, 0.1, False),
+     ("speed", 8.4, 0.1, True), ("speed", 8.6, 0.1, False), ("true_speed", 1.0, None, False),
+     ("true_speed", 1.0, 0.151, False)],
+)  # fmt: skip
+def test_verification_bounds(speed, overshoot, settling, passed) -> None:
+    summary = {"metrics_signal": speed,
+               "motors": {m: {"overshoot_percent": overshoot, "settling_time_s": settling}
+                          for m in ("a", "b")}}  # fmt: skip
+    predicted = {"nominal_overshoot_percent": 0.5, "nominal_settling_time_s": 0.12}
+    result = verify.compare(summary, predicted)
+    assert result.passed is passed
+    quantum = 100.0 * 2.0 * math.pi / 1792 / 0.01 / 10.0  # one count per tick over 10 rad/s
+    assert result.limits["overshoot_percent"] == pytest.approx(
+        5.0 + (1.0 if speed == "true_speed" else quantum)
+    )
