@@ -199,3 +199,20 @@ def test_a_serial_path_trace_gets_both_with_the_model_of_the_controller_it_ran(
     assert doc["smoothed"]["extra_delay_ticks"] == 0
     true, smoothed = doc["motors"]["a"], doc["motors"]["a"]["smoothed"]
     assert smoothed["rms_error"] == pytest.approx(true["rms_error"], rel=0.05)
+
+
+def test_review_streams_the_smoothed_series_with_the_recording(
+    physics_run: Path, tmp_path: Path, rrd_rows: Callable[[str | Path], Counter]
+) -> None:
+    from cartctl.commands.review.recorded import recording_summary
+    from cartctl.commands.review.recording import new_stream, read_recording, stream
+
+    _, extra = recording_summary(physics_run / "p.rrd", GROUND)
+    reader, entry = read_recording(physics_run / "p.rrd")
+    rec = new_stream(entry)
+    rec.save(tmp_path / "viewed.rrd")  # what a viewer would be sent, into a file
+    stream(reader, entry, rec, extra=extra)
+    rec.disconnect()
+    rows = rrd_rows(tmp_path / "viewed.rrd")
+    assert rows["motor/a/smoothed_speed"] == rows["motor/a/speed"] > 0
+    assert rows["motor/b/smoothed_speed"] == rows["motor/b/speed"]
