@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
             f"{args.amplitude:g} V on motor {args.motor}, plant {description}"
         )
         ticks = "unknown" if loop_delay is None else f"{loop_delay} tick(s)"
-        print(f"wrote {meta}: the plant and its loop delay ({ticks}), for identify")
+        print(f"wrote {meta}: loop delay {ticks} and the plant, for identify")
     if link is not None:
         delay = link["loop_delay_ticks"]
         stats = link["link"]
