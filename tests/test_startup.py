@@ -18,10 +18,11 @@ from cartctl.cli import build_parser
 HEAVY = ("numpy", "scipy", "control", "matplotlib", "rerun", "filterpy", "pymavlink", "serial",
          "pyarrow")  # fmt: skip
 COMMANDS = ("excite", "identify", "inspect", "validate", "linearity", "design", "run", "review",
-            "tune", "convert", "export", "virtual-cart", "monitor")  # fmt: skip
+            "tune", "convert", "export", "virtual-cart", "monitor", "commission")  # fmt: skip
 
 # The option strings of every command, as the parser had them before the imports became lazy.
 OPTIONS = {
+    "commission": ["--connect-timeout", "--help", "--jobs", "--json", "--noise", "--out", "--preset", "--seed", "-h"],
     "convert": ["--help", "--json", "--map", "--out", "-h"],
     "design": ["--anti-windup", "--bandwidth-hz", "--bias-drift-v", "--crossover-hz", "--disturbance-v", "--estimator", "--estimator-gain", "--extra-delay", "--help", "--json", "--loop-delay", "--measurement-noise", "--method", "--motor", "--out", "--overshoot", "--phase-margin", "--poles", "--process-noise-v", "--report", "--settling-time", "--step", "--timing-noise-ticks", "--voltage-limit", "-h"],
     "excite": ["--amplitude", "--connect-timeout", "--cycles", "--duration", "--help", "--json", "--model", "--motor", "--noise", "--out", "--plant", "--preset", "--seed", "--signal", "-h"],
