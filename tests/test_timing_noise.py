@@ -114,7 +114,8 @@ def test_design_writes_the_loop_delay_and_the_timing_noise(capsys, workdir: Path
     argv = ["design", "models/ground-timing.toml", "--method", "poles", "--settling-time", "0.06",
             "--overshoot", "2", "--timing-noise-ticks", "0.5"]  # fmt: skip
     assert main([*argv, "--out", "controllers/zero.toml"]) == 0
-    assert load_controller("controllers/zero.toml").loop_delay_ticks == 0  # nk − 1
+    # the model file's loop_delay_ticks (1), not nk − 1 = 0: nk = 1 lands within the tick
+    assert load_controller("controllers/zero.toml").loop_delay_ticks == 1
     assert main([*argv, "--loop-delay", "1", "--out", "controllers/one.toml"]) == 0
     capsys.readouterr()
     raw = tomllib.loads(Path("controllers/one.toml").read_text(encoding="utf-8"))
