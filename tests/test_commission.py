@@ -132,6 +132,57 @@ def test_commission_bad_input_is_one_line(argv, words, tmp_path, capsys) -> None
     assert not (tmp_path / "c").exists()
 
 
+class _StopAt:
+    """A physics plant that raises KeyboardInterrupt (Ctrl-C) at step ``stop_at`` of its
+    experiment, and remembers what it was told last."""
+
+    made = 0
+
+    def __init__(self, plant, stop_at: int | None) -> None:
+        self.plant, self.stop_at, self.steps = plant, stop_at, 0
+        self.period_s = plant.period_s
+        self.loop_delay_ticks = 1
+        self.closed = False
+
+    def reset(self):
+        return self.plant.reset()
+
+    def step(self, va: float, vb: float):
+        self.steps += 1
+        if self.steps == self.stop_at:
+            raise KeyboardInterrupt
+        return self.plant.step(va, vb)
+
+    def close(self) -> None:
+        self.plant.close()
+        self.closed = True
+
+
+def test_ctrl_c_in_the_excitation_keeps_the_files_and_zero_volts(tmp_path, capsys, monkeypatch):
+    from cartctl.commission import stages
+    from cartctl.plants.factory import make_plant
+
+    made: list[_StopAt] = []
+
+    def make(spec, **options):
+        plant, description = make_plant(spec, **options)
+        made.append(_StopAt(plant, 100 if made else None))  # the second plant: the excitation
+        return made[-1], description
+
+    monkeypatch.setattr(stages, "make_plant", make)
+    out = tmp_path / "c"
+    code = main(["commission", "physics", "--out", str(out)])
+    assert code == 130
+    assert "excitation: interrupted; zero volts sent" in capsys.readouterr().err
+    assert all(p.closed for p in made) and len(made) == 2
+    assert made[1].plant.applied_voltage_v == (0.0, 0.0)
+    rows = (out / "excitation.csv").read_text().strip().splitlines()
+    assert len(rows) == 1 + 100  # the header and the 100 ticks measured before Ctrl-C
+    summary = (out / "summary.md").read_text(encoding="utf-8")
+    assert "## checks" in summary and "## stopped" in summary
+    assert not (out / "model.toml").exists()
+
+
 # -- the pure parts --------------------------------------------------------------------------------
 
 
