@@ -58,6 +58,11 @@ def test_commission_json_keys_and_figures(commissioned) -> None:
         model = result["model"]["motors"][m]
         assert model["validation_fit_percent"] > 90.0
         assert model["pole_radius"] < 0.99
+    from cartctl.design.controllerfile import load_controller
+    from cartctl.modelfile import load_models
+
+    assert load_models(out / "model.toml").loop_delay_ticks == 1  # the simulator's, as checked
+    assert load_controller(out / "controller.toml").loop_delay_ticks == 1
     predicted = result["controller"]["predicted"]
     assert predicted["nominal_overshoot_percent"] <= 5.0
     assert predicted["nominal_settling_time_s"] <= 0.13

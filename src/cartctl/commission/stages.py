@@ -10,7 +10,7 @@ keeps its ticks and the plant closed (:func:`cartctl.experiment.run_experiment`)
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -104,8 +104,13 @@ class Commission:
             bar.close()
 
     def _keep(self, stage: str, result: ExperimentResult) -> Trace:
+        from cartctl.data.tracemeta import write_trace_meta
+
         if len(result.trace):
             write_trace(result.trace, self.out / f"{stage}.csv")
+            write_trace_meta(self.out / f"{stage}.csv", plant=self.description,
+                             loop_delay_ticks=self.loop_delay_ticks,
+                             command=f"cartctl commission {self.spec}")  # fmt: skip
         if result.interrupted or result.failure:
             self.report.add(stage, f"StageStoppedError after {len(result.trace)} ticks: "
                                    f"{result.failure or 'interrupted'}; {stage}.csv holds them.")  # fmt: skip
@@ -177,8 +182,8 @@ class Commission:
         if not passed:
             self.model_path = self.out / "model-failed.toml"
         files = [str(self.out / "excitation.csv")]
-        save_models(model_file(result, files, request, source=f"cartctl commission {self.spec}"),
-                    self.model_path)  # fmt: skip
+        models = model_file(result, files, request, source=f"cartctl commission {self.spec}")
+        save_models(replace(models, loop_delay_ticks=self.loop_delay_ticks), self.model_path)
         body = report.model_body(result, verdicts, self.model_path.name)
         series, panels = {}, []
         for m, r in result.motors.items():
