@@ -103,9 +103,8 @@ def make_plant(
             )
         from cartctl.plants.sim import ArxPlant
 
-        plant = ArxPlant(
-            models.motors["a"], models.motors["b"], noise_std_rad_s=noise_std_rad_s, seed=seed
-        )
+        plant = ArxPlant(models.motors["a"], models.motors["b"], noise_std_rad_s=noise_std_rad_s,
+                         seed=seed, loop_delay_ticks=models.loop_delay_ticks)  # fmt: skip
         return plant, f"sim ({model_path})"
     if spec == "physics" or spec.startswith("physics:"):
         from cartctl.plants.physics import PhysicsPlant

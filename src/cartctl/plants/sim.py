@@ -70,6 +70,9 @@ class ArxPlant:
         Seed of the noise generator (reproducible runs).
     voltage_limit_v : float
         Saturation of the command (V).
+    loop_delay_ticks : int or None
+        The loop delay of the cart the models describe (their model file's), which the plant
+        reports; None: the models' nk − 1.
     """
 
     def __init__(
@@ -80,6 +83,7 @@ class ArxPlant:
         noise_std_rad_s: float = 0.0,
         seed: int | None = None,
         voltage_limit_v: float = SUPPLY_V,
+        loop_delay_ticks: int | None = None,
     ) -> None:
         if model_a.period_s != model_b.period_s:
             raise InputError(
@@ -94,6 +98,7 @@ class ArxPlant:
             )
         self.period_s = model_a.period_s
         self.models = (model_a, model_b)
+        self._loop_delay_ticks = loop_delay_ticks
         self.noise_std_rad_s = float(noise_std_rad_s)
         self.seed = seed
         self.voltage_limit_v = float(voltage_limit_v)
@@ -102,7 +107,10 @@ class ArxPlant:
 
     @property
     def loop_delay_ticks(self) -> int:
-        """Ticks from a measurement to its voltage on the motor: the models' nk − 1 (the larger)."""
+        """Ticks from a measurement to its voltage on the motor: the model file's, else the
+        models' nk − 1 (the larger)."""
+        if self._loop_delay_ticks is not None:
+            return int(self._loop_delay_ticks)
         return max(m.nk for m in self.models) - 1
 
     def _measure(self, ya: float, yb: float) -> Measurement:
