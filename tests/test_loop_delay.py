@@ -3,6 +3,7 @@ the loop delay design takes from it."""
 
 from __future__ import annotations
 
+import json
 import math
 import tomllib
 from pathlib import Path
@@ -175,3 +176,18 @@ def test_a_model_file_with_a_bad_loop_delay_is_one_line(
     assert main(["inspect", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "loop_delay_ticks" in err
+
+
+def test_a_design_for_the_models_loop_runs_on_its_sim_plant(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    model = _model_file(tmp_path, 1, 1)  # nk = 1, loop delay 1: nk - 1 would say 0
+    out = tmp_path / "c.toml"
+    assert main(["design", str(model), "--method", "poles", "--out", str(out)]) == 0
+    argv = ["run", "--plant", "sim", "--model", str(model), "--controller", str(out), "--fast",
+            "--rerun", "off", "--duration", "0.5", "--out", str(tmp_path / "logs"), "--json"]  # fmt: skip
+    assert main(argv) == 0, capsys.readouterr().err
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["loop_delay_ticks"] == 1
+    meta = read_trace_meta(summary["trace"])  # run's trace carries its loop too
+    assert meta is not None and meta.loop_delay_ticks == 1
