@@ -52,7 +52,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "frames), corrupt=FRACTION (frames with a changed byte), stall=S (stop ticking S seconds "
         "after the host's first frame, port open), pull=S (the port vanishes S seconds after the "
         "host's first frame), generation=b (speak the "
-        "newer MAVLink 2 firmware instead)",
+        "newer MAVLink 2 firmware instead), reverse_a=1 / reverse_b=1 (that motor wired "
+        "backwards: + volts turn it the negative way)",
     )  # fmt: skip
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     p.add_argument(
