@@ -184,6 +184,7 @@ def test_a_design_for_the_models_loop_runs_on_its_sim_plant(
     model = _model_file(tmp_path, 1, 1)  # nk = 1, loop delay 1: nk - 1 would say 0
     out = tmp_path / "c.toml"
     assert main(["design", str(model), "--method", "poles", "--out", str(out)]) == 0
+    capsys.readouterr()
     argv = ["run", "--plant", "sim", "--model", str(model), "--controller", str(out), "--fast",
             "--rerun", "off", "--duration", "0.5", "--out", str(tmp_path / "logs"), "--json"]  # fmt: skip
     assert main(argv) == 0, capsys.readouterr().err
