@@ -290,10 +290,11 @@ def run(args: argparse.Namespace) -> int:
     models = load_models(args.model)
     names = ("a", "b") if args.motor == "both" else (args.motor,)
     if args.out:  # a file is for one loop: refuse before designing when there is none
+        given = request.loop_delay_ticks is not None  # a misfit --loop-delay names itself
         try:
             loop_delay_for(request, {m: models.motor(m) for m in names}, models.loop_delay_ticks)
         except InputError as exc:
-            raise InputError(f"--out: {exc}") from None
+            raise InputError(str(exc) if given else f"--out: {exc}") from None
     designs = design_models(request, models, names)
     if designs.loop_delay_note is not None:
         print(f"cartctl design: note: {designs.loop_delay_note}", file=sys.stderr)
