@@ -126,7 +126,10 @@ def _motor_section(
         )
         text += [
             "",
-            f"Delay estimated as nk = {res.delay.nk} (equation-error RMS per candidate: {evidence}).",
+            f"Delay estimated as nk = {res.delay.nk}, one for all motors identified, from their joint "
+            f"evidence (this motor's equation-error RMS per candidate: {evidence}"
+            + ("" if res.delay.nk_alone is None else f"; on its own: nk = {res.delay.nk_alone}")
+            + ").",
         ]
     if res.cycles_averaged:
         text += [
