@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import tomllib
 import warnings
 from pathlib import Path
 
@@ -254,3 +255,32 @@ def test_settling_bound_and_ratio_are_for_the_designs_loop_and_band(
     assert (
         text.count("fastest settling within the voltage limit for a loop delay of 4 tick(s)") == 2
     )
+
+
+def test_a_design_on_a_shipped_model_from_another_folder_runs_without_a_changed_model(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """In a folder without models/, 'models/ground.toml' is the shipped file: design hashes it,
+    the controller keeps its shipped name, and a run of that controller finds it unchanged."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["design", "models/ground.toml", "--method", "pi", "--out", "c/g.toml"]) == 0
+    capsys.readouterr()
+    doc = tomllib.loads((tmp_path / "c" / "g.toml").read_text())
+    assert doc["model"]["path"] == "models/ground.toml"
+    code = main(["run", "--fast", "--controller", "c/g.toml", "--duration", "0.3", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert "changed" not in err
+    assert json.loads(out)["ticks"] > 0
+
+
+def test_the_settling_bound_names_the_loop_the_design_is_for(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """models/ground-timing.toml: nk = 1, recorded in a loop of 1 tick. The design is for loop
+    delay 1 (the file's loop_delay_ticks), and so is the bound it is compared with."""
+    timing = ROOT / "models" / "ground-timing.toml"
+    assert load_models(timing).motor("a").nk == 1
+    doc = _design(capsys, str(timing), "--method", "poles")
+    for motor in ("a", "b"):
+        assert doc["motors"][motor]["settling_bound_loop_delay_ticks"] == 1

@@ -95,7 +95,7 @@ def common_loop_delay(nk: Mapping[str, int], extra_delay_ticks: int) -> int:
 
 def file_sha256(path: str | Path) -> str:
     """SHA-256 of a file's bytes (hex), to tie a controller to the exact model it was designed on."""
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    return hashlib.sha256(find_file(path).read_bytes()).hexdigest()
 
 
 def _plain(value: Any) -> Any:
@@ -215,7 +215,7 @@ class ControllerFile:
 
     def model_changed(self) -> bool:
         """True when the model file now differs from the one designed on (or is gone)."""
-        path = Path(self.model_path)
+        path = find_file(self.model_path)
         return not path.is_file() or file_sha256(path) != self.model_sha256
 
 
@@ -251,7 +251,13 @@ def absurd_gain(controller: ControllerFile) -> str | None:
 
 
 def _relative_to(model_path: str, folder: str | Path) -> str:
-    """``model_path`` (from the working directory) as a path from ``folder`` (POSIX separators)."""
+    """``model_path`` (from the working directory) as a path from ``folder`` (POSIX separators).
+
+    A shipped model named without a local copy (``models/ground.toml`` designed on from another
+    folder, :func:`~cartctl.choices.find_file`) keeps its shipped name.
+    """
+    if not Path(model_path).exists() and find_file(model_path) != Path(model_path):
+        return Path(model_path).as_posix()
     try:
         relative = os.path.relpath(os.path.abspath(model_path), os.path.abspath(folder))
     except ValueError:  # another drive (Windows): only an absolute path works
@@ -270,6 +276,8 @@ def _resolve_model(stored: str, controller_path: Path, *, legacy: bool) -> str:
     resolved = os.path.normpath(os.path.join(controller_path.parent, stored))
     if legacy and not Path(resolved).is_file() and Path(stored).is_file():
         return stored
+    if not Path(resolved).is_file() and find_file(stored).is_file():
+        return str(find_file(stored))  # a shipped model's name (_relative_to)
     return resolved
 
 

@@ -236,7 +236,10 @@ def design_models(
         entry["step"] = step.to_dict()
         entry["settling_bound_s"] = bound.settling_time_s
         entry["settling_ratio"] = None if settle is None else settle / bound.settling_time_s
-        entry["settling_bound_loop_delay_ticks"] = bound.loop_delay_ticks
+        # the loop the design is for (the model's recorded loop, or nk − 1, plus the extra delay)
+        entry["settling_bound_loop_delay_ticks"] = (
+            bound.loop_delay_ticks if loop_delay is None else loop_delay
+        )
         designs[m] = made
         steps[m] = step
     return Designs(request, by_motor, designs, steps, loop_delay, recorded, note)
