@@ -264,9 +264,8 @@ def test_amplitude_rule_by_hand() -> None:
      ("true_speed", 1.0, 0.151, False)],
 )  # fmt: skip
 def test_verification_bounds(speed, overshoot, settling, passed) -> None:
-    summary = {"metrics_signal": speed,
-               "motors": {m: {"overshoot_percent": overshoot, "settling_time_s": settling}
-                          for m in ("a", "b")}}  # fmt: skip
+    figures = {"overshoot_percent": overshoot, "settling_time_s": settling}
+    summary = {"metrics_signal": speed, "motors": {m: dict(figures) for m in ("a", "b")}}
     predicted = {"nominal_overshoot_percent": 0.5, "nominal_settling_time_s": 0.12}
     result = verify.compare(summary, predicted)
     assert result.passed is passed
@@ -274,3 +273,13 @@ def test_verification_bounds(speed, overshoot, settling, passed) -> None:
     assert result.limits["overshoot_percent"] == pytest.approx(
         5.0 + (1.0 if speed == "true_speed" else quantum)
     )
+
+
+def test_verification_takes_the_smoothed_speed_over_the_encoder() -> None:
+    quantum = 100.0 * 2.0 * math.pi / 1792 / 0.01 / 10.0
+    smoothed = {"overshoot_percent": 2.0, "settling_time_s": 0.12}
+    motor = {"overshoot_percent": 5.2, "settling_time_s": 0.185, "smoothed": smoothed}
+    summary = {"metrics_signal": "speed", "motors": {"a": motor, "b": motor}}
+    result = verify.compare(summary, {"nominal_overshoot_percent": 0.5})
+    assert result.passed and result.measured == smoothed and result.limits["speed"] == "smoothed"
+    assert result.limits["overshoot_percent"] == pytest.approx(5.0 + 1.0 + quantum / 2)

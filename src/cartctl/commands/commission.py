@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from cartctl import stopping
-from cartctl.errors import InputError
+from cartctl.errors import CartctlError, InputError
 
 COMMISSIONED = ("physics", "virtual", "serial")
 
@@ -134,6 +134,9 @@ def run(args: argparse.Namespace) -> int:
                                       else "interrupted; zero volts sent")  # fmt: skip
     except KeyboardInterrupt:
         code, failure = stopping.exit_code(), f"{job.current}: interrupted; zero volts sent"
+    except CartctlError as exc:  # the port or the cart in the checks (the user's to fix: its
+        # own code), or a refusal further on (a stage that failed: 1)
+        code, failure = (exc.exit_code if job.current == "checks" else 1), f"{job.current}: {exc}"
     if failure is not None:
         job.report.add("stopped", f"At stage **{job.current}**: {failure}. The files written so "
                        "far are kept.")  # fmt: skip

@@ -4,7 +4,11 @@ The excitation is split in time (:data:`SPLIT`: the first 70 % estimates, the la
 whole square cycle and a half of the report's five — validates), and the model structure is the
 one that holds whatever the cart's actuation timing: ARX with na = 2, nb = 3 and nk equal to the
 loop delay the checks measured (the measurement right after a command already sees part of it
-when it lands within the tick; ``models/ground-timing.toml`` has the same structure).
+when it lands within the tick; ``models/ground-timing.toml`` has the same structure). A motor whose
+last numerator term is within :data:`TAIL_SIGMAS` standard deviations of zero is fitted again with
+nb = 2 (:func:`identify_and_judge`): that term is noise, and the zero it puts near the origin
+makes pole placement cancel it with a gain of a hundred volts per rad/s, which ``cartctl run``
+refuses as a switch.
 
 A model passes (:func:`judge`) when, on the validation part:
 
@@ -26,7 +30,7 @@ friction leave coloured residuals on any real cart, and the loop is tuned on θ'
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -40,6 +44,7 @@ NA, NB = 2, 3
 MIN_FIT_PERCENT = 80.0
 MAX_POLE_RADIUS = 0.99
 CROSS_CLEAR_FACTOR = 2.0
+TAIL_SIGMAS = 2.0
 
 
 def request_for(loop_delay_ticks: int) -> IdentifyRequest:
@@ -110,12 +115,29 @@ def judge(result: IdentifyResult) -> dict[str, MotorVerdict]:
     return out
 
 
+def _noise_tail(fit: Any) -> bool:
+    """The last numerator coefficient within :data:`TAIL_SIGMAS` standard deviations of zero."""
+    b_last = float(fit.model.b[-1])
+    std = np.asarray(fit.theta_std, dtype=float)
+    return fit.model.nb > 1 and bool(np.isfinite(std[-1])) and abs(b_last) < TAIL_SIGMAS * std[-1]
+
+
 def identify_and_judge(
     trace: Trace, loop_delay_ticks: int
 ) -> tuple[IdentifyResult, IdentifyRequest, dict[str, MotorVerdict]]:
-    """Identify both motors from the excitation and judge them (no exception for a failure)."""
+    """Identify both motors from the excitation and judge them (no exception for a failure).
+
+    A motor whose last numerator term is noise (:func:`_noise_tail`) is fitted again with one
+    term fewer.
+    """
     request = request_for(loop_delay_ticks)
     result = identify([trace], request)
+    short = tuple(m for m, r in result.motors.items() if _noise_tail(r.chosen))
+    if short:
+        again = identify([trace], replace(request, nb=NB - 1, motors=short))
+        motors = {m: again.motors.get(m, r) for m, r in result.motors.items()}
+        note = f"motor(s) {', '.join(short)}: nb = {NB - 1}, the last term being noise"
+        result = IdentifyResult(result.period_s, motors, (*result.notes, note))
     return result, request, judge(result)
 
 

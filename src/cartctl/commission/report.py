@@ -115,7 +115,8 @@ def model_body(result: Any, verdicts: Mapping[str, Any], model_name: str) -> str
                      fmt(model.dc_gain(), 3), fmt(v.fit_percent, 1), fmt(v.pole_radius, 3),
                      f"{v.cross_outside}/{v.cross_lags} ({v.cross_ratio:.1f}×)", "yes" if v.white else "no",
                      "pass" if not v.problems else "FAIL: " + "; ".join(v.problems)])  # fmt: skip
-    return (table(["motor", "θ = [a1, a2, b0, b1, b2]", "nk", "DC gain (rad/s/V)",
+    return (table(["motor", "θ = [a1, a2, b0 …]", "nk", "DC gain (rad/s/V)",
                    "validation fit (%)", "max |pole|", "cross-corr. lags outside (max/bound)",
                    "white", "verdict"], rows)
+            + "".join(f"\n\n{note}." for note in result.notes)
             + f"\n\nFiles: {model_name}, identification.rrd, identification.png.")  # fmt: skip

@@ -12,7 +12,9 @@ the course's cart, not the one being commissioned.
 The choice is ``tune --choose best --max-overshoot 5``'s (:func:`cartctl.tune.robust_choice.
 choose_best_robust`): among the settings that settle on every plant, with overshoot ≤ 5 % on the
 model and on both timing plants and a nominal settling time ≤ :data:`MAX_SETTLING_S`, the lowest
-worst-case overshoot, then the fastest nominal settling.
+worst-case overshoot, then the fastest nominal settling; a setting whose controller file
+``cartctl run`` would refuse (a gain that turns one encoder count into the whole supply) is passed
+over for the next.
 """
 
 from __future__ import annotations
@@ -134,13 +136,17 @@ class TuningResult:
     rows : list of RobustRow
         Every setting, sorted as ``tune --robust`` sorts them.
     chosen : RobustRow
-    request_argv : list of str
-        The ``cartctl design`` arguments that make the chosen controller.
+    design_fixed : dict
+        The design request fields every setting shares (the loop delay, the estimator's noise).
+    refused : tuple of (int, str)
+        Settings the rule picked first whose controller file ``cartctl run`` would refuse (an
+        absurd gain), with why; the next by the rule was taken.
     """
 
     rows: list[robustness.RobustRow]
     chosen: robustness.RobustRow
     design_fixed: dict[str, float]
+    refused: tuple[tuple[int, str], ...] = ()
 
     def predicted(self) -> dict[str, float | None]:
         """The chosen setting's nominal and worst-case overshoot (%) and settling (s)."""
@@ -169,18 +175,50 @@ def run_tuning(model_path: Path, loop_delay_ticks: int,
     rows = engine.run_grid(job, jobs or min(2, os.cpu_count() or 1), progress, evaluate_chunk)
     rows = choice.sort_robust(choice.mark_robust_pareto(rows))
     limits = choice.Limits(MAX_OVERSHOOT_PERCENT)
-    fast = [r for r in rows if r.score is not None
-            and r.score.value("settling_time_s", "nominal") <= MAX_SETTLING_S]  # fmt: skip
-    try:
-        chosen = choice.choose_best_robust(fast, limits)
-    except InputError:
-        raise StageError(
-            f"tuning: none of the {len(rows)} pole-placement settings settles on every plant "
-            f"with overshoot <= {MAX_OVERSHOOT_PERCENT:g} % on the model and the later-command "
-            f"plants and settling <= {MAX_SETTLING_S * 1e3:g} ms on the model; the model "
-            "may be too uncertain (see identification in summary.md)"
-        ) from None
-    return TuningResult(rows, chosen, fixed)
+    candidates = [r for r in rows if r.score is not None
+                  and r.score.value("settling_time_s", "nominal") <= MAX_SETTLING_S]  # fmt: skip
+    refused: list[tuple[int, str]] = []
+    while True:
+        try:
+            chosen = choice.choose_best_robust(candidates, limits)
+        except InputError:
+            raise StageError(
+                f"tuning: none of the {len(rows)} pole-placement settings settles on every plant "
+                f"with overshoot <= {MAX_OVERSHOOT_PERCENT:g} % on the model and the "
+                f"later-command plants and settling <= {MAX_SETTLING_S * 1e3:g} ms on the model"
+                f"{' with gains a controller file accepts' if refused else ''}; the model may be "
+                "too uncertain (see identification in summary.md)"
+            ) from None
+        problem = _file_refusal(models, model_path, chosen, fixed)
+        if problem is None:
+            return TuningResult(rows, chosen, fixed, tuple(refused))
+        refused.append((chosen.index, problem))
+        candidates = [r for r in candidates if r.index != chosen.index]
+
+
+def _file_refusal(models: ModelFile, model_path: Path, row: robustness.RobustRow,
+                  fixed: dict[str, float]) -> str | None:  # fmt: skip
+    """Why ``cartctl run`` would refuse the setting's controller file (an absurd gain), or None.
+
+    The file is written to a temporary folder and read back as ``run`` reads it.
+    """
+    import tempfile
+
+    from cartctl.design.controllerfile import load_controller, save_controller
+    from cartctl.design.make import controller_file, design_models
+    from cartctl.errors import CartctlError
+
+    request = tuning.design_request(METHOD, row.result.settings, 0, fixed)
+    designs = design_models(request, models, ("a", "b"))
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "controller.toml"
+        save_controller(controller_file(designs, model_path, command="cartctl commission",
+                                        period_s=models.period_s), path)  # fmt: skip
+        try:
+            load_controller(path)
+        except CartctlError as exc:
+            return str(exc).replace(str(path), "its controller file")
+    return None
 
 
 def save_chosen(result: TuningResult, model_path: Path, out: Path) -> str:

@@ -59,7 +59,8 @@ def tuning_body(result: tuning.TuningResult, command: str) -> str:
             rows,
         )
         + f"\n\n→ chosen; *: on the robust Pareto front. Controller: `{command}`.\n\n"
-        "Files: controller.toml, tuning.rrd, tuning.png."
+        + "".join(f"Setting #{i} passed over: {why}.\n\n" for i, why in result.refused)
+        + "Files: controller.toml, tuning.rrd, tuning.png."
     )
 
 
@@ -115,9 +116,10 @@ def verification_body(checked: verify.Verification, summary: dict[str, Any],
         f"`cartctl {' '.join(argv)}` (worse of motors a and b, on the {lim['speed']} speed).\n\n"
         + table(["", "measured", "predicted nominal", "predicted worst", "pass bound"], rows)
         + f"\n\n**{'PASS' if checked.passed else 'FAIL'}**. Bounds: overshoot ≤ max("
-        f"{verify.TARGET_OVERSHOOT_PERCENT:g} %, predicted nominal) + a tolerance (one encoder "
-        f"count per tick over the step on an encoder speed, {verify.TRUE_SPEED_TOLERANCE_PP:g} "
-        f"point on a true speed); settling ≤ max({verify.TARGET_SETTLING_S * 1e3:g} ms, "
+        f"{verify.TARGET_OVERSHOOT_PERCENT:g} %, predicted nominal) + a tolerance "
+        f"({verify.TRUE_SPEED_TOLERANCE_PP:g} point on a true speed, half an encoder count per "
+        "tick over the step more on the smoothed speed, a whole count on the bare encoder "
+        "speed); settling ≤ max({verify.TARGET_SETTLING_S * 1e3:g} ms, "
         "predicted nominal + 20 ms).\n\n"
         f"Files: {Path(str(summary.get('trace'))).name}, "
         f"{Path(str(summary.get('recording'))).name}."
