@@ -190,6 +190,7 @@ def test_a_serial_path_trace_gets_both_with_the_model_of_the_controller_it_ran(
         'plant = "virtual cart on /dev/pts/9 (physics preset ground)"\n'
         "loop_delay_ticks = 1\n"
         f'command = "cartctl run --plant virtual --controller {controller}"\n'
+        f'controller = "{controller}"\n'  # as run writes it; the model from the controller
     )
     code, out, err = _cli(capsys, "review", str(trace), "--json")
     assert code == 0, err
@@ -216,3 +217,14 @@ def test_review_streams_the_smoothed_series_with_the_recording(
     rows = rrd_rows(tmp_path / "viewed.rrd")
     assert rows["motor/a/smoothed_speed"] == rows["motor/a/speed"] > 0
     assert rows["motor/b/smoothed_speed"] == rows["motor/b/speed"]
+
+
+def test_a_runs_meta_file_names_its_controller_and_model(physics_run: Path) -> None:
+    """run stores the controller it ran (the shipped default here) and that controller's design
+    model beside its trace, so review finds the smoother's model without parsing a command."""
+    from cartctl.data.tracemeta import read_trace_meta
+
+    meta = read_trace_meta(physics_run / "p.csv")
+    assert meta is not None
+    assert Path(meta.controller) == (ROOT / "controllers" / "pi.toml").resolve()
+    assert Path(meta.model) == Path(GROUND).resolve()

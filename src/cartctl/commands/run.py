@@ -239,11 +239,13 @@ def run(args: argparse.Namespace) -> int:
         plant.close()
         raise
     csv_path, rrd_path = output_paths(args, "run")
+    from cartctl.choices import find_file
     from cartctl.data.tracemeta import write_trace_meta
 
     # the trace's loop beside it, for identify (before the loop: an interrupted run has it too)
     write_trace_meta(csv_path, plant=description, loop_delay_ticks=delay,
-                     command=command_line("run"))  # fmt: skip
+                     command=command_line("run"), controller=controller_file.path or find_file(given),
+                     model=find_file(controller_file.model_path))  # fmt: skip
     memory = MemorySink()
     # on the virtual clock a second of trace takes milliseconds: write it in bigger blocks
     sinks: list[Any] = [CsvSink(csv_path, flush_every=1000 if args.fast else 50), memory]

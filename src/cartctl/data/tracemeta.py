@@ -45,6 +45,9 @@ class TraceMeta:
         measured over serial, the known 1 of the simulators; None when unknown.
     command : str
         The command that recorded it ('' when not known).
+    controller, model : str
+        A closed-loop run's controller file and the model it was designed on (absolute paths;
+        '' for an excitation or when not known): what a smoother of the trace needs.
     created : str
         ISO 8601 date-time of the recording ('' when not known).
     path : Path or None
@@ -54,6 +57,8 @@ class TraceMeta:
     plant: str
     loop_delay_ticks: int | None
     command: str = ""
+    controller: str = ""
+    model: str = ""
     created: str = ""
     path: Path | None = None
 
@@ -64,6 +69,9 @@ class TraceMeta:
             out["loop_delay_ticks"] = int(self.loop_delay_ticks)
         if self.command:
             out["command"] = self.command
+        for key in ("controller", "model"):
+            if getattr(self, key):
+                out[key] = getattr(self, key)
         out["created"] = self.created or datetime.now(UTC).isoformat(timespec="seconds")
         return out
 
@@ -80,6 +88,8 @@ def write_trace_meta(
     plant: str,
     loop_delay_ticks: int | None,
     command: str = "",
+    controller: str | Path | None = None,
+    model: str | Path | None = None,
 ) -> Path:
     """Write the meta file beside the trace ``trace_path``; returns the meta file's path.
 
@@ -93,10 +103,18 @@ def write_trace_meta(
         The loop delay (ticks), None when unknown (the key is then left out).
     command : str
         The command that recorded the trace.
+    controller, model : str or Path, optional
+        A run's controller file and its design model (stored as absolute paths).
     """
     if loop_delay_ticks is not None and int(loop_delay_ticks) < 0:
         raise InputError(f"loop_delay_ticks must be >= 0 ticks, got {loop_delay_ticks}")
-    meta = TraceMeta(plant=plant, loop_delay_ticks=loop_delay_ticks, command=command)
+    meta = TraceMeta(
+        plant=plant,
+        loop_delay_ticks=loop_delay_ticks,
+        command=command,
+        controller="" if controller is None else str(Path(controller).resolve()),
+        model="" if model is None else str(Path(model).resolve()),
+    )
     path = meta_path(trace_path)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(
@@ -131,6 +149,8 @@ def read_trace_meta(trace_path: str | Path) -> TraceMeta | None:
         plant=str(doc.get("plant", "unknown")),
         loop_delay_ticks=delay,
         command=str(doc.get("command", "")),
+        controller=str(doc.get("controller", "")),
+        model=str(doc.get("model", "")),
         created=str(doc.get("created", "")),
         path=path,
     )

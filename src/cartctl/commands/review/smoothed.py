@@ -8,9 +8,9 @@ The numerics are :func:`cartctl.design.smoother.smooth_speed`; the metrics on it
   there the smoothed speed stands beside the simulator's true speed), or whenever ``review`` is
   given ``--model``.
 - Which model: ``run`` takes the model its controller file was designed on; ``review`` takes
-  ``--model``, else the model a ``run`` named in its ``.rrd`` beside the CSV, else the model of
-  the controller named by the command in the trace's meta file. Without one the summary says, in
-  one line, that the smoothed metrics need a model, and shows the encoder's.
+  ``--model``, else the model a ``run`` named in its ``.rrd`` beside the CSV, else the model the
+  trace's meta file names (a run stores its controller and that model there). Without one the
+  summary says, in one line, that the smoothed metrics need a model, and shows the encoder's.
 - The loop delay: the model applies to the rows as written (contract 1) on the loop it was
   identified on; a run whose measured loop delay is longer than the one the controller was designed
   for (its ``loop_delay_ticks``) smooths with the difference as extra input delay, as ``design``
@@ -216,16 +216,6 @@ def recorded_model(chunks: Any) -> str | None:
     return None
 
 
-def _option(words: list[str], name: str) -> str | None:
-    """The value of ``name`` in a split command line (``--name V`` or ``--name=V``), or None."""
-    for i, word in enumerate(words):
-        if word == name and i + 1 < len(words):
-            return words[i + 1]
-        if word.startswith(name + "="):
-            return word.split("=", 1)[1]
-    return None
-
-
 def trace_hints(trace_path: str | Path) -> tuple[bool, str | None, int]:
     """What a run trace's meta file (:mod:`cartctl.data.tracemeta`) tells the smoother.
 
@@ -234,14 +224,11 @@ def trace_hints(trace_path: str | Path) -> tuple[bool, str | None, int]:
     serial_path : bool
         The trace came through the serial path (``virtual``, a cart on a port).
     model : str or None
-        The model of the controller the run's command names (the shipped default when it names
-        none), None when that cannot be found (another command, another folder).
+        The model the run's controller was designed on, as the meta file names it; None for a
+        trace whose meta file names none.
     extra_delay_ticks : int
         The run's loop delay beyond the controller's (0 when either is unknown).
     """
-    import shlex
-
-    from cartctl.commands.run_checks import DEFAULT_CONTROLLER
     from cartctl.data.tracemeta import read_trace_meta
     from cartctl.design.controllerfile import load_controller
 
@@ -252,20 +239,15 @@ def trace_hints(trace_path: str | Path) -> tuple[bool, str | None, int]:
     if meta is None:
         return False, None, 0
     serial = meta.plant.startswith(("virtual", "cart on"))
+    if not meta.controller:  # an excitation, or a run from an older cartctl
+        return serial, meta.model or None, 0
     try:
-        words = shlex.split(meta.command)
-    except ValueError:
-        words = []
-    if words[1:2] != ["run"]:
-        return serial, None, 0
-    controller = _option(words, "--controller") or str(DEFAULT_CONTROLLER)
-    try:
-        design = load_controller(controller)
+        design = load_controller(meta.controller)
     except (CartctlError, OSError):
-        return serial, None, 0
+        return serial, meta.model or None, 0
     return (
         serial,
-        design.model_path,
+        meta.model or design.model_path,
         run_extra_delay(meta.loop_delay_ticks, design.loop_delay_ticks),
     )
 
