@@ -257,7 +257,8 @@ def test_unlabelled_monitor_trace_with_a_map(
     code, out, err = _cli(capsys, "review", path, "--map", "voltage_a=FloatIn2,speed_a=FloatIn0")
     assert code == 2
     (line,) = err.strip().splitlines()
-    assert "missing reference_a" in line
+    assert "no reference_a" in line and "validate" in line
+    assert "--labels" not in line  # speed and voltage are named: no relabelling hint
 
 
 # -- the review layout of a monitor recording ----------------------------------------------------

@@ -39,6 +39,14 @@ def csv_summary(path: str | Path, mapping: Mapping[str, str] | None = None) -> d
     trace = read_trace(path, mapping)
     columns = trace.columns()
     missing = [name for name in TRACKING_COLUMNS if name not in columns]
+    if missing == ["reference_a"]:  # speed and voltage named: a trace with no controller in it
+        raise DataFileError(
+            Path(path),
+            "has speed and voltage but no reference_a: review measures how a controller tracks "
+            "its reference, and this trace has none (an excitation, or a monitor of the bridge, "
+            "which only passes commands on); 'cartctl validate MODEL.toml' and 'cartctl convert' "
+            "take it, or give --map reference_a=<column>",
+        )
     if missing:
         raise DataFileError(
             Path(path),
