@@ -263,7 +263,10 @@ class Commission:
                               f"{self.out / 'verification.csv'}")  # fmt: skip
         from cartctl.commission.tuning_report import verification_body
 
-        checked = verify.compare(summary, tuning.replace_none(self.tuned.predicted()))
+        smoothed = None
+        if summary.get("metrics_signal") != "true_speed" and summary.get("trace"):
+            smoothed = verify.smoothed_figures(Path(summary["trace"]), self.model_path)
+        checked = verify.compare(summary, tuning.replace_none(self.tuned.predicted()), smoothed)
         self.results["verification"] = {**checked.to_dict(), "trace": summary.get("trace"),
                                          "recording": summary.get("recording"),
                                          "command": "cartctl " + " ".join(argv)}  # fmt: skip
