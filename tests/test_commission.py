@@ -49,6 +49,21 @@ def test_commission_physics_writes_every_file(commissioned) -> None:
     assert sorted(result["recordings"]) == sorted(str(out / f"{s}.rrd") for s in STAGE_FILES)
 
 
+def test_commission_recordings_hold_each_stage(commissioned, rrd_rows) -> None:
+    _, _, out = commissioned
+    ticks = len((out / "checks.csv").read_text().strip().splitlines()) - 1
+    expected = {
+        "checks": ("motor/a/speed", ticks),
+        "excitation": ("motor/b/voltage", 1500),
+        "identification": ("identification/a/simulated", None),
+        "tuning": ("tuning/model/speed_a", 101),
+        "verification": ("motor/a/speed", 201),
+    }
+    for stage, (entity, rows) in expected.items():
+        counted = rrd_rows(out / f"{stage}.rrd")  # also: each file has its footer (closed)
+        assert counted[entity] == rows if rows is not None else counted[entity] > 100, stage
+
+
 def test_commission_json_keys_and_figures(commissioned) -> None:
     _, result, out = commissioned
     assert result["model"]["path"] == str(out / "model.toml")
