@@ -27,7 +27,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "Commission a cart in five stages, each written to --out: (1) checks: the port, the "
             "cart's heartbeat and loop delay, each motor's direction and encoder sign (a short "
             "pulse) and breakaway voltage (a slow ramp); (2) the report's square excitation at an "
-            "amplitude the checks chose; (3) ARX identification validated on the last 30 %% of "
+            "amplitude the checks chose; (3) ARX identification validated on the last 30 % of "
             "it; (4) robust pole-placement tuning on the model's uncertainty and on its commands "
             "landing 2 and 4 ms later; (5) a closed-loop 10 rad/s step on the cart with the "
             "chosen controller, measured against the prediction. Writes model.toml, "
