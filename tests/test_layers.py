@@ -2,7 +2,8 @@
 
 Layers, from the bottom: the core (facts, errors, model, data, signals, metrics, the link's
 framing), then what runs (runtime, plants, sinks), then what makes things (identification,
-design, tune, export), then the Python API and the commands, then the CLI. A module imports from its own layer or below, with
+design, tune, export), then the Python API, the commands and commissioning (which runs
+``cartctl run``'s command in process, to verify on the path users take), then the CLI. A module imports from its own layer or below, with
 two more rules: runtime consumes plain data and imports nothing from design, and nothing imports
 the CLI but ``__main__``. Function-level imports count as much as top-level ones.
 """
@@ -19,7 +20,7 @@ CORE = {"cartctl", "cart", "choices", "errors", "model", "modelfile", "tomlfile"
 RUNS = {"runtime", "plants", "sinks", "experiment"}
 MAKES = {"identification", "design", "tune", "export"}
 LAYER = {**dict.fromkeys(CORE, 0), **dict.fromkeys(RUNS, 1), **dict.fromkeys(MAKES, 2),
-         "api": 3, "commands": 3, "cli": 4, "__main__": 5}  # fmt: skip
+         "api": 3, "commands": 3, "commission": 3, "cli": 4, "__main__": 5}  # fmt: skip
 # Within the makers: tune and export build on design; identification stands alone.
 MAKERS_MAY_IMPORT = {
     "tune": {"design"},

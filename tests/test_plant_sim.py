@@ -126,3 +126,19 @@ def test_ctrl_c_keeps_the_ticks_recorded_and_closes_the_plant() -> None:
     assert result.interrupted
     assert plant.closed
     assert len(result.trace) == 31  # ticks 0..30 were measured; the 31st command never went out
+
+
+def test_the_recorded_loop_delay_holds_only_where_the_models_delay_fits_it() -> None:
+    """A model file records the loop its data came from; a model whose nk is neither that delay
+    nor one more (edited to answer later) is a longer loop: nk − 1."""
+    from cartctl.model import ArxModel
+    from cartctl.plants.sim import ArxPlant
+
+    def model(nk: int) -> ArxModel:
+        return ArxModel(ar=(-0.6, 0.0), b=(0.5, 0.3), nk=nk, period_s=0.01)
+
+    assert ArxPlant(model(2), model(2), loop_delay_ticks=1).loop_delay_ticks == 1
+    assert ArxPlant(model(1), model(1), loop_delay_ticks=1).loop_delay_ticks == 1
+    assert ArxPlant(model(4), model(4), loop_delay_ticks=1).loop_delay_ticks == 3
+    assert ArxPlant(model(2), model(4), loop_delay_ticks=1).loop_delay_ticks == 3
+    assert ArxPlant(model(3), model(3)).loop_delay_ticks == 2

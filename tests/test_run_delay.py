@@ -75,6 +75,8 @@ def test_sim_delay_comes_from_its_model(
     text = ground_path.read_text(encoding="utf-8")
     slower, count = re.subn(r"^nk = 2$", "nk = 3", text, flags=re.M)  # both motors one later
     assert count == 2
+    slower, count = re.subn(r"^loop_delay_ticks = 1\b", "loop_delay_ticks = 2", slower, flags=re.M)
+    assert count == 1  # recorded in a loop one tick longer, as the model's delay says
     slow.write_text(slower, encoding="utf-8")
     code, _out, err = _run(capsys, "--fast", "--model", "models/slow.toml", "--rerun", "off")
     assert code == 2

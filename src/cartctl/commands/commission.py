@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
                "connect_timeout_s": args.connect_timeout}  # fmt: skip
     _check_plant_options(args.plant)
     out.mkdir(parents=True, exist_ok=True)
-    job = Commission(args.plant, out, options, jobs=args.jobs)
+    job = Commission(args.plant, out, options, jobs=args.jobs, run_command=run_in_process)
     code, failure = 0, None
     try:
         job.run_all()
@@ -150,3 +150,24 @@ def run(args: argparse.Namespace) -> int:
     if failure is not None:
         print(f"cartctl commission: {failure}", file=sys.stderr)
     return code
+
+
+def run_in_process(argv: list[str]) -> tuple[int, dict[str, Any] | None]:
+    """``cartctl run ARGV`` in this process: its exit code and its ``--json`` summary (None when
+    it printed none). Commissioning verifies its controller on the path users take."""
+    import contextlib
+    import io
+    import json
+
+    from cartctl.commands.run import add_parser as add_run_parser
+
+    parser = argparse.ArgumentParser(prog="cartctl")
+    add_run_parser(parser.add_subparsers())
+    args = parser.parse_args(argv)
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = int(args.func(args))
+    try:
+        return code, json.loads(out.getvalue())
+    except json.JSONDecodeError:
+        return code, None

@@ -10,6 +10,7 @@ keeps its ticks and the plant closed (:func:`cartctl.experiment.run_experiment`)
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -50,6 +51,10 @@ class Commission:
         ``preset``, ``noise_std_rad_s``, ``seed``, ``connect_timeout_s`` for ``make_plant``.
     jobs : int or None
         Worker processes of the tuning.
+    run_command : callable
+        Runs ``cartctl run`` with the given arguments (without ``cartctl``) and returns its exit
+        code and its ``--json`` summary (None when it printed none): the verification's step,
+        on the path users take. Injected by the command, which owns the CLI.
     results : dict
         Each finished stage's figures (for ``--json``).
     """
@@ -58,6 +63,7 @@ class Commission:
     out: Path
     plant_options: dict[str, Any]
     jobs: int | None = None
+    run_command: Callable[[list[str]], tuple[int, dict[str, Any] | None]] | None = None
     results: dict[str, Any] = field(default_factory=dict)
     problems: list[str] = field(default_factory=list)
 
@@ -254,7 +260,9 @@ class Commission:
                                               str(opts["noise_std_rad_s"]), "--connect-timeout",
                                               str(opts["connect_timeout_s"])]
                                + ([] if opts["seed"] is None else ["--seed", str(opts["seed"])]))  # fmt: skip
-        code, summary = verify.run_step(argv)
+        if self.run_command is None:
+            raise StageError("verification: no way to run the closed loop was given")
+        code, summary = self.run_command(argv)
         if summary is None or code not in (0,):
             self.report.add("verification", f"`cartctl {' '.join(argv)}` ended with code {code}.")
             if code >= 128:

@@ -1,6 +1,7 @@
 """Commissioning, stage 5: a closed-loop step on the cart, measured against the prediction.
 
-The step is ``cartctl run`` itself (:func:`run_step`: the chosen controller, ``step:10`` for 2 s,
+The step is ``cartctl run`` itself (run in process by the command that drives commissioning: the
+chosen controller, ``step:10`` for 2 s,
 the same plant; ``--fast`` where the plant is simulated), so what commissioning verified is what
 the user will run. :func:`compare` judges it (pure): the worse of motors a and b must have
 
@@ -20,9 +21,6 @@ worst: over its sampled and timing plants), shown beside the measured ones.
 
 from __future__ import annotations
 
-import contextlib
-import io
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,20 +44,6 @@ def run_argv(plant: str, controller: Path, out: Path, *, fast: bool,
             "--duration", f"{DURATION_S:g}", "--rerun", "save", "--out", str(out),
             "--name", "verification", "--json", *plant_options]  # fmt: skip
     return argv + (["--fast"] if fast else [])
-
-
-def run_step(argv: list[str]) -> tuple[int, dict[str, Any] | None]:
-    """Run ``cartctl run`` in this process; its exit code and its ``--json`` summary."""
-    from cartctl.cli import build_parser
-
-    args = build_parser().parse_args(argv)
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out):
-        code = int(args.func(args))
-    try:
-        return code, json.loads(out.getvalue())
-    except json.JSONDecodeError:
-        return code, None
 
 
 @dataclass(frozen=True)

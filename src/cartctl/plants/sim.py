@@ -107,11 +107,15 @@ class ArxPlant:
 
     @property
     def loop_delay_ticks(self) -> int:
-        """Ticks from a measurement to its voltage on the motor: the model file's, else the
-        models' nk − 1 (the larger)."""
-        if self._loop_delay_ticks is not None:
-            return int(self._loop_delay_ticks)
-        return max(m.nk for m in self.models) - 1
+        """Ticks from a measurement to its voltage on the motor: the model file's where every
+        model's nk fits it (nk is that delay, the command landing within the tick, or one more, as
+        ``design`` takes it), else the models' nk − 1 (the larger): a model edited to answer later
+        is a longer loop, whatever its file once recorded."""
+        nk = max(m.nk for m in self.models)
+        recorded = self._loop_delay_ticks
+        if recorded is not None and all(m.nk in (recorded, recorded + 1) for m in self.models):
+            return int(recorded)
+        return nk - 1
 
     def _measure(self, ya: float, yb: float) -> Measurement:
         if self.noise_std_rad_s > 0.0:
