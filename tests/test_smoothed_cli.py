@@ -228,3 +228,21 @@ def test_a_runs_meta_file_names_its_controller_and_model(physics_run: Path) -> N
     assert meta is not None
     assert Path(meta.controller) == (ROOT / "controllers" / "pi.toml").resolve()
     assert Path(meta.model) == Path(GROUND).resolve()
+
+
+def test_the_stop_row_does_not_bend_the_last_smoothed_speed(physics_run: Path) -> None:
+    """A run's last row is its zero-volt stop command, which acts after the last measurement.
+    With an nk = 1 model (the next measurement already sees a command) the smoother must not
+    pull the last row's speed towards that stop."""
+    from cartctl.commands.review.smoothed import smoothed_speeds
+    from cartctl.data import read_trace
+    from cartctl.modelfile import load_models
+
+    trace = read_trace(physics_run / "p.csv")
+    columns = trace.columns()
+    assert columns["voltage_a"][-1] == 0.0 and abs(columns["voltage_a"][-2]) > 1.0
+    models = load_models(ROOT / "models" / "ground-timing.toml")
+    assert models.motor("a").nk == 1
+    smoothed = smoothed_speeds(columns, models, trace.period_s)["a"]
+    error = np.abs(smoothed - columns["true_speed_a"])
+    assert error[-1] <= 0.1  # rad/s, a third of a count (0.18 when it follows the stop)

@@ -271,9 +271,10 @@ class Commission:
                               f"{self.out / 'verification.csv'}")  # fmt: skip
         from cartctl.commission.tuning_report import verification_body
 
-        smoothed = None
-        if summary.get("metrics_signal") != "true_speed" and summary.get("trace"):
-            smoothed = verify.smoothed_figures(Path(summary["trace"]), self.model_path)
+        smoothed = None  # run's figures on the RTS-smoothed speed, where it has no true speed
+        if summary.get("metrics_signal") != "true_speed":
+            smoothed = {m: f["smoothed"] for m, f in (summary.get("motors") or {}).items()
+                        if isinstance(f.get("smoothed"), dict)} or None  # fmt: skip
         checked = verify.compare(summary, tuning.replace_none(self.tuned.predicted()), smoothed)
         self.results["verification"] = {**checked.to_dict(), "trace": summary.get("trace"),
                                          "recording": summary.get("recording"),

@@ -10,8 +10,6 @@ the user will run. :func:`compare` judges it (pure): the worse of motors a and b
   true speed; on a cart, the run's RTS-smoothed speed (``motors.<m>.smoothed`` of its summary,
   the encoder speed blurred by a whole count being no measure of a few percent) with half an
   encoder count per tick over the step more (the smoother's error is at most about half a count);
-  :func:`smoothed_figures` computes it without the trace's stop row, whose 0 V the smoother
-  otherwise follows in the last row (the run's own ``smoothed`` figures then never settle);
   one whole count (3.5 % of 10 rad/s) on the bare encoder speed, where the run gives nothing else;
 - settling ≤ max(:data:`TARGET_SETTLING_S`, the predicted nominal settling + two ticks).
 
@@ -80,31 +78,12 @@ def _worse(motors: dict[str, dict[str, Any]], key: str) -> float | None:
     return max(float(v) for v in values)  # type: ignore[arg-type]
 
 
-def smoothed_figures(trace_path: Path, model_path: Path) -> dict[str, dict[str, Any]]:
-    """Per motor, the run summary's figures on the RTS-smoothed speed of a run trace, its stop
-    row (the last, 0 V) left out."""
-    from cartctl.commands.review.smoothed import smoothed_speeds
-    from cartctl.data import read_trace
-    from cartctl.modelfile import load_models
-    from cartctl.sinks.summary import motor_metrics
-    from cartctl.stepinfo import encoder_quantum_rad_s
-
-    trace = read_trace(trace_path)
-    columns = {k: v[:-1] for k, v in trace.columns().items()}
-    period_s = trace.period_s
-    speeds = smoothed_speeds(columns, load_models(model_path), period_s)
-    return {m: motor_metrics(columns["time_s"], columns[f"reference_{m}"], speed,
-                             columns[f"voltage_{m}"],
-                             settling_floor=encoder_quantum_rad_s(period_s))
-            for m, speed in speeds.items()}  # fmt: skip
-
-
 def compare(summary: dict[str, Any], predicted: dict[str, float | None],
             smoothed: dict[str, dict[str, Any]] | None = None) -> Verification:  # fmt: skip
     """Judge a ``cartctl run --json`` summary against the tuning's prediction (module docstring).
 
-    ``smoothed``: the figures on the smoothed speed (:func:`smoothed_figures`), judged instead of
-    the encoder's where the run has no true speed.
+    ``smoothed``: per motor, the run's figures on the smoothed speed (``motors.<m>.smoothed`` of
+    its summary), judged instead of the encoder's where the run has no true speed.
     """
     motors = summary.get("motors") or {}
     count_pp = 100.0 * SPEED_QUANTUM_RAD_S / STEP_RAD_S

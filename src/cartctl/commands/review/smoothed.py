@@ -52,6 +52,11 @@ def smoothed_speeds(
 ) -> dict[str, NDArray[np.float64]]:
     """Per motor with a reference in the trace, the smoothed speed at each row (rad/s).
 
+    A run's trace (it has the loop's timing columns) ends with its stop row: the zero-volt
+    command sent when the run ended, which acts only after the last measurement. The smoother
+    holds the last tick's voltage there instead, so the smoothed speed of the last row does not
+    bend towards a stop that had not happened yet (that would keep it out of the settling band).
+
     Raises
     ------
     InputError
@@ -62,11 +67,15 @@ def smoothed_speeds(
         raise InputError(
             f"the model is for Ts = {models.period_s} s but the trace ticks at {period_s} s"
         )
+    stop_row = "period_error_us" in columns and "compute_us" in columns
     out: dict[str, NDArray[np.float64]] = {}
     for m in ("a", "b"):
         if f"reference_{m}" not in columns:
             continue
-        result = smooth_speed(models.motor(m), columns[f"voltage_{m}"], columns[f"speed_{m}"],
+        voltage_v = np.array(columns[f"voltage_{m}"], dtype=float)
+        if stop_row and voltage_v.size > 1:
+            voltage_v[-1] = voltage_v[-2]
+        result = smooth_speed(models.motor(m), voltage_v, columns[f"speed_{m}"],
                               extra_delay_ticks=extra_delay_ticks)  # fmt: skip
         out[m] = result.speed_rad_s
     return out
