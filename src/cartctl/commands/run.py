@@ -201,6 +201,10 @@ def run(args: argparse.Namespace) -> int:
             stacklevel=1,
         )
     controllers = build_controllers(controller_file, voltage_limit_v=limit)
+    if args.rerun != "off" and not args.fast:  # the recording's first-use costs, before a cart
+        from cartctl.sinks.rerun_series import warm_up
+
+        warm_up()
     plant, description = make_plant(args.plant, model_path=args.model, preset=args.preset,
                                     noise_std_rad_s=args.noise, seed=args.seed,
                                     connect_timeout_s=args.connect_timeout)  # fmt: skip

@@ -101,3 +101,16 @@ class HeldRerunSink(RerunSink):
                 rec.log(entity, rr.TextDocument(text), static=True)
         except Exception as exc:
             self._problem(f"sending what was made from the run failed: {exc}", raise_now=True)
+
+
+def warm_up() -> None:
+    """Load what the Rerun sink's first use loads lazily, before a cart is connected.
+
+    pyarrow imports pandas on its first array where pandas is installed (about 0.15 s here);
+    done when the sink opens, that delay would fall between the loop-delay probe and the first
+    command, with the cart ticking on. A throw-away blueprint of the run's layout pays for it
+    (and for the SDK's own first-use work) at a time nothing waits.
+    """
+    from cartctl.sinks.rerun_layout import blueprint
+
+    blueprint(("a", "b"))
