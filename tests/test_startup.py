@@ -120,3 +120,9 @@ def test_parsed_defaults_are_the_home_values() -> None:
     assert parser.parse_args(["virtual-cart"]).faults == CartFaults()
     args = parser.parse_args(["design", "m.toml", "--method", "pi", "--estimator-gain", "kalman"])
     assert args.estimator_gain == "time-varying"
+
+
+def test_no_help_text_shows_a_doubled_percent_sign() -> None:
+    """argparse %-formats option help but not descriptions: a '%%' there is printed as is."""
+    for name, parser in _subparsers().items():
+        assert "%%" not in parser.format_help(), name

@@ -66,7 +66,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "Design one controller per grid setting (pi: phase margin × crossover; poles: settling "
             "time × overshoot), run each like 'cartctl run --fast' against a simulated plant with "
             "the loop delay the design is for (--extra-delay) and compare overshoot, settling time "
-            "(band: 2 %% of the step or one encoder count per tick, whichever is wider), RMS error "
+            "(band: 2 % of the step or one encoder count per tick, whichever is wider), RMS error "
             "and peak voltage (the worse of motors a and b). Grid: comma-separated "
             "NAME=START:STOP:STEP (inclusive) or NAME=VALUE; pi "
             "axes phase_margin (deg, default 50:75:5), crossover_hz (Hz, 2:5:0.5); poles axes "
