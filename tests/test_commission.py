@@ -47,6 +47,8 @@ def test_commission_physics_writes_every_file(commissioned) -> None:
         assert (out / f"{stage}.rrd").stat().st_size > 0, stage
         assert f"## {stage}" in (out / "summary.md").read_text(encoding="utf-8")
     assert sorted(result["recordings"]) == sorted(str(out / f"{s}.rrd") for s in STAGE_FILES)
+    text = (out / "summary.md").read_text(encoding="utf-8")
+    assert "{" not in text and "}" not in text  # every figure formatted, no template left
 
 
 def test_commission_recordings_hold_each_stage(commissioned, rrd_rows) -> None:

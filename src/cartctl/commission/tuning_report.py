@@ -119,8 +119,10 @@ def verification_body(checked: verify.Verification, summary: dict[str, Any],
         f"{verify.TARGET_OVERSHOOT_PERCENT:g} %, predicted nominal) + a tolerance "
         f"({verify.TRUE_SPEED_TOLERANCE_PP:g} point on a true speed, half an encoder count per "
         "tick over the step more on the smoothed speed, a whole count on the bare encoder "
-        "speed); settling ≤ max({verify.TARGET_SETTLING_S * 1e3:g} ms, "
-        "predicted nominal + 20 ms).\n\n"
+        f"speed); settling ≤ max({verify.TARGET_SETTLING_S * 1e3:g} ms, "
+        "predicted nominal + 20 ms). The prediction is the linear model's: a cart's friction "
+        "and encoder, which the model leaves out, usually add a point or two of overshoot; the "
+        "bounds are the targets, the prediction is shown beside them.\n\n"
         f"Files: {Path(str(summary.get('trace'))).name}, "
         f"{Path(str(summary.get('recording'))).name}."
     )
