@@ -7,8 +7,6 @@ From Python: ``cartctl.load_trace``, ``excite``, ``identify``, ``load_model``, `
 ``design_pi``, ``design_poles`` and ``simulate`` (see :mod:`cartctl.api`).
 """
 
-from cartctl.cart import PERIOD_S as TS_S
-
 __version__ = "0.1.0"
 
 _API = ("load_trace", "excite", "identify", "load_model", "save_model", "design_pi",
@@ -18,8 +16,12 @@ __all__ = ["TS_S", "__version__", *_API]
 
 
 def __getattr__(name: str) -> object:
-    """The Python API (:mod:`cartctl.api`), imported on first use: ``import cartctl`` stays light,
-    so the command line starts (and routes its stop signals) before numpy and friends load."""
+    """The Python API (:mod:`cartctl.api`) and ``TS_S``, imported on first use: ``import cartctl``
+    imports nothing, so the command line routes its stop signals before any other import runs."""
+    if name == "TS_S":
+        from cartctl.cart import PERIOD_S
+
+        return PERIOD_S
     if name in _API:
         from cartctl import api
 

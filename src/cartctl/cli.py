@@ -5,17 +5,32 @@ Each subcommand lives in :mod:`cartctl.commands` as a module with ``add_parser(s
 line on stderr and exit with code 2, with no traceback.
 """
 
-from __future__ import annotations
-
-import argparse
 import os
 import sys
-import warnings
-from collections.abc import Sequence
-from typing import NoReturn
 
-from cartctl import __version__, stopping
-from cartctl.errors import CartctlError
+from cartctl import stopping
+
+
+def _started_as_cartctl() -> bool:
+    """Whether this process is the ``cartctl`` program (its console script, ``python -m
+    cartctl``), not a Python program that imports the command line."""
+    main = sys.modules.get("__main__")
+    spec = getattr(main, "__spec__", None)
+    if spec is not None:
+        return bool(spec.name.partition(".")[0] == "cartctl")
+    return os.path.basename(getattr(main, "__file__", None) or "").startswith("cartctl")
+
+
+if _started_as_cartctl():  # before any other import: a stop signal from here on is one line
+    stopping.install_at_start()
+
+import argparse  # noqa: E402 - the stop handlers come first
+import warnings  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
+from typing import NoReturn  # noqa: E402
+
+from cartctl import __version__  # noqa: E402
+from cartctl.errors import CartctlError  # noqa: E402
 
 
 class _Parser(argparse.ArgumentParser):
@@ -68,9 +83,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     SIGINT, SIGTERM and SIGHUP end a command through its shutdown path (exit 130, 143, 129); one
     that arrives while cartctl starts ends it with one line.
     """
-    handlers = stopping.install()
+    handlers: dict[int, object] = {}
     try:
+        handlers = stopping.install()
         return _main(argv)
+    except KeyboardInterrupt:  # in the few instructions around _main's own handling
+        print("cartctl: interrupted", file=sys.stderr)
+        return stopping.exit_code()
     finally:
         stopping.restore(handlers)
 
@@ -78,23 +97,28 @@ def main(argv: Sequence[str] | None = None) -> int:
 def console_main() -> int:
     """The ``cartctl`` program: :func:`main`, then the exit.
 
-    After a stop signal the stop signals are ignored until the process ends: a second one,
-    arriving while the interpreter shuts down (the Rerun SDK flushes at exit), must not cut the
-    exit short.
+    The stop handlers are in place from the start (:func:`cartctl.stopping.install_at_start`,
+    when this module is imported by the program). Once :func:`main` is over the stop signals are
+    ignored until the process ends: one arriving while the interpreter shuts down (the Rerun SDK
+    flushes at exit) must not cut the exit short, nor turn into a traceback.
     """
-    code = main()
-    if stopping.received() is not None:
+    stopping.install_at_start()  # already done on import, unless another launcher imported us
+    try:
+        return main()
+    finally:
         stopping.ignore()
-    return code
 
 
 def _main(argv: Sequence[str] | None) -> int:
     try:
         parser = build_parser()  # light modules only: a stop signal here is Interrupted
     except KeyboardInterrupt:
-        print("cartctl: stopped while starting; nothing was done", file=sys.stderr)
+        print(stopping.STARTING_LINE, file=sys.stderr)
         return stopping.exit_code()
     args = parser.parse_args(argv)
+    from cartctl.sinks.rerun_problems import quiet_sdk_logs
+
+    quiet_sdk_logs()  # before any command loads the Rerun SDK: its failures are ours to say
     previous = warnings.showwarning
     warnings.showwarning = _show_warning
     try:

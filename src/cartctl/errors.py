@@ -9,6 +9,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from cartctl.stopping import Interrupted
+
+__all__ = [
+    "CartctlError",
+    "DataFileError",
+    "DataWarning",
+    "InputError",
+    "Interrupted",
+    "MissingFileError",
+    "PlantError",
+    "one_line",
+]
+
 
 def one_line(text: str) -> str:
     """``text`` with line breaks and other control characters shown as escapes (``\\n``)."""
@@ -86,23 +99,36 @@ class PlantError(CartctlError, RuntimeError):
     exit_code = 1
 
 
-class DataWarning(UserWarning):
-    """Data that can be used but looks suspicious (uneven sample spacing, a clipped channel)."""
+class OutputError(CartctlError, OSError):
+    """A file being written stopped short (a full disk, a vanished drive): a fault, not a warning.
 
+    The message names the file and why, and how many rows it holds complete when the writer
+    counts them: ``logs/run.csv is incomplete: No space left on device (after 412 rows)``.
 
-class Interrupted(KeyboardInterrupt):
-    """A stop signal (SIGINT, SIGTERM, SIGHUP) arrived: end through the shutdown path.
-
-    A :class:`KeyboardInterrupt`, so that every place that handles Ctrl-C handles the others too.
+    Parameters
+    ----------
+    path : str or Path
+        The file left incomplete.
+    reason : str
+        Why (the system's words, e.g. ``No space left on device``).
+    rows : int, optional
+        Complete rows the file holds.
     """
 
-    def __init__(self, signum: int) -> None:
-        import signal
+    exit_code = 1
 
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
+    def __init__(self, path: str | Path, reason: str, *, rows: int | None = None) -> None:
+        self.path = Path(path)
+        self.reason = reason
+        self.rows = rows
+        after = "" if rows is None else f" (after {rows} row{'' if rows == 1 else 's'})"
+        self.detail = f"{reason}{after}"
+        """The message without the file: why, and the rows complete."""
+        super().__init__(f"{self.path} is incomplete: {self.detail}")
 
-    @property
-    def exit_code(self) -> int:
-        """128 + the signal's number: 130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP."""
-        return 128 + self.signum
+    def __str__(self) -> str:  # OSError would otherwise format (errno, strerror)
+        return one_line(self.args[0])
+
+
+class DataWarning(UserWarning):
+    """Data that can be used but looks suspicious (uneven sample spacing, a clipped channel)."""

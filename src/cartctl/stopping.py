@@ -3,34 +3,61 @@
 Python turns only SIGINT (Ctrl-C) into an exception; SIGTERM (``kill``, ``systemctl stop``,
 ``timeout``) and SIGHUP (a closing terminal) would end the process on the spot, with the motors at
 the last voltage and the files cut short. :func:`install` makes all three raise
-:class:`~cartctl.errors.Interrupted` in the main thread, which the commands catch like Ctrl-C: zero
-volts out, files closed, summary printed, exit code 128 + the signal's number (130, 143, 129).
+:class:`Interrupted` in the main thread, which the commands catch like Ctrl-C: zero volts out,
+files closed, summary printed, exit code 128 + the signal's number (130, 143, 129).
 
 Only the first signal interrupts. Any later one, while the shutdown runs, is absorbed (a second
 Ctrl-C in impatience must not cut the shutdown short); so is any signal inside :func:`deferred`.
+
+The program installs the handlers before anything else (:func:`install_at_start`, the first thing
+``cartctl.cli`` does when it runs as ``cartctl``): until the command line takes over, a stop
+signal ends the process with one line and its exit code, as nothing has been done yet. This module
+imports only ``signal``, ``sys`` and ``os`` for that reason: what remains before the handlers is
+the interpreter's own start.
 """
 
-from __future__ import annotations
-
-import contextlib
+import os
 import signal
-import threading
-from collections.abc import Iterator
-from typing import Any
+import sys
 
-from cartctl.errors import Interrupted
-
-__all__ = ["STOP_SIGNALS", "deferred", "exit_code", "ignore", "install", "received", "restore"]
+__all__ = ["STOP_SIGNALS", "Interrupted", "deferred", "exit_code", "ignore", "install",
+           "install_at_start", "received", "restore"]  # fmt: skip
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+STARTING_LINE = "cartctl: stopped while starting; nothing was done"
+"""What a stop signal before the command line took over prints (stderr)."""
 
+_STARTING, _RUNNING, _ENDING = "starting", "running", "ending"
+_phase = _RUNNING
 _first: int | None = None
 _deferred = 0
 
 
-def _handler(signum: int, frame: Any) -> None:
+class Interrupted(KeyboardInterrupt):
+    """A stop signal (SIGINT, SIGTERM, SIGHUP) arrived: end through the shutdown path.
+
+    A :class:`KeyboardInterrupt`, so that every place that handles Ctrl-C handles the others too.
+    """
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+    @property
+    def exit_code(self) -> int:
+        """128 + the signal's number: 130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP."""
+        return 128 + self.signum
+
+
+def _handler(signum: int, frame: object) -> None:
     global _first
-    if _first is not None or _deferred:  # the shutdown is under way: let it finish
+    if _phase == _STARTING:  # nothing done yet: one line, the signal's exit code, no unwinding
+        try:
+            sys.stderr.write(STARTING_LINE + "\n")
+            sys.stderr.flush()
+        finally:
+            os._exit(128 + signum)
+    if _first is not None or _deferred or _phase == _ENDING:  # a shutdown is under way
         if _first is None:
             _first = signum
         return
@@ -38,33 +65,57 @@ def _handler(signum: int, frame: Any) -> None:
     raise Interrupted(signum)
 
 
-def install() -> dict[int, Any]:
-    """Route the stop signals to :class:`~cartctl.errors.Interrupted` (main thread only).
+def _route(handler: object) -> dict[int, object]:
+    """Set ``handler`` for every stop signal; the handlers replaced ({} outside the main thread)."""
+    previous: dict[int, object] = {}
+    try:
+        for signum in STOP_SIGNALS:
+            previous[signum] = signal.signal(signum, handler)  # type: ignore[arg-type]
+    except ValueError:  # not the main thread: signals are the main thread's business
+        restore(previous)
+        return {}
+    return previous
+
+
+def install_at_start() -> None:
+    """The program's first step: a stop signal from now until :func:`install` ends the process at
+    once, with :data:`STARTING_LINE` on stderr and exit code 128 + its number (130 for Ctrl-C)."""
+    global _phase
+    _phase = _STARTING
+    _route(_handler)
+
+
+def install() -> dict[int, object]:
+    """Route the stop signals to :class:`Interrupted` (main thread only).
 
     Returns the handlers it replaced, for :func:`restore`.
     """
-    global _first, _deferred
+    global _first, _deferred, _phase
     _first, _deferred = None, 0
-    if threading.current_thread() is not threading.main_thread():
-        return {}
-    return {signum: signal.signal(signum, _handler) for signum in STOP_SIGNALS}
+    previous = _route(_handler)
+    _phase = _RUNNING
+    return previous
 
 
-def restore(previous: dict[int, Any]) -> None:
-    """Put back the handlers :func:`install` replaced."""
+def restore(previous: dict[int, object]) -> None:
+    """Put back the handlers :func:`install` replaced.
+
+    The program's own (from :func:`install_at_start`) come back absorbing: the command is over,
+    and a signal while it returns is noted (:func:`received`) but cuts nothing short.
+    """
+    global _phase
+    _phase = _ENDING
     for signum, handler in previous.items():
-        signal.signal(signum, handler)
+        signal.signal(signum, handler)  # type: ignore[arg-type]
 
 
 def ignore() -> None:
-    """Ignore the stop signals from now on: for the exit after a stop signal.
+    """Ignore the stop signals from now on: for the program's exit.
 
     An ignored signal stays ignored while the interpreter finalises (a handler of ours would be
-    reset to the default there, and a late second signal would then kill the process).
+    reset to the default there, and a late signal would then kill the process).
     """
-    if threading.current_thread() is threading.main_thread():
-        for signum in STOP_SIGNALS:
-            signal.signal(signum, signal.SIG_IGN)
+    _route(signal.SIG_IGN)
 
 
 def received() -> int | None:
@@ -77,12 +128,13 @@ def exit_code(default: int = 130) -> int:
     return default if _first is None else 128 + _first
 
 
-@contextlib.contextmanager
-def deferred() -> Iterator[None]:
+class deferred:  # noqa: N801 - used as a function: ``with stopping.deferred():``
     """Within the block, stop signals are noted (:func:`received`) but raise nothing."""
-    global _deferred
-    _deferred += 1
-    try:
-        yield
-    finally:
+
+    def __enter__(self) -> None:
+        global _deferred
+        _deferred += 1
+
+    def __exit__(self, *exc: object) -> None:
+        global _deferred
         _deferred -= 1
