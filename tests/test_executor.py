@@ -237,13 +237,15 @@ def test_monotonic_clock_rejects_negative_spin() -> None:
         MonotonicClock(spin_s=-0.001)
 
 
+@pytest.mark.realtime
 def test_monotonic_clock_runs_the_grid_in_real_time() -> None:
-    """The one real-time test: 20 ticks at 10 ms, with generous bounds."""
+    """The one real-time test: 20 ticks at 10 ms wait for their deadlines, so they never finish
+    early (a loaded machine only makes them late; how late: ``benchmarks/bench_speeds.py``)."""
     ex = PeriodicExecutor(0.01, MonotonicClock(), max_ticks=20)
     t = time.perf_counter()
     stats = ex.run(lambda k: True)
     elapsed_s = time.perf_counter() - t
-    assert 0.19 <= elapsed_s <= 0.5
+    assert elapsed_s >= 0.19  # tick 0 at once, tick 19 at 190 ms at the earliest
     assert stats.ticks == 20
     assert stats.period_error_us_p50 >= 0.0
 

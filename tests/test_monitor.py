@@ -2,8 +2,8 @@
 
 Unit tests (labels, the monitor's row loop on a scripted link, the on-board firmware's channels)
 run without a clock. A few short integration tests run the virtual cart in real time behind a real
-pseudo-terminal, with generous bounds: the on-board PI tracking a step, a pulled cable, a silent
-port and Ctrl-C.
+pseudo-terminal (marked ``realtime``; they check what happens, never how fast): the on-board PI
+tracking a step, a pulled cable, a silent port and Ctrl-C.
 """
 
 from __future__ import annotations
@@ -285,6 +285,7 @@ def test_onboard_from_file(tmp_path: Path) -> None:
 # -- real time, through the pseudo-terminal ------------------------------------------------------
 
 
+@pytest.mark.realtime
 def test_monitor_onboard_pi(capsys: pytest.CaptureFixture[str], tmp_path: Path, rrd_rows) -> None:
     labels = "f0=speed_a,f1=speed_b,f2=voltage_a,f3=voltage_b,f4=reference_a,f5=reference_b"
     code, out, err = _cli(capsys, "monitor", "virtual", "--onboard", str(PI), "--reference",
@@ -313,41 +314,41 @@ def test_monitor_onboard_pi(capsys: pytest.CaptureFixture[str], tmp_path: Path, 
     assert entities.get("cart/print") == 1  # the cart's boot line
 
 
+@pytest.mark.realtime
 def test_pulled_cable_is_one_error_and_valid_files(
     capsys: pytest.CaptureFixture[str], tmp_path: Path, rrd_rows
 ) -> None:
-    started = time.perf_counter()
     code, out, err = _cli(capsys, "monitor", "virtual:pull=0.5", "--duration", "5", "--rerun",
                           "save", "--out", str(tmp_path), "--name", "f", "--json")  # fmt: skip
     assert code == 1
-    assert time.perf_counter() - started < 3.0
     errors = _error_lines(err)
     assert len(errors) == 1 and ("vanished" in errors[0] or "no data" in errors[0])
     summary = json.loads(out)
     assert summary["stopped"] == "fault"
     _, table = _read_csv(tmp_path / "f.csv")
-    assert 30 <= len(table) == summary["frames"] <= 55
+    # frames until the cable went (0.5 s of cart ticks on an idle machine), far fewer than the
+    # 500 of the whole duration: the fault ended the monitor
+    assert 10 <= len(table) == summary["frames"] < 250
     assert rrd_rows(tmp_path / "f.rrd")["gpio/speed_a"] == len(table)  # the bridge's labels
 
 
+@pytest.mark.realtime
 def test_silent_port_times_out(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     master, slave = os.openpty()
     try:
-        started = time.perf_counter()
         code, out, err = _cli(capsys, "monitor", f"serial:{os.ttyname(slave)}",
                               "--connect-timeout", "0.3", "--out", str(tmp_path))  # fmt: skip
-        elapsed = time.perf_counter() - started
     finally:
         os.close(master)
         os.close(slave)
     assert code == 1
-    assert elapsed < 2.0
     assert out == ""
     (line,) = err.strip().splitlines()
     assert "no HEARTBEAT" in line and "0.3 s" in line
     assert not list(tmp_path.iterdir()), "no files for a cart that is not there"
 
 
+@pytest.mark.realtime
 def test_ctrl_c_stops_cleanly(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     csv_path = tmp_path / "c.csv"
 
@@ -372,6 +373,7 @@ def test_ctrl_c_stops_cleanly(capsys: pytest.CaptureFixture[str], tmp_path: Path
     assert len(table) == summary["frames"] >= 50
 
 
+@pytest.mark.realtime
 def test_virtual_cart_onboard_options(capsys: pytest.CaptureFixture[str]) -> None:
     code, _, err = _cli(capsys, "virtual-cart", "--reference", "step:8")
     assert code == 2 and "--reference needs --onboard" in err
