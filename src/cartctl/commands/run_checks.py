@@ -12,6 +12,7 @@ from cartctl.errors import CartctlError, DataWarning, InputError
 
 if TYPE_CHECKING:  # imported where used: the parser takes this module's defaults (light)
     from cartctl.design.controllerfile import ControllerFile
+    from cartctl.link.loop_delay import EchoDelays
     from cartctl.model import ArxModel
     from cartctl.reference import ReferenceSchedule
 
@@ -113,18 +114,36 @@ def _fitting_controller(controller: ControllerFile, given: str, delay: int) -> s
 
 
 def check_loop_delay(
-    controller: ControllerFile, given: str, plant: str, delay: int | None, *, allow: bool
+    controller: ControllerFile,
+    given: str,
+    plant: str,
+    delay: int | None,
+    *,
+    allow: bool,
+    measured: EchoDelays | None = None,
 ) -> None:
     """Refuse (InputError) a controller designed for another loop delay than the plant's.
 
-    With ``allow`` the mismatch is a warning; an unknown plant delay (None) is not checked.
+    With ``allow`` the mismatch is a warning; an unknown plant delay (None) is not checked. A
+    ``measured`` delay (a serial plant's probe) that is not clear is never refused: the run
+    warns, says how sure the measurement is, and goes on (it watches the delay as it runs).
     """
     designed = controller.loop_delay_ticks
-    if delay is None or designed is None or designed == delay:
+    if delay is None or designed is None:
+        return
+    if measured is not None and not measured.clear:
+        warnings.warn(
+            f"the loop delay of the plant '{plant}' is not clear: {measured.describe()}; "
+            f"{given} is designed for {designed}: running it, watching the delay",
+            DataWarning,
+            stacklevel=2,
+        )
+        return
+    if designed == delay:
         return
     problem = (
         f"{given} is designed for a loop delay of {designed} tick(s) but the plant '{plant}' has "
-        f"{delay}"
+        f"{delay}" + ("" if measured is None else f" (measured: {measured.describe()})")
     )
     if allow:
         warnings.warn(f"{problem}; running it anyway (--allow-delay-mismatch)", DataWarning,

@@ -11,7 +11,10 @@ from dataclasses import dataclass, replace
 
 from cartctl.errors import InputError
 
-__all__ = ["RECEIVE_SCHEDULES", "CartFaults"]
+__all__ = ["LATE_STRETCH_TICKS", "RECEIVE_SCHEDULES", "CartFaults"]
+
+LATE_STRETCH_TICKS = 5
+"""With ``late``, the cart takes the host's commands a tick late in stretches of this many ticks."""
 
 RECEIVE_SCHEDULES = {"bridge": 1000, "microos": None}
 """Receive schedules: the bridge's drain period (µs), or None for microOS's communication thread
@@ -54,6 +57,12 @@ class CartFaults:
     reverse_a, reverse_b : bool
         That motor's leads swapped: a positive command turns its wheel (and encoder) backwards
         (``reverse_b=1``), a wiring fault for ``cartctl commission`` to find.
+    late : float
+        Fraction of the cart's ticks (in [0, 1]) at which the host's commands arrive a tick late,
+        as from a host that falls behind now and then: stretches of :data:`LATE_STRETCH_TICKS`
+        ticks, one every ``LATE_STRETCH_TICKS / late`` ticks (:meth:`late_at`). Within a stretch
+        the echoes show a loop delay one tick longer; at its end one command is overtaken by the
+        next and never applied.
     """
 
     garbage: float = 0.0
@@ -68,17 +77,25 @@ class CartFaults:
     actuation_ms: float | None = None
     reverse_a: bool = False
     reverse_b: bool = False
+    late: float = 0.0
 
     KEYS = ("garbage", "corrupt", "stall", "pull", "generation", "reply_jitter_ms", "receive",
-            "bridge", "usb", "actuation_ms", "reverse_a", "reverse_b")  # fmt: skip
+            "bridge", "usb", "actuation_ms", "reverse_a", "reverse_b", "late")  # fmt: skip
 
     @property
     def reversed_motors(self) -> str:
         """The motors wired backwards ('', 'a', 'b' or 'ab')."""
         return ("a" if self.reverse_a else "") + ("b" if self.reverse_b else "")
 
+    def late_at(self, tick: int) -> bool:
+        """Whether the host's commands reach the cart a tick late at cart tick ``tick``."""
+        if self.late <= 0.0:
+            return False
+        every = max(LATE_STRETCH_TICKS, round(LATE_STRETCH_TICKS / self.late))
+        return tick % every < LATE_STRETCH_TICKS
+
     def __post_init__(self) -> None:
-        for name in ("garbage", "corrupt"):
+        for name in ("garbage", "corrupt", "late"):
             value = getattr(self, name)
             if not (math.isfinite(value) and 0.0 <= value <= 1.0):
                 raise InputError(f"fault '{name}' must be a fraction in [0, 1], got {value}")
@@ -108,7 +125,7 @@ class CartFaults:
         """Faults from ``key=value,...``.
 
         Keys: garbage=0.05, corrupt=0.05, stall=S, pull=S, generation=b, reply_jitter_ms=3,
-        receive=microos, bridge=1, usb=off, actuation_ms=10, reverse_b=1.
+        receive=microos, bridge=1, usb=off, actuation_ms=10, reverse_b=1, late=0.3.
         """
         faults = cls()
         for item in filter(None, (part.strip() for part in text.split(","))):

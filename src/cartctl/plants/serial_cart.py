@@ -51,6 +51,7 @@ from cartctl.link import (
     next_seq,
     tick_difference,
 )
+from cartctl.link.loop_delay import MIN_ECHOES, EchoDelays, delay_change
 from cartctl.plants.base import Measurement
 from cartctl.plants.cart_link import (
     DEFAULT_SILENCE_TIMEOUT_S,
@@ -60,8 +61,10 @@ from cartctl.plants.cart_link import (
 
 STOP_FRAMES = 3
 """drive = 0 frames sent on close (one may be lost to line noise)."""
-PROBE_ECHOES = 20
-"""Echoes :meth:`SerialCart.measure_loop_delay` waits for (the most frequent delay counts)."""
+PROBE_ECHOES = MIN_ECHOES
+"""Echoes :meth:`SerialCart.measure_loop_delay` judges first: done when they are clear."""
+PROBE_MAX_ECHOES = 50
+"""Echoes it takes when the first :data:`PROBE_ECHOES` are not clear."""
 PROBE_MAX_TICKS = 100
 """Longest :meth:`SerialCart.measure_loop_delay` waits for them (ticks, 1 s)."""
 BACKLOG_WAIT_S = 0.006
@@ -117,6 +120,9 @@ class SerialCart:
         self._sent_at: dict[int, int] = {}
         self._echo = -1
         self.echo_delays: collections.Counter[int] = collections.Counter()
+        """Echoes per delay (ticks) since the probe: every command the cart applied."""
+        self.probe_delays: EchoDelays | None = None
+        """What :meth:`measure_loop_delay` measured, None before it."""
         self.missed_ticks = 0
         self.skipped_ticks = 0
         self.watchdog_trips = 0
@@ -234,14 +240,21 @@ class SerialCart:
         self.sample, self.arrival_s = sample, arrival_s
 
     def measure_loop_delay(
-        self, *, echoes: int = PROBE_ECHOES, max_ticks: int = PROBE_MAX_TICKS
+        self,
+        *,
+        echoes: int = PROBE_ECHOES,
+        max_echoes: int = PROBE_MAX_ECHOES,
+        max_ticks: int = PROBE_MAX_TICKS,
     ) -> int:
         """The loop delay (ticks), measured from the echo without driving the motors.
 
         Connects if needed, then answers each cart tick with drive = 0 and zero volts (the bridge
-        echoes the sequence number whatever drive says) until ``echoes`` echoes came back; the most
-        frequent delay counts. The echo statistics are then cleared, so the run's own are not mixed
-        with the probe's; a following :meth:`reset` starts the run at the next tick.
+        echoes the sequence number whatever drive says) until ``echoes`` echoes came back. When
+        they are clear (:attr:`EchoDelays.clear <cartctl.link.loop_delay.EchoDelays.clear>`) the
+        probe is done; otherwise it goes on to ``max_echoes`` and judges them all. The most
+        frequent delay counts; :attr:`probe_delays` keeps the spread. The echo statistics are then
+        cleared, so the run's own are not mixed with the probe's; a following :meth:`reset` starts
+        the run at the next tick.
 
         Raises
         ------
@@ -251,11 +264,18 @@ class SerialCart:
         """
         self.reset()
         self.echo_delays.clear()
+        judged = False
         for _ in range(max_ticks):
             self.send(0.0, 0.0, drive=False)
             self.receive()
-            if self.echo_delays.total() >= echoes:
+            total = self.echo_delays.total()
+            if total >= max_echoes:
                 break
+            if total >= echoes and not judged:  # judged once: no stopping at a lucky moment
+                judged = True
+                if EchoDelays.of(self.echo_delays).clear:
+                    break
+        self.probe_delays = EchoDelays.of(self.echo_delays)
         delay = self.loop_delay_ticks
         if delay is None:
             raise PlantError(
@@ -318,6 +338,7 @@ class SerialCart:
         """Link figures for the run summary (extends contract 3)."""
         stats = self.link.stats
         delays = list(self.echo_delays.elements())
+        seen, probe = EchoDelays.of(self.echo_delays), self.probe_delays
         lost, sent = self.host_frames_lost, self.frames_sent
         latency_us = 1e6 * np.array(self.reply_latency_s)
         p50, p99, top = (
@@ -333,6 +354,9 @@ class SerialCart:
                 "echo_delay_ticks": self.echo_delay_ticks,
                 "echo_delay_range": [min(delays), max(delays)] if delays else None,
                 "echo_delay_median": statistics.median(delays) if delays else None,
+                "loop_delay_ticks_seen": seen.to_dict()["counts"],
+                "loop_delay_probe": None if probe is None else probe.to_dict(),
+                "loop_delay_change": None if probe is None else delay_change(probe, seen),
                 "frames": stats.frames,
                 "crc_errors": stats.crc_errors,
                 "garbage_bytes": stats.garbage_bytes,

@@ -34,7 +34,8 @@ the cart's replies but not its view of when bytes arrived.
 
 Faults (:class:`CartFaults`) are injected on the way out: garbage bursts between frames, corrupted
 frames, a stall (the cart stops ticking and sending, the port stays open) and a pulled cable (the
-port vanishes); and on the way in: replies held back by a random delay (``reply_jitter_ms``).
+port vanishes); and on the way in: replies held back by a random delay (``reply_jitter_ms``),
+and stretches of ticks at which the host's commands arrive a tick late (``late``).
 """
 
 from __future__ import annotations
@@ -164,7 +165,7 @@ class VirtualCart:
         )  # fmt: skip
         self._reader.rate_ok = self._writer.rate_ok = self._host_rate_matches
         self._parser = MicroosParser()
-        self._ring_high = 0
+        self._ring_high = self._lag_us = 0
         self._held: tuple[list[float], list[int]] = ([0.0] * 8, [0] * 4)
         self.boot_s = 0.0
         """``time.perf_counter`` at boot: tick k starts ``k × period_s`` later."""
@@ -258,7 +259,8 @@ class VirtualCart:
 
     def _drain(self, at_us: int, hand_over: bool) -> None:
         """A call of microOS's receive at ``at_us`` after boot; ``hand_over``: the bridge's."""
-        kept, dropped = fill_ring(self._reader.take(self.boot_s + at_us * 1e-6), self.ring_bytes)
+        until_us = at_us - self._lag_us  # ``late``: what reached the line a tick ago
+        kept, dropped = fill_ring(self._reader.take(self.boot_s + until_us * 1e-6), self.ring_bytes)
         self._ring_high = max(self._ring_high, len(kept))
         self.ring_dropped_bytes += dropped
         for gpio in self._parser.feed(kept):
@@ -280,6 +282,7 @@ class VirtualCart:
         """
         period_us = round(self.period_s * 1e6)
         tick_us = j * period_us
+        self._lag_us = period_us if self.faults.late_at(j) else 0
         drain_us = RECEIVE_SCHEDULES[self.receive_schedule]
         if j > 0:
             start_us = tick_us - period_us

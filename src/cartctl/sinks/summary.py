@@ -268,9 +268,12 @@ def format_summary(summary: Mapping[str, Any]) -> str:
             f"{link['skipped_ticks']} skipped by the host, {link['watchdog_trips']} watchdog trips"
         )
         lines.append("  " + host_loss_text(link))
+        lines += delay_seen_lines(link)
+    incomplete = summary.get("incomplete") or {}
     for key in ("trace", "recording"):
         if summary.get(key):
-            lines.append(f"  {key}: {summary[key]}")
+            why = incomplete.get(summary[key])
+            lines.append(f"  {key}: {summary[key]}" + (f" (INCOMPLETE: {why})" if why else ""))
     return "\n".join(lines)
 
 
@@ -303,6 +306,31 @@ def host_loss_text(link: Mapping[str, Any]) -> str:
     if percent > HOST_LOSS_WARN_PERCENT:
         text += " — more than 1 %: the cart held older voltages at those ticks"
     return text
+
+
+def delay_seen_lines(link: Mapping[str, Any]) -> list[str]:
+    """The echo delays of the run and of the probe before it, and a change between them."""
+    from cartctl.link.loop_delay import EchoDelays
+
+    def spread(counts: Mapping[str, int] | None) -> str:
+        return EchoDelays.of({int(d): n for d, n in (counts or {}).items()}).describe()
+
+    if "loop_delay_ticks_seen" not in link:  # not a run's link (a monitor's)
+        return []
+    probe = link.get("loop_delay_probe")
+    lines = [
+        f"  loop delay seen over the run: {spread(link.get('loop_delay_ticks_seen'))}"
+        + ("" if probe is None else f"; the probe before it: {spread(probe.get('counts'))}")
+    ]
+    if link.get("loop_delay_change"):
+        lines.append("  " + link["loop_delay_change"])
+    return lines
+
+
+def warn_delay_change(link: Mapping[str, Any] | None, command: str) -> None:
+    """One line on stderr when the loop delay changed during the run (from the probe's)."""
+    if link and link.get("loop_delay_change"):
+        print(f"cartctl {command}: warning: {link['loop_delay_change']}", file=sys.stderr)
 
 
 def warn_host_losses(link: Mapping[str, Any] | None, command: str) -> None:

@@ -1,0 +1,196 @@
+"""The loop-delay probe does not guess: it judges a spread of echoes, and a run watches the delay.
+
+The decision rule is tested without any timing (counts in, verdict out); then ``cartctl run`` on
+the virtual cart with ``late``, a fault that makes the host's commands reach the cart a tick late
+in stretches, so that the echoes spread over two delays (real time, about 2 s each).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import warnings
+from collections import Counter
+from pathlib import Path
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from cartctl.commands.run_checks import check_loop_delay
+from cartctl.design.controllerfile import load_controller
+from cartctl.errors import DataWarning, InputError
+from cartctl.link.loop_delay import CLEAR_SHARE, MIN_ECHOES, EchoDelays, delay_change
+from cartctl.plants.cart_faults import LATE_STRETCH_TICKS, CartFaults
+
+ROOT = Path(__file__).resolve().parents[1]
+PI = str(ROOT / "controllers" / "pi.toml")  # designed for the on-board loop delay, 1 tick
+
+# -- the measurement and its verdict (no timing) ------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("counts", "mode", "clear"),
+    [
+        ({1: 20}, 1, True),
+        ({1: 17, 2: 3}, 1, True),  # 85 %: the least share that is clear
+        ({1: 16, 2: 4}, 1, False),  # 80 %
+        ({2: 19}, 2, False),  # all agree, but fewer than 20 echoes
+        ({1: 10, 2: 10}, 1, False),  # a tie: the shorter delay is named, and it is not clear
+        ({2: 45, 1: 3, 3: 2}, 2, True),
+        ({}, None, False),
+    ],
+)
+def test_a_measurement_is_clear_only_with_20_echoes_mostly_agreeing(
+    counts: dict[int, int], mode: int | None, clear: bool
+) -> None:
+    measured = EchoDelays.of(counts)
+    assert (measured.mode, measured.clear) == (mode, clear)
+
+
+def test_the_spread_is_described_and_in_the_json() -> None:
+    measured = EchoDelays.of(Counter({1: 19, 2: 1}))
+    assert measured.describe() == "1 tick in 19 of 20 echoes (95 %), 2 ticks in 1"
+    assert measured.to_dict() == {"ticks": 1, "echoes": 20, "mode_share_percent": 95.0,
+                                  "min": 1, "max": 2, "clear": True,
+                                  "counts": {"1": 19, "2": 1}}  # fmt: skip
+
+
+@given(st.dictionaries(st.integers(0, 6), st.integers(0, 60), max_size=5))
+def test_clear_means_enough_echoes_and_the_clear_share_at_one_delay(counts: dict) -> None:
+    total = sum(counts.values())
+    top = max(counts.values(), default=0)
+    measured = EchoDelays.of(counts)
+    assert measured.echoes == total
+    assert measured.clear == (total >= MIN_ECHOES and top >= CLEAR_SHARE * total > 0)
+    if total:
+        assert counts[measured.mode] == top
+        assert measured.mode == min(d for d, n in counts.items() if n == top)
+
+
+@pytest.mark.parametrize(
+    ("counts", "delay", "verdict"),
+    [
+        ({1: 20}, 1, "runs"),
+        ({2: 20}, 2, "refused"),  # clearly another loop than the controller's
+        ({2: 18, 1: 2}, 2, "refused"),
+        ({2: 14, 1: 6}, 2, "warns"),  # mostly 2, but not clear: run it, say how sure
+        ({1: 12, 2: 8}, 1, "warns"),  # mostly the controller's, not clear either
+        ({2: 19}, 2, "warns"),  # too few echoes to be sure
+    ],
+)
+def test_run_refuses_a_mismatch_only_when_the_measurement_is_clear(
+    counts: dict[int, int], delay: int, verdict: str
+) -> None:
+    controller = load_controller(PI)
+    measured = EchoDelays.of(counts)
+    if verdict == "refused":
+        with pytest.raises(InputError, match=f"has {delay}") as refused:
+            check_loop_delay(controller, PI, "serial:X", delay, allow=False, measured=measured)
+        assert measured.describe() in str(refused.value)
+        return
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_loop_delay(controller, PI, "serial:X", delay, allow=False, measured=measured)
+    if verdict == "warns":
+        assert len(caught) == 1 and issubclass(caught[0].category, DataWarning)
+        text = str(caught[0].message)
+        assert "not clear" in text and measured.describe() in text
+    else:
+        assert caught == []
+
+
+def test_a_plant_that_knows_its_delay_is_checked_as_before() -> None:
+    with pytest.raises(InputError, match="has 2"):
+        check_loop_delay(load_controller(PI), PI, "sim", 2, allow=False)
+
+
+@pytest.mark.parametrize(
+    ("run", "change"),
+    [
+        ({1: 498, 2: 3}, None),  # 0.6 % at 2: the loop the controller was checked against
+        ({1: 450, 2: 50}, "varied (10 % of the commands took another than 1 tick)"),
+        ({2: 400, 1: 100}, "changed"),
+        ({}, None),
+    ],
+)
+def test_a_run_that_leaves_the_probed_delay_is_a_change(
+    run: dict[int, int], change: str | None
+) -> None:
+    text = delay_change(EchoDelays.of({1: 20}), EchoDelays.of(run))
+    if change is None:
+        assert text is None
+    else:
+        assert text is not None and text.startswith(f"the loop delay {change} during the run")
+
+
+# -- the virtual cart's late stretches ------------------------------------------------------------
+
+
+@pytest.mark.parametrize("late", [0.05, 0.1, 0.3, 0.5, 1.0])
+def test_late_makes_that_share_of_ticks_late_in_stretches(late: float) -> None:
+    faults = CartFaults.parse(f"late={late}")
+    pattern = [faults.late_at(j) for j in range(2000)]
+    assert abs(sum(pattern) / len(pattern) - late) < 0.02
+    if late < 1.0:  # stretches of LATE_STRETCH_TICKS late ticks
+        starts = [j for j in range(1, 2000) if pattern[j] and not pattern[j - 1]]
+        assert starts and all(pattern[s : s + LATE_STRETCH_TICKS] == [True] * 5 for s in starts)
+        assert all(not pattern[s + LATE_STRETCH_TICKS] for s in starts if s + 5 < 2000)
+    assert not any(CartFaults().late_at(j) for j in range(100))
+
+
+@pytest.mark.parametrize("text", ["late=2", "late=-0.1", "late=x"])
+def test_a_bad_late_fraction_is_refused(text: str) -> None:
+    with pytest.raises(InputError, match="late"):
+        CartFaults.parse(text)
+
+
+# -- cartctl run on the virtual cart (real time) ------------------------------------------------
+
+
+def _run(workdir: Path, plant: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "cartctl", "run", "--plant", plant, "--duration", "1",
+         "--rerun", "off", "--json"],
+        cwd=workdir, capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+
+
+@pytest.mark.realtime
+def test_a_cart_whose_commands_all_come_a_tick_late_is_refused_clearly(workdir: Path) -> None:
+    done = _run(workdir, "virtual:late=1")
+    assert done.returncode == 2, done.stderr
+    errors = [line for line in done.stderr.splitlines() if line.startswith("cartctl run: error")]
+    assert len(errors) == 1 and "has 2" in errors[0], done.stderr
+    assert "2 ticks in 20 of 20 echoes (100 %)" in errors[0]
+    assert not (workdir / "logs").exists() or not list((workdir / "logs").glob("*.csv"))
+
+
+@pytest.mark.realtime
+def test_a_spread_delay_warns_runs_and_shows_in_the_summary(workdir: Path) -> None:
+    # late=0.5: stretches of 5 late ticks every 10 ticks; about 4 in 9 echoes at 2 ticks
+    done = _run(workdir, "virtual:late=0.5")
+    assert done.returncode == 0, done.stderr
+    assert "Traceback" not in done.stderr
+    warned = [line for line in done.stderr.splitlines() if "warning" in line]
+    assert any("loop delay" in line and "not clear" in line for line in warned), done.stderr
+    assert any("during the run" in line for line in warned), done.stderr
+    link = json.loads(done.stdout)["link"]
+    probe = link["loop_delay_probe"]
+    assert probe["clear"] is False and probe["echoes"] >= 50  # went on past the first 20
+    seen = {int(d): n for d, n in link["loop_delay_ticks_seen"].items()}
+    assert set(seen) >= {1, 2} and all(n > 10 for n in seen.values())
+    assert link["loop_delay_change"] is not None
+
+
+@pytest.mark.realtime
+def test_a_clean_virtual_cart_measures_one_tick(workdir: Path) -> None:
+    done = _run(workdir, "virtual")
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
+    link = summary["link"]
+    assert summary["loop_delay_ticks"] == link["loop_delay_probe"]["ticks"] == 1
+    assert link["loop_delay_probe"]["echoes"] >= MIN_ECHOES
+    seen = {int(d): n for d, n in link["loop_delay_ticks_seen"].items()}
+    assert max(seen, key=lambda d: seen[d]) == 1
