@@ -26,7 +26,7 @@ if _started_as_cartctl():  # before any other import: a stop signal from here on
 
 import argparse  # noqa: E402 - the stop handlers come first
 import warnings  # noqa: E402
-from collections.abc import Sequence  # noqa: E402
+from collections.abc import Callable, Sequence  # noqa: E402
 from typing import NoReturn  # noqa: E402
 
 from cartctl import __version__  # noqa: E402
@@ -73,8 +73,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    print(f"cartctl: warning: {message}", file=sys.stderr)
+def _warning_printer(command: str) -> Callable[..., None]:
+    """A ``warnings.showwarning`` that prints one line, ``cartctl COMMAND: warning: …``."""
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        print(f"cartctl {command}: warning: {message}", file=sys.stderr)
+
+    return show
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -120,7 +125,7 @@ def _main(argv: Sequence[str] | None) -> int:
 
     quiet_sdk_logs()  # before any command loads the Rerun SDK: its failures are ours to say
     previous = warnings.showwarning
-    warnings.showwarning = _show_warning
+    warnings.showwarning = _warning_printer(args.command)
     try:
         return int(args.func(args))
     except CartctlError as exc:

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from cartctl import stopping
+from cartctl.commands.options import MAX_JOBS, check_jobs, check_output_folder
 from cartctl.errors import CartctlError, InputError
 
 COMMISSIONED = ("physics", "virtual", "serial")
@@ -54,7 +55,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="serial and virtual carts: longest wait for the first HEARTBEAT "
                         "(default 5 s)")  # fmt: skip
     p.add_argument("--jobs", type=int, metavar="N",
-                   help="worker processes of the tuning (default: 2 at most)")  # fmt: skip
+                   help=f"worker processes of the tuning, 1..{MAX_JOBS} (default: 2 at most)")  # fmt: skip
     p.add_argument("--json", action="store_true",
                    help="print one JSON object: model, controller, verification (and the checks)")  # fmt: skip
     p.set_defaults(func=run)
@@ -73,11 +74,9 @@ def _check(args: argparse.Namespace) -> Path:
     if not (math.isfinite(args.connect_timeout) and args.connect_timeout > 0.0):
         raise InputError(f"--connect-timeout must be a number of seconds > 0, got "
                          f"{args.connect_timeout}")  # fmt: skip
-    if args.jobs is not None and args.jobs < 1:
-        raise InputError(f"--jobs must be a number of processes >= 1, got {args.jobs}")
-    out = Path(args.out or datetime.now().strftime("logs/commission-%Y%m%d-%H%M%S"))
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out} is a file, not a folder")
+    check_jobs(args.jobs)
+    out = check_output_folder(args.out or datetime.now().strftime("logs/commission-%Y%m%d-%H%M%S"),
+                              "--out")  # fmt: skip
     earlier = [n for n in ("summary.md", "model.toml", "controller.toml") if (out / n).exists()]
     if earlier:
         raise InputError(f"--out {out} already holds {earlier[0]} of an earlier commissioning; "

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING, Any
 
-from cartctl.commands.options import add_map_option
+from cartctl.commands.options import add_map_option, check_outputs
 
 if TYPE_CHECKING:
     from cartctl.data import Trace
@@ -52,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.data import read_trace, write_trace
     from cartctl.jsonout import dumps
 
+    check_outputs(args, files=("out",))
     trace = read_trace(args.file, args.map)
     info = summary(trace)
     if args.out:

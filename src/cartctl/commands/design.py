@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from cartctl.commands.options import command_line
+from cartctl.commands.options import check_outputs, command_line
 from cartctl.design.request import (  # light: the parser's choices and defaults
     ANTI_WINDUP,
     DEFAULT_BIAS_DRIFT_STD_V,
@@ -280,15 +280,19 @@ def _disturbance_v(args: argparse.Namespace) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
+    request = request_from_args(args)  # every option in range before the heavy imports
+    disturbance_v = _disturbance_v(args)
+    check_outputs(args, files=("out",), folders=("report",))
+
     from cartctl.design.controllerfile import save_controller
     from cartctl.design.loop_report import analyse_designs
-    from cartctl.design.make import controller_file, design_models, loop_delay_for
+    from cartctl.design.make import check_models, controller_file, design_models, loop_delay_for
     from cartctl.jsonout import dumps
     from cartctl.modelfile import load_models
 
-    request = request_from_args(args)
     models = load_models(args.model)
     names = ("a", "b") if args.motor == "both" else (args.motor,)
+    check_models(models, names, str(args.model))
     if args.out:  # a file is for one loop: refuse before designing when there is none
         given = request.loop_delay_ticks is not None  # a misfit --loop-delay names itself
         try:
@@ -298,7 +302,7 @@ def run(args: argparse.Namespace) -> int:
     designs = design_models(request, models, names)
     if designs.loop_delay_note is not None:
         print(f"cartctl design: note: {designs.loop_delay_note}", file=sys.stderr)
-    analyses = analyse_designs(designs, disturbance_v=_disturbance_v(args))
+    analyses = analyse_designs(designs, disturbance_v=disturbance_v)
     motors_json = designs.entries()
     for m, analysis in analyses.items():  # before the file: its analysis keeps the loop's Ms
         motors_json[m].update(analysis.entry())

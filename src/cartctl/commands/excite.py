@@ -3,11 +3,23 @@
 from __future__ import annotations
 
 import argparse
+import os
+import stat
 import sys
+from collections.abc import Callable
+from pathlib import Path
 
 from cartctl import stopping
-from cartctl.commands.options import SIGNALS, add_plant_options, check_duration, command_line
-from cartctl.errors import InputError
+from cartctl.commands.options import (
+    SIGNALS,
+    add_plant_options,
+    check_duration,
+    check_finite,
+    check_output_file,
+    check_plant_options,
+    command_line,
+)
+from cartctl.errors import InputError, OutputError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -53,24 +65,31 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from cartctl.data import write_trace
-    from cartctl.data.tracemeta import write_trace_meta
+    from cartctl.data.tracemeta import meta_path, write_trace_meta
     from cartctl.experiment import run_experiment
     from cartctl.jsonout import dumps
-    from cartctl.plants.factory import is_serial, make_plant
+    from cartctl.plants.factory import check_plant_name, is_serial, make_plant
     from cartctl.plants.sim import SUPPLY_V
     from cartctl.progress import ProgressBar
     from cartctl.runtime.gcpause import gc_paused
     from cartctl.signals import make_signal
     from cartctl.sinks.summary import host_loss_text, warn_host_losses
 
-    if not args.amplitude <= SUPPLY_V:
+    check_plant_name(args.plant)
+    amplitude_v = check_finite(args.amplitude, "--amplitude")
+    if amplitude_v > SUPPLY_V:
         raise InputError(
-            f"--amplitude {args.amplitude} V is beyond the cart's ±{SUPPLY_V:g} V supply"
+            f"--amplitude {amplitude_v:g} V is beyond the cart's ±{SUPPLY_V:g} V supply"
         )
+    if amplitude_v <= 0.0:
+        raise InputError(f"--amplitude must be a positive peak voltage (V), got {amplitude_v:g}")
+    check_plant_options(args)
     if args.duration is not None and args.signal == "square":
         raise InputError("--duration does not apply to the square signal; use --cycles (3 s each)")
     if args.duration is not None:
         check_duration(args.duration)
+    check_output_file(args.out, "--out")  # before anything is driven
+    check_output_file(meta_path(args.out), "--out")
     volts = make_signal(args.signal, args.amplitude, cycles=args.cycles, duration_s=args.duration)
     zeros = np.zeros_like(volts)
     ua = volts if args.motor in ("a", "both") else zeros
@@ -97,15 +116,18 @@ def run(args: argparse.Namespace) -> int:
     if n == 0:
         print("cartctl excite: interrupted before the first tick; nothing written", file=sys.stderr)
         return stopping.exit_code()
-    write_trace(result.trace, args.out)
     path = args.out
+    _write_whole(lambda target: write_trace(result.trace, target), path)
     link_summary = getattr(plant, "link_summary", None)
     link = link_summary() if link_summary is not None else None
     loop_delay = (
         getattr(plant, "loop_delay_ticks", None) if link is None else link["loop_delay_ticks"]
     )  # the simulators know theirs; over serial, the echo's
-    meta = write_trace_meta(path, plant=description, loop_delay_ticks=loop_delay,
-                            command=command_line("excite"))  # fmt: skip
+    try:
+        meta = write_trace_meta(path, plant=description, loop_delay_ticks=loop_delay,
+                                command=command_line("excite"))  # fmt: skip
+    except OSError as exc:  # the trace is whole; its meta file is not
+        raise OutputError(meta_path(path), exc.strerror or str(exc)) from None
     if args.json:
         print(dumps({
             "trace": str(path), "ticks": n, "duration_s": n * plant.period_s,
@@ -144,3 +166,34 @@ def run(args: argparse.Namespace) -> int:
         )
         return stopping.exit_code()
     return 0
+
+
+def _write_whole(write: Callable[[Path], object], path: str | Path) -> None:
+    """``write`` the trace to ``path``; when that fails (a full disk), cut the file back to its last
+    whole row, so no half row is left to pass for data.
+
+    Raises
+    ------
+    OutputError
+        The write failed; it says how many rows the file holds.
+    """
+    path = Path(path)
+    try:
+        write(path)
+    except OSError as exc:
+        kept = _cut_to_whole_rows(path)
+        raise OutputError(path, f"{exc.strerror or exc}", rows=kept) from None
+
+
+def _cut_to_whole_rows(path: Path) -> int:
+    """Truncate a regular file after its last line break; the rows (lines after the header) kept."""
+    try:
+        if not stat.S_ISREG(os.stat(path).st_mode):  # a device (/dev/full) holds nothing
+            return 0
+        with path.open("r+b") as file:
+            data = file.read()
+            whole = data.rfind(b"\n") + 1
+            file.truncate(whole)
+        return max(0, data.count(b"\n", 0, whole) - 1)
+    except OSError:
+        return 0

@@ -13,6 +13,7 @@ import argparse
 import shlex
 from pathlib import Path
 
+from cartctl.commands.options import check_outputs
 from cartctl.errors import DataFileError, InputError
 
 MODEL_FORMAT = "cartctl-model/1"
@@ -78,10 +79,11 @@ def file_kind(path: str | Path) -> tuple[str, Path]:
         return "controller", found
     if fmt == MODEL_FORMAT or (fmt is None and "motors" in doc and "method" not in doc):
         return "model", found
+    shown = "has no 'format' line" if fmt is None else f"has format {fmt!r}"
     raise DataFileError(
         found,
-        f"format {fmt!r} is neither a model file ({MODEL_FORMAT!r}) nor a controller file "
-        f"({CONTROLLER_FORMAT!r})",
+        f"is neither a model file nor a controller file ({shown}; they say format = "
+        f"{MODEL_FORMAT!r} or {CONTROLLER_FORMAT!r})",
     )
 
 
@@ -92,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.out and not args.arduino:
         raise InputError("--out is where --arduino writes its C; for --mat give the file there")
+    check_outputs(args, files=("out", "mat"))
     kind, found = file_kind(args.file)
     if args.arduino and kind != "controller":
         raise InputError(

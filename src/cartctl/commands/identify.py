@@ -9,7 +9,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from cartctl.commands.options import add_map_option, command_line
+from cartctl.commands.options import add_map_option, check_outputs, command_line
 from cartctl.errors import InputError
 
 if TYPE_CHECKING:
@@ -331,6 +331,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.jsonout import dumps
     from cartctl.modelfile import load_models, save_models
 
+    check_outputs(args, files=("out",), folders=("report",))
     recorded = loop_delay_of(args.files)  # the traces' meta files; they must agree
     if args.loop_delay is not None and recorded is not None and recorded != args.loop_delay:
         print(

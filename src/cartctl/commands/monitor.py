@@ -24,9 +24,9 @@ from cartctl.commands.options import (
     add_output_options,
     add_rerun_options,
     check_duration,
-    output_paths,
+    check_run_outputs,
 )
-from cartctl.errors import InputError
+from cartctl.errors import InputError, OutputError
 
 if TYPE_CHECKING:  # cartctl.plants loads numpy and scipy: imported where used, not for --help
     from cartctl.plants.cart_monitor import Monitor, MonitorLink, MonitorResult
@@ -86,24 +86,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _check(args: argparse.Namespace) -> tuple[str, str]:
     """Validate the options; returns (kind, rest) of PLANT: ('serial', PORT) or ('virtual', FAULTS)."""
+    kind, _, rest = args.plant.partition(":")
+    if not (kind == "virtual" or (kind == "serial" and rest)):  # the plant first
+        raise InputError(f"unknown plant '{args.plant}'; expected serial:PORT or virtual[:FAULTS]")
     if args.duration is not None:
         check_duration(args.duration)
     if not (math.isfinite(args.connect_timeout) and args.connect_timeout > 0):
         raise InputError(f"--connect-timeout must be a positive number of seconds, got "
                          f"{args.connect_timeout}")  # fmt: skip
-    kind, _, rest = args.plant.partition(":")
-    if kind == "serial" and rest:
+    if args.reference:
+        from cartctl.reference import check_reference
+
+        check_reference(args.reference)
+    if kind == "serial":
         if args.onboard or args.reference:
             raise InputError(
                 "--onboard and --reference set up the virtual cart; a real cart runs the C of "
                 "'cartctl export CONTROLLER.toml --arduino' with its own references"
             )
         return kind, rest
-    if kind == "virtual":
-        if args.reference and not args.onboard:
-            raise InputError("--reference needs --onboard CONTROLLER.toml")
-        return kind, rest
-    raise InputError(f"unknown plant '{args.plant}'; expected serial:PORT or virtual[:FAULTS]")
+    if args.reference and not args.onboard:
+        raise InputError("--reference needs --onboard CONTROLLER.toml")
+    return kind, rest
 
 
 def _virtual_cart(faults_text: str, args: argparse.Namespace) -> Any:
@@ -162,7 +166,11 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.sinks.csv_sink import CsvSink
 
     kind, rest = _check(args)
-    labels = parse_labels(args.labels) if args.labels is not None else None
+    csv_path, rrd_path = check_run_outputs(args, "monitor")  # before a cart is connected
+    try:
+        labels = parse_labels(args.labels) if args.labels is not None else None
+    except InputError as exc:
+        raise InputError(f"--labels: {exc}") from None
     cart = _virtual_cart(rest, args) if kind == "virtual" else None
     port = cart.port if cart is not None else rest
     monitor = Monitor([], [], labels, echo=print_to_stderr, announce=_to_stderr)
@@ -177,7 +185,6 @@ def run(args: argparse.Namespace) -> int:
         wait_started(link, args.connect_timeout)  # no file is opened for a cart that is not there
         if cart is not None:  # its faults count from the host's first frame; a monitor sends none
             cart.arm_faults()
-        csv_path, rrd_path = output_paths(args, "monitor")
         rerun = _rerun_sink(args, rrd_path)
         monitor.rows.append(CsvSink(csv_path))
         if rerun is not None:
@@ -187,8 +194,7 @@ def run(args: argparse.Namespace) -> int:
             with _stop_on_signals(monitor, received):  # the sinks open at the first frames
                 result = monitor.run(link, args.duration)
         finally:
-            for sink in monitor.rows:
-                sink.close()
+            _close_all(monitor.rows)
     finally:
         link.close()
         if cart is not None:
@@ -202,6 +208,18 @@ def run(args: argparse.Namespace) -> int:
     if received and received[0] != signal.SIGINT:  # Ctrl-C is the normal way to stop a monitor
         return 128 + received[0]
     return 0
+
+
+def _close_all(sinks: list[Any]) -> None:
+    """Close every sink; the first file found incomplete (an OutputError) is raised after."""
+    failed: OutputError | None = None
+    for sink in sinks:
+        try:
+            sink.close()
+        except OutputError as exc:
+            failed = failed or exc
+    if failed is not None:
+        raise failed
 
 
 def _to_stderr(line: str) -> None:

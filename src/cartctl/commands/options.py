@@ -8,7 +8,10 @@ show come from :mod:`cartctl.choices`, where the modules that implement them tak
 from __future__ import annotations
 
 import argparse
+import contextlib
+import errno
 import math
+import os
 import shlex
 import sys
 from datetime import datetime
@@ -52,6 +55,24 @@ def check_duration(seconds: float, option: str = "--duration") -> float:
             f"got {seconds:g}"
         )
     return seconds
+
+
+MAX_JOBS = 64
+"""The most worker processes ``--jobs`` accepts: the work is CPU-bound, so workers beyond the
+cores only add processes (each some 100 MB); 64 covers the largest workstation."""
+
+
+def check_jobs(jobs: int | None, option: str = "--jobs") -> int | None:
+    """``jobs`` if it is None (all cores) or a number of worker processes in 1..:data:`MAX_JOBS`.
+
+    Raises
+    ------
+    InputError
+        Otherwise, in one line naming ``option``.
+    """
+    if jobs is not None and not 1 <= jobs <= MAX_JOBS:
+        raise InputError(f"{option} must be a number of processes in 1..{MAX_JOBS}, got {jobs}")
+    return jobs
 
 
 def file_stem(text: str) -> str:
@@ -104,6 +125,142 @@ def output_paths(args: argparse.Namespace, prefix: str) -> tuple[Path, Path]:
     out = Path(args.out)
     stem = args.name or _free_stem(out, datetime.now().strftime(f"{prefix}-%Y%m%d-%H%M%S"))
     return out / f"{stem}.csv", out / f"{stem}.rrd"
+
+
+def check_output_folder(folder: str | Path, option: str) -> Path:
+    """``folder`` when cartctl can create it (if missing) and write files into it.
+
+    The check really writes: the missing folders are made, an empty file is created in the last
+    and everything is removed again, so it answers for permissions, read-only and virtual file
+    systems (``/proc``, ``/sys``) alike, and leaves nothing behind. Run it before anything is
+    driven or computed.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The output folder.
+    option : str
+        The option that named it (``--out``), for the message.
+
+    Returns
+    -------
+    Path
+        ``folder``.
+
+    Raises
+    ------
+    InputError
+        In one line naming ``option``, the folder and why (``is a file, not a folder``,
+        ``cannot create: permission denied``, ``cannot write there: read-only file system`` …).
+    """
+    folder = Path(folder)
+    why = _unwritable(folder)
+    if why is not None:
+        raise InputError(f"{option} {folder}: {why}")
+    return folder
+
+
+def check_output_file(path: str | Path, option: str) -> Path:
+    """``path`` when cartctl can write that file: not a folder, in a folder it can write in.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to be written (it may exist: it is then replaced).
+    option : str
+        The option that named it (``--out``, ``--plot`` …), for the message.
+
+    Raises
+    ------
+    InputError
+        As :func:`check_output_folder`, or ``is a folder, not a file``.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{option} {path}: is a folder, not a file")
+    parent = path.parent
+    if parent.exists() and not parent.is_dir():
+        raise InputError(f"{option} {path}: cannot create: {parent} is a file")
+    why = _unwritable(parent, there="cannot create")
+    if why is None and path.exists() and not os.access(path, os.W_OK):
+        why = "cannot write: permission denied"
+    if why is not None:
+        raise InputError(f"{option} {path}: {why}")
+    return path
+
+
+def check_run_outputs(args: argparse.Namespace, prefix: str) -> tuple[Path, Path]:
+    """:func:`output_paths`, each checked (:func:`check_output_folder`, :func:`check_output_file`)."""
+    check_output_folder(args.out, "--out")
+    csv_path, rrd_path = output_paths(args, prefix)
+    for path in (csv_path, rrd_path, csv_path.with_suffix(".meta.toml")):
+        check_output_file(path, "--out")
+    return csv_path, rrd_path
+
+
+def check_outputs(
+    args: argparse.Namespace, *, files: tuple[str, ...] = (), folders: tuple[str, ...] = ()
+) -> None:
+    """The output options given (``args.out``, ``args.plot`` …) checked before any work.
+
+    ``files`` and ``folders`` name ``args`` attributes (``"out"`` is ``--out``); each one given is
+    checked with :func:`check_output_file` or :func:`check_output_folder`.
+    """
+    for names, check in ((files, check_output_file), (folders, check_output_folder)):
+        for name in names:
+            value = getattr(args, name, None)
+            if value:
+                check(value, "--" + name.replace("_", "-"))
+
+
+_REASONS = {
+    errno.EACCES: "permission denied",
+    errno.EPERM: "permission denied",
+    errno.EROFS: "read-only file system",
+    errno.ENOSPC: "no space left on device",
+    errno.EDQUOT: "disk quota exceeded",
+    errno.ENAMETOOLONG: "file name too long",
+}
+
+
+def _unwritable(folder: Path, there: str = "cannot write there") -> str | None:
+    """None when files can be written in ``folder`` (made for the test and removed), else why.
+
+    ``there`` begins the answer when ``folder`` exists but takes no file.
+    """
+    existing, missing = folder, []
+    while not existing.exists():
+        if existing.is_symlink():  # a dangling link: mkdir would fail on it
+            return f"cannot create: {existing} is a broken link"
+        missing.append(existing)
+        if existing.parent == existing:
+            break
+        existing = existing.parent
+    if not existing.is_dir():
+        return (
+            "is a file, not a folder"
+            if existing == folder
+            else f"cannot create: {existing} is a file"
+        )
+    made: list[Path] = []
+    step = "cannot create"
+    try:
+        for path in reversed(missing):
+            path.mkdir()
+            made.append(path)
+        step = there if not made else step
+        probe = folder / f".cartctl-write-test-{os.getpid()}"
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        os.unlink(probe)
+    except OSError as exc:
+        if exc.errno == errno.ENOENT:  # its parent is there, yet it cannot be made: /proc
+            return f"{step}: {existing} takes no new files or folders"
+        return f"{step}: {_REASONS.get(exc.errno or 0, (exc.strerror or str(exc)).lower())}"
+    finally:
+        for path in reversed(made):
+            with contextlib.suppress(OSError):
+                path.rmdir()
+    return None
 
 
 def _free_stem(out: Path, stem: str) -> str:
@@ -174,3 +331,54 @@ def add_plant_options(p: argparse.ArgumentParser, *, what: str) -> None:
         help="serial and virtual carts: longest wait for the cart's first HEARTBEAT (default 5 s; "
         "opening the port resets the Arduino, which takes 1-2 s)",
     )
+
+
+def check_input_file(path: str | Path, what: str, option: str | None = None) -> Path:
+    """The file ``path`` names (a shipped file's relative path finds the shipped one), if it is one.
+
+    Run it before the work that needs the file, so a mistake in any file given is the first
+    thing said.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file given.
+    what : str
+        What it should be (``"a model file"``), for the message.
+    option : str, optional
+        The option that named it (``--model``); None for a positional argument.
+
+    Raises
+    ------
+    InputError
+        One line naming ``option`` and ``path``: ``is a folder`` or ``not found``.
+    """
+    from cartctl.choices import find_file
+
+    found = find_file(path)
+    lead = f"{option} {path}" if option else str(path)
+    if found.is_dir():
+        raise InputError(f"{lead}: is a folder; expected {what}")
+    if not found.is_file():
+        raise InputError(f"{lead}: not found; expected {what}")
+    return found
+
+
+def check_finite(value: float, option: str) -> float:
+    """``value`` if it is a finite number; else one line: ``OPTION must be a number, got nan``."""
+    if math.isnan(value):
+        raise InputError(f"{option} must be a number, got nan")
+    if math.isinf(value):
+        raise InputError(f"{option} must be finite, got {value:g}")
+    return value
+
+
+def check_plant_options(args: argparse.Namespace) -> None:
+    """``--noise`` and ``--connect-timeout`` (:func:`add_plant_options`) in range, before any plant
+    is made or connected (one line naming the option otherwise)."""
+    noise = check_finite(args.noise, "--noise")
+    if noise < 0.0:
+        raise InputError(f"--noise must be a standard deviation >= 0 rad/s, got {noise:g}")
+    timeout = check_finite(args.connect_timeout, "--connect-timeout")
+    if timeout <= 0.0:
+        raise InputError(f"--connect-timeout must be a positive number of seconds, got {timeout:g}")

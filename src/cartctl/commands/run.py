@@ -17,8 +17,9 @@ from cartctl.commands.options import (
     add_plant_options,
     add_rerun_options,
     check_duration,
+    check_plant_options,
+    check_run_outputs,
     command_line,
-    output_paths,
 )
 from cartctl.commands.run_checks import (
     DEFAULT_CONTROLLER,
@@ -27,7 +28,7 @@ from cartctl.commands.run_checks import (
     models_designed_on,
     refuse_unstable,
 )
-from cartctl.errors import DataWarning, InputError, PlantError
+from cartctl.errors import DataWarning, InputError, OutputError, PlantError
 
 if TYPE_CHECKING:
     from cartctl.plants.base import Plant
@@ -156,23 +157,47 @@ def _measured_delay(plant: Plant) -> int | None:
     return None if measure is None else int(measure())
 
 
+def _mark_incomplete(summary: dict[str, Any], incomplete: list[OutputError]) -> None:
+    """``trace_complete``, ``recording_complete`` (None without a recording) and ``incomplete``
+    (path → why) in the summary: its ``trace`` and ``recording`` never pass for whole files."""
+    short = {str(e.path): e.detail for e in incomplete}
+    summary["incomplete"] = short
+    summary["trace_complete"] = summary["trace"] not in short
+    recording = summary.get("recording")
+    summary["recording_complete"] = None if recording is None else recording not in short
+
+
 def run(args: argparse.Namespace) -> int:
     from cartctl.design.controllerfile import load_controller
     from cartctl.jsonout import dumps
     from cartctl.plants.base import ClockedPlant
     from cartctl.runtime.loop import ControlLoop, MemorySink
     from cartctl.sinks.csv_sink import CsvSink
-    from cartctl.sinks.summary import format_summary, trace_metrics, warn_host_losses
+    from cartctl.sinks.summary import (
+        format_summary,
+        trace_metrics,
+        warn_delay_change,
+        warn_host_losses,
+    )
 
     check_duration(args.duration)
     if args.voltage_limit is not None and not 0.0 < args.voltage_limit <= SUPPLY_V:
         raise InputError(f"--voltage-limit must be in (0, 12] V, got {args.voltage_limit}")
-    from cartctl.plants.factory import SIMULATED, plant_kind
+    from cartctl.plants.factory import SIMULATED, check_plant_name, plant_period_s
+    from cartctl.reference import check_reference
 
-    if args.fast and plant_kind(args.plant) not in SIMULATED:
+    kind = check_plant_name(args.plant)  # first: what is checked next depends on the plant
+    check_plant_options(args)
+    check_reference(args.reference, "--reference")
+    if args.reference_b:
+        check_reference(args.reference_b, "--reference-b")
+    csv_path, rrd_path = check_run_outputs(args, "run")  # before anything is loaded or driven
+    if args.fast and kind not in SIMULATED:
         raise InputError(f"--fast needs a simulated plant (sim or physics), not '{args.plant}'")
     given = args.controller or str(default_controller(args.plant))
-    controller_file = load_controller(given, force=args.force)
+    controller_file = load_controller(  # its period before its coefficients
+        given, force=args.force, period_s=plant_period_s(args.plant, args.model)
+    )
     if controller_file.ignored:
         more = (
             f" (and {len(controller_file.ignored) - 1} more)"
@@ -225,7 +250,8 @@ def run(args: argparse.Namespace) -> int:
         else:
             delay = getattr(plant, "loop_delay_ticks", None)  # sim and physics know theirs
         check_loop_delay(controller_file, given, args.plant, delay,
-                         allow=args.allow_delay_mismatch)  # fmt: skip
+                         allow=args.allow_delay_mismatch,
+                         measured=getattr(plant, "probe_delays", None))  # fmt: skip
     except BaseException:
         plant.close()
         raise
@@ -242,14 +268,18 @@ def run(args: argparse.Namespace) -> int:
     except BaseException:
         plant.close()
         raise
-    csv_path, rrd_path = output_paths(args, "run")
     from cartctl.choices import find_file
     from cartctl.data.tracemeta import write_trace_meta
 
     # the trace's loop beside it, for identify (before the loop: an interrupted run has it too)
-    write_trace_meta(csv_path, plant=description, loop_delay_ticks=delay,
-                     command=command_line("run"), controller=controller_file.path or find_file(given),
-                     model=find_file(controller_file.model_path))  # fmt: skip
+    try:
+        write_trace_meta(csv_path, plant=description, loop_delay_ticks=delay,
+                         command=command_line("run"),
+                         controller=controller_file.path or find_file(given),
+                         model=find_file(controller_file.model_path))  # fmt: skip
+    except OSError as exc:  # a full disk: nothing driven yet
+        plant.close()
+        raise OutputError(exc.filename or csv_path, exc.strerror or str(exc)) from None
     memory = MemorySink()
     # on the virtual clock a second of trace takes milliseconds: write it in bigger blocks
     sinks: list[Any] = [CsvSink(csv_path, flush_every=1000 if args.fast else 50), memory]
@@ -302,6 +332,8 @@ def run(args: argparse.Namespace) -> int:
             stats = executor.run(tick) if clocked else executor.run(tick, loop.idle)
     except KeyboardInterrupt:  # Ctrl-C, SIGTERM, SIGHUP (cartctl.stopping)
         loop.state.interrupted = True
+    except OutputError:  # a file write failed: kept in loop.state.incomplete, a fault
+        pass
     except PlantError as exc:
         loop.state.failure = str(exc)
     except Exception as exc:  # a fault of cartctl itself: the motors still get zero volts
@@ -334,7 +366,11 @@ def run(args: argparse.Namespace) -> int:
     )
     from cartctl.commands.review.smoothed import smooth_run
 
-    smooth_run(summary, memory.arrays(), period_s, controller_file.model_path, rerun)
+    try:
+        smooth_run(summary, memory.arrays(), period_s, controller_file.model_path, rerun)
+    except OutputError as exc:  # the recording's file, found short when it is closed
+        loop.state.output_failed(exc)
+    _mark_incomplete(summary, loop.state.incomplete)
     if args.json:
         print(dumps(summary))
     else:
@@ -343,6 +379,13 @@ def run(args: argparse.Namespace) -> int:
     for problem in loop.state.sink_errors:
         print(f"cartctl run: warning: {problem}", file=sys.stderr)
     warn_host_losses(summary.get("link"), "run")
+    warn_delay_change(summary.get("link"), "run")
+    if loop.state.incomplete:  # one line: each file and why, the other failure, the motors
+        failed = [str(e) for e in loop.state.incomplete] + [loop.state.failure or ""]
+        stopped = "could not send zero volts" not in (loop.state.failure or "")
+        print(f"cartctl run: error: {'; '.join(f for f in failed if f)}"
+              f"{'; the motors were stopped' if stopped else ''}", file=sys.stderr)  # fmt: skip
+        return 1
     if loop.state.failure:
         print(f"cartctl run: error: {loop.state.failure}", file=sys.stderr)
         return 1

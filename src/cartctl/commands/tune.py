@@ -23,39 +23,33 @@ worst case, spread and physics, and the front of nominal settling against worst-
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import shlex
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
-from cartctl.cart import PERIOD_S
-from cartctl.commands.options import FORMS, check_duration
-from cartctl.design.request import METHODS  # light; tune.grid.AXES has one entry per method
+from cartctl.choices import MAX_TUNE_SETTINGS
+from cartctl.commands.options import FORMS, MAX_JOBS, check_outputs
+from cartctl.commands.tune_checks import (
+    DEFAULT_PLANTS,
+    MAX_GRID_TICKS,
+    MAX_PLANTS,
+    MAX_ROBUST_PLANT_TICKS,
+    MAX_TUNE_DURATION_S,
+    actuation_timings,
+    check_inputs,
+    check_options,
+    check_work,
+    choice_limits,
+    design_fixed,
+)
+from cartctl.design.request import MAX_EXTRA_DELAY_TICKS, METHODS  # light: no numpy
 from cartctl.errors import InputError
 
 if TYPE_CHECKING:  # the tuning modules load numpy and scipy: imported where used, not for --help
     from cartctl.tune import engine
     from cartctl.tune import grid as tuning
-
-
-DEFAULT_PLANTS = 200
-"""Sampled plants of ``--robust`` by default."""
-
-MAX_PLANTS = 10_000
-"""The most ``--plants`` accepted."""
-
-DEFAULT_ACTUATION_MS = (3.0, 10.0)
-"""``--actuation-ms`` by default with ``--robust``: the presets' calibrated timing and microOS's
-documented order (the next tick's ``io()``)."""
-
-MAX_ACTUATION_TIMINGS = 20
-"""The most ``--actuation-ms`` timings accepted."""
-
-MAX_PLANT_TICKS = 2_000_000
-"""(plants + 1) × ticks per motor beyond which ``--robust`` is refused (memory: four float64
-arrays of that size per motor in each worker, 64 MB each)."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -75,7 +69,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("model", metavar="MODEL.toml", help="model to design on (and of the sim plant)")
     p.add_argument("--method", choices=METHODS, required=True)
-    p.add_argument("--grid", metavar="SPEC", help="e.g. 'phase_margin=50:75:5,crossover_hz=2:5:0.5'")  # fmt: skip
+    p.add_argument("--grid", metavar="SPEC",
+                   help="e.g. 'phase_margin=50:75:5,crossover_hz=2:5:0.5' (at most "
+                        f"{MAX_TUNE_SETTINGS} settings; each value in the range cartctl design "
+                        "takes for its option)")  # fmt: skip
     p.add_argument("--plant", default="sim", metavar="PLANT",
                    help="sim (MODEL, the default), physics or physics:actuation_ms=X (the "
                         "physics --preset with each command landing X ms after its tick, "
@@ -83,11 +80,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--preset", choices=("air", "ground"), default="ground", help="physics preset")
     p.add_argument("--reference", default="step:10", metavar="SPEC",
                    help=f"speed reference of both motors (default step:10): {FORMS}")  # fmt: skip
-    p.add_argument("--duration", type=float, default=2.0, metavar="S", help="run time (default 2 s)")  # fmt: skip
+    p.add_argument("--duration", type=float, default=2.0, metavar="S",
+                   help=f"run time of each setting (default 2 s, at most {MAX_TUNE_DURATION_S:g} "
+                        f"s, and at most {MAX_GRID_TICKS:,} ticks over the grid)")  # fmt: skip
     p.add_argument("--extra-delay", type=int, default=0, metavar="N",
                    help="ticks of loop delay beyond the model's, designed for and simulated "
-                        "(a PC-side loop over serial)")  # fmt: skip
-    p.add_argument("--jobs", type=int, metavar="N", help="worker processes (default: all cores)")
+                        f"(a PC-side loop over serial; 0..{MAX_EXTRA_DELAY_TICKS})")  # fmt: skip
+    p.add_argument("--jobs", type=int, metavar="N",
+                   help=f"worker processes, 1..{MAX_JOBS} (default: all cores)")  # fmt: skip
     p.add_argument("--plot", metavar="FILE.png",
                    help="run settling time vs run overshoot; the front of these two ringed and "
                         "numbered")  # fmt: skip
@@ -102,7 +102,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "nominal, worst case, spread and the front of nominal settling against "
                         "worst-case overshoot")  # fmt: skip
     p.add_argument("--plants", type=int, metavar="N",
-                   help=f"plants drawn for --robust (default {DEFAULT_PLANTS})")  # fmt: skip
+                   help=f"plants drawn for --robust, 1..{MAX_PLANTS} (default {DEFAULT_PLANTS}; "
+                        f"at most {MAX_ROBUST_PLANT_TICKS:,} plant-ticks over the grid)")  # fmt: skip
     p.add_argument("--seed", type=int, metavar="S", help="seed of the plants drawn for --robust (default 1)")  # fmt: skip
     p.add_argument("--actuation-ms", metavar="X,Y,...",
                    help="with --robust: also run every setting on the physics --preset with each "
@@ -127,132 +128,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", metavar="CONTROLLER.toml", help="where --choose writes the controller")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
-
-
-def _choice(text: str | None, n_settings: int) -> int | str | None:
-    """``--choose``: None, 'best', or a setting number in 1..n_settings."""
-    if text is None or text.strip() == "best":
-        return None if text is None else "best"
-    try:
-        number = int(text)
-    except ValueError:
-        raise InputError(f"--choose takes a setting number or 'best', got '{text}'") from None
-    if not 1 <= number <= n_settings:
-        raise InputError(f"--choose must be a setting number in 1..{n_settings}, got {number}")
-    return number
-
-
-def actuation_timings(text: str | None) -> tuple[float, ...]:
-    """``--actuation-ms``: the timings (ms) in the order given; () for 'none'; the default when
-    None. Each checked by ``check_actuation_ms`` (0 < X <= 10, to 0.1 ms); repeats refused."""
-    from cartctl.plants.physics_params import check_actuation_ms
-
-    if text is None:
-        return DEFAULT_ACTUATION_MS
-    if text.strip() == "none":
-        return ()
-    timings: list[float] = []
-    for item in text.split(","):
-        try:
-            ms = check_actuation_ms(item.strip())
-        except InputError as exc:
-            raise InputError(f"--actuation-ms: {exc}") from None
-        if ms in timings:
-            raise InputError(f"--actuation-ms lists {ms:g} ms twice")
-        timings.append(ms)
-    if len(timings) > MAX_ACTUATION_TIMINGS:
-        raise InputError(f"--actuation-ms takes at most {MAX_ACTUATION_TIMINGS} timings, got "
-                         f"{len(timings)}")  # fmt: skip
-    return tuple(timings)
-
-
-def design_fixed(args: argparse.Namespace) -> dict[str, float]:
-    """The design request fields every setting shares (``--process-noise-v``, ``--bias-drift-v``)."""
-    fixed = {}
-    for option, field, value in (("--process-noise-v", "process_noise_std_v", args.process_noise_v),
-                                 ("--bias-drift-v", "bias_drift_std_v", args.bias_drift_v)):  # fmt: skip
-        if value is None:
-            continue
-        if not (math.isfinite(value) and value >= 0.0):
-            raise InputError(f"{option} must be a number of volts >= 0, got {value}")
-        fixed[field] = float(value)
-    return fixed
-
-
-def choice_limits(args: argparse.Namespace) -> Any:
-    """``--max-overshoot`` and ``--max-settling`` as :class:`~cartctl.tune.robust_choice.Limits`."""
-    from cartctl.tune.robust_choice import Limits
-
-    for option, value in (("--max-overshoot", args.max_overshoot),
-                          ("--max-settling", args.max_settling)):  # fmt: skip
-        if value is None:
-            continue
-        if args.choose != "best":
-            raise InputError(f"{option} only applies to --choose best")
-        if not (math.isfinite(value) and value > 0.0):
-            raise InputError(f"{option} must be a number > 0, got {value}")
-    return Limits(args.max_overshoot, args.max_settling)
-
-
-def _check_plant(args: argparse.Namespace) -> None:
-    """``--plant``: sim, physics or physics:actuation_ms=X (one line otherwise)."""
-    from cartctl.plants.factory import SIMULATED, physics_options, plant_kind
-
-    if plant_kind(args.plant) not in SIMULATED:
-        raise InputError(f"--plant must be sim, physics or physics:actuation_ms=X, got "
-                         f"'{args.plant}'")  # fmt: skip
-    if args.plant.startswith("physics:"):
-        physics_options(args.plant.partition(":")[2])
-
-
-def _check_robust(args: argparse.Namespace) -> None:
-    if not args.robust:
-        given = [o for o, v in (("--plants", args.plants), ("--seed", args.seed),
-                                ("--actuation-ms", args.actuation_ms)) if v is not None]  # fmt: skip
-        if given:
-            raise InputError(f"{' and '.join(given)} only apply to --robust")
-        return
-    if args.plant != "sim":
-        raise InputError("--robust scores on the model (sim) and the physics --preset (at each "
-                         "--actuation-ms); leave out --plant physics")  # fmt: skip
-    actuation_timings(args.actuation_ms)  # a bad list fails here, before the grid runs
-    plants = DEFAULT_PLANTS if args.plants is None else args.plants
-    if not 1 <= plants <= MAX_PLANTS:
-        raise InputError(f"--plants must be a number of plants in 1..{MAX_PLANTS}, got {plants}")
-    ticks = max(1, round(args.duration / PERIOD_S))
-    if (plants + 1) * ticks > MAX_PLANT_TICKS:
-        raise InputError(
-            f"--robust with {plants} plants and --duration {args.duration:g} s simulates "
-            f"{(plants + 1) * ticks} plant-ticks per motor, more than {MAX_PLANT_TICKS}; use fewer "
-            "--plants or a shorter --duration"
-        )
-
-
-def _check(args: argparse.Namespace, n_settings: int) -> None:
-    from cartctl.modelfile import load_models
-    from cartctl.plants.factory import make_plant
-    from cartctl.reference import reference_signal
-
-    check_duration(args.duration)
-    _check_plant(args)
-    _check_robust(args)
-    if args.extra_delay < 0:
-        raise InputError(f"--extra-delay must be >= 0 ticks, got {args.extra_delay}")
-    if args.jobs is not None and args.jobs < 1:
-        raise InputError(f"--jobs must be a number of processes >= 1, got {args.jobs}")
-    if (args.choose is None) != (args.out is None):
-        raise InputError("--choose N and --out CONTROLLER.toml go together; give both or neither")
-    args.choose = _choice(args.choose, n_settings)
-    choice_limits(args)
-    design_fixed(args)
-    models = load_models(args.model)
-    plant, _ = make_plant(args.plant, model_path=args.model, preset=args.preset)
-    plant.close()
-    if abs(plant.period_s - models.period_s) > 1e-9:
-        raise InputError(
-            f"the model is for Ts = {models.period_s} s but the plant ticks at {plant.period_s} s"
-        )
-    reference_signal(args.reference, 1, plant.period_s)  # a bad spec fails here, once
 
 
 def choosable_text(results: Sequence[tuning.TuneResult]) -> str:
@@ -427,16 +302,21 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cartctl.jsonout import dumps
-    from cartctl.progress import ProgressBar
-    from cartctl.tune import engine, table
+    check_options(args)  # what sets the size of the work, before anything heavy is imported
     from cartctl.tune import grid as tuning
-    from cartctl.tune import robust_choice as choice
-    from cartctl.tune.plot import plot_tuning
 
     axes = tuning.parse_grid(args.grid, args.method)
     settings = tuning.grid_settings(axes)
-    _check(args, len(settings))
+    check_work(args, len(settings))
+    check_inputs(args, len(settings))
+    check_outputs(args, files=("out", "plot"))
+
+    from cartctl.jsonout import dumps
+    from cartctl.progress import ProgressBar
+    from cartctl.tune import engine, table
+    from cartctl.tune import robust_choice as choice
+    from cartctl.tune.plot import plot_tuning
+
     job = engine.TuneJob(str(args.model), args.method, args.plant, args.preset, args.reference,
                          float(args.duration), args.extra_delay,
                          tuple(enumerate(settings, start=1)),

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from cartctl.commands.options import add_map_option
+from cartctl.commands.options import add_map_option, check_output_file
 from cartctl.errors import InputError
 
 if TYPE_CHECKING:
@@ -63,9 +63,7 @@ def check_plot_path(path: str | None) -> Path | None:
     out = Path(path)
     if out.suffix.lower() != ".png":
         raise InputError(f"--plot writes a PNG image; give a file ending in .png, got {path!r}")
-    if out.is_dir():
-        raise InputError(f"--plot {path} is a directory; give a file ending in .png")
-    return out
+    return check_output_file(out, "--plot")
 
 
 def new_figure(rows: int, cols: int, *, width_in: float, height_in: float) -> tuple[Figure, Any]:

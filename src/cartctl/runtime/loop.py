@@ -14,6 +14,10 @@ code. Per tick k::
 
 :meth:`ControlLoop.finish` runs on every exit path: zero volts to the plant, the plant closed, every
 sink closed (files valid), whatever happened.
+
+A sink whose file write fails raises :class:`~cartctl.errors.OutputError`: the tick (or ``idle``)
+gives every other sink its row first, keeps the error in :attr:`LoopState.incomplete` and raises it,
+so the run ends through :meth:`ControlLoop.finish` (zero volts) like any other fault.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.cart import SUPPLY_V
-from cartctl.errors import InputError
+from cartctl.errors import InputError, OutputError
 from cartctl.plants.base import ClockedPlant, Measurement, Plant
 from cartctl.runtime.base import Controller
 from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS, Sink
@@ -96,6 +100,13 @@ class LoopState:
     interrupted: bool = False
     failure: str | None = None
     sink_errors: list[str] = field(default_factory=list)
+    incomplete: list[OutputError] = field(default_factory=list)
+    """The files a failed write left incomplete (one error per file): a fault of the run."""
+
+    def output_failed(self, error: OutputError) -> None:
+        """Keep ``error`` unless its file is already known to be incomplete."""
+        if all(e.path != error.path for e in self.incomplete):
+            self.incomplete.append(error)
 
 
 def _per_tick(reference: Any, n: int) -> Sequence[float]:
@@ -180,15 +191,25 @@ class ControlLoop:
         if self._clocked:  # a real cart reports no true speed; the virtual one does
             self._true = bool(getattr(self.plant, "reports_true_speed", False))
             self.columns = TRACE_COLUMNS + (TRUE_SPEED_COLUMNS if self._true else ())
-            for s in self.sinks:
-                s.open(self.columns)
+            self._open_sinks()
             self._y = self.plant.reset()
             return
         self._y = self.plant.reset()
         self._true = self._y.true_speed_a_rad_s is not None
         self.columns = TRACE_COLUMNS + (TRUE_SPEED_COLUMNS if self._true else ())
+        self._open_sinks()
+
+    def _open_sinks(self) -> None:
+        """Open every sink; a file that cannot be written is raised once all are open."""
+        failed: OutputError | None = None
         for s in self.sinks:
-            s.open(self.columns)
+            try:
+                s.open(self.columns)
+            except OutputError as exc:
+                self.state.output_failed(exc)
+                failed = failed or exc
+        if failed is not None:
+            raise failed
 
     def _command(self, motor: str, reference: float, measured: float) -> tuple[float, float]:
         ctrl = self.controllers.get(motor)
@@ -238,10 +259,17 @@ class ControlLoop:
         )  # fmt: skip
         if self._true:
             row += (y.true_speed_a_rad_s, y.true_speed_b_rad_s)  # type: ignore[operator]
+        failed: OutputError | None = None
         for s in self.sinks:
-            s.write(row)
+            try:  # a failed file write: the other sinks still get the row, then the run stops
+                s.write(row)
+            except OutputError as exc:
+                self.state.output_failed(exc)
+                failed = failed or exc
         self.state.rows += 1
         self._last_time_s = row[0]
+        if failed is not None:
+            raise failed
 
     def idle(self) -> None:
         """The sinks' work that need not delay a command (their ``idle``), after a tick.
@@ -249,8 +277,15 @@ class ControlLoop:
         An executor calls it once the tick's compute time is taken; on a cart-clocked plant the
         tick itself calls it, between logging and waiting for the cart's next frame.
         """
+        failed: OutputError | None = None
         for idle in self._idlers:
-            idle()
+            try:
+                idle()
+            except OutputError as exc:
+                self.state.output_failed(exc)
+                failed = failed or exc
+        if failed is not None:
+            raise failed
 
     def finish(self) -> None:
         """Zero volts, plant closed, sinks closed: on every exit path. Never raises.
@@ -277,6 +312,8 @@ class ControlLoop:
             try:
                 self._log(k, time_s, 0.0, 0.0, y, ra, rb, y.speed_a_rad_s, y.speed_b_rad_s, 0.0,
                           self.now_s())  # fmt: skip
+            except OutputError:
+                pass  # kept in state.incomplete by _log
             except Exception as exc:
                 self.state.sink_errors.append(f"the stop row: {exc}")
         try:
@@ -286,5 +323,7 @@ class ControlLoop:
         for s in self.sinks:
             try:
                 s.close()
+            except OutputError as exc:
+                self.state.output_failed(exc)
             except Exception as exc:  # report, but close the others too
                 self.state.sink_errors.append(f"{type(s).__name__}: {exc}")

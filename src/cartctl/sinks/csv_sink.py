@@ -7,13 +7,22 @@ crash loses at most the last block. Everything happens in the loop's thread (a w
 compete for the GIL and add wake-up jitter); formatting a row costs some 5–30 µs, which the
 command no longer waits for, and a 50-row block formatted at once would have put some 300 µs into
 every 50th tick, the loop's 99th percentile. ``close`` writes whatever is left.
+
+A write that fails (a full disk) is a fault: the file is cut back to its last whole row where the
+system allows (a regular file; ``/dev/full`` holds nothing anyway), later rows are dropped, and
+:class:`~cartctl.errors.OutputError` says how many rows the file holds complete. It is raised once,
+from the call that met it (``open``, ``write``, ``idle`` or ``close``); :attr:`CsvSink.error` keeps it.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
+import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TextIO
+
+from cartctl.errors import OutputError
 
 
 class CsvSink:
@@ -25,23 +34,41 @@ class CsvSink:
         The trace file; parent folders are created.
     flush_every : int
         Rows per written block (ticks).
+
+    Attributes
+    ----------
+    rows_written : int
+        Rows the file holds complete (the header not counted).
+    error : OutputError or None
+        The write that failed, if one did: the file then holds ``rows_written`` rows.
     """
 
     def __init__(self, path: str | Path, *, flush_every: int = 50) -> None:
         self.path = Path(path)
         self.flush_every = max(1, int(flush_every))
-        self._file: TextIO | None = None
+        self._file: io.FileIO | None = None
         self._rows: list[Sequence[float]] = []
         self._lines: list[str] = []
         self._template = ""
+        self._size = 0  # bytes of the header and the whole rows in the file
         self.rows_written = 0
+        self.error: OutputError | None = None
 
     def open(self, columns: Sequence[str]) -> None:
+        """Create the file and write the header.
+
+        Raises
+        ------
+        OutputError
+            The header could not be written (the file holds no row).
+        OSError
+            The file cannot be created (its folder is checked before a run: see
+            :func:`cartctl.commands.options.check_output_folder`).
+        """
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = self.path.open("w", encoding="utf-8", newline="")
-        self._file.write(",".join(columns) + "\n")
+        self._file = io.FileIO(self.path, "w")  # unbuffered: each block is one write we can count
         self._template = ",".join(["%s"] * len(columns))  # %s is str(): 10 % under a join
-        self._file.flush()
+        self._write((",".join(columns) + "\n").encode(), rows=0)
 
     def write(self, row: Sequence[float]) -> None:
         rows = self._rows
@@ -67,17 +94,57 @@ class CsvSink:
     def _flush(self) -> None:
         self._format()
         if self._file is None or not self._lines:
+            self._lines = []
             return
-        self._file.write("\n".join(self._lines) + "\n")
-        self._file.flush()
-        self.rows_written += len(self._lines)
-        self._lines = []
+        lines, self._lines = self._lines, []
+        self._write(("\n".join(lines) + "\n").encode(), rows=len(lines))
+
+    def _write(self, data: bytes, *, rows: int) -> None:
+        """Write ``data`` (``rows`` whole rows) in full, or cut the file back to its last whole row
+        and raise :class:`OutputError`."""
+        file = self._file
+        if file is None:
+            return
+        done = 0
+        try:
+            while done < len(data):
+                n = file.write(memoryview(data)[done:])
+                if not n:  # the system took nothing and said nothing: treat as full
+                    raise OSError(28, os.strerror(28))
+                done += n
+        except OSError as exc:
+            whole = data.rfind(b"\n", 0, done) + 1  # bytes of the whole lines that went in
+            self.rows_written += max(0, data.count(b"\n", 0, whole) - (rows == 0))
+            self._size += whole
+            try:
+                if done > whole:
+                    os.ftruncate(file.fileno(), self._size)  # no half row left behind
+            except OSError:
+                pass  # a device (/dev/full) or a file system that cannot: nothing more to do
+            self._fail(exc.strerror or str(exc))
+        self._size += len(data)
+        self.rows_written += rows
+
+    def _fail(self, reason: str) -> None:
+        """Drop what is kept, close the file, and raise the :class:`OutputError` (once)."""
+        self._rows, self._lines = [], []
+        file, self._file = self._file, None
+        if file is not None:
+            with contextlib.suppress(OSError):
+                file.close()
+        self.error = OutputError(self.path, reason, rows=self.rows_written)
+        raise self.error
 
     def close(self) -> None:
+        """Write the rows kept and close the file.
+
+        Raises
+        ------
+        OutputError
+            Their write failed (and had not failed before).
+        """
         if self._file is None:
             return
-        try:
-            self._flush()
-        finally:
-            self._file.close()
-            self._file = None
+        self._flush()
+        file, self._file = self._file, None
+        file.close()

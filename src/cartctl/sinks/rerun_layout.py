@@ -7,7 +7,7 @@ beneath, then the loop's timing.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -99,6 +99,16 @@ SPEED_MARGIN = 0.25
 """Room above and below the reference's span in the speed plot (overshoot), as a fraction of it."""
 VOLTAGE_MARGIN = 0.05
 """Room beyond the voltage limit in the voltage plot, as a fraction of it."""
+
+
+def motors_in(entities: Iterable[str]) -> tuple[str, ...]:
+    """Motor names among entity paths (``motor/a/speed`` → ``a``), in order; both when none is."""
+    names: list[str] = []
+    for entity in entities:
+        parts = entity.split("/")
+        if parts[0] == "motor" and len(parts) > 1 and parts[1] not in names:
+            names.append(parts[1])
+    return tuple(names) or ("a", "b")
 
 
 def padded_range(lo: float, hi: float, *, margin: float = 0.1, min_span: float = 1.0) -> Range:

@@ -10,7 +10,9 @@ loop, waking or mid-tick, would wait for it (measured: compute p99 156–163 µs
 190–250 µs with such a thread). The SDK's own threads (batching, the file, the viewer) need no
 interpreter lock. The recording stream is the sink's own, never the
 global one. Logging problems never raise into the loop: they are recorded and reported as one
-warning at ``close`` (or raised there with ``strict=True``).
+warning at ``close`` (or raised there with ``strict=True``). A ``.rrd`` the SDK could not write
+(a full disk) is a fault, not a warning: :class:`~cartctl.errors.OutputError` from ``open`` or
+``close`` (:mod:`cartctl.sinks.rerun_problems` reads the reason; the SDK's own log lines are off).
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ import numpy as np
 import rerun as rr
 from numpy.typing import NDArray
 
-from cartctl.errors import CartctlError, InputError
+from cartctl.errors import InputError, OutputError
 from cartctl.sinks.rerun_layout import (
     ENTITY_PATHS,
     STYLES,
@@ -35,7 +37,9 @@ from cartctl.sinks.rerun_layout import (
     TIME_COLUMN,
     PlotRanges,
     blueprint,
+    motors_in,
 )
+from cartctl.sinks.rerun_problems import RecordingError, RecordingWarning, file_failure
 from cartctl.sinks.viewer import VIEWER_PORT, display_available, viewer_executable, viewer_reachable
 
 RERUN_MODES: Final[tuple[str, ...]] = ("save", "spawn", "connect", "off")
@@ -48,16 +52,6 @@ DEFAULT_CONNECT_URL: Final[str] = "rerun+http://127.0.0.1:9876/proxy"
 
 _MAX_PROBLEMS = 10  # messages kept; further problems are only counted
 _FLUSH_TIMEOUT_S = 5.0  # for the SDK to hand everything to the file and the viewer
-
-
-class RecordingError(CartctlError, RuntimeError):
-    """The Rerun recording could not be written completely (raised at ``close`` when strict)."""
-
-    exit_code = 1
-
-
-class RecordingWarning(UserWarning):
-    """The Rerun recording had problems; the run itself went on."""
 
 
 class RerunSink:
@@ -132,6 +126,8 @@ class RerunSink:
         self._signals: tuple[tuple[int, str], ...] = ()
         self._sent_rows = 0
         self._closed = False
+        self.error: OutputError | None = None
+        """The recording's file could not be written (raised once, from ``open`` or ``close``)."""
 
     # -- the Sink protocol ------------------------------------------------------------------
 
@@ -149,6 +145,8 @@ class RerunSink:
             No ``time_s`` column.
         OSError
             The recording's folder cannot be created.
+        OutputError
+            The SDK could not write the file (the run goes on without a recording).
         """
         columns = list(columns)
         if TIME_COLUMN not in columns:
@@ -174,6 +172,11 @@ class RerunSink:
             self._describe(rec)
             _warm_up_conversions()
         except Exception as exc:  # the SDK's own failures: keep the run going without Rerun
+            why = file_failure(exc, self.path)
+            if why is not None:  # the file: a fault
+                self._recording = None
+                self.error = OutputError(self.path or "", why, rows=0)
+                raise self.error from None
             self._problem(f"could not start the recording: {exc}", raise_now=True)
             return
         self._block = np.empty((self.batch_ticks, len(columns)))
@@ -186,7 +189,7 @@ class RerunSink:
 
     def _describe(self, rec: rr.RecordingStream) -> None:
         """Send the layout and the static series styles (before any value)."""
-        rec.send_blueprint(blueprint(_motors(self._signals), self.ranges))
+        rec.send_blueprint(blueprint(motors_in(e for _, e in self._signals), self.ranges))
         for _, entity in self._signals:
             style = STYLES[entity]
             rec.log(
@@ -242,6 +245,8 @@ class RerunSink:
 
         Raises
         ------
+        OutputError
+            The SDK could not write the whole file (after the other problems are reported).
         RecordingError
             Only with ``strict=True``, when anything went wrong while recording.
         """
@@ -249,17 +254,21 @@ class RerunSink:
             return
         self._send_rows()
         self._closed = True
-        if self._recording is not None:
+        failed: str | None = None
+        rec, self._recording = self._recording, None
+        steps = {} if rec is None else {"flushing": lambda: rec.flush(timeout_sec=_FLUSH_TIMEOUT_S),
+                                        "closing": rec.disconnect}  # fmt: skip
+        for step, call in steps.items():
             try:
-                self._recording.flush(timeout_sec=_FLUSH_TIMEOUT_S)
+                call()
             except Exception as exc:
-                self._problem(f"flushing the recording failed: {exc}")
-            try:
-                self._recording.disconnect()
-            except Exception as exc:
-                self._problem(f"closing the recording failed: {exc}")
-            self._recording = None
+                failed = failed or file_failure(exc, self.path)
+                if failed is None:  # the viewer's side: a problem, not a fault
+                    self._problem(f"{step} the recording failed: {exc}")
         self._report()
+        if failed is not None:
+            self.error = OutputError(self.path or "", failed)
+            raise self.error
 
     # -- extras -----------------------------------------------------------------------------
 
@@ -381,16 +390,6 @@ class RerunSink:
         if self.strict:
             raise RecordingError(text)
         warnings.warn(text, RecordingWarning, stacklevel=3)
-
-
-def _motors(signals: Sequence[tuple[int, str]]) -> tuple[str, ...]:
-    """Motor names present among the entity paths, in order (both when none is present)."""
-    names: list[str] = []
-    for _, entity in signals:
-        parts = entity.split("/")
-        if parts[0] == "motor" and parts[1] not in names:
-            names.append(parts[1])
-    return tuple(names) or ("a", "b")
 
 
 def _warm_up_conversions() -> None:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cartctl.commands.options import add_map_option
+from cartctl.commands.options import add_map_option, check_input_file, check_outputs
 from cartctl.commands.review.recording import read_recording
 from cartctl.commands.review.screenshot import (
     SCREENSHOT_WINDOW,
@@ -93,6 +93,14 @@ def run(args: argparse.Namespace) -> int:
     """Dispatch on the file's suffix: ``.rrd`` to the viewer, ``.csv`` to the trace metrics."""
     path = Path(args.recording)
     suffix = path.suffix.lower()
+    if path.is_dir():
+        raise InputError(
+            f"{path}: is a folder; expected a Rerun recording (.rrd) or a CSV trace (.csv)"
+        )
+    if args.compare:  # every file given is checked before the first is read
+        check_input_file(args.compare, "a CSV trace", "--compare")
+    if args.model:
+        check_input_file(args.model, "a model file", "--model")
     if suffix == ".csv":
         return _review_csv(args)
     if suffix != ".rrd":
@@ -101,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.json or args.compare or args.map:
         raise InputError("--json, --compare and --map apply to CSV traces, not to .rrd recordings")
+    check_outputs(args, files=("screenshot",))
     from cartctl.commands.review.recorded import recording_summary
 
     text, extra = recording_summary(path, args.model)
