@@ -1,7 +1,8 @@
 """The serial path end to end: ``cartctl`` against the virtual cart behind a real pseudo-terminal.
 
-These run in real time (the cart ticks every 10 ms), so they are few and short, with generous
-bounds. They cover the acceptance of the serial issue: tracking with the loop delay measured and
+These run in real time (the cart ticks every 10 ms), so they are few and short, and marked
+``realtime``; they check what happens, in cart ticks, never how fast (the figures:
+``benchmarks/bench_speeds.py``). They cover the acceptance of the serial issue: tracking with the loop delay measured and
 zero volts at the end, line noise, a pulled cable and a stall, a silent port, a generation-B cart,
 and the identified delay against the echo.
 """
@@ -10,7 +11,6 @@ from __future__ import annotations
 
 import json
 import os
-import time
 import tty
 from pathlib import Path
 
@@ -54,6 +54,7 @@ def _error_lines(err: str) -> list[str]:
     return [line for line in err.splitlines() if line.startswith("cartctl")]
 
 
+@pytest.mark.realtime
 def test_closed_loop_tracks_8_rad_s_reports_the_delay_and_ends_at_zero_volts(
     capsys: pytest.CaptureFixture[str], workdir: Path, delay_controller: Path
 ) -> None:
@@ -81,6 +82,7 @@ def test_closed_loop_tracks_8_rad_s_reports_the_delay_and_ends_at_zero_volts(
     RrdReader(workdir / "logs/v.rrd").store()
 
 
+@pytest.mark.realtime
 def test_line_noise_is_counted_and_the_run_still_tracks(
     capsys: pytest.CaptureFixture[str], workdir: Path, delay_controller: Path
 ) -> None:
@@ -99,8 +101,9 @@ def test_line_noise_is_counted_and_the_run_still_tracks(
         assert abs(summary["motors"][m]["steady_state_error"]) < 0.5
 
 
+@pytest.mark.realtime
 @pytest.mark.parametrize(("fault", "message"), [("pull", "vanished"), ("stall", "no data")])
-def test_a_fault_mid_run_stops_within_0_2_s_with_one_line_and_valid_files(
+def test_a_fault_mid_run_stops_with_one_line_and_valid_files(
     capsys: pytest.CaptureFixture[str],
     workdir: Path,
     delay_controller: Path,
@@ -112,34 +115,39 @@ def test_a_fault_mid_run_stops_within_0_2_s_with_one_line_and_valid_files(
         code, _out, err = _cli(capsys, "run", "--plant", f"serial:{cart.port}", "--controller",
                                str(delay_controller), "--reference", "step:8", "--duration", "5",
                               "--rerun", "save", "--name", "f")  # fmt: skip
-        assert cart.fault_at_s is not None
+        assert cart.fault_at_s is not None, err
     assert code == 1
     # one error line (a busy machine may add a warning about commands the cart missed)
     lines = [line for line in _error_lines(err) if not line.startswith("cartctl run: warning:")]
     assert len(lines) == 1 and message in lines[0], err
     trace = read_trace(workdir / "logs/f.csv")
-    # the fault comes 80 ticks after the host's first frame, the loop-delay probe's: the probe
-    # takes its tick 0 and PROBE_ECHOES more (each echoed a tick later), then the run drives until
-    # the fault; setting the run up (the recording) takes some ticks, nothing comes after the fault
-    probe_ticks = PROBE_ECHOES + 1
-    assert 80 - probe_ticks - 15 <= len(trace) <= 80 - probe_ticks + 2
+    # the fault comes 80 cart ticks after the host's first frame, the loop-delay probe's: the probe
+    # takes at least PROBE_ECHOES + 1 of them, then the run drives until the fault and logs its
+    # stop row; nothing comes after the fault
+    assert 1 <= len(trace) <= 80 - (PROBE_ECHOES + 1) + 2
+    assert (trace.voltage_a[-1], trace.voltage_b[-1]) == (0.0, 0.0)  # the stop command, logged
     RrdReader(workdir / "logs/f.rrd").store()
 
 
+@pytest.mark.realtime
 @pytest.mark.parametrize("fault", ["pull", "stall"])
-def test_the_serial_plant_notices_a_fault_within_0_2_s(fault: str) -> None:
+def test_the_serial_plant_notices_a_fault(fault: str) -> None:
+    """The plant raises at the first step the cart no longer answers: it never steps on past the
+    cart's last tick. (How soon in wall time: ``benchmarks/bench_speeds.py``.)"""
+    steps = 0
     with VirtualCart(faults=CartFaults.parse(f"{fault}=0.3")) as cart:
         plant = SerialCart(cart.port, on_print=lambda line: None)
         plant.reset()
         with pytest.raises(PlantError):  # noqa: PT012
             for _ in range(300):
                 plant.step(1.0, 1.0)
-        noticed = time.perf_counter()
+                steps += 1
         plant.close()
     assert cart.fault_at_s is not None
-    assert noticed - cart.fault_at_s < 0.2
+    assert 0 < steps <= cart.ticks  # a step per cart tick that answered, none after the fault
 
 
+@pytest.mark.realtime
 def test_a_silent_port_is_a_clear_timeout(
     capsys: pytest.CaptureFixture[str], workdir: Path
 ) -> None:
@@ -157,6 +165,7 @@ def test_a_silent_port_is_a_clear_timeout(
     assert not (workdir / "logs").exists()  # nothing recorded before the cart answered
 
 
+@pytest.mark.realtime
 def test_a_generation_b_cart_is_named_and_refused(
     capsys: pytest.CaptureFixture[str], workdir: Path
 ) -> None:
@@ -167,6 +176,7 @@ def test_a_generation_b_cart_is_named_and_refused(
     assert len(lines) == 1 and "generation B" in lines[0] and "firmware/" in lines[0]
 
 
+@pytest.mark.realtime
 def test_an_old_bridge_is_refused_by_name_within_the_connect_timeout(
     capsys: pytest.CaptureFixture[str], workdir: Path
 ) -> None:
@@ -205,6 +215,7 @@ def test_an_actuation_timing_out_of_range_is_one_line(
     assert not (workdir / "logs").exists()
 
 
+@pytest.mark.realtime
 @pytest.mark.filterwarnings("always::cartctl.errors.DataWarning")  # a busy machine may skip a tick
 def test_identified_delay_matches_the_echo(
     capsys: pytest.CaptureFixture[str], workdir: Path
