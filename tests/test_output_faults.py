@@ -367,3 +367,18 @@ def test_the_loop_stops_on_a_failed_write_with_zero_volts_and_whole_rows(tmp_pat
         str(raised.value)
         == f"{path} is incomplete: No space left on device (after {len(rows) - 1} rows)"
     )
+
+
+@needs_dev_full
+@pytest.mark.realtime  # the virtual cart behind a pseudo-terminal
+def test_monitor_on_a_full_disk_is_a_fault(tmp_path: Path) -> None:
+    (tmp_path / "m.csv").symlink_to(FULL)
+    result = cartctl("monitor", "virtual", "--duration", "1", "--out", str(tmp_path), "--name", "m",
+                     cwd=ROOT)  # fmt: skip
+    assert result.returncode == 1
+    assert not RAW_SDK_LINE.search(result.stderr), result.stderr
+    lines = [line for line in result.stderr.splitlines() if not line.startswith("cart: ")]
+    assert lines == [
+        f"cartctl monitor: error: {tmp_path / 'm.csv'} is incomplete: No space left on device "
+        "(after 0 rows)"
+    ]  # the cart's own PRINT lines (``cart: …``) are what a monitor shows
