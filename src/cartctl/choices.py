@@ -23,6 +23,7 @@ __all__ = [
     "DEFAULT_MODEL",
     "FORMS",
     "MAX_DURATION_S",
+    "MAX_TUNE_SETTINGS",
     "SHIPPED_FILES",
     "SHIPPED_FOLDERS",
     "SIGNALS",
@@ -31,6 +32,10 @@ __all__ = [
 
 MAX_DURATION_S = 24 * 3600.0
 """The longest signal, run or recording cartctl takes: 24 h (8.64 million ticks of 10 ms)."""
+
+MAX_TUNE_SETTINGS = 1_000
+"""The largest ``cartctl tune --grid`` (settings): a setting is designed and run in about 50 ms
+on one core, so a grid this size is about a minute of work per core (the default grids have 42)."""
 
 SIGNALS = ("square", "step", "prbs", "multisine", "chirp")
 """Names accepted by :func:`cartctl.signals.make_signal` (and ``cartctl excite --signal``)."""

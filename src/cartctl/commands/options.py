@@ -299,7 +299,7 @@ def add_plant_options(p: argparse.ArgumentParser, *, what: str) -> None:
         metavar="PLANT",
         help=f"{what}: sim (the ARX models of --model, default), physics (the physical "
         "simulator), virtual (that simulator behind a pseudo-terminal, through the serial path; "
-        "virtual:garbage=0.05,corrupt=0.05,stall=S,pull=S injects faults; physics:reverse_b=1 or "
+        "virtual:garbage=0.05,corrupt=0.05,stall=S,pull=S,late=0.3 injects faults; physics:reverse_b=1 or "
         "virtual:reverse_b=1 wires motor b backwards) or serial:PORT (the "
         "cart, e.g. serial:/dev/ttyACM0)",
     )

@@ -178,6 +178,33 @@ def loop_delay_for(
         return None, note
 
 
+def check_models(
+    models: ModelFile | Mapping[str, ArxModel], motors: tuple[str, ...], name: str | None = None
+) -> None:
+    """Refuse models no design can use, before any design work (one line naming the file).
+
+    Every motor's model must be stable: a PI needs it, and the simulated step and the settling
+    bound of every design run on it. ``cartctl design`` and ``cartctl tune`` refuse with this line,
+    naming the file as ``name`` (as the user gave it; default the model file's path).
+
+    Raises
+    ------
+    InputError
+        A motor's model has a pole on or outside the unit circle.
+    """
+    if name is None and isinstance(models, ModelFile) and models.path:
+        name = str(models.path)
+    where = f"{name}: " if name else ""
+    for m in motors:
+        model = models.motor(m) if isinstance(models, ModelFile) else models[m]
+        if not model.is_stable():
+            raise InputError(
+                f"{where}motor {m}'s model is unstable (pole at |z| = {model.pole_radius():.4g}); "
+                "a design needs a stable model (its simulated step and settling bound run on "
+                "it): identify it again"
+            )
+
+
 @dataclass(frozen=True)
 class Designs:
     """The designs of the motors asked for, each with its simulated step.
@@ -217,6 +244,7 @@ def design_models(
 ) -> Designs:
     """Design every motor of ``motors`` on its model, with the simulated step and its bound."""
     request.check()
+    check_models(models, motors)
     by_motor = {
         m: (models.motor(m) if isinstance(models, ModelFile) else models[m]) for m in motors
     }

@@ -27,11 +27,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
+from cartctl.design.request import PM_RANGE_DEG
 from cartctl.errors import InputError
 from cartctl.model import ArxModel, check_extra_delay_ticks
-
-PM_RANGE_DEG = (0.0, 89.0)
-"""Phase margins accepted: (0, 89] degrees."""
 
 _GRID_POINTS = 400
 _FREQ_POINTS = 4001

@@ -8,10 +8,12 @@ line that regenerates the file (:meth:`DesignRequest.to_argv`).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, fields
+from numbers import Integral, Real
 from typing import Any
 
-from cartctl.cart import SUPPLY_V
+from cartctl.cart import PERIOD_S, SUPPLY_V
 from cartctl.errors import InputError
 
 METHODS = ("pi", "poles")
@@ -21,6 +23,16 @@ DEFAULT_PROCESS_NOISE_STD_V = 0.1
 DEFAULT_BIAS_DRIFT_STD_V = 0.03
 """Random-walk step of the estimator's input-disturbance state (V std per tick); see
 :mod:`cartctl.design.kalman`."""
+PM_RANGE_DEG = (0.0, 89.0)
+"""Phase margins accepted: (0, 89] degrees (at 90° the PI's proportional gain is gone)."""
+MAX_EXTRA_DELAY_TICKS = 50
+"""The most ``--extra-delay`` accepted (ticks). The PC's serial loop adds 3; 50 more (0.5 s) is
+no speed loop any more, and the design's state grows by one per tick (500 took 76 s of CPU)."""
+MAX_LOOP_DELAY_TICKS = 100
+"""The most ``--loop-delay`` accepted (ticks): a recorded loop of at most 50 (as ``identify
+--loop-delay`` takes it) plus at most :data:`MAX_EXTRA_DELAY_TICKS`."""
+MAX_TIMING_NOISE_TICKS = 10.0
+"""The most ``--timing-noise-ticks`` accepted (a command landing ±10 ticks late is no loop)."""
 ANTI_WINDUP = ("conditional", "back-calculation", "none")
 PI_ESTIMATORS = ("none", "kalman")
 ESTIMATOR_GAINS = ("time-varying", "steady-state")
@@ -122,7 +134,11 @@ class DesignRequest:
         object.__setattr__(self, "estimator_gain", estimator_gain_name(self.estimator_gain))
 
     def check(self) -> DesignRequest:
-        """This request, if its options are in range (one-line :class:`InputError` otherwise)."""
+        """This request, if its options are in range (one-line :class:`InputError` otherwise).
+
+        Each field the method uses is checked by :func:`check_field` (no model needed, so a
+        request is refused before any design work), then the combinations.
+        """
         if self.estimator_gain not in ESTIMATOR_GAINS:
             raise InputError(
                 f"estimator gain must be one of {', '.join(ESTIMATOR_GAINS)}, got "
@@ -130,17 +146,13 @@ class DesignRequest:
             )
         if self.method not in METHODS:
             raise InputError(f"method must be one of {', '.join(METHODS)}, got '{self.method}'")
-        if not 0.0 < self.voltage_limit_v <= SUPPLY_V:
-            raise InputError(
-                f"--voltage-limit must be in (0, {SUPPLY_V:g}] V, got {self.voltage_limit_v}"
-            )
-        if self.extra_delay_ticks < 0:
-            raise InputError(f"--extra-delay must be >= 0 ticks, got {self.extra_delay_ticks}")
-        if self.loop_delay_ticks is not None and self.loop_delay_ticks < 0:
-            raise InputError(f"--loop-delay must be >= 0 ticks, got {self.loop_delay_ticks}")
+        unused = _POLES_FIELDS if self.method == "pi" else _PI_FIELDS
+        if self.method == "poles" and self.poles:
+            unused = unused | _POLES_FIELDS  # the poles are given: no settling time or overshoot
+        for f in fields(self):
+            if f.name in RANGES and f.name not in unused:
+                check_field(f.name, getattr(self, f.name))
         timing = self.timing_noise_std_ticks
-        if not (math.isfinite(timing) and 0.0 <= timing <= 10.0):
-            raise InputError(f"--timing-noise-ticks must be in [0, 10] ticks, got {timing}")
         if timing > 0.0 and self.estimator_gain != "time-varying":
             raise InputError(
                 "--timing-noise-ticks needs --estimator-gain time-varying (a fixed gain cannot "
@@ -149,8 +161,6 @@ class DesignRequest:
         if timing > 0.0 and self.method == "pi" and self.estimator != "kalman":
             raise InputError("--timing-noise-ticks is for an estimator; the PI runs without one "
                              "unless --estimator kalman")  # fmt: skip
-        if not (math.isfinite(self.step_rad_s) and self.step_rad_s != 0.0):
-            raise InputError(f"--step must be a non-zero speed in rad/s, got {self.step_rad_s}")
         return self
 
     def pole_list(self) -> list[complex] | None:
@@ -199,6 +209,75 @@ class DesignRequest:
                 continue
             argv += [OPTIONS[f.name], _text(value)]
         return argv
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _whole(value: Any, high: int) -> bool:
+    return isinstance(value, Integral) and not isinstance(value, bool) and 0 <= value <= high
+
+
+_NYQUIST_HZ = 0.5 / PERIOD_S
+_BELOW_NYQUIST = f"in (0, {_NYQUIST_HZ:g}) Hz (below the Nyquist frequency of the {PERIOD_S * 1e3:g} ms tick)"  # fmt: skip
+
+RANGES: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "phase_margin_deg": (lambda v: _number(v) and PM_RANGE_DEG[0] < v <= PM_RANGE_DEG[1],
+                         f"in (0, {PM_RANGE_DEG[1]:g}] degrees"),
+    "crossover_hz": (lambda v: _number(v) and 0.0 < v < _NYQUIST_HZ, _BELOW_NYQUIST),
+    "bandwidth_hz": (lambda v: v is None or (_number(v) and 0.0 < v < _NYQUIST_HZ),
+                     _BELOW_NYQUIST),
+    "settling_time_s": (lambda v: _number(v) and v > 0.0, "a positive number of seconds"),
+    "overshoot_percent": (lambda v: _number(v) and 0.0 < v < 100.0, "in (0, 100) %"),
+    "process_noise_std_v": (lambda v: _number(v) and v > 0.0, "a positive number of volts"),
+    "bias_drift_std_v": (lambda v: _number(v) and v >= 0.0, "a number of volts >= 0"),
+    "extra_noise_std_rad_s": (lambda v: _number(v) and v >= 0.0, "a number of rad/s >= 0"),
+    "timing_noise_std_ticks": (lambda v: _number(v) and 0.0 <= v <= MAX_TIMING_NOISE_TICKS,
+                               f"in [0, {MAX_TIMING_NOISE_TICKS:g}] ticks"),
+    "extra_delay_ticks": (lambda v: _whole(v, MAX_EXTRA_DELAY_TICKS),
+                          f">= 0 ticks and at most {MAX_EXTRA_DELAY_TICKS} (0.5 s: beyond it "
+                          "there is no speed loop)"),
+    "loop_delay_ticks": (lambda v: v is None or _whole(v, MAX_LOOP_DELAY_TICKS),
+                         f">= 0 ticks and at most {MAX_LOOP_DELAY_TICKS} (a recorded loop of at "
+                         f"most 50 ticks and at most {MAX_EXTRA_DELAY_TICKS} extra)"),
+    "voltage_limit_v": (lambda v: _number(v) and 0.0 < v <= SUPPLY_V, f"in (0, {SUPPLY_V:g}] V"),
+    "step_rad_s": (lambda v: _number(v) and v != 0.0, "a non-zero speed in rad/s"),
+}  # fmt: skip
+"""Per numeric request field: the test its value must pass (no model needed) and the range in
+words. The model-dependent limits (a crossover a PI can reach, a settling time of at least the
+loop's deadbeat time) are the designs' own."""
+
+_PI_FIELDS = frozenset({"phase_margin_deg", "crossover_hz", "bandwidth_hz"})
+_POLES_FIELDS = frozenset({"settling_time_s", "overshoot_percent"})
+
+
+def check_field(field: str, value: Any, option: str | None = None) -> Any:
+    """``value`` if it is in the range of request field ``field`` (:data:`RANGES`).
+
+    Parameters
+    ----------
+    field : str
+        A key of :data:`RANGES` (``'phase_margin_deg'``, ``'extra_delay_ticks'``, …).
+    value
+        The value asked for, in the field's unit.
+    option : str, optional
+        How the message names what the user gave; default the design option
+        (:data:`OPTIONS`, e.g. ``--phase-margin``). ``cartctl tune`` passes its grid axis
+        (``--grid phase_margin=50:120:5``), so both commands refuse a value in the same words.
+
+    Raises
+    ------
+    InputError
+        Out of range: one line, ``OPTION must be RANGE, got VALUE``.
+    """
+    test, allowed = RANGES[field]
+    if not test(value):
+        shown = f"{value:g}" if isinstance(value, float) else str(value)
+        if isinstance(value, float) and not math.isfinite(value):  # not a number is no range
+            allowed = "a number" if math.isnan(value) else "finite"
+        raise InputError(f"{option or OPTIONS[field]} must be {allowed}, got {shown}")
+    return value
 
 
 def check_loop_delay(loop_delay_ticks: int | None, nk: int, extra_delay_ticks: int) -> int:

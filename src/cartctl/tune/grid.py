@@ -23,11 +23,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cartctl.design.request import DesignRequest
+from cartctl.choices import MAX_TUNE_SETTINGS
+from cartctl.design.request import DesignRequest, check_field
 from cartctl.errors import InputError
-
-MAX_SETTINGS = 10_000
-"""Largest grid accepted (settings)."""
 
 METRICS = ("overshoot_percent", "settling_time_s", "rms_error", "max_abs_voltage")
 """The per-motor run metrics compared (%, s, rad/s, V), all to be minimised."""
@@ -77,7 +75,11 @@ def grid_form(method: str) -> str:
 
 
 def _count(start: float, stop: float, step: float) -> int:
-    return math.floor((stop - start) / step + 1e-9) + 1
+    span = (stop - start) / step + 1e-9
+    if not math.isfinite(span):  # a step too small for its span (1e-320): never a grid
+        raise InputError(f"--grid: a step of {step:g} over {start:g}..{stop:g} gives more than "
+                         f"{MAX_TUNE_SETTINGS} settings; use coarser steps")  # fmt: skip
+    return math.floor(span) + 1
 
 
 def inclusive_range(start: float, stop: float, step: float) -> tuple[float, ...]:
@@ -85,51 +87,66 @@ def inclusive_range(start: float, stop: float, step: float) -> tuple[float, ...]
     return tuple(round(start + i * step, 10) for i in range(_count(start, stop, step)))
 
 
+def _axis_range(item: str, text: str, form: str) -> tuple[float, float, float]:
+    """``START:STOP:STEP`` or ``VALUE`` of grid item ``item`` as (start, stop, step)."""
+    parts = [p.strip() for p in text.split(":")]
+    if len(parts) not in (1, 3) or not all(parts):
+        raise InputError(f"--grid {item}: expected START:STOP:STEP or one VALUE after the '='")
+    try:
+        numbers = [float(p) for p in parts]
+    except ValueError:
+        raise InputError(f"--grid {item}: the values must be numbers; expected {form}") from None
+    if not all(math.isfinite(v) for v in numbers):
+        raise InputError(f"--grid {item}: the values must be finite numbers (not nan or inf)")
+    if len(numbers) == 1:
+        return numbers[0], numbers[0], 1.0
+    start, stop, step = numbers
+    if step <= 0.0:
+        raise InputError(f"--grid {item}: STEP must be > 0, got {step:g}")
+    if start > stop:
+        raise InputError(f"--grid {item}: START {start:g} is above STOP {stop:g}; the range is "
+                         "empty")  # fmt: skip
+    return start, stop, step
+
+
 def parse_grid(spec: str | None, method: str) -> dict[str, tuple[float, ...]]:
     """The values of each axis of ``method`` (module docstring), defaults where ``spec`` is silent.
+
+    Each value is checked as ``cartctl design`` checks its option
+    (:func:`~cartctl.design.request.check_field`), named as the grid axis the user gave, so an
+    out-of-range value is refused before any design runs, in design's words.
 
     Raises
     ------
     InputError
-        An unknown axis name, a repeated one, a malformed or empty range, or too many settings;
-        the message gives the expected form.
+        An unknown axis name, a repeated one, a malformed, non-finite or empty range, a value
+        ``cartctl design`` refuses, or more than :data:`MAX_TUNE_SETTINGS` settings; one line each.
     """
     axes = {a.name: a for a in AXES[method]}
     ranges = {name: a.default for name, a in axes.items()}
+    given: dict[str, str] = {}
     form = grid_form(method)
-    seen: set[str] = set()
     for item in (spec or "").split(",") if spec and spec.strip() else []:
         name, eq, text = (s.strip() for s in item.partition("="))
+        item = item.strip()
         if not eq or name not in axes:
-            raise InputError(
-                f"--grid: bad axis '{item.strip()}' for --method {method}; expected {form}"
-            )
-        if name in seen:
-            raise InputError(f"--grid: axis '{name}' is given twice; expected {form}")
-        seen.add(name)
-        try:
-            numbers = [float(p) for p in text.split(":")]
-        except ValueError:
-            numbers = []
-        if len(numbers) not in (1, 3) or not all(math.isfinite(v) for v in numbers):
-            raise InputError(
-                f"--grid: '{item.strip()}' is not NAME=START:STOP:STEP or NAME=VALUE; expected {form}"
-            )
-        if len(numbers) == 3 and not (numbers[2] > 0 and numbers[1] >= numbers[0]):
-            raise InputError(
-                f"--grid: '{item.strip()}' needs STEP > 0 and STOP >= START; expected {form}"
-            )
-        ranges[name] = (
-            (numbers[0], numbers[0], 1.0)
-            if len(numbers) == 1
-            else (numbers[0], numbers[1], numbers[2])
-        )
+            raise InputError(f"--grid: bad axis '{item}' for --method {method}; expected {form}")
+        if name in given:
+            raise InputError(f"--grid: axis '{name}' is given twice ({given[name]}, {item})")
+        given[name] = item
+        ranges[name] = _axis_range(item, text, form)
     size = math.prod(_count(*r) for r in ranges.values())
-    if size > MAX_SETTINGS:
+    if size > MAX_TUNE_SETTINGS:
         raise InputError(
-            f"--grid gives {size} settings, more than {MAX_SETTINGS}; use coarser steps"
+            f"--grid gives {size if size < 10**9 else 'over 10^9'} settings, more than "
+            f"{MAX_TUNE_SETTINGS}; use coarser steps"
         )
-    return {name: inclusive_range(*r) for name, r in ranges.items()}
+    values = {name: inclusive_range(*r) for name, r in ranges.items()}
+    for name, axis_values in values.items():
+        option = f"--grid {given[name]}" if name in given else f"the default --grid {name}"
+        for v in axis_values:
+            check_field(FIELDS[name], v, option)
+    return values
 
 
 def grid_settings(axes: Mapping[str, Sequence[float]]) -> list[dict[str, float]]:
