@@ -382,3 +382,37 @@ def test_monitor_on_a_full_disk_is_a_fault(tmp_path: Path) -> None:
         f"cartctl monitor: error: {tmp_path / 'm.csv'} is incomplete: No space left on device "
         "(after 0 rows)"
     ]  # the cart's own PRINT lines (``cart: …``) are what a monitor shows
+
+
+@pytest.mark.parametrize(
+    ("message", "why"),
+    [
+        ("Failed to encode LogMsg: Failed to write: No space left on device (os error 28)",
+         "No space left on device"),
+        ("Failed to write: File too large (os error 27)", "File too large"),
+        ("File-writer thread shut down prematurely", "the recording's writer stopped"),
+        ("transport error: connection refused", None),  # the viewer's side: not the file
+    ],
+)  # fmt: skip
+def test_the_sdk_failure_is_read_into_the_file_reason(
+    message: str, why: str | None, tmp_path: Path
+) -> None:
+    from cartctl.sinks.rerun_problems import file_failure
+
+    assert file_failure(RuntimeError(message), tmp_path / "r.rrd") == why
+    assert file_failure(RuntimeError(message), None) is None  # no file, no file failure
+
+
+def test_the_sdk_logs_are_off_unless_the_user_asked(monkeypatch: pytest.MonkeyPatch) -> None:
+    from cartctl.sinks import rerun_problems
+
+    monkeypatch.setattr(rerun_problems, "_QUIETED", set())
+    monkeypatch.delenv("RUST_LOG", raising=False)
+    rerun_problems.quiet_sdk_logs()
+    assert os.environ["RUST_LOG"] == "off"
+    assert "RUST_LOG" not in rerun_problems.viewer_env()  # a viewer keeps its own log
+    monkeypatch.setattr(rerun_problems, "_QUIETED", set())
+    monkeypatch.setenv("RUST_LOG", "debug")
+    rerun_problems.quiet_sdk_logs()
+    assert os.environ["RUST_LOG"] == "debug"
+    assert rerun_problems.viewer_env()["RUST_LOG"] == "debug"

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from cartctl.data import Trace
 from cartctl.sinks.rerun_layout import ENTITY_PATHS, blueprint
+from cartctl.sinks.rerun_problems import file_failure
 from cartctl.sinks.rerun_sink import APPLICATION_ID
 
 Series = Mapping[str, tuple[NDArray[np.float64], NDArray[np.float64]]]
@@ -53,5 +54,5 @@ def record_stage(path: Path, series: Series, note: str, stage: str, *,
         rec.flush(timeout_sec=5.0)
         rec.disconnect()
     except Exception as exc:  # the SDK's failures: commissioning goes on, the summary says so
-        return f"{path}: {exc}"
+        return f"{path}: {file_failure(exc, path) or exc}"  # the SDK's own log lines are off
     return None

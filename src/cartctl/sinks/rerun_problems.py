@@ -38,12 +38,23 @@ _OS_ERROR = re.compile(r"(?:Failed to write: )?([^:]*?) \(os error (\d+)\)")
 _FILE_WRITER = ("File-writer", "Failed to write", "file sink", "os error")
 
 
+_QUIETED: set[str] = set()  # the variables quiet_sdk_logs set (not the user's)
+
+
 def quiet_sdk_logs() -> None:
     """Turn the Rerun SDK's own log lines off unless the user asked for them (``RUST_LOG``).
 
     Call before ``rerun`` is imported: the SDK reads the variable once, as it loads.
     """
-    os.environ.setdefault(SDK_LOG_VARIABLE, "off")
+    if SDK_LOG_VARIABLE not in os.environ:
+        os.environ[SDK_LOG_VARIABLE] = "off"
+        _QUIETED.add(SDK_LOG_VARIABLE)
+
+
+def viewer_env() -> dict[str, str]:
+    """The environment for a viewer process cartctl starts: the user's own, without the
+    ``RUST_LOG=off`` of :func:`quiet_sdk_logs` (a viewer's log explains why it failed)."""
+    return {k: v for k, v in os.environ.items() if k not in _QUIETED}
 
 
 def file_failure(exc: BaseException, path: Path | None) -> str | None:

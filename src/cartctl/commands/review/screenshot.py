@@ -27,6 +27,7 @@ from cartctl.commands.review.recording import (
 )
 from cartctl.commands.review.viewer import ViewerError, free_port, require_viewer
 from cartctl.errors import InputError
+from cartctl.sinks.rerun_problems import viewer_env
 
 if TYPE_CHECKING:  # rerun takes ~0.6 s to import: only the review itself loads it
     from rerun.experimental import ViewerClient
@@ -89,7 +90,7 @@ def screenshot(
             # Its own session, so the wrapper script and the viewer it starts stop together.
             viewer = subprocess.Popen(
                 [executable, "--headless", "--port", str(port), "--window-size", window, *_QUIET],
-                env={**os.environ, "RERUN_APP_ONLY": "true"},
+                env={**viewer_env(), "RERUN_APP_ONLY": "true"},
                 stdin=subprocess.DEVNULL,
                 stdout=log,
                 stderr=subprocess.STDOUT,
