@@ -382,9 +382,8 @@ def run(args: argparse.Namespace) -> int:
     warn_delay_change(summary.get("link"), "run")
     if loop.state.incomplete:  # one line: each file and why, the other failure, the motors
         failed = [str(e) for e in loop.state.incomplete] + [loop.state.failure or ""]
-        stopped = "could not send zero volts" not in (loop.state.failure or "")
-        print(f"cartctl run: error: {'; '.join(f for f in failed if f)}"
-              f"{'; the motors were stopped' if stopped else ''}", file=sys.stderr)  # fmt: skip
+        stopped = "; the motors were stopped" if loop.state.zero_volts_sent else ""
+        print(f"cartctl run: error: {'; '.join(f for f in failed if f)}{stopped}", file=sys.stderr)
         return 1
     if loop.state.failure:
         print(f"cartctl run: error: {loop.state.failure}", file=sys.stderr)

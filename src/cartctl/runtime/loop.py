@@ -99,6 +99,8 @@ class LoopState:
     """Rows written to the sinks: the ticks logged, and the stop row of :meth:`ControlLoop.finish`."""
     interrupted: bool = False
     failure: str | None = None
+    zero_volts_sent: bool = False
+    """The stop command went out (:meth:`ControlLoop.finish`)."""
     sink_errors: list[str] = field(default_factory=list)
     incomplete: list[OutputError] = field(default_factory=list)
     """The files a failed write left incomplete (one error per file): a fault of the run."""
@@ -303,6 +305,7 @@ class ControlLoop:
         except Exception as exc:  # a vanished port: still close what can be closed
             self.state.failure = self.state.failure or f"could not send zero volts: {exc}"
             sent = False
+        self.state.zero_volts_sent = sent
         y = self._y
         if sent and y is not None:
             k = self.state.rows
