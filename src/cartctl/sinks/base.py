@@ -2,8 +2,10 @@
 
 The loop opens every sink with the column names, writes one row of floats per tick in that order,
 and closes every sink on every exit path. ``write`` runs inside the 10 ms tick, before the tick's
-compute time is taken: it must never block (buffer, hand off to a thread) and must never raise
-into the loop for an I/O problem; it records the problem and reports it at ``close``. A sink may
+compute time is taken: it must never block (buffer, hand off to a thread). A problem that loses no
+data (a viewer gone) is recorded and reported at ``close``; a file that cannot be written (a full
+disk) raises :class:`~cartctl.errors.OutputError` from the call that met it, once: the loop gives
+the other sinks their row, then stops through its normal stop path (a fault of the run). A sink may
 also have ``idle()``, which the loop calls after each tick's compute time is taken and before it
 waits for the next deadline (or the cart's next frame): work that need not delay the command
 (formatting, handing a block to a thread) belongs there.
