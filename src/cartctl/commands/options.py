@@ -351,14 +351,14 @@ def check_input_file(path: str | Path, what: str, option: str | None = None) -> 
     Raises
     ------
     InputError
-        One line naming ``option`` and ``path``: ``is a folder`` or ``not found``.
+        One line naming ``option`` and ``path``: ``is a directory`` or ``not found``.
     """
     from cartctl.choices import find_file
 
     found = find_file(path)
     lead = f"{option} {path}" if option else str(path)
     if found.is_dir():
-        raise InputError(f"{lead}: is a folder; expected {what}")
+        raise InputError(f"{lead}: is a directory; expected {what}")
     if not found.is_file():
         raise InputError(f"{lead}: not found; expected {what}")
     return found

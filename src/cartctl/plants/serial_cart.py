@@ -67,6 +67,9 @@ PROBE_MAX_ECHOES = 50
 """Echoes it takes when the first :data:`PROBE_ECHOES` are not clear."""
 PROBE_MAX_TICKS = 100
 """Longest :meth:`SerialCart.measure_loop_delay` waits for them (ticks, 1 s)."""
+PROBE_SILENCE_S = 0.5
+"""Longest wait for a GPIO during the probe (s), as :meth:`SerialCart.reset` allows: nothing is
+driven yet, and a host held up that long (a loaded PC) is no fault of the cart's."""
 BACKLOG_WAIT_S = 0.006
 """A GPIO that follows the one :meth:`SerialCart.reset` took within this long is a backlog (the
 cart's frames come 10 ms apart, give or take the USB bridge's 5 ms), not the next tick."""
@@ -265,16 +268,21 @@ class SerialCart:
         self.reset()
         self.echo_delays.clear()
         judged = False
-        for _ in range(max_ticks):
-            self.send(0.0, 0.0, drive=False)
-            self.receive()
-            total = self.echo_delays.total()
-            if total >= max_echoes:
-                break
-            if total >= echoes and not judged:  # judged once: no stopping at a lucky moment
-                judged = True
-                if EchoDelays.of(self.echo_delays).clear:
+        silence_s = self.link.silence_timeout_s
+        self.link.silence_timeout_s = max(silence_s, PROBE_SILENCE_S)
+        try:
+            for _ in range(max_ticks):
+                self.send(0.0, 0.0, drive=False)
+                self.receive()
+                total = self.echo_delays.total()
+                if total >= max_echoes:
                     break
+                if total >= echoes and not judged:  # judged once: no stopping at a lucky moment
+                    judged = True
+                    if EchoDelays.of(self.echo_delays).clear:
+                        break
+        finally:
+            self.link.silence_timeout_s = silence_s
         self.probe_delays = EchoDelays.of(self.echo_delays)
         delay = self.loop_delay_ticks
         if delay is None:
