@@ -91,16 +91,15 @@ def _sys(tmp: Path) -> tuple[str, str]:
         pytest.param(_sys, marks=pytest.mark.skipif(not Path("/sys/kernel").is_dir(), reason="no /sys")),
     ],
 )  # fmt: skip
-def test_run_refuses_an_output_folder_before_it_connects_a_plant(tmp_path: Path, case) -> None:
+def test_run_refuses_an_output_folder_before_it_connects_a_plant(
+    tmp_path: Path, case, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
     out, why = case(tmp_path)
+    monkeypatch.chdir(tmp_path)
     before = tree(tmp_path)
     # a port that does not exist: had the plant come first, the message would be about it
-    result = cartctl(
-        "run", "--plant", "serial:/dev/cartctl-no-such-port", "--out", out, cwd=tmp_path
-    )
-    assert result.returncode == 2
-    assert result.stderr == f"cartctl run: error: --out {out}: {why}\n"
-    assert result.stdout == ""
+    assert main(["run", "--plant", "serial:/dev/cartctl-no-such-port", "--out", out]) == 2
+    assert capsys.readouterr() == ("", f"cartctl run: error: --out {out}: {why}\n")
     assert tree(tmp_path) == before  # no logs/, no meta file
     if case is _file:
         assert (tmp_path / "notes.txt").read_text() == "mine\n"
