@@ -59,7 +59,7 @@ def test_missing_model_file() -> None:
         ("this is = = not toml", "not a valid TOML"),
         (
             'format = "other/9"\nperiod_s = 0.01\n[motors.a]\ntheta=[1]\nna=0\nnb=1\nnk=1',
-            "unknown format",
+            "has format 'other/9'",
         ),
         ("[motors.a]\ntheta = [1.0]\nna = 0\nnb = 1\nnk = 1", "missing key 'period_s'"),
         (

@@ -40,7 +40,7 @@ import tomli_w
 from cartctl.choices import find_file
 from cartctl.errors import CartctlError, DataFileError, InputError
 from cartctl.model import ArxModel
-from cartctl.tomlfile import read_toml, require
+from cartctl.tomlfile import check_format, read_toml, require
 
 FORMAT = "cartctl-model/1"
 MOTORS = ("a", "b")
@@ -187,9 +187,8 @@ def load_models(path: str | Path) -> ModelFile:
 
 
 def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
-    fmt = doc.get("format", FORMAT)
-    if fmt != FORMAT:
-        raise DataFileError(path, f"unknown format {fmt!r}; expected {FORMAT!r}")
+    if "format" in doc:  # a model file may leave it out
+        check_format(doc, path, FORMAT, "model file")
     period_s = float(require(doc, "period_s", (int, float), path, "the top level"))
     loop_delay = None
     if "loop_delay_ticks" in doc:

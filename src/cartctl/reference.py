@@ -108,6 +108,15 @@ def reference_signal(
     raise InputError(f"unknown reference '{spec}'; expected {FORMS}")
 
 
+def check_reference(spec: str, option: str = "--reference", period_s: float = 0.01) -> str:
+    """``spec`` if it names a reference (a file one is read); else one line naming ``option``."""
+    try:
+        reference_signal(spec, 1, period_s)
+    except InputError as exc:
+        raise InputError(f"{option}: {exc}") from None
+    return spec
+
+
 class ReferenceSchedule:
     """A reference spec evaluated on the tick grid one chunk at a time, not all at once.
 

@@ -218,12 +218,12 @@ def make_signal(
     if name not in builders:
         raise InputError(f"unknown signal '{name}'; choose one of {', '.join(SIGNALS)}")
     if cycles is not None and cycles < 1:
-        raise InputError(f"cycles must be at least 1, got {cycles}")
+        raise InputError(f"--cycles must be at least 1, got {cycles}")
     if cycles is not None and name in ("square", "multisine"):
         cycle_s = 3.0 if name == "square" else 2.56
         if cycles * cycle_s > MAX_DURATION_S:
             raise InputError(
-                f"{cycles} cycles of {name} are {cycles * cycle_s:g} s of signal; at most "
+                f"--cycles {cycles} of {name} are {cycles * cycle_s:g} s of signal; at most "
                 f"{int(MAX_DURATION_S // cycle_s)} ({MAX_DURATION_S / 3600:g} h)"
             )
     return builders[name]()

@@ -9,16 +9,49 @@ from typing import Any
 
 from cartctl.errors import DataFileError, MissingFileError
 
+FORMATS = {"cartctl-model/1": "a model file", "cartctl-controller/1": "a controller file",
+           "cartctl-trace-meta/1": "a trace meta file"}  # fmt: skip
+"""What each ``format`` line says a file is, for messages about a file given in another's place."""
+
 
 def read_toml(path: str | Path, what: str) -> dict[str, Any]:
-    """Parse a TOML file; MissingFileError or a DataFileError naming ``what`` the file should be."""
+    """Parse a TOML file; MissingFileError or a DataFileError naming ``what`` the file should be.
+
+    A folder, an empty file and a CSV trace given in a TOML file's place are each named as such.
+    """
     path = Path(path)
+    if path.is_dir():
+        raise DataFileError(path, f"is a directory; expected a {what}")
     if not path.is_file():
         raise MissingFileError(path, what)
     try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise DataFileError(path, f"is not text; expected a {what} (TOML)") from None
+    if not text.strip():
+        raise DataFileError(path, f"the file is empty; expected a {what}")
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        first = text.lstrip().partition("\n")[0]
+        if path.suffix.lower() == ".csv" or ("," in first and "=" not in first):
+            raise DataFileError(path, f"is a CSV file, not a {what} (TOML)") from None
         raise DataFileError(path, f"not a valid TOML {what} ({exc})") from None
+
+
+def check_format(doc: Mapping[str, Any], path: Path, expected: str, what: str) -> None:
+    """Refuse (DataFileError) a document whose ``format`` line is not ``expected``.
+
+    The message says what the file is instead when its format is a known one (a model given as a
+    controller: ``is a model file, not a controller file``).
+    """
+    found = doc.get("format")
+    if found == expected:
+        return
+    if found in FORMATS:
+        raise DataFileError(path, f"is {FORMATS[found]}, not a {what}")
+    shown = "has no 'format' line" if found is None else f"has format {found!r}"
+    raise DataFileError(path, f"{shown}; a {what} says format = {expected!r}")
 
 
 def require(

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from cartctl.commands.options import check_outputs, command_line
+from cartctl.commands.options import check_finite, check_outputs, command_line
 from cartctl.design.request import (  # light: the parser's choices and defaults
     ANTI_WINDUP,
     DEFAULT_BIAS_DRIFT_STD_V,
@@ -269,10 +269,8 @@ def _format(method: str, motors: dict[str, dict[str, Any]]) -> str:
 
 
 def _disturbance_v(args: argparse.Namespace) -> float:
-    import math
-
-    d = float(args.disturbance_v)
-    if not (math.isfinite(d) and d != 0.0 and abs(d) <= 12.0):
+    d = check_finite(float(args.disturbance_v), "--disturbance-v")
+    if not (d != 0.0 and abs(d) <= 12.0):
         raise InputError(
             f"--disturbance-v must be a non-zero voltage within ±12 V, got {args.disturbance_v}"
         )

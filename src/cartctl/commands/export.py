@@ -138,7 +138,7 @@ def _write_arduino(args: argparse.Namespace) -> None:
     controller = load_controller(args.file)
     note = timing_noise_note(controller)
     if note is not None:
-        print(f"warning: {note}", file=sys.stderr)
+        print(f"cartctl export: warning: {note}", file=sys.stderr)
     source = arduino_source(controller, command=_command(args))
     if args.out:
         path = Path(args.out)

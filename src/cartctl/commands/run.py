@@ -17,6 +17,7 @@ from cartctl.commands.options import (
     add_plant_options,
     add_rerun_options,
     check_duration,
+    check_finite,
     check_plant_options,
     check_run_outputs,
     command_line,
@@ -181,7 +182,10 @@ def run(args: argparse.Namespace) -> int:
     )
 
     check_duration(args.duration)
-    if args.voltage_limit is not None and not 0.0 < args.voltage_limit <= SUPPLY_V:
+    if (
+        args.voltage_limit is not None
+        and not 0.0 < check_finite(args.voltage_limit, "--voltage-limit") <= SUPPLY_V
+    ):
         raise InputError(f"--voltage-limit must be in (0, 12] V, got {args.voltage_limit}")
     from cartctl.plants.factory import SIMULATED, check_plant_name, plant_period_s
     from cartctl.reference import check_reference

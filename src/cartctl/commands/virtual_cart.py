@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import TYPE_CHECKING
 
-from cartctl.commands.options import FORMS
+from cartctl.commands.options import FORMS, check_duration, check_finite
 from cartctl.errors import InputError
 
 if TYPE_CHECKING:
@@ -51,7 +51,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="inject faults: garbage=FRACTION (bursts of random bytes before that fraction of "
         "frames), corrupt=FRACTION (frames with a changed byte), stall=S (stop ticking S seconds "
         "after the host's first frame, port open), pull=S (the port vanishes S seconds after the "
-        "host's first frame), generation=b (speak the "
+        "host's first frame), late=FRACTION (that fraction of the ticks, in stretches of 5, take "
+        "the host's commands a tick late), generation=b (speak the "
         "newer MAVLink 2 firmware instead), reverse_a=1 / reverse_b=1 (that motor wired "
         "backwards: + volts turn it the negative way)",
     )  # fmt: skip
@@ -75,6 +76,14 @@ def run(args: argparse.Namespace) -> int:
 
     if args.reference and not args.onboard:
         raise InputError("--reference needs --onboard CONTROLLER.toml")
+    if args.duration is not None:
+        check_duration(args.duration)
+    if check_finite(args.noise, "--noise") < 0.0:
+        raise InputError(f"--noise must be a standard deviation >= 0 rad/s, got {args.noise:g}")
+    if args.reference:
+        from cartctl.reference import check_reference
+
+        check_reference(args.reference)
     firmware = None
     if args.onboard:
         from cartctl.export.arduino import onboard_controllers

@@ -32,6 +32,7 @@ from cartctl.data.table import (
     to_floats,
 )
 from cartctl.errors import DataFileError, DataWarning, MissingFileError
+from cartctl.tomlfile import FORMATS
 from cartctl.trace import REQUIRED_COLUMNS, Trace
 
 __all__ = ["SPACING_TOLERANCE_S", "VOLTAGE_READ_LIMIT_V", "read_trace"]
@@ -161,7 +162,16 @@ def _sniff(path: Path) -> str:
             f"the file is empty; expected a header row ({','.join(REQUIRED_COLUMNS)}) and one "
             "row per 10 ms tick",
         )
-    return qrc.detect(text) or "csv"
+    kind = qrc.detect(text)
+    toml = _CARTCTL_TOML.search(text) if kind is None else None
+    if toml is not None:
+        what = FORMATS.get(toml.group(1), "a cartctl TOML file")
+        raise DataFileError(path, f"is {what}, not a trace (.csv or a QRC log)")
+    return kind or "csv"
+
+
+_CARTCTL_TOML = re.compile(r'^format = "(cartctl-[a-z-]+/\d+)"', re.MULTILINE)
+"""The format line of a model, controller or trace meta file."""
 
 
 VOLTAGE_READ_LIMIT_V = SUPPLY_V + 0.5

@@ -54,7 +54,7 @@ from cartctl.cart import PERIOD_S, SPEED_QUANTUM_RAD_S, SUPPLY_V
 from cartctl.choices import find_file
 from cartctl.design.entries import consistency_problems
 from cartctl.errors import CartctlError, DataFileError
-from cartctl.tomlfile import read_toml, require
+from cartctl.tomlfile import check_format, read_toml, require
 
 FORMAT = "cartctl-controller/1"
 METHODS = ("pi", "poles")
@@ -316,9 +316,10 @@ def _derived_loop_delay(
         ) from None
 
 
-def load_controller(path: str | Path, *, force: bool = False) -> ControllerFile:
-    """Read a controller file; clear errors for a missing file, bad TOML, missing keys or a file
-    that contradicts itself.
+def load_controller(
+    path: str | Path, *, force: bool = False, period_s: float | None = None
+) -> ControllerFile:
+    """Read a controller file, with one clear error for each way it can be wrong (Raises).
 
     Parameters
     ----------
@@ -327,18 +328,23 @@ def load_controller(path: str | Path, *, force: bool = False) -> ControllerFile:
     force : bool
         Load a file whose ``controller_num``/``controller_den`` disagree with its gains anyway
         (the gains are what runs); the disagreements are in the result's ``ignored``.
+    period_s : float, optional
+        The plant's tick (s): a file for another period is refused before its coefficients.
 
     Raises
     ------
     MissingFileError, DataFileError
         No such file; not a controller file; a key missing or of the wrong type; ``plant_kind``
         against ``loop_delay_ticks``; without ``force``, a ``controller_num``/``controller_den``
-        that the gains do not give (relative tolerance 1e-6).
+        that the gains do not give (relative tolerance 1e-6); ``period_s`` not the file's.
     """
     path = find_file(path)  # the working folder's, else the shipped one
     doc = read_toml(path, "controller file")
-    if doc.get("format") != FORMAT:
-        raise DataFileError(path, f"unknown format {doc.get('format')!r}; expected {FORMAT!r}")
+    check_format(doc, path, FORMAT, "controller file")
+    file_period_s = float(require(doc, "period_s", (int, float), path, "the top level"))
+    if period_s is not None and abs(file_period_s - period_s) > 1e-9:
+        raise DataFileError(path, f"is designed for Ts = {file_period_s:g} s but the plant ticks "
+                            f"every {period_s:g} s; design it on a model of the plant's period")  # fmt: skip
     method = require(doc, "method", str, path, "the top level")
     if method not in METHODS:
         raise DataFileError(
@@ -369,12 +375,11 @@ def load_controller(path: str | Path, *, force: bool = False) -> ControllerFile:
             f"plant_kind = {kind!r} contradicts loop_delay_ticks = {delay} ('onboard' is a loop "
             f"delay of {ONBOARD_LOOP_DELAY_TICKS} tick, 'serial' more)",
         )
-    period_s = float(require(doc, "period_s", (int, float), path, "the top level"))
-    if not (math.isfinite(period_s) and 0.0 < period_s <= 1.0):
-        raise DataFileError(path, f"period_s must be a sample period in (0, 1] s, got {period_s}")
+    if not (math.isfinite(file_period_s) and 0.0 < file_period_s <= 1.0):
+        raise DataFileError(path, f"period_s must be in (0, 1] s, got {file_period_s}")
     controller = ControllerFile(
         method=method,
-        period_s=period_s,
+        period_s=file_period_s,
         voltage_limit_v=limit,
         model_path=model_path,
         model_sha256=str(require(model, "sha256", str, path, "[model]")),

@@ -71,7 +71,7 @@ def check_poles(poles: Sequence[complex], count: int, what: str) -> list[complex
         raise InputError(f"{what} needs {count} closed-loop poles, got {len(p)}")
     for v in p:
         if not (math.isfinite(v.real) and math.isfinite(v.imag)):
-            raise InputError(f"poles must be finite, got {v}")
+            raise InputError(f"pole {v} is not a finite number")
         if abs(v) >= 1.0:
             raise InputError(
                 f"pole {v:.6g} lies on or outside the unit circle (|z| = {abs(v):.6g}); a stable "

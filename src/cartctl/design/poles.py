@@ -306,7 +306,10 @@ def design_poles(
         )
     else:
         wanted = list(poles)
-    placed = check_poles(wanted, count, what)
+    try:
+        placed = check_poles(wanted, count, what)
+    except InputError as exc:  # poles given are the user's --poles
+        raise InputError(f"--poles: {exc}" if poles is not None else str(exc)) from None
 
     A_p, B_p = (plant.A, plant.B) if integral == "disturbance" else (A_a, B_a)
     B_col = B_p.reshape(count, 1)

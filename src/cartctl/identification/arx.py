@@ -219,8 +219,8 @@ def stacked_regression(
 
 
 def check_orders(na: int, nb: int, nk: int) -> None:
-    """Refuse nonsense orders with a message naming the parameter."""
-    for name, value, low in (("na", na, 0), ("nb", nb, 1), ("nk", nk, 0)):
+    """Refuse nonsense orders with a message naming the parameter (and its option)."""
+    for name, value, low in (("na (--na)", na, 0), ("nb (--nb)", nb, 1), ("nk (--delay)", nk, 0)):
         if not isinstance(value, int | np.integer) or value < low or value > 50:
             raise InputError(f"{name} must be a whole number in {low}..50, got {value!r}")
 

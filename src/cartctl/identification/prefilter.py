@@ -38,10 +38,15 @@ class Prefilter:
 
     def __post_init__(self) -> None:
         if not isinstance(self.order, int) or not 1 <= self.order <= 12:
-            raise InputError(f"prefilter order must be a whole number in 1..12, got {self.order!r}")
+            raise InputError(
+                f"prefilter order (--order) must be a whole number in 1..12, got {self.order!r}"
+            )
+        if math.isnan(self.cutoff_hz):
+            raise InputError("prefilter cut-off (--cutoff-hz) must be a number, got nan")
         if not (math.isfinite(self.cutoff_hz) and self.cutoff_hz > 0.0):
             raise InputError(
-                f"prefilter cut-off must be a positive frequency in Hz, got {self.cutoff_hz}"
+                "prefilter cut-off (--cutoff-hz) must be a positive, finite frequency in Hz, got "
+                f"{self.cutoff_hz:g}"
             )
 
     def sos(self, period_s: float) -> NDArray[np.float64]:
@@ -49,7 +54,7 @@ class Prefilter:
         nyquist_hz = 0.5 / period_s
         if self.cutoff_hz >= nyquist_hz:
             raise InputError(
-                f"prefilter cut-off {self.cutoff_hz:g} Hz must lie below the Nyquist frequency "
+                f"prefilter cut-off (--cutoff-hz) {self.cutoff_hz:g} Hz must lie below the Nyquist frequency "
                 f"{nyquist_hz:g} Hz"
             )
         return signal.butter(self.order, self.cutoff_hz, fs=1.0 / period_s, output="sos")

@@ -50,6 +50,42 @@ def physics_options(text: str) -> dict[str, float | str]:
     return options
 
 
+def check_plant_name(spec: str) -> str:
+    """The kind of plant ``spec`` names ('sim', 'physics', 'virtual', 'serial'), its options
+    parsed, without making it: run it before any other check that depends on the plant.
+
+    Raises
+    ------
+    InputError
+        An unknown plant, a bad option of ``physics:``/``virtual:``, or ``serial:`` without a port.
+    """
+    kind, _, options = spec.partition(":")
+    if spec == "sim":
+        return kind
+    if kind == "physics":
+        physics_options(options)
+        return kind
+    if kind == "virtual":
+        from cartctl.plants.cart_faults import CartFaults
+
+        CartFaults.parse(options)
+        return kind
+    if kind == "serial" and spec.startswith("serial:"):
+        if not options:
+            raise InputError("plant 'serial:' needs a port, e.g. serial:/dev/ttyACM0")
+        return kind
+    raise InputError(f"unknown plant '{spec}'; expected one of {', '.join(PLANT_NAMES)}")
+
+
+def plant_period_s(spec: str, model_path: str | Path = DEFAULT_MODEL) -> float:
+    """The tick (s) of plant ``spec`` before it is made: the sim plant's models', else the cart's."""
+    if spec == "sim":
+        return load_models(model_path).period_s
+    from cartctl.cart import PERIOD_S
+
+    return PERIOD_S
+
+
 def is_serial(spec: str) -> bool:
     """Whether a plant name is one reached over the serial line ('virtual…', 'serial:…')."""
     return spec == "virtual" or spec.startswith(("virtual:", "serial:"))

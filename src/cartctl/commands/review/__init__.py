@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     suffix = path.suffix.lower()
     if path.is_dir():
         raise InputError(
-            f"{path}: is a folder; expected a Rerun recording (.rrd) or a CSV trace (.csv)"
+            f"{path}: is a directory; expected a Rerun recording (.rrd) or a CSV trace (.csv)"
         )
     if args.compare:  # every file given is checked before the first is read
         check_input_file(args.compare, "a CSV trace", "--compare")

@@ -40,8 +40,12 @@ def read_recording(path: Path) -> tuple[RrdReader, StoreEntry]:
     """
     from rerun.chunk import RrdReader
 
+    if path.is_dir():
+        raise DataFileError(path, "is a directory; expected a Rerun recording (.rrd)")
     if not path.is_file():
         raise MissingFileError(path, "recording")
+    if path.stat().st_size == 0:
+        raise DataFileError(path, "the file is empty; expected a Rerun recording (.rrd)")
     try:
         reader = RrdReader(path)
         entries = reader.recordings()
