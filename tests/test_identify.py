@@ -201,7 +201,7 @@ def test_nan_file_gives_one_line(capsys: pytest.CaptureFixture[str], tmp_path: P
         (["--delay", "soon"], "--delay must be 'auto' or a whole number"),
         (["--prefilter", "butter", "--cutoff-hz", "60"], "Nyquist"),
         (["--prefilter", "butter", "--order", "0"], "order"),
-        (["--na", "-1"], "na must be"),
+        (["--na", "-1"], "na (--na) must be"),
         (["--compare", "missing.toml"], "model file not found"),
     ],
 )

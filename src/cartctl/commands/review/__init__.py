@@ -97,7 +97,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(
             f"{path}: is a directory; expected a Rerun recording (.rrd) or a CSV trace (.csv)"
         )
-    if args.compare:  # every file given is checked before the first is read
+    if args.compare and suffix == ".csv":  # every file given is checked before one is read
+        if Path(args.compare).suffix.lower() != ".csv":
+            raise InputError(f"--compare takes a second CSV trace, got '{args.compare}'")
         check_input_file(args.compare, "a CSV trace", "--compare")
     if args.model:
         check_input_file(args.model, "a model file", "--model")
@@ -145,8 +147,6 @@ def _review_csv(args: argparse.Namespace) -> int:
     if not args.compare:
         print(dumps(summary) if args.json else format_csv_summary(summary))
         return 0
-    if Path(args.compare).suffix.lower() != ".csv":
-        raise InputError(f"--compare takes a second CSV trace, got '{args.compare}'")
     other = smooth_csv(csv_summary(args.compare, args.map), args.compare, args.map, args.model)
     print(dumps(compare(summary, other)) if args.json else format_compare(summary, other))
     return 0
