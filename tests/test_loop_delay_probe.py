@@ -8,6 +8,7 @@ in stretches, so that the echoes spread over two delays (real time, about 2 s ea
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import warnings
@@ -163,7 +164,8 @@ def test_a_cart_whose_commands_all_come_a_tick_late_is_refused_clearly(workdir: 
     assert done.returncode == 2, done.stderr
     errors = [line for line in done.stderr.splitlines() if line.startswith("cartctl run: error")]
     assert len(errors) == 1 and "has 2" in errors[0], done.stderr
-    assert "2 ticks in 20 of 20 echoes (100 %)" in errors[0]
+    # the spread comes with it (a loaded machine may add an echo or two at 3 ticks)
+    assert re.search(r"\(measured: 2 ticks in \d+ of \d+ echoes \(\d+ %\)", errors[0]), errors[0]
     assert not (workdir / "logs").exists() or not list((workdir / "logs").glob("*.csv"))
 
 
@@ -180,7 +182,7 @@ def test_a_spread_delay_warns_runs_and_shows_in_the_summary(workdir: Path) -> No
     probe = link["loop_delay_probe"]
     assert probe["clear"] is False and probe["echoes"] >= 50  # went on past the first 20
     seen = {int(d): n for d, n in link["loop_delay_ticks_seen"].items()}
-    assert set(seen) >= {1, 2} and all(n > 10 for n in seen.values())
+    assert seen.get(1, 0) > 10 and seen.get(2, 0) > 10  # a loaded machine may add a few at 3
     assert link["loop_delay_change"] is not None
 
 
@@ -194,3 +196,18 @@ def test_a_clean_virtual_cart_measures_one_tick(workdir: Path) -> None:
     assert link["loop_delay_probe"]["echoes"] >= MIN_ECHOES
     seen = {int(d): n for d, n in link["loop_delay_ticks_seen"].items()}
     assert max(seen, key=lambda d: seen[d]) == 1
+
+
+def test_the_summary_shows_the_run_s_delays_the_probe_s_and_a_change() -> None:
+    from cartctl.sinks.summary import delay_seen_lines
+
+    probe, seen = EchoDelays.of({1: 20}), EchoDelays.of({1: 450, 2: 50})
+    link = {"loop_delay_ticks_seen": seen.to_dict()["counts"], "loop_delay_probe": probe.to_dict(),
+            "loop_delay_change": delay_change(probe, seen)}  # fmt: skip
+    lines = delay_seen_lines(link)
+    assert lines[0] == (
+        "  loop delay seen over the run: 1 tick in 450 of 500 echoes (90 %), 2 ticks in 50; "
+        "the probe before it: 1 tick in 20 of 20 echoes (100 %)"
+    )
+    assert len(lines) == 2 and lines[1].startswith("  the loop delay varied (10 %")
+    assert delay_seen_lines({"port": "/dev/ttyACM0"}) == []  # a monitor's link: no run echoes
