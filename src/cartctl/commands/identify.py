@@ -42,7 +42,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default="none",
         help="Butterworth low-pass on input and output before the fit (default none)",
     )
-    p.add_argument("--order", type=int, default=6, metavar="N", help="prefilter order (default 6)")
+    p.add_argument(
+        "--order", type=int, default=6, metavar="N", help="prefilter order, 1..12 (default 6)"
+    )
     p.add_argument(
         "--cutoff-hz",
         type=float,
@@ -71,16 +73,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "files (excite and run write them), else unknown",
     )
     p.add_argument(
-        "--na", type=int, default=2, metavar="N", help="number of output lags (default 2)"
+        "--na", type=int, default=2, metavar="N", help="number of output lags, 0..50 (default 2)"
     )
     p.add_argument(
-        "--nb", type=int, default=2, metavar="N", help="number of input terms (default 2)"
+        "--nb", type=int, default=2, metavar="N", help="number of input terms, 1..50 (default 2)"
     )
     p.add_argument(
         "--method",
         choices=("arx", "oe"),
         default="arx",
-        help="arx: least squares; oe: refine by output error, ARX shown beside",
+        help="arx: least squares; oe: refine by output error, ARX shown beside (na + nb up to "
+        "10: its cost grows fast with the order)",
     )
     p.add_argument(
         "--average",
@@ -109,7 +112,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help=(
             "fit ARX for every na, nb, nk of a grid and print loss, AIC, FPE and the simulation "
             "fit (on the validation data, if any), marking the best; SPEC like na=1:3,nb=1:3,nk=1:4 (ranges inclusive, "
-            "keys left out keep these defaults)"
+            "keys left out keep these defaults; each order up to 50, at most 400 combinations and "
+            "a sum of (na + nb)² over them up to 40000)"
         ),
     )
     val = p.add_mutually_exclusive_group()

@@ -46,6 +46,12 @@ DEFAULT_GRID = {"na": (1, 2, 3), "nb": (1, 2, 3), "nk": (1, 2, 3, 4)}
 MAX_COMBINATIONS = 400
 """More combinations than this are refused (a grid that large is a typing error)."""
 
+MAX_ORDER_WORK = 40_000
+"""The most Σ (na + nb)² over the combinations of ``--orders``. A combination's fit and
+simulation cost about N·(na + nb)²: measured, 1e-4 s per unit of the sum for a motor on a minute
+of data (N = 6000), so this is about 5 s a motor per minute of data (the default grid is 624;
+na = nb = 50 alone is 10 000)."""
+
 _LOW = {"na": 0, "nb": 1, "nk": 0}
 
 
@@ -86,6 +92,13 @@ def parse_grid(spec: str | None) -> dict[str, tuple[int, ...]]:
     if count > MAX_COMBINATIONS:
         raise InputError(
             f"--orders: {count} combinations is too many (at most {MAX_COMBINATIONS}); narrow the ranges"
+        )
+    work = len(grid["nk"]) * sum((na + nb) ** 2 for na in grid["na"] for nb in grid["nb"])
+    if work > MAX_ORDER_WORK:
+        raise InputError(
+            f"--orders: the fits of this grid cost {work} (the sum of (na + nb)² over its "
+            f"{count} combinations), more than {MAX_ORDER_WORK}; narrow the ranges or lower the "
+            "orders"
         )
     return grid
 

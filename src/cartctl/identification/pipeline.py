@@ -17,11 +17,11 @@ import numpy as np
 
 from cartctl.data import Trace
 from cartctl.errors import InputError
-from cartctl.identification.arx import ArxFit, Segment, first_row, fit_arx
+from cartctl.identification.arx import ArxFit, Segment, check_orders, first_row, fit_arx
 from cartctl.identification.cycles import average_cycles, find_period, periodic_regression_pad
 from cartctl.identification.delay import DelayEstimate, JointDelay, delay_evidence, joint_delay
 from cartctl.identification.diagnostics import Diagnostics, diagnose, on_validation, split_segments
-from cartctl.identification.oe import fit_oe
+from cartctl.identification.oe import check_oe_orders, fit_oe
 from cartctl.identification.prefilter import Prefilter
 from cartctl.modelfile import ModelFile, Provenance
 
@@ -76,6 +76,9 @@ class IdentifyRequest:
             raise InputError(f"--loop-delay must be in 0..50 ticks, got {self.loop_delay_ticks}")
         if self.method not in METHODS:
             raise InputError(f"unknown method '{self.method}'; choose one of {', '.join(METHODS)}")
+        check_orders(self.na, self.nb, 0 if self.delay is None else self.delay)  # before the data
+        if self.method == "oe":
+            check_oe_orders(self.na, self.nb)
         bad = [m for m in self.motors if m not in ("a", "b")]
         if bad or not self.motors:
             raise InputError(f"motors must be 'a' and/or 'b', got {list(self.motors)}")
