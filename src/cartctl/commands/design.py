@@ -13,8 +13,11 @@ from cartctl.design.request import (  # light: the parser's choices and defaults
     DEFAULT_BIAS_DRIFT_STD_V,
     DEFAULT_PROCESS_NOISE_STD_V,
     ESTIMATOR_GAINS,
+    MAX_EXTRA_DELAY_TICKS,
+    MAX_LOOP_DELAY_TICKS,
     OPTIONS,
     PI_ESTIMATORS,
+    PM_RANGE_DEG,
     DesignRequest,
     estimator_gain_name,
 )
@@ -42,7 +45,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--motor", choices=("a", "b", "both"), default="both", help="default both")
     pi = p.add_argument_group("PI (--method pi)")
     pi.add_argument("--phase-margin", type=float, default=_DEFAULT.phase_margin_deg, metavar="DEG",
-                    help=f"default {_DEFAULT.phase_margin_deg:g}")  # fmt: skip
+                    help=f"in (0, {PM_RANGE_DEG[1]:g}] (default {_DEFAULT.phase_margin_deg:g})")  # fmt: skip
     pi.add_argument("--crossover-hz", type=float, default=_DEFAULT.crossover_hz, metavar="F",
                     help=f"default {_DEFAULT.crossover_hz:g}")  # fmt: skip
     pi.add_argument(
@@ -134,14 +137,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="the loop delay the controller is for (ticks from a measurement to its voltage on "
         "the motor; default the model file's loop_delay_ticks + extra delay, else its nk - 1 + "
         "extra delay); nk + extra delay for a model whose next measurement already sees part of "
-        "a command that lands within the tick",
+        f"a command that lands within the tick; at most {MAX_LOOP_DELAY_TICKS}",
     )
     p.add_argument(
         "--extra-delay",
         type=int,
         default=_DEFAULT.extra_delay_ticks,
         metavar="N",
-        help="ticks of loop delay beyond the model's (a PC-side loop over serial)",
+        help="ticks of loop delay beyond the model's (a PC-side loop over serial), "
+        f"0..{MAX_EXTRA_DELAY_TICKS}",
     )
     p.add_argument(
         "--voltage-limit",
