@@ -106,6 +106,7 @@ def test_duration_counts_cart_ticks() -> None:
 # -- through the CLI: the virtual cart ---------------------------------------------------------
 
 
+@pytest.mark.realtime
 def test_monitor_time_with_lost_frames(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     """Corrupted frames are lost: time still rises strictly, in whole ticks of 10 ms."""
     code, out, err = _cli(capsys, "monitor", "virtual:corrupt=0.2", "--duration", "0.6",
@@ -156,6 +157,7 @@ def monitor_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
             "stderr": out / "pi.stderr"}  # fmt: skip
 
 
+@pytest.mark.realtime
 def test_monitor_names_the_onboard_firmwares_channels(monitor_files: dict[str, Path]) -> None:
     """Contract 1's columns from the export's layout (floats 0-5), told by float 6 = 1001."""
     header, table = _read_csv(monitor_files["labelled"])
@@ -171,6 +173,7 @@ def test_monitor_names_the_onboard_firmwares_channels(monitor_files: dict[str, P
     assert "f0=speed_a" in line and "f5=reference_b" in line
 
 
+@pytest.mark.realtime
 def test_monitor_trace_time_is_whole_ticks(monitor_files: dict[str, Path]) -> None:
     _, table = _read_csv(monitor_files["labelled"])
     steps = np.diff(table[:, 0])
@@ -178,6 +181,7 @@ def test_monitor_trace_time_is_whole_ticks(monitor_files: dict[str, Path]) -> No
     np.testing.assert_allclose(steps / 0.01, np.round(steps / 0.01), atol=1e-9)
 
 
+@pytest.mark.realtime
 def test_review_reads_a_monitor_trace(
     monitor_files: dict[str, Path], capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -205,6 +209,7 @@ def test_review_reads_a_monitor_trace(
     assert "no loop timing" in out.splitlines()[0]
 
 
+@pytest.mark.realtime
 def test_validate_and_convert_read_a_monitor_trace(
     monitor_files: dict[str, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
@@ -233,6 +238,7 @@ def test_validate_and_convert_read_a_monitor_trace(
     assert first["tick"] == "0" and first["reference_a"] == "0.0"
 
 
+@pytest.mark.realtime
 @pytest.mark.parametrize("command", ["review", "validate", "convert"])
 def test_unlabelled_monitor_trace_is_one_line_naming_the_columns(
     command: str, monitor_files: dict[str, Path], capsys: pytest.CaptureFixture[str]
@@ -246,6 +252,7 @@ def test_unlabelled_monitor_trace_is_one_line_naming_the_columns(
     assert "--labels f0=speed_a" in line and "FloatIn0" in line
 
 
+@pytest.mark.realtime
 def test_unlabelled_monitor_trace_with_a_map(
     monitor_files: dict[str, Path], capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -264,6 +271,7 @@ def test_unlabelled_monitor_trace_with_a_map(
 # -- the review layout of a monitor recording ----------------------------------------------------
 
 
+@pytest.mark.realtime
 def test_review_layout_of_a_monitor_is_built_from_its_labels(
     monitor_files: dict[str, Path], tmp_path: Path, blueprint_views, rrd_rows
 ) -> None:
@@ -300,6 +308,7 @@ def test_review_layout_of_a_monitor_is_built_from_its_labels(
     ]
 
 
+@pytest.mark.realtime
 def test_review_screenshot_of_a_monitor_shows_the_lines(
     monitor_files: dict[str, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:

@@ -97,6 +97,7 @@ def test_summary_has_the_loop_delay_of_simulators(
     assert "controller controllers/pi.toml" in out
 
 
+@pytest.mark.realtime
 def test_virtual_plant_takes_the_pi_controller(
     capsys: pytest.CaptureFixture[str], workdir: Path
 ) -> None:
@@ -111,6 +112,7 @@ def test_virtual_plant_takes_the_pi_controller(
     assert summary["controller_loop_delay_ticks"] == 1
 
 
+@pytest.mark.realtime
 def test_serial_controller_on_the_virtual_cart_stops_before_driving(
     capsys: pytest.CaptureFixture[str], workdir: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

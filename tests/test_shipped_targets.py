@@ -103,16 +103,18 @@ def test_serial_step(capsys, workdir: Path, name: str) -> None:
         assert settling is not None and settling <= 3.0 * bound_s, motor
 
 
+@pytest.mark.realtime
 @pytest.mark.filterwarnings("ignore::cartctl.errors.DataWarning")  # a busy machine may skip a tick
-@pytest.mark.parametrize("plant", ["virtual", "virtual:actuation_ms=10"])
 @pytest.mark.parametrize(
-    ("controller", "limit_s"), [(None, 0.12), ("controllers/poles.toml", 0.09)]
+    ("controller", "limit_s", "plant"),
+    [(None, 0.12, "virtual"), ("controllers/poles.toml", 0.09, "virtual:actuation_ms=10")],
 )
 def test_step_on_the_virtual_cart(
     capsys, workdir: Path, controller: str | None, limit_s: float, plant: str
 ) -> None:
     """Through the serial path in real time (the virtual cart: the physics simulator behind the
-    bridge, loop delay 1 measured from the echo, as on board), at both actuation timings:
+    bridge, loop delay 1 measured from the echo, as on board), once per file and once per
+    actuation timing (each file at each timing: ``test_on_board_step``, on the virtual clock):
     ``run --plant virtual`` takes pi.toml by itself; both on-board files meet their on-board
     targets on the true speed."""
     given = [] if controller is None else ["--controller", controller]

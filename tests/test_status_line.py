@@ -53,6 +53,7 @@ def test_write_alone_prints_nothing() -> None:
     assert term.getvalue() == ""
 
 
+@pytest.mark.realtime
 def test_no_status_line_when_stderr_is_not_a_terminal(
     capsys: pytest.CaptureFixture[str], tmp_path
 ) -> None:
@@ -62,6 +63,7 @@ def test_no_status_line_when_stderr_is_not_a_terminal(
     assert "\r" not in err and "tick" not in err
 
 
+@pytest.mark.realtime
 def test_a_real_time_run_on_a_terminal_shows_the_line(tmp_path) -> None:
     import os
     import pty
@@ -90,7 +92,7 @@ def test_a_real_time_run_on_a_terminal_shows_the_line(tmp_path) -> None:
         if slave >= 0:
             os.close(slave)
         os.close(master)
-    assert proc.returncode == 0
+    assert proc.returncode == 0, err.decode(errors="replace")
     assert json.loads(proc.stdout)["ticks"] == 101  # stdout stays the JSON alone
     lines = [part for part in err.decode().split("\r") if "tick" in part]  # the tty adds \r\n
     assert len(lines) == 4  # refreshed 4 times a second over 1 s (ticks 24, 49, 74, 99)
