@@ -119,6 +119,30 @@ def test_a_bounded_option_is_refused_before_the_work(
     assert names in _refusal(capsys, argv)
 
 
+@pytest.mark.parametrize("command", ["design", "tune"])
+@pytest.mark.parametrize(("key", "value"), [("nk", 500), ("na", 51), ("nb", 51)])
+def test_a_model_file_of_a_huge_order_is_refused_before_designing(
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path,
+    command: str,
+    key: str,
+    value: int,
+) -> None:
+    """A design's state grows with the model's orders and delay (nk = 500 ran for minutes)."""
+    text = (ROOT / "models" / "ground.toml").read_text(encoding="utf-8")
+    na_nb = {"na": 2, "nb": 2, key: value}
+    theta = [0.1] * (na_nb["na"] + na_nb["nb"])  # as many coefficients as the orders say
+    head, _, _ = text.partition("[motors.a]")
+    model = tmp_path / "big.toml"
+    model.write_text(head + f"[motors.a]\ntheta = {theta}\nna = {na_nb['na']}\nnb = "
+                     f"{na_nb['nb']}\nnk = {na_nb.get('nk', 2)}\n",
+                     encoding="utf-8")  # fmt: skip
+    _forbid(monkeypatch, "cartctl.design.make:design_models", "cartctl.tune.engine:run_grid")
+    line = _refusal(capsys, [command, str(model), "--method", "pi"])
+    assert f"{model}: {key} in [motors.a] must be in" in line and f"got {value}" in line
+
+
 @pytest.mark.parametrize(
     ("command", "limits"),
     [

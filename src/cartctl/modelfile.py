@@ -30,6 +30,7 @@ designs for it. A file without it (an older one) leaves ``design`` to assume nk 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -157,6 +158,11 @@ class ModelFile:
         return doc | {"provenance": self.provenance.to_dict(), "motors": motors}
 
 
+MAX_MODEL_ORDER = 50
+"""The largest na, nb and nk a model file may hold: identify fits orders and delays up to 50,
+and a design's state grows with them (nk = 500 kept ``cartctl design`` busy for minutes)."""
+
+
 def save_models(models: ModelFile, path: str | Path) -> Path:
     """Write a model file (TOML), creating parent folders. Returns the path written."""
     path = Path(path)
@@ -223,6 +229,12 @@ def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
         nk = require(entry, "nk", int, path, where)
         if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in theta):
             raise DataFileError(path, f"theta in {where} must be a list of numbers, got {theta!r}")
+        if not all(math.isfinite(v) for v in theta):
+            raise DataFileError(path, f"theta in {where} must hold finite numbers, got {theta!r}")
+        for key, value, low in (("na", na, 0), ("nb", nb, 1), ("nk", nk, 0)):
+            if not low <= value <= MAX_MODEL_ORDER:
+                raise DataFileError(path, f"{key} in {where} must be in {low}..{MAX_MODEL_ORDER} "
+                                          f"(as identify fits models), got {value}")  # fmt: skip
         motors[name] = ArxModel.from_theta(theta, na=na, nb=nb, nk=nk, period_s=period_s)
         stats[name] = {k: v for k, v in entry.items() if k not in ("theta", "na", "nb", "nk")}
     return ModelFile(motors, provenance, stats, path, loop_delay)
