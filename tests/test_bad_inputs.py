@@ -81,6 +81,7 @@ CASES = [
     _case("identify trace.csv --split nan", "--split"),
     _case("identify trace.csv --split 1.5", "--split"),
     _case("identify trace.csv --map nonsense", "--map", "'nonsense'"),
+    _case("identify binary.toml", "binary.toml", "binary"),
     # inspect
     _case("inspect missing.toml", "missing.toml", MISSING),
     _case("inspect folder.toml", "folder.toml", DIR),
@@ -88,6 +89,8 @@ CASES = [
     _case("inspect trace.csv", "trace.csv", "is a CSV file, not a model file"),
     _case("inspect controllers/pi.toml", "controllers/pi.toml", "is a controller file"),
     _case("inspect garbage.toml", "garbage.toml", "not a valid TOML model file"),
+    _case("inspect binary.toml", "binary.toml", "is not text"),
+    _case("inspect nan.toml", "nan.toml", "theta", "finite"),
     # validate
     _case("validate missing.toml trace.csv", "missing.toml", MISSING),
     _case("validate models/ground.toml missing.csv", "missing.csv", MISSING),
@@ -110,6 +113,8 @@ CASES = [
     _case("design trace.csv --method pi", "trace.csv", "is a CSV file, not a model file"),
     _case("design controllers/pi.toml --method pi", "controllers/pi.toml", "is a controller file"),
     _case("design empty.toml --method pi", "empty.toml", EMPTY),
+    _case("design nan.toml --method pi", "nan.toml", "theta", "finite"),
+    _case("design models/ground.toml --method poles --poles 0.5", "--poles", "needs 3"),
     _case("design models/ground.toml --method pi --phase-margin nan", "--phase-margin", NAN),
     _case("design models/ground.toml --method pi --phase-margin 120", "--phase-margin", "89"),
     _case("design models/ground.toml --method pi --phase-margin -10", "--phase-margin", "89"),
@@ -170,6 +175,9 @@ CASES = [
     _case("run --plant virtual --connect-timeout -1 --rerun off", "--connect-timeout"),
     _case("run --plant physics:actuation_ms=99 --fast", "actuation_ms"),
     _case("run --plant serial: --rerun off", "needs a port"),
+    _case("run --fast --seed -1", "--seed", ">= 0"),
+    _case("run --fast --model nan.toml", "nan.toml", "finite"),
+    _case("run --fast --reference file:folder", "folder", DIR),
     # review
     _case("review missing.rrd", "missing.rrd", MISSING),
     _case("review folder.rrd", "folder.rrd", DIR),
@@ -177,6 +185,7 @@ CASES = [
     _case("review models/ground.toml", "models/ground.toml", ".rrd"),
     _case("review empty.csv", "empty.csv", EMPTY),
     _case("review folder.csv", "folder.csv", DIR),
+    _case("review garbage.rrd", "garbage.rrd", "not a readable Rerun recording"),
     _case("review trace.csv --compare missing.csv", "--compare missing.csv", MISSING),
     _case("review trace.csv --model missing.toml", "--model missing.toml", MISSING),
     _case("review trace.csv --model folder.toml", "--model folder.toml", DIR),
@@ -191,6 +200,8 @@ CASES = [
     _case("tune models/ground.toml --method pi --robust --plants 0", "--plants"),
     _case("tune models/ground.toml --method pi --choose 1 --out folder", "--out folder"),
     _case("tune models/ground.toml --method pi --plot folder", "--plot folder"),
+    _case("tune models/ground.toml --method pi --plot x.txt", "--plot", ".png"),
+    _case("tune models/ground.toml --method pi --robust --seed -3", "--seed"),
     _case("tune models/ground.toml --method poles --process-noise-v -1", "--process-noise-v"),
     # convert
     _case("convert missing.csv", "missing.csv", MISSING),
@@ -214,6 +225,7 @@ CASES = [
     _case("virtual-cart --noise nan --duration 0.1", "--noise", NAN),
     _case("virtual-cart --faults moon=1 --duration 0.1", "--faults", "'moon=1'"),
     _case("virtual-cart --duration nan", "--duration"),
+    _case("virtual-cart --seed x --duration 0.1", "--seed"),
     _case("virtual-cart --onboard missing.toml --duration 0.1", "missing.toml", MISSING),
     _case("virtual-cart --onboard models/ground.toml --duration 0.1", "models/ground.toml",
           "is a model file, not a controller file"),
@@ -222,6 +234,7 @@ CASES = [
     # monitor (each refuses before a cart is made)
     _case("monitor moon --duration 0.1", "unknown plant 'moon'"),
     _case("monitor moon --duration nan", "unknown plant 'moon'"),
+    _case("monitor serial: --duration 0.1", "needs a port"),
     _case("monitor virtual --duration nan", "--duration"),
     _case("monitor virtual --duration 0.1 --out file.txt", "--out file.txt", "is a file"),
     _case("monitor virtual --duration 0.1 --onboard missing.toml", "missing.toml", MISSING),
@@ -234,6 +247,8 @@ CASES = [
     _case("commission physics --out file.txt", "--out file.txt", "is a file"),
     _case("commission physics --jobs 0", "--jobs"),
     _case("commission physics --noise -1", "--noise"),
+    _case("commission physics --seed -1", "--seed"),
+    _case("commission serial:", "needs a port"),
     _case("commission virtual --connect-timeout nan", "--connect-timeout"),
 ]
 # fmt: on
@@ -257,6 +272,12 @@ def _make_folder(root: Path) -> None:
         (root / name).mkdir()
     (root / "file.txt").write_text("hello\n", encoding="utf-8")
     (root / "garbage.toml").write_text("this is = not [toml\n", encoding="utf-8")
+    (root / "garbage.rrd").write_text("not a recording\n", encoding="utf-8")
+    (root / "binary.toml").write_bytes(bytes(range(256)))
+    ground = (root / "models" / "ground.toml").read_text(encoding="utf-8")
+    theta = "\ntheta = [-0.9356,"
+    assert theta in ground
+    (root / "nan.toml").write_text(ground.replace(theta, "\ntheta = [nan,", 1), encoding="utf-8")
     pi = (root / "controllers" / "pi.toml").read_text(encoding="utf-8")
     assert "\nperiod_s = 0.01\n" in pi
     (root / "pi20.toml").write_text(pi.replace("\nperiod_s = 0.01\n", "\nperiod_s = 0.02\n"),

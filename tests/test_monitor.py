@@ -102,7 +102,7 @@ def test_bad_labels(text: str, match: str) -> None:
         (["virtual", "--reference", "step:8"], "--reference needs --onboard"),
         (["serial:/dev/x", "--onboard", str(PI)], "virtual cart"),
         (["usb:/dev/x"], "unknown plant"),
-        (["serial:"], "unknown plant"),
+        (["serial:"], "needs a port"),
         (["virtual", "--duration", "0"], "--duration"),
         (["virtual", "--connect-timeout", "nan"], "--connect-timeout"),
         (["virtual:bogus=1"], "bad virtual cart option 'bogus=1'"),

@@ -41,6 +41,8 @@ def _numbers(spec: str, parts: list[str], low: int, high: int) -> list[float]:
 
 def _from_file(path_text: str, motor: str, time_s: NDArray[np.float64]) -> NDArray[np.float64]:
     path = Path(path_text)
+    if path.is_dir():
+        raise DataFileError(path, "is a directory; expected a reference file (CSV)")
     if not path.is_file():
         raise MissingFileError(path, "reference file")
     t, r = _read_reference_file(str(path), path.stat().st_mtime_ns, motor)

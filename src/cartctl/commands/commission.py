@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from cartctl import stopping
-from cartctl.commands.options import MAX_JOBS, check_jobs, check_output_folder
+from cartctl.commands.options import MAX_JOBS, check_jobs, check_output_folder, seed
 from cartctl.errors import CartctlError, InputError
 
 COMMISSIONED = ("physics", "virtual", "serial")
@@ -50,7 +50,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "ground)")  # fmt: skip
     p.add_argument("--noise", type=float, default=0.0, metavar="RAD_S",
                    help="physics and virtual: extra white measurement noise (rad/s, default 0)")  # fmt: skip
-    p.add_argument("--seed", type=int, default=None, help="seed of the measurement noise")
+    p.add_argument("--seed", type=seed, default=None, help="seed of the measurement noise")
     p.add_argument("--connect-timeout", type=float, default=5.0, metavar="S",
                    help="serial and virtual carts: longest wait for the first HEARTBEAT "
                         "(default 5 s)")  # fmt: skip

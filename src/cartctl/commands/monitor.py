@@ -87,6 +87,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def _check(args: argparse.Namespace) -> tuple[str, str]:
     """Validate the options; returns (kind, rest) of PLANT: ('serial', PORT) or ('virtual', FAULTS)."""
     kind, _, rest = args.plant.partition(":")
+    if args.plant == "serial:":
+        raise InputError("plant 'serial:' needs a port, e.g. serial:/dev/ttyACM0")
     if not (kind == "virtual" or (kind == "serial" and rest)):  # the plant first
         raise InputError(f"unknown plant '{args.plant}'; expected serial:PORT or virtual[:FAULTS]")
     if args.duration is not None:

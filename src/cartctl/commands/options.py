@@ -75,6 +75,17 @@ def check_jobs(jobs: int | None, option: str = "--jobs") -> int | None:
     return jobs
 
 
+def seed(text: str) -> int:
+    """A ``--seed``: a whole number >= 0 (numpy's generators take no other)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0, got {text!r}")
+    return value
+
+
 def file_stem(text: str) -> str:
     """An output name that stays in its folder: no path separator, not '.' or '..', not empty."""
     if not text or text in (".", "..") or "/" in text or "\\" in text or "\0" in text:
@@ -322,7 +333,7 @@ def add_plant_options(p: argparse.ArgumentParser, *, what: str) -> None:
         metavar="RAD_S",
         help="extra white measurement noise, standard deviation in rad/s (default 0: off)",
     )
-    p.add_argument("--seed", type=int, default=None, help="seed of the measurement noise")
+    p.add_argument("--seed", type=seed, default=None, help="seed of the measurement noise")
     p.add_argument(
         "--connect-timeout",
         type=float,

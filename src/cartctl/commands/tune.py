@@ -30,7 +30,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from cartctl.choices import MAX_TUNE_SETTINGS
-from cartctl.commands.options import FORMS, MAX_JOBS, check_outputs
+from cartctl.commands.options import FORMS, MAX_JOBS, check_outputs, seed
 from cartctl.commands.tune_checks import (
     DEFAULT_PLANTS,
     MAX_GRID_TICKS,
@@ -104,7 +104,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--plants", type=int, metavar="N",
                    help=f"plants drawn for --robust, 1..{MAX_PLANTS} (default {DEFAULT_PLANTS}; "
                         f"at most {MAX_ROBUST_PLANT_TICKS:,} plant-ticks over the grid)")  # fmt: skip
-    p.add_argument("--seed", type=int, metavar="S", help="seed of the plants drawn for --robust (default 1)")  # fmt: skip
+    p.add_argument("--seed", type=seed, metavar="S", help="seed of the plants drawn for --robust (default 1)")  # fmt: skip
     p.add_argument("--actuation-ms", metavar="X,Y,...",
                    help="with --robust: also run every setting on the physics --preset with each "
                         "command landing X ms after its tick (0 < X <= 10, to 0.1 ms; 3: the "
@@ -310,6 +310,9 @@ def run(args: argparse.Namespace) -> int:
     check_work(args, len(settings))
     check_inputs(args, len(settings))
     check_outputs(args, files=("out", "plot"))
+    from cartctl.commands.validate import check_plot_path
+
+    check_plot_path(args.plot)  # a PNG: matplotlib would refuse another suffix after the work
 
     from cartctl.jsonout import dumps
     from cartctl.progress import ProgressBar

@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import TYPE_CHECKING
 
-from cartctl.commands.options import FORMS, check_duration, check_finite
+from cartctl.commands.options import FORMS, check_duration, check_finite, seed
 from cartctl.errors import InputError
 
 if TYPE_CHECKING:
@@ -45,7 +45,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--noise", type=float, default=0.0, metavar="RAD_S",
                    help="extra measurement noise, standard deviation in rad/s (default 0)")  # fmt: skip
-    p.add_argument("--seed", type=int, default=None, help="seed of the noise and the faults")
+    p.add_argument("--seed", type=seed, default=None, help="seed of the noise and the faults")
     p.add_argument(
         "--faults", type=_faults, default=_NO_FAULTS, metavar="KEY=VALUE,...",
         help="inject faults: garbage=FRACTION (bursts of random bytes before that fraction of "
