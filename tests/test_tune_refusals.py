@@ -163,6 +163,23 @@ def test_a_missing_model_file_is_designs_line(
     assert _one_line("tune", err) == _one_line("design", design_err)
 
 
+def test_a_reference_no_motor_follows_is_runs_line(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    no_work: None,
+) -> None:  # fmt: skip
+    """1000 rad/s is beyond twice what the ground model's motors reach at 12 V (DC gain × 12 V,
+    about 24 rad/s): every setting would only saturate, and run refuses it."""
+    monkeypatch.chdir(tmp_path)
+    code, out, run_err = _cli("run", "--fast", "--model", str(GROUND), "--reference", "step:1000",
+                              "--rerun", "off", capsys=capsys)  # fmt: skip
+    assert code == 2 and out == ""
+    code, out, err = _cli("tune", str(GROUND), "--method", "pi", "--reference", "step:1000",
+                          capsys=capsys)  # fmt: skip
+    assert code == 2 and out == ""
+    assert _one_line("tune", err) == _one_line("run", run_err)
+    assert not list(tmp_path.iterdir())  # nothing written by either
+
+
 def test_a_setting_only_its_design_refuses_stays_a_row(capsys: pytest.CaptureFixture[str]) -> None:
     """65° at 2 Hz needs Kp < 0 on the ground model (design refuses it, for that setting
     alone); 65° at 4 Hz is designed. Both are rows, the command succeeds."""

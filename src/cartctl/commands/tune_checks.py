@@ -197,14 +197,17 @@ def check_work(args: argparse.Namespace, n_settings: int) -> None:
 
 
 def check_inputs(args: argparse.Namespace, n_settings: int) -> None:
-    """The model, the plant and the reference, refused as ``design`` and ``run`` refuse them.
+    """The model, the plant and the reference, refused as ``design`` and ``run`` refuse them
+    (a reference beyond what the model's motors reach at 12 V: :func:`check_reach`).
 
     Sets ``args.choose`` to the setting number or 'best'.
     """
+    from cartctl.cart import SUPPLY_V
+    from cartctl.commands.run_checks import check_reach
     from cartctl.design.make import check_models
     from cartctl.modelfile import load_models
     from cartctl.plants.factory import make_plant
-    from cartctl.reference import reference_signal
+    from cartctl.reference import ReferenceSchedule, reference_signal
 
     args.choose = choice(args.choose, n_settings)
     choice_limits(args)
@@ -218,3 +221,7 @@ def check_inputs(args: argparse.Namespace, n_settings: int) -> None:
             f"the model is for Ts = {models.period_s} s but the plant ticks at {plant.period_s} s"
         )
     reference_signal(args.reference, 1, plant.period_s)  # a bad spec fails here, once
+    # a reference no motor can follow is refused as run refuses it (every setting would saturate)
+    n = max(1, round(args.duration / plant.period_s))
+    references = {m: ReferenceSchedule(args.reference, n, plant.period_s, m) for m in ("a", "b")}
+    check_reach(references, dict(models.motors), SUPPLY_V, str(args.model))
