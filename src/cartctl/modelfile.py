@@ -41,9 +41,9 @@ import tomli_w
 from cartctl.choices import find_file
 from cartctl.errors import CartctlError, DataFileError, InputError
 from cartctl.model import ArxModel
-from cartctl.tomlfile import check_format, read_toml, require
+from cartctl.tomlfile import MODEL_FORMAT, check_format, read_toml, require
 
-FORMAT = "cartctl-model/1"
+FORMAT = MODEL_FORMAT
 MOTORS = ("a", "b")
 
 

@@ -9,8 +9,14 @@ from typing import Any
 
 from cartctl.errors import DataFileError, MissingFileError
 
-FORMATS = {"cartctl-model/1": "a model file", "cartctl-controller/1": "a controller file",
-           "cartctl-trace-meta/1": "a trace meta file"}  # fmt: skip
+MODEL_FORMAT = "cartctl-model/1"
+"""The ``format`` line of a model file (:mod:`cartctl.modelfile`)."""
+CONTROLLER_FORMAT = "cartctl-controller/1"
+"""The ``format`` line of a controller file (:mod:`cartctl.design.controllerfile`)."""
+TRACE_META_FORMAT = "cartctl-trace-meta/1"
+"""The ``format`` line of a trace's meta file (:mod:`cartctl.data.tracemeta`)."""
+FORMATS = {MODEL_FORMAT: "a model file", CONTROLLER_FORMAT: "a controller file",
+           TRACE_META_FORMAT: "a trace meta file"}  # fmt: skip
 """What each ``format`` line says a file is, for messages about a file given in another's place."""
 
 

@@ -15,9 +15,7 @@ from pathlib import Path
 
 from cartctl.commands.options import check_outputs
 from cartctl.errors import DataFileError, InputError
-
-MODEL_FORMAT = "cartctl-model/1"
-CONTROLLER_FORMAT = "cartctl-controller/1"
+from cartctl.tomlfile import CONTROLLER_FORMAT, MODEL_FORMAT
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

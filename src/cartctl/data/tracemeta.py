@@ -26,9 +26,9 @@ from typing import Any
 import tomli_w
 
 from cartctl.errors import DataFileError, InputError
-from cartctl.tomlfile import read_toml, require
+from cartctl.tomlfile import TRACE_META_FORMAT, read_toml, require
 
-FORMAT = "cartctl-trace-meta/1"
+FORMAT = TRACE_META_FORMAT
 SUFFIX = ".meta.toml"
 
 

@@ -54,9 +54,9 @@ from cartctl.cart import PERIOD_S, SPEED_QUANTUM_RAD_S, SUPPLY_V
 from cartctl.choices import find_file
 from cartctl.design.entries import consistency_problems
 from cartctl.errors import CartctlError, DataFileError
-from cartctl.tomlfile import check_format, read_toml, require
+from cartctl.tomlfile import CONTROLLER_FORMAT, check_format, read_toml, require
 
-FORMAT = "cartctl-controller/1"
+FORMAT = CONTROLLER_FORMAT
 METHODS = ("pi", "poles")
 PLANT_KINDS = ("onboard", "serial")
 ONBOARD_LOOP_DELAY_TICKS = 1
