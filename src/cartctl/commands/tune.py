@@ -1,7 +1,9 @@
 """``cartctl tune MODEL.toml --method pi|poles``: a grid of designs, each run in the simulated loop.
 
 Between ``design`` and ``run``. The grid and the Pareto front are :mod:`cartctl.tune.grid`;
-designing and running the settings on worker processes is :mod:`cartctl.tune.engine`. Here: the
+designing and running the settings on worker processes is :mod:`cartctl.tune.engine`; what is
+refused before any of that (the options that size the work, then what ``design`` and ``run``
+refuse for every setting alike, in their words) is :mod:`cartctl.commands.tune_checks`. Here: the
 options, the table or JSON, the plot, and ``--choose N --out FILE``, which writes setting N's
 controller file through ``cartctl design`` itself.
 
