@@ -250,6 +250,8 @@ def check_actuation_ms(value: float) -> float:
         ms = float(value)
     except (TypeError, ValueError):
         raise InputError(f"actuation_ms needs a number of ms in (0, 10], got {value!r}") from None
+    if math.isnan(ms):
+        raise InputError("actuation_ms must be a number of ms, got nan")
     if not (math.isfinite(ms) and low < ms <= high):
         raise InputError(
             f"actuation_ms must be in (0, 10] ms (3: the calibrated timing, 10: the next io()), "
