@@ -145,7 +145,7 @@ def test_saturation_and_pwm_quantisation() -> None:
 
 
 @given(st.floats(allow_nan=True, allow_infinity=True))
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=100, deadline=None)  # each builds a plant (~10 ms)
 def test_applied_voltage_is_bounded_on_the_grid_and_safe(command: float) -> None:
     plant = PhysicsPlant("air")
     plant.step(command, -command)
