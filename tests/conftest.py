@@ -1,5 +1,5 @@
 """Shared fixtures: paths to the shipped files, the report's models, a checkout-like folder, and
-the rows of a Rerun recording."""
+the rows of a Rerun recording; the hypothesis profile of the property tests."""
 
 from __future__ import annotations
 
@@ -9,8 +9,15 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 ROOT = Path(__file__).resolve().parents[1]
+
+# Property tests: the same examples on every run (derandomize, no example database) and no
+# per-example time limit, which a loaded machine would break. A test's own @settings adds to this.
+settings.register_profile("cartctl", derandomize=True, database=None, deadline=None)
+settings.load_profile("cartctl")
+
 MODELS = ROOT / "models"
 
 
