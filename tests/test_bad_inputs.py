@@ -12,6 +12,7 @@ from __future__ import annotations
 import shlex
 import shutil
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -26,7 +27,7 @@ MISSING = "not found"
 EMPTY = "the file is empty"
 
 
-def _case(argv: str, *says: str) -> pytest.param:
+def _case(argv: str, *says: str) -> Any:
     """A row: the command line (shell words) and what its one error line must contain."""
     return pytest.param(shlex.split(argv), says, id=argv)
 
