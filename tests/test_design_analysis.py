@@ -10,6 +10,10 @@ runs) from its impulse response in closed loop.
 
 from __future__ import annotations
 
+import contextlib
+import copy
+import functools
+import io
 import json
 import shlex
 import tomllib
@@ -48,6 +52,21 @@ def _design(capsys: pytest.CaptureFixture[str], *argv: str) -> dict:
     return json.loads(out)
 
 
+@functools.cache
+def _shipped_design_json(name: str) -> dict:
+    """``cartctl design --json`` of the shipped file's own command, run once per module (several
+    tests read the same design; each gets its own copy)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(["design", *_shipped_argv(name), "--json"])
+    assert code == 0, err.getvalue()
+    return json.loads(out.getvalue())
+
+
+def _shipped_design(name: str) -> dict:
+    return copy.deepcopy(_shipped_design_json(name))
+
+
 def _pc_loop(kp: float, ki: float, motor: str, extra: int) -> control.TransferFunction:
     """L = C·G·z^−extra with C(z) = Kp + Ki·Ts·z/(z − 1), built here by hand."""
     model = load_models(ROOT / "models" / "ground.toml").motor(motor)
@@ -62,10 +81,8 @@ def _grid_peak(values: np.ndarray, freq_hz: np.ndarray) -> tuple[float, float]:
 
 
 @pytest.mark.parametrize(("name", "extra"), [("pi", 0), ("serial-pi", 2)])
-def test_pi_sensitivity_peaks_match_python_control(
-    capsys: pytest.CaptureFixture[str], name: str, extra: int
-) -> None:
-    doc = _design(capsys, *_shipped_argv(name))
+def test_pi_sensitivity_peaks_match_python_control(name: str, extra: int) -> None:
+    doc = _shipped_design(name)
     shipped = load_controller(CONTROLLERS / f"{name}.toml")
     freq = np.linspace(0.005, 50.0, 40000)
     z = np.exp(2j * np.pi * freq * TS)
@@ -136,9 +153,9 @@ def _check_against_runtime(doc: dict, path: Path) -> None:
 
 @pytest.mark.parametrize("name", ["poles", "serial-poles"])
 def test_pole_placement_sensitivity_matches_the_runtime_controller_in_closed_loop(
-    capsys: pytest.CaptureFixture[str], name: str
+    name: str,
 ) -> None:
-    _check_against_runtime(_design(capsys, *_shipped_argv(name)), CONTROLLERS / f"{name}.toml")
+    _check_against_runtime(_shipped_design(name), CONTROLLERS / f"{name}.toml")
 
 
 def test_pi_on_its_estimate_is_analysed_with_the_estimator_in_the_loop(
@@ -188,10 +205,8 @@ def test_pi_rejects_a_load_step_as_python_control_simulates_it(
 
 
 @pytest.mark.parametrize("name", ["pi", "poles", "serial-poles"])
-def test_damping_and_frequency_of_each_closed_loop_pole_as_control_damp(
-    capsys: pytest.CaptureFixture[str], name: str
-) -> None:
-    doc = _design(capsys, *_shipped_argv(name))
+def test_damping_and_frequency_of_each_closed_loop_pole_as_control_damp(name: str) -> None:
+    doc = _shipped_design(name)
     for e in doc["motors"].values():
         table = e["closed_loop_pole_table"]
         poles = np.array([complex(re, im) for re, im in e["closed_loop_poles"]])
@@ -235,10 +250,8 @@ def test_text_shows_the_analysis_with_units_and_3_significant_figures(
     assert len(largest.lstrip("-").replace(".", "").lstrip("0")) == 3, k_line
 
 
-def test_json_keeps_the_contract_and_adds_the_analysis(
-    capsys: pytest.CaptureFixture[str],
-) -> None:
-    doc = _design(capsys, *_shipped_argv("poles"))
+def test_json_keeps_the_contract_and_adds_the_analysis() -> None:
+    doc = _shipped_design("poles")
     for e in doc["motors"].values():
         assert {"closed_loop_poles", "phase_margin_deg", "sensitivity_peak", "step"} <= set(e)
         assert all(len(p) == 2 for p in e["closed_loop_poles"])
