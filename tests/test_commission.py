@@ -126,6 +126,18 @@ def test_commission_refuses_a_backwards_motor(tmp_path, capsys) -> None:
     assert not (out / "model.toml").exists() and not (out / "controller.toml").exists()
 
 
+@pytest.mark.realtime
+def test_commission_stops_when_the_loop_delay_is_not_clear(tmp_path, capsys) -> None:
+    """virtual:late=0.5: stretches of commands answered a tick late, 40 % of the echoes at 2
+    ticks. A controller is for one loop: commissioning stops at its checks, before driving."""
+    out = tmp_path / "c"
+    code = main(["commission", "virtual:late=0.5", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1
+    assert "loop delay is not clear" in err[-1] and "echoes" in err[-1]
+    assert not (out / "checks.csv").exists() and not (out / "model.toml").exists()
+
+
 def test_commission_stops_on_a_model_that_fails_validation(tmp_path, capsys) -> None:
     out = tmp_path / "c"
     code = main(["commission", "physics", "--noise", "10", "--seed", "3", "--out", str(out),

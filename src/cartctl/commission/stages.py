@@ -98,6 +98,13 @@ class Commission:
                 plant.connect()  # the port and the cart's HEARTBEAT, or one clear line
                 if probe:
                     self.loop_delay_ticks = int(plant.measure_loop_delay())  # type: ignore[attr-defined]
+                    spread = getattr(plant, "probe_delays", None)
+                    if spread is not None and not spread.clear:  # a controller is for one loop
+                        raise StageError(
+                            f"checks: the loop delay is not clear ({spread.describe()}): the PC "
+                            "answers the cart late now and then; close what else runs (or "
+                            "use a less busy machine) and commission again"
+                        )
             elif probe:
                 self.loop_delay_ticks = int(getattr(plant, "loop_delay_ticks", 1) or 1)
         except BaseException:
