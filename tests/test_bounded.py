@@ -8,10 +8,12 @@ patched to raise: the refusal has to come, in one line and exit 2, before that s
 from __future__ import annotations
 
 import importlib
+import pkgutil
 from pathlib import Path
 
 import pytest
 
+import cartctl
 from cartctl.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -20,6 +22,16 @@ GROUND = str(ROOT / "models" / "ground.toml")
 
 class WorkStartedError(Exception):
     """Raised by a patched expensive step: the refusal came too late."""
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _every_module_imported_first() -> None:
+    """Every cartctl module imported before the first stand-in: a module first imported while one
+    is on (a command's lazy import of a module that does ``from cartctl.plants.factory import
+    make_plant`` at its top) would keep the stand-in for the rest of the session."""
+    for info in pkgutil.walk_packages(cartctl.__path__, "cartctl."):
+        if not info.name.endswith("__main__"):  # runs the command line
+            importlib.import_module(info.name)
 
 
 def _forbid(monkeypatch: pytest.MonkeyPatch, *targets: str) -> None:
