@@ -28,6 +28,7 @@ a controller that matches the bound shows a ratio a little below 1 (by less than
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 
@@ -201,6 +202,24 @@ def settling_bound(
         limit), the step lies within its own band, the extra delay is not a whole number >= 0, or
         the model is unstable.
     """
+    return _settling_bound(model, float(step_rad_s), float(voltage_limit_v), extra_delay_ticks,
+                           float(band), quantum_rad_s, float(hold_s), float(max_s))  # fmt: skip
+
+
+@functools.lru_cache(maxsize=256)
+def _settling_bound(
+    model: ArxModel,
+    step_rad_s: float,
+    voltage_limit_v: float,
+    extra_delay_ticks: int,
+    band: float,
+    quantum_rad_s: float | None,
+    hold_s: float,
+    max_s: float,
+) -> SettlingBound:
+    """:func:`settling_bound`, cached: a bound is a function of its arguments alone, and design,
+    tune and commission ask for the same one many times (each is a search of linear programs).
+    The arrays it returns are read-only, as every caller shares them."""
     plant = model.with_extra_delay(extra_delay_ticks)
     if not plant.is_stable():
         raise InputError("the settling bound needs a stable model")
@@ -229,7 +248,10 @@ def settling_bound(
         else:
             hi, best = mid, u
     best = _closest(impulse, hi, hold, step_rad_s, tol, voltage_limit_v, best)
-    return SettlingBound(hi * ts, hi, best, plant.simulate(best), plant.nk - 1, tol)
+    speed = plant.simulate(best)
+    best.setflags(write=False)
+    speed.setflags(write=False)
+    return SettlingBound(hi * ts, hi, best, speed, plant.nk - 1, tol)
 
 
 def _closest(

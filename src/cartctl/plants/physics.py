@@ -46,6 +46,7 @@ cost of a few µs each, and there is no chattering around zero speed.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -56,6 +57,17 @@ from cartctl.plants.base import Measurement
 from cartctl.plants.physics_params import PRESETS, CartParams, MotorParams, preset
 
 __all__ = ["PRESETS", "CartParams", "MotorParams", "PhysicsPlant", "preset"]
+
+
+@functools.lru_cache(maxsize=64)
+def _substep_map(
+    a11: float, a12: float, a21: float, a22: float, L: float, J: float, h: float
+) -> tuple[float, ...]:
+    """The exact substep map's 12 entries the hot loop uses (cached: most of a plant's build)."""
+    M = np.zeros((5, 5))  # (i, ω, θ, v, τ)
+    M[0, :2], M[1, :2], M[2, 1], M[0, 3], M[1, 4] = (a11, a12), (a21, a22), 1.0, 1.0 / L, -1.0 / J
+    rows, cols = (0, 0, 1, 1, 2, 2, 0, 1, 2, 0, 1, 2), (0, 1, 0, 1, 0, 1, 3, 3, 3, 4, 4, 4)
+    return tuple(float(e) for e in expm(M * h)[rows, cols])
 
 
 class _Wheel:
@@ -76,16 +88,8 @@ class _Wheel:
         self.a11, self.a12, self.a21, self.a22 = -R / L, -K / L, K / J, -b / J
         self.det = (R * b + K * K) / (L * J)
         self.half_tr = 0.5 * (self.a11 + self.a22)
-        M = np.zeros((5, 5))  # (i, ω, θ, v, τ): the exact ZOH map over one substep
-        M[0, :2] = self.a11, self.a12
-        M[1, :2] = self.a21, self.a22
-        M[2, 1] = 1.0
-        M[0, 3] = 1.0 / L
-        M[1, 4] = -1.0 / J
-        E = expm(M * h)
-        index = ((0, 0), (0, 1), (1, 0), (1, 1), (2, 0), (2, 1), (0, 3), (1, 3), (2, 3))
-        index += ((0, 4), (1, 4), (2, 4))
-        self.fast = (*(float(E[r, c]) for r, c in index), K, self.tc, R, h, math.exp(-h * R / L))
+        self.fast = (*_substep_map(self.a11, self.a12, self.a21, self.a22, L, J, h),
+                     K, self.tc, R, h, math.exp(-h * R / L))  # fmt: skip
 
     def flow(
         self, i: float, w: float, th: float, v: float, tau: float, t: float
