@@ -153,7 +153,8 @@ def make_plant(
             timing += f", motor(s) {options['reversed_motors']} wired backwards"
         return plant, f"physics (preset {preset}{timing})"
     if spec == "virtual" or spec.startswith("virtual:"):
-        from cartctl.plants.virtual_cart import CartFaults, VirtualCart, VirtualSerialCart
+        from cartctl.plants.virtual_cart import CartFaults, VirtualCart
+        from cartctl.plants.virtual_serial import VirtualSerialCart
 
         faults = CartFaults.parse(spec.partition(":")[2])
         cart = VirtualCart(preset, noise_std_rad_s=noise_std_rad_s, seed=seed, faults=faults)

@@ -1,8 +1,8 @@
 """The virtual cart: the physical simulator behind a pseudo-terminal, speaking like the bridge sketch.
 
 ``cartctl virtual-cart`` runs one in the foreground and prints its port; ``--plant virtual`` starts
-one inside the process and drives it through :class:`~cartctl.plants.serial_cart.SerialCart`, so the
-real serial code path (pyserial, framing, the bridge contract, the faults) runs with no hardware.
+one inside the process and drives it through :class:`~cartctl.plants.serial_cart.SerialCart`
+(:mod:`cartctl.plants.virtual_serial`), so the real serial code path (pyserial, framing, the bridge contract, the faults) runs with no hardware.
 
 It keeps the firmware's schedule within each 10 ms tick (``docs/serial-protocol.md``). The bridge
 sketch (version 2, the default)::
@@ -50,11 +50,10 @@ import threading
 import time
 import tty
 from collections.abc import Sequence
-from typing import Any, Protocol
+from typing import Protocol
 
 from cartctl.link import Encoder, encode_gpiox_v2
 from cartctl.link.bridge import BRIDGE_BAUD, CH_BRIDGE_VERSION, LEGACY_BAUD, TIMING_FIRST_ID
-from cartctl.plants.base import Measurement
 from cartctl.plants.bridge_firmware import TICK_MODULO, BridgeFirmware, CartIO
 from cartctl.plants.cart_faults import RECEIVE_SCHEDULES, CartFaults
 from cartctl.plants.cart_uart import (
@@ -70,7 +69,6 @@ from cartctl.plants.cart_uart import (
     fill_ring,
 )
 from cartctl.plants.physics import PhysicsPlant
-from cartctl.plants.serial_cart import SerialCart
 
 HEARTBEAT_PERIOD_S = 1.1
 READY_TEXT = "cartctl bridge ready"
@@ -386,48 +384,3 @@ class VirtualCart:
             j += 1
             self.ticks = j
         self.state = "stopped"
-
-
-class VirtualSerialCart(SerialCart):
-    """``--plant virtual``: a :class:`VirtualCart` in this process, driven through the serial path.
-
-    The cart boots once :meth:`connect` has opened the port, and is switched off on
-    :meth:`close`, after it has taken the host's drive = 0 frames (so a test can check what it
-    was left applying).
-    """
-
-    reports_true_speed = True
-    """The simulator behind the line knows the true speeds: the trace gets them too."""
-
-    def __init__(self, cart: VirtualCart, **kwargs: Any) -> None:
-        super().__init__(cart.port, **kwargs)
-        self.cart = cart
-
-    def _port_opened(self) -> None:
-        """Boot the cart once the port is open (opening a real cart's port resets it, too)."""
-        if self.cart.state == "idle":
-            self.cart.start()
-
-    def _with_true_speed(self, measured: Measurement) -> Measurement:
-        """The measurement with the simulator's true speeds at the same cart tick (rad/s)."""
-        assert self.sample is not None
-        true_a, true_b = self.cart.true_speeds.get(self.sample.cart_tick, (math.nan, math.nan))
-        return Measurement(measured.speed_a_rad_s, measured.speed_b_rad_s, true_a, true_b)
-
-    def reset(self) -> Measurement:
-        """As :meth:`SerialCart.reset`, with the true speed: the simulator knows it."""
-        return self._with_true_speed(super().reset())
-
-    def receive(self) -> Measurement:
-        """As :meth:`SerialCart.receive`, with the true speed: the simulator knows it."""
-        return self._with_true_speed(super().receive())
-
-    def close(self) -> None:
-        was_connected = self.connected and not self.link.failure
-        super().close()
-        if was_connected:  # let the stop frames cross the line and reach control()
-            deadline = time.perf_counter() + 0.2
-            while self.cart.firmware.in_ints[1] != 0 and time.perf_counter() < deadline:
-                time.sleep(0.005)
-            self.cart.wait_ticks(2)
-        self.cart.stop()
