@@ -159,16 +159,6 @@ def _measured_delay(plant: Plant) -> int | None:
     return None if measure is None else int(measure())
 
 
-def _mark_incomplete(summary: dict[str, Any], incomplete: list[OutputError]) -> None:
-    """``trace_complete``, ``recording_complete`` (None without a recording) and ``incomplete``
-    (path → why) in the summary: its ``trace`` and ``recording`` never pass for whole files."""
-    short = {str(e.path): e.detail for e in incomplete}
-    summary["incomplete"] = short
-    summary["trace_complete"] = summary["trace"] not in short
-    recording = summary.get("recording")
-    summary["recording_complete"] = None if recording is None else recording not in short
-
-
 def run(args: argparse.Namespace) -> int:
     from cartctl.design.controllerfile import load_controller
     from cartctl.jsonout import dumps
@@ -177,6 +167,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.sinks.csv_sink import CsvSink
     from cartctl.sinks.summary import (
         format_summary,
+        mark_incomplete,
         trace_metrics,
         warn_delay_change,
         warn_host_losses,
@@ -376,7 +367,7 @@ def run(args: argparse.Namespace) -> int:
         smooth_run(summary, memory.arrays(), period_s, controller_file.model_path, rerun)
     except OutputError as exc:  # the recording's file, found short when it is closed
         loop.state.output_failed(exc)
-    _mark_incomplete(summary, loop.state.incomplete)
+    mark_incomplete(summary, loop.state.incomplete)
     if args.json:
         print(dumps(summary))
     else:

@@ -21,13 +21,13 @@ holds the same keys, judged in the same settling band, and ``smoothed`` says fro
 from __future__ import annotations
 
 import sys
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.errors import InputError
+from cartctl.errors import InputError, OutputError
 from cartctl.link.bridge import HOST_LOSS_WARN_PERCENT
 from cartctl.metrics import finite_or_none
 from cartctl.numfmt import column_decimals, format_column, format_fixed, render_table
@@ -337,3 +337,13 @@ def warn_host_losses(link: Mapping[str, Any] | None, command: str) -> None:
     """One line on stderr when more than 1 % of the host's frames never reached the cart."""
     if link and link.get("host_frames_lost_percent", 0.0) > HOST_LOSS_WARN_PERCENT:
         print(f"cartctl {command}: warning: {host_loss_text(link)}", file=sys.stderr)
+
+
+def mark_incomplete(summary: dict[str, Any], incomplete: Sequence[OutputError]) -> None:
+    """``trace_complete``, ``recording_complete`` (None without a recording) and ``incomplete``
+    (path → why) in the summary: its ``trace`` and ``recording`` never pass for whole files."""
+    short = {str(e.path): e.detail for e in incomplete}
+    summary["incomplete"] = short
+    summary["trace_complete"] = summary["trace"] not in short
+    recording = summary.get("recording")
+    summary["recording_complete"] = None if recording is None else recording not in short
