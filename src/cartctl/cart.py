@@ -18,3 +18,14 @@ PWM_STEP_V = SUPPLY_V / 255.0
 """One step of the H-bridges' 8-bit PWM (V): 47 mV."""
 SPEED_QUANTUM_RAD_S = 2.0 * math.pi / ENCODER_COUNTS_PER_REV / PERIOD_S
 """One encoder count per tick as a speed: the resolution of a measured speed (0.3506 rad/s)."""
+
+
+def nk_fits_loop_delay(nk: int, loop_delay_ticks: int) -> bool:
+    """Whether a model with input delay ``nk`` describes a loop of ``loop_delay_ticks``.
+
+    nk = loop delay + 1 is the report's timing (a command lands at the tick after the
+    measurement it answers and shows in the measurement after that); nk = loop delay is a
+    command landing within the tick, which the next measurement (the tick's average speed)
+    already sees part of. Any other nk belongs to another loop.
+    """
+    return int(nk) in (int(loop_delay_ticks), int(loop_delay_ticks) + 1)

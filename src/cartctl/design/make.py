@@ -14,6 +14,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from cartctl.cart import nk_fits_loop_delay
 from cartctl.design.analysis import StepAnalysis, simulate_step
 from cartctl.design.build import make_estimator, pi_entry, poles_entry
 from cartctl.design.controllerfile import ControllerFile, common_loop_delay, file_sha256
@@ -162,7 +163,7 @@ def loop_delay_for(
         return request.loop_delay_ticks, nk_note(nks, request.loop_delay_ticks - extra)
     note = None
     if recorded is not None:
-        if all(n in (recorded, recorded + 1) for n in nks.values()):
+        if all(nk_fits_loop_delay(n, recorded) for n in nks.values()):
             return recorded + extra, nk_note(nks, recorded)
         shown = ", ".join(f"nk = {n}" for n in sorted(set(nks.values())))
         note = (

@@ -13,7 +13,7 @@ from dataclasses import dataclass, fields
 from numbers import Integral, Real
 from typing import Any
 
-from cartctl.cart import PERIOD_S, SUPPLY_V
+from cartctl.cart import PERIOD_S, SUPPLY_V, nk_fits_loop_delay
 from cartctl.errors import InputError
 
 METHODS = ("pi", "poles")
@@ -292,7 +292,7 @@ def check_loop_delay(loop_delay_ticks: int | None, nk: int, extra_delay_ticks: i
     derived = int(nk) - 1 + int(extra_delay_ticks)
     if loop_delay_ticks is None:
         return derived
-    if loop_delay_ticks not in (derived, derived + 1):
+    if not nk_fits_loop_delay(int(nk) + int(extra_delay_ticks), loop_delay_ticks):
         raise InputError(
             f"--loop-delay {loop_delay_ticks} does not fit a model with input delay nk = {nk} and "
             f"{extra_delay_ticks} extra tick(s): the loop delay is nk - 1 + extra ({derived}) or, "

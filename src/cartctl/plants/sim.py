@@ -13,7 +13,7 @@ from collections import deque
 
 import numpy as np
 
-from cartctl.cart import SUPPLY_V
+from cartctl.cart import SUPPLY_V, nk_fits_loop_delay
 from cartctl.errors import InputError, PlantError
 from cartctl.model import ArxModel
 from cartctl.plants.base import Measurement
@@ -113,7 +113,7 @@ class ArxPlant:
         is a longer loop, whatever its file once recorded."""
         nk = max(m.nk for m in self.models)
         recorded = self._loop_delay_ticks
-        if recorded is not None and all(m.nk in (recorded, recorded + 1) for m in self.models):
+        if recorded is not None and all(nk_fits_loop_delay(m.nk, recorded) for m in self.models):
             return int(recorded)
         return nk - 1
 
