@@ -9,15 +9,17 @@ Usage::
 Every number comes from ``cartctl run`` itself (a subprocess, ``--rerun off``), read back from the
 trace it writes. For each controller file and each plant that has the controller's loop delay:
 
-- ``sim``: the ARX cart on the controller's own model, with the loop delay of the file (a model
-  with nk = loop delay + 1 is written to a temporary file for a serial controller);
+- ``sim``: the ARX cart on the controller's own model where its nk fits the file's loop delay
+  (nk = loop delay or loop delay + 1), else on a copy moved to nk = loop delay + 1 (a serial
+  controller designed on an on-board model);
 - ``physics`` and ``physics:actuation_ms=10``: the physical simulator, loop delay 1 (on-board
   controllers only), with each command landing 3 ms after its tick (the presets' calibrated
   timing) and 10 ms after it (microOS's documented order, the next tick's ``io()``): a real cart's
   timing is unknown, so the on-board files are measured at both ends;
 - ``virtual``: the physical simulator behind the serial link, in real time (serial controllers
-  only, loop delay 3 with the bridge sketch; the virtual cart hands the simulator's true speed to
-  the trace as well).
+  only; the virtual cart hands the simulator's true speed to the trace as well). Since bridge
+  version 2 the serial loop's delay is 1, as on board, and ``run`` refuses these loop-delay-3
+  files there in one line, which is reported as a failure.
 
 Step (``--reference step:10``, 2 s): overshoot and settling of each motor's *true* speed where the
 plant gives one, in the band max(2 % of the step, one encoder count per tick = 0.3506 rad/s), and
@@ -128,7 +130,13 @@ def _file_name(plant: str) -> str:
 
 
 def on_loop(model: ArxModel, delay: int) -> ArxModel:
-    """The model with the input delay of a loop of ``delay`` ticks: nk = delay + 1."""
+    """The model for a loop of ``delay`` ticks: itself where its nk fits that loop
+    (:func:`cartctl.cart.nk_fits_loop_delay`: nk = delay, or delay + 1), else moved to
+    nk = delay + 1."""
+    from cartctl.cart import nk_fits_loop_delay
+
+    if nk_fits_loop_delay(model.nk, delay):
+        return model
     return model.with_extra_delay(delay + 1 - model.nk)
 
 
@@ -140,7 +148,7 @@ def measure(path: Path, out: Path, virtual: bool) -> tuple[list[dict[str, Any]],
     delay = controller.loop_delay_ticks  # load_controller derives it for older files
     assert delay is not None
     plants: list[tuple[str, list[str], bool]] = []
-    if delay == nk["a"] - 1:
+    if all(on_loop(models.motor(m), delay) == models.motor(m) for m in nk):
         plants.append(("sim", ["--plant", "sim", "--model", str(controller.model_path), "--fast"],
                        True))  # fmt: skip
     else:
