@@ -3,7 +3,9 @@ the rows of a Rerun recording; the hypothesis profile of the property tests."""
 
 from __future__ import annotations
 
+import os
 import shutil
+import threading
 from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
@@ -19,6 +21,59 @@ settings.register_profile("cartctl", derandomize=True, database=None, deadline=N
 settings.load_profile("cartctl")
 
 MODELS = ROOT / "models"
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """With workers: the controller rewrites the test modules' asserts once, into pytest's own
+    cache files, while the workers start; each worker then reads them instead of rewriting all of
+    them itself (about 2 s of CPU each). Only a speed-up: without it the workers rewrite as usual."""
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    threading.Thread(target=_rewrite_tests_once, args=(config,), daemon=True).start()
+
+
+def _rewrite_tests_once(config: pytest.Config) -> None:
+    try:
+        from _pytest.assertion import rewrite
+
+        for source in sorted(Path(__file__).parent.glob("test_*.py")):
+            pyc = rewrite.get_cache_dir(source) / (source.name[:-3] + rewrite.PYC_TAIL)
+            if rewrite._read_pyc(source, pyc) is None and rewrite.try_makedirs(pyc.parent):
+                source_hash, code = rewrite._rewrite_test(source, config)
+                rewrite._write_pyc(config.stash[rewrite.assertstate_key], code, source_hash, pyc)
+    except Exception:  # pytest's internals moved: the workers rewrite for themselves
+        return
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The order the workers take modules in (``--dist loadfile --no-loadscope-reorder``): one
+    with real-time tests, then two without, and so on, each kind largest first. At any time about
+    one worker waits on a real-time cart while the others compute, and the long waits do not all
+    come at the end."""
+    by_module: dict[str, list[pytest.Item]] = {}
+    for item in items:
+        by_module.setdefault(item.nodeid.split("::")[0], []).append(item)
+
+    def realtime(group: list[pytest.Item]) -> int:
+        return sum(1 for item in group if item.get_closest_marker("realtime"))
+
+    waiting = sorted((g for g in by_module.values() if realtime(g)), key=realtime, reverse=True)
+    computing = sorted((g for g in by_module.values() if not realtime(g)), key=len, reverse=True)
+    ordered: list[pytest.Item] = []
+    while waiting or computing:
+        for queue, take in ((waiting, 1), (computing, 2)):
+            for _ in range(take):
+                if queue:
+                    ordered.extend(queue.pop(0))
+    items[:] = ordered
+
+
+@pytest.hookimpl(optionalhook=True)  # a pytest-xdist hook; without the plugin, not called
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
+    """``-n auto``: one worker more than the cores this process may use. The real-time tests
+    spend most of their time waiting for the cart's 10 ms ticks; the extra worker keeps the cores
+    busy meanwhile."""
+    return len(os.sched_getaffinity(0)) + 1
 
 
 @pytest.fixture

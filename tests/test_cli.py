@@ -245,3 +245,18 @@ def test_bad_map_option(capsys: pytest.CaptureFixture[str]) -> None:
     assert code == 2
     assert "--map" in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_a_command_line_builds_only_its_command_with_the_same_options() -> None:
+    """``cartctl run …`` builds the run parser alone; it must be the full parser's run parser."""
+    from cartctl.cli import build_parser, command_name
+    from cartctl.commands import COMMANDS
+
+    full = build_parser()
+    full_sub = {a.dest: a for a in full._actions}["command"].choices
+    assert [command_name(m) for m in COMMANDS] == list(full_sub)
+    for name, whole in full_sub.items():
+        alone = {a.dest: a for a in build_parser(name)._actions}["command"].choices
+        assert list(alone) == [name]
+        options = [(a.option_strings, a.dest, a.default, a.help) for a in alone[name]._actions]
+        assert options == [(a.option_strings, a.dest, a.default, a.help) for a in whole._actions]

@@ -144,18 +144,6 @@ def test_exact_data_gives_negligible_residuals_and_no_verdict(
     assert "e-1" not in out  # standard deviations at rounding level print as 0, not 1e-16
 
 
-def test_report_has_the_residual_figure(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
-    path, _, _ = _data(tmp_path)
-    code, _, err = _run(
-        capsys, "identify", str(path), "--motor", "a", "--report", str(tmp_path / "r")
-    )
-    assert code == 0, err
-    png = tmp_path / "r" / "residuals_a.png"
-    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    summary = (tmp_path / "r" / "summary.md").read_text()
-    assert "![residuals_a](residuals_a.png)" in summary and "Residual tests" in summary
-
-
 # -- order table -----------------------------------------------------------------------------
 
 
@@ -286,7 +274,7 @@ def test_bode_bands_grow_with_noise_and_hold_the_true_response(
 # -- compared models -------------------------------------------------------------------------
 
 
-def test_compared_models_in_the_table_json_and_summary(
+def test_compared_models_and_the_residual_figure_in_the_table_json_and_report(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
     path, u, y = _data(tmp_path)
@@ -308,6 +296,9 @@ def test_compared_models_in_the_table_json_and_summary(
     )
     summary = (out_dir / "summary.md").read_text()
     assert "| air (models/air.toml) |" in summary and "| ground (models/ground.toml) |" in summary
+    png = out_dir / "residuals_a.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "![residuals_a](residuals_a.png)" in summary and "Residual tests" in summary
     code, out, _ = _run(
         capsys, "identify", str(path), "--motor", "a", "--compare", "models/air.toml"
     )

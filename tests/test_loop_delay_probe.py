@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import json
 import re
-import subprocess
-import sys
 import warnings
 from collections import Counter
 from pathlib import Path
@@ -19,6 +17,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from cartctl.cli import main
 from cartctl.commands.run_checks import check_loop_delay
 from cartctl.design.controllerfile import load_controller
 from cartctl.errors import DataWarning, InputError
@@ -150,35 +149,40 @@ def test_a_bad_late_fraction_is_refused(text: str) -> None:
 # -- cartctl run on the virtual cart (real time) ------------------------------------------------
 
 
-def _run(workdir: Path, plant: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "cartctl", "run", "--plant", plant, "--duration", "1",
-         "--rerun", "off", "--json"],
-        cwd=workdir, capture_output=True, text=True, timeout=60,
-    )  # fmt: skip
+def _run(capsys: pytest.CaptureFixture[str], plant: str) -> tuple[int, str, str]:
+    """``cartctl run`` in this process (the ``workdir`` fixture's folder): exit code, out, err."""
+    code = main(["run", "--plant", plant, "--duration", "1", "--rerun", "off", "--json"])
+    out, err = capsys.readouterr()
+    return code, out, err
 
 
 @pytest.mark.realtime
-def test_a_cart_whose_commands_all_come_a_tick_late_is_refused_clearly(workdir: Path) -> None:
-    done = _run(workdir, "virtual:late=1")
-    assert done.returncode == 2, done.stderr
-    errors = [line for line in done.stderr.splitlines() if line.startswith("cartctl run: error")]
-    assert len(errors) == 1 and "has 2" in errors[0], done.stderr
+def test_a_cart_whose_commands_all_come_a_tick_late_is_refused_clearly(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    code, _, err = _run(capsys, "virtual:late=1")
+    assert code == 2, err
+    errors = [line for line in err.splitlines() if line.startswith("cartctl run: error")]
+    assert len(errors) == 1 and "has 2" in errors[0], err
     # the spread comes with it (a loaded machine may add an echo or two at 3 ticks)
     assert re.search(r"\(measured: 2 ticks in \d+ of \d+ echoes \(\d+ %\)", errors[0]), errors[0]
     assert not (workdir / "logs").exists() or not list((workdir / "logs").glob("*.csv"))
 
 
 @pytest.mark.realtime
-def test_a_spread_delay_warns_runs_and_shows_in_the_summary(workdir: Path) -> None:
+@pytest.mark.filterwarnings("always::cartctl.errors.DataWarning")  # the CLI prints it
+def test_a_spread_delay_warns_runs_and_shows_in_the_summary(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
     # late=0.5: stretches of 5 late ticks every 10 ticks; about 4 in 9 echoes at 2 ticks
-    done = _run(workdir, "virtual:late=0.5")
-    assert done.returncode == 0, done.stderr
-    assert "Traceback" not in done.stderr
-    warned = [line for line in done.stderr.splitlines() if "warning" in line]
-    assert any("loop delay" in line and "not clear" in line for line in warned), done.stderr
-    assert any("during the run" in line for line in warned), done.stderr
-    link = json.loads(done.stdout)["link"]
+    code, out, err = _run(capsys, "virtual:late=0.5")
+    assert code == 0, err
+    assert "Traceback" not in err
+    warned = [line for line in err.splitlines() if "warning" in line]
+    assert all(line.startswith("cartctl run: warning:") for line in warned), err
+    assert any("loop delay" in line and "not clear" in line for line in warned), err
+    assert any("during the run" in line for line in warned), err
+    link = json.loads(out)["link"]
     probe = link["loop_delay_probe"]
     assert probe["clear"] is False and probe["echoes"] >= 50  # went on past the first 20
     seen = {int(d): n for d, n in link["loop_delay_ticks_seen"].items()}
@@ -187,10 +191,12 @@ def test_a_spread_delay_warns_runs_and_shows_in_the_summary(workdir: Path) -> No
 
 
 @pytest.mark.realtime
-def test_a_clean_virtual_cart_measures_one_tick(workdir: Path) -> None:
-    done = _run(workdir, "virtual")
-    assert done.returncode == 0, done.stderr
-    summary = json.loads(done.stdout)
+def test_a_clean_virtual_cart_measures_one_tick(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    code, out, err = _run(capsys, "virtual")
+    assert code == 0, err
+    summary = json.loads(out)
     link = summary["link"]
     assert summary["loop_delay_ticks"] == link["loop_delay_probe"]["ticks"] == 1
     assert link["loop_delay_probe"]["echoes"] >= MIN_ECHOES

@@ -51,6 +51,8 @@ class ScriptedCart:
         self.timeout = 0.005
         self.replied = False
         self.last_tick_s = -math.inf
+        self.pause_at: int | None = None  # the host is paused in its read at this tick, once
+        self.pause_s = 0.0
 
     # -- pyserial's surface -------------------------------------------------------------------
 
@@ -66,6 +68,10 @@ class ScriptedCart:
     def read(self, size: int = 1) -> bytes:
         if self.vanish_from is not None and self.tick >= self.vanish_from:
             raise OSError(5, "Input/output error")
+        if self.pause_at is not None and self.tick >= self.pause_at:  # the PC stops the host
+            self.pause_at = None
+            time.sleep(self.pause_s)
+            return b""
         if not self.outbox and (self.replied or time.perf_counter() - self.last_tick_s >= PERIOD_S):
             self._tick()
         if not self.outbox:  # pyserial's read timeout: nothing came
@@ -242,6 +248,31 @@ def test_silence_is_a_plant_error_and_later_steps_fail_at_once() -> None:
     plant.send(0.0, 0.0)  # the port still works: zero volts can go out
     plant.close()
     assert cart.in_flight[-1][1]  # the stop frames were written
+
+
+def test_a_host_paused_past_the_silence_timeout_listens_again_before_calling_it_silence() -> None:
+    """A busy PC can stop the host longer than the timeout while the cart talks on: that is not a
+    silent cart (the frames are in the port's buffer, or an emulated cart was paused with it)."""
+    cart = ScriptedCart(1)
+    cart.pause_at, cart.pause_s = 8, 0.06
+    plant = _plant(cart, silence_timeout_s=0.02)
+    plant.reset()
+    for _ in range(20):
+        plant.step(1.0, 1.0)
+    assert cart.pause_at is None  # the pause happened
+    plant.close()
+
+
+def test_a_silent_cart_is_silence_even_when_the_host_was_paused_too() -> None:
+    cart = ScriptedCart(1)
+    cart.silent_from = 8
+    cart.pause_at, cart.pause_s = 8, 0.06
+    plant = _plant(cart, silence_timeout_s=0.02)
+    plant.reset()
+    with pytest.raises(PlantError, match="no data from the cart on /dev/fake for 20 ms"):  # noqa: PT012
+        for _ in range(20):
+            plant.step(1.0, 1.0)
+    plant.close()
 
 
 def test_a_vanished_port_is_a_plant_error_and_close_does_not_write() -> None:

@@ -123,8 +123,10 @@ def _source_copy(tmp_path: Path) -> Path:
 EXPECTED = {f"{folder}/{name}" for folder, names in SHIPPED_FILES.items() for name in names}
 
 
-def test_the_wheel_ships_only_cartctl_files(tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """pip's own build of a wheel, with a user's model and controller beside the shipped ones."""
+    tmp_path = tmp_path_factory.mktemp("wheel")
     source = _source_copy(tmp_path)
     out = tmp_path / "wheel"
     built = subprocess.run(
@@ -132,7 +134,11 @@ def test_the_wheel_ships_only_cartctl_files(tmp_path: Path) -> None:
         capture_output=True, text=True, cwd=tmp_path,
     )  # fmt: skip
     assert built.returncode == 0, built.stderr
-    (wheel,) = out.glob("cartctl-*.whl")
+    (path,) = out.glob("cartctl-*.whl")
+    return path
+
+
+def test_the_wheel_ships_only_cartctl_files(wheel: Path) -> None:
     prefix = "cartctl/shipped/"
     with zipfile.ZipFile(wheel) as archive:
         names = archive.namelist()
@@ -140,14 +146,14 @@ def test_the_wheel_ships_only_cartctl_files(tmp_path: Path) -> None:
     assert not [n for n in names if "mine" in n]  # not models/mine.toml nor controllers/mine2.toml
 
 
-def test_the_built_package_finds_its_shipped_files_from_any_folder(tmp_path: Path) -> None:
-    """The wheel's build step (``build_py``) into a folder, then that folder used as installed:
-    first on the path, from a folder without models/ or controllers/."""
-    source = _source_copy(tmp_path)
+def test_the_installed_package_finds_its_shipped_files_from_any_folder(
+    wheel: Path, tmp_path: Path
+) -> None:
+    """The wheel unpacked into a folder, as an install puts it, and that folder first on the
+    path, from a folder without models/ or controllers/."""
     site = tmp_path / "site"
-    built = subprocess.run([sys.executable, "setup.py", "-q", "build_py", "--build-lib", str(site)],
-                           capture_output=True, text=True, cwd=source)  # fmt: skip
-    assert built.returncode == 0, built.stderr
+    with zipfile.ZipFile(wheel) as archive:
+        archive.extractall(site)
     shipped = site / "cartctl" / "shipped"
     assert {p.relative_to(shipped).as_posix() for p in shipped.rglob("*.toml")} == EXPECTED
     code = (

@@ -40,6 +40,7 @@ from cartctl.design.controllerfile import load_controller
 from cartctl.design.limit import settling_bound
 from cartctl.modelfile import load_models
 from cartctl.stepinfo import step_info
+from realtime_upsets import link_upsets
 
 ROOT = Path(__file__).resolve().parents[1]
 QUANTUM_RAD_S = 2 * math.pi / 1792 / 0.01
@@ -133,11 +134,14 @@ def test_step_on_the_virtual_cart(
     # machine's load moves: the on-board targets are test_on_board_step's (virtual clock), the
     # figures on the virtual cart benchmarks/measure_shipped.py's; here the step is reached and held
     band = max(0.02 * STEP_RAD_S, QUANTUM_RAD_S)  # the settling band, as step_of's
+    # a busy machine can hold the host up past the cart's watchdog or a tick: the link says so,
+    # and then the speed has to come back to the step rather than stay in the band throughout
+    upset = link_upsets(link)
     for motor in ("a", "b"):
         _, settling = step_of(columns, motor)
         assert settling is not None, (motor, link)
-        final = columns[f"true_speed_{motor}"][-50:-1]  # the last 0.5 s before the stop row
-        assert np.abs(final - STEP_RAD_S).max() <= band, (motor, link)
+        error = np.abs(columns[f"true_speed_{motor}"][-50:-1] - STEP_RAD_S)  # last 0.5 s
+        assert (np.median(error) if upset else error.max()) <= band, (motor, error, link)
 
 
 def steady_windows(reference: np.ndarray) -> list[slice]:

@@ -53,8 +53,14 @@ class _Parser(argparse.ArgumentParser):
         return parsed
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The full parser with every subcommand of contract 2."""
+def command_name(module: object) -> str:
+    """The subcommand a module of :mod:`cartctl.commands` adds (``virtual_cart``: ``virtual-cart``)."""
+    return str(getattr(module, "__name__", "")).rpartition(".")[2].replace("_", "-")
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser with every subcommand of contract 2; with ``command`` (one of them), that
+    subcommand alone: what a command line naming it needs, built in a tenth of the time."""
     parser = _Parser(
         prog="cartctl",
         description=(
@@ -68,7 +74,8 @@ def build_parser() -> argparse.ArgumentParser:
     from cartctl.commands import COMMANDS  # light: each command loads numpy & co. when it runs
 
     for module in COMMANDS:
-        module.add_parser(sub)
+        if command is None or command_name(module) == command:
+            module.add_parser(sub)
     parser.subcommands = dict(sub.choices)
     return parser
 
@@ -115,12 +122,19 @@ def console_main() -> int:
 
 
 def _main(argv: Sequence[str] | None) -> int:
+    words = list(sys.argv[1:] if argv is None else argv)
+    named = next((word for word in words if not word.startswith("-")), None)
     try:
-        parser = build_parser()  # light modules only: a stop signal here is Interrupted
+        from cartctl.commands import COMMANDS
+
+        # light modules only: a stop signal here is Interrupted. Only the command named is built;
+        # an unknown name, or none (--help), gets the full parser and its list of commands.
+        known = named in {command_name(module) for module in COMMANDS}
+        parser = build_parser(named if known else None)
     except KeyboardInterrupt:
         print(stopping.STARTING_LINE, file=sys.stderr)
         return stopping.exit_code()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(words)
     from cartctl.sinks.rerun_problems import quiet_sdk_logs
 
     quiet_sdk_logs()  # before any command loads the Rerun SDK: its failures are ours to say

@@ -165,6 +165,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.jsonout import dumps
     from cartctl.plants.cart_link import print_to_stderr
     from cartctl.plants.cart_monitor import Monitor, MonitorLink, parse_labels, wait_started
+    from cartctl.runtime.gcpause import gc_paused
     from cartctl.sinks.csv_sink import CsvSink
 
     kind, rest = _check(args)
@@ -179,7 +180,10 @@ def run(args: argparse.Namespace) -> int:
     received: list[int] = []
     link = MonitorLink(port, on_event=monitor.on_event, on_print=monitor.on_print)
     if cart is not None:  # the virtual cart's rate is known: the bridge's, or the course's
+        from cartctl.plants.virtual_cart import SILENCE_TIMEOUT_S
+
         link.baud = cart.baud
+        link.silence_timeout_s = SILENCE_TIMEOUT_S  # it shares this process: see there
     try:
         link.open()  # before the virtual cart boots: its first HEARTBEAT is not flushed away
         if cart is not None:
@@ -193,7 +197,8 @@ def run(args: argparse.Namespace) -> int:
             monitor.rows.append(rerun)
             monitor.texts.append(rerun)
         try:
-            with _stop_on_signals(monitor, received):  # the sinks open at the first frames
+            # the sinks open at the first frames; a collection walks only the objects made meanwhile
+            with _stop_on_signals(monitor, received), gc_paused(collect_new=True):
                 result = monitor.run(link, args.duration)
         finally:
             _close_all(monitor.rows)

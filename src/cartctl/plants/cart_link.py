@@ -36,6 +36,9 @@ from cartctl.link import (
 DEFAULT_SILENCE_TIMEOUT_S = 0.1
 """No GPIO for this long (10 ticks) ends a run: the cart's own watchdog trips at the same age."""
 READ_SLICE_S = 0.005
+COUNTED_SLICE_S = 2 * READ_SLICE_S
+"""Silence counts the time the host listened: a read the PC held up longer (a busy machine, a
+garbage collection, an emulated cart paused with this process) counts as this much."""
 """A read returns after the first byte, or after this long without one."""
 THREAD_INFO_BYTES = 22
 """THREAD_INFO's payload: time, total duration, total latency, executions (uint32), the last
@@ -202,23 +205,25 @@ class CartLink:
         Raises
         ------
         PlantError
-            No GPIO within ``timeout_s`` (default :attr:`silence_timeout_s`), or the port vanished.
+            No GPIO within ``timeout_s`` (default :attr:`silence_timeout_s`) of listening (see
+            :data:`COUNTED_SLICE_S`), or the port vanished.
         UnsupportedCartError
             The port carries generation-B frames.
         """
         wait_s = self.silence_timeout_s if timeout_s is None else timeout_s
-        deadline = time.perf_counter() + wait_s
+        listened_s = 0.0
         while True:
-            remaining = deadline - time.perf_counter()
-            if remaining <= 0:
+            if listened_s >= wait_s:
                 self.failure = (
                     f"no data from the cart on {self.port} for {wait_s * 1000:.0f} ms "
                     "(cable pulled, cart stalled or reset)"
                 )
                 raise PlantError(self.failure)
-            message = self._next_message(remaining)
+            started_s = time.perf_counter()
+            message = self._next_message(min(READ_SLICE_S, wait_s - listened_s))
             if isinstance(message, Gpio):
                 return message, time.perf_counter()
+            listened_s += min(time.perf_counter() - started_s, COUNTED_SLICE_S)
 
     def gpio_waiting(self, wait_s: float = 0.0) -> bool:
         """Whether another complete GPIO is buffered (the host is behind the cart), or arrives

@@ -71,6 +71,11 @@ from cartctl.plants.cart_uart import (
 from cartctl.plants.physics import PhysicsPlant
 
 HEARTBEAT_PERIOD_S = 1.1
+SILENCE_TIMEOUT_S = 0.5
+"""How long a host in this process waits for the virtual cart before it calls it silent (a real
+cart's is 0.1 s): the cart is threads of this process, which a busy PC (or a virtual machine's
+host) can hold up for longer than a real cart is ever quiet. Its stall and pull faults are still
+found, that much later."""
 READY_TEXT = "cartctl bridge ready"
 COMM_PHASE_US = 1200
 """The cart's GPIO goes out this long (µs) after the tick starts: io() and control() take 1.2 ms

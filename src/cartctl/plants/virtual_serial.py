@@ -13,7 +13,7 @@ from typing import Any
 
 from cartctl.plants.base import Measurement
 from cartctl.plants.serial_cart import SerialCart
-from cartctl.plants.virtual_cart import VirtualCart
+from cartctl.plants.virtual_cart import SILENCE_TIMEOUT_S, VirtualCart
 
 
 class VirtualSerialCart(SerialCart):
@@ -28,6 +28,7 @@ class VirtualSerialCart(SerialCart):
     """The simulator behind the line knows the true speeds: the trace gets them too."""
 
     def __init__(self, cart: VirtualCart, **kwargs: Any) -> None:
+        kwargs.setdefault("silence_timeout_s", SILENCE_TIMEOUT_S)
         super().__init__(cart.port, **kwargs)
         self.cart = cart
 

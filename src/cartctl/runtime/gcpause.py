@@ -20,12 +20,17 @@ __all__ = ["gc_paused"]
 
 
 @contextmanager
-def gc_paused() -> Iterator[None]:
-    """Within the block: no automatic garbage collection, and the objects from before frozen."""
+def gc_paused(*, collect_new: bool = False) -> Iterator[None]:
+    """Within the block: no automatic garbage collection, and the objects from before frozen.
+
+    ``collect_new``: keep collecting, but only what the block allocates (the frozen heap is not
+    walked, so a collection stays short), for loops that may run for hours (``cartctl monitor``).
+    """
     was_enabled = gc.isenabled()
     gc.collect()
     gc.freeze()
-    gc.disable()
+    if not collect_new:
+        gc.disable()
     try:
         yield
     finally:
