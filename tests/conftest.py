@@ -3,6 +3,7 @@ the rows of a Rerun recording; the hypothesis profile of the property tests."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import threading
@@ -24,15 +25,21 @@ MODELS = ROOT / "models"
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """With workers: the controller rewrites the test modules' asserts once, into pytest's own
-    cache files, while the workers start; each worker then reads them instead of rewriting all of
-    them itself (about 2 s of CPU each). Only a speed-up: without it the workers rewrite as usual."""
+    """With workers: the controller compiles cartctl's sources and rewrites the test modules'
+    asserts once, into the usual cache files, while the workers start; each worker (and each
+    ``cartctl`` a test starts) then reads them instead of compiling all of them itself (about 2 s
+    of CPU each, even where PYTHONDONTWRITEBYTECODE is set). Only a speed-up: without it every
+    process compiles for itself, as before."""
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
         return
-    threading.Thread(target=_rewrite_tests_once, args=(config,), daemon=True).start()
+    threading.Thread(target=_compile_once, args=(config,), daemon=True).start()
 
 
-def _rewrite_tests_once(config: pytest.Config) -> None:
+def _compile_once(config: pytest.Config) -> None:
+    import compileall
+
+    with contextlib.suppress(Exception):
+        compileall.compile_dir(ROOT / "src" / "cartctl", quiet=2)
     try:
         from _pytest.assertion import rewrite
 
@@ -45,9 +52,19 @@ def _rewrite_tests_once(config: pytest.Config) -> None:
         return
 
 
+HEAVY_MODULES = frozenset({
+    "test_output_faults", "test_design_cli", "test_design_pi", "test_tune_output", "test_identify",
+    "test_design_analysis", "test_shipped_files", "test_commission", "test_readme_session",
+    "test_identify_diagnostics", "test_report", "test_tune_robust",
+})  # fmt: skip
+"""Modules of several seconds of CPU each (figures, subprocesses, builds): they go out first, so
+that the run ends on short modules, not on one worker still busy with a long one."""
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """The order the workers take modules in (``--dist loadfile --no-loadscope-reorder``): one
-    with real-time tests, then two without, and so on, each kind largest first. At any time about
+    with real-time tests, then two without, and so on, each kind largest first (the heavy ones,
+    then by number of tests). At any time about
     one worker waits on a real-time cart while the others compute, and the long waits do not all
     come at the end."""
     by_module: dict[str, list[pytest.Item]] = {}
@@ -57,8 +74,11 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     def realtime(group: list[pytest.Item]) -> int:
         return sum(1 for item in group if item.get_closest_marker("realtime"))
 
+    def weight(group: list[pytest.Item]) -> tuple[bool, int]:
+        return group[0].path.stem in HEAVY_MODULES, len(group)
+
     waiting = sorted((g for g in by_module.values() if realtime(g)), key=realtime, reverse=True)
-    computing = sorted((g for g in by_module.values() if not realtime(g)), key=len, reverse=True)
+    computing = sorted((g for g in by_module.values() if not realtime(g)), key=weight, reverse=True)
     ordered: list[pytest.Item] = []
     while waiting or computing:
         for queue, take in ((waiting, 1), (computing, 2)):
