@@ -67,7 +67,12 @@ def test_delay_pole_has_no_frequency() -> None:
     ("z", "freq_hz", "damping"),
     [
         (math.exp(-0.5), 0.5 / (2 * math.pi * 0.01), 1.0),  # real positive: s = ln z / Ts
-        (-0.5, 50.0, -math.log(0.5) / math.hypot(math.log(0.5), math.pi)),  # negative real: Nyquist
+        # negative real: s = (ln|z| + jπ) / Ts, at or above the Nyquist 50 Hz (as control.damp)
+        (
+            -0.5,
+            math.hypot(math.log(0.5), math.pi) / (2 * math.pi * 0.01),
+            -math.log(0.5) / math.hypot(math.log(0.5), math.pi),
+        ),
         (-1.0, 50.0, 0.0),
         (1.2, math.log(1.2) / (2 * math.pi * 0.01), -1.0),  # unstable real pole
     ],
@@ -88,12 +93,15 @@ def test_complex_pair_matches_continuous_system() -> None:
     assert root.damping == pytest.approx(zeta)
 
 
-def test_negative_real_zero_sits_at_nyquist() -> None:
+def test_negative_real_zero_oscillates_at_nyquist() -> None:
     # Equation 10 (motor A, filtered) has numerator 1.266 z + 1.029: a zero at −0.8128.
     model = ArxModel.from_theta([-1.044, 0.1567, 1.266, 1.029])
     (zero,) = model.zeros()
     assert zero.value.real == pytest.approx(-1.029 / 1.266)
-    assert zero.freq_hz == pytest.approx(50.0)
+    # s = (ln 0.8128 + jπ) / Ts: Im(s) is the Nyquist frequency, |s| a little above it
+    s = complex(math.log(1.029 / 1.266), math.pi) / 0.01
+    assert s.imag / (2 * math.pi) == pytest.approx(50.0)
+    assert zero.freq_hz == pytest.approx(abs(s) / (2 * math.pi))
 
 
 @pytest.mark.parametrize("nk", [1, 2, 3, 4])

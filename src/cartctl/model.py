@@ -17,6 +17,7 @@ and in general ``A(q) y[k] = B(q) u[k − nk]`` with
 
 from __future__ import annotations
 
+import cmath
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -46,6 +47,38 @@ def check_extra_delay_ticks(ticks: object, name: str = "extra delay") -> int:
     return int(ticks)
 
 
+def pole_damping(z: complex, period_s: float) -> tuple[float | None, float | None]:
+    """Damping ratio ζ and natural frequency f_n (Hz) of a discrete root, as ``control.damp``.
+
+    The root z of a system sampled every Ts behaves like the continuous root s = ln(z) / Ts
+    (principal logarithm), so f_n = |ln z| / (2π Ts) and ζ = −Re(s) / |s| = −cos(∠ ln z). A
+    negative real root lands at Im(s) = π/Ts: it alternates sign every tick. The one rule for
+    ``inspect`` and ``design``.
+
+    Parameters
+    ----------
+    z : complex
+        The root in the z-plane.
+    period_s : float
+        Sample period Ts (s).
+
+    Returns
+    -------
+    damping : float or None
+        ζ; None where ``control.damp`` gives NaN: at z = 0 (a pure delay, ln z = −∞) and at
+        z = 1 (an integrator, s = 0).
+    freq_hz : float or None
+        f_n (Hz); None at z = 0, where ``control.damp`` gives an infinite ωn.
+    """
+    z = complex(z)
+    if z == 0:
+        return None, None
+    s = cmath.log(z)
+    if s == 0:
+        return None, 0.0
+    return -s.real / abs(s), abs(s) / (2.0 * math.pi * period_s)
+
+
 @dataclass(frozen=True, slots=True)
 class Root:
     """A pole or zero of a discrete model with its continuous-time equivalent.
@@ -57,11 +90,11 @@ class Root:
     kind : {'delay', 'pole', 'zero'}
         'delay' for a pole at z = 0 (a pure one-sample delay, with no frequency).
     freq_hz : float or None
-        Continuous-equivalent natural frequency |ln z| / (2π Ts) in Hz. A negative real root has
-        no unique continuous equivalent; its oscillation is at the Nyquist frequency 1 / (2 Ts),
-        which is what is reported. None for z = 0.
+        Continuous-equivalent natural frequency |ln z| / (2π Ts) in Hz (:func:`pole_damping`).
+        None for z = 0.
     damping : float or None
-        Damping ratio −Re(s) / |s| of s = ln(z) / Ts. None for z = 0.
+        Damping ratio −Re(s) / |s| of s = ln(z) / Ts (:func:`pole_damping`). None for z = 0
+        and z = 1.
     """
 
     value: complex
@@ -86,7 +119,7 @@ def classify_root(value: complex, kind: Literal["pole", "zero"], period_s: float
     Parameters
     ----------
     value : complex
-        The root in the z-plane.
+        The root in the z-plane; within 1e-12 of the origin it is taken as z = 0.
     kind : {'pole', 'zero'}
         What the root is. A pole at the origin becomes kind 'delay'.
     period_s : float
@@ -99,14 +132,8 @@ def classify_root(value: complex, kind: Literal["pole", "zero"], period_s: float
     z = complex(value)
     if abs(z) < _ORIGIN_TOL:
         return Root(0j, "delay" if kind == "pole" else "zero", None, None)
-    if z.imag == 0.0 and z.real < 0.0:
-        log_mag = math.log(-z.real)
-        s_abs = math.hypot(log_mag, math.pi)
-        return Root(z, kind, 1.0 / (2.0 * period_s), -log_mag / s_abs)
-    s = complex(math.log(abs(z)), math.atan2(z.imag, z.real))  # ln z (principal branch)
-    s_abs = abs(s)
-    damping = -s.real / s_abs if s_abs > 0.0 else None
-    return Root(z, kind, s_abs / (2.0 * math.pi * period_s), damping)
+    damping, freq_hz = pole_damping(z, period_s)
+    return Root(z, kind, freq_hz, damping)
 
 
 def _clean_roots(coeffs: NDArray[np.float64]) -> NDArray[np.complex128]:

@@ -10,11 +10,11 @@ designed for (the model with the design's extra delay). Its figures are added to
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
 from cartctl.design.controller_ss import ControllerStateSpace, controller_state_space
-from cartctl.design.damping import pole_table
 from cartctl.design.disturbance import (
     DEFAULT_DISTURBANCE_V,
     DisturbanceResponse,
@@ -22,11 +22,29 @@ from cartctl.design.disturbance import (
 )
 from cartctl.design.make import Designs
 from cartctl.design.sensitivity import LoopShape, loop_shape
+from cartctl.model import pole_damping
 
-__all__ = ["LIGHT_DAMPING", "MotorAnalysis", "analyse_designs", "damping_warning"]
+__all__ = ["LIGHT_DAMPING", "MotorAnalysis", "analyse_designs", "damping_warning", "pole_table"]
 
 LIGHT_DAMPING = 0.1
 """A closed-loop pole with a damping ratio ζ below this rings for many periods: a warning."""
+
+
+def pole_table(poles: Iterable[list[float]], period_s: float) -> list[dict[str, Any]]:
+    """Per pole ``{"re", "im", "damping", "freq_hz"}`` (:func:`cartctl.model.pole_damping`).
+
+    Parameters
+    ----------
+    poles : iterable of [re, im]
+        Discrete poles, as ``closed_loop_poles`` lists them.
+    period_s : float
+        Sample period Ts (s).
+    """
+    rows = []
+    for re, im in poles:
+        damping, freq_hz = pole_damping(complex(re, im), period_s)
+        rows.append({"re": re, "im": im, "damping": damping, "freq_hz": freq_hz})
+    return rows
 
 
 def damping_warning(pole_table: list[dict[str, Any]], motor: str) -> str | None:
@@ -35,14 +53,14 @@ def damping_warning(pole_table: list[dict[str, Any]], motor: str) -> str | None:
     Parameters
     ----------
     pole_table : list of dict
-        ``{"re", "im", "damping", "freq_hz"}`` per pole (:func:`cartctl.design.damping.pole_table`).
+        ``{"re", "im", "damping", "freq_hz"}`` per pole (:func:`pole_table`).
     motor : str
         The motor, named in the line.
 
     Returns
     -------
     str or None
-        None when every ζ is at least ``LIGHT_DAMPING`` (or undefined, at z = 1).
+        None when every ζ is at least ``LIGHT_DAMPING`` (or undefined, at z = 0 and z = 1).
     """
     light = [r for r in pole_table if r["damping"] is not None and r["damping"] < LIGHT_DAMPING]
     if not light:
