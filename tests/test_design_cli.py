@@ -141,7 +141,7 @@ def test_controller_file_runs_what_was_designed(
 ) -> None:
     out = tmp_path / "c.toml"
     doc = _design(capsys, str(ground_path), "--method", "pi", "--estimator", "kalman",
-                  "--estimator-gain", "steady-state", "--out", str(out))  # fmt: skip
+                  "--out", str(out))  # fmt: skip
     loaded = build_controllers(load_controller(out))
     models = load_models(ground_path)
     for motor, ctrl in loaded.items():
@@ -153,21 +153,27 @@ def test_controller_file_runs_what_was_designed(
 
 
 @pytest.mark.parametrize("given", ["kalman", "time-varying", "steady-state"])
-def test_estimator_gain_names_and_the_old_name_kalman(
+def test_an_old_files_estimator_gain_loads_with_the_fixed_gain(
     capsys: pytest.CaptureFixture[str], tmp_path: Path, ground_path: Path, given: str
 ) -> None:
+    """``--estimator-gain`` is gone (a designed P is stationary: every name ran the same
+    estimates); a file that still names one loads, and runs the fixed-gain filter."""
+    with pytest.raises(SystemExit) as exc:
+        main(["design", str(ground_path), "--method", "poles", "--estimator-gain", given])
+    assert exc.value.code == 2
+    assert "--estimator-gain" in capsys.readouterr().err
     out = tmp_path / "c.toml"
-    _design(capsys, str(ground_path), "--method", "poles", "--estimator-gain", given,
-            "--measurement-noise", "0.05", "--out", str(out))  # fmt: skip
+    _design(capsys, str(ground_path), "--method", "poles", "--measurement-noise", "0.05",
+            "--out", str(out))  # fmt: skip
     request = load_controller(out).request
-    assert request["estimator_gain"] == ("time-varying" if given == "kalman" else given)
+    assert "estimator_gain" not in request
     assert request["extra_noise_std_rad_s"] == 0.05  # beyond the quantisation: not the total √R
     assert "measurement_noise_std_rad_s" not in request
-    # a file written before the rename still runs; its stationary covariance keeps the gain
-    # fixed, so every name runs the fixed-gain filter (filterpy only where the gain would change:
-    # tests/test_kalman.py)
-    old = out.read_text(encoding="utf-8").replace('"time-varying"', '"kalman"')
-    out.write_text(old, encoding="utf-8")
+    text = out.read_text(encoding="utf-8").replace(
+        "[request]\n", f'[request]\nestimator_gain = "{given}"\n'
+    )
+    out.write_text(text, encoding="utf-8")
+    assert load_controller(out).request["estimator_gain"] == given
     estimators = {
         type(c.estimator).__name__ for c in build_controllers(load_controller(out)).values()
     }

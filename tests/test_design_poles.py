@@ -470,7 +470,7 @@ def test_feedforward_advances_the_response_by_one_tick(ground) -> None:
     np.testing.assert_allclose(u1[:-1], u0[1:], atol=1e-9)
 
 
-def test_controller_with_the_filterpy_estimator(ground) -> None:
+def test_controller_with_the_propagated_estimator(ground) -> None:
     designs = [design_poles(m, **RECOMMENDED) for m in ground]
     ca, cb = (
         StateFeedbackController(d, estimator=KalmanSpeedEstimator(d.estimator)) for d in designs

@@ -150,7 +150,7 @@ def designed(
     options = {
         "pi-back-calculation": ("--anti-windup", "back-calculation"),
         "pi-none": ("--anti-windup", "none", "--crossover-hz", "4"),
-        "pi-kalman": ("--estimator", "kalman", "--estimator-gain", "steady-state"),
+        "pi-kalman": ("--estimator", "kalman"),
     }[name]
     return _design(capsys, ground_path, tmp_path / f"{name}.toml", *options)
 

@@ -24,7 +24,7 @@ COMMANDS = ("excite", "identify", "inspect", "validate", "linearity", "design", 
 OPTIONS = {
     "commission": ["--connect-timeout", "--help", "--jobs", "--json", "--noise", "--out", "--preset", "--seed", "-h"],
     "convert": ["--help", "--json", "--map", "--out", "-h"],
-    "design": ["--anti-windup", "--bandwidth-hz", "--bias-drift-v", "--crossover-hz", "--disturbance-v", "--estimator", "--estimator-gain", "--extra-delay", "--help", "--json", "--loop-delay", "--measurement-noise", "--method", "--motor", "--out", "--overshoot", "--phase-margin", "--poles", "--process-noise-v", "--report", "--settling-time", "--step", "--timing-noise-ticks", "--voltage-limit", "-h"],
+    "design": ["--anti-windup", "--bandwidth-hz", "--bias-drift-v", "--crossover-hz", "--disturbance-v", "--estimator", "--extra-delay", "--help", "--json", "--loop-delay", "--measurement-noise", "--method", "--motor", "--out", "--overshoot", "--phase-margin", "--poles", "--process-noise-v", "--report", "--settling-time", "--step", "--timing-noise-ticks", "--voltage-limit", "-h"],
     "excite": ["--amplitude", "--connect-timeout", "--cycles", "--duration", "--help", "--json", "--model", "--motor", "--noise", "--out", "--plant", "--preset", "--seed", "--signal", "-h"],
     "export": ["--arduino", "--help", "--mat", "--out", "-h"],
     "identify": ["--average", "--compare", "--cutoff-hz", "--delay", "--help", "--json", "--loop-delay", "--map", "--method", "--motor", "--na", "--nb", "--order", "--orders", "--out", "--prefilter", "--report", "--split", "--validate-on", "--zero-phase", "-h"],
@@ -107,7 +107,6 @@ def test_the_parser_and_the_implementations_share_one_definition() -> None:
     assert options.SIGNALS is signals.SIGNALS is choices.SIGNALS
     assert options.DEFAULT_CONNECT_TIMEOUT_S is cart_link.DEFAULT_CONNECT_TIMEOUT_S
     assert design.ANTI_WINDUP is request.ANTI_WINDUP
-    assert design.ESTIMATOR_GAINS is request.ESTIMATOR_GAINS
     assert kalman.DEFAULT_PROCESS_NOISE_STD_V is request.DEFAULT_PROCESS_NOISE_STD_V
     assert kalman.DEFAULT_BIAS_DRIFT_STD_V is request.DEFAULT_BIAS_DRIFT_STD_V
     assert tuple(AXES) == tune.METHODS  # one grid per method tune offers
@@ -118,8 +117,6 @@ def test_parsed_defaults_are_the_home_values() -> None:
 
     parser = build_parser()
     assert parser.parse_args(["virtual-cart"]).faults == CartFaults()
-    args = parser.parse_args(["design", "m.toml", "--method", "pi", "--estimator-gain", "kalman"])
-    assert args.estimator_gain == "time-varying"
 
 
 def test_no_help_text_shows_a_doubled_percent_sign() -> None:

@@ -72,7 +72,7 @@ def test_runtime_filter_with_timing_noise_matches_a_hand_written_one(sequence, s
     u, y = sequence
     design = design_kalman(load_models(TIMING_MODEL).motor("a"), process_noise_std_v=0.05,
                            bias_drift_std_v=0.06, timing_noise_std_ticks=sigma)  # fmt: skip
-    estimator = make_estimator(design, "time-varying")
+    estimator = make_estimator(design)
     assert isinstance(estimator, KalmanSpeedEstimator)  # not the fixed-gain shortcut
     got = run_estimator(estimator, u, y)
     np.testing.assert_allclose(got, hand_filter(design, sigma, u, y), rtol=1e-9, atol=1e-9)
@@ -87,7 +87,7 @@ def test_without_timing_noise_the_fixed_gain_runs_as_before(sequence) -> None:
     u, y = sequence
     design = design_kalman(load_models(TIMING_MODEL).motor("a"))
     assert design.timing_noise_std_ticks == 0.0
-    estimator = make_estimator(design, "time-varying")
+    estimator = make_estimator(design)
     assert isinstance(estimator, SteadyStateSpeedEstimator)
     np.testing.assert_allclose(run_estimator(estimator, u, y), hand_filter(design, 0.0, u, y),
                                rtol=1e-9, atol=1e-9)  # fmt: skip
@@ -150,8 +150,6 @@ def test_design_writes_the_loop_delay_and_the_timing_noise(capsys, workdir: Path
          "--timing-noise-ticks must be in [0, 10] ticks"),
         (["models/ground.toml", "--timing-noise-ticks", "nan"],
          "--timing-noise-ticks must be a number, got nan"),
-        (["models/ground.toml", "--timing-noise-ticks", "0.5", "--estimator-gain", "steady-state"],
-         "--timing-noise-ticks needs --estimator-gain time-varying"),
     ],
 )  # fmt: skip
 def test_refusals_are_one_line_exit_2(capsys, workdir: Path, argv, message) -> None:

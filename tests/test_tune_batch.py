@@ -14,9 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cartctl.design.kalman import design_kalman
 from cartctl.design.make import design_motor
-from cartctl.design.poles import design_poles
 from cartctl.design.request import DesignRequest
 from cartctl.model import ArxModel
 from cartctl.modelfile import load_models
@@ -24,9 +22,7 @@ from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller
 from cartctl.runtime.fast import run_in_memory
-from cartctl.runtime.kalman import KalmanSpeedEstimator
 from cartctl.runtime.pi import PiController
-from cartctl.runtime.statefeedback import StateFeedbackController
 from cartctl.sinks.summary import motor_metrics
 from cartctl.stepinfo import encoder_quantum_rad_s
 from cartctl.tune.batch import ArxBatch, simulate_batch
@@ -66,11 +62,9 @@ CASES = [
     ("pi", {"phase_margin_deg": 50.0, "crossover_hz": 8.0, "anti_windup": "back-calculation"}),
     ("pi", {"phase_margin_deg": 50.0, "crossover_hz": 8.0, "anti_windup": "none"}),
     ("pi", {"phase_margin_deg": 60.0, "crossover_hz": 6.0, "estimator": "kalman"}),
-    ("pi", {"phase_margin_deg": 60.0, "crossover_hz": 6.0, "estimator": "kalman",
-            "estimator_gain": "steady-state"}),
     ("poles", {"settling_time_s": 0.04, "overshoot_percent": 5.0}),
     ("poles", {"settling_time_s": 0.1, "overshoot_percent": 1.0}),
-    ("poles", {"settling_time_s": 0.04, "overshoot_percent": 2.0, "estimator_gain": "steady-state"}),
+    ("poles", {"settling_time_s": 0.04, "overshoot_percent": 2.0}),
     ("poles", {"settling_time_s": 0.06, "overshoot_percent": 1.0, "bias_drift_std_v": 0.0}),
 ]  # fmt: skip
 
@@ -91,35 +85,6 @@ def test_the_batch_loop_gives_the_real_loops_traces(method: str, options: dict) 
         np.testing.assert_array_equal(batch.time_s, columns["time_s"])
         np.testing.assert_array_equal(batch.reference, columns["reference_a"])
         np.testing.assert_array_equal(columns["speed_a"], columns["true_speed_a"])  # no noise
-
-
-@pytest.mark.parametrize("method", ["pi", "poles"])
-def test_a_kalman_filter_whose_gain_changes_tick_by_tick(method: str) -> None:
-    """filterpy's filter started from 20 × the steady-state P: its gain moves for some ticks
-    before it settles at L, and the batch applies that very sequence to every plant."""
-    plants = _plants()
-    reference = reference_signal("square:14:0.8", 160, TS)
-    if method == "pi":
-        kalman = design_kalman(plants[0])
-    else:
-        gains = design_poles(plants[0], settling_time_s=0.05, overshoot_percent=2.0)
-        kalman = gains.estimator
-
-    def make() -> Controller:
-        est = KalmanSpeedEstimator(kalman, initial_covariance=20.0 * kalman.P)
-        if method == "pi":
-            return PiController(0.5, 12.0, TS, estimator=est)
-        return StateFeedbackController(gains, estimator=est)
-
-    seen = KalmanSpeedEstimator(kalman, initial_covariance=20.0 * kalman.P)
-    seen.correct(1.0)
-    assert not np.allclose(seen.gain, kalman.L, rtol=1e-3)  # tick 0's gain is not L
-    batch = simulate_batch(make(), ArxBatch.from_models(plants), reference)
-    assert np.max(np.abs(batch.voltage)) == 12.0
-    for i, plant in enumerate(plants):
-        columns = _real_loop(make(), plant, reference, 12.0)
-        np.testing.assert_allclose(batch.speed[i], columns["speed_a"], rtol=0, atol=1e-9)
-        np.testing.assert_allclose(batch.voltage[i], columns["voltage_a"], rtol=0, atol=1e-9)
 
 
 def test_the_cases_cover_saturation_and_the_anti_windup_modes_differ() -> None:

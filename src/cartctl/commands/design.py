@@ -12,14 +12,12 @@ from cartctl.design.request import (  # light: the parser's choices and defaults
     ANTI_WINDUP,
     DEFAULT_BIAS_DRIFT_STD_V,
     DEFAULT_PROCESS_NOISE_STD_V,
-    ESTIMATOR_GAINS,
     MAX_EXTRA_DELAY_TICKS,
     MAX_LOOP_DELAY_TICKS,
     OPTIONS,
     PI_ESTIMATORS,
     PM_RANGE_DEG,
     DesignRequest,
-    estimator_gain_name,
 )
 from cartctl.errors import InputError
 
@@ -89,15 +87,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     est = p.add_argument_group("estimator")
     est.add_argument(
-        "--estimator-gain",
-        choices=ESTIMATOR_GAINS,
-        type=estimator_gain_name,
-        default=_DEFAULT.estimator_gain,
-        help="time-varying: filterpy's Kalman filter, its gain converging from the initial "
-        "covariance; steady-state: the fixed gain it converges to (kalman: old name of "
-        "time-varying)",
-    )
-    est.add_argument(
         "--process-noise-v",
         type=float,
         default=_DEFAULT.process_noise_std_v,
@@ -126,7 +115,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=_DEFAULT.timing_noise_std_ticks,
         metavar="TICKS",
         help="how uncertain the moment a command lands is (std in ticks): after each command "
-        "change Δu the time-varying estimator adds (TICKS·Δu)²·B·Bᵀ to its process noise "
+        "change Δu the estimator adds (TICKS·Δu)²·B·Bᵀ to its process noise "
         "(default 0)",
     )
     p.add_argument(

@@ -21,7 +21,6 @@ from cartctl.design.entries import _Gains, kalman_from_entry
 from cartctl.design.kalman import KalmanDesign
 from cartctl.design.pi import PiDesign
 from cartctl.design.poles import PolesDesign
-from cartctl.design.request import ESTIMATOR_GAINS, estimator_gain_name
 from cartctl.errors import DataFileError, InputError
 from cartctl.runtime.base import Controller
 from cartctl.runtime.kalman import KalmanSpeedEstimator, SteadyStateSpeedEstimator
@@ -81,22 +80,14 @@ def poles_entry(
     }
 
 
-def make_estimator(
-    design: KalmanDesign, gain: str
-) -> KalmanSpeedEstimator | SteadyStateSpeedEstimator:
-    """The runtime estimator for a design and its ``estimator_gain``.
+def make_estimator(design: KalmanDesign) -> KalmanSpeedEstimator | SteadyStateSpeedEstimator:
+    """The runtime estimator of a design: the fixed steady-state gain L, or, with timing noise
+    (``timing_noise_std_ticks`` > 0), the filter whose gain moves at every change of the command.
 
-    ``'steady-state'`` is the fixed gain. ``'time-varying'`` (or its old name ``'kalman'``) is
-    filterpy's filter started from the design's P, unless P is stationary
-    (:meth:`~cartctl.runtime.kalman.KalmanDesign.is_stationary`, as the designs cartctl writes
-    are): then the filter's gain is L at every tick, the two compute the same estimates, and the
-    fixed gain runs, in a few µs instead of some 100 µs of filterpy's matrix algebra per tick.
-    With timing noise (``timing_noise_std_ticks`` > 0) the gain moves at every change of the
-    command, so ``'time-varying'`` is always filterpy's filter.
+    A design's P is the stationary covariance, so without timing noise the gain is L at every
+    tick. A controller file's ``estimator_gain`` key (written by older versions) is ignored.
     """
-    if estimator_gain_name(gain) == "time-varying" and (
-        design.timing_noise_std_ticks > 0.0 or not design.is_stationary()
-    ):
+    if design.timing_noise_std_ticks > 0.0:
         return KalmanSpeedEstimator(design)
     return SteadyStateSpeedEstimator(design)
 
@@ -128,11 +119,6 @@ def build_controllers(
                 f"{voltage_limit_v}"
             )
         limit = float(voltage_limit_v)
-    gain = estimator_gain_name(str(controller.request.get("estimator_gain", "time-varying")))
-    if gain not in ESTIMATOR_GAINS:
-        raise DataFileError(
-            controller.path or "controller file", f"unknown estimator_gain {gain!r}"
-        )
     out: dict[str, Controller] = {}
     for motor, entry in controller.motors.items():
         try:
@@ -144,7 +130,7 @@ def build_controllers(
                     controller.period_s,
                     voltage_limit_v=limit,
                     anti_windup=str(entry.get("anti_windup", "conditional")),
-                    estimator=None if est is None else make_estimator(kalman_from_entry(est), gain),
+                    estimator=None if est is None else make_estimator(kalman_from_entry(est)),
                 )
             else:
                 kalman = kalman_from_entry(entry["estimator"])
@@ -157,7 +143,7 @@ def build_controllers(
                 )
                 out[motor] = StateFeedbackController(
                     gains,
-                    estimator=make_estimator(kalman, gain),
+                    estimator=make_estimator(kalman),
                     voltage_limit_v=limit,
                 )
         except KeyError as exc:

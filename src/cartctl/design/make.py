@@ -61,7 +61,6 @@ class MotorDesign:
 def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
     """Design one motor's controller as ``request`` asks."""
     extra = request.extra_delay_ticks
-    gain = request.estimator_gain
     if request.method == "pi":
         if request.bandwidth_hz is not None:
             d = design_pi_bandwidth(model, bandwidth_hz=request.bandwidth_hz,
@@ -79,7 +78,7 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
                                    timing_noise_std_ticks=request.timing_noise_std_ticks)  # fmt: skip
         ctrl = PiController(d.kp, d.ki, model.period_s, voltage_limit_v=request.voltage_limit_v,
                             anti_windup=request.anti_windup,
-                            estimator=None if kalman is None else make_estimator(kalman, gain))  # fmt: skip
+                            estimator=None if kalman is None else make_estimator(kalman))  # fmt: skip
         entry = {**d.to_dict(), **d.analysis()}
         if kalman is not None:
             entry["estimator_poles"] = [[p.real, p.imag] for p in kalman.poles()]
@@ -96,7 +95,7 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
         extra_noise_std_rad_s=request.extra_noise_std_rad_s,
         timing_noise_std_ticks=request.timing_noise_std_ticks,
     )
-    ctrl = StateFeedbackController(d, estimator=make_estimator(d.estimator, gain),
+    ctrl = StateFeedbackController(d, estimator=make_estimator(d.estimator),
                                    voltage_limit_v=request.voltage_limit_v)  # fmt: skip
     num, den = feedback_tf_coeffs(d)
     loop = loop_analysis(num, den, model, extra)

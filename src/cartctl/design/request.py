@@ -35,14 +35,6 @@ MAX_TIMING_NOISE_TICKS = 10.0
 """The most ``--timing-noise-ticks`` accepted (a command landing ±10 ticks late is no loop)."""
 ANTI_WINDUP = ("conditional", "back-calculation", "none")
 PI_ESTIMATORS = ("none", "kalman")
-ESTIMATOR_GAINS = ("time-varying", "steady-state")
-"""The estimator's gain: filterpy's KalmanFilter (time-varying) or the fixed DARE gain."""
-_OLD_GAIN_NAMES = {"kalman": "time-varying"}
-
-
-def estimator_gain_name(name: str) -> str:
-    """The current name of an estimator gain: ``'kalman'``, its old name, is ``'time-varying'``."""
-    return _OLD_GAIN_NAMES.get(name, name)
 
 
 OPTIONS: dict[str, str] = {
@@ -54,7 +46,6 @@ OPTIONS: dict[str, str] = {
     "poles": "--poles",
     "settling_time_s": "--settling-time",
     "overshoot_percent": "--overshoot",
-    "estimator_gain": "--estimator-gain",
     "process_noise_std_v": "--process-noise-v",
     "bias_drift_std_v": "--bias-drift-v",
     "extra_noise_std_rad_s": "--measurement-noise",
@@ -86,17 +77,14 @@ class DesignRequest:
         Pole placement: closed-loop poles as given (``0.8,0.7+0.1j,0.7-0.1j``).
     settling_time_s, overshoot_percent : float
         Pole placement: the dominant poles' 2 % settling time (s) and overshoot (%).
-    estimator_gain : {'time-varying', 'steady-state'}
-        filterpy's filter with its time-varying gain, or the fixed steady-state gain. ``'kalman'``,
-        the old name of ``'time-varying'`` (both are Kalman gains), is read as it.
     process_noise_std_v, bias_drift_std_v : float
         The estimator's process noise (V) and its disturbance state's random walk (V per tick).
     extra_noise_std_rad_s : float
         Measurement noise beyond the encoder's quantisation (rad/s); the estimator's √R is this
         and the quantisation noise together.
     timing_noise_std_ticks : float
-        σ_ε, how uncertain (std, ticks) the moment a command lands is: the time-varying
-        estimator adds (σ_ε Δu)² B Bᵀ to its process noise after each command change Δu (see
+        σ_ε, how uncertain (std, ticks) the moment a command lands is: the estimator
+        adds (σ_ε Δu)² B Bᵀ to its process noise after each command change Δu (see
         :class:`~cartctl.runtime.kalman.KalmanDesign`); 0 leaves Q fixed.
     extra_delay_ticks : int
         Ticks of loop delay beyond the model's (a PC-side loop over serial).
@@ -120,7 +108,6 @@ class DesignRequest:
     poles: str | None = None
     settling_time_s: float = 0.06
     overshoot_percent: float = 1.0
-    estimator_gain: str = "time-varying"
     process_noise_std_v: float = DEFAULT_PROCESS_NOISE_STD_V
     bias_drift_std_v: float = DEFAULT_BIAS_DRIFT_STD_V
     extra_noise_std_rad_s: float = 0.0
@@ -130,20 +117,12 @@ class DesignRequest:
     voltage_limit_v: float = SUPPLY_V
     step_rad_s: float = 10.0
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "estimator_gain", estimator_gain_name(self.estimator_gain))
-
     def check(self) -> DesignRequest:
         """This request, if its options are in range (one-line :class:`InputError` otherwise).
 
         Each field the method uses is checked by :func:`check_field` (no model needed, so a
         request is refused before any design work), then the combinations.
         """
-        if self.estimator_gain not in ESTIMATOR_GAINS:
-            raise InputError(
-                f"estimator gain must be one of {', '.join(ESTIMATOR_GAINS)}, got "
-                f"'{self.estimator_gain}'"
-            )
         if self.method not in METHODS:
             raise InputError(f"method must be one of {', '.join(METHODS)}, got '{self.method}'")
         unused = _POLES_FIELDS if self.method == "pi" else _PI_FIELDS
@@ -153,11 +132,6 @@ class DesignRequest:
             if f.name in RANGES and f.name not in unused:
                 check_field(f.name, getattr(self, f.name))
         timing = self.timing_noise_std_ticks
-        if timing > 0.0 and self.estimator_gain != "time-varying":
-            raise InputError(
-                "--timing-noise-ticks needs --estimator-gain time-varying (a fixed gain cannot "
-                "follow the command's changes)"
-            )
         if timing > 0.0 and self.method == "pi" and self.estimator != "kalman":
             raise InputError("--timing-noise-ticks is for an estimator; the PI runs without one "
                              "unless --estimator kalman")  # fmt: skip
@@ -171,8 +145,7 @@ class DesignRequest:
         """The ``[request]`` table of a controller file: the options this method used."""
         req: dict[str, Any] = {
             "extra_delay_ticks": self.extra_delay_ticks, "step_rad_s": self.step_rad_s,
-            "estimator_gain": self.estimator_gain, "process_noise_std_v": self.process_noise_std_v,
-            "bias_drift_std_v": self.bias_drift_std_v,
+            "process_noise_std_v": self.process_noise_std_v, "bias_drift_std_v": self.bias_drift_std_v,
             "extra_noise_std_rad_s": self.extra_noise_std_rad_s,
         }  # fmt: skip
         if self.timing_noise_std_ticks:  # only when used: older files stay as they were

@@ -11,7 +11,7 @@ as the runtime controllers (:class:`~cartctl.runtime.pi.PiController`,
   controller of :func:`as_steady_state`;
 - a file whose estimator has timing noise (``timing_noise_std_ticks`` > 0, a gain that moves
   after each command change in cartctl's loop) runs without it: the C keeps the fixed L, which
-  the time-varying gain returns to while the command holds; the header says so and
+  the moving gain returns to while the command holds; the header says so and
   ``cartctl export`` warns (:func:`timing_noise_note`);
 - float32 arithmetic: the voltages agree with the runtime's to within 1e-4 of the voltage range
   (a few µV for the PI; up to 0.2 mV for state feedback, which sums terms of tens of volts), and
@@ -62,15 +62,19 @@ def timing_noise_note(controller: ControllerFile) -> str | None:
         return None
     return (
         f"the estimator's timing noise ({sigma:g} ticks) is not in the C, which runs the fixed "
-        "steady-state gain L (cartctl's loop runs the time-varying gain)"
+        "steady-state gain L (cartctl's loop moves the gain after each command change)"
     )
 
 
 def as_steady_state(controller: ControllerFile) -> ControllerFile:
-    """The same controller file, asking for the fixed-gain estimator (what the C runs)."""
-    return dataclasses.replace(
-        controller, request={**controller.request, "estimator_gain": "steady-state"}
-    )
+    """The same controller file without timing noise: the fixed-gain estimator (what the C runs)."""
+    motors = {
+        m: {**e, "estimator": {**e["estimator"], "timing_noise_std_ticks": 0.0}}
+        if "estimator" in e
+        else e
+        for m, e in controller.motors.items()
+    }
+    return dataclasses.replace(controller, motors=motors)
 
 
 def onboard_controllers(path: str | Path) -> dict[str, Controller]:
@@ -157,9 +161,7 @@ def _header(controller: ControllerFile, command: str) -> list[str]:
     )
     if uses_estimator:
         lines += [
-            "// The Kalman speed estimator runs its steady-state (fixed) gain L, like cartctl's",
-            "// '--estimator-gain steady-state'; cartctl's default filterpy filter converges to the "
-            "same L.",
+            "// The Kalman speed estimator runs its steady-state (fixed) gain L, as cartctl's does.",
         ]
         note = timing_noise_note(controller)
         if note is not None:

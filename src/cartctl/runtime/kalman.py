@@ -1,4 +1,4 @@
-"""Kalman speed estimators for the 10 ms loop: a filterpy one and a cheap fixed-gain one.
+"""Kalman speed estimators for the 10 ms loop: the fixed-gain one, and one for timing noise.
 
 Where it sits: the runtime, stepped once per tick by a controller
 (:class:`~cartctl.runtime.statefeedback.StateFeedbackController`) or by the loop, in the order of
@@ -8,9 +8,10 @@ Where it sits: the runtime, stepped once per tick by a controller
     correct:  x̂[k|k]   = x̂[k|k−1] + L (y[k] − C x̂[k|k−1])
     predict:  x̂[k+1|k] = A x̂[k|k] + B u[k]
 
-:class:`KalmanSpeedEstimator` runs filterpy's ``KalmanFilter`` (covariance propagated, gain L[k]
-time-varying, converging to the design's L); :class:`SteadyStateSpeedEstimator` uses the fixed
-steady-state L with plain floats. ``correct`` returns x̂_1[k|k] (the design's C is [1, 0, …]), the
+:class:`SteadyStateSpeedEstimator` uses the fixed steady-state L with plain floats (a design's P
+is stationary, so a propagated covariance would keep that gain); :class:`KalmanSpeedEstimator`
+propagates the covariance, for a design with timing noise, whose process noise moves with each
+change of the command. ``correct`` returns x̂_1[k|k] (the design's C is [1, 0, …]), the
 estimate of the *measured* speed, an average over the last tick; after ``predict``, ``state[0]``
 is x̂_1[k+1|k], and the mean of the two estimates the true speed at tick k (see
 :mod:`cartctl.design.kalman`), which the state-feedback controller reports.
@@ -25,16 +26,14 @@ from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
-from cartctl.errors import InputError
 from cartctl.runtime.base import SpeedEstimator
 
 
 @dataclass(frozen=True, eq=False)
 class KalmanDesign:
-    """A steady-state Kalman filter for the speed (names as in the literature and filterpy).
+    """A steady-state Kalman filter for the speed (names as in the literature).
 
     The state is x = [x_1 … x_n, b]: the n states of the realisation (rad/s; x_1 is the speed),
     then, when ``has_bias``, the input disturbance b (V). m = n + 1 with the bias, else n.
@@ -42,11 +41,11 @@ class KalmanDesign:
     Attributes
     ----------
     A : ndarray, shape (m, m)
-        State transition (filterpy's F).
+        State transition (F in filterpy).
     B : ndarray, shape (m,)
         Input vector (rad/s per V); 0 in the bias row.
     C : ndarray, shape (m,)
-        Measurement row (filterpy's H), [1, 0, …, 0].
+        Measurement row (H in filterpy), [1, 0, …, 0].
     Q : ndarray, shape (m, m)
         Process-noise covariance per tick: σ_w² B_x B_xᵀ on the realisation, σ_b² on the bias.
     R : float
@@ -63,7 +62,7 @@ class KalmanDesign:
         The noise levels the design used (σ_w in V, σ_b in V per tick, √R in rad/s).
     timing_noise_std_ticks : float
         σ_ε, the uncertainty of when a command lands (ticks); 0 (the default, and what a file
-        without it gets): Q is fixed. Above 0 the time-varying filter adds, at each prediction, the
+        without it gets): Q is fixed. Above 0 the estimator adds, at each prediction, the
         process noise of a command change Δu[k] = u[k] − u[k−1] landing ε ticks early or late, which
         acts as an extra input −ε Δu: Q[k] = Q + (σ_ε Δu[k])² B Bᵀ (:class:`KalmanSpeedEstimator`).
         P and L stay those of Q (between command changes the gain returns to L).
@@ -98,23 +97,6 @@ class KalmanDesign:
         """Steady-state a posteriori covariance P[k|k] = (I − L C) P, shape (m, m)."""
         m = self.A.shape[0]
         return (np.eye(m) - np.outer(self.L, self.C)) @ self.P
-
-    def is_stationary(self, rtol: float = 1e-9) -> bool:
-        """Whether a Kalman filter started from P keeps the gain L at every tick.
-
-        True when L = P Cᵀ / (C P Cᵀ + R) and one correct-and-predict step gives P back,
-        A (I − L C) P Aᵀ + Q = P, both to ``rtol`` (relative to the largest entry): then filterpy's
-        time-varying filter and the fixed-gain one compute the same estimates.
-        """
-        P, C = self.P, self.C
-        gain = P @ C / float(C @ P @ C + self.R)
-        again = self.A @ self.posterior_covariance() @ self.A.T + self.Q
-        scale_l = max(float(np.max(np.abs(self.L))), 1e-300)
-        scale_p = max(float(np.max(np.abs(P))), 1e-300)
-        return bool(
-            np.max(np.abs(gain - self.L)) <= rtol * scale_l
-            and np.max(np.abs(again - P)) <= rtol * scale_p
-        )
 
     def poles(self) -> NDArray[np.complex128]:
         """Estimator poles: eigenvalues of (I − L C) A, shape (m,), sorted by magnitude."""
@@ -157,81 +139,67 @@ class StateEstimator(SpeedEstimator, Protocol):
 
 
 class KalmanSpeedEstimator:
-    """The Kalman filter with time-varying gain (filterpy), on a designed model.
+    """The Kalman filter with its covariance propagated, for a design with timing noise.
 
     Parameters
     ----------
     design : KalmanDesign
-        F = A, B, H = C, Q and R come from here.
-    initial_covariance : array_like, shape (m, m), optional
-        P[0|−1], the covariance at reset; default the design's steady-state P (then the gain
-        starts at its steady-state value). The state starts at rest, x̂ = 0.
+        A, B, C, Q, R and the starting covariance P[0|−1] = P come from here; x̂ starts at 0.
 
-    With the design's ``timing_noise_std_ticks`` σ_ε > 0, each ``predict(u[k])`` propagates the
-    covariance with Q[k] = Q + (σ_ε (u[k] − u[k−1]))² B Bᵀ (u[−1] = 0 after a reset): the command
-    just sent may land up to a fraction of a tick earlier or later than the model says, so the
-    prediction after a jump is trusted less and the next measurement counts more.
-
-    Attributes
-    ----------
-    filter : filterpy.kalman.KalmanFilter
-        The underlying filter (x is a column, shape (m, 1)).
+    Each ``predict(u[k])`` propagates the covariance with Q[k] = Q + (σ_ε (u[k] − u[k−1]))² B Bᵀ
+    (u[−1] = 0 after a reset; σ_ε is the design's ``timing_noise_std_ticks``): the command just
+    sent may land a fraction of a tick earlier or later than the model says, so the prediction
+    after a jump is trusted less and the next measurement counts more. ``correct`` uses the gain
+    L[k] = P Cᵀ / (C P Cᵀ + R) and the Joseph form of the covariance update. With σ_ε = 0 the
+    gain stays L, and :class:`SteadyStateSpeedEstimator` computes the same, faster.
     """
 
-    def __init__(
-        self, design: KalmanDesign, *, initial_covariance: ArrayLike | None = None
-    ) -> None:
-        m = design.A.shape[0]
-        P0 = design.P if initial_covariance is None else np.asarray(initial_covariance, float)
-        if P0.shape != (m, m) or not np.all(np.isfinite(P0)):
-            raise InputError(
-                f"initial_covariance must be a finite ({m}, {m}) matrix, got shape {P0.shape}"
-            )
+    def __init__(self, design: KalmanDesign) -> None:
         self.design = design
-        self._P0 = np.array(P0, dtype=float)
-        kf = KalmanFilter(dim_x=m, dim_z=1, dim_u=1)
-        kf.F = np.array(design.A)
-        kf.B = np.array(design.B).reshape(m, 1)
-        kf.H = np.array(design.C).reshape(1, m)
-        kf.Q = np.array(design.Q)
-        kf.R = np.array([[design.R]])
-        self.filter = kf
+        self._eye = np.eye(design.A.shape[0])
         self.reset()
 
     def reset(self) -> None:
-        """State at rest (x̂ = 0), covariance back to ``initial_covariance``."""
-        self.filter.x = np.zeros((self.design.A.shape[0], 1))
-        self.filter.P = self._P0.copy()
-        self.filter.Q = np.array(self.design.Q)
+        """State at rest (x̂ = 0), covariance back to the design's P."""
+        self._x = np.zeros(self.design.A.shape[0])
+        self._P = np.array(self.design.P, dtype=float)
+        self._gain = np.array(self.design.L, dtype=float)
         self._last_voltage_v = 0.0
 
     def correct(self, measured_rad_s: float) -> float:
         """Update with the speed measured at this tick (rad/s); return x̂_1[k|k] (rad/s)."""
         if math.isfinite(measured_rad_s):
-            self.filter.update(float(measured_rad_s))
-        return float(self.filter.x[0, 0])
+            d, P = self.design, self._P
+            PC = P @ d.C
+            gain = PC / float(d.C @ PC + d.R)
+            self._x = self._x + gain * (float(measured_rad_s) - float(d.C @ self._x))
+            joseph = self._eye - np.outer(gain, d.C)
+            self._P = joseph @ P @ joseph.T + d.R * np.outer(gain, gain)
+            self._gain = gain
+        return float(self._x[0])
 
     def predict(self, voltage_v: float) -> None:
         """Propagate state and covariance with the voltage applied at this tick (V)."""
+        d = self.design
         u = float(voltage_v) if math.isfinite(voltage_v) else 0.0
-        if self.design.timing_noise_std_ticks > 0.0:
-            self.filter.Q = self.design.timing_covariance(u - self._last_voltage_v)
-            self._last_voltage_v = u
-        self.filter.predict(u=u)
+        Q = d.timing_covariance(u - self._last_voltage_v)
+        self._last_voltage_v = u
+        self._x = d.A @ self._x + d.B * u
+        self._P = d.A @ self._P @ d.A.T + Q
 
     @property
     def state(self) -> NDArray[np.float64]:
         """x̂, shape (m,) (a copy)."""
-        return self.filter.x[:, 0].copy()
+        return self._x.copy()
 
     def state_values(self) -> list[float]:
         """x̂ as a list of floats (a copy), for the per-tick arithmetic of state feedback."""
-        return self.filter.x[:, 0].tolist()
+        return self._x.tolist()
 
     @property
     def gain(self) -> NDArray[np.float64]:
         """The latest gain L[k], shape (m,)."""
-        return np.asarray(self.filter.K, dtype=float)[:, 0].copy()
+        return self._gain.copy()
 
 
 class SteadyStateSpeedEstimator:

@@ -14,10 +14,7 @@ the same floating-point operations where the runtime uses plain floats:
    anti-windup modes, the clamp, the optional estimator) or
    :class:`~cartctl.runtime.statefeedback.StateFeedbackController` (conditional integration, the
    estimator predicting with the clamped voltage) runs it; the estimators as
-   :class:`~cartctl.runtime.kalman.SteadyStateSpeedEstimator` (fixed gain) or
-   :class:`~cartctl.runtime.kalman.KalmanSpeedEstimator` (filterpy's filter: its gain sequence
-   depends on the covariance alone, never on the data, so it is taken once per design from a copy
-   of the controller's own filter and applied to every plant);
+   :class:`~cartctl.runtime.kalman.SteadyStateSpeedEstimator` (fixed gain);
 2. the loop's clamp to its voltage limit, then the plant's saturation at its own limit;
 3. the difference equation y[k+1] = Σ b_i u[k+1−nk−i] − Σ a_j y[k+1−j]: with the input
    coefficients of every plant laid out by lag (zero where a plant's delay puts none), so plants of
@@ -25,14 +22,12 @@ the same floating-point operations where the runtime uses plain floats:
 4. a speed beyond :data:`~cartctl.plants.sim.DIVERGED_RAD_S` marks that plant as run away (where
    the real loop stops with a plant fault); its row is held at zero from then on.
 
-The trace ends like a run's: after the n ticks, the stop row (0 V, the measurement of tick n).
-With filterpy's filter the sums of its matrix products may round differently from numpy's here
-(last bits); ``tests/test_tune_batch.py`` checks the traces against the real loop to 1e-9.
+The trace ends like a run's: after the n ticks, the stop row (0 V, the measurement of tick n);
+``tests/test_tune_batch.py`` checks the traces against the real loop to 1e-9.
 """
 
 from __future__ import annotations
 
-import copy
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -185,54 +180,16 @@ class _SteadyBatch:
         self.x = new
 
 
-class _TimeVaryingBatch:
-    """:class:`KalmanSpeedEstimator` over N rows: its gains L[0 … n−1] taken from a copy of it.
-
-    filterpy's gain K = P Hᵀ (H P Hᵀ + R)⁻¹ and its covariance updates never see the measurement
-    or the input, so the copy, stepped with zeros, has the very gains the controller's filter
-    will have on any plant.
-    """
-
-    def __init__(self, est: KalmanSpeedEstimator, n: int, ticks: int) -> None:
-        kf = copy.deepcopy(est)
-        kf.reset()
-        m = est.design.A.shape[0]
-        gains = np.empty((ticks, m))
-        for k in range(ticks):
-            kf.filter.update(0.0)
-            gains[k] = np.asarray(kf.filter.K, dtype=float)[:, 0]
-            kf.filter.predict(u=0.0)
-        f = est.filter
-        self.gains = gains
-        self.H = [(j, float(h)) for j, h in enumerate(np.asarray(f.H, dtype=float)[0]) if h != 0.0]
-        self.F = np.asarray(f.F, dtype=float)
-        self.B = np.asarray(f.B, dtype=float)[:, 0]
-        self.x = np.zeros((n, m))
-
-    def correct(self, y: FloatArray, k: int) -> FloatArray:
-        x = self.x
-        innovation = y.copy()
-        for j, h in self.H:
-            innovation -= h * x[:, j]
-        self.x = x = x + self.gains[k] * innovation[:, None]
-        return x[:, 0]
-
-    def predict(self, u: FloatArray) -> None:
-        self.x = self.x @ self.F.T + self.B * u[:, None]
-
-
-def _estimator(est: object, n: int, ticks: int) -> _SteadyBatch | _TimeVaryingBatch | None:
+def _estimator(est: object, n: int, ticks: int) -> _SteadyBatch | None:
     if est is None:
         return None
     if isinstance(est, SteadyStateSpeedEstimator):
         return _SteadyBatch(est, n)
-    if isinstance(est, KalmanSpeedEstimator):
-        if est.design.timing_noise_std_ticks > 0.0:  # its gains follow the commands it is given
-            raise InputError(
-                "the batch loop cannot run an estimator with timing noise "
-                "(timing_noise_std_ticks > 0): its gain depends on the commands"
-            )
-        return _TimeVaryingBatch(est, n, ticks)
+    if isinstance(est, KalmanSpeedEstimator):  # its gains follow the commands it is given
+        raise InputError(
+            "the batch loop cannot run an estimator with timing noise "
+            "(timing_noise_std_ticks > 0): its gain depends on the commands"
+        )
     raise InputError(f"the batch loop does not know the estimator {type(est).__name__}")
 
 
