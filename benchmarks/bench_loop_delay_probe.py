@@ -10,7 +10,7 @@ Usage::
 
     python benchmarks/bench_loop_delay_probe.py [--tries 20] [--busy 1] [--plant virtual]
 
-The figures are in the README's table of measured figures.
+The figures are in benchmarks/RESULTS.md.
 """
 
 from __future__ import annotations

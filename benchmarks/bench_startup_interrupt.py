@@ -16,7 +16,7 @@ Usage::
 
     python benchmarks/bench_startup_interrupt.py [--tries 40] [--window-ms 300] [--seed 1]
 
-The figures are in the README's table of measured figures.
+The figures are in benchmarks/RESULTS.md.
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""The Python API: the README's example runs as written, and each function agrees with the CLI."""
+"""The Python API: the guide's example (docs/python-api.md) runs as written, and each function agrees
+with the CLI."""
 
 from __future__ import annotations
 
@@ -19,12 +20,15 @@ matplotlib.use("Agg")
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _readme_blocks() -> tuple[str, str]:
-    """The README's API example and the printed summary shown after it."""
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
-    match = re.search(r"<!-- api-example[^>]*-->\s*```python\n(.*?)```.*?```\n(.*?)```",
+API_PAGE = ROOT / "docs" / "python-api.md"
+
+
+def _example_blocks() -> tuple[str, str]:
+    """The guide's API example and the printed summary shown after it."""
+    text = API_PAGE.read_text(encoding="utf-8")
+    match = re.search(r"<!-- api-example[^>]*-->\s*```python\n(.*?)```.*?```(?:text)?\n(.*?)```",
                       text, flags=re.S)  # fmt: skip
-    assert match, "the README has no API example"
+    assert match, f"{API_PAGE} has no API example"
     return match.group(1), match.group(2)
 
 
@@ -37,15 +41,15 @@ def square(capsys: pytest.CaptureFixture[str], workdir: Path) -> Path:
     return workdir / "logs" / "square.csv"
 
 
-def test_the_readme_example_runs_in_an_empty_folder(
+def test_the_guide_example_runs_in_an_empty_folder(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """The example makes its own data: nothing in the folder before, the files after."""
     monkeypatch.chdir(tmp_path)
     assert not any(tmp_path.iterdir())
-    code, shown = _readme_blocks()
+    code, shown = _example_blocks()
     namespace: dict[str, object] = {}
-    exec(compile(code, "README.md", "exec"), namespace)
+    exec(compile(code, str(API_PAGE), "exec"), namespace)
     printed = capsys.readouterr().out
     assert (tmp_path / "models" / "mine.toml").is_file()
     assert (tmp_path / "controllers" / "mine.toml").is_file()
@@ -53,7 +57,7 @@ def test_the_readme_example_runs_in_an_empty_folder(
     run = namespace["run"]
     a = run.summary["motors"]["a"]  # type: ignore[attr-defined]
     assert a["overshoot_percent"] < 10.0 and a["settling_time_s"] is not None
-    # the summary the README shows has the layout print(run) gives: its title and its columns
+    # the summary the guide shows has the layout print(run) gives: its title and its columns
     title, headers = shown.splitlines()[:2]
     assert title.split(", plant")[0] in printed and headers in printed.splitlines()
     assert len(printed) < 3 * 2_000  # three short summaries and a transfer function

@@ -227,7 +227,7 @@ def test_damping_and_frequency_of_each_closed_loop_pole_as_control_damp(name: st
 def test_text_shows_the_analysis_with_units_and_3_significant_figures(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    # the README's example (the PI shipped before the actuation timing entered its choice)
+    # the example of docs/design.md (the PI shipped before the actuation timing entered its choice)
     readme_pi = [str(ROOT / "models" / "ground.toml"), "--method", "pi", "--phase-margin", "65",
                  "--crossover-hz", "4"]  # fmt: skip
     assert main(["design", *readme_pi]) == 0

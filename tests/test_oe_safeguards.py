@@ -66,7 +66,7 @@ def _coloured_oe_data(seed: int, n: int = 2000) -> tuple[np.ndarray, np.ndarray]
     return y0 + noise, u
 
 
-# -- (a) the README's prefilter + OE example, through the CLI ------------------------------------
+# -- (a) the prefilter + OE example of docs/identification.md, through the CLI --------------------
 
 
 def test_readme_prefilter_oe_example_is_never_below_arx_and_keeps_poles_inside(
