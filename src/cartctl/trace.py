@@ -8,6 +8,7 @@ columns. :mod:`cartctl.data` reads traces (contract-1 CSV and QRoboticsCenter lo
 
 from __future__ import annotations
 
+import csv
 import difflib
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
@@ -306,12 +307,13 @@ def write_trace(
                 f"cannot write column {list(columns)[j]!r} as integers: it has fractions"
             )
     path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", encoding="utf-8", newline="\n") as file:
-        file.write(",".join(columns) + "\n")
+    with path.open("w", encoding="utf-8", newline="") as file:
+        writer = csv.writer(file, lineterminator="\n")  # str of a Python float: shortest exact
+        writer.writerow(columns)
         for start in range(0, len(data), _WRITE_CHUNK_ROWS):
             block = data[start : start + _WRITE_CHUNK_ROWS].tolist()
             if whole:
                 for row in block:
                     for j in whole:
                         row[j] = int(row[j])
-            file.write("".join(",".join(map(repr, row)) + "\n" for row in block))
+            writer.writerows(block)

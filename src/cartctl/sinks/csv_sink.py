@@ -1,10 +1,12 @@
 """The CSV trace sink: contract 1 plus the closed-loop columns, flushed at least once a second.
 
-``write`` keeps the tick's row (a tuple of floats, nothing formatted); ``idle``, which the loop
-calls after the tick's compute time is taken, formats the rows kept so far and, every
+``write`` keeps the tick's row (a tuple of floats, nothing formatted; a row of another length than
+the header's is a ``ValueError``, never a short row in the file); ``idle``, which the loop calls
+after the tick's compute time is taken, formats the rows kept so far with :func:`csv.writer` and,
+every
 ``flush_every`` rows (default 50: twice a second at 10 ms), writes them and flushes the file, so a
 crash loses at most the last block. Everything happens in the loop's thread (a writer thread would
-compete for the GIL and add wake-up jitter); formatting a row costs some 5–30 µs, which the
+compete for the GIL and add wake-up jitter); formatting a row costs some 10–30 µs, which the
 command no longer waits for, and a 50-row block formatted at once would have put some 300 µs into
 every 50th tick, the loop's 99th percentile. ``close`` writes whatever is left.
 
@@ -17,6 +19,7 @@ from the call that met it (``open``, ``write``, ``idle`` or ``close``); :attr:`C
 from __future__ import annotations
 
 import contextlib
+import csv
 import io
 import os
 from collections.abc import Sequence
@@ -27,6 +30,9 @@ from cartctl.errors import OutputError
 
 class CsvSink:
     """Writes the loop's rows to a CSV file (``str`` of each value: shortest exact floats, whole ticks).
+
+    The header and the rows go through one :func:`csv.writer` (``\\n`` line ends, quotes only
+    where a field needs them: never for numbers).
 
     Parameters
     ----------
@@ -48,8 +54,10 @@ class CsvSink:
         self.flush_every = max(1, int(flush_every))
         self._file: io.FileIO | None = None
         self._rows: list[Sequence[float]] = []
-        self._lines: list[str] = []
-        self._template = ""
+        self._text = io.StringIO()  # the rows formatted and not yet written
+        self._writer = csv.writer(self._text, lineterminator="\n")
+        self._formatted = 0  # rows in self._text
+        self._width = 0  # fields of a row: the header's
         self._size = 0  # bytes of the header and the whole rows in the file
         self.rows_written = 0
         self.error: OutputError | None = None
@@ -67,10 +75,22 @@ class CsvSink:
         """
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = io.FileIO(self.path, "w")  # unbuffered: each block is one write we can count
-        self._template = ",".join(["%s"] * len(columns))  # %s is str(): 10 % under a join
-        self._write((",".join(columns) + "\n").encode(), rows=0)
+        self._width = len(columns)
+        self._writer.writerow(columns)
+        self._write(self._take_text(), rows=0)
 
     def write(self, row: Sequence[float]) -> None:
+        """Keep one row: a value for each column of the header.
+
+        Raises
+        ------
+        ValueError
+            The row has another number of fields than the header (nothing is kept).
+        OutputError
+            The block this row completed could not be written.
+        """
+        if len(row) != self._width:
+            raise ValueError(f"{self.path}: a row of {len(row)} fields under {self._width} columns")
         rows = self._rows
         rows.append(row)
         if len(rows) >= self.flush_every:  # nobody calls idle(): write from here, as before
@@ -79,25 +99,30 @@ class CsvSink:
     def idle(self) -> None:
         """Format the rows kept so far; write and flush once a block is complete."""
         self._format()
-        if len(self._lines) >= self.flush_every:
+        if self._formatted >= self.flush_every:
             self._flush()
 
     def _format(self) -> None:
-        lines, template = self._lines, self._template
-        for row in self._rows:  # str: exact floats (numpy's too), whole ticks
-            try:
-                lines.append(template % tuple(row))
-            except TypeError:  # a row of another length than the header's
-                lines.append(",".join(map(str, row)))
-        self._rows = []
+        if self._rows:  # str of each value: exact floats (numpy's too), whole ticks
+            self._writer.writerows(self._rows)
+            self._formatted += len(self._rows)
+            self._rows = []
+
+    def _take_text(self) -> bytes:
+        """The text formatted so far, encoded; the buffer is emptied."""
+        data = self._text.getvalue().encode()
+        self._text.seek(0)
+        self._text.truncate()
+        self._formatted = 0
+        return data
 
     def _flush(self) -> None:
         self._format()
-        if self._file is None or not self._lines:
-            self._lines = []
+        rows = self._formatted
+        data = self._take_text()
+        if self._file is None or not rows:
             return
-        lines, self._lines = self._lines, []
-        self._write(("\n".join(lines) + "\n").encode(), rows=len(lines))
+        self._write(data, rows=rows)
 
     def _write(self, data: bytes, *, rows: int) -> None:
         """Write ``data`` (``rows`` whole rows) in full, or cut the file back to its last whole row
@@ -127,7 +152,8 @@ class CsvSink:
 
     def _fail(self, reason: str) -> None:
         """Drop what is kept, close the file, and raise the :class:`OutputError` (once)."""
-        self._rows, self._lines = [], []
+        self._rows = []
+        self._take_text()
         file, self._file = self._file, None
         if file is not None:
             with contextlib.suppress(OSError):
