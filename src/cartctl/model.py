@@ -337,7 +337,7 @@ class ArxModel:
         n = round(duration_s / self.period_s) + 1
         if n < 2:
             raise InputError(f"step duration must be at least one period, got {duration_s} s")
-        time_s = np.arange(n) * self.period_s
+        time_s = np.arange(n, dtype=np.float64) * self.period_s
         return time_s, self.simulate(np.full(n, float(amplitude_v)))
 
     def describe(self, var: str = "z") -> str:

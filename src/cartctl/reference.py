@@ -88,7 +88,7 @@ def reference_signal(
     (see the module docstring)."""
     kind, _, rest = spec.partition(":")
     parts = rest.split(":") if rest else []
-    t = (start_tick + np.arange(n_ticks)) * period_s
+    t = (start_tick + np.arange(n_ticks, dtype=np.float64)) * period_s
     if kind == "step":
         values = _numbers(spec, parts, 1, 2)
         amp, delay = values[0], (values[1] if len(values) == 2 else 0.5)

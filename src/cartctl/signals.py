@@ -177,7 +177,7 @@ def ramp(
     if not math.isfinite(slope_per_s):
         raise InputError(f"ramp slope must be finite, got {slope_per_s}")
     n = _ticks(duration_s, period_s, "duration")
-    out = slope_per_s * np.arange(n) * period_s
+    out = slope_per_s * np.arange(n, dtype=np.float64) * period_s
     if limit is not None:
         out = np.clip(out, -abs(limit), abs(limit))
     return out

@@ -13,6 +13,7 @@ import difflib
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -168,8 +169,10 @@ class Trace:
                 f"missing required column(s) {', '.join(missing)}; a trace needs "
                 f"{', '.join(REQUIRED_COLUMNS)} (got {', '.join(columns) or 'none'})"
             )
-        extra = {name: values for name, values in columns.items() if name not in REQUIRED_COLUMNS}
-        required = {name: columns[name] for name in REQUIRED_COLUMNS}
+        # array_like as the fields take it: __post_init__ makes each a float64 array
+        given = cast("Mapping[str, np.ndarray]", columns)
+        extra = {name: values for name, values in given.items() if name not in REQUIRED_COLUMNS}
+        required = {name: given[name] for name in REQUIRED_COLUMNS}
         return cls(**required, extra=extra, source=source,
                    integer_columns=frozenset(integer_columns))  # fmt: skip
 
@@ -288,7 +291,7 @@ def write_trace(
     data = np.column_stack(list(columns.values()))
     bad = ~np.isfinite(data)
     if bad.any():
-        i, j = np.unravel_index(np.argmax(bad), bad.shape)
+        i, j = (int(k) for k in np.unravel_index(np.argmax(bad), bad.shape))
         raise InputError(
             f"cannot write {path}: column {list(columns)[j]!r} holds {data[i, j]} at tick {i}; "
             "trace files hold finite numbers only"

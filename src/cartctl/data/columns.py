@@ -110,12 +110,12 @@ def plan_columns(
     if not any(f"voltage_{motor}" in source for motor in MOTORS):
         example = _guess_mapping(names[first:])
         if monitor:
-            missing = ", ".join(n for n in REQUIRED_COLUMNS[1:] if n not in source)
+            unnamed = ", ".join(n for n in REQUIRED_COLUMNS[1:] if n not in source)
             if {"FloatIn0", "FloatIn2", "FloatIn4"} <= set(names):
                 example = "voltage_a=FloatIn2,speed_a=FloatIn0,reference_a=FloatIn4 (the export's)"
             raise DataFileError(
                 path,
-                f"a 'cartctl monitor' trace whose labels name none of {missing}; its channels "
+                f"a 'cartctl monitor' trace whose labels name none of {unnamed}; its channels "
                 f"are {', '.join(names[2:])}; record with {MONITOR_LABELS_HINT}, or say which "
                 f"is which with --map {example}",
             )
