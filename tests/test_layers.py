@@ -20,7 +20,8 @@ CORE = {"cartctl", "cart", "choices", "errors", "model", "modelfile", "tomlfile"
 RUNS = {"runtime", "plants", "sinks", "experiment"}
 MAKES = {"identification", "design", "tune", "export"}
 LAYER = {**dict.fromkeys(CORE, 0), **dict.fromkeys(RUNS, 1), **dict.fromkeys(MAKES, 2),
-         "api": 3, "commands": 3, "commission": 3, "cli": 4, "__main__": 5}  # fmt: skip
+         "api": 3, "commands": 3, "commission": 3, "session": 3, "cli": 4,
+         "__main__": 5}  # fmt: skip
 # Within the makers: tune and export build on design; identification stands alone.
 MAKERS_MAY_IMPORT = {
     "tune": {"design"},

@@ -30,7 +30,6 @@ import numpy as np
 from cartctl.api.results import Design, Identification, MotorResult, SimulationResult
 from cartctl.choices import DEFAULT_MODEL
 from cartctl.data import Trace, parse_mapping, read_trace
-from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.design.make import design_models
 from cartctl.design.request import DesignRequest
@@ -40,8 +39,8 @@ from cartctl.identification.pipeline import identify as identify_traces
 from cartctl.identification.prefilter import Prefilter
 from cartctl.modelfile import ModelFile, load_models, save_models
 from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
-from cartctl.reference import ReferenceSchedule
 from cartctl.runtime.fast import run_in_memory
+from cartctl.session.prepare import prepare_run
 from cartctl.sinks.summary import trace_metrics
 
 __all__ = [
@@ -284,13 +283,13 @@ def simulate(
     else:
         file = load_controller(controller)
         name = str(controller)
-    built = build_controllers(file)
-    the_plant, _ = make_plant(plant, model_path=model or file.model_path, preset=preset,
-                              noise_std_rad_s=noise_std_rad_s, seed=seed)  # fmt: skip
-    period_s = the_plant.period_s
-    n = max(1, round(float(duration_s) / period_s))
-    refs = {m: ReferenceSchedule(reference, n, period_s, m) for m in MOTORS}
-    columns, state = run_in_memory(the_plant, built, refs, period_s=period_s,
-                                   voltage_limit_v=file.voltage_limit_v)  # fmt: skip
+    # what cartctl run refuses, refused here with the same line (cartctl.session)
+    prepared = prepare_run(file, given=name, plant=plant, duration_s=float(duration_s),
+                           reference=reference, model=model or file.model_path, preset=preset,
+                           noise_std_rad_s=noise_std_rad_s, seed=seed)  # fmt: skip
+    period_s = prepared.period_s
+    columns, state = run_in_memory(prepared.plant, prepared.controllers, prepared.references,
+                                   period_s=period_s,
+                                   voltage_limit_v=prepared.voltage_limit_v)  # fmt: skip
     return SimulationResult(columns, trace_metrics(columns, period_s), state.failure,
                             controller=name, plant=plant, reference=reference)  # fmt: skip

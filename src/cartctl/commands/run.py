@@ -6,7 +6,6 @@ import argparse
 import contextlib
 import signal
 import sys
-import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -23,17 +22,11 @@ from cartctl.commands.options import (
     check_run_outputs,
     command_line,
 )
-from cartctl.commands.run_checks import (
-    DEFAULT_CONTROLLER,
-    check_loop_delay,
-    check_reach,
-    models_designed_on,
-    refuse_unstable,
-)
-from cartctl.errors import DataWarning, InputError, OutputError, PlantError
+from cartctl.errors import InputError, OutputError, PlantError
+from cartctl.session.checks import DEFAULT_CONTROLLER
 
 if TYPE_CHECKING:
-    from cartctl.plants.base import Plant
+    pass
 
 # numpy, scipy and the rest load when the command runs (in run() and the two functions below),
 # not when the parser is built: cartctl --help stays fast.
@@ -117,14 +110,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _references(args: argparse.Namespace, n: int, period_s: float) -> dict[str, Any]:
-    from cartctl.reference import ReferenceSchedule
-
-    ref_a = ReferenceSchedule(args.reference, n, period_s, "a")
-    ref_b = ReferenceSchedule(args.reference_b or args.reference, n, period_s, "b")
-    return {"a": ref_a, "b": ref_b}
-
-
 def _rerun_sink(
     args: argparse.Namespace, path: Path, references: dict[str, Any], limit_v: float
 ) -> Any:
@@ -153,17 +138,11 @@ def default_controller(plant: str) -> Path:
     return DEFAULT_CONTROLLER
 
 
-def _measured_delay(plant: Plant) -> int | None:
-    """A serial plant's loop delay from the echo (drive = 0, zero volts), before any driving."""
-    measure = getattr(plant, "measure_loop_delay", None)
-    return None if measure is None else int(measure())
-
-
 def run(args: argparse.Namespace) -> int:
-    from cartctl.design.controllerfile import load_controller
     from cartctl.jsonout import dumps
     from cartctl.plants.base import ClockedPlant
     from cartctl.runtime.loop import ControlLoop, MemorySink
+    from cartctl.session.prepare import prepare_run
     from cartctl.sinks.csv_sink import CsvSink
     from cartctl.sinks.summary import (
         format_summary,
@@ -179,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
         and not 0.0 < check_finite(args.voltage_limit, "--voltage-limit") <= SUPPLY_V
     ):
         raise InputError(f"--voltage-limit must be in (0, 12] V, got {args.voltage_limit}")
-    from cartctl.plants.factory import SIMULATED, check_plant_name, plant_period_s
+    from cartctl.plants.factory import SIMULATED, check_plant_name
     from cartctl.reference import check_reference
 
     kind = check_plant_name(args.plant)  # first: what is checked next depends on the plant
@@ -191,79 +170,27 @@ def run(args: argparse.Namespace) -> int:
     if args.fast and kind not in SIMULATED:
         raise InputError(f"--fast needs a simulated plant (sim or physics), not '{args.plant}'")
     given = args.controller or str(default_controller(args.plant))
-    controller_file = load_controller(  # its period before its coefficients
-        given, force=args.force, period_s=plant_period_s(args.plant, args.model)
-    )
-    if controller_file.ignored:
-        more = (
-            f" (and {len(controller_file.ignored) - 1} more)"
-            if len(controller_file.ignored) > 1
-            else ""
-        )
-        warnings.warn(
-            f"--force: {given}: running its gains; ignoring controller_num/controller_den, which "
-            f"disagree with them: {controller_file.ignored[0]}{more}",
-            DataWarning,
-            stacklevel=1,
-        )
-    limit = controller_file.voltage_limit_v
-    if args.voltage_limit is not None:
-        if args.voltage_limit > limit:
-            raise InputError(
-                f"--voltage-limit {args.voltage_limit:g} V is above the {limit:g} V {given} is "
-                "designed for; it can only be lowered"
-            )
-        limit = args.voltage_limit
-    if controller_file.model_changed():
-        warnings.warn(
-            f"{given} was designed on {controller_file.model_path}, which has changed "
-            "since (or is gone); redesign with the command in the file's header",
-            DataWarning,
-            stacklevel=1,
-        )
-    controllers = build_controllers(controller_file, voltage_limit_v=limit)
-    if args.rerun != "off" and not args.fast:  # the recording's first-use costs, before a cart
-        from cartctl.sinks.rerun_series import warm_up
 
-        warm_up()
-    plant, description = make_plant(args.plant, model_path=args.model, preset=args.preset,
-                                    noise_std_rad_s=args.noise, seed=args.seed,
-                                    connect_timeout_s=args.connect_timeout)  # fmt: skip
-    period_s = plant.period_s
-    if abs(period_s - controller_file.period_s) > 1e-9:
-        plant.close()
-        raise InputError(
-            f"the controller is for Ts = {controller_file.period_s} s but the plant ticks at {period_s} s"
-        )
+    def warm_up_rerun() -> None:  # the recording's first-use costs, before a cart ticks
+        if args.rerun != "off" and not args.fast:
+            from cartctl.sinks.rerun_series import warm_up
+
+            warm_up()
+
+    prepared = prepare_run(
+        given, given=given, plant=args.plant, duration_s=args.duration, reference=args.reference,
+        reference_b=args.reference_b, model=args.model, preset=args.preset,
+        noise_std_rad_s=args.noise, seed=args.seed, connect_timeout_s=args.connect_timeout,
+        voltage_limit_v=args.voltage_limit, force=args.force, allow_unstable=args.allow_unstable,
+        allow_delay_mismatch=args.allow_delay_mismatch, make_plant=make_plant,
+        build_controllers=build_controllers, before_plant=warm_up_rerun,
+    )  # fmt: skip
+    controller_file, controllers, plant = (
+        prepared.controller_file, prepared.controllers, prepared.plant,
+    )  # fmt: skip
+    limit, period_s, delay = prepared.voltage_limit_v, prepared.period_s, prepared.loop_delay_ticks
+    references, n, description = prepared.references, prepared.ticks, prepared.description
     clocked = isinstance(plant, ClockedPlant)
-    models = getattr(plant, "models", None)  # the sim plant's own
-    if models is not None and not args.allow_unstable:
-        refuse_unstable(dict(zip("ab", models, strict=True)), args.model)
-    try:  # before any file is opened and before driving: a missing cart, a wrong controller
-        if clocked:
-            plant.connect()
-            delay = _measured_delay(plant)
-        else:
-            delay = getattr(plant, "loop_delay_ticks", None)  # sim and physics know theirs
-        check_loop_delay(controller_file, given, args.plant, delay,
-                         allow=args.allow_delay_mismatch,
-                         measured=getattr(plant, "probe_delays", None))  # fmt: skip
-    except BaseException:
-        plant.close()
-        raise
-    n = max(1, round(args.duration / period_s))
-    references = _references(args, n, period_s)
-    try:
-        reach_models = (
-            dict(zip("ab", models, strict=True))
-            if models is not None
-            else models_designed_on(controller_file)
-        )
-        where = args.model if models is not None else controller_file.model_path
-        check_reach(references, reach_models, limit, where)
-    except BaseException:
-        plant.close()
-        raise
     from cartctl.choices import find_file
     from cartctl.data.tracemeta import write_trace_meta
 

@@ -203,11 +203,11 @@ def check_inputs(args: argparse.Namespace, n_settings: int) -> None:
     Sets ``args.choose`` to the setting number or 'best'.
     """
     from cartctl.cart import SUPPLY_V
-    from cartctl.commands.run_checks import check_reach
     from cartctl.design.make import check_models
     from cartctl.modelfile import load_models
     from cartctl.plants.factory import make_plant
     from cartctl.reference import ReferenceSchedule, reference_signal
+    from cartctl.session.checks import check_reach
 
     args.choose = choice(args.choose, n_settings)
     choice_limits(args)

@@ -1,4 +1,4 @@
-"""What ``cartctl run`` refuses (or flags) before it drives: a controller for another loop delay,
+"""What a run refuses (or flags) before it drives: a controller for another loop delay,
 an unstable model on the sim plant, a reference no motor can follow."""
 
 from __future__ import annotations

@@ -1,0 +1,56 @@
+"""``cartctl.simulate`` refuses what ``cartctl run --fast`` refuses, with the same line: both start
+from :func:`cartctl.session.prepare.prepare_run`. Each case runs the command line first and then
+the API on the same files; the line must be one and the same, and say the thing that is wrong."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+import cartctl
+from cartctl.cli import main
+from cartctl.errors import InputError
+
+
+def _run_line(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
+    code = main(["run", "--fast", "--rerun", "off", *argv])
+    _, err = capsys.readouterr()
+    assert code == 2, err
+    (line,) = [x for x in err.splitlines() if x.startswith("cartctl run: error: ")]
+    return line.removeprefix("cartctl run: error: ")
+
+
+def _simulate_line(controller: str, **options: object) -> str:
+    with pytest.raises(InputError) as refused:
+        cartctl.simulate(controller, **options)  # type: ignore[arg-type]
+    return str(refused.value)
+
+
+def test_a_controller_for_another_loop_delay(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    # serial-pi.toml is designed for the serial loop's 3 ticks; the physics cart has 1
+    line = _run_line(capsys, "--plant", "physics", "--controller", "controllers/serial-pi.toml")
+    assert "designed for a loop delay of 3" in line and "has 1" in line
+    assert _simulate_line("controllers/serial-pi.toml", plant="physics") == line
+
+
+def test_a_reference_no_motor_can_follow(capsys: pytest.CaptureFixture[str], workdir: Path) -> None:
+    # the report's ground model reaches about 2 rad/s per volt: 12 V gives about 24 rad/s
+    line = _run_line(capsys, "--controller", "controllers/pi.toml", "--reference", "step:100")
+    assert "give a reference within that" in line
+    assert _simulate_line("controllers/pi.toml", reference="step:100") == line
+
+
+def test_an_unstable_model_on_the_sim_plant(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    text = (workdir / "models" / "ground.toml").read_text(encoding="utf-8")
+    # motor a: z² − 2.1 z + 1.05 has roots 1.05 ± 0.224j, |z| ≈ 1.07: outside the unit circle
+    assert "[-0.9356, 0.2173," in text
+    unstable = workdir / "models" / "unstable.toml"
+    unstable.write_text(text.replace("[-0.9356, 0.2173,", "[-2.1, 1.05,"), encoding="utf-8")
+    line = _run_line(capsys, "--model", str(unstable), "--controller", "controllers/pi.toml")
+    assert "unstable" in line and str(unstable) in line
+    assert _simulate_line("controllers/pi.toml", model=str(unstable)) == line
