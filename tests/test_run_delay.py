@@ -98,6 +98,9 @@ def test_summary_has_the_loop_delay_of_simulators(
 
 
 @pytest.mark.realtime
+# a heavily loaded machine can leave the probe unclear: the run warns and goes on (that warning:
+# test_loop_delay_probe.py); what is checked here holds either way
+@pytest.mark.filterwarnings("ignore::cartctl.errors.DataWarning")
 def test_virtual_plant_takes_the_pi_controller(
     capsys: pytest.CaptureFixture[str], workdir: Path
 ) -> None:

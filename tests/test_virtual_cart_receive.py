@@ -241,6 +241,9 @@ def test_the_watchdog_stops_the_motors_once_the_host_goes_quiet() -> None:
 
 
 @pytest.mark.realtime
+# a heavily loaded machine can leave the probe unclear: the run warns and goes on (that warning:
+# test_loop_delay_probe.py); what is checked here holds either way
+@pytest.mark.filterwarnings("ignore::cartctl.errors.DataWarning")
 def test_run_over_the_bridge_has_loop_delay_1_and_loses_nothing_to_the_ring(
     capsys: pytest.CaptureFixture[str], workdir: Path
 ) -> None:
