@@ -99,6 +99,7 @@ def test_the_parser_and_the_implementations_share_one_definition() -> None:
     from cartctl.commands import design, options, tune
     from cartctl.design import kalman, request
     from cartctl.plants import cart_link, factory
+    from cartctl.runtime import pi
     from cartctl.tune.grid import AXES
 
     assert options.DEFAULT_MODEL is factory.DEFAULT_MODEL is choices.DEFAULT_MODEL
@@ -106,7 +107,7 @@ def test_the_parser_and_the_implementations_share_one_definition() -> None:
     assert options.FORMS is reference.FORMS is choices.FORMS
     assert options.SIGNALS is signals.SIGNALS is choices.SIGNALS
     assert options.DEFAULT_CONNECT_TIMEOUT_S is cart_link.DEFAULT_CONNECT_TIMEOUT_S
-    assert design.ANTI_WINDUP is request.ANTI_WINDUP
+    assert design.ANTI_WINDUP is pi.ANTI_WINDUP
     assert kalman.DEFAULT_PROCESS_NOISE_STD_V is request.DEFAULT_PROCESS_NOISE_STD_V
     assert kalman.DEFAULT_BIAS_DRIFT_STD_V is request.DEFAULT_BIAS_DRIFT_STD_V
     assert tuple(AXES) == tune.METHODS  # one grid per method tune offers

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import math
 
+from cartctl.errors import InputError
+
 SUPPLY_V = 12.0
 """The cart's supply voltage: every command saturates at ± this value (V)."""
 ENCODER_COUNTS_PER_REV = 1792
@@ -29,3 +31,31 @@ def nk_fits_loop_delay(nk: int, loop_delay_ticks: int) -> bool:
     already sees part of. Any other nk belongs to another loop.
     """
     return int(nk) in (int(loop_delay_ticks), int(loop_delay_ticks) + 1)
+
+
+def check_voltage_limit(
+    limit_v: float, name: str = "voltage limit", *, most_v: float = SUPPLY_V
+) -> float:
+    """``limit_v`` as a float, if it is a command limit the cart can apply: in (0, ``most_v``] V.
+
+    Parameters
+    ----------
+    limit_v : float
+        The limit asked for (V).
+    name : str
+        How the message names it (``'--voltage-limit'``, ``'voltage_limit_v'``).
+    most_v : float
+        The highest limit allowed (V): the supply, or a controller file's own limit.
+
+    Raises
+    ------
+    InputError
+        Not a number in (0, ``most_v``]: one line, ``NAME must be in (0, MOST] V, got VALUE``.
+    """
+    try:
+        value = float(limit_v)
+    except (TypeError, ValueError):
+        value = math.nan
+    if not (math.isfinite(value) and 0.0 < value <= most_v):
+        raise InputError(f"{name} must be in (0, {most_v:g}] V, got {limit_v}")
+    return value

@@ -7,9 +7,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from cartctl.cart import SUPPLY_V
 from cartctl.commands.options import check_finite, check_outputs, command_line
 from cartctl.design.request import (  # light: the parser's choices and defaults
-    ANTI_WINDUP,
     DEFAULT_BIAS_DRIFT_STD_V,
     DEFAULT_PROCESS_NOISE_STD_V,
     MAX_EXTRA_DELAY_TICKS,
@@ -20,6 +20,7 @@ from cartctl.design.request import (  # light: the parser's choices and defaults
     DesignRequest,
 )
 from cartctl.errors import InputError
+from cartctl.runtime.pi import ANTI_WINDUP  # light too
 
 _DEFAULT = DesignRequest(method="pi")
 
@@ -263,9 +264,10 @@ def _format(method: str, motors: dict[str, dict[str, Any]]) -> str:
 
 def _disturbance_v(args: argparse.Namespace) -> float:
     d = check_finite(float(args.disturbance_v), "--disturbance-v")
-    if not (d != 0.0 and abs(d) <= 12.0):
+    if not (d != 0.0 and abs(d) <= SUPPLY_V):
         raise InputError(
-            f"--disturbance-v must be a non-zero voltage within ±12 V, got {args.disturbance_v}"
+            f"--disturbance-v must be a non-zero voltage within ±{SUPPLY_V:g} V, got "
+            f"{args.disturbance_v}"
         )
     return d
 

@@ -9,19 +9,19 @@ agree, so a hand-edited file cannot say one controller and run another.
 
 from __future__ import annotations
 
-import math
 from dataclasses import fields
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from cartctl.cart import check_voltage_limit
 from cartctl.design.controllerfile import ControllerFile
 from cartctl.design.entries import _Gains, kalman_from_entry
 from cartctl.design.kalman import KalmanDesign
 from cartctl.design.pi import PiDesign
 from cartctl.design.poles import PolesDesign
-from cartctl.errors import DataFileError, InputError
+from cartctl.errors import DataFileError
 from cartctl.runtime.base import Controller
 from cartctl.runtime.kalman import KalmanSpeedEstimator, SteadyStateSpeedEstimator
 from cartctl.runtime.pi import PiController
@@ -63,10 +63,10 @@ def poles_entry(
     """A pole-placement design's ``[motors.X]`` entry.
 
     ``controller_num``/``controller_den`` are the feedback C(z) of
-    :func:`cartctl.design.loop.feedback_tf_coeffs` (computed here when not given).
+    :func:`cartctl.design.controller_ss.feedback_tf_coeffs` (computed here when not given).
     """
     if controller_num is None or controller_den is None:
-        from cartctl.design.loop import feedback_tf_coeffs
+        from cartctl.design.controller_ss import feedback_tf_coeffs
 
         controller_num, controller_den = feedback_tf_coeffs(design)
     return {
@@ -112,13 +112,8 @@ def build_controllers(
         A voltage limit above the file's, or not in (0, 12] V.
     """
     limit = controller.voltage_limit_v
-    if voltage_limit_v is not None:
-        if not (math.isfinite(voltage_limit_v) and 0.0 < voltage_limit_v <= limit):
-            raise InputError(
-                f"voltage limit must be in (0, {limit:g}] V (the controller file's limit), got "
-                f"{voltage_limit_v}"
-            )
-        limit = float(voltage_limit_v)
+    if voltage_limit_v is not None:  # at most the file's limit
+        limit = check_voltage_limit(voltage_limit_v, most_v=limit)
     out: dict[str, Controller] = {}
     for motor, entry in controller.motors.items():
         try:

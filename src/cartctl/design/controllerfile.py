@@ -32,7 +32,7 @@ on an older model file with input delay nk, for nk − 1 + d (:func:`cartctl.des
 Loading checks the format and the keys, resolves the model path against the file's folder, and
 checks that the file does not contradict itself: ``plant_kind`` against ``loop_delay_ticks``, and
 each motor's ``controller_num``/``controller_den`` against its gains
-(:func:`cartctl.design.build.consistency_problems`). A file without ``loop_delay_ticks`` (from an
+(:func:`cartctl.design.controller_ss.consistency_problems`). A file without ``loop_delay_ticks`` (from an
 older cartctl) gets it from its model's nk and ``request.extra_delay_ticks``.
 :mod:`cartctl.design.build` turns a file into runtime controllers.
 """
@@ -50,10 +50,10 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from cartctl.cart import PERIOD_S, SPEED_QUANTUM_RAD_S, SUPPLY_V
+from cartctl.cart import PERIOD_S, SPEED_QUANTUM_RAD_S, check_voltage_limit
 from cartctl.choices import find_file
-from cartctl.design.entries import consistency_problems
-from cartctl.errors import CartctlError, DataFileError
+from cartctl.design.controller_ss import consistency_problems
+from cartctl.errors import CartctlError, DataFileError, InputError
 from cartctl.tomlfile import CONTROLLER_FORMAT, check_format, read_toml, require
 
 FORMAT = CONTROLLER_FORMAT
@@ -347,16 +347,16 @@ def load_controller(
                             f"every {period_s:g} s; design it on a model of the plant's period")  # fmt: skip
     method = require(doc, "method", str, path, "the top level")
     if method not in METHODS:
-        raise DataFileError(
-            path, f"unknown method {method!r}; expected one of {', '.join(METHODS)}"
-        )
+        raise DataFileError(path, f"unknown method {method!r}; expected one of {', '.join(METHODS)}")  # fmt: skip
     model = require(doc, "model", dict, path, "the top level")
     motors = require(doc, "motors", dict, path, "the top level")
     if not motors or set(motors) - {"a", "b"}:
         raise DataFileError(path, f"[motors] must hold 'a' and/or 'b', got {sorted(motors)}")
-    limit = float(require(doc, "voltage_limit_v", (int, float), path, "the top level"))
-    if not 0.0 < limit <= SUPPLY_V:
-        raise DataFileError(path, f"voltage_limit_v must be in (0, 12] V, got {limit}")
+    limit = require(doc, "voltage_limit_v", (int, float), path, "the top level")
+    try:
+        limit = check_voltage_limit(limit, "voltage_limit_v")
+    except InputError as exc:
+        raise DataFileError(path, str(exc)) from None
     legacy = "loop_delay_ticks" not in doc
     model_path = _resolve_model(
         str(require(model, "path", str, path, "[model]")), path, legacy=legacy

@@ -13,7 +13,7 @@ from dataclasses import dataclass, fields
 from numbers import Integral, Real
 from typing import Any
 
-from cartctl.cart import PERIOD_S, SUPPLY_V, nk_fits_loop_delay
+from cartctl.cart import PERIOD_S, SUPPLY_V, check_voltage_limit, nk_fits_loop_delay
 from cartctl.errors import InputError
 
 METHODS = ("pi", "poles")
@@ -33,7 +33,6 @@ MAX_LOOP_DELAY_TICKS = 100
 --loop-delay`` takes it) plus at most :data:`MAX_EXTRA_DELAY_TICKS`."""
 MAX_TIMING_NOISE_TICKS = 10.0
 """The most ``--timing-noise-ticks`` accepted (a command landing ±10 ticks late is no loop)."""
-ANTI_WINDUP = ("conditional", "back-calculation", "none")
 PI_ESTIMATORS = ("none", "kalman")
 
 
@@ -188,6 +187,14 @@ def _number(value: Any) -> bool:
     return isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
 
 
+def _voltage_limit(value: Any) -> bool:
+    try:
+        check_voltage_limit(value)
+    except InputError:
+        return False
+    return _number(value)
+
+
 def _whole(value: Any, high: int) -> bool:
     return isinstance(value, Integral) and not isinstance(value, bool) and 0 <= value <= high
 
@@ -214,7 +221,7 @@ RANGES: dict[str, tuple[Callable[[Any], bool], str]] = {
     "loop_delay_ticks": (lambda v: v is None or _whole(v, MAX_LOOP_DELAY_TICKS),
                          f">= 0 ticks and at most {MAX_LOOP_DELAY_TICKS} (a recorded loop of at "
                          f"most 50 ticks and at most {MAX_EXTRA_DELAY_TICKS} extra)"),
-    "voltage_limit_v": (lambda v: _number(v) and 0.0 < v <= SUPPLY_V, f"in (0, {SUPPLY_V:g}] V"),
+    "voltage_limit_v": (_voltage_limit, f"in (0, {SUPPLY_V:g}] V"),
     "step_rad_s": (lambda v: _number(v) and v != 0.0, "a non-zero speed in rad/s"),
 }  # fmt: skip
 """Per numeric request field: the test its value must pass (no model needed) and the range in

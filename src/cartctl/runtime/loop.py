@@ -30,13 +30,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.cart import SUPPLY_V
+from cartctl.cart import PERIOD_S, SUPPLY_V, check_voltage_limit
 from cartctl.errors import InputError, OutputError
 from cartctl.plants.base import ClockedPlant, Measurement, Plant
 from cartctl.runtime.base import Controller
 from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS, Sink
-
-MAX_VOLTAGE_V = SUPPLY_V
 
 
 class MemorySink:
@@ -151,13 +149,10 @@ class ControlLoop:
         sinks: Sequence[Sink],
         *,
         now_s: Callable[[], float],
-        voltage_limit_v: float = MAX_VOLTAGE_V,
-        period_s: float = 0.01,
+        voltage_limit_v: float = SUPPLY_V,
+        period_s: float = PERIOD_S,
     ) -> None:
-        if not (math.isfinite(voltage_limit_v) and 0.0 < voltage_limit_v <= MAX_VOLTAGE_V):
-            raise InputError(
-                f"voltage limit must be in (0, {MAX_VOLTAGE_V:g}] V, got {voltage_limit_v}"
-            )
+        check_voltage_limit(voltage_limit_v)
         lengths = {len(r) for r in references.values()}
         if len(lengths) != 1:
             raise InputError(

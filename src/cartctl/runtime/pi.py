@@ -27,17 +27,15 @@ always predicts with the command sent.
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Literal, get_args
 
-from cartctl.cart import SUPPLY_V
+from cartctl.cart import SUPPLY_V, check_voltage_limit
 from cartctl.errors import InputError
 from cartctl.runtime.base import SpeedEstimator
 
 AntiWindup = Literal["conditional", "back-calculation", "none"]
-ANTI_WINDUP: tuple[str, ...] = ("conditional", "back-calculation", "none")
-
-MAX_VOLTAGE_V = SUPPLY_V
-"""The cart's supply: no controller may command more (V)."""
+ANTI_WINDUP: tuple[str, ...] = get_args(AntiWindup)
+"""The anti-windup modes, in :class:`PiController`'s order."""
 
 
 def _finite(name: str, value: float, unit: str, *, positive: bool = False) -> float:
@@ -96,7 +94,7 @@ class PiController:
         ki: float,
         period_s: float,
         *,
-        voltage_limit_v: float = MAX_VOLTAGE_V,
+        voltage_limit_v: float = SUPPLY_V,
         anti_windup: AntiWindup = "conditional",
         tracking_gain: float | None = None,
         estimator: SpeedEstimator | None = None,
@@ -104,12 +102,7 @@ class PiController:
         self._kp = _finite("Kp", kp, "V/(rad/s)")
         self._ki = _finite("Ki", ki, "V/rad")
         self._period_s = _finite("the period", period_s, "s", positive=True)
-        limit = float(voltage_limit_v)
-        if not (math.isfinite(limit) and 0.0 < limit <= MAX_VOLTAGE_V):
-            raise InputError(
-                f"voltage limit must be in (0, {MAX_VOLTAGE_V:g}] V (the cart's supply), got "
-                f"{voltage_limit_v}"
-            )
+        limit = check_voltage_limit(voltage_limit_v)
         if anti_windup not in ANTI_WINDUP:
             raise InputError(
                 f"unknown anti-windup {anti_windup!r}; expected one of {', '.join(ANTI_WINDUP)}"

@@ -33,14 +33,11 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.cart import SUPPLY_V
+from cartctl.cart import SUPPLY_V, check_voltage_limit
 from cartctl.errors import InputError
 from cartctl.runtime.kalman import KalmanDesign, StateEstimator, SteadyStateSpeedEstimator
 
-__all__ = ["MAX_VOLTAGE_V", "StateFeedbackController"]
-
-MAX_VOLTAGE_V = SUPPLY_V
-"""The cart's supply: no voltage limit may exceed it (V)."""
+__all__ = ["StateFeedbackController"]
 
 
 class FeedbackGains(Protocol):
@@ -86,13 +83,9 @@ class StateFeedbackController:
         design: FeedbackGains,
         *,
         estimator: StateEstimator | None = None,
-        voltage_limit_v: float = MAX_VOLTAGE_V,
+        voltage_limit_v: float = SUPPLY_V,
     ) -> None:
-        limit = float(voltage_limit_v)
-        if not (math.isfinite(limit) and 0.0 < limit <= MAX_VOLTAGE_V):
-            raise InputError(
-                f"voltage_limit_v must be in (0, {MAX_VOLTAGE_V:g}] V, got {voltage_limit_v}"
-            )
+        limit = check_voltage_limit(voltage_limit_v, "voltage_limit_v")
         if estimator is None:
             estimator = SteadyStateSpeedEstimator(design.estimator)
         n = design.K.size

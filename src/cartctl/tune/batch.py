@@ -28,14 +28,13 @@ The trace ends like a run's: after the n ticks, the stop row (0 V, the measureme
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cartctl.cart import SUPPLY_V
+from cartctl.cart import SUPPLY_V, check_voltage_limit
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 from cartctl.plants.sim import DIVERGED_RAD_S
@@ -312,8 +311,7 @@ def simulate_batch(
     ref = np.asarray(reference, dtype=float)
     if ref.ndim != 1 or ref.size == 0:
         raise InputError(f"the reference must be a non-empty 1-D array, got shape {ref.shape}")
-    if not (math.isfinite(voltage_limit_v) and 0.0 < voltage_limit_v <= SUPPLY_V):
-        raise InputError(f"voltage limit must be in (0, {SUPPLY_V:g}] V, got {voltage_limit_v}")
+    check_voltage_limit(voltage_limit_v)
     n_ticks, n = ref.size, plants.size
     ctrl = _controller(controller, n, n_ticks)
     na, width = plants.ar.shape[1], plants.b_lags.shape[1]
