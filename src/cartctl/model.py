@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import signal
 
+from cartctl.cart import PERIOD_S
 from cartctl.errors import InputError
 
 RootKind = Literal["delay", "pole", "zero"]
@@ -168,7 +169,7 @@ class ArxModel:
     ar: tuple[float, ...]
     b: tuple[float, ...]
     nk: int = 2
-    period_s: float = 0.01
+    period_s: float = PERIOD_S
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "ar", tuple(float(v) for v in self.ar))
@@ -198,7 +199,7 @@ class ArxModel:
     # -- construction -------------------------------------------------------------------------
     @classmethod
     def from_theta(
-        cls, theta: ArrayLike, *, na: int = 2, nb: int = 2, nk: int = 2, period_s: float = 0.01
+        cls, theta: ArrayLike, *, na: int = 2, nb: int = 2, nk: int = 2, period_s: float = PERIOD_S
     ) -> ArxModel:
         """Build from θ = [a_1 … a_na, b_0 … b_{nb−1}] (the report's [c, d, a, b] for na = nb = 2)."""
         values = np.asarray(theta, dtype=float).ravel()
@@ -210,7 +211,7 @@ class ArxModel:
 
     @classmethod
     def from_tf(
-        cls, num: Sequence[float], den: Sequence[float], *, period_s: float = 0.01
+        cls, num: Sequence[float], den: Sequence[float], *, period_s: float = PERIOD_S
     ) -> ArxModel:
         """Build from a transfer function in descending powers of z (as python-control takes it).
 

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from cartctl.cart import PERIOD_S
 from cartctl.choices import FORMS
 from cartctl.errors import DataFileError, InputError, MissingFileError
 
@@ -82,7 +83,7 @@ def _read_reference_file(
 
 
 def reference_signal(
-    spec: str, n_ticks: int, period_s: float = 0.01, motor: str = "a", *, start_tick: int = 0
+    spec: str, n_ticks: int, period_s: float = PERIOD_S, motor: str = "a", *, start_tick: int = 0
 ) -> NDArray[np.float64]:
     """The reference (rad/s) at ticks ``start_tick`` … ``start_tick + n_ticks − 1`` for a spec
     (see the module docstring)."""
@@ -110,7 +111,7 @@ def reference_signal(
     raise InputError(f"unknown reference '{spec}'; expected {FORMS}")
 
 
-def check_reference(spec: str, option: str = "--reference", period_s: float = 0.01) -> str:
+def check_reference(spec: str, option: str = "--reference", period_s: float = PERIOD_S) -> str:
     """``spec`` if it names a reference (a file one is read); else one line naming ``option``."""
     try:
         reference_signal(spec, 1, period_s)
@@ -141,7 +142,7 @@ class ReferenceSchedule:
     """
 
     def __init__(
-        self, spec: str, n_ticks: int, period_s: float = 0.01, motor: str = "a", *,
+        self, spec: str, n_ticks: int, period_s: float = PERIOD_S, motor: str = "a", *,
         chunk_ticks: int = 6000,
     ) -> None:  # fmt: skip
         if n_ticks < 0 or chunk_ticks < 1:

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal as sps
 
-from cartctl.cart import PERIOD_S as TS_S
+from cartctl.cart import PERIOD_S
 from cartctl.choices import MAX_DURATION_S, SIGNALS
 from cartctl.errors import InputError
 
@@ -39,7 +39,7 @@ def _check_amplitude(amplitude: float) -> float:
 
 
 def square(
-    amplitude_v: float, *, hold_s: float = 1.0, cycles: int = 5, period_s: float = TS_S
+    amplitude_v: float, *, hold_s: float = 1.0, cycles: int = 5, period_s: float = PERIOD_S
 ) -> NDArray[np.float64]:
     """The report's excitation: +A for ``hold_s``, 0 for ``hold_s``, −A for ``hold_s``, repeated.
 
@@ -58,7 +58,7 @@ def square(
 
 
 def step(
-    amplitude_v: float, *, duration_s: float = 3.0, delay_s: float = 0.5, period_s: float = TS_S
+    amplitude_v: float, *, duration_s: float = 3.0, delay_s: float = 0.5, period_s: float = PERIOD_S
 ) -> NDArray[np.float64]:
     """Zero for ``delay_s``, then ``amplitude_v`` until ``duration_s`` (total length)."""
     amp = _check_amplitude(amplitude_v)
@@ -77,7 +77,7 @@ def prbs(
     bit_s: float = 0.05,
     order: int = 8,
     seed: int = 1,
-    period_s: float = TS_S,
+    period_s: float = PERIOD_S,
 ) -> NDArray[np.float64]:
     """A pseudo-random binary sequence of ±A from a maximum-length shift register.
 
@@ -113,7 +113,7 @@ def multisine(
     cycle_s: float = 2.56,
     f_min_hz: float = 0.5,
     f_max_hz: float = 20.0,
-    period_s: float = TS_S,
+    period_s: float = PERIOD_S,
 ) -> NDArray[np.float64]:
     """Equal-amplitude harmonics of 1/cycle_s in [f_min_hz, f_max_hz], Schroeder phases.
 
@@ -150,7 +150,7 @@ def chirp(
     duration_s: float = 20.0,
     f_start_hz: float = 0.1,
     f_end_hz: float = 20.0,
-    period_s: float = TS_S,
+    period_s: float = PERIOD_S,
 ) -> NDArray[np.float64]:
     """A logarithmic sine sweep from ``f_start_hz`` to ``f_end_hz`` over ``duration_s``."""
     amp = _check_amplitude(amplitude_v)
@@ -171,7 +171,7 @@ def ramp(
     *,
     duration_s: float = 5.0,
     limit: float | None = None,
-    period_s: float = TS_S,
+    period_s: float = PERIOD_S,
 ) -> NDArray[np.float64]:
     """A ramp from 0 rising ``slope_per_s`` units per second, held at ``limit`` when given."""
     if not math.isfinite(slope_per_s):
@@ -189,7 +189,7 @@ def make_signal(
     *,
     cycles: int | None = None,
     duration_s: float | None = None,
-    period_s: float = TS_S,
+    period_s: float = PERIOD_S,
 ) -> NDArray[np.float64]:
     """Build an excitation by name with sensible defaults (``cartctl excite``).
 

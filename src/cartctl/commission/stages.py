@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from cartctl.cart import PERIOD_S
 from cartctl.commission import StageError, checks, modelcheck, report, tuning, verify
 from cartctl.commission.recording import record_stage, trace_series
 from cartctl.commission.timing import later_command
@@ -135,7 +136,7 @@ class Commission:
     def run_checks(self) -> None:
         """Stage 1: port, heartbeat, loop delay; direction, encoder sign, breakaway; amplitude."""
         self.say("checks", "connecting, then a pulse and a slow ramp on each motor (5.5 s)")
-        ua, ub, windows = checks.checks_sequence(0.01)
+        ua, ub, windows = checks.checks_sequence(PERIOD_S)
         trace = self._keep("checks", self._experiment("checks", ua, ub, probe=True))
         found = checks.analyse_checks(trace, windows, self.loop_delay_ticks)
         failure = None

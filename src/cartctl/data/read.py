@@ -20,8 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from cartctl import qrc
-from cartctl.cart import PERIOD_S as TS_S
-from cartctl.cart import SUPPLY_V
+from cartctl.cart import PERIOD_S, SUPPLY_V
 from cartctl.data.columns import check_mapping, plan_columns
 from cartctl.data.table import (
     Table,
@@ -222,28 +221,28 @@ def _check_increasing(table: Table, time: np.ndarray, label: str, unit: str) -> 
 def _warn_spacing(table: Table, time_s: np.ndarray) -> None:
     """Warn once if time steps stray from the 10 ms tick by more than the tolerance."""
     steps = np.diff(time_s)
-    off = np.abs(steps - TS_S)
+    off = np.abs(steps - PERIOD_S)
     stray = np.flatnonzero(off > SPACING_TOLERANCE_S)
     if not stray.size:
         return
     worst = int(stray[np.argmax(off[stray])])
     _, worst_at = table.where(worst + 1)
     _, first_at = table.where(int(stray[0]) + 1)
-    gaps = steps[steps > 1.5 * TS_S]
+    gaps = steps[steps > 1.5 * PERIOD_S]
     if gaps.size:  # a missing row leaves a step of about two ticks
-        missing = int(np.sum(np.round(gaps / TS_S) - 1))
+        missing = int(np.sum(np.round(gaps / PERIOD_S) - 1))
         what = (
             f"about {missing} row(s) are missing (a lost frame leaves a step of about "
-            f"{2 * TS_S * 1000:g} ms); identification assumes one row per tick"
+            f"{2 * PERIOD_S * 1000:g} ms); identification assumes one row per tick"
         )
     else:
         what = (
             "no row is missing, but the sample clock jitters; identification assumes one row "
-            f"per {TS_S * 1000:g} ms tick"
+            f"per {PERIOD_S * 1000:g} ms tick"
         )
     warnings.warn(
         f"{table.path}: {stray.size} of {steps.size} time steps stray from the "
-        f"{TS_S * 1000:g} ms tick by more than {SPACING_TOLERANCE_S * 1000:g} ms; the farthest "
+        f"{PERIOD_S * 1000:g} ms tick by more than {SPACING_TOLERANCE_S * 1000:g} ms; the farthest "
         f"is {steps[worst] * 1000:.4g} ms (at {worst_at}), the first at {first_at}: {what}",
         DataWarning,
         stacklevel=3,

@@ -45,10 +45,7 @@ from cartctl.link.firmware_id import (
 )
 from cartctl.runtime.base import Controller
 
-__all__ = ["CART_PERIOD_S", "arduino_source", "as_steady_state", "c_float", "timing_noise_note"]
-
-CART_PERIOD_S = PERIOD_S
-"""The period of the template's control thread (s): ``control()`` runs every 10 ms."""
+__all__ = ["arduino_source", "as_steady_state", "c_float", "timing_noise_note"]
 
 
 def timing_noise_note(controller: ControllerFile) -> str | None:
@@ -148,7 +145,7 @@ def _header(controller: ControllerFile, command: str) -> list[str]:
     lines += [
         f"// On model:     {controller.model_path} (sha256 {controller.model_sha256[:16]}...)",
         "//",
-        f"// Assumes control() every {CART_PERIOD_S:g} s (the template's 10 ms control thread) and "
+        f"// Assumes control() every {PERIOD_S:g} s (the template's 10 ms control thread) and "
         f"saturates the",
         f"// command at +-{controller.voltage_limit_v:g} V (the cart's supply is 12 V).",
         "//",
@@ -239,10 +236,10 @@ def arduino_source(controller: ControllerFile, *, command: str = "") -> str:
     DataFileError
         A motor entry misses a key or holds numbers that do not make a controller.
     """
-    if not math.isclose(controller.period_s, CART_PERIOD_S, rel_tol=1e-9):
+    if not math.isclose(controller.period_s, PERIOD_S, rel_tol=1e-9):
         raise InputError(
             f"{where(controller)} was designed for a period of {controller.period_s:g} s; the "
-            f"cart's control() runs every {CART_PERIOD_S:g} s, so design on a 10 ms model"
+            f"cart's control() runs every {PERIOD_S:g} s, so design on a 10 ms model"
         )
     # the checks the loop applies (keys, gains, anti-windup) before any C is written
     build_controllers(as_steady_state(controller))

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import qr, solve_triangular
 
+from cartctl.cart import PERIOD_S
 from cartctl.errors import InputError
 from cartctl.metrics import finite_or_none, fit_percent
 from cartctl.model import ArxModel
@@ -347,7 +348,7 @@ def fit_arx(
     na: int = 2,
     nb: int = 2,
     nk: int = 2,
-    period_s: float = 0.01,
+    period_s: float = PERIOD_S,
     start: int | None = None,
     eval_segments: Sequence[Segment] | None = None,
 ) -> ArxFit:

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from cartctl.cart import PERIOD_S
 from cartctl.errors import InputError
 from cartctl.identification.arx import (
     IdentificationError,
@@ -93,7 +94,7 @@ def estimate_delay(
     na: int = 2,
     nb: int = 2,
     candidates: Sequence[int] = range(1, 7),
-    period_s: float = 0.01,
+    period_s: float = PERIOD_S,
     eval_segments: Sequence[Segment] | None = None,
 ) -> DelayEstimate:
     """Pick the input delay with the smallest ARX equation error (one motor on its own).
@@ -159,7 +160,7 @@ def delay_evidence(
     na: int = 2,
     nb: int = 2,
     candidates: Sequence[int] = range(1, 7),
-    period_s: float = 0.01,
+    period_s: float = PERIOD_S,
     eval_segments: Sequence[Segment] | None = None,
 ) -> DelayEstimate:
     """Fit every candidate delay on common equations: the evidence, and this motor's best.

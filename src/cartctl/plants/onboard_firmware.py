@@ -45,10 +45,8 @@ from cartctl.link.firmware_id import (
 from cartctl.plants.bridge_firmware import CartIO, HeldChannels
 from cartctl.reference import ReferenceSchedule
 
-CART_PERIOD_S = PERIOD_S
-"""The period of the cart's control thread (s)."""
 MOTORS = tuple(IN_REFERENCE)
-MAX_TICKS = round(MAX_DURATION_S / CART_PERIOD_S)
+MAX_TICKS = round(MAX_DURATION_S / PERIOD_S)
 """A reference spec is evaluated over the longest run cartctl takes (24 h), then held."""
 
 
@@ -80,7 +78,7 @@ class OnboardFirmware(HeldChannels):
         controllers: Mapping[str, _Controller],
         *,
         reference: str | None = None,
-        period_s: float = CART_PERIOD_S,
+        period_s: float = PERIOD_S,
     ) -> None:
         unknown = sorted(set(controllers) - set(MOTORS))
         if unknown:

@@ -50,8 +50,9 @@ import threading
 import time
 import tty
 from collections.abc import Sequence
-from typing import Protocol
+from typing import Protocol, cast
 
+from cartctl.cart import PERIOD_S
 from cartctl.link import Encoder, encode_gpiox_v2
 from cartctl.link.bridge import BRIDGE_BAUD, CH_BRIDGE_VERSION, LEGACY_BAUD, TIMING_FIRST_ID
 from cartctl.plants.bridge_firmware import TICK_MODULO, BridgeFirmware, CartIO
@@ -91,8 +92,10 @@ _TERMIOS_SPEED = {getattr(termios, f"B{rate}"): rate for rate in (9600, 19200, 3
 class CartFirmware(Protocol):
     """What the virtual cart runs in ``control()``, with the GPIO channels it holds and writes."""
 
+    in_ints: list[int]
     out_floats: list[float]
     out_ints: list[int]
+    tick: int
 
     def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int) -> None:
         """The channels held from the host's last GPIO, handed over at ``now_ms``."""
@@ -133,7 +136,7 @@ class VirtualCart:
         noise_std_rad_s: float = 0.0,
         seed: int | None = None,
         faults: CartFaults | None = None,
-        period_s: float = 0.01,
+        period_s: float = PERIOD_S,
         firmware: CartFirmware | None = None,
     ) -> None:
         self.faults = faults or CartFaults()
@@ -347,7 +350,7 @@ class VirtualCart:
                 return
             self.receive_for_tick(j)  # on the cart's clock, whenever this thread gets here
             if self.bridge_version == 2:  # the newest command the drains stored
-                voltage = firmware.command_v  # type: ignore[attr-defined]
+                voltage = cast("BridgeFirmware", firmware).command_v
             # io(): the stored voltage drives from actuation_ms after the previous tick; encoders
             if j > 0:
                 measurement = physics.step(*voltage)

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cartctl.cart import SUPPLY_V, check_voltage_limit
+from cartctl.cart import PERIOD_S, SUPPLY_V, check_voltage_limit
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 from cartctl.plants.sim import DIVERGED_RAD_S
@@ -68,7 +68,7 @@ class ArxBatch:
     ar: FloatArray
     b_lags: FloatArray
     voltage_limit_v: float = SUPPLY_V
-    period_s: float = 0.01
+    period_s: float = PERIOD_S
 
     @property
     def size(self) -> int:
@@ -83,7 +83,7 @@ class ArxBatch:
         nk: ArrayLike,
         *,
         voltage_limit_v: float = SUPPLY_V,
-        period_s: float = 0.01,
+        period_s: float = PERIOD_S,
     ) -> ArxBatch:
         """From per-plant coefficients: ``ar`` (N, na), ``b`` (N, nb), input delays ``nk`` (N,), ≥ 1."""
         ar_arr = np.asarray(ar, dtype=float)

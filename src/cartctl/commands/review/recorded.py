@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from cartctl.cart import PERIOD_S
 from cartctl.commands.review.recording import Series, read_recording
 from cartctl.commands.review.smoothed import (
     add_smoothed,
@@ -73,7 +74,7 @@ def recording_summary(path: Path, model: str | None) -> tuple[str, Series | None
         return "", None
     time_s = columns["time_s"]
     steps = np.diff(time_s[np.isfinite(time_s)])
-    period_s = float(np.round(np.median(steps), 6)) if steps.size else 0.01
+    period_s = float(np.round(np.median(steps), 6)) if steps.size else PERIOD_S
     zeros = np.zeros(time_s.size)
     columns = {**dict.fromkeys(TIMING_COLUMNS, zeros), **columns}
     summary = trace_metrics(columns, period_s)
