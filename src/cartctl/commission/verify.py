@@ -97,10 +97,9 @@ def compare(summary: dict[str, Any], predicted: dict[str, float | None],
     measured = {k: _worse(motors, k) for k in ("overshoot_percent", "settling_time_s")}
     nominal_os = predicted.get("nominal_overshoot_percent") or 0.0
     nominal_ts = predicted.get("nominal_settling_time_s") or 0.0
-    limits = {"overshoot_percent": max(TARGET_OVERSHOOT_PERCENT, nominal_os) + tol,
-              "settling_time_s": max(TARGET_SETTLING_S, nominal_ts + 0.02),
-              "speed": speed}  # fmt: skip
+    max_os = max(TARGET_OVERSHOOT_PERCENT, nominal_os) + tol
+    max_ts = max(TARGET_SETTLING_S, nominal_ts + 0.02)
+    limits = {"overshoot_percent": max_os, "settling_time_s": max_ts, "speed": speed}
     os_, ts = measured["overshoot_percent"], measured["settling_time_s"]
-    passed = (os_ is not None and ts is not None and os_ <= limits["overshoot_percent"]
-              and ts <= limits["settling_time_s"])  # fmt: skip
+    passed = os_ is not None and ts is not None and os_ <= max_os and ts <= max_ts
     return Verification(measured, dict(predicted), limits, bool(passed))

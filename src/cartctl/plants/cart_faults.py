@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 from cartctl.errors import InputError
 
@@ -137,7 +138,8 @@ class CartFaults:
                     f"{', '.join(cls.KEYS)}"
                 )
             if key in ("generation", "receive"):
-                faults = replace(faults, **{key: value.strip().lower()})
+                text_value: dict[str, Any] = {key: value.strip().lower()}
+                faults = replace(faults, **text_value)
                 continue
             if key == "usb":
                 flag = value.strip().lower()
@@ -148,7 +150,8 @@ class CartFaults:
             if key in ("reverse_a", "reverse_b"):
                 if value.strip() not in ("0", "1"):
                     raise InputError(f"virtual cart option '{key}' must be 0 or 1, got '{value}'")
-                faults = replace(faults, **{key: value.strip() == "1"})
+                flag_value: dict[str, Any] = {key: value.strip() == "1"}
+                faults = replace(faults, **flag_value)
                 continue
             if key == "bridge":
                 if value.strip() not in ("1", "2"):
@@ -164,5 +167,6 @@ class CartFaults:
                     ) from None
                 raise InputError(f"fault '{key}' needs a number, got '{value}'") from None
             field = {"stall": "stall_after_s", "pull": "pull_after_s"}.get(key, key)
-            faults = replace(faults, **{field: number})
+            number_value: dict[str, Any] = {field: number}
+            faults = replace(faults, **number_value)
         return faults

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TypedDict
 
 from cartctl.choices import DEFAULT_MODEL
 from cartctl.errors import InputError
@@ -27,12 +28,19 @@ def plant_kind(spec: str) -> str:
     return kind if kind in ("physics", "virtual", "serial") else spec
 
 
-def physics_options(text: str) -> dict[str, float | str]:
+class PhysicsOptions(TypedDict, total=False):
+    """The keyword arguments of :class:`~cartctl.plants.physics.PhysicsPlant` a plant name sets."""
+
+    actuation_ms: float
+    reversed_motors: str
+
+
+def physics_options(text: str) -> PhysicsOptions:
     """The options of ``physics:KEY=VALUE,...``: ``actuation_ms`` (see ``check_actuation_ms``) and
     ``reverse_a=1`` / ``reverse_b=1`` (that motor's leads swapped: it runs backwards)."""
     from cartctl.plants.physics_params import check_actuation_ms
 
-    options: dict[str, float | str] = {}
+    options: PhysicsOptions = {}
     for item in filter(None, (part.strip() for part in text.split(","))):
         key, sep, value = (part.strip() for part in item.partition("="))
         if sep and key in ("reverse_a", "reverse_b"):
@@ -139,14 +147,14 @@ def make_plant(
             )
         from cartctl.plants.sim import ArxPlant
 
-        plant = ArxPlant(models.motors["a"], models.motors["b"], noise_std_rad_s=noise_std_rad_s,
+        plant: Plant = ArxPlant(models.motors["a"], models.motors["b"], noise_std_rad_s=noise_std_rad_s,
                          seed=seed, loop_delay_ticks=models.loop_delay_ticks)  # fmt: skip
         return plant, f"sim ({model_path})"
     if spec == "physics" or spec.startswith("physics:"):
         from cartctl.plants.physics import PhysicsPlant
 
         options = physics_options(spec.partition(":")[2])
-        plant = PhysicsPlant(preset, noise_std_rad_s=noise_std_rad_s, seed=seed, **options)  # type: ignore[arg-type]
+        plant = PhysicsPlant(preset, noise_std_rad_s=noise_std_rad_s, seed=seed, **options)
         timing = (f", command lands {options['actuation_ms']:g} ms after its tick"
                   if "actuation_ms" in options else "")  # fmt: skip
         if options.get("reversed_motors"):

@@ -239,7 +239,7 @@ ACTUATION_MS_STEP = 0.1
 """``actuation_ms`` is given to this resolution (ms)."""
 
 
-def check_actuation_ms(value: float) -> float:
+def check_actuation_ms(value: float | str) -> float:
     """``value`` (ms) if it is a valid actuation timing; else a one-line :class:`InputError`.
 
     A command lands ``actuation_ms`` after the tick it was given at: 3 is the presets' calibrated
