@@ -1,9 +1,11 @@
 """A controller as the loop runs it, as one linear state-space system from (r, y) to u.
 
-Where it sits: between a controller's ``[motors.X]`` entry (the file's numbers, or a fresh design's
-:attr:`~cartctl.design.make.MotorDesign.file_entry`) and the analyses that need the whole
-controller: the loop broken at the plant input (:mod:`cartctl.design.sensitivity`) and
-``cartctl export --mat`` (:mod:`cartctl.export.mat`). Pure: no I/O.
+Where it sits: between a controller (a fresh design, or a file's ``[motors.X]`` entry) and what
+needs it whole: the pole-placement ``controller_num``/``controller_den`` of its files and its
+margins (:func:`feedback_tf_coeffs`), the check that a file's stored C(z) agrees with its gains
+(:func:`consistency_problems`), the loop broken at the plant input
+(:mod:`cartctl.design.sensitivity`) and ``cartctl export --mat`` (:mod:`cartctl.export.mat`).
+The one place the controller is built as an LTI system. Pure: no I/O.
 
 Unsaturated and with the estimator's steady-state gain L (the gain the time-varying filter of the
 designs starts at and keeps), every controller of cartctl is linear time-invariant::
@@ -27,14 +29,24 @@ negative feedback; for the PI on the measurement it is the PI's C(z) = Kp + Ki·
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["ControllerStateSpace", "controller_state_space"]
+from cartctl.design.entries import feedback_gains
+from cartctl.design.pi import pi_tf_coeffs
+from cartctl.runtime.statefeedback import FeedbackGains
+
+__all__ = [
+    "ControllerStateSpace",
+    "consistency_problems",
+    "controller_state_space",
+    "feedback_tf_coeffs",
+    "state_feedback",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,7 +129,7 @@ def controller_state_space(
                 ("integral_v",),
             )
         return _pi_on_estimate(kp, ki, ts, est)
-    return _state_feedback(entry, ts)
+    return state_feedback(feedback_gains(entry, ts))
 
 
 def _estimator(est: Mapping[str, Any]) -> tuple[NDArray[np.float64], ...]:
@@ -128,9 +140,8 @@ def _estimator(est: Mapping[str, Any]) -> tuple[NDArray[np.float64], ...]:
     return a, b, c, gain
 
 
-def _state_names(est: Mapping[str, Any], m: int) -> list[str]:
-    """xhat_1 … xhat_n (rad/s), then bias_v (V) when the estimator has the disturbance state."""
-    n = int(est.get("n_model_states", m))
+def _state_names(n: int, m: int) -> list[str]:
+    """xhat_1 … xhat_n (rad/s) of m estimator states, then bias_v (V) for the disturbance state."""
     return [f"xhat_{i + 1}" for i in range(min(n, m))] + ["bias_v"] * (m - n)
 
 
@@ -156,17 +167,19 @@ def _pi_on_estimate(
     big_c[0, :m] = -g * c1
     big_c[0, m] = 1.0
     big_d = np.array([[g, -g * cl]])
-    states = (*_state_names(est, m), "integral_v")
+    states = (*_state_names(int(est.get("n_model_states", m)), m), "integral_v")
     return ControllerStateSpace(big_a, big_b, big_c, big_d, ts, states)
 
 
-def _state_feedback(entry: Mapping[str, Any], ts: float) -> ControllerStateSpace:
-    a, b, c, gain = _estimator(entry["estimator"])
+def state_feedback(design: FeedbackGains) -> ControllerStateSpace:
+    """Pole placement's controller (see the module docstring) from its gains: a fresh
+    :class:`~cartctl.design.poles.PolesDesign` or a file's, read back."""
+    est = design.estimator
+    a, b, c, gain = est.A, est.B, est.C, est.L
     m = a.shape[0]
-    k = np.asarray(entry["K"], dtype=float).ravel()
     k_full = np.zeros(m)
-    k_full[: k.size] = k
-    k_xi, kr = float(entry["Ki"]), float(entry["Kr"])
+    k_full[: design.K.size] = design.K
+    k_xi, kr, ts = float(design.K_xi), float(design.Kr), float(design.period_s)
     lc = np.eye(m) - np.outer(gain, c)
     kl = float(k_full @ gain)
     n = m + 1 if k_xi != 0.0 else m
@@ -178,7 +191,7 @@ def _state_feedback(entry: Mapping[str, Any], ts: float) -> ControllerStateSpace
     big_c = np.zeros((1, n))
     big_c[0, :m] = -(k_full @ lc)
     big_d = np.array([[kr, -kl]])
-    states = _state_names(entry["estimator"], m)
+    states = _state_names(est.n_model_states, m)
     if n > m:
         big_a[:m, m] = -k_xi * b
         big_a[m, m] = 1.0
@@ -186,3 +199,97 @@ def _state_feedback(entry: Mapping[str, Any], ts: float) -> ControllerStateSpace
         big_c[0, m] = -k_xi
         states.append("integral_rad")
     return ControllerStateSpace(big_a, big_b, big_c, big_d, ts, tuple(states))
+
+
+def feedback_tf_coeffs(design: FeedbackGains) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Pole placement's C_fb(z) = −U/Y as (num, den), descending powers of z, den monic, minimal
+    (common roots cancelled to 1e-9): the ``controller_num``/``controller_den`` of its files."""
+    import control
+
+    num, den = state_feedback(design).feedback_tf()
+    # a transfer-function minreal: the state-space one needs slycot
+    tf = control.tf(num, den, design.period_s).minreal(tol=1e-9)
+    num = np.atleast_1d(np.squeeze(tf.num[0][0]))
+    den = np.atleast_1d(np.squeeze(tf.den[0][0]))
+    return num / den[0], den / den[0]
+
+
+CONSISTENCY_RTOL = 1e-6
+"""How far a stored C(z) coefficient may be from the one its gains give, relative to the largest
+coefficient of that polynomial (a file rounds nothing: the rest is floating-point noise)."""
+
+
+def _coeffs(values: Sequence[Any]) -> str:
+    """Coefficients for a message; an entry that is not a number is shown as it is."""
+    return (
+        "["
+        + ", ".join(
+            f"{v:.10g}" if isinstance(v, int | float) and not isinstance(v, bool) else repr(v)
+            for v in values
+        )
+        + "]"
+    )
+
+
+def _disagrees(stored: Any, expected: NDArray[np.float64]) -> bool:
+    """True unless ``stored`` is a list of numbers equal to ``expected`` (see CONSISTENCY_RTOL)."""
+    try:
+        got = np.asarray(stored, dtype=float)
+    except (TypeError, ValueError):
+        return True
+    if got.shape != expected.shape or not np.all(np.isfinite(got)):
+        return True
+    scale = float(np.max(np.abs(expected))) if expected.size else 0.0
+    return bool(np.any(np.abs(got - expected) > CONSISTENCY_RTOL * scale))
+
+
+def expected_tf(
+    controller: Any, entry: Mapping[str, Any]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
+    """C(z) as one motor's gains give it: (num, den, what it was computed from).
+
+    PI: C(z) = Kp + Ki·Ts·z/(z − 1), num = [Kp + Ki·Ts, −Kp], den = [1, −1]. Pole placement: the
+    feedback from the measured speed to the voltage through the estimator, integrator and K
+    (:func:`cartctl.design.controller_ss.feedback_tf_coeffs`; Kr acts on the reference and is not in it).
+
+    Raises
+    ------
+    KeyError, TypeError, ValueError
+        The entry lacks a gain or holds something that is not a number.
+    """
+    ts = controller.period_s
+    if controller.method == "pi":
+        kp, ki = float(entry["kp"]), float(entry["ki"])
+        num, den = pi_tf_coeffs(kp, ki, ts)
+        return (
+            num,
+            den,
+            f"Kp = {kp:.10g}, Ki = {ki:.10g} and Ts = {ts:g} s give (C(z) = Kp + Ki·Ts·z/(z−1))",
+        )
+    num, den = feedback_tf_coeffs(feedback_gains(entry, ts))
+    return num, den, f"K, Ki, the estimator and Ts = {ts:g} s give"
+
+
+def consistency_problems(controller: Any) -> list[str]:
+    """Where a file's stored C(z) disagrees with its gains, one sentence per key.
+
+    A motor entry without ``controller_num``/``controller_den`` (pole-placement files of older
+    cartctl) has nothing to disagree with; an entry whose gains are missing or not numbers is left
+    to :func:`build_controllers`, which names the problem.
+    """
+    problems: list[str] = []
+    for motor, entry in controller.motors.items():
+        if "controller_num" not in entry and "controller_den" not in entry:
+            continue
+        try:
+            num, den, source = expected_tf(controller, entry)
+        except (KeyError, TypeError, ValueError, IndexError, np.linalg.LinAlgError):
+            continue
+        for key, expected in (("controller_num", num), ("controller_den", den)):
+            stored = entry.get(key)
+            if _disagrees(stored, expected):
+                shown = _coeffs(stored) if isinstance(stored, list) else repr(stored)
+                problems.append(
+                    f"[motors.{motor}] {key} = {shown} but {source} {_coeffs(expected)}"
+                )
+    return problems

@@ -1,29 +1,25 @@
-"""A controller file's tables, read back: the estimator, the gains and their C(z) checked.
+"""A controller file's tables, read back: the estimator and the gains.
 
 :mod:`cartctl.design.controllerfile` loads a file through these checks and
-:mod:`cartctl.design.build` turns the checked tables into runtime controllers. The checks: an
-estimator whose arrays fit together and whose error decays (:func:`kalman_from_entry`), and a
-stored ``controller_num``/``controller_den`` that agrees with the gains
-(:func:`consistency_problems`).
+:mod:`cartctl.design.build` turns the checked tables into runtime controllers. The check here: an
+estimator whose arrays fit together and whose error decays (:func:`kalman_from_entry`); that a
+stored ``controller_num``/``controller_den`` agrees with the gains is
+:func:`cartctl.design.controller_ss.consistency_problems`.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import MISSING, dataclass, fields
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.design.pi import pi_tf_coeffs
 from cartctl.runtime.kalman import KalmanDesign
 
 _KALMAN_ARRAYS = ("A", "B", "C", "Q", "P", "L")
-CONSISTENCY_RTOL = 1e-6
-"""How far a stored C(z) coefficient may be from the one its gains give, relative to the largest
-coefficient of that polynomial (a file rounds nothing: the rest is floating-point noise)."""
 
 
 def kalman_from_entry(entry: Mapping[str, Any]) -> KalmanDesign:
@@ -105,83 +101,14 @@ class _Gains:
     estimator: KalmanDesign
 
 
-def _coeffs(values: Sequence[Any]) -> str:
-    """Coefficients for a message; an entry that is not a number is shown as it is."""
-    return (
-        "["
-        + ", ".join(
-            f"{v:.10g}" if isinstance(v, int | float) and not isinstance(v, bool) else repr(v)
-            for v in values
-        )
-        + "]"
-    )
-
-
-def _disagrees(stored: Any, expected: NDArray[np.float64]) -> bool:
-    """True unless ``stored`` is a list of numbers equal to ``expected`` (see CONSISTENCY_RTOL)."""
-    try:
-        got = np.asarray(stored, dtype=float)
-    except (TypeError, ValueError):
-        return True
-    if got.shape != expected.shape or not np.all(np.isfinite(got)):
-        return True
-    scale = float(np.max(np.abs(expected))) if expected.size else 0.0
-    return bool(np.any(np.abs(got - expected) > CONSISTENCY_RTOL * scale))
-
-
-def expected_tf(
-    controller: Any, entry: Mapping[str, Any]
-) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
-    """C(z) as one motor's gains give it: (num, den, what it was computed from).
-
-    PI: C(z) = Kp + Ki·Ts·z/(z − 1), num = [Kp + Ki·Ts, −Kp], den = [1, −1]. Pole placement: the
-    feedback from the measured speed to the voltage through the estimator, integrator and K
-    (:func:`cartctl.design.loop.feedback_tf_coeffs`; Kr acts on the reference and is not in it).
+def feedback_gains(entry: Mapping[str, Any], period_s: float) -> _Gains:
+    """A pole-placement ``[motors.X]`` entry's K, Ki (K_xi), Kr and estimator.
 
     Raises
     ------
     KeyError, TypeError, ValueError
         The entry lacks a gain or holds something that is not a number.
     """
-    ts = controller.period_s
-    if controller.method == "pi":
-        kp, ki = float(entry["kp"]), float(entry["ki"])
-        num, den = pi_tf_coeffs(kp, ki, ts)
-        return (
-            num,
-            den,
-            f"Kp = {kp:.10g}, Ki = {ki:.10g} and Ts = {ts:g} s give (C(z) = Kp + Ki·Ts·z/(z−1))",
-        )
-    from cartctl.design.loop import feedback_tf_coeffs
-
     kalman = kalman_from_entry(entry["estimator"])
-    gains = _Gains(
-        np.asarray(entry["K"], dtype=float), float(entry["Ki"]), float(entry["Kr"]), ts, kalman
-    )
-    num, den = feedback_tf_coeffs(gains)  # type: ignore[arg-type]
-    return num, den, f"K, Ki, the estimator and Ts = {ts:g} s give"
-
-
-def consistency_problems(controller: Any) -> list[str]:
-    """Where a file's stored C(z) disagrees with its gains, one sentence per key.
-
-    A motor entry without ``controller_num``/``controller_den`` (pole-placement files of older
-    cartctl) has nothing to disagree with; an entry whose gains are missing or not numbers is left
-    to :func:`build_controllers`, which names the problem.
-    """
-    problems: list[str] = []
-    for motor, entry in controller.motors.items():
-        if "controller_num" not in entry and "controller_den" not in entry:
-            continue
-        try:
-            num, den, source = expected_tf(controller, entry)
-        except (KeyError, TypeError, ValueError, IndexError, np.linalg.LinAlgError):
-            continue
-        for key, expected in (("controller_num", num), ("controller_den", den)):
-            stored = entry.get(key)
-            if _disagrees(stored, expected):
-                shown = _coeffs(stored) if isinstance(stored, list) else repr(stored)
-                problems.append(
-                    f"[motors.{motor}] {key} = {shown} but {source} {_coeffs(expected)}"
-                )
-    return problems
+    k = np.asarray(entry["K"], dtype=float).ravel()
+    return _Gains(k, float(entry["Ki"]), float(entry["Kr"]), float(period_s), kalman)

@@ -1,16 +1,9 @@
-"""The linear feedback part of a pole-placement controller, for margins and ``controller_num/den``.
+"""Margins, crossover and sensitivity peak of a designed loop, from python-control.
 
-With the steady-state estimator the pole-placement controller is linear time-invariant. Its state
-is the predicted estimate x̂[k|k−1] (m states) and the error integral x_i; per tick (the order of
-:class:`~cartctl.runtime.statefeedback.StateFeedbackController`)::
-
-    x̂c     = x̂ + L (y − C x̂)
-    u      = −K x̂c − K_xi x_i + Kr r          (K on the first K.size states: with the input-
-    x̂⁺     = A x̂c + B u                      disturbance state it ends with 1 on b̂)
-    x_i⁺   = x_i + Ts (r − y)               (left out when K_xi = 0: it does not reach u)
-
-The loop is broken at the measurement: C_fb(z) = −U(z)/Y(z) with r = 0, so that the open loop is
-C_fb(z) G(z) z^(−extra) with negative feedback, as for the PI.
+Where it sits: after a design (:mod:`cartctl.design.pi`, :mod:`cartctl.design.make`) and in the
+robustness analysis (:mod:`cartctl.design.sensitivity`). The controller's feedback part C(z)
+(the PI's, or C_fb = −U/Y of :mod:`cartctl.design.controller_ss`) closes the loop as
+L = C·G·z^(−extra) with negative feedback. Pure: no I/O.
 """
 
 from __future__ import annotations
@@ -22,55 +15,39 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.design.poles import PolesDesign
 from cartctl.model import ArxModel
-
-
-def feedback_tf_coeffs(design: PolesDesign) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """C_fb(z) = −U/Y as (num, den) in descending powers of z (minimal: common roots cancelled)."""
-    import control
-
-    est = design.estimator
-    m = est.A.shape[0]
-    n = design.K.size
-    k_full = np.zeros(m)
-    k_full[:n] = design.K
-    lc = np.eye(m) - np.outer(est.L, est.C)
-    # state s = [x̂ (m), x_i], input y, output u; without K_xi (integral action from the
-    # disturbance estimate) x_i does not reach u and is left out: its pole at z = 1 would meet
-    # the estimator's own there and not cancel cleanly
-    i = m + 1 if design.K_xi != 0.0 else m
-    a = np.zeros((i, i))
-    a[:m, :m] = est.A @ lc - np.outer(est.B, k_full @ lc)
-    b = np.zeros((i, 1))
-    b[:m, 0] = est.A @ est.L - est.B * float(k_full @ est.L)
-    c = np.zeros((1, i))
-    c[0, :m] = -(k_full @ lc)
-    if i > m:
-        a[:m, m] = -est.B * design.K_xi
-        a[m, m] = 1.0
-        b[m, 0] = -design.period_s
-        c[0, m] = -design.K_xi
-    d = np.array([[-float(k_full @ est.L)]])
-    # ss2tf then a transfer-function minreal: the state-space minreal needs slycot
-    tf = control.ss2tf(control.ss(a, b, -c, -d, design.period_s)).minreal(tol=1e-9)
-    num = np.atleast_1d(np.squeeze(tf.num[0][0]))
-    den = np.atleast_1d(np.squeeze(tf.den[0][0]))
-    return num / den[0], den / den[0]
 
 
 def loop_analysis(
     num: NDArray[np.float64], den: NDArray[np.float64], model: ArxModel, extra_delay_ticks: int
 ) -> dict[str, Any]:
-    """Margins, crossover and sensitivity peak max|1/(1 + L)| of the open loop L = C G z^(−extra).
+    """Margins, crossover and sensitivity peak Ms = max|1/(1 + L)| of the open loop
+    L = C G z^(−extra), all from one call of python-control's ``stability_margins``.
 
-    The margins are python-control's ``stability_margins`` with the exact polynomial method:
-    ``margin``'s default falls back, for some well-damped low-crossover designs, to a frequency
-    grid that misses the crossover. On high-order loops (a pole-placement controller with its
-    estimator and a serial loop's delay) the polynomial's roots include spurious crossings, so
-    every crossing is checked on L itself (|L| = 1 within 1e-6, or a phase of −180° within 1e-4
-    rad) before python-control's choice (the smallest |PM|, the GM closest to 1) is made. The
-    sensitivity is sampled at 4001 points up to Nyquist.
+    Parameters
+    ----------
+    num, den : ndarray
+        C(z), descending powers of z.
+    model : ArxModel
+        The plant G (V → rad/s, its delay nk included).
+    extra_delay_ticks : int
+        Ticks of loop delay beyond the model's.
+
+    Returns
+    -------
+    dict
+        ``phase_margin_deg``, ``gain_margin_db`` (None when infinite), ``crossover_hz``,
+        ``sensitivity_peak`` (Ms = 1 / sm, python-control's stability margin sm: the shortest
+        distance from L to −1), ``sensitivity_peak_db`` and ``sensitivity_peak_hz``.
+
+    Notes
+    -----
+    The exact polynomial method is asked for: ``margin``'s default falls back, for some
+    well-damped low-crossover designs, to a frequency grid that misses the crossover. On
+    high-order loops (a pole-placement controller with its estimator and a serial loop's delay)
+    the polynomial's roots include spurious crossings, so every crossing is checked on L itself
+    (|L| = 1 within 1e-6, or a phase of −180° within 1e-4 rad) before python-control's choice
+    (the smallest |PM|, the GM closest to 1) is made.
     """
     import control
 
@@ -83,15 +60,17 @@ def loop_analysis(
     ln, ld = np.squeeze(loop.num[0][0]), np.squeeze(loop.den[0][0])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        gms, pms, _, w180, wcs, _ = control.stability_margins(loop, method="poly", returnall=True)
+        gms, pms, sms, w180, wcs, wms = control.stability_margins(
+            loop, method="poly", returnall=True
+        )
     gm, pm, wcp = _checked_margins(ln, ld, ts, gms, pms, w180, wcs)
-    z = np.exp(2j * np.pi * np.linspace(0.0, 0.5 / ts, 4001) * ts)
-    with np.errstate(divide="ignore", invalid="ignore"):  # L has a pole at z = 1 (the integrator)
-        sensitivity = np.abs(np.polyval(ld, z) / (np.polyval(ld, z) + np.polyval(ln, z)))
-    ms = float(np.nanmax(sensitivity))
+    ms = 1.0 / float(np.min(sms))
+    # python-control searches ωTs in [0, 2π]: a peak above Nyquist is the mirror of one below
+    wdt = float(wms[np.argmin(sms)]) * ts % (2.0 * math.pi)
     return {
         "sensitivity_peak": ms,
         "sensitivity_peak_db": 20.0 * math.log10(ms),
+        "sensitivity_peak_hz": min(wdt, 2.0 * math.pi - wdt) / (2.0 * math.pi * ts),
         "phase_margin_deg": float(pm) if math.isfinite(pm) else None,
         "gain_margin_db": 20.0 * math.log10(gm) if math.isfinite(gm) and gm > 0 else None,
         "crossover_hz": float(wcp) / (2.0 * math.pi) if math.isfinite(wcp) else None,

@@ -101,11 +101,11 @@ class MotorAnalysis:
     motor: str = "a"
 
     def entry(self) -> dict[str, Any]:
-        """The keys this analysis adds to (or refines in) a motor's ``design --json`` entry.
+        """The keys this analysis adds to (or replaces in) a motor's ``design --json`` entry.
 
         ``sensitivity_peak`` and ``sensitivity_peak_db`` are those of the loop as it runs: the
-        same loop as before for the PI on the measurement and for pole placement (refined between
-        grid points), the PI with its estimator for ``--estimator kalman``.
+        design's own loop for the PI on the measurement and for pole placement (the same numbers),
+        the PI with its estimator for ``--estimator kalman``.
         """
         return {
             "sensitivity_peak": self.shape.sensitivity_peak,

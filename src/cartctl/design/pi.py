@@ -334,8 +334,8 @@ class PiDesign:
         -------
         dict
             ``phase_margin_deg``, ``gain_margin_db`` (None when infinite), ``crossover_hz``,
-            ``closed_loop_poles`` ([[re, im], ...]), ``sensitivity_peak`` (max |1/(1+L)| on a
-            dense grid up to Nyquist), ``sensitivity_peak_db``, ``bandwidth_hz``.
+            ``closed_loop_poles`` ([[re, im], ...]), ``sensitivity_peak`` (max |1/(1+L)|, from
+            python-control's stability margin), ``sensitivity_peak_db``, ``bandwidth_hz``.
         """
         from cartctl.design.loop import loop_analysis
 

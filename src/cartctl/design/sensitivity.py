@@ -9,9 +9,10 @@ the estimate with its integral action)::
 
 with G the model (its own delay nk included) and ``extra`` the design's ticks of delay beyond it:
 the loop delay the controller was designed for. For a single loop L is the same wherever it is
-broken. The peaks Ms = max|S| and Mt = max|T| are found on a frequency grid up to Nyquist and
-refined with :func:`scipy.optimize.minimize_scalar`. Ms is the inverse of the shortest distance
-from L to −1: the circle of radius 1/Ms around −1 touches the Nyquist curve. Pure: no I/O.
+broken. Ms = max|S| is the inverse of the shortest distance from L to −1 (the circle of radius
+1/Ms around −1 touches the Nyquist curve): python-control's stability margin, through
+:func:`cartctl.design.loop.loop_analysis`. Mt = max|T| is found on a frequency grid up to Nyquist
+and refined with :func:`scipy.optimize.minimize_scalar`. Pure: no I/O.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from numpy.typing import NDArray
 from scipy import optimize
 
 from cartctl.design.controller_ss import ControllerStateSpace
+from cartctl.design.loop import loop_analysis
 from cartctl.model import ArxModel
 
 __all__ = ["LoopShape", "loop_shape"]
@@ -112,7 +114,8 @@ def _peak(
 def loop_shape(
     controller: ControllerStateSpace, model: ArxModel, extra_delay_ticks: int = 0
 ) -> LoopShape:
-    """S and T of the loop a controller was designed for, with their peaks.
+    """S and T of the loop a controller was designed for, with their peaks (Ms from
+    :func:`~cartctl.design.loop.loop_analysis`).
 
     Parameters
     ----------
@@ -127,14 +130,11 @@ def loop_shape(
     freq = np.geomspace(_LOW_HZ, nyquist, _GRID_POINTS)
     loop = loop_response(controller, model, extra_delay_ticks, freq)
 
-    def s_at(f: float) -> float:
-        ell = loop_response(controller, model, extra_delay_ticks, np.array([f]))[0]
-        return float(abs(1.0 / (1.0 + ell)))
-
     def t_at(f: float) -> float:
         ell = loop_response(controller, model, extra_delay_ticks, np.array([f]))[0]
         return float(abs(ell / (1.0 + ell)))
 
-    ms, ms_hz = _peak(s_at, freq, np.abs(1.0 / (1.0 + loop)))
     mt, mt_hz = _peak(t_at, freq, np.abs(loop / (1.0 + loop)))
+    margins = loop_analysis(*controller.feedback_tf(), model, extra_delay_ticks)
+    ms, ms_hz = margins["sensitivity_peak"], margins["sensitivity_peak_hz"]
     return LoopShape(freq, loop, ms, ms_hz, mt, mt_hz)
