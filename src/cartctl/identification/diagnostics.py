@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,6 +26,9 @@ from cartctl.metrics import finite_or_none
 from cartctl.model import ArxModel
 
 __all__ = ["Diagnostics", "band_frequencies", "diagnose", "on_validation", "split_segments"]
+
+FitT = TypeVar("FitT", bound=ArxFit)
+"""An ARX fit or an output-error one: :func:`on_validation` keeps the kind."""
 
 MIN_PART = 50
 """Fewest samples an estimation or validation part of a split may have."""
@@ -43,8 +46,10 @@ def split_segments(
     """
     if not 0.0 < fraction < 1.0:
         raise InputError(f"--split must be a fraction between 0 and 1 (e.g. 0.7), got {fraction:g}")
-    est, val = [], []
-    for y, u in segments:
+    est: list[Segment] = []
+    val: list[Segment] = []
+    for y_like, u_like in segments:
+        y, u = np.asarray(y_like), np.asarray(u_like)
         n = len(y)
         m = round(fraction * n)
         if min(m, n - m) < MIN_PART:
@@ -57,7 +62,7 @@ def split_segments(
     return est, val
 
 
-def on_validation(fit: ArxFit, validation: Sequence[Segment]) -> ArxFit:
+def on_validation(fit: FitT, validation: Sequence[Segment]) -> FitT:
     """``fit`` with its simulation and prediction fits recomputed on the validation data."""
     return dataclasses.replace(
         fit,

@@ -187,7 +187,7 @@ def _periodic(
     if n > 1:  # standard error of the mean output spectrum, from the periods' spread
         y_sem = np.sqrt(np.sum(np.abs(Y_cycles - Y) ** 2, axis=0) / (n - 1) / n)
         std = y_sem[keep] / np.abs(U[keep])
-    freq = np.fft.rfftfreq(p, d=period_s)
+    freq = np.asarray(np.fft.rfftfreq(p, d=period_s), dtype=np.float64)
     return Etfe(
         freq_hz=freq[keep],
         response=Y[keep] / U[keep],
@@ -206,7 +206,7 @@ def _whole_record(
     Y = np.fft.rfft(y)
     U = np.fft.rfft(u)
     keep = _excited(np.abs(U), fraction)
-    freq = np.fft.rfftfreq(y.size, d=period_s)
+    freq = np.asarray(np.fft.rfftfreq(y.size, d=period_s), dtype=np.float64)
     return Etfe(freq[keep], Y[keep] / U[keep], False, 1, float(period_s), None)
 
 

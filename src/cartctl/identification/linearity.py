@@ -192,12 +192,15 @@ def linearity(small: Trace, large: Trace, total: Trace, motor: str = "a") -> Lin
     speeds = [t.speed(motor)[o.index : o.index + n] for t, o in zip(traces, onsets, strict=True)]
     added = speeds[0] + speeds[1]
     period_s = float(f"{np.median(periods):.9g}")  # 0.01, not 0.010000000000000009
+    on_small, on_large, on_sum = (
+        float(t.time_s[o.index]) for t, o in zip(traces, onsets, strict=True)
+    )
     return LinearityResult(
         motor=motor,
         period_s=period_s,
         sources=(small.source, large.source, total.source),
         amplitudes_v=(amp_small, amp_large, amp_sum),
-        onsets_s=tuple(float(t.time_s[o.index]) for t, o in zip(traces, onsets, strict=True)),
+        onsets_s=(on_small, on_large, on_sum),
         time_s=np.arange(n) * period_s,
         speed_small_rad_s=speeds[0],
         speed_large_rad_s=speeds[1],

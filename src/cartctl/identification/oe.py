@@ -174,7 +174,7 @@ def _d_ar_d_eta(eta: NDArray[np.float64], rho: float) -> NDArray[np.float64]:
     return np.array(cols).T.reshape(eta.size, eta.size)
 
 
-def project_poles(ar: Sequence[float], radius: float) -> NDArray[np.float64]:
+def project_poles(ar: Sequence[float] | NDArray[np.float64], radius: float) -> NDArray[np.float64]:
     """a_1 … a_na with every root of magnitude above ``radius`` pulled in to ``radius``.
 
     Conjugate pairs move together, so the coefficients stay real; the angles are kept.

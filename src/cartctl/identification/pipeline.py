@@ -265,7 +265,7 @@ def identify_motor(
     arx_fit = arx(fit_data)
     unfiltered = None
     if request.prefilter is not None:
-        unfiltered = arx(_averaged(raw, start, sources)[0] if request.average else raw)
+        unfiltered = arx(raw if start is None else _averaged(raw, start, sources)[0])
     oe_fit = fit_oe(work, arx_fit.model, eval_segments=raw) if request.method == "oe" else None
     diagnostics = diagnose(
         oe_fit or arx_fit, work if oe_fit else fit_data, start=start, raw=raw,

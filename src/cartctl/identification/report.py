@@ -107,7 +107,7 @@ def plot_io(
             ax_z.set_ylabel("speed (rad/s)")
             ax_z.set_xlabel("time (s)")
             ax_z.set_title(f"zoom {zoom_s[0]:g}–{zoom_s[1]:g} s", fontsize=10)
-        if len(t):
+        if len(t) and first is not None:
             first.set_xlim(t[0], t[-1])
         fig.suptitle(title)
         return _save(fig, path)
@@ -167,8 +167,8 @@ def plot_step_validation(
         ax_u.plot(t, series["voltage"], drawstyle="steps-post", color="tab:blue")
         ax_u.set_ylabel("voltage (V)")
         ax_y.plot(t, y, color="black", linewidth=2.0, label="measured")
-        for i, (label, values) in enumerate(simulated.items()):
-            sim = np.asarray(values, dtype=float)
+        for i, (label, given) in enumerate(simulated.items()):
+            sim = np.asarray(given, dtype=float)
             fit = fit_percent(y, sim)
             ax_y.plot(t, sim, color=_color(i), label=f"{label} (fit {fit:.1f} %)")
             ax_e.plot(t, np.abs(y - sim), color=_color(i))
