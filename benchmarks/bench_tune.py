@@ -24,6 +24,7 @@ import os
 import time
 from pathlib import Path
 
+from cartctl.cart import encoder_quantum_rad_s
 from cartctl.cli import main
 from cartctl.design.make import design_motor
 from cartctl.modelfile import load_models
@@ -31,7 +32,6 @@ from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
 from cartctl.runtime.fast import run_in_memory
 from cartctl.sinks.summary import trace_metrics
-from cartctl.stepinfo import encoder_quantum_rad_s
 from cartctl.tune.batch import ArxBatch, simulate_batch
 from cartctl.tune.grid import design_request, grid_settings, parse_grid
 from cartctl.tune.robust import step_metrics

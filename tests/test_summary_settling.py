@@ -12,10 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cartctl.cart import encoder_quantum_rad_s
 from cartctl.cli import main
 from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS
 from cartctl.sinks.summary import format_summary, trace_metrics
-from cartctl.stepinfo import encoder_quantum_rad_s, settling_half_width, step_info
+from cartctl.stepinfo import settling_half_width, step_info
 
 TS = 0.01
 N = 300

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cartctl.cart import encoder_quantum_rad_s
 from cartctl.design.make import design_motor
 from cartctl.design.request import DesignRequest
 from cartctl.model import ArxModel
@@ -24,7 +25,6 @@ from cartctl.runtime.base import Controller
 from cartctl.runtime.fast import run_in_memory
 from cartctl.runtime.pi import PiController
 from cartctl.sinks.summary import motor_metrics
-from cartctl.stepinfo import encoder_quantum_rad_s
 from cartctl.tune.batch import ArxBatch, simulate_batch
 from cartctl.tune.robust import step_metrics
 

@@ -18,8 +18,24 @@ PERIOD_S = 0.01
 """The control thread's period on the cart (s)."""
 PWM_STEP_V = SUPPLY_V / 255.0
 """One step of the H-bridges' 8-bit PWM (V): 47 mV."""
-SPEED_QUANTUM_RAD_S = 2.0 * math.pi / ENCODER_COUNTS_PER_REV / PERIOD_S
-"""One encoder count per tick as a speed: the resolution of a measured speed (0.3506 rad/s)."""
+
+
+def encoder_quantum_rad_s(
+    period_s: float = PERIOD_S, counts_per_rev: int = ENCODER_COUNTS_PER_REV
+) -> float:
+    """One encoder count per tick as a speed, the resolution of a measured speed (rad/s):
+    q = 2π / counts_per_rev / Ts, 0.3506 rad/s at the cart's 10 ms.
+
+    Parameters
+    ----------
+    period_s : float
+        Tick Ts (s), > 0.
+    counts_per_rev : int
+        Encoder counts per wheel revolution.
+    """
+    if not (math.isfinite(period_s) and period_s > 0.0):
+        raise InputError(f"the period must be a positive number of seconds, got {period_s}")
+    return 2.0 * math.pi / counts_per_rev / period_s
 
 
 def nk_fits_loop_delay(nk: int, loop_delay_ticks: int) -> bool:

@@ -14,7 +14,7 @@ negative step is handled like a positive one):
 - settling time: from the step onset to the moment the response enters, for good, the band of
   ±2 % of the step size around the target (``settling_band``), or a wider one where a floor in
   response units is given (``settling_floor``: :func:`settling_half_width` with the
-  :func:`encoder_quantum_rad_s` of a measured wheel speed, whose resolution is one encoder count
+  :func:`~cartctl.cart.encoder_quantum_rad_s` of a measured wheel speed, whose resolution is one encoder count
   per tick);
 - peak: the sample farthest in the step's direction, its value and its time from the onset.
 
@@ -38,16 +38,13 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cartctl.cart import ENCODER_COUNTS_PER_REV
 from cartctl.errors import InputError
 
 __all__ = [
-    "ENCODER_COUNTS_PER_REV",
     "MIN_FINAL_SAMPLES",
     "SETTLING_FRACTION",
     "StepInfo",
     "StepOnset",
-    "encoder_quantum_rad_s",
     "final_value",
     "find_step",
     "settling_half_width",
@@ -70,21 +67,6 @@ SETTLING_FRACTION = 0.02
 """The settling band's half-width as a fraction of the step (the 2 % criterion)."""
 
 
-def encoder_quantum_rad_s(period_s: float, counts_per_rev: int = ENCODER_COUNTS_PER_REV) -> float:
-    """One encoder count per tick as a speed: q = 2π / counts_per_rev / Ts (0.3506 rad/s at 10 ms).
-
-    Parameters
-    ----------
-    period_s : float
-        Tick Ts (s), > 0.
-    counts_per_rev : int
-        Encoder counts per wheel revolution.
-    """
-    if not (math.isfinite(period_s) and period_s > 0.0):
-        raise InputError(f"the period must be a positive number of seconds, got {period_s}")
-    return 2.0 * math.pi / counts_per_rev / period_s
-
-
 def settling_half_width(
     step_size: float, floor: float = 0.0, fraction: float = SETTLING_FRACTION
 ) -> float:
@@ -96,7 +78,7 @@ def settling_half_width(
         Target − initial (response units, e.g. rad/s).
     floor : float
         The narrowest band worth judging (response units, ≥ 0): for a measured wheel speed one
-        encoder count per tick, :func:`encoder_quantum_rad_s`, so that a small step is not
+        encoder count per tick, :func:`~cartctl.cart.encoder_quantum_rad_s`, so that a small step is not
         judged on the encoder's resolution.
     fraction : float
         Band as a fraction of |step|, in (0, 1).
@@ -296,10 +278,7 @@ def step_info(
         raise InputError("time and response must hold finite numbers only")
     if np.any(np.diff(t) <= 0.0):
         raise InputError("time must increase from sample to sample")
-    if not 0.0 < settling_band < 1.0:
-        raise InputError(f"settling band must be a fraction in (0, 1), got {settling_band}")
-    if not (math.isfinite(settling_floor) and settling_floor >= 0.0):
-        raise InputError(f"settling band floor must be a finite number >= 0, got {settling_floor}")
+    settling_half_width(1.0, settling_floor, settling_band)  # the band's arguments, checked
     onset = float(t[0]) if onset_s is None else float(onset_s)
     if not t[0] <= onset <= t[-1]:
         raise InputError(
@@ -327,7 +306,7 @@ def step_info(
         )
         rise = hi - lo
 
-    band = max(settling_band, settling_floor / abs(size))  # as a fraction of the step
+    band = settling_half_width(size, settling_floor, settling_band) / abs(size)  # of the step
     outside = np.flatnonzero(np.abs(z - 1.0) > band)
     settling: float | None
     if band >= 1.0:  # the band reaches back to the initial value: nothing to settle

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.cart import SPEED_QUANTUM_RAD_S, SUPPLY_V
+from cartctl.cart import SUPPLY_V, encoder_quantum_rad_s
 from cartctl.commission import StageError
 from cartctl.data import Trace
 
@@ -130,7 +130,7 @@ def _breakaway(
     speed: NDArray[np.float64], volts: NDArray[np.float64], w: Window, loop_delay_ticks: int
 ) -> tuple[float | None, float | None]:
     """(breakaway V, gain rad/s/V) of one motor's ramp; (None, None) if the wheel never turned."""
-    moving = np.abs(speed[w.start : w.stop]) >= 0.5 * SPEED_QUANTUM_RAD_S
+    moving = np.abs(speed[w.start : w.stop]) >= 0.5 * encoder_quantum_rad_s()
     runs = moving[:-2] & moving[1:-1] & moving[2:]
     if not runs.any():
         return None, None
@@ -154,7 +154,7 @@ def analyse_checks(
     """
     period_s = trace.period_s
     n = len(trace)
-    quantum_rad = SPEED_QUANTUM_RAD_S * period_s
+    quantum_rad = encoder_quantum_rad_s(period_s) * period_s  # one count (rad)
     out: dict[str, MotorCheck] = {}
     for m in MOTORS:
         other = "b" if m == "a" else "a"

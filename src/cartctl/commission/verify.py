@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from cartctl.cart import SPEED_QUANTUM_RAD_S
+from cartctl.cart import encoder_quantum_rad_s
 
 STEP_RAD_S = 10.0
 REFERENCE = f"step:{STEP_RAD_S:g}"
@@ -86,7 +86,7 @@ def compare(summary: dict[str, Any], predicted: dict[str, float | None],
     its summary), judged instead of the encoder's where the run has no true speed.
     """
     motors = summary.get("motors") or {}
-    count_pp = 100.0 * SPEED_QUANTUM_RAD_S / STEP_RAD_S
+    count_pp = 100.0 * encoder_quantum_rad_s() / STEP_RAD_S
     if summary.get("metrics_signal") == "true_speed":
         speed, tol = "true", TRUE_SPEED_TOLERANCE_PP
     elif smoothed:

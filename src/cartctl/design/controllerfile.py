@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from cartctl.cart import PERIOD_S, SPEED_QUANTUM_RAD_S, check_voltage_limit
+from cartctl.cart import check_voltage_limit, encoder_quantum_rad_s
 from cartctl.choices import find_file
 from cartctl.design.controller_ss import consistency_problems
 from cartctl.errors import CartctlError, DataFileError, InputError
@@ -222,13 +222,13 @@ class ControllerFile:
 def absurd_gain(controller: ControllerFile) -> str | None:
     """The first gain that saturates the output at an error of one encoder count, or None.
 
-    A speed is measured in whole counts per tick (:data:`~cartctl.cart.SPEED_QUANTUM_RAD_S`,
+    A speed is measured in whole counts per tick (:func:`~cartctl.cart.encoder_quantum_rad_s`,
     0.35 rad/s at 10 ms): a proportional gain (``kp``, ``Kr``, an entry of ``K``) that turns one
     count into the whole voltage limit, or an integral gain (``ki``) that does so in one tick, is
     no controller but a switch, and a value that is not a finite number is no gain at all.
     """
     limit = controller.voltage_limit_v
-    q = SPEED_QUANTUM_RAD_S * PERIOD_S / controller.period_s
+    q = encoder_quantum_rad_s(controller.period_s)
     for motor, entry in controller.motors.items():
         for key, per_error in (("kp", q), ("Kr", q), ("K", q), ("ki", q * controller.period_s)):
             values = entry.get(key)
@@ -243,7 +243,7 @@ def absurd_gain(controller: ControllerFile) -> str | None:
                     unit = "V/rad" if key == "ki" else "V per rad/s"
                     return (
                         f"[motors.{motor}] {key} = {value:g} {unit} puts the whole {limit:g} V on "
-                        f"an error of one encoder count ({SPEED_QUANTUM_RAD_S:.3g} rad/s"
+                        f"an error of one encoder count ({q:.3g} rad/s"
                         f"{' for one tick' if key == 'ki' else ''}): that is a switch, not a "
                         f"controller; keep |{key}| below {limit / per_error:.3g}"
                     )

@@ -62,7 +62,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 
-from cartctl.cart import ENCODER_COUNTS_PER_REV
+from cartctl.cart import ENCODER_COUNTS_PER_REV, encoder_quantum_rad_s
 from cartctl.design.request import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOISE_STD_V
 from cartctl.design.statespace import StateSpace, realise
 from cartctl.errors import InputError
@@ -78,17 +78,13 @@ __all__ = [
 ]
 
 
-COUNTS_PER_REV = ENCODER_COUNTS_PER_REV
-"""Encoder counts per wheel revolution on the cart."""
-
-
-def quantisation_std_rad_s(period_s: float, counts_per_rev: int = COUNTS_PER_REV) -> float:
+def quantisation_std_rad_s(period_s: float, counts_per_rev: int = ENCODER_COUNTS_PER_REV) -> float:
     """Standard deviation (rad/s) of the quantisation error of a whole-count speed: q / √6.
 
-    q = (2π / counts_per_rev) / Ts is one count per tick in rad/s; the error is the difference of
-    two independent errors uniform over one count (variance 2 × q²/12).
+    q is one count per tick (:func:`~cartctl.cart.encoder_quantum_rad_s`); the error is the
+    difference of two independent errors uniform over one count (variance 2 × q²/12).
     """
-    return (2.0 * math.pi / counts_per_rev) / period_s / math.sqrt(6.0)
+    return encoder_quantum_rad_s(period_s, counts_per_rev) / math.sqrt(6.0)
 
 
 def _nonnegative(name: str, value: float, *, positive: bool = False) -> float:
@@ -111,7 +107,7 @@ def design_kalman(
     process_noise_std_v: float = DEFAULT_PROCESS_NOISE_STD_V,
     bias_drift_std_v: float = DEFAULT_BIAS_DRIFT_STD_V,
     extra_noise_std_rad_s: float = 0.0,
-    counts_per_rev: int = COUNTS_PER_REV,
+    counts_per_rev: int = ENCODER_COUNTS_PER_REV,
     extra_delay_ticks: int = 0,
     timing_noise_std_ticks: float = 0.0,
 ) -> KalmanDesign:

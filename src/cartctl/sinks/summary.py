@@ -27,11 +27,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from cartctl.cart import encoder_quantum_rad_s
 from cartctl.errors import InputError, OutputError
 from cartctl.link.bridge import HOST_LOSS_WARN_PERCENT
 from cartctl.metrics import finite_or_none
 from cartctl.numfmt import column_decimals, format_column, format_fixed, render_table
-from cartctl.stepinfo import SETTLING_FRACTION, encoder_quantum_rad_s, step_info
+from cartctl.stepinfo import SETTLING_FRACTION, step_info
 
 SIGNALS = {"true_speed": "the true speed", "speed": "the measured speed"}
 """``metrics_signal`` values and how the summary text names them."""
