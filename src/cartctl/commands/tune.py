@@ -330,7 +330,9 @@ def run(args: argparse.Namespace) -> int:
         return run_robust(args, job)
     bar = ProgressBar(len(settings), "cartctl tune")
     try:
-        results = engine.run_grid(job, args.jobs or os.cpu_count() or 1, bar.update)
+        results = engine.run_grid(
+            job, args.jobs or os.cpu_count() or 1, bar.update, engine.evaluate_chunk
+        )
     finally:
         bar.close()
     results = tuning.sort_results(tuning.mark_pareto(results))

@@ -21,7 +21,7 @@ from collections import deque
 from collections.abc import Callable, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
-from typing import Any, Protocol, TypeVar
+from typing import Any, ClassVar, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -210,13 +210,27 @@ def one_blas_thread() -> None:
 
 
 class GridJob(Protocol):
-    """A job :func:`run_grid` can split: a dataclass with the settings as ``items``."""
+    """A job :func:`run_grid` can split: a dataclass (frozen or not) with the settings as ``items``."""
 
-    items: tuple[tuple[int, dict[str, float]], ...]
+    __dataclass_fields__: ClassVar[dict[str, Any]]
+
+    @property
+    def items(self) -> tuple[tuple[int, dict[str, float]], ...]:
+        """The settings: (1-based grid index, axis values)."""
+        ...
+
+
+class GridRow(Protocol):
+    """A result of one setting: :func:`run_grid` puts them back in grid order by ``index``."""
+
+    @property
+    def index(self) -> int:
+        """The setting's 1-based grid index."""
+        ...
 
 
 Job = TypeVar("Job", bound=GridJob)
-Row = TypeVar("Row")
+Row = TypeVar("Row", bound=GridRow)
 
 
 def run_grid(
@@ -244,13 +258,13 @@ def run_grid(
     items = job.items
     results: list[Row] = []
     for item in items if jobs == 1 else items[:1]:
-        results += evaluate(replace(job, items=(item,)))  # type: ignore[type-var]
+        results += evaluate(replace(job, items=(item,)))
         if progress is not None:
             progress(len(results))
     rest = items[1:] if jobs > 1 else ()
     if rest:
         size = max(1, math.ceil(len(rest) / (4 * jobs)))
-        chunks = [replace(job, items=rest[i : i + size]) for i in range(0, len(rest), size)]  # type: ignore[type-var]
+        chunks = [replace(job, items=rest[i : i + size]) for i in range(0, len(rest), size)]
         pool = ProcessPoolExecutor(max_workers=min(jobs, len(chunks)), initializer=one_blas_thread)
         try:
             for future in as_completed([pool.submit(evaluate, c) for c in chunks]):
@@ -259,4 +273,4 @@ def run_grid(
                     progress(len(results))
         finally:
             pool.shutdown(cancel_futures=True)
-    return sorted(results, key=lambda r: r.index)  # type: ignore[attr-defined]
+    return sorted(results, key=lambda r: r.index)
