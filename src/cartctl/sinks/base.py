@@ -16,12 +16,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
+from cartctl.trace import REQUIRED_COLUMNS
+
 TRACE_COLUMNS: tuple[str, ...] = (
-    "time_s",
-    "voltage_a",
-    "voltage_b",
-    "speed_a",
-    "speed_b",
+    *REQUIRED_COLUMNS,
     "tick",
     "reference_a",
     "reference_b",
@@ -30,8 +28,8 @@ TRACE_COLUMNS: tuple[str, ...] = (
     "period_error_us",
     "compute_us",
 )
-"""Columns of a closed-loop trace, in file order. Simulated plants add ``true_speed_a``,
-``true_speed_b`` after these. Row k: the voltage commanded at tick k and the speed measured at
+"""Columns of a closed-loop trace, in file order: contract 1's, then the loop's. Simulated
+plants add ``true_speed_a``, ``true_speed_b`` after these. Row k: the voltage commanded at tick k and the speed measured at
 tick k (contract 1); ``period_error_us`` is how late tick k started against its deadline (µs),
 ``compute_us`` the time from its start to the command being sent (µs)."""
 

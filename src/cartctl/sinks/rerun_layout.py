@@ -13,25 +13,7 @@ from typing import Final
 
 import rerun.blueprint as rrb
 
-ENTITY_PATHS: Final[dict[str, str]] = {
-    "reference_a": "motor/a/reference",
-    "speed_a": "motor/a/speed",
-    "estimate_a": "motor/a/estimate",
-    "voltage_a": "motor/a/voltage",
-    "reference_b": "motor/b/reference",
-    "speed_b": "motor/b/speed",
-    "estimate_b": "motor/b/estimate",
-    "voltage_b": "motor/b/voltage",
-    "period_error_us": "loop/period_error_us",
-    "compute_us": "loop/compute_us",
-    "true_speed_a": "motor/a/true_speed",
-    "true_speed_b": "motor/b/true_speed",
-    "smoothed_speed_a": "motor/a/smoothed_speed",
-    "smoothed_speed_b": "motor/b/smoothed_speed",
-}
-"""Trace column → entity path. The first ten are contract 4; ``true_speed_*`` (simulated plants
-only) and ``smoothed_speed_*`` (the Kalman RTS smoothed speed, computed after a run from the whole
-trace, :mod:`cartctl.design.smoother`; not a column the loop writes) are extensions."""
+from cartctl.trace import MOTORS
 
 TIME_COLUMN: Final[str] = "time_s"
 TICK_COLUMN: Final[str] = "tick"
@@ -48,29 +30,34 @@ class SeriesStyle:
 
 # The viewer draws a plot's series in entity-path order (estimate, reference, smoothed_speed,
 # speed, true_speed), so the estimate is drawn wider to stay visible under a noisy measured speed.
-_REFERENCE = SeriesStyle("reference (rad/s)", (150, 150, 150), 1.5)
-_SPEED = SeriesStyle("measured speed (rad/s)", (31, 119, 180), 1.0)
-_ESTIMATE = SeriesStyle("estimate (rad/s)", (255, 127, 14), 2.5)
-_TRUE = SeriesStyle("true speed (rad/s)", (44, 160, 44), 1.0)
-_SMOOTHED = SeriesStyle("smoothed speed (rad/s)", (227, 119, 194), 1.5)
-_VOLTAGE = SeriesStyle("voltage (V)", (148, 103, 189), 1.5)
-
-STYLES: Final[dict[str, SeriesStyle]] = {
-    "motor/a/reference": _REFERENCE,
-    "motor/a/speed": _SPEED,
-    "motor/a/estimate": _ESTIMATE,
-    "motor/a/true_speed": _TRUE,
-    "motor/a/smoothed_speed": _SMOOTHED,
-    "motor/a/voltage": _VOLTAGE,
-    "motor/b/reference": _REFERENCE,
-    "motor/b/speed": _SPEED,
-    "motor/b/estimate": _ESTIMATE,
-    "motor/b/true_speed": _TRUE,
-    "motor/b/smoothed_speed": _SMOOTHED,
-    "motor/b/voltage": _VOLTAGE,
-    "loop/period_error_us": SeriesStyle("period error (µs)", (214, 39, 40), 1.0),
-    "loop/compute_us": SeriesStyle("compute time (µs)", (23, 190, 207), 1.0),
+_MOTOR_SERIES: Final[dict[str, SeriesStyle]] = {
+    "reference": SeriesStyle("reference (rad/s)", (150, 150, 150), 1.5),
+    "speed": SeriesStyle("measured speed (rad/s)", (31, 119, 180), 1.0),
+    "estimate": SeriesStyle("estimate (rad/s)", (255, 127, 14), 2.5),
+    "true_speed": SeriesStyle("true speed (rad/s)", (44, 160, 44), 1.0),
+    "smoothed_speed": SeriesStyle("smoothed speed (rad/s)", (227, 119, 194), 1.5),
+    "voltage": SeriesStyle("voltage (V)", (148, 103, 189), 1.5),
 }
+"""Per motor: trace column ``<kind>_<m>`` → entity ``motor/<m>/<kind>``, drawn in this style."""
+_LOOP_SERIES: Final[dict[str, SeriesStyle]] = {
+    "period_error_us": SeriesStyle("period error (µs)", (214, 39, 40), 1.0),
+    "compute_us": SeriesStyle("compute time (µs)", (23, 190, 207), 1.0),
+}
+"""The loop's timing: trace column ``<name>`` → entity ``loop/<name>``."""
+
+_TABLE: Final[dict[str, tuple[str, SeriesStyle]]] = {
+    **{f"{kind}_{m}": (f"motor/{m}/{kind}", style)
+       for m in MOTORS for kind, style in _MOTOR_SERIES.items()},
+    **{name: (f"loop/{name}", style) for name, style in _LOOP_SERIES.items()},
+}  # fmt: skip
+
+ENTITY_PATHS: Final[dict[str, str]] = {column: path for column, (path, _) in _TABLE.items()}
+"""Trace column → entity path. Those of the columns the loop writes are contract 4;
+``true_speed_*`` (simulated plants only) and ``smoothed_speed_*`` (the Kalman RTS smoothed speed,
+computed after a run from the whole trace, :mod:`cartctl.design.smoother`; not a column the loop
+writes) are extensions."""
+STYLES: Final[dict[str, SeriesStyle]] = {path: style for path, style in _TABLE.values()}
+"""Entity path → how its line is drawn."""
 
 
 Range = tuple[float, float]
