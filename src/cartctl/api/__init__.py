@@ -115,8 +115,8 @@ def excite(
     Trace
         Contract-1 columns, with ``true_speed_a``/``true_speed_b`` from the simulator.
     """
+    from cartctl.cart import SUPPLY_V
     from cartctl.experiment import run_experiment
-    from cartctl.plants.sim import SUPPLY_V
     from cartctl.signals import make_signal
 
     _check_simulated(plant, "excite")

@@ -65,12 +65,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from cartctl.cart import SUPPLY_V
     from cartctl.data import write_trace
     from cartctl.data.tracemeta import meta_path, write_trace_meta
     from cartctl.experiment import run_experiment
     from cartctl.jsonout import dumps
     from cartctl.plants.factory import check_plant_name, is_serial, make_plant
-    from cartctl.plants.sim import SUPPLY_V
     from cartctl.progress import ProgressBar
     from cartctl.runtime.gcpause import gc_paused
     from cartctl.signals import make_signal

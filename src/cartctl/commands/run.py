@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cartctl import stopping
-from cartctl.cart import SUPPLY_V
+from cartctl.cart import check_voltage_limit
 from cartctl.commands.options import (
     FORMS,
     add_output_options,
@@ -153,11 +153,8 @@ def run(args: argparse.Namespace) -> int:
     )
 
     check_duration(args.duration)
-    if (
-        args.voltage_limit is not None
-        and not 0.0 < check_finite(args.voltage_limit, "--voltage-limit") <= SUPPLY_V
-    ):
-        raise InputError(f"--voltage-limit must be in (0, 12] V, got {args.voltage_limit}")
+    if args.voltage_limit is not None:
+        check_voltage_limit(check_finite(args.voltage_limit, "--voltage-limit"), "--voltage-limit")
     from cartctl.plants.factory import SIMULATED, check_plant_name
     from cartctl.reference import check_reference
 
