@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from cartctl.cart import check_voltage_limit
 from cartctl.design.controllerfile import ControllerFile
-from cartctl.design.entries import _Gains, kalman_from_entry
+from cartctl.design.entries import feedback_gains, kalman_from_entry
 from cartctl.design.kalman import KalmanDesign
 from cartctl.design.pi import PiDesign
 from cartctl.design.poles import PolesDesign
@@ -128,17 +128,10 @@ def build_controllers(
                     estimator=None if est is None else make_estimator(kalman_from_entry(est)),
                 )
             else:
-                kalman = kalman_from_entry(entry["estimator"])
-                gains = _Gains(
-                    np.asarray(entry["K"], dtype=float),
-                    float(entry["Ki"]),
-                    float(entry["Kr"]),
-                    controller.period_s,
-                    kalman,
-                )
+                gains = feedback_gains(entry, controller.period_s)
                 out[motor] = StateFeedbackController(
                     gains,
-                    estimator=make_estimator(kalman),
+                    estimator=make_estimator(gains.estimator),
                     voltage_limit_v=limit,
                 )
         except KeyError as exc:

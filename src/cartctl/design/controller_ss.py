@@ -29,7 +29,7 @@ negative feedback; for the PI on the measurement it is the PI's C(z) = Kp + Ki·
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -219,7 +219,7 @@ CONSISTENCY_RTOL = 1e-6
 coefficient of that polynomial (a file rounds nothing: the rest is floating-point noise)."""
 
 
-def _coeffs(values: Sequence[Any]) -> str:
+def _coeffs(values: Iterable[Any]) -> str:
     """Coefficients for a message; an entry that is not a number is shown as it is."""
     return (
         "["

@@ -24,7 +24,7 @@ _KALMAN_ARRAYS = ("A", "B", "C", "Q", "P", "L")
 
 def kalman_from_entry(entry: Mapping[str, Any]) -> KalmanDesign:
     """Rebuild a :class:`KalmanDesign` from :func:`kalman_entry`'s table."""
-    values = {}
+    values: dict[str, Any] = {}
     for f in fields(KalmanDesign):
         if f.name not in entry:
             if f.default is not MISSING:  # a newer field (timing_noise_std_ticks): its default

@@ -44,11 +44,14 @@ class FeedbackGains(Protocol):
     """What the controller needs of a design: a :class:`~cartctl.design.poles.PolesDesign`, or
     the same numbers read back from a controller file."""
 
-    K: NDArray[np.float64]
-    K_xi: float
-    Kr: float
-    estimator: KalmanDesign
-
+    @property
+    def K(self) -> NDArray[np.float64]: ...  # noqa: N802 (the literature's K)
+    @property
+    def K_xi(self) -> float: ...  # noqa: N802
+    @property
+    def Kr(self) -> float: ...  # noqa: N802
+    @property
+    def estimator(self) -> KalmanDesign: ...
     @property
     def period_s(self) -> float: ...
 
