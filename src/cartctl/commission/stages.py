@@ -204,8 +204,8 @@ class Commission:
             d = r.diagnostics
             if d is None or not d.validation:
                 continue
-            y, u = d.validation[0]
-            t = np.arange(y.size) * result.period_s
+            y, u = (np.asarray(part, dtype=np.float64) for part in d.validation[0])
+            t = np.arange(y.size, dtype=np.float64) * result.period_s
             sim = r.chosen.model.simulate(u)
             series[f"identification/{m}/measured"] = (t, y)
             series[f"identification/{m}/simulated"] = (t, sim)

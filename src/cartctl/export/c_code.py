@@ -70,7 +70,7 @@ def _estimator(controller: ControllerFile, motor: str, entry: Mapping[str, Any])
     return design
 
 
-def _c_array(values: Sequence[float]) -> str:
+def _c_array(values: Sequence[float] | np.ndarray) -> str:
     return "{" + ", ".join(c_float(v) for v in values) + "}"
 
 

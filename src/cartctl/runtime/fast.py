@@ -8,8 +8,7 @@ ending, like every run, with the zero-volt stop row.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Mapping
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,14 +17,14 @@ from cartctl.errors import PlantError
 from cartctl.plants.base import Plant
 from cartctl.runtime.base import Controller
 from cartctl.runtime.clock import VirtualClock
-from cartctl.runtime.loop import ControlLoop, LoopState, MemorySink
+from cartctl.runtime.loop import ControlLoop, LoopState, MemorySink, PerTick
 from cartctl.runtime.virtual import VirtualExecutor
 
 
 def run_in_memory(
     plant: Plant,
     controllers: Mapping[str, Controller],
-    references: Mapping[str, Sequence[float] | NDArray[np.float64] | Any],
+    references: Mapping[str, PerTick],
     *,
     period_s: float,
     voltage_limit_v: float,

@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -109,7 +109,16 @@ class LoopState:
             self.incomplete.append(error)
 
 
-def _per_tick(reference: Any, n: int) -> Sequence[float]:
+class PerTick(Protocol):
+    """A reference (rad/s) with a value per tick: an array, a list or a
+    :class:`~cartctl.reference.ReferenceSchedule`."""
+
+    def __len__(self) -> int: ...
+
+    def __getitem__(self, k: int, /) -> float: ...
+
+
+def _per_tick(reference: PerTick | None, n: int) -> PerTick:
     """A reference the tick can index fast: arrays become lists; a schedule computing its values
     chunk by chunk (:class:`~cartctl.reference.ReferenceSchedule`) stays as it is."""
     if reference is None:
@@ -145,7 +154,7 @@ class ControlLoop:
         self,
         plant: Plant,
         controllers: Mapping[str, Controller],
-        references: Mapping[str, NDArray[np.float64]],
+        references: Mapping[str, PerTick],
         sinks: Sequence[Sink],
         *,
         now_s: Callable[[], float],
@@ -165,7 +174,8 @@ class ControlLoop:
         self.ref_b = _per_tick(references.get("b"), n)
         self.n_ticks = n
         self.sinks = list(sinks)
-        self._idlers = [s.idle for s in self.sinks if callable(getattr(s, "idle", None))]
+        idlers = (getattr(s, "idle", None) for s in self.sinks)  # a sink may have idle()
+        self._idlers = [idle for idle in idlers if callable(idle)]
         self.now_s = now_s
         self.limit = float(voltage_limit_v)
         self.period_s = float(period_s)
