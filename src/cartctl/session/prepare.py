@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import DataWarning, InputError
 from cartctl.session.checks import (
     check_loop_delay,
@@ -117,7 +118,7 @@ def prepare_run(
     preset: str = "ground",
     noise_std_rad_s: float = 0.0,
     seed: int | None = None,
-    connect_timeout_s: float | None = None,
+    connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S,
     voltage_limit_v: float | None = None,
     force: bool = False,
     allow_unstable: bool = False,
@@ -140,6 +141,8 @@ def prepare_run(
         Reference specs of motor a, and of b (default: a's).
     model : str or Path
         The sim plant's model file (and where an unstable one is named).
+    connect_timeout_s : float
+        A serial or virtual cart's longest wait for its first HEARTBEAT (s).
     make_plant, build_controllers : callable, optional
         :func:`cartctl.plants.factory.make_plant` and
         :func:`cartctl.design.build.build_controllers` unless given (a test's stand-ins).
@@ -156,9 +159,13 @@ def prepare_run(
     from cartctl.reference import ReferenceSchedule
 
     if make_plant is None:
-        from cartctl.plants.factory import make_plant
+        from cartctl.plants.factory import make_plant as factory_make_plant
+
+        make_plant = factory_make_plant
     if build_controllers is None:
-        from cartctl.design.build import build_controllers
+        from cartctl.design.build import build_controllers as build_from_file
+
+        build_controllers = build_from_file
     given = given if given is not None else str(controller)
     file, limit = load_run_controller(controller, given=given, plant=plant, model=model,
                                       force=force, voltage_limit_v=voltage_limit_v)  # fmt: skip
