@@ -52,7 +52,7 @@ from cartctl.cart import encoder_quantum_rad_s
 from cartctl.modelfile import ModelFile, load_models
 from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller
-from cartctl.stepinfo import SETTLING_FRACTION
+from cartctl.stepinfo import settling_half_width
 from cartctl.tune.batch import ArxBatch, BatchTrace, simulate_batch
 from cartctl.tune.engine import TuneJob, evaluate_nominal, scoring_plant, simulate
 from cartctl.tune.grid import TuneResult, worst_metrics
@@ -112,7 +112,7 @@ def step_metrics(trace: BatchTrace, settling_floor: float) -> dict[str, FloatArr
                 z = y[:, start:end] / size
             excess = np.max(z, axis=1) - 1.0
             out["overshoot_percent"] = np.where(excess <= 1e-12, 0.0, excess) * 100.0
-            band = max(SETTLING_FRACTION, settling_floor / abs(size))
+            band = settling_half_width(size, settling_floor) / abs(size)  # as step_info
             if band < 1.0:
                 outside = np.abs(z - 1.0) > band
                 last = z.shape[1] - 1 - np.argmax(outside[:, ::-1], axis=1)
