@@ -166,7 +166,7 @@ def design_request(
     method: str,
     settings: Mapping[str, float],
     extra_delay_ticks: int = 0,
-    fixed: Mapping[str, float] | None = None,
+    fixed: Mapping[str, Any] | None = None,
 ) -> DesignRequest:
     """The design request of one setting: the design command's defaults, ``fixed`` (request
     fields every setting shares, such as ``process_noise_std_v``), the setting's axes.
@@ -175,7 +175,7 @@ def design_request(
     very same controller; :meth:`~cartctl.design.request.DesignRequest.to_argv` gives the
     ``cartctl design`` command that makes it.
     """
-    axes = {FIELDS[a.name]: float(settings[a.name]) for a in AXES[method]}
+    axes: dict[str, Any] = {FIELDS[a.name]: float(settings[a.name]) for a in AXES[method]}
     return DesignRequest(method=method, extra_delay_ticks=extra_delay_ticks, **dict(fixed or {}),
                          **axes)  # fmt: skip
 
@@ -190,7 +190,8 @@ def worst_metrics(motors: Mapping[str, Mapping[str, Any]]) -> dict[str, float | 
     out: dict[str, float | None] = {}
     for key in METRICS:
         values = [m.get(key) for m in motors.values()]
-        out[key] = None if not values or None in values else float(max(values))
+        known = [v for v in values if v is not None]
+        out[key] = float(max(known)) if values and len(known) == len(values) else None
     return out
 
 
@@ -281,8 +282,12 @@ def pareto_front(points: ArrayLike) -> NDArray[np.bool_]:
     return front
 
 
+def _nan_if_none(value: float | None) -> float:
+    return math.nan if value is None else value
+
+
 def _front_over(results: Sequence[TuneResult], metrics: Sequence[str]) -> NDArray[np.bool_]:
-    rows = [[math.nan if r.worst[k] is None else r.worst[k] for k in metrics] for r in results]
+    rows = [[_nan_if_none(r.worst[k]) for k in metrics] for r in results]
     return pareto_front(np.reshape(rows, (len(results), len(metrics))))
 
 

@@ -169,10 +169,16 @@ def plot_tuning(path: str, method: str, results: Sequence[TuneResult]) -> None:
     |voltage|); the front over these two metrics ringed and numbered."""
     from cartctl.tune.table import counts_text
 
-    shown = [r for r in results if r.status == "settled" and r.worst["overshoot_percent"] is not None]  # fmt: skip
+    shown: list[TuneResult] = []
+    x: list[float] = []  # settling (ms)
+    y: list[float] = []  # overshoot (%)
+    for r in results:
+        settling_s, overshoot = r.worst["settling_time_s"], r.worst["overshoot_percent"]
+        if r.status == "settled" and settling_s is not None and overshoot is not None:
+            shown.append(r)
+            x.append(settling_s * 1e3)
+            y.append(overshoot)
     fig, ax = _figure()
-    x = [r.worst["settling_time_s"] * 1e3 for r in shown]  # type: ignore[operator]
-    y = [r.worst["overshoot_percent"] for r in shown]
     points = ax.scatter(x, y, c=[r.worst["max_abs_voltage"] for r in shown], cmap="viridis",
                         s=POINT_AREA_PT2, zorder=3, gid="settings",
                         label="settings that settled (colour: run peak |V|)")  # fmt: skip
@@ -220,8 +226,8 @@ def plot_robust(path: str, method: str, rows: Sequence[RobustRow], plants: int) 
     nominal = [(x, s.value("overshoot_percent", "nominal")) for x, _, s, _ in shown]
     ax.scatter([x for x, _ in nominal], [v for _, v in nominal], s=12, color="0.5", zorder=2,
                label="nominal (the model)")  # fmt: skip
-    phys = [(x, s.physics.get("overshoot_percent")) for x, _, s, _ in shown]
-    phys = [(x, v) for x, v in phys if v is not None]
+    physics = [(x, s.physics.get("overshoot_percent")) for x, _, s, _ in shown]
+    phys = [(x, v) for x, v in physics if v is not None]
     ax.scatter([x for x, _ in phys], [v for _, v in phys], marker="x", color="tab:orange", s=30,
                zorder=2, label=f"physics preset {shown[0][2].physics.get('preset') if shown else ''}")  # fmt: skip
     front = sorted((x, y, r.index) for x, y, _, r in shown if r.pareto)
