@@ -104,9 +104,8 @@ def checks_sequence(
     """
     rest = round(REST_S / period_s)
     pulse = np.full(round(PULSE_S / period_s), PULSE_V)
-    ramp = np.arange(1, round(RAMP_MAX_V / RAMP_RATE_V_S / period_s) + 1) * (
-        RAMP_RATE_V_S * period_s
-    )
+    ramp_ticks = round(RAMP_MAX_V / RAMP_RATE_V_S / period_s)
+    ramp = np.arange(1, ramp_ticks + 1, dtype=np.float64) * (RAMP_RATE_V_S * period_s)
     parts: list[tuple[str, str, NDArray[np.float64]]] = [("", "rest", np.zeros(rest))]
     for kind, shape in (("pulse", pulse), ("ramp", ramp)):
         for m in MOTORS:

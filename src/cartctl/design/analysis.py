@@ -91,6 +91,6 @@ def simulate_step(
         u = controller.step(ref[k], y)
         speed[k], estimate[k], voltage[k] = y, controller.estimate_rad_s, u
         y = plant.step(u, 0.0).speed_a_rad_s
-    time_s = np.arange(n) * model.period_s
+    time_s = np.arange(n, dtype=np.float64) * model.period_s
     info = step_info(time_s, speed, reference=float(step_rad_s), initial=0.0, onset_s=0.0)
     return StepAnalysis(time_s, ref, speed, estimate, voltage, info)

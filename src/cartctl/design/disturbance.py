@@ -128,4 +128,4 @@ def simulate_disturbance(
         speed[k], voltage[k] = y, u
         queue.append(u)
         y = plant.step(queue.popleft() + d, 0.0).speed_a_rad_s
-    return DisturbanceResponse(np.arange(n) * model.period_s, speed, voltage, d)
+    return DisturbanceResponse(np.arange(n, dtype=np.float64) * model.period_s, speed, voltage, d)

@@ -85,7 +85,7 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
             entry["estimator_poles"] = [[p.real, p.imag] for p in kalman.poles()]
         return MotorDesign(ctrl, entry, pi_entry(d, request.anti_windup, kalman))
     poles = request.pole_list()
-    d = design_poles(
+    placement = design_poles(
         model,
         poles=poles,
         settling_time_s=None if poles else request.settling_time_s,
@@ -96,12 +96,15 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
         extra_noise_std_rad_s=request.extra_noise_std_rad_s,
         timing_noise_std_ticks=request.timing_noise_std_ticks,
     )
-    ctrl = StateFeedbackController(d, estimator=make_estimator(d.estimator),
-                                   voltage_limit_v=request.voltage_limit_v)  # fmt: skip
-    num, den = feedback_tf_coeffs(d)
+    feedback = StateFeedbackController(
+        placement,
+        estimator=make_estimator(placement.estimator),
+        voltage_limit_v=request.voltage_limit_v,
+    )
+    num, den = feedback_tf_coeffs(placement)
     loop = loop_analysis(num, den, model, extra)
     entry = {
-        **{k: v for k, v in d.to_dict().items() if k != "estimator"},
+        **{k: v for k, v in placement.to_dict().items() if k != "estimator"},
         "phase_margin_deg": loop["phase_margin_deg"],
         "gain_margin_db": loop["gain_margin_db"],
         "crossover_hz": loop["crossover_hz"],
@@ -110,7 +113,7 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
         "controller_num": num.tolist(),
         "controller_den": den.tolist(),
     }
-    return MotorDesign(ctrl, entry, poles_entry(d, num, den))
+    return MotorDesign(feedback, entry, poles_entry(placement, num, den))
 
 
 def nk_note(nk: Mapping[str, int], loop_delay_ticks: int) -> str | None:

@@ -63,7 +63,7 @@ def _loop_coeffs(
     c_num, c_den = pi_tf_coeffs(kp, ki, model.period_s)
     num = np.polymul(c_num, model.num())
     den = np.polymul(np.polymul(c_den, model.den()), np.r_[1.0, np.zeros(extra)])
-    return num, den
+    return np.asarray(num, dtype=np.float64), np.asarray(den, dtype=np.float64)
 
 
 def _gains(

@@ -81,6 +81,7 @@ def design_figure(
     if fc:
         for ax in (mag_ax, ph_ax):
             ax.axvline(fc, color="tab:red", ls="--", lw=0.9)
+    if fc and pm is not None:  # a crossover has a phase margin
         ph_ax.plot([fc, fc], [-180.0, -180.0 + pm], color="tab:red", lw=2.5)
         # the note in axes coordinates, lower left, where the phase curve never is
         ph_ax.text(0.03, 0.05, f"phase margin {pm:.1f}° at {fc:.2f} Hz", color="tab:red",

@@ -91,7 +91,7 @@ def check_poles(poles: Sequence[complex], count: int, what: str) -> list[complex
     return sorted(out, key=lambda v: (abs(v), v.imag))
 
 
-def poles_text(poles: Sequence[complex] | NDArray[np.complex128]) -> str:
+def poles_text(poles: Sequence[complex] | NDArray[np.inexact]) -> str:
     """Poles on one line: ``0.999998, 0.5±0.2j``."""
     parts = []
     for p in poles:

@@ -300,12 +300,13 @@ def design_poles(
         if integral == "disturbance"
         else " and an error integrator"
     )
-    if poles is None:
-        wanted = spec_poles(
-            count, plant.period_s, float(settling_time_s), float(overshoot_percent), fast_pole_ratio
-        )
-    else:
+    spec: tuple[float, float] | None = None  # settling time (s), overshoot (%)
+    if poles is not None:
         wanted = list(poles)
+    else:
+        assert settling_time_s is not None and overshoot_percent is not None  # checked above
+        spec = (float(settling_time_s), float(overshoot_percent))
+        wanted = spec_poles(count, plant.period_s, *spec, fast_pole_ratio)
     try:
         placed = check_poles(wanted, count, what)
     except InputError as exc:  # poles given are the user's --poles
@@ -348,6 +349,6 @@ def design_poles(
         estimator=estimator,
         method=method,
         integral=integral,
-        settling_time_s=None if poles is not None else float(settling_time_s),
-        overshoot_percent=None if poles is not None else float(overshoot_percent),
+        settling_time_s=None if spec is None else spec[0],
+        overshoot_percent=None if spec is None else spec[1],
     )

@@ -196,7 +196,7 @@ def _voltage_limit(value: Any) -> bool:
 
 
 def _whole(value: Any, high: int) -> bool:
-    return isinstance(value, Integral) and not isinstance(value, bool) and 0 <= value <= high
+    return isinstance(value, Integral) and not isinstance(value, bool) and 0 <= int(value) <= high
 
 
 _NYQUIST_HZ = 0.5 / PERIOD_S

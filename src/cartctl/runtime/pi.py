@@ -95,7 +95,7 @@ class PiController:
         period_s: float,
         *,
         voltage_limit_v: float = SUPPLY_V,
-        anti_windup: AntiWindup = "conditional",
+        anti_windup: str = "conditional",  # one of AntiWindup, checked here (files, options)
         tracking_gain: float | None = None,
         estimator: SpeedEstimator | None = None,
     ) -> None:

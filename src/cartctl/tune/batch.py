@@ -340,6 +340,6 @@ def simulate_batch(
             y_next[diverged] = 0.0
             y_hist[:, na + k + 1] = y_next
     period = plants.period_s
-    time_s = np.arange(n_ticks + 1) * period
+    time_s = np.arange(n_ticks + 1, dtype=np.float64) * period
     time_s[-1] = time_s[-2] + period  # the stop row: the last tick's time + Ts, as the loop logs it
     return BatchTrace(time_s, np.append(ref, ref[-1]), y_hist[:, na:], voltage, diverged)
