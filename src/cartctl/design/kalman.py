@@ -49,7 +49,7 @@ of the measured speed, acts on x̂_1[k|k].
 The gain is the steady-state *filter* gain L = P Cᵀ (C P Cᵀ + R)⁻¹, with P the a priori (predicted)
 covariance, the stabilising solution of the filter DARE ``P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ
 + Q``. It corrects the prediction with the measurement of the same tick: x̂[k|k] = x̂[k|k−1] +
-L (y[k] − C x̂[k|k−1]); filterpy's time-varying gain converges to it. ``control.dlqe`` returns the
+L (y[k] − C x̂[k|k−1]); a Kalman filter's time-varying gain converges to it. ``control.dlqe`` returns the
 *predictor* gain A L instead. The estimation error of x̂[k|k] evolves with (I − L C) A, whose
 eigenvalues are the estimator poles.
 """
