@@ -1,9 +1,9 @@
 """``.ci/run`` runs the README's test command in a fresh folder of its own and leaves ``.venv`` alone.
 
 The script is run for real, on a small git checkout made here: the shipped ``.ci/run``, a README
-whose Quickstart test command is cheap (it makes a ``.venv`` with stand-ins for ``ruff`` and
-``mkdocs`` and notes where it ran), a developer's ``.venv`` with a file in it, an untracked file and
-an ignored one.
+whose Quickstart test command is cheap (it makes a ``.venv`` with stand-ins for ``ruff``, ``mypy``
+and ``mkdocs`` and notes where it ran), a developer's ``.venv`` with a file in it, an untracked
+file and an ignored one.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ README = """# demo
 
 ```sh
 echo install-and-run
-mkdir -p .venv/bin && for t in ruff mkdocs; do printf '#!/bin/sh\\necho %s "$@" >> "$CI_LOG"\\n' $t > .venv/bin/$t && chmod +x .venv/bin/$t; done && pwd > "$CI_LOG.where" && ls > "$CI_LOG.files"
+mkdir -p .venv/bin && for t in ruff mypy mkdocs; do printf '#!/bin/sh\\necho %s "$@" >> "$CI_LOG"\\n' $t > .venv/bin/$t && chmod +x .venv/bin/$t; done && pwd > "$CI_LOG.where" && ls > "$CI_LOG.files"
 ```
 """
 
@@ -69,11 +69,12 @@ def test_ci_runs_the_readme_command_elsewhere_and_keeps_the_developers_venv(
     # the developer's .venv is untouched, and the command's own .venv did not land in it
     assert (checkout / ".venv" / "developer-env").read_text() == "the developer's environment\n"
     assert not (checkout / ".venv" / "bin").exists()
-    # the lint ran with the fresh environment's ruff, over the project's folders, and the
-    # documentation was built strictly, into the copy's own folder
+    # the lint and the type check ran with the fresh environment's ruff and mypy, over the
+    # project's folders, and the documentation was built strictly, into the copy's own folder
     assert log.read_text().splitlines() == [
         "ruff check src tests benchmarks tools",
         "ruff format --check src tests benchmarks tools",
+        "mypy src",
         f"mkdocs build --strict --site-dir {where}/site",
     ]
     assert not where.exists()  # the folder is removed afterwards (CI_KEEP=1 keeps it)
