@@ -59,8 +59,9 @@ def command_name(module: object) -> str:
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
-    """The parser with every subcommand of contract 2; with ``command`` (one of them), that
-    subcommand alone: what a command line naming it needs, built in a tenth of the time."""
+    """The parser with every subcommand of the command line (docs/architecture.md); with
+    ``command`` (one of them), that subcommand alone: what a command line naming it needs, built
+    in a tenth of the time."""
     parser = _Parser(
         prog="cartctl",
         description=(

@@ -25,7 +25,7 @@ class ExperimentResult:
     Attributes
     ----------
     trace : Trace
-        Contract-1 columns; simulated plants add ``true_speed_a`` and ``true_speed_b``.
+        The trace columns; simulated plants add ``true_speed_a`` and ``true_speed_b``.
     interrupted : bool
         True when Ctrl-C stopped the run early (the trace holds the ticks done so far).
     failure : str or None
@@ -52,7 +52,7 @@ def run_experiment(
     early with the ticks recorded so far; a fault before it propagates.
 
     Row k of the trace holds the voltage commanded at tick k and the speed measured at tick k
-    (contract 1), so the report's model applies to the trace as written.
+    (the trace columns), so the report's model applies to the trace as written.
 
     Parameters
     ----------

@@ -104,7 +104,7 @@ class Root:
     damping: float | None
 
     def to_dict(self) -> dict[str, object]:
-        """Contract-3 form: ``{"re", "im", "kind", "freq_hz", "damping"}``."""
+        """``inspect --json`` form: ``{"re", "im", "kind", "freq_hz", "damping"}``."""
         return {
             "re": float(self.value.real),
             "im": float(self.value.imag),

@@ -1,9 +1,9 @@
 """The experiment trace: the :class:`Trace` type, the ``--map`` form and the CSV writer.
 
 A trace holds, per 10 ms tick k, the voltage *commanded* at tick k (V) and the speed *measured*
-at tick k (rad/s) of both motors (the CSV columns are in the README, "Traces"), and any further
-columns. :mod:`cartctl.data` reads traces (contract-1 CSV and QRoboticsCenter logs);
-:func:`write_trace` writes contract-1 CSV that reads back bit for bit.
+at tick k (rad/s) of both motors, and any further columns (the trace columns of
+docs/architecture.md). :mod:`cartctl.data` reads traces (CSV and QRoboticsCenter logs);
+:func:`write_trace` writes a CSV that reads back bit for bit.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from cartctl.errors import InputError
 __all__ = ["MOTORS", "REQUIRED_COLUMNS", "Trace", "parse_mapping", "write_trace"]
 
 REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "voltage_a", "voltage_b", "speed_a", "speed_b")
-"""The columns every trace has, in contract order."""
+"""The columns every trace has, in the order docs/architecture.md gives them."""
 
 MOTORS: tuple[str, ...] = ("a", "b")
 """The motor names, as in ``voltage_a`` and ``speed_b``."""
@@ -36,7 +36,8 @@ _WRITE_CHUNK_ROWS = 65536
 class Trace:
     """One experiment: per tick, the time, the commanded voltages and the measured speeds.
 
-    Row k holds the voltage commanded at tick k and the speed measured at tick k (contract 1).
+    Row k holds the voltage commanded at tick k and the speed measured at tick k (the trace
+    columns, docs/architecture.md).
     All arrays are 1-D float64 copies of equal length, made read-only.
 
     Attributes
@@ -124,7 +125,7 @@ class Trace:
         return columns[name]
 
     def columns(self) -> dict[str, np.ndarray]:
-        """All columns by name: the required ones in contract order, then the extras."""
+        """All columns by name: the required ones (:data:`REQUIRED_COLUMNS` order), the extras."""
         return {name: getattr(self, name) for name in REQUIRED_COLUMNS} | self.extra
 
     @property
@@ -254,7 +255,7 @@ def _check_name(name: object) -> None:
 def write_trace(
     trace: Trace, path: str | Path, *, integer_columns: Collection[str] | None = None
 ) -> None:
-    """Write a trace as contract-1 CSV, creating parent directories.
+    """Write a trace as CSV (the trace columns), creating parent directories.
 
     The header row names the required columns then the extras; each value is written as the
     shortest text that reads back to the same float64, so a round trip is bit-exact. Integer

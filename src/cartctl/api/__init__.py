@@ -62,7 +62,7 @@ MOTORS = ("a", "b")
 
 
 def load_trace(path: str | Path, map: str | Mapping[str, str] | None = None) -> Trace:
-    """Read an experiment: contract-1 CSV or a QRoboticsCenter log (as every command does).
+    """Read an experiment: a trace CSV or a QRoboticsCenter log (as every command does).
 
     Parameters
     ----------
@@ -113,7 +113,7 @@ def excite(
     Returns
     -------
     Trace
-        Contract-1 columns, with ``true_speed_a``/``true_speed_b`` from the simulator.
+        The trace columns, with ``true_speed_a``/``true_speed_b`` from the simulator.
     """
     from cartctl.cart import SUPPLY_V
     from cartctl.experiment import run_experiment

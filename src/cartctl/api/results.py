@@ -193,7 +193,7 @@ class SimulationResult(_Shown):
     Attributes
     ----------
     columns : dict of str to ndarray
-        The trace's columns (contract 1 and the loop's: ``time_s``, ``voltage_a``, ``speed_a``,
+        The trace's columns (every trace's and the loop's: ``time_s``, ``voltage_a``, ``speed_a``,
         ``reference_a``, ``estimate_a``, ``true_speed_a`` …); the last row is the stop row.
     summary : dict
         The run summary of ``cartctl run --json`` (overshoot, settling, errors per motor).

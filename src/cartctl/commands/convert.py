@@ -1,7 +1,7 @@
 """``cartctl convert FILE [--map ...] [--out FILE.csv] [--json]``: check, summarise and convert a trace.
 
-Reads a contract-1 CSV or a QRoboticsCenter log (QRC 5 XML, QRC 6 CSV), reports what it holds, and
-with ``--out`` writes it as a contract-1 CSV that every other command reads.
+Reads a trace CSV or a QRoboticsCenter log (QRC 5 XML, QRC 6 CSV), reports what it holds, and
+with ``--out`` writes it as a trace CSV that every other command reads.
 """
 
 from __future__ import annotations

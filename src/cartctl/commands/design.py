@@ -166,7 +166,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="write PNGs per motor: design_X.png (Bode, step) and analysis_X.png (S and T, "
         "Nyquist, load disturbance)",
     )
-    p.add_argument("--json", action="store_true", help="print one JSON object (contract 3)")
+    p.add_argument(
+        "--json", action="store_true", help="print one JSON object (keys: docs/architecture.md)"
+    )
     p.set_defaults(func=run)
 
 

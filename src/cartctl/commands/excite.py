@@ -1,4 +1,4 @@
-"""``cartctl excite``: record an excitation experiment on a plant into a contract-1 CSV."""
+"""``cartctl excite``: record an excitation experiment on a plant into a trace CSV."""
 
 from __future__ import annotations
 

@@ -130,7 +130,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="F",
         help="estimate on the first fraction F of each experiment (e.g. 0.7), validate on the rest",
     )
-    p.add_argument("--json", action="store_true", help="print one JSON object (contract 3)")
+    p.add_argument(
+        "--json", action="store_true", help="print one JSON object (keys: docs/architecture.md)"
+    )
     p.set_defaults(func=run)
 
 

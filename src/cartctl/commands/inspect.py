@@ -24,7 +24,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("model", metavar="MODEL.toml", help="model file, e.g. models/ground.toml")
     p.add_argument(
-        "--json", action="store_true", help="print one JSON object (contract 3) instead of a table"
+        "--json",
+        action="store_true",
+        help="print one JSON object (keys: docs/architecture.md) instead of a table",
     )
     p.set_defaults(func=run)
 
@@ -37,7 +39,8 @@ def marginal_poles(model: ArxModel) -> list[complex]:
 
 
 def _pole_dict(root: Root) -> dict[str, Any]:
-    """Contract-3 P of a pole, plus ``magnitude`` |z| and ``slow_or_marginal`` (|z| > 0.99)."""
+    """``inspect --json``'s entry of a pole, plus ``magnitude`` |z| and ``slow_or_marginal``
+    (|z| > 0.99)."""
     from cartctl.model import MARGINAL_POLE_RADIUS
 
     return root.to_dict() | {
@@ -52,7 +55,7 @@ def outside_zeros(model: ArxModel) -> list[complex]:
 
 
 def model_summary(model: ArxModel) -> dict[str, Any]:
-    """Contract-3 ``inspect`` entry of one motor (plus nk, num, den, minimum_phase: no zero
+    """``inspect --json`` entry of one motor (plus nk, num, den, minimum_phase: no zero
     with |z| > 1, and slow_or_marginal: a pole with |z| > 0.99, with ``flags`` naming both)."""
     from cartctl.metrics import finite_or_none
 

@@ -105,7 +105,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "their anti-windup and estimators work with it",
     )
     p.add_argument(
-        "--json", action="store_true", help="print the summary as one JSON object (contract 3)"
+        "--json",
+        action="store_true",
+        help="print the summary as one JSON object (keys: docs/architecture.md)",
     )
     p.set_defaults(func=run)
 

@@ -2,7 +2,7 @@
 
 A stage's recording holds its series on the ``time`` timeline (duration, s) and the stage's
 figures as a Markdown document at ``commission/<stage>``. A trace (the checks, the excitation)
-goes under contract 4's entity paths (``motor/a/voltage``, ``motor/a/speed`` …) with the run's
+goes under the run's Rerun entity paths (``motor/a/voltage``, ``motor/a/speed`` …) with the run's
 layout (:func:`cartctl.sinks.rerun_layout.blueprint`), so ``cartctl review`` shows it as a run.
 Recording problems never stop commissioning: they come back as text for the summary.
 """
@@ -27,7 +27,7 @@ Series = Mapping[str, tuple[NDArray[np.float64], NDArray[np.float64]]]
 
 
 def trace_series(trace: Trace) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]:
-    """A trace's columns under contract 4's entity paths."""
+    """A trace's columns under the run's Rerun entity paths."""
     t = np.asarray(trace.time_s, dtype=float)
     return {ENTITY_PATHS[c]: (t, np.asarray(v, dtype=float))
             for c, v in trace.columns().items() if c in ENTITY_PATHS}  # fmt: skip

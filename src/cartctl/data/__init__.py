@@ -1,6 +1,6 @@
 """Experiment traces in and out: the first stage of the pipeline (data → identify → design → run).
 
-- :mod:`cartctl.data.read`: :func:`read_trace`, contract-1 CSV and QRoboticsCenter logs to a
+- :mod:`cartctl.data.read`: :func:`read_trace`, trace CSV and QRoboticsCenter logs to a
   :class:`~cartctl.trace.Trace`, with the checks of what the numbers mean;
 - :mod:`cartctl.data.table`: a file's numbers, with errors that name line, row and column;
 - :mod:`cartctl.data.columns`: which file column or QRC label becomes which trace column.

@@ -1,6 +1,6 @@
-"""Which column of a file becomes which trace column: the contract's names or a ``--map``.
+"""Which column of a file becomes which trace column: the trace's own names or a ``--map``.
 
-A contract-1 CSV file names its columns as the trace does. A foreign CSV file or a QRC log needs a
+A trace CSV file names its columns as the trace does. A foreign CSV file or a QRC log needs a
 mapping (trace column → file column or QRC label); where the mapping is silent, a column named
 like a trace column is taken. :func:`plan_columns` makes that decision, or says in one line what is
 missing and how to map it.

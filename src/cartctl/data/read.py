@@ -1,9 +1,9 @@
-"""Reading experiment traces: contract-1 CSV and QRoboticsCenter logs into a :class:`Trace`.
+"""Reading experiment traces: trace CSV and QRoboticsCenter logs into a :class:`Trace`.
 
 The first stage of the pipeline (data → identify → models/ → design → controllers/ → runtime →
 logs/). A trace holds, per 10 ms tick k, the voltage *commanded* at tick k (V) and the speed
 *measured* at tick k (rad/s) of both motors (the CSV columns are in the README, "Traces").
-:func:`read_trace` reads contract-1 CSV files and QRoboticsCenter logs (whose layout
+:func:`read_trace` reads trace CSV files and QRoboticsCenter logs (whose layout
 :mod:`cartctl.qrc` parses), optionally mapping QRC labels or foreign CSV headers onto trace
 columns. The file's numbers come from :mod:`cartctl.data.table`, the choice of columns from
 :mod:`cartctl.data.columns`; the checks of what the numbers mean (finite, increasing time, voltages
@@ -44,10 +44,10 @@ gives about 20 ms."""
 
 
 def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Trace:
-    """Read an experiment trace: contract-1 CSV, a QRC 5 XML log or a QRC 6 CSV log.
+    """Read an experiment trace: a trace CSV, a QRC 5 XML log or a QRC 6 CSV log.
 
     The format is told from the content: an XML root ``<QGPIORecord>`` is QRC 5, a first line
-    starting with ``QGPIORecord`` is QRC 6, anything else is contract-1 CSV. QRC times (ms) become
+    starting with ``QGPIORecord`` is QRC 6, anything else is a trace CSV. QRC times (ms) become
     seconds from the first row. Time steps that stray from the 10 ms tick by more than
     :data:`SPACING_TOLERANCE_S` give one :class:`~cartctl.errors.DataWarning` per file.
 
@@ -57,7 +57,7 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
         The file.
     mapping : mapping of str to str, optional
         Trace column name → QRC label or CSV header name (see :func:`parse_mapping`). Without
-        one, a CSV must have the contract's columns, and a QRC log's labels that equal trace
+        one, a CSV must have the trace columns, and a QRC log's labels that equal trace
         column names are used (compared in lower case, with other characters read as ``_``).
         A ``cartctl monitor`` trace (``time_s, tick`` and its labels) is read by its labels:
         ``speed_a``, ``speedA`` or ``Speed_A`` is speed_a (see

@@ -1,6 +1,6 @@
 """A table of numbers from a text file, with errors that name the line, row and column.
 
-:func:`cartctl.data.read.read_trace` turns a contract-1 CSV file's rows, or a QRC log's samples,
+:func:`cartctl.data.read.read_trace` turns a trace CSV file's rows, or a QRC log's samples,
 into a :class:`Table` here before it decides which columns become which trace column
 (:mod:`cartctl.data.columns`). Parsing goes through :mod:`csv` and :func:`numpy.loadtxt`; the slow
 field-by-field scan runs only to name the first field that is not a number.

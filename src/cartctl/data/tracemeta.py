@@ -1,6 +1,7 @@
 """The loop a trace was recorded in: a small TOML file beside the trace (its *meta* file).
 
-The CSV's columns are fixed (contract 1), so what the trace cannot say about itself goes beside it:
+The CSV's columns are fixed (docs/architecture.md), so what the trace cannot say about itself
+goes beside it:
 ``logs/ground.csv`` has ``logs/ground.meta.toml``::
 
     format = "cartctl-trace-meta/1"

@@ -45,7 +45,7 @@ class StepAnalysis:
         return float(np.max(np.abs(self.voltage_v)))
 
     def to_dict(self) -> dict[str, Any]:
-        """Contract-3 ``step`` entry (plus the full step info and the peak voltage)."""
+        """``design --json``'s ``step`` entry (plus the full step info and the peak voltage)."""
         info = self.info.to_dict()
         return {
             "overshoot_percent": info["overshoot_percent"],

@@ -49,7 +49,7 @@ class MotorDesign:
     controller : Controller
         The runtime controller, as ``cartctl run`` builds it from the file.
     entry : dict
-        The design's figures (gains, margins, poles; contract 3's ``design --json`` entry).
+        The design's figures (gains, margins, poles; the ``design --json`` entry).
     file_entry : dict
         The ``[motors.X]`` table of the controller file (without ``analysis``).
     """

@@ -353,7 +353,7 @@ class PiDesign:
         }
 
     def to_dict(self) -> dict[str, Any]:
-        """Contract-3 ``design`` entry of one motor (without the simulated ``step``)."""
+        """``design --json`` entry of one motor (without the simulated ``step``)."""
         num, den = self.controller_tf_coeffs()
         return {
             "kp": self.kp,

@@ -185,7 +185,7 @@ class PolesDesign:
         return A_a - np.outer(B_a, np.append(self.state_gain, self.K_xi))
 
     def to_dict(self) -> dict[str, object]:
-        """JSON form (contract 3's ``closed_loop_poles`` and ``estimator_poles`` as [re, im])."""
+        """JSON form (``design --json``: ``closed_loop_poles``, ``estimator_poles`` as [re, im])."""
         return {
             "method": "poles",
             "Ts": self.period_s,

@@ -33,9 +33,9 @@ both entering where the voltage does; the angle shares x_1's noise. The measurem
 quantisation alone (the model files record no noise level).
 
 Rows and delays. Row k holds the voltage commanded at tick k and the speed measured at tick k
-(contract 1): the model applies to the rows as written, with its own nk. A loop slower than the
-one the model was identified on (``extra_delay_ticks``, as in ``design``) adds whole ticks of
-input delay.
+(the trace columns): the model applies to the rows as written, with its own nk. A loop slower
+than the one the model was identified on (``extra_delay_ticks``, as in ``design``) adds whole
+ticks of input delay.
 
 The speed at a tick. x̂_1[k] estimates the mean speed over the last tick, about the true speed
 half a tick earlier. The estimate of the true speed at tick k is the mean of x̂_1[k] and x̂_1[k+1]

@@ -77,7 +77,7 @@ class ArxFit:
         return [f"a{i + 1}" for i in range(m.na)] + [f"b{j}" for j in range(m.nb)]
 
     def to_dict(self) -> dict[str, Any]:
-        """Contract-3 entry of one motor (plus na, nb, method, residual_rms, n_samples)."""
+        """``identify --json`` entry of one motor (plus na, nb, method, residual_rms, n_samples)."""
         m = self.model
         return {
             "theta": m.theta.tolist(),

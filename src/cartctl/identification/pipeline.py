@@ -130,7 +130,7 @@ class MotorIdentification:
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        """Contract-3 entry (the chosen fit) plus the side-by-side variants and the evidence."""
+        """``identify --json`` entry (the chosen fit), the variants side by side, the evidence."""
         out = self.chosen.to_dict()
         if self.oe is not None:
             out["arx"] = self.arx.to_dict()
@@ -166,7 +166,7 @@ class IdentifyResult:
     loop_delay_ticks: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """The ``identify --json`` object (contract 3, plus ``delay`` and ``loop_delay_ticks``)."""
+        """The ``identify --json`` object (fixed keys, plus ``delay`` and ``loop_delay_ticks``)."""
         return {
             "Ts": self.period_s,
             "motors": {m: r.to_dict() for m, r in self.motors.items()},

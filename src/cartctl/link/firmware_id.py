@@ -13,7 +13,7 @@ one it is:
 
 :func:`recognise_firmware` reads one frame's channels and returns the :class:`Firmware` with the
 labels of its channels, named as the columns of a trace (``speed_a``, ``voltage_a``,
-``reference_a``: docs/architecture.md's contract 1), so that ``review``, ``validate`` and
+``reference_a``: docs/architecture.md's trace columns), so that ``review``, ``validate`` and
 ``convert`` read a ``cartctl monitor`` trace of it as it is. Pure: no I/O.
 """
 

@@ -1,6 +1,6 @@
 """The plant interface: what the loop and the experiments talk to.
 
-A plant is advanced one control tick at a time. The tick convention matches contract 1 (the
+A plant is advanced one control tick at a time. The tick convention matches a trace's rows (the
 trace CSV): row k holds the voltage *commanded* at tick k and the speed *measured* at tick k.
 
     y0 = plant.reset()            # speeds measured at tick 0

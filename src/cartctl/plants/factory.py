@@ -1,4 +1,4 @@
-"""Build a plant from its command-line name (contract 2: ``sim``, ``physics``, ``virtual``, ``serial:PORT``)."""
+"""Build a plant from its ``--plant`` name ( ``sim``, ``physics``, ``virtual``, ``serial:PORT``)."""
 
 from __future__ import annotations
 

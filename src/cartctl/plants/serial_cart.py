@@ -343,7 +343,7 @@ class SerialCart:
         return {name: maxima.get(i, 0) for i, name in zip(ids, TIMING_REPORTS, strict=True)}
 
     def link_summary(self) -> dict[str, Any]:
-        """Link figures for the run summary (extends contract 3)."""
+        """Link figures for the run summary (``run --json``'s ``link``)."""
         stats = self.link.stats
         delays = list(self.echo_delays.elements())
         seen, probe = EchoDelays.of(self.echo_delays), self.probe_delays

@@ -135,7 +135,7 @@ class TimingStats:
         )
 
     def to_dict(self) -> dict[str, Any]:
-        """The timing part of the run JSON (contract 3), extended with skipped deadlines.
+        """The timing part of ``run --json`` (docs/architecture.md), plus skipped deadlines.
 
         Returns
         -------

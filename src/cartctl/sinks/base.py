@@ -1,4 +1,4 @@
-"""The sink interface and the closed-loop trace columns (contract 1 plus the closed-loop columns).
+"""The sink interface and the closed-loop trace columns (docs/architecture.md's trace columns).
 
 The loop opens every sink with the column names, writes one row of floats per tick in that order,
 and closes every sink on every exit path. ``write`` runs inside the 10 ms tick, before the tick's
@@ -28,10 +28,11 @@ TRACE_COLUMNS: tuple[str, ...] = (
     "period_error_us",
     "compute_us",
 )
-"""Columns of a closed-loop trace, in file order: contract 1's, then the loop's. Simulated
-plants add ``true_speed_a``, ``true_speed_b`` after these. Row k: the voltage commanded at tick k and the speed measured at
-tick k (contract 1); ``period_error_us`` is how late tick k started against its deadline (µs),
-``compute_us`` the time from its start to the command being sent (µs)."""
+"""Columns of a closed-loop trace, in file order: every trace's, then the loop's. Simulated
+plants add ``true_speed_a``, ``true_speed_b`` after these. Row k: the voltage commanded at tick k
+and the speed measured at tick k (as in every trace); ``period_error_us`` is how late tick k
+started against its deadline (µs), ``compute_us`` the time from its start to the command being
+sent (µs)."""
 
 TRUE_SPEED_COLUMNS: tuple[str, ...] = ("true_speed_a", "true_speed_b")
 

@@ -1,4 +1,4 @@
-"""The CSV trace sink: contract 1 plus the closed-loop columns, flushed at least once a second.
+"""The CSV trace sink: the trace columns of docs/architecture.md, flushed at least once a second.
 
 ``write`` keeps the tick's row (a tuple of floats, nothing formatted; a row of another length than
 the header's is a ``ValueError``, never a short row in the file); ``idle``, which the loop calls

@@ -1,4 +1,6 @@
-"""The project's Rerun layout: entity paths, series styles and the blueprint (contract 4).
+"""The project's Rerun layout: entity paths, series styles and the blueprint.
+
+The entity paths of the loop's columns are fixed (docs/architecture.md, "Rerun entity paths").
 
 What a recording holds and how it is shown, shared by the run's sink (:mod:`cartctl.sinks.rerun_sink`)
 and ``cartctl review``: per motor, speed with reference and estimate in one plot and the voltage
@@ -52,10 +54,10 @@ _TABLE: Final[dict[str, tuple[str, SeriesStyle]]] = {
 }  # fmt: skip
 
 ENTITY_PATHS: Final[dict[str, str]] = {column: path for column, (path, _) in _TABLE.items()}
-"""Trace column → entity path. Those of the columns the loop writes are contract 4;
-``true_speed_*`` (simulated plants only) and ``smoothed_speed_*`` (the Kalman RTS smoothed speed,
-computed after a run from the whole trace, :mod:`cartctl.design.smoother`; not a column the loop
-writes) are extensions."""
+"""Trace column → entity path. Those of the columns the loop writes are fixed
+(docs/architecture.md); ``true_speed_*`` (simulated plants only) and ``smoothed_speed_*`` (the
+Kalman RTS smoothed speed, computed after a run from the whole trace,
+:mod:`cartctl.design.smoother`; not a column the loop writes) are extensions."""
 STYLES: Final[dict[str, SeriesStyle]] = {path: style for path, style in _TABLE.values()}
 """Entity path → how its line is drawn."""
 

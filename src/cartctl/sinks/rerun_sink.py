@@ -1,4 +1,5 @@
-"""The Rerun sink: the loop's rows as a ``.rrd`` recording and/or a live viewer (contract 4).
+"""The Rerun sink: the loop's rows as a ``.rrd`` recording and/or a live viewer, under the fixed
+entity paths of docs/architecture.md.
 
 Sits at the end of the run stage (runtime loop → sinks → logs/ → review). ``write`` only keeps the
 row; ``idle``, which the loop calls after the tick's compute time is taken, copies the rows into a
@@ -184,7 +185,7 @@ class RerunSink:
         self._rows = []
 
     def _entities(self, columns: list[str]) -> tuple[tuple[int, str], ...]:
-        """(column index, entity path) of each column recorded: contract 4's paths."""
+        """(column index, entity path) of each column recorded: the fixed entity paths."""
         return tuple((i, ENTITY_PATHS[c]) for i, c in enumerate(columns) if c in ENTITY_PATHS)
 
     def _describe(self, rec: rr.RecordingStream) -> None:

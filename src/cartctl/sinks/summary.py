@@ -49,7 +49,7 @@ def motor_metrics(
     *,
     settling_floor: float = 0.0,
 ) -> dict[str, Any]:
-    """Contract-3 ``run`` entry of one motor (step metrics None when the reference has no step).
+    """``run --json`` entry of one motor (step metrics None when the reference has no step).
 
     ``speed`` is the signal judged (rad/s); the settling band is max(2 % of the step,
     ``settling_floor``) (rad/s).
@@ -127,7 +127,7 @@ def trace_duration_s(time_s: NDArray[np.float64]) -> float:
 
 
 def trace_metrics(columns: Mapping[str, NDArray[np.float64]], period_s: float) -> dict[str, Any]:
-    """The whole summary (without file names) from trace columns (contract 1 + closed loop)."""
+    """The whole summary (without file names) from trace columns (a closed-loop trace's)."""
     for name in ("time_s", "reference_a", "speed_a", "voltage_a", "period_error_us", "compute_us"):
         if name not in columns:
             raise InputError(f"the trace has no '{name}' column: it is not a closed-loop run trace")

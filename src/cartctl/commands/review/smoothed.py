@@ -11,7 +11,7 @@ The numerics are :func:`cartctl.design.smoother.smooth_speed`; the metrics on it
   ``--model``, else the model a ``run`` named in its ``.rrd`` beside the CSV, else the model the
   trace's meta file names (a run stores its controller and that model there). Without one the
   summary says, in one line, that the smoothed metrics need a model, and shows the encoder's.
-- The loop delay: the model applies to the rows as written (contract 1) on the loop it was
+- The loop delay: the model applies to the rows as written (the trace columns) on the loop it was
   identified on; a run whose measured loop delay is longer than the one the controller was designed
   for (its ``loop_delay_ticks``) smooths with the difference as extra input delay, as ``design``
   would.
@@ -167,7 +167,7 @@ def smooth_run(
 
 
 def recording_columns(chunks: Any) -> dict[str, NDArray[np.float64]]:
-    """The trace columns a run's recording holds (contract 4's entities back to their columns),
+    """The trace columns a run's recording holds (the Rerun entity paths back to their columns),
     one row per recorded tick, with ``time_s`` and ``tick``; empty when it holds no motor.
 
     Parameters
