@@ -73,9 +73,10 @@ class Verification:
 
 def _worse(motors: dict[str, dict[str, Any]], key: str) -> float | None:
     values = [m.get(key) for m in motors.values()]
-    if any(v is None for v in values):
+    known = [float(v) for v in values if v is not None]
+    if len(known) < len(values):
         return None
-    return max(float(v) for v in values)  # type: ignore[arg-type]
+    return max(known)
 
 
 def compare(summary: dict[str, Any], predicted: dict[str, float | None],

@@ -60,8 +60,8 @@ class EchoDelays:
     @property
     def mode_share(self) -> float:
         """Share of the echoes at :attr:`mode` (0 without echoes)."""
-        total = self.echoes
-        return 0.0 if total == 0 else dict(self.counts)[self.mode] / total  # type: ignore[index]
+        total, mode = self.echoes, self.mode
+        return 0.0 if total == 0 or mode is None else dict(self.counts)[mode] / total
 
     @property
     def clear(self) -> bool:
