@@ -223,8 +223,8 @@ def run(args: argparse.Namespace) -> int:
     loop = ControlLoop(plant, controllers, references, sinks, now_s=clock.now_s,
                        voltage_limit_v=limit, period_s=period_s)  # fmt: skip
     executor: Any
-    if clocked:
-        executor = CartClockedExecutor(plant, max_ticks=n, now_s=clock.now_s,  # type: ignore[arg-type]
+    if isinstance(plant, ClockedPlant):  # clocked
+        executor = CartClockedExecutor(plant, max_ticks=n, now_s=clock.now_s,
                                        compute_us=lambda: loop.last_compute_us)  # fmt: skip
     elif args.fast:  # ticks back to back: nothing that only real time needs
         executor = VirtualExecutor(period_s, max_ticks=n)

@@ -8,7 +8,7 @@ is the run's sink kept open after the loop has closed it, until those series are
 from __future__ import annotations
 
 import atexit
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import rerun as rr
@@ -69,7 +69,7 @@ class HeldRerunSink(RerunSink):
 
     _released = False
 
-    def open(self, columns: list[str]) -> None:  # type: ignore[override]
+    def open(self, columns: Sequence[str]) -> None:
         super().open(columns)
         atexit.register(self.release)
 
