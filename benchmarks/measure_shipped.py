@@ -161,7 +161,7 @@ def measure(path: Path, out: Path, virtual: bool) -> tuple[list[dict[str, Any]],
     if delay == 1:
         for spec in PHYSICS_TIMINGS:
             plants.append((spec, ["--plant", spec, "--fast"], True))
-    if controller.plant_kind == "serial" and virtual:
+    if controller.loop_site == "serial" and virtual:
         plants.append(("virtual", ["--plant", "virtual"], True))
     rows, failures = [], []
     for plant, plant_args, has_true in plants:

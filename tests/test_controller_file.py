@@ -63,7 +63,7 @@ def test_shipped_files_say_the_loop_they_are_for(name: str, ground_path: Path) -
     assert raw["plant_kind"] == ("onboard" if expected == 1 else "serial")
     loaded = load_controller(CONTROLLERS / name)
     assert loaded.loop_delay_ticks == expected
-    assert name.startswith("serial-") == (loaded.plant_kind == "serial")
+    assert name.startswith("serial-") == (loaded.loop_site == "serial")
 
 
 def test_a_file_without_loop_delay_gets_it_from_its_model(workdir: Path) -> None:

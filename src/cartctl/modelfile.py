@@ -3,7 +3,7 @@
 ``identify --out`` writes these files, ``design``, ``inspect``, ``validate`` and the simulated plant
 read them. A file holds one model per motor and says where the models came from::
 
-    format = "cartctl-model/1"
+    format = "cartctl-model/2"
     period_s = 0.01
     loop_delay_ticks = 1        # optional: the loop the data was recorded in
 
@@ -26,6 +26,10 @@ Extra keys in ``[motors.X]`` (``theta_std``, fit percentages …) are kept as ``
 the voltage it leads to being on the motor (1 on board and in the simulators). ``identify`` takes
 it from its traces' meta files (:mod:`cartctl.data.tracemeta`) or ``--loop-delay``; ``design``
 designs for it. A file without it (an older one) leaves ``design`` to assume nk − 1.
+
+Files are written as version 2 (``cartctl-model/2``). Version 1, an older cartctl's, has the same
+keys and reads the same way, as does a file without a ``format`` line; another version is refused
+in one line that names the file and the versions read.
 """
 
 from __future__ import annotations

@@ -9,14 +9,20 @@ from typing import Any
 
 from cartctl.errors import DataFileError, MissingFileError
 
-MODEL_FORMAT = "cartctl-model/1"
-"""The ``format`` line of a model file (:mod:`cartctl.modelfile`)."""
-CONTROLLER_FORMAT = "cartctl-controller/1"
-"""The ``format`` line of a controller file (:mod:`cartctl.design.controllerfile`)."""
+MODEL_FORMAT = "cartctl-model/2"
+"""The ``format`` line a model file is written with (:mod:`cartctl.modelfile`)."""
+CONTROLLER_FORMAT = "cartctl-controller/2"
+"""The ``format`` line a controller file is written with (:mod:`cartctl.design.controllerfile`)."""
 TRACE_META_FORMAT = "cartctl-trace-meta/1"
 """The ``format`` line of a trace's meta file (:mod:`cartctl.data.tracemeta`)."""
-FORMATS = {MODEL_FORMAT: "a model file", CONTROLLER_FORMAT: "a controller file",
-           TRACE_META_FORMAT: "a trace meta file"}  # fmt: skip
+READABLE = {MODEL_FORMAT: ("cartctl-model/1", MODEL_FORMAT),
+            CONTROLLER_FORMAT: ("cartctl-controller/1", CONTROLLER_FORMAT),
+            TRACE_META_FORMAT: (TRACE_META_FORMAT,)}  # fmt: skip
+"""Every version read, by the format written. Version 2 of model and controller files has version
+1's keys, read the same way; the number says the file's names are those of docs/file-formats.md."""
+FORMATS = {version: what for written, what in ((MODEL_FORMAT, "a model file"),
+           (CONTROLLER_FORMAT, "a controller file"), (TRACE_META_FORMAT, "a trace meta file"))
+           for version in READABLE[written]}  # fmt: skip
 """What each ``format`` line says a file is, for messages about a file given in another's place."""
 
 
@@ -45,17 +51,24 @@ def read_toml(path: str | Path, what: str) -> dict[str, Any]:
         raise DataFileError(path, f"not a valid TOML {what} ({exc})") from None
 
 
-def check_format(doc: Mapping[str, Any], path: Path, expected: str, what: str) -> None:
-    """Refuse (DataFileError) a document whose ``format`` line is not ``expected``.
+def check_format(doc: Mapping[str, Any], path: Path, expected: str, what: str) -> str:
+    """The document's ``format`` line when it is a version of ``expected`` this cartctl reads
+    (:data:`READABLE`); else a DataFileError.
 
     The message says what the file is instead when its format is a known one (a model given as a
-    controller: ``is a model file, not a controller file``).
+    controller: ``is a model file, not a controller file``), and lists the versions read when the
+    file is of another version (a newer cartctl's).
     """
     found = doc.get("format")
-    if found == expected:
-        return
+    readable = READABLE.get(expected, (expected,))
+    if found in readable:
+        return str(found)
     if found in FORMATS:
         raise DataFileError(path, f"is {FORMATS[found]}, not a {what}")
+    known = " and ".join(repr(v) for v in readable)
+    if isinstance(found, str) and found.startswith(expected.rpartition("/")[0] + "/"):
+        raise DataFileError(path, f"has format {found!r}, a version this cartctl does not read; "
+                                  f"it reads {known}")  # fmt: skip
     shown = "has no 'format' line" if found is None else f"has format {found!r}"
     raise DataFileError(path, f"{shown}; a {what} says format = {expected!r}")
 

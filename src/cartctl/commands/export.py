@@ -15,7 +15,7 @@ from pathlib import Path
 
 from cartctl.commands.options import check_outputs
 from cartctl.errors import DataFileError, InputError
-from cartctl.tomlfile import CONTROLLER_FORMAT, MODEL_FORMAT
+from cartctl.tomlfile import CONTROLLER_FORMAT, MODEL_FORMAT, READABLE
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -73,9 +73,9 @@ def file_kind(path: str | Path) -> tuple[str, Path]:
     found = find_file(path)
     doc = read_toml(found, "model or controller file")
     fmt = doc.get("format")
-    if fmt == CONTROLLER_FORMAT:
+    if fmt in READABLE[CONTROLLER_FORMAT]:
         return "controller", found
-    if fmt == MODEL_FORMAT or (fmt is None and "motors" in doc and "method" not in doc):
+    if fmt in READABLE[MODEL_FORMAT] or (fmt is None and "motors" in doc and "method" not in doc):
         return "model", found
     shown = "has no 'format' line" if fmt is None else f"has format {fmt!r}"
     raise DataFileError(

@@ -2,12 +2,12 @@
 
 ``cartctl design --out`` writes them into ``controllers/``; the 10 ms loop loads them. A file::
 
-    format = "cartctl-controller/1"
+    format = "cartctl-controller/2"
     method = "pi"                      # or "poles"
     period_s = 0.01
     voltage_limit_v = 12.0
     loop_delay_ticks = 1               # the loop it is designed for (see below)
-    plant_kind = "onboard"             # loop delay 1 (on the cart, simulators); "serial": more
+    plant_kind = "onboard"             # where the loop runs: "onboard" (delay 1) or "serial"
     created = "2026-11-22T15:00:00+00:00"
     command = "cartctl design models/ground.toml --method pi ..."
 
@@ -29,11 +29,11 @@ the motor: 1 on board the cart and in the simulators, 3 over the PC serial loop.
 ``--extra-delay d`` on a model file that records the loop delay L its data came from is for L + d;
 on an older model file with input delay nk, for nk − 1 + d (:func:`cartctl.design.make.loop_delay_for`).
 
-Loading checks the format and the keys, resolves the model path against the file's folder, and
-checks that the file does not contradict itself: ``plant_kind`` against ``loop_delay_ticks``, and
-each motor's ``controller_num``/``controller_den`` against its gains
-(:func:`cartctl.design.controller_ss.consistency_problems`). A file without ``loop_delay_ticks`` (from an
-older cartctl) gets it from its model's nk and ``request.extra_delay_ticks``.
+Loading checks the format (version 1, an older cartctl's, has version 2's keys and loads the
+same way), the keys, resolves the model path against the file's folder, and checks that the file
+does not contradict itself: ``plant_kind`` against ``loop_delay_ticks``, each motor's
+``controller_num``/``controller_den`` against its gains (:mod:`cartctl.design.controller_ss`). A
+file without ``loop_delay_ticks`` (older) gets it from its model's nk and the extra delay.
 :mod:`cartctl.design.build` turns a file into runtime controllers.
 """
 
@@ -58,7 +58,7 @@ from cartctl.tomlfile import CONTROLLER_FORMAT, check_format, read_toml, require
 
 FORMAT = CONTROLLER_FORMAT
 METHODS = ("pi", "poles")
-PLANT_KINDS = ("onboard", "serial")
+LOOP_SITES = ("onboard", "serial")
 ONBOARD_LOOP_DELAY_TICKS = 1
 """Loop delay of control on board the cart, and of the simulated plants (ticks)."""
 
@@ -68,9 +68,9 @@ def design_loop_delay(nk: int, extra_delay_ticks: int) -> int:
     return int(nk) - 1 + int(extra_delay_ticks)
 
 
-def plant_kind(loop_delay_ticks: int) -> str:
-    """'onboard' for a loop delay of at most one tick (the cart itself, the simulators), else
-    'serial' (the PC-side loop over the serial line)."""
+def loop_site(loop_delay_ticks: int) -> str:
+    """Where a loop of this delay runs: 'onboard' for at most one tick (the cart itself, the
+    simulators), else 'serial' (the PC over the serial line); the file's ``plant_kind`` key."""
     return "onboard" if loop_delay_ticks <= ONBOARD_LOOP_DELAY_TICKS else "serial"
 
 
@@ -181,9 +181,9 @@ class ControllerFile:
         return "\n".join(lines)
 
     @property
-    def plant_kind(self) -> str | None:
-        """'onboard' or 'serial' (:func:`plant_kind`), None without a loop delay."""
-        return None if self.loop_delay_ticks is None else plant_kind(self.loop_delay_ticks)
+    def loop_site(self) -> str | None:
+        """'onboard' or 'serial' (:func:`loop_site`, the ``plant_kind`` key), None without a delay."""
+        return None if self.loop_delay_ticks is None else loop_site(self.loop_delay_ticks)
 
     def to_toml_dict(self, folder: str | Path | None = None) -> dict[str, Any]:
         """The document :func:`save_controller` writes.
@@ -196,7 +196,7 @@ class ControllerFile:
         """
         delay: dict[str, Any] = {}
         if self.loop_delay_ticks is not None:
-            delay = {"loop_delay_ticks": self.loop_delay_ticks, "plant_kind": self.plant_kind}
+            delay = {"loop_delay_ticks": self.loop_delay_ticks, "plant_kind": self.loop_site}
         model_path = self.model_path if folder is None else _relative_to(self.model_path, folder)
         return _plain(
             {
@@ -368,11 +368,11 @@ def load_controller(
         delay = require(doc, "loop_delay_ticks", int, path, "the top level")
         if delay < 0:
             raise DataFileError(path, f"loop_delay_ticks must be >= 0 ticks, got {delay}")
-    kind = doc.get("plant_kind", plant_kind(delay))
-    if kind != plant_kind(delay):
+    site = doc.get("plant_kind", loop_site(delay))
+    if site != loop_site(delay):
         raise DataFileError(
             path,
-            f"plant_kind = {kind!r} contradicts loop_delay_ticks = {delay} ('onboard' is a loop "
+            f"plant_kind = {site!r} contradicts loop_delay_ticks = {delay} ('onboard' is a loop "
             f"delay of {ONBOARD_LOOP_DELAY_TICKS} tick, 'serial' more)",
         )
     if not (math.isfinite(file_period_s) and 0.0 < file_period_s <= 1.0):
