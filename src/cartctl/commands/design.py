@@ -108,7 +108,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=float,
         default=_DEFAULT.extra_noise_std_rad_s,
         metavar="RAD_S",
-        help="measurement noise beyond encoder quantisation, std in rad/s (default 0)",
+        help="extra measurement noise on top of the encoder's quantisation, std in rad/s "
+        "(default 0); the file's estimator records the total as measurement_noise_std_rad_s",
     )
     est.add_argument(
         "--timing-noise-ticks",

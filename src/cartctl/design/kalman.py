@@ -122,7 +122,8 @@ def design_kalman(
     bias_drift_std_v : float
         σ_b, random-walk step of the input-disturbance state (V per tick); 0 leaves it out.
     extra_noise_std_rad_s : float
-        Measurement noise beyond the quantisation (rad/s std), added in variance.
+        Measurement noise beyond the quantisation (rad/s std, ``--measurement-noise``), added in
+        variance: the result's ``measurement_noise_std_rad_s`` is the total √R.
     counts_per_rev : int
         Encoder counts per wheel revolution (sets the quantisation step).
     extra_delay_ticks : int

@@ -23,7 +23,10 @@ SIMULATED = ("sim", "physics")
 
 
 def plant_kind(spec: str) -> str:
-    """The kind of a plant name: 'sim', 'physics', 'virtual', 'serial', or the name as given."""
+    """The kind of a ``--plant`` name: 'sim', 'physics', 'virtual', 'serial', or the name as given.
+
+    Not a controller file's ``plant_kind`` key, which is where a loop runs ('onboard', 'serial';
+    ``cartctl.design.controllerfile.loop_site``)."""
     kind = spec.partition(":")[0]
     return kind if kind in ("physics", "virtual", "serial") else spec
 
