@@ -12,10 +12,12 @@ import re
 import tomllib
 from pathlib import Path
 
+import control
 import pytest
 
 from cartctl.cli import main
 from cartctl.design.controllerfile import load_controller, loop_site
+from cartctl.modelfile import load_models
 from cartctl.plants.factory import plant_kind
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -95,3 +97,16 @@ def test_plant_kind_in_a_controller_file_is_where_the_loop_runs() -> None:
         assert loop_site(raw["loop_delay_ticks"]) == expected
     assert loop_site(1) == "onboard" and loop_site(3) == "serial"
     assert plant_kind("serial:/dev/ttyACM0") == "serial" and plant_kind("sim") == "sim"
+
+
+def test_arx_model_b_holds_the_reports_a_and_b_and_ar_its_c_and_d() -> None:
+    """``ArxModel.b`` is B(q), the numerator: the report's (a, b); ``ar`` is (c, d). Checked on
+    the shipped ground model (the report's equation 12) against python-control, evaluating the
+    report's (a z + b) / (z³ + c z² + d z) by hand at a point."""
+    c, d, a, b = -0.9356, 0.2173, 0.6466, -0.07751  # the report's θ for motor A, on the ground
+    model = load_models("models/ground.toml").motor("a")
+    assert model.ar == (c, d) and model.b == (a, b)
+    assert list(model.theta) == [c, d, a, b]
+    system = control.tf(model.num(), model.den(), model.period_s)
+    z = 0.3 + 0.4j
+    assert complex(system(z)) == pytest.approx((a * z + b) / (z**3 + c * z**2 + d * z))

@@ -150,13 +150,27 @@ def _clean_roots(coeffs: NDArray[np.float64]) -> NDArray[np.complex128]:
 class ArxModel:
     """A single-input single-output ARX model ``A(q) y[k] = B(q) u[k − nk]``.
 
+    The attributes are named after the polynomials A (output side, the transfer function's
+    denominator) and B (input side, its numerator), as in system identification and in
+    :func:`scipy.signal.lfilter`'s ``(b, a)``. The report names the same four numbers
+    θ = [c, d, a, b], where **a and b are both numerator coefficients**. For its structure
+    (na = nb = 2, nk = 2)::
+
+        report   Ω(z)/V(z) = (a z + b) / (z³ + c z² + d z)
+        here     ar = (c, d)      b = (a, b): the report's a is b[0], its b is b[1]
+                 num() = [a, b]   den() = [1, c, d, 0]   (descending powers of z, as control.tf)
+
+    so neither of the report's a and b is in ``ar``, and ``theta`` is ``(*ar, *b)`` in the
+    report's order.
+
     Attributes
     ----------
     ar : tuple of float
         a_1 … a_na, the output (denominator) coefficients after the leading 1. For the report's
         structure this is (c, d).
     b : tuple of float
-        b_0 … b_{nb−1}, the input (numerator) coefficients. For the report's structure (a, b).
+        b_0 … b_{nb−1}, the input (numerator) coefficients: B(q), not the report's scalar b. For
+        the report's structure this is (a, b).
     nk : int
         Input delay in samples (≥ 0). The report's structure has nk = 2: one sample from the
         zero-order hold and one from the firmware.
