@@ -15,14 +15,18 @@ CONTROLLER_FORMAT = "cartctl-controller/2"
 """The ``format`` line a controller file is written with (:mod:`cartctl.design.controllerfile`)."""
 TRACE_META_FORMAT = "cartctl-trace-meta/1"
 """The ``format`` line of a trace's meta file (:mod:`cartctl.data.tracemeta`)."""
-READABLE = {MODEL_FORMAT: ("cartctl-model/1", MODEL_FORMAT),
-            CONTROLLER_FORMAT: ("cartctl-controller/1", CONTROLLER_FORMAT),
-            TRACE_META_FORMAT: (TRACE_META_FORMAT,)}  # fmt: skip
+READABLE: dict[str, tuple[str, ...]] = {
+    MODEL_FORMAT: ("cartctl-model/1", MODEL_FORMAT),
+    CONTROLLER_FORMAT: ("cartctl-controller/1", CONTROLLER_FORMAT),
+    TRACE_META_FORMAT: (TRACE_META_FORMAT,),
+}
 """Every version read, by the format written. Version 2 of model and controller files has version
 1's keys, read the same way; the number says the file's names are those of docs/file-formats.md."""
-FORMATS = {version: what for written, what in ((MODEL_FORMAT, "a model file"),
-           (CONTROLLER_FORMAT, "a controller file"), (TRACE_META_FORMAT, "a trace meta file"))
-           for version in READABLE[written]}  # fmt: skip
+_KINDS = {MODEL_FORMAT: "a model file", CONTROLLER_FORMAT: "a controller file",
+          TRACE_META_FORMAT: "a trace meta file"}  # fmt: skip
+FORMATS = {
+    version: _KINDS[written] for written, versions in READABLE.items() for version in versions
+}
 """What each ``format`` line says a file is, for messages about a file given in another's place."""
 
 
