@@ -47,8 +47,10 @@ __all__ = [
     "StepOnset",
     "final_value",
     "find_step",
+    "first_step",
     "settling_half_width",
     "step_info",
+    "step_rows",
 ]
 
 MIN_FINAL_SAMPLES = 5
@@ -210,6 +212,22 @@ def find_step(
     return StepOnset(index, level - initial)
 
 
+def first_step(reference: NDArray[np.float64], *, initial: float = 0.0) -> tuple[int, int] | None:
+    """The first step of a reference (shape (n,)) that starts at ``initial`` (a loop starts at rest).
+
+    Returns ``(start, end)``: ``reference[start:end]`` is its first other level (a change of more
+    than 1e-9 ends it); None when it never leaves ``initial`` or holds that level for fewer than
+    :data:`MIN_FINAL_SAMPLES` samples.
+    """
+    moved = np.flatnonzero(np.abs(reference - initial) > 1e-9)
+    if moved.size == 0:
+        return None
+    start = int(moved[0])
+    changes = np.flatnonzero(np.abs(np.diff(reference[start:])) > 1e-9)
+    end = start + int(changes[0]) + 1 if changes.size else reference.size
+    return (start, end) if end - start >= MIN_FINAL_SAMPLES else None
+
+
 def _crossing(
     time_s: NDArray[np.float64], z: NDArray[np.float64], i: int, level: float, *, interpolate: bool
 ) -> float:
@@ -218,6 +236,56 @@ def _crossing(
         return float(time_s[i])
     frac = (level - z[i - 1]) / (z[i] - z[i - 1])
     return float(time_s[i - 1] + frac * (time_s[i] - time_s[i - 1]))
+
+
+def step_rows(
+    time_s: NDArray[np.float64],
+    z: NDArray[np.float64],
+    band: float,
+    onset_s: float,
+    *,
+    interpolate: bool = True,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Overshoot and settling time of N responses at once, as :func:`step_info` defines them.
+
+    Parameters
+    ----------
+    time_s : ndarray, shape (n,)
+        Sample times from the onset on (s), n ≥ 2.
+    z : ndarray, shape (N, n)
+        Each response as a fraction of its step: 0 at the initial value, 1 at the target.
+    band : float
+        The settling band's half-width as a fraction of the step
+        (:func:`settling_half_width` / |step|); at 1 or more nothing is left to settle, which
+        the caller judges (:func:`step_info` gives None).
+    onset_s : float
+        When the step is applied (s); settling counts from it.
+    interpolate : bool
+        As for :func:`step_info`.
+
+    Returns
+    -------
+    overshoot_percent : ndarray, shape (N,)
+        (max z − 1)·100, 0 when within rounding of the target or below it (%).
+    settling_time_s : ndarray, shape (N,)
+        From the onset to entering the band for good (s); ``inf`` where the last sample is
+        outside it (not settled within the record).
+    """
+    excess = np.max(z, axis=1) - 1.0
+    overshoot = np.where(excess <= _ROUNDING, 0.0, excess) * 100.0
+    outside = np.abs(z - 1.0) > band
+    last = z.shape[1] - 1 - np.argmax(outside[:, ::-1], axis=1)  # the last sample outside
+    j = np.minimum(last, z.shape[1] - 2)
+    rows = np.arange(z.shape[0])
+    zj, zi = z[rows, j], z[rows, j + 1]
+    if interpolate:
+        edge = np.where(zj > 1.0, 1.0 + band, 1.0 - band)
+        with np.errstate(all="ignore"):
+            settled = time_s[j] + (edge - zj) / (zi - zj) * (time_s[j + 1] - time_s[j])
+    else:
+        settled = time_s[j + 1]
+    settling = np.where(outside.any(axis=1), settled - onset_s, time_s[0] - onset_s)
+    return overshoot, np.where(outside[:, -1], np.inf, settling)
 
 
 def step_info(
@@ -307,28 +375,14 @@ def step_info(
         rise = hi - lo
 
     band = settling_half_width(size, settling_floor, settling_band) / abs(size)  # of the step
-    outside = np.flatnonzero(np.abs(z - 1.0) > band)
-    settling: float | None
-    if band >= 1.0:  # the band reaches back to the initial value: nothing to settle
-        settling = None
-    elif outside.size == 0:
-        settling = float(ts[0] - onset)
-    elif outside[-1] == z.size - 1:
-        settling = None
-    else:
-        j = int(outside[-1])
-        edge = 1.0 + band if z[j] > 1.0 else 1.0 - band
-        settled = _crossing(ts, z, j + 1, edge, interpolate=interpolate)
-        settling = settled - onset
-
+    overshoot, settled = step_rows(ts, z[None, :], band, onset, interpolate=interpolate)
+    # a band that reaches back to the initial value leaves nothing to settle
+    settling = None if band >= 1.0 or math.isinf(settled[0]) else float(settled[0])
     i_peak = int(np.argmax(z))
-    excess = float(z[i_peak]) - 1.0
-    if excess <= _ROUNDING:  # a flat tail whose mean differs from its samples in the last bit
-        excess = 0.0
     return StepInfo(
         rise_time_s=rise,
         settling_time_s=settling,
-        overshoot_percent=excess * 100.0,
+        overshoot_percent=float(overshoot[0]),
         peak_value=float(ys[i_peak]),
         peak_time_s=float(ts[i_peak] - onset),
         steady_state_value=final,

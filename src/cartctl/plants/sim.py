@@ -10,13 +10,17 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from cartctl.cart import SUPPLY_V, nk_fits_loop_delay
 from cartctl.errors import InputError, PlantError
 from cartctl.model import ArxModel
 from cartctl.plants.base import Measurement
+from cartctl.runtime.elementwise import Value
 
 DIVERGED_RAD_S = 1e6
 """A simulated speed beyond this (rad/s; the cart's motors reach about 25) has run away."""
@@ -27,6 +31,36 @@ def saturate(voltage_v: float, limit_v: float = SUPPLY_V) -> float:
     if not math.isfinite(voltage_v):
         return 0.0
     return min(limit_v, max(-limit_v, voltage_v))
+
+
+def arx_next(
+    b: Sequence[float | Value], u: Sequence[Value] | NDArray[np.float64], offset: int,
+    ar: Sequence[float | Value], y: Sequence[Value] | NDArray[np.float64],
+) -> Value:  # fmt: skip
+    """y[k+1] = Σ b_i v[k+1−nk−i] − Σ a_j y[k+1−j], the ARX difference equation.
+
+    Works on floats (one motor) and on arrays of shape (N,) (N plants, one per element, as
+    ``cartctl tune --robust`` runs them), with the same operations.
+
+    Parameters
+    ----------
+    b : sequence of float or ndarray
+        b_0, b_1, … (rad/s per V), or per plant.
+    u : sequence of float or ndarray
+        The commands, newest first: u[0] = v[k], u[1] = v[k−1], … (V).
+    offset : int
+        Where b_0's command sits in ``u``: nk − 1.
+    ar : sequence of float or ndarray
+        a_1 … a_na, or per plant.
+    y : sequence of float or ndarray
+        The outputs, newest first: y[0] = y[k], y[1] = y[k−1], … (rad/s).
+    """
+    y_next: Any = 0.0  # an array after the first term, for arrays
+    for i, b_i in enumerate(b):
+        y_next = y_next + b_i * u[offset + i]
+    for j, a_j in enumerate(ar):
+        y_next = y_next - a_j * y[j]
+    return y_next
 
 
 class _ArxMotor:
@@ -46,14 +80,9 @@ class _ArxMotor:
     def step(self, voltage_v: float) -> float:
         """Take v[k] (V) and return y[k+1]: y[k+1] = Σ b_i v[k+1−nk−i] − Σ a_j y[k+1−j]."""
         self.u.appendleft(voltage_v)  # u[0] = v[k], u[1] = v[k-1], ...
-        u, y = self.u, self.y  # y[0] = y[k], y[1] = y[k-1], ...
-        y_next = 0.0
-        for i, b_i in enumerate(self.b):
-            y_next += b_i * u[self.nk - 1 + i]
-        for j, aj in enumerate(self.ar):
-            y_next -= aj * y[j]
+        y_next = arx_next(self.b, self.u, self.nk - 1, self.ar, self.y)
         if self.ar:
-            y.appendleft(y_next)
+            self.y.appendleft(y_next)
         return y_next
 
 

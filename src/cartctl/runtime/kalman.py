@@ -23,12 +23,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.runtime.base import SpeedEstimator
+from cartctl.runtime.elementwise import Value
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,7 +60,8 @@ class KalmanDesign:
     period_s : float
         Ts (s).
     process_noise_std_v, bias_drift_std_v, measurement_noise_std_rad_s : float
-        The noise levels the design used (σ_w in V, σ_b in V per tick, √R in rad/s).
+        The noise levels the design used (σ_w in V, σ_b in V per tick, √R in rad/s: the total,
+        the encoder's quantisation and ``design --measurement-noise`` together).
     timing_noise_std_ticks : float
         σ_ε, the uncertainty of when a command lands (ticks); 0 (the default, and what a file
         without it gets): Q is fixed. Above 0 the estimator adds, at each prediction, the
@@ -125,7 +127,14 @@ class KalmanDesign:
         }
 
 
-__all__ = ["KalmanSpeedEstimator", "StateEstimator", "SteadyStateSpeedEstimator"]
+__all__ = [
+    "FilterTerms",
+    "KalmanSpeedEstimator",
+    "StateEstimator",
+    "SteadyStateSpeedEstimator",
+    "filter_correct",
+    "filter_predict",
+]
 
 
 @runtime_checkable
@@ -202,6 +211,57 @@ class KalmanSpeedEstimator:
         return self._gain.copy()
 
 
+class FilterTerms(NamedTuple):
+    """A :class:`KalmanDesign`'s fixed-gain filter as plain floats, its zeros left out.
+
+    Attributes
+    ----------
+    L : tuple of float
+        The gain, one entry per state.
+    C : tuple of (int, float)
+        The measurement row's non-zero entries (state index, value).
+    AB : tuple of (tuple of (int, float), float)
+        Per state: the non-zero entries of its row of A (column, value), and its entry of B.
+    """
+
+    L: tuple[float, ...]
+    C: tuple[tuple[int, float], ...]
+    AB: tuple[tuple[tuple[tuple[int, float], ...], float], ...]
+
+    @classmethod
+    def from_design(cls, design: KalmanDesign) -> FilterTerms:
+        """The terms of ``design`` (the observer form has at most three entries per row of A)."""
+        m = design.A.shape[0]
+        rows = tuple(tuple((j, float(a)) for j, a in enumerate(design.A[i]) if a != 0.0)
+                     for i in range(m))  # fmt: skip
+        return cls(tuple(float(v) for v in design.L),
+                   tuple((j, float(c)) for j, c in enumerate(design.C) if c != 0.0),
+                   tuple(zip(rows, (float(b) for b in design.B), strict=True)))  # fmt: skip
+
+
+def filter_correct(terms: FilterTerms, x: list[Value], measured_rad_s: Value) -> list[Value]:
+    """x̂[k|k] = x̂[k|k−1] + L (y[k] − C x̂[k|k−1]).
+
+    ``x`` is the state as a list of m entries, each a float (one filter) or an array of shape
+    (N,) (N filters, one per element, as ``cartctl tune --robust`` runs them); so is the result.
+    """
+    innovation = measured_rad_s
+    for j, c in terms.C:
+        innovation = innovation - c * x[j]
+    return [xi + li * innovation for xi, li in zip(x, terms.L, strict=True)]
+
+
+def filter_predict(terms: FilterTerms, x: list[Value], voltage_v: Value) -> list[Value]:
+    """x̂[k+1|k] = A x̂[k|k] + B u[k], on a state as :func:`filter_correct` takes it."""
+    new = []
+    for row, b in terms.AB:  # plain loops: a generator per row costs more than the sums
+        acc = b * voltage_v
+        for j, a in row:
+            acc = acc + a * x[j]
+        new.append(acc)
+    return new
+
+
 class SteadyStateSpeedEstimator:
     """The steady-state Kalman filter: fixed gain L, plain floats, a few µs per tick.
 
@@ -212,42 +272,25 @@ class SteadyStateSpeedEstimator:
     """
 
     def __init__(self, design: KalmanDesign) -> None:
-        m = design.A.shape[0]
         self.design = design
-        self._m = m
-        self._L = [float(v) for v in design.L]
-        self._C = [(j, float(c)) for j, c in enumerate(design.C) if c != 0.0]
-        # each row of A as its non-zero entries: the observer form has at most three per row
-        self._A = [[(j, float(a)) for j, a in enumerate(design.A[i]) if a != 0.0] for i in range(m)]
-        self._B = [float(b) for b in design.B]
-        self._AB = tuple(zip(self._A, self._B, strict=True))
+        self.terms = FilterTerms.from_design(design)
+        """The filter :func:`filter_correct` and :func:`filter_predict` run (read only)."""
         self.reset()
 
     def reset(self) -> None:
         """State at rest (x̂ = 0)."""
-        self._x = [0.0] * self._m
+        self._x: list[float] = [0.0] * len(self.terms.L)
 
     def correct(self, measured_rad_s: float) -> float:
         """x̂ += L (y − C x̂) with the speed measured at this tick (rad/s); return x̂_1 (rad/s)."""
-        x = self._x
         if math.isfinite(measured_rad_s):
-            innovation = float(measured_rad_s)  # plain floats throughout: no numpy overhead
-            for j, c in self._C:
-                innovation -= c * x[j]
-            self._x = x = [xi + li * innovation for xi, li in zip(x, self._L, strict=True)]
-        return x[0]
+            self._x = filter_correct(self.terms, self._x, float(measured_rad_s))
+        return self._x[0]
 
     def predict(self, voltage_v: float) -> None:
         """x̂ ← A x̂ + B u with the voltage applied at this tick (V; non-finite counts as 0)."""
         u = float(voltage_v) if math.isfinite(voltage_v) else 0.0
-        x = self._x
-        new = []
-        for row, b in self._AB:  # plain loops: a generator per row costs more than the sums
-            acc = b * u
-            for j, a in row:
-                acc += a * x[j]
-            new.append(acc)
-        self._x = new
+        self._x = filter_predict(self.terms, self._x, u)
 
     @property
     def state(self) -> NDArray[np.float64]:

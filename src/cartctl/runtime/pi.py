@@ -32,10 +32,70 @@ from typing import Literal, get_args
 from cartctl.cart import SUPPLY_V, check_voltage_limit
 from cartctl.errors import InputError
 from cartctl.runtime.base import SpeedEstimator
+from cartctl.runtime.elementwise import Value, any_true, clip, is_finite, larger, select, smaller
 
 AntiWindup = Literal["conditional", "back-calculation", "none"]
 ANTI_WINDUP: tuple[str, ...] = get_args(AntiWindup)
 """The anti-windup modes, in :class:`PiController`'s order."""
+
+CONDITIONAL, BACK_CALCULATION = 0, 1
+"""Indices of the modes in :data:`ANTI_WINDUP`, as :func:`pi_law` takes them."""
+
+
+def default_tracking_gain(kp: float, ki: float, period_s: float) -> float:
+    """Kt = min(1, Ts·Ki/Kp): a tracking time constant equal to the integral time Kp/Ki (1 for
+    Kp = 0)."""
+    return min(1.0, period_s * ki / kp) if kp > 0.0 else 1.0
+
+
+def pi_law(
+    error: Value,
+    integral_v: Value,
+    kp: float,
+    ki_ts: float,
+    kt: float,
+    mode: int,
+    limit_v: float,
+) -> tuple[Value, Value]:
+    """One tick of the PI with its clamp and anti-windup (the module docstring's law).
+
+    Works on floats (one controller) and on arrays of shape (N,) (one setting per element, as
+    ``cartctl tune --robust`` runs them), with the same operations.
+
+    Parameters
+    ----------
+    error : float or ndarray
+        e[k] = r[k] − y[k] (rad/s).
+    integral_v : float or ndarray
+        I[k−1] (V).
+    kp, ki_ts, kt : float
+        Kp (V/(rad/s)), Ki·Ts (V/(rad/s)) and the back-calculation gain Kt (per tick).
+    mode : int
+        Index of the anti-windup mode in :data:`ANTI_WINDUP`.
+    limit_v : float
+        The clamp (V).
+
+    Returns
+    -------
+    (u, integral) : float or ndarray
+        u[k] within ±limit_v (V), and I[k] (V); where u would not be finite, 0 V and I[k−1].
+    """
+    p = kp * error
+    integral = integral_v + ki_ts * error
+    u = p + integral
+    u_sat = clip(u, limit_v)
+    if mode == CONDITIONAL:  # up to the limit, never further
+        held = (u_sat != u) & (error * u > 0.0)
+        if any_true(held):
+            edge = u_sat - p
+            moved = select(error > 0.0, larger(integral_v, smaller(integral, edge)),
+                           smaller(integral_v, larger(integral, edge)))  # fmt: skip
+            integral = select(held, moved, integral)
+            u_sat = select(held, clip(p + integral, limit_v), u_sat)
+    elif mode == BACK_CALCULATION:
+        integral = select(u_sat != u, integral + kt * (u_sat - u), integral)
+    finite = is_finite(u)  # False for a non-finite r or y, and for absurd inputs that overflow
+    return select(finite, u_sat, 0.0), select(finite, integral, integral_v)
 
 
 def _finite(name: str, value: float, unit: str, *, positive: bool = False) -> float:
@@ -119,7 +179,7 @@ class PiController:
                     f"tracking gain Kt must be in (0, 1] per tick, got {tracking_gain}"
                 )
         else:
-            kt = min(1.0, self._period_s * self._ki / self._kp) if self._kp > 0.0 else 1.0
+            kt = default_tracking_gain(self._kp, self._ki, self._period_s)
         self.voltage_limit_v = limit
         self.anti_windup = anti_windup
         self.tracking_gain = tracking_gain
@@ -143,6 +203,11 @@ class PiController:
     def period_s(self) -> float:
         """Tick period Ts (s)."""
         return self._period_s
+
+    @property
+    def tracking_gain_per_tick(self) -> float:
+        """Kt in use for back-calculation: ``tracking_gain``, or its default (per tick)."""
+        return self._kt
 
     @property
     def integral_v(self) -> float:
@@ -177,26 +242,8 @@ class PiController:
         if estimator is not None and math.isfinite(y):
             y = estimator.correct(y)
         self.estimate_rad_s = y
-        e = reference_rad_s - y
-        integral = self._integral + self._ki_ts * e
-        p = self._kp * e
-        u = p + integral
-        u_sat = 0.0
-        if math.isfinite(u):  # False for a non-finite r or y, and for absurd inputs that overflow
-            lim = self.voltage_limit_v
-            u_sat = lim if u > lim else (-lim if u < -lim else u)
-            if u_sat != u:
-                mode = self._mode
-                if mode == 0 and e * u > 0.0:  # conditional: up to the limit, never further
-                    old = self._integral
-                    edge = u_sat - p
-                    integral = (
-                        max(old, min(integral, edge)) if e > 0.0 else min(old, max(integral, edge))
-                    )
-                    u_sat = min(lim, max(-lim, p + integral))
-                elif mode == 1:  # back-calculation
-                    integral += self._kt * (u_sat - u)
-            self._integral = integral
+        u_sat, self._integral = pi_law(reference_rad_s - y, self._integral, self._kp, self._ki_ts,
+                                       self._kt, self._mode, self.voltage_limit_v)  # fmt: skip
         if estimator is not None:
             estimator.predict(u_sat)
         return u_sat

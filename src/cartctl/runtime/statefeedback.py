@@ -28,16 +28,60 @@ controller, so it recovers instead of holding a poisoned state.
 from __future__ import annotations
 
 import math
-from typing import Protocol
+from collections.abc import Sequence
+from typing import NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.cart import SUPPLY_V, check_voltage_limit
 from cartctl.errors import InputError
+from cartctl.runtime.elementwise import Value, clip, select
 from cartctl.runtime.kalman import KalmanDesign, StateEstimator, SteadyStateSpeedEstimator
 
-__all__ = ["StateFeedbackController"]
+__all__ = ["StateFeedbackController", "feedback_law"]
+
+
+def feedback_law(
+    reference_rad_s: float | Value,
+    measured_rad_s: Value,
+    state: Sequence[Value],
+    integral_rad: Value,
+    gains: FeedbackTerms,
+    limit_v: float,
+) -> tuple[Value, Value, Value]:
+    """One tick of state feedback with conditional integration (the module docstring's law).
+
+    Works on floats (one controller) and on arrays of shape (N,) (one setting per element, as
+    ``cartctl tune --robust`` runs them), with the same operations.
+
+    Parameters
+    ----------
+    reference_rad_s, measured_rad_s : float or ndarray
+        r[k] and y[k] (rad/s), finite.
+    state : sequence of float or ndarray
+        x̂[k|k], at least as many entries as K.
+    integral_rad : float or ndarray
+        x_i before this tick (rad).
+    gains : FeedbackTerms
+        K, K_xi, Kr and Ts.
+    limit_v : float
+        The clamp (V).
+
+    Returns
+    -------
+    (u_raw, u, integral) : float or ndarray
+        The command before and after the clamp (V), and x_i after this tick (rad).
+    """
+    K, k_xi, k_r, period_s = gains
+    u_raw = k_r * reference_rad_s - k_xi * integral_rad
+    for k, xk in zip(K, state, strict=False):
+        u_raw = u_raw - k * xk
+    u = clip(u_raw, limit_v)
+    error = reference_rad_s - measured_rad_s
+    # the integrator moves u by −K_xi·Ts·error next tick: hold it if that deepens saturation
+    grow = (u == u_raw) | ((u_raw > u) != (-k_xi * error > 0.0))
+    return u_raw, u, select(grow, integral_rad + period_s * error, integral_rad)
 
 
 class FeedbackGains(Protocol):
@@ -54,6 +98,16 @@ class FeedbackGains(Protocol):
     def estimator(self) -> KalmanDesign: ...
     @property
     def period_s(self) -> float: ...
+
+
+class FeedbackTerms(NamedTuple):
+    """A design's gains as plain floats: K (one per state fed back, V per state unit), K_xi
+    (V/rad), Kr (V/(rad/s)) and Ts (s)."""
+
+    K: tuple[float, ...]
+    K_xi: float
+    Kr: float
+    period_s: float
 
 
 class StateFeedbackController:
@@ -102,10 +156,9 @@ class StateFeedbackController:
         values = getattr(estimator, "state_values", None)  # a list, without a numpy array
         self._state_values = values if callable(values) else lambda: estimator.state.tolist()
         self.voltage_limit_v = limit
-        self._K = tuple(float(k) for k in design.K)
-        self._Ki = float(design.K_xi)
-        self._Kr = float(design.Kr)
-        self._Ts = float(design.period_s)
+        self.terms = FeedbackTerms(tuple(float(k) for k in design.K), float(design.K_xi),
+                                   float(design.Kr), float(design.period_s))  # fmt: skip
+        """The gains :func:`feedback_law` runs (read only)."""
         self.reset()
 
     def reset(self) -> None:
@@ -125,21 +178,14 @@ class StateFeedbackController:
             self.saturated = False
             return 0.0
         x1 = est.correct(measured_rad_s)
-        state = self._state_values()
-        u_raw = self._Kr * reference_rad_s - self._Ki * self.integral_rad
-        for k, xk in zip(self._K, state, strict=False):  # plain floats: no warnings
-            u_raw -= k * xk
+        u_raw, u, integral = feedback_law(reference_rad_s, measured_rad_s, self._state_values(),
+                                          self.integral_rad, self.terms, self.voltage_limit_v)  # fmt: skip
         if not math.isfinite(u_raw):  # overflowed on an absurd value: 0 V and start afresh
             self.reset()
             self._predict_and_estimate(0.0, 0.0)
             return 0.0
-        limit = self.voltage_limit_v
-        u = min(limit, max(-limit, u_raw))
+        self.integral_rad = integral
         self.saturated = u != u_raw
-        error = reference_rad_s - measured_rad_s
-        # the integrator moves u by −K_xi·Ts·error next tick: hold it if that deepens saturation
-        if not self.saturated or (u_raw > u) != (-self._Ki * error > 0.0):
-            self.integral_rad += self._Ts * error
         self._predict_and_estimate(x1, u)
         return u
 

@@ -32,7 +32,7 @@ from cartctl.errors import InputError, OutputError
 from cartctl.link.bridge import HOST_LOSS_WARN_PERCENT
 from cartctl.metrics import finite_or_none
 from cartctl.numfmt import column_decimals, format_column, format_fixed, render_table
-from cartctl.stepinfo import SETTLING_FRACTION, step_info
+from cartctl.stepinfo import SETTLING_FRACTION, first_step, step_info
 
 SIGNALS = {"true_speed": "the true speed", "speed": "the measured speed"}
 """``metrics_signal`` values and how the summary text names them."""
@@ -65,15 +65,11 @@ def motor_metrics(
         "max_abs_voltage": finite_or_none(float(np.max(np.abs(voltage)))) if voltage.size else None,
     }
     initial = 0.0  # the loop starts from rest: the first step is the first departure from 0
-    moved = np.flatnonzero(np.abs(reference - initial) > 1e-9)
-    if moved.size == 0:
+    span = first_step(reference, initial=initial)
+    if span is None:
         return out
-    start = int(moved[0])
-    changes = np.flatnonzero(np.abs(np.diff(reference[start:])) > 1e-9)
-    end = start + int(changes[0]) + 1 if changes.size else reference.size
+    start, end = span
     target = float(reference[start])
-    if end - start < 5:
-        return out
     info = step_info(time_s[:end], speed[:end], reference=target, initial=initial,
                      onset_s=float(time_s[start]), settling_floor=settling_floor)  # fmt: skip
     out.update(

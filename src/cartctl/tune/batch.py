@@ -6,24 +6,23 @@ plant costs a Python loop per plant (a few ms per 2 s run; ``benchmarks/bench_tu
 it); here one Python loop over the ticks steps all N plants together, each
 quantity an array of shape (N,) (or (N, m) for an estimator state).
 
-Per tick k it does, for every plant, exactly what one tick of ``cartctl run --fast`` does with one
-motor of :class:`~cartctl.plants.sim.ArxPlant` (no measurement noise), in the same order and with
-the same floating-point operations where the runtime uses plain floats:
+Per tick k it steps, for every plant, the runtime's own laws on arrays (one element per plant),
+so it does what one tick of ``cartctl run --fast`` does with one motor of
+:class:`~cartctl.plants.sim.ArxPlant` (no measurement noise), operation for operation:
 
-1. the controller's step on (r[k], y[k]), as :class:`~cartctl.runtime.pi.PiController` (its
-   anti-windup modes, the clamp, the optional estimator) or
-   :class:`~cartctl.runtime.statefeedback.StateFeedbackController` (conditional integration, the
-   estimator predicting with the clamped voltage) runs it; the estimators as
-   :class:`~cartctl.runtime.kalman.SteadyStateSpeedEstimator` (fixed gain);
+1. the controller: :func:`~cartctl.runtime.pi.pi_law` (:class:`~cartctl.runtime.pi.PiController`)
+   or :func:`~cartctl.runtime.statefeedback.feedback_law`
+   (:class:`~cartctl.runtime.statefeedback.StateFeedbackController`), with the fixed-gain
+   estimator's :func:`~cartctl.runtime.kalman.filter_correct` and
+   :func:`~cartctl.runtime.kalman.filter_predict` around it;
 2. the loop's clamp to its voltage limit, then the plant's saturation at its own limit;
-3. the difference equation y[k+1] = Σ b_i u[k+1−nk−i] − Σ a_j y[k+1−j]: with the input
-   coefficients of every plant laid out by lag (zero where a plant's delay puts none), so plants of
-   different delays run together; a zero coefficient adds an exact zero;
+3. the plant: :func:`~cartctl.plants.sim.arx_next`, with the input coefficients of every plant laid
+   out by lag (zero where a plant's delay puts none), so plants of different delays run together;
 4. a speed beyond :data:`~cartctl.plants.sim.DIVERGED_RAD_S` marks that plant as run away (where
    the real loop stops with a plant fault); its row is held at zero from then on.
 
 The trace ends like a run's: after the n ticks, the stop row (0 V, the measurement of tick n);
-``tests/test_tune_batch.py`` checks the traces against the real loop to 1e-9.
+``tests/test_control_laws.py`` checks the traces against the real loop bit for bit.
 """
 
 from __future__ import annotations
@@ -37,11 +36,16 @@ from numpy.typing import ArrayLike, NDArray
 from cartctl.cart import PERIOD_S, SUPPLY_V, check_voltage_limit
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
-from cartctl.plants.sim import DIVERGED_RAD_S
+from cartctl.plants.sim import DIVERGED_RAD_S, arx_next
 from cartctl.runtime.base import Controller
-from cartctl.runtime.kalman import KalmanSpeedEstimator, SteadyStateSpeedEstimator
-from cartctl.runtime.pi import ANTI_WINDUP, PiController
-from cartctl.runtime.statefeedback import StateFeedbackController
+from cartctl.runtime.kalman import (
+    FilterTerms,
+    SteadyStateSpeedEstimator,
+    filter_correct,
+    filter_predict,
+)
+from cartctl.runtime.pi import ANTI_WINDUP, PiController, pi_law
+from cartctl.runtime.statefeedback import StateFeedbackController, feedback_law
 
 __all__ = ["ArxBatch", "BatchTrace", "simulate_batch"]
 
@@ -144,139 +148,62 @@ class BatchTrace:
     diverged: NDArray[np.bool_]
 
 
-# -- estimators ----------------------------------------------------------------------------------
+# -- controllers: the runtime's laws on arrays ----------------------------------------------------
 
 
-class _SteadyBatch:
-    """:class:`SteadyStateSpeedEstimator` over N rows: same non-zero entries, same order."""
-
-    def __init__(self, est: SteadyStateSpeedEstimator, n: int) -> None:
-        d = est.design
-        m = d.A.shape[0]
-        self.L = [float(v) for v in d.L]
-        self.C = [(j, float(c)) for j, c in enumerate(d.C) if c != 0.0]
-        self.A = [[(j, float(a)) for j, a in enumerate(d.A[i]) if a != 0.0] for i in range(m)]
-        self.B = [float(b) for b in d.B]
-        self.x = np.zeros((n, m))
-
-    def correct(self, y: FloatArray, k: int) -> FloatArray:
-        x = self.x
-        innovation = y.copy()
-        for j, c in self.C:
-            innovation -= c * x[:, j]
-        for i, li in enumerate(self.L):
-            x[:, i] += li * innovation
-        return x[:, 0]
-
-    def predict(self, u: FloatArray) -> None:
-        x = self.x
-        new = np.empty_like(x)
-        for i, (row, b) in enumerate(zip(self.A, self.B, strict=True)):
-            acc = np.zeros(x.shape[0])
-            for j, a in row:
-                acc += a * x[:, j]
-            new[:, i] = acc + b * u
-        self.x = new
-
-
-def _estimator(est: object, n: int, ticks: int) -> _SteadyBatch | None:
-    if est is None:
-        return None
+def _filter_terms(est: object) -> FilterTerms:
     if isinstance(est, SteadyStateSpeedEstimator):
-        return _SteadyBatch(est, n)
-    if isinstance(est, KalmanSpeedEstimator):  # its gains follow the commands it is given
-        raise InputError(
-            "the batch loop cannot run an estimator with timing noise "
-            "(timing_noise_std_ticks > 0): its gain depends on the commands"
-        )
-    raise InputError(f"the batch loop does not know the estimator {type(est).__name__}")
-
-
-# -- controllers ---------------------------------------------------------------------------------
+        return est.terms
+    raise InputError(
+        f"the batch loop runs the fixed-gain estimator only, not {type(est).__name__} (a design "
+        "with timing noise, timing_noise_std_ticks > 0, has a gain that depends on the commands)"
+    )
 
 
 class _PiBatch:
-    """:meth:`PiController.step` over N rows."""
+    """:class:`PiController` over N rows: its :func:`~cartctl.runtime.pi.pi_law` on arrays."""
 
-    def __init__(self, ctrl: PiController, n: int, ticks: int) -> None:
-        self.kp = ctrl.kp
-        self.ki_ts = ctrl.ki * ctrl.period_s
-        if ctrl.tracking_gain is not None:
-            self.kt = float(ctrl.tracking_gain)
-        else:  # PiController's default: a tracking time constant equal to Kp/Ki
-            self.kt = min(1.0, ctrl.period_s * ctrl.ki / ctrl.kp) if ctrl.kp > 0.0 else 1.0
-        self.mode = ANTI_WINDUP.index(ctrl.anti_windup)
-        self.lim = ctrl.voltage_limit_v
-        self.integral = np.zeros(n)
-        self.est = _estimator(ctrl.estimator, n, ticks)
+    def __init__(self, ctrl: PiController, n: int) -> None:
+        self.gains = (ctrl.kp, ctrl.ki * ctrl.period_s, ctrl.tracking_gain_per_tick,
+                      ANTI_WINDUP.index(ctrl.anti_windup), ctrl.voltage_limit_v)  # fmt: skip
+        self.integral: FloatArray = np.zeros(n)
+        self.est = None if ctrl.estimator is None else _filter_terms(ctrl.estimator)
+        self.x: list[FloatArray] = [np.zeros(n) for _ in (self.est.L if self.est else ())]
 
-    def step(self, r: float, y: FloatArray, k: int) -> FloatArray:
-        lim = self.lim
+    def step(self, r: float, y: FloatArray) -> FloatArray:
         if self.est is not None:
-            y = self.est.correct(y, k)
-        e = r - y
-        integral = self.integral + self.ki_ts * e
-        p = self.kp * e
-        u = p + integral
-        finite = np.isfinite(u)
-        u_sat = np.minimum(lim, np.maximum(-lim, u))
-        clamped = u_sat != u
-        if self.mode == 0:  # conditional: up to the limit, never further
-            held = clamped & (e * u > 0.0)
-            if held.any():
-                old = self.integral
-                edge = u_sat - p
-                moved = np.where(e > 0.0, np.maximum(old, np.minimum(integral, edge)),
-                                 np.minimum(old, np.maximum(integral, edge)))  # fmt: skip
-                integral = np.where(held, moved, integral)
-                u_sat = np.where(held, np.minimum(lim, np.maximum(-lim, p + integral)), u_sat)
-        elif self.mode == 1:  # back-calculation
-            integral = np.where(clamped, integral + self.kt * (u_sat - u), integral)
-        self.integral = np.where(finite, integral, self.integral)
-        u_sat = np.where(finite, u_sat, 0.0)
+            self.x = filter_correct(self.est, self.x, y)
+            y = self.x[0]
+        u, self.integral = pi_law(r - y, self.integral, *self.gains)
         if self.est is not None:
-            self.est.predict(u_sat)
-        return u_sat
-
-
-class _FeedbackBatch:
-    """:meth:`StateFeedbackController.step` over N rows (finite inputs)."""
-
-    def __init__(self, ctrl: StateFeedbackController, n: int, ticks: int) -> None:
-        d = ctrl.design
-        self.K = [float(v) for v in d.K]
-        self.Ki = float(d.K_xi)
-        self.Kr = float(d.Kr)
-        self.Ts = float(d.period_s)
-        self.lim = ctrl.voltage_limit_v
-        self.integral = np.zeros(n)
-        est = _estimator(ctrl.estimator, n, ticks)
-        assert est is not None  # the controller always has one
-        self.est = est
-
-    def step(self, r: float, y: FloatArray, k: int) -> FloatArray:
-        est = self.est
-        est.correct(y, k)
-        x = est.x
-        u_raw = self.Kr * r - self.Ki * self.integral
-        for j, kj in enumerate(self.K):
-            u_raw = u_raw - kj * x[:, j]
-        lim = self.lim
-        u = np.minimum(lim, np.maximum(-lim, u_raw))
-        u = np.where(np.isfinite(u_raw), u, 0.0)
-        saturated = u != u_raw
-        error = r - y
-        grow = ~saturated | ((u_raw > u) != (-self.Ki * error > 0.0))
-        self.integral = np.where(grow, self.integral + self.Ts * error, self.integral)
-        est.predict(u)
+            self.x = filter_predict(self.est, self.x, u)
         return u
 
 
-def _controller(ctrl: Controller, n: int, ticks: int) -> _PiBatch | _FeedbackBatch:
+class _FeedbackBatch:
+    """:class:`StateFeedbackController` over N rows: its
+    :func:`~cartctl.runtime.statefeedback.feedback_law` on arrays (finite inputs)."""
+
+    def __init__(self, ctrl: StateFeedbackController, n: int) -> None:
+        self.ctrl = ctrl
+        self.integral: FloatArray = np.zeros(n)
+        self.est = _filter_terms(ctrl.estimator)
+        self.x: list[FloatArray] = [np.zeros(n) for _ in self.est.L]
+
+    def step(self, r: float, y: FloatArray) -> FloatArray:
+        self.x = filter_correct(self.est, self.x, y)
+        u_raw, u, self.integral = feedback_law(r, y, self.x, self.integral, self.ctrl.terms,
+                                               self.ctrl.voltage_limit_v)  # fmt: skip
+        u = np.where(np.isfinite(u_raw), u, 0.0)
+        self.x = filter_predict(self.est, self.x, u)
+        return u
+
+
+def _controller(ctrl: Controller, n: int) -> _PiBatch | _FeedbackBatch:
     if isinstance(ctrl, PiController):
-        return _PiBatch(ctrl, n, ticks)
+        return _PiBatch(ctrl, n)
     if isinstance(ctrl, StateFeedbackController):
-        return _FeedbackBatch(ctrl, n, ticks)
+        return _FeedbackBatch(ctrl, n)
     raise InputError(f"the batch loop does not know the controller {type(ctrl).__name__}")
 
 
@@ -313,33 +240,29 @@ def simulate_batch(
         raise InputError(f"the reference must be a non-empty 1-D array, got shape {ref.shape}")
     check_voltage_limit(voltage_limit_v)
     n_ticks, n = ref.size, plants.size
-    ctrl = _controller(controller, n, n_ticks)
+    ctrl = _controller(controller, n)
     na, width = plants.ar.shape[1], plants.b_lags.shape[1]
-    ar = [plants.ar[:, j] for j in range(na)]
-    b_lags = [plants.b_lags[:, lag] for lag in range(width)]
-    # u_hist[:, width - 1 + k] = u[k] as the plant applies it; y_hist[:, na + k] = y[k]; zeros
-    # before tick 0 (rest). voltage[:, k] = u[k] as the loop sent (and logged) it.
-    u_hist = np.zeros((n, width - 1 + n_ticks))
-    y_hist = np.zeros((n, na + n_ticks + 1))
+    ar, b_lags = list(plants.ar.T), list(plants.b_lags.T)
+    # row width − 1 + k of u_hist is u[k] as the plant applies it, row na + k of y_hist is y[k]
+    # (one column per plant), zeros before tick 0 (rest); voltage[:, k] is u[k] as sent and logged
+    u_hist = np.zeros((width - 1 + n_ticks, n))
+    y_hist = np.zeros((na + n_ticks + 1, n))
     voltage = np.zeros((n, n_ticks + 1))
     diverged = np.zeros(n, dtype=bool)
     loop_lim, plant_lim = float(voltage_limit_v), plants.voltage_limit_v
     with np.errstate(all="ignore"):
         for k in range(n_ticks):
-            u = ctrl.step(float(ref[k]), y_hist[:, na + k], k)
+            u = ctrl.step(float(ref[k]), y_hist[na + k])
             u = np.minimum(loop_lim, np.maximum(-loop_lim, np.where(np.isfinite(u), u, 0.0)))
             voltage[:, k] = u
             base = width - 1 + k
-            u_hist[:, base] = np.minimum(plant_lim, np.maximum(-plant_lim, u))
-            y_next = np.zeros(n)
-            for lag, b in enumerate(b_lags):
-                y_next += b * u_hist[:, base - lag]
-            for j, a in enumerate(ar):
-                y_next -= a * y_hist[:, na + k - j]
+            u_hist[base] = np.minimum(plant_lim, np.maximum(-plant_lim, u))
+            y_next = arx_next(b_lags, u_hist[base::-1], 0, ar, y_hist[na + k :: -1])
             diverged |= ~(np.abs(y_next) < DIVERGED_RAD_S)
             y_next[diverged] = 0.0
-            y_hist[:, na + k + 1] = y_next
+            y_hist[na + k + 1] = y_next
     period = plants.period_s
     time_s = np.arange(n_ticks + 1, dtype=np.float64) * period
     time_s[-1] = time_s[-2] + period  # the stop row: the last tick's time + Ts, as the loop logs it
-    return BatchTrace(time_s, np.append(ref, ref[-1]), y_hist[:, na:], voltage, diverged)
+    return BatchTrace(time_s, np.append(ref, ref[-1]), np.ascontiguousarray(y_hist[na:].T),
+                      voltage, diverged)  # fmt: skip

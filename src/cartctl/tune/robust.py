@@ -52,7 +52,7 @@ from cartctl.cart import encoder_quantum_rad_s
 from cartctl.modelfile import ModelFile, load_models
 from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller
-from cartctl.stepinfo import settling_half_width
+from cartctl.stepinfo import first_step, settling_half_width, step_rows
 from cartctl.tune.batch import ArxBatch, BatchTrace, simulate_batch
 from cartctl.tune.engine import TuneJob, evaluate_nominal, scoring_plant, simulate
 from cartctl.tune.grid import TuneResult, worst_metrics
@@ -99,34 +99,17 @@ def step_metrics(trace: BatchTrace, settling_floor: float) -> dict[str, FloatArr
             "rms_error": np.sqrt(np.mean((ref - y) ** 2, axis=1)),
             "peak_voltage_v": np.max(np.abs(trace.voltage), axis=1),
         }
-    moved = np.flatnonzero(np.abs(ref) > 1e-9)
-    if moved.size:
-        start = int(moved[0])
-        changes = np.flatnonzero(np.abs(np.diff(ref[start:])) > 1e-9)
-        end = start + int(changes[0]) + 1 if changes.size else ref.size
-        if end - start >= 5:
-            size = float(ref[start])
-            ts = t[start:end]
-            onset = float(t[start])
-            with np.errstate(all="ignore"):
-                z = y[:, start:end] / size
-            excess = np.max(z, axis=1) - 1.0
-            out["overshoot_percent"] = np.where(excess <= 1e-12, 0.0, excess) * 100.0
-            band = settling_half_width(size, settling_floor) / abs(size)  # as step_info
-            if band < 1.0:
-                outside = np.abs(z - 1.0) > band
-                last = z.shape[1] - 1 - np.argmax(outside[:, ::-1], axis=1)
-                any_out = outside.any(axis=1)
-                j = np.minimum(last, z.shape[1] - 2)
-                rows = np.arange(n)
-                zj, zi = z[rows, j], z[rows, j + 1]
-                edge = np.where(zj > 1.0, 1.0 + band, 1.0 - band)
-                with np.errstate(all="ignore"):
-                    frac = (edge - zj) / (zi - zj)
-                settled = ts[j] + frac * (ts[j + 1] - ts[j]) - onset
-                settling = np.where(any_out, settled, ts[0] - onset)
-                out["settling_time_s"] = np.where(any_out & (last == z.shape[1] - 1), np.inf,
-                                                  settling)  # fmt: skip
+    span = first_step(ref)
+    if span is not None:
+        start, end = span
+        size = float(ref[start])
+        half_width = settling_half_width(size, settling_floor)
+        with np.errstate(all="ignore"):
+            overshoot, settling = step_rows(t[start:end], y[:, start:end] / size,
+                                            half_width / abs(size), float(t[start]))  # fmt: skip
+        out["overshoot_percent"] = overshoot
+        if half_width < abs(size):  # else the band reaches back to rest: nothing to settle
+            out["settling_time_s"] = settling
     for key in ("overshoot_percent", "settling_time_s", "rms_error"):
         out[key] = np.where(trace.diverged, np.inf, out[key])
     return out
