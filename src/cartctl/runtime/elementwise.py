@@ -16,7 +16,7 @@ from typing import Any, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["any_true", "clip", "is_finite", "larger", "select", "smaller"]
+__all__ = ["all_true", "any_true", "clip", "is_finite", "larger", "select", "smaller"]
 
 Value = TypeVar("Value", float, NDArray[np.float64])
 """A float, or an array of floats with one element per setting."""
@@ -61,3 +61,8 @@ def is_finite(value: float | NDArray[np.float64]) -> bool | NDArray[np.bool_]:
 def any_true(condition: bool | NDArray[np.bool_]) -> bool:
     """Whether ``condition`` holds anywhere."""
     return bool(condition.any()) if isinstance(condition, np.ndarray) else bool(condition)
+
+
+def all_true(condition: bool | NDArray[np.bool_]) -> bool:
+    """Whether ``condition`` holds everywhere."""
+    return bool(condition.all()) if isinstance(condition, np.ndarray) else bool(condition)

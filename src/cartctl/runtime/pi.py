@@ -32,7 +32,16 @@ from typing import Literal, get_args
 from cartctl.cart import SUPPLY_V, check_voltage_limit
 from cartctl.errors import InputError
 from cartctl.runtime.base import SpeedEstimator
-from cartctl.runtime.elementwise import Value, any_true, clip, is_finite, larger, select, smaller
+from cartctl.runtime.elementwise import (
+    Value,
+    all_true,
+    any_true,
+    clip,
+    is_finite,
+    larger,
+    select,
+    smaller,
+)
 
 AntiWindup = Literal["conditional", "back-calculation", "none"]
 ANTI_WINDUP: tuple[str, ...] = get_args(AntiWindup)
@@ -84,17 +93,20 @@ def pi_law(
     integral = integral_v + ki_ts * error
     u = p + integral
     u_sat = clip(u, limit_v)
-    if mode == CONDITIONAL:  # up to the limit, never further
-        held = (u_sat != u) & (error * u > 0.0)
-        if any_true(held):
+    clamped = u_sat != u
+    if any_true(clamped):
+        if mode == CONDITIONAL:  # up to the limit, never further
+            held = clamped & (error * u > 0.0)
             edge = u_sat - p
             moved = select(error > 0.0, larger(integral_v, smaller(integral, edge)),
                            smaller(integral_v, larger(integral, edge)))  # fmt: skip
             integral = select(held, moved, integral)
             u_sat = select(held, clip(p + integral, limit_v), u_sat)
-    elif mode == BACK_CALCULATION:
-        integral = select(u_sat != u, integral + kt * (u_sat - u), integral)
+        elif mode == BACK_CALCULATION:
+            integral = select(clamped, integral + kt * (u_sat - u), integral)
     finite = is_finite(u)  # False for a non-finite r or y, and for absurd inputs that overflow
+    if all_true(finite):
+        return u_sat, integral
     return select(finite, u_sat, 0.0), select(finite, integral, integral_v)
 
 
