@@ -27,8 +27,8 @@ from pathlib import Path
 from cartctl.cli import main
 from cartctl.errors import PlantError
 from cartctl.link import Encoder, Framer
-from cartctl.plants.serial_cart import SerialCart
-from cartctl.plants.virtual_cart import CartFaults, VirtualCart
+from cartctl.link.serial_cart import SerialCart
+from cartctl.link.virtual_cart import CartFaults, VirtualCart
 from cartctl.runtime.clock import MonotonicClock
 from cartctl.runtime.executor import PeriodicExecutor
 

@@ -26,8 +26,8 @@ from pathlib import Path
 
 from cartctl.cart import encoder_quantum_rad_s
 from cartctl.cli import main
+from cartctl.data.modelfile import load_models
 from cartctl.design.make import design_motor
-from cartctl.modelfile import load_models
 from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
 from cartctl.runtime.fast import run_in_memory

@@ -53,21 +53,21 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 try:
     from cartctl.cart import encoder_quantum_rad_s
-    from cartctl.data import read_trace
+    from cartctl.data.modelfile import load_models, save_models
+    from cartctl.data.read import read_trace
     from cartctl.design.controllerfile import load_controller
     from cartctl.design.limit import settling_bound
+    from cartctl.measures.stepinfo import step_info
     from cartctl.model import ArxModel
-    from cartctl.modelfile import load_models, save_models
-    from cartctl.stepinfo import step_info
 except ModuleNotFoundError:  # not installed: run from a checkout
     sys.path.insert(0, str(ROOT / "src"))
     from cartctl.cart import encoder_quantum_rad_s
-    from cartctl.data import read_trace
+    from cartctl.data.modelfile import load_models, save_models
+    from cartctl.data.read import read_trace
     from cartctl.design.controllerfile import load_controller
     from cartctl.design.limit import settling_bound
+    from cartctl.measures.stepinfo import step_info
     from cartctl.model import ArxModel
-    from cartctl.modelfile import load_models, save_models
-    from cartctl.stepinfo import step_info
 
 SHIPPED = ("pi", "poles", "serial-pi", "serial-poles")
 PHYSICS_TIMINGS = ("physics", "physics:actuation_ms=10")

@@ -260,7 +260,7 @@ CASES = [
 
 def _make_folder(root: Path) -> None:
     """The shipped models and controllers, a valid trace, and the wrong things to give."""
-    from cartctl.data import Trace, write_trace
+    from cartctl.data.trace import Trace, write_trace
 
     shutil.copytree(ROOT / "models", root / "models")
     shutil.copytree(ROOT / "controllers", root / "controllers")

@@ -59,13 +59,13 @@ def _refusal(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
     return lines[0]
 
 
-DESIGN_WORK = ("cartctl.modelfile:load_models", "cartctl.design.make:design_models")
-TUNE_WORK = ("cartctl.modelfile:load_models", "cartctl.tune.engine:run_grid",
+DESIGN_WORK = ("cartctl.data.modelfile:load_models", "cartctl.design.make:design_models")
+TUNE_WORK = ("cartctl.data.modelfile:load_models", "cartctl.tune.engine:run_grid",
              "cartctl.tune.grid:parse_grid")  # fmt: skip
-TUNE_GRID_WORK = ("cartctl.modelfile:load_models", "cartctl.tune.engine:run_grid")
+TUNE_GRID_WORK = ("cartctl.data.modelfile:load_models", "cartctl.tune.engine:run_grid")
 IDENTIFY_WORK = ("cartctl.data:read_trace", "cartctl.identification.pipeline:identify")
 PLANT_WORK = ("cartctl.plants.factory:make_plant",)
-CART_WORK = ("cartctl.plants.virtual_cart:VirtualCart", "cartctl.plants.factory:make_plant")
+CART_WORK = ("cartctl.link.virtual_cart:VirtualCart", "cartctl.plants.factory:make_plant")
 
 CASES = [
     # design: the delay sets the state's size (500 ticks took 76 s of CPU before the refusal)

@@ -15,7 +15,7 @@ import pytest
 from scipy import signal
 
 from cartctl.cli import main
-from cartctl.data import read_trace
+from cartctl.data.read import read_trace
 
 CONTRACT_COMMANDS = (
     "excite",
@@ -250,7 +250,7 @@ def test_bad_map_option(capsys: pytest.CaptureFixture[str]) -> None:
 def test_a_command_line_builds_only_its_command_with_the_same_options() -> None:
     """``cartctl run …`` builds the run parser alone; it must be the full parser's run parser."""
     from cartctl.cli import build_parser, command_name
-    from cartctl.commands import COMMANDS
+    from cartctl.cli.commands import COMMANDS
 
     full = build_parser()
     full_sub = {a.dest: a for a in full._actions}["command"].choices

@@ -11,7 +11,7 @@ import pytest
 
 from cartctl.cli import main
 from cartctl.commission import checks, timing, verify
-from cartctl.data import Trace
+from cartctl.data.trace import Trace
 from cartctl.model import ArxModel
 from cartctl.plants.physics_params import preset
 
@@ -75,8 +75,8 @@ def test_commission_json_keys_and_figures(commissioned) -> None:
         model = result["model"]["motors"][m]
         assert model["validation_fit_percent"] > 90.0
         assert model["pole_radius"] < 0.99
+    from cartctl.data.modelfile import load_models
     from cartctl.design.controllerfile import load_controller
-    from cartctl.modelfile import load_models
 
     assert load_models(out / "model.toml").loop_delay_ticks == 1  # the simulator's, as checked
     assert load_controller(out / "controller.toml").loop_delay_ticks == 1

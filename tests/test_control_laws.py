@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cartctl.data.modelfile import load_models
 from cartctl.design.make import design_motor
 from cartctl.design.request import DesignRequest
 from cartctl.model import ArxModel
-from cartctl.modelfile import load_models
 from cartctl.plants.sim import ArxPlant, arx_next
 from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller

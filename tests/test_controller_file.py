@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.data import read_trace
+from cartctl.data.modelfile import load_models
+from cartctl.data.read import read_trace
 from cartctl.design.controllerfile import load_controller
 from cartctl.errors import DataFileError
-from cartctl.modelfile import load_models
 
 ROOT = Path(__file__).resolve().parents[1]
 CONTROLLERS = ROOT / "controllers"

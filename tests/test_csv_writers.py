@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cartctl.data import Trace, write_trace
+from cartctl.data.trace import Trace, write_trace
 from cartctl.sinks.csv_sink import CsvSink
 
 

@@ -1,4 +1,4 @@
-"""Tests for cartctl.data (traces, contract-1 CSV) and cartctl.qrc (QRoboticsCenter logs)."""
+"""Tests for cartctl.data (traces, contract-1 CSV) and cartctl.data.qrc (QRoboticsCenter logs)."""
 
 from __future__ import annotations
 
@@ -10,13 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cartctl.data import (
-    REQUIRED_COLUMNS,
-    Trace,
-    parse_mapping,
-    read_trace,
-    write_trace,
-)
+from cartctl.data.read import read_trace
+from cartctl.data.trace import REQUIRED_COLUMNS, Trace, parse_mapping, write_trace
 from cartctl.errors import CartctlError, DataFileError, DataWarning, InputError, MissingFileError
 
 DATA = Path(__file__).parent / "data"

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
+from cartctl.data.modelfile import load_models
 from cartctl.design.analysis import simulate_step
 from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import load_controller
-from cartctl.modelfile import load_models
-from cartctl.stepinfo import step_info
+from cartctl.measures.stepinfo import step_info
 
 ROOT = Path(__file__).resolve().parents[1]
 CONTROLLERS = ROOT / "controllers"

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from cartctl.data.modelfile import load_models
 from cartctl.design.analysis import StepAnalysis
 from cartctl.design.limit import in_settling_band, settling_band_rad_s, settling_bound
 from cartctl.errors import InputError
+from cartctl.measures.stepinfo import step_info
 from cartctl.model import ArxModel
-from cartctl.modelfile import load_models
-from cartctl.stepinfo import step_info
 
 GROUND = Path(__file__).resolve().parents[1] / "models" / "ground.toml"
 QUANTUM = 2 * math.pi / 1792 / 0.01  # one encoder count per 10 ms tick, 0.3506 rad/s

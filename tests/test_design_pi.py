@@ -14,14 +14,14 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from scipy import signal
 
+from cartctl.data.modelfile import load_models
 from cartctl.design.pi import PiDesign, crossover_range, design_pi, design_pi_bandwidth
 from cartctl.errors import InputError
+from cartctl.measures.stepinfo import step_info
 from cartctl.model import ArxModel
-from cartctl.modelfile import load_models
 from cartctl.plants.sim import ArxPlant
 from cartctl.runtime.base import Controller
 from cartctl.runtime.pi import PiController
-from cartctl.stepinfo import step_info
 
 GROUND = load_models(Path(__file__).resolve().parents[1] / "models" / "ground.toml")
 MOTORS = {name: GROUND.motor(name) for name in ("a", "b")}

@@ -14,18 +14,18 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from cartctl.data.modelfile import load_models
 from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import load_controller
 from cartctl.design.limit import settling_bound
 from cartctl.design.poles import augment, design_poles, spec_poles
 from cartctl.design.statespace import realise
 from cartctl.errors import InputError
+from cartctl.measures.stepinfo import step_info
 from cartctl.model import ArxModel
-from cartctl.modelfile import load_models
 from cartctl.plants.sim import ArxPlant
 from cartctl.runtime.kalman import KalmanSpeedEstimator
 from cartctl.runtime.statefeedback import StateFeedbackController
-from cartctl.stepinfo import step_info
 
 # The designs of the shipped controllers/poles.toml (on board, loop delay 1) and
 # controllers/serial-poles.toml (through the PC serial loop, loop delay 3).

@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 from cartctl.cli import main
+from cartctl.data.modelfile import load_models, save_models
 from cartctl.design.controllerfile import load_controller
-from cartctl.modelfile import load_models, save_models
 
 ROOT = Path(__file__).resolve().parents[1]
 V1 = Path(__file__).resolve().parent / "data" / "format-v1"

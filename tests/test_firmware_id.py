@@ -21,9 +21,8 @@ from cartctl.design.controllerfile import load_controller
 from cartctl.errors import PlantError
 from cartctl.export.arduino import arduino_source, onboard_controllers
 from cartctl.link import Gpio
-from cartctl.link.firmware_id import BRIDGE, CHANNEL_KEYS, ONBOARD, recognise_firmware
-from cartctl.plants.bridge_firmware import BridgeFirmware, CartIO
-from cartctl.plants.cart_monitor import (
+from cartctl.link.bridge_firmware import BridgeFirmware, CartIO
+from cartctl.link.cart_monitor import (
     DEFAULT_LABELS,
     Monitor,
     MonitorResult,
@@ -31,7 +30,8 @@ from cartctl.plants.cart_monitor import (
     firmware_labels,
     parse_labels,
 )
-from cartctl.plants.onboard_firmware import OnboardFirmware
+from cartctl.link.firmware_id import BRIDGE, CHANNEL_KEYS, ONBOARD, recognise_firmware
+from cartctl.link.onboard_firmware import OnboardFirmware
 
 ROOT = Path(__file__).resolve().parents[1]
 PI = ROOT / "controllers" / "pi.toml"

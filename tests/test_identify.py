@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.data import Trace, write_trace
+from cartctl.data.trace import Trace, write_trace
 from cartctl.errors import InputError
-from cartctl.experiment import run_experiment
 from cartctl.identification.arx import IdentificationError, fit_arx
 from cartctl.identification.delay import estimate_delay
 from cartctl.identification.prefilter import Prefilter
 from cartctl.model import ArxModel
 from cartctl.plants.physics import PhysicsPlant
+from cartctl.runtime.experiment import run_experiment
 from cartctl.signals import prbs, square
 
 THETA_A = [-0.9356, 0.2173, 0.6466, -0.07751]
@@ -149,7 +149,7 @@ def test_prefilter_comparison_in_one_command(
 def test_model_file_written_with_provenance(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
-    from cartctl.modelfile import load_models
+    from cartctl.data.modelfile import load_models
 
     model = ArxModel.from_theta(THETA_B, nk=3)
     u = prbs(6.0, duration_s=8.0)

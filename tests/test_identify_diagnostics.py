@@ -13,7 +13,7 @@ import pytest
 from scipy import signal
 
 from cartctl.cli import main
-from cartctl.data import Trace, write_trace
+from cartctl.data.trace import Trace, write_trace
 
 THETA = [-0.9356, 0.2173, 0.6466, -0.07751]  # the report's ground model, motor A
 Z99 = 2.576
@@ -41,7 +41,7 @@ def _data(
     u, y = _simulate(seed, **kw)
     # the CSV holds rounded numbers: read back what the command reads
     path = _write(tmp_path / name, u, y)
-    from cartctl.data import read_trace
+    from cartctl.data.read import read_trace
 
     trace = read_trace(path)
     return path, trace.voltage("a"), trace.speed("a")
@@ -283,7 +283,7 @@ def test_compared_models_and_the_residual_figure_in_the_table_json_and_report(
                 "models/ground.toml", "--report", str(out_dir))  # fmt: skip
     compared = doc["motors"]["a"]["compared"]
     assert set(compared) == {"models/air.toml", "models/ground.toml"}
-    from cartctl.modelfile import load_models
+    from cartctl.data.modelfile import load_models
 
     air = load_models("models/air.toml").motors["a"]
     sim = signal.lfilter([0.0] * air.nk + list(air.b), [1.0, *air.ar], u)

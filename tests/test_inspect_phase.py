@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.data import write_trace
-from cartctl.experiment import run_experiment
-from cartctl.modelfile import load_models
+from cartctl.data.modelfile import load_models
+from cartctl.data.trace import write_trace
 from cartctl.plants.sim import ArxPlant
+from cartctl.runtime.experiment import run_experiment
 from cartctl.signals import step
 
 # Motor a: the ground model's poles with b = (0.2, 0.5): zero at −0.5 / 0.2 = −2.5, as an ARX fit
@@ -97,8 +97,8 @@ def test_linearity_legends_sit_beside_the_panels(
     capsys.readouterr()
     assert png.read_bytes()[:4] == b"\x89PNG"
     # the figure the command drew: no legend overlaps any panel's data area
-    from cartctl.commands.linearity import linearity_figure
-    from cartctl.data import read_trace
+    from cartctl.cli.commands.linearity import linearity_figure
+    from cartctl.data.read import read_trace
     from cartctl.identification.linearity import linearity
 
     fig = linearity_figure(linearity(*(read_trace(f) for f in files), "a"))

@@ -20,19 +20,19 @@ import control
 import numpy as np
 import pytest
 
+from cartctl.data.modelfile import load_models
 from cartctl.design.kalman import KalmanDesign, design_kalman, quantisation_std_rad_s
 from cartctl.design.pi import design_pi
 from cartctl.design.poles import design_poles
 from cartctl.design.statespace import realise
 from cartctl.errors import InputError
-from cartctl.experiment import run_experiment
 from cartctl.identification.arx import fit_arx
 from cartctl.identification.oe import fit_oe
 from cartctl.model import ArxModel
-from cartctl.modelfile import load_models
 from cartctl.plants.physics import PhysicsPlant
 from cartctl.plants.sim import ArxPlant
 from cartctl.runtime.base import SpeedEstimator
+from cartctl.runtime.experiment import run_experiment
 from cartctl.runtime.kalman import KalmanSpeedEstimator, SteadyStateSpeedEstimator
 from cartctl.runtime.pi import PiController
 from cartctl.runtime.statefeedback import StateFeedbackController

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.data import Trace, write_trace
+from cartctl.data.modelfile import load_models
+from cartctl.data.trace import Trace, write_trace
 from cartctl.errors import InputError
-from cartctl.experiment import run_experiment
 from cartctl.identification.linearity import linearity
-from cartctl.modelfile import load_models
 from cartctl.plants.physics import PhysicsPlant
 from cartctl.plants.sim import ArxPlant
+from cartctl.runtime.experiment import run_experiment
 from cartctl.signals import step
 
 

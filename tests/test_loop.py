@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cartctl.data import read_trace
+from cartctl.data.read import read_trace
 from cartctl.errors import CartctlError, PlantError
 from cartctl.model import ArxModel
 from cartctl.plants.sim import ArxPlant

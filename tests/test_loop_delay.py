@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.data import Trace, write_trace
+from cartctl.data.modelfile import ModelFile, Provenance, load_models, save_models
+from cartctl.data.trace import Trace, write_trace
 from cartctl.data.tracemeta import (
     agreed_loop_delay,
     meta_path,
@@ -22,7 +23,6 @@ from cartctl.data.tracemeta import (
 from cartctl.errors import DataFileError, InputError
 from cartctl.identification.delay import CLOSE_FRACTION, DelayEstimate, joint_delay
 from cartctl.model import ArxModel
-from cartctl.modelfile import ModelFile, Provenance, load_models, save_models
 from cartctl.signals import prbs
 
 GROUND_A = [-0.9356, 0.2173, 0.6466, -0.07751]  # the report's equation 12, motor a

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cartctl.data.modelfile import ModelFile, Provenance, load_models, save_models
 from cartctl.errors import CartctlError, DataFileError, MissingFileError
 from cartctl.model import ArxModel
-from cartctl.modelfile import ModelFile, Provenance, load_models, save_models
 
 
 def test_shipped_ground_models_are_equation_12(ground_path: Path) -> None:

@@ -25,8 +25,8 @@ from cartctl.design.controllerfile import load_controller
 from cartctl.errors import InputError, PlantError
 from cartctl.export.arduino import onboard_controllers
 from cartctl.link import Event, Gpio
-from cartctl.plants.bridge_firmware import CartIO
-from cartctl.plants.cart_monitor import (
+from cartctl.link.bridge_firmware import CartIO
+from cartctl.link.cart_monitor import (
     CHANNEL_KEYS,
     DEFAULT_LABELS,
     EVENT_ENTITY,
@@ -34,7 +34,7 @@ from cartctl.plants.cart_monitor import (
     Monitor,
     parse_labels,
 )
-from cartctl.plants.onboard_firmware import OnboardFirmware
+from cartctl.link.onboard_firmware import OnboardFirmware
 
 ROOT = Path(__file__).resolve().parents[1]
 PI = ROOT / "controllers" / "pi.toml"

@@ -16,7 +16,7 @@ import pytest
 
 from cartctl.cli import main
 from cartctl.link import Gpio
-from cartctl.plants.cart_monitor import Monitor, parse_labels
+from cartctl.link.cart_monitor import Monitor, parse_labels
 
 ROOT = Path(__file__).resolve().parents[1]
 PI = ROOT / "controllers" / "pi.toml"
@@ -277,7 +277,7 @@ def test_review_layout_of_a_monitor_is_built_from_its_labels(
 ) -> None:
     from rerun.chunk import RrdReader
 
-    from cartctl.commands.review.recording import layout
+    from cartctl.cli.commands.review.recording import layout
 
     reader = RrdReader(monitor_files["rrd"])
     chunks = list(reader.stream(store=reader.recordings()[0]))
@@ -312,7 +312,7 @@ def test_review_layout_of_a_monitor_is_built_from_its_labels(
 def test_review_screenshot_of_a_monitor_shows_the_lines(
     monitor_files: dict[str, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
-    from cartctl.commands.review import vulkan_available
+    from cartctl.cli.commands.review import vulkan_available
     from cartctl.sinks.rerun_layout import STYLES
 
     if not vulkan_available():

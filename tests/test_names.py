@@ -16,8 +16,8 @@ import control
 import pytest
 
 from cartctl.cli import main
+from cartctl.data.modelfile import load_models
 from cartctl.design.controllerfile import load_controller, loop_site
-from cartctl.modelfile import load_models
 from cartctl.plants.factory import plant_kind
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,9 +44,9 @@ def test_each_contract_has_a_heading_with_a_stable_anchor() -> None:
 
 def test_the_contracts_name_what_the_code_keeps() -> None:
     """The defined columns and entity paths are the ones the code writes (a typo in either fails)."""
+    from cartctl.data.trace import REQUIRED_COLUMNS
     from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS
     from cartctl.sinks.rerun_layout import ENTITY_PATHS
-    from cartctl.trace import REQUIRED_COLUMNS
 
     text = ARCHITECTURE.read_text(encoding="utf-8")
     section = text.split("{#trace-columns}", 1)[1].split("{#command-line}", 1)[0]

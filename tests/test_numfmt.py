@@ -1,4 +1,4 @@
-"""``cartctl.numfmt``: one rounding per column, on hand-computed cases."""
+"""``cartctl.measures.numfmt``: one rounding per column, on hand-computed cases."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from cartctl.numfmt import column_decimals, exact_decimals, format_column, format_fixed
+from cartctl.measures.numfmt import column_decimals, exact_decimals, format_column, format_fixed
 
 
 @pytest.mark.parametrize(

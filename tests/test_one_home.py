@@ -140,8 +140,8 @@ def test_once_defined() -> None:
                     homes.setdefault(name, []).append(path)
     assert homes == {
         "encoder_quantum_rad_s": [CART],
-        "ANTI_WINDUP": ["runtime/pi.py"],
-        "settling_half_width": ["stepinfo.py"],
+        "ANTI_WINDUP": ["runtime/base.py"],
+        "settling_half_width": ["measures/stepinfo.py"],
     }
 
 
@@ -157,7 +157,7 @@ def test_trace_columns_and_entity_paths_written_once() -> None:
     """The closed-loop columns start from contract 1's (not a copy of them), and no entity path
     is spelled out twice among the sinks."""
     required = {"time_s", "voltage_a", "voltage_b", "speed_a", "speed_b"}
-    assert required <= set(_strings("trace.py"))
+    assert required <= set(_strings("data/trace.py"))
     assert not required & set(_strings("sinks/base.py"))
     spelled = [
         s

@@ -21,11 +21,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from cartctl.cli import main
-from cartctl.data import parse_mapping, read_trace
+from cartctl.data.modelfile import load_models
+from cartctl.data.read import read_trace
+from cartctl.data.trace import parse_mapping
 from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import load_controller
 from cartctl.errors import CartctlError
-from cartctl.modelfile import load_models
 from cartctl.reference import reference_signal
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cartctl.cli import main
-from cartctl.commands.options import file_stem
+from cartctl.cli.commands.options import file_stem
 
 
 def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
@@ -128,7 +128,7 @@ def _trace_file(path: Path, volts_a: float | None, volts_b: float | None) -> Pat
     """500 ticks with constant voltages (None: a square wave) and some speed."""
     import numpy as np
 
-    from cartctl.data import Trace, write_trace
+    from cartctl.data.trace import Trace, write_trace
 
     n = 500
     t = np.arange(n) * 0.01
@@ -208,7 +208,7 @@ def test_data_with_voltages_beyond_the_supply_is_refused(
 ) -> None:
     import numpy as np
 
-    from cartctl.data import Trace, write_trace
+    from cartctl.data.trace import Trace, write_trace
 
     n = 300
     volts = np.where(np.arange(n) < 150, 6.0, 1e300)
@@ -305,7 +305,7 @@ def test_validate_says_the_model_is_unstable(
 
 
 def _spaced_trace(path: Path, steps_s: np.ndarray) -> Path:
-    from cartctl.data import Trace, write_trace
+    from cartctl.data.trace import Trace, write_trace
 
     t = np.concatenate([[0.0], np.cumsum(steps_s)])
     n = t.size
@@ -316,7 +316,7 @@ def _spaced_trace(path: Path, steps_s: np.ndarray) -> Path:
 
 
 def test_spacing_warning_tells_jitter_from_missing_rows(tmp_path: Path) -> None:
-    from cartctl.data import read_trace
+    from cartctl.data.read import read_trace
     from cartctl.errors import DataWarning
 
     jitter = np.full(300, 0.01)
@@ -359,7 +359,7 @@ def test_delay_auto_says_when_the_data_cannot_tell(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
     """A speed that is noise, whatever the voltage: every delay explains it equally (badly)."""
-    from cartctl.data import Trace, write_trace
+    from cartctl.data.trace import Trace, write_trace
 
     rng = np.random.default_rng(11)
     n = 20000

@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cartctl.data import Trace
+from cartctl.data.modelfile import load_models
+from cartctl.data.trace import Trace
 from cartctl.errors import InputError
 from cartctl.identification.etfe import etfe
 from cartctl.identification.report import (
@@ -19,7 +20,6 @@ from cartctl.identification.report import (
     write_summary,
 )
 from cartctl.model import ArxModel
-from cartctl.modelfile import load_models
 from cartctl.signals import square, step
 
 TS = 0.01

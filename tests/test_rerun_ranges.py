@@ -70,7 +70,7 @@ def test_review_layout_spans_the_recorded_values(
 ) -> None:
     from rerun.chunk import RrdReader
 
-    from cartctl.commands.review.recording import layout
+    from cartctl.cli.commands.review.recording import layout
 
     path = _run(capsys, tmp_path, "--reference", "square:6:0.4")
     reader = RrdReader(path)

@@ -20,7 +20,7 @@ import pytest
 from rerun.chunk import RrdReader
 
 from cartctl.cli import main
-from cartctl.commands import review
+from cartctl.cli.commands import review
 from cartctl.errors import InputError
 from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS, Sink
 from cartctl.sinks.rerun_layout import ENTITY_PATHS, STYLES, blueprint

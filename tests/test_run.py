@@ -10,8 +10,8 @@ import pytest
 from rerun.chunk import RrdReader
 
 from cartctl.cli import main
-from cartctl.commands import run as run_command
-from cartctl.data import read_trace
+from cartctl.cli.commands import run as run_command
+from cartctl.data.read import read_trace
 from cartctl.plants.sim import ArxPlant
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.commands import run as run_command
-from cartctl.data import read_trace
+from cartctl.cli.commands import run as run_command
+from cartctl.data.read import read_trace
 
 ROOT = Path(__file__).resolve().parents[1]
 MISMATCH = (

@@ -35,11 +35,11 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.data import read_trace
+from cartctl.data.modelfile import load_models
+from cartctl.data.read import read_trace
 from cartctl.design.controllerfile import load_controller
 from cartctl.design.limit import settling_bound
-from cartctl.modelfile import load_models
-from cartctl.stepinfo import step_info
+from cartctl.measures.stepinfo import step_info
 from realtime_upsets import link_upsets
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.data import read_trace
+from cartctl.data.modelfile import load_models
+from cartctl.data.read import read_trace
 from cartctl.design.smoother import smooth_speed
-from cartctl.modelfile import load_models
 
 ROOT = Path(__file__).resolve().parents[1]
 GROUND = str(ROOT / "models" / "ground.toml")
@@ -128,7 +128,7 @@ def test_a_missing_model_is_one_line_and_exit_2(
 
 
 def test_review_of_a_recording_adds_the_smoothed_series(physics_run: Path) -> None:
-    from cartctl.commands.review.recorded import recording_summary
+    from cartctl.cli.commands.review.recorded import recording_summary
 
     text, extra = recording_summary(physics_run / "p.rrd", GROUND)
     n = len(read_trace(physics_run / "p.csv"))
@@ -140,7 +140,7 @@ def test_review_of_a_recording_adds_the_smoothed_series(physics_run: Path) -> No
 def test_the_runs_recording_holds_the_smoothed_speed(
     tmp_path: Path, physics_run: Path, rrd_rows: Callable[[str | Path], Counter]
 ) -> None:
-    from cartctl.commands.review.smoothed import smooth_run
+    from cartctl.cli.commands.review.smoothed import smooth_run
     from cartctl.sinks.rerun_series import HeldRerunSink
     from cartctl.sinks.summary import trace_metrics
 
@@ -205,8 +205,8 @@ def test_a_serial_path_trace_gets_both_with_the_model_of_the_controller_it_ran(
 def test_review_streams_the_smoothed_series_with_the_recording(
     physics_run: Path, tmp_path: Path, rrd_rows: Callable[[str | Path], Counter]
 ) -> None:
-    from cartctl.commands.review.recorded import recording_summary
-    from cartctl.commands.review.recording import new_stream, read_recording, stream
+    from cartctl.cli.commands.review.recorded import recording_summary
+    from cartctl.cli.commands.review.recording import new_stream, read_recording, stream
 
     _, extra = recording_summary(physics_run / "p.rrd", GROUND)
     reader, entry = read_recording(physics_run / "p.rrd")
@@ -234,9 +234,9 @@ def test_the_stop_row_does_not_bend_the_last_smoothed_speed(physics_run: Path) -
     """A run's last row is its zero-volt stop command, which acts after the last measurement.
     With an nk = 1 model (the next measurement already sees a command) the smoother must not
     pull the last row's speed towards that stop."""
-    from cartctl.commands.review.smoothed import smoothed_speeds
-    from cartctl.data import read_trace
-    from cartctl.modelfile import load_models
+    from cartctl.cli.commands.review.smoothed import smoothed_speeds
+    from cartctl.data.modelfile import load_models
+    from cartctl.data.read import read_trace
 
     trace = read_trace(physics_run / "p.csv")
     columns = trace.columns()

@@ -84,7 +84,7 @@ def test_the_angle_noise_is_one_count_over_root_twelve() -> None:
 
 
 def test_physics_trace_smoothed_rms_error_is_under_half_the_encoders(ground_path) -> None:
-    from cartctl.modelfile import load_models
+    from cartctl.data.modelfile import load_models
     from cartctl.plants.factory import make_plant
 
     plant, _ = make_plant("physics", seed=7)

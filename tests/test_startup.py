@@ -96,9 +96,10 @@ def test_every_command_is_there_with_its_options() -> None:
 def test_the_parser_and_the_implementations_share_one_definition() -> None:
     """Each name, limit and default the parser shows is defined once (no copy to drift)."""
     from cartctl import choices, reference, signals
-    from cartctl.commands import design, options, tune
+    from cartctl.cli.commands import design, options, tune
     from cartctl.design import kalman, request
-    from cartctl.plants import cart_link, factory
+    from cartctl.link import cart_link
+    from cartctl.plants import factory
     from cartctl.runtime import pi
     from cartctl.tune.grid import AXES
 
@@ -114,7 +115,7 @@ def test_the_parser_and_the_implementations_share_one_definition() -> None:
 
 
 def test_parsed_defaults_are_the_home_values() -> None:
-    from cartctl.plants.cart_faults import CartFaults
+    from cartctl.link.cart_faults import CartFaults
 
     parser = build_parser()
     assert parser.parse_args(["virtual-cart"]).faults == CartFaults()

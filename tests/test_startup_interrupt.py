@@ -62,8 +62,8 @@ MOMENTS = [
     ("warnings", ["--version"]),
     ("pathlib", ["--version"]),
     ("cartctl.errors", ["run", "--help"]),
-    ("cartctl.commands", ["run", "--help"]),
-    ("cartctl.commands.run", ["run", "--help"]),
+    ("cartctl.cli.commands", ["run", "--help"]),
+    ("cartctl.cli.commands.run", ["run", "--help"]),
     ("numpy", ["inspect", "models/ground.toml"]),
 ]
 

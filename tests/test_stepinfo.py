@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cartctl.errors import InputError
-from cartctl.stepinfo import StepOnset, final_value, find_step, step_info
+from cartctl.measures.stepinfo import StepOnset, final_value, find_step, step_info
 
 TS = 0.01
 T = np.arange(400) * TS

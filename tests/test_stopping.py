@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from cartctl.data import read_trace
+from cartctl.data.read import read_trace
 
 STARTED_TIMEOUT_S = 30.0
 

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.data import read_trace
-from cartctl.jsonout import dumps, strict
+from cartctl.cli.jsonout import dumps, strict
+from cartctl.data.read import read_trace
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"

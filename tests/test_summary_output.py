@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.data import read_trace
+from cartctl.data.read import read_trace
 
 
 def _cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str]:

@@ -14,9 +14,9 @@ import pytest
 
 from cartctl.cart import encoder_quantum_rad_s
 from cartctl.cli import main
+from cartctl.measures.stepinfo import settling_half_width, step_info
 from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS
 from cartctl.sinks.summary import format_summary, trace_metrics
-from cartctl.stepinfo import settling_half_width, step_info
 
 TS = 0.01
 N = 300

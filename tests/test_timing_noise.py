@@ -13,12 +13,12 @@ import pytest
 import scipy.io
 
 from cartctl.cli import main
+from cartctl.data.modelfile import load_models
 from cartctl.design.build import build_controllers, make_estimator
 from cartctl.design.controllerfile import load_controller
 from cartctl.design.kalman import design_kalman
 from cartctl.design.request import DesignRequest
 from cartctl.errors import InputError
-from cartctl.modelfile import load_models
 from cartctl.runtime.kalman import KalmanSpeedEstimator, SteadyStateSpeedEstimator
 
 ROOT = Path(__file__).resolve().parents[1]

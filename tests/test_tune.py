@@ -16,14 +16,14 @@ import pytest
 
 from cartctl.cli import build_parser as main_parser
 from cartctl.cli import main
-from cartctl.commands.design import request_from_args
-from cartctl.data import read_trace
+from cartctl.cli.commands.design import request_from_args
+from cartctl.data.modelfile import load_models
+from cartctl.data.read import read_trace
 from cartctl.design.analysis import simulate_step
 from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import load_controller
 from cartctl.errors import InputError
-from cartctl.modelfile import load_models
-from cartctl.stepinfo import step_info
+from cartctl.measures.stepinfo import step_info
 from cartctl.tune.engine import TuneJob, scoring_plant
 from cartctl.tune.grid import (
     TuneResult,

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from cartctl.cart import encoder_quantum_rad_s
+from cartctl.data.modelfile import load_models
 from cartctl.design.make import design_motor
 from cartctl.design.request import DesignRequest
 from cartctl.model import ArxModel
-from cartctl.modelfile import load_models
 from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller

@@ -22,7 +22,7 @@ from matplotlib.figure import Figure
 from matplotlib.text import Text
 
 from cartctl.cli import main
-from cartctl.numfmt import SIG_FIGS
+from cartctl.measures.numfmt import SIG_FIGS
 
 GROUND = Path(__file__).resolve().parents[1] / "models" / "ground.toml"
 # 60° and 65° at 2 Hz need Kp < 0 on the ground model; at 0.6 s (10 ticks after the step) the

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cartctl.data.modelfile import ModelFile, Provenance, load_models
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
-from cartctl.modelfile import ModelFile, Provenance, load_models
 from cartctl.tune.uncertainty import sample_plants
 
 GROUND = Path(__file__).resolve().parents[1] / "models" / "ground.toml"

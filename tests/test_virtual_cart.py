@@ -19,10 +19,10 @@ import pytest
 from rerun.chunk import RrdReader
 
 from cartctl.cli import main
-from cartctl.data import read_trace
+from cartctl.data.read import read_trace
 from cartctl.errors import PlantError
-from cartctl.plants.serial_cart import PROBE_ECHOES, SerialCart
-from cartctl.plants.virtual_cart import CartFaults, VirtualCart
+from cartctl.link.serial_cart import PROBE_ECHOES, SerialCart
+from cartctl.link.virtual_cart import CartFaults, VirtualCart
 from realtime_upsets import link_upsets
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -22,8 +22,8 @@ import pytest
 from cartctl.cli import main
 from cartctl.link import Encoder, Framer, Gpio, HostCommand
 from cartctl.link.bridge import STATUS_WATCHDOG
-from cartctl.plants.bridge_firmware import CartIO
-from cartctl.plants.cart_uart import (
+from cartctl.link.bridge_firmware import CartIO
+from cartctl.link.cart_uart import (
     BRIDGE_RX_RING_BYTES,
     BYTE_TIME_S,
     RX_RING_BYTES,
@@ -31,8 +31,8 @@ from cartctl.plants.cart_uart import (
     UsbBridge,
     fill_ring,
 )
-from cartctl.plants.serial_cart import SerialCart
-from cartctl.plants.virtual_cart import CartFaults, VirtualCart
+from cartctl.link.serial_cart import SerialCart
+from cartctl.link.virtual_cart import CartFaults, VirtualCart
 
 FRAME_S = 60 * BYTE_TIME_S
 CART_SENDS_S = 0.0012  # the communication thread's send, into each tick

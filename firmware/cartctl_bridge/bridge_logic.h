@@ -1,7 +1,7 @@
 // cartctl bridge: the contract logic of the bridge sketch, as plain C++ with no Arduino dependency.
 //
 // The contract is docs/serial-protocol.md (the channel map is also in firmware/README.md). Its
-// Python twin is src/cartctl/plants/bridge_firmware.py (class BridgeFirmware), which the virtual
+// Python twin is src/cartctl/link/bridge_firmware.py (class BridgeFirmware), which the virtual
 // cart runs; tests/test_firmware.py compiles this file with g++ and compares both, tick by tick.
 // Change one, change the other.
 //

@@ -4,7 +4,7 @@ The parser is built from these before any command runs, so this module imports n
 (``cartctl --help`` loads no numpy or scipy). The modules that implement them import them from
 here: :mod:`cartctl.signals` (the excitation signals, the longest run), :mod:`cartctl.reference`
 (the reference specifications), :mod:`cartctl.plants.factory` (the sim plant's model) and
-:mod:`cartctl.plants.cart_link` (the wait for a cart).
+:mod:`cartctl.link.cart_link` (the wait for a cart).
 
 The shipped model and controller files, :data:`SHIPPED_FILES` by name, are found by
 :func:`find_file` from any folder: the working folder first, then the copies installed with the

@@ -2,7 +2,7 @@
 
 Sits at the bottom of the pipeline: ``identify`` produces these models, ``design`` and the simulated
 plant consume them. Everything here is pure maths on arrays (no I/O; model files are in
-:mod:`cartctl.modelfile`).
+:mod:`cartctl.data.modelfile`).
 
 The model, in the report's notation for its structure (na = 2, nb = 2, nk = 2), is
 

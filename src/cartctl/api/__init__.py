@@ -29,7 +29,9 @@ import numpy as np
 
 from cartctl.api.results import Design, Identification, MotorResult, SimulationResult
 from cartctl.choices import DEFAULT_MODEL
-from cartctl.data import Trace, parse_mapping, read_trace
+from cartctl.data.modelfile import ModelFile, load_models, save_models
+from cartctl.data.read import read_trace
+from cartctl.data.trace import Trace, parse_mapping
 from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.design.make import design_models
 from cartctl.design.request import DesignRequest
@@ -37,7 +39,6 @@ from cartctl.errors import InputError, PlantError
 from cartctl.identification.pipeline import IdentifyRequest
 from cartctl.identification.pipeline import identify as identify_traces
 from cartctl.identification.prefilter import Prefilter
-from cartctl.modelfile import ModelFile, load_models, save_models
 from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
 from cartctl.runtime.fast import run_in_memory
 from cartctl.session.prepare import prepare_run
@@ -116,7 +117,7 @@ def excite(
         The trace columns, with ``true_speed_a``/``true_speed_b`` from the simulator.
     """
     from cartctl.cart import SUPPLY_V
-    from cartctl.experiment import run_experiment
+    from cartctl.runtime.experiment import run_experiment
     from cartctl.signals import make_signal
 
     _check_simulated(plant, "excite")

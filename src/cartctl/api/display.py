@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.numfmt import MISSING, render_table
+from cartctl.measures.numfmt import MISSING, render_table
 
 __all__ = ["Summary", "number", "numbers", "plot_run"]
 

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.api.display import Summary, number, numbers, plot_run
+from cartctl.data.modelfile import ModelFile, save_models
 from cartctl.design.controllerfile import ControllerFile, save_controller
 from cartctl.design.make import Designs, controller_file
 from cartctl.design.request import DesignRequest
@@ -22,7 +23,6 @@ from cartctl.errors import InputError
 from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, MotorIdentification
 from cartctl.identification.pipeline import model_file as identified_model_file
 from cartctl.model import ArxModel
-from cartctl.modelfile import ModelFile, save_models
 
 __all__ = ["Design", "Identification", "MotorResult", "SimulationResult"]
 

@@ -1,6 +1,6 @@
 """``cartctl commission``: from a connected cart to a verified controller, in stages.
 
-The stages, each a small module, run in this order by :mod:`cartctl.commands.commission`:
+The stages, each a small module, run in this order by :mod:`cartctl.cli.commands.commission`:
 
 1. :mod:`.checks`: the port, the heartbeat and the loop delay; each motor's direction and encoder
    sign from a short pulse; each motor's breakaway voltage from a slow ramp; the excitation
@@ -12,7 +12,7 @@ The stages, each a small module, run in this order by :mod:`cartctl.commands.com
 5. :mod:`.verify`: a closed-loop step on the cart against the tuning's prediction.
 
 Numbers in, numbers out, wherever a stage can be: the plant is driven only by
-:mod:`cartctl.commands.commission` and the functions named ``run_*``.
+:mod:`cartctl.cli.commands.commission` and the functions named ``run_*``.
 """
 
 from __future__ import annotations

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from cartctl.cart import SUPPLY_V, encoder_quantum_rad_s
 from cartctl.commission import StageError
-from cartctl.data import Trace
+from cartctl.data.trace import Trace
 
 MOTORS = ("a", "b")
 PULSE_V = 4.0

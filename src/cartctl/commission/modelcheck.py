@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from cartctl.commission import StageError
-from cartctl.data import Trace
+from cartctl.data.trace import Trace
 from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, identify
 
 SPLIT = 0.7

@@ -17,7 +17,7 @@ import numpy as np
 import rerun as rr
 from numpy.typing import NDArray
 
-from cartctl.data import Trace
+from cartctl.data.trace import Trace
 from cartctl.sinks.rerun_layout import ENTITY_PATHS, blueprint
 from cartctl.sinks.rerun_problems import file_failure
 from cartctl.sinks.rerun_sink import APPLICATION_ID

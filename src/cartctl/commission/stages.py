@@ -4,7 +4,7 @@
 the report, the results so far) and runs one stage per method. Each stage makes its own plant
 from the name (:func:`cartctl.plants.factory.make_plant`), so a serial cart is connected for its
 experiment and closed (zero volts) at its end; an experiment stopped by Ctrl-C or a plant fault
-keeps its ticks and the plant closed (:func:`cartctl.experiment.run_experiment`).
+keeps its ticks and the plant closed (:func:`cartctl.runtime.experiment.run_experiment`).
 """
 
 from __future__ import annotations
@@ -18,15 +18,15 @@ from typing import Any
 import numpy as np
 
 from cartctl.cart import PERIOD_S
+from cartctl.cli.progress import ProgressBar
 from cartctl.commission import StageError, checks, modelcheck, report, tuning, verify
 from cartctl.commission.recording import record_stage, trace_series
 from cartctl.commission.timing import later_command
-from cartctl.data import Trace, write_trace
+from cartctl.data.trace import Trace, write_trace
 from cartctl.errors import CartctlError
-from cartctl.experiment import ExperimentResult, run_experiment
 from cartctl.plants.base import ClockedPlant
 from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
-from cartctl.progress import ProgressBar
+from cartctl.runtime.experiment import ExperimentResult, run_experiment
 
 STAGES = ("checks", "excitation", "identification", "tuning", "verification")
 
@@ -183,8 +183,8 @@ class Commission:
 
     def run_identification(self) -> None:
         """Stage 3: ARX with a validation split; the verdict; model.toml (model-failed.toml)."""
+        from cartctl.data.modelfile import save_models
         from cartctl.identification.pipeline import model_file
-        from cartctl.modelfile import save_models
 
         assert self.excitation is not None and self.amplitude is not None
         self.say("identification", f"ARX na={modelcheck.NA} nb={modelcheck.NB} "

@@ -31,8 +31,8 @@ import numpy as np
 from cartctl.cart import encoder_quantum_rad_s
 from cartctl.commission import StageError
 from cartctl.commission.timing import LATER_FRACTIONS, later_command
+from cartctl.data.modelfile import ModelFile, load_models
 from cartctl.errors import InputError
-from cartctl.modelfile import ModelFile, load_models
 from cartctl.plants.sim import ArxPlant
 from cartctl.tune import engine
 from cartctl.tune import grid as tuning

@@ -68,9 +68,9 @@ def tuning_steps(controller_path: Path, model_path: Path,
                  later: Callable[[ArxModel, float], ArxModel],
                  png: Path) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]:  # fmt: skip
     """The chosen controller's simulated step on the model and the timing plants (series, PNG)."""
+    from cartctl.data.modelfile import load_models
     from cartctl.design.build import build_controllers
     from cartctl.design.controllerfile import load_controller
-    from cartctl.modelfile import load_models
     from cartctl.plants.sim import ArxPlant
     from cartctl.reference import reference_signal
     from cartctl.runtime.fast import run_in_memory

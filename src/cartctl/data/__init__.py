@@ -1,24 +1,16 @@
-"""Experiment traces in and out: the first stage of the pipeline (data → identify → design → run).
+"""Files and formats: what cartctl reads and writes on disk.
 
-- :mod:`cartctl.data.read`: :func:`read_trace`, trace CSV and QRoboticsCenter logs to a
-  :class:`~cartctl.trace.Trace`, with the checks of what the numbers mean;
+- :mod:`cartctl.data.trace`: the :class:`~cartctl.data.trace.Trace` (the trace columns) and
+  :func:`~cartctl.data.trace.write_trace`;
+- :mod:`cartctl.data.read`: :func:`~cartctl.data.read.read_trace`, trace CSV and
+  QRoboticsCenter logs to a trace, with the checks of what the numbers mean;
 - :mod:`cartctl.data.table`: a file's numbers, with errors that name line, row and column;
-- :mod:`cartctl.data.columns`: which file column or QRC label becomes which trace column.
+- :mod:`cartctl.data.columns`: which file column or QRC label becomes which trace column;
+- :mod:`cartctl.data.qrc`: the QRoboticsCenter log formats;
+- :mod:`cartctl.data.tracemeta`: the meta file beside a trace (its plant and loop delay);
+- :mod:`cartctl.data.tomlfile`: the TOML files' format lines and versions;
+- :mod:`cartctl.data.modelfile`: model files (the ARX models of both motors).
 
-The :class:`~cartctl.trace.Trace` type and :func:`~cartctl.trace.write_trace` live in
-:mod:`cartctl.trace` and are importable from here.
+The package imports nothing: the command line's parser takes the formats' names from
+:mod:`cartctl.data.tomlfile` without loading numpy.
 """
-
-from cartctl.data.read import SPACING_TOLERANCE_S, VOLTAGE_READ_LIMIT_V, read_trace
-from cartctl.trace import MOTORS, REQUIRED_COLUMNS, Trace, parse_mapping, write_trace
-
-__all__ = [
-    "MOTORS",
-    "REQUIRED_COLUMNS",
-    "SPACING_TOLERANCE_S",
-    "VOLTAGE_READ_LIMIT_V",
-    "Trace",
-    "parse_mapping",
-    "read_trace",
-    "write_trace",
-]

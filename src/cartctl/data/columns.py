@@ -12,9 +12,9 @@ import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from cartctl import qrc
+from cartctl.data.qrc import QRC5_DEFAULT_LABELS, column_name
+from cartctl.data.trace import _MAP_FORM, MOTORS, REQUIRED_COLUMNS, _check_name
 from cartctl.errors import DataFileError, InputError
-from cartctl.trace import _MAP_FORM, MOTORS, REQUIRED_COLUMNS, _check_name
 
 __all__ = ["check_mapping", "plan_columns"]
 
@@ -65,7 +65,7 @@ def plan_columns(
             f"a {kind} log carries its own time (ms), which becomes time_s; "
             f"drop time_s={mapping['time_s']} from the mapping",
         )
-    auto = [n if not first else qrc.column_name(n, j - 1, kind) for j, n in enumerate(names)]
+    auto = [n if not first else column_name(n, j - 1, kind) for j, n in enumerate(names)]
     kept = [n if not first else _extra_name(n, j - 1, kind) for j, n in enumerate(names)]
     source = {"time_s": 0} if first else {}
     for name, label in mapping.items():
@@ -214,14 +214,14 @@ def _counterparts(
 def _extra_name(label: str, index: int, kind: str) -> str:
     """A QRC channel's name as an extra trace column: its label with case kept.
 
-    As :func:`cartctl.qrc.column_name` (runs of other characters become one ``_``, ``ch_``
+    As :func:`cartctl.data.qrc.column_name` (runs of other characters become one ``_``, ``ch_``
     before a leading digit, the default label of an empty one) but without lower-casing:
     ``speedB`` stays ``speedB``.
     """
     name = re.sub(r"[^0-9A-Za-z]+", "_", label).strip("_")
     if not name:
-        if kind.startswith("QRC 5") and index < len(qrc.QRC5_DEFAULT_LABELS):
-            return qrc.QRC5_DEFAULT_LABELS[index]
+        if kind.startswith("QRC 5") and index < len(QRC5_DEFAULT_LABELS):
+            return QRC5_DEFAULT_LABELS[index]
         return f"channel{index}"
     return f"ch_{name}" if name[0].isdigit() else name
 

@@ -4,7 +4,7 @@ The first stage of the pipeline (data → identify → models/ → design → co
 logs/). A trace holds, per 10 ms tick k, the voltage *commanded* at tick k (V) and the speed
 *measured* at tick k (rad/s) of both motors (the CSV columns are in the README, "Traces").
 :func:`read_trace` reads trace CSV files and QRoboticsCenter logs (whose layout
-:mod:`cartctl.qrc` parses), optionally mapping QRC labels or foreign CSV headers onto trace
+:mod:`cartctl.data.qrc` parses), optionally mapping QRC labels or foreign CSV headers onto trace
 columns. The file's numbers come from :mod:`cartctl.data.table`, the choice of columns from
 :mod:`cartctl.data.columns`; the checks of what the numbers mean (finite, increasing time, voltages
 within the supply, 10 ms spacing) are here.
@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from cartctl import qrc
 from cartctl.cart import PERIOD_S, SUPPLY_V
 from cartctl.data.columns import check_mapping, plan_columns
+from cartctl.data.qrc import detect, read_qrc5, read_qrc6
 from cartctl.data.table import (
     Table,
     Where,
@@ -30,9 +30,9 @@ from cartctl.data.table import (
     read_csv_rows,
     to_floats,
 )
+from cartctl.data.tomlfile import FORMATS
+from cartctl.data.trace import REQUIRED_COLUMNS, Trace
 from cartctl.errors import DataFileError, DataWarning, MissingFileError
-from cartctl.tomlfile import FORMATS
-from cartctl.trace import REQUIRED_COLUMNS, Trace
 
 __all__ = ["SPACING_TOLERANCE_S", "VOLTAGE_READ_LIMIT_V", "read_trace"]
 
@@ -90,7 +90,7 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
         time_j, plan = plan_columns(path, "CSV", names, checked, header_line)
         table = read_csv_rows(path, names, header_line)
     else:
-        log = qrc.read_qrc5(path) if kind == "qrc5" else qrc.read_qrc6(path)
+        log = read_qrc5(path) if kind == "qrc5" else read_qrc6(path)
         if log.truncated:
             warnings.warn(
                 f"{path}: the QRC log ends without its closing tags (QRC did not close the "
@@ -161,7 +161,7 @@ def _sniff(path: Path) -> str:
             f"the file is empty; expected a header row ({','.join(REQUIRED_COLUMNS)}) and one "
             "row per 10 ms tick",
         )
-    kind = qrc.detect(text)
+    kind = detect(text)
     toml = _CARTCTL_TOML.search(text) if kind is None else None
     if toml is not None:
         what = FORMATS.get(toml.group(1), "a cartctl TOML file")

@@ -17,8 +17,8 @@ from typing import TextIO
 
 import numpy as np
 
+from cartctl.data.trace import REQUIRED_COLUMNS
 from cartctl.errors import DataFileError
-from cartctl.trace import REQUIRED_COLUMNS
 
 __all__ = ["Table", "Where", "read_csv_header", "read_csv_rows", "to_floats"]
 

@@ -26,8 +26,8 @@ from typing import Any
 
 import tomli_w
 
+from cartctl.data.tomlfile import TRACE_META_FORMAT, read_toml, require
 from cartctl.errors import DataFileError, InputError
-from cartctl.tomlfile import TRACE_META_FORMAT, read_toml, require
 
 FORMAT = TRACE_META_FORMAT
 SUFFIX = ".meta.toml"

@@ -13,10 +13,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from cartctl.measures.stepinfo import StepInfo, step_info
 from cartctl.model import ArxModel
 from cartctl.plants.sim import ArxPlant
 from cartctl.runtime.base import Controller
-from cartctl.stepinfo import StepInfo, step_info
 
 
 @dataclass(frozen=True)

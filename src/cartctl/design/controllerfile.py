@@ -52,9 +52,9 @@ import tomli_w
 
 from cartctl.cart import check_voltage_limit, encoder_quantum_rad_s
 from cartctl.choices import find_file
+from cartctl.data.tomlfile import CONTROLLER_FORMAT, check_format, read_toml, require
 from cartctl.design.controller_ss import consistency_problems
 from cartctl.errors import CartctlError, DataFileError, InputError
-from cartctl.tomlfile import CONTROLLER_FORMAT, check_format, read_toml, require
 
 FORMAT = CONTROLLER_FORMAT
 METHODS = ("pi", "poles")
@@ -296,7 +296,7 @@ def _derived_loop_delay(
     path: Path, model_path: str, request: Mapping[str, Any], motors: Mapping[str, Any]
 ) -> int:
     """The loop delay of a file without ``loop_delay_ticks``: its model's nk − 1 + extra delay."""
-    from cartctl.modelfile import load_models
+    from cartctl.data.modelfile import load_models
 
     extra = request.get("extra_delay_ticks", 0)
     if not isinstance(extra, int) or isinstance(extra, bool) or extra < 0:

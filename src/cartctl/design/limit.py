@@ -40,8 +40,8 @@ from scipy.linalg import toeplitz
 from cartctl.cart import SUPPLY_V, encoder_quantum_rad_s
 from cartctl.design.analysis import StepAnalysis
 from cartctl.errors import InputError
+from cartctl.measures.stepinfo import SETTLING_FRACTION, settling_half_width, step_info
 from cartctl.model import ArxModel
-from cartctl.stepinfo import SETTLING_FRACTION, settling_half_width, step_info
 
 
 def settling_band_rad_s(
@@ -53,7 +53,7 @@ def settling_band_rad_s(
 ) -> float:
     """Half-width of the settling band of a speed step: max(fraction · |r|, q).
 
-    The rule of :func:`cartctl.stepinfo.settling_half_width` with the floor q of a measured wheel
+    The rule of :func:`cartctl.measures.stepinfo.settling_half_width` with the floor q of a measured wheel
     speed, one encoder count per tick (:func:`cartctl.cart.encoder_quantum_rad_s`): a band
     narrower than that (2 % of steps below 17.5 rad/s at 10 ms) would judge the encoder rather
     than the controller. The run summary judges its steps in the same band.

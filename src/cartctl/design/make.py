@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from cartctl.cart import nk_fits_loop_delay
+from cartctl.data.modelfile import ModelFile
 from cartctl.design.analysis import StepAnalysis, simulate_step
 from cartctl.design.build import make_estimator, pi_entry, poles_entry
 from cartctl.design.controller_ss import feedback_tf_coeffs
@@ -27,7 +28,6 @@ from cartctl.design.poles import design_poles
 from cartctl.design.request import DesignRequest, check_loop_delay
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
-from cartctl.modelfile import ModelFile
 from cartctl.runtime.base import Controller
 from cartctl.runtime.pi import PiController
 from cartctl.runtime.statefeedback import StateFeedbackController

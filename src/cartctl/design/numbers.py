@@ -1,4 +1,4 @@
-"""Numbers as the design command prints them, on :mod:`cartctl.numfmt`'s rules.
+"""Numbers as the design command prints them, on :mod:`cartctl.measures.numfmt`'s rules.
 
 A single value gets 3 significant figures (``0.178``, ``12.4``); a list of values shares one
 number of decimals, 3 significant figures for its largest (``0.088, -0.011, 0.636`` rather than
@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 
-from cartctl.numfmt import format_column, format_fixed
+from cartctl.measures.numfmt import format_column, format_fixed
 
 __all__ = ["db", "sig", "sig_list"]
 

@@ -48,9 +48,9 @@ from typing import Any
 
 import numpy as np
 
+from cartctl.data.modelfile import ModelFile
 from cartctl.design.controller_ss import controller_state_space
 from cartctl.design.controllerfile import ControllerFile
-from cartctl.modelfile import ModelFile
 
 __all__ = ["controller_mat", "model_mat", "write_mat"]
 

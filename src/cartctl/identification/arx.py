@@ -22,7 +22,7 @@ from scipy.linalg import qr, solve_triangular
 
 from cartctl.cart import PERIOD_S
 from cartctl.errors import InputError
-from cartctl.metrics import finite_or_none, fit_percent
+from cartctl.measures.metrics import finite_or_none, fit_percent
 from cartctl.model import ArxModel
 
 Segment = tuple[ArrayLike, ArrayLike]
@@ -291,7 +291,7 @@ def _sum_squares(x: NDArray[np.float64]) -> float:
 def _fit_from_norms(error_norm: float, spread: float) -> float:
     """NRMSE fit (%) 100 · (1 − ‖y − ŷ‖ / ‖y − mean(y)‖) from the two norms; NaN for no spread.
 
-    The same figure as :func:`cartctl.metrics.fit_percent`, for callers that have the norms.
+    The same figure as :func:`cartctl.measures.metrics.fit_percent`, for callers that have the norms.
     """
     if spread == 0.0:
         return float("nan")

@@ -22,7 +22,7 @@ from cartctl.identification.arx import ArxFit, Segment, prediction_fit, simulati
 from cartctl.identification.bands import BodeBand, bode_band, theta_covariance
 from cartctl.identification.orders import OrderTable, order_table
 from cartctl.identification.residuals import ResidualTest, prediction_residuals, residual_test
-from cartctl.metrics import finite_or_none
+from cartctl.measures.metrics import finite_or_none
 from cartctl.model import ArxModel
 
 __all__ = ["Diagnostics", "band_frequencies", "diagnose", "on_validation", "split_segments"]

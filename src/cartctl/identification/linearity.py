@@ -5,7 +5,7 @@ Part of the identification stage (report §3.3, equation 11 and figure 8) and th
 their step onsets; the responses to the small and the large step are added and compared with the
 response to the summed step. A linear motor gives zero error; Coulomb friction makes the summed
 step's response run above the added ones (each small step loses the friction once, the summed
-step only once in all). Pure numpy on :class:`~cartctl.data.Trace` objects; no I/O.
+step only once in all). Pure numpy on :class:`~cartctl.data.trace.Trace` objects; no I/O.
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from cartctl.data import Trace
+from cartctl.data.trace import Trace
 from cartctl.errors import InputError
-from cartctl.stepinfo import StepOnset, final_value, find_step
+from cartctl.measures.stepinfo import StepOnset, final_value, find_step
 
 __all__ = [
     "AMPLITUDE_ABS_TOLERANCE_V",

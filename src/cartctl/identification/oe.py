@@ -98,7 +98,7 @@ class OeFit(ArxFit):
 
     def to_dict(self) -> dict[str, Any]:
         """The ArxFit entry plus the safeguards' outcome."""
-        from cartctl.metrics import finite_or_none
+        from cartctl.measures.metrics import finite_or_none
 
         return super().to_dict() | {
             "pole_bound": self.pole_bound,

@@ -36,7 +36,7 @@ from cartctl.identification.arx import (
     fit_arx,
     simulation_fit,
 )
-from cartctl.metrics import finite_or_none
+from cartctl.measures.metrics import finite_or_none
 
 __all__ = ["DEFAULT_GRID", "OrderRow", "OrderTable", "order_table", "parse_grid"]
 

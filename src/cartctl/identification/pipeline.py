@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from cartctl.data import Trace
+from cartctl.data.modelfile import ModelFile, Provenance
+from cartctl.data.trace import Trace
 from cartctl.errors import InputError
 from cartctl.identification.arx import ArxFit, Segment, check_orders, first_row, fit_arx
 from cartctl.identification.cycles import average_cycles, find_period, periodic_regression_pad
@@ -23,7 +24,6 @@ from cartctl.identification.delay import DelayEstimate, JointDelay, delay_eviden
 from cartctl.identification.diagnostics import Diagnostics, diagnose, on_validation, split_segments
 from cartctl.identification.oe import check_oe_orders, fit_oe
 from cartctl.identification.prefilter import Prefilter
-from cartctl.modelfile import ModelFile, Provenance
 
 METHODS = ("arx", "oe")
 

@@ -18,13 +18,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from cartctl.data import Trace
+from cartctl.data.trace import Trace
 from cartctl.errors import InputError
 from cartctl.identification.figure_base import color as _color
 from cartctl.identification.figure_base import figure as _figure
 from cartctl.identification.figure_base import save as _save
 from cartctl.identification.plots_freq import plot_etfe, plot_pzmap
-from cartctl.metrics import fit_percent
+from cartctl.measures.metrics import fit_percent
 
 if TYPE_CHECKING:
     pass
@@ -126,7 +126,7 @@ def plot_step_validation(
 
     Three panels sharing the time axis: the voltage applied (V), the measured speed and each
     model's simulated speed (rad/s; the legend gives each model's simulation fit in percent,
-    see :func:`cartctl.metrics.fit_percent`), and |measured − simulated| (rad/s).
+    see :func:`cartctl.measures.metrics.fit_percent`), and |measured − simulated| (rad/s).
 
     Parameters
     ----------

@@ -13,7 +13,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from cartctl.data import Trace
+from cartctl.data.modelfile import ModelFile
+from cartctl.data.trace import Trace
 from cartctl.identification.cycles import find_period
 from cartctl.identification.etfe import etfe
 from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, MotorIdentification
@@ -27,7 +28,6 @@ from cartctl.identification.report import (
 )
 from cartctl.identification.residuals import plot_residuals
 from cartctl.model import ArxModel
-from cartctl.modelfile import ModelFile
 
 
 def _fit_text(value: float | None) -> str:

@@ -4,7 +4,7 @@ The last check of the identification stage (report §3.3, figures 6 and 7) and t
 ``cartctl validate``: the model runs from rest on the trace's commanded voltage (simulation, not
 one-step prediction), and the result says how well it follows the measured speed: the fit (%), the
 absolute error over time, and, when the input is a single step, the step metrics of the measured
-and simulated responses side by side. Pure numpy on a :class:`~cartctl.data.Trace`; no I/O.
+and simulated responses side by side. Pure numpy on a :class:`~cartctl.data.trace.Trace`; no I/O.
 """
 
 from __future__ import annotations
@@ -16,12 +16,12 @@ from typing import Any
 
 import numpy as np
 
-from cartctl.data import MOTORS, Trace
+from cartctl.data.modelfile import ModelFile
+from cartctl.data.trace import MOTORS, Trace
 from cartctl.errors import InputError
-from cartctl.metrics import finite_or_none, fit_percent
+from cartctl.measures.metrics import finite_or_none, fit_percent
+from cartctl.measures.stepinfo import StepInfo, find_step, step_info
 from cartctl.model import ArxModel
-from cartctl.modelfile import ModelFile
-from cartctl.stepinfo import StepInfo, find_step, step_info
 
 __all__ = [
     "PERIOD_TOLERANCE",

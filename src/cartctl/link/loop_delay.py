@@ -1,7 +1,7 @@
 """The loop delay read from the bridge's echoes: its spread, how sure it is, and when it changes.
 
 Each command the cart applied comes back as an echo, and the ticks between the measurement it
-answered and that echo are the loop delay of that one command (:mod:`cartctl.plants.serial_cart`).
+answered and that echo are the loop delay of that one command (:mod:`cartctl.link.serial_cart`).
 A host that replies late now and then gives a spread of delays. :class:`EchoDelays` holds the count
 per delay and says whether one value is clear; :func:`delay_change` compares a run's echoes with
 the probe's before it. Pure: counts in, verdicts out.

@@ -6,8 +6,8 @@ from pathlib import Path
 from typing import TypedDict
 
 from cartctl.choices import DEFAULT_MODEL
+from cartctl.data.modelfile import load_models
 from cartctl.errors import InputError
-from cartctl.modelfile import load_models
 from cartctl.plants.base import Plant
 
 PLANT_NAMES = (
@@ -77,7 +77,7 @@ def check_plant_name(spec: str) -> str:
         physics_options(options)
         return kind
     if kind == "virtual":
-        from cartctl.plants.cart_faults import CartFaults
+        from cartctl.link.cart_faults import CartFaults
 
         CartFaults.parse(options)
         return kind
@@ -164,8 +164,8 @@ def make_plant(
             timing += f", motor(s) {options['reversed_motors']} wired backwards"
         return plant, f"physics (preset {preset}{timing})"
     if spec == "virtual" or spec.startswith("virtual:"):
-        from cartctl.plants.virtual_cart import CartFaults, VirtualCart
-        from cartctl.plants.virtual_serial import VirtualSerialCart
+        from cartctl.link.virtual_cart import CartFaults, VirtualCart
+        from cartctl.link.virtual_serial import VirtualSerialCart
 
         faults = CartFaults.parse(spec.partition(":")[2])
         cart = VirtualCart(preset, noise_std_rad_s=noise_std_rad_s, seed=seed, faults=faults)
@@ -177,7 +177,7 @@ def make_plant(
         port = spec.partition(":")[2]
         if not port:
             raise InputError("plant 'serial:' needs a port, e.g. serial:/dev/ttyACM0")
-        from cartctl.plants.serial_cart import SerialCart
+        from cartctl.link.serial_cart import SerialCart
 
         return SerialCart(port, connect_timeout_s=connect_timeout_s), f"cart on {port}"
     raise InputError(f"unknown plant '{spec}'; expected one of {', '.join(PLANT_NAMES)}")

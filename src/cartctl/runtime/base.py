@@ -14,7 +14,12 @@ Everything is plain floats: no clock, no I/O, cheap enough for a fast simulated 
 
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+from typing import Literal, Protocol, get_args, runtime_checkable
+
+AntiWindup = Literal["conditional", "back-calculation", "none"]
+ANTI_WINDUP: tuple[str, ...] = get_args(AntiWindup)
+"""The PI's anti-windup modes, in :class:`~cartctl.runtime.pi.PiController`'s order (here, where
+the command line's parser takes them without loading numpy)."""
 
 
 @runtime_checkable

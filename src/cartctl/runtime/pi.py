@@ -27,11 +27,10 @@ always predicts with the command sent.
 from __future__ import annotations
 
 import math
-from typing import Literal, get_args
 
 from cartctl.cart import SUPPLY_V, check_voltage_limit
 from cartctl.errors import InputError
-from cartctl.runtime.base import SpeedEstimator
+from cartctl.runtime.base import ANTI_WINDUP, SpeedEstimator
 from cartctl.runtime.elementwise import (
     Value,
     all_true,
@@ -42,10 +41,6 @@ from cartctl.runtime.elementwise import (
     select,
     smaller,
 )
-
-AntiWindup = Literal["conditional", "back-calculation", "none"]
-ANTI_WINDUP: tuple[str, ...] = get_args(AntiWindup)
-"""The anti-windup modes, in :class:`PiController`'s order."""
 
 CONDITIONAL, BACK_CALCULATION = 0, 1
 """Indices of the modes in :data:`ANTI_WINDUP`, as :func:`pi_law` takes them."""

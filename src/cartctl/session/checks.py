@@ -46,7 +46,7 @@ def refuse_unstable(models: dict[str, ArxModel], path: str) -> None:
 
 def models_designed_on(controller_file: ControllerFile) -> dict[str, ArxModel]:
     """The models the controller was designed on; none when that file is gone or unreadable."""
-    from cartctl.modelfile import load_models
+    from cartctl.data.modelfile import load_models
 
     try:
         return dict(load_models(controller_file.model_path).motors)

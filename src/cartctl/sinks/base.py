@@ -16,7 +16,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
-from cartctl.trace import REQUIRED_COLUMNS
+from cartctl.data.trace import REQUIRED_COLUMNS
 
 TRACE_COLUMNS: tuple[str, ...] = (
     *REQUIRED_COLUMNS,

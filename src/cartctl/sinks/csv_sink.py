@@ -71,7 +71,7 @@ class CsvSink:
             The header could not be written (the file holds no row).
         OSError
             The file cannot be created (its folder is checked before a run: see
-            :func:`cartctl.commands.options.check_output_folder`).
+            :func:`cartctl.cli.commands.options.check_output_folder`).
         """
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = io.FileIO(self.path, "w")  # unbuffered: each block is one write we can count

@@ -15,7 +15,7 @@ from typing import Final
 
 import rerun.blueprint as rrb
 
-from cartctl.trace import MOTORS
+from cartctl.data.trace import MOTORS
 
 TIME_COLUMN: Final[str] = "time_s"
 TICK_COLUMN: Final[str] = "tick"

@@ -1,7 +1,7 @@
 """Series made after a run from all its rows (the smoothed speed), into its Rerun recording.
 
 :func:`send_series` sends one whole scalar series with the project's style for its entity; ``review``
-uses it for a recording it streams (:mod:`cartctl.commands.review.recording`). :class:`HeldRerunSink`
+uses it for a recording it streams (:mod:`cartctl.cli.commands.review.recording`). :class:`HeldRerunSink`
 is the run's sink kept open after the loop has closed it, until those series are in.
 """
 

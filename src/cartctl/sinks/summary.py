@@ -30,9 +30,9 @@ from numpy.typing import NDArray
 from cartctl.cart import encoder_quantum_rad_s
 from cartctl.errors import InputError, OutputError
 from cartctl.link.bridge import HOST_LOSS_WARN_PERCENT
-from cartctl.metrics import finite_or_none
-from cartctl.numfmt import column_decimals, format_column, format_fixed, render_table
-from cartctl.stepinfo import SETTLING_FRACTION, first_step, step_info
+from cartctl.measures.metrics import finite_or_none
+from cartctl.measures.numfmt import column_decimals, format_column, format_fixed, render_table
+from cartctl.measures.stepinfo import SETTLING_FRACTION, first_step, step_info
 
 SIGNALS = {"true_speed": "the true speed", "speed": "the measured speed"}
 """``metrics_signal`` values and how the summary text names them."""
@@ -196,7 +196,7 @@ SUMMARY_COLUMNS = (
 def motor_table(motors: Mapping[str, Mapping[str, Any]], indent: str = "  ") -> list[str]:
     """The per-motor table of a summary: units in the headers, one rounding per column.
 
-    Each column has :data:`cartctl.numfmt.SIG_FIGS` significant figures of its largest value;
+    Each column has :data:`cartctl.measures.numfmt.SIG_FIGS` significant figures of its largest value;
     the steady-state error is rounded like the RMS error (its scale), so a numerical zero such as
     3.6e-15 rad/s prints as 0 (0.000 beside 0.791).
     """

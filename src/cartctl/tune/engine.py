@@ -1,6 +1,6 @@
 """Running a tuning grid: each setting designed, then run in the loop of ``cartctl run --fast``.
 
-The execution part of ``cartctl tune`` (:mod:`cartctl.commands.tune`); the grid, the result rows
+The execution part of ``cartctl tune`` (:mod:`cartctl.cli.commands.tune`); the grid, the result rows
 and the Pareto front are in :mod:`cartctl.tune.grid`. A setting is designed per motor by
 :func:`cartctl.design.make.design_motor` (the design command's own path, from the setting's
 :class:`~cartctl.design.request.DesignRequest`), run by
@@ -27,10 +27,10 @@ import numpy as np
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
+from cartctl.data.modelfile import ModelFile, load_models
 from cartctl.design.make import design_motor
 from cartctl.errors import CartctlError
 from cartctl.model import check_extra_delay_ticks
-from cartctl.modelfile import ModelFile, load_models
 from cartctl.plants.base import Measurement, Plant
 from cartctl.plants.factory import make_plant
 from cartctl.plants.sim import ArxPlant

@@ -1,6 +1,6 @@
 """Grid tuning, the pure part: grid specs, the design request of a setting, results, Pareto front.
 
-Pipeline: between ``design`` and ``run``. ``cartctl tune`` (:mod:`cartctl.commands.tune`) designs
+Pipeline: between ``design`` and ``run``. ``cartctl tune`` (:mod:`cartctl.cli.commands.tune`) designs
 one controller per grid setting, runs it in the simulated loop and compares the run metrics; this
 module holds what needs no I/O: parsing ``--grid``, the ``cartctl design`` arguments of a setting
 (the single source of truth for both the tuning run and ``--choose``), the result rows and the

@@ -49,10 +49,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.cart import encoder_quantum_rad_s
-from cartctl.modelfile import ModelFile, load_models
+from cartctl.data.modelfile import ModelFile, load_models
+from cartctl.measures.stepinfo import first_step, settling_half_width, step_rows
 from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller
-from cartctl.stepinfo import first_step, settling_half_width, step_rows
 from cartctl.tune.batch import ArxBatch, BatchTrace, simulate_batch
 from cartctl.tune.engine import TuneJob, evaluate_nominal, scoring_plant, simulate
 from cartctl.tune.grid import TuneResult, worst_metrics

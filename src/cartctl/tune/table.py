@@ -3,8 +3,8 @@
 Every column says what it is and its unit: ``design …`` columns are the grid setting asked of
 ``cartctl design``, ``run …`` columns what the simulated run measured (the worse of motors a
 and b). Each column (or group of columns, with ``--robust``) has one rounding:
-:data:`cartctl.numfmt.SIG_FIGS` significant figures of its largest value
-(:mod:`cartctl.numfmt`). The settings are counted by status (:data:`cartctl.tune.grid.STATUSES`):
+:data:`cartctl.measures.numfmt.SIG_FIGS` significant figures of its largest value
+(:mod:`cartctl.measures.numfmt`). The settings are counted by status (:data:`cartctl.tune.grid.STATUSES`):
 the infeasible requests, which the design refused and which never ran, apart from the runs that
 did not settle.
 """
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from cartctl.numfmt import column_decimals, exact_decimals, format_column, format_fixed
+from cartctl.measures.numfmt import column_decimals, exact_decimals, format_column, format_fixed
 from cartctl.tune.grid import AXES, STATUSES, TuneResult, status_counts
 from cartctl.tune.robust import RobustRow
 

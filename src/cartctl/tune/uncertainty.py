@@ -29,9 +29,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from cartctl.data.modelfile import ModelFile
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
-from cartctl.modelfile import ModelFile
 
 GAIN_RANGE = (0.9, 1.1)
 """The DC gain factor's range (dimensionless)."""

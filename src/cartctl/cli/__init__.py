@@ -1,0 +1,175 @@
+"""The ``cartctl`` command line: parses arguments and turns errors into one clear line.
+
+Each subcommand lives in :mod:`cartctl.cli.commands` as a module with ``add_parser(subparsers)`` and
+``run(args) -> int``. User mistakes (:class:`~cartctl.errors.CartctlError`, bad options) print one
+line on stderr and exit with code 2, with no traceback.
+"""
+
+import os
+import sys
+
+from cartctl import stopping
+
+
+def _started_as_cartctl() -> bool:
+    """Whether this process is the ``cartctl`` program (its console script, ``python -m
+    cartctl``), not a Python program that imports the command line."""
+    main = sys.modules.get("__main__")
+    spec = getattr(main, "__spec__", None)
+    if spec is not None:
+        return bool(spec.name.partition(".")[0] == "cartctl")
+    return os.path.basename(getattr(main, "__file__", None) or "").startswith("cartctl")
+
+
+if _started_as_cartctl():  # before any other import: a stop signal from here on is one line
+    stopping.install_at_start()
+
+import argparse  # noqa: E402 - the stop handlers come first
+import warnings  # noqa: E402
+from collections.abc import Callable, Sequence  # noqa: E402
+from typing import NoReturn  # noqa: E402
+
+from cartctl import __version__  # noqa: E402
+from cartctl.errors import CartctlError  # noqa: E402
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage mistake is one line (plus where to look) and exit code 2.
+
+    Arguments no option takes are reported by the subcommand they were given to (``cartctl run:
+    error: unrecognized arguments: …``), not by ``cartctl`` (argparse's own way).
+    """
+
+    subcommands: dict[str, argparse.ArgumentParser] = {}  # noqa: RUF012 - set per instance
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+    def parse_args(self, args=None, namespace=None):
+        parsed, extra = self.parse_known_args(args, namespace)
+        if extra:
+            owner = self.subcommands.get(getattr(parsed, "command", None) or "", self)
+            owner.error(f"unrecognized arguments: {' '.join(extra)}")
+        return parsed
+
+
+def command_name(module: object) -> str:
+    """The subcommand a module of :mod:`cartctl.cli.commands` adds (``virtual_cart``: ``virtual-cart``)."""
+    return str(getattr(module, "__name__", "")).rpartition(".")[2].replace("_", "-")
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser with every subcommand of the command line (docs/architecture.md); with
+    ``command`` (one of them), that subcommand alone: what a command line naming it needs, built
+    in a tenth of the time."""
+    parser = _Parser(
+        prog="cartctl",
+        description=(
+            "Identify, design and run velocity control of a two-wheeled DC-motor cart. "
+            "Workflow: excite → identify → design → run → review."
+        ),
+    )
+    parser.add_argument("--version", action="version", version=f"cartctl {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+    from cartctl.cli.commands import COMMANDS  # light: each command loads numpy & co. when it runs
+
+    for module in COMMANDS:
+        if command is None or command_name(module) == command:
+            module.add_parser(sub)
+    parser.subcommands = dict(sub.choices)
+    return parser
+
+
+def _warning_printer(command: str) -> Callable[..., None]:
+    """A ``warnings.showwarning`` that prints one line, ``cartctl COMMAND: warning: …``."""
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        print(f"cartctl {command}: warning: {message}", file=sys.stderr)
+
+    return show
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit code (0 ok, 2 user mistake, 1 runtime failure).
+
+    SIGINT, SIGTERM and SIGHUP end a command through its shutdown path (exit 130, 143, 129); one
+    that arrives while cartctl starts ends it with one line.
+    """
+    handlers: dict[int, object] = {}
+    try:
+        handlers = stopping.install()
+        return _main(argv)
+    except KeyboardInterrupt:  # in the few instructions around _main's own handling
+        print("cartctl: interrupted", file=sys.stderr)
+        return stopping.exit_code()
+    finally:
+        stopping.restore(handlers)
+
+
+def console_main() -> int:
+    """The ``cartctl`` program: :func:`main`, then the exit.
+
+    The stop handlers are in place from the start (:func:`cartctl.stopping.install_at_start`,
+    when this module is imported by the program). Once :func:`main` is over the stop signals are
+    ignored until the process ends: one arriving while the interpreter shuts down (the Rerun SDK
+    flushes at exit) must not cut the exit short, nor turn into a traceback.
+    """
+    stopping.install_at_start()  # already done on import, unless another launcher imported us
+    try:
+        return main()
+    finally:
+        stopping.ignore()
+
+
+def _main(argv: Sequence[str] | None) -> int:
+    words = list(sys.argv[1:] if argv is None else argv)
+    named = next((word for word in words if not word.startswith("-")), None)
+    try:
+        from cartctl.cli.commands import COMMANDS
+
+        # light modules only: a stop signal here is Interrupted. Only the command named is built;
+        # an unknown name, or none (--help), gets the full parser and its list of commands.
+        known = named in {command_name(module) for module in COMMANDS}
+        parser = build_parser(named if known else None)
+    except KeyboardInterrupt:
+        print(stopping.STARTING_LINE, file=sys.stderr)
+        return stopping.exit_code()
+    args = parser.parse_args(words)
+    from cartctl.sinks.rerun_problems import quiet_sdk_logs
+
+    quiet_sdk_logs()  # before any command loads the Rerun SDK: its failures are ours to say
+    previous = warnings.showwarning
+    warnings.showwarning = _warning_printer(args.command)
+    try:
+        return int(args.func(args))
+    except CartctlError as exc:
+        print(f"cartctl {args.command}: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except ImportError:
+        # The command's heavy imports come first in its run(): a stop signal inside an extension
+        # module's initialisation surfaces as its ImportError, before anything was done.
+        if stopping.received() is None:
+            raise
+        print("cartctl: stopped while starting; nothing was done", file=sys.stderr)
+        return stopping.exit_code()
+    except BrokenPipeError:  # output piped into a command that stopped reading (| head)
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - keeps the interpreter's flush quiet
+        return 0
+    except OSError as exc:  # a file we could not write or read for a reason the user can fix
+        print(
+            f"cartctl {args.command}: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(
+                ": "
+            ),
+            file=sys.stderr,
+        )
+        return 2
+    except KeyboardInterrupt:
+        print(f"cartctl {args.command}: interrupted", file=sys.stderr)
+        return stopping.exit_code()
+    finally:
+        warnings.showwarning = previous
+
+
+if __name__ == "__main__":
+    raise SystemExit(console_main())

@@ -1,0 +1,202 @@
+"""``cartctl excite``: record an excitation experiment on a plant into a trace CSV."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import stat
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from cartctl import stopping
+from cartctl.cli.commands.options import (
+    SIGNALS,
+    add_plant_options,
+    check_duration,
+    check_finite,
+    check_output_file,
+    check_plant_options,
+    command_line,
+)
+from cartctl.errors import InputError, OutputError
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "excite",
+        help="record an excitation experiment (input voltage, measured speed) to CSV",
+        description=(
+            "Drive the motors with an excitation signal and record the commanded voltage and the "
+            "measured speed every 10 ms into a CSV trace (time_s, voltage_a, voltage_b, speed_a, "
+            "speed_b). Simulated plants run as fast as possible, a serial or virtual cart at its own "
+            "10 ms tick (its loop delay is then in the data). The report's experiment is "
+            "'--signal square --amplitude 10': +10 V, 0 V, −10 V for 1 s each, repeated."
+        ),
+    )
+    add_plant_options(p, what="what to excite")
+    p.add_argument(
+        "--signal", choices=SIGNALS, default="square", help="excitation shape (default square)"
+    )
+    p.add_argument(
+        "--amplitude", type=float, required=True, metavar="V", help="peak voltage, at most 12 V"
+    )
+    p.add_argument(
+        "--cycles",
+        type=int,
+        metavar="N",
+        help="repetitions of the square cycle (default 5) or of the 2.56 s multisine period",
+    )
+    p.add_argument(
+        "--duration", type=float, metavar="S", help="length of step, prbs, chirp, multisine (s)"
+    )
+    p.add_argument(
+        "--motor",
+        choices=("a", "b", "both"),
+        default="both",
+        help="which motor gets the signal; the other stays at 0 V (default both)",
+    )
+    p.add_argument("--out", required=True, metavar="FILE.csv", help="where to write the trace")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from cartctl.cart import SUPPLY_V
+    from cartctl.cli.jsonout import dumps
+    from cartctl.cli.progress import ProgressBar
+    from cartctl.data.trace import write_trace
+    from cartctl.data.tracemeta import meta_path, write_trace_meta
+    from cartctl.plants.factory import check_plant_name, is_serial, make_plant
+    from cartctl.runtime.experiment import run_experiment
+    from cartctl.runtime.gcpause import gc_paused
+    from cartctl.signals import make_signal
+    from cartctl.sinks.summary import host_loss_text, warn_host_losses
+
+    check_plant_name(args.plant)
+    amplitude_v = check_finite(args.amplitude, "--amplitude")
+    if amplitude_v > SUPPLY_V:
+        raise InputError(
+            f"--amplitude {amplitude_v:g} V is beyond the cart's ±{SUPPLY_V:g} V supply"
+        )
+    if amplitude_v <= 0.0:
+        raise InputError(f"--amplitude must be a positive peak voltage (V), got {amplitude_v:g}")
+    check_plant_options(args)
+    if args.duration is not None and args.signal == "square":
+        raise InputError("--duration does not apply to the square signal; use --cycles (3 s each)")
+    if args.duration is not None:
+        check_duration(args.duration)
+    check_output_file(args.out, "--out")  # before anything is driven
+    check_output_file(meta_path(args.out), "--out")
+    volts = make_signal(args.signal, args.amplitude, cycles=args.cycles, duration_s=args.duration)
+    zeros = np.zeros_like(volts)
+    ua = volts if args.motor in ("a", "both") else zeros
+    ub = volts if args.motor in ("b", "both") else zeros
+    plant, description = make_plant(
+        args.plant,
+        model_path=args.model,
+        preset=args.preset,
+        noise_std_rad_s=args.noise,
+        seed=args.seed,
+        connect_timeout_s=args.connect_timeout,
+    )
+    bar = ProgressBar(volts.size, f"excite {args.signal}")
+    switch_interval = sys.getswitchinterval()
+    if is_serial(args.plant):  # answer each cart tick at once: threads hand the GIL back quickly
+        sys.setswitchinterval(1e-4)
+    try:
+        # no collector pass at a random tick of a cart: a late answer raises the echo (a
+        # simulated plant has no deadline)
+        with gc_paused() if is_serial(args.plant) else contextlib.nullcontext():
+            result = run_experiment(plant, ua, ub, on_tick=bar.update, source=description)
+    finally:
+        sys.setswitchinterval(switch_interval)
+        bar.close()
+    n = len(result.trace)
+    if n == 0:
+        print("cartctl excite: interrupted before the first tick; nothing written", file=sys.stderr)
+        return stopping.exit_code()
+    path = args.out
+    _write_whole(lambda target: write_trace(result.trace, target), path)
+    link_summary = getattr(plant, "link_summary", None)
+    link = link_summary() if link_summary is not None else None
+    loop_delay = (
+        getattr(plant, "loop_delay_ticks", None) if link is None else link["loop_delay_ticks"]
+    )  # the simulators know theirs; over serial, the echo's
+    try:
+        meta = write_trace_meta(path, plant=description, loop_delay_ticks=loop_delay,
+                                command=command_line("excite"))  # fmt: skip
+    except OSError as exc:  # the trace is whole; its meta file is not
+        raise OutputError(meta_path(path), exc.strerror or str(exc)) from None
+    if args.json:
+        print(dumps({
+            "trace": str(path), "ticks": n, "duration_s": n * plant.period_s,
+            "signal": args.signal, "amplitude_v": args.amplitude, "motor": args.motor,
+            "plant": description, "loop_delay_ticks": loop_delay, "meta": str(meta),
+            "link": None if link is None else link["link"],
+            "stopped": "failure" if result.failure else "interrupted" if result.interrupted else None,
+            "failure": result.failure or None,
+        }))  # fmt: skip
+    else:
+        print(
+            f"wrote {path}: {n} ticks ({n * plant.period_s:.2f} s), {args.signal} "
+            f"{args.amplitude:g} V on motor {args.motor}, plant {description}"
+        )
+        ticks = "unknown" if loop_delay is None else f"{loop_delay} tick(s)"
+        print(f"wrote {meta}: loop delay {ticks} and the plant, for identify")
+    if link is not None:
+        delay = link["loop_delay_ticks"]
+        stats = link["link"]
+        if not args.json:
+            print(
+                f"  loop delay {delay} ticks from the echo (the report's model structure for "
+                f"this loop: nk = {None if delay is None else delay + 1}); "
+                f"{stats['crc_errors']} CRC errors, {stats['lost_frames']} frames lost, "
+                f"{stats['missed_ticks']} cart ticks missed; " + host_loss_text(stats)
+            )
+        warn_host_losses(stats, "excite")
+    if result.failure:
+        print(f"cartctl excite: error: {result.failure}; the trace holds the ticks recorded so far",
+              file=sys.stderr)  # fmt: skip
+        return 1
+    if result.interrupted:
+        print(
+            "cartctl excite: interrupted; the trace holds the ticks recorded so far",
+            file=sys.stderr,
+        )
+        return stopping.exit_code()
+    return 0
+
+
+def _write_whole(write: Callable[[Path], object], path: str | Path) -> None:
+    """``write`` the trace to ``path``; when that fails (a full disk), cut the file back to its last
+    whole row, so no half row is left to pass for data.
+
+    Raises
+    ------
+    OutputError
+        The write failed; it says how many rows the file holds.
+    """
+    path = Path(path)
+    try:
+        write(path)
+    except OSError as exc:
+        kept = _cut_to_whole_rows(path)
+        raise OutputError(path, f"{exc.strerror or exc}", rows=kept) from None
+
+
+def _cut_to_whole_rows(path: Path) -> int:
+    """Truncate a regular file after its last line break; the rows (lines after the header) kept."""
+    try:
+        if not stat.S_ISREG(os.stat(path).st_mode):  # a device (/dev/full) holds nothing
+            return 0
+        with path.open("r+b") as file:
+            data = file.read()
+            whole = data.rfind(b"\n") + 1
+            file.truncate(whole)
+        return max(0, data.count(b"\n", 0, whole) - 1)
+    except OSError:
+        return 0

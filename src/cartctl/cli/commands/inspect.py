@@ -1,0 +1,156 @@
+"""``cartctl inspect MODEL.toml [--json]``: poles, zeros, continuous-equivalent frequencies, DC gain."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from cartctl.data.modelfile import ModelFile
+    from cartctl.model import ArxModel, Root
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "inspect",
+        help="poles, zeros, continuous-equivalent frequencies and DC gain of a model file",
+        description=(
+            "Show each motor's transfer function, its poles and zeros with their continuous-equivalent "
+            "frequencies f = |ln z| / (2π Ts) and damping, and its DC gain. A pole at z = 0 is a pure "
+            "delay and has no frequency. Zeros outside the unit circle (|z| > 1) are flagged: such "
+            "a model is not minimum phase, and a controller must not cancel those zeros."
+        ),
+    )
+    p.add_argument("model", metavar="MODEL.toml", help="model file, e.g. models/ground.toml")
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object (keys: docs/architecture.md) instead of a table",
+    )
+    p.set_defaults(func=run)
+
+
+def marginal_poles(model: ArxModel) -> list[complex]:
+    """The poles with |z| above :data:`~cartctl.model.MARGINAL_POLE_RADIUS` (slow or marginal)."""
+    from cartctl.model import MARGINAL_POLE_RADIUS
+
+    return [r.value for r in model.poles() if abs(r.value) > MARGINAL_POLE_RADIUS]
+
+
+def _pole_dict(root: Root) -> dict[str, Any]:
+    """``inspect --json``'s entry of a pole, plus ``magnitude`` |z| and ``slow_or_marginal``
+    (|z| > 0.99)."""
+    from cartctl.model import MARGINAL_POLE_RADIUS
+
+    return root.to_dict() | {
+        "magnitude": abs(root.value),
+        "slow_or_marginal": abs(root.value) > MARGINAL_POLE_RADIUS,
+    }
+
+
+def outside_zeros(model: ArxModel) -> list[complex]:
+    """The zeros with |z| > 1 (non-minimum-phase), in the order of :meth:`ArxModel.zeros`."""
+    return [r.value for r in model.zeros() if abs(r.value) > 1.0]
+
+
+def model_summary(model: ArxModel) -> dict[str, Any]:
+    """``inspect --json`` entry of one motor (plus nk, num, den, minimum_phase: no zero
+    with |z| > 1, and slow_or_marginal: a pole with |z| > 0.99, with ``flags`` naming both)."""
+    from cartctl.measures.metrics import finite_or_none
+
+    marginal = marginal_poles(model)
+    flags = ["slow_or_marginal"] if marginal else []
+    flags += ["non_minimum_phase"] if outside_zeros(model) else []
+    return {
+        "minimum_phase": not outside_zeros(model),
+        "slow_or_marginal": bool(marginal),
+        "flags": flags,
+        "poles": [_pole_dict(r) for r in model.poles()],
+        "zeros": [r.to_dict() for r in model.zeros()],
+        "dc_gain": finite_or_none(model.dc_gain()),
+        "stable": model.is_stable(),
+        "nk": model.nk,
+        "num": model.num().tolist(),
+        "den": model.den().tolist(),
+    }
+
+
+def inspect_dict(models: ModelFile) -> dict[str, Any]:
+    """The whole ``inspect --json`` object."""
+    return {
+        "Ts": models.period_s,
+        "motors": {n: model_summary(m) for n, m in models.motors.items()},
+    }
+
+
+def _fmt_z(z: complex) -> str:
+    if z.imag == 0.0:
+        return f"{z.real:.4f}"
+    return f"{z.real:.4f} {'+' if z.imag > 0 else '−'} {abs(z.imag):.4f}j"
+
+
+def _row(root: Root) -> str:
+    freq = "—" if root.freq_hz is None else f"{root.freq_hz:.2f}"
+    damp = "—" if root.damping is None else f"{root.damping:.3f}"
+    flag = "  non-minimum-phase" if root.kind == "zero" and abs(root.value) > 1.0 else ""
+    if root.kind == "pole" and _pole_dict(root)["slow_or_marginal"]:
+        flag = "  slow or marginal (|z| > 0.99)"
+    return (
+        f"    {root.kind:<6} {_fmt_z(root.value):>22} {abs(root.value):>8.4f} {freq:>8} "
+        f"{damp:>7}{flag}"
+    )
+
+
+def format_table(models: ModelFile) -> str:
+    """The human-readable report."""
+    prov = models.provenance
+    lines = [
+        f"{models.path}",
+        f"  {prov.source}",
+        f"  method {prov.method}, prefilter {prov.prefilter}, created {prov.created}; Ts = {models.period_s * 1e3:g} ms",
+    ]
+    for name, m in models.motors.items():
+        gain = m.dc_gain()
+        lines += [
+            "",
+            f"  motor {name}:  H(z) = {m.describe()}    (input delay nk = {m.nk})",
+            f"    {'kind':<6} {'z (–)':>22} {'|z| (–)':>8} {'f (Hz)':>8} {'ζ (–)':>7}",
+        ]
+        lines += [_row(r) for r in (*m.poles(), *m.zeros())]
+        gain_txt = f"{gain:.4g} rad/s/V" if math.isfinite(gain) else "unbounded (integrator)"
+        outside = outside_zeros(m)
+        phase = "minimum phase"
+        if outside:
+            where = ", ".join(f"z = {_fmt_z(z)}" for z in outside)
+            phase = (
+                f"NOT minimum phase: zero{'s' if len(outside) > 1 else ''} outside the unit "
+                f"circle at {where} (a controller must not cancel {'them' if len(outside) > 1 else 'it'})"
+            )
+        stability = "stable" if m.is_stable() else "UNSTABLE"
+        marginal = marginal_poles(m)
+        if marginal and m.is_stable():
+            radius = max(abs(z) for z in marginal)
+            stability += (
+                f" but SLOW OR MARGINAL: a pole at |z| = {radius:.4f} > 0.99 (it decays by "
+                f"{100.0 * (1.0 - radius):.2g} % a tick)"
+            )
+        lines.append(f"    DC gain {gain_txt}, {stability}, {phase}")
+    lines.append("")
+    lines.append(
+        "  f = |ln z| / (2π Ts); a delay pole (z = 0) has no frequency; ζ is the damping ratio; "
+        "a zero with |z| > 1 is non-minimum-phase; a pole with |z| > 0.99 is slow or marginal."
+    )
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    from cartctl.cli.jsonout import dumps
+    from cartctl.data.modelfile import load_models
+
+    models = load_models(args.model)
+    if args.json:
+        print(dumps(inspect_dict(models)))
+    else:
+        print(format_table(models))
+    return 0

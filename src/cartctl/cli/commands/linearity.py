@@ -1,0 +1,139 @@
+"""``cartctl linearity STEP_SMALL.csv STEP_LARGE.csv STEP_SUM.csv``: the superposition test.
+
+The shell around :mod:`cartctl.identification.linearity`: reads the three step traces, prints the error
+summary or the JSON object, and with ``--plot`` draws the report's figure 8 (the two responses
+added against the summed step's response, the error beneath).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from cartctl.cli.commands.options import add_map_option
+from cartctl.cli.commands.validate import (
+    add_plot_option,
+    check_plot_path,
+    new_figure,
+    save_png,
+)
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from cartctl.identification.linearity import LinearityResult
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "linearity",
+        help="the superposition test: two small steps added against their sum",
+        description=(
+            "Check superposition on one motor (report §3.3, figure 8): align the responses to a "
+            "small and a large voltage step (e.g. 3 V and 7 V) at their onsets, add them, and "
+            "compare with the response to the summed step (10 V). The error is the summed "
+            "step's response minus the added responses; a linear motor gives zero."
+        ),
+    )
+    p.add_argument("small", metavar="STEP_SMALL.csv", help="response to the small step")
+    p.add_argument("large", metavar="STEP_LARGE.csv", help="response to the large step")
+    p.add_argument("sum", metavar="STEP_SUM.csv", help="response to the step of their sum")
+    p.add_argument(
+        "--motor", choices=("a", "b"), default="a", help="which motor to test (default a)"
+    )
+    add_map_option(p)
+    add_plot_option(p, "the added responses, the summed step's response, and the error beneath")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    p.set_defaults(func=run)
+
+
+def plot_linearity(result: LinearityResult, path: Path) -> None:
+    """Figure 8 of the report: the responses above, the superposition error beneath."""
+    save_png(linearity_figure(result), path)
+
+
+def linearity_figure(result: LinearityResult) -> Figure:
+    """The figure of :func:`plot_linearity`; each legend sits right of its panel, off the data."""
+    small_v, large_v, sum_v = result.amplitudes_v
+    fig, axes = new_figure(2, 1, width_in=10.0, height_in=6.0)
+    top, bottom = axes[0, 0], axes[1, 0]
+    t = result.time_s
+    top.plot(t, result.speed_small_rad_s, color="0.6", lw=1.0, ls=":", label=f"{small_v:g} V step")
+    top.plot(t, result.speed_large_rad_s, color="0.4", lw=1.0, ls="-.", label=f"{large_v:g} V step")
+    top.plot(
+        t,
+        result.speed_added_rad_s,
+        color="tab:blue",
+        label=f"{small_v:g} V + {large_v:g} V responses added",
+    )
+    top.plot(t, result.speed_sum_rad_s, color="tab:orange", ls="--", label=f"{sum_v:g} V step")
+    top.set_ylabel("speed (rad/s)")
+    top.set_title(f"motor {result.motor}: responses aligned at their step onsets")
+    top.grid(True, alpha=0.3)
+    top.legend(**_BESIDE)
+    bottom.plot(t, result.error_rad_s, color="tab:red", label="error (sum step − added)")
+    bottom.axhline(0.0, color="0.3", lw=0.8)
+    bottom.axhline(
+        result.mean_error_rad_s,
+        color="tab:red",
+        ls="--",
+        lw=0.8,
+        label=f"mean {result.mean_error_rad_s:+.3f} rad/s",
+    )
+    bottom.set_ylabel("error (rad/s)")
+    bottom.set_xlabel("time since the step (s)")
+    bottom.grid(True, alpha=0.3)
+    bottom.legend(**_BESIDE)
+    fig.suptitle("Superposition test")
+    return fig
+
+
+_BESIDE = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "borderaxespad": 0.0}
+"""Legend placement outside the axes, to their right (constrained layout makes room)."""
+
+
+def _pct(value: float | None) -> str:
+    return "—" if value is None else f"{value:+.2f} %"
+
+
+def format_text(result: LinearityResult, files: tuple[str, str, str]) -> str:
+    """The human-readable report."""
+    small_v, large_v, sum_v = result.amplitudes_v
+    lines = [f"superposition test, motor {result.motor}"]
+    for role, path, amp, onset in zip(
+        ("small", "large", "sum"), files, result.amplitudes_v, result.onsets_s, strict=True
+    ):
+        lines.append(f"  {role:<6} {amp:>7.3g} V step at {onset:6.2f} s   {path}")
+    lines += [
+        "",
+        f"  error = {sum_v:g} V response − ({small_v:g} V + {large_v:g} V responses), "
+        f"over {result.time_s[-1]:.2f} s after the onsets",
+        f"  {'mean':<8} {result.mean_error_rad_s:+9.3f} rad/s   "
+        f"{_pct(result.mean_error_percent)} of the {sum_v:g} V steady state "
+        f"({result.steady_state_sum_rad_s:.3f} rad/s)",
+        f"  {'max |e|':<8} {result.max_abs_error_rad_s:9.3f} rad/s",
+        f"  {'rms':<8} {result.rms_error_rad_s:9.3f} rad/s   "
+        f"{_pct(result.rms_error_percent).lstrip('+')} of the {sum_v:g} V response's rms",
+    ]
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    from cartctl.cli.jsonout import dumps
+    from cartctl.data.read import read_trace
+    from cartctl.identification.linearity import linearity
+
+    plot = check_plot_path(args.plot)
+    files = (args.small, args.large, args.sum)
+    small, large, total = (read_trace(path, args.map) for path in files)
+    result = linearity(small, large, total, args.motor)
+    if plot is not None:
+        plot_linearity(result, plot)
+    if args.json:
+        print(dumps(result.to_dict()))
+    else:
+        print(format_text(result, files))
+        if plot is not None:
+            print(f"\nwrote {plot}")
+    return 0

@@ -1,0 +1,276 @@
+"""``cartctl monitor PLANT``: record and stream what a cart running its own controller sends.
+
+Like QRoboticsCenter's plots and logs, but live in Rerun: every GPIO the cart sends is one CSV row
+and one point per channel under ``gpio/<label>``; PRINT lines and QRC button events go to
+``cart/print`` and ``cart/events``. Passive: nothing is ever sent to the cart. See
+:mod:`cartctl.link.cart_monitor` for the row format.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import math
+import signal
+import sys
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from cartctl.cli.commands.options import (
+    DEFAULT_CONNECT_TIMEOUT_S,
+    FORMS,
+    add_output_options,
+    add_rerun_options,
+    check_duration,
+    check_run_outputs,
+)
+from cartctl.errors import InputError, OutputError
+
+if TYPE_CHECKING:  # cartctl.plants loads numpy and scipy: imported where used, not for --help
+    from cartctl.link.cart_monitor import Monitor, MonitorLink, MonitorResult
+
+DEFAULT_REFERENCE = "step:10"
+_STOPPED = {"duration": "after --duration", "interrupted": "by Ctrl-C", "fault": "by a line fault"}
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "monitor",
+        help="record and stream the GPIO channels a cart sends (a cart running its own controller)",
+        description=(
+            "Record every GPIO frame a cart sends to a CSV trace and a Rerun recording (live in "
+            "the viewer), with your channel labels, as QRoboticsCenter does. cartctl's own "
+            "firmware (the bridge sketch, a controller of 'cartctl export --arduino') says so in "
+            "float 6, and its channels are then named as trace columns (speed_a, voltage_a, "
+            "reference_a, ...) without --labels. Passive: nothing is sent to the cart. Stops "
+            "after --duration, on Ctrl-C (exit 0) or on a line fault (100 ms without data, the "
+            "port gone: exit 1, the files hold what came before)."
+        ),
+    )
+    p.add_argument(
+        "plant", metavar="PLANT",
+        help="serial:PORT (a cart, e.g. serial:/dev/ttyACM0) or virtual[:FAULTS] (the simulated "
+        "cart behind a pseudo-terminal, in this process; FAULTS as for 'cartctl virtual-cart "
+        "--faults', e.g. virtual:pull=2)",
+    )  # fmt: skip
+    p.add_argument(
+        "--labels", metavar="KEY=LABEL,...",
+        help="channel labels (CSV columns, Rerun entities gpio/LABEL), KEY f0..f7 or i0..i3, e.g. "
+        "f0=speed_a,f1=speed_b,i0=echo; default: those of cartctl's firmware when the cart's "
+        "frames say it runs the bridge or an exported controller (float 6), else FloatIn0..7, "
+        "IntIn0..3 (QRoboticsCenter's)",
+    )  # fmt: skip
+    p.add_argument("--duration", type=float, metavar="S",
+                   help="stop after S seconds of cart time (default: run until Ctrl-C)")  # fmt: skip
+    add_output_options(p, name_default="monitor-DATE-TIME")
+    add_rerun_options(p)
+    p.add_argument(
+        "--connect-timeout", type=float, default=DEFAULT_CONNECT_TIMEOUT_S, metavar="S",
+        help=f"longest wait for the cart's HEARTBEAT (default {DEFAULT_CONNECT_TIMEOUT_S:g} s)",
+    )  # fmt: skip
+    p.add_argument(
+        "--onboard", metavar="CONTROLLER.toml",
+        help="virtual plant only: the cart runs this controller on board (as the C of 'cartctl "
+        "export --arduino' does on a real cart)",
+    )  # fmt: skip
+    p.add_argument(
+        "--reference", metavar="SPEC",
+        help=f"with --onboard: the on-board reference of both motors (default {DEFAULT_REFERENCE})"
+        f": {FORMS}",
+    )  # fmt: skip
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.set_defaults(func=run)
+
+
+def _check(args: argparse.Namespace) -> tuple[str, str]:
+    """Validate the options; returns (kind, rest) of PLANT: ('serial', PORT) or ('virtual', FAULTS)."""
+    kind, _, rest = args.plant.partition(":")
+    if args.plant == "serial:":
+        raise InputError("plant 'serial:' needs a port, e.g. serial:/dev/ttyACM0")
+    if not (kind == "virtual" or (kind == "serial" and rest)):  # the plant first
+        raise InputError(f"unknown plant '{args.plant}'; expected serial:PORT or virtual[:FAULTS]")
+    if args.duration is not None:
+        check_duration(args.duration)
+    if not (math.isfinite(args.connect_timeout) and args.connect_timeout > 0):
+        raise InputError(f"--connect-timeout must be a positive number of seconds, got "
+                         f"{args.connect_timeout}")  # fmt: skip
+    if args.reference:
+        from cartctl.reference import check_reference
+
+        check_reference(args.reference)
+    if kind == "serial":
+        if args.onboard or args.reference:
+            raise InputError(
+                "--onboard and --reference set up the virtual cart; a real cart runs the C of "
+                "'cartctl export CONTROLLER.toml --arduino' with its own references"
+            )
+        return kind, rest
+    if args.reference and not args.onboard:
+        raise InputError("--reference needs --onboard CONTROLLER.toml")
+    return kind, rest
+
+
+def _virtual_cart(faults_text: str, args: argparse.Namespace) -> Any:
+    from cartctl.export.arduino import onboard_controllers
+    from cartctl.link.onboard_firmware import OnboardFirmware
+    from cartctl.link.virtual_cart import CartFaults, VirtualCart
+
+    faults = CartFaults.parse(faults_text)
+    firmware = None
+    if args.onboard:
+        firmware = OnboardFirmware(
+            onboard_controllers(args.onboard), reference=args.reference or DEFAULT_REFERENCE
+        )
+    return VirtualCart(faults=faults, firmware=firmware)
+
+
+def _rerun_sink(args: argparse.Namespace, path: Path) -> Any:
+    from cartctl.link.cart_monitor import FLOAT_CHANNELS
+
+    if args.rerun == "off":
+        return None
+    from cartctl.sinks.channels_rerun import ChannelsRerunSink
+    from cartctl.sinks.viewer import resolve_mode
+
+    return ChannelsRerunSink(resolve_mode(args.rerun), path, float_count=FLOAT_CHANNELS,
+                             connect_url=args.connect_url)  # fmt: skip
+
+
+@contextlib.contextmanager
+def _stop_on_signals(monitor: Monitor, received: list[int]) -> Iterator[None]:
+    """SIGINT, SIGTERM and SIGHUP ask the monitor to stop after the current frame; a second
+    SIGINT interrupts. The signals received go into ``received``."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: Any) -> None:
+        received.append(signum)
+        monitor.stop_requested = True
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    previous = {
+        s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    }
+    try:
+        yield
+    finally:
+        for signum, old in previous.items():
+            signal.signal(signum, old)
+
+
+def run(args: argparse.Namespace) -> int:
+    from cartctl.cli.jsonout import dumps
+    from cartctl.link.cart_link import print_to_stderr
+    from cartctl.link.cart_monitor import Monitor, MonitorLink, parse_labels, wait_started
+    from cartctl.runtime.gcpause import gc_paused
+    from cartctl.sinks.csv_sink import CsvSink
+
+    kind, rest = _check(args)
+    csv_path, rrd_path = check_run_outputs(args, "monitor")  # before a cart is connected
+    try:
+        labels = parse_labels(args.labels) if args.labels is not None else None
+    except InputError as exc:
+        raise InputError(f"--labels: {exc}") from None
+    cart = _virtual_cart(rest, args) if kind == "virtual" else None
+    port = cart.port if cart is not None else rest
+    monitor = Monitor([], [], labels, echo=print_to_stderr, announce=_to_stderr)
+    received: list[int] = []
+    link = MonitorLink(port, on_event=monitor.on_event, on_print=monitor.on_print)
+    if cart is not None:  # the virtual cart's rate is known: the bridge's, or the course's
+        from cartctl.link.virtual_cart import SILENCE_TIMEOUT_S
+
+        link.baud = cart.baud
+        link.silence_timeout_s = SILENCE_TIMEOUT_S  # it shares this process: see there
+    try:
+        link.open()  # before the virtual cart boots: its first HEARTBEAT is not flushed away
+        if cart is not None:
+            cart.start()
+        wait_started(link, args.connect_timeout)  # no file is opened for a cart that is not there
+        if cart is not None:  # its faults count from the host's first frame; a monitor sends none
+            cart.arm_faults()
+        rerun = _rerun_sink(args, rrd_path)
+        monitor.rows.append(CsvSink(csv_path))
+        if rerun is not None:
+            monitor.rows.append(rerun)
+            monitor.texts.append(rerun)
+        try:
+            # the sinks open at the first frames; a collection walks only the objects made meanwhile
+            with _stop_on_signals(monitor, received), gc_paused(collect_new=True):
+                result = monitor.run(link, args.duration)
+        finally:
+            _close_all(monitor.rows)
+    finally:
+        link.close()
+        if cart is not None:
+            cart.stop()
+    summary = _summary(result, link, args.plant, monitor, csv_path,
+                       rrd_path if rerun is not None else None)  # fmt: skip
+    print(dumps(summary) if args.json else _format(summary))
+    if result.failure:
+        print(f"cartctl monitor: error: {result.failure}", file=sys.stderr)
+        return 1
+    if received and received[0] != signal.SIGINT:  # Ctrl-C is the normal way to stop a monitor
+        return 128 + received[0]
+    return 0
+
+
+def _close_all(sinks: list[Any]) -> None:
+    """Close every sink; the first file found incomplete (an OutputError) is raised after."""
+    failed: OutputError | None = None
+    for sink in sinks:
+        try:
+            sink.close()
+        except OutputError as exc:
+            failed = failed or exc
+    if failed is not None:
+        raise failed
+
+
+def _to_stderr(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def _summary(
+    result: MonitorResult,
+    link: MonitorLink,
+    plant: str,
+    monitor: Monitor,
+    csv_path: Path,
+    rrd_path: Path | None,
+) -> dict[str, Any]:
+    stats = link.stats.to_dict()
+    stats.pop("generation_b_frames", None)
+    return {
+        "frames": result.frames,
+        "duration_s": result.duration_s,
+        "stopped": result.stopped,
+        "failure": result.failure,
+        "plant": plant,
+        "port": link.port,
+        "firmware": monitor.firmware.name if monitor.firmware is not None else None,
+        "labels": list(monitor.labels or ()),
+        "print_lines": result.print_lines,
+        "events": result.events,
+        "link": stats,
+        "trace": str(csv_path),
+        "recording": str(rrd_path) if rrd_path is not None else None,
+    }
+
+
+def _format(summary: dict[str, Any]) -> str:
+    link = summary["link"]
+    lines = [
+        f"monitor {summary['plant']}: {summary['frames']} frames over {summary['duration_s']:.2f} s "
+        f"of cart time, stopped {_STOPPED[summary['stopped']]}",
+        f"  link: {link['frames']} frames, {link['crc_errors']} CRC errors, "
+        f"{link['garbage_bytes']} garbage bytes, {link['lost_frames']} lost frames "
+        f"({link['seq_gaps']} gaps)",
+        f"  cart: {summary['print_lines']} PRINT lines, {summary['events']} events",
+        f"  trace {summary['trace']}",
+    ]
+    if summary["recording"]:
+        lines.append(f"  recording {summary['recording']}")
+    return "\n".join(lines)

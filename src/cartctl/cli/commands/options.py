@@ -1,0 +1,395 @@
+"""Command-line options shared by several subcommands (one definition each).
+
+This module is imported to build the parser, before any command runs: it imports no numpy, scipy
+or module that does (``cartctl --help`` stays fast). The names, limits and defaults the options
+show come from :mod:`cartctl.choices`, where the modules that implement them take them too.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import errno
+import math
+import os
+import shlex
+import sys
+from datetime import datetime
+from pathlib import Path
+
+from cartctl.choices import (
+    DEFAULT_CONNECT_TIMEOUT_S,
+    DEFAULT_MODEL,
+    FORMS,
+    MAX_DURATION_S,
+    SIGNALS,
+)
+from cartctl.errors import InputError
+
+__all__ = ["DEFAULT_CONNECT_TIMEOUT_S", "DEFAULT_MODEL", "FORMS", "MAX_DURATION_S", "SIGNALS"]
+
+RERUN_MODES = ("auto", "spawn", "connect", "save", "off")
+"""The choices of ``--rerun``."""
+
+
+def _mapping_arg(text: str) -> dict[str, str]:
+    from cartctl.data.trace import parse_mapping
+
+    try:
+        return parse_mapping(text)
+    except InputError as exc:  # argparse shows an ArgumentTypeError's own message
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def check_duration(seconds: float, option: str = "--duration") -> float:
+    """``seconds`` if it is a positive number of seconds up to :data:`MAX_DURATION_S`.
+
+    Raises
+    ------
+    InputError
+        Otherwise, in one line naming ``option``.
+    """
+    if not (math.isfinite(seconds) and 0.0 < seconds <= MAX_DURATION_S):
+        raise InputError(
+            f"{option} must be a positive number of seconds up to {MAX_DURATION_S:g} (24 h), "
+            f"got {seconds:g}"
+        )
+    return seconds
+
+
+MAX_JOBS = 64
+"""The most worker processes ``--jobs`` accepts: the work is CPU-bound, so workers beyond the
+cores only add processes (each some 100 MB); 64 covers the largest workstation."""
+
+
+def check_jobs(jobs: int | None, option: str = "--jobs") -> int | None:
+    """``jobs`` if it is None (all cores) or a number of worker processes in 1..:data:`MAX_JOBS`.
+
+    Raises
+    ------
+    InputError
+        Otherwise, in one line naming ``option``.
+    """
+    if jobs is not None and not 1 <= jobs <= MAX_JOBS:
+        raise InputError(f"{option} must be a number of processes in 1..{MAX_JOBS}, got {jobs}")
+    return jobs
+
+
+def seed(text: str) -> int:
+    """A ``--seed``: a whole number >= 0 (numpy's generators take no other)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0, got {text!r}")
+    return value
+
+
+def file_stem(text: str) -> str:
+    """An output name that stays in its folder: no path separator, not '.' or '..', not empty."""
+    if not text or text in (".", "..") or "/" in text or "\\" in text or "\0" in text:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a file name: give a name without a folder (e.g. step8) and the "
+            "folder with --out"
+        )
+    return text
+
+
+def add_name_option(p: argparse.ArgumentParser, *, default: str) -> None:
+    """``--name``: the stem of the trace and recording written into ``--out``."""
+    p.add_argument("--name", type=file_stem, metavar="NAME",
+                   help=f"file name stem, without a folder (default {default})")  # fmt: skip
+
+
+def add_output_options(p: argparse.ArgumentParser, *, name_default: str) -> None:
+    """``--out DIR`` and ``--name``: where the trace and the recording go, under which name."""
+    p.add_argument("--out", default="logs", metavar="DIR", help="where the trace and recording go")
+    add_name_option(p, default=name_default)
+
+
+def add_rerun_options(p: argparse.ArgumentParser) -> None:
+    """``--rerun MODE`` and ``--connect-url``: the Rerun recording, and the viewer it goes to."""
+    p.add_argument("--rerun", choices=RERUN_MODES, default="auto",
+                   help="auto: record to --out and open the viewer where a display exists; spawn: "
+                        "record and open the viewer; connect: record and stream to a running viewer; "
+                        "save: record only; off: no recording")  # fmt: skip
+    p.add_argument("--connect-url", metavar="URL", help="viewer address for --rerun connect")
+
+
+def output_paths(args: argparse.Namespace, prefix: str) -> tuple[Path, Path]:
+    """The trace (``.csv``) and recording (``.rrd``) paths that ``--out`` and ``--name`` ask for.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``out`` and ``name`` (:func:`add_output_options`).
+    prefix : str
+        Without ``--name`` the files are named ``PREFIX-YYYYmmdd-HHMMSS``, with ``-2``, ``-3`` …
+        added when a trace or recording of that name is already in ``--out``.
+
+    Returns
+    -------
+    tuple of Path
+        The trace and the recording.
+    """
+    out = Path(args.out)
+    stem = args.name or _free_stem(out, datetime.now().strftime(f"{prefix}-%Y%m%d-%H%M%S"))
+    return out / f"{stem}.csv", out / f"{stem}.rrd"
+
+
+def check_output_folder(folder: str | Path, option: str) -> Path:
+    """``folder`` when cartctl can create it (if missing) and write files into it.
+
+    The check really writes: the missing folders are made, an empty file is created in the last
+    and everything is removed again, so it answers for permissions, read-only and virtual file
+    systems (``/proc``, ``/sys``) alike, and leaves nothing behind. Run it before anything is
+    driven or computed.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The output folder.
+    option : str
+        The option that named it (``--out``), for the message.
+
+    Returns
+    -------
+    Path
+        ``folder``.
+
+    Raises
+    ------
+    InputError
+        In one line naming ``option``, the folder and why (``is a file, not a folder``,
+        ``cannot create: permission denied``, ``cannot write there: read-only file system`` …).
+    """
+    folder = Path(folder)
+    why = _unwritable(folder)
+    if why is not None:
+        raise InputError(f"{option} {folder}: {why}")
+    return folder
+
+
+def check_output_file(path: str | Path, option: str) -> Path:
+    """``path`` when cartctl can write that file: not a folder, in a folder it can write in.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to be written (it may exist: it is then replaced).
+    option : str
+        The option that named it (``--out``, ``--plot`` …), for the message.
+
+    Raises
+    ------
+    InputError
+        As :func:`check_output_folder`, or ``is a folder, not a file``.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{option} {path}: is a folder, not a file")
+    parent = path.parent
+    if parent.exists() and not parent.is_dir():
+        raise InputError(f"{option} {path}: cannot create: {parent} is a file")
+    why = _unwritable(parent, there="cannot create")
+    if why is None and path.exists() and not os.access(path, os.W_OK):
+        why = "cannot write: permission denied"
+    if why is not None:
+        raise InputError(f"{option} {path}: {why}")
+    return path
+
+
+def check_run_outputs(args: argparse.Namespace, prefix: str) -> tuple[Path, Path]:
+    """:func:`output_paths`, each checked (:func:`check_output_folder`, :func:`check_output_file`)."""
+    check_output_folder(args.out, "--out")
+    csv_path, rrd_path = output_paths(args, prefix)
+    for path in (csv_path, rrd_path, csv_path.with_suffix(".meta.toml")):
+        check_output_file(path, "--out")
+    return csv_path, rrd_path
+
+
+def check_outputs(
+    args: argparse.Namespace, *, files: tuple[str, ...] = (), folders: tuple[str, ...] = ()
+) -> None:
+    """The output options given (``args.out``, ``args.plot`` …) checked before any work.
+
+    ``files`` and ``folders`` name ``args`` attributes (``"out"`` is ``--out``); each one given is
+    checked with :func:`check_output_file` or :func:`check_output_folder`.
+    """
+    for names, check in ((files, check_output_file), (folders, check_output_folder)):
+        for name in names:
+            value = getattr(args, name, None)
+            if value:
+                check(value, "--" + name.replace("_", "-"))
+
+
+_REASONS = {
+    errno.EACCES: "permission denied",
+    errno.EPERM: "permission denied",
+    errno.EROFS: "read-only file system",
+    errno.ENOSPC: "no space left on device",
+    errno.EDQUOT: "disk quota exceeded",
+    errno.ENAMETOOLONG: "file name too long",
+}
+
+
+def _unwritable(folder: Path, there: str = "cannot write there") -> str | None:
+    """None when files can be written in ``folder`` (made for the test and removed), else why.
+
+    ``there`` begins the answer when ``folder`` exists but takes no file.
+    """
+    existing, missing = folder, []
+    while not existing.exists():
+        if existing.is_symlink():  # a dangling link: mkdir would fail on it
+            return f"cannot create: {existing} is a broken link"
+        missing.append(existing)
+        if existing.parent == existing:
+            break
+        existing = existing.parent
+    if not existing.is_dir():
+        return (
+            "is a file, not a folder"
+            if existing == folder
+            else f"cannot create: {existing} is a file"
+        )
+    made: list[Path] = []
+    step = "cannot create"
+    try:
+        for path in reversed(missing):
+            path.mkdir()
+            made.append(path)
+        step = there if not made else step
+        probe = folder / f".cartctl-write-test-{os.getpid()}"
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        os.unlink(probe)
+    except OSError as exc:
+        if exc.errno == errno.ENOENT:  # its parent is there, yet it cannot be made: /proc
+            return f"{step}: {existing} takes no new files or folders"
+        return f"{step}: {_REASONS.get(exc.errno or 0, (exc.strerror or str(exc)).lower())}"
+    finally:
+        for path in reversed(made):
+            with contextlib.suppress(OSError):
+                path.rmdir()
+    return None
+
+
+def _free_stem(out: Path, stem: str) -> str:
+    """``stem``, or ``stem-2``, ``stem-3`` … when a run of that name is already in ``out``."""
+    candidate, n = stem, 1
+    while (out / f"{candidate}.csv").exists() or (out / f"{candidate}.rrd").exists():
+        n += 1
+        candidate = f"{stem}-{n}"
+    return candidate
+
+
+def command_line(command: str) -> str:
+    """The command line being run, as the files it writes record it (their provenance).
+
+    ``cartctl`` and the process's arguments, quoted for a shell; ``cartctl COMMAND`` when the
+    process has no arguments (a call from Python).
+    """
+    return "cartctl " + shlex.join(sys.argv[1:]) if sys.argv[1:] else f"cartctl {command}"
+
+
+def add_map_option(p: argparse.ArgumentParser) -> None:
+    """``--map``: which QRoboticsCenter channel is which trace column."""
+    p.add_argument(
+        "--map",
+        type=_mapping_arg,
+        metavar="COLUMN=LABEL,...",
+        help="which log channel is which column, e.g. voltage_a=FloatIn2,speed_a=FloatIn0",
+    )
+
+
+def add_plant_options(p: argparse.ArgumentParser, *, what: str) -> None:
+    """``--plant`` and the simulated plants' ``--model``, ``--preset``, ``--noise``, ``--seed``."""
+    p.add_argument(
+        "--plant",
+        default="sim",
+        metavar="PLANT",
+        help=f"{what}: sim (the ARX models of --model, default), physics (the physical "
+        "simulator), virtual (that simulator behind a pseudo-terminal, through the serial path; "
+        "virtual:garbage=0.05,corrupt=0.05,stall=S,pull=S,late=0.3 injects faults; physics:reverse_b=1 or "
+        "virtual:reverse_b=1 wires motor b backwards) or serial:PORT (the "
+        "cart, e.g. serial:/dev/ttyACM0)",
+    )
+    p.add_argument(
+        "--model",
+        default=str(DEFAULT_MODEL),
+        metavar="MODEL.toml",
+        help=f"model file of the sim plant (default {DEFAULT_MODEL})",
+    )
+    p.add_argument(
+        "--preset",
+        choices=("air", "ground"),
+        default="ground",
+        help="physics plant: wheels in the air or cart on the ground (default ground)",
+    )
+    p.add_argument(
+        "--noise",
+        type=float,
+        default=0.0,
+        metavar="RAD_S",
+        help="extra white measurement noise, standard deviation in rad/s (default 0: off)",
+    )
+    p.add_argument("--seed", type=seed, default=None, help="seed of the measurement noise")
+    p.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="serial and virtual carts: longest wait for the cart's first HEARTBEAT (default 5 s; "
+        "opening the port resets the Arduino, which takes 1-2 s)",
+    )
+
+
+def check_input_file(path: str | Path, what: str, option: str | None = None) -> Path:
+    """The file ``path`` names (a shipped file's relative path finds the shipped one), if it is one.
+
+    Run it before the work that needs the file, so a mistake in any file given is the first
+    thing said.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file given.
+    what : str
+        What it should be (``"a model file"``), for the message.
+    option : str, optional
+        The option that named it (``--model``); None for a positional argument.
+
+    Raises
+    ------
+    InputError
+        One line naming ``option`` and ``path``: ``is a directory`` or ``not found``.
+    """
+    from cartctl.choices import find_file
+
+    found = find_file(path)
+    lead = f"{option} {path}" if option else str(path)
+    if found.is_dir():
+        raise InputError(f"{lead}: is a directory; expected {what}")
+    if not found.is_file():
+        raise InputError(f"{lead}: not found; expected {what}")
+    return found
+
+
+def check_finite(value: float, option: str) -> float:
+    """``value`` if it is a finite number; else one line: ``OPTION must be a number, got nan``."""
+    if math.isnan(value):
+        raise InputError(f"{option} must be a number, got nan")
+    if math.isinf(value):
+        raise InputError(f"{option} must be finite, got {value:g}")
+    return value
+
+
+def check_plant_options(args: argparse.Namespace) -> None:
+    """``--noise`` and ``--connect-timeout`` (:func:`add_plant_options`) in range, before any plant
+    is made or connected (one line naming the option otherwise)."""
+    noise = check_finite(args.noise, "--noise")
+    if noise < 0.0:
+        raise InputError(f"--noise must be a standard deviation >= 0 rad/s, got {noise:g}")
+    timeout = check_finite(args.connect_timeout, "--connect-timeout")
+    if timeout <= 0.0:
+        raise InputError(f"--connect-timeout must be a positive number of seconds, got {timeout:g}")

@@ -1,0 +1,152 @@
+"""``cartctl review FILE.rrd [--web] [--screenshot FILE.png]``: a recorded run in the Rerun viewer.
+
+The last stage of the pipeline (run → logs/ → review). The recording is streamed into a viewer
+together with the project's layout (:func:`cartctl.sinks.rerun_layout.blueprint`), so recordings
+made without a layout, or with an older one, show the same plots. ``review RUN.csv [--json]
+[--compare OTHER.csv]`` recomputes the run metrics from CSV traces instead (see
+:mod:`cartctl.sinks.summary`).
+
+Here: the options, the dispatch on the file's suffix and the CSV metrics. The recording read back
+and streamed with the layout is :mod:`~cartctl.cli.commands.review.recording`; the native and web
+viewers are :mod:`~cartctl.cli.commands.review.viewer`; the headless ``--screenshot`` is
+:mod:`~cartctl.cli.commands.review.screenshot`.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from cartctl.cli.commands.options import add_map_option, check_input_file, check_outputs
+from cartctl.cli.commands.review.recording import read_recording
+from cartctl.cli.commands.review.screenshot import (
+    SCREENSHOT_WINDOW,
+    VULKAN_HINT,
+    screenshot,
+    vulkan_available,
+)
+from cartctl.cli.commands.review.viewer import ViewerError, open_in_viewer, serve_web
+from cartctl.errors import InputError
+
+__all__ = [
+    "SCREENSHOT_WINDOW",
+    "VULKAN_HINT",
+    "ViewerError",
+    "add_parser",
+    "open_in_viewer",
+    "read_recording",
+    "run",
+    "screenshot",
+    "serve_web",
+    "vulkan_available",
+]
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "review",
+        help="open a recorded run in the Rerun viewer (or the metrics of a CSV trace)",
+        description=(
+            "Open a Rerun recording (.rrd) in the viewer with the project's layout: per motor, "
+            "speed with reference and estimate above the voltage, then the loop timing. --web "
+            "serves the web viewer instead, --screenshot renders the layout headless to a PNG. "
+            "Given a CSV trace, print its run metrics instead (--json, --compare). Where the "
+            "trace has no true speed (a real cart) or came through the serial path, the metrics "
+            "on a Kalman RTS smoothed speed stand beside the encoder's (a recording's are printed "
+            "before the viewer opens, its smoothed speed drawn with the speed)."
+        ),
+    )
+    p.add_argument("recording", metavar="FILE.rrd|RUN.csv", help="a recording or a CSV trace")
+    view = p.add_mutually_exclusive_group()
+    view.add_argument(
+        "--web",
+        action="store_true",
+        help="serve the web viewer and print its URL; runs until Ctrl-C",
+    )
+    view.add_argument(
+        "--screenshot",
+        metavar="FILE.png",
+        help=f"render the layout headless and save a picture (needs Vulkan: {VULKAN_HINT})",
+    )
+    p.add_argument(
+        "--json", action="store_true", help="CSV traces: print one JSON object instead of a table"
+    )
+    p.add_argument(
+        "--compare",
+        metavar="OTHER.csv",
+        help="CSV traces: a second run (B) beside this one (A): one table of A, B, B − A and "
+        "(B − A)/|A| per metric and motor",
+    )
+    p.add_argument(
+        "--model",
+        metavar="MODEL.toml",
+        help="the motor model for the smoothed speed (Kalman RTS over the trace with the recorded "
+        "voltages), whose metrics stand beside the encoder's; default: the model a run named in "
+        "its recording (RUN.rrd, also beside RUN.csv), else that of the controller its "
+        "RUN.meta.toml's command ran",
+    )
+    add_map_option(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Dispatch on the file's suffix: ``.rrd`` to the viewer, ``.csv`` to the trace metrics."""
+    path = Path(args.recording)
+    suffix = path.suffix.lower()
+    if path.is_dir():
+        raise InputError(
+            f"{path}: is a directory; expected a Rerun recording (.rrd) or a CSV trace (.csv)"
+        )
+    if args.compare and suffix == ".csv":  # every file given is checked before one is read
+        if Path(args.compare).suffix.lower() != ".csv":
+            raise InputError(f"--compare takes a second CSV trace, got '{args.compare}'")
+        check_input_file(args.compare, "a CSV trace", "--compare")
+    if args.model:
+        check_input_file(args.model, "a model file", "--model")
+    if suffix == ".csv":
+        return _review_csv(args)
+    if suffix != ".rrd":
+        raise InputError(
+            f"review takes a Rerun recording (.rrd) or a CSV trace (.csv), got '{path}'"
+        )
+    if args.json or args.compare or args.map:
+        raise InputError("--json, --compare and --map apply to CSV traces, not to .rrd recordings")
+    check_outputs(args, files=("screenshot",))
+    from cartctl.cli.commands.review.recorded import recording_summary
+
+    text, extra = recording_summary(path, args.model)
+    if text:
+        print(text)
+    if args.screenshot:
+        out = screenshot(path, Path(args.screenshot), extra=extra)
+        print(f"saved {out}")
+        return 0
+    if args.web:
+        serve_web(path, extra=extra)
+        return 0
+    url = open_in_viewer(path, extra=extra)
+    print(f"opened {path} in the Rerun viewer ({url})")
+    return 0
+
+
+def _review_csv(args: argparse.Namespace) -> int:
+    """``cartctl review RUN.csv [--compare OTHER.csv] [--json]``: the run metrics from traces."""
+    if args.web or args.screenshot:
+        raise InputError("--web and --screenshot apply to .rrd recordings, not to CSV traces")
+    from cartctl.cli.commands.review.metrics import (
+        compare,
+        csv_summary,
+        format_compare,
+        format_csv_summary,
+    )
+    from cartctl.cli.commands.review.recorded import smooth_csv
+    from cartctl.cli.jsonout import dumps
+
+    summary = smooth_csv(csv_summary(args.recording, args.map), args.recording, args.map,
+                         args.model)  # fmt: skip
+    if not args.compare:
+        print(dumps(summary) if args.json else format_csv_summary(summary))
+        return 0
+    other = smooth_csv(csv_summary(args.compare, args.map), args.compare, args.map, args.model)
+    print(dumps(compare(summary, other)) if args.json else format_compare(summary, other))
+    return 0

@@ -1,0 +1,266 @@
+"""``cartctl review RUN.csv``: the run metrics of a trace, of a monitor trace, and of two side by side.
+
+A run trace (``cartctl run``) gets :func:`cartctl.sinks.summary.trace_metrics` as it is. A monitor
+trace (``cartctl monitor``: ``time_s, tick`` and labelled channels, read by their labels, see
+:mod:`cartctl.data.columns`) has no loop timing, since the cart ran its own loop: the same
+tracking metrics, with the timing figures None.
+
+``--compare A B`` sets two summaries side by side: one row per metric (per motor), the values of
+A and B, the difference B − A and, where a ratio means something (a duration, an error, a
+voltage, a time), the relative difference (B − A) / |A| in %.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cartctl.data.columns import MONITOR_LABELS_HINT
+from cartctl.data.read import read_trace
+from cartctl.errors import DataFileError
+from cartctl.sinks.summary import format_summary, timing_metrics, trace_metrics
+
+TIMING_COLUMNS = ("period_error_us", "compute_us")
+TRACKING_COLUMNS = ("reference_a", "speed_a", "voltage_a")
+
+
+def csv_summary(path: str | Path, mapping: Mapping[str, str] | None = None) -> dict[str, Any]:
+    """The run summary of a CSV trace (a run's or a monitor's), with its file name.
+
+    Raises
+    ------
+    DataFileError
+        A trace without the reference, speed and voltage of motor a (names the missing columns).
+    """
+    trace = read_trace(path, mapping)
+    columns = trace.columns()
+    missing = [name for name in TRACKING_COLUMNS if name not in columns]
+    if missing == ["reference_a"]:  # speed and voltage named: a trace with no controller in it
+        raise DataFileError(
+            Path(path),
+            "has speed and voltage but no reference_a: review measures how a controller tracks "
+            "its reference, and this trace has none (an excitation, or a monitor of the bridge, "
+            "which only passes commands on); 'cartctl validate MODEL.toml' and 'cartctl convert' "
+            "take it, or give --map reference_a=<column>",
+        )
+    if missing:
+        raise DataFileError(
+            Path(path),
+            f"review measures tracking and needs {', '.join(TRACKING_COLUMNS)}; missing "
+            f"{', '.join(missing)} (the trace has {', '.join(columns)}); a monitor trace names "
+            f"them with {MONITOR_LABELS_HINT}, or give --map reference_a=<column>",
+        )
+    if all(name in columns for name in TIMING_COLUMNS):
+        summary = trace_metrics(columns, trace.period_s)
+        summary["trace_kind"] = "run"
+    else:  # the cart's own loop (monitor): tracking metrics, no loop timing
+        zeros = np.zeros(len(trace))
+        summary = trace_metrics({**columns, **dict.fromkeys(TIMING_COLUMNS, zeros)}, trace.period_s)
+        empty = np.zeros(0)
+        summary.update(timing_metrics(empty, empty, trace.period_s), deadline_misses=None)
+        summary["trace_kind"] = "monitor"
+    summary["trace"] = str(path)
+    return summary
+
+
+def format_csv_summary(summary: Mapping[str, Any]) -> str:
+    """The run summary's table; a monitor trace's first line says it has no loop timing."""
+    text = format_summary(summary)
+    if summary.get("trace_kind") != "monitor":
+        return text
+    first = (
+        f"{summary['ticks']} ticks, {summary['duration_s']:.2f} s; no loop timing (a monitor "
+        "trace: the cart ran its own loop)"
+    )
+    return "\n".join([first, *text.splitlines()[1:]])
+
+
+# -- two runs side by side ---------------------------------------------------------------------
+
+_RUN_ROWS: tuple[tuple[tuple[str, ...], str, str, float, int, bool], ...] = (
+    # (key path, label, unit, scale, decimals, relative difference meaningful)
+    (("ticks",), "ticks", "", 1.0, 0, True),
+    (("duration_s",), "duration", "s", 1.0, 2, True),
+    (("deadline_misses",), "deadline misses", "", 1.0, 0, True),
+    (("period_error_us", "p50"), "period error p50", "µs", 1.0, 0, True),
+    (("period_error_us", "p99"), "period error p99", "µs", 1.0, 0, True),
+    (("period_error_us", "max"), "period error max", "µs", 1.0, 0, True),
+    (("compute_us", "p50"), "compute p50", "µs", 1.0, 0, True),
+    (("compute_us", "p99"), "compute p99", "µs", 1.0, 0, True),
+    (("compute_us", "max"), "compute max", "µs", 1.0, 0, True),
+)
+_MOTOR_ROWS: tuple[tuple[str, str, str, float, int, bool], ...] = (
+    # overshoot is already a percentage: its difference is in points, a ratio of it misleads;
+    # the steady-state error is signed: a ratio across zero misleads
+    ("overshoot_percent", "overshoot", "%", 1.0, 2, False),
+    ("rise_time_s", "rise time 10–90 %", "ms", 1e3, 1, True),
+    ("settling_time_s", "settling time", "ms", 1e3, 1, True),
+    ("steady_state_error", "steady-state error", "rad/s", 1.0, 3, False),
+    ("rms_error", "rms error", "rad/s", 1.0, 3, True),
+    ("max_abs_voltage", "max |voltage|", "V", 1.0, 2, True),
+)
+
+
+def _number(value: Any) -> float | None:
+    """A finite number (not a bool) as float, else None."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    return float(value) if math.isfinite(value) else None
+
+
+_SKIP = object()
+
+
+def _slot(value: Any) -> bool:
+    """A number's place: a number (not a bool) or None (a metric without a value)."""
+    return value is None or (isinstance(value, int | float) and not isinstance(value, bool))
+
+
+def difference(a: Any, b: Any) -> Any:
+    """B − A over the numeric leaves of two summaries (None where either has no number).
+
+    Dicts are walked key by key (A's keys, then B's); strings, bools and lists are left out.
+    """
+    if isinstance(a, Mapping) and isinstance(b, Mapping):
+        walked = {
+            key: difference(a.get(key), b.get(key)) for key in [*a, *(k for k in b if k not in a)]
+        }
+        return {key: value for key, value in walked.items() if value is not _SKIP}
+    if not (_slot(a) and _slot(b)):
+        return _SKIP
+    x, y = _number(a), _number(b)
+    if x is None or y is None:
+        return None
+    return int(y - x) if isinstance(a, int) and isinstance(b, int) else y - x
+
+
+def relative_difference(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any]:
+    """(B − A) / |A| in %, for the rows where that ratio means something (None when A is 0)."""
+    out: dict[str, Any] = {}
+    for path, _, _, _, _, relative in _RUN_ROWS:
+        if relative:
+            _put(out, path, _percent(_get(a, path), _get(b, path)))
+    motors: dict[str, Any] = {}
+    for m in _motors(a, b):
+        ea, eb = a["motors"].get(m, {}), b["motors"].get(m, {})
+        motors[m] = {
+            key: _percent(ea.get(key), eb.get(key))
+            for key, _, _, _, _, relative in _MOTOR_ROWS
+            if relative
+        }
+    out["motors"] = motors
+    return out
+
+
+def compare(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
+    """``review --compare --json``: both summaries, B − A and (B − A) / |A| in %."""
+    return {
+        "runs": [a, b],
+        "a": a,
+        "b": b,
+        "difference": difference(a, b),
+        "difference_percent": relative_difference(a, b),
+    }
+
+
+def format_compare(a: Mapping[str, Any], b: Mapping[str, Any]) -> str:
+    """One table: per metric (per motor) A, B, B − A and (B − A) / |A|, units in the labels."""
+    rows: list[tuple[str, str, str, str, str]] = []
+
+    def add(label: str, unit: str, x: Any, y: Any, scale: float, decimals: int, rel: bool) -> None:
+        xa, yb = _number(x), _number(y)
+        diff = None if xa is None or yb is None else (yb - xa) * scale
+        percent = _percent(x, y) if rel else None
+        name = f"{label} ({unit})" if unit else label
+        rows.append(
+            (
+                name,
+                _fixed(None if xa is None else xa * scale, decimals),
+                _fixed(None if yb is None else yb * scale, decimals),
+                _fixed(diff, decimals, signed=True),
+                "—" if percent is None else f"{percent:+.1f} %",
+            )
+        )
+
+    timed = _real_time(a) or _real_time(b)
+    for path, label, unit, scale, decimals, rel in _RUN_ROWS:
+        if timed or path[0] not in ("period_error_us", "compute_us"):
+            add(label, unit, _get(a, path), _get(b, path), scale, decimals, rel)
+    for m in _motors(a, b):
+        ea, eb = a["motors"].get(m, {}), b["motors"].get(m, {})
+        for key, label, unit, scale, decimals, rel in _MOTOR_ROWS:
+            add(f"motor {m}: {label}", unit, ea.get(key), eb.get(key), scale, decimals, rel)
+    head = ("metric", "A", "B", "B − A", "(B − A)/|A|")
+    width = max(len(head[0]), *(len(r[0]) for r in rows))
+    cols = [max(len(head[i]), *(len(r[i]) for r in rows)) for i in range(1, 5)]
+
+    def line(r: tuple[str, ...]) -> str:
+        return (
+            "  "
+            + f"{r[0]:<{width}}"
+            + "".join(f"  {v:>{w}}" for v, w in zip(r[1:], cols, strict=True))
+        )
+
+    lines = [
+        f"A: {a.get('trace', 'A')}",
+        f"B: {b.get('trace', 'B')}",
+        *(_signal_note(s, name) for s, name in ((a, "A"), (b, "B")) if _signal_note(s, name)),
+        line(head),
+        *(line(r) for r in rows),
+    ]
+    return "\n".join(lines)
+
+
+def _real_time(summary: Mapping[str, Any]) -> bool:
+    """Whether the summary has real-time loop figures (not a virtual clock, not a monitor)."""
+    pe, cu = summary.get("period_error_us") or {}, summary.get("compute_us") or {}
+    if pe.get("max") is None or cu.get("p99") is None:
+        return False
+    return not (pe.get("max") == 0.0 and cu.get("p99") == 0.0)
+
+
+def _signal_note(summary: Mapping[str, Any], name: str) -> str:
+    if summary.get("trace_kind") == "monitor":
+        return f"  {name} is a monitor trace: no loop timing (the cart ran its own loop)"
+    if not _real_time(summary):
+        return f"  {name} ran on a virtual clock: no real-time figures"
+    return ""
+
+
+def _motors(a: Mapping[str, Any], b: Mapping[str, Any]) -> list[str]:
+    return [*a["motors"], *(m for m in b["motors"] if m not in a["motors"])]
+
+
+def _get(summary: Mapping[str, Any], path: tuple[str, ...]) -> Any:
+    value: Any = summary
+    for key in path:
+        if not isinstance(value, Mapping):
+            return None
+        value = value.get(key)
+    return value
+
+
+def _put(out: dict[str, Any], path: tuple[str, ...], value: Any) -> None:
+    for key in path[:-1]:
+        out = out.setdefault(key, {})
+    out[path[-1]] = value
+
+
+def _percent(a: Any, b: Any) -> float | None:
+    x, y = _number(a), _number(b)
+    if x is None or y is None or x == 0.0:
+        return None
+    return (y - x) / abs(x) * 100.0
+
+
+def _fixed(value: float | None, decimals: int, *, signed: bool = False) -> str:
+    """Fixed decimals per row (one precision for A, B and B − A); a −0 prints as 0."""
+    if value is None:
+        return "—"
+    if round(value, decimals) == 0.0:
+        value = 0.0
+    return f"{value:+.{decimals}f}" if signed and value != 0.0 else f"{value:.{decimals}f}"

@@ -1,0 +1,320 @@
+"""``cartctl run``: the closed loop against a plant, in real time or as fast as possible (``--fast``)."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import signal
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from cartctl import stopping
+from cartctl.cart import check_voltage_limit
+from cartctl.cli.commands.options import (
+    FORMS,
+    add_output_options,
+    add_plant_options,
+    add_rerun_options,
+    check_duration,
+    check_finite,
+    check_plant_options,
+    check_run_outputs,
+    command_line,
+)
+from cartctl.errors import InputError, OutputError, PlantError
+from cartctl.session.checks import DEFAULT_CONTROLLER
+
+if TYPE_CHECKING:
+    pass
+
+# numpy, scipy and the rest load when the command runs (in run() and the two functions below),
+# not when the parser is built: cartctl --help stays fast.
+
+
+def make_plant(*args: Any, **kwargs: Any) -> Any:
+    """:func:`cartctl.plants.factory.make_plant`, imported on the first call."""
+    from cartctl.plants.factory import make_plant
+
+    return make_plant(*args, **kwargs)
+
+
+def build_controllers(*args: Any, **kwargs: Any) -> Any:
+    """:func:`cartctl.design.build.build_controllers`, imported on the first call."""
+    from cartctl.design.build import build_controllers
+
+    return build_controllers(*args, **kwargs)
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "run",
+        help="run the 10 ms closed loop against a plant",
+        description=(
+            "Run the designed controller every 10 ms against a plant, record the trace (CSV) and a "
+            "Rerun recording to --out, and print a summary. With no options: the shipped PI "
+            "controller on the simulated ground model, a 10 rad/s step, 5 s in real time."
+        ),
+    )
+    add_plant_options(p, what="what to control")
+    p.add_argument(
+        "--controller",
+        metavar="CONTROLLER.toml",
+        help=f"controller file (default {DEFAULT_CONTROLLER}, on every plant: the serial loop "
+        "has the on-board loop delay of 1 tick)",
+    )
+    p.add_argument(
+        "--allow-delay-mismatch",
+        action="store_true",
+        help="run a controller designed for another loop delay than the plant's (a warning "
+        "instead of an error)",
+    )
+    p.add_argument(
+        "--allow-unstable",
+        action="store_true",
+        help="run the sim plant on an unstable model (it stops once a speed runs away)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="run a controller file whose controller_num/controller_den disagree with its gains "
+        "(the gains run; a warning says what is ignored)",
+    )
+    p.add_argument(
+        "--reference",
+        default="step:10",
+        metavar="SPEC",
+        help=f"speed reference of both motors (default step:10): {FORMS}",
+    )
+    p.add_argument("--reference-b", metavar="SPEC", help="a different reference for motor b")
+    p.add_argument(
+        "--duration", type=float, default=5.0, metavar="S", help="run time (default 5 s)"
+    )
+    p.add_argument(
+        "--fast",
+        action="store_true",
+        help="simulate on a virtual clock as fast as the CPU allows (simulated plants)",
+    )
+    add_rerun_options(p)
+    add_output_options(p, name_default="run-DATE-TIME")
+    p.add_argument(
+        "--voltage-limit",
+        type=float,
+        metavar="V",
+        help="a lower voltage limit than the controller file's (at most 12 V): the controllers, "
+        "their anti-windup and estimators work with it",
+    )
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print the summary as one JSON object (keys: docs/architecture.md)",
+    )
+    p.set_defaults(func=run)
+
+
+def _rerun_sink(
+    args: argparse.Namespace, path: Path, references: dict[str, Any], limit_v: float
+) -> Any:
+    if args.rerun == "off":
+        return None
+    from cartctl.sinks.rerun_layout import run_ranges
+    from cartctl.sinks.rerun_series import HeldRerunSink  # open for the smoothed speed
+    from cartctl.sinks.viewer import resolve_mode
+
+    mode = resolve_mode(args.rerun)
+    extremes = {}  # each reference's lowest and highest value: the speed plots' ranges
+    for m, ref in references.items():
+        spans = [(float(c.min()), float(c.max())) for c in ref.chunks() if c.size]
+        extremes[m] = (min((lo for lo, _ in spans), default=0.0),
+                       max((hi for _, hi in spans), default=0.0))  # fmt: skip
+    # one send_columns costs ~170 µs whatever its length: batch 20 ticks live (the SDK flushes
+    # every 200 ms anyway), 1000 on the virtual clock
+    return HeldRerunSink(mode, path, connect_url=args.connect_url,
+                         batch_ticks=1000 if args.fast else 20,
+                         ranges=run_ranges(extremes, limit_v))  # fmt: skip
+
+
+def default_controller(plant: str) -> Path:
+    """The shipped controller for a plant: the PI, on every plant (one loop delay, 1 tick)."""
+    del plant  # the bridge gives the serial loop the on-board delay: one file serves all
+    return DEFAULT_CONTROLLER
+
+
+def run(args: argparse.Namespace) -> int:
+    from cartctl.cli.jsonout import dumps
+    from cartctl.plants.base import ClockedPlant
+    from cartctl.runtime.loop import ControlLoop, MemorySink
+    from cartctl.session.prepare import prepare_run
+    from cartctl.sinks.csv_sink import CsvSink
+    from cartctl.sinks.summary import (
+        format_summary,
+        mark_incomplete,
+        trace_metrics,
+        warn_delay_change,
+        warn_host_losses,
+    )
+
+    check_duration(args.duration)
+    if args.voltage_limit is not None:
+        check_voltage_limit(check_finite(args.voltage_limit, "--voltage-limit"), "--voltage-limit")
+    from cartctl.plants.factory import SIMULATED, check_plant_name
+    from cartctl.reference import check_reference
+
+    kind = check_plant_name(args.plant)  # first: what is checked next depends on the plant
+    check_plant_options(args)
+    check_reference(args.reference, "--reference")
+    if args.reference_b:
+        check_reference(args.reference_b, "--reference-b")
+    csv_path, rrd_path = check_run_outputs(args, "run")  # before anything is loaded or driven
+    if args.fast and kind not in SIMULATED:
+        raise InputError(f"--fast needs a simulated plant (sim or physics), not '{args.plant}'")
+    given = args.controller or str(default_controller(args.plant))
+
+    def warm_up_rerun() -> None:  # the recording's first-use costs, before a cart ticks
+        if args.rerun != "off" and not args.fast:
+            from cartctl.sinks.rerun_series import warm_up
+
+            warm_up()
+
+    prepared = prepare_run(
+        given, given=given, plant=args.plant, duration_s=args.duration, reference=args.reference,
+        reference_b=args.reference_b, model=args.model, preset=args.preset,
+        noise_std_rad_s=args.noise, seed=args.seed, connect_timeout_s=args.connect_timeout,
+        voltage_limit_v=args.voltage_limit, force=args.force, allow_unstable=args.allow_unstable,
+        allow_delay_mismatch=args.allow_delay_mismatch, make_plant=make_plant,
+        build_controllers=build_controllers, before_plant=warm_up_rerun,
+    )  # fmt: skip
+    controller_file, controllers, plant = (
+        prepared.controller_file, prepared.controllers, prepared.plant,
+    )  # fmt: skip
+    limit, period_s, delay = prepared.voltage_limit_v, prepared.period_s, prepared.loop_delay_ticks
+    references, n, description = prepared.references, prepared.ticks, prepared.description
+    clocked = isinstance(plant, ClockedPlant)
+    from cartctl.choices import find_file
+    from cartctl.data.tracemeta import write_trace_meta
+
+    # the trace's loop beside it, for identify (before the loop: an interrupted run has it too)
+    try:
+        write_trace_meta(csv_path, plant=description, loop_delay_ticks=delay,
+                         command=command_line("run"),
+                         controller=controller_file.path or find_file(given),
+                         model=find_file(controller_file.model_path))  # fmt: skip
+    except OSError as exc:  # a full disk: nothing driven yet
+        plant.close()
+        raise OutputError(exc.filename or csv_path, exc.strerror or str(exc)) from None
+    memory = MemorySink()
+    # on the virtual clock a second of trace takes milliseconds: write it in bigger blocks
+    sinks: list[Any] = [CsvSink(csv_path, flush_every=1000 if args.fast else 50), memory]
+    rerun = _rerun_sink(args, rrd_path, references, limit)
+    if rerun is not None:
+        sinks.append(rerun)
+    if not args.fast and sys.stderr.isatty():  # a live line on a terminal, refreshed after ticks
+        from cartctl.sinks.status import StatusLine
+
+        sinks.append(StatusLine(sys.stderr, period_s=period_s))
+
+    from cartctl.runtime.cartclock import CartClockedExecutor
+    from cartctl.runtime.clock import MonotonicClock, VirtualClock
+    from cartctl.runtime.executor import PeriodicExecutor
+    from cartctl.runtime.gcpause import gc_paused
+    from cartctl.runtime.virtual import VirtualExecutor
+
+    clock = VirtualClock() if args.fast else MonotonicClock()
+    loop = ControlLoop(plant, controllers, references, sinks, now_s=clock.now_s,
+                       voltage_limit_v=limit, period_s=period_s)  # fmt: skip
+    executor: Any
+    if isinstance(plant, ClockedPlant):  # clocked
+        executor = CartClockedExecutor(plant, max_ticks=n, now_s=clock.now_s,
+                                       compute_us=lambda: loop.last_compute_us)  # fmt: skip
+    elif args.fast:  # ticks back to back: nothing that only real time needs
+        executor = VirtualExecutor(period_s, max_ticks=n)
+    else:
+        executor = PeriodicExecutor(period_s, clock, max_ticks=n)
+    scheduling = "virtual clock (--fast)"
+    switch_interval = sys.getswitchinterval()
+    stats = None
+    try:
+        if not args.fast:  # before the start: locking memory takes a while, and a cart ticks on
+            from cartctl.runtime.realtime import enable_realtime
+
+            scheduling = enable_realtime()
+            sys.setswitchinterval(1e-4)  # any other thread must hand the GIL back within 0.1 ms
+
+        loop_tick, fast = loop.tick, bool(args.fast)
+
+        def tick(k: int) -> bool:
+            if fast:  # every tick on its grid point, on time, in no time
+                return loop_tick(k, 0.0, 0.0, k * period_s)
+            time_s = executor.time_s if clocked else executor.grid_index * period_s
+            return loop_tick(k, executor.period_error_us, executor.start_s, time_s)
+
+        # no collector pass at a random tick (runtime.gcpause); the virtual clock has no deadline
+        with contextlib.nullcontext() if fast else gc_paused():
+            loop.start()  # after the one collection: a cart ticks on from its reset
+            # a cart-clocked loop calls its idle() itself, while it waits for the cart's frame
+            stats = executor.run(tick) if clocked else executor.run(tick, loop.idle)
+    except KeyboardInterrupt:  # Ctrl-C, SIGTERM, SIGHUP (cartctl.stopping)
+        loop.state.interrupted = True
+    except OutputError:  # a file write failed: kept in loop.state.incomplete, a fault
+        pass
+    except PlantError as exc:
+        loop.state.failure = str(exc)
+    except Exception as exc:  # a fault of cartctl itself: the motors still get zero volts
+        loop.state.failure = f"internal error: {type(exc).__name__}: {exc}"
+    finally:
+        with stopping.deferred():  # a second signal must not cut the shutdown short
+            loop.finish()
+            sys.setswitchinterval(switch_interval)
+            if not args.fast:
+                from cartctl.runtime.realtime import restore
+
+                restore()
+    summary = trace_metrics(memory.arrays(), period_s)
+    timing = (stats or executor.stats()).to_dict()
+    del timing["duration_s"]  # the executor's clock span; the trace's own duration stays
+    summary.update(timing)
+    summary["ticks"] = loop.state.rows  # as the trace and the recording: the stop row included
+    link_summary = getattr(plant, "link_summary", None)
+    if link_summary is not None:
+        summary.update(link_summary())
+    if summary.get("loop_delay_ticks") is None:  # the run's own echoes, else the probe's
+        summary["loop_delay_ticks"] = delay
+    summary.update(
+        controller_loop_delay_ticks=controller_file.loop_delay_ticks,
+        recording=str(rrd_path) if rerun is not None else None,
+        trace=str(csv_path),
+        plant=description,
+        controller=given,
+        scheduling=scheduling,
+    )
+    from cartctl.cli.commands.review.smoothed import smooth_run
+
+    try:
+        smooth_run(summary, memory.arrays(), period_s, controller_file.model_path, rerun)
+    except OutputError as exc:  # the recording's file, found short when it is closed
+        loop.state.output_failed(exc)
+    mark_incomplete(summary, loop.state.incomplete)
+    if args.json:
+        print(dumps(summary))
+    else:
+        print(format_summary(summary))
+        print(f"  plant {description}; controller {given}; {scheduling}")
+    for problem in loop.state.sink_errors:
+        print(f"cartctl run: warning: {problem}", file=sys.stderr)
+    warn_host_losses(summary.get("link"), "run")
+    warn_delay_change(summary.get("link"), "run")
+    if loop.state.incomplete:  # one line: each file and why, the other failure, the motors
+        failed = [str(e) for e in loop.state.incomplete] + [loop.state.failure or ""]
+        stopped = "; the motors were stopped" if loop.state.zero_volts_sent else ""
+        print(f"cartctl run: error: {'; '.join(f for f in failed if f)}{stopped}", file=sys.stderr)
+        return 1
+    if loop.state.failure:
+        print(f"cartctl run: error: {loop.state.failure}", file=sys.stderr)
+        return 1
+    if loop.state.interrupted:
+        signum = stopping.received()
+        why = "interrupted" if signum is None else f"stopped by {signal.Signals(signum).name}"
+        print(f"cartctl run: {why}; zero volts sent, the trace and recording hold the run so far",
+              file=sys.stderr)  # fmt: skip
+        return stopping.exit_code()
+    return 0

@@ -1,0 +1,380 @@
+"""``cartctl tune MODEL.toml --method pi|poles``: a grid of designs, each run in the simulated loop.
+
+Between ``design`` and ``run``. The grid and the Pareto front are :mod:`cartctl.tune.grid`;
+designing and running the settings on worker processes is :mod:`cartctl.tune.engine`; what is
+refused before any of that (the options that size the work, then what ``design`` and ``run``
+refuse for every setting alike, in their words) is :mod:`cartctl.cli.commands.tune_checks`. Here: the
+options, the table or JSON, the plot, and ``--choose N --out FILE``, which writes setting N's
+controller file through ``cartctl design`` itself.
+
+Each setting is scored on the loop it is designed for: with ``--extra-delay N`` the simulated
+plant has N more ticks of delay too. Settling is measured in the band of ``cartctl design``'s
+settling bound, max(2 %, one encoder count per tick).
+
+``--robust`` (:mod:`cartctl.tune.robust`) also scores every setting on ``--plants N`` plants drawn
+from the model's uncertainty (:mod:`cartctl.tune.uncertainty`, ``--seed``), simulated all at once
+(:mod:`cartctl.tune.batch`), and on the physics preset, as it is and at each ``--actuation-ms``
+timing (default 3 and 10 ms: when a command lands after its tick, a property of the cart); the
+physics runs at those timings enter the worst case beside the sampled plants. The table,
+``--json`` (key ``robust``, added to each row and at the top) and the plot then show nominal,
+worst case, spread and physics, and the front of nominal settling against worst-case overshoot. ``--choose best`` picks by
+:data:`cartctl.tune.robust_choice.CHOICE_RULE` (with ``--robust``) or
+:data:`~cartctl.tune.robust_choice.CHOICE_RULE_NOMINAL` (without).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shlex
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
+
+from cartctl.choices import MAX_TUNE_SETTINGS
+from cartctl.cli.commands.options import FORMS, MAX_JOBS, check_outputs, seed
+from cartctl.cli.commands.tune_checks import (
+    DEFAULT_PLANTS,
+    MAX_GRID_TICKS,
+    MAX_PLANTS,
+    MAX_ROBUST_PLANT_TICKS,
+    MAX_TUNE_DURATION_S,
+    actuation_timings,
+    check_inputs,
+    check_options,
+    check_work,
+    choice_limits,
+    design_fixed,
+)
+from cartctl.design.request import MAX_EXTRA_DELAY_TICKS, METHODS  # light: no numpy
+from cartctl.errors import InputError
+
+if TYPE_CHECKING:  # the tuning modules load numpy and scipy: imported where used, not for --help
+    from cartctl.tune import engine
+    from cartctl.tune import grid as tuning
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "tune",
+        help="design a grid of controllers, run each in the simulated loop, show the Pareto front",
+        description=(
+            "Design one controller per grid setting (pi: phase margin × crossover; poles: settling "
+            "time × overshoot), run each like 'cartctl run --fast' against a simulated plant with "
+            "the loop delay the design is for (--extra-delay) and compare overshoot, settling time "
+            "(band: 2 % of the step or one encoder count per tick, whichever is wider), RMS error "
+            "and peak voltage (the worse of motors a and b). Grid: comma-separated "
+            "NAME=START:STOP:STEP (inclusive) or NAME=VALUE; pi "
+            "axes phase_margin (deg, default 50:75:5), crossover_hz (Hz, 2:5:0.5); poles axes "
+            "settling_time (s, 0.04:0.16:0.02), overshoot (%, 0.5:5:1.5)."
+        ),
+    )
+    p.add_argument("model", metavar="MODEL.toml", help="model to design on (and of the sim plant)")
+    p.add_argument("--method", choices=METHODS, required=True)
+    p.add_argument("--grid", metavar="SPEC",
+                   help="e.g. 'phase_margin=50:75:5,crossover_hz=2:5:0.5' (at most "
+                        f"{MAX_TUNE_SETTINGS} settings; each value in the range cartctl design "
+                        "takes for its option)")  # fmt: skip
+    p.add_argument("--plant", default="sim", metavar="PLANT",
+                   help="sim (MODEL, the default), physics or physics:actuation_ms=X (the "
+                        "physics --preset with each command landing X ms after its tick, "
+                        "0 < X <= 10 to 0.1 ms)")  # fmt: skip
+    p.add_argument("--preset", choices=("air", "ground"), default="ground", help="physics preset")
+    p.add_argument("--reference", default="step:10", metavar="SPEC",
+                   help=f"speed reference of both motors (default step:10): {FORMS}")  # fmt: skip
+    p.add_argument("--duration", type=float, default=2.0, metavar="S",
+                   help=f"run time of each setting (default 2 s, at most {MAX_TUNE_DURATION_S:g} "
+                        f"s, and at most {MAX_GRID_TICKS:,} ticks over the grid)")  # fmt: skip
+    p.add_argument("--extra-delay", type=int, default=0, metavar="N",
+                   help="ticks of loop delay beyond the model's, designed for and simulated "
+                        f"(a PC-side loop over serial; 0..{MAX_EXTRA_DELAY_TICKS})")  # fmt: skip
+    p.add_argument("--jobs", type=int, metavar="N",
+                   help=f"worker processes, 1..{MAX_JOBS} (default: all cores)")  # fmt: skip
+    p.add_argument("--plot", metavar="FILE.png",
+                   help="run settling time vs run overshoot; the front of these two ringed and "
+                        "numbered")  # fmt: skip
+    p.add_argument("--choose", metavar="N|best",
+                   help="write setting #N's controller (with --out); 'best': the lowest "
+                        "(worst-case, with --robust) overshoot among the settings that settle "
+                        "(on every plant), then the fastest (nominal) settling")  # fmt: skip
+    p.add_argument("--robust", action="store_true",
+                   help="also score every setting on --plants plants drawn from the model's "
+                        "uncertainty (θ ± its theta_std, uniform; DC gain ±10 %%; loop delay ±1 "
+                        "tick) and on the physics --preset (also at each --actuation-ms); report "
+                        "nominal, worst case, spread and the front of nominal settling against "
+                        "worst-case overshoot")  # fmt: skip
+    p.add_argument("--plants", type=int, metavar="N",
+                   help=f"plants drawn for --robust, 1..{MAX_PLANTS} (default {DEFAULT_PLANTS}; "
+                        f"at most {MAX_ROBUST_PLANT_TICKS:,} plant-ticks over the grid)")  # fmt: skip
+    p.add_argument("--seed", type=seed, metavar="S", help="seed of the plants drawn for --robust (default 1)")  # fmt: skip
+    p.add_argument("--actuation-ms", metavar="X,Y,...",
+                   help="with --robust: also run every setting on the physics --preset with each "
+                        "command landing X ms after its tick (0 < X <= 10, to 0.1 ms; 3: the "
+                        "presets' calibrated timing, 10: the next tick's io()), one run per "
+                        "timing; these runs enter the worst case and --choose best like the "
+                        "sampled plants (default 3,10; 'none': only the physics preset as it is, "
+                        "reported beside the worst case)")  # fmt: skip
+    p.add_argument("--max-overshoot", type=float, metavar="PERCENT",
+                   help="--choose best only among the settings whose overshoot is at most this "
+                        "on the plant (with --robust: on the model and on the physics --preset "
+                        "at each --actuation-ms)")  # fmt: skip
+    p.add_argument("--max-settling", type=float, metavar="S",
+                   help="--choose best only among the settings whose settling time is at most "
+                        "this (s), where --max-overshoot applies")  # fmt: skip
+    p.add_argument("--process-noise-v", type=float, metavar="V",
+                   help="the estimator's process noise of every setting, as cartctl design's "
+                        "(default: design's)")  # fmt: skip
+    p.add_argument("--bias-drift-v", type=float, metavar="V",
+                   help="the estimator's disturbance random walk of every setting, as cartctl "
+                        "design's (default: design's)")  # fmt: skip
+    p.add_argument("--out", metavar="CONTROLLER.toml", help="where --choose writes the controller")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run)
+
+
+def choosable_text(results: Sequence[tuning.TuneResult]) -> str:
+    """The settings ``--choose N`` accepts (those designed and run), as ranges: '5-7, 11-14'."""
+    indices = sorted(r.index for r in results if r.feasible)
+    if not indices:
+        return "none: no setting of the grid could be designed and run; widen the grid"
+    spans: list[list[int]] = []
+    for i in indices:
+        if spans and i == spans[-1][1] + 1:
+            spans[-1][1] = i
+        else:
+            spans.append([i, i])
+    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in spans)
+
+
+def choose(
+    args: argparse.Namespace,
+    result: tuning.TuneResult,
+    results: Sequence[tuning.TuneResult] = (),
+) -> str:
+    """Write the chosen setting's controller file, as ``cartctl design`` would.
+
+    Returns the design command (``cartctl design ...``), as the file records it.
+
+    Raises
+    ------
+    InputError
+        The setting did not run (an infeasible request, or its run failed); the message names
+        the settings of ``results`` that can be chosen.
+    """
+    from cartctl.data.modelfile import load_models
+    from cartctl.design.controllerfile import save_controller
+    from cartctl.design.loop_report import analyse_designs
+    from cartctl.design.make import controller_file, design_models
+    from cartctl.tune import grid as tuning
+
+    if not result.feasible:
+        what = ("its run failed" if result.status == "run failed"
+                else "it is an infeasible request: the design refused it")  # fmt: skip
+        raise InputError(
+            f"--choose {result.index}: setting #{result.index} cannot be chosen, {what} (the "
+            f"reason is listed as #{result.index} with the results); settings that can be "
+            f"chosen: {choosable_text(results or [result])}"
+        )
+    request = tuning.design_request(args.method, result.settings, args.extra_delay,
+                                    design_fixed(args))  # fmt: skip
+    argv = ["design", *request.to_argv(str(args.model), always=tuning.request_axes(args.method)),
+            "--out", args.out]  # fmt: skip
+    models = load_models(args.model)
+    designs = design_models(request, models, ("a", "b"))
+    entries = designs.entries()  # as cartctl design: the file keeps the loop's refined analysis
+    for m, analysis in analyse_designs(designs).items():
+        entries[m].update(analysis.entry())
+    command = "cartctl " + shlex.join(argv)
+    save_controller(controller_file(designs, args.model, command=command,
+                                    period_s=models.period_s), args.out)  # fmt: skip
+    return command
+
+
+def _chosen(args: argparse.Namespace, result: tuning.TuneResult, rule: str | None,
+            results: Sequence[tuning.TuneResult]) -> dict[str, Any]:  # fmt: skip
+    command = choose(args, result, results)
+    out: dict[str, Any] = {"index": result.index, "out": args.out, "command": command}
+    if rule is not None:
+        out["rule"] = rule
+    return out
+
+
+def _choice_or_refusal(
+    args: argparse.Namespace, make: Callable[[], dict[str, Any]]
+) -> tuple[dict[str, Any] | None, InputError | None]:
+    """``--choose``'s entry, or the refusal to raise once the results are printed."""
+    if args.choose is None:
+        return None, None
+    try:
+        return make(), None
+    except InputError as exc:
+        return None, exc
+
+
+def _delay_text(args: argparse.Namespace) -> str:
+    return f", {args.extra_delay} extra tick(s) of loop delay" if args.extra_delay else ""
+
+
+def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
+    """``tune --robust``: the grid on the nominal model, the sampled plants and the physics preset."""
+    from cartctl.cli.jsonout import dumps
+    from cartctl.cli.progress import ProgressBar
+    from cartctl.data.modelfile import load_models
+    from cartctl.tune import engine, table
+    from cartctl.tune import grid as tuning
+    from cartctl.tune import robust as robustness
+    from cartctl.tune import robust_choice as choice
+    from cartctl.tune.plot import plot_robust
+    from cartctl.tune.uncertainty import describe_line, sample_plants
+
+    plants = DEFAULT_PLANTS if args.plants is None else args.plants
+    seed = 1 if args.seed is None else args.seed
+    sample = sample_plants(load_models(args.model), plants, seed,
+                           extra_delay_ticks=args.extra_delay)  # fmt: skip
+    timings = actuation_timings(args.actuation_ms)
+    rjob = robustness.RobustJob(job, sample, job.items, timings)
+    bar = ProgressBar(len(job.items), "cartctl tune --robust")
+    try:
+        rows = engine.run_grid(rjob, args.jobs or os.cpu_count() or 1, bar.update,
+                               robustness.evaluate_robust_chunk)  # fmt: skip
+    finally:
+        bar.close()
+    marked = tuning.mark_pareto([r.result for r in rows])  # the plain front, for the JSON rows
+    rows = [replace(r, result=m) for r, m in zip(rows, marked, strict=True)]
+    rows = choice.sort_robust(choice.mark_robust_pareto(rows))
+    if args.plot:
+        plot_robust(args.plot, args.method, rows, plants)
+    results = [r.result for r in rows]
+
+    limits = choice_limits(args)
+
+    def make() -> dict[str, Any]:
+        if args.choose == "best":
+            rule = choice.rule_text(choice.CHOICE_RULE, limits, choice.LIMITS_WHERE)
+            return _chosen(args, choice.choose_best_robust(rows, limits).result, rule,
+                           results)  # fmt: skip
+        return _chosen(args, next(r for r in results if r.index == args.choose), None, results)
+
+    chosen, refusal = _choice_or_refusal(args, make)
+    timed = ", ".join(f"{ms:g}" for ms in timings)
+    worst_over = "the nominal model and the sampled plants" + (
+        f" and the physics preset with commands landing {timed} ms after their tick"
+        if timings else "")  # fmt: skip
+    meta = {**sample.describe(), "nominal": f"the model ({args.model}), as without --robust",
+            "worst_over": worst_over,
+            "worst_sampled_over": "the nominal model and the sampled plants",
+            "actuation_ms": list(timings),
+            "spread_over": "the sampled plants (percentiles: values of sampled plants)",
+            "physics_preset": args.preset, "pareto_of": "nominal settling_time_s against worst-case "
+            "overshoot_percent", "choice_rule": choice.rule_text(choice.CHOICE_RULE, limits, choice.LIMITS_WHERE),
+            "counts": {k.replace(" ", "_"): v for k, v in table.robust_counts(rows).items()},
+            "statuses": table.ROBUST_STATUSES}  # fmt: skip
+    if args.json:
+        print(dumps({"method": args.method, "model": str(args.model), "plant": args.plant,
+                     "reference": args.reference, "duration_s": args.duration,
+                     "extra_delay_ticks": args.extra_delay, "metrics_of": "worse of motors a and b",
+                     "settings": [r.to_dict() for r in rows], "chosen": chosen,
+                     "robust": meta}))  # fmt: skip
+    else:
+        print(f"{args.method} on {args.model}{_delay_text(args)}, {args.reference}, "
+              f"{args.duration:g} s, --robust: {table.robust_counts_text(rows)}; the worse of "
+              "motors a and b")  # fmt: skip
+        print(describe_line(sample, str(args.model)))
+        if timings:
+            print(f"nominal: the model; worst: over the model, the {plants} plants and physics "
+                  f"preset {args.preset} with commands landing {timed} ms after their tick (∞: a "
+                  "plant never settles); p5–p95: over the plants; physics run, X ms: those "
+                  "runs")  # fmt: skip
+        else:
+            print(f"nominal: the model; worst: over the model and the {plants} plants (∞: a "
+                  f"plant never settles); p5–p95: over the plants; physics: preset "
+                  f"{args.preset}, not in the worst case")  # fmt: skip
+        print(table.LEGEND)
+        print(f"*: on the robust Pareto front, nominal settling against worst-case overshoot, the "
+              f"axes of --plot, which rings them "
+              f"({table.plural(sum(r.pareto for r in rows), 'setting', 'settings')})")  # fmt: skip
+        print(table.format_robust_table(args.method, rows))
+        if args.plot:
+            print(f"wrote {args.plot}")
+        if chosen is not None:
+            print(f"wrote {args.out} (setting #{chosen['index']}): {chosen['command']}")
+    if refusal is not None:
+        raise refusal
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    check_options(args)  # what sets the size of the work, before anything heavy is imported
+    from cartctl.tune import grid as tuning
+
+    axes = tuning.parse_grid(args.grid, args.method)
+    settings = tuning.grid_settings(axes)
+    check_work(args, len(settings))
+    check_inputs(args, len(settings))
+    check_outputs(args, files=("out", "plot"))
+    from cartctl.cli.commands.validate import check_plot_path
+
+    check_plot_path(args.plot)  # a PNG: matplotlib would refuse another suffix after the work
+
+    from cartctl.cli.jsonout import dumps
+    from cartctl.cli.progress import ProgressBar
+    from cartctl.tune import engine, table
+    from cartctl.tune import robust_choice as choice
+    from cartctl.tune.plot import plot_tuning
+
+    job = engine.TuneJob(str(args.model), args.method, args.plant, args.preset, args.reference,
+                         float(args.duration), args.extra_delay,
+                         tuple(enumerate(settings, start=1)),
+                         tuple(design_fixed(args).items()))  # fmt: skip
+    if args.robust:
+        return run_robust(args, job)
+    bar = ProgressBar(len(settings), "cartctl tune")
+    try:
+        results = engine.run_grid(
+            job, args.jobs or os.cpu_count() or 1, bar.update, engine.evaluate_chunk
+        )
+    finally:
+        bar.close()
+    results = tuning.sort_results(tuning.mark_pareto(results))
+    if args.plot:
+        plot_tuning(args.plot, args.method, results)
+
+    limits = choice_limits(args)
+
+    def make() -> dict[str, Any]:
+        if args.choose == "best":
+            rule = choice.rule_text(choice.CHOICE_RULE_NOMINAL, limits, choice.LIMITS_WHERE_NOMINAL)
+            return _chosen(args, choice.choose_best_nominal(results, limits), rule,
+                           results)  # fmt: skip
+        return _chosen(args, next(r for r in results if r.index == args.choose), None, results)
+
+    chosen, refusal = _choice_or_refusal(args, make)
+    front, plotted = sum(r.pareto for r in results), sum(r.pareto_plot for r in results)
+    if args.json:
+        counts = {k.replace(" ", "_"): v for k, v in tuning.status_counts(results).items()}
+        print(dumps({"method": args.method, "model": str(args.model), "plant": args.plant,
+                     "reference": args.reference, "duration_s": args.duration,
+                     "extra_delay_ticks": args.extra_delay, "metrics_of": "worse of motors a and b",
+                     "settings": [r.to_dict() for r in results], "chosen": chosen,
+                     "counts": {"settings": len(results), **counts, "pareto": front,
+                                "pareto_plot": plotted},
+                     "statuses": tuning.STATUSES,
+                     "pareto_of": list(tuning.METRICS),
+                     "pareto_plot_of": list(tuning.PLOT_METRICS)}))  # fmt: skip
+    else:
+        print(f"{args.method} on {args.model}, {args.plant} plant{_delay_text(args)}, "
+              f"{args.reference}, {args.duration:g} s: {table.counts_text(results)}")  # fmt: skip
+        print(table.LEGEND)
+        print(f"*: on the Pareto front over the four run metrics "
+              f"({table.plural(front, 'setting', 'settings')}); o: on the front of run settling "
+              f"against run overshoot, the axes of --plot, which rings them "
+              f"({table.plural(plotted, 'setting', 'settings')})")  # fmt: skip
+        print(table.format_table(args.method, results))
+        if args.plot:
+            print(f"wrote {args.plot}")
+        if chosen is not None:
+            which = f" (setting #{chosen['index']})" if "rule" in chosen else ""
+            print(f"wrote {args.out}{which}: {chosen['command']}")
+    if refusal is not None:
+        raise refusal
+    return 0

@@ -1,0 +1,212 @@
+"""``cartctl validate MODEL.toml FILE.csv``: a model simulated on recorded input against the measured speed.
+
+The shell around :mod:`cartctl.identification.validate`: reads the model file and the trace, prints a
+table or the JSON object, and with ``--plot`` draws the report's figures 6 and 7 (measured and
+simulated speed, the absolute error beneath). Also home of the ``--plot`` helpers that
+``cartctl linearity`` shares.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from cartctl.cli.commands.options import add_map_option, check_output_file
+from cartctl.errors import InputError
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from cartctl.identification.validate import ModelValidation, ValidationResult
+    from cartctl.measures.stepinfo import StepInfo
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "validate",
+        help="simulate a model on recorded data against the measured speed",
+        description=(
+            "Simulate each motor's model from rest on the trace's commanded voltage and compare "
+            "with the measured speed: the simulation fit (%), the absolute error over time and, "
+            "when the input is a single step, rise time, overshoot, settling time and steady "
+            "state of the measured and simulated responses side by side (report §3.3)."
+        ),
+    )
+    p.add_argument("model", metavar="MODEL.toml", help="model file, e.g. models/ground.toml")
+    p.add_argument("data", metavar="FILE.csv", help="recorded experiment (CSV or QRC log)")
+    p.add_argument(
+        "--motor",
+        choices=("a", "b", "both"),
+        default="both",
+        help="which motor to validate (default both; a motor left at 0 V is then skipped)",
+    )
+    add_map_option(p)
+    add_plot_option(p, "measured and simulated speed with the absolute error beneath")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    p.set_defaults(func=run)
+
+
+# -- the --plot option, shared with ``cartctl linearity`` ------------------------------------------
+
+
+def add_plot_option(p: argparse.ArgumentParser, what: str) -> None:
+    """The ``--plot FILE.png`` option; ``what`` says what the figure shows."""
+    p.add_argument("--plot", metavar="FILE.png", help=f"write a PNG figure: {what}")
+
+
+def check_plot_path(path: str | None) -> Path | None:
+    """The ``--plot`` path, refused early (before any work) unless it names a .png file."""
+    if path is None:
+        return None
+    out = Path(path)
+    if out.suffix.lower() != ".png":
+        raise InputError(f"--plot writes a PNG image; give a file ending in .png, got {path!r}")
+    return check_output_file(out, "--plot")
+
+
+def new_figure(rows: int, cols: int, *, width_in: float, height_in: float) -> tuple[Figure, Any]:
+    """A matplotlib figure on the Agg canvas (no GUI, no pyplot state) and its grid of axes."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width_in, height_in), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(
+        rows, cols, sharex="col", squeeze=False, height_ratios=[2] + [1] * (rows - 1)
+    )
+    return fig, axes
+
+
+def save_png(fig: Figure, path: Path) -> None:
+    """Write the figure as PNG, creating parent folders."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, format="png", dpi=120)
+
+
+# -- validate -----------------------------------------------------------------------------------
+
+
+def plot_validation(validation: ModelValidation, path: Path) -> None:
+    """Figures 6 and 7 of the report in one PNG: per motor, speeds above and |error| beneath."""
+    results = list(validation.results.values())
+    fig, axes = new_figure(2, len(results), width_in=6.0 * len(results), height_in=6.0)
+    for col, r in enumerate(results):
+        top, bottom = axes[0, col], axes[1, col]
+        top.plot(r.time_s, r.measured_rad_s, label="measured", color="tab:blue")
+        top.plot(r.time_s, r.simulated_rad_s, label="simulated", color="tab:orange", ls="--")
+        top.set_title(f"motor {r.motor}: fit {r.fit_simulation_percent:.1f} % (simulation)")
+        top.set_ylabel("speed (rad/s)")
+        top.grid(True, alpha=0.3)
+        top.legend(loc="best")
+        bottom.plot(r.time_s, r.abs_error_rad_s, color="tab:red", label="|measured − simulated|")
+        bottom.set_ylabel("|error| (rad/s)")
+        bottom.set_xlabel("time (s)")
+        bottom.grid(True, alpha=0.3)
+        bottom.legend(loc="best")
+    model = Path(validation.model).name if validation.model else "model"
+    data = Path(validation.data).name if validation.data else "trace"
+    fig.suptitle(f"Validation of {model} on {data}")
+    save_png(fig, path)
+
+
+def _num(value: float | None, spec: str) -> str:
+    return "—" if value is None else format(value, spec)
+
+
+def _step_rows(measured: StepInfo, simulated: StepInfo) -> list[tuple[str, str, str]]:
+    rows = [
+        ("rise time 10–90 % (s)", "rise_time_s", ".3f"),
+        ("overshoot (%)", "overshoot_percent", ".1f"),
+        ("settling time 2 % (s)", "settling_time_s", ".3f"),
+        ("peak (rad/s)", "peak_value", ".3f"),
+        ("steady state (rad/s)", "steady_state_value", ".3f"),
+    ]
+    return [
+        (label, _num(getattr(measured, key), spec), _num(getattr(simulated, key), spec))
+        for label, key, spec in rows
+    ]
+
+
+def format_result(r: ValidationResult) -> list[str]:
+    """The lines of one motor's table."""
+    if r.unstable_pole is not None:
+        return [
+            f"motor {r.motor}: the model is unstable (pole at |z| = {r.unstable_pole:.4g}): its "
+            "simulation runs away from any input, so there is no fit to show"
+        ]
+    e = r.error_summary()
+    lines = [
+        f"motor {r.motor}: fit {_num(r.fit_simulation_percent, '.2f')} % (simulation)",
+        f"  |error| (rad/s): max {e['max']:.3f}, mean {e['mean']:.3f}, rms {e['rms']:.3f}",
+    ]
+    if r.step is None:
+        lines.append("  input is not a single step from 0 V: no step metrics")
+        return lines
+    s = r.step
+    lines.append(
+        f"  {f'step of {s.amplitude_v:g} V at {s.onset_s:.2f} s':<26} {'measured':>10} "
+        f"{'simulated':>10}"
+    )
+    lines += [
+        f"  {label:<26} {m:>10} {sim:>10}" for label, m, sim in _step_rows(s.measured, s.simulated)
+    ]
+    lines.append(
+        f"  steady-state error of the model (measured − simulated): "
+        f"{s.steady_state_error_rad_s:+.3f} rad/s"
+    )
+    return lines
+
+
+def format_table(validation: ModelValidation) -> str:
+    """The human-readable report."""
+    lines = [
+        f"validate {validation.model} on {validation.data} (Ts = {validation.period_s * 1e3:g} ms)"
+    ]
+    for r in validation.results.values():
+        lines += ["", *format_result(r)]
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    from cartctl.cli.jsonout import dumps
+    from cartctl.data.modelfile import load_models
+    from cartctl.data.read import read_trace
+    from cartctl.data.trace import MOTORS
+    from cartctl.identification.validate import validate_models
+
+    plot = check_plot_path(args.plot)
+    models = load_models(args.model)
+    trace = read_trace(args.data, args.map)
+    motors: tuple[str, ...] = (args.motor,)
+    if args.motor == "both":
+        motors = tuple(m for m in MOTORS if m in models.motors)
+        for name in sorted(set(MOTORS) - set(motors)):
+            print(
+                f"cartctl validate: note: {args.model} has no model of motor {name}; skipped",
+                file=sys.stderr,
+            )
+    validation = validate_models(models, trace, motors, skip_idle=args.motor == "both")
+    for name in validation.skipped:
+        print(
+            f"cartctl validate: note: motor {name}'s voltage is zero throughout {args.data}; "
+            "skipped",
+            file=sys.stderr,
+        )
+    for r in validation.results.values():
+        if r.unstable_pole is not None:
+            print(
+                f"cartctl validate: warning: {args.model}: motor {r.motor}'s model is unstable "
+                f"(pole at |z| = {r.unstable_pole:.4g}); identify it again",
+                file=sys.stderr,
+            )
+    if plot is not None:
+        plot_validation(validation, plot)
+    if args.json:
+        print(dumps(validation.to_dict()))
+    else:
+        print(format_table(validation))
+        if plot is not None:
+            print(f"\nwrote {plot}")
+    return 0

@@ -1,0 +1,120 @@
+"""``cartctl virtual-cart``: the physical simulator behind a pseudo-terminal, until Ctrl-C."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import TYPE_CHECKING
+
+from cartctl.cli.commands.options import FORMS, check_duration, check_finite, seed
+from cartctl.errors import InputError
+
+if TYPE_CHECKING:
+    from cartctl.link.cart_faults import CartFaults
+
+
+_NO_FAULTS = ""
+"""``--faults`` by default: argparse passes a string default through ``type`` when it parses, so
+the parser is built without cartctl.plants (numpy, scipy) and the default is still ``CartFaults()``."""
+
+
+def _faults(text: str) -> CartFaults:
+    from cartctl.link.cart_faults import CartFaults
+
+    try:
+        return CartFaults.parse(text)
+    except ValueError as exc:  # InputError: argparse shows the message as one line
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "virtual-cart",
+        help="serve the simulated cart on a pseudo-terminal, as the bridge firmware would",
+        description=(
+            "Run the physical simulator behind a pseudo-terminal that speaks the cart's microOS "
+            "MAVLink protocol and the bridge contract (firmware/): 100 GPIO frames per second at "
+            "500 kbaud (115200 with --onboard or --faults bridge=1), a HEARTBEAT every 1.1 s, the "
+            "watchdog. Prints the port; point "
+            "'cartctl run --plant serial:PORT', 'excite' or 'monitor' at it. Ctrl-C stops it."
+        ),
+    )
+    p.add_argument(
+        "--preset", choices=("air", "ground"), default="ground",
+        help="wheels in the air or cart on the ground (default ground)",
+    )  # fmt: skip
+    p.add_argument("--noise", type=float, default=0.0, metavar="RAD_S",
+                   help="extra measurement noise, standard deviation in rad/s (default 0)")  # fmt: skip
+    p.add_argument("--seed", type=seed, default=None, help="seed of the noise and the faults")
+    p.add_argument(
+        "--faults", type=_faults, default=_NO_FAULTS, metavar="KEY=VALUE,...",
+        help="inject faults: garbage=FRACTION (bursts of random bytes before that fraction of "
+        "frames), corrupt=FRACTION (frames with a changed byte), stall=S (stop ticking S seconds "
+        "after the host's first frame, port open), pull=S (the port vanishes S seconds after the "
+        "host's first frame), late=FRACTION (that fraction of the ticks, in stretches of 5, take "
+        "the host's commands a tick late), generation=b (speak the "
+        "newer MAVLink 2 firmware instead), reverse_a=1 / reverse_b=1 (that motor wired "
+        "backwards: + volts turn it the negative way)",
+    )  # fmt: skip
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument(
+        "--onboard", metavar="CONTROLLER.toml",
+        help="run this controller on the cart instead of the bridge sketch, as the C of 'cartctl "
+        "export --arduino' does (one tick of delay); out channels: float 0/1 speed A/B, 2/3 "
+        "voltage A/B, 4/5 reference A/B",
+    )  # fmt: skip
+    p.add_argument(
+        "--reference", metavar="SPEC",
+        help=f"with --onboard: the reference of both motors, {FORMS}; default: the float "
+        "channels 0 (A) and 1 (B) the host sends, held between frames, as the exported C reads them",
+    )  # fmt: skip
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from cartctl.link.virtual_cart import VirtualCart
+
+    if args.reference and not args.onboard:
+        raise InputError("--reference needs --onboard CONTROLLER.toml")
+    if args.duration is not None:
+        check_duration(args.duration)
+    if check_finite(args.noise, "--noise") < 0.0:
+        raise InputError(f"--noise must be a standard deviation >= 0 rad/s, got {args.noise:g}")
+    if args.reference:
+        from cartctl.reference import check_reference
+
+        check_reference(args.reference)
+    firmware = None
+    if args.onboard:
+        from cartctl.export.arduino import onboard_controllers
+        from cartctl.link.onboard_firmware import OnboardFirmware
+
+        firmware = OnboardFirmware(onboard_controllers(args.onboard), reference=args.reference)
+    cart = VirtualCart(args.preset, noise_std_rad_s=args.noise, seed=args.seed, faults=args.faults,
+                       firmware=firmware)  # fmt: skip
+    print(cart.port, flush=True)
+    running = (
+        f"controller {args.onboard} on board"
+        if args.onboard
+        else f"the bridge sketch version {cart.bridge_version}"
+    )
+    running += f", {cart.baud} baud, USB chip {'modelled' if cart.faults.usb else 'off'}"
+    timing = cart.physics.params.actuation_delay() * 1000.0
+    running += f", commands land {timing:g} ms after their tick"
+    example = "monitor serial:" if args.onboard else "run --plant serial:"
+    print(
+        f"virtual cart (physics preset {args.preset}, {running}) on {cart.port}; "
+        f"e.g. cartctl {example}{cart.port}; Ctrl-C stops it",
+        file=sys.stderr,
+        flush=True,
+    )
+    try:
+        with cart:
+            if args.duration is not None:
+                cart.wait_seconds(args.duration)
+            else:
+                cart.wait()
+    except KeyboardInterrupt:
+        pass
+    print(f"virtual cart stopped ({cart.state}) after {cart.ticks} ticks", file=sys.stderr)
+    return 0

@@ -1,0 +1,244 @@
+"""Model files: the identified motor models of a cart as TOML, with their provenance.
+
+``identify --out`` writes these files, ``design``, ``inspect``, ``validate`` and the simulated plant
+read them. A file holds one model per motor and says where the models came from::
+
+    format = "cartctl-model/2"
+    period_s = 0.01
+    loop_delay_ticks = 1        # optional: the loop the data was recorded in
+
+    [provenance]
+    source = "report, equation 12 (cart on the ground)"
+    created = "2023-11-06"
+    data = ["ground_square.csv"]
+    method = "arx"
+    prefilter = "none"
+
+    [motors.a]
+    theta = [-0.9356, 0.2173, 0.6466, -0.07751]   # [c, d, a, b]
+    na = 2
+    nb = 2
+    nk = 2
+
+Extra keys in ``[motors.X]`` (``theta_std``, fit percentages …) are kept as ``stats``.
+
+``loop_delay_ticks`` is the loop delay of the cart the models describe: ticks from a measurement to
+the voltage it leads to being on the motor (1 on board and in the simulators). ``identify`` takes
+it from its traces' meta files (:mod:`cartctl.data.tracemeta`) or ``--loop-delay``; ``design``
+designs for it. A file without it (an older one) leaves ``design`` to assume nk − 1.
+
+Files are written as version 2 (``cartctl-model/2``). Version 1, an older cartctl's, has the same
+keys and reads the same way, as does a file without a ``format`` line; another version is refused
+in one line that names the file and the versions read.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+from cartctl.choices import find_file
+from cartctl.data.tomlfile import MODEL_FORMAT, check_format, read_toml, require
+from cartctl.errors import CartctlError, DataFileError, InputError
+from cartctl.model import ArxModel
+
+FORMAT = MODEL_FORMAT
+MOTORS = ("a", "b")
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """Where a model came from.
+
+    Attributes
+    ----------
+    source : str
+        Free text: the experiment, report or command that produced the models.
+    created : str
+        ISO 8601 date or date-time.
+    data : tuple of str
+        Data files the models were fitted to (empty when not from data).
+    method : str
+        'arx', 'oe', 'report', …
+    prefilter : str
+        'none', or a description such as 'butter order 6, 20 Hz, causal'.
+    notes : str
+        Anything else a reader should know.
+    """
+
+    source: str
+    created: str
+    data: tuple[str, ...] = ()
+    method: str = "arx"
+    prefilter: str = "none"
+    notes: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        """TOML/JSON form."""
+        out: dict[str, Any] = {
+            "source": self.source,
+            "created": self.created,
+            "data": list(self.data),
+            "method": self.method,
+            "prefilter": self.prefilter,
+        }
+        if self.notes:
+            out["notes"] = self.notes
+        return out
+
+
+@dataclass(frozen=True)
+class ModelFile:
+    """The motor models of one cart, per motor ('a', 'b'), with provenance.
+
+    Attributes
+    ----------
+    motors : dict of str to ArxModel
+        At least one of 'a' and 'b'.
+    provenance : Provenance
+    stats : dict of str to dict
+        Per motor, extra figures from identification (theta_std, fits …), kept as written.
+    path : Path or None
+        The file it was read from.
+    loop_delay_ticks : int or None
+        The loop delay of the cart the models describe (ticks), None when unknown.
+    """
+
+    motors: dict[str, ArxModel]
+    provenance: Provenance
+    stats: dict[str, dict[str, Any]] = field(default_factory=dict)
+    path: Path | None = None
+    loop_delay_ticks: int | None = None
+
+    def motor(self, name: str) -> ArxModel:
+        """The model of motor ``name``, with an error naming the motors present."""
+        try:
+            return self.motors[name]
+        except KeyError:
+            where = f" in {self.path}" if self.path else ""
+            raise InputError(
+                f"no model for motor '{name}'{where}; it has motor(s) {', '.join(self.motors)}"
+            ) from None
+
+    def __repr__(self) -> str:
+        """A few lines (not the whole provenance and statistics): where from, each motor's θ."""
+        where = f" {self.path}" if self.path else ""
+        ticks = self.loop_delay_ticks
+        delay = "" if ticks is None else f", loop delay {ticks} tick{'s' * (ticks != 1)}"
+        source = self.provenance.source
+        source = source if len(source) <= 100 else source[:99] + "…"
+        lines = [f"ModelFile{where}: Ts = {self.period_s:g} s{delay}, {self.provenance.method} "
+                 f"({source})"]  # fmt: skip
+        for name, m in self.motors.items():
+            theta = ", ".join(f"{v:.4g}" for v in m.theta)
+            lines.append(f"  motor {name}: na = {m.na}, nb = {m.nb}, nk = {m.nk}, θ = [{theta}]")
+        return "\n".join(lines)
+
+    @property
+    def period_s(self) -> float:
+        """The common sample period of the models (s)."""
+        return next(iter(self.motors.values())).period_s
+
+    def to_toml_dict(self) -> dict[str, Any]:
+        """The document written by :func:`save_models`."""
+        motors: dict[str, Any] = {}
+        for name, m in self.motors.items():
+            entry: dict[str, Any] = {
+                "theta": [float(v) for v in m.theta],
+                "na": m.na,
+                "nb": m.nb,
+                "nk": m.nk,
+            }
+            entry.update(self.stats.get(name, {}))
+            motors[name] = entry
+        doc: dict[str, Any] = {"format": FORMAT, "period_s": self.period_s}
+        if self.loop_delay_ticks is not None:
+            doc["loop_delay_ticks"] = int(self.loop_delay_ticks)
+        return doc | {"provenance": self.provenance.to_dict(), "motors": motors}
+
+
+MAX_MODEL_ORDER = 50
+"""The largest na, nb and nk a model file may hold: identify fits orders and delays up to 50,
+and a design's state grows with them (nk = 500 kept ``cartctl design`` busy for minutes)."""
+
+
+def save_models(models: ModelFile, path: str | Path) -> Path:
+    """Write a model file (TOML), creating parent folders. Returns the path written."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    header = "# cartctl motor models: theta = [a_1..a_na, b_0..b_nb-1], the report's [c, d, a, b]\n"
+    path.write_text(header + tomli_w.dumps(models.to_toml_dict()), encoding="utf-8")
+    return path
+
+
+def load_models(path: str | Path) -> ModelFile:
+    """Read a model file.
+
+    Raises
+    ------
+    MissingFileError
+        The file does not exist.
+    DataFileError
+        The file is not valid TOML or misses a required key; the message names the key.
+    """
+    path = find_file(path)  # the working folder's, else the shipped one
+    doc = read_toml(path, "model file")
+    try:
+        return _parse(doc, path)
+    except DataFileError:
+        raise
+    except CartctlError as exc:
+        raise DataFileError(path, str(exc)) from None
+
+
+def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
+    if "format" in doc:  # a model file may leave it out
+        check_format(doc, path, FORMAT, "model file")
+    period_s = float(require(doc, "period_s", (int, float), path, "the top level"))
+    loop_delay = None
+    if "loop_delay_ticks" in doc:
+        loop_delay = require(doc, "loop_delay_ticks", int, path, "the top level")
+        if loop_delay < 0:
+            raise DataFileError(path, f"loop_delay_ticks must be >= 0 ticks, got {loop_delay}")
+    prov_tab = doc.get("provenance", {})
+    provenance = Provenance(
+        source=str(prov_tab.get("source", "unknown")),
+        created=str(prov_tab.get("created", "unknown")),
+        data=tuple(str(d) for d in prov_tab.get("data", ())),
+        method=str(prov_tab.get("method", "unknown")),
+        prefilter=str(prov_tab.get("prefilter", "none")),
+        notes=str(prov_tab.get("notes", "")),
+    )
+    motors_tab = require(doc, "motors", dict, path, "the top level")
+    unknown = sorted(set(motors_tab) - set(MOTORS))
+    if unknown:
+        raise DataFileError(path, f"unknown motor(s) {unknown}; motors are 'a' and 'b'")
+    if not motors_tab:
+        raise DataFileError(path, "[motors] is empty; expected [motors.a] and/or [motors.b]")
+    motors: dict[str, ArxModel] = {}
+    stats: dict[str, dict[str, Any]] = {}
+    for name in MOTORS:
+        if name not in motors_tab:
+            continue
+        entry = motors_tab[name]
+        where = f"[motors.{name}]"
+        theta = require(entry, "theta", list, path, where)
+        na = require(entry, "na", int, path, where)
+        nb = require(entry, "nb", int, path, where)
+        nk = require(entry, "nk", int, path, where)
+        if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in theta):
+            raise DataFileError(path, f"theta in {where} must be a list of numbers, got {theta!r}")
+        if not all(math.isfinite(v) for v in theta):
+            raise DataFileError(path, f"theta in {where} must hold finite numbers, got {theta!r}")
+        for key, value, low in (("na", na, 0), ("nb", nb, 1), ("nk", nk, 0)):
+            if not low <= value <= MAX_MODEL_ORDER:
+                raise DataFileError(path, f"{key} in {where} must be in {low}..{MAX_MODEL_ORDER} "
+                                          f"(as identify fits models), got {value}")  # fmt: skip
+        motors[name] = ArxModel.from_theta(theta, na=na, nb=nb, nk=nk, period_s=period_s)
+        stats[name] = {k: v for k, v in entry.items() if k not in ("theta", "na", "nb", "nk")}
+    return ModelFile(motors, provenance, stats, path, loop_delay)

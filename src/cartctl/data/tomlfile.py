@@ -1,0 +1,89 @@
+"""Reading the project's TOML files (models, controllers) with errors that name the file and key."""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from cartctl.errors import DataFileError, MissingFileError
+
+MODEL_FORMAT = "cartctl-model/2"
+"""The ``format`` line a model file is written with (:mod:`cartctl.data.modelfile`)."""
+CONTROLLER_FORMAT = "cartctl-controller/2"
+"""The ``format`` line a controller file is written with (:mod:`cartctl.design.controllerfile`)."""
+TRACE_META_FORMAT = "cartctl-trace-meta/1"
+"""The ``format`` line of a trace's meta file (:mod:`cartctl.data.tracemeta`)."""
+READABLE: dict[str, tuple[str, ...]] = {
+    MODEL_FORMAT: ("cartctl-model/1", MODEL_FORMAT),
+    CONTROLLER_FORMAT: ("cartctl-controller/1", CONTROLLER_FORMAT),
+    TRACE_META_FORMAT: (TRACE_META_FORMAT,),
+}
+"""Every version read, by the format written. Version 2 of model and controller files has version
+1's keys, read the same way; the number says the file's names are those of docs/file-formats.md."""
+_KINDS = {MODEL_FORMAT: "a model file", CONTROLLER_FORMAT: "a controller file",
+          TRACE_META_FORMAT: "a trace meta file"}  # fmt: skip
+FORMATS = {
+    version: _KINDS[written] for written, versions in READABLE.items() for version in versions
+}
+"""What each ``format`` line says a file is, for messages about a file given in another's place."""
+
+
+def read_toml(path: str | Path, what: str) -> dict[str, Any]:
+    """Parse a TOML file; MissingFileError or a DataFileError naming ``what`` the file should be.
+
+    A folder, an empty file and a CSV trace given in a TOML file's place are each named as such.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise DataFileError(path, f"is a directory; expected a {what}")
+    if not path.is_file():
+        raise MissingFileError(path, what)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise DataFileError(path, f"is not text; expected a {what} (TOML)") from None
+    if not text.strip():
+        raise DataFileError(path, f"the file is empty; expected a {what}")
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        first = text.lstrip().partition("\n")[0]
+        if path.suffix.lower() == ".csv" or ("," in first and "=" not in first):
+            raise DataFileError(path, f"is a CSV file, not a {what} (TOML)") from None
+        raise DataFileError(path, f"not a valid TOML {what} ({exc})") from None
+
+
+def check_format(doc: Mapping[str, Any], path: Path, expected: str, what: str) -> str:
+    """The document's ``format`` line when it is a version of ``expected`` this cartctl reads
+    (:data:`READABLE`); else a DataFileError.
+
+    The message says what the file is instead when its format is a known one (a model given as a
+    controller: ``is a model file, not a controller file``), and lists the versions read when the
+    file is of another version (a newer cartctl's).
+    """
+    found = doc.get("format")
+    readable = READABLE.get(expected, (expected,))
+    if found in readable:
+        return str(found)
+    if found in FORMATS:
+        raise DataFileError(path, f"is {FORMATS[found]}, not a {what}")
+    known = " and ".join(repr(v) for v in readable)
+    if isinstance(found, str) and found.startswith(expected.rpartition("/")[0] + "/"):
+        raise DataFileError(path, f"has format {found!r}, a version this cartctl does not read; "
+                                  f"it reads {known}")  # fmt: skip
+    shown = "has no 'format' line" if found is None else f"has format {found!r}"
+    raise DataFileError(path, f"{shown}; a {what} says format = {expected!r}")
+
+
+def require(
+    table: Mapping[str, Any], key: str, kind: type | tuple[type, ...], path: Path, where: str
+) -> Any:
+    """``table[key]``, checked to be of ``kind`` (bools are never numbers); else a DataFileError."""
+    if key not in table:
+        raise DataFileError(path, f"missing key '{key}' in {where}")
+    value = table[key]
+    if not isinstance(value, kind) or isinstance(value, bool):
+        raise DataFileError(path, f"key '{key}' in {where} has the wrong type: {value!r}")
+    return value

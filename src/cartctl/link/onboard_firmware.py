@@ -1,0 +1,132 @@
+"""A designed controller running on the (virtual) cart itself, as the exported C does.
+
+``cartctl export CONTROLLER.toml --arduino`` writes C for the course template's ``control()``;
+:class:`OnboardFirmware` is the same thing in Python for :class:`~cartctl.link.virtual_cart.VirtualCart`
+(``cartctl virtual-cart --onboard``, ``cartctl monitor virtual --onboard``). Per tick::
+
+    io()       the virtual cart applies the voltage returned at the previous tick, reads speeds
+    control()  reference r (see below), u = controller.step(r, measured speed), per motor;
+               u is returned and reaches the motor at the next io(): one tick of delay, as on
+               the real cart, instead of a PC-side loop's several
+
+Channels, as in the export snippet (:mod:`cartctl.export.arduino`):
+
+- in: float 0 = reference A, float 1 = reference B (rad/s), held from the host's last GPIO;
+- out: float 0/1 = speed A/B (rad/s), 2/3 = voltage A/B computed at this tick (V, applied at
+  the next tick), 4/5 = reference A/B (rad/s), 6 = :data:`~cartctl.link.firmware_id.ONBOARD_ID`
+  (1001: cartctl's on-board layout 1, by which ``cartctl monitor`` names the channels itself);
+  the int channels stay 0.
+
+The layout is :mod:`cartctl.link.firmware_id`'s, which the export and the monitor read too.
+
+The reference comes from a reference spec (``step:8``, see :mod:`cartctl.reference`)
+when one is given, with tick 0 at the cart's first ``control()``; otherwise from the held input
+float channels, exactly as the exported snippet reads them. The controllers run the fixed
+(steady-state) Kalman gain where they have an estimator, as the C does. The template's
+``controlEnabled()`` (QRC button 0) is not modelled: the controller always runs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Protocol
+
+from cartctl.cart import PERIOD_S
+from cartctl.choices import MAX_DURATION_S
+from cartctl.errors import InputError
+from cartctl.link.bridge_firmware import CartIO, HeldChannels
+from cartctl.link.firmware_id import (
+    CH_FIRMWARE_ID,
+    IN_REFERENCE,
+    ONBOARD_ID,
+    OUT_REFERENCE,
+    OUT_SPEED,
+    OUT_VOLTAGE,
+)
+from cartctl.reference import ReferenceSchedule
+
+MOTORS = tuple(IN_REFERENCE)
+MAX_TICKS = round(MAX_DURATION_S / PERIOD_S)
+"""A reference spec is evaluated over the longest run cartctl takes (24 h), then held."""
+
+
+class _Controller(Protocol):
+    """What the cart's control() calls per motor (a runtime controller, structurally)."""
+
+    def reset(self) -> None: ...
+
+    def step(self, reference_rad_s: float, measured_rad_s: float) -> float: ...
+
+
+class OnboardFirmware(HeldChannels):
+    """``control()`` running one controller per motor on the cart (a ``CartFirmware``).
+
+    Parameters
+    ----------
+    controllers : mapping of str to Controller
+        The runtime controller of each motor ('a', 'b'); a motor without one gets 0 V.
+    reference : str, optional
+        Reference spec of both motors; None reads the held input float channels 0 and 1.
+    period_s : float
+        The cart's tick (s), the period the controllers were designed for.
+    """
+
+    ready_text = "cartctl on-board controller ready"
+
+    def __init__(
+        self,
+        controllers: Mapping[str, _Controller],
+        *,
+        reference: str | None = None,
+        period_s: float = PERIOD_S,
+    ) -> None:
+        unknown = sorted(set(controllers) - set(MOTORS))
+        if unknown:
+            raise InputError(f"the cart has motors a and b, not {', '.join(unknown)}")
+        self.controllers = dict(controllers)
+        self.reference = reference
+        self.period_s = float(period_s)
+        self._schedules = (
+            None
+            if reference is None
+            else {
+                m: ReferenceSchedule(reference, MAX_TICKS, self.period_s, m)
+                for m in self.controllers
+            }
+        )
+        self.reset()
+
+    def reset(self) -> None:
+        """Power-on state: channels 0, controllers at rest, tick 0."""
+        self.reset_channels()
+        for controller in self.controllers.values():
+            controller.reset()
+
+    def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int = 0) -> None:
+        """A GPIO from the host: every input channel is overwritten and then held."""
+        self.hold(floats, ints)
+
+    def reference_at(self, motor: str) -> float:
+        """The reference (rad/s) of ``motor`` at the current tick."""
+        if self._schedules is not None:
+            return self._schedules[motor][min(self.tick, MAX_TICKS - 1)]
+        return self.in_floats[IN_REFERENCE[motor]]
+
+    def control(self, io: CartIO, now_ms: int = 0) -> tuple[float, float]:
+        """One ``control()`` call: returns the voltages (V) for the next tick's ``io()``."""
+        measured = {"a": io.speed_a_rad_s, "b": io.speed_b_rad_s}
+        out = [0.0] * 8
+        out[CH_FIRMWARE_ID] = float(ONBOARD_ID)
+        voltage = {"a": 0.0, "b": 0.0}
+        for i, motor in enumerate(MOTORS):
+            controller = self.controllers.get(motor)
+            if controller is None:
+                continue
+            reference = self.reference_at(motor)
+            voltage[motor] = controller.step(reference, measured[motor])
+            out[OUT_SPEED + i] = measured[motor]
+            out[OUT_VOLTAGE + i] = voltage[motor]
+            out[OUT_REFERENCE + i] = reference
+        self.out_floats = out
+        self.tick += 1
+        return voltage["a"], voltage["b"]

@@ -1,0 +1,382 @@
+"""The real cart over serial (``--plant serial:PORT``), running the bridge sketch of ``firmware/``.
+
+The loop is clocked by the cart: each GPIO the cart sends (every 10 ms) is one tick. The host
+answers each with the full channel vector of the bridge contract (``docs/serial-protocol.md``):
+voltages A and B, drive = 1 and a sequence number that increases by one per frame. The bridge
+(version 2) writes the newest command as the voltage of its next ``io()`` and echoes the sequence
+number of the command each ``io()`` applied; from that echo the plant measures the loop delay::
+
+    tick k      the cart measures, sends GPIO k (1.2 ms on the line at 500 kbaud, then the USB bridge)
+    host        computes from GPIO k, sends command s
+    tick k+E    io() put s's voltage on the motor: the first GPIO that echoes s
+
+so the loop delay from measurement to applied voltage is E ticks: 1 when the reply reaches the cart
+within the tick, as on-board control (the report's "microOS delay"). A model of the loop has an
+input delay of ``nk = loop_delay_ticks + 1`` (2, as in the report).
+
+The port opens at 500 kbaud. A cart that answers only at 115200 baud (the course's firmware, or a
+bridge before version 2), or that sends another bridge version, is refused with one line naming
+the sketch to flash (:class:`~cartctl.link.cart_link.UnsupportedCartError`).
+
+Faults are counted, not fatal: CRC errors and garbage are skipped by the framer, missing cart ticks
+are counted, and so are the host's frames the cart never saw (the bridge counts the sequence
+numbers it skipped and sends the count back). No GPIO for 100 ms, or a vanished port, raises
+:class:`~cartctl.errors.PlantError`. :meth:`SerialCart.close` sends drive = 0 with zero volts
+whenever the port still works.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import statistics
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from cartctl.cart import PERIOD_S
+from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
+from cartctl.errors import PlantError
+from cartctl.link import (
+    BRIDGE_BAUD,
+    BRIDGE_VERSION,
+    TIMING_FIRST_ID,
+    TIMING_REPORTS,
+    CartSample,
+    Encoder,
+    Gpio,
+    HostCommand,
+    next_seq,
+    tick_difference,
+)
+from cartctl.link.cart_link import (
+    DEFAULT_SILENCE_TIMEOUT_S,
+    CartLink,
+    UnsupportedCartError,
+)
+from cartctl.link.loop_delay import MIN_ECHOES, EchoDelays, delay_change
+from cartctl.plants.base import Measurement
+
+STOP_FRAMES = 3
+"""drive = 0 frames sent on close (one may be lost to line noise)."""
+PROBE_ECHOES = MIN_ECHOES
+"""Echoes :meth:`SerialCart.measure_loop_delay` judges first: done when they are clear."""
+PROBE_MAX_ECHOES = 50
+"""Echoes it takes when the first :data:`PROBE_ECHOES` are not clear."""
+PROBE_MAX_TICKS = 100
+"""Longest :meth:`SerialCart.measure_loop_delay` waits for them (ticks, 1 s)."""
+PROBE_SILENCE_S = 0.5
+"""Longest wait for a GPIO during the probe (s), as :meth:`SerialCart.reset` allows: nothing is
+driven yet, and a host held up that long (a loaded PC) is no fault of the cart's."""
+BACKLOG_WAIT_S = 0.006
+"""A GPIO that follows the one :meth:`SerialCart.reset` took within this long is a backlog (the
+cart's frames come 10 ms apart, give or take the USB bridge's 5 ms), not the next tick."""
+FLASH_HINT = (
+    f"flash firmware/cartctl_bridge (bridge version {BRIDGE_VERSION}, 500 kbaud; see "
+    "firmware/README.md)"
+)
+
+
+class SerialCart:
+    """A cart on a serial port as a :class:`~cartctl.plants.base.Plant`, clocked by the cart.
+
+    Parameters
+    ----------
+    port : str
+        Device path (``/dev/ttyACM0``, or the virtual cart's ``/dev/pts/N``).
+    connect_timeout_s : float
+        Longest wait for the first HEARTBEAT after opening the port.
+    silence_timeout_s : float
+        Longest wait for a GPIO once running (default 0.1 s).
+    on_print : callable, optional
+        Receives the cart's PRINT lines (default: ``cart: …`` on stderr).
+    serial_factory : callable, optional
+        Opens the port (default ``serial.Serial``).
+
+    Besides the Plant protocol it offers the split :meth:`send` / :meth:`receive` that the
+    cart-clocked loop uses to time its own compute, and :meth:`link_summary` for the run summary.
+    """
+
+    period_s: float = PERIOD_S
+
+    def __init__(
+        self,
+        port: str,
+        *,
+        connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S,
+        silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
+        on_print: Callable[[str], None] | None = None,
+        serial_factory: Callable[..., Any] | None = None,
+    ) -> None:
+        self.port = port
+        self.connect_timeout_s = float(connect_timeout_s)
+        self.link = CartLink(port, silence_timeout_s=silence_timeout_s, on_print=on_print,
+                             serial_factory=serial_factory)  # fmt: skip
+        self.encoder = Encoder(sysid=0, compid=0)
+        self.connected = False
+        self.sample: CartSample | None = None
+        self.arrival_s = 0.0
+        self.tick_index = 0
+        self._seq = 1
+        self._sent_at: dict[int, int] = {}
+        self._echo = -1
+        self.echo_delays: collections.Counter[int] = collections.Counter()
+        """Echoes per delay (ticks) since the probe: every command the cart applied."""
+        self.probe_delays: EchoDelays | None = None
+        """What :meth:`measure_loop_delay` measured, None before it."""
+        self.missed_ticks = 0
+        self.skipped_ticks = 0
+        self.watchdog_trips = 0
+        self.frames_sent = 0
+        """Frames sent since the last :meth:`reset` (the stop frames of :meth:`close` excluded)."""
+        self._lost_base = 0
+        self._sent_any = False
+        self.reply_latency_s: collections.deque[float] = collections.deque(maxlen=1 << 20)
+        """Per tick of the run: from the cart's frame decoded to the host's reply written (s)."""
+
+    # -- connecting -----------------------------------------------------------------------------
+
+    def connect(self) -> None:
+        """Open the port and wait for the cart's HEARTBEAT (raises a clear error otherwise)."""
+        if self.connected:
+            return
+        self.link.open()
+        self._port_opened()
+        try:
+            baud = self.link.wait_heartbeat_any_rate(self.connect_timeout_s)
+            if baud != BRIDGE_BAUD:
+                raise UnsupportedCartError(
+                    f"the cart on {self.port} answers at {baud} baud: it runs the course's "
+                    f"firmware or a cartctl bridge older than version {BRIDGE_VERSION}; "
+                    f"{FLASH_HINT}"
+                )
+        except BaseException:
+            self.link.close()
+            raise
+        self.connected = True
+
+    def _port_opened(self) -> None:
+        """Between opening the port and waiting for the HEARTBEAT (the virtual cart boots here)."""
+
+    # -- the Plant protocol ---------------------------------------------------------------------
+
+    def reset(self) -> Measurement:
+        """Connect if needed, drop what waited in the buffer, and take the next GPIO as tick 0."""
+        self.connect()
+        while self.link.gpio_waiting():  # stale ticks from before the run
+            self.link.next_gpio()
+        self.link.next_gpio(max(self.link.silence_timeout_s, 0.5))
+        # a backlog still coming in (the port's reader was held up) is not a fresh tick: answering
+        # it would put two replies into one tick of the cart, and one of them would be lost. Let
+        # it pass, then take the next frame as it arrives: tick 0 is answered while it is fresh.
+        while self.link.gpio_waiting(wait_s=BACKLOG_WAIT_S):
+            self.link.next_gpio()
+        gpio, arrival = self.link.next_gpio(max(self.link.silence_timeout_s, 0.5))
+        sample = CartSample.from_gpio(gpio)
+        if sample.bridge_version != BRIDGE_VERSION:
+            raise UnsupportedCartError(
+                f"the cart on {self.port} runs bridge version {sample.bridge_version or 'before 2'}"
+                f", cartctl needs {BRIDGE_VERSION}; {FLASH_HINT}"
+            )
+        self.sample, self.arrival_s, self.tick_index = sample, arrival, 0
+        if not self._sent_any:  # differs from what the cart holds: counts as new, none lost
+            self._seq = next_seq(sample.echo_seq)
+        self._echo = sample.echo_seq
+        self._sent_at.clear()
+        self._lost_base = sample.host_frames_lost
+        self.frames_sent = 0
+        self.reply_latency_s.clear()
+        self.link.thread_maxima.clear()
+        return Measurement(sample.speed_a_rad_s, sample.speed_b_rad_s)
+
+    def send(self, voltage_a_v: float, voltage_b_v: float, *, drive: bool = True) -> None:
+        """Send the channel vector for this tick (voltages, sequence number, drive)."""
+        self._send(voltage_a_v, voltage_b_v, drive)
+        self.frames_sent += 1
+        self.reply_latency_s.append(time.perf_counter() - self.arrival_s)
+
+    def _send(self, voltage_a_v: float, voltage_b_v: float, drive: bool) -> None:
+        if self.link.vanished:
+            raise PlantError(self.link.failure)
+        command = HostCommand(float(voltage_a_v), float(voltage_b_v), self._seq, drive)
+        floats, ints = command.to_channels()
+        self.link.send(self.encoder.gpio(0, floats, ints))
+        self._sent_any = True
+        self._sent_at[self._seq] = self.tick_index
+        if len(self._sent_at) > 256:  # only the recent ones can still be echoed
+            self._sent_at.pop(next(iter(self._sent_at)))
+        self._seq = next_seq(self._seq)
+
+    def receive(self) -> Measurement:
+        """Wait for the cart's next tick and return its measurement.
+
+        When the host has fallen behind (more GPIOs already waiting), the older ones are dropped
+        and counted in ``skipped_ticks``: the loop always answers the freshest measurement.
+        """
+        if self.link.failure:  # after a fault, do not wait again (zero volts go out at once)
+            raise PlantError(self.link.failure)
+        self._accept(*self.link.next_gpio())
+        while self.link.gpio_waiting():
+            self._accept(*self.link.next_gpio())
+            self.skipped_ticks += 1
+        sample = self.sample
+        assert sample is not None
+        return Measurement(sample.speed_a_rad_s, sample.speed_b_rad_s)
+
+    def _accept(self, gpio: Gpio, arrival_s: float) -> None:
+        """Take one GPIO: count missing cart ticks, watchdog trips and the echo delay."""
+        sample = CartSample.from_gpio(gpio)
+        previous = self.sample
+        if previous is not None:
+            gap = tick_difference(previous.cart_tick, sample.cart_tick)
+            self.missed_ticks += max(0, gap - 1)
+            self.tick_index += max(1, gap)
+            if sample.watchdog_tripped and not previous.watchdog_tripped:
+                self.watchdog_trips += 1
+        if sample.echo_seq != self._echo:
+            self._echo = sample.echo_seq
+            sent = self._sent_at.get(sample.echo_seq)
+            if sent is not None:
+                self.echo_delays[self.tick_index - sent] += 1
+        self.sample, self.arrival_s = sample, arrival_s
+
+    def measure_loop_delay(
+        self,
+        *,
+        echoes: int = PROBE_ECHOES,
+        max_echoes: int = PROBE_MAX_ECHOES,
+        max_ticks: int = PROBE_MAX_TICKS,
+    ) -> int:
+        """The loop delay (ticks), measured from the echo without driving the motors.
+
+        Connects if needed, then answers each cart tick with drive = 0 and zero volts (the bridge
+        echoes the sequence number whatever drive says) until ``echoes`` echoes came back. When
+        they are clear (:attr:`EchoDelays.clear <cartctl.link.loop_delay.EchoDelays.clear>`) the
+        probe is done; otherwise it goes on to ``max_echoes`` and judges them all. The most
+        frequent delay counts; :attr:`probe_delays` keeps the spread. The echo statistics are then
+        cleared, so the run's own are not mixed with the probe's; a following :meth:`reset` starts
+        the run at the next tick.
+
+        Raises
+        ------
+        PlantError
+            No echo within ``max_ticks`` ticks (the cart does not run the bridge sketch), or a
+            fault of the link.
+        """
+        self.reset()
+        self.echo_delays.clear()
+        judged = False
+        silence_s = self.link.silence_timeout_s
+        self.link.silence_timeout_s = max(silence_s, PROBE_SILENCE_S)
+        try:
+            for _ in range(max_ticks):
+                self.send(0.0, 0.0, drive=False)
+                self.receive()
+                total = self.echo_delays.total()
+                if total >= max_echoes:
+                    break
+                if total >= echoes and not judged:  # judged once: no stopping at a lucky moment
+                    judged = True
+                    if EchoDelays.of(self.echo_delays).clear:
+                        break
+        finally:
+            self.link.silence_timeout_s = silence_s
+        self.probe_delays = EchoDelays.of(self.echo_delays)
+        delay = self.loop_delay_ticks
+        if delay is None:
+            raise PlantError(
+                f"the cart on {self.port} echoed none of {max_ticks} commands: is the bridge "
+                "sketch of firmware/ on it?"
+            )
+        self.echo_delays.clear()
+        self.missed_ticks = self.skipped_ticks = self.watchdog_trips = 0
+        return delay
+
+    def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
+        """Send this tick's voltages, then wait for the cart's next tick."""
+        self.send(voltage_a_v, voltage_b_v)
+        return self.receive()
+
+    def close(self) -> None:
+        """Send drive = 0 with zero volts (if the port still works), then close it."""
+        if self.connected and not self.link.vanished:
+            with contextlib.suppress(PlantError):
+                for _ in range(STOP_FRAMES):
+                    self._send(0.0, 0.0, drive=False)
+        self.link.close()
+        self.connected = False
+
+    # -- what the link measured ------------------------------------------------------------------
+
+    @property
+    def echo_delay_ticks(self) -> int | None:
+        """The most frequent echo delay E (ticks), None before any echo."""
+        if not self.echo_delays:
+            return None
+        return self.echo_delays.most_common(1)[0][0]
+
+    @property
+    def loop_delay_ticks(self) -> int | None:
+        """Ticks from a measurement to the tick its voltage is on the motor: E (the bridge echoes
+        what ``io()`` applied)."""
+        return self.echo_delay_ticks
+
+    @property
+    def host_frames_lost(self) -> int:
+        """The host's frames the cart never saw since :meth:`reset` (from the cart's count).
+
+        The count comes with the cart's samples, so the last few frames of a run (those sent
+        after the last sample's tick) are not in it.
+        """
+        if self.sample is None:
+            return 0
+        return tick_difference(self._lost_base, self.sample.host_frames_lost)
+
+    def _cart_timing(self) -> dict[str, int] | None:
+        """The maxima of the bridge's own reports over the run, None without any."""
+        maxima = self.link.thread_maxima
+        ids = [TIMING_FIRST_ID + k for k in range(len(TIMING_REPORTS))]
+        if not any(i in maxima for i in ids):
+            return None
+        return {name: maxima.get(i, 0) for i, name in zip(ids, TIMING_REPORTS, strict=True)}
+
+    def link_summary(self) -> dict[str, Any]:
+        """Link figures for the run summary (``run --json``'s ``link``)."""
+        stats = self.link.stats
+        delays = list(self.echo_delays.elements())
+        seen, probe = EchoDelays.of(self.echo_delays), self.probe_delays
+        lost, sent = self.host_frames_lost, self.frames_sent
+        latency_us = 1e6 * np.array(self.reply_latency_s)
+        p50, p99, top = (
+            (float(v) for v in (*np.percentile(latency_us, [50.0, 99.0]), latency_us.max()))
+            if latency_us.size
+            else (None, None, None)
+        )  # as the executor's timing figures
+
+        return {
+            "loop_delay_ticks": self.loop_delay_ticks,
+            "link": {
+                "port": self.port,
+                "echo_delay_ticks": self.echo_delay_ticks,
+                "echo_delay_range": [min(delays), max(delays)] if delays else None,
+                "echo_delay_median": statistics.median(delays) if delays else None,
+                "loop_delay_ticks_seen": seen.to_dict()["counts"],
+                "loop_delay_probe": None if probe is None else probe.to_dict(),
+                "loop_delay_change": None if probe is None else delay_change(probe, seen),
+                "frames": stats.frames,
+                "crc_errors": stats.crc_errors,
+                "garbage_bytes": stats.garbage_bytes,
+                "seq_gaps": stats.seq_gaps,
+                "lost_frames": stats.lost_frames,
+                "missed_ticks": self.missed_ticks,
+                "skipped_ticks": self.skipped_ticks,
+                "watchdog_trips": self.watchdog_trips,
+                "host_frames_sent": sent,
+                "host_frames_lost": lost,
+                "host_frames_lost_percent": 100.0 * lost / sent if sent else 0.0,
+                "reply_latency_us": {"p50": p50, "p99": p99, "max": top},
+                "cart_timing": self._cart_timing(),
+            },
+        }

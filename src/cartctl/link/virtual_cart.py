@@ -1,0 +1,394 @@
+"""The virtual cart: the physical simulator behind a pseudo-terminal, speaking like the bridge sketch.
+
+``cartctl virtual-cart`` runs one in the foreground and prints its port; ``--plant virtual`` starts
+one inside the process and drives it through :class:`~cartctl.link.serial_cart.SerialCart`
+(:mod:`cartctl.link.virtual_serial`), so the real serial code path (pyserial, framing, the bridge contract, the faults) runs with no hardware.
+
+It keeps the firmware's schedule within each 10 ms tick (``docs/serial-protocol.md``). The bridge
+sketch (version 2, the default)::
+
+    0 ms       drain the serial port: the host's newest command becomes the stored voltage;
+               io(): the physics advances one tick with that command landing ``actuation_ms``
+               after the previous tick, and the encoders are read; control(): the bridge logic
+               (:class:`~cartctl.link.bridge_firmware.BridgeFirmware`)
+    1.2 ms     one GPIO out with what control() wrote (a HEARTBEAT every 1.1 s as well)
+    every ms   the bridge's own thread drains the serial port: a newer command replaces the
+               stored voltage
+
+The line runs at 500 kbaud and the receive ring holds 255 bytes (the sketch's build flag). The
+Mega's USB bridge is modelled (``usb=off`` turns it off): the cart's bytes reach the PC at the
+ATmega16U2's next 4.096 ms flush and the USB frame after it, the PC's at the next 1 ms USB frame
+(:mod:`cartctl.link.cart_uart`). ``bridge=1`` runs the sketch before version 2: 115200 baud, a
+63-byte ring, microOS's communication thread 1.2 ms into the tick, a drain every 1 ms and right
+before ``control()``, and the voltage stored at ``control()`` (loop delay 3); it sends 0 as its
+version. ``receive=microos`` runs the sketch as it was before its own drains: microOS's
+communication thread alone drains the port, once per tick, and ``control()`` reads what it held.
+Then two replies that reach the cart a little closer together than the tick overflow the ring.
+
+A pseudo-terminal ignores the baud rate, so the writer thread releases outgoing bytes at the line's
+rate, and incoming bytes count as received only once the line could have carried them. When the
+host opens the port at another rate than the cart's, both sides read noise, as on a real line.
+Three threads: ticks, reader, writer. The drains are computed on the cart's clock (tick k starts
+``k × 10 ms`` after boot), whenever the tick thread gets to them, so a busy host machine delays
+the cart's replies but not its view of when bytes arrived.
+
+Faults (:class:`CartFaults`) are injected on the way out: garbage bursts between frames, corrupted
+frames, a stall (the cart stops ticking and sending, the port stays open) and a pulled cable (the
+port vanishes); and on the way in: replies held back by a random delay (``reply_jitter_ms``),
+and stretches of ticks at which the host's commands arrive a tick late (``late``).
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import math
+import os
+import random
+import termios
+import threading
+import time
+import tty
+from collections.abc import Sequence
+from typing import Protocol, cast
+
+from cartctl.cart import PERIOD_S
+from cartctl.link import Encoder, encode_gpiox_v2
+from cartctl.link.bridge import BRIDGE_BAUD, CH_BRIDGE_VERSION, LEGACY_BAUD, TIMING_FIRST_ID
+from cartctl.link.bridge_firmware import TICK_MODULO, BridgeFirmware, CartIO
+from cartctl.link.cart_faults import RECEIVE_SCHEDULES, CartFaults
+from cartctl.link.cart_uart import (
+    BRIDGE_RX_RING_BYTES,
+    RX_RING_BYTES,
+    USB_FLUSH_PERIOD_S,
+    USB_FRAME_S,
+    LineReader,
+    MicroosParser,
+    PacedWriter,
+    UsbBridge,
+    byte_time_s,
+    fill_ring,
+)
+from cartctl.plants.physics import PhysicsPlant
+
+HEARTBEAT_PERIOD_S = 1.1
+SILENCE_TIMEOUT_S = 0.5
+"""How long a host in this process waits for the virtual cart before it calls it silent (a real
+cart's is 0.1 s): the cart is threads of this process, which a busy PC (or a virtual machine's
+host) can hold up for longer than a real cart is ever quiet. Its stall and pull faults are still
+found, that much later."""
+READY_TEXT = "cartctl bridge ready"
+COMM_PHASE_US = 1200
+"""The cart's GPIO goes out this long (µs) after the tick starts: io() and control() take 1.2 ms
+on the Mega (then the bridge sends it; before version 2, microOS's communication thread did)."""
+TICK_BUSY_US, DRAIN_BUSY_US = COMM_PHASE_US, 60
+"""What the virtual cart reports as 200 and 201 (µs): fixed figures, it has no AVR to time; 202
+is the tick on its clock and 203 its model of the ring."""
+_TERMIOS_SPEED = {getattr(termios, f"B{rate}"): rate for rate in (9600, 19200, 38400, 57600,
+                  115200, 230400, 250000, 460800, 500000, 576000, 921600, 1000000, 2000000)
+                  if hasattr(termios, f"B{rate}")}  # fmt: skip
+
+
+class CartFirmware(Protocol):
+    """What the virtual cart runs in ``control()``, with the GPIO channels it holds and writes."""
+
+    in_ints: list[int]
+    out_floats: list[float]
+    out_ints: list[int]
+    tick: int
+
+    def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int) -> None:
+        """The channels held from the host's last GPIO, handed over at ``now_ms``."""
+        ...
+
+    def control(self, io: CartIO, now_ms: int) -> tuple[float, float]:
+        """One tick: returns the voltages (V) for the next ``io()``; fills the output channels."""
+        ...
+
+
+class VirtualCart:
+    """The physical simulator behind a pseudo-terminal, speaking the bridge contract.
+
+    Parameters
+    ----------
+    preset : str
+        Physics preset, 'ground' or 'air'.
+    noise_std_rad_s : float
+        Extra measurement noise of the simulator (rad/s).
+    seed : int, optional
+        Seeds the simulator's noise and the fault injection.
+    faults : CartFaults, optional
+        Faults to inject (none by default).
+    period_s : float
+        The tick (s), 0.01 as microOS.
+    firmware : CartFirmware, optional
+        What runs in ``control()``: the bridge sketch (default), or a controller on the cart
+        (which reads the channels microOS's communication thread received: ``receive=microos``).
+
+    Use as a context manager, or :meth:`start` and :meth:`stop`. :attr:`port` is the path to
+    open (``/dev/pts/N``).
+    """
+
+    def __init__(
+        self,
+        preset: str = "ground",
+        *,
+        noise_std_rad_s: float = 0.0,
+        seed: int | None = None,
+        faults: CartFaults | None = None,
+        period_s: float = PERIOD_S,
+        firmware: CartFirmware | None = None,
+    ) -> None:
+        self.faults = faults or CartFaults()
+        self.physics = PhysicsPlant(preset, noise_std_rad_s=noise_std_rad_s, seed=seed,
+                                    actuation_ms=self.faults.actuation_ms,
+                                    reversed_motors=self.faults.reversed_motors)  # fmt: skip
+        self.preset = preset
+        self.period_s = float(period_s)
+        self.firmware: CartFirmware = firmware if firmware is not None else BridgeFirmware()
+        self.receive_schedule = self.faults.receive if firmware is None else "microos"
+        self.bridge_version = self.faults.bridge if firmware is None else 0
+        if self.receive_schedule == "microos" and self.bridge_version == 2:
+            self.bridge_version = 1  # microOS's thread alone: the sketch before its own drains
+        """2: the bridge sketch of ``firmware/``; 1: the one before; 0: not the bridge."""
+        self.baud = BRIDGE_BAUD if self.bridge_version == 2 else LEGACY_BAUD
+        self.ring_bytes = BRIDGE_RX_RING_BYTES if self.bridge_version == 2 else RX_RING_BYTES
+        self._rng = random.Random(seed)
+        usb = (UsbBridge(self._rng.uniform(0.0, USB_FLUSH_PERIOD_S),
+                         self._rng.uniform(0.0, USB_FRAME_S))
+               if self.faults.usb else None)  # fmt: skip
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)  # no echo, no line editing before the host configures the port
+        os.set_blocking(self._master, False)
+        self.port = os.ttyname(self._slave)
+        self._stop = threading.Event()
+        self._writer = PacedWriter(self._master, self._stop, byte_s=byte_time_s(self.baud),
+                                   usb=usb)  # fmt: skip
+        self._reader = LineReader(
+            self._master, self._stop, reply_jitter_s=self.faults.reply_jitter_ms / 1000.0,
+            seed=None if seed is None else seed + 1, byte_s=byte_time_s(self.baud),
+            usb_frame_phase_s=None if usb is None else usb.frame_phase_s,
+        )  # fmt: skip
+        self._reader.rate_ok = self._writer.rate_ok = self._host_rate_matches
+        self._parser = MicroosParser()
+        self._ring_high = self._lag_us = 0
+        self._held: tuple[list[float], list[int]] = ([0.0] * 8, [0] * 4)
+        self.boot_s = 0.0
+        """``time.perf_counter`` at boot: tick k starts ``k × period_s`` later."""
+        self._ticker = threading.Thread(target=self._run, name="virtual-cart", daemon=True)
+        self.ticks = 0
+        self.true_speeds: dict[int, tuple[float, float]] = {}
+        """True wheel speeds (rad/s) at each recent tick, by the tick counter the cart sends."""
+        self.frames_received = 0
+        """GPIO frames microOS decoded from the host."""
+        self.ring_dropped_bytes = 0
+        """Bytes the receive ring dropped (it was full)."""
+        self.last_voltage_v: tuple[float, float] = (0.0, 0.0)
+        self.applied_log: collections.deque[tuple[float, float, float]] = collections.deque(
+            maxlen=1024
+        )
+        """``(time.perf_counter, A, B)``: the voltages io() put on the motors at recent ticks."""
+        self.state = "idle"
+        self.first_frame_at_s: float | None = None
+        """``time.perf_counter`` when the host's first GPIO arrived (faults count from there)."""
+        self.fault_at_s: float | None = None
+        """``time.perf_counter`` when the injected stall or pulled cable began."""
+
+    def __enter__(self) -> VirtualCart:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def start(self) -> None:
+        """Boot the cart: the threads start, the first HEARTBEAT and the PRINT line go out."""
+        self._writer.start()
+        self._reader.start()
+        self._ticker.start()
+
+    def stop(self) -> None:
+        """Stop the threads and close the pseudo-terminal."""
+        self._stop.set()
+        for thread in (self._ticker, self._writer, self._reader):
+            if thread.is_alive() and thread is not threading.current_thread():
+                thread.join(timeout=1.0)
+        self._close_fds()
+
+    def wait(self) -> None:
+        """Block until the cart stops (Ctrl-C, a pulled cable)."""
+        while self._ticker.is_alive():
+            self._ticker.join(timeout=0.2)
+
+    def arm_faults(self) -> None:
+        """Start the stall/pull clock now, for a host that never sends (``cartctl monitor``)."""
+        if self.first_frame_at_s is None:
+            self.first_frame_at_s = time.perf_counter()
+
+    def wait_seconds(self, seconds: float) -> None:
+        """Block for ``seconds`` or until the cart stops."""
+        self._ticker.join(timeout=seconds)
+
+    @property
+    def last_host_byte_at_s(self) -> float | None:
+        """``time.perf_counter`` when the host's last byte was through the line (None: none yet)."""
+        return self._reader.last_byte_at_s
+
+    def wait_ticks(self, n: int, timeout_s: float = 0.5) -> None:
+        """Block until the cart has run ``n`` more ticks (or stopped, or ``timeout_s`` passed)."""
+        target = self.ticks + n
+        deadline = time.perf_counter() + timeout_s
+        while self.ticks < target and self._ticker.is_alive() and time.perf_counter() < deadline:
+            time.sleep(0.002)
+
+    def _close_fds(self) -> None:
+        for name in ("_master", "_slave"):
+            fd = getattr(self, name)
+            if fd >= 0:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+                setattr(self, name, -1)
+
+    # -- the firmware ---------------------------------------------------------------------------
+
+    def _send(self, frame: bytes, not_before_s: float, *, track: bool = False) -> None:
+        faults, rng = self.faults, self._rng
+        if faults.garbage and rng.random() < faults.garbage:
+            burst = bytes(rng.getrandbits(8) for _ in range(rng.randint(1, 16)))
+            self._writer.put(burst, not_before_s)
+        if faults.corrupt and rng.random() < faults.corrupt:
+            data = bytearray(frame)
+            i = rng.randrange(1, len(data))  # any byte after the start byte
+            data[i] ^= rng.randint(1, 255)
+            frame = bytes(data)
+        self._writer.put(frame, not_before_s, track=track)
+
+    def _drain(self, at_us: int, hand_over: bool) -> None:
+        """A call of microOS's receive at ``at_us`` after boot; ``hand_over``: the bridge's."""
+        until_us = at_us - self._lag_us  # ``late``: what reached the line a tick ago
+        kept, dropped = fill_ring(self._reader.take(self.boot_s + until_us * 1e-6), self.ring_bytes)
+        self._ring_high = max(self._ring_high, len(kept))
+        self.ring_dropped_bytes += dropped
+        for gpio in self._parser.feed(kept):
+            self._held = (list(gpio.floats), list(gpio.ints))
+            self.frames_received += 1
+            if self.first_frame_at_s is None:
+                self.first_frame_at_s = self.boot_s + at_us * 1e-6
+        if hand_over:
+            self.firmware.receive(*self._held, at_us // 1000)
+
+    def receive_for_tick(self, j: int) -> None:
+        """Every drain from the previous tick's ``io()`` up to tick ``j``'s, in order.
+
+        Bridge 2: a drain every 1 ms and one at the tick's start, right before ``io()``, each
+        handing the held channels over (the newest command becomes the stored voltage). Bridge 1:
+        microOS's communication thread drains :data:`COMM_PHASE_US` into each tick and the bridge
+        every 1 ms and right before ``control()``. ``receive='microos'``: the communication
+        thread alone, and ``control()`` is handed what microOS holds.
+        """
+        period_us = round(self.period_s * 1e6)
+        tick_us = j * period_us
+        self._lag_us = period_us if self.faults.late_at(j) else 0
+        drain_us = RECEIVE_SCHEDULES[self.receive_schedule]
+        if j > 0:
+            start_us = tick_us - period_us
+            drains = [] if self.bridge_version == 2 else [(start_us + COMM_PHASE_US, False)]
+            if drain_us is not None:  # its drain at start_us came before that tick's io()
+                drains += [(start_us + m * drain_us, True) for m in range(1, period_us // drain_us)]
+            for at_us, hand_over in sorted(drains):
+                self._drain(at_us, hand_over)
+        if drain_us is not None:
+            self._drain(tick_us, hand_over=True)
+        else:
+            self.firmware.receive(*self._held, tick_us // 1000)
+
+    def _host_rate_matches(self) -> bool:
+        """Whether the host opened the port at the cart's rate (else both sides read noise)."""
+        try:
+            speed = termios.tcgetattr(self._slave)[5]
+        except (OSError, termios.error):
+            return True
+        rate = _TERMIOS_SPEED.get(speed)
+        return rate is None or rate == self.baud
+
+    def _run(self) -> None:
+        encoder = Encoder(sysid=0, compid=0)
+        physics, firmware = self.physics, self.firmware
+        rad_per_count = 2.0 * math.pi / physics.params.counts_per_rev
+        period_us = round(self.period_s * 1e6)
+        boot = self.boot_s = time.perf_counter()
+        self.state = "running"
+        generation_a = self.faults.generation == "a"
+        if generation_a:  # a generation-B cart speaks MAVLink 2 only (its GPIOX frames, below)
+            self._writer.put(encoder.heartbeat(0))
+            ready = getattr(self.firmware, "ready_text", READY_TEXT)
+            for frame in encoder.print_text(ready + "\r\n"):
+                self._writer.put(frame)
+        next_heartbeat = boot + HEARTBEAT_PERIOD_S
+        measurement = physics.reset()
+        voltage = (0.0, 0.0)
+        j = 0
+        faults = self.faults
+        while not self._stop.is_set():
+            tick_us = j * period_us
+            deadline = boot + tick_us * 1e-6
+            delay = deadline - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+            now = time.perf_counter()
+            driven = 0.0 if self.first_frame_at_s is None else now - self.first_frame_at_s
+            if faults.pull_after_s is not None and driven >= faults.pull_after_s:
+                self.state = "cable pulled"
+                self.fault_at_s = time.perf_counter()
+                self._stop.set()
+                self._close_fds()
+                return
+            if faults.stall_after_s is not None and driven >= faults.stall_after_s:
+                self.state = "stalled"
+                self.fault_at_s = time.perf_counter()
+                self._stop.wait()
+                return
+            self.receive_for_tick(j)  # on the cart's clock, whenever this thread gets here
+            if self.bridge_version == 2:  # the newest command the drains stored
+                voltage = cast("BridgeFirmware", firmware).command_v
+            # io(): the stored voltage drives from actuation_ms after the previous tick; encoders
+            if j > 0:
+                measurement = physics.step(*voltage)
+            counts = physics.encoder_counts
+            applied = physics.applied_voltage_v
+            self.applied_log.append((deadline, applied[0], applied[1]))
+            io = CartIO(
+                measurement.speed_a_rad_s, measurement.speed_b_rad_s, applied[0], applied[1],
+                counts[0] * rad_per_count, counts[1] * rad_per_count,
+            )  # fmt: skip
+            tick_counter = firmware.tick
+            self.true_speeds[tick_counter] = (
+                measurement.true_speed_a_rad_s or 0.0,
+                measurement.true_speed_b_rad_s or 0.0,
+            )
+            self.true_speeds.pop((tick_counter - 512) % TICK_MODULO, None)  # keep the recent ones
+            voltage = firmware.control(io, tick_us // 1000)
+            if self.bridge_version == 1:  # the sketch before version 2 sends 0 there
+                firmware.out_floats[CH_BRIDGE_VERSION] = 0.0
+            self.last_voltage_v = voltage
+            # microOS's communication thread sends what control() wrote
+            send_at = deadline + COMM_PHASE_US * 1e-6
+            time_ms = (tick_us // 1000) & 0xFFFFFFFF
+            if not generation_a:
+                floats12 = [*firmware.out_floats, *(float(v) for v in firmware.out_ints)]
+                self._send(encode_gpiox_v2(time_ms, floats12, seq=j % 256), send_at)
+            else:
+                self._send(encoder.gpio(time_ms, firmware.out_floats, firmware.out_ints), send_at,
+                           track=True)  # fmt: skip
+                if self.bridge_version == 2:  # its tick's timing: 120 bytes, a USB flush at once
+                    reports = (TICK_BUSY_US, DRAIN_BUSY_US, period_us, self._ring_high)
+                    self._ring_high = 0
+                    for k, value in enumerate(reports):
+                        self._writer.put(encoder.thread_info(time_ms, TIMING_FIRST_ID + k, value,
+                                                             executions=j + 1), send_at)  # fmt: skip
+            if generation_a and now >= next_heartbeat:
+                self._send(encoder.heartbeat(time_ms), send_at)
+                next_heartbeat += HEARTBEAT_PERIOD_S
+            j += 1
+            self.ticks = j
+        self.state = "stopped"
