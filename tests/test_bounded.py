@@ -63,7 +63,7 @@ DESIGN_WORK = ("cartctl.data.modelfile:load_models", "cartctl.design.make:design
 TUNE_WORK = ("cartctl.data.modelfile:load_models", "cartctl.tune.engine:run_grid",
              "cartctl.tune.grid:parse_grid")  # fmt: skip
 TUNE_GRID_WORK = ("cartctl.data.modelfile:load_models", "cartctl.tune.engine:run_grid")
-IDENTIFY_WORK = ("cartctl.data:read_trace", "cartctl.identification.pipeline:identify")
+IDENTIFY_WORK = ("cartctl.data.read:read_trace", "cartctl.identification.pipeline:identify")
 PLANT_WORK = ("cartctl.plants.factory:make_plant",)
 CART_WORK = ("cartctl.link.virtual_cart:VirtualCart", "cartctl.plants.factory:make_plant")
 

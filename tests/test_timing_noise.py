@@ -199,8 +199,8 @@ def test_mat_export_carries_the_timing_noise(capsys, workdir: Path) -> None:
 
 
 def test_the_batch_loop_refuses_timing_noise() -> None:
-    from cartctl.tune.batch import _estimator
+    from cartctl.tune.batch import _filter_terms
 
     design = design_kalman(load_models(TIMING_MODEL).motor("a"), timing_noise_std_ticks=0.5)
     with pytest.raises(InputError, match="timing noise"):
-        _estimator(KalmanSpeedEstimator(design), 4, 10)
+        _filter_terms(KalmanSpeedEstimator(design))
