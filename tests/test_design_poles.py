@@ -166,7 +166,7 @@ def test_placed_poles_with_the_disturbance_estimate(ground, poles, extra, method
     assert match(poles, np.linalg.eigvals(a_cl)) < 1e-6
     # the gain covers the estimator's state: 1 V per V on the disturbance estimate, no integrator
     assert design.estimator.has_bias and design.K.shape == (n + 1,) and design.K[n] == 1.0
-    assert design.K_xi == 0.0
+    assert design.Ki == 0.0
     # Kr gives the model's loop r → y unit DC gain: C (I − A + B K)⁻¹ B Kr = 1
     dc = design.plant.C @ np.linalg.solve(np.eye(n) - a_cl, design.plant.B)
     assert dc * design.Kr == pytest.approx(1.0)
@@ -180,7 +180,7 @@ def test_placed_poles_with_the_error_integrator(ground, poles, extra, method) ->
     assert match(poles, np.linalg.eigvals(design.closed_loop_matrix())) < 1e-6
     assert design.K.shape == (design.plant.order,)
     assert not design.estimator.has_bias
-    assert design.K_xi < 0.0  # a wheel behind (r > y) raises the voltage
+    assert design.Ki < 0.0  # a wheel behind (r > y) raises the voltage
 
 
 @pytest.mark.parametrize(("bias", "count"), [(0.0, 4), (0.03, 3)])
@@ -202,7 +202,7 @@ def test_gains_agree_with_python_control(ground) -> None:
     integrator = design_poles(ground[1], poles=[*poles, 0.1], bias_drift_std_v=0.0)
     A_a, B_a = augment(integrator.plant)
     expected = np.ravel(control.place(A_a, B_a.reshape(-1, 1), [*poles, 0.1]))
-    np.testing.assert_allclose(np.append(integrator.K, integrator.K_xi), expected, rtol=1e-9)
+    np.testing.assert_allclose(np.append(integrator.K, integrator.Ki), expected, rtol=1e-9)
 
 
 @pytest.mark.parametrize(("bias", "fast"), [(0.03, [4]), (0.0, [5, 4])])
@@ -232,10 +232,10 @@ def test_specification_with_extra_delay_places_more_fast_poles(ground) -> None:
     assert match(design.poles, np.linalg.eigvals(design.closed_loop_matrix())) < 1e-6
 
 
-def _controller_ss(K, K_xi, A, B, C, L, ts):
+def _controller_ss(K, Ki, A, B, C, L, ts):
     """The runtime's control law from y to u (r = 0) as a python-control system.
 
-    Per tick: x̂c = x̂ + L (y − C x̂), u = −K x̂c − K_xi x_i, x̂⁺ = A x̂c + B u, x_i⁺ = x_i − Ts y;
+    Per tick: x̂c = x̂ + L (y − C x̂), u = −K x̂c − Ki x_i, x̂⁺ = A x̂c + B u, x_i⁺ = x_i − Ts y;
     state [x̂, x_i], the gains K on the first K.size states of x̂.
     """
     m = A.shape[0]
@@ -244,17 +244,17 @@ def _controller_ss(K, K_xi, A, B, C, L, ts):
     lc = np.eye(m) - np.outer(L, C)
     a = np.zeros((m + 1, m + 1))
     a[:m, :m] = A @ lc - np.outer(B, k @ lc)
-    a[:m, m] = -B * K_xi
+    a[:m, m] = -B * Ki
     a[m, m] = 1.0
     b = np.r_[A @ L - B * (k @ L), -ts].reshape(-1, 1)
-    c = np.r_[-(k @ lc), -K_xi].reshape(1, -1)
+    c = np.r_[-(k @ lc), -Ki].reshape(1, -1)
     d = [[-(k @ L)]]
     return control.ss(a, b, c, d, ts)
 
 
-def _check_every_pole_is_placed(theta, nk, extra, K, K_xi, Kr, est, placed, runtime) -> None:
+def _check_every_pole_is_placed(theta, nk, extra, K, Ki, Kr, est, placed, runtime) -> None:
     """The closed loop of the plant (with its whole delay) and the controller has, as poles, the
-    placed ones, the estimator's, and z = 1 for an integrator that does not act (K_xi = 0)."""
+    placed ones, the estimator's, and z = 1 for an integrator that does not act (Ki = 0)."""
     ar, num = np.asarray(theta[:2]), np.asarray(theta[2:])  # na = 2: [c, d], then the b's
     ts = 0.01
     delay = nk + extra  # the loop's whole input delay, in ticks
@@ -262,12 +262,12 @@ def _check_every_pole_is_placed(theta, nk, extra, K, K_xi, Kr, est, placed, runt
         num, np.polymul(np.r_[1.0, ar], np.r_[1.0, np.zeros(delay + num.size - 1 - ar.size)]), ts
     )  # (a z + b) / (z² + c z + d) · z^−(delay − 1)
     A, B, C, L = (np.asarray(est[k], dtype=float) for k in ("A", "B", "C", "L"))
-    ctrl = _controller_ss(np.asarray(K, dtype=float), K_xi, A, B, C, L, ts)
+    ctrl = _controller_ss(np.asarray(K, dtype=float), Ki, A, B, C, L, ts)
     loop = control.feedback(control.ss(plant), -ctrl, sign=-1)  # u = C_ss(y): positive feedback
     got = np.linalg.eigvals(loop.A)
     filt = np.linalg.eigvals((np.eye(A.shape[0]) - np.outer(L, C)) @ A)
     expected = [complex(*p) if isinstance(p, list) else complex(p) for p in placed]
-    expected += list(filt) + ([1.0] if K_xi == 0.0 else [])
+    expected += list(filt) + ([1.0] if Ki == 0.0 else [])
     assert len(got) == len(expected)
     # the estimator's delay states give a multiple pole at 0, whose eigenvalues are only good to
     # ε^(1/k): compare the characteristic polynomials, the roots loosely
@@ -287,7 +287,7 @@ def test_the_serial_design_places_every_closed_loop_pole(ground) -> None:
     assert design.plant.order == 5 and len(design.poles) == 5  # 3 + 2 delay states
     est = {k: getattr(design.estimator, k) for k in ("A", "B", "C", "L")}
     _check_every_pole_is_placed(
-        (*model.ar, *model.b), model.nk, 2, design.K, design.K_xi, design.Kr, est,
+        (*model.ar, *model.b), model.nk, 2, design.K, design.Ki, design.Kr, est,
         list(design.poles), StateFeedbackController(design),
     )  # fmt: skip
 
@@ -456,7 +456,7 @@ def test_the_disturbance_estimate_is_the_lost_voltage(ground) -> None:
 
 
 def test_feedforward_advances_the_response_by_one_tick(ground) -> None:
-    """Error integrator: Kr = −K_xi Ts puts the reference zero at z = 0: the same response, one
+    """Error integrator: Kr = −Ki Ts puts the reference zero at z = 0: the same response, one
     tick sooner."""
     plain = [
         design_poles(m, **RECOMMENDED, reference_feedforward=False, bias_drift_std_v=0.0)

@@ -71,7 +71,7 @@ def poles_entry(
         controller_num, controller_den = feedback_tf_coeffs(design)
     return {
         "K": design.K,
-        "Ki": design.K_xi,  # the file keeps the name Ki for the state gain on x_i
+        "Ki": design.Ki,
         "Kr": design.Kr,
         "controller_num": controller_num,
         "controller_den": controller_den,

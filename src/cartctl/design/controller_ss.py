@@ -19,8 +19,8 @@ in the tick order of :mod:`cartctl.runtime.base` (correct, compute u, predict):
   u[k] = Kp·e[k] + I[k], e = r − y (:mod:`cartctl.runtime.pi`).
 - PI on the Kalman estimate: s = [x̂[k|k−1] (m states), I[k−1]]; the PI's e = r − x̂_1[k|k], with
   x̂[k|k] = x̂ + L (y − C x̂), and the estimator predicts with u.
-- Pole placement: s = [x̂[k|k−1] (m states), x_i]; u = Kr·r − K·x̂[k|k] − K_xi·x_i, x_i⁺ = x_i +
-  Ts (r − y) (:mod:`cartctl.runtime.statefeedback`). Without K_xi (integral action from the
+- Pole placement: s = [x̂[k|k−1] (m states), x_i]; u = Kr·r − K·x̂[k|k] − Ki·x_i, x_i⁺ = x_i +
+  Ts (r − y) (:mod:`cartctl.runtime.statefeedback`). Without Ki (integral action from the
   disturbance estimate) x_i does not reach u and is left out.
 
 The feedback part C_fb(z) = −U(z)/Y(z) (r = 0) closes the loop as L = C_fb·G·z^(−extra) with
@@ -179,10 +179,10 @@ def state_feedback(design: FeedbackGains) -> ControllerStateSpace:
     m = a.shape[0]
     k_full = np.zeros(m)
     k_full[: design.K.size] = design.K
-    k_xi, kr, ts = float(design.K_xi), float(design.Kr), float(design.period_s)
+    ki, kr, ts = float(design.Ki), float(design.Kr), float(design.period_s)
     lc = np.eye(m) - np.outer(gain, c)
     kl = float(k_full @ gain)
-    n = m + 1 if k_xi != 0.0 else m
+    n = m + 1 if ki != 0.0 else m
     big_a = np.zeros((n, n))
     big_a[:m, :m] = a @ lc - np.outer(b, k_full @ lc)
     big_b = np.zeros((n, 2))
@@ -193,10 +193,10 @@ def state_feedback(design: FeedbackGains) -> ControllerStateSpace:
     big_d = np.array([[kr, -kl]])
     states = _state_names(est.n_model_states, m)
     if n > m:
-        big_a[:m, m] = -k_xi * b
+        big_a[:m, m] = -ki * b
         big_a[m, m] = 1.0
         big_b[m] = [ts, -ts]
-        big_c[0, m] = -k_xi
+        big_c[0, m] = -ki
         states.append("integral_rad")
     return ControllerStateSpace(big_a, big_b, big_c, big_d, ts, tuple(states))
 

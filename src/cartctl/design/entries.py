@@ -95,14 +95,14 @@ class _Gains:
     """A :class:`~cartctl.runtime.statefeedback.FeedbackGains` rebuilt from a controller file."""
 
     K: NDArray[np.float64]
-    K_xi: float
+    Ki: float
     Kr: float
     period_s: float
     estimator: KalmanDesign
 
 
 def feedback_gains(entry: Mapping[str, Any], period_s: float) -> _Gains:
-    """A pole-placement ``[motors.X]`` entry's K, Ki (K_xi), Kr and estimator.
+    """A pole-placement ``[motors.X]`` entry's K, Ki, Kr and estimator.
 
     Raises
     ------

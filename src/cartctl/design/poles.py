@@ -33,13 +33,13 @@ integral of the speed error, which is the wheel's angle error (rad)::
     ⎡ x  ⎤        ⎡  A     0 ⎤ ⎡ x  ⎤   ⎡ B ⎤        ⎡ 0  ⎤
     ⎣ x_i⎦[k+1] = ⎣ −Ts C  1 ⎦ ⎣ x_i⎦ + ⎣ 0 ⎦ u  +   ⎣ Ts ⎦ r
 
-    u[k] = −K x̂[k|k] − K_xi x_i[k] + Kr r[k]
+    u[k] = −K x̂[k|k] − Ki x_i[k] + Kr r[k]
 
-with [K, K_xi] placing the n + 1 eigenvalues of the augmented closed loop. K_xi is negative: a
+with [K, Ki] placing the n + 1 eigenvalues of the augmented closed loop. Ki is negative: a
 positive angle error (the wheel behind) raises the voltage. The reference reaches u through the
 integrator and through Kr, which multiplies the closed loop's r → y transfer by
-(Kr (z − 1) − K_xi Ts) / (−K_xi Ts): one zero at z = 1 + K_xi Ts / Kr. With Kr = 0 there is no zero;
-the default, Kr = −K_xi Ts, puts the zero at z = 0: every signal's response to r is advanced by
+(Kr (z − 1) − Ki Ts) / (−Ki Ts): one zero at z = 1 + Ki Ts / Kr. With Kr = 0 there is no zero;
+the default, Kr = −Ki Ts, puts the zero at z = 0: every signal's response to r is advanced by
 exactly one tick, with the same shape, overshoot and peak voltage. Without the disturbance state
 the estimate carries the model's static error (friction is about 0.8 V on the ground), which is
 why it is not the default.
@@ -132,12 +132,12 @@ class PolesDesign:
         Gain on the estimator's whole state x̂ (m states): V per rad/s on the n realisation
         states, then, with the disturbance state, 1 (V per V) on b̂. ``K[:n]`` is the placed
         state-feedback gain (:attr:`state_gain`).
-    K_xi : float
-        State gain on the error integrator x_i (V per rad of angle error), u −= K_xi x_i:
-        negative, or 0 with the disturbance estimate. Controller files and ``--json`` keep the
-        key ``Ki`` for it; in the PI's sense (u += Ki ∫e) the integral gain is −K_xi.
+    Ki : float
+        State gain on the error integrator x_i (V per rad of angle error), u −= Ki x_i:
+        negative, or 0 with the disturbance estimate; the key ``Ki`` of controller files and
+        ``--json``. A state gain, so its sign is opposite to a PI's ``ki`` (u += ki ∫e).
     Kr : float
-        Reference gain (V per rad/s): the static gain with the disturbance estimate; −K_xi Ts, or 0
+        Reference gain (V per rad/s): the static gain with the disturbance estimate; −Ki Ts, or 0
         without feedforward, with the error integrator.
     estimator : KalmanDesign
         The speed estimator, on the same realisation.
@@ -145,7 +145,7 @@ class PolesDesign:
         How the gains were computed.
     integral : {'disturbance', 'error'}
         Where the integral action comes from: the estimator's input-disturbance state b̂ fed
-        back (n placed poles, K_xi = 0), or the error integrator x_i (n + 1 placed poles).
+        back (n placed poles, Ki = 0), or the error integrator x_i (n + 1 placed poles).
     settling_time_s, overshoot_percent : float or None
         The specification the poles came from, None when the poles were given.
     """
@@ -155,7 +155,7 @@ class PolesDesign:
     extra_delay_ticks: int
     poles: tuple[complex, ...]
     K: NDArray[np.float64]
-    K_xi: float
+    Ki: float
     Kr: float
     estimator: KalmanDesign
     method: str
@@ -176,13 +176,13 @@ class PolesDesign:
     def closed_loop_matrix(self) -> NDArray[np.float64]:
         """The state-feedback loop on the model; its eigenvalues are the placed poles.
 
-        A − B K[:n], shape (n, n), with the disturbance estimate; A_a − B_a [K[:n], K_xi], shape
+        A − B K[:n], shape (n, n), with the disturbance estimate; A_a − B_a [K[:n], Ki], shape
         (n + 1, n + 1), with the error integrator.
         """
         if self.integral == "disturbance":
             return self.plant.A - np.outer(self.plant.B, self.state_gain)
         A_a, B_a = augment(self.plant)
-        return A_a - np.outer(B_a, np.append(self.state_gain, self.K_xi))
+        return A_a - np.outer(B_a, np.append(self.state_gain, self.Ki))
 
     def to_dict(self) -> dict[str, object]:
         """JSON form (``design --json``: ``closed_loop_poles``, ``estimator_poles`` as [re, im])."""
@@ -193,7 +193,7 @@ class PolesDesign:
             "model_den": self.model.den().tolist(),
             "extra_delay_ticks": self.extra_delay_ticks,
             "K": self.K.tolist(),
-            "Ki": self.K_xi,
+            "Ki": self.Ki,
             "Kr": self.Kr,
             "gain_method": self.method,
             "integral_action": self.integral,
@@ -246,7 +246,7 @@ def design_poles(
         In the specification mode, how many times faster (in decay rate) the first non-dominant
         pole is than the dominant pair; the next ones are ratio + 1, ratio + 2, ….
     reference_feedforward : bool
-        Error integrator only: Kr = −K_xi Ts (True: the response one tick sooner) or Kr = 0 (r
+        Error integrator only: Kr = −Ki Ts (True: the response one tick sooner) or Kr = 0 (r
         through the integrator only). With the disturbance estimate Kr is always the static gain.
     process_noise_std_v, bias_drift_std_v, extra_noise_std_rad_s, timing_noise_std_ticks : float
         The estimator's noise levels (see :func:`~cartctl.design.kalman.design_kalman`);
@@ -332,11 +332,11 @@ def design_poles(
         # u = Kr r − K x̂ − b̂: the model's closed loop C (I − A + B K)⁻¹ B Kr has unit DC gain
         dc = float(plant.C @ np.linalg.solve(np.eye(n) - A_cl, plant.B))
         K = np.append(gains, 1.0)
-        K_xi, Kr = 0.0, 1.0 / dc  # dc ≠ 0: a zero at z = 1 was refused above
+        Ki, Kr = 0.0, 1.0 / dc  # dc ≠ 0: a zero at z = 1 was refused above
     else:
         K = gains[:-1]
-        K_xi = float(gains[-1])
-        Kr = -K_xi * plant.period_s if reference_feedforward else 0.0
+        Ki = float(gains[-1])
+        Kr = -Ki * plant.period_s if reference_feedforward else 0.0
     K.setflags(write=False)
     return PolesDesign(
         model=model,
@@ -344,7 +344,7 @@ def design_poles(
         extra_delay_ticks=int(extra_delay_ticks),
         poles=tuple(placed),
         K=K,
-        K_xi=K_xi,
+        Ki=Ki,
         Kr=Kr,
         estimator=estimator,
         method=method,

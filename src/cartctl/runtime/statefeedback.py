@@ -4,14 +4,14 @@ Where it sits: the runtime, one object per motor, stepped once per tick by the l
 :class:`~cartctl.design.poles.PolesDesign`. Per tick, in the order of :mod:`cartctl.runtime.base`::
 
     x̂      = estimator.correct(y[k])                      # x̂[k|k]
-    u_raw  = Kr r[k] − K x̂ − K_xi x_i                        (V)
+    u_raw  = Kr r[k] − K x̂ − Ki x_i                          (V)
     u      = clamp(u_raw, ±voltage_limit_v)
     x_i   += Ts (r[k] − y[k])    unless u is saturated and the error would drive it further
     estimator.predict(u)                                   # x̂[k+1|k], with the clamped voltage
     estimate = (x̂_1[k|k] + x̂_1[k+1|k]) / 2                 # the true speed now (rad/s)
 
 K covers the whole estimator state: with the input-disturbance state its last entry is 1, so
-u carries −b̂, the integral action, and K_xi is 0 (see :mod:`cartctl.design.poles`). The estimate
+u carries −b̂, the integral action, and Ki is 0 (see :mod:`cartctl.design.poles`). The estimate
 reported is the true speed at tick k: the measured speed is the average over the last tick, which
 x̂_1[k|k] estimates, and the true speed now lies half-way to the next tick's average, which the
 prediction gives (see :mod:`cartctl.design.kalman`). On ``--plant sim`` the "true" speed is the
@@ -64,7 +64,7 @@ def feedback_law(
     integral_rad : float or ndarray
         x_i before this tick (rad).
     gains : FeedbackTerms
-        K, K_xi, Kr and Ts.
+        K, Ki, Kr and Ts.
     limit_v : float
         The clamp (V).
 
@@ -73,14 +73,14 @@ def feedback_law(
     (u_raw, u, integral) : float or ndarray
         The command before and after the clamp (V), and x_i after this tick (rad).
     """
-    K, k_xi, k_r, period_s = gains
-    u_raw = k_r * reference_rad_s - k_xi * integral_rad
+    K, ki, k_r, period_s = gains
+    u_raw = k_r * reference_rad_s - ki * integral_rad
     for k, xk in zip(K, state, strict=False):
         u_raw = u_raw - k * xk
     u = clip(u_raw, limit_v)
     error = reference_rad_s - measured_rad_s
-    # the integrator moves u by −K_xi·Ts·error next tick: hold it if that deepens saturation
-    grow = (u == u_raw) | ((u_raw > u) != (-k_xi * error > 0.0))
+    # the integrator moves u by −Ki·Ts·error next tick: hold it if that deepens saturation
+    grow = (u == u_raw) | ((u_raw > u) != (-ki * error > 0.0))
     return u_raw, u, select(grow, integral_rad + period_s * error, integral_rad)
 
 
@@ -91,7 +91,7 @@ class FeedbackGains(Protocol):
     @property
     def K(self) -> NDArray[np.float64]: ...  # noqa: N802 (the literature's K)
     @property
-    def K_xi(self) -> float: ...  # noqa: N802
+    def Ki(self) -> float: ...  # noqa: N802
     @property
     def Kr(self) -> float: ...  # noqa: N802
     @property
@@ -101,11 +101,11 @@ class FeedbackGains(Protocol):
 
 
 class FeedbackTerms(NamedTuple):
-    """A design's gains as plain floats: K (one per state fed back, V per state unit), K_xi
+    """A design's gains as plain floats: K (one per state fed back, V per state unit), Ki
     (V/rad), Kr (V/(rad/s)) and Ts (s)."""
 
     K: tuple[float, ...]
-    K_xi: float
+    Ki: float
     Kr: float
     period_s: float
 
@@ -116,7 +116,7 @@ class StateFeedbackController:
     Parameters
     ----------
     design : FeedbackGains
-        K (one gain per estimator state fed back), K_xi, Kr and Ts come from here.
+        K (one gain per estimator state fed back), Ki, Kr and Ts come from here.
     estimator : StateEstimator, optional
         Owned by the controller (reset with it). Its state must start with the states K acts
         on; default a :class:`SteadyStateSpeedEstimator` on ``design.estimator``.
@@ -130,7 +130,7 @@ class StateFeedbackController:
         (rad/s).
     integral_rad : float
         The integrator state x_i, the integral of (r − y) (rad of wheel angle); it acts only
-        when K_xi ≠ 0.
+        when Ki ≠ 0.
     saturated : bool
         Whether the last command hit the limit.
     """
@@ -156,7 +156,7 @@ class StateFeedbackController:
         values = getattr(estimator, "state_values", None)  # a list, without a numpy array
         self._state_values = values if callable(values) else lambda: estimator.state.tolist()
         self.voltage_limit_v = limit
-        self.terms = FeedbackTerms(tuple(float(k) for k in design.K), float(design.K_xi),
+        self.terms = FeedbackTerms(tuple(float(k) for k in design.K), float(design.Ki),
                                    float(design.Kr), float(design.period_s))  # fmt: skip
         """The gains :func:`feedback_law` runs (read only)."""
         self.reset()
