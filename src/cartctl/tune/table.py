@@ -38,26 +38,24 @@ def plural(n: int, one: str, many: str) -> str:
     return f"{n} {one if n == 1 else many}"
 
 
-def _infeasible(n: int) -> str:
-    if n == 1:
-        return "1 infeasible request (the design refused it)"
-    return f"{n} infeasible requests (the design refused them)"
+def _counts_line(n_settings: int, c: dict[str, int], outcomes: Sequence[str]) -> str:
+    """The settings counted: the infeasible requests, the runs that failed and those without a
+    step to measure (if any), then ``outcomes`` (the counts of the runs that were measured)."""
+    parts = [plural(c["infeasible"], "infeasible request (the design refused it)",
+                    "infeasible requests (the design refused them)")]  # fmt: skip
+    if c["run failed"]:
+        parts.append(plural(c["run failed"], "run failed", "runs failed"))
+    if c["no step"]:
+        parts.append(f"{c['no step']} ran without a step in the reference to measure")
+    return f"{plural(n_settings, 'setting', 'settings')}: " + ", ".join([*parts, *outcomes])
 
 
 def counts_text(results: Sequence[TuneResult]) -> str:
     """'42 settings: 10 infeasible requests (the design refused them), 0 ran but did not settle,
     32 settled' (runs that failed and runs without a step to measure, if any, counted apart)."""
     c = status_counts(results)
-    parts = [
-        _infeasible(c["infeasible"]),
-        f"{c['not settled']} ran but did not settle",
-        f"{c['settled']} settled",
-    ]
-    if c["run failed"]:
-        parts.insert(1, plural(c["run failed"], "run failed", "runs failed"))
-    if c["no step"]:
-        parts.insert(-2, f"{c['no step']} ran without a step in the reference to measure")
-    return f"{plural(len(results), 'setting', 'settings')}: " + ", ".join(parts)
+    outcomes = [f"{c['not settled']} ran but did not settle", f"{c['settled']} settled"]
+    return _counts_line(len(results), c, outcomes)
 
 
 def robust_status(row: RobustRow) -> str:
@@ -79,17 +77,12 @@ def robust_counts(rows: Sequence[RobustRow]) -> dict[str, int]:
 def robust_counts_text(rows: Sequence[RobustRow]) -> str:
     """The counts line of ``--robust``."""
     c = robust_counts(rows)
-    parts = [
-        _infeasible(c["infeasible"]),
+    outcomes = [
         f"{c['not settled']} ran but did not settle on the model",
         f"{c['settled on some']} settled on the model but not on every plant",
         f"{c['settled on all']} settled on every plant",
     ]
-    if c["run failed"]:
-        parts.insert(1, plural(c["run failed"], "run failed", "runs failed"))
-    if c["no step"]:
-        parts.insert(-3, f"{c['no step']} ran without a step in the reference to measure")
-    return f"{plural(len(rows), 'setting', 'settings')}: " + ", ".join(parts)
+    return _counts_line(len(rows), c, outcomes)
 
 
 def _settings_columns(method: str, results: Sequence[TuneResult]) -> tuple[list[str], list[list[str]]]:  # fmt: skip
