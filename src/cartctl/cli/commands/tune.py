@@ -64,15 +64,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "the loop delay the design is for (--extra-delay) and compare overshoot, settling time "
             "(band: 2 % of the step or one encoder count per tick, whichever is wider), RMS error "
             "and peak voltage (the worse of motors a and b). Grid: comma-separated "
-            "NAME=START:STOP:STEP (inclusive) or NAME=VALUE; pi "
-            "axes phase_margin (deg, default 50:75:5), crossover_hz (Hz, 2:5:0.5); poles axes "
-            "settling_time (s, 0.04:0.16:0.02), overshoot (%, 0.5:5:1.5)."
+            "NAME=START:STOP:STEP (inclusive) or NAME=VALUE, NAME being design's option without "
+            "its dashes; pi axes phase-margin (deg, default 50:75:5), crossover-hz (Hz, "
+            "2:5:0.5); poles axes settling-time (s, 0.04:0.16:0.02), overshoot (%, 0.5:5:1.5). "
+            "The older names phase_margin, crossover_hz, settling_time are accepted too."
         ),
     )
     p.add_argument("model", metavar="MODEL.toml", help="model to design on (and of the sim plant)")
     p.add_argument("--method", choices=METHODS, required=True)
     p.add_argument("--grid", metavar="SPEC",
-                   help="e.g. 'phase_margin=50:75:5,crossover_hz=2:5:0.5' (at most "
+                   help="e.g. 'phase-margin=50:75:5,crossover-hz=2:5:0.5' (at most "
                         f"{MAX_TUNE_SETTINGS} settings; each value in the range cartctl design "
                         "takes for its option)")  # fmt: skip
     p.add_argument("--plant", default="sim", metavar="PLANT",
@@ -215,6 +216,26 @@ def _delay_text(args: argparse.Namespace) -> str:
     return f", {args.extra_delay} extra tick(s) of loop delay" if args.extra_delay else ""
 
 
+def _json_head(args: argparse.Namespace) -> dict[str, Any]:
+    """The keys that open both ``--json`` documents (plain and ``--robust``)."""
+    return {"method": args.method, "model": str(args.model), "plant": args.plant,
+            "reference": args.reference, "duration_s": args.duration,
+            "extra_delay_ticks": args.extra_delay, "metrics_of": "worse of motors a and b"}  # fmt: skip
+
+
+def _finish(args: argparse.Namespace, chosen: dict[str, Any] | None,
+            refusal: InputError | None, which: str) -> int:  # fmt: skip
+    """Say what was written (without ``--json``), then raise ``--choose``'s refusal, if any."""
+    if not args.json:
+        if args.plot:
+            print(f"wrote {args.plot}")
+        if chosen is not None:
+            print(f"wrote {args.out}{which}: {chosen['command']}")
+    if refusal is not None:
+        raise refusal
+    return 0
+
+
 def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
     """``tune --robust``: the grid on the nominal model, the sampled plants and the physics preset."""
     from cartctl.cli.jsonout import dumps
@@ -270,11 +291,8 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
             "counts": {k.replace(" ", "_"): v for k, v in table.robust_counts(rows).items()},
             "statuses": table.ROBUST_STATUSES}  # fmt: skip
     if args.json:
-        print(dumps({"method": args.method, "model": str(args.model), "plant": args.plant,
-                     "reference": args.reference, "duration_s": args.duration,
-                     "extra_delay_ticks": args.extra_delay, "metrics_of": "worse of motors a and b",
-                     "settings": [r.to_dict() for r in rows], "chosen": chosen,
-                     "robust": meta}))  # fmt: skip
+        print(dumps({**_json_head(args), "settings": [r.to_dict() for r in rows],
+                     "chosen": chosen, "robust": meta}))  # fmt: skip
     else:
         print(f"{args.method} on {args.model}{_delay_text(args)}, {args.reference}, "
               f"{args.duration:g} s, --robust: {table.robust_counts_text(rows)}; the worse of "
@@ -294,13 +312,8 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
               f"axes of --plot, which rings them "
               f"({table.plural(sum(r.pareto for r in rows), 'setting', 'settings')})")  # fmt: skip
         print(table.format_robust_table(args.method, rows))
-        if args.plot:
-            print(f"wrote {args.plot}")
-        if chosen is not None:
-            print(f"wrote {args.out} (setting #{chosen['index']}): {chosen['command']}")
-    if refusal is not None:
-        raise refusal
-    return 0
+    which = "" if chosen is None else f" (setting #{chosen['index']})"
+    return _finish(args, chosen, refusal, which)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -352,10 +365,8 @@ def run(args: argparse.Namespace) -> int:
     front, plotted = sum(r.pareto for r in results), sum(r.pareto_plot for r in results)
     if args.json:
         counts = {k.replace(" ", "_"): v for k, v in tuning.status_counts(results).items()}
-        print(dumps({"method": args.method, "model": str(args.model), "plant": args.plant,
-                     "reference": args.reference, "duration_s": args.duration,
-                     "extra_delay_ticks": args.extra_delay, "metrics_of": "worse of motors a and b",
-                     "settings": [r.to_dict() for r in results], "chosen": chosen,
+        print(dumps({**_json_head(args), "settings": [r.to_dict() for r in results],
+                     "chosen": chosen,
                      "counts": {"settings": len(results), **counts, "pareto": front,
                                 "pareto_plot": plotted},
                      "statuses": tuning.STATUSES,
@@ -370,11 +381,5 @@ def run(args: argparse.Namespace) -> int:
               f"against run overshoot, the axes of --plot, which rings them "
               f"({table.plural(plotted, 'setting', 'settings')})")  # fmt: skip
         print(table.format_table(args.method, results))
-        if args.plot:
-            print(f"wrote {args.plot}")
-        if chosen is not None:
-            which = f" (setting #{chosen['index']})" if "rule" in chosen else ""
-            print(f"wrote {args.out}{which}: {chosen['command']}")
-    if refusal is not None:
-        raise refusal
-    return 0
+    which = f" (setting #{chosen['index']})" if chosen is not None and "rule" in chosen else ""
+    return _finish(args, chosen, refusal, which)
