@@ -30,24 +30,6 @@ def _loop_response(
     return c * g * z ** (-extra)
 
 
-def plot_design(
-    path: Path,
-    motor: str,
-    model: ArxModel,
-    entry: Mapping[str, Any],
-    step: StepAnalysis,
-    *,
-    extra_delay_ticks: int,
-    voltage_limit_v: float,
-) -> Path:
-    """Write one motor's figure (:func:`design_figure`) as PNG; returns ``path``."""
-    fig = design_figure(motor, model, entry, step, extra_delay_ticks=extra_delay_ticks,
-                        voltage_limit_v=voltage_limit_v)  # fmt: skip
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    return path
-
-
 def design_figure(
     motor: str,
     model: ArxModel,
@@ -147,17 +129,12 @@ def write_design_report(
     extra_delay_ticks: int,
     voltage_limit_v: float,
 ) -> list[Path]:
-    """One PNG per motor, ``design_a.png`` …; returns their paths."""
-    out = Path(out_dir)
-    return [
-        plot_design(
-            out / f"design_{m}.png",
-            m,
-            models[m],
-            {**entries[m], "method": method},
-            steps[m],
-            extra_delay_ticks=extra_delay_ticks,
-            voltage_limit_v=voltage_limit_v,
-        )
-        for m in entries
-    ]
+    """One PNG per motor (:func:`design_figure`), ``design_a.png`` …; returns their paths."""
+    paths = []
+    for m in entries:
+        fig = design_figure(m, models[m], {**entries[m], "method": method}, steps[m],
+                            extra_delay_ticks=extra_delay_ticks, voltage_limit_v=voltage_limit_v)  # fmt: skip
+        paths.append(Path(out_dir) / f"design_{m}.png")
+        paths[-1].parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(paths[-1])
+    return paths
