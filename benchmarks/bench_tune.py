@@ -39,8 +39,8 @@ from cartctl.tune.uncertainty import sample_plants
 
 MODEL = Path(__file__).resolve().parents[1] / "models" / "ground.toml"
 GRIDS = {
-    "pi": "phase_margin=60:78:2,crossover_hz=3:7.5:0.5",
-    "poles": "settling_time=0.04:0.22:0.02,overshoot=0.5:5:0.5",
+    "pi": "phase-margin=60:78:2,crossover-hz=3:7.5:0.5",
+    "poles": "settling-time=0.04:0.22:0.02,overshoot=0.5:5:0.5",
 }
 """10 × 10 grids where every setting is feasible on the ground model (so every one is simulated)."""
 

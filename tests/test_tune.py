@@ -90,12 +90,18 @@ def test_mark_pareto_uses_the_worse_motor_and_skips_unsettled_and_infeasible() -
 @pytest.mark.parametrize(
     ("spec", "method", "expected"),
     [
-        ("phase_margin=50:60:5", "pi", {"phase_margin": (50.0, 55.0, 60.0),
-                                        "crossover_hz": (2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0)}),
+        ("phase_margin=50:60:5", "pi", {"phase-margin": (50.0, 55.0, 60.0),
+                                        "crossover-hz": (2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0)}),
+        ("phase-margin=50:60:5", "pi", {"phase-margin": (50.0, 55.0, 60.0),
+                                        "crossover-hz": (2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0)}),
         (" crossover_hz = 2:2.3:0.1 , phase_margin=70", "pi",
-         {"phase_margin": (70.0,), "crossover_hz": (2.0, 2.1, 2.2, 2.3)}),
-        ("overshoot=1", "poles", {"settling_time": (0.04, 0.06, 0.08, 0.1, 0.12, 0.14, 0.16),
+         {"phase-margin": (70.0,), "crossover-hz": (2.0, 2.1, 2.2, 2.3)}),
+        ("crossover-hz=2:2.3:0.1,phase_margin=70", "pi",
+         {"phase-margin": (70.0,), "crossover-hz": (2.0, 2.1, 2.2, 2.3)}),
+        ("overshoot=1", "poles", {"settling-time": (0.04, 0.06, 0.08, 0.1, 0.12, 0.14, 0.16),
                                   "overshoot": (1.0,)}),
+        ("settling-time=0.05,overshoot=1", "poles", {"settling-time": (0.05,),
+                                                     "overshoot": (1.0,)}),
     ],
 )  # fmt: skip
 def test_grid_specs(spec: str, method: str, expected: dict) -> None:
@@ -108,7 +114,8 @@ def test_grid_specs(spec: str, method: str, expected: dict) -> None:
     "spec",
     ["phase_margin=50-75", "phase_margin=50:40:5", "phase_margin=50:60:0", "margin=1",
      "phase_margin=a:b:c", "phase_margin=1:2", "phase_margin=60,phase_margin=65",
-     "settling_time=0.1", "phase_margin=nan", "phase_margin=1:100000:0.001"],
+     "settling_time=0.1", "phase_margin=nan", "phase_margin=1:100000:0.001",
+     "phase-margin=60,phase_margin=65", "phase_margin_deg=60", "--phase-margin=60"],
 )  # fmt: skip
 def test_bad_grid_specs_are_refused(spec: str) -> None:
     with pytest.raises(InputError, match="--grid"):
@@ -127,7 +134,7 @@ def test_bad_grid_spec_on_the_command_line_is_one_line_and_exit_2(
 
 
 def test_a_setting_is_a_design_request_and_its_design_command() -> None:
-    request = design_request("pi", {"phase_margin": 65.0, "crossover_hz": 3.5}, 1)
+    request = design_request("pi", {"phase-margin": 65.0, "crossover-hz": 3.5}, 1)
     assert (request.phase_margin_deg, request.crossover_hz, request.extra_delay_ticks) == (
         65,
         3.5,
@@ -160,7 +167,7 @@ def test_json_has_one_row_per_setting_and_reports_infeasible_ones(tuned: dict[st
     assert doc["method"] == "pi"
     rows = {r["index"]: r for r in doc["settings"]}
     assert sorted(rows) == [1, 2, 3, 4]
-    assert {(r["settings"]["phase_margin"], r["settings"]["crossover_hz"]) for r in rows.values()} == {
+    assert {(r["settings"]["phase-margin"], r["settings"]["crossover-hz"]) for r in rows.values()} == {
         (60.0, 2.0), (60.0, 4.0), (65.0, 2.0), (65.0, 4.0)}  # fmt: skip
     assert not rows[1]["feasible"] and "crossover must lie between" in rows[1]["reason"]
     assert rows[1]["overshoot_percent"] is None and not rows[1]["pareto"]
@@ -322,3 +329,26 @@ def test_a_worker_runs_one_blas_thread() -> None:
         one_blas_thread()
         blas = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
     assert blas and set(blas) == {1}
+
+
+@pytest.mark.parametrize(
+    ("method", "new", "old", "keys"),
+    [
+        ("pi", "phase-margin=65,crossover-hz=3:4:1", "phase_margin=65,crossover_hz=3:4:1",
+         ("phase-margin", "crossover-hz")),
+        ("poles", "settling-time=0.06,overshoot=1", "settling_time=0.06,overshoot=1",
+         ("settling-time", "overshoot")),
+    ],
+)  # fmt: skip
+def test_the_grid_takes_designs_option_names_and_the_older_ones_alike(
+    capsys: pytest.CaptureFixture[str], method: str, new: str, old: str, keys: tuple[str, str]
+) -> None:
+    """``--grid`` names an axis as design's option (``phase-margin`` for ``--phase-margin``) or,
+    as before, with underscores: the same rows; ``--json`` keys the settings by the option."""
+    rows = {spec: _tune_json(capsys, "--method", method, "--grid", spec, "--duration", "0.5")
+            for spec in (new, old)}  # fmt: skip
+    assert rows[new] == rows[old]
+    assert all(tuple(r["settings"]) == keys for r in rows[new]["settings"])
+    code = main(["tune", str(GROUND), "--method", method, "--grid", f"{old},{new}"])
+    _, err = capsys.readouterr()
+    assert code == 2 and f"--grid: axis '{keys[0]}' is given twice" in err

@@ -96,8 +96,8 @@ def test_the_worst_case_is_the_maximum_over_the_plants_and_the_timings(
         setting = next(r["settings"] for r in doc["settings"] if r["index"] == index)
         path = tmp / f"setting{index}.toml"
         code, _, err = _cli("design", str(GROUND), "--method", "pi", "--phase-margin",
-                            str(setting["phase_margin"]), "--crossover-hz",
-                            str(setting["crossover_hz"]), "--out", str(path))  # fmt: skip
+                            str(setting["phase-margin"]), "--crossover-hz",
+                            str(setting["crossover-hz"]), "--out", str(path))  # fmt: skip
         assert code == 0, err
         for t in timings:
             run = _physics_run(path, f"physics:actuation_ms={t['actuation_ms']:g}", tmp)

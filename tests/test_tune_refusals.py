@@ -60,6 +60,9 @@ def _one_line(command: str, err: str) -> str:
 # (method, grid item, the design option of that axis and the value design is given)
 OUT_OF_RANGE = [
     ("pi", "phase_margin=120", "--phase-margin", "120"),
+    ("pi", "phase-margin=120", "--phase-margin", "120"),
+    ("pi", "crossover-hz=60", "--crossover-hz", "60"),
+    ("poles", "settling-time=-0.1", "--settling-time", "-0.1"),
     ("pi", "phase_margin=0", "--phase-margin", "0"),
     ("pi", "phase_margin=-5", "--phase-margin", "-5"),
     ("pi", "crossover_hz=60", "--crossover-hz", "60"),
@@ -113,7 +116,7 @@ def test_a_range_reaching_out_of_bounds_names_its_first_bad_value(
         ("phase_margin=50::5", "--grid phase_margin=50::5: expected START:STOP:STEP"),
         ("phase_margin=50:75", "--grid phase_margin=50:75: expected START:STOP:STEP"),
         ("phase_margin=fifty", "--grid phase_margin=fifty: the values must be numbers"),
-        ("phase_margin=50,phase_margin=60", "--grid: axis 'phase_margin' is given twice"),
+        ("phase_margin=50,phase_margin=60", "--grid: axis 'phase-margin' is given twice"),
         ("overshoot=2", "--grid: bad axis 'overshoot=2' for --method pi"),
         ("phase_margin=50:75:1e-320", "more than 1000 settings"),
         ("phase_margin=1:89:0.01", "--grid gives 61607 settings, more than 1000"),  # 8801 × 7

@@ -150,8 +150,8 @@ def test_choose_best_takes_the_lowest_worst_case_that_settles_everywhere(
     assert "worst-case overshoot" in doc["chosen"]["rule"]
     written = load_controller(tuned["robust"]).request
     assert (written["phase_margin_deg"], written["crossover_hz"]) == (
-        best["settings"]["phase_margin"],
-        best["settings"]["crossover_hz"],
+        best["settings"]["phase-margin"],
+        best["settings"]["crossover-hz"],
     )
     # without --robust the same rule runs on the nominal figures
     plain = tuned["nominal_doc"]

@@ -42,7 +42,7 @@ from cartctl.tune.batch import ArxBatch, simulate_batch
 from cartctl.tune.uncertainty import PlantSample, sample_plants
 
 METHOD = "poles"
-GRID = "settling_time=0.08:0.16:0.02,overshoot=0.1:2.1:0.5"
+GRID = "settling-time=0.08:0.16:0.02,overshoot=0.1:2.1:0.5"
 """The grid: settling-time targets 80–160 ms × overshoot targets 0.1–2.1 % (25 settings). Low
 overshoot targets: on a cart with friction the step overshoots 2–3 points more than the linear
 model predicts (the physics simulator: 3.3–3.8 % for a 0.5 % design, 1.8–2.8 % for 0.1 %), and an

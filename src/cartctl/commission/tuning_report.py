@@ -22,12 +22,12 @@ def tuning_body(result: tuning.TuningResult, command: str) -> str:
         s = r["settings"]
         mark = "**→**" if row.index == result.chosen.index else ("*" if r.get("pareto") else "")
         if "nominal" not in r:
-            rows.append([mark, str(r["index"]), f"{s['settling_time'] * 1e3:g}",
+            rows.append([mark, str(r["index"]), f"{s['settling-time'] * 1e3:g}",
                          f"{s['overshoot']:g}", r["status"], "", "", "", "", ""])  # fmt: skip
             continue
         nom, worst = r["nominal"], r["worst"]
         timing = " / ".join(fmt(e["overshoot_percent"], 1) for e in r["timing"])
-        rows.append([mark, str(r["index"]), f"{s['settling_time'] * 1e3:g}", f"{s['overshoot']:g}",
+        rows.append([mark, str(r["index"]), f"{s['settling-time'] * 1e3:g}", f"{s['overshoot']:g}",
                      fmt(nom["overshoot_percent"], 1), fmt(nom["settling_time_s"], 0, 1e3),
                      fmt(worst["overshoot_percent"], 1), fmt(worst["settling_time_s"], 0, 1e3),
                      timing, fmt(nom["peak_voltage_v"], 1)])  # fmt: skip

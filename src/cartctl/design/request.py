@@ -244,7 +244,7 @@ def check_field(field: str, value: Any, option: str | None = None) -> Any:
     option : str, optional
         How the message names what the user gave; default the design option
         (:data:`OPTIONS`, e.g. ``--phase-margin``). ``cartctl tune`` passes its grid axis
-        (``--grid phase_margin=50:120:5``), so both commands refuse a value in the same words.
+        (``--grid phase-margin=50:120:5``), so both commands refuse a value in the same words.
 
     Raises
     ------

@@ -7,10 +7,12 @@ module holds what needs no I/O: parsing ``--grid``, the ``cartctl design`` argum
 non-dominated (Pareto) set over overshoot, settling time, RMS error and peak voltage.
 
 Grid spec (``--grid``): comma-separated axes, each ``NAME=START:STOP:STEP`` (an inclusive range,
-STEP > 0) or ``NAME=VALUE`` (one value). Axes left out keep their default range. Names::
+STEP > 0) or ``NAME=VALUE`` (one value). Axes left out keep their default range. NAME is the
+``cartctl design`` option without its dashes; the older spelling with underscores
+(``phase_margin``, ``crossover_hz``, ``settling_time``) is accepted too. Names::
 
-    pi      phase_margin (deg, default 50:75:5)   crossover_hz (Hz, default 2:5:0.5)
-    poles   settling_time (s, default 0.04:0.16:0.02)   overshoot (%, default 0.5:5:1.5)
+    pi      phase-margin (deg, default 50:75:5)   crossover-hz (Hz, default 2:5:0.5)
+    poles   settling-time (s, default 0.04:0.16:0.02)   overshoot (%, default 0.5:5:1.5)
 """
 
 from __future__ import annotations
@@ -48,24 +50,49 @@ RUN_FAILED = "the run failed: "
 
 @dataclass(frozen=True)
 class Axis:
-    """One tuning axis: its grid name, the ``cartctl design`` option, unit and default range."""
+    """One tuning axis.
+
+    Attributes
+    ----------
+    name : str
+        Its grid name: the ``cartctl design`` option without its dashes (``phase-margin``); the
+        key of a setting's values, in ``--json`` too.
+    field : str
+        The design request field it sets (``phase_margin_deg``).
+    unit : str
+    default : tuple of float
+        The default range (start, stop, step).
+    """
 
     name: str
-    option: str
+    field: str
     unit: str
     default: tuple[float, float, float]
+
+    @property
+    def option(self) -> str:
+        """The ``cartctl design`` option (``--phase-margin``)."""
+        return f"--{self.name}"
+
+    @property
+    def old_name(self) -> str:
+        """The grid name before it followed the option (``phase_margin``), still accepted."""
+        return self.name.replace("-", "_")
 
 
 AXES: dict[str, tuple[Axis, ...]] = {
     "pi": (
-        Axis("phase_margin", "--phase-margin", "deg", (50.0, 75.0, 5.0)),
-        Axis("crossover_hz", "--crossover-hz", "Hz", (2.0, 5.0, 0.5)),
+        Axis("phase-margin", "phase_margin_deg", "deg", (50.0, 75.0, 5.0)),
+        Axis("crossover-hz", "crossover_hz", "Hz", (2.0, 5.0, 0.5)),
     ),
     "poles": (
-        Axis("settling_time", "--settling-time", "s", (0.04, 0.16, 0.02)),
-        Axis("overshoot", "--overshoot", "%", (0.5, 5.0, 1.5)),
+        Axis("settling-time", "settling_time_s", "s", (0.04, 0.16, 0.02)),
+        Axis("overshoot", "overshoot_percent", "%", (0.5, 5.0, 1.5)),
     ),
 }
+
+FIELDS = {a.name: a.field for axes in AXES.values() for a in axes}
+"""The design request field of each grid axis."""
 
 
 def grid_form(method: str) -> str:
@@ -112,6 +139,9 @@ def _axis_range(item: str, text: str, form: str) -> tuple[float, float, float]:
 def parse_grid(spec: str | None, method: str) -> dict[str, tuple[float, ...]]:
     """The values of each axis of ``method`` (module docstring), defaults where ``spec`` is silent.
 
+    The keys are the axes' names (the design options' spelling), whichever spelling ``spec``
+    used.
+
     Each value is checked as ``cartctl design`` checks its option
     (:func:`~cartctl.design.request.check_field`), named as the grid axis the user gave, so an
     out-of-range value is refused before any design runs, in design's words.
@@ -122,15 +152,16 @@ def parse_grid(spec: str | None, method: str) -> dict[str, tuple[float, ...]]:
         An unknown axis name, a repeated one, a malformed, non-finite or empty range, a value
         ``cartctl design`` refuses, or more than :data:`MAX_TUNE_SETTINGS` settings; one line each.
     """
-    axes = {a.name: a for a in AXES[method]}
-    ranges = {name: a.default for name, a in axes.items()}
+    spelled = {n: a.name for a in AXES[method] for n in (a.name, a.old_name)}
+    ranges = {a.name: a.default for a in AXES[method]}
     given: dict[str, str] = {}
     form = grid_form(method)
     for item in (spec or "").split(",") if spec and spec.strip() else []:
-        name, eq, text = (s.strip() for s in item.partition("="))
+        typed, eq, text = (s.strip() for s in item.partition("="))
         item = item.strip()
-        if not eq or name not in axes:
+        if not eq or typed not in spelled:
             raise InputError(f"--grid: bad axis '{item}' for --method {method}; expected {form}")
+        name = spelled[typed]
         if name in given:
             raise InputError(f"--grid: axis '{name}' is given twice ({given[name]}, {item})")
         given[name] = item
@@ -157,11 +188,6 @@ def grid_settings(axes: Mapping[str, Sequence[float]]) -> list[dict[str, float]]
     return settings
 
 
-FIELDS = {"phase_margin": "phase_margin_deg", "crossover_hz": "crossover_hz",
-          "settling_time": "settling_time_s", "overshoot": "overshoot_percent"}  # fmt: skip
-"""The design request field of each grid axis."""
-
-
 def design_request(
     method: str,
     settings: Mapping[str, float],
@@ -175,14 +201,14 @@ def design_request(
     very same controller; :meth:`~cartctl.design.request.DesignRequest.to_argv` gives the
     ``cartctl design`` command that makes it.
     """
-    axes: dict[str, Any] = {FIELDS[a.name]: float(settings[a.name]) for a in AXES[method]}
+    axes: dict[str, Any] = {a.field: float(settings[a.name]) for a in AXES[method]}
     return DesignRequest(method=method, extra_delay_ticks=extra_delay_ticks, **dict(fixed or {}),
                          **axes)  # fmt: skip
 
 
 def request_axes(method: str) -> tuple[str, ...]:
     """The request fields of a method's axes (always written in the design command)."""
-    return tuple(FIELDS[a.name] for a in AXES[method])
+    return tuple(a.field for a in AXES[method])
 
 
 def worst_metrics(motors: Mapping[str, Mapping[str, Any]]) -> dict[str, float | None]:
@@ -204,7 +230,7 @@ class TuneResult:
     index : int
         1-based place in the grid (first axis slowest); ``--choose`` takes it.
     settings : dict of str to float
-        The axis values (units in :data:`AXES`).
+        The axis values, keyed by the axes' names (units in :data:`AXES`).
     feasible : bool
         False when the design refused the setting or the run failed; ``reason`` says why.
     reason : str or None
