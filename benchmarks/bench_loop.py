@@ -16,7 +16,7 @@ deviation of each interval from the period, the compute time, deadline misses an
 deadlines (executor only; for the naive loop the ticks it fell behind), and the CPU time the
 hypervisor stole meanwhile on a virtual machine (/proc/stat, in 10 ms steps: outliers that no
 guest-side scheduling can prevent). A last line gives the executor's own cost per tick on a
-virtual clock, the bound on the simulated loop's speed-up.
+simulated clock, the bound on the simulated loop's speed-up.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from cartctl.runtime.clock import MonotonicClock, VirtualClock
+from cartctl.runtime.clock import MonotonicClock, SimulatedClock
 from cartctl.runtime.executor import PeriodicExecutor
 from cartctl.runtime.realtime import enable_realtime, restore
 
@@ -170,9 +170,9 @@ def run_executor(
     )
 
 
-def virtual_overhead_us(period_s: float, n: int = 200_000) -> float:
-    """Wall time per tick (µs) of the executor on a virtual clock with an empty tick."""
-    ex = PeriodicExecutor(period_s, VirtualClock(), max_ticks=n)
+def simulated_clock_overhead_us(period_s: float, n: int = 200_000) -> float:
+    """Wall time per tick (µs) of the executor on a simulated clock with an empty tick."""
+    ex = PeriodicExecutor(period_s, SimulatedClock(), max_ticks=n)
     t = time.perf_counter()
     ex.run(lambda k: True)
     return (time.perf_counter() - t) / n * 1e6
@@ -253,9 +253,9 @@ def main(argv: list[str] | None = None) -> int:
             p.wait()
     print()
     print_table(rows)
-    overhead = virtual_overhead_us(period_s)
+    overhead = simulated_clock_overhead_us(period_s)
     print(
-        f"\nvirtual clock: executor overhead {overhead:.2f} µs/tick with an empty tick "
+        f"\nsimulated clock: executor overhead {overhead:.2f} µs/tick with an empty tick "
         f"(at most {period_s * 1e6 / overhead:,.0f}x real time before any tick work)"
     )
     return 0

@@ -4,7 +4,7 @@ Run: ``python benchmarks/fast_parts.py [--seconds 120]`` from the repository roo
 ``bench_run.py``. For both shipped controllers on both simulators it builds the loop as
 ``cartctl run --fast`` does (the shipped controller file, the plant, the CSV sink in blocks of
 1000 rows, the memory sink, the Rerun sink saving blocks of 1000 ticks to a file, the
-:class:`~cartctl.runtime.virtual.VirtualExecutor`, the collector paused) and times, in this
+:class:`~cartctl.runtime.back_to_back.BackToBackExecutor`, the collector paused) and times, in this
 process and one after the other:
 
 - ``no sink``: the loop alone (plant, estimators, controllers, the row);
@@ -31,10 +31,10 @@ from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import load_controller
 from cartctl.plants.factory import make_plant
 from cartctl.reference import reference_signal
-from cartctl.runtime.clock import VirtualClock
+from cartctl.runtime.back_to_back import BackToBackExecutor
+from cartctl.runtime.clock import SimulatedClock
 from cartctl.runtime.gcpause import gc_paused
 from cartctl.runtime.loop import ControlLoop, MemorySink
-from cartctl.runtime.virtual import VirtualExecutor
 from cartctl.sinks.csv_sink import CsvSink
 from cartctl.sinks.rerun_sink import RerunSink
 
@@ -61,11 +61,11 @@ def us_per_tick(plant_spec: str, controller_path: str, variant: str, seconds: fl
     n = round(seconds / plant.period_s)
     ref = reference_signal("square:8:2", n, plant.period_s)
     with tempfile.TemporaryDirectory() as out:
-        clock = VirtualClock()
+        clock = SimulatedClock()
         loop = ControlLoop(plant, build_controllers(controller), {"a": ref, "b": ref},
                            _sinks(variant, Path(out)), now_s=clock.now_s,
                            voltage_limit_v=controller.voltage_limit_v, period_s=plant.period_s)  # fmt: skip
-        executor = VirtualExecutor(plant.period_s, max_ticks=n)
+        executor = BackToBackExecutor(plant.period_s, max_ticks=n)
         tick = loop.tick
         period_s = plant.period_s
         finished = False

@@ -43,7 +43,7 @@ from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import load_controller
 from cartctl.plants.factory import make_plant
 from cartctl.reference import reference_signal
-from cartctl.runtime.clock import MonotonicClock, VirtualClock
+from cartctl.runtime.clock import MonotonicClock, SimulatedClock
 from cartctl.runtime.executor import PeriodicExecutor
 from cartctl.runtime.gcpause import gc_paused
 from cartctl.runtime.loop import ControlLoop, MemorySink
@@ -120,9 +120,9 @@ def measure(
             MemorySink(),
         ]
         if rerun != "off":
-            # as cartctl run makes it: blocks of 20 ticks live, 1000 on the virtual clock
+            # as cartctl run makes it: blocks of 20 ticks live, 1000 on the simulated clock
             sinks.append(RerunSink(rerun, Path(out) / "t.rrd", batch_ticks=1000 if fast else 20))
-        clock = VirtualClock() if fast else MonotonicClock()
+        clock = SimulatedClock() if fast else MonotonicClock()
         loop = ControlLoop(plant, controllers, {"a": ref, "b": ref}, sinks, now_s=clock.now_s,
                            voltage_limit_v=controller.voltage_limit_v, period_s=plant.period_s)  # fmt: skip
         executor = PeriodicExecutor(plant.period_s, clock, max_ticks=n)
@@ -134,7 +134,7 @@ def measure(
             timers.close_tick()
             return keep
 
-        scheduling = "virtual clock" if fast else enable_realtime()
+        scheduling = "simulated clock" if fast else enable_realtime()
         old = sys.getswitchinterval()
         sys.setswitchinterval(1e-4)
         try:
@@ -217,11 +217,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--plant", default="physics", choices=("sim", "physics"))
     parser.add_argument("--controller", default="controllers/poles.toml")
     parser.add_argument("--rerun", default="save", choices=("save", "off"))
-    parser.add_argument("--fast", action="store_true", help="on a virtual clock")
+    parser.add_argument("--fast", action="store_true", help="on a simulated clock")
     parser.add_argument("--busy", action="store_true", help="keep one other core busy meanwhile")
     args = parser.parse_args(argv)
     print(f"tick breakdown: {args.controller} on {args.plant}, Rerun {args.rerun}, "
-          f"{args.seconds:g} s {'virtual' if args.fast else 'real time'}")  # fmt: skip
+          f"{args.seconds:g} s {'simulated' if args.fast else 'real time'}")  # fmt: skip
     busy = busy_core() if args.busy else None  # one other core busy, as bench_run.py --soak
     try:
         samples = measure(args.seconds, args.plant, args.controller, args.rerun, args.fast)

@@ -1,4 +1,4 @@
-"""The periodic executor on a virtual clock: grid, statistics, misses, stopping; one real-clock run."""
+"""The periodic executor on a simulated clock: grid, statistics, misses, stopping; one real-clock run."""
 
 from __future__ import annotations
 
@@ -11,12 +11,12 @@ import pytest
 
 from cartctl.errors import InputError
 from cartctl.runtime import realtime
-from cartctl.runtime.clock import Clock, MonotonicClock, VirtualClock
+from cartctl.runtime.clock import Clock, MonotonicClock, SimulatedClock
 from cartctl.runtime.executor import MISS_LOG_LIMIT, PeriodicExecutor, TimingStats
 
 
-class LateClock(VirtualClock):
-    """A virtual clock that wakes up late by a given amount (s) at each wait, in turn."""
+class LateClock(SimulatedClock):
+    """A simulated clock that wakes up late by a given amount (s) at each wait, in turn."""
 
     def __init__(self, lateness_s: list[float]) -> None:
         super().__init__()
@@ -30,12 +30,12 @@ class LateClock(VirtualClock):
 
 
 def test_clocks_satisfy_the_protocol() -> None:
-    assert isinstance(VirtualClock(), Clock)
+    assert isinstance(SimulatedClock(), Clock)
     assert isinstance(MonotonicClock(), Clock)
 
 
-def test_virtual_clock_jumps_forward_only() -> None:
-    c = VirtualClock(2.0)
+def test_simulated_clock_jumps_forward_only() -> None:
+    c = SimulatedClock(2.0)
     c.wait_until(3.5)
     assert c.now_s() == 3.5
     c.wait_until(1.0)  # a past deadline: no change
@@ -48,7 +48,7 @@ def test_virtual_clock_jumps_forward_only() -> None:
 
 @pytest.mark.parametrize("start_s", [0.0, 5.0, 12345.678])
 def test_ticks_start_exactly_on_the_grid(start_s: float) -> None:
-    clock = VirtualClock(start_s)
+    clock = SimulatedClock(start_s)
     ex = PeriodicExecutor(0.01, clock, max_ticks=1000)
     seen: list[tuple[int, float, float, int, float]] = []
 
@@ -66,8 +66,8 @@ def test_ticks_start_exactly_on_the_grid(start_s: float) -> None:
     assert [s[0] for s in seen] == list(range(1000))
 
 
-def test_stats_of_a_clean_virtual_run() -> None:
-    stats = PeriodicExecutor(0.01, VirtualClock(), max_ticks=100).run(lambda k: True)
+def test_stats_of_a_clean_simulated_run() -> None:
+    stats = PeriodicExecutor(0.01, SimulatedClock(), max_ticks=100).run(lambda k: True)
     assert (stats.ticks, stats.misses, stats.skipped_deadlines, stats.miss_ticks) == (100, 0, 0, ())
     assert stats.duration_s == pytest.approx(0.99)
     assert stats.period_error_us_max == 0.0
@@ -122,7 +122,7 @@ def test_slow_tick_is_a_miss_and_realigns_to_the_grid(
     work_s: float, miss: bool, skipped: int, next_grid: int, caplog: pytest.LogCaptureFixture
 ) -> None:
     period_s = 0.25
-    clock = VirtualClock()
+    clock = SimulatedClock()
     ex = PeriodicExecutor(period_s, clock, max_ticks=8)
     starts: list[tuple[int, float]] = []
 
@@ -147,7 +147,7 @@ def test_slow_tick_is_a_miss_and_realigns_to_the_grid(
 
 
 def test_every_miss_is_counted_beyond_the_log_limit(caplog: pytest.LogCaptureFixture) -> None:
-    clock = VirtualClock()
+    clock = SimulatedClock()
     ex = PeriodicExecutor(0.01, clock, max_ticks=100)
 
     def tick(k: int) -> bool:
@@ -171,19 +171,19 @@ def test_stops_after_the_tick_that_returns_false() -> None:
         ticks.append(k)
         return k < 4
 
-    stats = PeriodicExecutor(0.01, VirtualClock()).run(tick)
+    stats = PeriodicExecutor(0.01, SimulatedClock()).run(tick)
     assert ticks == [0, 1, 2, 3, 4]
     assert stats.ticks == 5
 
 
 @pytest.mark.parametrize("n", [0, 1, 7])
 def test_max_ticks(n: int) -> None:
-    stats = PeriodicExecutor(0.01, VirtualClock(), max_ticks=n).run(lambda k: True)
+    stats = PeriodicExecutor(0.01, SimulatedClock(), max_ticks=n).run(lambda k: True)
     assert stats.ticks == n
 
 
 def test_empty_run_gives_null_percentiles() -> None:
-    d = PeriodicExecutor(0.01, VirtualClock(), max_ticks=0).run(lambda k: True).to_dict()
+    d = PeriodicExecutor(0.01, SimulatedClock(), max_ticks=0).run(lambda k: True).to_dict()
     assert d["ticks"] == 0
     assert d["period_error_us"] == {"p50": None, "p99": None, "max": None}
     assert d["compute_us"]["p50"] is None
@@ -195,14 +195,14 @@ def test_exception_in_tick_propagates_and_keeps_the_stats() -> None:
             raise RuntimeError("plant vanished")
         return True
 
-    ex = PeriodicExecutor(0.01, VirtualClock())
+    ex = PeriodicExecutor(0.01, SimulatedClock())
     with pytest.raises(RuntimeError, match="plant vanished"):
         ex.run(tick)
     assert ex.stats().ticks == 3
 
 
 def test_each_run_starts_afresh() -> None:
-    clock = VirtualClock()
+    clock = SimulatedClock()
     ex = PeriodicExecutor(0.5, clock, max_ticks=3)
     ex.run(lambda k: True)
     assert ex.t0_s == 0.0
@@ -222,7 +222,7 @@ def test_each_run_starts_afresh() -> None:
     ],
 )
 def test_bad_arguments_name_the_parameter(kwargs: dict[str, object], match: str) -> None:
-    args: dict[str, object] = {"period_s": 0.01, "clock": VirtualClock(), **kwargs}
+    args: dict[str, object] = {"period_s": 0.01, "clock": SimulatedClock(), **kwargs}
     with pytest.raises(ValueError, match=match):
         PeriodicExecutor(**args)  # type: ignore[arg-type]
 
@@ -278,7 +278,7 @@ def test_realtime_rejects_a_bad_priority() -> None:
 
 
 def test_idle_runs_after_each_tick_outside_its_compute_time() -> None:
-    clock = VirtualClock()
+    clock = SimulatedClock()
     calls: list[tuple[str, int]] = []
     ex = PeriodicExecutor(0.01, clock, max_ticks=5)
 

@@ -87,5 +87,5 @@ def test_review_layout_spans_the_recorded_values(
         volts = values[f"motor/{m}/voltage"]
         lo, hi = views[f"Motor {m.upper()}: voltage (V)"]["range"]
         assert lo < volts.min() and volts.max() < hi
-    lo, hi = views["Loop timing (µs)"]["range"]  # a virtual clock's zeros: a span of 10 µs
+    lo, hi = views["Loop timing (µs)"]["range"]  # a simulated clock's zeros: a span of 10 µs
     assert lo < 0.0 < 10.0 < hi

@@ -95,7 +95,7 @@ def test_compare_table_in_the_terminal(
         va, vb = a["motors"][m]["max_abs_voltage"], b["motors"][m]["max_abs_voltage"]
         assert rows[f"motor {m}: max |voltage| (V)"][:2] == [f"{va:.2f}", f"{vb:.2f}"]
         assert rows[f"motor {m}: overshoot (%)"][3] == "—"
-    assert "virtual clock" in out  # --fast runs: no timing rows of zeros
+    assert "simulated clock" in out  # --fast runs: no timing rows of zeros
     assert not any("compute" in label for label in rows)
 
 

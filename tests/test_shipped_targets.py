@@ -116,7 +116,7 @@ def test_step_on_the_virtual_cart(
 ) -> None:
     """Through the serial path in real time (the virtual cart: the physics simulator behind the
     bridge, loop delay 1 measured from the echo, as on board), once per file and once per
-    actuation timing (each file at each timing: ``test_on_board_step``, on the virtual clock):
+    actuation timing (each file at each timing: ``test_on_board_step``, on the simulated clock):
     ``run --plant virtual`` takes pi.toml by itself; both on-board files run with the loop delay
     measured from the echo and bring the true speed to the step and hold it there."""
     given = [] if controller is None else ["--controller", controller]
@@ -131,7 +131,7 @@ def test_step_on_the_virtual_cart(
     assert link["host_frames_sent"] >= 200
     columns = read_trace(summary["trace"]).columns()
     # how fast it settles depends on when the host's replies land within each tick, which the
-    # machine's load moves: the on-board targets are test_on_board_step's (virtual clock), the
+    # machine's load moves: the on-board targets are test_on_board_step's (simulated clock), the
     # figures on the virtual cart benchmarks/measure_shipped.py's; here the step is reached and held
     band = max(0.02 * STEP_RAD_S, QUANTUM_RAD_S)  # the settling band, as step_of's
     # a busy machine can hold the host up past the cart's watchdog or a tick: the link says so,

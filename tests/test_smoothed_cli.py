@@ -44,7 +44,7 @@ def _without_true_speed(src: Path, dst: Path) -> Path:
 @pytest.fixture(scope="module")
 def physics_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A 3 s physics run (square reference: reversals, where the encoder lags most) with its
-    recording, on the virtual clock."""
+    recording, on the simulated clock."""
     out = tmp_path_factory.mktemp("smoothed")
     code = main(["run", "--plant", "physics", "--fast", "--duration", "3", "--reference",
                  "square:8:0.5", "--out", str(out), "--name", "p", "--rerun", "save",

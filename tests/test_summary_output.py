@@ -1,4 +1,4 @@
-"""One duration for one trace, a virtual clock's timing said as such, and compute's maximum in
+"""One duration for one trace, a simulated clock's timing said as such, and compute's maximum in
 ``review --json``: ``run`` and ``review`` through the CLI on the same trace. Units in every
 column header of the summary, one rounding per column (three significant figures of its largest
 value, checked against the exact ``--json`` figures), a numerical zero printed as 0, and
@@ -41,14 +41,14 @@ def test_run_and_review_report_one_duration(
     assert reviewed["compute_us"]["max"] == np.max(trace.column("compute_us"))
 
 
-def test_a_virtual_clock_prints_no_timing_figures(
+def test_a_simulated_clock_prints_no_timing_figures(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
     _, out = _cli(capsys, "run", "--fast", "--duration", "2", "--out", str(tmp_path), "--name",
                   "t", "--rerun", "off")  # fmt: skip
     first = out.splitlines()[0]
     assert first.startswith("201 ticks, 2.00 s;")
-    assert "virtual clock, no real-time figures" in first and "compute" not in first
+    assert "simulated clock, no real-time figures" in first and "compute" not in first
     _, out = _cli(capsys, "review", str(tmp_path / "t.csv"))
     assert out.splitlines()[0] == first  # the same line for the same trace
 

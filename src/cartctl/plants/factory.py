@@ -19,7 +19,7 @@ PLANT_NAMES = (
     "serial:PORT",
 )
 SIMULATED = ("sim", "physics")
-"""Plant kinds that run in this process on a virtual clock (``--fast``)."""
+"""Plant kinds that run in this process on a simulated clock (``--fast``)."""
 
 
 def plant_kind(spec: str) -> str:

@@ -1,8 +1,8 @@
-"""Clocks for the periodic executor: the real monotonic clock and a virtual one for simulation.
+"""Clocks for the periodic executor: the real monotonic clock and a simulated one.
 
 The runtime is the shell around the pure per-tick core, and time enters it only through a
 :class:`Clock`. The real-time loop runs on :class:`MonotonicClock`; the fast simulated loop and
-the tests run the same executor on :class:`VirtualClock`, which never sleeps.
+the tests run the same executor on :class:`SimulatedClock`, which never sleeps.
 """
 
 from __future__ import annotations
@@ -71,7 +71,7 @@ class MonotonicClock:
             pass
 
 
-class VirtualClock:
+class SimulatedClock:
     """Simulated time: waiting jumps straight to the deadline, so nothing ever sleeps.
 
     Time only moves in :meth:`wait_until` and :meth:`advance`. Ticks therefore take zero time
@@ -108,6 +108,6 @@ class VirtualClock:
         """
         if not (math.isfinite(dt_s) and dt_s >= 0.0):
             raise InputError(
-                f"a virtual clock only moves forward: dt_s must be >= 0 s, got {dt_s!r}"
+                f"a simulated clock only moves forward: dt_s must be >= 0 s, got {dt_s!r}"
             )
         self._now_s += dt_s

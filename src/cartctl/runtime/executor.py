@@ -2,14 +2,14 @@
 
 The runtime is the shell around the pure per-tick core; this module is its heartbeat. The same
 :class:`PeriodicExecutor` runs the real-time loop on a :class:`~cartctl.runtime.clock.MonotonicClock`
-and the fast simulated loop on a :class:`~cartctl.runtime.clock.VirtualClock`, so it keeps its
+and the fast simulated loop on a :class:`~cartctl.runtime.clock.SimulatedClock`, so it keeps its
 per-tick work to a few attribute stores and two appends of a float.
 
 Contract of :meth:`PeriodicExecutor.run`, with ``t0`` the clock's time when ``run`` starts::
 
     grid point m       deadline_m = t0 + m * period_s        (computed, never accumulated: no drift)
     tick k             waits for its deadline, then calls tick(k); k = 0, 1, 2, ... counts ticks
-    period error       start_k - deadline                    (>= 0 on a real clock; 0 on a virtual one)
+    period error       start_k - deadline                    (>= 0 on a real clock; 0 on a simulated one)
     compute time       end_k - start_k                        (on the same clock)
     deadline miss      end_k > the next grid point            (the tick overran its period)
 
@@ -182,7 +182,7 @@ class PeriodicExecutor:
     period_s : float
         Tick period (s), > 0.
     clock : Clock
-        Time source and waiter: ``MonotonicClock`` for real time, ``VirtualClock`` for simulation.
+        Time source and waiter: ``MonotonicClock`` for real time, ``SimulatedClock`` for simulation.
     max_ticks : int, optional
         Stop after this many ticks (>= 0). None: run until the tick function returns False.
 
@@ -194,8 +194,8 @@ class PeriodicExecutor:
 
     Examples
     --------
-    >>> from cartctl.runtime.clock import VirtualClock
-    >>> ex = PeriodicExecutor(0.01, VirtualClock(), max_ticks=3)
+    >>> from cartctl.runtime.clock import SimulatedClock
+    >>> ex = PeriodicExecutor(0.01, SimulatedClock(), max_ticks=3)
     >>> ex.run(lambda k: True).ticks
     3
     """

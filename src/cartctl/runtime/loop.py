@@ -1,7 +1,7 @@
 """The closed loop: one tick reads the plant, runs each motor's controller, sends, and logs.
 
 :class:`ControlLoop` is the per-tick body; a periodic executor (:mod:`cartctl.runtime.executor`)
-calls it on a real or virtual clock, so the real-time run and the fast simulated run are the same
+calls it on a real or simulated clock, so the real-time run and the fast simulated run are the same
 code. Per tick k::
 
     y      = the speeds measured at tick k (kept from the previous plant.step)

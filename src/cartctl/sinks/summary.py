@@ -216,10 +216,10 @@ def motor_table(motors: Mapping[str, Mapping[str, Any]], indent: str = "  ") -> 
 
 def timing_text(summary: Mapping[str, Any]) -> str:
     """The loop timing of a summary: percentiles of period error and compute time (µs), each
-    triple with one rounding, or that the clock was virtual."""
+    triple with one rounding, or that the clock was simulated."""
     pe, cu = summary["period_error_us"], summary["compute_us"]
-    if pe.get("max") == 0.0 and cu.get("p99") == 0.0:  # a virtual clock: no time passed
-        return "timing: virtual clock, no real-time figures"
+    if pe.get("max") == 0.0 and cu.get("p99") == 0.0:  # a simulated clock: no time passed
+        return "timing: simulated clock, no real-time figures"
     period = "/".join(format_column([pe.get("p50"), pe.get("p99"), pe.get("max")]))
     compute = "/".join(format_column([cu.get("p50"), cu.get("p99"), cu.get("max")]))
     return f"period error p50/p99/max {period} µs; compute p50/p99/max {compute} µs"

@@ -4,7 +4,7 @@ The execution part of ``cartctl tune`` (:mod:`cartctl.cli.commands.tune`); the g
 and the Pareto front are in :mod:`cartctl.tune.grid`. A setting is designed per motor by
 :func:`cartctl.design.make.design_motor` (the design command's own path, from the setting's
 :class:`~cartctl.design.request.DesignRequest`), run by
-:func:`simulate` (ControlLoop, VirtualExecutor, VirtualClock and a MemorySink: the loop of
+:func:`simulate` (ControlLoop, BackToBackExecutor, SimulatedClock and a MemorySink: the loop of
 ``run --fast`` without files) and summarised by the run summary's ``trace_metrics`` (settling in
 the band of the design's settling bound, max(2 %, one encoder count per tick)). The settings are
 spread over worker processes in chunks; a refused design is a result, not an error.

@@ -93,7 +93,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--fast",
         action="store_true",
-        help="simulate on a virtual clock as fast as the CPU allows (simulated plants)",
+        help="run on a simulated clock, as fast as the CPU allows (simulated plants)",
     )
     add_rerun_options(p)
     add_output_options(p, name_default="run-DATE-TIME")
@@ -128,7 +128,7 @@ def _rerun_sink(
         extremes[m] = (min((lo for lo, _ in spans), default=0.0),
                        max((hi for _, hi in spans), default=0.0))  # fmt: skip
     # one send_columns costs ~170 µs whatever its length: batch 20 ticks live (the SDK flushes
-    # every 200 ms anyway), 1000 on the virtual clock
+    # every 200 ms anyway), 1000 on the simulated clock
     return HeldRerunSink(mode, path, connect_url=args.connect_url,
                          batch_ticks=1000 if args.fast else 20,
                          ranges=run_ranges(extremes, limit_v))  # fmt: skip
@@ -203,7 +203,7 @@ def run(args: argparse.Namespace) -> int:
         plant.close()
         raise OutputError(exc.filename or csv_path, exc.strerror or str(exc)) from None
     memory = MemorySink()
-    # on the virtual clock a second of trace takes milliseconds: write it in bigger blocks
+    # on the simulated clock a second of trace takes milliseconds: write it in bigger blocks
     sinks: list[Any] = [CsvSink(csv_path, flush_every=1000 if args.fast else 50), memory]
     rerun = _rerun_sink(args, rrd_path, references, limit)
     if rerun is not None:
@@ -213,13 +213,13 @@ def run(args: argparse.Namespace) -> int:
 
         sinks.append(StatusLine(sys.stderr, period_s=period_s))
 
+    from cartctl.runtime.back_to_back import BackToBackExecutor
     from cartctl.runtime.cartclock import CartClockedExecutor
-    from cartctl.runtime.clock import MonotonicClock, VirtualClock
+    from cartctl.runtime.clock import MonotonicClock, SimulatedClock
     from cartctl.runtime.executor import PeriodicExecutor
     from cartctl.runtime.gcpause import gc_paused
-    from cartctl.runtime.virtual import VirtualExecutor
 
-    clock = VirtualClock() if args.fast else MonotonicClock()
+    clock = SimulatedClock() if args.fast else MonotonicClock()
     loop = ControlLoop(plant, controllers, references, sinks, now_s=clock.now_s,
                        voltage_limit_v=limit, period_s=period_s)  # fmt: skip
     executor: Any
@@ -227,10 +227,10 @@ def run(args: argparse.Namespace) -> int:
         executor = CartClockedExecutor(plant, max_ticks=n, now_s=clock.now_s,
                                        compute_us=lambda: loop.last_compute_us)  # fmt: skip
     elif args.fast:  # ticks back to back: nothing that only real time needs
-        executor = VirtualExecutor(period_s, max_ticks=n)
+        executor = BackToBackExecutor(period_s, max_ticks=n)
     else:
         executor = PeriodicExecutor(period_s, clock, max_ticks=n)
-    scheduling = "virtual clock (--fast)"
+    scheduling = "simulated clock (--fast)"
     switch_interval = sys.getswitchinterval()
     stats = None
     try:
@@ -248,7 +248,7 @@ def run(args: argparse.Namespace) -> int:
             time_s = executor.time_s if clocked else executor.grid_index * period_s
             return loop_tick(k, executor.period_error_us, executor.start_s, time_s)
 
-        # no collector pass at a random tick (runtime.gcpause); the virtual clock has no deadline
+        # no collector pass at a random tick (runtime.gcpause); the simulated clock has no deadline
         with contextlib.nullcontext() if fast else gc_paused():
             loop.start()  # after the one collection: a cart ticks on from its reset
             # a cart-clocked loop calls its idle() itself, while it waits for the cart's frame

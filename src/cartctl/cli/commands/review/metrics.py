@@ -216,7 +216,7 @@ def format_compare(a: Mapping[str, Any], b: Mapping[str, Any]) -> str:
 
 
 def _real_time(summary: Mapping[str, Any]) -> bool:
-    """Whether the summary has real-time loop figures (not a virtual clock, not a monitor)."""
+    """Whether the summary has real-time loop figures (not a simulated clock, not a monitor)."""
     pe, cu = summary.get("period_error_us") or {}, summary.get("compute_us") or {}
     if pe.get("max") is None or cu.get("p99") is None:
         return False
@@ -227,7 +227,7 @@ def _signal_note(summary: Mapping[str, Any], name: str) -> str:
     if summary.get("trace_kind") == "monitor":
         return f"  {name} is a monitor trace: no loop timing (the cart ran its own loop)"
     if not _real_time(summary):
-        return f"  {name} ran on a virtual clock: no real-time figures"
+        return f"  {name} ran on a simulated clock: no real-time figures"
     return ""
 
 

@@ -14,16 +14,16 @@ from cartctl.design.controllerfile import load_controller
 from cartctl.errors import InputError
 from cartctl.plants.factory import make_plant
 from cartctl.reference import reference_signal
-from cartctl.runtime.clock import VirtualClock
+from cartctl.runtime.back_to_back import BackToBackExecutor
+from cartctl.runtime.clock import SimulatedClock
 from cartctl.runtime.executor import PeriodicExecutor
 from cartctl.runtime.loop import ControlLoop, MemorySink
-from cartctl.runtime.virtual import VirtualExecutor
 
 
 def test_runs_max_ticks_and_idles_every_block_and_at_the_end() -> None:
     seen: list[int] = []
     idles: list[int] = []
-    ex = VirtualExecutor(0.01, max_ticks=2500, idle_every=1000)
+    ex = BackToBackExecutor(0.01, max_ticks=2500, idle_every=1000)
     stats = ex.run(lambda k: seen.append(k) is None, lambda: idles.append(len(seen)))
     assert seen == list(range(2500))
     assert idles == [1000, 2000, 2500]
@@ -33,7 +33,7 @@ def test_runs_max_ticks_and_idles_every_block_and_at_the_end() -> None:
 
 
 def test_stops_after_a_false_tick_and_counts_ticks_before_an_exception() -> None:
-    ex = VirtualExecutor(0.01, max_ticks=100, idle_every=7)
+    ex = BackToBackExecutor(0.01, max_ticks=100, idle_every=7)
     idles: list[int] = []
     assert ex.run(lambda k: k < 9, lambda: idles.append(ex.ticks)).ticks == 10
     assert idles == [7, 10]  # the block, then the end of the run
@@ -55,7 +55,7 @@ def test_stops_after_a_false_tick_and_counts_ticks_before_an_exception() -> None
 )  # fmt: skip
 def test_bad_arguments(kwargs: dict) -> None:
     with pytest.raises(InputError):
-        VirtualExecutor(**kwargs)
+        BackToBackExecutor(**kwargs)
 
 
 def _trace(executor: str, plant_spec: str, controller: str) -> dict[str, np.ndarray]:
@@ -64,12 +64,12 @@ def _trace(executor: str, plant_spec: str, controller: str) -> dict[str, np.ndar
     plant, _ = make_plant(plant_spec)
     n = 300
     ref = reference_signal("square:8:1", n, plant.period_s)
-    memory, clock = MemorySink(), VirtualClock()
+    memory, clock = MemorySink(), SimulatedClock()
     loop = ControlLoop(plant, build_controllers(ctrl), {"a": ref, "b": -ref}, [memory],
                        now_s=clock.now_s, voltage_limit_v=ctrl.voltage_limit_v)  # fmt: skip
     loop.start()
-    if executor == "virtual":
-        VirtualExecutor(0.01, max_ticks=n, idle_every=64).run(
+    if executor == "back-to-back":
+        BackToBackExecutor(0.01, max_ticks=n, idle_every=64).run(
             lambda k: loop.tick(k, 0.0, 0.0, k * 0.01), loop.idle
         )
     else:
@@ -84,10 +84,10 @@ def _trace(executor: str, plant_spec: str, controller: str) -> dict[str, np.ndar
     ("plant", "controller"),
     [("sim", "controllers/pi.toml"), ("physics", "controllers/poles.toml")],
 )
-def test_same_trace_as_the_periodic_executor_on_a_virtual_clock(
+def test_same_trace_as_the_periodic_executor_on_a_simulated_clock(
     plant: str, controller: str
 ) -> None:
-    a, b = _trace("virtual", plant, controller), _trace("periodic", plant, controller)
+    a, b = _trace("back-to-back", plant, controller), _trace("periodic", plant, controller)
     assert a.keys() == b.keys()
     for name in a:
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)

@@ -4,14 +4,14 @@
 :class:`~cartctl.runtime.loop.ControlLoop` as a real-time run, but nothing in them waits for a
 deadline, so none of the real-time bookkeeping of
 :class:`~cartctl.runtime.executor.PeriodicExecutor` applies: every tick starts on its grid point
-(period error 0), takes no simulated time (compute 0) and cannot miss. :class:`VirtualExecutor`
+(period error 0), takes no simulated time (compute 0) and cannot miss. :class:`BackToBackExecutor`
 therefore only counts ticks, calls the tick function, and lets the sinks do their block work
-(``idle``) every :attr:`~VirtualExecutor.idle_every` ticks instead of after every tick. That is
-about a quarter of the fast loop's time saved against the periodic executor on a virtual clock
+(``idle``) every :attr:`~BackToBackExecutor.idle_every` ticks instead of after every tick. That is
+about a quarter of the fast loop's time saved against the periodic executor on a simulated clock
 (``benchmarks/bench_run.py`` prints the figures).
 
 A tick that needs simulated time to pass (a test of a slow tick, a miss) belongs on the periodic
-executor with a :class:`~cartctl.runtime.clock.VirtualClock`.
+executor with a :class:`~cartctl.runtime.clock.SimulatedClock`.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from cartctl.errors import InputError
 from cartctl.runtime.executor import TimingStats
 
 
-class VirtualExecutor:
+class BackToBackExecutor:
     """Calls ``tick(k)`` for k = 0, 1, ... back to back: simulated time, no deadlines.
 
     Parameters
@@ -43,7 +43,7 @@ class VirtualExecutor:
 
     Examples
     --------
-    >>> ex = VirtualExecutor(0.01, max_ticks=3)
+    >>> ex = BackToBackExecutor(0.01, max_ticks=3)
     >>> ex.run(lambda k: True).ticks
     3
     """
