@@ -188,22 +188,6 @@ def augmented_regression(
     return out
 
 
-def regression(
-    y: NDArray[np.float64],
-    u: NDArray[np.float64],
-    na: int,
-    nb: int,
-    nk: int,
-    start: int,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Regressor matrix Φ, shape (n − start, na + nb), and target y[start:], for one experiment.
-
-    ``start`` is at least :func:`first_row`. Both are views of one array from
-    :func:`augmented_regression`.
-    """
-    return stacked_regression([(y, u)], na, nb, nk, start)
-
-
 def stacked_regression(
     segments: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
     na: int,

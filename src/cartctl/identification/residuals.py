@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from cartctl.errors import InputError
-from cartctl.identification.arx import Segment, as_segments, first_row, regression
+from cartctl.identification.arx import Segment, as_segments, first_row, stacked_regression
 from cartctl.identification.figure_base import figure as _figure
 from cartctl.identification.figure_base import save as _save
 from cartctl.model import ArxModel
@@ -87,7 +87,7 @@ def prediction_residuals(
         start = first_row(model.na, model.nb, model.nk)
         if y.size <= start:
             continue
-        phi, target = regression(y, u, model.na, model.nb, model.nk, start)
+        phi, target = stacked_regression([(y, u)], model.na, model.nb, model.nk, start)
         out.append((target - phi @ model.theta, u[start:].copy()))
     return out
 
