@@ -26,10 +26,11 @@ from cartctl.errors import InputError, OutputError, PlantError
 from cartctl.session.checks import DEFAULT_CONTROLLER
 
 if TYPE_CHECKING:
-    pass
+    from cartctl.runtime.loop import ControlLoop, MemorySink
+    from cartctl.session.prepare import PreparedRun
 
-# numpy, scipy and the rest load when the command runs (in run() and the two functions below),
-# not when the parser is built: cartctl --help stays fast.
+# numpy, scipy and the rest load when the command runs (in the steps of run() and the two
+# functions below), not when the parser is built: cartctl --help stays fast.
 
 
 def make_plant(*args: Any, **kwargs: Any) -> Any:
@@ -140,20 +141,10 @@ def default_controller(plant: str) -> Path:
     return DEFAULT_CONTROLLER
 
 
-def run(args: argparse.Namespace) -> int:
-    from cartctl.cli.jsonout import dumps
-    from cartctl.plants.base import ClockedPlant
-    from cartctl.runtime.loop import ControlLoop, MemorySink
-    from cartctl.session.prepare import prepare_run
-    from cartctl.sinks.csv_sink import CsvSink
-    from cartctl.sinks.summary import (
-        format_summary,
-        mark_incomplete,
-        trace_metrics,
-        warn_delay_change,
-        warn_host_losses,
-    )
-
+def _checked_outputs(args: argparse.Namespace) -> tuple[Path, Path]:
+    """Step 1, the refusals that need nothing loaded or driven: duration, voltage limit, plant,
+    references, output files, ``--fast`` on a simulated plant. Returns the trace's and the
+    recording's paths."""
     check_duration(args.duration)
     if args.voltage_limit is not None:
         check_voltage_limit(check_finite(args.voltage_limit, "--voltage-limit"), "--voltage-limit")
@@ -168,7 +159,16 @@ def run(args: argparse.Namespace) -> int:
     csv_path, rrd_path = check_run_outputs(args, "run")  # before anything is loaded or driven
     if args.fast and kind not in SIMULATED:
         raise InputError(f"--fast needs a simulated plant (sim or physics), not '{args.plant}'")
-    given = args.controller or str(default_controller(args.plant))
+    return csv_path, rrd_path
+
+
+def _prepared(args: argparse.Namespace, given: str, csv_path: Path) -> PreparedRun:
+    """Step 2, the session's run path (:func:`cartctl.session.prepare.prepare_run`: controller,
+    plant, references and every refusal), then the trace's loop beside it, for identify (before
+    the loop: an interrupted run has it too)."""
+    from cartctl.choices import find_file
+    from cartctl.data.tracemeta import write_trace_meta
+    from cartctl.session.prepare import prepare_run
 
     def warm_up_rerun() -> None:  # the recording's first-use costs, before a cart ticks
         if args.rerun != "off" and not args.fast:
@@ -184,44 +184,59 @@ def run(args: argparse.Namespace) -> int:
         allow_delay_mismatch=args.allow_delay_mismatch, make_plant=make_plant,
         build_controllers=build_controllers, before_plant=warm_up_rerun,
     )  # fmt: skip
-    controller_file, controllers, plant = (
-        prepared.controller_file, prepared.controllers, prepared.plant,
-    )  # fmt: skip
-    limit, period_s, delay = prepared.voltage_limit_v, prepared.period_s, prepared.loop_delay_ticks
-    references, n, description = prepared.references, prepared.ticks, prepared.description
-    clocked = isinstance(plant, ClockedPlant)
-    from cartctl.choices import find_file
-    from cartctl.data.tracemeta import write_trace_meta
-
-    # the trace's loop beside it, for identify (before the loop: an interrupted run has it too)
     try:
-        write_trace_meta(csv_path, plant=description, loop_delay_ticks=delay,
-                         command=command_line("run"),
-                         controller=controller_file.path or find_file(given),
-                         model=find_file(controller_file.model_path))  # fmt: skip
+        write_trace_meta(csv_path, plant=prepared.description,
+                         loop_delay_ticks=prepared.loop_delay_ticks, command=command_line("run"),
+                         controller=prepared.controller_file.path or find_file(given),
+                         model=find_file(prepared.controller_file.model_path))  # fmt: skip
     except OSError as exc:  # a full disk: nothing driven yet
-        plant.close()
+        prepared.plant.close()
         raise OutputError(exc.filename or csv_path, exc.strerror or str(exc)) from None
+    return prepared
+
+
+def _sinks(
+    args: argparse.Namespace, prepared: PreparedRun, csv_path: Path, rrd_path: Path
+) -> tuple[list[Any], MemorySink, Any]:
+    """Step 3, where the rows go: the CSV trace, memory (for the summary), the Rerun recording
+    unless ``--rerun off``, a live status line on a terminal. Returns the sinks, the memory
+    sink and the Rerun sink (None without one)."""
+    from cartctl.runtime.loop import MemorySink
+    from cartctl.sinks.csv_sink import CsvSink
+
     memory = MemorySink()
     # on the simulated clock a second of trace takes milliseconds: write it in bigger blocks
     sinks: list[Any] = [CsvSink(csv_path, flush_every=1000 if args.fast else 50), memory]
-    rerun = _rerun_sink(args, rrd_path, references, limit)
+    rerun = _rerun_sink(args, rrd_path, prepared.references, prepared.voltage_limit_v)
     if rerun is not None:
         sinks.append(rerun)
     if not args.fast and sys.stderr.isatty():  # a live line on a terminal, refreshed after ticks
         from cartctl.sinks.status import StatusLine
 
-        sinks.append(StatusLine(sys.stderr, period_s=period_s))
+        sinks.append(StatusLine(sys.stderr, period_s=prepared.period_s))
+    return sinks, memory, rerun
 
+
+def _run_loop(
+    args: argparse.Namespace, prepared: PreparedRun, sinks: list[Any]
+) -> tuple[ControlLoop, dict[str, Any], str]:
+    """Step 4, the loop on its executor until the last tick, a signal or a fault; the motors
+    get zero volts whatever happens. Returns the loop (its ``state`` says how it ended), the
+    executor's timing figures and how the loop was scheduled."""
+    from cartctl.plants.base import ClockedPlant
     from cartctl.runtime.back_to_back import BackToBackExecutor
     from cartctl.runtime.cartclock import CartClockedExecutor
     from cartctl.runtime.clock import MonotonicClock, SimulatedClock
     from cartctl.runtime.executor import PeriodicExecutor
     from cartctl.runtime.gcpause import gc_paused
+    from cartctl.runtime.loop import ControlLoop
 
+    plant, period_s, n = prepared.plant, prepared.period_s, prepared.ticks
+    clocked = isinstance(plant, ClockedPlant)
     clock = SimulatedClock() if args.fast else MonotonicClock()
-    loop = ControlLoop(plant, controllers, references, sinks, now_s=clock.now_s,
-                       voltage_limit_v=limit, period_s=period_s)  # fmt: skip
+    loop = ControlLoop(plant, prepared.controllers, prepared.references, sinks,
+                       now_s=clock.now_s, voltage_limit_v=prepared.voltage_limit_v,
+                       period_s=period_s)  # fmt: skip
     executor: Any
     if isinstance(plant, ClockedPlant):  # clocked
         executor = CartClockedExecutor(plant, max_ticks=n, now_s=clock.now_s,
@@ -269,36 +284,52 @@ def run(args: argparse.Namespace) -> int:
                 from cartctl.runtime.realtime import restore
 
                 restore()
-    summary = trace_metrics(memory.arrays(), period_s)
-    timing = (stats or executor.stats()).to_dict()
+    return loop, (stats or executor.stats()).to_dict(), scheduling
+
+
+def _summary(
+    args: argparse.Namespace, prepared: PreparedRun, loop: ControlLoop, memory: MemorySink,
+    rerun: Any, timing: dict[str, Any], run_facts: dict[str, Any],
+) -> dict[str, Any]:  # fmt: skip
+    """Step 5, the run's summary (``--json``'s object): the trace's metrics, the executor's
+    timing, the link's figures, ``run_facts`` (recording, trace, plant, controller,
+    scheduling), the smoothed speed, and which files are incomplete."""
+    from cartctl.cli.commands.review.smoothed import smooth_run
+    from cartctl.sinks.summary import mark_incomplete, trace_metrics
+
+    summary = trace_metrics(memory.arrays(), prepared.period_s)
+    timing = dict(timing)
     del timing["duration_s"]  # the executor's clock span; the trace's own duration stays
     summary.update(timing)
     summary["ticks"] = loop.state.rows  # as the trace and the recording: the stop row included
-    link_summary = getattr(plant, "link_summary", None)
+    link_summary = getattr(prepared.plant, "link_summary", None)
     if link_summary is not None:
         summary.update(link_summary())
     if summary.get("loop_delay_ticks") is None:  # the run's own echoes, else the probe's
-        summary["loop_delay_ticks"] = delay
-    summary.update(
-        controller_loop_delay_ticks=controller_file.loop_delay_ticks,
-        recording=str(rrd_path) if rerun is not None else None,
-        trace=str(csv_path),
-        plant=description,
-        controller=given,
-        scheduling=scheduling,
-    )
-    from cartctl.cli.commands.review.smoothed import smooth_run
-
+        summary["loop_delay_ticks"] = prepared.loop_delay_ticks
+    summary.update(controller_loop_delay_ticks=prepared.controller_file.loop_delay_ticks,
+                   **run_facts)  # fmt: skip
     try:
-        smooth_run(summary, memory.arrays(), period_s, controller_file.model_path, rerun)
+        smooth_run(summary, memory.arrays(), prepared.period_s,
+                   prepared.controller_file.model_path, rerun)  # fmt: skip
     except OutputError as exc:  # the recording's file, found short when it is closed
         loop.state.output_failed(exc)
     mark_incomplete(summary, loop.state.incomplete)
+    return summary
+
+
+def _report(args: argparse.Namespace, summary: dict[str, Any], loop: ControlLoop,
+            run_facts: dict[str, Any]) -> int:  # fmt: skip
+    """Step 6, the summary on stdout, warnings and the error line on stderr; the exit code."""
+    from cartctl.cli.jsonout import dumps
+    from cartctl.sinks.summary import format_summary, warn_delay_change, warn_host_losses
+
     if args.json:
         print(dumps(summary))
     else:
         print(format_summary(summary))
-        print(f"  plant {description}; controller {given}; {scheduling}")
+        print(f"  plant {run_facts['plant']}; controller {run_facts['controller']}; "
+              f"{run_facts['scheduling']}")  # fmt: skip
     for problem in loop.state.sink_errors:
         print(f"cartctl run: warning: {problem}", file=sys.stderr)
     warn_host_losses(summary.get("link"), "run")
@@ -318,3 +349,21 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)  # fmt: skip
         return stopping.exit_code()
     return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    """``cartctl run``: checks, the session's run path, sinks, the loop, the summary.
+
+    Returns 0, 1 when the run failed (a plant fault, a file left incomplete) or the exit code
+    of the signal that stopped it.
+    """
+    csv_path, rrd_path = _checked_outputs(args)
+    given = args.controller or str(default_controller(args.plant))
+    prepared = _prepared(args, given, csv_path)
+    sinks, memory, rerun = _sinks(args, prepared, csv_path, rrd_path)
+    loop, timing, scheduling = _run_loop(args, prepared, sinks)
+    run_facts = {"recording": str(rrd_path) if rerun is not None else None,
+                 "trace": str(csv_path), "plant": prepared.description, "controller": given,
+                 "scheduling": scheduling}  # fmt: skip
+    summary = _summary(args, prepared, loop, memory, rerun, timing, run_facts)
+    return _report(args, summary, loop, run_facts)
