@@ -13,7 +13,7 @@ from cartctl.cli import main
 from cartctl.data.trace import Trace, write_trace
 from cartctl.errors import InputError
 from cartctl.identification.arx import IdentificationError, fit_arx
-from cartctl.identification.delay import estimate_delay
+from cartctl.identification.delay import delay_evidence
 from cartctl.identification.prefilter import Prefilter
 from cartctl.model import ArxModel
 from cartctl.plants.physics import PhysicsPlant
@@ -267,7 +267,7 @@ def test_delay_estimate_ties_go_to_the_smaller_delay() -> None:
     # b = [0, 1] at nk = 2 is a pure delay of 3: nk = 2 and nk = 3 both represent it exactly
     model = ArxModel.from_theta([-0.5, 0.0, 1.0], na=1, nb=2, nk=2)
     u = prbs(5.0, duration_s=5.0)
-    est = estimate_delay([(model.simulate(u), u)], na=1, nb=2, candidates=(1, 2, 3, 4))
+    est = delay_evidence([(model.simulate(u), u)], na=1, nb=2, candidates=(1, 2, 3, 4))
     assert est.residual_rms[1] < 1e-9
     assert est.residual_rms[2] < 1e-9
     assert est.nk == 2

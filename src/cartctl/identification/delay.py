@@ -88,47 +88,6 @@ INDISTINCT_FRACTION = 1e-3
 """Candidates whose equation errors all lie within this fraction of the best cannot be told apart."""
 
 
-def estimate_delay(
-    segments: Sequence[Segment],
-    *,
-    na: int = 2,
-    nb: int = 2,
-    candidates: Sequence[int] = range(1, 7),
-    period_s: float = PERIOD_S,
-    eval_segments: Sequence[Segment] | None = None,
-) -> DelayEstimate:
-    """Pick the input delay with the smallest ARX equation error (one motor on its own).
-
-    Parameters
-    ----------
-    segments : sequence of (y, u)
-        Experiments (rad/s, V).
-    na, nb : int
-        Model orders.
-    candidates : sequence of int
-        Delays to try (samples), default 1..6.
-    period_s : float
-        Sample period (s).
-    eval_segments : sequence of (y, u), optional
-        Raw data for the simulation fits (when ``segments`` is prefiltered).
-
-    Returns
-    -------
-    DelayEstimate
-        Ties (equal losses up to rounding, 1e-9 of the output's RMS) go to the smaller delay.
-
-    Raises
-    ------
-    IdentificationError
-        Every candidate's loss within :data:`INDISTINCT_FRACTION` of the best: the data cannot
-        tell the delays apart.
-    """
-    est = delay_evidence(segments, na=na, nb=nb, candidates=candidates, period_s=period_s,
-                         eval_segments=eval_segments)  # fmt: skip
-    check_distinct({"": est})
-    return est
-
-
 def check_distinct(estimates: Mapping[str, DelayEstimate]) -> None:
     """Refuse evidence that cannot tell the delays apart: every candidate's equation error
     within :data:`INDISTINCT_FRACTION` of the best, for every motor of ``estimates``.
@@ -165,9 +124,26 @@ def delay_evidence(
 ) -> DelayEstimate:
     """Fit every candidate delay on common equations: the evidence, and this motor's best.
 
-    Parameters are those of :func:`estimate_delay`; nothing is refused for being too close
-    (:func:`check_distinct` does that). Ties (equal losses up to rounding, 1e-9 of the output's
-    RMS) go to the smaller delay.
+    Nothing is refused for being too close (:func:`check_distinct` does that).
+
+    Parameters
+    ----------
+    segments : sequence of (y, u)
+        Experiments (rad/s, V).
+    na, nb : int
+        Model orders.
+    candidates : sequence of int
+        Delays to try (samples), default 1..6.
+    period_s : float
+        Sample period (s).
+    eval_segments : sequence of (y, u), optional
+        Raw data for the simulation fits (when ``segments`` is prefiltered).
+
+    Returns
+    -------
+    DelayEstimate
+        The best delay has the smallest ARX equation error; ties (equal losses up to rounding,
+        1e-9 of the output's RMS) go to the smaller delay.
     """
     cands = tuple(int(c) for c in candidates)
     if not cands:
