@@ -197,3 +197,13 @@ def test_stable_iff_poles_inside_unit_circle(c: float, d: float) -> None:
     if model.is_stable() and max(radii) < 0.9:
         _, y = model.step_response(1.0, duration_s=3.0)
         assert y[-1] == pytest.approx(model.dc_gain(), rel=1e-6, abs=1e-9)
+
+
+@pytest.mark.parametrize(("na", "nb", "nk"), [(2, 2, 2), (3, 1, 1), (1, 3, 4)])
+def test_response_at_matches_freqz_of_the_difference_equation(na: int, nb: int, nk: int) -> None:
+    # scipy's freqz evaluates B(q⁻¹)/A(q⁻¹) from the lfilter form, not from num()/den()
+    theta = np.r_[np.linspace(-0.5, 0.2, na), np.linspace(1.0, 0.3, nb)]
+    model = ArxModel.from_theta(theta, na=na, nb=nb, nk=nk)
+    w = np.linspace(0.01, np.pi, 50)
+    _, expected = signal.freqz(np.r_[np.zeros(nk), theta[na:]], np.r_[1.0, theta[:na]], worN=w)
+    np.testing.assert_allclose(model.response_at(np.exp(1j * w)), expected, rtol=1e-10)

@@ -281,6 +281,11 @@ class ArxModel:
         den[1 : self.na + 1] = self.ar
         return den
 
+    def response_at(self, z: NDArray[np.complex128]) -> NDArray[np.complex128]:
+        """G(z) = num(z) / den(z) (rad/s per V) at the points ``z``; at z = exp(j 2π f Ts), the
+        frequency response at f Hz."""
+        return np.polyval(self.num(), z) / np.polyval(self.den(), z)
+
     def lfilter_coeffs(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(b, a) in powers of q⁻¹ for :func:`scipy.signal.lfilter`: b = [0]*nk + b, a = [1, ar]."""
         b = np.concatenate([np.zeros(self.nk), self.b])

@@ -72,7 +72,7 @@ def _gains(
     """Kp, Ki (arrays) that put L(e^{jωTs}) at angle −180° + PM on the unit circle."""
     ts = model.period_s
     z = np.exp(2j * np.pi * freq_hz * ts)
-    plant = np.polyval(model.num(), z) / np.polyval(model.den(), z) * z ** (-extra)
+    plant = model.response_at(z) * z ** (-extra)
     target = np.exp(1j * np.deg2rad(phase_margin_deg - 180.0)) / plant  # required C(e^{jωTs})
     w = ts * z / (z - 1.0)  # C = Kp·1 + Ki·w: Re and Im give two real equations
     ki = target.imag / w.imag

@@ -26,7 +26,7 @@ def _loop_response(
 ) -> np.ndarray:
     z = np.exp(2j * np.pi * freq_hz * model.period_s)
     c = np.polyval(entry["controller_num"], z) / np.polyval(entry["controller_den"], z)
-    g = np.polyval(model.num(), z) / np.polyval(model.den(), z)
+    g = model.response_at(z)
     return c * g * z ** (-extra)
 
 

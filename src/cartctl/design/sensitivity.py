@@ -89,7 +89,7 @@ def loop_response(
 ) -> NDArray[np.complex128]:
     """L(e^{j2πf·Ts}) = C_fb·G·z^(−extra) at the frequencies ``freq_hz`` (Hz)."""
     z = np.exp(2j * np.pi * np.asarray(freq_hz, dtype=float) * model.period_s)
-    plant = np.polyval(model.num(), z) / np.polyval(model.den(), z)
+    plant = model.response_at(z)
     return controller.feedback_response(z) * plant * z ** (-int(extra_delay_ticks))
 
 

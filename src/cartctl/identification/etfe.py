@@ -250,4 +250,4 @@ def model_response(model: ArxModel, freq_hz: ArrayLike) -> NDArray[np.complex128
     """
     f = np.asarray(freq_hz, dtype=float)
     z = np.exp(2j * np.pi * f * model.period_s)
-    return np.polyval(model.num(), z) / np.polyval(model.den(), z)
+    return model.response_at(z)
