@@ -2,7 +2,7 @@
 
 The first stage of the pipeline (data → identify → models/ → design → controllers/ → runtime →
 logs/). A trace holds, per 10 ms tick k, the voltage *commanded* at tick k (V) and the speed
-*measured* at tick k (rad/s) of both motors (the CSV columns are in the README, "Traces").
+*measured* at tick k (rad/s) of both motors (the CSV columns: docs/architecture.md, "Trace columns").
 :func:`read_trace` reads trace CSV files and QRoboticsCenter logs (whose layout
 :mod:`cartctl.data.qrc` parses), optionally mapping QRC labels or foreign CSV headers onto trace
 columns. The file's numbers come from :mod:`cartctl.data.table`, the choice of columns from
