@@ -231,10 +231,13 @@ def _settling_bound(
     hold = max(1, round(hold_s / ts))
     n_max = max(1, round(max_s / ts))
     impulse = plant.simulate(np.r_[1.0, np.zeros(n_max + hold)])
-    lo, hi = -1, n_max  # N = 0 is tested too; hi must be feasible
-    best = _feasible(impulse, hi, hold, step_rad_s, tol, voltage_limit_v)
-    if best is None:
-        raise InputError(f"no admissible voltage settles this step within {max_s:g} s")
+    # feasibility only grows with N (a sequence settling at N settles at N + 1): gallop up from
+    # N = 0 (a bound is a few ticks; small programs are cheap), then bisect the last doubling
+    lo, hi, best = -1, 0, None
+    while (best := _feasible(impulse, hi, hold, step_rad_s, tol, voltage_limit_v)) is None:
+        if hi >= n_max:
+            raise InputError(f"no admissible voltage settles this step within {max_s:g} s")
+        lo, hi = hi, min(n_max, 2 * hi + 1)
     while hi - lo > 1:
         mid = (lo + hi) // 2
         u = _feasible(impulse, mid, hold, step_rad_s, tol, voltage_limit_v)
