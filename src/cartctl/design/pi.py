@@ -32,6 +32,8 @@ from cartctl.errors import InputError
 from cartctl.model import ArxModel, check_extra_delay_ticks
 
 _GRID_POINTS = 400
+_EDGE_TOL_HZ = 1e-7
+"""How closely :func:`crossover_range` bisects an edge (a tenth of the 1e-6 Hz it promises)."""
 _FREQ_POINTS = 4001
 _BANDWIDTH_GRID = 41
 
@@ -123,14 +125,17 @@ def crossover_range(
     _check_common(model, phase_margin_deg, extra_delay_ticks)
     nyquist = 0.5 / model.period_s
     grid = np.geomspace(nyquist * 1e-4, nyquist * (1.0 - 1e-6), _GRID_POINTS)
-    ok = [not _solve(model, phase_margin_deg, f, extra_delay_ticks)[2] for f in grid]
+    kp, ki = _gains(model, phase_margin_deg, grid, extra_delay_ticks)  # the whole grid at once
+    signs = (kp >= 0.0) & (ki > 0.0)
+    ok = [bool(good) and _stable(model, float(p), float(i), extra_delay_ticks)
+          for good, p, i in zip(signs, kp, ki, strict=True)]  # fmt: skip
     if not any(ok):
         return None
     first = ok.index(True)
     last = ok.index(False, first) - 1 if False in ok[first:] else len(ok) - 1
 
     def edge(good: float, bad: float) -> float:
-        for _ in range(60):
+        while abs(good - bad) > _EDGE_TOL_HZ:
             mid = 0.5 * (good + bad)
             if not _solve(model, phase_margin_deg, mid, extra_delay_ticks)[2]:
                 good = mid
