@@ -15,6 +15,7 @@ count as much as top-level ones.
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 SRC = Path(__file__).resolve().parents[1] / "src"
@@ -42,6 +43,7 @@ def _module(path: Path) -> str:
     return ".".join(parts)
 
 
+@functools.cache  # parsing every module once serves every test here (none changes it)
 def _graph() -> dict[str, set[str]]:
     modules = {_module(p): p for p in (SRC / "cartctl").rglob("*.py")}
     graph: dict[str, set[str]] = {m: set() for m in modules}
