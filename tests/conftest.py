@@ -64,9 +64,8 @@ that the run ends on short modules, not on one worker still busy with a long one
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """The order the workers take modules in (``--dist loadfile --no-loadscope-reorder``): one
     with real-time tests, then two without, and so on, each kind largest first (the heavy ones,
-    then by number of tests). At any time about
-    one worker waits on a real-time cart while the others compute, and the long waits do not all
-    come at the end."""
+    then by number of tests). At any time about one worker waits on a real-time cart while the
+    others compute, and the long waits do not all come at the end."""
     by_module: dict[str, list[pytest.Item]] = {}
     for item in items:
         by_module.setdefault(item.nodeid.split("::")[0], []).append(item)
