@@ -11,14 +11,12 @@ import math
 import re
 import shutil
 import subprocess
-from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from cartctl.design.controllerfile import load_controller
-from cartctl.errors import PlantError
 from cartctl.export.arduino import arduino_source, onboard_controllers
 from cartctl.link import Gpio
 from cartctl.link.bridge_firmware import BridgeFirmware, CartIO
@@ -32,6 +30,7 @@ from cartctl.link.cart_monitor import (
 )
 from cartctl.link.firmware_id import BRIDGE, CHANNEL_KEYS, ONBOARD, recognise_firmware
 from cartctl.link.onboard_firmware import OnboardFirmware
+from monitor_stubs import MemoryRows, MemoryTexts, ScriptedLink
 
 ROOT = Path(__file__).resolve().parents[1]
 PI = ROOT / "controllers" / "pi.toml"
@@ -140,46 +139,6 @@ def test_unknown_firmware_keeps_qrc_labels() -> None:
 # -- the monitor's choice, on scripted frames ---------------------------------------------------
 
 
-class _Rows:
-    def __init__(self) -> None:
-        self.columns: list[str] | None = None
-        self.rows: list[list[float]] = []
-
-    def open(self, columns: Sequence[str]) -> None:
-        assert self.columns is None, "opened once"
-        self.columns = list(columns)
-
-    def write(self, row: Sequence[float]) -> None:
-        assert self.columns is not None, "written after open"
-        self.rows.append([float(v) for v in row])
-
-    def close(self) -> None:
-        pass
-
-
-class _Texts:
-    def __init__(self) -> None:
-        self.texts: list[tuple[str, float, int]] = []
-
-    def log_text(self, entity: str, text: str, time_s: float, tick: int, level: str) -> None:
-        self.texts.append((text, time_s, tick))
-
-
-class _Link:
-    """``next_gpio`` playing GPIOs and PRINT lines, then a line fault."""
-
-    def __init__(self, monitor: Monitor, script: list[object]) -> None:
-        self.monitor, self.script = monitor, list(script)
-
-    def next_gpio(self) -> tuple[Gpio, float]:
-        while self.script:
-            item = self.script.pop(0)
-            if isinstance(item, Gpio):
-                return item, 0.0
-            self.monitor.on_print(str(item))
-        raise PlantError("no data from the cart on /dev/fake for 100 ms")
-
-
 def _gpio(k: int, marker: float) -> Gpio:
     floats = [float(k), 0.0, 0.0, 0.0, 0.0, 0.0, marker, 0.0]
     return Gpio(10 * k, tuple(floats), (0, 0, 0, 0))
@@ -187,10 +146,10 @@ def _gpio(k: int, marker: float) -> Gpio:
 
 def _run(
     script: list[object], labels: tuple[str, ...] | None = None
-) -> tuple[Monitor, _Rows, _Texts, list[str], MonitorResult]:
-    rows, texts, said = _Rows(), _Texts(), list[str]()
+) -> tuple[Monitor, MemoryRows, MemoryTexts, list[str], MonitorResult]:
+    rows, texts, said = MemoryRows(), MemoryTexts(), list[str]()
     monitor = Monitor([rows], [texts], labels, announce=said.append)
-    result = monitor.run(_Link(monitor, script))  # type: ignore[arg-type]
+    result = monitor.run(ScriptedLink(monitor, script))  # type: ignore[arg-type]
     return monitor, rows, texts, said, result
 
 
@@ -206,7 +165,7 @@ def test_marker_after_a_few_unmarked_frames_names_every_row() -> None:
     table = np.array(rows.rows)
     np.testing.assert_allclose(table[:, 0], [0.0, 0.01, 0.02, 0.03])
     np.testing.assert_array_equal(table[:, 2], [0, 1, 2, 3])  # every frame, in order
-    assert texts.texts == [("boot", 0.0, 0), ("hello", 0.01, 1)]  # stamped as they came
+    assert [t[1:] for t in texts.texts] == [("boot", 0.0, 0), ("hello", 0.01, 1)]  # as they came
     assert result.frames == 4 and result.stopped == "fault"
     assert len(said) == 1 and "on-board controller" in said[0] and "float 6 = 1001" in said[0]
 

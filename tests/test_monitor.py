@@ -14,7 +14,6 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +21,7 @@ import pytest
 
 from cartctl.cli import main
 from cartctl.design.controllerfile import load_controller
-from cartctl.errors import InputError, PlantError
+from cartctl.errors import InputError
 from cartctl.export.arduino import onboard_controllers
 from cartctl.link import Event, Gpio
 from cartctl.link.bridge_firmware import CartIO
@@ -35,6 +34,7 @@ from cartctl.link.cart_monitor import (
     parse_labels,
 )
 from cartctl.link.onboard_firmware import OnboardFirmware
+from monitor_stubs import MemoryRows, MemoryTexts, ScriptedLink
 
 ROOT = Path(__file__).resolve().parents[1]
 PI = ROOT / "controllers" / "pi.toml"
@@ -122,53 +122,12 @@ def test_user_mistakes_are_one_line(
 # -- the monitor loop on a scripted link --------------------------------------------------------
 
 
-class _MemoryRows:
-    def __init__(self) -> None:
-        self.columns: list[str] = []
-        self.rows: list[list[float]] = []
-
-    def open(self, columns: Sequence[str]) -> None:
-        self.columns = list(columns)
-
-    def write(self, row: Sequence[float]) -> None:
-        self.rows.append([float(v) for v in row])
-
-    def close(self) -> None:
-        pass
-
-
-class _MemoryTexts:
-    def __init__(self) -> None:
-        self.texts: list[tuple[str, str, float, int]] = []
-
-    def log_text(self, entity: str, text: str, time_s: float, tick: int, level: str) -> None:
-        self.texts.append((entity, text, time_s, tick))
-
-
-class _ScriptedLink:
-    """``next_gpio`` of a CartLink, playing a script of GPIOs, PRINT lines and EVENTs."""
-
-    def __init__(self, monitor: Monitor, script: list[object]) -> None:
-        self.monitor, self.script = monitor, list(script)
-
-    def next_gpio(self) -> tuple[Gpio, float]:
-        while self.script:
-            item = self.script.pop(0)
-            if isinstance(item, Gpio):
-                return item, 0.0
-            if isinstance(item, Event):
-                self.monitor.on_event(item)
-            else:
-                self.monitor.on_print(str(item))
-        raise PlantError("no data from the cart on /dev/fake for 100 ms")
-
-
 def _gpio(time_ms: int, value: float) -> Gpio:
     return Gpio(time_ms, (value, -value, 0.1, 0, 0, 0, 0, 0), (7, -3, 0, 2**31 - 1))
 
 
-def _monitor() -> tuple[Monitor, _MemoryRows, _MemoryTexts]:
-    rows, texts = _MemoryRows(), _MemoryTexts()
+def _monitor() -> tuple[Monitor, MemoryRows, MemoryTexts]:
+    rows, texts = MemoryRows(), MemoryTexts()
     monitor = Monitor([rows], [texts], parse_labels("f0=speed_a,i1=status"))
     monitor.open()
     return monitor, rows, texts
@@ -178,7 +137,7 @@ def test_rows_texts_and_fault() -> None:
     monitor, rows, texts = _monitor()
     script = ["hello", _gpio(5000, 1.0), _gpio(5010, 2.0), Event(1003), "line",
               _gpio(5030, 3.0), Event(42)]  # fmt: skip
-    result = monitor.run(_ScriptedLink(monitor, script))  # type: ignore[arg-type]
+    result = monitor.run(ScriptedLink(monitor, script))  # type: ignore[arg-type]
     assert rows.columns[:4] == ["time_s", "tick", "speed_a", "FloatIn1"]
     assert rows.columns[-3:] == ["status", "IntIn2", "IntIn3"]
     table = np.array(rows.rows)
@@ -202,7 +161,7 @@ def test_duration_is_cart_time_and_time_wraps() -> None:
     monitor, rows, _ = _monitor()
     start = 2**32 - 20  # the u32 millisecond counter wraps within the run
     script = [_gpio((start + 10 * k) % 2**32, k) for k in range(10)]
-    result = monitor.run(_ScriptedLink(monitor, script), duration_s=0.05)  # type: ignore[arg-type]
+    result = monitor.run(ScriptedLink(monitor, script), duration_s=0.05)  # type: ignore[arg-type]
     assert result.stopped == "duration" and result.failure is None
     np.testing.assert_allclose(np.array(rows.rows)[:, 0], [0.0, 0.01, 0.02, 0.03, 0.04])
 
@@ -210,7 +169,7 @@ def test_duration_is_cart_time_and_time_wraps() -> None:
 def test_stop_request_ends_cleanly() -> None:
     monitor, rows, _ = _monitor()
     monitor.stop_requested = True
-    result = monitor.run(_ScriptedLink(monitor, [_gpio(0, 1.0)]))  # type: ignore[arg-type]
+    result = monitor.run(ScriptedLink(monitor, [_gpio(0, 1.0)]))  # type: ignore[arg-type]
     assert result.stopped == "interrupted" and rows.rows == []
 
 
