@@ -126,9 +126,8 @@ def crossover_range(
     nyquist = 0.5 / model.period_s
     grid = np.geomspace(nyquist * 1e-4, nyquist * (1.0 - 1e-6), _GRID_POINTS)
     kp, ki = _gains(model, phase_margin_deg, grid, extra_delay_ticks)  # the whole grid at once
-    signs = (kp >= 0.0) & (ki > 0.0)
-    ok = [bool(good) and _stable(model, float(p), float(i), extra_delay_ticks)
-          for good, p, i in zip(signs, kp, ki, strict=True)]  # fmt: skip
+    ok = [not _problem(model, phase_margin_deg, float(p), float(i), extra_delay_ticks)
+          for p, i in zip(kp, ki, strict=True)]  # fmt: skip
     if not any(ok):
         return None
     first = ok.index(True)
