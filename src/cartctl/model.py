@@ -25,7 +25,6 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import signal
 
 from cartctl.cart import PERIOD_S
 from cartctl.errors import InputError
@@ -340,6 +339,8 @@ class ArxModel:
         u = np.asarray(voltage_v, dtype=float)
         if u.ndim != 1:
             raise InputError(f"voltage sequence must be one-dimensional, got shape {u.shape}")
+        from scipy import signal  # here, not at the top: it costs a run's start 0.8 s
+
         b, a = self.lfilter_coeffs()
         return signal.lfilter(b, a, u)
 

@@ -12,7 +12,6 @@ from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import signal as sps
 
 from cartctl.cart import PERIOD_S
 from cartctl.choices import MAX_DURATION_S, SIGNALS
@@ -99,6 +98,8 @@ def prbs(
     state = np.array([(seed >> i) & 1 for i in range(order)], dtype=np.int8)
     if not state.any():
         raise InputError("PRBS seed must have a non-zero low-order bit pattern")
+    from scipy import signal as sps
+
     bits, _ = sps.max_len_seq(order, state=state)
     n_bits = -(-n // per_bit)
     reps = -(-n_bits // bits.size)
@@ -161,6 +162,8 @@ def chirp(
             f"chirp frequencies must lie in (0, {nyquist_hz:g}) Hz, got {f_start_hz}..{f_end_hz}"
         )
     t = np.arange(n) * period_s
+    from scipy import signal as sps
+
     return amp * sps.chirp(
         t, f0=f_start_hz, t1=t[-1] if n > 1 else period_s, f1=f_end_hz, method="logarithmic"
     )

@@ -59,7 +59,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import NDArray
 
 from cartctl.cart import ENCODER_COUNTS_PER_REV, encoder_quantum_rad_s
@@ -170,6 +169,8 @@ def design_kalman(
         A[n, n] = 1.0
         Q[n, n] = sb**2
     try:
+        import scipy.linalg
+
         P = scipy.linalg.solve_discrete_are(A.T, C.reshape(m, 1), Q, np.array([[R]]))
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise InputError(f"no steady-state Kalman gain for this model and noise ({exc})") from None

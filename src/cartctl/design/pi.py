@@ -25,7 +25,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import optimize
 
 from cartctl.design.request import PM_RANGE_DEG
 from cartctl.errors import InputError
@@ -248,6 +247,8 @@ def design_pi_bandwidth(
         )
     fc = float(grid[top])
     if bandwidth_hz < widths[top]:
+        from scipy import optimize
+
         fc = optimize.brentq(lambda f: at(f).bandwidth_hz() - bandwidth_hz, low, fc, xtol=1e-9)
     design = at(fc)
     return replace(design, target_bandwidth_hz=float(bandwidth_hz))
@@ -325,6 +326,8 @@ class PiDesign:
         if below.size == 0:
             return nyquist
         i = int(below[0])
+        from scipy import optimize
+
         return float(optimize.brentq(lambda f: float(excess(f)[0]), grid[i - 1], grid[i]))
 
     def analysis(self) -> dict[str, Any]:

@@ -35,7 +35,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.signal
 from numpy.typing import NDArray
 
 from cartctl.errors import InputError
@@ -95,6 +94,8 @@ class StateSpace:
             np.zeros((1, 1)),
             self.period_s,
         )
+        import scipy.signal
+
         _, y, _ = scipy.signal.dlsim(system, u)
         return np.asarray(y, dtype=float).ravel()
 
