@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 from cartctl.errors import InputError
-from cartctl.identification._checks import as_pair, is_whole
 from cartctl.identification.cycles import (
+    as_pair,
     average_cycles,
     find_period,
+    is_whole,
     periodic_regression_pad,
     split_cycles,
 )

@@ -1,10 +1,15 @@
-"""The frequency-domain figures of an identification: the ETFE with the models' Bode plots
-(the report's figure 4) and the pole-zero map (figures 5, 12)."""
+"""The identification figures: their common style and saving, the ETFE with the models' Bode
+plots (the report's figure 4) and the pole-zero map (figures 5, 12).
+
+matplotlib is imported inside the functions (the package import stays light) and figures are
+drawn on their own canvases, without pyplot's global state.
+"""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -12,15 +17,51 @@ import numpy as np
 
 from cartctl.errors import InputError
 from cartctl.identification.etfe import Etfe, model_response
-from cartctl.identification.figure_base import color as _color
-from cartctl.identification.figure_base import figure as _figure
-from cartctl.identification.figure_base import save as _save
 from cartctl.model import ArxModel
 
 if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+    from matplotlib.typing import RcKeyType
+
     from cartctl.identification.bands import BodeBand
 
-__all__ = ["plot_etfe", "plot_pzmap"]
+__all__ = ["DPI", "color", "figure", "plot_etfe", "plot_pzmap", "save"]
+
+DPI = 110
+"""Resolution of the PNG files (dots per inch); 10 × 6.5 in figures are 1100 × 715 px."""
+
+_STYLE: dict[RcKeyType, Any] = {
+    "font.size": 10,
+    "axes.titlesize": 11,
+    "axes.labelsize": 10,
+    "legend.fontsize": 9,
+    "figure.titlesize": 13,
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+    "lines.linewidth": 1.4,
+}
+_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
+
+
+@contextmanager
+def figure(width_in: float, height_in: float) -> Iterator[Figure]:
+    """A constrained-layout figure drawn under the report's style (no pyplot, nothing to close)."""
+    import matplotlib as mpl
+    from matplotlib.figure import Figure
+
+    with mpl.rc_context(_STYLE):
+        yield Figure(figsize=(width_in, height_in), dpi=DPI, layout="constrained")
+
+
+def save(fig: Figure, path: Path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
+def color(i: int) -> str:
+    return _COLORS[i % len(_COLORS)]
 
 
 def plot_etfe(
@@ -31,39 +72,14 @@ def plot_etfe(
     title: str,
     band: BodeBand | None = None,
 ) -> Path:
-    """ETFE as dots and each model's Bode plot as a line (report, figure 4).
+    """ETFE as dots and each model's Bode plot as a line (report, figure 4); returns ``path``.
 
-    Magnitude (dB re 1 rad/s per V) above, phase (degrees) below, on a logarithmic frequency
-    axis up to the Nyquist frequency 1 / (2 Ts). Model phases are unwrapped from low
-    frequency; each ETFE phase is shifted by a whole number of turns to the branch of the first
-    model's phase (to the unwrapped ETFE itself when there is no model), so measurement and
-    models are drawn on the same branch.
-
-    Parameters
-    ----------
-    etfe : Etfe
-        The empirical estimate (one motor).
-    models : mapping of str to ArxModel
-        Label → model of the same motor; may be empty.
-    path : Path
-        PNG file to write.
-    title : str
-        Figure title.
-    band : BodeBand, optional
-        1σ and 2σ bands of the first model, shaded in its colour
-        (:mod:`~cartctl.identification.bands`).
-
-    Returns
-    -------
-    Path
-        ``path``.
-
-    Raises
-    ------
-    InputError
-        An ETFE with no frequency above 0 Hz.
+    Magnitude (dB re 1 rad/s per V) above, phase (deg) below, on a log frequency axis up to the
+    Nyquist frequency. Model phases are unwrapped from low frequency; each ETFE phase is moved by
+    whole turns to the first model's branch (or unwrapped, without models). ``band`` shades the
+    first model's 1σ and 2σ bands (:mod:`~cartctl.identification.bands`).
     """
-    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+    from matplotlib.ticker import FuncFormatter, LogLocator, MultipleLocator, NullFormatter
 
     positive = etfe.freq_hz > 0.0
     if not np.any(positive):
@@ -85,9 +101,9 @@ def plot_etfe(
         phase_e = np.degrees(np.unwrap(np.angle(h_e)))
     n = etfe.n_segments
     kind = f"{n} period{'s' if n != 1 else ''} averaged" if etfe.periodic else "whole record"
-    if not etfe.periodic and etfe.n_segments > 1:
-        kind = f"{etfe.n_segments} Hann segments"
-    with _figure(10.0, 7.0) as fig:
+    if not etfe.periodic and n > 1:
+        kind = f"{n} Hann segments"
+    with figure(10.0, 7.0) as fig:
         ax_m, ax_p = fig.subplots(2, 1, sharex=True)
         style = {"linestyle": "none", "marker": "o", "markersize": 3.5, "color": "0.15"}
         ax_m.plot(f_e, 20.0 * np.log10(np.abs(h_e)), label=f"ETFE ({kind})", **style)
@@ -95,8 +111,8 @@ def plot_etfe(
         if band is not None and curves:
             _draw_band(ax_m, ax_p, band, f_lo, curves[0][0])
         for i, (label, mag_db, phase_deg) in enumerate(curves):
-            ax_m.plot(f_grid, mag_db, color=_color(i), label=label, linewidth=1.8)
-            ax_p.plot(f_grid, phase_deg, color=_color(i), linewidth=1.8)
+            ax_m.plot(f_grid, mag_db, color=color(i), label=label, linewidth=1.8)
+            ax_p.plot(f_grid, phase_deg, color=color(i), linewidth=1.8)
         ax_m.set_xscale("log")
         ax_m.set_xlim(f_lo, nyquist_hz)
         ax_p.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
@@ -105,12 +121,13 @@ def plot_etfe(
         ax_m.set_ylabel("magnitude (dB re 1 rad/s/V)")
         ax_p.set_ylabel("phase (deg)")
         ax_p.set_xlabel(f"frequency (Hz), up to the Nyquist frequency {nyquist_hz:g} Hz")
-        _phase_ticks(ax_p, [phase_e, *(c[2] for c in curves)])
+        span = float(np.ptp(np.concatenate([phase_e, *(c[2] for c in curves)])))
+        ax_p.yaxis.set_major_locator(MultipleLocator(90.0 if span <= 540.0 else 180.0))
         ax_m.grid(True, which="minor", alpha=0.12)
         ax_p.grid(True, which="minor", alpha=0.12)
         ax_m.legend(loc="lower left")
         fig.suptitle(title)
-        return _save(fig, path)
+        return save(fig, path)
 
 
 def _draw_band(ax_m: Any, ax_p: Any, band: BodeBand, f_lo: float, label: str) -> None:
@@ -119,48 +136,18 @@ def _draw_band(ax_m: Any, ax_p: Any, band: BodeBand, f_lo: float, label: str) ->
     f = band.freq_hz[keep]
     for row, alpha, name in ((1, 0.15, "2σ"), (0, 0.3, "1σ")):
         ax_m.fill_between(f, band.mag_db_lo[row][keep], band.mag_db_hi[row][keep], lw=0,
-                          color=_color(0), alpha=alpha, label=f"{label}: {name} band")  # fmt: skip
+                          color=color(0), alpha=alpha, label=f"{label}: {name} band")  # fmt: skip
         ax_p.fill_between(f, band.phase_deg_lo[row][keep], band.phase_deg_hi[row][keep], lw=0,
-                          color=_color(0), alpha=alpha)  # fmt: skip
-
-
-def _phase_ticks(ax: Any, phases: Sequence[np.ndarray]) -> None:
-    """Phase ticks every 90° (every 180° when the phases span more than 540°)."""
-    from matplotlib.ticker import MultipleLocator
-
-    values = np.concatenate([np.ravel(p) for p in phases])
-    span = float(np.ptp(values)) if values.size else 0.0
-    ax.yaxis.set_major_locator(MultipleLocator(90.0 if span <= 540.0 else 180.0))
+                          color=color(0), alpha=alpha)  # fmt: skip
 
 
 def plot_pzmap(models: Mapping[str, ArxModel], path: Path, *, title: str) -> Path:
-    """Pole-zero map of one or more models (report, figures 5 and 12).
+    """Pole-zero map of one or more models (report, figures 5 and 12); returns ``path``.
 
-    Poles ×, zeros ○, one colour per model. Poles at z = 0 (pure delays) are drawn as a black
-    square at the origin with their count per model. Each other pole is labelled with its
-    continuous-equivalent frequency (Hz); a conjugate pair once. The left panel shows the whole
-    unit circle (and any root outside it) with the zoomed region boxed; the right panel zooms on
-    the roots inside the circle. When those spread over most of the circle, one panel is drawn,
-    or, with roots outside, the right panel shows the unit circle.
-
-    Parameters
-    ----------
-    models : mapping of str to ArxModel
-        Label → model; at least one.
-    path : Path
-        PNG file to write.
-    title : str
-        Figure title.
-
-    Returns
-    -------
-    Path
-        ``path``.
-
-    Raises
-    ------
-    InputError
-        No models.
+    Poles ×, zeros ○, one colour per model; poles at z = 0 (pure delays) as one black square at
+    the origin with their count; other poles labelled with their continuous-equivalent frequency
+    (Hz), a conjugate pair once. Left the whole unit circle (and any root outside) with the zoom
+    boxed, right the zoom on the roots inside; one panel when those fill the circle.
     """
     from matplotlib.lines import Line2D
     from matplotlib.patches import Circle, Rectangle
@@ -174,7 +161,7 @@ def plot_pzmap(models: Mapping[str, ArxModel], path: Path, *, title: str) -> Pat
     if zoom[1] - zoom[0] >= 1.6:  # the roots inside fill the circle: show all of it
         zoom = (-1.15, 1.15, -1.15, 1.15)
     zoomed = zoom[1] - zoom[0] < 1.6 or reach > 1.2
-    with _figure(11.0, 5.8 if zoomed else 6.5) as fig:
+    with figure(11.0, 5.8 if zoomed else 6.5) as fig:
         if zoomed:
             ax_full, ax_zoom = fig.subplots(1, 2, width_ratios=[1.0, 1.5])
             panels = [ax_full, ax_zoom]
@@ -201,17 +188,17 @@ def plot_pzmap(models: Mapping[str, ArxModel], path: Path, *, title: str) -> Pat
         labels: list[tuple[complex, str, str]] = []
         handles = []
         for i, (label, (poles, zeros)) in enumerate(roots.items()):
-            color = _color(i)
+            tint = color(i)
             p = np.array([r.value for r in poles if r.kind != "delay"], dtype=complex)
             z = np.array([r.value for r in zeros], dtype=complex)
             delays[label] = sum(r.kind == "delay" for r in poles)
             for ax in panels:
-                ax.plot(p.real, p.imag, "x", color=color, markersize=10, mew=2.2)
-                ax.plot(z.real, z.imag, "o", mfc="none", color=color, markersize=9, mew=1.8)
-            handles.append(Line2D([], [], color=color, lw=5, label=label))
+                ax.plot(p.real, p.imag, "x", color=tint, markersize=10, mew=2.2)
+                ax.plot(z.real, z.imag, "o", mfc="none", color=tint, markersize=9, mew=1.8)
+            handles.append(Line2D([], [], color=tint, lw=5, label=label))
             for r in poles:
                 if r.kind != "delay" and r.value.imag >= 0.0 and r.freq_hz is not None:
-                    labels.append((r.value, f"{r.freq_hz:.1f} Hz", color))
+                    labels.append((r.value, f"{r.freq_hz:.1f} Hz", tint))
         if any(delays.values()):
             for ax in panels:
                 ax.plot(0.0, 0.0, "s", color="black", markersize=7, zorder=5)
@@ -239,7 +226,7 @@ def plot_pzmap(models: Mapping[str, ArxModel], path: Path, *, title: str) -> Pat
         ]
         fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4))
         fig.suptitle(title)
-        return _save(fig, path)
+        return save(fig, path)
 
 
 def _zoom_window(values: np.ndarray) -> tuple[float, float, float, float]:
@@ -258,7 +245,7 @@ def _label_poles(ax: Any, labels: list[tuple[complex, str, str]], view_width: fl
     offsets = [(0, 14), (0, -22), (0, 28), (0, -36), (0, 42), (0, -50)]
     min_dx = 0.14 * view_width
     last_x = [-math.inf] * len(offsets)
-    for value, text, color in sorted(labels, key=lambda item: item[0].real):
+    for value, text, tint in sorted(labels, key=lambda item: item[0].real):
         level = next(
             (k for k in range(len(offsets)) if value.real - last_x[k] >= min_dx),
             int(np.argmin(last_x)),
@@ -271,8 +258,8 @@ def _label_poles(ax: Any, labels: list[tuple[complex, str, str]], view_width: fl
             textcoords="offset points",
             ha="center",
             va="center",
-            color=color,
+            color=tint,
             fontsize=9,
             fontweight="bold",
-            arrowprops={"arrowstyle": "-", "color": color, "lw": 0.7, "shrinkA": 0, "shrinkB": 5},
+            arrowprops={"arrowstyle": "-", "color": tint, "lw": 0.7, "shrinkA": 0, "shrinkB": 5},
         )

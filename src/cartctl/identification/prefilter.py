@@ -1,9 +1,8 @@
-"""The Butterworth prefilter of the report (§3.2): the same low-pass on input and output.
+"""The report's Butterworth prefilter (§3.2): one low-pass on input and output before the fit.
 
-Filtering both signals keeps their ratio, the transfer function, intact in the pass band while
-removing high-frequency noise before the ARX fit. The report used a 6th-order filter at 20 Hz,
-causal (MATLAB's ``filter``); ``zero_phase`` runs it forward and backward instead (no phase lag,
-squared magnitude). scipy.signal designs and runs it, in second-order sections.
+Filtering both keeps their ratio, the transfer function, in the pass band while removing noise.
+The report: 6th order at 20 Hz, causal (MATLAB's ``filter``); ``zero_phase`` runs it forward and
+backward instead (no phase lag, squared magnitude). Second-order sections from scipy.signal.
 """
 
 from __future__ import annotations
@@ -20,17 +19,7 @@ from cartctl.errors import InputError
 
 @dataclass(frozen=True)
 class Prefilter:
-    """A Butterworth low-pass prefilter.
-
-    Attributes
-    ----------
-    order : int
-        Filter order (the report: 6).
-    cutoff_hz : float
-        −3 dB frequency (Hz), below the Nyquist frequency (the report: 20 Hz).
-    zero_phase : bool
-        Forward-backward filtering (no phase lag) instead of the causal filter.
-    """
+    """A Butterworth low-pass of ``order`` (1..12) with its −3 dB point at ``cutoff_hz`` (Hz)."""
 
     order: int = 6
     cutoff_hz: float = 20.0
@@ -49,23 +38,17 @@ class Prefilter:
                 f"{self.cutoff_hz:g}"
             )
 
-    def sos(self, period_s: float) -> NDArray[np.float64]:
-        """Second-order sections of the filter at sample period ``period_s``."""
+    def apply(self, x: ArrayLike, period_s: float) -> NDArray[np.float64]:
+        """Filter one signal (one value per tick of ``period_s`` s), starting from rest."""
         nyquist_hz = 0.5 / period_s
         if self.cutoff_hz >= nyquist_hz:
             raise InputError(
                 f"prefilter cut-off (--cutoff-hz) {self.cutoff_hz:g} Hz must lie below the Nyquist frequency "
                 f"{nyquist_hz:g} Hz"
             )
-        return signal.butter(self.order, self.cutoff_hz, fs=1.0 / period_s, output="sos")
-
-    def apply(self, x: ArrayLike, period_s: float) -> NDArray[np.float64]:
-        """Filter one signal (1-D, one value per tick), starting from rest."""
-        sos = self.sos(period_s)
+        sos = signal.butter(self.order, self.cutoff_hz, fs=1.0 / period_s, output="sos")
         arr = np.asarray(x, dtype=float)
-        if self.zero_phase:
-            return signal.sosfiltfilt(sos, arr)
-        return signal.sosfilt(sos, arr)
+        return signal.sosfiltfilt(sos, arr) if self.zero_phase else signal.sosfilt(sos, arr)
 
     def describe(self) -> str:
         """For provenance and tables, e.g. 'butter order 6, 20 Hz, causal'."""

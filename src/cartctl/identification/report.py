@@ -1,33 +1,23 @@
-"""Figures and a markdown summary of an identification (``cartctl identify --report``).
-
-Identification stage, at its edge: the numeric work is done elsewhere (:mod:`~cartctl.identification.etfe`,
-the fits, validation); this module draws what a person looks at, after the report's figures:
-the experiment's input and output (figures 3, 11) and the step validation (figures 6, 7) here,
-the ETFE with the models' Bode plots (figure 4) and the pole-zero map (figures 5, 12) in
-:mod:`~cartctl.identification.plots_freq`; and writes ``summary.md`` embedding them.
+"""The time-domain figures and the markdown summary of ``cartctl identify --report``: the
+experiment's input and output (the report's figures 3, 11) and the step validation (figures 6, 7);
+the frequency-domain ones live in :mod:`~cartctl.identification.plots_freq`.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from cartctl.data.trace import Trace
 from cartctl.errors import InputError
-from cartctl.identification.figure_base import color as _color
-from cartctl.identification.figure_base import figure as _figure
-from cartctl.identification.figure_base import save as _save
-from cartctl.identification.plots_freq import plot_etfe, plot_pzmap
+from cartctl.identification.plots_freq import color, figure, plot_etfe, plot_pzmap, save
 from cartctl.measures.metrics import fit_percent
-
-if TYPE_CHECKING:
-    pass
 
 __all__ = [
     "ReportSection",
@@ -47,34 +37,10 @@ def plot_io(
     title: str,
     zoom_s: tuple[float, float] | None = None,
 ) -> Path:
-    """Input and output of an experiment per motor (report, figures 3 and 11).
+    """Input and output of an experiment per motor (report, figures 3 and 11); returns ``path``.
 
-    One column per motor: commanded voltage (V) above, measured speed (rad/s) below, against
-    time (s). With ``zoom_s`` a third row repeats the speed over that window (shaded above), as
-    the report zooms in on one cycle.
-
-    Parameters
-    ----------
-    trace : Trace
-        The experiment.
-    motors : sequence of str
-        Motors to show, e.g. ``("a", "b")``.
-    path : Path
-        PNG file to write (folders are created).
-    title : str
-        Figure title.
-    zoom_s : (float, float), optional
-        Start and end of the zoom window (s).
-
-    Returns
-    -------
-    Path
-        ``path``.
-
-    Raises
-    ------
-    InputError
-        No motors, an unknown motor, or an empty or reversed zoom window.
+    One column per motor: voltage (V) above, speed (rad/s) below; with ``zoom_s`` (start, end in
+    s) a third row repeats the speed over that window, shaded above.
     """
     if not motors:
         raise InputError("plot_io needs at least one motor, e.g. ('a', 'b')")
@@ -82,7 +48,7 @@ def plot_io(
         raise InputError(f"zoom window must be (start_s, end_s) with start < end, got {zoom_s}")
     t = trace.time_s
     rows = 3 if zoom_s is not None else 2
-    with _figure(max(9.0, 5.5 * len(motors) + 0.5), 2.4 * rows + 0.8) as fig:
+    with figure(max(9.0, 5.5 * len(motors) + 0.5), 2.4 * rows + 0.8) as fig:
         grid = fig.add_gridspec(rows, len(motors), height_ratios=[1.0, 1.4, 1.4][:rows])
         first = None
         for j, motor in enumerate(motors):
@@ -110,7 +76,7 @@ def plot_io(
         if len(t) and first is not None:
             first.set_xlim(t[0], t[-1])
         fig.suptitle(title)
-        return _save(fig, path)
+        return save(fig, path)
 
 
 def plot_step_validation(
@@ -122,36 +88,11 @@ def plot_step_validation(
     *,
     title: str,
 ) -> Path:
-    """Measured against simulated speed, with the absolute error beneath (report, figures 6, 7).
+    """Measured against simulated speed with |error| beneath (report, figures 6, 7); returns
+    ``path``.
 
-    Three panels sharing the time axis: the voltage applied (V), the measured speed and each
-    model's simulated speed (rad/s; the legend gives each model's simulation fit in percent,
-    see :func:`cartctl.measures.metrics.fit_percent`), and |measured − simulated| (rad/s).
-
-    Parameters
-    ----------
-    time_s : array_like, shape (n,)
-        Time of each tick (s).
-    voltage : array_like, shape (n,)
-        Applied voltage (V).
-    measured : array_like, shape (n,)
-        Measured speed (rad/s).
-    simulated : mapping of str to array_like, each shape (n,)
-        Label → simulated speed (rad/s).
-    path : Path
-        PNG file to write.
-    title : str
-        Figure title.
-
-    Returns
-    -------
-    Path
-        ``path``.
-
-    Raises
-    ------
-    InputError
-        Sequences of different lengths or not 1-D.
+    Three panels on one time axis (s): voltage (V); the measured and each ``simulated`` speed
+    (rad/s, label → array, the legend with each simulation fit in %); |measured − simulated|.
     """
     t = np.asarray(time_s, dtype=float)
     series = {"voltage": np.asarray(voltage, dtype=float), "measured": np.asarray(measured, float)}
@@ -162,7 +103,7 @@ def plot_step_validation(
                 f"{name} must be 1-D with one value per time step ({t.shape}), got {values.shape}"
             )
     y = series["measured"]
-    with _figure(10.0, 7.5) as fig:
+    with figure(10.0, 7.5) as fig:
         ax_u, ax_y, ax_e = fig.subplots(3, 1, sharex=True, height_ratios=[1.0, 2.6, 1.6])
         ax_u.plot(t, series["voltage"], drawstyle="steps-post", color="tab:blue")
         ax_u.set_ylabel("voltage (V)")
@@ -170,8 +111,8 @@ def plot_step_validation(
         for i, (label, given) in enumerate(simulated.items()):
             sim = np.asarray(given, dtype=float)
             fit = fit_percent(y, sim)
-            ax_y.plot(t, sim, color=_color(i), label=f"{label} (fit {fit:.1f} %)")
-            ax_e.plot(t, np.abs(y - sim), color=_color(i))
+            ax_y.plot(t, sim, color=color(i), label=f"{label} (fit {fit:.1f} %)")
+            ax_e.plot(t, np.abs(y - sim), color=color(i))
         ax_y.set_ylabel("speed (rad/s)")
         ax_e.set_ylabel("|error| (rad/s)")
         ax_e.set_xlabel("time (s)")
@@ -179,30 +120,19 @@ def plot_step_validation(
             ax_e.set_xlim(t[0], t[-1])
         fig.legend(*ax_y.get_legend_handles_labels(), loc="outside lower center", ncols=3)
         fig.suptitle(title)
-        return _save(fig, path)
+        return save(fig, path)
 
 
 @dataclass(frozen=True)
 class ReportSection:
-    """One section of ``summary.md``.
-
-    Attributes
-    ----------
-    heading : str
-        Section heading (rendered as ``## heading``).
-    text : str
-        Markdown paragraph(s) under the heading.
-    images : sequence of str or Path
-        Figures to embed, relative to the summary's folder (absolute paths are made relative).
-    table : sequence of mapping, optional
-        Rows of a table, column name → value; columns in order of first appearance. Floats are
-        written with 4 significant digits.
-    """
+    """One ``## heading`` of ``summary.md``: markdown text, figures (relative to the summary's
+    folder; absolute paths are made relative) and an optional table (rows of column → value,
+    columns in order of first appearance, floats to 4 significant digits)."""
 
     heading: str
     text: str = ""
     images: Sequence[str | Path] = ()
-    table: Sequence[Mapping[str, Any]] | None = field(default=None)
+    table: Sequence[Mapping[str, Any]] | None = None
 
 
 def _cell(value: Any) -> str:
@@ -225,22 +155,8 @@ def _table(rows: Sequence[Mapping[str, Any]]) -> list[str]:
 
 
 def write_summary(out_dir: Path, *, title: str, sections: Sequence[ReportSection]) -> Path:
-    """Write ``out_dir/summary.md``: the title, then each section's text, figures and table.
-
-    Parameters
-    ----------
-    out_dir : Path
-        Folder of the report (created if missing); image paths are relative to it.
-    title : str
-        Document title (``# title``).
-    sections : sequence of ReportSection
-        In order.
-
-    Returns
-    -------
-    Path
-        The summary file written.
-    """
+    """Write ``out_dir/summary.md`` (the title, then each section's text, figures and table)
+    and return its path."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     lines = [f"# {title}", ""]

@@ -43,8 +43,8 @@ from scipy import stats
 
 from cartctl.errors import InputError
 from cartctl.identification.arx import Segment, as_segments, first_row, stacked_regression
-from cartctl.identification.figure_base import figure as _figure
-from cartctl.identification.figure_base import save as _save
+from cartctl.identification.plots_freq import figure as _figure
+from cartctl.identification.plots_freq import save as _save
 from cartctl.model import ArxModel
 
 __all__ = ["Z_99", "ResidualTest", "plot_residuals", "prediction_residuals", "residual_test"]
