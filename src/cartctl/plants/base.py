@@ -19,16 +19,8 @@ from typing import Protocol, runtime_checkable
 
 @dataclass(frozen=True, slots=True)
 class Measurement:
-    """What a plant reports at one tick.
-
-    Attributes
-    ----------
-    speed_a_rad_s, speed_b_rad_s : float
-        Measured wheel speeds (rad/s), as the cart reports them.
-    true_speed_a_rad_s, true_speed_b_rad_s : float or None
-        The unquantised wheel speeds (rad/s) at the tick instant, where the plant knows them
-        (simulators); None for real hardware.
-    """
+    """What a plant reports at one tick: the measured wheel speeds (rad/s, as the cart reports
+    them) and, where the plant knows them (simulators; None on hardware), the unquantised ones."""
 
     speed_a_rad_s: float
     speed_b_rad_s: float

@@ -23,10 +23,8 @@ SIMULATED = ("sim", "physics")
 
 
 def plant_kind(spec: str) -> str:
-    """The kind of a ``--plant`` name: 'sim', 'physics', 'virtual', 'serial', or the name as given.
-
-    Not a controller file's ``plant_kind`` key, which is where a loop runs ('onboard', 'serial';
-    ``cartctl.design.controllerfile.loop_site``)."""
+    """The kind of a ``--plant`` name: 'sim', 'physics', 'virtual', 'serial', or the name as given
+    (not a controller file's ``plant_kind`` key, which says where a loop runs)."""
     kind = spec.partition(":")[0]
     return kind if kind in ("physics", "virtual", "serial") else spec
 
@@ -62,14 +60,9 @@ def physics_options(text: str) -> PhysicsOptions:
 
 
 def check_plant_name(spec: str) -> str:
-    """The kind of plant ``spec`` names ('sim', 'physics', 'virtual', 'serial'), its options
-    parsed, without making it: run it before any other check that depends on the plant.
-
-    Raises
-    ------
-    InputError
-        An unknown plant, a bad option of ``physics:``/``virtual:``, or ``serial:`` without a port.
-    """
+    """The kind of plant ``spec`` names, its options parsed, without making it; InputError for an
+    unknown plant, a bad option, or ``serial:`` without a port. Run it before any other check
+    that depends on the plant."""
     kind, _, options = spec.partition(":")
     if spec == "sim":
         return kind
@@ -111,37 +104,16 @@ def make_plant(
     seed: int | None = None,
     connect_timeout_s: float = 5.0,
 ) -> tuple[Plant, str]:
-    """Create the plant named ``spec``.
+    """The plant named ``spec`` (docs/plants.md) and one line saying what it is.
 
-    A serial plant is returned unconnected: its ``connect()`` (or first ``reset()``) opens the
-    port and waits for the cart.
-
-    Parameters
-    ----------
-    spec : str
-        'sim' (the ARX models of ``model_path``), 'physics' (the physical simulator with
-        ``preset``; 'physics:actuation_ms=10' lands each command 10 ms after its tick instead of
-        the calibrated 3; 'physics:reverse_b=1' wires motor b backwards), 'virtual' (that simulator behind a pseudo-terminal, through the serial
-        path; 'virtual:garbage=0.05,corrupt=0.05,stall=S,pull=S,generation=b' injects faults)
-        or 'serial:PORT' (the cart on that port).
-    model_path : str or Path
-        Model file for 'sim'.
-    preset : str
-        'air' or 'ground', for 'physics'.
-    noise_std_rad_s : float
-        Extra white measurement noise (rad/s) for simulated plants; 0 = off.
-    seed : int, optional
-        Noise seed.
-    connect_timeout_s : float
-        Longest wait for a serial cart's first HEARTBEAT (s).
-
-    Returns
-    -------
-    plant : Plant
-    description : str
-        One line saying what the plant is, for summaries and provenance.
+    ``model_path``: the ``sim`` plant's models; ``preset``: ``air`` or ``ground`` for the physics
+    simulator; ``noise_std_rad_s``: extra white measurement noise of a simulated plant (0: off);
+    ``connect_timeout_s``: a serial cart's longest wait for its first HEARTBEAT (s). A serial
+    plant is returned unconnected: its ``connect()`` (or first ``reset()``) opens the port.
     """
-    if spec == "sim":
+    kind = check_plant_name(spec)
+    options = spec.partition(":")[2]
+    if kind == "sim":
         models = load_models(model_path)
         missing = [m for m in ("a", "b") if m not in models.motors]
         if missing:
@@ -153,31 +125,26 @@ def make_plant(
         plant: Plant = ArxPlant(models.motors["a"], models.motors["b"], noise_std_rad_s=noise_std_rad_s,
                          seed=seed, loop_delay_ticks=models.loop_delay_ticks)  # fmt: skip
         return plant, f"sim ({model_path})"
-    if spec == "physics" or spec.startswith("physics:"):
+    if kind == "physics":
         from cartctl.plants.physics import PhysicsPlant
 
-        options = physics_options(spec.partition(":")[2])
-        plant = PhysicsPlant(preset, noise_std_rad_s=noise_std_rad_s, seed=seed, **options)
-        timing = (f", command lands {options['actuation_ms']:g} ms after its tick"
-                  if "actuation_ms" in options else "")  # fmt: skip
-        if options.get("reversed_motors"):
-            timing += f", motor(s) {options['reversed_motors']} wired backwards"
+        physics = physics_options(options)
+        plant = PhysicsPlant(preset, noise_std_rad_s=noise_std_rad_s, seed=seed, **physics)
+        timing = (f", command lands {physics['actuation_ms']:g} ms after its tick"
+                  if "actuation_ms" in physics else "")  # fmt: skip
+        if physics.get("reversed_motors"):
+            timing += f", motor(s) {physics['reversed_motors']} wired backwards"
         return plant, f"physics (preset {preset}{timing})"
-    if spec == "virtual" or spec.startswith("virtual:"):
+    if kind == "virtual":
         from cartctl.link.virtual_cart import CartFaults, VirtualCart
         from cartctl.link.virtual_serial import VirtualSerialCart
 
-        faults = CartFaults.parse(spec.partition(":")[2])
+        faults = CartFaults.parse(options)
         cart = VirtualCart(preset, noise_std_rad_s=noise_std_rad_s, seed=seed, faults=faults)
-        shown = f", faults {spec.partition(':')[2]}" if faults != CartFaults() else ""
+        shown = f", faults {options}" if faults != CartFaults() else ""
         return VirtualSerialCart(
             cart, connect_timeout_s=connect_timeout_s
         ), f"virtual cart on {cart.port} (physics preset {preset}{shown})"
-    if spec.startswith("serial:"):
-        port = spec.partition(":")[2]
-        if not port:
-            raise InputError("plant 'serial:' needs a port, e.g. serial:/dev/ttyACM0")
-        from cartctl.link.serial_cart import SerialCart
+    from cartctl.link.serial_cart import SerialCart
 
-        return SerialCart(port, connect_timeout_s=connect_timeout_s), f"cart on {port}"
-    raise InputError(f"unknown plant '{spec}'; expected one of {', '.join(PLANT_NAMES)}")
+    return SerialCart(options, connect_timeout_s=connect_timeout_s), f"cart on {options}"

@@ -1,53 +1,29 @@
 """The physical cart simulator: two DC motors with friction, driven and sensed like the real cart.
 
-Where it sits: a plant (see :mod:`cartctl.plants.base`) that experiments (``cartctl excite``) and the
-control loop (``cartctl run --plant physics``) run against when no cart is attached, and that the
-virtual serial cart puts behind a pseudo-terminal. Unlike the ARX plant it is not linear: it has
-Coulomb friction with stiction, voltage saturation, PWM and encoder quantisation, and the
-firmware's delay, so identification and control meet the same defects as on the cart.
-
-Per motor, at the wheel (gearbox folded in; report, equation 1, plus dry friction)::
+A plant for ``excite`` and ``run --plant physics`` (and behind the virtual serial cart). Unlike the
+ARX plant it is not linear: Coulomb friction with stiction, saturation, PWM and encoder
+quantisation, and the firmware's timing. Per motor, at the wheel (report eq. 1 plus dry friction)::
 
     J dω/dt + b ω + τ_c sign(ω) = K i          L di/dt + R i = v − K ω
 
-On the ground the cart adds inertia and rolling resistance to each wheel (see
-:mod:`cartctl.plants.physics_params`). Zero volts brakes: the H-bridge shorts the terminals, which
-is ``v = 0`` in the electrical equation, so the back-EMF drives a braking current (coasting would be
-``i = 0`` instead).
+Zero volts brakes (the H-bridge shorts the terminals: ``v = 0``, not ``i = 0``). The speed of tick
+k is the whole-count encoder difference between ticks k−1 and k times ``(2π/1792) / Ts``: the
+average speed over the last tick, quantised to 0.35 rad/s. A command is saturated to ±12 V,
+rounded to the nearest 12/255 V PWM step, and lands ``CartParams.actuation_delay_s`` after its tick
+(3 ms in the presets, a calibration: docs/plants.md says why), so the loop delay is one tick.
 
-Tick timing. microOS's control thread runs ``io()`` then ``control()`` every 10 ms, and ``io()``
-first writes the voltage stored by the previous ``control()`` to the H-bridges, then reads the
-encoders. The measured speed of tick k is the whole-count difference between the encoder reads of
-ticks k−1 and k, times ``(2π/1792) / Ts``: the *average* wheel speed over [k−1, k], quantised to
-0.35 rad/s. The command is saturated to ±12 V and rounded to the nearest 12/255 V PWM step.
-
-When a command reaches the motor is the one calibrated timing: ``CartParams.actuation_delay_s``
-after the tick it was given at (the previous command drives until then). Taken literally, the order
-above puts it one full period later, at tick k+1's ``io()`` (``actuation_delay_s = None``). But the
-report's cart answers sooner than that: a motor whose first averaged speed sample after a step
-comes a full tick after the voltage reaches at most 6–30 % of the final speed in that sample, the
-report's models say 32 % (ground) and 51 % (air), and no two-pole motor gives back their θ that way.
-The presets therefore apply a command 3 ms after its tick (0.7 tick sooner). It stands for whatever
-makes the real cart respond sooner than the documented order (the motor's shaft answering before the
-wheel and the cart, the exact moments of the write and the read); it is a calibration, not a claim
-about the firmware. The voltage commanded at tick k thus drives [k + 0.3, k + 1.3] (in ticks) and
-shows partly in the speed measured at tick k+1 and mostly at tick k+2: the report's model, with
-its two-tick input delay, describes it, and the loop delay (measurement to applied voltage) is one
-tick, as on the cart.
-
-Integration: with the voltage and the friction torque held, the (i, ω, θ) dynamics are linear, so
-each substep (``period / substeps``, 1 ms by default) applies the exact zero-order-hold map (a matrix
-exponential, computed once). Only when ω reaches zero inside a substep, or a stuck wheel's drive
-torque passes τ_c, does the substep switch to the closed-form 2×2 exponential: the crossing time is
-found by Newton's method, and from there the wheel sticks while ``|K i| ≤ τ_c`` (only the current
-moves, exactly) or moves off the other way. So friction events are resolved exactly in time, at the
-cost of a few µs each, and there is no chattering around zero speed.
+Integration: with v and the friction torque held, (i, ω, θ) is linear, so each substep (1 ms by
+default) applies the exact zero-order-hold map (a matrix exponential, computed once). When ω
+reaches zero inside a substep, or a stuck wheel's drive torque passes τ_c, the substep switches to
+the closed-form 2×2 exponential and finds the crossing by Newton's method: friction events are
+exact in time, without chattering around zero speed.
 """
 
 from __future__ import annotations
 
 import functools
 import math
+from dataclasses import replace
 
 import numpy as np
 from scipy.linalg import expm
@@ -224,31 +200,13 @@ def _advance(
 
 
 class PhysicsPlant:
-    """A simulated cart with two physical DC motors (see the module docstring for the model).
+    """A simulated cart with two physical DC motors (the module docstring has the model).
 
-    Parameters
-    ----------
-    cart : str or CartParams, default "ground"
-        A preset name (``"air"`` or ``"ground"``) or explicit parameters.
-    noise_std_rad_s : float, optional
-        Measurement noise (rad/s standard deviation) added to each measured speed; overrides the
-        cart's ``noise_std_rad_s`` (0, off, in the presets).
-    seed : int, optional
-        Seed of the numpy Generator that draws the noise. The noise stream is not restarted by
-        :meth:`reset`, so repeated experiments see fresh noise; the same seed and the same calls
-        reproduce the same measurements.
-    actuation_ms : float, optional
-        When a command lands after its tick (ms, in (0, 10]); overrides the cart's
-        ``actuation_delay_s`` (3 ms in the presets; 10 is microOS's next ``io()``).
-    reversed_motors : str, optional
-        Motors wired backwards, e.g. ``"b"``: their leads swapped, so a positive command turns
-        the wheel (and its encoder) the negative way. A fault to commission against; "" (none)
-        by default.
-
-    Raises
-    ------
-    InputError
-        For an unknown preset name or a negative or non-finite noise level.
+    ``cart`` is a preset name (``"air"``, ``"ground"``) or explicit parameters;
+    ``noise_std_rad_s`` (white, on each measured speed) and ``actuation_ms`` (when a command lands
+    after its tick, in (0, 10] ms) override the cart's. The noise stream of ``seed`` is not
+    restarted by :meth:`reset`. ``reversed_motors`` (e.g. ``"b"``): motors wired backwards, so a
+    positive command turns that wheel (and its encoder) the negative way.
     """
 
     def __init__(
@@ -267,7 +225,7 @@ class PhysicsPlant:
         if not isinstance(params, CartParams):
             raise InputError(f"cart must be a preset name or CartParams, got {type(cart).__name__}")
         if noise_std_rad_s is not None:
-            params = params.with_noise(float(noise_std_rad_s))
+            params = replace(params, noise_std_rad_s=float(noise_std_rad_s))
         if actuation_ms is not None:
             params = params.with_actuation_ms(actuation_ms)
         self.params: CartParams = params
@@ -284,21 +242,13 @@ class PhysicsPlant:
         self._pwm = (limit, step, top)
         self.reset()
 
-    # -- the Plant protocol -------------------------------------------------------------------
-
     loop_delay_ticks = 1
     """Ticks from a measurement to its voltage on the motor, as with microOS on the cart: the
     command of tick k lands within the tick after it (``CartParams.actuation_delay_s``)."""
 
     def reset(self, *, position_rad: tuple[float, float] = (0.0, 0.0)) -> Measurement:
-        """Put both wheels at rest with no current and 0 V, and measure tick 0.
-
-        Parameters
-        ----------
-        position_rad : tuple of float, default (0, 0)
-            Wheel positions (rad) to start from. Only their place between encoder edges matters:
-            it shifts when the counts tick over, as the arbitrary start angle of a real wheel does.
-        """
+        """Both wheels at rest, no current, 0 V; the measurement of tick 0. ``position_rad``
+        places the wheels between encoder edges, as a real wheel's start angle does."""
         self._ia = self._wa = 0.0
         self._ib = self._wb = 0.0
         self._tha, self._thb = (float(x) for x in position_rad)
@@ -310,12 +260,8 @@ class PhysicsPlant:
         return Measurement(0.0, 0.0, 0.0, 0.0)
 
     def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
-        """Command voltages (V) at this tick, advance one tick, and measure the next tick.
-
-        The command reaches the motors ``actuation_delay_s`` after this tick (see the module
-        docstring); until then the previous command drives them. A non-finite command counts as
-        0 V.
-        """
+        """Command voltages (V) at this tick (they land ``actuation_delay_s`` later; non-finite
+        is 0 V), advance one tick, and measure the next tick."""
         n, nd = self.params.substeps, self._delay_substeps
         va, vb = self._applied  # on the bridges since the previous command landed
         ca, cb = self.condition_voltage(voltage_a_v), self.condition_voltage(voltage_b_v)
@@ -346,14 +292,9 @@ class PhysicsPlant:
         """Command zero volts (the motors brake); there is no resource to release."""
         self._applied = (0.0, 0.0)
 
-    # -- what the cart also knows ---------------------------------------------------------------
-
     def condition_voltage(self, voltage_v: float) -> float:
-        """What the firmware makes of a command (V): 0 if non-finite, saturated, on the PWM grid.
-
-        Rounds to the nearest PWM step (ties to even: 10 V is 212.5 steps and gives 212, as a
-        truncating firmware would), never beyond the supply.
-        """
+        """What the firmware makes of a command (V): 0 if non-finite, saturated, rounded to the
+        nearest PWM step (ties to even: 10 V is 212.5 steps, giving 212), never beyond the supply."""
         v = float(voltage_v)
         if not math.isfinite(v):
             return 0.0
@@ -362,21 +303,13 @@ class PhysicsPlant:
 
     @property
     def applied_voltage_v(self) -> tuple[float, float]:
-        """Voltages (V) of the latest command, saturated and quantised: what the bridges hold.
-
-        That is the previous :meth:`step` call's command; it drives the motors from
-        ``actuation_delay_s`` after the tick it was given at until the next command lands. What
-        the bridge reports in gpio_float[2], [3].
-        """
+        """The latest command, saturated and quantised (V): what the bridges hold (and report)."""
         return self._applied
 
     @property
     def last_interval_voltage_v(self) -> tuple[float, float]:
-        """Voltages (V) that drove the motors at the start of the tick interval that just ended.
-
-        They held until the newest command landed, ``actuation_delay_s`` into the interval (for
-        the whole interval when the delay is one period).
-        """
+        """What drove the motors at the start of the tick just ended, until the newest command
+        landed (V)."""
         return self._driving
 
     @property
@@ -386,13 +319,8 @@ class PhysicsPlant:
 
     @property
     def encoder_counts(self) -> tuple[int, int]:
-        """Encoder counts at the latest tick (1792 per revolution by default)."""
+        """Encoder counts at the latest tick."""
         return (self._count_a, self._count_b)
-
-    @property
-    def true_speed_rad_s(self) -> tuple[float, float]:
-        """True wheel speeds (rad/s) now."""
-        return (self._wa, self._wb)
 
     @property
     def armature_current_amp(self) -> tuple[float, float]:

@@ -39,21 +39,9 @@ def arx_next(
 ) -> Value:  # fmt: skip
     """y[k+1] = Σ b_i v[k+1−nk−i] − Σ a_j y[k+1−j], the ARX difference equation.
 
-    Works on floats (one motor) and on arrays of shape (N,) (N plants, one per element, as
+    ``u`` (V) and ``y`` (rad/s) are newest first (u[0] = v[k], y[0] = y[k]); b_0's command sits at
+    ``u[offset]``, offset = nk − 1. Floats (one motor) or arrays of shape (N,) (N plants, as
     ``cartctl tune --robust`` runs them), with the same operations.
-
-    Parameters
-    ----------
-    b : sequence of float or ndarray
-        b_0, b_1, … (rad/s per V), or per plant.
-    u : sequence of float or ndarray
-        The commands, newest first: u[0] = v[k], u[1] = v[k−1], … (V).
-    offset : int
-        Where b_0's command sits in ``u``: nk − 1.
-    ar : sequence of float or ndarray
-        a_1 … a_na, or per plant.
-    y : sequence of float or ndarray
-        The outputs, newest first: y[0] = y[k], y[1] = y[k−1], … (rad/s).
     """
     y_next: Any = 0.0  # an array after the first term, for arrays
     for i, b_i in enumerate(b):
@@ -64,7 +52,7 @@ def arx_next(
 
 
 class _ArxMotor:
-    """One motor's difference equation, stepped one tick at a time with plain floats."""
+    """One motor's difference equation, on plain floats."""
 
     def __init__(self, model: ArxModel) -> None:
         self.ar = model.ar
@@ -78,7 +66,7 @@ class _ArxMotor:
         self.u: deque[float] = deque([0.0] * n_u, maxlen=n_u)
 
     def step(self, voltage_v: float) -> float:
-        """Take v[k] (V) and return y[k+1]: y[k+1] = Σ b_i v[k+1−nk−i] − Σ a_j y[k+1−j]."""
+        """Take v[k] (V), return y[k+1] (rad/s)."""
         self.u.appendleft(voltage_v)  # u[0] = v[k], u[1] = v[k-1], ...
         y_next = arx_next(self.b, self.u, self.nk - 1, self.ar, self.y)
         if self.ar:
@@ -89,19 +77,8 @@ class _ArxMotor:
 class ArxPlant:
     """Two ARX motors behind the :class:`~cartctl.plants.base.Plant` interface.
 
-    Parameters
-    ----------
-    model_a, model_b : ArxModel
-        The motors' models (same sample period).
-    noise_std_rad_s : float
-        Standard deviation of white Gaussian measurement noise (rad/s); 0 turns it off.
-    seed : int or None
-        Seed of the noise generator (reproducible runs).
-    voltage_limit_v : float
-        Saturation of the command (V).
-    loop_delay_ticks : int or None
-        The loop delay of the cart the models describe (their model file's), which the plant
-        reports; None: the models' nk − 1.
+    ``noise_std_rad_s``: white Gaussian measurement noise (0: off), seeded by ``seed``; commands
+    saturate at ±``voltage_limit_v``. ``loop_delay_ticks`` is the model file's (None: nk − 1).
     """
 
     def __init__(
@@ -153,24 +130,15 @@ class ArxPlant:
         return Measurement(ya, yb, ya, yb)
 
     def reset(self) -> Measurement:
-        """Back to rest; the tick-0 measurement.
-
-        The noise stream carries on (as in the physics plant), so repeated experiments on one
-        plant see fresh noise; the same seed and the same calls reproduce the same results.
-        """
+        """Back to rest; the tick-0 measurement. The noise stream carries on (fresh noise for
+        each experiment; the same seed and calls reproduce the same results)."""
         for m in self._motors:
             m.reset()
         return self._measure(0.0, 0.0)
 
     def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
-        """Command voltages at tick k (saturated), advance, return the tick k+1 measurement.
-
-        Raises
-        ------
-        PlantError
-            A motor's speed left :data:`DIVERGED_RAD_S`: its model is unstable and the
-            simulation has run away (the run stops as on a plant fault).
-        """
+        """Command voltages at tick k (saturated), advance, return the tick k+1 measurement;
+        PlantError once a speed passes :data:`DIVERGED_RAD_S` (an unstable model ran away)."""
         ya = self._motors[0].step(saturate(voltage_a_v, self.voltage_limit_v))
         yb = self._motors[1].step(saturate(voltage_b_v, self.voltage_limit_v))
         for motor, y in (("a", ya), ("b", yb)):

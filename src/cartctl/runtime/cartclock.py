@@ -1,15 +1,11 @@
 """The loop on the cart's clock: tick k starts when the cart's k-th GPIO arrives.
 
-Against a serial cart the host does not keep time: the cart ticks every 10 ms and sends one GPIO
-per tick, and the host answers each. So the timing figures mean something slightly different from
-the host-clocked :class:`~cartctl.runtime.executor.PeriodicExecutor`:
-
-- **period error** of tick k: how much later its GPIO arrived than the earliest-arriving tick of
-  the run predicts (arrival − tick · Ts, minus the smallest such value so far). It is the jitter of
-  the line and of the host's wake-up; the constant transmission time (5.2 ms) is not in it.
-- **compute**: from the GPIO's arrival to the command sent (the loop measures it).
-- **misses**: ticks after which the host had fallen behind, so older GPIOs were dropped to answer
-  the freshest one.
+Against a serial cart the cart ticks every 10 ms and sends one GPIO per tick, and the host answers
+each, so the timing figures differ slightly from :class:`~cartctl.runtime.executor.PeriodicExecutor`'s:
+the **period error** of tick k is how much later its GPIO arrived than the earliest-arriving tick
+of the run predicts (the line's and the host's jitter, not the constant 5.2 ms transmission);
+**compute** runs from the GPIO's arrival to the command sent; a **miss** is a tick after which the
+host had fallen behind, so older GPIOs were dropped to answer the freshest one.
 """
 
 from __future__ import annotations
@@ -27,16 +23,9 @@ from cartctl.runtime.executor import TimingStats
 class CartClockedExecutor:
     """Runs ``tick(k)`` once per cart tick until it returns False or ``max_ticks`` ran.
 
-    Parameters
-    ----------
-    plant : ClockedPlant
-        The cart; its latest measurement must have arrived (the loop's ``start`` resets it).
-    max_ticks : int
-        Ticks to run.
-    compute_us : callable
-        The loop's compute time of the tick just run (µs).
-    now_s : callable
-        The host clock (``time.perf_counter``), the one the plant stamps arrivals with.
+    ``plant``'s latest measurement must have arrived (the loop's ``start`` resets it);
+    ``compute_us`` gives the loop's compute time of the tick just run (µs); ``now_s`` is the host
+    clock the plant stamps arrivals with (``time.perf_counter``).
     """
 
     def __init__(
@@ -52,14 +41,11 @@ class CartClockedExecutor:
         self.max_ticks = int(max_ticks)
         self.compute_us = compute_us
         self.now_s = now_s
-        self.period_error_us = 0.0
-        self.start_s = 0.0
-        self.time_s = 0.0
+        self.period_error_us = self.start_s = self.time_s = 0.0
         self._errors_us = array("d")
         self._compute = array("d")
         self._misses: list[int] = []
-        self._t0 = math.nan
-        self._end = math.nan
+        self._t0 = self._end = math.nan
 
     def run(self, tick: Callable[[int], bool]) -> TimingStats:
         """Run the ticks; an exception from ``tick`` propagates (:meth:`stats` has the ticks done)."""

@@ -1,11 +1,10 @@
-"""Float-or-array arithmetic for the control laws: one law, stepped on one setting or on many.
+"""Float-or-array arithmetic, so one control law runs on one setting or on many.
 
-Where it sits: the runtime, under the per-tick laws (:func:`~cartctl.runtime.pi.pi_law`,
-:func:`~cartctl.runtime.statefeedback.feedback_law`, :func:`~cartctl.runtime.kalman.filter_correct`
-and :func:`~cartctl.runtime.kalman.filter_predict`, :func:`~cartctl.plants.sim.arx_next`). A law
-written with Python's operators and these helpers runs on plain floats (the loop's tick: no numpy
-call, a fraction of a µs) and on numpy arrays of shape (N,), one setting or plant per element
-(``cartctl tune --robust``'s batch), with the same floating-point operations either way.
+A law written with Python's operators and these helpers (:func:`~cartctl.runtime.pi.pi_law`,
+:func:`~cartctl.runtime.statefeedback.feedback_law`, the Kalman filter's steps,
+:func:`~cartctl.plants.sim.arx_next`) runs on plain floats (the loop's tick: no numpy call) and on
+arrays of shape (N,), one setting or plant per element (``cartctl tune --robust``), with the same
+floating-point operations either way.
 """
 
 from __future__ import annotations
@@ -38,31 +37,24 @@ def select(condition: object, if_true: Value, if_false: Value | float) -> Value:
 
 
 def larger(a: Value, b: Value) -> Value:
-    """The larger of a and b (element-wise)."""
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
         return np.maximum(a, b)
     return a if a >= b else b
 
 
 def smaller(a: Value, b: Value) -> Value:
-    """The smaller of a and b (element-wise)."""
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
         return np.minimum(a, b)
     return a if a <= b else b
 
 
 def is_finite(value: float | NDArray[np.float64]) -> bool | NDArray[np.bool_]:
-    """Whether ``value`` is finite (element-wise)."""
-    if isinstance(value, np.ndarray):
-        return np.isfinite(value)
-    return math.isfinite(value)
+    return np.isfinite(value) if isinstance(value, np.ndarray) else math.isfinite(value)
 
 
 def any_true(condition: bool | NDArray[np.bool_]) -> bool:
-    """Whether ``condition`` holds anywhere."""
     return bool(condition.any()) if isinstance(condition, np.ndarray) else bool(condition)
 
 
 def all_true(condition: bool | NDArray[np.bool_]) -> bool:
-    """Whether ``condition`` holds everywhere."""
     return bool(condition.all()) if isinstance(condition, np.ndarray) else bool(condition)

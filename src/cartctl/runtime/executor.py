@@ -1,24 +1,20 @@
 """The periodic executor: calls a tick function on a fixed grid of absolute deadlines.
 
-The runtime is the shell around the pure per-tick core; this module is its heartbeat. The same
-:class:`PeriodicExecutor` runs the real-time loop on a :class:`~cartctl.runtime.clock.MonotonicClock`
-and the fast simulated loop on a :class:`~cartctl.runtime.clock.SimulatedClock`, so it keeps its
-per-tick work to a few attribute stores and two appends of a float.
-
-Contract of :meth:`PeriodicExecutor.run`, with ``t0`` the clock's time when ``run`` starts::
+The same :class:`PeriodicExecutor` runs the real-time loop on a
+:class:`~cartctl.runtime.clock.MonotonicClock` and tests on a
+:class:`~cartctl.runtime.clock.SimulatedClock`, so its per-tick work is a few attribute stores and
+two appends. With ``t0`` the clock's time when ``run`` starts::
 
     grid point m       deadline_m = t0 + m * period_s        (computed, never accumulated: no drift)
     tick k             waits for its deadline, then calls tick(k); k = 0, 1, 2, ... counts ticks
-    period error       start_k - deadline                    (>= 0 on a real clock; 0 on a simulated one)
-    compute time       end_k - start_k                        (on the same clock)
-    deadline miss      end_k > the next grid point            (the tick overran its period)
+    period error       start_k - deadline                    (>= 0 on a real clock)
+    compute time       end_k - start_k                       (on the same clock)
+    deadline miss      end_k > the next grid point           (the tick overran its period)
 
-After a miss the next tick starts at the first grid point not before ``end_k``; the grid points
-passed over are counted as skipped deadlines, the miss is logged (``logging``, logger
-``cartctl.runtime.executor``) and recorded in the statistics with its tick index. Without misses
-tick k starts at grid point k; after skipped deadlines the grid index runs ahead of k, and
-:attr:`PeriodicExecutor.grid_index` says where tick k sits in time (``grid_index * period_s``
-after ``t0``). The last tick is not checked for a miss: no further deadline is waited for.
+After a miss the next tick starts at the first grid point not before ``end_k``; the points passed
+over are counted as skipped deadlines and the miss is logged (logger ``cartctl.runtime.executor``)
+and recorded with its tick index, so :attr:`PeriodicExecutor.grid_index` may run ahead of k (tick
+k sits at ``grid_index * period_s`` after ``t0``). The last tick is not checked for a miss.
 """
 
 from __future__ import annotations
@@ -37,34 +33,33 @@ from cartctl.runtime.clock import Clock
 
 _log = logging.getLogger(__name__)
 
-#: Misses logged one by one per run; later ones are counted, and summed up at the end of the run.
 MISS_LOG_LIMIT = 20
+"""Misses logged one by one per run; later ones are counted, and summed up at the end."""
+
+
+def check_period(period_s: float) -> float:
+    """``period_s`` as a float, or InputError unless it is a finite time > 0 s."""
+    if not (isinstance(period_s, int | float) and math.isfinite(period_s) and period_s > 0.0):
+        raise InputError(f"period_s must be a finite time > 0 s, got {period_s!r}")
+    return float(period_s)
+
+
+def check_count(name: str, value: int, minimum: int) -> int:
+    """``value``, or InputError unless it is an integer >= ``minimum``."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise InputError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return value
 
 
 @dataclass(frozen=True)
 class TimingStats:
-    """Timing of one run of the executor.
+    """Timing of one run of an executor; percentiles are NaN when no tick ran.
 
-    Percentiles are NaN when no tick ran (``to_dict`` gives null for them).
-
-    Attributes
-    ----------
-    period_s : float
-        The period (s).
-    ticks : int
-        Ticks that completed (tick function returned).
-    duration_s : float
-        From the first deadline to the end of the last tick (s, on the executor's clock).
-    misses : int
-        Ticks that ended after the next deadline.
-    skipped_deadlines : int
-        Grid points passed over after misses (no tick started at them). At least ``misses``.
-    miss_ticks : tuple of int
-        Tick index k of every miss.
-    period_error_us_p50, period_error_us_p99, period_error_us_max : float
-        Start of each tick minus its deadline (µs): median, 99th percentile, maximum.
-    compute_us_p50, compute_us_p99, compute_us_max : float
-        Duration of each tick function call (µs): median, 99th percentile, maximum.
+    ``ticks`` completed, ``duration_s`` from the first deadline to the end of the last tick,
+    ``misses`` (ticks that ended after the next deadline, at the tick indices ``miss_ticks``),
+    ``skipped_deadlines`` (grid points passed over after misses, at least ``misses``); the period
+    error (start minus deadline) and the compute time of the ticks (µs): median, 99th
+    percentile, maximum.
     """
 
     period_s: float
@@ -91,21 +86,7 @@ class TimingStats:
         miss_ticks: tuple[int, ...] = (),
         skipped_deadlines: int = 0,
     ) -> TimingStats:
-        """Statistics from per-tick samples.
-
-        Parameters
-        ----------
-        period_error_us, compute_us : ndarray, shape (n,)
-            Per-tick period error and compute time (µs), one entry per completed tick.
-        period_s : float
-            The period (s).
-        duration_s : float, optional
-            Duration of the run (s).
-        miss_ticks : tuple of int, optional
-            Tick indices of the misses.
-        skipped_deadlines : int, optional
-            Grid points passed over.
-        """
+        """Statistics from the per-tick period errors and compute times (µs, one per tick)."""
         pe = np.asarray(period_error_us, dtype=np.float64)
         cu = np.asarray(compute_us, dtype=np.float64)
         if pe.shape != cu.shape or pe.ndim != 1:
@@ -113,40 +94,24 @@ class TimingStats:
                 f"period_error_us and compute_us must be 1-D and equally long, got shapes "
                 f"{pe.shape} and {cu.shape}"
             )
-        if pe.size:
-            pe50, pe99 = np.percentile(pe, [50.0, 99.0])
-            cu50, cu99 = np.percentile(cu, [50.0, 99.0])
-            pemax, cumax = pe.max(), cu.max()
-        else:
-            pe50 = pe99 = pemax = cu50 = cu99 = cumax = math.nan
-        return cls(
-            period_s=float(period_s),
-            ticks=int(pe.size),
-            duration_s=float(duration_s),
-            misses=len(miss_ticks),
-            skipped_deadlines=int(skipped_deadlines),
-            miss_ticks=tuple(int(k) for k in miss_ticks),
-            period_error_us_p50=float(pe50),
-            period_error_us_p99=float(pe99),
-            period_error_us_max=float(pemax),
-            compute_us_p50=float(cu50),
-            compute_us_p99=float(cu99),
-            compute_us_max=float(cumax),
-        )
+
+        def summary(x: np.ndarray) -> list[float]:
+            if not x.size:
+                return [math.nan] * 3
+            return [float(v) for v in (*np.percentile(x, [50.0, 99.0]), x.max())]
+
+        (pe50, pe99, pemax), (cu50, cu99, cumax) = summary(pe), summary(cu)
+        return cls(float(period_s), int(pe.size), float(duration_s), len(miss_ticks),
+                   int(skipped_deadlines), tuple(int(k) for k in miss_ticks),
+                   pe50, pe99, pemax, cu50, cu99, cumax)  # fmt: skip
 
     def to_dict(self) -> dict[str, Any]:
-        """The timing part of ``run --json`` (docs/architecture.md), plus skipped deadlines.
+        """The timing part of ``run --json`` (docs/architecture.md), plus skipped deadlines;
+        times in µs except ``duration_s``, null for the percentiles of an empty run."""
 
-        Returns
-        -------
-        dict
-            ``{"ticks", "duration_s", "deadline_misses", "skipped_deadlines", "miss_ticks",
-            "period_error_us": {"p50", "p99", "max"}, "compute_us": {"p50", "p99", "max"}}``;
-            times in µs except ``duration_s`` (s); null for percentiles of an empty run.
-        """
-
-        def num(x: float) -> float | None:
-            return None if math.isnan(x) else x
+        def nums(*xs: float) -> dict[str, float | None]:
+            keys = ("p50", "p99", "max")
+            return {k: None if math.isnan(x) else x for k, x in zip(keys, xs, strict=True)}
 
         return {
             "ticks": self.ticks,
@@ -154,43 +119,18 @@ class TimingStats:
             "deadline_misses": self.misses,
             "skipped_deadlines": self.skipped_deadlines,
             "miss_ticks": list(self.miss_ticks),
-            "period_error_us": {
-                "p50": num(self.period_error_us_p50),
-                "p99": num(self.period_error_us_p99),
-                "max": num(self.period_error_us_max),
-            },
-            "compute_us": {
-                "p50": num(self.compute_us_p50),
-                "p99": num(self.compute_us_p99),
-                "max": num(self.compute_us_max),
-            },
-        }
+            "period_error_us": nums(self.period_error_us_p50, self.period_error_us_p99,
+                                    self.period_error_us_max),
+            "compute_us": nums(self.compute_us_p50, self.compute_us_p99, self.compute_us_max),
+        }  # fmt: skip
 
 
 class PeriodicExecutor:
-    """Runs a tick function every ``period_s`` on absolute deadlines of an injected clock.
+    """Runs a tick function every ``period_s`` (s) on absolute deadlines of ``clock``.
 
-    See the module docstring for the timing contract. While a tick runs, the executor's
-    attributes describe it, so the tick function can log its own timing:
-
-    - ``tick_index`` (k), ``grid_index`` (m, the grid point it was started for),
-    - ``deadline_s`` and ``start_s`` (s, on the clock), ``period_error_us`` (µs),
-    - ``last_compute_us``: compute time of the previous tick (µs; 0 before the second tick).
-
-    Parameters
-    ----------
-    period_s : float
-        Tick period (s), > 0.
-    clock : Clock
-        Time source and waiter: ``MonotonicClock`` for real time, ``SimulatedClock`` for simulation.
-    max_ticks : int, optional
-        Stop after this many ticks (>= 0). None: run until the tick function returns False.
-
-    Raises
-    ------
-    InputError
-        For a period that is not a positive finite time, a negative ``max_ticks``, or a clock
-        without ``now_s`` and ``wait_until``.
+    ``max_ticks``: stop after this many ticks (None: until the tick function returns False).
+    While a tick runs, ``tick_index`` (k), ``grid_index`` (m), ``deadline_s``, ``start_s`` (s,
+    on the clock) and ``period_error_us`` describe it, so the tick can log its own timing.
 
     Examples
     --------
@@ -201,26 +141,16 @@ class PeriodicExecutor:
     """
 
     def __init__(self, period_s: float, clock: Clock, *, max_ticks: int | None = None) -> None:
-        if not (isinstance(period_s, int | float) and math.isfinite(period_s) and period_s > 0.0):
-            raise InputError(f"period_s must be a finite time > 0 s, got {period_s!r}")
-        if max_ticks is not None and (
-            isinstance(max_ticks, bool) or not isinstance(max_ticks, int) or max_ticks < 0
-        ):
-            raise InputError(f"max_ticks must be None or an integer >= 0, got {max_ticks!r}")
+        self.period_s = check_period(period_s)
+        self.max_ticks = None if max_ticks is None else check_count("max_ticks", max_ticks, 0)
         if not isinstance(clock, Clock):
             raise InputError(
                 f"clock must provide now_s() and wait_until(deadline_s), got {type(clock).__name__}"
             )
-        self.period_s = float(period_s)
         self.clock = clock
-        self.max_ticks = max_ticks
-        self.t0_s = math.nan
-        self.tick_index = 0
-        self.grid_index = 0
-        self.deadline_s = math.nan
-        self.start_s = math.nan
+        self.t0_s = self.deadline_s = self.start_s = math.nan
+        self.tick_index = self.grid_index = 0
         self.period_error_us = 0.0
-        self.last_compute_us = 0.0
         self._reset()
 
     def _reset(self) -> None:
@@ -233,54 +163,31 @@ class PeriodicExecutor:
     def run(
         self, tick: Callable[[int], bool], idle: Callable[[], None] | None = None
     ) -> TimingStats:
-        """Call ``tick(k)`` on the deadline grid until it returns False or ``max_ticks`` ran.
+        """Call ``tick(k)`` on a new deadline grid until it returns False or ``max_ticks`` ran.
 
-        Parameters
-        ----------
-        tick : callable
-            ``tick(k) -> bool`` with k the tick index (0, 1, ...); a false return value stops
-            the run after this tick. An exception from it ends the run and propagates;
-            :meth:`stats` still gives the ticks completed so far.
-        idle : callable, optional
-            Called after each tick, once its compute time is taken, before the wait for the next
-            deadline: work that must not count as the tick's (it shows as the next tick's period
-            error if it runs past the deadline).
-
-        Returns
-        -------
-        TimingStats
-            The statistics of this run (each call of ``run`` starts afresh, on a new grid).
+        An exception from ``tick`` ends the run and propagates (:meth:`stats` has the ticks
+        done). ``idle`` runs after each tick, once its compute time is taken, before the wait:
+        work that is not the tick's (past the deadline, it shows as the next period error).
         """
         self._reset()
-        clock = self.clock
-        now = clock.now_s
-        wait_until = clock.wait_until
-        period = self.period_s
-        limit = self.max_ticks
-        err_append = self._period_error_s.append
-        comp_append = self._compute_s.append
-        t0 = now()
-        self.t0_s = t0
-        self.last_compute_us = 0.0
-        k = 0
-        m = 0
+        now, wait_until = self.clock.now_s, self.clock.wait_until
+        period, limit = self.period_s, self.max_ticks
+        err_append, comp_append = self._period_error_s.append, self._compute_s.append
+        t0 = self.t0_s = now()
+        k = m = 0
         try:
             while limit is None or k < limit:
                 deadline = t0 + m * period
                 wait_until(deadline)
                 start = now()
                 err = start - deadline
-                self.tick_index = k
-                self.grid_index = m
-                self.deadline_s = deadline
-                self.start_s = start
+                self.tick_index, self.grid_index = k, m
+                self.deadline_s, self.start_s = deadline, start
                 self.period_error_us = err * 1e6
                 keep_going = tick(k)
-                end = now()
-                self._end_s = end
+                end = self._end_s = now()
                 err_append(err)
                 comp_append(end - start)
-                self.last_compute_us = (end - start) * 1e6
                 if idle is not None:
                     idle()
                 k += 1
@@ -293,11 +200,8 @@ class PeriodicExecutor:
             if self._miss_ticks:
                 _log.warning(
                     "%d deadline misses in %d ticks (%d deadlines skipped) at period %.6g s",
-                    len(self._miss_ticks),
-                    k,
-                    self._skipped,
-                    period,
-                )
+                    len(self._miss_ticks), k, self._skipped, period,
+                )  # fmt: skip
         return self.stats()
 
     def _realign(self, k: int, m_next: int, end_s: float) -> int:
@@ -314,25 +218,17 @@ class PeriodicExecutor:
             _log.warning(
                 "deadline miss: tick %d (grid point %d) ended %.1f µs after the next deadline; "
                 "%d deadline(s) skipped, next tick at grid point %d%s",
-                k,
-                m_next - 1,
-                (end_s - (t0 + m_next * period)) * 1e6,
-                skipped,
-                m,
+                k, m_next - 1, (end_s - (t0 + m_next * period)) * 1e6, skipped, m,
                 "; further misses are only counted" if n == MISS_LOG_LIMIT else "",
-            )
+            )  # fmt: skip
         return m
 
     def stats(self) -> TimingStats:
         """Statistics of the current or last run, over the ticks completed so far."""
-        pe = np.frombuffer(self._period_error_s, dtype=np.float64) * 1e6
-        cu = np.frombuffer(self._compute_s, dtype=np.float64) * 1e6
         duration = 0.0 if math.isnan(self._end_s) else self._end_s - self.t0_s
         return TimingStats.from_samples(
-            pe,
-            cu,
-            period_s=self.period_s,
-            duration_s=duration,
-            miss_ticks=tuple(self._miss_ticks),
-            skipped_deadlines=self._skipped,
-        )
+            np.frombuffer(self._period_error_s, dtype=np.float64) * 1e6,
+            np.frombuffer(self._compute_s, dtype=np.float64) * 1e6,
+            period_s=self.period_s, duration_s=duration,
+            miss_ticks=tuple(self._miss_ticks), skipped_deadlines=self._skipped,
+        )  # fmt: skip

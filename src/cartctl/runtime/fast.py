@@ -1,9 +1,6 @@
-"""The loop of ``cartctl run --fast`` kept in memory: for tune and the Python API.
-
-The same :class:`~cartctl.runtime.loop.ControlLoop` on a :class:`~cartctl.runtime.clock.SimulatedClock`
-and a :class:`~cartctl.runtime.back_to_back.BackToBackExecutor` (ticks back to back), with a
-:class:`~cartctl.runtime.loop.MemorySink` instead of files: as fast as the CPU allows, and
-ending, like every run, with the zero-volt stop row.
+"""The loop of ``cartctl run --fast`` kept in memory, for tune and the Python API: the same
+:class:`~cartctl.runtime.loop.ControlLoop` on a simulated clock, ticks back to back, a
+:class:`~cartctl.runtime.loop.MemorySink` instead of files, and the zero-volt stop row at the end.
 """
 
 from __future__ import annotations
@@ -29,24 +26,18 @@ def run_in_memory(
     period_s: float,
     voltage_limit_v: float,
 ) -> tuple[dict[str, NDArray[np.float64]], LoopState]:
-    """Run the loop on a simulated clock; returns the trace columns and what happened.
+    """Run the loop on a simulated clock; the trace columns and what happened.
 
-    ``plant``, ``controllers`` and ``references`` (rad/s per tick) are as for
-    :class:`~cartctl.runtime.loop.ControlLoop`; ``period_s`` is the tick (s), ``voltage_limit_v``
-    the clamp (V). A plant fault ends the run early and is in ``state.failure``.
+    Arguments as for :class:`~cartctl.runtime.loop.ControlLoop`; a plant fault ends the run early
+    and is in ``state.failure``.
     """
     clock, memory = SimulatedClock(), MemorySink()
     loop = ControlLoop(plant, controllers, references, [memory], now_s=clock.now_s,
                        voltage_limit_v=voltage_limit_v, period_s=period_s)  # fmt: skip
-    executor = BackToBackExecutor(period_s, max_ticks=loop.n_ticks)
-    loop_tick = loop.tick
+    executor, loop_tick = BackToBackExecutor(period_s, max_ticks=loop.n_ticks), loop.tick
     try:
         loop.start()
-
-        def tick(k: int) -> bool:
-            return loop_tick(k, 0.0, 0.0, k * period_s)
-
-        executor.run(tick, loop.idle)
+        executor.run(lambda k: loop_tick(k, 0.0, 0.0, k * period_s), loop.idle)
     except PlantError as exc:
         loop.state.failure = str(exc)
     finally:
