@@ -1,4 +1,4 @@
-"""Figures of merit shared by identification, design and run review (pure numpy)."""
+"""Figures of merit of a model against data, and JSON-safe numbers (pure numpy)."""
 
 from __future__ import annotations
 
@@ -9,21 +9,10 @@ from numpy.typing import ArrayLike
 
 
 def fit_percent(measured: ArrayLike, modelled: ArrayLike) -> float:
-    """Normalised-RMSE fit in percent: 100 · (1 − ‖y − ŷ‖ / ‖y − mean(y)‖).
+    """Normalised-RMSE fit (%): 100 · (1 − ‖y − ŷ‖ / ‖y − mean(y)‖); NaN for a constant ``measured``.
 
-    100 % is a perfect fit, 0 % is no better than the mean, and it is negative when worse.
-    Used both for simulation (ŷ simulated from the input alone) and for one-step prediction
-    (ŷ predicted from past measurements); callers label which.
-
-    Parameters
-    ----------
-    measured, modelled : array_like, shape (n,)
-        Measured and modelled output, same units.
-
-    Returns
-    -------
-    float
-        The fit (%); NaN when the measured output is constant.
+    100 % is perfect, 0 % no better than the mean, negative when worse. Used for simulation (ŷ from
+    the input alone) and one-step prediction (ŷ from past measurements); callers label which.
     """
     y = np.asarray(measured, dtype=float)
     y_hat = np.asarray(modelled, dtype=float)

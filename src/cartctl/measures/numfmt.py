@@ -1,12 +1,9 @@
 """Numbers for the terminal: one rounding per table column, the unit in the column's header.
 
-The tables of ``run``, ``review`` and ``tune`` print each column with one number of decimals,
-chosen so that the column's largest magnitude (or a larger scale the caller gives, such as the
-RMS error for the steady-state error beside it) has :data:`SIG_FIGS` significant figures. Smaller
-values of the column then show fewer significant figures, never more; a value far below the
-scale (3.6e-15 rad/s next to 0.79 rad/s) rounds to 0 and prints as a zero of the column's
-precision, without a sign. A magnitude of 1000 or more is rounded to tens (1234 → 1230). Light:
-no numpy, so the parser's modules may import it.
+A column gets the decimals that give its largest magnitude (or a larger ``scale`` the caller
+gives, such as the RMS error beside a steady-state error) :data:`SIG_FIGS` significant figures;
+smaller values show fewer, and one far below the scale prints as an unsigned zero. 1000 and more
+round to tens. No numpy: the parser's modules import it.
 """
 
 from __future__ import annotations
@@ -15,13 +12,8 @@ import math
 from collections.abc import Iterable, Sequence
 
 SIG_FIGS = 3
-"""Significant figures of a column's largest magnitude."""
-
 MAX_DECIMALS = 6
-"""The most decimals a column gets (a column of tiny values without a scale)."""
-
-MISSING = "—"
-"""How a missing (None or NaN) value prints."""
+MISSING = "—"  # a None or NaN
 
 
 def _finite(values: Iterable[float | None]) -> list[float]:
@@ -35,24 +27,9 @@ def column_decimals(
     scale: float | None = None,
     max_decimals: int = MAX_DECIMALS,
 ) -> int:
-    """Decimals that give the column's largest magnitude ``sig`` significant figures.
-
-    Parameters
-    ----------
-    values : iterable of float or None
-        The column (None, NaN and infinities are left out).
-    sig : int
-        Significant figures of the largest magnitude.
-    scale : float, optional
-        A magnitude the column is measured against (its decimals are chosen for the larger of
-        it and the column's largest value).
-    max_decimals : int
-        The most decimals returned.
-
-    Returns
-    -------
-    int
-        Decimals, negative to round to tens, hundreds, …; 0 for a column of zeros.
+    """Decimals giving the column's largest magnitude (or ``scale``, if larger) ``sig`` significant
+    figures, at most ``max_decimals``; negative to round to tens …; 0 for a column of zeros. None,
+    NaN and infinities are left out.
     """
     top = max(_finite([*values, scale]), default=0.0)
     if top == 0.0:
@@ -84,9 +61,8 @@ def format_column(
     factor: float = 1.0,
     max_decimals: int = MAX_DECIMALS,
 ) -> list[str]:
-    """The cells of one column: every value with the column's decimals (:func:`column_decimals`).
-
-    ``factor`` converts the values first (1e3: s to ms); ``scale`` is in the printed unit.
+    """The cells of one column with the column's decimals; ``factor`` converts the values first (1e3:
+    s to ms), ``scale`` is in the printed unit.
     """
     shown = [None if v is None else float(v) * factor for v in values]
     decimals = column_decimals(shown, sig=sig, scale=scale, max_decimals=max_decimals)
@@ -94,8 +70,7 @@ def format_column(
 
 
 def exact_decimals(values: Iterable[float], max_decimals: int = MAX_DECIMALS) -> int:
-    """The fewest decimals (up to ``max_decimals``) that print every value exactly (grid settings
-    as the user gave them: 0.04, 0.10, 0.16)."""
+    """The fewest decimals (up to ``max_decimals``) that print every value exactly (0.04, 0.10, 0.16)."""
     for decimals in range(max_decimals + 1):
         if all(abs(round(v, decimals) - v) <= 1e-9 * max(1.0, abs(v)) for v in values):
             return decimals
@@ -109,14 +84,27 @@ def render_table(
     left: Sequence[int] = (0,),
     gap: int = 2,
     indent: str = "",
+    groups: Sequence[tuple[str, int, int]] = (),
 ) -> list[str]:
     """Lines of a table: each column as wide as its header or widest cell, right-aligned (the
-    columns in ``left`` left-aligned), ``gap`` spaces between columns."""
+    columns in ``left`` left-aligned), ``gap`` spaces apart; each of ``groups`` (label, first
+    column, last column) prints centred on a line above its columns."""
     widths = [max([len(h), *(len(r[i]) for r in rows)]) for i, h in enumerate(headers)]
+
+    def span(first: int, last: int) -> int:
+        return sum(widths[first : last + 1]) + gap * (last - first)
+
+    for label, first, last in groups:  # widen the group's last column to fit its label
+        widths[last] += max(0, len(label) - span(first, last))
 
     def line(cells: Sequence[str]) -> str:
         parts = [c.ljust(w) if i in left else c.rjust(w)
                  for i, (c, w) in enumerate(zip(cells, widths, strict=True))]  # fmt: skip
         return (indent + (" " * gap).join(parts)).rstrip()
 
-    return [line(headers), *(line(r) for r in rows)]
+    top, at = indent, len(indent)
+    for label, first, last in groups:
+        start = len(indent) + sum(widths[:first]) + gap * first
+        top += " " * (start - at) + label.center(span(first, last))
+        at = start + span(first, last)
+    return [*([top.rstrip()] if groups else []), line(headers), *(line(r) for r in rows)]

@@ -1,33 +1,22 @@
-"""Step-response metrics: rise time, overshoot, settling time, steady state (pure numpy).
+"""Step-response metrics of sampled data (any units; times in s), shared by ``validate``,
+``design`` and the run summary.
 
-Shared by identification (``cartctl validate`` compares measured and simulated steps), controller
-design (closed-loop step of a design) and run review (the steps of a recorded run). It works on
-sampled data of any units; times are in seconds.
-
-Definitions (``target`` is the reference when one is given, else the final value; the step size is
-``target − initial``; every level is a fraction of the way from ``initial`` to ``target``, so a
-negative step is handled like a positive one):
+``target`` is the reference when given, else the final value; levels are fractions of the way
+from ``initial`` to ``target``, so a step down is measured like a step up.
 
 - final value: the mean of the last 5 % of the samples (at least :data:`MIN_FINAL_SAMPLES`);
 - rise time: from the first reach of 10 % to the first reach of 90 %;
-- overshoot: how far the response goes beyond the target, in % of the step size (0 if never);
-- settling time: from the step onset to the moment the response enters, for good, the band of
-  ±2 % of the step size around the target (``settling_band``), or a wider one where a floor in
-  response units is given (``settling_floor``: :func:`settling_half_width` with the
-  :func:`~cartctl.cart.encoder_quantum_rad_s` of a measured wheel speed, whose resolution is one encoder count
-  per tick);
-- peak: the sample farthest in the step's direction, its value and its time from the onset.
+- overshoot: beyond the target, in % of the step size (0 if never);
+- settling time: from the onset until the response stays within ±2 % of the step around the
+  target, or within ``settling_floor`` (response units) where that is wider: for a measured wheel
+  speed, one encoder count per tick (:func:`~cartctl.cart.encoder_quantum_rad_s`);
+- peak: the sample farthest in the step's direction, and its time from the onset.
 
-With a reference, the metrics judge how the response tracks that reference, as
-``control.step_info(..., final_output=reference)`` and MATLAB's ``stepinfo(..., 'yfinal', r)`` do:
-a response that settles more than 2 % away from its reference has no settling time.
-
-Differences from ``control.step_info`` (python-control 0.10): python-control measures settling and
-peak times from t = 0, not from the onset; takes the last sample (not a mean) as the final value
-when none is given; counts a sample exactly on the band edge as outside; assumes the response
-starts at 0; reports ``abs`` of the peak; and uses the first sample past a level, where this module
-by default interpolates linearly between samples (``interpolate=False`` gives python-control's
-sample times).
+With a reference the metrics judge tracking of it, as ``control.step_info(..., final_output=r)``
+does. Unlike python-control 0.10, times count from the onset, not t = 0; the final value is a
+mean, not the last sample; a sample on the band edge is inside; the response need not start at 0;
+and level crossings are interpolated between samples (``interpolate=False`` gives the sample
+times python-control reports).
 """
 
 from __future__ import annotations
@@ -40,55 +29,20 @@ from numpy.typing import ArrayLike, NDArray
 
 from cartctl.errors import InputError
 
-__all__ = [
-    "MIN_FINAL_SAMPLES",
-    "SETTLING_FRACTION",
-    "StepInfo",
-    "StepOnset",
-    "final_value",
-    "find_step",
-    "first_step",
-    "settling_half_width",
-    "step_info",
-    "step_rows",
-]
-
 MIN_FINAL_SAMPLES = 5
-"""The final value averages at least this many samples (or all, if there are fewer)."""
-
 FINAL_FRACTION = 0.05
-"""The final value averages this fraction of the samples at the end."""
-
-_ROUNDING = 1e-12
-"""An excursion past the target below this fraction of the step is rounding, not overshoot."""
-
 RISE_LIMITS = (0.1, 0.9)
-"""The rise time runs from the first reach of the first to the first reach of the second fraction."""
-
 SETTLING_FRACTION = 0.02
-"""The settling band's half-width as a fraction of the step (the 2 % criterion)."""
+_ROUNDING = 1e-12  # an excursion past the target below this fraction of the step is rounding
 
 
 def settling_half_width(
     step_size: float, floor: float = 0.0, fraction: float = SETTLING_FRACTION
 ) -> float:
-    """Half-width of the settling band of a step: max(fraction · |step|, floor).
+    """Half-width of the settling band: max(fraction · |step_size|, floor), in response units.
 
-    Parameters
-    ----------
-    step_size : float
-        Target − initial (response units, e.g. rad/s).
-    floor : float
-        The narrowest band worth judging (response units, ≥ 0): for a measured wheel speed one
-        encoder count per tick, :func:`~cartctl.cart.encoder_quantum_rad_s`, so that a small step is not
-        judged on the encoder's resolution.
-    fraction : float
-        Band as a fraction of |step|, in (0, 1).
-
-    Returns
-    -------
-    float
-        The half-width (response units).
+    ``floor`` (≥ 0) is the narrowest band worth judging (one encoder count per tick for a measured
+    wheel speed); ``fraction`` is in (0, 1).
     """
     if not 0.0 < fraction < 1.0:
         raise InputError(f"settling band must be a fraction in (0, 1), got {fraction}")
@@ -99,31 +53,11 @@ def settling_half_width(
 
 @dataclass(frozen=True)
 class StepInfo:
-    """Metrics of one step response.
+    """Metrics of one step response: values in the response's units, times in s from the onset.
 
-    Values are in the response's units (rad/s for a wheel speed); times in seconds.
-
-    Attributes
-    ----------
-    rise_time_s : float or None
-        10–90 % rise time (s); None if the response never reaches 90 % of the step.
-    settling_time_s : float or None
-        2 % settling time from the step onset (s); None if the response is outside the band at
-        the last sample (it has not settled within the record).
-    overshoot_percent : float
-        Excursion beyond the target in % of the step size; 0 when the response never passes it.
-    peak_value : float
-        The response's value farthest in the step's direction (after the onset).
-    peak_time_s : float
-        When the peak occurs, from the onset (s).
-    steady_state_value : float
-        The final value: mean of the last 5 % of the samples.
-    steady_state_error : float or None
-        Reference − final value; None without a reference.
-    initial_value : float
-        The value the step starts from.
-    step_size : float
-        (reference, or final value) − initial; negative for a step down.
+    ``rise_time_s`` is None if 90 % is never reached, ``settling_time_s`` if the last sample is
+    outside the band; ``steady_state_error`` (reference − final value) is None without a reference;
+    ``step_size`` is (reference or final value) − initial, negative for a step down.
     """
 
     rise_time_s: float | None
@@ -137,39 +71,19 @@ class StepInfo:
     step_size: float
 
     def to_dict(self) -> dict[str, float | None]:
-        """JSON form: the attributes by name (None for an undefined metric)."""
         return asdict(self)
 
 
 @dataclass(frozen=True)
 class StepOnset:
-    """Where a signal steps: at sample ``index`` it jumps by ``amplitude`` and then stays.
-
-    Attributes
-    ----------
-    index : int
-        First sample at the new level; 0 when the signal starts at it.
-    amplitude : float
-        New level − initial level, in the signal's units (V for a voltage); never 0.
-    """
+    """At sample ``index`` a signal jumps by ``amplitude`` (≠ 0, signal units) and then stays."""
 
     index: int
     amplitude: float
 
 
 def final_value(response: ArrayLike) -> float:
-    """The steady-state value of a response: the mean of its last 5 % of samples.
-
-    Parameters
-    ----------
-    response : array_like, shape (n,)
-        The response, n ≥ 1.
-
-    Returns
-    -------
-    float
-        Mean of the last max(:data:`MIN_FINAL_SAMPLES`, ceil(0.05 n)) samples (all if fewer).
-    """
+    """The mean of the last max(:data:`MIN_FINAL_SAMPLES`, ceil(0.05 n)) samples (all if fewer)."""
     y = np.asarray(response, dtype=float)
     if y.ndim != 1 or y.size == 0:
         raise InputError(f"a response must be a non-empty 1-D array, got shape {y.shape}")
@@ -180,24 +94,8 @@ def final_value(response: ArrayLike) -> float:
 def find_step(
     values: ArrayLike, *, initial: float = 0.0, tolerance: float = 1e-6
 ) -> StepOnset | None:
-    """Find a single step: ``initial`` up to some sample, then one other constant level to the end.
-
-    A signal that holds a level other than ``initial`` from its first sample is taken as a step at
-    index 0 (a record that starts at the step, from rest at ``initial``).
-
-    Parameters
-    ----------
-    values : array_like, shape (n,)
-        The signal, e.g. a commanded voltage (V).
-    initial : float
-        The level before the step.
-    tolerance : float
-        How far a sample may stray from its level and still count as on it (signal units).
-
-    Returns
-    -------
-    StepOnset or None
-        None when the signal is at ``initial`` throughout, or is not one clean step.
+    """A single step: ``initial`` up to some sample, then one other level (within ``tolerance``) to the
+    end; a signal at another level from sample 0 steps at index 0. None: no step, or not one clean step.
     """
     u = np.asarray(values, dtype=float)
     if u.ndim != 1:
@@ -213,11 +111,8 @@ def find_step(
 
 
 def first_step(reference: NDArray[np.float64], *, initial: float = 0.0) -> tuple[int, int] | None:
-    """The first step of a reference (shape (n,)) that starts at ``initial`` (a loop starts at rest).
-
-    Returns ``(start, end)``: ``reference[start:end]`` is its first other level (a change of more
-    than 1e-9 ends it); None when it never leaves ``initial`` or holds that level for fewer than
-    :data:`MIN_FINAL_SAMPLES` samples.
+    """``(start, end)`` of the first other level of a reference that starts at ``initial``; None when
+    it never leaves it or holds the level for fewer than :data:`MIN_FINAL_SAMPLES` samples.
     """
     moved = np.flatnonzero(np.abs(reference - initial) > 1e-9)
     if moved.size == 0:
@@ -231,7 +126,7 @@ def first_step(reference: NDArray[np.float64], *, initial: float = 0.0) -> tuple
 def _crossing(
     time_s: NDArray[np.float64], z: NDArray[np.float64], i: int, level: float, *, interpolate: bool
 ) -> float:
-    """Time at which z reaches ``level`` between samples i − 1 and i (z[i] has reached it)."""
+    """Time at which z reaches ``level`` between samples i − 1 and i."""
     if i == 0 or not interpolate:
         return float(time_s[i])
     frac = (level - z[i - 1]) / (z[i] - z[i - 1])
@@ -246,30 +141,11 @@ def step_rows(
     *,
     interpolate: bool = True,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Overshoot and settling time of N responses at once, as :func:`step_info` defines them.
+    """Overshoot (%) and settling time (s, ``inf`` if not settled) of N responses at once.
 
-    Parameters
-    ----------
-    time_s : ndarray, shape (n,)
-        Sample times from the onset on (s), n ≥ 2.
-    z : ndarray, shape (N, n)
-        Each response as a fraction of its step: 0 at the initial value, 1 at the target.
-    band : float
-        The settling band's half-width as a fraction of the step
-        (:func:`settling_half_width` / |step|); at 1 or more nothing is left to settle, which
-        the caller judges (:func:`step_info` gives None).
-    onset_s : float
-        When the step is applied (s); settling counts from it.
-    interpolate : bool
-        As for :func:`step_info`.
-
-    Returns
-    -------
-    overshoot_percent : ndarray, shape (N,)
-        (max z − 1)·100, 0 when within rounding of the target or below it (%).
-    settling_time_s : ndarray, shape (N,)
-        From the onset to entering the band for good (s); ``inf`` where the last sample is
-        outside it (not settled within the record).
+    ``z`` (N, n) holds each response as a fraction of its step (0 initial, 1 target) at ``time_s``
+    (from the onset on); ``band`` is the band's half-width as a fraction of the step (at 1 or more
+    nothing is left to settle, which the caller judges).
     """
     excess = np.max(z, axis=1) - 1.0
     overshoot = np.where(excess <= _ROUNDING, 0.0, excess) * 100.0
@@ -299,39 +175,31 @@ def step_info(
     settling_floor: float = 0.0,
     interpolate: bool = True,
 ) -> StepInfo:
-    """Measure a step response (see the module docstring for the definitions).
+    """Measure a step response (definitions in the module docstring).
 
     Parameters
     ----------
-    time_s : array_like, shape (n,)
-        Sample times (s), strictly increasing, n ≥ 2.
-    response : array_like, shape (n,)
-        The response at those times (any units, e.g. rad/s).
+    time_s, response : array_like, shape (n,)
+        Strictly increasing sample times (s), n ≥ 2, and the response (e.g. rad/s).
     reference : float, optional
-        The value the response should reach; without one, the final value is the target.
+        The value to reach; without one, the final value is the target.
     initial : float
-        The value the step starts from (response units).
+        The value the step starts from.
     onset_s : float, optional
-        When the step is applied (s); default ``time_s[0]``. Samples before it are ignored, and
-        settling and peak times count from it.
+        When the step is applied (default ``time_s[0]``); earlier samples are ignored.
     settling_band : float
-        Half-width of the settling band as a fraction of the step size (0.02 is 2 %).
+        Band half-width as a fraction of the step size (0.02 is 2 %).
     settling_floor : float
-        The band is never narrower than this, in response units (default 0: the fraction alone;
-        see :func:`settling_half_width`). A step no larger than its band has no settling time (None).
+        The band is never narrower than this (response units); a step no larger than its band has
+        no settling time.
     interpolate : bool
-        Interpolate linearly between samples for the rise and settling instants; False takes the
-        first sample past the level, as ``control.step_info`` does.
-
-    Returns
-    -------
-    StepInfo
+        Interpolate the rise and settling instants; False takes the first sample past the level.
 
     Raises
     ------
     InputError
-        Arrays of unequal length, not 1-D, shorter than 2, not finite; time not increasing; an
-        onset outside the record; a step of size zero; a band not in (0, 1).
+        Unequal, short or non-finite arrays; time not increasing; an onset outside the record; a
+        step of size zero; a band not in (0, 1).
     """
     t = np.asarray(time_s, dtype=float)
     y = np.asarray(response, dtype=float)
