@@ -1,13 +1,10 @@
-"""ARX least squares: the report's estimator, with parameter uncertainty and labelled fits.
-
-The regression of the report (equation 6, table 1), for general orders::
+"""ARX least squares, the report's estimator (equation 6, table 1), for general orders::
 
     y[k] = φ(k)ᵀ θ + e[k],   φ(k) = [−y[k−1] … −y[k−na], u[k−nk] … u[k−nk−nb+1]]
 
-θ is the least-squares solution from one Householder QR factorisation of the regressor matrix with
-the target appended, [Φ | y] (not the normal equations): the same triangular factor gives θ, the
-residual norm and the θ covariance. Several experiments (segments) are stacked without regressors
-across their boundaries. Pure numpy/scipy: arrays in, frozen results out.
+y in rad/s, u in V. θ comes from one Householder QR of [Φ | y] (not the normal equations), which
+also gives the residual norm and θ's covariance. Experiments (segments) are stacked without
+regressors across their boundaries.
 """
 
 from __future__ import annotations
@@ -28,9 +25,11 @@ from cartctl.model import ArxModel
 Segment = tuple[ArrayLike, ArrayLike]
 """One experiment: (output y in rad/s, input u in V), equally long 1-D arrays."""
 
-RCOND = 1e-10
-"""Smallest singular value of the regressor matrix, relative to its largest, before it counts as rank deficient."""
+Checked = tuple[NDArray[np.float64], NDArray[np.float64]]
+"""One experiment as float arrays, from :func:`as_segments`."""
 
+RCOND = 1e-10
+"""Smallest singular value of Φ, relative to its largest, before Φ counts as rank deficient."""
 
 MIN_ROWS_PER_PARAMETER = 10
 """Fewer equations per parameter than this gives no meaningful model, and is refused."""
@@ -42,23 +41,12 @@ class IdentificationError(InputError):
 
 @dataclass(frozen=True)
 class ArxFit:
-    """An identified model with its uncertainty and fit figures.
+    """An identified model with its uncertainty and fits.
 
-    Attributes
-    ----------
-    model : ArxModel
-    theta_std : ndarray, shape (na + nb,)
-        Standard deviation of each θ entry, σ̂ √diag((ΦᵀΦ)⁻¹) for ARX (the Jacobian's for OE).
-    fit_simulation_percent : float
-        NRMSE fit (%) of the model simulated from rest on the input alone.
-    fit_prediction_percent : float
-        NRMSE fit (%) of the one-step-ahead prediction from past measurements.
-    residual_rms : float
-        RMS of the equation (ARX) or simulation (OE) error (rad/s).
-    n_samples : int
-        Number of equations (regression rows) used.
-    method : str
-        'arx' or 'oe'.
+    ``theta_std`` is σ̂ √diag((ΦᵀΦ)⁻¹) (ARX; the Jacobian's for OE); the fits are NRMSE (%) of
+    the simulation from rest on the input alone and of the one-step-ahead prediction;
+    ``residual_rms`` (rad/s) of the equation (ARX) or simulation (OE) error over ``n_samples``
+    equations; ``method`` 'arx' or 'oe'.
     """
 
     model: ArxModel
@@ -97,8 +85,8 @@ class ArxFit:
 
 def as_segments(
     segments: Sequence[Segment],
-) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-    """Check and convert experiments to float arrays; a clear error for bad shapes or values."""
+) -> list[Checked]:
+    """Experiments as float arrays; a clear error for bad shapes or values."""
     out = []
     if not segments:
         raise IdentificationError("no data to identify from")
@@ -120,57 +108,18 @@ def first_row(na: int, nb: int, nk: int) -> int:
     return max(na, nk + nb - 1)
 
 
-def _fill_regression(
-    out: NDArray[np.float64],
-    y: NDArray[np.float64],
-    u: NDArray[np.float64],
-    na: int,
-    nb: int,
-    nk: int,
-    start: int,
-) -> None:
-    """Write the rows k = start … n − 1 of one experiment's [Φ | y] into ``out``.
-
-    ``out`` has shape (n − start, na + nb + 1); each column is filled from a shifted view of
-    ``y`` or ``u``, without intermediate arrays.
-    """
-    n = y.size
-    for i in range(1, na + 1):
-        np.negative(y[start - i : n - i], out=out[:, i - 1])
-    for j in range(nb):
-        out[:, na + j] = u[start - nk - j : n - nk - j]
-    out[:, na + nb] = y[start:]
-
-
 def augmented_regression(
-    segments: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    segments: Sequence[Checked],
     na: int,
     nb: int,
     nk: int,
     start: int | None = None,
 ) -> NDArray[np.float64]:
-    """Regressor matrix and target of all experiments as one array [Φ | y], column-major.
+    """[Φ | y] of all experiments in one Fortran-order array, ready for an in-place QR.
 
-    Parameters
-    ----------
-    segments : sequence of (y, u)
-        Experiments as float arrays (see :func:`as_segments`).
-    na, nb, nk : int
-        Orders and input delay.
-    start : int, optional
-        First regression row of each experiment (default :func:`first_row`); experiments not
-        longer than ``start`` give no rows. No regressor crosses an experiment's boundary.
-
-    Returns
-    -------
-    ndarray, shape (rows, na + nb + 1), Fortran order
-        Columns −y[k−1] … −y[k−na], u[k−nk] … u[k−nk−nb+1], then the target y[k]. The array is
-        allocated once and filled in place, ready for an in-place QR factorisation.
-
-    Raises
-    ------
-    IdentificationError
-        No experiment is longer than ``start``.
+    Rows k = ``start`` (default :func:`first_row`) … n − 1 of each experiment; columns
+    −y[k−1] … −y[k−na], u[k−nk] … u[k−nk−nb+1], then y[k]. No regressor crosses a boundary;
+    an experiment not longer than ``start`` gives no rows.
     """
     start = first_row(na, nb, nk) if start is None else start
     used = [(y, u) for y, u in segments if y.size > start]
@@ -182,23 +131,25 @@ def augmented_regression(
     out = np.empty((rows, na + nb + 1), order="F")
     row = 0
     for y, u in used:
-        m = y.size - start
-        _fill_regression(out[row : row + m], y, u, na, nb, nk, start)
-        row += m
+        n = y.size
+        block = out[row : row + n - start]
+        for i in range(1, na + 1):  # filled from shifted views, without intermediate arrays
+            np.negative(y[start - i : n - i], out=block[:, i - 1])
+        for j in range(nb):
+            block[:, na + j] = u[start - nk - j : n - nk - j]
+        block[:, na + nb] = y[start:]
+        row += n - start
     return out
 
 
 def stacked_regression(
-    segments: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    segments: Sequence[Checked],
     na: int,
     nb: int,
     nk: int,
     start: int | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Φ and target of several experiments, stacked (no regressor crosses a boundary).
-
-    Views of the one array built by :func:`augmented_regression` (no copies).
-    """
+    """Φ and target as views of :func:`augmented_regression`'s array."""
     phi_y = augmented_regression(segments, na, nb, nk, start)
     return phi_y[:, :-1], phi_y[:, -1]
 
@@ -213,31 +164,11 @@ def check_orders(na: int, nb: int, nk: int) -> None:
 def least_squares(
     phi_y: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], float, NDArray[np.float64]]:
-    """Solve min ‖Φθ − y‖ from one QR factorisation of [Φ | y], overwriting ``phi_y``.
+    """θ, ‖y − Φθ‖ and θ's standard deviations from one QR of [Φ | y] (destroyed).
 
-    With [Φ | y] = Q [[R, z], [0, ρ]] (Householder QR, Q never formed): θ = R⁻¹ z, the
-    residual norm is ‖y − Φθ‖ = |ρ|, and the θ covariance σ̂² (ΦᵀΦ)⁻¹ = σ̂² R⁻¹ R⁻ᵀ with
-    σ̂² = ρ² / (rows − parameters), so the standard deviations are σ̂ times the row norms of R⁻¹.
-
-    Parameters
-    ----------
-    phi_y : ndarray, shape (rows, parameters + 1)
-        Regressor matrix with the target as its last column (:func:`augmented_regression`);
-        Fortran order lets the factorisation work in place. Its contents are destroyed.
-
-    Returns
-    -------
-    theta : ndarray, shape (parameters,)
-    residual_norm : float
-        ‖y − Φθ‖ (2-norm of the equation errors).
-    theta_std : ndarray, shape (parameters,)
-        Standard deviation of each θ entry, σ̂ √diag((ΦᵀΦ)⁻¹).
-
-    Raises
-    ------
-    IdentificationError
-        Fewer than :data:`MIN_ROWS_PER_PARAMETER` equations per parameter, or a rank-deficient
-        Φ (the data does not excite the model).
+    With [Φ | y] = Q [[R, z], [0, ρ]] (Q never formed): θ = R⁻¹ z, ‖y − Φθ‖ = |ρ|, and
+    cov θ = σ̂² R⁻¹ R⁻ᵀ with σ̂² = ρ² / (rows − parameters). Refuses fewer than
+    :data:`MIN_ROWS_PER_PARAMETER` equations per parameter and a rank-deficient Φ.
     """
     n, p = phi_y.shape[0], phi_y.shape[1] - 1
     if n < MIN_ROWS_PER_PARAMETER * p:
@@ -262,30 +193,20 @@ def least_squares(
 
 
 def _sum_squares(x: NDArray[np.float64]) -> float:
-    """Σ x², without BLAS.
-
-    numpy and scipy each bring their own multithreaded OpenBLAS; a numpy dot product between
-    scipy's QR calls leaves one library's threads spinning while the other's wait for the cores
-    (on 2 cores, fits of 10⁵ samples took about three times as long). einsum sums in numpy's own
-    loops.
-    """
+    """Σ x² in numpy's own loops: between scipy's QR calls a BLAS dot product left the two
+    libraries' OpenBLAS threads fighting for the cores (3× slower on 2 cores)."""
     return float(np.einsum("i,i->", x, x))
 
 
 def _fit_from_norms(error_norm: float, spread: float) -> float:
-    """NRMSE fit (%) 100 · (1 − ‖y − ŷ‖ / ‖y − mean(y)‖) from the two norms; NaN for no spread.
-
-    The same figure as :func:`cartctl.measures.metrics.fit_percent`, for callers that have the norms.
-    """
+    """100 (1 − ‖y − ŷ‖ / ‖y − mean(y)‖) from the two norms; NaN for no spread."""
     if spread == 0.0:
         return float("nan")
     return float(100.0 * (1.0 - error_norm / spread))
 
 
-def _simulation_fit(
-    model: ArxModel, data: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]]
-) -> float:
-    """:func:`simulation_fit` of already checked experiments, without concatenating them."""
+def _simulation_fit(model: ArxModel, data: Sequence[Checked]) -> float:
+    """:func:`simulation_fit` of checked experiments, without concatenating them."""
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model may diverge
         sims = [model.simulate(u) for _, u in data]
         if not all(np.isfinite(sim).all() for sim in sims):
@@ -302,11 +223,8 @@ def _simulation_fit(
 
 
 def simulation_fit(model: ArxModel, segments: Sequence[Segment]) -> float:
-    """NRMSE fit (%) of the model simulated from rest on each experiment's input, all samples.
-
-    One figure over all experiments together (as if concatenated); −inf when the simulation
-    diverges, NaN when the measured output is constant.
-    """
+    """NRMSE fit (%) of ``model`` simulated from rest on each experiment, over all of them
+    together; −inf when the simulation diverges, NaN for a constant output."""
     return _simulation_fit(model, as_segments(segments))
 
 
@@ -316,8 +234,8 @@ def prediction_fit(model: ArxModel, segments: Sequence[Segment]) -> float:
     return fit_percent(target, phi @ model.theta)
 
 
-def _check_excited(data: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]]) -> None:
-    """Refuse an input voltage that is constant over all experiments (it excites nothing)."""
+def _check_excited(data: Sequence[Checked]) -> None:
+    """Refuse an input that is constant over all experiments (it excites nothing)."""
     inputs = [u for _, u in data if u.size]
     if inputs and min(float(u.min()) for u in inputs) == max(float(u.max()) for u in inputs):
         raise IdentificationError(
@@ -336,26 +254,11 @@ def fit_arx(
     start: int | None = None,
     eval_segments: Sequence[Segment] | None = None,
 ) -> ArxFit:
-    """Fit an ARX model by least squares (the report's method).
+    """Fit an ARX model by least squares (the report's method; 2, 2, 2 its structure).
 
-    Parameters
-    ----------
-    segments : sequence of (y, u)
-        Experiments: measured speed (rad/s) and commanded voltage (V) per tick, possibly
-        prefiltered.
-    na, nb, nk : int
-        Orders and input delay (2, 2, 2 is the report's structure).
-    period_s : float
-        Sample period (s).
-    start : int, optional
-        First regression row (defaults to the first with all regressors inside the data).
-    eval_segments : sequence of (y, u), optional
-        Data for the simulation fit (default: ``segments``). Pass the raw data when
-        ``segments`` is prefiltered, so fits with and without a filter compare on equal terms.
-
-    Returns
-    -------
-    ArxFit
+    ``segments`` are (speed rad/s, voltage V) per tick, possibly prefiltered; ``start`` the first
+    regression row (default: the first with all regressors inside). The simulation fit is on
+    ``eval_segments`` when given: the raw data, so fits with and without a filter compare.
     """
     check_orders(na, nb, nk)
     data = as_segments(segments)

@@ -1,35 +1,27 @@
-"""Output-error refinement: minimise the simulation error over θ, starting from the ARX estimate.
+"""Output-error refinement: minimise the simulation error over θ, from the ARX estimate.
 
-ARX minimises the equation error, which under measurement noise biases θ (the report's dilemma:
+ARX minimises the equation error, which measurement noise biases (the report's dilemma:
 unfiltered too fast, filtered too slow). The output-error criterion
 
     V(θ) = Σ_k (y[k] − ŷ(k, θ))²,     ŷ = B(q) q⁻ⁿᵏ / A(q) u    (simulated from rest)
 
-is unbiased for white measurement noise. It is solved with scipy.optimize.least_squares using the
-exact Jacobian, itself obtained by filtering:
+is unbiased for white measurement noise. scipy.optimize.least_squares solves it with the exact
+Jacobian, by filtering: ∂ŷ/∂a_i = −q⁻ⁱ ŷ / A(q), ∂ŷ/∂b_j = q⁻⁽ⁿᵏ⁺ʲ⁾ u / A(q).
 
-    ∂ŷ/∂a_i = −q⁻ⁱ ŷ / A(q),      ∂ŷ/∂b_j = q⁻⁽ⁿᵏ⁺ʲ⁾ u / A(q).
+Two safeguards:
 
-Two guarantees make the refinement safe to ask for:
-
-* **Poles inside |z| ≤ ρ** (``POLE_BOUND``, 0.99). A(q) is not searched directly but through its
-  reflection coefficients k_i = tanh(η_i) ∈ (−1, 1) (Schur–Cohn): the Levinson step-up recursion
-  turns any real η into a polynomial Ã with every root inside the unit circle, and
-  a_i = ã_i ρⁱ scales those roots by ρ. Every η the optimiser tries is a model whose poles lie
-  inside ρ, so the simulation cannot diverge and no pole can drift onto z = −1. The Jacobian in
-  η is the one in θ times ∂a/∂η, the latter by a complex step (exact to rounding). An ARX start
-  with a pole beyond ρ (or outside the unit circle) is projected inside first: its poles are
-  pulled in to radius ρ − 0.01 and B refitted by linear least squares (ŷ is linear in B).
-* **Never worse than the start.** The fit that decides is the simulation fit on ``eval_segments``
-  (the unfiltered data the model will meet, when the criterion is on prefiltered data). The
-  candidates are the start, its refinement on the criterion data and, when the two differ, its
-  refinement on the evaluation data; the best wins, and the start is returned (and said so) when
-  no refinement beats it.
+* **Poles inside |z| ≤ ρ** (:data:`POLE_BOUND`). A(q) is searched through its reflection
+  coefficients k_i = tanh(η_i) ∈ (−1, 1) (Schur–Cohn): the Levinson step-up turns any real η
+  into Ã with every root inside the unit circle, and a_i = ã_i ρⁱ scales them by ρ, so no trial
+  model diverges or reaches z = −1 (∂a/∂η by a complex step). A start with a pole beyond ρ is
+  projected to ρ − 0.01 first, B refitted by linear least squares (ŷ is linear in B).
+* **Never worse than the start.** The simulation fit on ``eval_segments`` (the unfiltered data)
+  decides between the start, its refinement on the criterion data and, when they differ, its
+  refinement on the evaluation data; the start is returned (and said so) when none beats it.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -42,26 +34,27 @@ from scipy import optimize, signal
 from cartctl.errors import InputError
 from cartctl.identification.arx import (
     ArxFit,
+    Checked,
     IdentificationError,
     Segment,
     as_segments,
     prediction_fit,
     simulation_fit,
 )
+from cartctl.measures.metrics import finite_or_none
 from cartctl.model import MARGINAL_POLE_RADIUS, ArxModel
 
 __all__ = ["POLE_BOUND", "OeFit", "fit_oe", "project_poles"]
 
 MAX_OE_PARAMETERS = 10
-"""The most na + nb an output-error refinement takes: each of its evaluations simulates the
-model with its Jacobian, and the cost grows fast with the order (measured on a minute of data,
-one core: 4 parameters 0.2 s, 10 parameters 4 s, 20 parameters 33 s). A DC motor needs 2 + 2."""
+"""The most na + nb an output-error refinement takes: measured on a minute of data, one core,
+4 parameters take 0.2 s, 10 take 4 s, 20 take 33 s. A DC motor needs 2 + 2."""
 
 POLE_BOUND = MARGINAL_POLE_RADIUS
 """Largest pole magnitude |z| an output-error model may have (ρ, 0.99): beyond it is marginal."""
 
 _PROJECT_MARGIN = 0.01
-"""A start's poles beyond ρ are pulled in to ρ − this: inside, where tanh is not saturated."""
+"""A start's poles beyond ρ are pulled in to ρ − this, where tanh is not saturated."""
 
 _ACTIVE_TOL = 1e-3
 """The bound counts as active when the largest pole is within this of ρ."""
@@ -71,23 +64,9 @@ _COMPLEX_STEP = 1e-20
 
 @dataclass(frozen=True)
 class OeFit(ArxFit):
-    """An output-error fit with what the safeguards did.
-
-    Attributes
-    ----------
-    pole_bound : float
-        ρ, the bound on every pole's magnitude.
-    pole_bound_active : bool
-        The largest pole sits on the bound: the data pull a pole further out.
-    start_kept : bool
-        No refinement beat the start's simulation fit; the start is returned.
-    start_projected : bool
-        The ARX start had a pole beyond ρ and was projected inside before refining.
-    start_fit_simulation_percent : float
-        The ARX start's simulation fit (%) on the evaluation data.
-    notes : tuple of str
-        One line per safeguard that acted, for the user.
-    """
+    """An output-error fit with what the safeguards did: the bound ρ and whether the largest
+    pole sits on it, whether the start was kept (nothing beat it) or projected inside ρ, the
+    start's simulation fit (%), and one note per safeguard that acted."""
 
     pole_bound: float = POLE_BOUND
     pole_bound_active: bool = False
@@ -97,9 +76,6 @@ class OeFit(ArxFit):
     notes: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        """The ArxFit entry plus the safeguards' outcome."""
-        from cartctl.measures.metrics import finite_or_none
-
         return super().to_dict() | {
             "pole_bound": self.pole_bound,
             "pole_bound_active": self.pole_bound_active,
@@ -130,17 +106,6 @@ def _simulate_with_jacobian(
     for j in range(nb):
         jac[:, na + j] = _shift(v, nk + j)
     return y_hat, jac
-
-
-def _same(
-    one: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
-    other: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
-) -> bool:
-    """Whether two lists of experiments hold the same samples."""
-    return len(one) == len(other) and all(
-        np.array_equal(y1, y2) and np.array_equal(u1, u2)
-        for (y1, u1), (y2, u2) in zip(one, other, strict=True)
-    )
 
 
 def _step_up(eta: NDArray[Any], rho: float) -> NDArray[Any]:
@@ -175,10 +140,8 @@ def _d_ar_d_eta(eta: NDArray[np.float64], rho: float) -> NDArray[np.float64]:
 
 
 def project_poles(ar: Sequence[float] | NDArray[np.float64], radius: float) -> NDArray[np.float64]:
-    """a_1 … a_na with every root of magnitude above ``radius`` pulled in to ``radius``.
-
-    Conjugate pairs move together, so the coefficients stay real; the angles are kept.
-    """
+    """a_1 … a_na with every root beyond ``radius`` pulled in to it (angles kept, so
+    conjugate pairs move together and the coefficients stay real)."""
     roots = np.roots(np.concatenate([[1.0], np.asarray(ar, dtype=float)]))
     mags = np.abs(roots)
     scale = np.where(mags > radius, radius / np.maximum(mags, 1e-300), 1.0)
@@ -186,7 +149,7 @@ def project_poles(ar: Sequence[float] | NDArray[np.float64], radius: float) -> N
 
 
 def _refit_b(
-    ar: NDArray[np.float64], data: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    ar: NDArray[np.float64], data: Sequence[Checked],
     nb: int, nk: int,
 ) -> NDArray[np.float64]:  # fmt: skip
     """B minimising the simulation error with A fixed (ŷ is linear in B)."""
@@ -201,7 +164,7 @@ def _refit_b(
 
 def _refine(
     start: NDArray[np.float64],
-    data: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    data: Sequence[Checked],
     na: int, nb: int, nk: int, rho: float, max_evaluations: int,
 ) -> NDArray[np.float64]:  # fmt: skip
     """θ minimising the simulation error on ``data`` over poles inside ρ, from θ ``start``."""
@@ -235,8 +198,7 @@ def _refine(
 
 
 def check_oe_orders(na: int, nb: int) -> None:
-    """Refuse orders whose output-error refinement is too costly (na + nb above
-    :data:`MAX_OE_PARAMETERS`), in one line naming the options."""
+    """Refuse na + nb above :data:`MAX_OE_PARAMETERS`, naming the options."""
     if na + nb > MAX_OE_PARAMETERS:
         raise InputError(
             f"--method oe takes na + nb up to {MAX_OE_PARAMETERS} (its refinement simulates the "
@@ -253,36 +215,13 @@ def fit_oe(
     eval_segments: Sequence[Segment] | None = None,
     pole_bound: float = POLE_BOUND,
 ) -> OeFit:
-    """Refine a model by output-error least squares (simulation error), from ``initial``.
+    """Refine ``initial`` (its orders and delay kept) by output-error least squares.
 
-    Parameters
-    ----------
-    segments : sequence of (y, u)
-        Experiments (rad/s, V) for the criterion, each simulated from rest (prefiltered, when a
-        prefilter is used).
-    initial : ArxModel
-        Starting point, usually the ARX estimate; its orders and delay are kept. A pole beyond
-        ``pole_bound`` (even an unstable one) is projected inside first.
-    max_evaluations : int
-        Limit on function evaluations of each refinement.
-    eval_segments : sequence of (y, u), optional
-        The data whose simulation fit decides and is reported: the unfiltered data the model
-        will meet (default ``segments``). When they differ from ``segments``, the start is
-        also refined on them.
-    pole_bound : float
-        ρ in (0, 1]: every pole of the result has |z| ≤ ρ.
-
-    Returns
-    -------
-    OeFit
-        ``method='oe'``; the best of the start and its refinements by the simulation fit on
-        ``eval_segments``, never below the start's; ``theta_std`` from the Jacobian in θ on the
-        criterion data, σ̂ √diag((JᵀJ)⁻¹).
-
-    Raises
-    ------
-    InputError
-        ``max_evaluations`` below 1 or ``pole_bound`` outside (0, 1].
+    ``segments`` (rad/s, V) are the criterion's data, each simulated from rest (prefiltered, with
+    a prefilter); ``eval_segments`` the data whose simulation fit decides and is reported
+    (default ``segments``). Every pole of the result has |z| ≤ ``pole_bound`` (in (0, 1]), and
+    its fit is never below the start's; ``theta_std`` is σ̂ √diag((JᵀJ)⁻¹) from the Jacobian in θ.
+    ``max_evaluations`` limits each refinement.
     """
     if max_evaluations < 1:
         raise InputError(f"max_evaluations must be at least 1, got {max_evaluations}")
@@ -317,7 +256,11 @@ def fit_oe(
         candidates.append(("refined", _refit_b(start[:0], data, nb, nk)))
     else:
         candidates.append(("refined", _refine(start, data, na, nb, nk, rho, max_evaluations)))
-        if not _same(evaluation, data):
+        same = len(evaluation) == len(data) and all(
+            np.array_equal(y1, y2) and np.array_equal(u1, u2)
+            for (y1, u1), (y2, u2) in zip(evaluation, data, strict=True)
+        )
+        if not same:
             candidates.append(
                 ("refined on eval", _refine(start, evaluation, na, nb, nk, rho, max_evaluations))
             )
@@ -354,7 +297,7 @@ def fit_oe(
         theta_std = np.sqrt(np.clip(np.diag(sigma2 * np.linalg.inv(jac.T @ jac)), 0.0, None))
     except np.linalg.LinAlgError:
         theta_std = np.full(p, np.nan)
-    base = ArxFit(
+    return OeFit(
         model=model,
         theta_std=theta_std,
         fit_simulation_percent=simulation_fit(model, evaluation),
@@ -362,9 +305,6 @@ def fit_oe(
         residual_rms=float(np.sqrt(np.mean(err**2))),
         n_samples=int(n),
         method="oe",
-    )
-    return OeFit(
-        **{f.name: getattr(base, f.name) for f in dataclasses.fields(ArxFit)},
         pole_bound=rho,
         pole_bound_active=bool(active),
         start_kept=kept,
