@@ -1,10 +1,6 @@
-"""Margins, crossover and sensitivity peak of a designed loop, from python-control.
-
-Where it sits: after a design (:mod:`cartctl.design.pi`, :mod:`cartctl.design.make`) and in the
-robustness analysis (:mod:`cartctl.design.sensitivity`). The controller's feedback part C(z)
-(the PI's, or C_fb = −U/Y of :mod:`cartctl.design.controller_ss`) closes the loop as
-L = C·G·z^(−extra) with negative feedback. Pure: no I/O.
-"""
+"""Margins, crossover and sensitivity peak of a designed loop L = C·G·z^(−extra) (negative
+feedback; C the PI's C(z) or C_fb = −U/Y of :mod:`cartctl.design.controller_ss`), from
+python-control. Pure: no I/O."""
 
 from __future__ import annotations
 
@@ -21,31 +17,18 @@ from cartctl.model import ArxModel
 def loop_analysis(
     num: NDArray[np.float64], den: NDArray[np.float64], model: ArxModel, extra_delay_ticks: int
 ) -> dict[str, Any]:
-    """Margins, crossover and sensitivity peak Ms = max|1/(1 + L)| of the open loop
-    L = C G z^(−extra), all from one call of python-control's ``stability_margins``.
+    """Margins, crossover and sensitivity peak of L = C G z^(−extra), from one call of
+    python-control's ``stability_margins``; C(z) as ``num``, ``den`` (descending powers of z), G
+    the model (V → rad/s, its delay nk included).
 
-    Parameters
-    ----------
-    num, den : ndarray
-        C(z), descending powers of z.
-    model : ArxModel
-        The plant G (V → rad/s, its delay nk included).
-    extra_delay_ticks : int
-        Ticks of loop delay beyond the model's.
+    Returns ``phase_margin_deg``, ``gain_margin_db`` (None when infinite), ``crossover_hz``,
+    ``sensitivity_peak`` (Ms = max|1/(1 + L)| = 1/sm, sm python-control's stability margin: the
+    shortest distance from L to −1), ``sensitivity_peak_db`` and ``sensitivity_peak_hz``.
 
-    Returns
-    -------
-    dict
-        ``phase_margin_deg``, ``gain_margin_db`` (None when infinite), ``crossover_hz``,
-        ``sensitivity_peak`` (Ms = 1 / sm, python-control's stability margin sm: the shortest
-        distance from L to −1), ``sensitivity_peak_db`` and ``sensitivity_peak_hz``.
-
-    Notes
-    -----
     The exact polynomial method is asked for: ``margin``'s default falls back, for some
     well-damped low-crossover designs, to a frequency grid that misses the crossover. On
-    high-order loops (a pole-placement controller with its estimator and a serial loop's delay)
-    the polynomial's roots include spurious crossings, so every crossing is checked on L itself
+    high-order loops (pole placement with its estimator and a serial loop's delay) the
+    polynomial's roots include spurious crossings, so every crossing is checked on L itself
     (|L| = 1 within 1e-6, or a phase of −180° within 1e-4 rad) before python-control's choice
     (the smallest |PM|, the GM closest to 1) is made.
     """

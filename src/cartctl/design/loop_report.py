@@ -1,45 +1,126 @@
-"""The robustness analysis of designs: S and T with their peaks, the load-disturbance step, and the
-damping and natural frequency of each closed-loop pole, per motor.
+"""The robustness analysis of designs, per motor: S and T with their peaks, the load-disturbance
+step, and the damping and natural frequency of each closed-loop pole.
 
-Where it sits: in ``cartctl design``, after :func:`cartctl.design.make.design_models`. Each motor's
-controller is taken as the loop runs it (:mod:`cartctl.design.controller_ss`), on the loop it was
-designed for (the model with the design's extra delay). Its figures are added to the motor's
-``design --json`` entry (:meth:`MotorAnalysis.entry`) and drawn by
-:mod:`cartctl.design.analysis_plots`.
+Each controller is taken whole, as the loop runs it (:mod:`cartctl.design.controller_ss`: the PI,
+the PI on its Kalman estimate, or state feedback on the estimate with its integral action), on the
+loop it was designed for, broken at the plant input::
+
+    L(z) = C_fb(z) · G(z) · z^(−extra),     C_fb = −U/Y (r = 0),   S = 1/(1 + L),  T = L/(1 + L)
+
+Ms = max|S| is python-control's stability margin inverted (:func:`cartctl.design.loop.loop_analysis`);
+Mt = max|T| is found on a frequency grid up to Nyquist, refined by ``minimize_scalar``. The figures
+join each motor's ``design --json`` entry and :mod:`cartctl.design.analysis_plots` draws them.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import math
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
+from cartctl.design.analysis import DEFAULT_DISTURBANCE_V, DisturbanceResponse, simulate_disturbance
 from cartctl.design.controller_ss import ControllerStateSpace, controller_state_space
-from cartctl.design.disturbance import (
-    DEFAULT_DISTURBANCE_V,
-    DisturbanceResponse,
-    simulate_disturbance,
-)
+from cartctl.design.loop import loop_analysis
 from cartctl.design.make import Designs
-from cartctl.design.sensitivity import LoopShape, loop_shape
-from cartctl.model import pole_damping
+from cartctl.model import ArxModel, pole_damping
 
 __all__ = ["LIGHT_DAMPING", "MotorAnalysis", "analyse_designs", "damping_warning", "pole_table"]
 
 LIGHT_DAMPING = 0.1
 """A closed-loop pole with a damping ratio ζ below this rings for many periods: a warning."""
 
+_GRID_POINTS = 2000
+_LOW_HZ = 1e-3
+"""Lowest frequency of the grid (Hz): an integrator puts L's pole at 0 Hz (z = 1)."""
+
+
+@dataclass(frozen=True, eq=False)
+class LoopShape:
+    """The open loop L on a frequency grid (``freq_hz``, 1 mHz to Nyquist, log-spaced), with the
+    peaks Ms = max|S| and Mt = max|T| and where they are (Hz; 0 when |T| is largest at 0 Hz, as
+    integral action gives T(1) = 1)."""
+
+    freq_hz: NDArray[np.float64]
+    loop: NDArray[np.complex128]
+    sensitivity_peak: float
+    sensitivity_peak_hz: float
+    complementary_peak: float
+    complementary_peak_hz: float
+
+    @property
+    def sensitivity(self) -> NDArray[np.float64]:
+        """|S| on the grid."""
+        return np.abs(1.0 / (1.0 + self.loop))
+
+    @property
+    def complementary(self) -> NDArray[np.float64]:
+        """|T| on the grid."""
+        return np.abs(self.loop / (1.0 + self.loop))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``design --json`` keys (added to each motor's entry)."""
+        return {
+            "sensitivity_peak_db": 20.0 * math.log10(self.sensitivity_peak),
+            "sensitivity_peak_hz": self.sensitivity_peak_hz,
+            "complementary_peak": self.complementary_peak,
+            "complementary_peak_db": 20.0 * math.log10(self.complementary_peak),
+            "complementary_peak_hz": self.complementary_peak_hz,
+            "sensitivity_distance": 1.0 / self.sensitivity_peak,
+        }
+
+
+def _loop_response(
+    controller: ControllerStateSpace, model: ArxModel, extra: int, freq_hz: NDArray[np.float64]
+) -> NDArray[np.complex128]:
+    z = np.exp(2j * np.pi * np.asarray(freq_hz, dtype=float) * model.period_s)
+    return controller.feedback_response(z) * model.response_at(z) * z ** (-int(extra))
+
+
+def _peak(
+    value: Callable[[float], float], freq_hz: NDArray[np.float64], on_grid: NDArray[np.float64]
+) -> tuple[float, float]:
+    """(max, where) of ``value(f)``: the grid's best point, refined between its neighbours."""
+    from scipy import optimize
+
+    i = int(np.argmax(on_grid))
+    best, where = float(on_grid[i]), float(freq_hz[i])
+    lo, hi = freq_hz[max(i - 1, 0)], freq_hz[min(i + 1, freq_hz.size - 1)]
+    if hi > lo:
+        res = optimize.minimize_scalar(
+            lambda f: -value(f), bounds=(lo, hi), method="bounded", options={"xatol": 1e-9}
+        )
+        if res.success and -res.fun > best:
+            best, where = float(-res.fun), float(res.x)
+    if i == 0:  # largest at the bottom of the grid: at 0 Hz, where the integrator puts it
+        where = 0.0
+    return best, where
+
+
+def loop_shape(
+    controller: ControllerStateSpace, model: ArxModel, extra_delay_ticks: int = 0
+) -> LoopShape:
+    """S and T of the loop a controller was designed for (``extra_delay_ticks`` beyond the
+    model's delay), with their peaks."""
+    freq = np.geomspace(_LOW_HZ, 0.5 / model.period_s, _GRID_POINTS)
+    loop = _loop_response(controller, model, extra_delay_ticks, freq)
+
+    def t_at(f: float) -> float:
+        ell = _loop_response(controller, model, extra_delay_ticks, np.array([f]))[0]
+        return float(abs(ell / (1.0 + ell)))
+
+    mt, mt_hz = _peak(t_at, freq, np.abs(loop / (1.0 + loop)))
+    margins = loop_analysis(*controller.feedback_tf(), model, extra_delay_ticks)
+    ms, ms_hz = margins["sensitivity_peak"], margins["sensitivity_peak_hz"]
+    return LoopShape(freq, loop, ms, ms_hz, mt, mt_hz)
+
 
 def pole_table(poles: Iterable[list[float]], period_s: float) -> list[dict[str, Any]]:
-    """Per pole ``{"re", "im", "damping", "freq_hz"}`` (:func:`cartctl.model.pole_damping`).
-
-    Parameters
-    ----------
-    poles : iterable of [re, im]
-        Discrete poles, as ``closed_loop_poles`` lists them.
-    period_s : float
-        Sample period Ts (s).
-    """
+    """Per discrete pole [re, im], ``{"re", "im", "damping", "freq_hz"}``
+    (:func:`cartctl.model.pole_damping`)."""
     rows = []
     for re, im in poles:
         damping, freq_hz = pole_damping(complex(re, im), period_s)
@@ -48,20 +129,8 @@ def pole_table(poles: Iterable[list[float]], period_s: float) -> list[dict[str, 
 
 
 def damping_warning(pole_table: list[dict[str, Any]], motor: str) -> str | None:
-    """One line naming the least damped closed-loop pole when its ζ is below ``LIGHT_DAMPING``.
-
-    Parameters
-    ----------
-    pole_table : list of dict
-        ``{"re", "im", "damping", "freq_hz"}`` per pole (:func:`pole_table`).
-    motor : str
-        The motor, named in the line.
-
-    Returns
-    -------
-    str or None
-        None when every ζ is at least ``LIGHT_DAMPING`` (or undefined, at z = 0 and z = 1).
-    """
+    """One line naming motor ``motor``'s least damped pole of :func:`pole_table` when its ζ is
+    below ``LIGHT_DAMPING``; None when every ζ is at least that (or undefined: z = 0, z = 1)."""
     light = [r for r in pole_table if r["damping"] is not None and r["damping"] < LIGHT_DAMPING]
     if not light:
         return None
@@ -78,21 +147,8 @@ def damping_warning(pole_table: list[dict[str, Any]], motor: str) -> str | None:
 
 @dataclass(frozen=True, eq=False)
 class MotorAnalysis:
-    """One motor's loop analysis.
-
-    Attributes
-    ----------
-    controller : ControllerStateSpace
-        The controller as the loop runs it.
-    shape : LoopShape
-        L, S and T on a frequency grid with the peaks.
-    disturbance : DisturbanceResponse
-        The simulated load-disturbance step.
-    pole_table : list of dict
-        Per closed-loop pole ``{"re", "im", "damping", "freq_hz"}``.
-    motor : str
-        The motor ('a' or 'b'), for the warnings.
-    """
+    """One motor's loop analysis: the controller as the loop runs it, L, S and T on a grid
+    (``shape``), the simulated load-disturbance step, and the pole table."""
 
     controller: ControllerStateSpace
     shape: LoopShape
@@ -103,9 +159,8 @@ class MotorAnalysis:
     def entry(self) -> dict[str, Any]:
         """The keys this analysis adds to (or replaces in) a motor's ``design --json`` entry.
 
-        ``sensitivity_peak`` and ``sensitivity_peak_db`` are those of the loop as it runs: the
-        design's own loop for the PI on the measurement and for pole placement (the same numbers),
-        the PI with its estimator for ``--estimator kalman``.
+        ``sensitivity_peak`` is that of the loop as it runs: for the PI with ``--estimator
+        kalman`` the PI with its estimator (for the others, the design's own loop: the same).
         """
         return {
             "sensitivity_peak": self.shape.sensitivity_peak,
@@ -125,21 +180,12 @@ class MotorAnalysis:
 def analyse_designs(
     designs: Designs, *, disturbance_v: float = DEFAULT_DISTURBANCE_V
 ) -> dict[str, MotorAnalysis]:
-    """The analysis of every motor of ``designs``.
-
-    Parameters
-    ----------
-    designs : Designs
-        From :func:`cartctl.design.make.design_models`.
-    disturbance_v : float
-        The load-disturbance step at the plant input (V).
-    """
-    request = designs.request
-    extra = request.extra_delay_ticks
+    """The analysis of every motor of ``designs``, with a load step of ``disturbance_v`` (V)."""
+    extra = designs.request.extra_delay_ticks
     out: dict[str, MotorAnalysis] = {}
     for m, made in designs.motors.items():
         model = designs.models[m]
-        ss = controller_state_space(request.method, made.file_entry, model.period_s)
+        ss = controller_state_space(designs.request.method, made.file_entry, model.period_s)
         dist = simulate_disturbance(
             made.controller, model, disturbance_v=disturbance_v, extra_delay_ticks=extra
         )

@@ -1,79 +1,37 @@
 """Discrete pole placement with integral action, on the observer-form realisation of a model.
 
-Where it sits: the ``design`` stage (``cartctl design --method poles``). The result, a
-:class:`PolesDesign`, carries the gains and the Kalman estimator design; the runtime's
-:class:`~cartctl.runtime.statefeedback.StateFeedbackController` runs it.
+The plant is x[k+1] = A x + B u, y = C x of :func:`~cartctl.design.statespace.realise` (n states,
+x_1 = speed), the loop's delay in it: nk covers one tick of loop delay, ``extra_delay_ticks`` = d
+more (3 through the PC serial loop) are d more states, and every closed-loop pole is placed, the
+delay's included. :class:`~cartctl.runtime.statefeedback.StateFeedbackController` runs the result.
 
-The plant is the realisation x[k+1] = A x + B u, y = C x of :func:`~cartctl.design.statespace.realise`
-(n states, x_1 = speed). The loop's delay is part of it: the model's nk covers one tick of loop
-delay (the report's nk = 2: a voltage computed from y[k] is on the motor from tick k + 1), and
-``extra_delay_ticks`` = d more ticks (3 through the PC serial loop, loop delay 4) are realised as d
-more states, n = 3 + d for the report's structure. Every closed-loop pole is placed, the delay's
-included: with d = 3 there are 6 (or 7) of them.
-
-Integral action, by default from the estimator's input-disturbance state b̂ (V): the Kalman filter
-of :mod:`cartctl.design.kalman` models x[k+1] = A x + B (u + b), b a slow random walk, and the
-control law cancels the estimated disturbance::
+Integral action, by default, is the estimator's input-disturbance state b̂ (V) of
+:mod:`cartctl.design.kalman` (x[k+1] = A x + B (u + b), b a slow random walk), cancelled::
 
     u[k] = Kr r[k] − K x̂[k|k] − b̂[k|k]          (V; then clamped to ±voltage_limit_v)
 
-with K placing the n eigenvalues of A − B K, and Kr = 1 / (C (I − A + B K)⁻¹ B) the static gain
-that makes the model's closed loop r → y exact at DC. The measured speed then has no static error
-whatever the model's gain or the friction: in steady state the innovation y − C x̂ is zero, so
-y = C x̂, and the model, driven by u + b̂ = Kr r − K x̂, settles at C x̂ = r. On the model itself b̂
-stays at 0 and r → y is the placed loop, the reference acting at once through Kr. With the model
-exact the closed loop's eigenvalues are the n placed poles and the n + 1 estimator poles
-(separation); b̂'s own integrating mode is the controller's integrator, so nothing fights it.
+K places the n eigenvalues of A − B K; Kr = 1 / (C (I − A + B K)⁻¹ B) makes the model's r → y
+exact at DC. In steady state the innovation is zero, so y = C x̂ = r whatever the model's gain or
+the friction; on the model b̂ stays 0 and r → y is the placed loop. The closed loop's eigenvalues
+are the n placed poles and the n + 1 estimator poles (separation). On the ground model this
+loop keeps 75° and 12.5 dB (Ms 1.36) where an error integrator beside b̂ falls to 36° (type 2);
+see docs/design.md.
 
-Without the disturbance state (``bias_drift_std_v=0``) the integral is an error integrator, the
-integral of the speed error, which is the wheel's angle error (rad)::
+Without the disturbance state (``bias_drift_std_v=0``) an error integrator, the wheel's angle
+error (rad), x_i[k+1] = x_i[k] + Ts (r[k] − y[k]), is added and [K, Ki] place the n + 1
+eigenvalues of [[A, 0], [−Ts C, 1]] − [B; 0] [K, Ki]; u[k] = −K x̂[k|k] − Ki x_i[k] + Kr r[k].
+Ki is negative (the wheel behind raises the voltage). Kr = −Ki Ts (the default) puts the zero of
+r → y, z = 1 + Ki Ts / Kr, at z = 0: the response one tick sooner, same shape; Kr = 0 has none.
 
-    x_i[k+1] = x_i[k] + Ts (r[k] − y[k])
-
-    ⎡ x  ⎤        ⎡  A     0 ⎤ ⎡ x  ⎤   ⎡ B ⎤        ⎡ 0  ⎤
-    ⎣ x_i⎦[k+1] = ⎣ −Ts C  1 ⎦ ⎣ x_i⎦ + ⎣ 0 ⎦ u  +   ⎣ Ts ⎦ r
-
-    u[k] = −K x̂[k|k] − Ki x_i[k] + Kr r[k]
-
-with [K, Ki] placing the n + 1 eigenvalues of the augmented closed loop. Ki is negative: a
-positive angle error (the wheel behind) raises the voltage. The reference reaches u through the
-integrator and through Kr, which multiplies the closed loop's r → y transfer by
-(Kr (z − 1) − Ki Ts) / (−Ki Ts): one zero at z = 1 + Ki Ts / Kr. With Kr = 0 there is no zero;
-the default, Kr = −Ki Ts, puts the zero at z = 0: every signal's response to r is advanced by
-exactly one tick, with the same shape, overshoot and peak voltage. Without the disturbance state
-the estimate carries the model's static error (friction is about 0.8 V on the ground), which is
-why it is not the default.
-
-Why the disturbance estimate replaces the error integrator rather than joining it, measured on
-the report's ground model A for a 45 ms, 1 % specification (phase margin, gain margin, peak of
-|1/(1 + L)| with the loop broken at the measurement; a 10 rad/s step on the model, and on the
-physics simulator when it answered about 0.7 tick later than the model):
-
-=====================================================  =======  =======  ====  ======  ========
-integral action                                         PM       GM       Ms    model   late sim
-=====================================================  =======  =======  ====  ======  ========
-error integrator, no disturbance state                  56°      6.7 dB   1.91  1.2 %   32 %
-error integrator, b̂ estimated but not used              40°      5.5 dB   2.24  1.2 %   49 %
-error integrator and u −= b̂ (two integrators)           36°      5.1 dB   2.35  1.2 %   56 %
-b̂ fed back, no error integrator (the default)           75°      12.5 dB  1.36  1.3 %   13 %
-=====================================================  =======  =======  ====  ======  ========
-
-The disturbance state costs margin as long as an error integrator stays: its integrating mode
-and the integrator's act on the same low-frequency error, and feeding b̂ forward beside the
-integrator makes the controller type 2. Used as the integral action, b̂ corrects only what the
-model does not predict, so the placed response to the reference is untouched, and the margins are
-those of a model-based (two-degree-of-freedom) loop.
-
-Poles from a specification: ζ from the overshoot, ζ = −ln(OS) / √(π² + ln²(OS)); ω_n from the 2 %
-settling time, T_s ≈ 4 / (ζ ω_n); the dominant pair s = −ζ ω_n ± j ω_n √(1 − ζ²) maps to
-z = exp(s Ts). The other poles are real and fast, distinct so that ``control.place`` applies:
-z_j = exp(−(ratio + j) ζ ω_n Ts), j = 0, 1, …, with ratio = ``fast_pole_ratio``. Given poles
-that repeat are placed with Ackermann's formula (``control.acker``). The choice and the checks of the
-poles are in :mod:`cartctl.design.pole_choice`.
+Poles from a specification: ζ = −ln(OS) / √(π² + ln²(OS)), ζ ω_n = 4 / T_s (2 % settling), the
+dominant pair s = −ζ ω_n ± j ω_n √(1 − ζ²) mapped by z = exp(s Ts); the rest real, fast and
+distinct for ``control.place``: z_j = exp(−(ratio + j) ζ ω_n Ts), j = 0, 1, …. Given poles that
+repeat are placed with Ackermann's formula (``control.acker``).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -86,7 +44,6 @@ from cartctl.design.kalman import (
     KalmanDesign,
     design_kalman,
 )
-from cartctl.design.pole_choice import check_poles, has_repeats, poles_text, spec_poles
 from cartctl.design.statespace import StateSpace, realise, uncontrollable_modes
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
@@ -95,16 +52,13 @@ __all__ = ["PolesDesign", "augment", "design_poles", "spec_poles"]
 
 _CHECK_TOL = 1e-6
 """The placed characteristic polynomial must match the requested one to this (coefficients)."""
+_REPEAT_TOL = 1e-8
+"""Poles closer than this (relative) count as repeated: ``place`` cannot take them."""
 
 
 def augment(plant: StateSpace) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The plant with the error integrator x_i[k+1] = x_i[k] − Ts y[k] (r enters separately).
-
-    Returns
-    -------
-    A_a : ndarray, shape (n + 1, n + 1)
-    B_a : ndarray, shape (n + 1,)
-    """
+    """(A_a, B_a): the plant with the error integrator x_i[k+1] = x_i[k] − Ts y[k] (r enters
+    separately), n + 1 states."""
     n = plant.order
     A_a = np.zeros((n + 1, n + 1))
     A_a[:n, :n] = plant.A
@@ -113,39 +67,113 @@ def augment(plant: StateSpace) -> tuple[NDArray[np.float64], NDArray[np.float64]
     return A_a, np.append(plant.B, 0.0)
 
 
+def spec_poles(
+    count: int,
+    period_s: float,
+    settling_time_s: float,
+    overshoot_percent: float,
+    fast_pole_ratio: float,
+) -> list[complex]:
+    """The dominant pair for a settling time and overshoot, then ``count − 2`` fast real poles
+    (the rule in the module docstring).
+
+    Raises InputError for an overshoot outside (0, 100) %, a settling time shorter than ``count``
+    ticks (deadbeat, the fastest a discrete loop of this order settles), a pair oscillating
+    beyond Nyquist, or a ratio below 1.
+    """
+    os_ = float(overshoot_percent)
+    if not (math.isfinite(os_) and 0.0 < os_ < 100.0):
+        raise InputError(f"overshoot_percent must lie strictly between 0 and 100, got {os_}")
+    ts = float(settling_time_s)
+    if not (math.isfinite(ts) and ts >= count * period_s):
+        raise InputError(
+            f"settling_time_s must be at least {count} ticks ({count * period_s:g} s), the "
+            f"deadbeat time of a loop with {count} poles; got {settling_time_s}"
+        )
+    ratio = float(fast_pole_ratio)
+    if not (math.isfinite(ratio) and ratio >= 1.0):
+        raise InputError(f"fast_pole_ratio must be a number >= 1, got {fast_pole_ratio}")
+    log_os = math.log(os_ / 100.0)
+    zeta = -log_os / math.hypot(math.pi, log_os)
+    sigma = 4.0 / ts  # ζ ω_n (1/s)
+    omega_d = sigma / zeta * math.sqrt(1.0 - zeta * zeta)
+    if omega_d * period_s >= math.pi:
+        raise InputError(
+            f"{os_:g} % overshoot with a {ts:g} s settling time oscillates beyond the Nyquist "
+            "frequency; ask for less overshoot or a longer settling time"
+        )
+    pair = complex(math.exp(-sigma * period_s), 0.0) * complex(
+        math.cos(omega_d * period_s), math.sin(omega_d * period_s)
+    )
+    fast = [complex(math.exp(-(ratio + j) * sigma * period_s)) for j in range(count - 2)]
+    return [pair, pair.conjugate(), *fast]
+
+
+def _check_poles(poles: Sequence[complex], count: int, what: str) -> list[complex]:
+    """The poles with exact conjugate pairs, sorted; InputError for the wrong number, one not
+    finite or not inside the unit circle, or a complex one without its conjugate."""
+    p = [complex(v) for v in poles]
+    p = [complex(v.real, 0.0) if abs(v.imag) <= 1e-12 * max(1.0, abs(v)) else v for v in p]
+    if len(p) != count:
+        raise InputError(f"{what} needs {count} closed-loop poles, got {len(p)}")
+    for v in p:
+        if not (math.isfinite(v.real) and math.isfinite(v.imag)):
+            raise InputError(f"pole {v} is not a finite number")
+        if abs(v) >= 1.0:
+            raise InputError(
+                f"pole {v:.6g} lies on or outside the unit circle (|z| = {abs(v):.6g}); a stable "
+                "discrete loop needs |z| < 1"
+            )
+    upper = sorted((v for v in p if v.imag > 0.0), key=lambda v: (v.real, v.imag))
+    lower = sorted((v.conjugate() for v in p if v.imag < 0.0), key=lambda v: (v.real, v.imag))
+    if len(upper) != len(lower) or any(
+        abs(a - b) > 1e-9 * max(1.0, abs(a)) for a, b in zip(upper, lower, strict=True)
+    ):
+        raise InputError(
+            f"complex poles must come in conjugate pairs, got {[f'{v:.6g}' for v in p]}"
+        )
+    out = [v for v in p if v.imag == 0.0]
+    for v in upper:
+        out += [v, v.conjugate()]
+    return sorted(out, key=lambda v: (abs(v), v.imag))
+
+
+def _poles_text(poles: Sequence[complex] | NDArray[np.inexact]) -> str:
+    """Poles on one line: ``0.999998, 0.5±0.2j``."""
+    parts = []
+    for p in poles:
+        z = complex(p)
+        if abs(z.imag) < 1e-9:
+            parts.append(f"{z.real:.6g}")
+        elif z.imag > 0:
+            parts.append(f"{z.real:.6g}±{z.imag:.3g}j")
+    return ", ".join(parts)
+
+
 @dataclass(frozen=True, eq=False)
 class PolesDesign:
     """A pole-placement speed controller with integral action and its Kalman estimator.
 
     Attributes
     ----------
-    model : ArxModel
-        The model designed on.
     plant : StateSpace
-        Its realisation (n states, d extra delay ticks included).
-    extra_delay_ticks : int
-        d, the extra loop delay designed for (ticks).
+        The model's realisation (n states, the d extra delay ticks included).
     poles : tuple of complex
-        The placed closed-loop poles (z-plane), sorted by magnitude: n with the disturbance
-        estimate, n + 1 with the error integrator.
+        The placed closed-loop poles (z), sorted by magnitude: n with the disturbance estimate,
+        n + 1 with the error integrator.
     K : ndarray, shape (m,)
         Gain on the estimator's whole state x̂ (m states): V per rad/s on the n realisation
-        states, then, with the disturbance state, 1 (V per V) on b̂. ``K[:n]`` is the placed
-        state-feedback gain (:attr:`state_gain`).
+        states, then, with the disturbance state, 1 (V per V) on b̂.
     Ki : float
         State gain on the error integrator x_i (V per rad of angle error), u −= Ki x_i:
-        negative, or 0 with the disturbance estimate; the key ``Ki`` of controller files and
-        ``--json``. A state gain, so its sign is opposite to a PI's ``ki`` (u += ki ∫e).
+        negative, or 0 with the disturbance estimate. Its sign is opposite to a PI's ``ki``.
     Kr : float
-        Reference gain (V per rad/s): the static gain with the disturbance estimate; −Ki Ts, or 0
-        without feedforward, with the error integrator.
-    estimator : KalmanDesign
-        The speed estimator, on the same realisation.
+        Reference gain (V per rad/s): the static gain with the disturbance estimate; −Ki Ts, or
+        0 without feedforward, with the error integrator.
     method : {'place', 'acker'}
         How the gains were computed.
     integral : {'disturbance', 'error'}
-        Where the integral action comes from: the estimator's input-disturbance state b̂ fed
-        back (n placed poles, Ki = 0), or the error integrator x_i (n + 1 placed poles).
+        b̂ fed back (n placed poles, Ki = 0), or the error integrator x_i (n + 1 placed poles).
     settling_time_s, overshoot_percent : float or None
         The specification the poles came from, None when the poles were given.
     """
@@ -168,21 +196,14 @@ class PolesDesign:
         """Ts (s)."""
         return self.plant.period_s
 
-    @property
-    def state_gain(self) -> NDArray[np.float64]:
-        """The placed gain on the n realisation states, ``K[:n]`` (V per rad/s), shape (n,)."""
-        return self.K[: self.plant.order]
-
     def closed_loop_matrix(self) -> NDArray[np.float64]:
-        """The state-feedback loop on the model; its eigenvalues are the placed poles.
-
-        A − B K[:n], shape (n, n), with the disturbance estimate; A_a − B_a [K[:n], Ki], shape
-        (n + 1, n + 1), with the error integrator.
-        """
+        """The state-feedback loop on the model, whose eigenvalues are the placed poles:
+        A − B K[:n], or A_a − B_a [K[:n], Ki] with the error integrator."""
+        gain = self.K[: self.plant.order]
         if self.integral == "disturbance":
-            return self.plant.A - np.outer(self.plant.B, self.state_gain)
+            return self.plant.A - np.outer(self.plant.B, gain)
         A_a, B_a = augment(self.plant)
-        return A_a - np.outer(B_a, np.append(self.state_gain, self.Ki))
+        return A_a - np.outer(B_a, np.append(gain, self.Ki))
 
     def to_dict(self) -> dict[str, object]:
         """JSON form (``design --json``: ``closed_loop_poles``, ``estimator_poles`` as [re, im])."""
@@ -221,40 +242,27 @@ def design_poles(
 ) -> PolesDesign:
     """Place the closed-loop poles of a speed loop with integral action (module docstring).
 
-    Give either ``poles`` or both ``settling_time_s`` and ``overshoot_percent``. With the
-    estimator's input-disturbance state (``bias_drift_std_v > 0``, the default) the integral
-    action is the disturbance estimate fed back and n poles are placed; without it (0) an error
-    integrator is added and n + 1 poles are placed.
-
     Parameters
     ----------
     model : ArxModel
         Voltage (V) to speed (rad/s), nk ≥ 1.
     poles : sequence of complex, optional
-        The closed-loop poles (z-plane): one per state of the realisation with the extra delay
-        (3 + ``extra_delay_ticks`` for the report's structure), plus one for the error integrator
-        when ``bias_drift_std_v`` is 0. Inside the unit circle; complex ones with their
-        conjugates; repeats allowed (Ackermann).
-    settling_time_s : float, optional
-        2 % settling time of the dominant pair (s); at least as many ticks as there are poles.
-    overshoot_percent : float, optional
-        Overshoot of the dominant pair (%), in (0, 100).
+        The closed-loop poles (z): one per state of the realisation with the extra delay, plus
+        one for the error integrator when ``bias_drift_std_v`` is 0; inside the unit circle,
+        complex ones with their conjugates, repeats allowed (Ackermann). Or, instead:
+    settling_time_s, overshoot_percent : float, optional
+        2 % settling time (s) and overshoot (%) of the dominant pair.
     extra_delay_ticks : int
-        Loop delay beyond the model's own (ticks), e.g. 3 for a PC-side serial loop; adds d
-        states and d poles (for the report's structure).
+        Loop delay beyond the model's own (ticks): d more states and poles.
     fast_pole_ratio : float
-        In the specification mode, how many times faster (in decay rate) the first non-dominant
-        pole is than the dominant pair; the next ones are ratio + 1, ratio + 2, ….
+        How many times faster (in decay rate) the first non-dominant pole of a specification is
+        than the dominant pair; the next ones ratio + 1, ratio + 2, ….
     reference_feedforward : bool
-        Error integrator only: Kr = −Ki Ts (True: the response one tick sooner) or Kr = 0 (r
-        through the integrator only). With the disturbance estimate Kr is always the static gain.
+        Error integrator only: Kr = −Ki Ts (True) or Kr = 0.
     process_noise_std_v, bias_drift_std_v, extra_noise_std_rad_s, timing_noise_std_ticks : float
-        The estimator's noise levels (see :func:`~cartctl.design.kalman.design_kalman`);
-        ``bias_drift_std_v`` also chooses the integral action (see above).
-
-    Returns
-    -------
-    PolesDesign
+        The estimator's noise levels (:func:`~cartctl.design.kalman.design_kalman`);
+        ``bias_drift_std_v`` > 0 makes b̂ the integral action (n poles), 0 adds an error
+        integrator (n + 1 poles).
 
     Raises
     ------
@@ -262,7 +270,7 @@ def design_poles(
         Both or neither pole modes; a bad specification; poles in the wrong number, outside the
         unit circle or without their conjugates; an uncontrollable model (a pole-zero
         cancellation, or a zero at z = 1 that no integral action can get past); a numerically
-        failed placement; estimator noise levels that :func:`design_kalman` refuses.
+        failed placement; noise levels :func:`design_kalman` refuses.
     """
     import control
 
@@ -308,24 +316,25 @@ def design_poles(
         spec = (float(settling_time_s), float(overshoot_percent))
         wanted = spec_poles(count, plant.period_s, *spec, fast_pole_ratio)
     try:
-        placed = check_poles(wanted, count, what)
+        placed = _check_poles(wanted, count, what)
     except InputError as exc:  # poles given are the user's --poles
         raise InputError(f"--poles: {exc}" if poles is not None else str(exc)) from None
 
     A_p, B_p = (plant.A, plant.B) if integral == "disturbance" else (A_a, B_a)
-    B_col = B_p.reshape(count, 1)
-    if has_repeats(placed):
-        method = "acker"
-        gains = np.asarray(control.acker(A_p, B_col, placed), dtype=float).ravel()
-    else:
-        method = "place"
-        gains = np.asarray(control.place(A_p, B_col, placed), dtype=float).ravel()
+    repeats = any(
+        abs(a - b) <= _REPEAT_TOL * max(1.0, abs(a))
+        for i, a in enumerate(placed)
+        for b in placed[i + 1 :]
+    )
+    method = "acker" if repeats else "place"
+    place = control.acker if repeats else control.place
+    gains = np.asarray(place(A_p, B_p.reshape(count, 1), placed), dtype=float).ravel()
     A_cl = A_p - np.outer(B_p, gains)
     got, target = np.poly(A_cl), np.real(np.poly(placed))
     if not np.allclose(got, target, rtol=0.0, atol=_CHECK_TOL):
         raise InputError(
-            f"pole placement is numerically ill-conditioned for poles {poles_text(placed)}: the "
-            f"closed loop would have {poles_text(np.linalg.eigvals(A_cl))}; choose poles further "
+            f"pole placement is numerically ill-conditioned for poles {_poles_text(placed)}: the "
+            f"closed loop would have {_poles_text(np.linalg.eigvals(A_cl))}; choose poles further "
             "apart or less extreme (a shorter --settling-time)"
         )
     if integral == "disturbance":
