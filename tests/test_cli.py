@@ -1,4 +1,4 @@
-"""The command line: contract-2 subcommands, contract-3 JSON, and one-line errors with exit code 2.
+"""The command line: its subcommands, their JSON output, and one-line errors with exit code 2.
 
 Tests call ``main(argv)`` in-process; one test runs the installed console script end to end.
 """
@@ -64,7 +64,7 @@ def test_inspect_json_reproduces_equation_12(
     assert a["stable"] is True
     assert a["dc_gain"] == pytest.approx(2.02, abs=0.005)
     delay = [p for p in a["poles"] if p["kind"] == "delay"]
-    contract = ("re", "im", "kind", "freq_hz", "damping")  # contract 3's P; more keys may follow
+    contract = ("re", "im", "kind", "freq_hz", "damping")  # the JSON pole keys; more may follow
     assert [{k: p[k] for k in contract} for p in delay] == [
         {"re": 0.0, "im": 0.0, "kind": "delay", "freq_hz": None, "damping": None}
     ]

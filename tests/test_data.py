@@ -1,4 +1,4 @@
-"""Tests for cartctl.data (traces, contract-1 CSV) and cartctl.data.qrc (QRoboticsCenter logs)."""
+"""Tests for cartctl.data (traces, the trace-column CSV) and cartctl.data.qrc (QRoboticsCenter logs)."""
 
 from __future__ import annotations
 
@@ -101,7 +101,7 @@ def test_trace_input_errors(call, match: str) -> None:
         call(sample_trace(5))
 
 
-# --- contract-1 CSV ------------------------------------------------------------------------------
+# --- trace-column CSV ------------------------------------------------------------------------------
 
 
 def test_round_trip_is_bit_exact(tmp_path: Path) -> None:

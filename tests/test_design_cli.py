@@ -1,4 +1,4 @@
-"""``cartctl design``: contract-3 JSON checked independently, the shipped controllers, controller
+"""``cartctl design``: the JSON output checked independently, the shipped controllers, controller
 files, and refused requests."""
 
 from __future__ import annotations

@@ -35,8 +35,8 @@ from monitor_stubs import MemoryRows, MemoryTexts, ScriptedLink
 ROOT = Path(__file__).resolve().parents[1]
 PI = ROOT / "controllers" / "pi.toml"
 GXX = shutil.which("g++")
-CONTRACT_1 = ("voltage_a", "voltage_b", "speed_a", "speed_b")
-"""The trace columns besides time_s (docs: contract 1)."""
+TRACE_COLUMNS = ("voltage_a", "voltage_b", "speed_a", "speed_b")
+"""The trace columns besides time_s (docs/architecture.md, "Trace columns")."""
 IO = CartIO(1.5, -2.25, 3.0, -4.5, 6.0, -7.5)
 """A tick's io() with a distinct value in every field."""
 
@@ -122,7 +122,7 @@ def test_onboard_labels_name_what_each_channel_carries() -> None:
 @pytest.mark.parametrize("firmware", [BRIDGE, ONBOARD], ids=["bridge", "onboard"])
 def test_firmware_labels_are_trace_columns_and_valid_labels(firmware: object) -> None:
     labels = firmware_labels(firmware)  # type: ignore[arg-type]
-    assert set(CONTRACT_1) <= set(labels)
+    assert set(TRACE_COLUMNS) <= set(labels)
     # the same labels pass the --labels checks (identifiers, unique, not time_s or tick)
     text = ",".join(f"{k}={v}" for k, v in zip(CHANNEL_KEYS, labels, strict=True))
     assert parse_labels(text) == labels

@@ -68,7 +68,7 @@ def test_noise_free_data_gives_the_true_model_and_delay(
         np.testing.assert_allclose(entry["theta"], theta, atol=1e-8)
 
 
-def test_json_follows_contract_3(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+def test_json_follows_its_contract(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     model = ArxModel.from_theta(THETA_A)
     u = square(10.0, cycles=2)
     doc = _identify_json(

@@ -62,7 +62,7 @@ def _run(loop: ControlLoop) -> None:
         loop.finish()
 
 
-def test_trace_rows_follow_contract_1(tmp_path: Path) -> None:
+def test_trace_rows_follow_the_trace_columns(tmp_path: Path) -> None:
     memory = MemorySink()
     plant = RecordingPlant()
     _run(_loop(plant, 200, [CsvSink(tmp_path / "t.csv", flush_every=7), memory]))

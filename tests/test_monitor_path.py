@@ -159,7 +159,7 @@ def monitor_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 @pytest.mark.realtime
 def test_monitor_names_the_onboard_firmwares_channels(monitor_files: dict[str, Path]) -> None:
-    """Contract 1's columns from the export's layout (floats 0-5), told by float 6 = 1001."""
+    """The trace columns from the export's layout (floats 0-5), told by float 6 = 1001."""
     header, table = _read_csv(monitor_files["labelled"])
     assert header[:9] == ["time_s", "tick", "speed_a", "speed_b", "voltage_a", "voltage_b",
                           "reference_a", "reference_b", "firmware_id"]  # fmt: skip

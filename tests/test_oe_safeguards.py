@@ -185,7 +185,7 @@ def test_inspect_flags_a_slow_or_marginal_pole(
     assert "slow_or_marginal" in a["flags"]
     flagged = [p for p in a["poles"] if p["slow_or_marginal"]]
     assert len(flagged) == 1 and flagged[0]["re"] == pytest.approx(0.995)
-    for p in a["poles"]:  # contract 3's keys are all still there
+    for p in a["poles"]:  # the JSON output's keys are all still there
         assert {"re", "im", "kind", "freq_hz", "damping"} <= set(p)
     assert b["slow_or_marginal"] is False and b["flags"] == []
     assert not any(p["slow_or_marginal"] for p in b["poles"])

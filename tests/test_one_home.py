@@ -154,7 +154,7 @@ def _strings(path: str) -> list[str]:
 
 
 def test_trace_columns_and_entity_paths_written_once() -> None:
-    """The closed-loop columns start from contract 1's (not a copy of them), and no entity path
+    """The closed-loop columns start from the trace columns (not a copy of them), and no entity path
     is spelled out twice among the sinks."""
     required = {"time_s", "voltage_a", "voltage_b", "speed_a", "speed_b"}
     assert required <= set(_strings("data/trace.py"))

@@ -222,7 +222,7 @@ def test_a_trace_on_a_full_disk_stops_the_run(tmp_path: Path, rrd_rows) -> None:
         "the motors were stopped"
     )
     summary = json.loads(result.stdout)
-    assert summary["trace"] == str(trace)  # contract 3's key, and beside it what it holds
+    assert summary["trace"] == str(trace)  # the JSON output's key, and beside it what it holds
     assert summary["trace_complete"] is False
     assert summary["incomplete"] == {str(trace): "No space left on device (after 0 rows)"}
     assert summary["recording_complete"] is True

@@ -1,4 +1,4 @@
-"""The Rerun sink (contract 4) and ``cartctl review FILE.rrd``.
+"""The Rerun sink (its entity paths are a contract) and ``cartctl review FILE.rrd``.
 
 A few hundred synthetic rows go through :class:`RerunSink` into a ``.rrd`` in ``tmp_path``, which
 is read back with ``rerun.chunk.RrdReader``: entity paths, timelines, row counts and values. The

@@ -30,7 +30,7 @@ def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, dict | st
         return code, out, err
 
 
-def test_fast_run_records_trace_and_contract_4_recording(
+def test_fast_run_records_trace_and_the_rerun_entity_paths(
     capsys: pytest.CaptureFixture[str], workdir: Path, rrd_rows
 ) -> None:
     code, summary, err = _run(

@@ -81,7 +81,7 @@ def test_review_without_true_speed_gives_both_metrics_and_smoothed_is_truer(
     assert doc["smoothed"]["model"] == GROUND and doc["smoothed"]["method"] == "kalman-rts"
     for m in "ab":
         encoder, smoothed = doc["motors"][m], doc["motors"][m]["smoothed"]
-        assert set(smoothed) == set(encoder) - {"smoothed"}  # the same contract-3 keys
+        assert set(smoothed) == set(encoder) - {"smoothed"}  # the same JSON output keys
         for key in ("overshoot_percent", "rms_error"):
             truth = true["motors"][m][key]
             assert abs(smoothed[key] - truth) < abs(encoder[key] - truth), (m, key)
