@@ -1,8 +1,4 @@
-"""Facts of the MECOtron cart that every layer uses, defined once.
-
-The supply and the encoder bound what any data, reference or controller can mean: a voltage beyond
-the supply was never on a motor, and a speed resolves to whole encoder counts per tick.
-"""
+"""Facts of the MECOtron cart that every layer uses, defined once: supply, encoder, period."""
 
 from __future__ import annotations
 
@@ -23,51 +19,25 @@ PWM_STEP_V = SUPPLY_V / 255.0
 def encoder_quantum_rad_s(
     period_s: float = PERIOD_S, counts_per_rev: int = ENCODER_COUNTS_PER_REV
 ) -> float:
-    """One encoder count per tick as a speed, the resolution of a measured speed (rad/s):
-    q = 2π / counts_per_rev / Ts, 0.3506 rad/s at the cart's 10 ms.
-
-    Parameters
-    ----------
-    period_s : float
-        Tick Ts (s), > 0.
-    counts_per_rev : int
-        Encoder counts per wheel revolution.
-    """
+    """One encoder count per tick, the resolution of a measured speed (rad/s):
+    q = 2π / counts_per_rev / Ts, 0.3506 rad/s at the cart's 10 ms."""
     if not (math.isfinite(period_s) and period_s > 0.0):
         raise InputError(f"the period must be a positive number of seconds, got {period_s}")
     return 2.0 * math.pi / counts_per_rev / period_s
 
 
 def nk_fits_loop_delay(nk: int, loop_delay_ticks: int) -> bool:
-    """Whether a model with input delay ``nk`` describes a loop of ``loop_delay_ticks``.
-
-    nk = loop delay + 1 is the report's timing (a command lands at the tick after the
-    measurement it answers and shows in the measurement after that); nk = loop delay is a
-    command landing within the tick, which the next measurement (the tick's average speed)
-    already sees part of. Any other nk belongs to another loop.
-    """
+    """Whether a model with input delay ``nk`` describes a loop of ``loop_delay_ticks``: nk =
+    delay + 1 (the report's timing: the command lands the tick after its measurement) or nk =
+    delay (it lands within the tick, and the tick's average speed already sees part of it)."""
     return int(nk) in (int(loop_delay_ticks), int(loop_delay_ticks) + 1)
 
 
 def check_voltage_limit(
     limit_v: float, name: str = "voltage limit", *, most_v: float = SUPPLY_V
 ) -> float:
-    """``limit_v`` as a float, if it is a command limit the cart can apply: in (0, ``most_v``] V.
-
-    Parameters
-    ----------
-    limit_v : float
-        The limit asked for (V).
-    name : str
-        How the message names it (``'--voltage-limit'``, ``'voltage_limit_v'``).
-    most_v : float
-        The highest limit allowed (V): the supply, or a controller file's own limit.
-
-    Raises
-    ------
-    InputError
-        Not a number in (0, ``most_v``]: one line, ``NAME must be in (0, MOST] V, got VALUE``.
-    """
+    """``limit_v`` as a float if it is in (0, ``most_v``] V (the supply, or a controller
+    file's own limit); else InputError ``NAME must be in (0, MOST] V, got VALUE``."""
     try:
         value = float(limit_v)
     except (TypeError, ValueError):

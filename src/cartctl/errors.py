@@ -1,8 +1,7 @@
 """The one exception family of cartctl.
 
-Every error a user can cause derives from :class:`CartctlError` and from the matching builtin, so
-callers may catch either. The command line turns a :class:`CartctlError` into one line on stderr and
-exit code 2 (no traceback). Messages say what was wrong, the value received, and what is expected.
+Every error a user can cause derives from :class:`CartctlError` and the matching builtin, so
+callers may catch either. The command line prints it as one line on stderr with its exit code.
 """
 
 from __future__ import annotations
@@ -11,16 +10,8 @@ from pathlib import Path
 
 from cartctl.stopping import Interrupted
 
-__all__ = [
-    "CartctlError",
-    "DataFileError",
-    "DataWarning",
-    "InputError",
-    "Interrupted",
-    "MissingFileError",
-    "PlantError",
-    "one_line",
-]
+__all__ = ["CartctlError", "DataFileError", "DataWarning", "InputError", "Interrupted",
+           "MissingFileError", "PlantError", "one_line"]  # fmt: skip
 
 
 def one_line(text: str) -> str:
@@ -31,11 +22,7 @@ def one_line(text: str) -> str:
 
 
 class CartctlError(Exception):
-    """Base of all errors that cartctl reports to the user.
-
-    Its message is always one line: a value the user gave that holds a line break or another
-    control character is shown escaped.
-    """
+    """Base of all errors that cartctl reports to the user; its message is always one line."""
 
     exit_code: int = 2
 
@@ -59,27 +46,10 @@ class MissingFileError(CartctlError, FileNotFoundError):
 
 
 class DataFileError(CartctlError, ValueError):
-    """A data or model file whose content is wrong.
-
-    Parameters
-    ----------
-    path : str or Path
-        The file.
-    problem : str
-        What is wrong and what is expected.
-    line : int, optional
-        1-based line number in the file, where known.
-    column : str, optional
-        Column name, where known.
-    """
+    """A data or model file whose content is wrong: ``PATH[, line N][, column 'C']: PROBLEM``."""
 
     def __init__(
-        self,
-        path: str | Path,
-        problem: str,
-        *,
-        line: int | None = None,
-        column: str | None = None,
+        self, path: str | Path, problem: str, *, line: int | None = None, column: str | None = None
     ) -> None:
         self.path = Path(path)
         self.problem = problem
@@ -100,19 +70,10 @@ class PlantError(CartctlError, RuntimeError):
 
 
 class OutputError(CartctlError, OSError):
-    """A file being written stopped short (a full disk, a vanished drive): a fault, not a warning.
+    """A file being written stopped short (a full disk): a fault, not a warning.
 
-    The message names the file and why, and how many rows it holds complete when the writer
-    counts them: ``logs/run.csv is incomplete: No space left on device (after 412 rows)``.
-
-    Parameters
-    ----------
-    path : str or Path
-        The file left incomplete.
-    reason : str
-        Why (the system's words, e.g. ``No space left on device``).
-    rows : int, optional
-        Complete rows the file holds.
+    ``logs/run.csv is incomplete: No space left on device (after 412 rows)``; ``detail`` is the
+    message without the file.
     """
 
     exit_code = 1
@@ -123,7 +84,6 @@ class OutputError(CartctlError, OSError):
         self.rows = rows
         after = "" if rows is None else f" (after {rows} row{'' if rows == 1 else 's'})"
         self.detail = f"{reason}{after}"
-        """The message without the file: why, and the rows complete."""
         super().__init__(f"{self.path} is incomplete: {self.detail}")
 
     def __str__(self) -> str:  # OSError would otherwise format (errno, strerror)

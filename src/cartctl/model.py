@@ -1,18 +1,12 @@
-"""ARX motor models: parameters, transfer functions, simulation, poles and zeros.
+"""ARX motor models: parameters, transfer functions, simulation, poles and zeros (pure maths).
 
-Sits at the bottom of the pipeline: ``identify`` produces these models, ``design`` and the simulated
-plant consume them. Everything here is pure maths on arrays (no I/O; model files are in
-:mod:`cartctl.data.modelfile`).
-
-The model, in the report's notation for its structure (na = 2, nb = 2, nk = 2), is
+The report's structure (na = 2, nb = 2, nk = 2) is
 
     ω[k] + c ω[k−1] + d ω[k−2] = a v[k−2] + b v[k−3],      θ = [c, d, a, b]
 
-and in general ``A(q) y[k] = B(q) u[k − nk]`` with
-
-    A(q) = 1 + a_1 q⁻¹ + … + a_na q⁻ⁿᵃ,      B(q) = b_0 + b_1 q⁻¹ + … + b_{nb−1} q⁻⁽ⁿᵇ⁻¹⁾.
-
-θ is ``[a_1 … a_na, b_0 … b_{nb−1}]``: the report's order and sign convention.
+and in general ``A(q) y[k] = B(q) u[k − nk]`` with A(q) = 1 + a_1 q⁻¹ + … + a_na q⁻ⁿᵃ and
+B(q) = b_0 + b_1 q⁻¹ + … + b_{nb−1} q⁻⁽ⁿᵇ⁻¹⁾; θ = [a_1 … a_na, b_0 … b_{nb−1}] in the report's
+order and signs. u in V, y in rad/s.
 """
 
 from __future__ import annotations
@@ -31,17 +25,13 @@ from cartctl.errors import InputError
 
 RootKind = Literal["delay", "pole", "zero"]
 
-_ORIGIN_TOL = 1e-12
-
 MARGINAL_POLE_RADIUS = 0.99
-"""A pole with |z| above this is slow or marginally stable (a time constant over 100 ticks, or
-an oscillation that barely decays): ``inspect`` flags it and output-error refinement keeps its
-poles within it."""
+"""A pole with |z| above this is slow or marginally stable: ``inspect`` flags it and
+output-error refinement keeps its poles within it."""
 
 
 def check_extra_delay_ticks(ticks: object, name: str = "extra delay") -> int:
-    """``ticks`` as a loop delay beyond a model's own: a whole number >= 0 (else InputError
-    naming it as ``name``)."""
+    """``ticks`` as a whole number >= 0 of extra loop delay, else InputError naming ``name``."""
     if isinstance(ticks, bool) or not isinstance(ticks, int | np.integer) or ticks < 0:
         raise InputError(f"{name} must be a whole number >= 0 ticks, got {ticks!r}")
     return int(ticks)
@@ -50,25 +40,9 @@ def check_extra_delay_ticks(ticks: object, name: str = "extra delay") -> int:
 def pole_damping(z: complex, period_s: float) -> tuple[float | None, float | None]:
     """Damping ratio ζ and natural frequency f_n (Hz) of a discrete root, as ``control.damp``.
 
-    The root z of a system sampled every Ts behaves like the continuous root s = ln(z) / Ts
-    (principal logarithm), so f_n = |ln z| / (2π Ts) and ζ = −Re(s) / |s| = −cos(∠ ln z). A
-    negative real root lands at Im(s) = π/Ts: it alternates sign every tick. The one rule for
-    ``inspect`` and ``design``.
-
-    Parameters
-    ----------
-    z : complex
-        The root in the z-plane.
-    period_s : float
-        Sample period Ts (s).
-
-    Returns
-    -------
-    damping : float or None
-        ζ; None where ``control.damp`` gives NaN: at z = 0 (a pure delay, ln z = −∞) and at
-        z = 1 (an integrator, s = 0).
-    freq_hz : float or None
-        f_n (Hz); None at z = 0, where ``control.damp`` gives an infinite ωn.
+    With s = ln(z) / Ts (principal logarithm): f_n = |s| / 2π and ζ = −Re(s) / |s|; a negative
+    real root has Im(s) = π/Ts. The one rule for ``inspect`` and ``design``. Returns
+    (None, None) at z = 0 and (None, 0.0) at z = 1, where ``control.damp`` gives NaN or inf.
     """
     z = complex(z)
     if z == 0:
@@ -81,20 +55,9 @@ def pole_damping(z: complex, period_s: float) -> tuple[float | None, float | Non
 
 @dataclass(frozen=True, slots=True)
 class Root:
-    """A pole or zero of a discrete model with its continuous-time equivalent.
+    """A pole or zero in the z-plane, with :func:`pole_damping`'s ``freq_hz`` and ``damping``.
 
-    Attributes
-    ----------
-    value : complex
-        Location in the z-plane.
-    kind : {'delay', 'pole', 'zero'}
-        'delay' for a pole at z = 0 (a pure one-sample delay, with no frequency).
-    freq_hz : float or None
-        Continuous-equivalent natural frequency |ln z| / (2π Ts) in Hz (:func:`pole_damping`).
-        None for z = 0.
-    damping : float or None
-        Damping ratio −Re(s) / |s| of s = ln(z) / Ts (:func:`pole_damping`). None for z = 0
-        and z = 1.
+    ``kind`` is 'delay' for a pole at z = 0 (a one-sample delay, no frequency).
     """
 
     value: complex
@@ -104,33 +67,14 @@ class Root:
 
     def to_dict(self) -> dict[str, object]:
         """``inspect --json`` form: ``{"re", "im", "kind", "freq_hz", "damping"}``."""
-        return {
-            "re": float(self.value.real),
-            "im": float(self.value.imag),
-            "kind": self.kind,
-            "freq_hz": self.freq_hz,
-            "damping": self.damping,
-        }
+        return {"re": float(self.value.real), "im": float(self.value.imag), "kind": self.kind,
+                "freq_hz": self.freq_hz, "damping": self.damping}  # fmt: skip
 
 
 def classify_root(value: complex, kind: Literal["pole", "zero"], period_s: float) -> Root:
-    """Describe a z-plane root by its continuous-equivalent frequency and damping.
-
-    Parameters
-    ----------
-    value : complex
-        The root in the z-plane; within 1e-12 of the origin it is taken as z = 0.
-    kind : {'pole', 'zero'}
-        What the root is. A pole at the origin becomes kind 'delay'.
-    period_s : float
-        Sample period Ts (s).
-
-    Returns
-    -------
-    Root
-    """
+    """A z-plane root as a :class:`Root`; within 1e-12 of the origin it is z = 0."""
     z = complex(value)
-    if abs(z) < _ORIGIN_TOL:
+    if abs(z) < 1e-12:
         return Root(0j, "delay" if kind == "pole" else "zero", None, None)
     damping, freq_hz = pole_damping(z, period_s)
     return Root(z, kind, freq_hz, damping)
@@ -149,34 +93,16 @@ def _clean_roots(coeffs: NDArray[np.float64]) -> NDArray[np.complex128]:
 class ArxModel:
     """A single-input single-output ARX model ``A(q) y[k] = B(q) u[k − nk]``.
 
-    The attributes are named after the polynomials A (output side, the transfer function's
-    denominator) and B (input side, its numerator), as in system identification and in
-    :func:`scipy.signal.lfilter`'s ``(b, a)``. The report names the same four numbers
-    θ = [c, d, a, b], where **a and b are both numerator coefficients**. For its structure
-    (na = nb = 2, nk = 2)::
+    ``ar`` holds a_1 … a_na (A, the denominator, after its leading 1) and ``b`` holds
+    b_0 … b_{nb−1} (B, the numerator), as :func:`scipy.signal.lfilter`'s ``(b, a)``. The
+    report's θ = [c, d, a, b] has **a and b both in the numerator**::
 
         report   Ω(z)/V(z) = (a z + b) / (z³ + c z² + d z)
-        here     ar = (c, d)      b = (a, b): the report's a is b[0], its b is b[1]
+        here     ar = (c, d)      b = (a, b)
                  num() = [a, b]   den() = [1, c, d, 0]   (descending powers of z, as control.tf)
 
-    so neither of the report's a and b is in ``ar``, and ``theta`` is ``(*ar, *b)`` in the
-    report's order.
-
-    Attributes
-    ----------
-    ar : tuple of float
-        a_1 … a_na, the output (denominator) coefficients after the leading 1. For the report's
-        structure this is (c, d).
-    b : tuple of float
-        b_0 … b_{nb−1}, the input (numerator) coefficients: B(q), not the report's scalar b. For
-        the report's structure this is (a, b).
-    nk : int
-        Input delay in samples (≥ 0). The report's structure has nk = 2: one sample from the
-        zero-order hold and one from the firmware.
-    period_s : float
-        Sample period Ts (s).
-
-    Units: u in V, y in rad/s, so the DC gain is in rad/s/V.
+    ``nk`` is the input delay (samples, ≥ 0; 2 in the report: the zero-order hold and the
+    firmware), ``period_s`` the sample period Ts (s). The DC gain is in rad/s/V.
     """
 
     ar: tuple[float, ...]
@@ -200,16 +126,9 @@ class ArxModel:
             )
 
     def with_extra_delay(self, ticks: int) -> ArxModel:
-        """This model with ``ticks`` more ticks of input delay (nk + d): a loop that much slower.
-
-        Raises
-        ------
-        InputError
-            ``ticks`` is not a whole number >= 0.
-        """
+        """This model with ``ticks`` (a whole number >= 0) more ticks of input delay."""
         return ArxModel(self.ar, self.b, self.nk + check_extra_delay_ticks(ticks), self.period_s)
 
-    # -- construction -------------------------------------------------------------------------
     @classmethod
     def from_theta(
         cls, theta: ArrayLike, *, na: int = 2, nb: int = 2, nk: int = 2, period_s: float = PERIOD_S
@@ -226,11 +145,8 @@ class ArxModel:
     def from_tf(
         cls, num: Sequence[float], den: Sequence[float], *, period_s: float = PERIOD_S
     ) -> ArxModel:
-        """Build from a transfer function in descending powers of z (as python-control takes it).
-
-        ``den`` must be monic (leading 1). The delay nk is the relative degree. Roots at the origin
-        (trailing zeros) are absorbed into the delay, as in ``(a z + b) / (z³ + c z² + d z)``.
-        """
+        """Build from num and monic den in descending powers of z; nk is the relative degree,
+        and roots at the origin (trailing zeros) go into the delay."""
         num_arr = np.trim_zeros(np.asarray(num, dtype=float), "f")
         den_arr = np.trim_zeros(np.asarray(den, dtype=float), "f")
         if num_arr.size == 0 or den_arr.size == 0:
@@ -245,15 +161,12 @@ class ArxModel:
         ar = np.trim_zeros(den_arr, "b")[1:]
         return cls(tuple(ar), tuple(np.trim_zeros(num_arr, "b")), nk, period_s)
 
-    # -- shapes -------------------------------------------------------------------------------
     @property
     def na(self) -> int:
-        """Number of output (denominator) coefficients."""
         return len(self.ar)
 
     @property
     def nb(self) -> int:
-        """Number of input (numerator) coefficients."""
         return len(self.b)
 
     @property
@@ -267,31 +180,24 @@ class ArxModel:
         return max(self.na, self.nk + self.nb - 1)
 
     def num(self) -> NDArray[np.float64]:
-        """Numerator in descending powers of z, leading zeros trimmed (``[a, b]`` for the report).
-
-        It is z^(n − nk) B(z⁻¹): trailing zeros appear when na > nk + nb − 1.
-        """
+        """Numerator z^(n − nk) B(z⁻¹) in descending powers of z (``[a, b]`` for the report)."""
         return np.concatenate([self.b, np.zeros(self.order - self.nk - self.nb + 1)])
 
     def den(self) -> NDArray[np.float64]:
-        """Denominator in descending powers of z (``[1, c, d, 0]`` for the report's structure)."""
+        """Denominator in descending powers of z (``[1, c, d, 0]`` for the report)."""
         den = np.zeros(self.order + 1)
         den[0] = 1.0
         den[1 : self.na + 1] = self.ar
         return den
 
     def response_at(self, z: NDArray[np.complex128]) -> NDArray[np.complex128]:
-        """G(z) = num(z) / den(z) (rad/s per V) at the points ``z``; at z = exp(j 2π f Ts), the
-        frequency response at f Hz."""
+        """G(z) (rad/s per V) at the points ``z``; at z = exp(j 2π f Ts), the response at f Hz."""
         return np.polyval(self.num(), z) / np.polyval(self.den(), z)
 
     def lfilter_coeffs(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(b, a) in powers of q⁻¹ for :func:`scipy.signal.lfilter`: b = [0]*nk + b, a = [1, ar]."""
-        b = np.concatenate([np.zeros(self.nk), self.b])
-        a = np.concatenate([[1.0], self.ar])
-        return b, a
+        return np.concatenate([np.zeros(self.nk), self.b]), np.concatenate([[1.0], self.ar])
 
-    # -- LTI views ----------------------------------------------------------------------------
     def to_tf(self):
         """The model as a python-control discrete transfer function (dt = Ts)."""
         import control
@@ -299,17 +205,14 @@ class ArxModel:
         return control.tf(self.num(), self.den(), dt=self.period_s)
 
     def poles(self) -> list[Root]:
-        """Poles with their continuous-equivalent frequencies; those at z = 0 are 'delay'."""
         return [classify_root(p, "pole", self.period_s) for p in _clean_roots(self.den())]
 
     def zeros(self) -> list[Root]:
-        """Zeros (finite roots of the numerator) with their continuous-equivalent frequencies."""
         return [classify_root(z, "zero", self.period_s) for z in _clean_roots(self.num())]
 
     def dc_gain(self) -> float:
-        """Static gain B(1) / A(1) in output units per input unit (rad/s/V); inf at an integrator."""
-        a_sum = 1.0 + sum(self.ar)
-        b_sum = sum(self.b)
+        """Static gain B(1) / A(1) (rad/s/V); inf at an integrator."""
+        a_sum, b_sum = 1.0 + sum(self.ar), sum(self.b)
         if a_sum == 0.0:
             return math.inf if b_sum != 0.0 else math.nan
         return b_sum / a_sum
@@ -319,42 +222,21 @@ class ArxModel:
         return max((abs(r.value) for r in self.poles()), default=0.0)
 
     def is_stable(self) -> bool:
-        """True when every pole lies strictly inside the unit circle."""
         return self.pole_radius() < 1.0
 
-    # -- time domain --------------------------------------------------------------------------
     def simulate(self, voltage_v: ArrayLike) -> NDArray[np.float64]:
-        """Simulate the difference equation from rest.
-
-        Parameters
-        ----------
-        voltage_v : array_like, shape (n,)
-            Input u[k] (V), one value per tick.
-
-        Returns
-        -------
-        ndarray, shape (n,)
-            Output y[k] (rad/s) with zero initial conditions.
-        """
+        """The output y[k] (rad/s) from rest for the input u[k] (V), shape (n,) both."""
         u = np.asarray(voltage_v, dtype=float)
         if u.ndim != 1:
             raise InputError(f"voltage sequence must be one-dimensional, got shape {u.shape}")
         from scipy import signal  # here, not at the top: it costs a run's start 0.8 s
 
-        b, a = self.lfilter_coeffs()
-        return signal.lfilter(b, a, u)
+        return signal.lfilter(*self.lfilter_coeffs(), u)
 
     def step_response(
         self, amplitude_v: float = 1.0, duration_s: float = 1.0
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Response to a step of ``amplitude_v`` applied at tick 0.
-
-        Returns
-        -------
-        time_s : ndarray, shape (n,)
-            Tick times (s), n = round(duration_s / Ts) + 1.
-        speed_rad_s : ndarray, shape (n,)
-        """
+        """(time_s, speed_rad_s) for a step applied at tick 0, n = round(duration_s / Ts) + 1."""
         n = round(duration_s / self.period_s) + 1
         if n < 2:
             raise InputError(f"step duration must be at least one period, got {duration_s} s")
@@ -370,24 +252,19 @@ _SUPERSCRIPT = str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹")
 
 
 def format_poly(coeffs: Sequence[float] | NDArray[np.float64], var: str = "z") -> str:
-    """Format a polynomial in descending powers of ``var`` with 4 significant digits."""
-    coeffs = list(coeffs)
+    """A polynomial in descending powers of ``var``, 4 significant digits."""
     degree = len(coeffs) - 1
     parts: list[str] = []
     for i, c in enumerate(coeffs):
         if c == 0.0:
             continue
         power = degree - i
-        mag = abs(c)
-        term = "" if (mag == 1.0 and power > 0) else f"{mag:.4g}"
+        term = "" if (abs(c) == 1.0 and power > 0) else f"{abs(c):.4g}"
         if power >= 1:
-            term += (
-                (" " if term else "")
-                + var
-                + (str(power).translate(_SUPERSCRIPT) if power > 1 else "")
-            )
-        sign = "−" if c < 0 else "+"
-        parts.append(
-            term if not parts and c > 0 else (f"−{term}" if not parts else f"{sign} {term}")
-        )
+            exponent = str(power).translate(_SUPERSCRIPT) if power > 1 else ""
+            term += (" " if term else "") + var + exponent
+        if parts:
+            parts.append(f"{'−' if c < 0 else '+'} {term}")
+        else:
+            parts.append(f"−{term}" if c < 0 else term)
     return " ".join(parts) if parts else "0"

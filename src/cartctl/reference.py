@@ -69,8 +69,7 @@ def _read_reference_file(
         )
     it, ir = header.index("time_s"), header.index(name)
     try:
-        t = np.array([float(r[it]) for r in rows[1:]])
-        r = np.array([float(r[ir]) for r in rows[1:]])
+        t, r = np.array([(float(row[it]), float(row[ir])) for row in rows[1:]]).reshape(-1, 2).T
     except (ValueError, IndexError):
         raise DataFileError(
             path, "every row needs numbers in time_s and the reference column"
@@ -85,8 +84,7 @@ def _read_reference_file(
 def reference_signal(
     spec: str, n_ticks: int, period_s: float = PERIOD_S, motor: str = "a", *, start_tick: int = 0
 ) -> NDArray[np.float64]:
-    """The reference (rad/s) at ticks ``start_tick`` … ``start_tick + n_ticks − 1`` for a spec
-    (see the module docstring)."""
+    """The reference (rad/s) of a spec at ticks ``start_tick`` … ``start_tick + n_ticks − 1``."""
     kind, _, rest = spec.partition(":")
     parts = rest.split(":") if rest else []
     t = (start_tick + np.arange(n_ticks, dtype=np.float64)) * period_s
@@ -121,25 +119,9 @@ def check_reference(spec: str, option: str = "--reference", period_s: float = PE
 
 
 class ReferenceSchedule:
-    """A reference spec evaluated on the tick grid one chunk at a time, not all at once.
-
-    Indexing (``schedule[k]``, k < ``len(schedule)``) computes the chunk that holds tick k when
-    the loop gets there, so a long run holds one chunk of its reference, not all of it. A bad spec
-    fails at construction (the first chunk is computed then).
-
-    Parameters
-    ----------
-    spec : str
-        A reference spec (see the module docstring).
-    n_ticks : int
-        Length of the run (ticks).
-    period_s : float
-        Tick period (s).
-    motor : {'a', 'b'}
-        For ``file:`` specs with per-motor columns.
-    chunk_ticks : int
-        Ticks per chunk (default 6000: one minute at 10 ms).
-    """
+    """A reference spec over ``n_ticks`` ticks, computed ``chunk_ticks`` at a time (a minute at
+    10 ms) as ``schedule[k]`` reaches them, so a long run never holds all of it. A bad spec fails
+    here (the first chunk is computed at once); ``motor`` picks a ``file:`` spec's column."""
 
     def __init__(
         self, spec: str, n_ticks: int, period_s: float = PERIOD_S, motor: str = "a", *,

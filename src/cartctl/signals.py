@@ -1,9 +1,4 @@
-"""Excitation and reference signals, sampled at the control period.
-
-Used by ``cartctl excite`` (identification experiments) and by the loop for references. Each
-signal is defined by its amplitude in volts (or rad/s for references) and its durations in seconds,
-and is returned as one value per tick. Pure numpy; no I/O.
-"""
+"""Excitation signals for ``cartctl excite``: amplitude in V, durations in s, one value per tick."""
 
 from __future__ import annotations
 
@@ -31,25 +26,18 @@ def _ticks(duration_s: float, period_s: float, what: str) -> int:
     return n
 
 
-def _check_amplitude(amplitude: float) -> float:
+def _start(amplitude: float, duration_s: float, period_s: float, what: str) -> tuple[float, int]:
+    """The checked amplitude and the length in ticks."""
     if not (math.isfinite(amplitude) and amplitude > 0.0):
         raise InputError(f"amplitude must be a positive finite number, got {amplitude}")
-    return float(amplitude)
+    return float(amplitude), _ticks(duration_s, period_s, what)
 
 
 def square(
     amplitude_v: float, *, hold_s: float = 1.0, cycles: int = 5, period_s: float = PERIOD_S
 ) -> NDArray[np.float64]:
-    """The report's excitation: +A for ``hold_s``, 0 for ``hold_s``, −A for ``hold_s``, repeated.
-
-    It has no DC component over whole cycles and excites a wide band.
-
-    Returns
-    -------
-    ndarray, shape (3 * cycles * round(hold_s / period_s),)
-    """
-    amp = _check_amplitude(amplitude_v)
-    n = _ticks(hold_s, period_s, "hold time")
+    """The report's excitation: +A, 0, −A for ``hold_s`` each, ``cycles`` times (no DC)."""
+    amp, n = _start(amplitude_v, hold_s, period_s, "hold time")
     if cycles < 1:
         raise InputError(f"cycles must be at least 1, got {cycles}")
     one = np.concatenate([np.full(n, amp), np.zeros(n), np.full(n, -amp)])
@@ -60,8 +48,7 @@ def step(
     amplitude_v: float, *, duration_s: float = 3.0, delay_s: float = 0.5, period_s: float = PERIOD_S
 ) -> NDArray[np.float64]:
     """Zero for ``delay_s``, then ``amplitude_v`` until ``duration_s`` (total length)."""
-    amp = _check_amplitude(amplitude_v)
-    n = _ticks(duration_s, period_s, "duration")
+    amp, n = _start(amplitude_v, duration_s, period_s, "duration")
     if not (math.isfinite(delay_s) and 0.0 <= delay_s < duration_s):
         raise InputError(f"step delay must be in [0, duration), got {delay_s} s")
     out = np.zeros(n)
@@ -78,20 +65,12 @@ def prbs(
     seed: int = 1,
     period_s: float = PERIOD_S,
 ) -> NDArray[np.float64]:
-    """A pseudo-random binary sequence of ±A from a maximum-length shift register.
+    """±A from a maximum-length shift register of ``order`` bits (period 2**order − 1 bits).
 
-    Parameters
-    ----------
-    bit_s : float
-        Duration of one bit (s): the shortest constant stretch. Its band reaches about
-        0.44 / bit_s Hz.
-    order : int
-        Register length; the sequence repeats every 2**order − 1 bits.
-    seed : int
-        Non-zero initial register state (selects the shift of the sequence).
+    A bit lasts ``bit_s`` (s), so the band reaches about 0.44 / bit_s Hz; ``seed`` is the
+    non-zero initial register state.
     """
-    amp = _check_amplitude(amplitude_v)
-    n = _ticks(duration_s, period_s, "duration")
+    amp, n = _start(amplitude_v, duration_s, period_s, "duration")
     per_bit = _ticks(bit_s, period_s, "bit duration")
     if not 2 <= order <= 32:
         raise InputError(f"PRBS order must be in 2..32, got {order}")
@@ -116,14 +95,9 @@ def multisine(
     f_max_hz: float = 20.0,
     period_s: float = PERIOD_S,
 ) -> NDArray[np.float64]:
-    """Equal-amplitude harmonics of 1/cycle_s in [f_min_hz, f_max_hz], Schroeder phases.
-
-    Schroeder's phases keep the crest factor low (about 1.5 to 1.8 instead of about √(2N) for
-    zero phases), so more power fits under the voltage limit. The result is scaled so its peak is
-    ``amplitude_v``. Whole cycles give exact periodicity for an empirical transfer function.
-    """
-    amp = _check_amplitude(amplitude_v)
-    n = _ticks(duration_s, period_s, "duration")
+    """Equal-amplitude harmonics of 1/cycle_s in [f_min_hz, f_max_hz] with Schroeder phases
+    (crest factor about 1.5–1.8, not √(2N)), scaled to a peak of ``amplitude_v``."""
+    amp, n = _start(amplitude_v, duration_s, period_s, "duration")
     n_cycle = _ticks(cycle_s, period_s, "cycle time")
     nyquist_hz = 0.5 / period_s
     if not (0.0 < f_min_hz <= f_max_hz < nyquist_hz):
@@ -154,8 +128,7 @@ def chirp(
     period_s: float = PERIOD_S,
 ) -> NDArray[np.float64]:
     """A logarithmic sine sweep from ``f_start_hz`` to ``f_end_hz`` over ``duration_s``."""
-    amp = _check_amplitude(amplitude_v)
-    n = _ticks(duration_s, period_s, "duration")
+    amp, n = _start(amplitude_v, duration_s, period_s, "duration")
     nyquist_hz = 0.5 / period_s
     if not (0.0 < f_start_hz < nyquist_hz and 0.0 < f_end_hz < nyquist_hz):
         raise InputError(
@@ -181,9 +154,7 @@ def ramp(
         raise InputError(f"ramp slope must be finite, got {slope_per_s}")
     n = _ticks(duration_s, period_s, "duration")
     out = slope_per_s * np.arange(n, dtype=np.float64) * period_s
-    if limit is not None:
-        out = np.clip(out, -abs(limit), abs(limit))
-    return out
+    return out if limit is None else np.clip(out, -abs(limit), abs(limit))
 
 
 def make_signal(
@@ -194,18 +165,10 @@ def make_signal(
     duration_s: float | None = None,
     period_s: float = PERIOD_S,
 ) -> NDArray[np.float64]:
-    """Build an excitation by name with sensible defaults (``cartctl excite``).
+    """An excitation by name (:data:`~cartctl.choices.SIGNALS`) with ``cartctl excite``'s defaults.
 
-    Parameters
-    ----------
-    name : {'square', 'step', 'prbs', 'multisine', 'chirp'}
-    amplitude_v : float
-        Peak voltage (V).
-    cycles : int, optional
-        Repetitions: of the +A/0/−A cycle for 'square' (default 5), of the 2.56 s period for
-        'multisine' (default 6). Not used by the others.
-    duration_s : float, optional
-        Total length for 'step', 'prbs', 'chirp' (and 'multisine' when ``cycles`` is not given).
+    ``cycles`` counts the +A/0/−A cycles of 'square' (default 5) or the 2.56 s periods of
+    'multisine' (default 6); ``duration_s`` is the length of the others (s).
     """
     builders: dict[str, Callable[[], NDArray[np.float64]]] = {
         "square": lambda: square(amplitude_v, cycles=cycles or 5, period_s=period_s),

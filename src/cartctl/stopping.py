@@ -1,19 +1,11 @@
 """Stop signals: SIGINT, SIGTERM and SIGHUP all end a command through its shutdown path.
 
-Python turns only SIGINT (Ctrl-C) into an exception; SIGTERM (``kill``, ``systemctl stop``,
-``timeout``) and SIGHUP (a closing terminal) would end the process on the spot, with the motors at
-the last voltage and the files cut short. :func:`install` makes all three raise
-:class:`Interrupted` in the main thread, which the commands catch like Ctrl-C: zero volts out,
-files closed, summary printed, exit code 128 + the signal's number (130, 143, 129).
-
-Only the first signal interrupts. Any later one, while the shutdown runs, is absorbed (a second
-Ctrl-C in impatience must not cut the shutdown short); so is any signal inside :func:`deferred`.
-
-The program installs the handlers before anything else (:func:`install_at_start`, the first thing
-``cartctl.cli`` does when it runs as ``cartctl``): until the command line takes over, a stop
-signal ends the process with one line and its exit code, as nothing has been done yet. This module
-imports only ``signal``, ``sys`` and ``os`` for that reason: what remains before the handlers is
-the interpreter's own start.
+:func:`install` makes all three raise :class:`Interrupted` in the main thread, which the commands
+catch like Ctrl-C: zero volts out, files closed, summary printed, exit code 128 + the signal's
+number. Only the first signal interrupts; later ones, and any inside :func:`deferred`, are
+absorbed so the shutdown is never cut short. Before the command line takes over
+(:func:`install_at_start`), a stop signal ends the process with one line, as nothing has been
+done yet; hence this module imports only ``signal``, ``sys`` and ``os``.
 """
 
 import os
@@ -34,10 +26,7 @@ _deferred = 0
 
 
 class Interrupted(KeyboardInterrupt):
-    """A stop signal (SIGINT, SIGTERM, SIGHUP) arrived: end through the shutdown path.
-
-    A :class:`KeyboardInterrupt`, so that every place that handles Ctrl-C handles the others too.
-    """
+    """A stop signal arrived; a :class:`KeyboardInterrupt`, so what handles Ctrl-C handles it."""
 
     def __init__(self, signum: int) -> None:
         super().__init__(signal.Signals(signum).name)
@@ -45,7 +34,6 @@ class Interrupted(KeyboardInterrupt):
 
     @property
     def exit_code(self) -> int:
-        """128 + the signal's number: 130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP."""
         return 128 + self.signum
 
 
@@ -78,18 +66,14 @@ def _route(handler: object) -> dict[int, object]:
 
 
 def install_at_start() -> None:
-    """The program's first step: a stop signal from now until :func:`install` ends the process at
-    once, with :data:`STARTING_LINE` on stderr and exit code 128 + its number (130 for Ctrl-C)."""
+    """From now until :func:`install`, a stop signal prints :data:`STARTING_LINE` and exits."""
     global _phase
     _phase = _STARTING
     _route(_handler)
 
 
 def install() -> dict[int, object]:
-    """Route the stop signals to :class:`Interrupted` (main thread only).
-
-    Returns the handlers it replaced, for :func:`restore`.
-    """
+    """Route the stop signals to :class:`Interrupted`; returns the handlers replaced."""
     global _first, _deferred, _phase
     _first, _deferred = None, 0
     previous = _route(_handler)
@@ -98,11 +82,7 @@ def install() -> dict[int, object]:
 
 
 def restore(previous: dict[int, object]) -> None:
-    """Put back the handlers :func:`install` replaced.
-
-    The program's own (from :func:`install_at_start`) come back absorbing: the command is over,
-    and a signal while it returns is noted (:func:`received`) but cuts nothing short.
-    """
+    """Put back the handlers :func:`install` replaced; a signal from now on is only noted."""
     global _phase
     _phase = _ENDING
     for signum, handler in previous.items():
@@ -110,11 +90,8 @@ def restore(previous: dict[int, object]) -> None:
 
 
 def ignore() -> None:
-    """Ignore the stop signals from now on: for the program's exit.
-
-    An ignored signal stays ignored while the interpreter finalises (a handler of ours would be
-    reset to the default there, and a late signal would then kill the process).
-    """
+    """Ignore the stop signals, for the program's exit (a handler would be reset to the default
+    while the interpreter finalises)."""
     _route(signal.SIG_IGN)
 
 

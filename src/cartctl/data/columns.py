@@ -1,10 +1,5 @@
-"""Which column of a file becomes which trace column: the trace's own names or a ``--map``.
-
-A trace CSV file names its columns as the trace does. A foreign CSV file or a QRC log needs a
-mapping (trace column → file column or QRC label); where the mapping is silent, a column named
-like a trace column is taken. :func:`plan_columns` makes that decision, or says in one line what is
-missing and how to map it.
-"""
+"""Which file column becomes which trace column: the trace's own names, or a ``--map`` (trace
+column → file column or QRC label) and, where it is silent, a column named like a trace column."""
 
 from __future__ import annotations
 
@@ -12,7 +7,7 @@ import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from cartctl.data.qrc import QRC5_DEFAULT_LABELS, column_name
+from cartctl.data.qrc import column_name
 from cartctl.data.trace import _MAP_FORM, MOTORS, REQUIRED_COLUMNS, _check_name
 from cartctl.errors import DataFileError, InputError
 
@@ -32,10 +27,9 @@ def check_mapping(mapping: Mapping[str, str]) -> dict[str, str]:
 def plan_columns(
     path: Path, kind: str, names: list[str], mapping: dict[str, str] | None, header_line: int | None
 ) -> tuple[int, dict[str, int | None]]:
-    """Decide where each trace column comes from: a file column's index, or None for zeros.
+    """The time column's index and, per trace column, its file column (None: zeros).
 
-    For QRC logs ``names`` starts with the time column, which always gives time_s. Returns the
-    time column's index and the plan, in trace column order.
+    For QRC logs ``names`` starts with the time column, which always gives time_s.
     """
     monitor = kind == "CSV" and names[:2] == list(MONITOR_FIRST_COLUMNS)
     if kind == "CSV" and mapping is None:
@@ -66,7 +60,9 @@ def plan_columns(
             f"drop time_s={mapping['time_s']} from the mapping",
         )
     auto = [n if not first else column_name(n, j - 1, kind) for j, n in enumerate(names)]
-    kept = [n if not first else _extra_name(n, j - 1, kind) for j, n in enumerate(names)]
+    kept = [
+        n if not first else column_name(n, j - 1, kind, lower=False) for j, n in enumerate(names)
+    ]
     source = {"time_s": 0} if first else {}
     for name, label in mapping.items():
         hits = [j for j, n in enumerate(names) if n == label and j >= first]
@@ -78,8 +74,7 @@ def plan_columns(
                 f"{problem}; its {what}s are {listing}",
             )
         source[name] = hits[0]
-    # Where the mapping is silent, take a column named like the trace column; but a motor's
-    # voltage or speed only if its partner is mapped or named too (else it half-maps a motor).
+    # A motor's voltage or speed named like the trace column, only with its partner (never half)
     explicit = set(source.values())
     partners = {f"voltage_{m}": f"speed_{m}" for m in MOTORS}
     partners |= {speed: voltage for voltage, speed in partners.items()}
@@ -138,14 +133,12 @@ def plan_columns(
 
 
 MONITOR_FIRST_COLUMNS = ("time_s", "tick")
-"""The first columns of a ``cartctl monitor`` trace; its labelled channels follow."""
 MONITOR_LABELS_HINT = (
     "--labels f0=speed_a,f1=speed_b,f2=voltage_a,f3=voltage_b,f4=reference_a,f5=reference_b "
     "(the out channels of 'cartctl export --arduino')"
 )
 MONITOR_NAMES = (*REQUIRED_COLUMNS[1:], *(f"{k}_{m}" for k in ("reference", "estimate")
                                           for m in MOTORS))  # fmt: skip
-"""Trace columns a monitor label can name (``speed_a``, ``speedA``, ``Speed_A``, ...)."""
 
 
 def label_key(label: str) -> str:
@@ -154,11 +147,7 @@ def label_key(label: str) -> str:
 
 
 def monitor_mapping(labels: Sequence[str]) -> dict[str, str]:
-    """Trace column → monitor label, for the labels that name a trace column.
-
-    A label names a column when it equals the column's name but for case and separators
-    (``speedA`` is ``speed_a``); a column two labels would name is left out.
-    """
+    """Trace column → the one monitor label equal to its name but for case and separators."""
     mapping: dict[str, str] = {}
     for name in MONITOR_NAMES:
         hits = [label for label in labels if label_key(label) == label_key(name)]
@@ -169,15 +158,11 @@ def monitor_mapping(labels: Sequence[str]) -> dict[str, str]:
 
 _MOTOR_LETTER = {m: re.compile(rf"(?:(?<![A-Za-z])[{m}{m.upper()}]|(?<=[a-z]){m.upper()})(?![a-z])")
                  for m in MOTORS}  # fmt: skip
-"""The motor's letter in a label: ``voltA``, ``volt_a``, ``voltage A [V]``, ``motorA_speed``."""
 
 
 def counterpart_label(label: str, motor: str, other: str) -> str | None:
-    """The label of the other motor's channel, by the motor letter in ``label``, or None.
-
-    ``voltA`` → ``voltB``, ``speed_a`` → ``speed_b``, ``voltage A [V]`` → ``voltage B [V]``; the
-    last letter that stands apart (or ends a camelCase word) is the motor's.
-    """
+    """The other motor's label (``voltA`` → ``voltB``, ``voltage A [V]`` → ``voltage B [V]``) by
+    the last motor letter that stands apart or ends a camelCase word; None without one."""
     hits = list(_MOTOR_LETTER[motor].finditer(label))
     if not hits:
         return None
@@ -189,11 +174,8 @@ def counterpart_label(label: str, motor: str, other: str) -> str | None:
 def _counterparts(
     names: list[str], first: int, mapping: Mapping[str, str], source: dict[str, int]
 ) -> None:
-    """A partial mapping of one motor also maps the other's same-named channels, when both exist.
-
-    ``--map voltage_a=voltA,speed_a=speedA`` on a log that also has ``voltB`` and ``speedB``
-    takes them for motor b (instead of zeros); an explicit or same-named column wins.
-    """
+    """A mapping of one motor's pair (``voltA``, ``speedA``) also maps the other's counterparts
+    (``voltB``, ``speedB``) when both exist and nothing else maps that motor."""
     used = set(source.values())
     for motor, other in (("a", "b"), ("b", "a")):
         pair = (f"voltage_{motor}", f"speed_{motor}")
@@ -211,31 +193,12 @@ def _counterparts(
             used.update(found.values())
 
 
-def _extra_name(label: str, index: int, kind: str) -> str:
-    """A QRC channel's name as an extra trace column: its label with case kept.
-
-    As :func:`cartctl.data.qrc.column_name` (runs of other characters become one ``_``, ``ch_``
-    before a leading digit, the default label of an empty one) but without lower-casing:
-    ``speedB`` stays ``speedB``.
-    """
-    name = re.sub(r"[^0-9A-Za-z]+", "_", label).strip("_")
-    if not name:
-        if kind.startswith("QRC 5") and index < len(QRC5_DEFAULT_LABELS):
-            return QRC5_DEFAULT_LABELS[index]
-        return f"channel{index}"
-    return f"ch_{name}" if name[0].isdigit() else name
-
-
 _VOLTAGE_WORDS = ("volt", "voltage", "u_", "pwm")
 _SPEED_WORDS = ("speed", "omega", "vel", "rad_s", "rads")
 
 
 def _guess_mapping(labels: Sequence[str]) -> str:
-    """A ``--map`` example from labels that say what they are; placeholders when none do.
-
-    Only a label's own words count (``voltA``, ``speedA``): a guess by position would wire a
-    voltage to whatever channel sits there (an error, a reference).
-    """
+    """A ``--map`` example from labels whose words say what they are (never by position)."""
 
     def first(words: tuple[str, ...]) -> str | None:
         return next((lab for lab in labels if any(w in lab.lower() for w in words)), None)

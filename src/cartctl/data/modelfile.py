@@ -1,35 +1,10 @@
-"""Model files: the identified motor models of a cart as TOML, with their provenance.
+"""Model files: one identified ARX model per motor, as TOML, with provenance.
 
-``identify --out`` writes these files, ``design``, ``inspect``, ``validate`` and the simulated plant
-read them. A file holds one model per motor and says where the models came from::
-
-    format = "cartctl-model/2"
-    period_s = 0.01
-    loop_delay_ticks = 1        # optional: the loop the data was recorded in
-
-    [provenance]
-    source = "report, equation 12 (cart on the ground)"
-    created = "2023-11-06"
-    data = ["ground_square.csv"]
-    method = "arx"
-    prefilter = "none"
-
-    [motors.a]
-    theta = [-0.9356, 0.2173, 0.6466, -0.07751]   # [c, d, a, b]
-    na = 2
-    nb = 2
-    nk = 2
-
-Extra keys in ``[motors.X]`` (``theta_std``, fit percentages …) are kept as ``stats``.
-
-``loop_delay_ticks`` is the loop delay of the cart the models describe: ticks from a measurement to
-the voltage it leads to being on the motor (1 on board and in the simulators). ``identify`` takes
-it from its traces' meta files (:mod:`cartctl.data.tracemeta`) or ``--loop-delay``; ``design``
-designs for it. A file without it (an older one) leaves ``design`` to assume nk − 1.
-
-Files are written as version 2 (``cartctl-model/2``). Version 1, an older cartctl's, has the same
-keys and reads the same way, as does a file without a ``format`` line; another version is refused
-in one line that names the file and the versions read.
+``identify --out`` writes them; ``design``, ``inspect``, ``validate`` and the simulated plant read
+them. The keys are in docs/file-formats.md: ``theta`` = [c, d, a, b] per ``[motors.X]`` (extra
+keys such as ``theta_std`` are kept as ``stats``), and ``loop_delay_ticks``, the loop the data
+came from (absent: ``design`` assumes nk − 1). Version 1 and a file without a ``format`` line
+read as version 2.
 """
 
 from __future__ import annotations
@@ -47,29 +22,11 @@ from cartctl.data.tomlfile import MODEL_FORMAT, check_format, read_toml, require
 from cartctl.errors import CartctlError, DataFileError, InputError
 from cartctl.model import ArxModel
 
-FORMAT = MODEL_FORMAT
-MOTORS = ("a", "b")
-
 
 @dataclass(frozen=True)
 class Provenance:
-    """Where a model came from.
-
-    Attributes
-    ----------
-    source : str
-        Free text: the experiment, report or command that produced the models.
-    created : str
-        ISO 8601 date or date-time.
-    data : tuple of str
-        Data files the models were fitted to (empty when not from data).
-    method : str
-        'arx', 'oe', 'report', …
-    prefilter : str
-        'none', or a description such as 'butter order 6, 20 Hz, causal'.
-    notes : str
-        Anything else a reader should know.
-    """
+    """Where a model came from: free-text ``source``, ISO 8601 ``created``, the ``data`` files
+    fitted, the ``method`` ('arx', 'oe', 'report') and ``prefilter`` ('none' or a description)."""
 
     source: str
     created: str
@@ -79,35 +36,15 @@ class Provenance:
     notes: str = ""
 
     def to_dict(self) -> dict[str, Any]:
-        """TOML/JSON form."""
-        out: dict[str, Any] = {
-            "source": self.source,
-            "created": self.created,
-            "data": list(self.data),
-            "method": self.method,
-            "prefilter": self.prefilter,
-        }
-        if self.notes:
-            out["notes"] = self.notes
-        return out
+        out = {"source": self.source, "created": self.created, "data": list(self.data),
+               "method": self.method, "prefilter": self.prefilter}  # fmt: skip
+        return out | ({"notes": self.notes} if self.notes else {})
 
 
 @dataclass(frozen=True)
 class ModelFile:
-    """The motor models of one cart, per motor ('a', 'b'), with provenance.
-
-    Attributes
-    ----------
-    motors : dict of str to ArxModel
-        At least one of 'a' and 'b'.
-    provenance : Provenance
-    stats : dict of str to dict
-        Per motor, extra figures from identification (theta_std, fits …), kept as written.
-    path : Path or None
-        The file it was read from.
-    loop_delay_ticks : int or None
-        The loop delay of the cart the models describe (ticks), None when unknown.
-    """
+    """The motor models of one cart ('a' and/or 'b'), with provenance, each motor's extra
+    figures as written (``stats``), the file read and the loop delay (ticks, None: unknown)."""
 
     motors: dict[str, ArxModel]
     provenance: Provenance
@@ -126,7 +63,6 @@ class ModelFile:
             ) from None
 
     def __repr__(self) -> str:
-        """A few lines (not the whole provenance and statistics): where from, each motor's θ."""
         where = f" {self.path}" if self.path else ""
         ticks = self.loop_delay_ticks
         delay = "" if ticks is None else f", loop delay {ticks} tick{'s' * (ticks != 1)}"
@@ -141,34 +77,27 @@ class ModelFile:
 
     @property
     def period_s(self) -> float:
-        """The common sample period of the models (s)."""
         return next(iter(self.motors.values())).period_s
 
     def to_toml_dict(self) -> dict[str, Any]:
         """The document written by :func:`save_models`."""
         motors: dict[str, Any] = {}
         for name, m in self.motors.items():
-            entry: dict[str, Any] = {
-                "theta": [float(v) for v in m.theta],
-                "na": m.na,
-                "nb": m.nb,
-                "nk": m.nk,
-            }
-            entry.update(self.stats.get(name, {}))
-            motors[name] = entry
-        doc: dict[str, Any] = {"format": FORMAT, "period_s": self.period_s}
+            motors[name] = {"theta": [float(v) for v in m.theta], "na": m.na, "nb": m.nb,
+                            "nk": m.nk, **self.stats.get(name, {})}  # fmt: skip
+        doc: dict[str, Any] = {"format": MODEL_FORMAT, "period_s": self.period_s}
         if self.loop_delay_ticks is not None:
             doc["loop_delay_ticks"] = int(self.loop_delay_ticks)
         return doc | {"provenance": self.provenance.to_dict(), "motors": motors}
 
 
 MAX_MODEL_ORDER = 50
-"""The largest na, nb and nk a model file may hold: identify fits orders and delays up to 50,
-and a design's state grows with them (nk = 500 kept ``cartctl design`` busy for minutes)."""
+"""The largest na, nb and nk a model file may hold (as identify fits; a design's state grows
+with them)."""
 
 
 def save_models(models: ModelFile, path: str | Path) -> Path:
-    """Write a model file (TOML), creating parent folders. Returns the path written."""
+    """Write a model file (TOML), creating parent folders; returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     header = "# cartctl motor models: theta = [a_1..a_na, b_0..b_nb-1], the report's [c, d, a, b]\n"
@@ -177,16 +106,8 @@ def save_models(models: ModelFile, path: str | Path) -> Path:
 
 
 def load_models(path: str | Path) -> ModelFile:
-    """Read a model file.
-
-    Raises
-    ------
-    MissingFileError
-        The file does not exist.
-    DataFileError
-        The file is not valid TOML or misses a required key; the message names the key.
-    """
-    path = find_file(path)  # the working folder's, else the shipped one
+    """Read a model file (a shipped one if the working folder has none)."""
+    path = find_file(path)
     doc = read_toml(path, "model file")
     try:
         return _parse(doc, path)
@@ -198,7 +119,7 @@ def load_models(path: str | Path) -> ModelFile:
 
 def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
     if "format" in doc:  # a model file may leave it out
-        check_format(doc, path, FORMAT, "model file")
+        check_format(doc, path, MODEL_FORMAT, "model file")
     period_s = float(require(doc, "period_s", (int, float), path, "the top level"))
     loop_delay = None
     if "loop_delay_ticks" in doc:
@@ -215,14 +136,14 @@ def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
         notes=str(prov_tab.get("notes", "")),
     )
     motors_tab = require(doc, "motors", dict, path, "the top level")
-    unknown = sorted(set(motors_tab) - set(MOTORS))
+    unknown = sorted(set(motors_tab) - {"a", "b"})
     if unknown:
         raise DataFileError(path, f"unknown motor(s) {unknown}; motors are 'a' and 'b'")
     if not motors_tab:
         raise DataFileError(path, "[motors] is empty; expected [motors.a] and/or [motors.b]")
     motors: dict[str, ArxModel] = {}
     stats: dict[str, dict[str, Any]] = {}
-    for name in MOTORS:
+    for name in ("a", "b"):
         if name not in motors_tab:
             continue
         entry = motors_tab[name]

@@ -1,15 +1,11 @@
-"""QRoboticsCenter (QRC) GPIO logs: their structure, read into labelled rows of text fields.
+"""QRoboticsCenter (QRC, the course's PC program) GPIO logs read into labels and text fields.
 
-QRC is the course's PC program; its GPIO logs are the data people already have. This module knows
-the two layouts (see docs/serial-protocol.md, section 6) and nothing else: it returns the channel
-labels and each sample's fields as text. :mod:`cartctl.data`, the first stage of the pipeline
-(data → identify → ...), detects the format, converts the fields to numbers, checks them and maps
-the channels onto trace columns.
+- QRC 5, XML: a ``<QGPIORecord>`` root with ``<labels>`` (``time``, 8 float and 4 int labels) and
+  ``<data>`` holding one tab-separated ``<row>`` per sample: time (ms), 8 floats, 4 ints.
+- QRC 6, CSV: line 1 ``QGPIORecord, QRC v<version>, <date @ time>, ...``, line 2
+  ``Time, <12 labels>``, then one ``", "``-separated line per sample: time (ms) and 12 floats.
 
-- QRC 5 (generation A), XML: a ``<QGPIORecord>`` root with ``<labels>`` (``time``, 8 float and 4 int
-  labels) and ``<data>`` holding one tab-separated ``<row>`` per GPIO: time (ms), 8 floats, 4 ints.
-- QRC 6 (generation B), CSV: line 1 ``QGPIORecord, QRC v<version>, <date @ time>, ...``, line 2
-  ``Time, <12 labels>``, then one ``", "``-separated line per GPIOX: time (ms) and 12 floats.
+:mod:`cartctl.data.read` turns the fields into numbers and the channels into trace columns.
 """
 
 from __future__ import annotations
@@ -24,31 +20,16 @@ from cartctl.errors import DataFileError
 QRC5_DEFAULT_LABELS: tuple[str, ...] = tuple(f"FloatIn{k}" for k in range(8)) + tuple(
     f"IntIn{k}" for k in range(4)
 )
-"""The channel labels QRC 5 uses when the user named none (the time column excluded)."""
+"""The channel labels QRC 5 uses when the user named none."""
 
 _RECORD_KIND = re.compile(r"Q\w*Record")
 
 
 @dataclass(frozen=True)
 class QrcLog:
-    """A QRC GPIO log, as text.
-
-    Attributes
-    ----------
-    kind : str
-        ``"QRC 5 XML"`` or ``"QRC 6 CSV"``, for messages.
-    version : str or None
-        The version the log states (QRC 5: the record format; QRC 6: the QRC program).
-    labels : tuple of str
-        The channel labels, in column order, without the time column.
-    rows : list of list of str
-        One entry per sample: the time (ms), then one field per label, still as text.
-    row_lines : list of int or None
-        The 1-based line of each row in the file (QRC 6), or None when rows are counted
-        instead (QRC 5 XML, where ``row 1`` is the first ``<row>`` element).
-    truncated : bool
-        True when the log lacked its closing tags and was read up to its last complete row.
-    """
+    """A QRC GPIO log as text: ``kind`` ("QRC 5 XML" or "QRC 6 CSV"), the channel ``labels``
+    (time excluded), ``rows`` of fields (time in ms first), the 1-based line of each row (None
+    for XML, whose rows are counted) and whether it lacked its closing tags (``truncated``)."""
 
     kind: str
     version: str | None
@@ -59,19 +40,8 @@ class QrcLog:
 
 
 def detect(head: str) -> str | None:
-    """Tell a QRC log from its first characters.
-
-    Parameters
-    ----------
-    head : str
-        The start of the file, with any byte-order mark and leading white space removed.
-
-    Returns
-    -------
-    str or None
-        ``"qrc5"`` for XML, ``"qrc6"`` for a CSV whose first field names a QRC record type
-        (``QGPIORecord``, ``QPositionRecord``, ...), None for anything else.
-    """
+    """``"qrc5"`` for XML, ``"qrc6"`` for a CSV whose first field names a QRC record type, else
+    None, from the start of a file (without byte-order mark and leading white space)."""
     if head.startswith("<"):
         return "qrc5"
     first_field = head.split("\n", 1)[0].split(",", 1)[0].strip()
@@ -81,26 +51,7 @@ def detect(head: str) -> str | None:
 
 
 def read_qrc5(path: Path) -> QrcLog:
-    """Read a QRC 5 XML GPIO log.
-
-    A log whose closing tags are missing (QRC stopped before it closed the file) is read up to
-    its last complete row, and marked ``truncated``.
-
-    Parameters
-    ----------
-    path : Path
-        The ``.xml`` file.
-
-    Returns
-    -------
-    QrcLog
-        Labels and rows as text; ``row_lines`` is None (rows are counted).
-
-    Raises
-    ------
-    DataFileError
-        Not well-formed XML, another record type, or no data rows.
-    """
+    """A QRC 5 XML GPIO log; one QRC did not close is read up to its last complete row."""
     text = _read_text(path)
     truncated = False
     try:
@@ -138,23 +89,7 @@ def _recover_truncated(path: Path, text: str, err: ET.ParseError) -> ET.Element:
 
 
 def read_qrc6(path: Path) -> QrcLog:
-    """Read a QRC 6 CSV GPIO log.
-
-    Parameters
-    ----------
-    path : Path
-        The ``.csv`` file; its first field is ``QGPIORecord``.
-
-    Returns
-    -------
-    QrcLog
-        Labels and rows as text, with the line of each row.
-
-    Raises
-    ------
-    DataFileError
-        Another record type, an early text log, a bad ``Time, ...`` header, or no data rows.
-    """
+    """A QRC 6 CSV GPIO log, with the line of each row."""
     lines = _read_text(path).splitlines() or [""]
     preamble = [field.strip() for field in lines[0].split(",")]
     if preamble[0] != "QGPIORecord":
@@ -199,28 +134,17 @@ def _read_text(path: Path) -> str:
         return raw.decode("latin-1")
 
 
-def column_name(label: str, index: int, kind: str) -> str:
-    """Turn a QRC channel label into a trace column name.
+def column_name(label: str, index: int, kind: str, *, lower: bool = True) -> str:
+    """A QRC channel label as a trace column name: ``"voltage A [V]"`` → ``"voltage_a_v"``.
 
-    Parameters
-    ----------
-    label : str
-        The label as the log gives it (``"speedA"``, ``"FloatIn3"``, ``"voltage A [V]"``).
-    index : int
-        The channel's 0-based position among the labels, used when the label is empty.
-    kind : str
-        The log's :attr:`QrcLog.kind`, which decides the fallback name.
-
-    Returns
-    -------
-    str
-        Lower case, with each run of characters other than letters and digits turned into one
-        ``_`` (``"voltage_a_v"``), and ``ch_`` in front of a leading digit. An empty label gives
-        the QRC 5 default label (``floatin3``) or ``channel<index>``.
+    Runs of other characters than letters and digits become one ``_``, ``ch_`` goes before a
+    leading digit, and an empty label (at ``index``) gives the QRC 5 default label or
+    ``channel<index>``; ``lower=False`` keeps the case (a channel kept as an extra column).
     """
-    name = re.sub(r"[^0-9a-z]+", "_", label.lower()).strip("_")
+    name = re.sub(r"[^0-9A-Za-z]+", "_", label.lower() if lower else label).strip("_")
     if not name:
         if kind.startswith("QRC 5") and index < len(QRC5_DEFAULT_LABELS):
-            return QRC5_DEFAULT_LABELS[index].lower()
+            default = QRC5_DEFAULT_LABELS[index]
+            return default.lower() if lower else default
         return f"channel{index}"
     return f"ch_{name}" if name[0].isdigit() else name

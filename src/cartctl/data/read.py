@@ -1,86 +1,42 @@
-"""Reading experiment traces: trace CSV and QRoboticsCenter logs into a :class:`Trace`.
-
-The first stage of the pipeline (data → identify → models/ → design → controllers/ → runtime →
-logs/). A trace holds, per 10 ms tick k, the voltage *commanded* at tick k (V) and the speed
-*measured* at tick k (rad/s) of both motors (the CSV columns: docs/architecture.md, "Trace columns").
-:func:`read_trace` reads trace CSV files and QRoboticsCenter logs (whose layout
-:mod:`cartctl.data.qrc` parses), optionally mapping QRC labels or foreign CSV headers onto trace
-columns. The file's numbers come from :mod:`cartctl.data.table`, the choice of columns from
-:mod:`cartctl.data.columns`; the checks of what the numbers mean (finite, increasing time, voltages
-within the supply, 10 ms spacing) are here.
+"""Reading experiment traces (trace CSV, QRoboticsCenter logs) into a :class:`Trace`, with the
+checks of what the numbers mean: finite, increasing time, voltages within the supply, 10 ms ticks.
 """
 
 from __future__ import annotations
 
+import csv
 import re
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 
 from cartctl.cart import PERIOD_S, SUPPLY_V
 from cartctl.data.columns import check_mapping, plan_columns
 from cartctl.data.qrc import detect, read_qrc5, read_qrc6
-from cartctl.data.table import (
-    Table,
-    Where,
-    _data_lines,
-    read_csv_header,
-    read_csv_rows,
-    to_floats,
-)
 from cartctl.data.tomlfile import FORMATS
 from cartctl.data.trace import REQUIRED_COLUMNS, Trace
 from cartctl.errors import DataFileError, DataWarning, MissingFileError
 
-__all__ = ["SPACING_TOLERANCE_S", "VOLTAGE_READ_LIMIT_V", "read_trace"]
-
 SPACING_TOLERANCE_S: float = 0.0015
-"""How far a time step may stray from the 10 ms tick (s) before :func:`read_trace` warns.
-
-QRC 5 stamps rows with the cart's millis(), so steps of 9, 10 and 11 ms are normal; a lost frame
-gives about 20 ms."""
+"""How far a time step may stray from the 10 ms tick (s) before :func:`read_trace` warns (QRC 5
+stamps rows with the cart's millis(): 9, 10 and 11 ms are normal, a lost frame gives 20 ms)."""
 
 
 def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Trace:
-    """Read an experiment trace: a trace CSV, a QRC 5 XML log or a QRC 6 CSV log.
+    """Read a trace CSV, a QRC 5 XML log or a QRC 6 CSV log (told by content) as a Trace.
 
-    The format is told from the content: an XML root ``<QGPIORecord>`` is QRC 5, a first line
-    starting with ``QGPIORecord`` is QRC 6, anything else is a trace CSV. QRC times (ms) become
-    seconds from the first row. Time steps that stray from the 10 ms tick by more than
-    :data:`SPACING_TOLERANCE_S` give one :class:`~cartctl.errors.DataWarning` per file.
-
-    Parameters
-    ----------
-    path : str or Path
-        The file.
-    mapping : mapping of str to str, optional
-        Trace column name → QRC label or CSV header name (see :func:`parse_mapping`). Without
-        one, a CSV must have the trace columns, and a QRC log's labels that equal trace
-        column names are used (compared in lower case, with other characters read as ``_``).
-        A ``cartctl monitor`` trace (``time_s, tick`` and its labels) is read by its labels:
-        ``speed_a``, ``speedA`` or ``Speed_A`` is speed_a (see
-        :func:`~cartctl.data.columns.monitor_mapping`). With a mapping, or for any QRC log, a
-        motor whose voltage and speed are both unmapped takes the channels named like the other
-        motor's mapped ones with its own letter (``voltA`` → ``voltB``) when the file has both,
-        else it is filled with zeros; at least one motor must have both. Unmapped channels and
-        columns are kept as extras under their labels, case kept (QRC labels made into names
-        such as ``FloatIn3`` or ``voltage_B_V``), unless their name is taken.
-
-    Returns
-    -------
-    Trace
-        With ``source`` set to ``path``.
-
-    Raises
-    ------
-    MissingFileError
-        No such file.
-    DataFileError
-        Content that is not a trace, naming the file and the line, row or column.
-    InputError
-        A malformed mapping.
+    QRC times (ms) become seconds from the first row; steps off the 10 ms tick by more than
+    :data:`SPACING_TOLERANCE_S` give one :class:`~cartctl.errors.DataWarning`. ``mapping`` is
+    trace column → QRC label or CSV header (:func:`parse_mapping`). Without one, a CSV needs
+    the trace columns, a ``cartctl monitor`` trace is read by its labels (``speedA`` is
+    speed_a) and a QRC log's labels equal to trace column names are used. A motor left
+    unmapped takes the other's counterpart channels (``voltA`` → ``voltB``) or zeros; at least
+    one motor must have both. Other channels are kept as extras under their labels.
     """
     path = Path(path)
     checked = None if mapping is None else check_mapping(mapping)
@@ -123,18 +79,13 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
 
 
 QRC5_FLOATS = 8
-"""A QRC 5 log's float channels come first (after the time), its int channels after them."""
 _INTEGER = re.compile(r"\s*[+-]?\d+\s*\Z")
 
 
 def _integer_text(
     table: Table, plan: Mapping[str, int | None], text: Callable[[], list[list[str]]]
 ) -> set[str]:
-    """The extra columns of whole numbers whose every field is written without '.' or exponent.
-
-    ``text`` gives the rows' fields; it is called only when some extra column holds whole
-    numbers only.
-    """
+    """The extra columns whose every field is an integer's text (``text()`` only when needed)."""
     values = table.values
     whole = {name: j for name, j in plan.items() if j is not None and name not in REQUIRED_COLUMNS
              and np.all(values[:, j] == np.round(values[:, j]))}  # fmt: skip
@@ -170,11 +121,9 @@ def _sniff(path: Path) -> str:
 
 
 _CARTCTL_TOML = re.compile(r'^format = "(cartctl-[a-z-]+/\d+)"', re.MULTILINE)
-"""The format line of a model, controller or trace meta file."""
 
 
 VOLTAGE_READ_LIMIT_V = SUPPLY_V + 0.5
-"""A voltage in data beyond this (V) was never on a motor of the cart (its supply is ±12 V)."""
 
 
 def _check_voltages(table: Table, plan: Mapping[str, int | None]) -> None:
@@ -247,3 +196,127 @@ def _warn_spacing(table: Table, time_s: np.ndarray) -> None:
         DataWarning,
         stacklevel=3,
     )
+
+
+class Where:
+    """Where row i of a file's data is: its line, or its row number when lines are unknown."""
+
+    def __init__(
+        self, path: Path, *, row_lines: list[int] | None = None, header_line: int | None = None
+    ) -> None:
+        self.path = path
+        self.row_lines = row_lines
+        self.header_line = header_line
+
+    def __call__(self, i: int) -> tuple[int | None, str]:
+        if self.row_lines is None and self.header_line is not None:
+            self.row_lines = _data_lines(self.path, self.header_line)[1]
+        if self.row_lines is None:
+            return None, f"row {i + 1}"
+        return self.row_lines[i], f"line {self.row_lines[i]}"
+
+    def error(self, i: int, problem: str, column: str | None = None) -> DataFileError:
+        line, label = self(i)
+        if line is None:
+            problem = f"{label}: {problem}"
+        return DataFileError(self.path, problem, line=line, column=column)
+
+
+@dataclass
+class Table:
+    """Numbers read from a file, before they become trace columns."""
+
+    path: Path
+    names: list[str]  # the file's column names; for QRC, "time" then the channel labels
+    values: np.ndarray  # shape (n, len(names))
+    where: Where
+
+
+def read_csv_header(path: Path) -> tuple[list[str], int]:
+    """The CSV header's names and line; also make sure that data rows follow."""
+    with _open_text(path) as file:
+        number, line = 1, file.readline()
+        while line and not line.strip():
+            number, line = number + 1, file.readline()
+        names = [name.strip() for name in next(csv.reader([line]))]
+        if all(_is_number(name) for name in names):
+            raise DataFileError(
+                path,
+                "no header row: the first row holds numbers; expected column names first, "
+                f"e.g. {','.join(REQUIRED_COLUMNS)}",
+                line=number,
+            )
+        for k, name in enumerate(names):
+            if not name:
+                raise DataFileError(path, f"column {k + 1} of the header has no name", line=number)
+            if names.index(name) != k:
+                raise DataFileError(
+                    path, f"column name {name!r} appears twice; names must be unique", line=number
+                )
+        if not any(line.strip() for line in file):
+            raise DataFileError(path, "no data rows after the header; expected one per 10 ms tick")
+    return names, number
+
+
+def read_csv_rows(path: Path, names: list[str], header_line: int) -> Table:
+    """The numbers after the header: np.loadtxt first, and on failure a scan for the culprit."""
+    with _open_text(path) as file:
+        for _ in range(header_line):
+            file.readline()
+        try:
+            values = np.loadtxt(file, delimiter=",", comments=None, ndmin=2, dtype=np.float64)
+        except ValueError:
+            values = None
+    if values is not None and values.shape[1] == len(names):
+        return Table(path, names, values, Where(path, header_line=header_line))
+    rows, lines = _data_lines(path, header_line)
+    where = Where(path, row_lines=lines)
+    return Table(path, names, to_floats(where, rows, names, f"the header has {len(names)}"), where)
+
+
+def _data_lines(path: Path, header_line: int) -> tuple[list[list[str]], list[int]]:
+    """The non-blank rows after the header (read with :mod:`csv`) and their line numbers."""
+    rows: list[list[str]] = []
+    lines: list[int] = []
+    with _open_text(path) as file:
+        reader = csv.reader(file)
+        for row in reader:
+            if reader.line_num > header_line and any(cell.strip() for cell in row):
+                rows.append(row)
+                lines.append(reader.line_num)
+    return rows, lines
+
+
+@contextmanager
+def _open_text(path: Path) -> Iterator[TextIO]:
+    try:
+        with path.open(encoding="utf-8-sig") as file:
+            yield file
+    except UnicodeDecodeError as err:
+        raise DataFileError(path, f"not UTF-8 text (byte {err.start}); expected CSV") from err
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def to_floats(where: Where, rows: list[list[str]], names: list[str], expected: str) -> np.ndarray:
+    """Convert rows of text fields to an (n, len(names)) array, naming the first bad field."""
+    try:
+        values = np.array(rows, dtype=np.float64)
+    except ValueError:
+        values = None
+    if values is not None and values.ndim == 2 and values.shape[1] == len(names):
+        return values
+    for i, fields in enumerate(rows):
+        if len(fields) != len(names):
+            raise where.error(i, f"{len(fields)} fields, {expected}")
+        for name, text in zip(names, fields, strict=True):
+            if not _is_number(text):
+                value = repr(text.strip()) if text.strip() else "an empty field"
+                raise where.error(i, f"{value} is not a number", column=name)
+    return np.array(rows, dtype=np.float64)

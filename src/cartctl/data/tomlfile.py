@@ -10,31 +10,24 @@ from typing import Any
 from cartctl.errors import DataFileError, MissingFileError
 
 MODEL_FORMAT = "cartctl-model/2"
-"""The ``format`` line a model file is written with (:mod:`cartctl.data.modelfile`)."""
 CONTROLLER_FORMAT = "cartctl-controller/2"
-"""The ``format`` line a controller file is written with (:mod:`cartctl.design.controllerfile`)."""
 TRACE_META_FORMAT = "cartctl-trace-meta/1"
-"""The ``format`` line of a trace's meta file (:mod:`cartctl.data.tracemeta`)."""
 READABLE: dict[str, tuple[str, ...]] = {
     MODEL_FORMAT: ("cartctl-model/1", MODEL_FORMAT),
     CONTROLLER_FORMAT: ("cartctl-controller/1", CONTROLLER_FORMAT),
     TRACE_META_FORMAT: (TRACE_META_FORMAT,),
 }
-"""Every version read, by the format written. Version 2 of model and controller files has version
-1's keys, read the same way; the number says the file's names are those of docs/file-formats.md."""
+"""Every version read, by the format written (version 1 has version 2's keys)."""
 _KINDS = {MODEL_FORMAT: "a model file", CONTROLLER_FORMAT: "a controller file",
           TRACE_META_FORMAT: "a trace meta file"}  # fmt: skip
 FORMATS = {
     version: _KINDS[written] for written, versions in READABLE.items() for version in versions
 }
-"""What each ``format`` line says a file is, for messages about a file given in another's place."""
+"""What each ``format`` line says a file is, for messages."""
 
 
 def read_toml(path: str | Path, what: str) -> dict[str, Any]:
-    """Parse a TOML file; MissingFileError or a DataFileError naming ``what`` the file should be.
-
-    A folder, an empty file and a CSV trace given in a TOML file's place are each named as such.
-    """
+    """Parse a TOML file; a missing file, a folder, an empty file or a CSV is named as such."""
     path = Path(path)
     if path.is_dir():
         raise DataFileError(path, f"is a directory; expected a {what}")
@@ -56,13 +49,8 @@ def read_toml(path: str | Path, what: str) -> dict[str, Any]:
 
 
 def check_format(doc: Mapping[str, Any], path: Path, expected: str, what: str) -> str:
-    """The document's ``format`` line when it is a version of ``expected`` this cartctl reads
-    (:data:`READABLE`); else a DataFileError.
-
-    The message says what the file is instead when its format is a known one (a model given as a
-    controller: ``is a model file, not a controller file``), and lists the versions read when the
-    file is of another version (a newer cartctl's).
-    """
+    """The ``format`` line if it is a version of ``expected`` this cartctl reads, else a
+    DataFileError saying what the file is instead or which versions are read."""
     found = doc.get("format")
     readable = READABLE.get(expected, (expected,))
     if found in readable:

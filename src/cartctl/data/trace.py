@@ -1,10 +1,4 @@
-"""The experiment trace: the :class:`Trace` type, the ``--map`` form and the CSV writer.
-
-A trace holds, per 10 ms tick k, the voltage *commanded* at tick k (V) and the speed *measured*
-at tick k (rad/s) of both motors, and any further columns (the trace columns of
-docs/architecture.md). :mod:`cartctl.data` reads traces (CSV and QRoboticsCenter logs);
-:func:`write_trace` writes a CSV that reads back bit for bit.
-"""
+"""The experiment trace (:class:`Trace`), the ``--map`` form and the CSV writer."""
 
 from __future__ import annotations
 
@@ -23,10 +17,9 @@ from cartctl.errors import InputError
 __all__ = ["MOTORS", "REQUIRED_COLUMNS", "Trace", "parse_mapping", "write_trace"]
 
 REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "voltage_a", "voltage_b", "speed_a", "speed_b")
-"""The columns every trace has, in the order docs/architecture.md gives them."""
+"""The columns every trace has (docs/architecture.md, trace columns)."""
 
 MOTORS: tuple[str, ...] = ("a", "b")
-"""The motor names, as in ``voltage_a`` and ``speed_b``."""
 
 _MAP_FORM = "NAME=LABEL[,NAME=LABEL...], e.g. voltage_a=FloatIn2,speed_a=FloatIn0"
 _WRITE_CHUNK_ROWS = 65536
@@ -34,35 +27,10 @@ _WRITE_CHUNK_ROWS = 65536
 
 @dataclass(frozen=True, eq=False)
 class Trace:
-    """One experiment: per tick, the time, the commanded voltages and the measured speeds.
-
-    Row k holds the voltage commanded at tick k and the speed measured at tick k (the trace
-    columns, docs/architecture.md).
-    All arrays are 1-D float64 copies of equal length, made read-only.
-
-    Attributes
-    ----------
-    time_s : ndarray, shape (n,)
-        Time of each tick (s).
-    voltage_a, voltage_b : ndarray, shape (n,)
-        Voltage commanded at tick k (V); zeros for a motor the experiment did not drive.
-    speed_a, speed_b : ndarray, shape (n,)
-        Wheel speed measured at tick k (rad/s).
-    extra : dict of str to ndarray, shape (n,)
-        Further columns in file order (``true_speed_a``, ``tick``, ``reference_a``, ...).
-    source : str or None
-        The file the trace came from, for messages and provenance.
-    integer_columns : frozenset of str
-        Extra columns the file held as integers (a log's int channels, a tick counter), which
-        :func:`write_trace` writes as such (``100``, not ``100.0``); names not among the extras
-        are dropped.
-
-    Raises
-    ------
-    InputError
-        A column that is not 1-D numbers, columns of unequal length, or an extra column with
-        no name or with a required column's name.
-    """
+    """One experiment: row k holds the time (s), the voltage commanded at tick k (V; zeros for a
+    motor not driven) and the speed measured at tick k (rad/s), and the ``extra`` columns in file
+    order. Every column is a read-only 1-D float64 copy of one length. ``integer_columns``: the
+    extras the file held as integers, which :func:`write_trace` writes as such (``100``)."""
 
     time_s: np.ndarray
     voltage_a: np.ndarray
@@ -103,21 +71,13 @@ class Trace:
         return f"Trace({len(self)} ticks, columns [{names}], source={self.source!r})"
 
     def voltage(self, motor: str) -> np.ndarray:
-        """The voltage commanded to motor ``'a'`` or ``'b'`` at each tick (V), shape (n,)."""
         return getattr(self, f"voltage_{_motor(motor)}")
 
     def speed(self, motor: str) -> np.ndarray:
-        """The speed of motor ``'a'`` or ``'b'`` measured at each tick (rad/s), shape (n,)."""
         return getattr(self, f"speed_{_motor(motor)}")
 
     def column(self, name: str) -> np.ndarray:
-        """A required or extra column by name, shape (n,).
-
-        Raises
-        ------
-        InputError
-            No such column; the message lists the trace's columns.
-        """
+        """A required or extra column by name (InputError listing the columns if none)."""
         columns = self.columns()
         if name not in columns:
             where = f" from {self.source}" if self.source else ""
@@ -130,13 +90,7 @@ class Trace:
 
     @property
     def period_s(self) -> float:
-        """The median time step (s).
-
-        Raises
-        ------
-        InputError
-            Fewer than two ticks.
-        """
+        """The median time step (s); InputError below two ticks."""
         if len(self) < 2:
             raise InputError(f"a trace needs two ticks or more to have a period; has {len(self)}")
         return float(np.median(np.diff(self.time_s)))
@@ -148,29 +102,13 @@ class Trace:
         source: str | None = None,
         integer_columns: Collection[str] = (),
     ) -> Trace:
-        """Build a trace from named columns.
-
-        Parameters
-        ----------
-        columns : mapping of str to array_like, each shape (n,)
-            All of :data:`REQUIRED_COLUMNS`, plus any extras (kept in the mapping's order).
-        source : str, optional
-            Where the columns came from.
-        integer_columns : collection of str
-            Extra columns held as integers (see :class:`Trace`).
-
-        Raises
-        ------
-        InputError
-            A required column is missing, or as for :class:`Trace`.
-        """
+        """A trace from all of :data:`REQUIRED_COLUMNS` and any extras (in the mapping's order)."""
         missing = [name for name in REQUIRED_COLUMNS if name not in columns]
         if missing:
             raise InputError(
                 f"missing required column(s) {', '.join(missing)}; a trace needs "
                 f"{', '.join(REQUIRED_COLUMNS)} (got {', '.join(columns) or 'none'})"
             )
-        # array_like as the fields take it: __post_init__ makes each a float64 array
         given = cast("Mapping[str, np.ndarray]", columns)
         extra = {name: values for name, values in given.items() if name not in REQUIRED_COLUMNS}
         required = {name: given[name] for name in REQUIRED_COLUMNS}
@@ -179,7 +117,6 @@ class Trace:
 
 
 def _as_column(name: str, values: ArrayLike) -> np.ndarray:
-    """Copy one column into a read-only 1-D float64 array."""
     try:
         array = np.array(values, dtype=np.float64)
     except (TypeError, ValueError) as err:
@@ -199,25 +136,10 @@ def _motor(motor: str) -> str:
 
 
 def parse_mapping(text: str) -> dict[str, str]:
-    """Parse a column mapping as given on the command line (``--map``).
+    """A ``--map`` text, ``NAME=LABEL[,...]``, as trace column → QRC label or CSV header.
 
-    Parameters
-    ----------
-    text : str
-        ``NAME=LABEL`` items separated by commas, e.g. ``"voltage_a=FloatIn2,speed_a=FloatIn0"``.
-        NAME is a trace column: a required one, or any identifier for an extra column.
-        LABEL is a QRC channel label or a CSV header name; spaces around items are ignored.
-
-    Returns
-    -------
-    dict of str to str
-        Trace column name → label, in the order given.
-
-    Raises
-    ------
-    InputError
-        An item without ``=``, an empty name or label, a name that is not an identifier or is
-        a near miss of a required column (``speed_A``), or a name given twice.
+    NAME is a required column or any identifier (an extra); a near miss of a required one
+    (``speed_A``), a bad item or a name given twice is an InputError.
     """
     mapping: dict[str, str] = {}
     for item in (part.strip() for part in text.split(",")):
@@ -255,29 +177,11 @@ def _check_name(name: object) -> None:
 def write_trace(
     trace: Trace, path: str | Path, *, integer_columns: Collection[str] | None = None
 ) -> None:
-    """Write a trace as CSV (the trace columns), creating parent directories.
+    """Write a trace as CSV, creating parent folders; it reads back bit for bit.
 
-    The header row names the required columns then the extras; each value is written as the
-    shortest text that reads back to the same float64, so a round trip is bit-exact. Integer
-    columns (``trace.integer_columns`` unless given: a log's int channels, a tick counter) are
-    written without a fraction: ``100``, not ``100.0``.
-
-    Parameters
-    ----------
-    trace : Trace
-        At least one tick, finite values, strictly increasing time: what :func:`read_trace`
-        accepts.
-    path : str or Path
-        The ``.csv`` file to write (overwritten if it exists).
-    integer_columns : collection of str, optional
-        Columns to write as integers, each of whole numbers only; default
-        ``trace.integer_columns``.
-
-    Raises
-    ------
-    InputError
-        An empty trace, a column name that CSV cannot carry, a value that is not finite, time
-        that does not increase, or a fraction in an integer column.
+    Each value is the shortest text of its float64; ``integer_columns`` (default
+    ``trace.integer_columns``) are written without a fraction. What :func:`read_trace` would
+    refuse (no ticks, values not finite, time not increasing) is an InputError here.
     """
     path = Path(path)
     columns = trace.columns()
