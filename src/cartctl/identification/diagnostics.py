@@ -1,10 +1,15 @@
 """The diagnostics of one motor's identification: validation fits, residual tests, θ's
-covariance with the Bode band it implies, and the order table.
+covariance with the Bode bands it implies, and the order table.
 
-Validation data is either an independent experiment (``identify --validate-on FILE``) or the end
-of each estimation experiment (``--split F``: the first fraction F estimates, the rest
-validates). With validation data the reported fits and the residual tests are on it; without, on
-the raw estimation data.
+Validation data is an independent experiment (``--validate-on FILE``) or the end of each
+estimation experiment (``--split F``: the first fraction F estimates); with it the fits and
+residual tests are on it, without on the raw estimation data.
+
+θ's covariance, from the fits' own σ̂ and normal matrix: ARX Σ = σ̂² (ΦᵀΦ)⁻¹ with
+σ̂² = ‖y − Φθ̂‖² / (N − d); OE Σ = σ̂² (JᵀJ)⁻¹, J the simulation's Jacobian at θ̂. The Bode bands
+sample θ ~ N(θ̂, Σ) (seeded) and take, per frequency, the percentiles a normal distribution has
+at ±1σ (15.9, 84.1 %) and ±2σ (2.3, 97.7 %) of the magnitude (dB) and of the phase (deg,
+measured from the nominal model's so no draw jumps a turn).
 """
 
 from __future__ import annotations
@@ -18,32 +23,125 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.errors import InputError
-from cartctl.identification.arx import ArxFit, Segment, prediction_fit, simulation_fit
-from cartctl.identification.bands import BodeBand, bode_band, theta_covariance
+from cartctl.identification.arx import (
+    ArxFit,
+    Segment,
+    as_segments,
+    prediction_fit,
+    simulation_fit,
+    stacked_regression,
+)
+from cartctl.identification.etfe import model_response
+from cartctl.identification.oe import _simulate_with_jacobian
 from cartctl.identification.orders import OrderTable, order_table
 from cartctl.identification.residuals import ResidualTest, prediction_residuals, residual_test
 from cartctl.measures.metrics import finite_or_none
 from cartctl.model import ArxModel
 
-__all__ = ["Diagnostics", "band_frequencies", "diagnose", "on_validation", "split_segments"]
+__all__ = ["BodeBand", "Diagnostics", "bode_band", "diagnose", "on_validation", "split_segments"]
 
 FitT = TypeVar("FitT", bound=ArxFit)
-"""An ARX fit or an output-error one: :func:`on_validation` keeps the kind."""
 
 MIN_PART = 50
 """Fewest samples an estimation or validation part of a split may have."""
+
+DRAWS = 1000
+"""Number of θ draws per band."""
+
+SEED = 0
+"""Seed of the draws: the same data gives the same band."""
+
+_PERCENTILES = (2.275, 15.866, 50.0, 84.134, 97.725)
+
+
+def theta_covariance(
+    fit: ArxFit, segments: Sequence[Segment], start: int | None = None
+) -> NDArray[np.float64]:
+    """Σ of θ̂ from the data the fit saw (``start``: the ARX fit's first row); NaN when singular."""
+    m = fit.model
+    data = as_segments(segments)
+    if fit.method == "oe":
+        parts = [_simulate_with_jacobian(m.theta, u, m.na, m.nb, m.nk) for _, u in data]
+        jac = np.concatenate([j for _, j in parts])
+        err = np.concatenate([y - y_hat for (y, _), (y_hat, _) in zip(data, parts, strict=True)])
+    else:
+        jac, target = stacked_regression(data, m.na, m.nb, m.nk, start)
+        err = target - jac @ m.theta
+    n, d = jac.shape
+    sigma2 = float(err @ err) / max(n - d, 1)
+    r = np.linalg.qr(jac, mode="r")
+    try:
+        r_inv = np.linalg.solve(r, np.eye(d))
+    except np.linalg.LinAlgError:
+        return np.full((d, d), np.nan)
+    return sigma2 * (r_inv @ r_inv.T)
+
+
+@dataclass(frozen=True)
+class BodeBand:
+    """A model's Bode plot (dB re 1 rad/s/V, phase in deg unwrapped from low frequency) with the
+    edges of its 1σ (row 0) and 2σ (row 1) bands, at ``freq_hz`` (Hz)."""
+
+    freq_hz: NDArray[np.float64]
+    mag_db: NDArray[np.float64]
+    phase_deg: NDArray[np.float64]
+    mag_db_lo: NDArray[np.float64]
+    mag_db_hi: NDArray[np.float64]
+    phase_deg_lo: NDArray[np.float64]
+    phase_deg_hi: NDArray[np.float64]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "method": f"sampling, {DRAWS} draws of θ ~ N(θ̂, Σ), seed {SEED}",
+            "freq_hz": self.freq_hz.tolist(),
+            "mag_db": self.mag_db.tolist(),
+            "mag_db_1sigma": [self.mag_db_lo[0].tolist(), self.mag_db_hi[0].tolist()],
+            "mag_db_2sigma": [self.mag_db_lo[1].tolist(), self.mag_db_hi[1].tolist()],
+            "phase_deg": self.phase_deg.tolist(),
+            "phase_deg_1sigma": [self.phase_deg_lo[0].tolist(), self.phase_deg_hi[0].tolist()],
+            "phase_deg_2sigma": [self.phase_deg_lo[1].tolist(), self.phase_deg_hi[1].tolist()],
+        }
+
+
+def bode_band(
+    model: ArxModel, cov: NDArray[np.float64], freq_hz: NDArray[np.float64]
+) -> BodeBand | None:
+    """The 1σ and 2σ Bode bands of ``model`` from θ's covariance; None when it is not finite."""
+    f = np.asarray(freq_hz, dtype=float)
+    if not np.all(np.isfinite(cov)):
+        return None
+    rng = np.random.default_rng(SEED)
+    thetas = rng.multivariate_normal(model.theta, cov, size=DRAWS, method="eigh")
+    z = np.exp(2j * np.pi * f * model.period_s)
+    h0 = model_response(model, f)
+    na = model.na
+    # H = z^-nk B(z^-1) / A(z^-1): evaluate in powers of z^-1 for every draw at once
+    zi = 1.0 / z
+    a_pow = zi[None, :] ** np.arange(1, na + 1)[:, None]  # (na, m)
+    b_pow = zi[None, :] ** (model.nk + np.arange(model.nb))[:, None]  # (nb, m)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h = (thetas[:, na:] @ b_pow) / (1.0 + thetas[:, :na] @ a_pow)
+        mag = 20.0 * np.log10(np.abs(h))
+        dphase = np.degrees(np.angle(h / h0[None, :]))
+    phase0 = np.degrees(np.unwrap(np.angle(h0)))
+    mag_p = np.nanpercentile(mag, _PERCENTILES, axis=0)
+    ph_p = np.nanpercentile(dphase, _PERCENTILES, axis=0) + phase0[None, :]
+    return BodeBand(
+        freq_hz=f,
+        mag_db=20.0 * np.log10(np.abs(h0)),
+        phase_deg=phase0,
+        mag_db_lo=mag_p[[1, 0]],
+        mag_db_hi=mag_p[[3, 4]],
+        phase_deg_lo=ph_p[[1, 0]],
+        phase_deg_hi=ph_p[[3, 4]],
+    )
 
 
 def split_segments(
     segments: Sequence[Segment], fraction: float
 ) -> tuple[list[Segment], list[Segment]]:
-    """Split each experiment: the first ``fraction`` of its samples estimate, the rest validate.
-
-    Raises
-    ------
-    InputError
-        ``fraction`` outside (0, 1), or a part shorter than :data:`MIN_PART` samples.
-    """
+    """Split each experiment: the first ``fraction`` of its samples estimate, the rest validate
+    (each part at least :data:`MIN_PART` samples)."""
     if not 0.0 < fraction < 1.0:
         raise InputError(f"--split must be a fraction between 0 and 1 (e.g. 0.7), got {fraction:g}")
     est: list[Segment] = []
@@ -71,32 +169,12 @@ def on_validation(fit: FitT, validation: Sequence[Segment]) -> FitT:
     )
 
 
-def band_frequencies(period_s: float, count: int = 60) -> NDArray[np.float64]:
-    """Logarithmically spaced frequencies from 1/5000 of Nyquist to just below it (Hz)."""
-    nyquist = 0.5 / period_s
-    return np.geomspace(nyquist / 5000.0, 0.999 * nyquist, count)
-
-
 @dataclass(frozen=True)
 class Diagnostics:
-    """What the diagnostics found for one motor.
-
-    Attributes
-    ----------
-    fit_on : {'validation', 'estimation'}
-        Which data the fits and residual tests are on.
-    residuals : ResidualTest
-        Of the chosen model.
-    theta_cov : ndarray, shape (d, d)
-        Σ of the chosen model's θ.
-    band : BodeBand or None
-        The chosen model's Bode plot with 1σ/2σ bands (None for a singular Σ).
-    orders : OrderTable or None
-        With ``--orders``.
-    raw, validation : list of (y, u)
-        The raw estimation data and the validation data (empty without), for fits of other
-        models on the same data.
-    """
+    """What the diagnostics found for one motor: which data the fits and residual tests are on
+    ('validation' or 'estimation'), the chosen model's residual tests, Σ of its θ and Bode band
+    (None for a singular Σ), the order table (with ``--orders``), and the raw estimation and
+    validation data (empty without) for fits of other models on the same data."""
 
     fit_on: str
     residuals: ResidualTest
@@ -106,13 +184,9 @@ class Diagnostics:
     raw: list[Segment]
     validation: list[Segment]
 
-    def fit_data(self) -> list[Segment]:
-        """The data fits are reported on."""
-        return self.validation or self.raw
-
     def compared_fits(self, models: Mapping[str, ArxModel]) -> dict[str, dict[str, Any]]:
         """Fits (%) and DC gain of other models (``--compare``) on the same data as the fits."""
-        data = self.fit_data()
+        data = self.validation or self.raw
         out = {}
         for label, model in models.items():
             out[label] = {
@@ -125,7 +199,6 @@ class Diagnostics:
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        """Keys added to a motor's ``identify --json`` entry."""
         out: dict[str, Any] = {
             "fit_data": self.fit_on,
             "residuals": self.residuals.to_dict(),
@@ -148,25 +221,10 @@ def diagnose(
     orders_grid: dict[str, tuple[int, ...]] | None = None,
     order_data: Sequence[Segment] | None = None,
 ) -> Diagnostics:
-    """Residual tests, Σ with its Bode band and, if asked for, the order table of one motor.
-
-    Parameters
-    ----------
-    chosen : ArxFit
-        The model the user asked for.
-    fitted : sequence of (y, u)
-        The data it was fitted on (for Σ); ``start`` its first regression row (ARX).
-    raw : sequence of (y, u)
-        Raw estimation data.
-    validation : sequence of (y, u)
-        Validation data, possibly empty.
-    period_s : float
-        Sample period (s).
-    orders_grid : dict, optional
-        The ``--orders`` grid.
-    order_data : sequence of (y, u), optional
-        Data for the order table's fits (default ``fitted``).
-    """
+    """Residual tests, Σ with its Bode band and, with ``orders_grid``, the order table of one
+    motor's ``chosen`` fit, made on ``fitted`` (from regression row ``start``, ARX). The order
+    table is fitted on ``order_data`` (default ``fitted``); the band spans 1/5000 of Nyquist to
+    just below it."""
     data = list(validation) or list(raw)
     y_all = np.concatenate([np.asarray(y, dtype=float) for y, _ in data])
     residuals = residual_test(
@@ -174,7 +232,8 @@ def diagnose(
         output_rms=float(np.sqrt(np.mean(y_all**2))),
     )
     cov = theta_covariance(chosen, fitted, start if chosen.method == "arx" else None)
-    band = bode_band(chosen.model, cov, band_frequencies(period_s))
+    nyquist = 0.5 / period_s
+    band = bode_band(chosen.model, cov, np.geomspace(nyquist / 5000.0, 0.999 * nyquist, 60))
     orders = None
     if orders_grid is not None:
         orders = order_table(

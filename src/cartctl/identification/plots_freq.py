@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
     from matplotlib.typing import RcKeyType
 
-    from cartctl.identification.bands import BodeBand
+    from cartctl.identification.diagnostics import BodeBand
 
 __all__ = ["DPI", "color", "figure", "plot_etfe", "plot_pzmap", "save"]
 
@@ -77,7 +77,7 @@ def plot_etfe(
     Magnitude (dB re 1 rad/s per V) above, phase (deg) below, on a log frequency axis up to the
     Nyquist frequency. Model phases are unwrapped from low frequency; each ETFE phase is moved by
     whole turns to the first model's branch (or unwrapped, without models). ``band`` shades the
-    first model's 1σ and 2σ bands (:mod:`~cartctl.identification.bands`).
+    first model's 1σ and 2σ bands (:class:`~cartctl.identification.diagnostics.BodeBand`).
     """
     from matplotlib.ticker import FuncFormatter, LogLocator, MultipleLocator, NullFormatter
 

@@ -1,33 +1,21 @@
 """Residual tests of an identified model, as MATLAB's ``resid``: whiteness and independence.
 
-The one-step prediction residuals ε(k) = y(k) − ŷ(k | k−1) of a good model are white (nothing
-left to predict from past outputs) and independent of past inputs (nothing left to explain by
-the input). For the ARX structure the predictor is φ(k)ᵀθ, so ε is the equation error; an
-output-error model's noise model is 1, so its predictor is the simulation from rest and ε is the
-simulation error.
-
-Estimates, per experiment with its mean removed and summed over experiments (N samples in all):
+The one-step prediction residuals ε(k) = y(k) − ŷ(k | k−1) of a good model are white and
+independent of past inputs. For ARX the predictor is φ(k)ᵀθ (ε is the equation error); an
+output-error model's noise model is 1, so its predictor is the simulation and ε its error.
+Per experiment with its mean removed, summed over experiments (N samples in all):
 
     r_ε(τ)  = Σ ε(k) ε(k+τ) / Σ ε(k)²,                        τ = 1 … M
     r_εu(τ) = Σ ε(k+τ) u(k) / √(Σ ε(k)² Σ u(k)²),              τ = −M … M
 
-A positive τ pairs the residual with an earlier input (what the model failed to explain); a
-negative τ pairs it with a later input (feedback). The 99 % bound of r_ε for white ε is
-2.58 / √N. The bound of r_εu is Ljung's, which accounts for the input's own correlation r_u:
-under independence √N r_εu(τ) is asymptotically N(0, P), P = Σ_{|τ| ≤ M} r_ε(τ) r_u(τ), so the
-bound is 2.58 √(P / N) (with white ε, P = 1 and both bounds agree).
+τ > 0 pairs the residual with an earlier input (unexplained), τ < 0 with a later one (feedback).
+The 99 % bound of r_ε is 2.58 / √N. That of r_εu is Ljung's, 2.58 √(P / N) with
+P = Σ_{|τ| ≤ M} r_ε(τ) r_u(τ); this truncated estimate can come out near zero or negative (a
+prefiltered or periodic input, a residual oscillating near Nyquist) and collapse the bound, so
+2.58 √(max(P, 1) / N) is used: never narrower than a white residual's.
 
-P is estimated from M lags of two estimated correlations, and that truncated sum is not
-guaranteed positive: when the residual's spectrum and the input's barely overlap (a prefiltered
-input, a periodic one, a residual oscillating near Nyquist) it comes out near zero or negative,
-the bound collapses to ±0.000 and every lag counts as "outside". The bound used is therefore
-2.58 √(max(P, 1) / N): never narrower than the white-residual bound 2.58 / √N, the value P takes
-when ε is white, so a lag is called correlated only against at least the bound a white residual
-would get.
-
-A test passes when no more lags fall outside the bounds than a white, independent residual
-would exceed with 5 % probability, treating the L lags as L independent 1 % chances
-(binomial): at most 1 of 25 lags, at most 2 of 51.
+A test passes when no more lags are outside than a white, independent residual exceeds with 5 %
+probability, the L lags taken as L independent 1 % chances (binomial): 1 of 25, 2 of 51.
 """
 
 from __future__ import annotations
@@ -42,9 +30,8 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from cartctl.errors import InputError
-from cartctl.identification.arx import Segment, as_segments, first_row, stacked_regression
-from cartctl.identification.plots_freq import figure as _figure
-from cartctl.identification.plots_freq import save as _save
+from cartctl.identification.arx import Checked, Segment, as_segments, first_row, stacked_regression
+from cartctl.identification.plots_freq import figure, save
 from cartctl.model import ArxModel
 
 __all__ = ["Z_99", "ResidualTest", "plot_residuals", "prediction_residuals", "residual_test"]
@@ -61,23 +48,11 @@ FALSE_ALARM = 0.05
 
 def prediction_residuals(
     model: ArxModel, segments: Sequence[Segment], method: str = "arx"
-) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+) -> list[Checked]:
     """One-step prediction residuals ε (rad/s) and the matching inputs u (V), per experiment.
 
-    Parameters
-    ----------
-    model : ArxModel
-        The identified model.
-    segments : sequence of (y, u)
-        Experiments (rad/s, V), raw.
-    method : {'arx', 'oe'}
-        'arx': ε(k) = y(k) − φ(k)ᵀθ for k from the first row with all regressors in the data;
-        'oe': ε = y − (simulation from rest), all samples.
-
-    Returns
-    -------
-    list of (ε, u)
-        Per experiment; experiments too short for one regression row are left out.
+    'arx': ε(k) = y(k) − φ(k)ᵀθ from the first row with all regressors inside (shorter
+    experiments are left out); 'oe': ε = y − the simulation from rest, all samples.
     """
     out = []
     for y, u in as_segments(segments):
@@ -94,32 +69,11 @@ def prediction_residuals(
 
 @dataclass(frozen=True)
 class ResidualTest:
-    """Auto- and cross-correlation of the residuals with their 99 % bounds and verdicts.
+    """r_ε at lags 1 … M and r_εu at −M … M with their 99 % bounds (module docstring).
 
-    Attributes
-    ----------
-    auto_lags : ndarray of int, shape (M,)
-        1 … M.
-    auto : ndarray, shape (M,)
-        r_ε(τ).
-    cross_lags : ndarray of int, shape (2M + 1,)
-        −M … M.
-    cross : ndarray, shape (2M + 1,)
-        r_εu(τ).
-    bound_99 : float
-        2.58 / √N, the whiteness bound.
-    cross_bound_99 : float
-        2.58 √(max(P, 1) / N), the independence bound (never below ``bound_99``).
-    cross_variance : float
-        P = Σ r_ε(τ) r_u(τ) as estimated, before the floor (it may be ≤ 0).
-    n_samples : int
-        N.
-    auto_allowed, cross_allowed : int
-        Most lags outside the bounds that still pass.
-    rms_rad_s : float
-        RMS of the residuals (after their mean is removed).
-    negligible : bool
-        Residuals below 1e-6 of the output's RMS: rounding, about which the tests say nothing.
+    ``cross_variance`` is P as estimated, before the floor; ``*_allowed`` the most lags outside
+    that still pass; ``rms_rad_s`` the residuals' RMS; ``negligible`` residuals below 1e-6 of
+    the output's RMS (rounding, about which the tests say nothing).
     """
 
     auto_lags: NDArray[np.int_]
@@ -152,7 +106,6 @@ class ResidualTest:
         return self.cross_outside <= self.cross_allowed
 
     def to_dict(self) -> dict[str, Any]:
-        """The ``residuals`` entry of ``identify --json``."""
         return {
             "auto_outside": self.auto_outside,
             "auto_lags": int(self.auto_lags.size),
@@ -193,7 +146,7 @@ class ResidualTest:
 
 
 def _lagged_sum(a: NDArray[np.float64], b: NDArray[np.float64], lag: int) -> float:
-    """Σ_k a(k + lag) b(k) over the samples where both exist (einsum: no BLAS threads)."""
+    """Σ_k a(k + lag) b(k) where both exist (einsum: no BLAS threads)."""
     n = a.size
     if abs(lag) >= n:
         return 0.0
@@ -202,9 +155,7 @@ def _lagged_sum(a: NDArray[np.float64], b: NDArray[np.float64], lag: int) -> flo
     return float(np.einsum("i,i->", a[: n + lag], b[-lag:]))
 
 
-def _correlation(
-    pairs: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]], lags: NDArray[np.int_]
-) -> NDArray[np.float64]:
+def _correlation(pairs: Sequence[Checked], lags: NDArray[np.int_]) -> NDArray[np.float64]:
     """Σ over experiments of Σ_k a(k+τ) b(k), normalised by √(Σ a² Σ b²)."""
     num = np.array([sum(_lagged_sum(a, b, int(t)) for a, b in pairs) for t in lags])
     energy_a = sum(float(np.einsum("i,i->", a, a)) for a, _ in pairs)
@@ -215,29 +166,14 @@ def _correlation(
 
 
 def residual_test(
-    residuals: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    residuals: Sequence[Checked],
     max_lags: int = MAX_LAGS,
     output_rms: float | None = None,
 ) -> ResidualTest:
-    """Whiteness and independence tests of residuals (see the module's docstring for the maths).
+    """Whiteness and independence tests of (ε, u) per experiment (:func:`prediction_residuals`).
 
-    Parameters
-    ----------
-    residuals : sequence of (ε, u)
-        Residuals (rad/s) and inputs (V) per experiment (:func:`prediction_residuals`).
-    max_lags : int
-        M; lowered to a quarter of the samples for short data.
-    output_rms : float, optional
-        RMS of the measured output (rad/s): residuals below 1e-6 of it are marked negligible.
-
-    Returns
-    -------
-    ResidualTest
-
-    Raises
-    ------
-    InputError
-        Fewer than 20 residual samples.
+    M = ``max_lags``, lowered to a quarter of the samples for short data; residuals below 1e-6
+    of ``output_rms`` (rad/s) are marked negligible. Refuses fewer than 20 samples.
     """
     centred = [(e - e.mean(), u - u.mean()) for e, u in residuals if e.size]
     n = sum(e.size for e, _ in centred)
@@ -269,22 +205,9 @@ def residual_test(
 
 
 def plot_residuals(test: ResidualTest, path: Path, *, title: str) -> Path:
-    """Autocorrelation (above) and cross-correlation with the input (below), 99 % bounds shaded.
-
-    Parameters
-    ----------
-    test : ResidualTest
-    path : Path
-        PNG file to write.
-    title : str
-        Figure title.
-
-    Returns
-    -------
-    Path
-        ``path``.
-    """
-    with _figure(9.0, 6.2) as fig:
+    """Autocorrelation above, cross-correlation with the input below, 99 % bounds shaded;
+    returns ``path``."""
+    with figure(9.0, 6.2) as fig:
         ax_a, ax_c = fig.subplots(2, 1)
         panels = (
             (ax_a, test.auto_lags, test.auto, test.bound_99, test.white, "white",
@@ -314,4 +237,4 @@ def plot_residuals(test: ResidualTest, path: Path, *, title: str) -> Path:
         if test.negligible:
             title += "\nresiduals at rounding level (RMS below 1e-6 of the output's): no test"
         fig.suptitle(title)
-        return _save(fig, path)
+        return save(fig, path)
