@@ -28,7 +28,6 @@ from typing import Any
 
 import numpy as np
 
-from cartctl.cart import encoder_quantum_rad_s
 from cartctl.commission import StageError
 from cartctl.commission.timing import LATER_FRACTIONS, later_command
 from cartctl.data.modelfile import ModelFile, load_models
@@ -38,7 +37,6 @@ from cartctl.tune import engine
 from cartctl.tune import grid as tuning
 from cartctl.tune import robust as robustness
 from cartctl.tune import robust_choice as choice
-from cartctl.tune.batch import ArxBatch, simulate_batch
 from cartctl.tune.uncertainty import PlantSample, sample_plants
 
 METHOD = "poles"
@@ -60,8 +58,6 @@ DESIGN_FIXED = {"process_noise_std_v": 0.05, "bias_drift_std_v": 0.06}
 timing noise, which the batch loop of the sampled plants cannot run)."""
 REFERENCE = "step:10"
 DURATION_S = 1.0
-_KEYS = {"overshoot_percent": "overshoot_percent", "settling_time_s": "settling_time_s",
-         "rms_error": "rms_error", "peak_voltage_v": "max_abs_voltage"}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -85,42 +81,18 @@ class CommissionJob:
     fractions: tuple[float, ...] = LATER_FRACTIONS
 
 
-def _timing_entry(job: CommissionJob, models: ModelFile, fraction: float,
-                  nominal: engine.Nominal) -> dict[str, Any]:  # fmt: skip
-    """One timing plant's real-loop run, as ``tune --robust``'s physics entries."""
-    plant = ArxPlant(*(later_command(models.motor(m), fraction) for m in ("a", "b")))
-    summary, failure = engine.simulate(plant, nominal.controllers, nominal.references,
-                                       period_s=nominal.period_s,
-                                       voltage_limit_v=nominal.voltage_limit_v)  # fmt: skip
-    worst = (
-        tuning.worst_metrics(summary["motors"]) if not failure else dict.fromkeys(_KEYS.values())
-    )
-    settled = not failure and all(m.get("settling_time_s") is not None
-                                  for m in summary["motors"].values())  # fmt: skip
-    return {"later_ms": round(fraction * models.period_s * 1e3, 3),
-            **{k: worst[v] for k, v in _KEYS.items()}, "failure": failure,
-            "motors": summary["motors"], "settled": settled}  # fmt: skip
-
-
 def evaluate(job: CommissionJob, models: ModelFile, index: int,
              settings: dict[str, float]) -> robustness.RobustRow:  # fmt: skip
     """One setting on the nominal model, the sampled plants and the timing plants."""
     nominal = engine.evaluate_nominal(job.tune, models, index, settings)
     if not nominal.result.feasible:
         return robustness.RobustRow(nominal.result)
-    floor = encoder_quantum_rad_s(nominal.period_s)
-    per_motor, diverged = [], np.zeros(job.sample.size + 1, dtype=bool)
-    for m in ("a", "b"):
-        s = job.sample.motors[m]
-        plants = ArxBatch.from_models(
-            [models.motor(m)] + [s.model(i, models.period_s) for i in range(job.sample.size)]
-        )
-        trace = simulate_batch(nominal.controllers[m], plants, nominal.references[m],
-                               voltage_limit_v=nominal.voltage_limit_v)  # fmt: skip
-        per_motor.append(robustness.step_metrics(trace, floor))
-        diverged |= trace.diverged
-    figures = {k: nominal.result.worst[v] for k, v in _KEYS.items()}
-    timing = [_timing_entry(job, models, f, nominal) for f in job.fractions]
+    per_motor, diverged = robustness.sampled_metrics(nominal, models, job.sample, 0)
+    figures = {k: nominal.result.worst[v] for k, v in robustness.SUMMARY_KEYS.items()}
+    timing = [{"later_ms": round(f * models.period_s * 1e3, 3),
+               **robustness.loop_entry(ArxPlant(*(later_command(models.motor(m), f) for m in "ab")),
+                                       nominal, nominal.references)}
+              for f in job.fractions]  # fmt: skip
     score = robustness.score_plants(per_motor, diverged, figures, {}, timing)
     return robustness.RobustRow(nominal.result, score)
 
@@ -251,9 +223,9 @@ def row_summary(row: robustness.RobustRow) -> dict[str, Any]:
     out: dict[str, Any] = {"index": row.index, "settings": dict(row.result.settings),
                            "status": row.result.status}  # fmt: skip
     if row.score is not None:
-        out |= {"nominal": {k: row.score.figures[k]["nominal"] for k in _KEYS},
-                "worst": {k: row.score.figures[k]["worst"] for k in _KEYS},
-                "timing": [{k: e[k] for k in ("later_ms", *_KEYS, "settled")}
+        out |= {"nominal": {k: row.score.figures[k]["nominal"] for k in robustness.SUMMARY_KEYS},
+                "worst": {k: row.score.figures[k]["worst"] for k in robustness.SUMMARY_KEYS},
+                "timing": [{k: e[k] for k in ("later_ms", *robustness.SUMMARY_KEYS, "settled")}
                            for e in row.score.actuation],
                 "pareto": row.pareto}  # fmt: skip
     return replace_none(out)
