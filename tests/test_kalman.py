@@ -152,8 +152,8 @@ def test_shipped_time_varying_estimators_match_filterpy(name: str) -> None:
     from filterpy.kalman import KalmanFilter
 
     from cartctl.design.build import build_controllers
+    from cartctl.design.controller_ss import kalman_from_entry
     from cartctl.design.controllerfile import load_controller
-    from cartctl.design.entries import kalman_from_entry
 
     controller = load_controller(ROOT / "controllers" / name)
     assert "estimator_gain" not in controller.request

@@ -1,10 +1,8 @@
 """From designs to controller-file entries, and from controller files to runtime controllers.
 
 A ``[motors.X]`` entry holds the result itself (gains, estimator matrices), so the loop runs
-exactly what was designed without re-designing: :func:`build_controllers` reads the numbers back.
-It also holds the controller's transfer function C(z) (``controller_num``/``controller_den``,
-descending powers of z) for independent checks; :func:`consistency_problems` checks that the two
-agree, so a hand-edited file cannot say one controller and run another.
+exactly what was designed, and C(z) (``controller_num``/``controller_den``) for independent
+checks, which loading compares with the gains.
 """
 
 from __future__ import annotations
@@ -16,8 +14,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.cart import check_voltage_limit
+from cartctl.design.controller_ss import feedback_gains, kalman_from_entry
 from cartctl.design.controllerfile import ControllerFile
-from cartctl.design.entries import feedback_gains, kalman_from_entry
 from cartctl.design.kalman import KalmanDesign
 from cartctl.design.pi import PiDesign
 from cartctl.design.poles import PolesDesign
@@ -29,11 +27,8 @@ from cartctl.runtime.statefeedback import StateFeedbackController
 
 
 def kalman_entry(design: KalmanDesign) -> dict[str, Any]:
-    """The estimator's matrices and noise levels, as stored in a controller file.
-
-    ``timing_noise_std_ticks`` only when it is not 0, so a design without it writes the same
-    file as before it existed (and a file without it loads with 0).
-    """
+    """The estimator's matrices and noise levels, as a file stores them;
+    ``timing_noise_std_ticks`` only when not 0 (files from before it stay the same)."""
     entry = {f.name: getattr(design, f.name) for f in fields(design)}
     if not entry["timing_noise_std_ticks"]:
         del entry["timing_noise_std_ticks"]
@@ -60,11 +55,8 @@ def poles_entry(
     controller_num: NDArray[np.float64] | None = None,
     controller_den: NDArray[np.float64] | None = None,
 ) -> dict[str, Any]:
-    """A pole-placement design's ``[motors.X]`` entry.
-
-    ``controller_num``/``controller_den`` are the feedback C(z) of
-    :func:`cartctl.design.controller_ss.feedback_tf_coeffs` (computed here when not given).
-    """
+    """A pole-placement design's ``[motors.X]`` entry, with its feedback C(z) (computed when
+    not given)."""
     if controller_num is None or controller_den is None:
         from cartctl.design.controller_ss import feedback_tf_coeffs
 
@@ -81,12 +73,9 @@ def poles_entry(
 
 
 def make_estimator(design: KalmanDesign) -> KalmanSpeedEstimator | SteadyStateSpeedEstimator:
-    """The runtime estimator of a design: the fixed steady-state gain L, or, with timing noise
-    (``timing_noise_std_ticks`` > 0), the filter whose gain moves at every change of the command.
-
-    A design's P is the stationary covariance, so without timing noise the gain is L at every
-    tick. A controller file's ``estimator_gain`` key (written by older versions) is ignored.
-    """
+    """The runtime estimator of a design: the fixed steady-state gain L (a design's P is
+    stationary), or, with timing noise, the filter whose gain moves at every command change. A
+    file's ``estimator_gain`` key (older versions) is ignored."""
     if design.timing_noise_std_ticks > 0.0:
         return KalmanSpeedEstimator(design)
     return SteadyStateSpeedEstimator(design)
@@ -95,14 +84,8 @@ def make_estimator(design: KalmanDesign) -> KalmanSpeedEstimator | SteadyStateSp
 def build_controllers(
     controller: ControllerFile, *, voltage_limit_v: float | None = None
 ) -> dict[str, Controller]:
-    """The runtime controller of each motor in a controller file.
-
-    Parameters
-    ----------
-    controller : ControllerFile
-    voltage_limit_v : float, optional
-        The command limit (V) the controllers, their anti-windup and their estimators work with:
-        at most the file's ``voltage_limit_v`` (the default).
+    """The runtime controller of each motor in a controller file, limited to ``voltage_limit_v``
+    (V; at most, and by default, the file's).
 
     Raises
     ------
@@ -134,12 +117,9 @@ def build_controllers(
                     estimator=make_estimator(gains.estimator),
                     voltage_limit_v=limit,
                 )
-        except KeyError as exc:
+        except (KeyError, TypeError, ValueError) as exc:
+            why = f" misses {exc.args[0]}" if isinstance(exc, KeyError) else f": {exc}"
             raise DataFileError(
-                controller.path or "controller file", f"[motors.{motor}] misses {exc.args[0]}"
-            ) from None
-        except (TypeError, ValueError) as exc:
-            raise DataFileError(
-                controller.path or "controller file", f"[motors.{motor}]: {exc}"
+                controller.path or "controller file", f"[motors.{motor}]{why}"
             ) from None
     return out

@@ -1,71 +1,137 @@
-"""A controller as the loop runs it, as one linear state-space system from (r, y) to u.
+"""A controller file's ``[motors.X]`` entry read back, and the controller as the loop runs it:
+one linear state-space system from (r, y) to u.
 
-Where it sits: between a controller (a fresh design, or a file's ``[motors.X]`` entry) and what
-needs it whole: the pole-placement ``controller_num``/``controller_den`` of its files and its
-margins (:func:`feedback_tf_coeffs`), the check that a file's stored C(z) agrees with its gains
-(:func:`consistency_problems`), the loop broken at the plant input
-(:mod:`cartctl.design.sensitivity`) and ``cartctl export --mat`` (:mod:`cartctl.export.mat`).
-The one place the controller is built as an LTI system. Pure: no I/O.
+Reading back: :func:`kalman_from_entry` (an estimator whose arrays fit together and whose error
+decays) and :func:`feedback_gains`. The LTI form (the one place it is built) serves the
+pole-placement ``controller_num``/``controller_den`` and margins (:func:`feedback_tf_coeffs`),
+the check that a file's stored C(z) agrees with its gains (:func:`consistency_problems`), the
+loop analysis (:mod:`cartctl.design.loop_report`) and ``export --mat``.
 
-Unsaturated and with the estimator's steady-state gain L (the gain the time-varying filter of the
-designs starts at and keeps), every controller of cartctl is linear time-invariant::
+Unsaturated and with the estimator's steady-state gain L, every controller of cartctl is LTI::
 
     s[k+1] = A s[k] + B [r[k], y[k]]ᵀ,     u[k] = C s[k] + D [r[k], y[k]]ᵀ
 
-with r the speed reference (rad/s), y the measured speed (rad/s), u the voltage (V). The states,
-in the tick order of :mod:`cartctl.runtime.base` (correct, compute u, predict):
+r the speed reference (rad/s), y the measured speed (rad/s), u the voltage (V). The states, in
+the tick order of :mod:`cartctl.runtime.base` (correct, compute u, predict):
 
 - PI on the measurement: s = [I[k−1]], the integral term (V): I[k] = I[k−1] + Ki·Ts·e[k],
-  u[k] = Kp·e[k] + I[k], e = r − y (:mod:`cartctl.runtime.pi`).
-- PI on the Kalman estimate: s = [x̂[k|k−1] (m states), I[k−1]]; the PI's e = r − x̂_1[k|k], with
+  u[k] = Kp·e[k] + I[k], e = r − y.
+- PI on the Kalman estimate: s = [x̂[k|k−1] (m states), I[k−1]]; e = r − x̂_1[k|k], with
   x̂[k|k] = x̂ + L (y − C x̂), and the estimator predicts with u.
 - Pole placement: s = [x̂[k|k−1] (m states), x_i]; u = Kr·r − K·x̂[k|k] − Ki·x_i, x_i⁺ = x_i +
-  Ts (r − y) (:mod:`cartctl.runtime.statefeedback`). Without Ki (integral action from the
-  disturbance estimate) x_i does not reach u and is left out.
+  Ts (r − y); without Ki (integral action from the disturbance estimate) x_i is left out.
 
 The feedback part C_fb(z) = −U(z)/Y(z) (r = 0) closes the loop as L = C_fb·G·z^(−extra) with
-negative feedback; for the PI on the measurement it is the PI's C(z) = Kp + Ki·Ts·z/(z − 1).
+negative feedback; for the PI on the measurement it is C(z) = Kp + Ki·Ts·z/(z − 1).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import MISSING, dataclass, fields
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.design.entries import feedback_gains
 from cartctl.design.pi import pi_tf_coeffs
+from cartctl.runtime.kalman import KalmanDesign
 from cartctl.runtime.statefeedback import FeedbackGains
 
-__all__ = [
-    "ControllerStateSpace",
-    "consistency_problems",
-    "controller_state_space",
-    "feedback_tf_coeffs",
-    "state_feedback",
-]
+COVARIANCE_BOUND = 1e6
+"""Largest covariance entry (rad²/s², V²) an estimator file may hold; the designs hold below 1."""
+
+CONSISTENCY_RTOL = 1e-6
+"""How far a stored C(z) coefficient may be from the one its gains give, relative to the largest
+coefficient of that polynomial (a file rounds nothing: the rest is floating-point noise)."""
+
+_KALMAN_ARRAYS = ("A", "B", "C", "Q", "P", "L")
+
+
+def kalman_from_entry(entry: Mapping[str, Any]) -> KalmanDesign:
+    """Rebuild a :class:`KalmanDesign` from a file's ``estimator`` table; KeyError for a missing
+    key, ValueError naming what does not fit."""
+    values: dict[str, Any] = {}
+    for f in fields(KalmanDesign):
+        if f.name not in entry:
+            if f.default is not MISSING:  # a newer field (timing_noise_std_ticks): its default
+                continue
+            raise KeyError(f"estimator.{f.name}")
+        value = entry[f.name]
+        values[f.name] = np.asarray(value, dtype=float) if f.name in _KALMAN_ARRAYS else value
+    _check_estimator(values)
+    return KalmanDesign(**values)
+
+
+def _check_estimator(values: Mapping[str, Any]) -> None:
+    """Shapes that fit together, finite numbers, covariances, and an error that decays."""
+    A = values["A"]
+    m = A.shape[0] if A.ndim == 2 else -1
+    shapes = {"A": (m, m), "B": (m,), "C": (m,), "L": (m,), "Q": (m, m), "P": (m, m)}
+    for name, shape in shapes.items():
+        array = values[name]
+        if m < 1 or array.shape != shape:
+            raise ValueError(f"estimator.{name} has shape {array.shape}; expected {shape}")
+        if not np.all(np.isfinite(array)):
+            raise ValueError(f"estimator.{name} holds a value that is not a finite number")
+    r = float(values["R"])
+    if not (math.isfinite(r) and 0.0 < r <= COVARIANCE_BOUND):
+        raise ValueError(f"estimator.R must be a variance in (0, {COVARIANCE_BOUND:g}], got {r}")
+    for name in ("Q", "P"):
+        cov = values[name]
+        scale = max(1.0, float(np.max(np.abs(cov))))
+        if (
+            np.max(np.abs(cov)) > COVARIANCE_BOUND
+            or np.max(np.abs(cov - cov.T)) > 1e-9 * scale
+            or np.min(np.linalg.eigvalsh((cov + cov.T) / 2.0)) < -1e-9 * scale
+        ):
+            raise ValueError(
+                f"estimator.{name} must be a covariance: symmetric, positive semidefinite, "
+                f"entries up to {COVARIANCE_BOUND:g}"
+            )
+    timing = values.get("timing_noise_std_ticks", 0.0)
+    if (
+        isinstance(timing, bool)
+        or not isinstance(timing, int | float)
+        or not (math.isfinite(timing) and 0.0 <= timing <= 10.0)
+    ):
+        raise ValueError(
+            f"estimator.timing_noise_std_ticks must be a number of ticks in [0, 10], got {timing!r}"
+        )
+    error_dynamics = (np.eye(m) - np.outer(values["L"], values["C"])) @ A
+    radius = float(np.max(np.abs(np.linalg.eigvals(error_dynamics))))
+    if not radius < 1.0:
+        raise ValueError(
+            f"the estimator's error does not decay (its poles reach |z| = {radius:.4g}); "
+            "redesign the controller"
+        )
+
+
+@dataclass(frozen=True)
+class _Gains:
+    """A :class:`~cartctl.runtime.statefeedback.FeedbackGains` rebuilt from a controller file."""
+
+    K: NDArray[np.float64]
+    Ki: float
+    Kr: float
+    period_s: float
+    estimator: KalmanDesign
+
+
+def feedback_gains(entry: Mapping[str, Any], period_s: float) -> _Gains:
+    """A pole-placement entry's K, Ki, Kr and estimator; KeyError, TypeError or ValueError for a
+    missing gain or one that is not a number."""
+    kalman = kalman_from_entry(entry["estimator"])
+    k = np.asarray(entry["K"], dtype=float).ravel()
+    return _Gains(k, float(entry["Ki"]), float(entry["Kr"]), float(period_s), kalman)
 
 
 @dataclass(frozen=True, eq=False)
 class ControllerStateSpace:
-    """A discrete controller ``s⁺ = A s + B [r, y]ᵀ``, ``u = C s + D [r, y]ᵀ`` (see the module).
-
-    Attributes
-    ----------
-    A : ndarray, shape (n, n)
-    B : ndarray, shape (n, 2)
-        Columns: reference r (rad/s), measured speed y (rad/s).
-    C : ndarray, shape (1, n)
-    D : ndarray, shape (1, 2)
-        Voltage (V) per rad/s of r and of y.
-    period_s : float
-        Sample period Ts (s).
-    states : tuple of str
-        What each state is, e.g. ``('xhat_1', 'xhat_2', 'bias', 'integral_v')``.
-    """
+    """A discrete controller ``s⁺ = A s + B [r, y]ᵀ``, ``u = C s + D [r, y]ᵀ`` (see the module):
+    B's and D's columns are r and y (rad/s), u is in V; ``states`` names each state, e.g.
+    ``('xhat_1', 'xhat_2', 'bias_v', 'integral_v')``."""
 
     A: NDArray[np.float64]
     B: NDArray[np.float64]
@@ -98,22 +164,9 @@ class ControllerStateSpace:
 def controller_state_space(
     method: str, entry: Mapping[str, Any], period_s: float
 ) -> ControllerStateSpace:
-    """The linear controller of one motor's ``[motors.X]`` entry (see the module docstring).
-
-    Parameters
-    ----------
-    method : {'pi', 'poles'}
-    entry : mapping
-        ``kp``, ``ki`` (and an optional ``estimator`` table) for a PI; ``K``, ``Ki``, ``Kr`` and
-        ``estimator`` for pole placement, as a controller file holds them.
-    period_s : float
-        Sample period Ts (s).
-
-    Raises
-    ------
-    KeyError, TypeError, ValueError
-        The entry misses a gain or holds something that is not a number.
-    """
+    """The linear controller of one motor's ``[motors.X]`` entry (``kp``, ``ki`` and an optional
+    ``estimator`` for a PI; ``K``, ``Ki``, ``Kr`` and ``estimator`` for pole placement); KeyError,
+    TypeError or ValueError for a missing gain or one that is not a number."""
     ts = float(period_s)
     est = entry.get("estimator")
     if method == "pi":
@@ -132,14 +185,6 @@ def controller_state_space(
     return state_feedback(feedback_gains(entry, ts))
 
 
-def _estimator(est: Mapping[str, Any]) -> tuple[NDArray[np.float64], ...]:
-    a = np.asarray(est["A"], dtype=float)
-    b = np.asarray(est["B"], dtype=float)
-    c = np.asarray(est["C"], dtype=float)
-    gain = np.asarray(est["L"], dtype=float)
-    return a, b, c, gain
-
-
 def _state_names(n: int, m: int) -> list[str]:
     """xhat_1 … xhat_n (rad/s) of m estimator states, then bias_v (V) for the disturbance state."""
     return [f"xhat_{i + 1}" for i in range(min(n, m))] + ["bias_v"] * (m - n)
@@ -148,7 +193,7 @@ def _state_names(n: int, m: int) -> list[str]:
 def _pi_on_estimate(
     kp: float, ki: float, ts: float, est: Mapping[str, Any]
 ) -> ControllerStateSpace:
-    a, b, c, gain = _estimator(est)
+    a, b, c, gain = (np.asarray(est[k], dtype=float) for k in ("A", "B", "C", "L"))
     m = a.shape[0]
     g, q = kp + ki * ts, ki * ts
     lc = np.eye(m) - np.outer(gain, c)
@@ -214,11 +259,6 @@ def feedback_tf_coeffs(design: FeedbackGains) -> tuple[NDArray[np.float64], NDAr
     return num / den[0], den / den[0]
 
 
-CONSISTENCY_RTOL = 1e-6
-"""How far a stored C(z) coefficient may be from the one its gains give, relative to the largest
-coefficient of that polynomial (a file rounds nothing: the rest is floating-point noise)."""
-
-
 def _coeffs(values: Iterable[Any]) -> str:
     """Coefficients for a message; an entry that is not a number is shown as it is."""
     return (
@@ -246,17 +286,8 @@ def _disagrees(stored: Any, expected: NDArray[np.float64]) -> bool:
 def expected_tf(
     controller: Any, entry: Mapping[str, Any]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
-    """C(z) as one motor's gains give it: (num, den, what it was computed from).
-
-    PI: C(z) = Kp + Ki·Ts·z/(z − 1), num = [Kp + Ki·Ts, −Kp], den = [1, −1]. Pole placement: the
-    feedback from the measured speed to the voltage through the estimator, integrator and K
-    (:func:`cartctl.design.controller_ss.feedback_tf_coeffs`; Kr acts on the reference and is not in it).
-
-    Raises
-    ------
-    KeyError, TypeError, ValueError
-        The entry lacks a gain or holds something that is not a number.
-    """
+    """C(z) as one motor's gains give it: (num, den, what it was computed from). For pole
+    placement, the feedback C_fb (Kr acts on the reference and is not in it)."""
     ts = controller.period_s
     if controller.method == "pi":
         kp, ki = float(entry["kp"]), float(entry["ki"])
@@ -271,12 +302,8 @@ def expected_tf(
 
 
 def consistency_problems(controller: Any) -> list[str]:
-    """Where a file's stored C(z) disagrees with its gains, one sentence per key.
-
-    A motor entry without ``controller_num``/``controller_den`` (pole-placement files of older
-    cartctl) has nothing to disagree with; an entry whose gains are missing or not numbers is left
-    to :func:`build_controllers`, which names the problem.
-    """
+    """Where a file's stored C(z) disagrees with its gains, one sentence per key (an entry without
+    C(z), or with gains that are missing or not numbers, is left to ``build_controllers``)."""
     problems: list[str] = []
     for motor, entry in controller.motors.items():
         if "controller_num" not in entry and "controller_den" not in entry:

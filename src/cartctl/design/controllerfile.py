@@ -1,40 +1,29 @@
-"""Controller files (TOML): what was asked, what came out, on which model, and when.
-
-``cartctl design --out`` writes them into ``controllers/``; the 10 ms loop loads them. A file::
+"""Controller files (TOML): what was asked, what came out, on which model, and when::
 
     format = "cartctl-controller/2"
     method = "pi"                      # or "poles"
     period_s = 0.01
     voltage_limit_v = 12.0
-    loop_delay_ticks = 1               # the loop it is designed for (see below)
+    loop_delay_ticks = 1               # ticks from a measurement to its voltage on the motor
     plant_kind = "onboard"             # where the loop runs: "onboard" (delay 1) or "serial"
     created = "2026-11-22T15:00:00+00:00"
     command = "cartctl design models/ground.toml --method pi ..."
-
-    [model]                            # the model it was designed on
-    path = "../models/ground.toml"     # relative to this file's folder
-    sha256 = "…"                       # of the model file's bytes
-
+    [model]                            # the model designed on: path relative to this file's
+    path = "../models/ground.toml"     # folder, and the SHA-256 of its bytes
+    sha256 = "…"
     [request]                          # the user's specification (method-specific)
-    phase_margin_deg = 60.0
-
-    [motors.a]                         # the result: gains, C(z), estimator matrices, analysis
+    [motors.a]                         # gains, C(z) (descending powers of z), estimator, analysis
     kp = 0.5
     ki = 12.0
-    controller_num = [0.62, -0.5]      # C(z) error → voltage, descending powers of z
+    controller_num = [0.62, -0.5]
     controller_den = [1.0, -1.0]
 
-The **loop delay** is the number of ticks from a measurement to the voltage it leads to being on
-the motor: 1 on board the cart and in the simulators, 3 over the PC serial loop. A design with
-``--extra-delay d`` on a model file that records the loop delay L its data came from is for L + d;
-on an older model file with input delay nk, for nk − 1 + d (:func:`cartctl.design.make.loop_delay_for`).
-
-Loading checks the format (version 1, an older cartctl's, has version 2's keys and loads the
-same way), the keys, resolves the model path against the file's folder, and checks that the file
-does not contradict itself: ``plant_kind`` against ``loop_delay_ticks``, each motor's
-``controller_num``/``controller_den`` against its gains (:mod:`cartctl.design.controller_ss`). A
-file without ``loop_delay_ticks`` (older) gets it from its model's nk and the extra delay.
-:mod:`cartctl.design.build` turns a file into runtime controllers.
+The loop delay is 1 on board the cart and in the simulators, 3 over the PC serial loop; a design
+with ``--extra-delay d`` is for the model file's recorded loop delay + d, or nk − 1 + d
+(:func:`cartctl.design.make.loop_delay_for`). Version 1 files have version 2's keys and load the
+same way; a file without ``loop_delay_ticks`` (older) gets it from its model's nk. Loading checks
+that a file does not contradict itself: ``plant_kind`` against ``loop_delay_ticks``, each
+motor's C(z) against its gains (:mod:`cartctl.design.controller_ss`).
 """
 
 from __future__ import annotations
@@ -54,18 +43,11 @@ from cartctl.cart import check_voltage_limit, encoder_quantum_rad_s
 from cartctl.choices import find_file
 from cartctl.data.tomlfile import CONTROLLER_FORMAT, check_format, read_toml, require
 from cartctl.design.controller_ss import consistency_problems
+from cartctl.design.request import METHODS, check_loop_delay
 from cartctl.errors import CartctlError, DataFileError, InputError
 
-FORMAT = CONTROLLER_FORMAT
-METHODS = ("pi", "poles")
-LOOP_SITES = ("onboard", "serial")
 ONBOARD_LOOP_DELAY_TICKS = 1
 """Loop delay of control on board the cart, and of the simulated plants (ticks)."""
-
-
-def design_loop_delay(nk: int, extra_delay_ticks: int) -> int:
-    """The loop delay (ticks) a design on a model with input delay ``nk`` is for: nk − 1 + d."""
-    return int(nk) - 1 + int(extra_delay_ticks)
 
 
 def loop_site(loop_delay_ticks: int) -> str:
@@ -75,15 +57,9 @@ def loop_site(loop_delay_ticks: int) -> str:
 
 
 def common_loop_delay(nk: Mapping[str, int], extra_delay_ticks: int) -> int:
-    """The one loop delay of a design on motors with input delays ``nk`` (motor → nk).
-
-    Raises
-    ------
-    ValueError
-        The motors' models have different input delays: a controller file is for one loop, and
-        a design on both would be for two different ones.
-    """
-    delays = {m: design_loop_delay(n, extra_delay_ticks) for m, n in nk.items()}
+    """The one loop delay, nk − 1 + extra, of a design on motors with input delays ``nk`` (motor →
+    nk); ValueError when they differ (a controller file is for one loop)."""
+    delays = {m: check_loop_delay(None, n, extra_delay_ticks) for m, n in nk.items()}
     if len(set(delays.values())) > 1:
         shown = ", ".join(f"motor {m}: nk = {n}" for m, n in sorted(nk.items()))
         raise ValueError(
@@ -99,7 +75,7 @@ def file_sha256(path: str | Path) -> str:
 
 
 def _plain(value: Any) -> Any:
-    """numpy arrays and scalars → lists and floats, None dropped by the caller (TOML has no null)."""
+    """numpy arrays and scalars → lists and floats, None dropped (TOML has no null)."""
     if isinstance(value, np.ndarray):
         return _plain(value.tolist())
     if isinstance(value, np.generic):
@@ -120,35 +96,12 @@ def _short(value: Any) -> str:
 
 @dataclass(frozen=True)
 class ControllerFile:
-    """A designed controller for both motors.
+    """A designed controller for both motors (the keys of the module docstring).
 
-    Attributes
-    ----------
-    method : {'pi', 'poles'}
-    period_s : float
-        Tick period the design assumes (s).
-    voltage_limit_v : float
-        Command saturation (V), at most 12.
-    model_path : str
-        The model file designed on, as a path that opens from the working directory (in the file
-        it is stored relative to the file's own folder).
-    model_sha256 : str
-        Its content hash at design time.
-    request : dict
-        The specification (method-specific keys).
-    motors : dict of str to dict
-        Per motor: gains, estimator matrices, analysis figures.
-    created : str
-        ISO 8601 date-time.
-    command : str
-        The command line that made it (to regenerate it).
-    path : Path or None
-        Where it was read from.
-    loop_delay_ticks : int or None
-        The loop delay the design is for (ticks, see the module docstring); None only for a
-        file being built that does not know it yet (it is then not written).
-    ignored : tuple of str
-        Self-contradictions found on loading with ``force=True`` (see :func:`load_controller`).
+    ``model_path`` opens from the working directory (the file stores it relative to its own
+    folder); ``path`` is where it was read from; ``loop_delay_ticks`` is None only for a file
+    being built that does not know it yet; ``ignored`` holds the self-contradictions a
+    ``force=True`` load let through.
     """
 
     method: str
@@ -182,25 +135,19 @@ class ControllerFile:
 
     @property
     def loop_site(self) -> str | None:
-        """'onboard' or 'serial' (:func:`loop_site`, the ``plant_kind`` key), None without a delay."""
+        """:func:`loop_site` of the loop delay (the ``plant_kind`` key), None without one."""
         return None if self.loop_delay_ticks is None else loop_site(self.loop_delay_ticks)
 
     def to_toml_dict(self, folder: str | Path | None = None) -> dict[str, Any]:
-        """The document :func:`save_controller` writes.
-
-        Parameters
-        ----------
-        folder : str or Path, optional
-            The folder the file goes to: the model path is written relative to it (as given when
-            None).
-        """
+        """The document :func:`save_controller` writes, the model path relative to ``folder``
+        (as given when None)."""
         delay: dict[str, Any] = {}
         if self.loop_delay_ticks is not None:
             delay = {"loop_delay_ticks": self.loop_delay_ticks, "plant_kind": self.loop_site}
         model_path = self.model_path if folder is None else _relative_to(self.model_path, folder)
         return _plain(
             {
-                "format": FORMAT,
+                "format": CONTROLLER_FORMAT,
                 "method": self.method,
                 "period_s": self.period_s,
                 "voltage_limit_v": self.voltage_limit_v,
@@ -220,13 +167,10 @@ class ControllerFile:
 
 
 def absurd_gain(controller: ControllerFile) -> str | None:
-    """The first gain that saturates the output at an error of one encoder count, or None.
-
-    A speed is measured in whole counts per tick (:func:`~cartctl.cart.encoder_quantum_rad_s`,
-    0.35 rad/s at 10 ms): a proportional gain (``kp``, ``Kr``, an entry of ``K``) that turns one
-    count into the whole voltage limit, or an integral gain (``ki``) that does so in one tick, is
-    no controller but a switch, and a value that is not a finite number is no gain at all.
-    """
+    """The first gain that is no controller but a switch, or None: a proportional gain (``kp``,
+    ``Kr``, an entry of ``K``) that puts the whole voltage limit on one encoder count per tick
+    (0.35 rad/s at 10 ms), an integral gain (``ki``) that does so in one tick, or not a finite
+    number."""
     limit = controller.voltage_limit_v
     q = encoder_quantum_rad_s(controller.period_s)
     for motor, entry in controller.motors.items():
@@ -251,11 +195,8 @@ def absurd_gain(controller: ControllerFile) -> str | None:
 
 
 def _relative_to(model_path: str, folder: str | Path) -> str:
-    """``model_path`` (from the working directory) as a path from ``folder`` (POSIX separators).
-
-    A shipped model named without a local copy (``models/ground.toml`` designed on from another
-    folder, :func:`~cartctl.choices.find_file`) keeps its shipped name.
-    """
+    """``model_path`` (from the working directory) from ``folder``, POSIX separators; a shipped
+    model without a local copy (:func:`~cartctl.choices.find_file`) keeps its shipped name."""
     if not Path(model_path).exists() and find_file(model_path) != Path(model_path):
         return Path(model_path).as_posix()
     try:
@@ -266,11 +207,8 @@ def _relative_to(model_path: str, folder: str | Path) -> str:
 
 
 def _resolve_model(stored: str, controller_path: Path, *, legacy: bool) -> str:
-    """The stored ``[model] path`` (relative to the controller's folder) from the working directory.
-
-    A file from an older cartctl (``legacy``) stored it relative to the working directory of the
-    design; that is tried when the path does not resolve against the controller's folder.
-    """
+    """The stored ``[model] path`` from the working directory: relative to the controller's
+    folder, or, for an older (``legacy``) file, to the design's working directory."""
     if Path(stored).is_absolute():
         return stored
     resolved = os.path.normpath(os.path.join(controller_path.parent, stored))
@@ -319,28 +257,22 @@ def _derived_loop_delay(
 def load_controller(
     path: str | Path, *, force: bool = False, period_s: float | None = None
 ) -> ControllerFile:
-    """Read a controller file, with one clear error for each way it can be wrong (Raises).
+    """Read a controller file, with one clear error for each way it can be wrong.
 
-    Parameters
-    ----------
-    path : str or Path
-        The controller file.
-    force : bool
-        Load a file whose ``controller_num``/``controller_den`` disagree with its gains anyway
-        (the gains are what runs); the disagreements are in the result's ``ignored``.
-    period_s : float, optional
-        The plant's tick (s): a file for another period is refused before its coefficients.
+    ``force`` loads a file whose ``controller_num``/``controller_den`` disagree with its gains
+    anyway (the gains are what runs; the disagreements go to ``ignored``). ``period_s``, the
+    plant's tick (s), refuses a file for another period before its coefficients.
 
     Raises
     ------
     MissingFileError, DataFileError
         No such file; not a controller file; a key missing or of the wrong type; ``plant_kind``
-        against ``loop_delay_ticks``; without ``force``, a ``controller_num``/``controller_den``
-        that the gains do not give (relative tolerance 1e-6); ``period_s`` not the file's.
+        against ``loop_delay_ticks``; without ``force``, a C(z) the gains do not give (relative
+        tolerance 1e-6); ``period_s`` not the file's.
     """
     path = find_file(path)  # the working folder's, else the shipped one
     doc = read_toml(path, "controller file")
-    check_format(doc, path, FORMAT, "controller file")
+    check_format(doc, path, CONTROLLER_FORMAT, "controller file")
     file_period_s = float(require(doc, "period_s", (int, float), path, "the top level"))
     if period_s is not None and abs(file_period_s - period_s) > 1e-9:
         raise DataFileError(path, f"is designed for Ts = {file_period_s:g} s but the plant ticks "

@@ -1,57 +1,30 @@
 """The steady-state Kalman speed estimator, designed on the realisation of a motor model.
 
-Where it sits: the ``design`` stage, beside pole placement (which embeds one in every
-:class:`~cartctl.design.poles.PolesDesign`) and the PI (``--estimator kalman``). The runtime
-estimators in :mod:`cartctl.runtime.kalman` run what is designed here.
-
-The estimator's model is the observer-form realisation of :mod:`cartctl.design.statespace`
-(x_1 = the modelled speed) with the loop's true delay in it: the model's nk (the report's 2: one
-tick of loop delay on board and in the simulators) plus ``extra_delay_ticks`` (3 through the PC
-serial loop), realised as states, so the prediction knows which voltages are already on their way.
-It is extended by one input-disturbance state b (V), on by default::
+The model is the observer-form realisation of :mod:`cartctl.design.statespace` (x_1 = the
+modelled speed) with the loop's whole delay realised as states (nk, plus ``extra_delay_ticks``),
+so the prediction knows which voltages are on their way, and one input-disturbance state b (V)::
 
     x[k+1] = A x[k] + B (u[k] + b[k] + w[k]),    b[k+1] = b[k] + w_b[k],    y[k] = x_1[k] + v[k]
 
-What the estimate represents. The measured speed y[k] is a whole-count encoder difference over
-the last tick: the *average* of the true speed over [k − 1, k], about the true speed half a tick
-earlier. The model is fitted to that, so x̂_1[k|k] estimates the same average. The true speed *now*,
-at tick k, lies between that average and the next one, which the model predicts from the voltages
-already sent::
+- w (std ``process_noise_std_v``, default 0.1 V): PWM rounding, the fast part of friction, model
+  error; on the cart simulator 0.05–0.1 V gave the smallest speed error, 0.2 V a third more.
+- b (random walk, step std ``bias_drift_std_v`` per tick, default 0.03 V; 0 leaves it out): dry
+  friction (≈ 0.8 V on the ground, changing sign with the direction) and the model's DC error;
+  it makes the estimate offset-free and is pole placement's integral action. 0.03 V gives its
+  estimator pole ≈ 0.78 (about 40 ms); 0.01 V is slow after each reversal, 0.1 V lets the
+  quantisation in and costs pole placement 15–20° of phase margin.
+- v (variance R): the encoder quantisation. A whole-count speed is the difference of two floored
+  angles, each uniform over one count q = (2π / counts_per_rev) / Ts rad/s (0.3506 rad/s at
+  1792 counts, 10 ms): R = q²/6 + (extra noise)², taken as white (the usual simplification).
 
-    ω̂[k] = (x̂_1[k|k] + x̂_1[k+1|k]) / 2,    x̂_1[k+1|k] = (A x̂[k|k] + B u[k])_1
+The measured speed is the mean over the last tick, so x̂_1[k|k] estimates that mean; the speed at
+tick k itself is ω̂[k] = (x̂_1[k|k] + x̂_1[k+1|k]) / 2 (:mod:`cartctl.runtime.statefeedback`
+reports it; the PI acts on x̂_1[k|k]).
 
-(exact for a speed that changes linearly over the two ticks). The state-feedback controller
-reports ω̂ as its estimate (:mod:`cartctl.runtime.statefeedback`); the PI, designed on the model
-of the measured speed, acts on x̂_1[k|k].
-
-- w (V std ``process_noise_std_v``): an input-equivalent voltage disturbance standing for PWM
-  rounding (47 mV steps: 14 mV std), the part of friction that varies fast, and model error. The
-  default 0.1 V is a few percent of a typical 3–6 V command; on the cart simulator 0.05–0.1 V gave
-  the smallest speed error, 0.2 V a third more.
-- b (a random walk, step std ``bias_drift_std_v`` per tick): the slowly varying part of that
-  disturbance, mainly dry friction and rolling resistance (≈ 0.8 V on the ground, changing sign
-  with the direction: an offset the ARX model cannot represent), and the model's DC error.
-  Without it the estimate carries that static error (±0.5 rad/s on the physics simulator in
-  steady state, following the sign of the friction); with it the estimate is offset-free, and
-  pole placement uses b̂ as its integral action (:mod:`cartctl.design.poles`). The default 0.03 V
-  per tick gives b a time constant of about 40 ms (its estimator pole ≈ 0.78 on the ground
-  models): 0.01 (pole ≈ 0.92) leaves the friction wrong for longer after each reversal, 0.1
-  lets the quantisation into b̂ (the steady-state estimate error nearly doubles) and costs pole
-  placement 15–20° of phase margin. 0 leaves the state out.
-- v (variance R): the encoder quantisation. The speed is a whole-count difference over one tick,
-  q = (2π / counts_per_rev) / Ts rad/s per count (0.3506 rad/s for 1792 counts and 10 ms). Each
-  count reading floors the angle, an error uniform on [0, 1) count (variance 1/12 count²); the
-  difference of two such errors has variance 1/6 count², so R = q² / 6 + (extra noise)². This
-  treats the errors of successive speeds as white, which they are not (they are the differences of
-  one white sequence, so neighbours correlate by −½, and at a whole number of counts per tick the
-  error freezes); it is the usual simplification.
-
-The gain is the steady-state *filter* gain L = P Cᵀ (C P Cᵀ + R)⁻¹, with P the a priori (predicted)
-covariance, the stabilising solution of the filter DARE ``P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ
-+ Q``. It corrects the prediction with the measurement of the same tick: x̂[k|k] = x̂[k|k−1] +
-L (y[k] − C x̂[k|k−1]); a Kalman filter's time-varying gain converges to it. ``control.dlqe`` returns the
-*predictor* gain A L instead. The estimation error of x̂[k|k] evolves with (I − L C) A, whose
-eigenvalues are the estimator poles.
+The gain is the steady-state *filter* gain L = P Cᵀ (C P Cᵀ + R)⁻¹, P the a priori covariance
+solving the filter DARE P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + Q; x̂[k|k] = x̂[k|k−1] +
+L (y[k] − C x̂[k|k−1]) (``control.dlqe`` gives the predictor gain A L instead). The error of
+x̂[k|k] evolves with (I − L C) A, whose eigenvalues are the estimator poles.
 """
 
 from __future__ import annotations
@@ -68,21 +41,11 @@ from cartctl.errors import InputError
 from cartctl.model import ArxModel
 from cartctl.runtime.kalman import KalmanDesign
 
-__all__ = [
-    "DEFAULT_BIAS_DRIFT_STD_V",
-    "DEFAULT_PROCESS_NOISE_STD_V",
-    "KalmanDesign",
-    "design_kalman",
-    "quantisation_std_rad_s",
-]
+__all__ = ["KalmanDesign", "design_kalman", "quantisation_std_rad_s"]
 
 
 def quantisation_std_rad_s(period_s: float, counts_per_rev: int = ENCODER_COUNTS_PER_REV) -> float:
-    """Standard deviation (rad/s) of the quantisation error of a whole-count speed: q / √6.
-
-    q is one count per tick (:func:`~cartctl.cart.encoder_quantum_rad_s`); the error is the
-    difference of two independent errors uniform over one count (variance 2 × q²/12).
-    """
+    """Std (rad/s) of a whole-count speed's quantisation error: q / √6, q one count per tick."""
     return encoder_quantum_rad_s(period_s, counts_per_rev) / math.sqrt(6.0)
 
 
@@ -115,32 +78,26 @@ def design_kalman(
     Parameters
     ----------
     plant : ArxModel or StateSpace
-        The motor model, or its realisation from :func:`~cartctl.design.statespace.realise`.
+        The motor model, or its realisation (:func:`~cartctl.design.statespace.realise`).
     process_noise_std_v : float
-        σ_w, white input-equivalent voltage disturbance (V), > 0.
+        σ_w (V), > 0.
     bias_drift_std_v : float
-        σ_b, random-walk step of the input-disturbance state (V per tick); 0 leaves it out.
+        σ_b (V per tick); 0 leaves the disturbance state out.
     extra_noise_std_rad_s : float
         Measurement noise beyond the quantisation (rad/s std, ``--measurement-noise``), added in
         variance: the result's ``measurement_noise_std_rad_s`` is the total √R.
     counts_per_rev : int
-        Encoder counts per wheel revolution (sets the quantisation step).
+        Encoder counts per wheel revolution (the quantisation step).
     extra_delay_ticks : int
-        With an ArxModel: extra ticks of input delay to realise (see ``realise``). Must be 0 with
-        a StateSpace (which has its delay built in).
+        With an ArxModel: extra ticks of input delay to realise; 0 with a StateSpace.
     timing_noise_std_ticks : float
-        σ_ε, the uncertainty (std, ticks) of when a command lands, for the time-varying filter's
-        Q[k] = Q + (σ_ε Δu[k])² B Bᵀ (see :class:`~cartctl.runtime.kalman.KalmanDesign`); it
-        does not change the steady-state P and L, which hold while the command is constant.
-
-    Returns
-    -------
-    KalmanDesign
+        σ_ε (ticks), for the time-varying filter's Q[k] = Q + (σ_ε Δu[k])² B Bᵀ
+        (:class:`~cartctl.runtime.kalman.KalmanDesign`); P and L hold while u is constant.
 
     Raises
     ------
     InputError
-        A noise level that is negative, non-finite, or zero where it must not be; a bad count; no
+        A noise level negative, non-finite, or zero where it must not be; a bad count; no
         stabilising DARE solution.
     """
     if isinstance(plant, ArxModel):

@@ -38,12 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.design.kalman import (
-    DEFAULT_BIAS_DRIFT_STD_V,
-    DEFAULT_PROCESS_NOISE_STD_V,
-    KalmanDesign,
-    design_kalman,
-)
+from cartctl.design.kalman import KalmanDesign, design_kalman
+from cartctl.design.request import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOISE_STD_V
 from cartctl.design.statespace import StateSpace, realise, uncontrollable_modes
 from cartctl.errors import InputError
 from cartctl.model import ArxModel

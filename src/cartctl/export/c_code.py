@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from cartctl.design.controller_ss import kalman_from_entry
 from cartctl.design.controllerfile import ControllerFile
-from cartctl.design.entries import kalman_from_entry
 from cartctl.design.kalman import KalmanDesign
 from cartctl.errors import DataFileError, InputError
 
