@@ -1,8 +1,7 @@
 """The closed loop: one tick reads the plant, runs each motor's controller, sends, and logs.
 
-:class:`ControlLoop` is the per-tick body; a periodic executor (:mod:`cartctl.runtime.executor`)
-calls it on a real or simulated clock, so the real-time run and the fast simulated run are the same
-code. Per tick k::
+:class:`ControlLoop` is the per-tick body an executor calls on a real or simulated clock, so the
+real-time run and the fast simulated run are the same code. Per tick k::
 
     y      = the speeds measured at tick k (kept from the previous plant.step)
     u_m    = controller_m.step(reference_m[k], y_m)      clamped to ±voltage_limit_v
@@ -12,12 +11,9 @@ code. Per tick k::
     row    = [time, u, y, k, reference, estimate, period error, compute time (, true speed)]
     every sink gets the row
 
-:meth:`ControlLoop.finish` runs on every exit path: zero volts to the plant, the plant closed, every
-sink closed (files valid), whatever happened.
-
-A sink whose file write fails raises :class:`~cartctl.errors.OutputError`: the tick (or ``idle``)
-gives every other sink its row first, keeps the error in :attr:`LoopState.incomplete` and raises it,
-so the run ends through :meth:`ControlLoop.finish` (zero volts) like any other fault.
+:meth:`ControlLoop.finish` runs on every exit path: zero volts, plant closed, sinks closed. A sink
+whose file write fails raises :class:`~cartctl.errors.OutputError` once every other sink has had
+its row; the error is kept in :attr:`LoopState.incomplete` and the run ends through ``finish``.
 """
 
 from __future__ import annotations
@@ -40,10 +36,9 @@ from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS, Sink
 class MemorySink:
     """Keeps every row in memory, for the run summary (same numbers as the CSV).
 
-    ``write`` keeps the row as it is; ``idle`` (after the tick's compute time is taken) copies the
-    rows kept into a preallocated float64 block of :attr:`BLOCK_ROWS` rows, so no Python tuple
-    is kept for long (112 bytes per row for the 14 columns of a simulated run: 1 GB for the longest
-    run, 24 h).
+    ``idle`` (after the tick's compute time is taken) packs the rows kept into float64 blocks of
+    :attr:`BLOCK_ROWS` rows, so no Python tuple is kept for long (112 bytes per row of a simulated
+    run: 1 GB for the longest run, 24 h).
     """
 
     BLOCK_ROWS = 1024
@@ -68,7 +63,6 @@ class MemorySink:
             self.idle()
 
     def idle(self) -> None:
-        """Copy the rows kept so far into the blocks."""
         for row in self._rows:
             self._block[self._filled] = row
             self._filled += 1
@@ -79,7 +73,7 @@ class MemorySink:
         self._rows = []
 
     def close(self) -> None:
-        """Nothing to flush."""
+        pass
 
     def arrays(self) -> dict[str, NDArray[np.float64]]:
         """The rows as one array per column."""
@@ -90,18 +84,17 @@ class MemorySink:
 
 @dataclass
 class LoopState:
-    """What happened, for the summary and the exit code."""
+    """What happened, for the summary and the exit code: ``rows`` written to the sinks (the
+    ticks and the stop row), whether the stop command went out, and ``incomplete``, the files a
+    failed write left incomplete (one error per file: a fault of the run)."""
 
     ticks: int = 0
     rows: int = 0
-    """Rows written to the sinks: the ticks logged, and the stop row of :meth:`ControlLoop.finish`."""
     interrupted: bool = False
     failure: str | None = None
     zero_volts_sent: bool = False
-    """The stop command went out (:meth:`ControlLoop.finish`)."""
     sink_errors: list[str] = field(default_factory=list)
     incomplete: list[OutputError] = field(default_factory=list)
-    """The files a failed write left incomplete (one error per file): a fault of the run."""
 
     def output_failed(self, error: OutputError) -> None:
         """Keep ``error`` unless its file is already known to be incomplete."""
@@ -110,8 +103,7 @@ class LoopState:
 
 
 class PerTick(Protocol):
-    """A reference (rad/s) with a value per tick: an array, a list or a
-    :class:`~cartctl.reference.ReferenceSchedule`."""
+    """A reference (rad/s) per tick: an array, a list or a ReferenceSchedule."""
 
     def __len__(self) -> int: ...
 
@@ -119,8 +111,7 @@ class PerTick(Protocol):
 
 
 def _per_tick(reference: PerTick | None, n: int) -> PerTick:
-    """A reference the tick can index fast: arrays become lists; a schedule computing its values
-    chunk by chunk (:class:`~cartctl.reference.ReferenceSchedule`) stays as it is."""
+    """Arrays become lists (fast to index); a ReferenceSchedule stays as it is."""
     if reference is None:
         return [0.0] * n
     if isinstance(reference, np.ndarray | list | tuple):
@@ -131,23 +122,9 @@ def _per_tick(reference: PerTick | None, n: int) -> PerTick:
 class ControlLoop:
     """The per-tick body of the closed loop over both motors.
 
-    Parameters
-    ----------
-    plant : Plant
-        What is controlled; reset in :meth:`start`, closed in :meth:`finish`.
-    controllers : mapping of {'a', 'b'} to Controller
-        One per motor; a motor without a controller gets 0 V.
-    references : mapping of {'a', 'b'} to ndarray, shape (n,), or ReferenceSchedule
-        Reference speed per tick (rad/s); n is the number of ticks to run. A
-        :class:`~cartctl.reference.ReferenceSchedule` computes it chunk by chunk.
-    sinks : sequence of Sink
-        Receive one row per tick.
-    now_s : callable
-        The clock's ``now_s`` (s), to time the compute of each tick.
-    voltage_limit_v : float
-        Command clamp (V), at most 12; a controller's own limit may be lower.
-    period_s : float
-        Tick period (s), for the time column.
+    ``controllers`` and ``references`` (rad/s per tick, equally long: the ticks to run) by motor
+    ``a``, ``b``; a motor without a controller gets 0 V. ``now_s`` is the clock that times each
+    tick's compute; ``voltage_limit_v`` clamps every command (a controller's own may be lower).
     """
 
     def __init__(
@@ -174,6 +151,7 @@ class ControlLoop:
         self.ref_b = _per_tick(references.get("b"), n)
         self.n_ticks = n
         self.sinks = list(sinks)
+        self._writers = [s.write for s in self.sinks]
         idlers = (getattr(s, "idle", None) for s in self.sinks)  # a sink may have idle()
         self._idlers = [idle for idle in idlers if callable(idle)]
         self.now_s = now_s
@@ -188,30 +166,29 @@ class ControlLoop:
         self.columns: tuple[str, ...] = TRACE_COLUMNS
 
     def start(self) -> None:
-        """Reset the plant and controllers and open the sinks (before the first deadline).
+        """Reset the controllers and the plant, open the sinks (before the first deadline).
 
         A cart-clocked plant is reset last: its tick 0 is the GPIO that arrives then, and the
-        sinks' start-up time must not make the loop begin behind the cart.
+        sinks' start-up must not make the loop begin behind the cart.
         """
         for c in self.controllers.values():
             c.reset()
         if self._clocked:  # a real cart reports no true speed; the virtual one does
             self._true = bool(getattr(self.plant, "reports_true_speed", False))
-            self.columns = TRACE_COLUMNS + (TRUE_SPEED_COLUMNS if self._true else ())
-            self._open_sinks()
+        else:
             self._y = self.plant.reset()
-            return
-        self._y = self.plant.reset()
-        self._true = self._y.true_speed_a_rad_s is not None
+            self._true = self._y.true_speed_a_rad_s is not None
         self.columns = TRACE_COLUMNS + (TRUE_SPEED_COLUMNS if self._true else ())
-        self._open_sinks()
+        self._each([s.open for s in self.sinks], self.columns)
+        if self._clocked:
+            self._y = self.plant.reset()
 
-    def _open_sinks(self) -> None:
-        """Open every sink; a file that cannot be written is raised once all are open."""
+    def _each(self, calls: Sequence[Callable[..., None]], *args: object) -> None:
+        """Call each with ``args``; a failed file write is kept and raised once all have run."""
         failed: OutputError | None = None
-        for s in self.sinks:
+        for call in calls:
             try:
-                s.open(self.columns)
+                call(*args)
             except OutputError as exc:
                 self.state.output_failed(exc)
                 failed = failed or exc
@@ -266,46 +243,22 @@ class ControlLoop:
         )  # fmt: skip
         if self._true:
             row += (y.true_speed_a_rad_s, y.true_speed_b_rad_s)  # type: ignore[operator]
-        failed: OutputError | None = None
-        for s in self.sinks:
-            try:  # a failed file write: the other sinks still get the row, then the run stops
-                s.write(row)
-            except OutputError as exc:
-                self.state.output_failed(exc)
-                failed = failed or exc
         self.state.rows += 1
         self._last_time_s = row[0]
-        if failed is not None:
-            raise failed
+        self._each(self._writers, row)
 
     def idle(self) -> None:
-        """The sinks' work that need not delay a command (their ``idle``), after a tick.
-
-        An executor calls it once the tick's compute time is taken; on a cart-clocked plant the
-        tick itself calls it, between logging and waiting for the cart's next frame.
-        """
-        failed: OutputError | None = None
-        for idle in self._idlers:
-            try:
-                idle()
-            except OutputError as exc:
-                self.state.output_failed(exc)
-                failed = failed or exc
-        if failed is not None:
-            raise failed
+        """The sinks' work that need not delay a command, after a tick: called by the executor
+        once the compute time is taken, or on a cart-clocked plant by the tick itself, between
+        logging and waiting for the cart's next frame."""
+        self._each(self._idlers)
 
     def finish(self) -> None:
-        """Zero volts, plant closed, sinks closed: on every exit path. Never raises.
-
-        The zero-volt command is the trace's last row (the stop row): tick index = rows so far,
-        0 V on both motors, the measurement at hand, no compute. It is written only when the
-        command went out (not to a vanished port).
-        """
-        try:
-            if self._clocked:  # send only: the cart's next tick need not be waited for
-                self.plant.send(0.0, 0.0)  # type: ignore[attr-defined]
-            else:
-                self.plant.step(0.0, 0.0)
+        """Zero volts, plant closed, sinks closed: on every exit path; never raises. The zero-volt
+        command is the trace's stop row (tick index = rows so far, 0 V, the measurement at hand,
+        no compute), written only when it went out (not to a vanished port)."""
+        try:  # a cart-clocked plant: send only, the cart's next tick need not be waited for
+            self.plant.send(0.0, 0.0) if self._clocked else self.plant.step(0.0, 0.0)  # type: ignore[attr-defined]
             sent = True
         except Exception as exc:  # a vanished port: still close what can be closed
             self.state.failure = self.state.failure or f"could not send zero volts: {exc}"

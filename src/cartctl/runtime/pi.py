@@ -16,7 +16,6 @@ Anti-windup (what happens to I when the clamp is active):
   puts the output exactly on the limit, and never back (if it already was beyond, it is frozen).
 - ``"back-calculation"``: after the clamp, I[k] ← I[k] + Kt·(u_sat − u_unsat), so each tick
   removes the fraction Kt of the excess (Kt = 1 puts the output back on the limit at once).
-  Default Kt = min(1, Ts·Ki/Kp), a tracking time constant equal to the integral time Kp/Ki.
 
 A non-finite reference or measurement (NaN, ±inf: a lost frame, a bad reference file), or inputs so
 absurd that the output overflows, make that tick's command 0 V, the safe value; the integral is
@@ -42,14 +41,7 @@ from cartctl.runtime.elementwise import (
     smaller,
 )
 
-CONDITIONAL, BACK_CALCULATION = 0, 1
-"""Indices of the modes in :data:`ANTI_WINDUP`, as :func:`pi_law` takes them."""
-
-
-def default_tracking_gain(kp: float, ki: float, period_s: float) -> float:
-    """Kt = min(1, Ts·Ki/Kp): a tracking time constant equal to the integral time Kp/Ki (1 for
-    Kp = 0)."""
-    return min(1.0, period_s * ki / kp) if kp > 0.0 else 1.0
+CONDITIONAL, BACK_CALCULATION = 0, 1  # indices in ANTI_WINDUP, as pi_law takes the mode
 
 
 def pi_law(
@@ -61,28 +53,12 @@ def pi_law(
     mode: int,
     limit_v: float,
 ) -> tuple[Value, Value]:
-    """One tick of the PI with its clamp and anti-windup (the module docstring's law).
+    """One tick of the module docstring's law: (u[k] within ±limit_v, I[k]) from e[k] (rad/s) and
+    I[k−1] (V), Kp (V/(rad/s)), Ki·Ts (V/(rad/s)), Kt (per tick) and the index of the anti-windup
+    mode in ``ANTI_WINDUP``; where u would not be finite, 0 V and I[k−1].
 
-    Works on floats (one controller) and on arrays of shape (N,) (one setting per element, as
-    ``cartctl tune --robust`` runs them), with the same operations.
-
-    Parameters
-    ----------
-    error : float or ndarray
-        e[k] = r[k] − y[k] (rad/s).
-    integral_v : float or ndarray
-        I[k−1] (V).
-    kp, ki_ts, kt : float
-        Kp (V/(rad/s)), Ki·Ts (V/(rad/s)) and the back-calculation gain Kt (per tick).
-    mode : int
-        Index of the anti-windup mode in :data:`ANTI_WINDUP`.
-    limit_v : float
-        The clamp (V).
-
-    Returns
-    -------
-    (u, integral) : float or ndarray
-        u[k] within ±limit_v (V), and I[k] (V); where u would not be finite, 0 V and I[k−1].
+    Floats (one controller) or arrays of shape (N,) (one setting per element, as ``cartctl tune
+    --robust`` runs them), with the same operations.
     """
     p = kp * error
     integral = integral_v + ki_ts * error
@@ -114,44 +90,29 @@ def _finite(name: str, value: float, unit: str, *, positive: bool = False) -> fl
 
 
 class PiController:
-    """Discrete PI speed controller with output clamp and anti-windup.
+    """Discrete PI speed controller with output clamp and anti-windup (a
+    :class:`~cartctl.runtime.base.Controller`).
 
-    Implements :class:`cartctl.runtime.base.Controller`.
-
-    Parameters
-    ----------
-    kp : float
-        Proportional gain Kp ≥ 0 (V/(rad/s)).
-    ki : float
-        Integral gain Ki ≥ 0 (V/rad).
-    period_s : float
-        Tick period Ts (s).
-    voltage_limit_v : float
-        The command stays within ±voltage_limit_v; in (0, 12] V.
-    anti_windup : {'conditional', 'back-calculation', 'none'}
-        See the module docstring.
-    tracking_gain : float, optional
-        Kt in (0, 1] for back-calculation (dimensionless, per tick); only with that mode.
-    estimator : SpeedEstimator, optional
-        When given, the PI acts on its estimate instead of the raw measurement: for the Kalman
-        estimators x̂_1[k|k], the estimate of the measured (tick-average) speed that the PI's
-        design model describes. Its input-disturbance state (on by default in
-        :func:`~cartctl.design.kalman.design_kalman`) keeps that estimate offset-free; without
-        it the estimate carries friction as a speed offset, and the PI holds the offset.
+    Kp ≥ 0 (V/(rad/s)), Ki ≥ 0 (V/rad), Ts (s); ``tracking_gain`` is Kt in (0, 1] per tick, for
+    back-calculation only (default min(1, Ts·Ki/Kp), 1 for Kp = 0: a tracking time constant equal
+    to the integral time). With an ``estimator`` the PI acts on its estimate: for the Kalman
+    estimators x̂_1[k|k], the measured (tick-average) speed the PI's design model describes; its
+    input-disturbance state keeps that estimate offset-free (without it, friction shows as a
+    speed offset the PI holds).
     """
 
     __slots__ = (
-        "_integral",
-        "_ki",
         "_ki_ts",
-        "_kp",
-        "_kt",
         "_mode",
-        "_period_s",
         "anti_windup",
         "estimate_rad_s",
         "estimator",
+        "integral_v",
+        "ki",
+        "kp",
+        "period_s",
         "tracking_gain",
+        "tracking_gain_per_tick",
         "voltage_limit_v",
     )
 
@@ -166,91 +127,53 @@ class PiController:
         tracking_gain: float | None = None,
         estimator: SpeedEstimator | None = None,
     ) -> None:
-        self._kp = _finite("Kp", kp, "V/(rad/s)")
-        self._ki = _finite("Ki", ki, "V/rad")
-        self._period_s = _finite("the period", period_s, "s", positive=True)
+        self.kp = _finite("Kp", kp, "V/(rad/s)")
+        self.ki = _finite("Ki", ki, "V/rad")
+        self.period_s = _finite("the period", period_s, "s", positive=True)
         limit = check_voltage_limit(voltage_limit_v)
         if anti_windup not in ANTI_WINDUP:
             raise InputError(
                 f"unknown anti-windup {anti_windup!r}; expected one of {', '.join(ANTI_WINDUP)}"
             )
-        if tracking_gain is not None:
-            if anti_windup != "back-calculation":
-                raise InputError(
-                    f"tracking_gain applies only to anti_windup='back-calculation', not "
-                    f"{anti_windup!r}"
-                )
+        if tracking_gain is None:
+            kt = min(1.0, self.period_s * self.ki / self.kp) if self.kp > 0.0 else 1.0
+        elif anti_windup != "back-calculation":
+            raise InputError(
+                f"tracking_gain applies only to anti_windup='back-calculation', not {anti_windup!r}"
+            )
+        else:
             kt = float(tracking_gain)
             if not (math.isfinite(kt) and 0.0 < kt <= 1.0):
                 raise InputError(
                     f"tracking gain Kt must be in (0, 1] per tick, got {tracking_gain}"
                 )
-        else:
-            kt = default_tracking_gain(self._kp, self._ki, self._period_s)
         self.voltage_limit_v = limit
         self.anti_windup = anti_windup
         self.tracking_gain = tracking_gain
+        self.tracking_gain_per_tick = kt  # Kt in use: tracking_gain, or its default
         self.estimator = estimator
-        self._ki_ts = self._ki * self._period_s
-        self._kt = kt
+        self._ki_ts = self.ki * self.period_s
         self._mode = ANTI_WINDUP.index(anti_windup)
         self.reset()
 
-    @property
-    def kp(self) -> float:
-        """Proportional gain Kp (V/(rad/s)); fixed at construction."""
-        return self._kp
-
-    @property
-    def ki(self) -> float:
-        """Integral gain Ki (V/rad); fixed at construction."""
-        return self._ki
-
-    @property
-    def period_s(self) -> float:
-        """Tick period Ts (s)."""
-        return self._period_s
-
-    @property
-    def tracking_gain_per_tick(self) -> float:
-        """Kt in use for back-calculation: ``tracking_gain``, or its default (per tick)."""
-        return self._kt
-
-    @property
-    def integral_v(self) -> float:
-        """The integral term I (V)."""
-        return self._integral
-
     def reset(self) -> None:
-        """Back to rest: integral 0, estimator reset."""
-        self._integral = 0.0
+        """Integral 0, estimator reset."""
+        self.integral_v = 0.0
         self.estimate_rad_s = 0.0
         if self.estimator is not None:
             self.estimator.reset()
 
     def step(self, reference_rad_s: float, measured_rad_s: float) -> float:
-        """One tick: the voltage command (V) for this tick, within ±voltage_limit_v.
-
-        Parameters
-        ----------
-        reference_rad_s : float
-            Speed reference r[k] (rad/s).
-        measured_rad_s : float
-            Measured speed y[k] (rad/s).
-
-        Returns
-        -------
-        float
-            u[k] (V); 0 V, with the integral unchanged, when the reference, the measurement or
-            the estimate is not finite (``estimate_rad_s`` is then that non-finite value).
-        """
+        """One tick: u[k] (V); 0 V, the integral unchanged, when the reference, the measurement or
+        the estimate is not finite (``estimate_rad_s`` is then that value)."""
         estimator = self.estimator
         y = measured_rad_s
         if estimator is not None and math.isfinite(y):
             y = estimator.correct(y)
         self.estimate_rad_s = y
-        u_sat, self._integral = pi_law(reference_rad_s - y, self._integral, self._kp, self._ki_ts,
-                                       self._kt, self._mode, self.voltage_limit_v)  # fmt: skip
+        u_sat, self.integral_v = pi_law(reference_rad_s - y, self.integral_v, self.kp, self._ki_ts,
+                                        self.tracking_gain_per_tick, self._mode,
+                                        self.voltage_limit_v)  # fmt: skip
         if estimator is not None:
             estimator.predict(u_sat)
         return u_sat
