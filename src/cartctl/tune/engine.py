@@ -1,17 +1,10 @@
 """Running a tuning grid: each setting designed, then run in the loop of ``cartctl run --fast``.
 
-The execution part of ``cartctl tune`` (:mod:`cartctl.cli.commands.tune`); the grid, the result rows
-and the Pareto front are in :mod:`cartctl.tune.grid`. A setting is designed per motor by
-:func:`cartctl.design.make.design_motor` (the design command's own path, from the setting's
-:class:`~cartctl.design.request.DesignRequest`), run by
-:func:`simulate` (ControlLoop, BackToBackExecutor, SimulatedClock and a MemorySink: the loop of
-``run --fast`` without files) and summarised by the run summary's ``trace_metrics`` (settling in
-the band of the design's settling bound, max(2 %, one encoder count per tick)). The settings are
-spread over worker processes in chunks; a refused design is a result, not an error.
-
-Every setting is scored on the loop it is designed for (:func:`scoring_plant`): with
-``--extra-delay d`` the plant carries d more ticks of delay, the sim plant being the model with
-nk + d as in ``cartctl design``'s simulated step.
+A setting is designed per motor by the design command's own path
+(:func:`cartctl.design.make.design_motor`), run in memory and summarised by the run summary's
+``trace_metrics``; settings are spread over worker processes in chunks, and a refused design is
+a result, not an error. Every setting is scored on the loop it is designed for
+(:func:`scoring_plant`). The grid itself and the result rows are in :mod:`cartctl.tune.grid`.
 """
 
 from __future__ import annotations
@@ -21,7 +14,7 @@ from collections import deque
 from collections.abc import Callable, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
-from typing import Any, ClassVar, Protocol, TypeVar
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,32 +31,18 @@ from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller
 from cartctl.runtime.fast import run_in_memory
 from cartctl.sinks.summary import trace_metrics
-from cartctl.tune.grid import TuneResult, design_request
+from cartctl.tune.grid import RUN_FAILED, TuneResult, design_request
 
 
 @dataclass(frozen=True)
 class TuneJob:
-    """A chunk of settings, with what every setting shares (picklable, for a worker process).
+    """A chunk of settings with what they share (picklable, for a worker process).
 
-    Attributes
-    ----------
-    model : str
-        Model file designed on, and the sim plant's model.
-    method : {'pi', 'poles'}
-    plant, preset : str
-        Plant name ('sim' or 'physics') and physics preset, as for ``make_plant``.
-    reference : str
-        Reference spec of both motors (rad/s; see :mod:`cartctl.reference`).
-    duration_s : float
-        Run time per setting (s).
-    extra_delay_ticks : int
-        Loop delay beyond the model's (ticks): the designs allow for it and the simulated loop has
-        it (:func:`scoring_plant`).
-    items : tuple of (int, dict)
-        The settings: (1-based grid index, axis values).
-    design : tuple of (str, float)
-        Design request fields every setting shares (``process_noise_std_v``,
-        ``bias_drift_std_v``), beside the design command's defaults; empty: the defaults.
+    ``model`` is designed on and is the sim plant's model; ``plant``/``preset`` as for
+    ``make_plant``; ``reference`` a spec of both motors (rad/s); ``duration_s`` per setting;
+    ``extra_delay_ticks`` the loop delay beyond the model's, which the designs allow for and the
+    scoring plant has; ``items`` the (1-based grid index, axis values); ``design`` request fields
+    every setting shares (``process_noise_std_v`` …).
     """
 
     model: str
@@ -78,17 +57,7 @@ class TuneJob:
 
 
 class DelayedPlant:
-    """A plant whose commands arrive ``ticks`` ticks late (a PC-side loop's extra delay).
-
-    Commands wait in a queue, zero volts at first; the inner plant saturates them as usual.
-
-    Parameters
-    ----------
-    plant : Plant
-        The plant delayed (it keeps its own delay).
-    ticks : int
-        Extra ticks of delay (>= 0).
-    """
+    """A plant whose commands arrive ``ticks`` ticks late (zero volts at first): a PC-side loop's delay."""
 
     def __init__(self, plant: Plant, ticks: int) -> None:
         self.plant = plant
@@ -97,26 +66,22 @@ class DelayedPlant:
         self._queue: deque[tuple[float, float]] = deque()
 
     def reset(self) -> Measurement:
-        """Inner plant at rest, the queue back to zero volts; the tick-0 measurement."""
         self._queue = deque([(0.0, 0.0)] * self.ticks)
         return self.plant.reset()
 
     def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
-        """Queue this tick's command, send the one ``ticks`` ticks old, measure tick k + 1."""
+        """Queue this tick's command, send the one ``ticks`` ticks old."""
         self._queue.append((voltage_a_v, voltage_b_v))
         return self.plant.step(*self._queue.popleft())
 
     def close(self) -> None:
-        """Close the inner plant."""
         self.plant.close()
 
 
 def scoring_plant(job: TuneJob) -> Plant:
-    """The plant a setting of ``job`` is scored on: the loop its design is for.
-
-    ``make_plant(job.plant, …)`` with ``job.extra_delay_ticks`` more ticks of delay: for the sim
-    plant, the ARX models with input delay nk + d (the plant of ``cartctl design``'s simulated
-    step with ``--extra-delay d``); for the physics plant, its commands delayed by d ticks.
+    """The plant a setting of ``job`` is scored on: ``job.plant`` with ``job.extra_delay_ticks`` more
+    ticks of delay (the sim plant's models with nk + d, as ``design``'s simulated step; the physics
+    plant's commands delayed).
     """
     plant, _ = make_plant(job.plant, model_path=job.model, preset=job.preset)
     d = job.extra_delay_ticks
@@ -137,7 +102,7 @@ def simulate(
     period_s: float,
     voltage_limit_v: float,
 ) -> tuple[dict[str, Any], str | None]:
-    """The loop of ``cartctl run --fast`` kept in memory: (``trace_metrics`` summary, failure)."""
+    """The loop of ``cartctl run --fast`` in memory: (``trace_metrics`` summary, failure)."""
     columns, state = run_in_memory(plant, controllers, references, period_s=period_s,
                                    voltage_limit_v=voltage_limit_v)  # fmt: skip
     return trace_metrics(columns, period_s), state.failure
@@ -146,8 +111,7 @@ def simulate(
 def design_setting(
     job: TuneJob, models: ModelFile, settings: dict[str, float]
 ) -> tuple[dict[str, Controller], float] | str:
-    """One grid setting's runtime controller per motor and its voltage limit (V), or why a motor's
-    design was refused."""
+    """A setting's runtime controller per motor and its voltage limit (V), or why a design was refused."""
     request = design_request(job.method, settings, job.extra_delay_ticks, dict(job.design))
     controllers: dict[str, Controller] = {}
     for m in ("a", "b"):
@@ -160,7 +124,7 @@ def design_setting(
 
 @dataclass(frozen=True)
 class Nominal:
-    """A setting scored on its nominal plant, with what it was run with (for more plants)."""
+    """A setting scored on its nominal plant, with what it ran with (for more plants)."""
 
     result: TuneResult
     controllers: dict[str, Controller] = field(default_factory=dict)
@@ -172,7 +136,7 @@ class Nominal:
 def evaluate_nominal(
     job: TuneJob, models: ModelFile, index: int, settings: dict[str, float]
 ) -> Nominal:
-    """Design one setting and run it on the scoring plant (:func:`scoring_plant`)."""
+    """Design one setting and run it on the scoring plant."""
     designed = design_setting(job, models, settings)
     if isinstance(designed, str):
         return Nominal(TuneResult(index, settings, False, designed))
@@ -183,77 +147,44 @@ def evaluate_nominal(
     summary, failure = simulate(plant, controllers, refs, period_s=plant.period_s,
                                 voltage_limit_v=limit_v)  # fmt: skip
     if failure:
-        return Nominal(TuneResult(index, settings, False, f"the run failed: {failure}"))
+        return Nominal(TuneResult(index, settings, False, RUN_FAILED + failure))
     result = TuneResult(index, settings, True, motors=summary["motors"])
     return Nominal(result, controllers, refs, limit_v, plant.period_s)
 
 
-def _evaluate(job: TuneJob, models: ModelFile, index: int,
-              settings: dict[str, float]) -> TuneResult:  # fmt: skip
-    return evaluate_nominal(job, models, index, settings).result
-
-
 def evaluate_chunk(job: TuneJob) -> list[TuneResult]:
-    """Design and run every setting of a chunk (the worker function of the process pool)."""
+    """The worker function of the process pool."""
     models = load_models(job.model)
-    return [_evaluate(job, models, i, s) for i, s in job.items]
+    return [evaluate_nominal(job, models, i, s).result for i, s in job.items]
 
 
 def one_blas_thread() -> None:
-    """Worker initializer: one BLAS thread in this process (threadpoolctl).
-
-    A forked worker keeps the parent's BLAS thread pool (as many threads as cores); two workers
-    on two cores then compete with each other's BLAS threads and the grid runs no faster than in
-    one process.
-    """
+    """Worker initializer: one BLAS thread per process, else forked workers compete for the cores."""
     threadpool_limits(limits=1, user_api="blas")
 
 
-class GridJob(Protocol):
-    """A job :func:`run_grid` can split: a dataclass (frozen or not) with the settings as ``items``."""
-
-    __dataclass_fields__: ClassVar[dict[str, Any]]
-
-    @property
-    def items(self) -> tuple[tuple[int, dict[str, float]], ...]:
-        """The settings: (1-based grid index, axis values)."""
-        ...
-
-
 class GridRow(Protocol):
-    """A result of one setting: :func:`run_grid` puts them back in grid order by ``index``."""
+    """A result of one setting, with its 1-based grid ``index``."""
 
     @property
-    def index(self) -> int:
-        """The setting's 1-based grid index."""
-        ...
+    def index(self) -> int: ...
 
 
-Job = TypeVar("Job", bound=GridJob)
 Row = TypeVar("Row", bound=GridRow)
 
 
 def run_grid(
-    job: Job,
+    job: Any,
     jobs: int,
     progress: Callable[[int], None] | None = None,
-    evaluate: Callable[[Job], list[Row]] = evaluate_chunk,  # type: ignore[assignment]
+    evaluate: Callable[[Any], list[Row]] = evaluate_chunk,  # type: ignore[assignment]
 ) -> list[Row]:
-    """Every setting of ``job``, in grid order, on ``jobs`` processes.
+    """Every setting of ``job`` (a dataclass with ``items``) in grid order, on ``jobs`` processes.
 
-    Parameters
-    ----------
-    job : TuneJob or another dataclass with ``items``
-        All the settings.
-    jobs : int
-        Processes (>= 1). With 1 everything runs in this process. Otherwise the first setting
-        runs here (its lazy imports and first-call costs are then paid before the workers fork,
-        not once per worker) and the rest in chunks of about a quarter of a worker's share.
-    progress : callable, optional
-        Called with the number of settings done so far as results arrive.
-    evaluate : callable
-        The worker function: a chunk (``job`` with some of its items) to its rows, each with an
-        ``index`` (default :func:`evaluate_chunk`; ``--robust`` passes its own).
+    With 1 process everything runs here; otherwise the first setting runs here (its lazy imports
+    are paid before the workers fork) and the rest in chunks of about a quarter of a worker's share.
+    ``progress`` gets the count done so far; ``evaluate`` maps a chunk to rows (default
+    :func:`evaluate_chunk`).
     """
     items = job.items
     results: list[Row] = []

@@ -1,18 +1,8 @@
-"""Grid tuning, the pure part: grid specs, the design request of a setting, results, Pareto front.
+"""Grid tuning, the pure part: the ``--grid`` spec, a setting's design request, result rows, fronts.
 
-Pipeline: between ``design`` and ``run``. ``cartctl tune`` (:mod:`cartctl.cli.commands.tune`) designs
-one controller per grid setting, runs it in the simulated loop and compares the run metrics; this
-module holds what needs no I/O: parsing ``--grid``, the ``cartctl design`` arguments of a setting
-(the single source of truth for both the tuning run and ``--choose``), the result rows and the
-non-dominated (Pareto) set over overshoot, settling time, RMS error and peak voltage.
-
-Grid spec (``--grid``): comma-separated axes, each ``NAME=START:STOP:STEP`` (an inclusive range,
-STEP > 0) or ``NAME=VALUE`` (one value). Axes left out keep their default range. NAME is the
-``cartctl design`` option without its dashes; the older spelling with underscores
-(``phase_margin``, ``crossover_hz``, ``settling_time``) is accepted too. Names::
-
-    pi      phase-margin (deg, default 50:75:5)   crossover-hz (Hz, default 2:5:0.5)
-    poles   settling-time (s, default 0.04:0.16:0.02)   overshoot (%, default 0.5:5:1.5)
+``--grid`` holds comma-separated axes, each ``NAME=START:STOP:STEP`` (inclusive, STEP > 0) or
+``NAME=VALUE``; axes left out keep their default range (:data:`AXES`). NAME is the ``cartctl
+design`` option without its dashes; the older spelling with underscores is accepted too.
 """
 
 from __future__ import annotations
@@ -29,11 +19,8 @@ from cartctl.choices import MAX_TUNE_SETTINGS
 from cartctl.design.request import DesignRequest, check_field
 from cartctl.errors import InputError
 
-METRICS = ("overshoot_percent", "settling_time_s", "rms_error", "max_abs_voltage")
-"""The per-motor run metrics compared (%, s, rad/s, V), all to be minimised."""
-
-PLOT_METRICS = ("settling_time_s", "overshoot_percent")
-"""The two metrics ``--plot`` draws (x, y); ``pareto_plot`` is the front over these alone."""
+METRICS = ("overshoot_percent", "settling_time_s", "rms_error", "max_abs_voltage")  # %, s, rad/s, V
+PLOT_METRICS = ("settling_time_s", "overshoot_percent")  # --plot's x and y
 
 STATUSES = {
     "infeasible": "infeasible request (the design refused it)",
@@ -41,43 +28,20 @@ STATUSES = {
     "no step": "ran, but its reference has no step to measure (overshoot, settling undefined)",
     "not settled": "ran, but did not settle",
     "settled": "ran and settled",
-}
-"""A setting's ``status`` and what it means (the worse of motors a and b)."""
-
-RUN_FAILED = "the run failed: "
-"""How the reason of a setting whose run failed begins (:mod:`cartctl.tune.engine`)."""
+}  # a setting's status (the worse of motors a and b)
+RUN_FAILED = "the run failed: "  # how the reason of a setting whose run failed begins
 
 
 @dataclass(frozen=True)
 class Axis:
-    """One tuning axis.
-
-    Attributes
-    ----------
-    name : str
-        Its grid name: the ``cartctl design`` option without its dashes (``phase-margin``); the
-        key of a setting's values, in ``--json`` too.
-    field : str
-        The design request field it sets (``phase_margin_deg``).
-    unit : str
-    default : tuple of float
-        The default range (start, stop, step).
+    """A tuning axis: its grid ``name`` (the design option without dashes, the settings' key in
+    ``--json`` too), the design request ``field`` it sets, its ``unit`` and default range.
     """
 
     name: str
     field: str
     unit: str
     default: tuple[float, float, float]
-
-    @property
-    def option(self) -> str:
-        """The ``cartctl design`` option (``--phase-margin``)."""
-        return f"--{self.name}"
-
-    @property
-    def old_name(self) -> str:
-        """The grid name before it followed the option (``phase_margin``), still accepted."""
-        return self.name.replace("-", "_")
 
 
 AXES: dict[str, tuple[Axis, ...]] = {
@@ -92,11 +56,10 @@ AXES: dict[str, tuple[Axis, ...]] = {
 }
 
 FIELDS = {a.name: a.field for axes in AXES.values() for a in axes}
-"""The design request field of each grid axis."""
 
 
 def grid_form(method: str) -> str:
-    """The expected ``--grid`` form for a method, for help texts and error messages."""
+    """The expected ``--grid`` form of a method, for help texts and error messages."""
     a, b = AXES[method]
     return f"'{a.name}=START:STOP:STEP,{b.name}=START:STOP:STEP' (inclusive; or NAME=VALUE)"
 
@@ -110,7 +73,7 @@ def _count(start: float, stop: float, step: float) -> int:
 
 
 def inclusive_range(start: float, stop: float, step: float) -> tuple[float, ...]:
-    """``start, start + step, …`` up to and including ``stop`` (to 1e-9 of a step), rounded to 1e-10."""
+    """``start, start + step, …`` up to ``stop`` inclusive (to 1e-9 of a step), rounded to 1e-10."""
     return tuple(round(start + i * step, 10) for i in range(_count(start, stop, step)))
 
 
@@ -137,22 +100,13 @@ def _axis_range(item: str, text: str, form: str) -> tuple[float, float, float]:
 
 
 def parse_grid(spec: str | None, method: str) -> dict[str, tuple[float, ...]]:
-    """The values of each axis of ``method`` (module docstring), defaults where ``spec`` is silent.
+    """The values of each axis of ``method``, keyed by the axes' names, defaults where ``spec`` is silent.
 
-    The keys are the axes' names (the design options' spelling), whichever spelling ``spec``
-    used.
-
-    Each value is checked as ``cartctl design`` checks its option
-    (:func:`~cartctl.design.request.check_field`), named as the grid axis the user gave, so an
-    out-of-range value is refused before any design runs, in design's words.
-
-    Raises
-    ------
-    InputError
-        An unknown axis name, a repeated one, a malformed, non-finite or empty range, a value
-        ``cartctl design`` refuses, or more than :data:`MAX_TUNE_SETTINGS` settings; one line each.
+    Each value is checked as ``cartctl design`` checks its option (named as the grid item the user
+    gave), so an out-of-range value is refused before any design runs; so are unknown or repeated
+    axes, malformed or empty ranges and more than :data:`MAX_TUNE_SETTINGS` settings.
     """
-    spelled = {n: a.name for a in AXES[method] for n in (a.name, a.old_name)}
+    spelled = {n: a.name for a in AXES[method] for n in (a.name, a.name.replace("-", "_"))}
     ranges = {a.name: a.default for a in AXES[method]}
     given: dict[str, str] = {}
     form = grid_form(method)
@@ -194,12 +148,9 @@ def design_request(
     extra_delay_ticks: int = 0,
     fixed: Mapping[str, Any] | None = None,
 ) -> DesignRequest:
-    """The design request of one setting: the design command's defaults, ``fixed`` (request
-    fields every setting shares, such as ``process_noise_std_v``), the setting's axes.
-
-    The tuning run designs with it and ``--choose`` writes its file with it, so both get the
-    very same controller; :meth:`~cartctl.design.request.DesignRequest.to_argv` gives the
-    ``cartctl design`` command that makes it.
+    """A setting's design request: the design defaults, ``fixed`` (shared fields such as
+    ``process_noise_std_v``), then the setting's axes. The tuning run and ``--choose`` both use it,
+    so both get the very same controller.
     """
     axes: dict[str, Any] = {a.field: float(settings[a.name]) for a in AXES[method]}
     return DesignRequest(method=method, extra_delay_ticks=extra_delay_ticks, **dict(fixed or {}),
@@ -212,7 +163,7 @@ def request_axes(method: str) -> tuple[str, ...]:
 
 
 def worst_metrics(motors: Mapping[str, Mapping[str, Any]]) -> dict[str, float | None]:
-    """Per metric of :data:`METRICS`, the larger (worse) value of the motors; None if any is None."""
+    """Per metric of :data:`METRICS`, the larger (worse) of the motors; None if any is None."""
     out: dict[str, float | None] = {}
     for key in METRICS:
         values = [m.get(key) for m in motors.values()]
@@ -223,25 +174,12 @@ def worst_metrics(motors: Mapping[str, Mapping[str, Any]]) -> dict[str, float | 
 
 @dataclass(frozen=True)
 class TuneResult:
-    """One grid setting: what was asked, whether it could be designed and run, and how it ran.
+    """One grid setting: what was asked, whether it was designed and ran, and how it ran.
 
-    Attributes
-    ----------
-    index : int
-        1-based place in the grid (first axis slowest); ``--choose`` takes it.
-    settings : dict of str to float
-        The axis values, keyed by the axes' names (units in :data:`AXES`).
-    feasible : bool
-        False when the design refused the setting or the run failed; ``reason`` says why.
-    reason : str or None
-        Why the setting is infeasible.
-    motors : dict
-        The run summary entry of each motor (as ``cartctl run --json`` gives it).
-    pareto : bool
-        On the non-dominated front over the four :data:`METRICS` (see :func:`mark_pareto`).
-    pareto_plot : bool
-        On the non-dominated front over the two :data:`PLOT_METRICS` alone (what ``--plot``
-        rings).
+    ``index`` is the 1-based place in the grid (first axis slowest), which ``--choose`` takes;
+    ``settings`` the axis values by axis name; ``reason`` why it is infeasible (refused design or
+    failed run); ``motors`` each motor's run summary entry (as ``run --json``); ``pareto`` and
+    ``pareto_plot`` mark the fronts over :data:`METRICS` and :data:`PLOT_METRICS`.
     """
 
     index: int
@@ -254,8 +192,7 @@ class TuneResult:
 
     @property
     def status(self) -> str:
-        """One of :data:`STATUSES`: 'infeasible', 'run failed', 'no step', 'not settled' or
-        'settled'."""
+        """One of :data:`STATUSES`."""
         if not self.feasible:
             return "run failed" if (self.reason or "").startswith(RUN_FAILED) else "infeasible"
         worst = self.worst
@@ -265,14 +202,13 @@ class TuneResult:
 
     @property
     def worst(self) -> dict[str, float | None]:
-        """The worse of the motors per metric (%, s, rad/s, V); all None when infeasible."""
+        """The worse of the motors per metric; all None when infeasible."""
         if not self.feasible:
             return dict.fromkeys(METRICS)
         return worst_metrics(self.motors)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON row: index, settings, feasible, reason, worst-of-motors metrics, pareto, motors;
-        added: status (:data:`STATUSES`) and pareto_plot."""
+        """JSON row (``peak_voltage_v`` is the worse ``max_abs_voltage``)."""
         worst = self.worst
         return {"index": self.index, "settings": dict(self.settings), "feasible": self.feasible,
                 "reason": self.reason, "overshoot_percent": worst["overshoot_percent"],
@@ -283,18 +219,10 @@ class TuneResult:
 
 
 def pareto_front(points: ArrayLike) -> NDArray[np.bool_]:
-    """Which rows are non-dominated, every column to be minimised.
+    """Which rows of ``points`` (n, k) are non-dominated, every column minimised.
 
-    Parameters
-    ----------
-    points : array_like, shape (n, k)
-        One row per candidate; a row with a NaN is never on the front and dominates nothing.
-
-    Returns
-    -------
-    ndarray of bool, shape (n,)
-        True where no other row is at most as large in every column and smaller in one. Equal
-        rows do not dominate each other.
+    A row with a NaN is never on the front and dominates nothing; equal rows do not dominate each
+    other.
     """
     p = np.asarray(points, dtype=float)
     if p.ndim != 2:
@@ -308,19 +236,15 @@ def pareto_front(points: ArrayLike) -> NDArray[np.bool_]:
     return front
 
 
-def _nan_if_none(value: float | None) -> float:
-    return math.nan if value is None else value
-
-
 def _front_over(results: Sequence[TuneResult], metrics: Sequence[str]) -> NDArray[np.bool_]:
-    rows = [[_nan_if_none(r.worst[k]) for k in metrics] for r in results]
-    return pareto_front(np.reshape(rows, (len(results), len(metrics))))
+    rows = np.array([[r.worst[k] for k in metrics] for r in results], dtype=float)  # None: NaN
+    return pareto_front(rows.reshape(len(results), len(metrics)))
 
 
 def mark_pareto(results: Sequence[TuneResult]) -> list[TuneResult]:
-    """The results with ``pareto`` set (the front over :data:`METRICS`, worse motor) and
-    ``pareto_plot`` (the front over :data:`PLOT_METRICS`, the axes of ``--plot``), both among
-    feasible settings whose metrics (settling in particular) are all defined."""
+    """The results with ``pareto`` (the front over :data:`METRICS`) and ``pareto_plot`` (over
+    :data:`PLOT_METRICS`) set, among feasible settings whose metrics are all defined.
+    """
     front = _front_over(results, METRICS)
     plotted = _front_over(results, PLOT_METRICS)
     return [replace(r, pareto=bool(f), pareto_plot=bool(p))
@@ -328,7 +252,7 @@ def mark_pareto(results: Sequence[TuneResult]) -> list[TuneResult]:
 
 
 def status_counts(results: Sequence[TuneResult]) -> dict[str, int]:
-    """How many settings have each status of :data:`STATUSES` (all four keys)."""
+    """How many settings have each status of :data:`STATUSES` (all keys)."""
     counts = dict.fromkeys(STATUSES, 0)
     for r in results:
         counts[r.status] += 1
@@ -336,8 +260,9 @@ def status_counts(results: Sequence[TuneResult]) -> dict[str, int]:
 
 
 def sort_results(results: Sequence[TuneResult]) -> list[TuneResult]:
-    """Pareto front first, then the other settled runs, each by settling time then overshoot;
-    then feasible runs that did not settle (by RMS error), then the infeasible (by index)."""
+    """Pareto front first, then the other settled runs, each by settling then overshoot; then the
+    unsettled (by RMS error), then the infeasible (by index).
+    """
 
     def key(r: TuneResult) -> tuple[int, float, float, int]:
         w = r.worst
