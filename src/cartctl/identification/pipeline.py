@@ -1,9 +1,9 @@
 """The identification pipeline behind ``cartctl identify``: traces in, one result per motor out.
 
-Per motor: gather the experiments that drive it, optionally average whole cycles, optionally
-prefilter (and then also fit without the filter, to show the filter's effect), pick the delay
-(given or estimated), fit ARX, and optionally refine by output error (reporting both). Simulation
-fits are always computed on the raw, unaveraged data, so every variant compares on equal terms.
+Per motor: the experiments that drive it, optionally averaged over whole cycles and prefiltered
+(then also fitted without the filter, to show its effect), the delay (given, or estimated jointly
+for both motors), ARX, and optionally its output-error refinement. Simulation fits are always on
+the raw, unaveraged data, so every variant compares on equal terms.
 """
 
 from __future__ import annotations
@@ -30,33 +30,12 @@ METHODS = ("arx", "oe")
 
 @dataclass(frozen=True)
 class IdentifyRequest:
-    """What the user asked for.
+    """What the user asked for (the options of ``cartctl identify``).
 
-    Attributes
-    ----------
-    motors : tuple of str
-        Motors to identify ('a', 'b'). A motor whose voltage is zero in every trace is an error
-        when named alone and skipped (with a note) when both are asked for.
-    na, nb : int
-        Model orders (2, 2 is the report's structure).
-    delay : int or None
-        Input delay nk in samples, or None to estimate it over ``delay_candidates``.
-    prefilter : Prefilter or None
-        Butterworth prefilter on input and output before the fit.
-    method : {'arx', 'oe'}
-        The model returned: ARX least squares, or its output-error refinement.
-    average : bool
-        Average whole excitation cycles before the ARX fit (the input must be periodic).
-    delay_candidates : tuple of int
-        Delays tried when ``delay`` is None.
-    orders : dict or None
-        The grid of the order table (``--orders``), ``na``/``nb``/``nk`` → values; None for none.
-    split : float or None
-        Estimate on the first fraction of each experiment, validate on the rest (``--split``).
-    loop_delay_ticks : int or None
-        The loop delay the data was recorded in (ticks from a measurement to its voltage on the
-        motor; the traces' meta files or ``--loop-delay``), written into the model file; None when
-        unknown.
+    ``delay`` None estimates nk over ``delay_candidates``; ``orders`` is the ``--orders`` grid;
+    ``split`` the estimation fraction of ``--split``; ``loop_delay_ticks`` the loop delay the data
+    was recorded in (ticks from a measurement to its voltage on the motor), written into the model
+    file. A motor without excitation is an error when named alone, else skipped with a note.
     """
 
     motors: tuple[str, ...] = ("a", "b")
@@ -86,27 +65,10 @@ class IdentifyRequest:
 
 @dataclass(frozen=True)
 class MotorIdentification:
-    """The result for one motor.
-
-    Attributes
-    ----------
-    motor : str
-    chosen : ArxFit
-        The model the user asked for (``method``, with the prefilter if any).
-    arx : ArxFit
-        The ARX fit (with the prefilter if any).
-    oe : ArxFit or None
-        The output-error refinement, when ``method='oe'``.
-    unfiltered : ArxFit or None
-        ARX without the prefilter, when a prefilter was used: the filter's effect.
-    delay : DelayEstimate or None
-        This motor's delay evidence, when the delay was estimated (``delay.nk`` is the delay
-        chosen for both motors, ``delay.nk_alone`` this motor's own best where it differs).
-    cycles_averaged : int or None
-        Number of cycles averaged, when averaging was used.
-    diagnostics : Diagnostics or None
-        Residual tests, θ's covariance and Bode band, the order table; fits on validation data.
-    """
+    """The result for one motor: the ``chosen`` fit (``method``, prefiltered if asked), the ARX
+    fit, its OE refinement (``method='oe'``), ARX without the prefilter (when one was used), the
+    motor's delay evidence (``delay.nk`` the joint choice), the cycles averaged, and the
+    diagnostics."""
 
     motor: str
     chosen: ArxFit
@@ -130,7 +92,6 @@ class MotorIdentification:
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        """``identify --json`` entry (the chosen fit), the variants side by side, the evidence."""
         out = self.chosen.to_dict()
         if self.oe is not None:
             out["arx"] = self.arx.to_dict()
@@ -146,18 +107,8 @@ class MotorIdentification:
 
 @dataclass(frozen=True)
 class IdentifyResult:
-    """Per motor results, and notes for the user (skipped motors, a close delay call).
-
-    Attributes
-    ----------
-    period_s : float
-    motors : dict of str to MotorIdentification
-    notes : tuple of str
-    delay : JointDelay or None
-        The one delay chosen for every motor and its joint evidence, when it was estimated.
-    loop_delay_ticks : int or None
-        The loop delay the data was recorded in, when known.
-    """
+    """Per motor results, notes for the user (skipped motors, a close delay call), the joint
+    delay when it was estimated, and the loop delay the data was recorded in."""
 
     period_s: float
     motors: dict[str, MotorIdentification]
@@ -166,7 +117,6 @@ class IdentifyResult:
     loop_delay_ticks: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """The ``identify --json`` object (fixed keys, plus ``delay`` and ``loop_delay_ticks``)."""
         return {
             "Ts": self.period_s,
             "motors": {m: r.to_dict() for m, r in self.motors.items()},
@@ -206,52 +156,20 @@ def _averaged(
     return out, total
 
 
-def _prefiltered(
-    raw: Sequence[Segment], request: IdentifyRequest, period_s: float
-) -> list[Segment]:
-    pf = request.prefilter
-    return [(pf.apply(y, period_s), pf.apply(u, period_s)) for y, u in raw] if pf else list(raw)
-
-
-def motor_delay_evidence(
-    segments: Sequence[Segment], request: IdentifyRequest, *, period_s: float
-) -> DelayEstimate:
-    """One motor's delay evidence over ``request.delay_candidates``, on the data the fit uses."""
-    raw = list(segments)
-    return delay_evidence(
-        _prefiltered(raw, request, period_s), na=request.na, nb=request.nb,
-        candidates=request.delay_candidates, period_s=period_s, eval_segments=raw,
-    )  # fmt: skip
-
-
-def identify_motor(
+def _identify_motor(
     motor: str,
-    segments: Sequence[Segment],
+    raw: list[Segment],
+    work: list[Segment],
     request: IdentifyRequest,
+    nk: int,
     *,
     period_s: float,
     sources: Sequence[str],
-    validation: Sequence[Segment] = (),
-    delay: DelayEstimate | None = None,
+    validation: Sequence[Segment],
+    delay: DelayEstimate | None,
 ) -> MotorIdentification:
-    """Run the pipeline on one motor's experiments (raw (y, u) pairs, rad/s and V).
-
-    With ``validation`` data the fits are recomputed on it (:mod:`.diagnostics`). ``delay`` is the
-    delay evidence with the delay chosen (for both motors, :func:`identify`); without it, a
-    request for an estimated delay estimates this motor's alone.
-    """
-    raw = list(segments)
-    work = _prefiltered(raw, request, period_s)
-    delay_est = None
-    nk = request.delay
-    if nk is None:
-        delay_est = (
-            delay
-            or joint_delay({motor: motor_delay_evidence(raw, request, period_s=period_s)}).motors[
-                motor
-            ]
-        )
-        nk = delay_est.nk
+    """The pipeline on one motor's raw and prefiltered (``work``) experiments with delay ``nk``;
+    with ``validation`` data the fits are recomputed on it."""
     cycles = None
     fit_data, start = work, None
     if request.average:
@@ -281,7 +199,7 @@ def identify_motor(
         arx=arx_fit,
         oe=oe_fit,
         unfiltered=unfiltered,
-        delay=delay_est,
+        delay=delay,
         cycles_averaged=cycles,
         diagnostics=diagnostics,
     )
@@ -292,11 +210,8 @@ def identify(
 ) -> IdentifyResult:
     """Identify the requested motors from the traces (validated on ``validation``, if any).
 
-    Raises
-    ------
-    InputError
-        Traces with different sample periods, a motor named alone that no trace excites, or no
-        motor excited at all (a voltage that is zero, or one constant, throughout).
+    Refuses traces with different sample periods, a motor named alone that no trace excites, and
+    no motor excited at all (a voltage zero, or one constant, throughout).
     """
     if not traces:
         raise InputError("no traces to identify from")
@@ -337,18 +252,26 @@ def identify(
             f"no motor has excitation in {names} ({'; '.join(problems)}); record with a varying "
             "voltage, e.g. cartctl excite --signal square"
         )
-    joint = None
+    pf = request.prefilter
+    work: dict[str, list[Segment]] = {
+        m: [(pf.apply(y, period_s), pf.apply(u, period_s)) for y, u in raw] if pf else raw
+        for m, (raw, _, _) in data.items()
+    }
     if request.delay is None:  # one loop, one delay: chosen from both motors' evidence
-        joint = joint_delay(
-            {m: motor_delay_evidence(d[0], request, period_s=period_s) for m, d in data.items()}
-        )
-        note = joint.note()
-        if note is not None:
+        joint = joint_delay({
+            m: delay_evidence(work[m], na=request.na, nb=request.nb, period_s=period_s,
+                              candidates=request.delay_candidates, eval_segments=raw)
+            for m, (raw, _, _) in data.items()
+        })  # fmt: skip
+        nk = joint.nk
+        if (note := joint.note()) is not None:
             notes.append(note)
+    else:
+        joint, nk = None, request.delay
     results = {
-        m: identify_motor(m, segments, request, period_s=period_s, sources=sources,
-                          validation=val, delay=None if joint is None else joint.motors[m])
-        for m, (segments, sources, val) in data.items()
+        m: _identify_motor(m, raw, work[m], request, nk, period_s=period_s, sources=sources,
+                           validation=val, delay=joint.motors[m] if joint else None)
+        for m, (raw, sources, val) in data.items()
     }  # fmt: skip
     return IdentifyResult(period_s, results, tuple(notes), joint, request.loop_delay_ticks)
 
