@@ -18,41 +18,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT
-from cartctl.link.messages import Gpio
-
-__all__ = [
-    "BRIDGE_BAUD",
-    "BRIDGE_VERSION",
-    "CH_APPLIED_A",
-    "CH_APPLIED_B",
-    "CH_BRIDGE_VERSION",
-    "CH_DRIVE",
-    "CH_ECHO",
-    "CH_HOST_LOST",
-    "CH_POSITION_A",
-    "CH_POSITION_B",
-    "CH_SEQ",
-    "CH_SPEED_A",
-    "CH_SPEED_B",
-    "CH_STATUS",
-    "CH_TICK",
-    "CH_VOLTAGE_A",
-    "CH_VOLTAGE_B",
-    "HOST_LOSS_WARN_PERCENT",
-    "LEGACY_BAUD",
-    "SEQ_MODULO",
-    "SEQ_WINDOW",
-    "STATUS_DRIVING",
-    "STATUS_WATCHDOG",
-    "TIMING_FIRST_ID",
-    "TIMING_REPORTS",
-    "WATCHDOG_MS",
-    "CartSample",
-    "HostCommand",
-    "next_seq",
-    "tick_difference",
-]
+from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT, check_gpio_counts
+from cartctl.link.framer import Gpio
 
 SEQ_MODULO = 32768
 """Host sequence numbers and cart ticks count modulo this (int16 helpers on the cart)."""
@@ -102,19 +69,16 @@ CH_STATUS = 2
 CH_HOST_LOST = 3
 
 
-def _check_counts(floats: Sequence[float], ints: Sequence[int]) -> None:
-    if len(floats) != GPIO_FLOAT_COUNT or len(ints) != GPIO_INT_COUNT:
-        raise ValueError(
-            f"GPIO has {GPIO_FLOAT_COUNT} floats and {GPIO_INT_COUNT} ints, "
-            f"got {len(floats)} and {len(ints)}"
-        )
-
-
 def _version(value: float) -> int:
     """A version number from its float channel (0 for anything that is not a small whole number)."""
     if value == value and 0.0 <= value < 1000.0 and float(int(value)) == value:
         return int(value)
     return 0
+
+
+def status_bits(driving: bool, tripped: bool) -> int:
+    """The status int channel: :data:`STATUS_DRIVING` and :data:`STATUS_WATCHDOG` as set."""
+    return (STATUS_DRIVING if driving else 0) | (STATUS_WATCHDOG if tripped else 0)
 
 
 def next_seq(seq: int) -> int:
@@ -129,17 +93,7 @@ def tick_difference(earlier: int, later: int) -> int:
 
 @dataclass(frozen=True)
 class HostCommand:
-    """One PC → cart command frame.
-
-    Attributes
-    ----------
-    voltage_a_v, voltage_b_v
-        Requested motor voltages (V).
-    seq
-        Host sequence number, 0..32767.
-    drive
-        True to apply the voltages, False to stop (zero volts).
-    """
+    """One PC → cart command frame: voltages (V), sequence number 0..32767, drive or stop."""
 
     voltage_a_v: float
     voltage_b_v: float
@@ -159,7 +113,7 @@ class HostCommand:
     @classmethod
     def from_channels(cls, floats: Sequence[float], ints: Sequence[int]) -> HostCommand:
         """The command carried by a GPIO frame's channels (drive only if int 1 is exactly 1)."""
-        _check_counts(floats, ints)
+        check_gpio_counts(floats, ints)
         return cls(
             voltage_a_v=float(floats[CH_VOLTAGE_A]),
             voltage_b_v=float(floats[CH_VOLTAGE_B]),
@@ -170,29 +124,11 @@ class HostCommand:
 
 @dataclass(frozen=True)
 class CartSample:
-    """One cart → PC measurement frame (one 10 ms tick of the cart).
+    """One cart → PC measurement frame (one 10 ms tick of the cart), in the channel map's units.
 
-    Attributes
-    ----------
-    time_ms
-        The cart's clock (ms).
-    speed_a_rad_s, speed_b_rad_s
-        Measured wheel speeds (rad/s).
-    applied_a_v, applied_b_v
-        Voltages actually applied at this tick (V).
-    position_a_rad, position_b_rad
-        Wheel positions (rad).
-    echo_seq
-        The last host sequence number the cart received.
-    cart_tick
-        The cart's tick counter, 0..32767.
-    driving, watchdog_tripped
-        The status bits.
-    host_frames_lost
-        Host sequence numbers the cart skipped since it booted (modulo 32768; 0 from a bridge
-        sketch that predates the count).
-    bridge_version
-        The bridge sketch's version (float 6): :data:`BRIDGE_VERSION`, or 0 from an older one.
+    ``echo_seq`` is the host sequence number of the command applied at this tick,
+    ``host_frames_lost`` the host sequence numbers skipped since boot (modulo 32768; 0 from an
+    older bridge), ``bridge_version`` the sketch's version (float 6; 0 from a bridge before 2).
     """
 
     time_ms: int
@@ -212,9 +148,7 @@ class CartSample:
     @property
     def status(self) -> int:
         """The status bits as sent in int channel 2."""
-        return (STATUS_DRIVING if self.driving else 0) | (
-            STATUS_WATCHDOG if self.watchdog_tripped else 0
-        )
+        return status_bits(self.driving, self.watchdog_tripped)
 
     def to_channels(self) -> tuple[tuple[float, ...], tuple[int, ...]]:
         """The 8 floats and 4 ints of the GPIO frame."""
@@ -237,7 +171,7 @@ class CartSample:
     def from_gpio(cls, gpio: Gpio) -> CartSample:
         """The sample carried by a GPIO message from the cart."""
         floats, ints = gpio.floats, gpio.ints
-        _check_counts(floats, ints)
+        check_gpio_counts(floats, ints)
         status = ints[CH_STATUS]
         return cls(
             time_ms=gpio.time_ms,

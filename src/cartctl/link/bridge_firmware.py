@@ -1,50 +1,40 @@
-"""The bridge sketch's logic (``firmware/cartctl_bridge/bridge_logic.h``), in Python, for the virtual cart.
+"""The bridge sketch's logic (``firmware/cartctl_bridge/bridge_logic.h``) in Python, for the virtual cart.
 
-The sketch on the cart and this class implement one contract (``docs/serial-protocol.md``), and a
-test runs both on the same input and compares them tick by tick, so keep them in sync.
-
-Bridge version 2. The sketch's 10 ms thread drains the serial port, runs ``io()`` (writes the
-stored voltage, reads the encoders), then ``control()``, which is :meth:`BridgeFirmware.control`,
-and sends one GPIO; its 1 ms thread drains as well. After each drain the sketch hands the channels
-microOS holds from the host's last GPIO to :meth:`BridgeFirmware.receive`, with the time, and
-stores :attr:`BridgeFirmware.command_v` as the voltage of the next ``io()``: the host's newest
-command acts there, one tick after the measurement it answers.
-
-- the requested voltages (float channels 0 and 1) are applied while drive (int channel 1) is 1 and
-  the host sequence number (int channel 0) keeps changing (a request that is not a finite number
-  counts as 0 V); when no new sequence number has arrived for :data:`WATCHDOG_MS` (checked at
-  every drain and every ``control()``), the watchdog trips and the cart applies zero volts until a
-  new one arrives;
-- out go the measured speeds, the voltages on the H-bridges at this tick, the wheel positions, the
-  bridge's version (float 6), the echo (the sequence number of the command ``io()`` applied at
-  this tick), a tick counter, the status bits and the count of host sequence numbers the cart
-  never saw (frames lost on the way in).
+Both implement one contract (``docs/serial-protocol.md``); a test runs them on the same input and
+compares them tick by tick, so keep them in sync. Bridge version 2: the 10 ms thread drains the
+serial port, runs ``io()`` (writes the stored voltage, reads the encoders), then ``control()``
+(:meth:`BridgeFirmware.control`) and sends one GPIO; the 1 ms thread drains as well. After each
+drain the held channels go to :meth:`BridgeFirmware.receive`, and :attr:`BridgeFirmware.command_v`
+is the voltage of the next ``io()``: the host's newest command acts one tick after the measurement
+it answers. The requested voltages apply while drive is 1 and the host sequence number keeps
+changing (a request that is not finite counts as 0 V); no new sequence number for
+:data:`WATCHDOG_MS` (checked at every drain and ``control()``) trips the watchdog: zero volts until
+a new one arrives.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 
 from cartctl.link.bridge import (
     BRIDGE_VERSION,
-    CH_BRIDGE_VERSION,
     SEQ_WINDOW,
     STATUS_DRIVING,
     STATUS_WATCHDOG,
     WATCHDOG_MS,
+    CartSample,
 )
 from cartctl.link.bridge import SEQ_MODULO as TICK_MODULO
 from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT
 
-__all__ = ["STATUS_DRIVING", "STATUS_WATCHDOG", "TICK_MODULO", "WATCHDOG_MS", "BridgeFirmware",
-           "CartIO", "HeldChannels"]  # fmt: skip
+__all__ = ["STATUS_DRIVING", "STATUS_WATCHDOG", "TICK_MODULO", "WATCHDOG_MS", "CartIO"]
 
 
 @dataclass(frozen=True, slots=True)
 class CartIO:
-    """What ``io()`` read at this tick and what it wrote to the H-bridges."""
+    """What ``io()`` read at this tick (rad/s, rad) and wrote to the H-bridges (V)."""
 
     speed_a_rad_s: float
     speed_b_rad_s: float
@@ -54,21 +44,11 @@ class CartIO:
     position_b_rad: float
 
 
-def _finite_or_zero(value: float) -> float:
-    return value if math.isfinite(value) else 0.0
-
-
 class HeldChannels:
     """The GPIO channels a cart firmware holds, as microOS keeps them for ``control()``.
 
-    Attributes
-    ----------
-    in_floats, in_ints
-        The channels of the host's last GPIO, held until the next one arrives.
-    out_floats, out_ints
-        The channels the last ``control()`` wrote, which microOS sends to the host.
-    tick
-        The firmware's tick counter.
+    ``in_*``: those of the host's last GPIO, held until the next; ``out_*``: those the last
+    ``control()`` wrote, which microOS sends; ``tick``: the firmware's tick counter.
     """
 
     def reset_channels(self) -> None:
@@ -111,13 +91,8 @@ class BridgeFirmware(HeldChannels):
         age_ms = ((int(now_ms) & 0xFFFFFFFF) - self._last_new_ms) & 0xFFFFFFFF
         self.tripped = not self._seen or age_ms >= WATCHDOG_MS
         self.driving = self.in_ints[1] == 1 and not self.tripped
-        if self.driving:
-            self.command_v = (
-                _finite_or_zero(self.in_floats[0]),
-                _finite_or_zero(self.in_floats[1]),
-            )
-        else:
-            self.command_v = (0.0, 0.0)
+        finite = [v if math.isfinite(v) else 0.0 for v in self.in_floats[:2]]
+        self.command_v = (finite[0], finite[1]) if self.driving else (0.0, 0.0)
         self.command_seq = self.in_ints[0]
 
     def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int) -> None:
@@ -147,12 +122,9 @@ class BridgeFirmware(HeldChannels):
         """
         applied_seq = self.command_seq  # nothing drains between io() and control()
         self._decide(now_ms)
-        self.out_floats = [
-            io.speed_a_rad_s, io.speed_b_rad_s, io.applied_a_v, io.applied_b_v,
-            io.position_a_rad, io.position_b_rad, 0.0, 0.0,
-        ]  # fmt: skip
-        self.out_floats[CH_BRIDGE_VERSION] = float(BRIDGE_VERSION)
-        status = (STATUS_DRIVING if self.driving else 0) | (STATUS_WATCHDOG if self.tripped else 0)
-        self.out_ints = [applied_seq, self.tick, status, self.frames_lost]
+        status = (applied_seq, self.tick, self.driving, self.tripped, self.frames_lost)
+        fields = (now_ms, *astuple(io), *status, BRIDGE_VERSION)  # in CartSample's order
+        floats, ints = CartSample(*fields).to_channels()
+        self.out_floats, self.out_ints = list(floats), list(ints)
         self.tick = (self.tick + 1) % TICK_MODULO
         return self.command_v

@@ -1,8 +1,4 @@
-"""The options of a virtual cart: its firmware, its timing, and the faults it can inject.
-
-``--plant virtual:KEY=VALUE,...`` and ``cartctl virtual-cart --faults`` parse into
-:class:`CartFaults`; :class:`~cartctl.link.virtual_cart.VirtualCart` follows them.
-"""
+"""The options of a virtual cart (``--plant virtual:KEY=VALUE,...``, ``virtual-cart --faults``)."""
 
 from __future__ import annotations
 
@@ -11,8 +7,6 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from cartctl.errors import InputError
-
-__all__ = ["LATE_STRETCH_TICKS", "RECEIVE_SCHEDULES", "CartFaults"]
 
 LATE_STRETCH_TICKS = 5
 """With ``late``, the cart takes the host's commands a tick late in stretches of this many ticks."""
@@ -24,31 +18,26 @@ alone (the bridge sketch before it drained the port itself, and a controller on 
 
 @dataclass(frozen=True)
 class CartFaults:
-    """Faults the virtual cart injects.
+    """The firmware, timing and faults of a virtual cart.
 
     Attributes
     ----------
-    garbage : float
-        Fraction of outgoing frames preceded by a burst of 1-16 random bytes.
-    corrupt : float
-        Fraction of outgoing frames with one byte changed (their CRC fails).
-    stall_after_s : float or None
-        This long (s) after the host's first frame, the cart stops: no ticks, nothing sent, port
-        open.
-    pull_after_s : float or None
-        This long (s) after the host's first frame, the cable is pulled: the port vanishes.
+    garbage, corrupt : float
+        Fraction of outgoing frames preceded by a burst of 1-16 random bytes, or with one byte
+        changed (their CRC fails).
+    stall_after_s, pull_after_s : float or None
+        This long (s) after the host's first frame the cart stalls (no ticks, nothing sent, port
+        open), or the cable is pulled (the port vanishes).
     generation : str
-        'a' (MAVLink 1, GPIO: what the bridge sketch speaks) or 'b' (MAVLink 2, GPIOX: the newer
-        firmware, which cartctl refuses).
+        'a' (MAVLink 1, GPIO: the bridge sketch) or 'b' (MAVLink 2, GPIOX, which cartctl refuses).
     reply_jitter_ms : float
         Each write of the host reaches the line a random 0 .. this many ms late.
     receive : str
-        'bridge' (the bridge sketch drains the port every 1 ms and before io()) or
-        'microos' (microOS's communication thread alone, once per tick: the sketch before).
+        'bridge' (the sketch drains the port every 1 ms and before io()) or 'microos' (microOS's
+        communication thread alone, once per tick: the sketch before).
     bridge : int
-        The bridge sketch's version: 2 (500 kbaud, the newest command at the next io(): loop delay
-        1) or 1 (115200 baud, the voltage stored at control(): loop delay 3), to see how cartctl
-        meets a cart that still runs the older sketch.
+        The sketch's version: 2 (500 kbaud, the newest command at the next io(): loop delay 1) or
+        1 (115200 baud, the voltage stored at control(): loop delay 3).
     usb : bool
         Model the Mega's ATmega16U2 USB bridge (the cart's frames reach the PC up to ~5 ms late,
         the PC's within 1 ms); ``usb=off`` is a bare pseudo-terminal.
@@ -56,14 +45,11 @@ class CartFaults:
         When a command lands after its tick in the simulated wheels (ms, (0, 10]); None: the
         preset's calibrated 3 ms.
     reverse_a, reverse_b : bool
-        That motor's leads swapped: a positive command turns its wheel (and encoder) backwards
-        (``reverse_b=1``), a wiring fault for ``cartctl commission`` to find.
+        That motor's leads swapped (a wiring fault for ``cartctl commission`` to find).
     late : float
-        Fraction of the cart's ticks (in [0, 1]) at which the host's commands arrive a tick late,
-        as from a host that falls behind now and then: stretches of :data:`LATE_STRETCH_TICKS`
-        ticks, one every ``LATE_STRETCH_TICKS / late`` ticks (:meth:`late_at`). Within a stretch
-        the echoes show a loop delay one tick longer; at its end one command is overtaken by the
-        next and never applied.
+        Fraction of ticks (in [0, 1]) at which the host's commands arrive a tick late, in stretches
+        of :data:`LATE_STRETCH_TICKS` (:meth:`late_at`): there the echoes show a loop delay one
+        tick longer, and at a stretch's end one command is overtaken by the next.
     """
 
     garbage: float = 0.0
@@ -130,43 +116,39 @@ class CartFaults:
         """
         faults = cls()
         for item in filter(None, (part.strip() for part in text.split(","))):
-            key, sep, value = item.partition("=")
-            key = key.strip()
+            key, sep, raw = item.partition("=")
+            key, value = key.strip(), raw.strip().lower()
             if not sep or key not in cls.KEYS:
                 raise InputError(
                     f"bad virtual cart option '{item}'; expected key=value with key in "
                     f"{', '.join(cls.KEYS)}"
                 )
-            if key in ("generation", "receive"):
-                text_value: dict[str, Any] = {key: value.strip().lower()}
-                faults = replace(faults, **text_value)
-                continue
-            if key == "usb":
-                flag = value.strip().lower()
-                if flag not in ("on", "off"):
-                    raise InputError(f"virtual cart option 'usb' must be on or off, got '{value}'")
-                faults = replace(faults, usb=flag == "on")
-                continue
-            if key in ("reverse_a", "reverse_b"):
-                if value.strip() not in ("0", "1"):
-                    raise InputError(f"virtual cart option '{key}' must be 0 or 1, got '{value}'")
-                flag_value: dict[str, Any] = {key: value.strip() == "1"}
-                faults = replace(faults, **flag_value)
-                continue
-            if key == "bridge":
-                if value.strip() not in ("1", "2"):
-                    raise InputError(f"virtual cart option 'bridge' must be 1 or 2, got '{value}'")
-                faults = replace(faults, bridge=int(value))
-                continue
-            try:
-                number = float(value)
-            except ValueError:
-                if key == "actuation_ms":
+            choices = _CHOICES.get(key)
+            parsed: Any = value
+            if choices is not None:
+                if value not in choices:
                     raise InputError(
-                        f"actuation_ms needs a number of ms in (0, 10], got '{value}'"
-                    ) from None
-                raise InputError(f"fault '{key}' needs a number, got '{value}'") from None
+                        f"virtual cart option '{key}' must be {' or '.join(choices)}, got '{raw}'"
+                    )
+                parsed = choices[value]
+            elif key not in ("generation", "receive"):
+                try:
+                    parsed = float(raw)
+                except ValueError:
+                    if key == "actuation_ms":
+                        raise InputError(
+                            f"actuation_ms needs a number of ms in (0, 10], got '{raw}'"
+                        ) from None
+                    raise InputError(f"fault '{key}' needs a number, got '{raw}'") from None
             field = {"stall": "stall_after_s", "pull": "pull_after_s"}.get(key, key)
-            number_value: dict[str, Any] = {field: number}
-            faults = replace(faults, **number_value)
+            faults = replace(faults, **{field: parsed})
         return faults
+
+
+_FLAG = {"0": False, "1": True}
+_CHOICES: dict[str, dict[str, Any]] = {
+    "usb": {"on": True, "off": False},
+    "reverse_a": _FLAG,
+    "reverse_b": _FLAG,
+    "bridge": {"1": 1, "2": 2},
+}

@@ -20,9 +20,8 @@ from typing import Any
 
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import CartctlError, InputError, PlantError
-from cartctl.link import (
-    BRIDGE_BAUD,
-    LEGACY_BAUD,
+from cartctl.link.bridge import BRIDGE_BAUD, LEGACY_BAUD
+from cartctl.link.framer import (
     Framer,
     GenerationBFrame,
     Gpio,

@@ -35,9 +35,10 @@ import numpy as np
 
 from cartctl.cart import PERIOD_S
 from cartctl.errors import InputError, PlantError
-from cartctl.link import GPIO_FLOAT_COUNT, GPIO_INT_COUNT, Event, Gpio, Message
 from cartctl.link.cart_link import CartLink
+from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT
 from cartctl.link.firmware_id import CH_FIRMWARE_ID, CHANNEL_KEYS, Firmware, recognise_firmware
+from cartctl.link.framer import Event, Gpio, Message
 
 FLOAT_CHANNELS = GPIO_FLOAT_COUNT
 INT_CHANNELS = GPIO_INT_COUNT
@@ -103,7 +104,7 @@ def firmware_labels(firmware: Firmware | None) -> tuple[str, ...]:
     """
     labels = dict(zip(CHANNEL_KEYS, DEFAULT_LABELS, strict=True))
     if firmware is not None:
-        labels.update(firmware.label_of())
+        labels.update(firmware.labels)
     return tuple(labels.values())
 
 

@@ -1,28 +1,22 @@
-"""A resynchronising stream framer for the cart's serial link (pure: no I/O).
+"""Bytes in, messages out (pure, no I/O): the decoded messages, :class:`Framer` and the text lines.
 
-:class:`Framer` takes bytes as they arrive, in chunks of any size, and returns the messages of the
-complete, valid frames among them. It recognises
+:class:`Framer` recognises generation A, MAVLink 1 (0xFE: HEARTBEAT, THREAD_INFO, GPIO, EVENT and
+PRINT, each checked against its payload length and CRC_EXTRA) and generation B, MAVLink 2 (0xFD:
+GPIOX only, reported as :class:`GenerationBFrame`). On a header that fits no known message, or a
+CRC mismatch, only the start byte is dropped and the scan resumes at the next byte, so a false start
+in line noise never swallows the real frame that follows (pymavlink's own parser can). Every byte
+outside a valid frame is counted once in :attr:`LinkStats.garbage_bytes`. The generated dialect
+module unpacks the payloads.
 
-- generation A, MAVLink 1 (start byte 0xFE): HEARTBEAT, THREAD_INFO, GPIO, EVENT and PRINT, each
-  checked against its payload length and CRC_EXTRA;
-- generation B, MAVLink 2 (start byte 0xFD): GPIOX only, reported as :class:`GenerationBFrame`.
-
-On a header that does not fit a known message, or a CRC mismatch, only the start byte is dropped and
-the scan resumes at the next byte, so a false start in line noise never swallows the real frame that
-follows (pymavlink's own parser can). Every byte that is not part of a valid frame is counted once
-in :attr:`LinkStats.garbage_bytes`.
-
-The framer finds and checks frames itself (header lengths, X.25 CRC and CRC_EXTRA come from the
-generated dialect module, :mod:`cartctl.link.vendor.microos_mavlink`, through
-:mod:`~cartctl.link.dialect`); that module's ``MAVLink.decode`` then unpacks the payload of each
-valid generation-A frame.
+Every message carries the frame's ``seq``, ``sysid`` and ``compid`` last, with defaults, so that
+tests and simulators can build messages without a frame.
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Any, TypeAlias
 
 from cartctl.link.dialect import (
     CRC_EXTRA,
@@ -37,34 +31,121 @@ from cartctl.link.dialect import (
     PAYLOAD_LENGTH,
     STX_V1,
 )
-from cartctl.link.messages import (
-    Event,
-    GenerationBFrame,
-    Gpio,
-    Heartbeat,
-    Message,
-    PrintText,
-    ThreadInfo,
-)
 from cartctl.link.vendor import microos_mavlink as mavlink
 
-__all__ = ["Framer", "LinkStats"]
+BUTTON_EVENT_BASE = 1000
+"""EVENT type of QRC's button 0; buttons 0..7 are 1000..1007."""
+
+
+@dataclass(frozen=True, slots=True)
+class Heartbeat:
+    """HEARTBEAT (id 0): the cart's sign of life, every 1.1 s."""
+
+    time_ms: int
+    type: int
+    data: bytes
+    mavlink_version: int
+    seq: int = 0
+    sysid: int = 0
+    compid: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class Gpio:
+    """GPIO (id 3): 8 float (float32) and 4 int (int32) channels, in either direction."""
+
+    time_ms: int
+    floats: tuple[float, ...]
+    ints: tuple[int, ...]
+    seq: int = 0
+    sysid: int = 0
+    compid: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    """EVENT (id 4), e.g. a QRC button press."""
+
+    type: int
+    seq: int = 0
+    sysid: int = 0
+    compid: int = 0
+
+    @property
+    def button(self) -> int | None:
+        """The QRC button 0..7 this event stands for, or None for another event type."""
+        index = self.type - BUTTON_EVENT_BASE
+        return index if 0 <= index < 8 else None
+
+
+@dataclass(frozen=True, slots=True)
+class PrintText:
+    """PRINT (id 5): up to 32 bytes of firmware text, NUL padding stripped (see LineAssembler)."""
+
+    text: str
+    seq: int = 0
+    sysid: int = 0
+    compid: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class ThreadInfo:
+    """THREAD_INFO (id 1): a firmware thread's timing report, its 22 bytes uninterpreted."""
+
+    payload: bytes
+    seq: int = 0
+    sysid: int = 0
+    compid: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class GenerationBFrame:
+    """A valid MAVLink 2 frame of a generation-B cart (only GPIOX, id 14, is recognised)."""
+
+    msgid: int
+    seq: int = 0
+    sysid: int = 0
+    compid: int = 0
+
+
+Message: TypeAlias = Heartbeat | Gpio | Event | PrintText | ThreadInfo | GenerationBFrame
+"""Any decoded message; usable with ``isinstance``."""
+
+
+class LineAssembler:
+    """Joins PRINT texts into lines.
+
+    The firmware ends lines with "\\r\\n" and splits text over 32-byte PRINT frames regardless of
+    line boundaries. A line ends at "\\n"; every "\\r" is dropped, so a "\\r\\n" split over two
+    frames still ends exactly one line.
+    """
+
+    def __init__(self) -> None:
+        self._partial: list[str] = []
+
+    def feed(self, text: str) -> list[str]:
+        """Add a fragment; return the lines it completes (oldest first, without line endings)."""
+        pieces = text.replace("\r", "").split("\n")
+        if len(pieces) == 1:
+            if pieces[0]:
+                self._partial.append(pieces[0])
+            return []
+        lines = ["".join([*self._partial, pieces[0]]), *pieces[1:-1]]
+        self._partial = [pieces[-1]] if pieces[-1] else []
+        return lines
+
+    def flush(self) -> str | None:
+        """Return and clear the unfinished line, or None if there is none."""
+        partial = "".join(self._partial)
+        self._partial = []
+        return partial or None
+
 
 _START = re.compile(rb"[\xfd\xfe]")
 _V1_HEADER = mavlink.HEADER_LEN_V1
 _V2_HEADER = mavlink.HEADER_LEN_V2
-_CRC_BYTES = 2
-_V2_SIGNATURE = mavlink.MAVLINK_SIGNATURE_BLOCK_LEN
 _V2_SIGNED = mavlink.MAVLINK_IFLAG_SIGNED
-_SEQ_MODULO = 256
-
-_WAIT = 0
-"""Return value of a frame check: the frame is incomplete, wait for more bytes."""
-_REJECT = -1
-"""Return value of a frame check: the start byte does not begin a valid frame."""
-
-_V1_EXTRA = {msgid: bytes([extra]) for msgid, extra in CRC_EXTRA.items()}
-_V2_EXTRA = bytes([GPIOX_CRC_EXTRA])
+_WAIT, _REJECT = 0, -1  # a frame check's verdict besides a size: wait for bytes, or not a frame
 
 
 @dataclass
@@ -95,42 +176,28 @@ class LinkStats:
     generation_b_frames: int = 0
 
     def to_dict(self) -> dict[str, int]:
-        """The counters by name."""
         return asdict(self)
 
 
-def _crc_ok(buf: bytearray, start: int, crc_at: int, extra: bytes) -> bool:
+def _crc_ok(buf: bytearray, start: int, crc_at: int, extra: int) -> bool:
     """Whether the CRC at ``buf[crc_at:crc_at + 2]`` matches ``buf[start:crc_at]`` + ``extra``."""
-    crc = mavlink.x25crc(bytes(buf[start:crc_at]) + extra).crc
+    crc = mavlink.x25crc(bytes(buf[start:crc_at]) + bytes((extra,))).crc
     return crc == buf[crc_at] | (buf[crc_at + 1] << 8)
 
 
-def _convert(
-    msgid: int, frame: bytes, mav: mavlink.MAVLink, seq: int, sysid: int, compid: int
-) -> Message:
+def _convert(msgid: int, frame: bytes, mav: mavlink.MAVLink, *header: int) -> Message:
     """The message of a checked generation-A frame; pymavlink's module unpacks the payload."""
     if msgid == MSG_THREAD_INFO:
-        return ThreadInfo(frame[_V1_HEADER:-_CRC_BYTES], seq, sysid, compid)
-    decoded: Any = mav.decode(bytearray(frame))
+        return ThreadInfo(frame[_V1_HEADER:-2], *header)
+    m: Any = mav.decode(bytearray(frame))
     if msgid == MSG_GPIO:
-        return Gpio(
-            decoded.time, tuple(decoded.gpio_float), tuple(decoded.gpio_int), seq, sysid, compid
-        )
+        return Gpio(m.time, tuple(m.gpio_float), tuple(m.gpio_int), *header)
     if msgid == MSG_HEARTBEAT:
-        return Heartbeat(
-            decoded.time,
-            decoded.type,
-            bytes(decoded.data),
-            decoded.mavlink_version,
-            seq,
-            sysid,
-            compid,
-        )
+        return Heartbeat(m.time, m.type, bytes(m.data), m.mavlink_version, *header)
     if msgid == MSG_EVENT:
-        return Event(decoded.type, seq, sysid, compid)
-    if msgid == MSG_PRINT:
-        return PrintText(decoded.text, seq, sysid, compid)
-    raise AssertionError(f"no conversion for message id {msgid}")  # PAYLOAD_LENGTH keeps it out
+        return Event(m.type, *header)
+    assert msgid == MSG_PRINT  # PAYLOAD_LENGTH lets no other id through
+    return PrintText(m.text, *header)
 
 
 class Framer:
@@ -154,18 +221,7 @@ class Framer:
         return len(self._buf)
 
     def feed(self, data: bytes) -> list[Message]:
-        """Add received bytes and return the messages of the frames they complete, in order.
-
-        Parameters
-        ----------
-        data
-            The next bytes of the stream, any number.
-
-        Returns
-        -------
-        list[Message]
-            The decoded messages (possibly none).
-        """
+        """Add received bytes (any number) and return the messages of the frames they complete."""
         buf = self._buf
         buf += data
         stats = self.stats
@@ -173,24 +229,19 @@ class Framer:
         pos = 0
         while True:
             match = _START.search(buf, pos)
-            if match is None:
-                stats.garbage_bytes += len(buf) - pos
-                pos = len(buf)
-                break
-            start = match.start()
+            start = len(buf) if match is None else match.start()
             stats.garbage_bytes += start - pos
             pos = start
-            if buf[pos] == STX_V1:
-                size = self._frame_v1(buf, pos, out)
-            else:
-                size = self._frame_v2(buf, pos, out)
+            if match is None:
+                break
+            check = self._frame_v1 if buf[pos] == STX_V1 else self._frame_v2
+            size = check(buf, pos, out)
             if size == _WAIT:
                 break
             if size == _REJECT:
                 stats.garbage_bytes += 1
-                pos += 1
-            else:
-                pos += size
+                size = 1
+            pos += size
         del buf[:pos]
         return out
 
@@ -198,19 +249,21 @@ class Framer:
         """Check a MAVLink 1 frame at ``pos``; on success append its message, return its size."""
         if len(buf) - pos < _V1_HEADER:
             return _WAIT
-        length = buf[pos + 1]
-        msgid = buf[pos + 5]
+        length, msgid = buf[pos + 1], buf[pos + 5]
         if PAYLOAD_LENGTH.get(msgid) != length:
             return _REJECT
-        size = _V1_HEADER + length + _CRC_BYTES
+        size = _V1_HEADER + length + 2
         if len(buf) - pos < size:
             return _WAIT
-        crc_at = pos + _V1_HEADER + length
-        if not _crc_ok(buf, pos + 1, crc_at, _V1_EXTRA[msgid]):
+        if not _crc_ok(buf, pos + 1, pos + size - 2, CRC_EXTRA[msgid]):
             self.stats.crc_errors += 1
             return _REJECT
         seq, sysid, compid = buf[pos + 2], buf[pos + 3], buf[pos + 4]
-        self._count_seq(seq, sysid, compid)
+        last = self._last_seq.get((sysid, compid))
+        if last is not None and seq != (last + 1) % 256:
+            self.stats.seq_gaps += 1
+            self.stats.lost_frames += (seq - last - 1) % 256
+        self._last_seq[(sysid, compid)] = seq
         self.stats.frames += 1
         out.append(_convert(msgid, bytes(buf[pos : pos + size]), self._mav, seq, sysid, compid))
         return size
@@ -219,25 +272,17 @@ class Framer:
         """Check a MAVLink 2 GPIOX frame at ``pos``; on success append it, return its size."""
         if len(buf) - pos < _V2_HEADER:
             return _WAIT
-        length = buf[pos + 1]
-        incompat = buf[pos + 2]
-        msgid = buf[pos + 7] | (buf[pos + 8] << 8) | (buf[pos + 9] << 16)
+        length, incompat = buf[pos + 1], buf[pos + 2]
+        msgid = int.from_bytes(buf[pos + 7 : pos + 10], "little")
         if msgid != MSG_GPIOX or length > GPIOX_PAYLOAD_LENGTH or incompat & ~_V2_SIGNED:
             return _REJECT
-        size = _V2_HEADER + length + _CRC_BYTES + (_V2_SIGNATURE if incompat & _V2_SIGNED else 0)
+        signature = mavlink.MAVLINK_SIGNATURE_BLOCK_LEN if incompat & _V2_SIGNED else 0
+        size = _V2_HEADER + length + 2 + signature
         if len(buf) - pos < size:
             return _WAIT
-        if not _crc_ok(buf, pos + 1, pos + _V2_HEADER + length, _V2_EXTRA):
+        if not _crc_ok(buf, pos + 1, pos + _V2_HEADER + length, GPIOX_CRC_EXTRA):
             return _REJECT
         self.stats.frames += 1
         self.stats.generation_b_frames += 1
         out.append(GenerationBFrame(msgid, buf[pos + 4], buf[pos + 5], buf[pos + 6]))
         return size
-
-    def _count_seq(self, seq: int, sysid: int, compid: int) -> None:
-        key = (sysid, compid)
-        last = self._last_seq.get(key)
-        if last is not None and seq != (last + 1) % _SEQ_MODULO:
-            self.stats.seq_gaps += 1
-            self.stats.lost_frames += (seq - last - 1) % _SEQ_MODULO
-        self._last_seq[key] = seq

@@ -9,21 +9,12 @@
                u is returned and reaches the motor at the next io(): one tick of delay, as on
                the real cart, instead of a PC-side loop's several
 
-Channels, as in the export snippet (:mod:`cartctl.export.arduino`):
-
-- in: float 0 = reference A, float 1 = reference B (rad/s), held from the host's last GPIO;
-- out: float 0/1 = speed A/B (rad/s), 2/3 = voltage A/B computed at this tick (V, applied at
-  the next tick), 4/5 = reference A/B (rad/s), 6 = :data:`~cartctl.link.firmware_id.ONBOARD_ID`
-  (1001: cartctl's on-board layout 1, by which ``cartctl monitor`` names the channels itself);
-  the int channels stay 0.
-
-The layout is :mod:`cartctl.link.firmware_id`'s, which the export and the monitor read too.
-
-The reference comes from a reference spec (``step:8``, see :mod:`cartctl.reference`)
-when one is given, with tick 0 at the cart's first ``control()``; otherwise from the held input
-float channels, exactly as the exported snippet reads them. The controllers run the fixed
-(steady-state) Kalman gain where they have an estimator, as the C does. The template's
-``controlEnabled()`` (QRC button 0) is not modelled: the controller always runs.
+The channels are :mod:`cartctl.link.firmware_id`'s layout 1, as the export snippet has them: in,
+the references (rad/s) held from the host's last GPIO; out, speeds, the voltages computed at this
+tick and references, and :data:`~cartctl.link.firmware_id.ONBOARD_ID` in float 6; the ints stay 0.
+With a reference spec (``step:8``, :mod:`cartctl.reference`), the references come from it instead,
+tick 0 at the cart's first ``control()``. The controllers run the fixed Kalman gain, as the C does;
+the template's ``controlEnabled()`` (QRC button 0) is not modelled: the controller always runs.
 """
 
 from __future__ import annotations
@@ -51,24 +42,15 @@ MAX_TICKS = round(MAX_DURATION_S / PERIOD_S)
 
 
 class _Controller(Protocol):
-    """What the cart's control() calls per motor (a runtime controller, structurally)."""
-
     def reset(self) -> None: ...
-
     def step(self, reference_rad_s: float, measured_rad_s: float) -> float: ...
 
 
 class OnboardFirmware(HeldChannels):
-    """``control()`` running one controller per motor on the cart (a ``CartFirmware``).
+    """``control()`` running a runtime controller per motor ('a', 'b'; none: 0 V) on the cart.
 
-    Parameters
-    ----------
-    controllers : mapping of str to Controller
-        The runtime controller of each motor ('a', 'b'); a motor without one gets 0 V.
-    reference : str, optional
-        Reference spec of both motors; None reads the held input float channels 0 and 1.
-    period_s : float
-        The cart's tick (s), the period the controllers were designed for.
+    ``reference`` is the reference spec of both motors (None: the held input channels),
+    ``period_s`` the tick the controllers were designed for.
     """
 
     ready_text = "cartctl on-board controller ready"

@@ -39,14 +39,12 @@ import numpy as np
 from cartctl.cart import PERIOD_S
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import PlantError
-from cartctl.link import (
+from cartctl.link.bridge import (
     BRIDGE_BAUD,
     BRIDGE_VERSION,
     TIMING_FIRST_ID,
     TIMING_REPORTS,
     CartSample,
-    Encoder,
-    Gpio,
     HostCommand,
     next_seq,
     tick_difference,
@@ -56,6 +54,8 @@ from cartctl.link.cart_link import (
     CartLink,
     UnsupportedCartError,
 )
+from cartctl.link.dialect import Encoder
+from cartctl.link.framer import Gpio
 from cartctl.link.loop_delay import MIN_ECHOES, EchoDelays, delay_change
 from cartctl.plants.base import Measurement
 
