@@ -1,11 +1,9 @@
-"""Input-delay estimation: which nk makes the ARX structure explain the data best.
+"""Input-delay estimation: which nk lets the ARX structure explain the data best.
 
-The report assumes nk = 2 (one sample from the zero-order hold, one from microOS). A PC-side loop
-over serial adds ticks. Here every candidate delay is fitted on the same equations (a common first
-row), and the one with the smallest equation-error loss wins; the table of losses and fits is the
-evidence, reported to the user. Both motors of a cart share one loop, so :func:`joint_delay` picks
-one delay for both from their joint evidence, and says when the best candidates are too close to
-call.
+The report assumes nk = 2 (one sample from the zero-order hold, one from microOS); a PC-side loop
+over serial adds ticks. Every candidate is fitted on the same equations and the smallest
+equation-error loss wins. Both motors share one loop, so :func:`joint_delay` picks one delay from
+their joint evidence and says when the best candidates are too close to call.
 """
 
 from __future__ import annotations
@@ -31,25 +29,11 @@ from cartctl.identification.arx import (
 
 @dataclass(frozen=True)
 class DelayEstimate:
-    """The chosen delay and the evidence for it.
+    """One motor's delay evidence: per candidate the equation-error RMS (rad/s) of its ARX fit on
+    the same ``equations`` and its fits (%; the simulation fit NaN for an unstable model).
 
-    Attributes
-    ----------
-    nk : int
-        The chosen input delay (samples): this motor's best, or the one chosen for both motors
-        (:func:`joint_delay`).
-    candidates : tuple of int
-        Delays tried.
-    residual_rms : tuple of float
-        Equation-error RMS (rad/s) of each candidate's ARX fit, on common equations.
-    fit_prediction_percent, fit_simulation_percent : tuple of float
-        Each candidate's fits (%); the simulation fit is NaN (null in JSON) for a candidate whose
-        model is unstable, as its simulation runs away and the figure would mean nothing.
-    equations : int
-        Number of equations each candidate's loss is computed on (the same for all).
-    nk_alone : int or None
-        This motor's own best delay when ``nk`` was chosen jointly with the other motor and
-        differs from it; None otherwise.
+    ``nk`` is this motor's best, or the joint choice (:func:`joint_delay`), and then
+    ``nk_alone`` is this motor's own best where it differs.
     """
 
     nk: int
@@ -61,26 +45,14 @@ class DelayEstimate:
     nk_alone: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON form: the choice and one row per candidate."""
+        keys = ("nk", "residual_rms", "fit_prediction_percent", "fit_simulation_percent")
+        rows = zip(self.candidates, self.residual_rms, self.fit_prediction_percent,
+                   self.fit_simulation_percent, strict=True)  # fmt: skip
         return {
             "nk": self.nk,
             "nk_alone": self.nk if self.nk_alone is None else self.nk_alone,
             "equations": self.equations,
-            "candidates": [
-                {
-                    "nk": nk,
-                    "residual_rms": r,
-                    "fit_prediction_percent": p,
-                    "fit_simulation_percent": s,
-                }
-                for nk, r, p, s in zip(
-                    self.candidates,
-                    self.residual_rms,
-                    self.fit_prediction_percent,
-                    self.fit_simulation_percent,
-                    strict=True,
-                )
-            ],
+            "candidates": [dict(zip(keys, row, strict=True)) for row in rows],
         }
 
 
@@ -89,14 +61,8 @@ INDISTINCT_FRACTION = 1e-3
 
 
 def check_distinct(estimates: Mapping[str, DelayEstimate]) -> None:
-    """Refuse evidence that cannot tell the delays apart: every candidate's equation error
-    within :data:`INDISTINCT_FRACTION` of the best, for every motor of ``estimates``.
-
-    Raises
-    ------
-    IdentificationError
-        The data does not show when the motor answers.
-    """
+    """Refuse evidence whose candidates' equation errors all lie within
+    :data:`INDISTINCT_FRACTION` of the best, for every motor: the data does not show the delay."""
     flat = []
     for est in estimates.values():
         rms = np.asarray(est.residual_rms)
@@ -122,28 +88,11 @@ def delay_evidence(
     period_s: float = PERIOD_S,
     eval_segments: Sequence[Segment] | None = None,
 ) -> DelayEstimate:
-    """Fit every candidate delay on common equations: the evidence, and this motor's best.
+    """Fit every candidate delay (samples) on common equations: the evidence, and this motor's
+    best (smallest equation error; ties up to 1e-9 of the output's RMS to the smaller delay).
 
+    ``eval_segments`` is the raw data for the simulation fits when ``segments`` is prefiltered.
     Nothing is refused for being too close (:func:`check_distinct` does that).
-
-    Parameters
-    ----------
-    segments : sequence of (y, u)
-        Experiments (rad/s, V).
-    na, nb : int
-        Model orders.
-    candidates : sequence of int
-        Delays to try (samples), default 1..6.
-    period_s : float
-        Sample period (s).
-    eval_segments : sequence of (y, u), optional
-        Raw data for the simulation fits (when ``segments`` is prefiltered).
-
-    Returns
-    -------
-    DelayEstimate
-        The best delay has the smallest ARX equation error; ties (equal losses up to rounding,
-        1e-9 of the output's RMS) go to the smaller delay.
     """
     cands = tuple(int(c) for c in candidates)
     if not cands:
@@ -155,17 +104,8 @@ def delay_evidence(
     fits = []
     for c in cands:
         try:
-            fits.append(
-                fit_arx(
-                    data,
-                    na=na,
-                    nb=nb,
-                    nk=c,
-                    period_s=period_s,
-                    start=start,
-                    eval_segments=eval_segments,
-                )
-            )
+            fits.append(fit_arx(data, na=na, nb=nb, nk=c, period_s=period_s, start=start,
+                                eval_segments=eval_segments))  # fmt: skip
         except IdentificationError as exc:
             raise IdentificationError(f"delay estimation, candidate nk = {c}: {exc}") from None
     rms = np.array([f.residual_rms for f in fits])
@@ -195,24 +135,12 @@ up to 2.5 %, while nk = 3 lies 160 % above both."""
 class JointDelay:
     """One input delay for every motor of a cart (they share one loop), and the evidence.
 
-    The joint evidence of a candidate nk is the weighted geometric mean of the motors'
-    equation-error RMS, exp(Σ_m w_m ln RMS_m(nk)) with w_m = N_m / Σ N (N_m: motor m's number of
-    equations). It is normalised per motor: scaling one motor's speeds scales its RMS by the same
-    factor for every candidate and leaves the ranking alone, so a faster or noisier motor does
-    not dominate. Its logarithm is, up to constants, the Gaussian log-likelihood of both motors'
-    equation errors with a noise variance of their own.
-
-    Attributes
-    ----------
-    nk : int
-        The chosen delay (samples).
-    candidates : tuple of int
-    evidence_rad_s : tuple of float
-        The joint evidence of each candidate (rad/s; smaller is better).
-    close : tuple of int
-        The candidates within :data:`CLOSE_FRACTION` of the best (the best included).
-    motors : dict of str to DelayEstimate
-        Each motor's own evidence.
+    The joint evidence of a candidate nk (rad/s, smaller is better) is the weighted geometric
+    mean of the motors' equation-error RMS, exp(Σ_m w_m ln RMS_m(nk)), w_m = N_m / Σ N with N_m
+    motor m's equations: scaling one motor's speeds leaves the ranking alone, so a faster or
+    noisier motor does not dominate (up to constants, the log-likelihood of both motors' errors
+    with a noise variance of their own). ``close``: the candidates within
+    :data:`CLOSE_FRACTION` of the best; ``motors``: each motor's own evidence.
     """
 
     nk: int
@@ -243,7 +171,6 @@ class JointDelay:
         )
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON form (``identify --json``'s ``"delay"``)."""
         return {
             "nk": self.nk,
             "evidence": "weighted geometric mean of the motors' equation-error RMS (rad/s)",
@@ -264,18 +191,9 @@ class JointDelay:
 def joint_delay(estimates: Mapping[str, DelayEstimate]) -> JointDelay:
     """Pick one delay for the motors of ``estimates`` (motor → its :func:`delay_evidence`).
 
-    The candidate with the smallest joint evidence (see :class:`JointDelay`) wins; when others
-    lie within :data:`CLOSE_FRACTION` of it, the larger of those close candidates is chosen, since
-    a controller designed for the later answer tolerates an earlier one better than the reverse.
-    Each motor's estimate comes back with ``nk`` set to the choice (and ``nk_alone`` to its own
-    best where that differs).
-
-    Raises
-    ------
-    InputError
-        No estimates, or estimates over different candidates.
-    IdentificationError
-        No motor's data can tell the candidates apart (:func:`check_distinct`).
+    The smallest joint evidence wins; when others lie within :data:`CLOSE_FRACTION` of it, the
+    largest of those close candidates, as a controller designed for the later answer tolerates an
+    earlier one better than the reverse. Each estimate comes back with ``nk`` set to the choice.
     """
     if not estimates:
         raise InputError("no delay evidence to choose from")
