@@ -20,18 +20,9 @@ from cartctl.plants.base import Plant
 
 @dataclass(frozen=True)
 class ExperimentResult:
-    """A recorded experiment.
-
-    Attributes
-    ----------
-    trace : Trace
-        The trace columns; simulated plants add ``true_speed_a`` and ``true_speed_b``.
-    interrupted : bool
-        True when Ctrl-C stopped the run early (the trace holds the ticks done so far).
-    failure : str or None
-        Why the plant stopped the run early (a serial cart gone silent, a vanished port); the
-        trace holds the ticks done so far.
-    """
+    """A recorded experiment: the trace (simulated plants add ``true_speed_a``, ``true_speed_b``),
+    whether Ctrl-C stopped it early, and why the plant did (a cart gone silent, a vanished port);
+    either way the trace holds the ticks done."""
 
     trace: Trace
     interrupted: bool
@@ -46,28 +37,13 @@ def run_experiment(
     on_tick: Callable[[int], None] | None = None,
     source: str | None = None,
 ) -> ExperimentResult:
-    """Apply the voltage sequences tick by tick and record commanded voltages and measured speeds.
+    """Apply the voltage sequences (V per tick) and record them with the measured speeds.
 
-    Ctrl-C or a plant fault (:class:`~cartctl.errors.PlantError`) after the first tick ends the run
-    early with the ticks recorded so far; a fault before it propagates.
-
-    Row k of the trace holds the voltage commanded at tick k and the speed measured at tick k
-    (the trace columns), so the report's model applies to the trace as written.
-
-    Parameters
-    ----------
-    plant : Plant
-        The plant; it is reset first and closed (zero volts) at the end, on every path.
-    voltage_a_v, voltage_b_v : array_like, shape (n,)
-        Commanded voltage per tick (V).
-    on_tick : callable, optional
-        Called with the number of ticks done (for a progress bar).
-    source : str, optional
-        Recorded as the trace's source.
-
-    Returns
-    -------
-    ExperimentResult
+    Row k holds the voltage commanded at tick k and the speed measured at tick k, so the report's
+    model applies to the trace as written. The plant is reset first and closed (zero volts) on
+    every path; Ctrl-C or a :class:`~cartctl.errors.PlantError` after the first tick ends the run
+    with the ticks recorded so far (a fault before it propagates). ``on_tick`` gets the number of
+    ticks done (a progress bar); ``source`` is recorded as the trace's.
     """
     ua = np.asarray(voltage_a_v, dtype=float)
     ub = np.asarray(voltage_b_v, dtype=float)

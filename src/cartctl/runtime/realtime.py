@@ -1,16 +1,13 @@
 """Real-time scheduling for the loop's thread: SCHED_FIFO and locked memory, where permitted.
 
-Part of the runtime shell: the loop calls :func:`enable_realtime` before its first deadline and
-:func:`restore` afterwards (or uses :func:`realtime_scheduling`). Neither ever raises because the
-OS said no; the returned line says what was obtained, for the run summary.
-
-On Linux a SCHED_FIFO thread preempts every normal thread on its core, which is what removes the
-millisecond wake-up outliers of a sleeping loop. It needs root or CAP_SYS_NICE (or an
-``rtprio`` limit). The policy is set for the calling thread only, with SCHED_RESET_ON_FORK, so
-processes started later (a Rerun viewer, say) get normal scheduling. Memory is locked with
-``mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT)``: pages already in memory, and those faulted
-in later, are never swapped out, without prefaulting every mapping. It is tried only where the
-locked-memory limit cannot make later allocations fail (root, or an unlimited RLIMIT_MEMLOCK).
+:func:`enable_realtime` before the first deadline, :func:`restore` afterwards (or
+:func:`realtime_scheduling`); neither raises because the OS said no, and the line returned says
+what was obtained. A SCHED_FIFO thread preempts every normal thread on its core, which removes the
+millisecond wake-up outliers of a sleeping loop; it needs root, CAP_SYS_NICE or an ``rtprio``
+limit. The policy is set for the calling thread only, with SCHED_RESET_ON_FORK (a Rerun viewer
+started later runs normally). ``mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT)`` keeps pages in
+memory without prefaulting every mapping; it is tried only where the locked-memory limit cannot
+make later allocations fail (root, or an unlimited RLIMIT_MEMLOCK).
 """
 
 from __future__ import annotations
@@ -41,26 +38,15 @@ class _Saved:
 _saved: _Saved | None = None  # the scheduling to go back to, set by the first enable_realtime
 
 
-def _libc() -> ctypes.CDLL:
-    return ctypes.CDLL(None, use_errno=True)
-
-
-def _may_lock_memory() -> tuple[bool, str]:
-    if resource is None:
-        return False, "no resource limits on this platform"
-    soft, _hard = resource.getrlimit(resource.RLIMIT_MEMLOCK)
-    if os.geteuid() == 0 or soft == resource.RLIM_INFINITY:
-        return True, ""
-    return False, f"RLIMIT_MEMLOCK is {soft} bytes and not root"
-
-
 def _lock_memory() -> str:
     """Try mlockall; return '' on success, else why not."""
-    ok, why = _may_lock_memory()
-    if not ok:
-        return why
+    if resource is None:
+        return "no resource limits on this platform"
+    soft, _hard = resource.getrlimit(resource.RLIMIT_MEMLOCK)
+    if os.geteuid() != 0 and soft != resource.RLIM_INFINITY:
+        return f"RLIMIT_MEMLOCK is {soft} bytes and not root"
     try:
-        libc = _libc()
+        libc = ctypes.CDLL(None, use_errno=True)
         if libc.mlockall(_MCL_CURRENT | _MCL_FUTURE | _MCL_ONFAULT) != 0:
             err = ctypes.get_errno()
             return f"mlockall: {os.strerror(err)}"
@@ -70,28 +56,13 @@ def _lock_memory() -> str:
 
 
 def enable_realtime(priority: int = 50, *, lock_memory: bool = True) -> str:
-    """Switch the calling thread to SCHED_FIFO and lock memory, as far as the OS permits.
+    """Switch the calling thread to SCHED_FIFO at ``priority`` and lock memory, as far as the OS
+    permits; call it from the thread that runs the executor.
 
-    Call it from the thread that runs the executor. Never raises because of the OS.
-
-    Parameters
-    ----------
-    priority : int, default 50
-        SCHED_FIFO priority, within the OS's range (1-99 on Linux). Staying at or below 50, the
-        priority of interrupt threads on PREEMPT_RT kernels, leaves the kernel's work ahead.
-    lock_memory : bool, default True
-        Also lock the process's memory (see the module docstring).
-
-    Returns
-    -------
-    str
-        One line: ``"SCHED_FIFO priority 50, memory locked"``, ``"SCHED_FIFO priority 50,
-        memory not locked (why)"``, or ``"normal scheduling: SCHED_FIFO not permitted (why)"``.
-
-    Raises
-    ------
-    InputError
-        If ``priority`` is outside the OS's SCHED_FIFO range (a caller's mistake, not the OS's).
+    Staying at or below 50, the priority of interrupt threads on PREEMPT_RT kernels, leaves the
+    kernel's work ahead. Returns one line: ``"SCHED_FIFO priority 50, memory locked"``, ``"…,
+    memory not locked (why)"`` or ``"normal scheduling: SCHED_FIFO not permitted (why)"``.
+    InputError for a priority outside the OS's SCHED_FIFO range (a caller's mistake).
     """
     global _saved
     setscheduler = getattr(os, "sched_setscheduler", None)
@@ -127,11 +98,8 @@ def enable_realtime(priority: int = 50, *, lock_memory: bool = True) -> str:
 
 
 def restore() -> None:
-    """Go back to the scheduling and memory state from before :func:`enable_realtime`.
-
-    Call it from the same thread. Does nothing if real-time scheduling was not obtained.
-    Never raises.
-    """
+    """Back to the scheduling and memory state from before :func:`enable_realtime` (from the same
+    thread); nothing if real-time scheduling was not obtained. Never raises."""
     global _saved
     saved, _saved = _saved, None
     if saved is None:
@@ -140,18 +108,12 @@ def restore() -> None:
         os.sched_setscheduler(0, saved.policy, os.sched_param(saved.priority))
     if saved.memory_locked:
         with suppress(OSError, AttributeError):
-            _libc().munlockall()
+            ctypes.CDLL(None, use_errno=True).munlockall()
 
 
 @contextmanager
 def realtime_scheduling(priority: int = 50, *, lock_memory: bool = True) -> Iterator[str]:
-    """:func:`enable_realtime` for the ``with`` block, then :func:`restore`.
-
-    Yields
-    ------
-    str
-        The description returned by :func:`enable_realtime`.
-    """
+    """:func:`enable_realtime` for the ``with`` block (yielding its line), then :func:`restore`."""
     description = enable_realtime(priority, lock_memory=lock_memory)
     try:
         yield description

@@ -1,5 +1,5 @@
-"""What a run refuses (or flags) before it drives: a controller for another loop delay,
-an unstable model on the sim plant, a reference no motor can follow."""
+"""What a run refuses (or flags) before it drives: a controller for another loop delay, a
+reference no motor can follow."""
 
 from __future__ import annotations
 
@@ -19,43 +19,11 @@ if TYPE_CHECKING:  # imported where used: the parser takes this module's default
 DEFAULT_CONTROLLER = Path("controllers/pi.toml")
 """The default on every plant: the simulators and the bridge (version 2) all have loop delay 1."""
 SHIPPED_CONTROLLERS = ("pi.toml", "poles.toml", "serial-pi.toml", "serial-poles.toml")
-"""The shipped controller files (in ``controllers/``), offered when a file does not fit a plant.
-``serial-*.toml`` are the fallback for a serial loop of 3 ticks (a PC whose replies keep missing
-the cart's tick)."""
-
-__all__ = [
-    "DEFAULT_CONTROLLER",
-    "REACH_REFUSE_FACTOR",
-    "check_loop_delay",
-    "check_reach",
-    "models_designed_on",
-    "refuse_unstable",
-]
-
-
-def refuse_unstable(models: dict[str, ArxModel], path: str) -> None:
-    """An unstable model on the sim plant runs away: refuse it (``--allow-unstable`` overrides)."""
-    for motor, model in models.items():
-        if not model.is_stable():
-            raise InputError(
-                f"{path}: motor {motor}'s model is unstable (pole at |z| = {model.pole_radius():.4g}): "
-                "a simulation of it runs away whatever the controller does; identify it again, "
-                "or pass --allow-unstable"
-            )
-
-
-def models_designed_on(controller_file: ControllerFile) -> dict[str, ArxModel]:
-    """The models the controller was designed on; none when that file is gone or unreadable."""
-    from cartctl.data.modelfile import load_models
-
-    try:
-        return dict(load_models(controller_file.model_path).motors)
-    except (CartctlError, OSError):
-        return {}
-
-
+"""Offered when a file does not fit a plant; ``serial-*`` for a serial loop of 3 ticks."""
 REACH_REFUSE_FACTOR = 2.0
 """A reference beyond this many times what a motor reaches at the voltage limit is refused."""
+
+__all__ = ["DEFAULT_CONTROLLER", "check_loop_delay", "check_reach"]
 
 
 def check_reach(
@@ -64,10 +32,8 @@ def check_reach(
     limit_v: float,
     where: str,
 ) -> None:
-    """Refuse a reference no motor can follow, warn (one line) about one reached only saturated.
-
-    What a motor reaches is its model's DC gain times the voltage limit (for a stable model).
-    """
+    """Refuse a reference no motor can follow, warn (one line) about one reached only saturated:
+    what a motor reaches is its (stable) model's DC gain times the voltage limit."""
     beyond: list[str] = []
     refuse = False
     for motor, ref in references.items():
@@ -124,9 +90,8 @@ def check_loop_delay(
 ) -> None:
     """Refuse (InputError) a controller designed for another loop delay than the plant's.
 
-    With ``allow`` the mismatch is a warning; an unknown plant delay (None) is not checked. A
-    ``measured`` delay (a serial plant's probe) that is not clear is never refused: the run
-    warns, says how sure the measurement is, and goes on (it watches the delay as it runs).
+    With ``allow`` a warning; an unknown plant delay (None) is not checked; a ``measured`` delay
+    (a serial plant's probe) that is not clear is never refused: the run warns and goes on.
     """
     designed = controller.loop_delay_ticks
     if delay is None or designed is None:

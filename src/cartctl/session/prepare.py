@@ -15,16 +15,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
-from cartctl.errors import DataWarning, InputError
-from cartctl.session.checks import (
-    check_loop_delay,
-    check_reach,
-    models_designed_on,
-    refuse_unstable,
-)
+from cartctl.errors import CartctlError, DataWarning, InputError
+from cartctl.session.checks import check_loop_delay, check_reach
 
 if TYPE_CHECKING:
     from cartctl.design.controllerfile import ControllerFile
+    from cartctl.model import ArxModel
     from cartctl.plants.base import Plant
     from cartctl.reference import ReferenceSchedule
 
@@ -33,16 +29,15 @@ __all__ = ["PreparedRun", "prepare_run"]
 
 @dataclass
 class PreparedRun:
-    """A run ready for its first tick: the plant is made (a cart connected) and nothing refused."""
+    """A run ready for its first tick: the plant made (a cart connected), nothing refused; the
+    controllers by motor, the plant in words, and its loop delay (measured on a cart; None where
+    the plant does not know it)."""
 
     controller_file: ControllerFile
     controllers: dict[str, Any]
-    """The run-time controller of each motor (``a``, ``b``)."""
     plant: Plant
     description: str
-    """The plant in words, for the summary."""
     loop_delay_ticks: int | None
-    """The plant's loop delay (measured on a cart; None where the plant does not know it)."""
     voltage_limit_v: float
     references: dict[str, ReferenceSchedule]
     ticks: int
@@ -52,27 +47,16 @@ class PreparedRun:
         return float(self.plant.period_s)
 
 
-def _measured_delay(plant: Plant) -> int | None:
-    """A serial plant's loop delay from the echo (drive = 0, zero volts), before any driving."""
-    measure = getattr(plant, "measure_loop_delay", None)
-    return None if measure is None else int(measure())
-
-
-def load_run_controller(
+def _load_controller(
     controller: str | Path | ControllerFile,
-    *,
     given: str,
     plant: str,
     model: str | Path,
-    force: bool = False,
-    voltage_limit_v: float | None = None,
+    force: bool,
+    voltage_limit_v: float | None,
 ) -> tuple[ControllerFile, float]:
-    """The controller file for ``plant`` and the voltage limit to run it at.
-
-    Refuses a file for another tick (before its coefficients are looked at) and a
-    ``voltage_limit_v`` above the file's; warns when ``--force`` ignores coefficients and when
-    the model the file was designed on has changed.
-    """
+    """The controller file for ``plant`` (refused for another tick before its coefficients are
+    read) and the voltage limit to run it at (refused above the file's)."""
     from cartctl.design.controllerfile import ControllerFile, load_controller
     from cartctl.plants.factory import plant_period_s
 
@@ -106,6 +90,16 @@ def load_run_controller(
     return file, limit
 
 
+def _designed_on(file: ControllerFile) -> dict[str, ArxModel]:
+    """The models the controller was designed on; none when that file is gone or unreadable."""
+    from cartctl.data.modelfile import load_models
+
+    try:
+        return dict(load_models(file.model_path).motors)
+    except (CartctlError, OSError):
+        return {}
+
+
 def prepare_run(
     controller: str | Path | ControllerFile,
     *,
@@ -127,33 +121,16 @@ def prepare_run(
     build_controllers: Callable[..., dict[str, Any]] | None = None,
     before_plant: Callable[[], None] | None = None,
 ) -> PreparedRun:
-    """Load, make and check everything a run needs; the plant is made last but one.
+    """Load, make and check everything a run needs (InputError for whatever it refuses).
 
-    Parameters
-    ----------
-    controller : str, Path or ControllerFile
-        The controller file (``given`` names it in messages: the path the user gave).
-    plant : str
-        A plant name (``sim``, ``physics[:…]``, ``virtual[:…]``, ``serial:PORT``).
-    duration_s : float
-        The run's length; the references are built for ``round(duration_s / Ts)`` ticks.
-    reference, reference_b : str
-        Reference specs of motor a, and of b (default: a's).
-    model : str or Path
-        The sim plant's model file (and where an unstable one is named).
-    connect_timeout_s : float
-        A serial or virtual cart's longest wait for its first HEARTBEAT (s).
-    make_plant, build_controllers : callable, optional
-        :func:`cartctl.plants.factory.make_plant` and
-        :func:`cartctl.design.build.build_controllers` unless given (a test's stand-ins).
-    before_plant : callable, optional
-        Called once everything that needs no plant is checked, before the plant is made (the
-        command warms up the Rerun SDK there, so its first-use cost comes before a cart ticks).
-
-    Raises
-    ------
-    InputError
-        Whatever the run refuses (see :mod:`cartctl.session.checks`).
+    ``given`` names the controller file in messages (the path the user gave); ``plant`` is a
+    ``--plant`` name; the references (specs of motor a, and of b, default a's) are built for
+    ``round(duration_s / Ts)`` ticks; ``model`` is the sim plant's model file (and where an
+    unstable one is named); ``connect_timeout_s`` a serial cart's longest wait for its first
+    HEARTBEAT. ``make_plant`` and ``build_controllers`` default to
+    :func:`cartctl.plants.factory.make_plant` and :func:`cartctl.design.build.build_controllers`
+    (a test's stand-ins). ``before_plant`` runs once everything that needs no plant is checked
+    (the command warms up the Rerun SDK there, before a cart ticks).
     """
     from cartctl.plants.base import ClockedPlant
     from cartctl.reference import ReferenceSchedule
@@ -167,8 +144,7 @@ def prepare_run(
 
         build_controllers = build_from_file
     given = given if given is not None else str(controller)
-    file, limit = load_run_controller(controller, given=given, plant=plant, model=model,
-                                      force=force, voltage_limit_v=voltage_limit_v)  # fmt: skip
+    file, limit = _load_controller(controller, given, plant, model, force, voltage_limit_v)
     controllers = build_controllers(file, voltage_limit_v=limit)
     if before_plant is not None:
         before_plant()
@@ -181,12 +157,19 @@ def prepare_run(
             raise InputError(
                 f"the controller is for Ts = {file.period_s} s but the plant ticks at {period_s} s"
             )
-        models = getattr(the_plant, "models", None)  # the sim plant's own
-        if models is not None and not allow_unstable:
-            refuse_unstable(dict(zip("ab", models, strict=True)), str(model))
+        own = getattr(the_plant, "models", None)  # the sim plant's
+        checked = own if own is not None and not allow_unstable else ()
+        for motor, m in zip("ab", checked, strict=False):
+            if not m.is_stable():  # it runs away: refused (--allow-unstable overrides)
+                raise InputError(
+                    f"{model}: motor {motor}'s model is unstable (pole at |z| = "
+                    f"{m.pole_radius():.4g}): a simulation of it runs away whatever the "
+                    "controller does; identify it again, or pass --allow-unstable"
+                )
         if isinstance(the_plant, ClockedPlant):
-            the_plant.connect()  # a cart: connected (its delay probed) before any driving
-            delay = _measured_delay(the_plant)
+            the_plant.connect()  # a cart: connected before any driving, its delay probed
+            measure = getattr(the_plant, "measure_loop_delay", None)  # the echo, at zero volts
+            delay = None if measure is None else int(measure())
         else:
             delay = getattr(the_plant, "loop_delay_ticks", None)  # sim and physics know theirs
         check_loop_delay(file, given, plant, delay, allow=allow_delay_mismatch,
@@ -196,11 +179,10 @@ def prepare_run(
             "a": ReferenceSchedule(reference, n, period_s, "a"),
             "b": ReferenceSchedule(reference_b or reference, n, period_s, "b"),
         }
-        reach_models = (
-            dict(zip("ab", models, strict=True)) if models is not None else models_designed_on(file)
-        )
-        check_reach(references, reach_models, limit, str(model) if models is not None
-                    else file.model_path)  # fmt: skip
+        if own is not None:
+            check_reach(references, dict(zip("ab", own, strict=True)), limit, str(model))
+        else:
+            check_reach(references, _designed_on(file), limit, file.model_path)
     except BaseException:
         the_plant.close()
         raise
