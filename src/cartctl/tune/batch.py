@@ -1,28 +1,16 @@
-"""One designed controller against many ARX plants at once: the closed loop vectorised over plants.
+"""One designed controller against N ARX plants at once (``tune --robust``): one Python loop over
+the ticks, each quantity an array over the plants.
 
-``cartctl tune --robust`` scores every design on a few hundred plants
-(:mod:`cartctl.tune.uncertainty`). Running :func:`cartctl.runtime.fast.run_in_memory` once per
-plant costs a Python loop per plant (a few ms per 2 s run; ``benchmarks/bench_tune.py`` measures
-it); here one Python loop over the ticks steps all N plants together, each
-quantity an array of shape (N,) (or (N, m) for an estimator state).
-
-Per tick k it steps, for every plant, the runtime's own laws on arrays (one element per plant),
-so it does what one tick of ``cartctl run --fast`` does with one motor of
-:class:`~cartctl.plants.sim.ArxPlant` (no measurement noise), operation for operation:
-
-1. the controller: :func:`~cartctl.runtime.pi.pi_law` (:class:`~cartctl.runtime.pi.PiController`)
-   or :func:`~cartctl.runtime.statefeedback.feedback_law`
-   (:class:`~cartctl.runtime.statefeedback.StateFeedbackController`), with the fixed-gain
-   estimator's :func:`~cartctl.runtime.kalman.filter_correct` and
-   :func:`~cartctl.runtime.kalman.filter_predict` around it;
-2. the loop's clamp to its voltage limit, then the plant's saturation at its own limit;
-3. the plant: :func:`~cartctl.plants.sim.arx_next`, with the input coefficients of every plant laid
-   out by lag (zero where a plant's delay puts none), so plants of different delays run together;
-4. a speed beyond :data:`~cartctl.plants.sim.DIVERGED_RAD_S` marks that plant as run away (where
-   the real loop stops with a plant fault); its row is held at zero from then on.
-
-The trace ends like a run's: after the n ticks, the stop row (0 V, the measurement of tick n);
-``tests/test_control_laws.py`` checks the traces against the real loop bit for bit.
+Per tick it does, operation for operation, what a tick of ``cartctl run --fast`` does with one
+motor of :class:`~cartctl.plants.sim.ArxPlant` (no measurement noise): the runtime's own control
+laws on arrays (:func:`~cartctl.runtime.pi.pi_law` or
+:func:`~cartctl.runtime.statefeedback.feedback_law`, with the fixed-gain estimator's
+:func:`~cartctl.runtime.kalman.filter_correct`/:func:`~cartctl.runtime.kalman.filter_predict`
+around it); the loop's clamp, then the plant's saturation; :func:`~cartctl.plants.sim.arx_next`
+with every plant's input coefficients laid out by lag, so plants of different delays run
+together. A plant whose speed passes :data:`~cartctl.plants.sim.DIVERGED_RAD_S` is marked as run
+away and held at zero. The trace ends with the run's stop row; ``tests/test_control_laws.py``
+checks it against the real loop bit for bit.
 """
 
 from __future__ import annotations
@@ -47,26 +35,13 @@ from cartctl.runtime.kalman import (
 from cartctl.runtime.pi import ANTI_WINDUP, PiController, pi_law
 from cartctl.runtime.statefeedback import StateFeedbackController, feedback_law
 
-__all__ = ["ArxBatch", "BatchTrace", "simulate_batch"]
-
 FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
 class ArxBatch:
-    """N ARX plants of one motor, as arrays.
-
-    Attributes
-    ----------
-    ar : ndarray, shape (N, na)
-        a_1 … a_na of each plant (zeros pad a shorter one: an exact no-op).
-    b_lags : ndarray, shape (N, L)
-        The coefficient of u[k − l] in y[k + 1], l = 0 … L − 1: b_i at l = nk − 1 + i, else 0 (V⁻¹
-        rad/s).
-    voltage_limit_v : float
-        The plants' saturation (V), as :class:`~cartctl.plants.sim.ArxPlant`'s.
-    period_s : float
-        Ts (s).
+    """N ARX plants of one motor: ``ar`` (N, na) and ``b_lags`` (N, L), the coefficient of u[k − l] in
+    y[k + 1] (b_i at l = nk − 1 + i, else 0; rad/s per V), with the plants' saturation (V) and Ts (s).
     """
 
     ar: FloatArray
@@ -76,7 +51,6 @@ class ArxBatch:
 
     @property
     def size(self) -> int:
-        """N, the number of plants."""
         return int(self.b_lags.shape[0])
 
     @classmethod
@@ -89,7 +63,7 @@ class ArxBatch:
         voltage_limit_v: float = SUPPLY_V,
         period_s: float = PERIOD_S,
     ) -> ArxBatch:
-        """From per-plant coefficients: ``ar`` (N, na), ``b`` (N, nb), input delays ``nk`` (N,), ≥ 1."""
+        """From ``ar`` (N, na), ``b`` (N, nb) and input delays ``nk`` (N,) ≥ 1."""
         ar_arr = np.asarray(ar, dtype=float)
         b_arr = np.asarray(b, dtype=float)
         nk_arr = np.asarray(nk, dtype=int)
@@ -125,20 +99,11 @@ class ArxBatch:
 
 @dataclass(frozen=True)
 class BatchTrace:
-    """The traces of one motor over N plants, rows as ``cartctl run`` logs them (with the stop row).
+    """One motor's traces over N plants, as ``cartctl run`` logs them (n ticks, then the stop row).
 
-    Attributes
-    ----------
-    time_s : ndarray, shape (n + 1,)
-        k·Ts for the n ticks, then the stop row's time (s).
-    reference : ndarray, shape (n + 1,)
-        r[k] (rad/s); the stop row repeats the last.
-    speed : ndarray, shape (N, n + 1)
-        y[k], the measurement of tick k, which on the ARX plant is also the true speed (rad/s).
-    voltage : ndarray, shape (N, n + 1)
-        u[k], the command sent at tick k (V); 0 in the stop row.
-    diverged : ndarray of bool, shape (N,)
-        The plant's speed left ±:data:`~cartctl.plants.sim.DIVERGED_RAD_S` (the real loop fails).
+    ``time_s`` and ``reference`` (n + 1,) in s and rad/s; ``speed`` (N, n + 1), the measured and
+    true speed (rad/s); ``voltage`` (N, n + 1), the command sent (V, 0 in the stop row);
+    ``diverged`` (N,), the plants that ran away.
     """
 
     time_s: FloatArray
@@ -146,9 +111,6 @@ class BatchTrace:
     speed: FloatArray
     voltage: FloatArray
     diverged: NDArray[np.bool_]
-
-
-# -- controllers: the runtime's laws on arrays ----------------------------------------------------
 
 
 def _filter_terms(est: object) -> FilterTerms:
@@ -161,7 +123,7 @@ def _filter_terms(est: object) -> FilterTerms:
 
 
 class _PiBatch:
-    """:class:`PiController` over N rows: its :func:`~cartctl.runtime.pi.pi_law` on arrays."""
+    """:class:`PiController`'s :func:`~cartctl.runtime.pi.pi_law` over N rows."""
 
     def __init__(self, ctrl: PiController, n: int) -> None:
         self.gains = (ctrl.kp, ctrl.ki * ctrl.period_s, ctrl.tracking_gain_per_tick,
@@ -181,8 +143,7 @@ class _PiBatch:
 
 
 class _FeedbackBatch:
-    """:class:`StateFeedbackController` over N rows: its
-    :func:`~cartctl.runtime.statefeedback.feedback_law` on arrays (finite inputs)."""
+    """:class:`StateFeedbackController`'s :func:`~cartctl.runtime.statefeedback.feedback_law` over N rows."""
 
     def __init__(self, ctrl: StateFeedbackController, n: int) -> None:
         self.ctrl = ctrl
@@ -207,9 +168,6 @@ def _controller(ctrl: Controller, n: int) -> _PiBatch | _FeedbackBatch:
     raise InputError(f"the batch loop does not know the controller {type(ctrl).__name__}")
 
 
-# -- the loop ------------------------------------------------------------------------------------
-
-
 def simulate_batch(
     controller: Controller,
     plants: ArxBatch,
@@ -217,23 +175,9 @@ def simulate_batch(
     *,
     voltage_limit_v: float = SUPPLY_V,
 ) -> BatchTrace:
-    """Run ``controller``'s design against every plant of ``plants``, from rest, all at once.
-
-    Parameters
-    ----------
-    controller : PiController or StateFeedbackController
-        Read only (its gains, limit, anti-windup and estimator); its own state is not touched.
-    plants : ArxBatch
-        The N plants (one motor each).
-    reference : array_like, shape (n,)
-        r[k] (rad/s) for the n ticks.
-    voltage_limit_v : float
-        The loop's clamp (V), as ``run_in_memory``'s.
-
-    Returns
-    -------
-    BatchTrace
-        The N traces, with the stop row.
+    """Run ``controller``'s design (read only: gains, limit, anti-windup, estimator) against every
+    plant from rest, with the loop's clamp ``voltage_limit_v`` (V), following ``reference`` (rad/s,
+    one value per tick).
     """
     ref = np.asarray(reference, dtype=float)
     if ref.ndim != 1 or ref.size == 0:

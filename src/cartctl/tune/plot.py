@@ -1,11 +1,9 @@
 """``cartctl tune --plot``: settling time against overshoot, the front ringed and numbered.
 
-The ringed points are the Pareto front **over the two plotted metrics** (plain ``tune``:
-``pareto_plot``, run settling against run overshoot; ``--robust``: the robust front, nominal
-settling against worst-case overshoot), so none is dominated in the plot's own axes. Each ringed
-point carries its setting number (the table's ``#``), placed by :func:`place_labels` where it
-overlaps no other label, no point and no ring, inside the axes; a point left without a room for
-its number is named in a note under the axes instead. The legend and notes sit under the axes.
+The ringed points are the front over the two plotted metrics (plain: ``pareto_plot``;
+``--robust``: the robust front), so none is dominated in the plot's own axes. Each carries its
+setting number where it overlaps no other label, point or ring (:func:`place_labels`); one left
+without room is named in a note under the axes, beside the legend.
 """
 
 from __future__ import annotations
@@ -18,14 +16,9 @@ from typing import Any
 from cartctl.tune.grid import TuneResult
 from cartctl.tune.robust import RobustRow
 
-RING_AREA_PT2 = 150.0
-"""Marker area of the rings (pt²)."""
-
+RING_AREA_PT2 = 150.0  # marker areas (pt²)
 POINT_AREA_PT2 = 36.0
-"""Marker area of the points (pt²)."""
-
-TITLE_CHARS = 100
-"""The longest title line (characters): 9-point text across the axes of the 8-inch figure."""
+TITLE_CHARS = 100  # 9-point text across the axes of the 8-inch figure
 
 _DISTANCES_PT = (7.0, 12.0, 18.0, 26.0, 36.0, 48.0, 62.0, 76.0, 90.0)
 _ANGLES_DEG = (45.0, -45.0, 135.0, -135.0, 90.0, -90.0, 0.0, 180.0, 20.0, -20.0, 160.0, -160.0,
@@ -42,7 +35,7 @@ def _figure() -> tuple[Any, Any]:
 
 
 def _title(ax: Any, *parts: str) -> None:
-    """A title of short lines (wrapped at :data:`TITLE_CHARS`), inside the figure."""
+    """A title of short lines (wrapped at :data:`TITLE_CHARS`)."""
     import textwrap
 
     lines = [line for part in parts for line in textwrap.wrap(part, TITLE_CHARS)]
@@ -62,17 +55,12 @@ def place_labels(
     obstacles: Sequence[tuple[float, float, float]],
     color: str = "tab:red",
 ) -> list[str]:
-    """Annotate each point (x, y, text; data coordinates) where its text overlaps nothing.
+    """Annotate each point (x, y, text; data coordinates) where its text overlaps nothing, and return
+    the texts left without a place.
 
-    Candidates: offsets of 7 to 90 pt in 16 directions, the first free one taken (a thin line to
-    the point when it is 18 pt or more away). Free: inside the axes, clear of the labels placed
-    so far and of every obstacle (x, y, radius in pt; data coordinates). Draws the figure once
-    to fix its layout; the annotations are kept out of the layout.
-
-    Returns
-    -------
-    list of str
-        The texts left without a place (no candidate was free).
+    Candidates are offsets of 7 to 90 pt in 16 directions, the first free one taken (with a thin
+    line when 18 pt or more away): inside the axes, clear of the labels placed so far and of the
+    ``obstacles`` (x, y, radius in pt). Draws the figure once to fix its layout.
     """
     from matplotlib.transforms import Bbox
 
@@ -118,14 +106,6 @@ def place_labels(
     return left
 
 
-def _ring_radius_pt() -> float:
-    return math.sqrt(RING_AREA_PT2) / 2.0
-
-
-def _point_radius_pt() -> float:
-    return math.sqrt(POINT_AREA_PT2) / 2.0
-
-
 def _unplaced_note(texts: Sequence[str]) -> str:
     return f"ringed without a number (no room for it): #{', #'.join(sorted(texts, key=int))}"
 
@@ -134,9 +114,9 @@ def _finish(fig: Any, ax: Any, front: Sequence[tuple[float, float, int]],
             everything: Sequence[tuple[float, float]], path: str, notes: Sequence[str]) -> None:  # fmt: skip
     """Ring and number the front, put the legend and notes under the axes, and save.
 
-    The labels are placed once the legend is in place (it moves the axes). When some find no
-    room, a legend line names them and they are placed again (the new line moves the axes once
-    more); its text then lists the final ones: one line either way, so the layout holds.
+    The labels are placed once the legend is in place (it moves the axes). When some find no room,
+    a legend line names them and they are placed again (the new line moves the axes once more); its
+    text then lists the final ones, so the layout holds.
     """
     if front:
         ax.scatter([x for x, _, _ in front], [y for _, y, _ in front], s=RING_AREA_PT2,
@@ -146,8 +126,8 @@ def _finish(fig: Any, ax: Any, front: Sequence[tuple[float, float, int]],
     for note in notes:  # legend entries without a marker
         ax.plot([], [], " ", label=note)
     fig.legend(loc="outside lower center", ncols=1, fontsize=8)
-    obstacles = [(x, y, _point_radius_pt()) for x, y in everything]
-    obstacles += [(x, y, _ring_radius_pt()) for x, y, _ in front]
+    obstacles = [(x, y, math.sqrt(POINT_AREA_PT2) / 2.0) for x, y in everything]
+    obstacles += [(x, y, math.sqrt(RING_AREA_PT2) / 2.0) for x, y, _ in front]
     labels = [(x, y, str(i)) for x, y, i in front]
     unplaced = place_labels(fig, ax, labels, obstacles)
     if unplaced:
@@ -165,8 +145,7 @@ def _finish(fig: Any, ax: Any, front: Sequence[tuple[float, float, int]],
 
 
 def plot_tuning(path: str, method: str, results: Sequence[TuneResult]) -> None:
-    """Run settling (ms) against run overshoot (%) of the settings that settled (colour: run peak
-    |voltage|); the front over these two metrics ringed and numbered."""
+    """Run settling (ms) against run overshoot (%) of the settings that settled (colour: peak |V|)."""
     from cartctl.tune.table import counts_text
 
     shown: list[TuneResult] = []
@@ -194,8 +173,9 @@ def plot_tuning(path: str, method: str, results: Sequence[TuneResult]) -> None:
 
 
 def plot_robust(path: str, method: str, rows: Sequence[RobustRow], plants: int) -> None:
-    """Nominal settling (ms) against overshoot (%): worst case (colour: p95 settling), nominal
-    (grey, joined to it) and physics (x); the robust Pareto front ringed and numbered."""
+    """Nominal settling (ms) against overshoot (%): worst case (colour: p95 settling), nominal (grey,
+    joined to it) and physics (x).
+    """
     import numpy as np
     from matplotlib import colormaps
 

@@ -1,9 +1,6 @@
-"""``cartctl tune --robust``, after the scoring: the robust Pareto front, the choice, the table.
-
-The rows come from :func:`cartctl.tune.robust.evaluate_robust_chunk`. The front is over (nominal
-settling time, worst-case overshoot), both minimised, among the feasible settings where both are
-finite; :func:`choose_best_robust` and :func:`choose_best_nominal` apply :data:`CHOICE_RULE` and
-:data:`CHOICE_RULE_NOMINAL`; the terminal table is :func:`cartctl.tune.table.format_robust_table`.
+"""``cartctl tune --robust`` after the scoring: the robust Pareto front (nominal settling against
+worst-case overshoot, both minimised, among feasible settings where both are finite), the
+``--choose best`` rules (:data:`CHOICE_RULE`, :data:`CHOICE_RULE_NOMINAL`) and the row order.
 """
 
 from __future__ import annotations
@@ -18,8 +15,7 @@ from cartctl.errors import InputError
 from cartctl.tune.grid import TuneResult, pareto_front
 from cartctl.tune.robust import RobustRow
 
-CHOICE_RESOLUTION_PERCENT = 0.01
-"""Overshoots that round to the same multiple of this (%) tie in ``--choose best``."""
+CHOICE_RESOLUTION_PERCENT = 0.01  # overshoots equal to this (the table's resolution) tie
 
 CHOICE_RULE = (
     "lowest worst-case overshoot (to 0.01 %) among the feasible settings that settle on every "
@@ -33,25 +29,20 @@ CHOICE_RULE_NOMINAL = (
 
 
 def mark_robust_pareto(rows: Sequence[RobustRow]) -> list[RobustRow]:
-    """The rows with ``pareto`` set: non-dominated in (nominal settling, worst-case overshoot)."""
-    points = []
-    for r in rows:
-        if r.score is None:
-            points.append([math.nan, math.nan])
-            continue
-        x = r.score.value("settling_time_s", "nominal")
-        y = r.score.value("overshoot_percent", "worst")
-        points.append([x if math.isfinite(x) else math.nan, y if math.isfinite(y) else math.nan])
-    front = pareto_front(np.reshape(points, (len(rows), 2)))
+    points = np.array([[math.nan, math.nan] if r.score is None
+                       else [r.score.value("settling_time_s", "nominal"),
+                             r.score.value("overshoot_percent", "worst")]
+                       for r in rows]).reshape(len(rows), 2)  # fmt: skip
+    front = pareto_front(np.where(np.isfinite(points), points, np.nan))
     return [replace(r, pareto=bool(f)) for r, f in zip(rows, front, strict=True)]
 
 
 @dataclass(frozen=True)
 class Limits:
-    """``--max-overshoot`` and ``--max-settling``: bounds a setting must meet to be chosen by
-    ``--choose best``, on the nominal run and (with ``--robust``) on the physics runs at every
-    actuation timing; None: no bound. The sampled plants are not bounded (their worst case ranks
-    the settings)."""
+    """``--max-overshoot`` (%) and ``--max-settling`` (s), None: no bound. ``--choose best`` applies
+    them to the nominal run and (with ``--robust``) the physics runs at every actuation timing, not
+    to the sampled plants (whose worst case ranks the settings).
+    """
 
     overshoot_percent: float | None = None
     settling_time_s: float | None = None
@@ -102,13 +93,8 @@ def _bounded_figures(r: RobustRow) -> list[tuple[float | None, float | None]]:
 
 
 def choose_best_robust(rows: Sequence[RobustRow], limits: Limits = Limits()) -> RobustRow:
-    """The setting ``--choose best`` takes with ``--robust`` (:data:`CHOICE_RULE`), among those
-    within ``limits`` on the model and the physics runs at each actuation timing.
-
-    Raises
-    ------
-    InputError
-        No feasible setting settles on every plant (or none is within the limits).
+    """``--choose best`` with ``--robust`` (:data:`CHOICE_RULE`), within ``limits``; InputError when
+    no setting qualifies.
     """
     candidates = [r for r in rows if r.score is not None and r.score.settles_everywhere
                   and math.isfinite(r.score.value("overshoot_percent", "worst"))]  # fmt: skip
@@ -130,13 +116,8 @@ def choose_best_robust(rows: Sequence[RobustRow], limits: Limits = Limits()) -> 
 
 
 def choose_best_nominal(results: Sequence[TuneResult], limits: Limits = Limits()) -> TuneResult:
-    """The setting ``--choose best`` takes without ``--robust`` (:data:`CHOICE_RULE_NOMINAL`),
-    among those within ``limits`` on the plant.
-
-    Raises
-    ------
-    InputError
-        No feasible setting settles (or none is within the limits).
+    """``--choose best`` without ``--robust`` (:data:`CHOICE_RULE_NOMINAL`), within ``limits``;
+    InputError when no setting qualifies.
     """
     candidates = [r for r in results if r.feasible and r.worst["settling_time_s"] is not None
                   and r.worst["overshoot_percent"] is not None]  # fmt: skip
@@ -154,7 +135,8 @@ def choose_best_nominal(results: Sequence[TuneResult], limits: Limits = Limits()
 
 def sort_robust(rows: Sequence[RobustRow]) -> list[RobustRow]:
     """Robust front first (by nominal settling), then the other scored settings by worst-case
-    overshoot, then the infeasible (by index)."""
+    overshoot, then the infeasible (by index).
+    """
 
     def key(r: RobustRow) -> tuple[int, float, float, int]:
         if r.score is None:

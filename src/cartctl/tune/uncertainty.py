@@ -1,23 +1,18 @@
 """Plants drawn from a model file's own uncertainty, for ``cartctl tune --robust``.
 
-Each sampled plant is the cart (both motors, one loop) with three things changed from the model:
+Each sampled plant is the cart (both motors, one loop) with, from the model:
 
-- **θ within its standard deviation**: each entry of θ = [a_1 … a_na, b_0 … b_nb−1] moves by
-  δ ~ uniform[−σ, +σ], independently, σ being the entry's ``theta_std`` from identification
-  (kept in the model file's ``[motors.X]`` by ``cartctl identify --out``). Uniform within ±1σ, not
-  Gaussian: the issue asks for θ ± its standard deviation, bounded like the two other factors;
-  and a file keeps only the standard deviations, not their covariance, so independent Gaussian
-  tails would weight combinations the data rule out. A file without ``theta_std`` for a motor (the
-  shipped ``models/ground.toml``: the report's θ) leaves that motor's θ as it is, and says so.
-- **the DC gain within ±10 %**: the input coefficients b scaled by g ~ uniform[0.9, 1.1], one g
-  per motor.
-- **the loop delay ±1 tick**: the input delay nk + d + s with s drawn from {−1, 0, +1} with equal
-  chances (d: ``--extra-delay``), one s per plant (both motors share the loop), never below 1.
+- θ = [a_1 … a_na, b_0 … b_nb−1] moved entry by entry by δ ~ uniform[−σ, +σ], σ the entry's
+  ``theta_std`` from identification (uniform and bounded like the other two factors: the file
+  keeps no covariance, so Gaussian tails would weight combinations the data rule out); a motor
+  without ``theta_std`` keeps its θ, and says so;
+- the input coefficients b scaled by a DC gain factor g ~ uniform[0.9, 1.1], one per motor;
+- the input delay nk + d + s, s from {−1, 0, +1} equally likely, one per plant (d:
+  ``--extra-delay``), never below 1.
 
-A draw whose θ puts a pole on or outside the unit circle is rejected and that motor's θ is drawn
-again (the count is reported); gain and delay cannot make a stable model unstable. All draws come
-from one ``numpy.random.Generator`` seeded with ``--seed``, in a fixed order, so a seed gives the
-same plants whatever the number of worker processes.
+A θ draw with a pole on or outside the unit circle is drawn again (and counted). All draws come
+from one generator seeded with ``--seed`` in a fixed order, so a seed gives the same plants
+whatever the number of worker processes.
 """
 
 from __future__ import annotations
@@ -34,37 +29,15 @@ from cartctl.errors import InputError
 from cartctl.model import ArxModel
 
 GAIN_RANGE = (0.9, 1.1)
-"""The DC gain factor's range (dimensionless)."""
-
 DELAY_SHIFTS_TICKS = (-1, 0, 1)
-"""The loop delay's shifts (ticks), equally likely."""
-
-MAX_DRAWS_PER_PLANT = 100
-"""Give up when a motor needs more than this many θ draws per plant on average (stable ones)."""
+MAX_DRAWS_PER_PLANT = 100  # θ draws per plant on average before giving up on stable ones
 
 
 @dataclass(frozen=True)
 class MotorSamples:
-    """The sampled models of one motor.
-
-    Attributes
-    ----------
-    ar : ndarray, shape (N, na)
-        a_1 … a_na of each plant.
-    b : ndarray, shape (N, nb)
-        b_0 … b_nb−1 of each plant, the DC gain factor applied (rad/s per V).
-    nk : ndarray of int, shape (N,)
-        Input delay (ticks), ≥ 1.
-    gain_factor : ndarray, shape (N,)
-        g (dimensionless).
-    theta_delta : ndarray, shape (N, na + nb)
-        δ added to θ before the gain factor.
-    theta_std : ndarray or None
-        σ used, shape (na + nb,); None when the file has none for this motor.
-    theta_std_note : str or None
-        Why σ is not used (no ``theta_std``, or not a usable one), else None.
-    rejected_unstable : int
-        θ draws rejected for an unstable model.
+    """The sampled models of one motor: ``ar`` (N, na), ``b`` (N, nb, the gain factor applied), ``nk``
+    (N,), ``gain_factor`` g and ``theta_delta`` δ per plant, the σ used (None when the file has no
+    usable one, ``theta_std_note`` saying why) and the count of unstable draws rejected.
     """
 
     ar: NDArray[np.float64]
@@ -83,19 +56,7 @@ class MotorSamples:
 
 @dataclass(frozen=True)
 class PlantSample:
-    """N plants drawn around a model file (see the module docstring).
-
-    Attributes
-    ----------
-    motors : dict of str to MotorSamples
-        'a' and 'b'.
-    delay_shift_ticks : ndarray of int, shape (N,)
-        s of each plant (ticks).
-    seed : int
-        The generator's seed.
-    period_s : float
-        Ts (s).
-    """
+    """N plants drawn around a model file: per motor samples, each plant's delay shift s, the seed, Ts."""
 
     motors: dict[str, MotorSamples]
     delay_shift_ticks: NDArray[np.int_]
@@ -104,42 +65,27 @@ class PlantSample:
 
     @property
     def size(self) -> int:
-        """N, the number of plants."""
         return int(self.delay_shift_ticks.size)
 
     def describe(self) -> dict[str, Any]:
-        """The sampling for ``--json``: what was drawn, the σ used per motor, the rejections."""
-        return {
-            "plants": self.size,
-            "seed": self.seed,
-            "theta": "θ + δ, δ ~ uniform[−σ, +σ] per entry (σ: the model file's theta_std)",
-            "dc_gain_factor": {
-                "distribution": "uniform",
-                "range": list(GAIN_RANGE),
-                "per": "motor",
-            },
-            "delay_shift_ticks": {
-                "values": list(DELAY_SHIFTS_TICKS),
-                "per": "plant",
-                "minimum_nk": 1,
-            },
-            "theta_std": {
-                m: None if s.theta_std is None else s.theta_std.tolist()
-                for m, s in self.motors.items()
-            },
-            "theta_std_available": {m: s.theta_std is not None for m, s in self.motors.items()},
-            "theta_std_notes": {
-                m: s.theta_std_note for m, s in self.motors.items() if s.theta_std_note
-            },
-            "rejected_unstable": {m: s.rejected_unstable for m, s in self.motors.items()},
-        }
+        """The sampling for ``--json``."""
+        motors = self.motors.items()
+        return {"plants": self.size, "seed": self.seed,
+                "theta": "θ + δ, δ ~ uniform[−σ, +σ] per entry (σ: the model file's theta_std)",
+                "dc_gain_factor": {"distribution": "uniform", "range": list(GAIN_RANGE),
+                                   "per": "motor"},
+                "delay_shift_ticks": {"values": list(DELAY_SHIFTS_TICKS), "per": "plant",
+                                      "minimum_nk": 1},
+                "theta_std": {m: None if s.theta_std is None else s.theta_std.tolist()
+                              for m, s in motors},
+                "theta_std_available": {m: s.theta_std is not None for m, s in motors},
+                "theta_std_notes": {m: s.theta_std_note for m, s in motors if s.theta_std_note},
+                "rejected_unstable": {m: s.rejected_unstable for m, s in motors}}  # fmt: skip
 
 
 def theta_std_of(model: ArxModel, stats: Mapping[str, Any]) -> tuple[NDArray[np.float64] | None, str | None]:  # fmt: skip
-    """A motor's σ of θ from its model-file ``stats``: (σ, None), or (None, why not).
-
-    σ must be na + nb finite numbers ≥ 0 (an output-error fit whose Jacobian was singular writes
-    NaN: then θ is not perturbed, and the reason says so).
+    """A motor's σ of θ from its model-file ``stats``: (σ, None), or (None, why not); σ must be
+    na + nb finite numbers ≥ 0 (an output-error fit with a singular Jacobian writes NaN).
     """
     raw = stats.get("theta_std")
     if raw is None:
@@ -203,24 +149,9 @@ def _sample_motor(
 def sample_plants(
     models: ModelFile, n_plants: int, seed: int, *, extra_delay_ticks: int = 0
 ) -> PlantSample:
-    """Draw ``n_plants`` plants around ``models`` (see the module docstring for how).
-
-    Parameters
-    ----------
-    models : ModelFile
-        Both motors' models, with their ``theta_std`` where the file has it.
-    n_plants : int
-        N ≥ 1.
-    seed : int
-        Seed of the ``numpy.random.Generator``.
-    extra_delay_ticks : int
-        d, the loop delay beyond the model's, as designed for (``--extra-delay``).
-
-    Raises
-    ------
-    InputError
-        N < 1, a motor missing, a model that is itself unstable, or a σ so large that stable draws
-        are too rare.
+    """Draw ``n_plants`` ≥ 1 plants around ``models`` with ``seed``, for ``extra_delay_ticks`` beyond
+    the model's delay; refuses a missing or unstable model and a σ so large that stable draws are
+    too rare.
     """
     if isinstance(n_plants, bool) or not isinstance(n_plants, int) or n_plants < 1:
         raise InputError(f"--plants must be a number of plants >= 1, got {n_plants!r}")
