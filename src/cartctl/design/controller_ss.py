@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.design.pi import pi_tf_coeffs
+from cartctl.design.request import MAX_TIMING_NOISE_TICKS
 from cartctl.runtime.kalman import KalmanDesign
 from cartctl.runtime.statefeedback import FeedbackGains
 
@@ -94,10 +95,11 @@ def _check_estimator(values: Mapping[str, Any]) -> None:
     if (
         isinstance(timing, bool)
         or not isinstance(timing, int | float)
-        or not (math.isfinite(timing) and 0.0 <= timing <= 10.0)
+        or not (math.isfinite(timing) and 0.0 <= timing <= MAX_TIMING_NOISE_TICKS)
     ):
         raise ValueError(
-            f"estimator.timing_noise_std_ticks must be a number of ticks in [0, 10], got {timing!r}"
+            "estimator.timing_noise_std_ticks must be a number of ticks in "
+            f"[0, {MAX_TIMING_NOISE_TICKS:g}], got {timing!r}"
         )
     error_dynamics = (np.eye(m) - np.outer(values["L"], values["C"])) @ A
     radius = float(np.max(np.abs(np.linalg.eigvals(error_dynamics))))

@@ -1,29 +1,19 @@
 """The physical limit: the fastest settling any voltage sequence within ±12 V allows on a model.
 
-The plant is the model with the design's extra loop delay: input delay nk + d, the loop a design
-made with ``--extra-delay d`` is for and the one its step is simulated on
-(:func:`cartctl.design.analysis.simulate_step` with ``extra_delay_ticks=d``). Its loop delay, ticks
-from a measurement to the voltage it leads to, is nk − 1 + d.
-
-For a step of the speed reference from rest to ``r``, the plant's output is linear in the voltage
-sequence, y = T u with T the lower-triangular Toeplitz matrix of the impulse response. The question
-"can the output be inside the settling band from tick N on?" is then a linear feasibility problem:
+The plant is the model with the design's extra delay d (input delay nk + d, loop delay
+nk − 1 + d), as the design's step is simulated. For a step from rest to r the output is linear in
+the voltages, y = T u (T the lower-triangular Toeplitz matrix of the impulse response), so "can
+y be in the band from tick N on?" is a linear feasibility problem::
 
     find u   with   |u[k]| ≤ U_max                         for all k,
-                    |y[k] − r| ≤ max(0.02 |r|, q)          for N ≤ k < N + M,
+                    |y[k] − r| ≤ max(0.02 |r|, q)          for N ≤ k < N + M (hold, default 2 s)
 
-where the band must hold over a hold window of M ticks (default 2 s). The band is the settling
-rule of :func:`settling_band_rad_s`: 2 % of the step, but never narrower than one encoder count per
-tick, q = (2π / 1792) / Ts (0.3506 rad/s at 10 ms), the resolution of the measured speed. The
-smallest feasible N, found by bisection over linear programs (scipy.optimize.linprog, HiGHS), is
-the bound that no controller can beat on this plant. A controller's settling time is reported as
-a ratio to it, measured in the same band (:func:`in_settling_band`). The sequence returned is,
-among those settling at N, the one closest to the reference after N (least Σ|y − r|), so that it
-can be drawn next to the controller's.
-
-Like with like: the bound is a whole number of ticks (the first sample from which every sample is
-in the band), while a step's settling time interpolates the band crossing between two samples, so
-a controller that matches the bound shows a ratio a little below 1 (by less than one tick).
+with q one encoder count per tick (0.3506 rad/s at 10 ms; :func:`settling_band_rad_s`). The
+smallest feasible N (bisection over HiGHS linear programs) is the bound no controller can beat;
+a controller's settling time, measured in the same band (:func:`in_settling_band`), is reported
+as a ratio to it. Of the sequences settling at N the one closest to r after N (least Σ|y − r|) is
+returned, to draw. The bound is whole ticks while a step's settling time interpolates between
+samples, so a controller matching the bound shows a ratio a little below 1.
 """
 
 from __future__ import annotations
@@ -51,34 +41,12 @@ def settling_band_rad_s(
     fraction: float = SETTLING_FRACTION,
     quantum_rad_s: float | None = None,
 ) -> float:
-    """Half-width of the settling band of a speed step: max(fraction · |r|, q).
+    """Half-width (rad/s) of the settling band of a step r: max(fraction · |r|, q)
+    (:func:`~cartctl.measures.stepinfo.settling_half_width`), q by default one encoder count per
+    tick (a narrower band would judge the encoder, not the controller; 0: the fraction alone).
 
-    The rule of :func:`cartctl.measures.stepinfo.settling_half_width` with the floor q of a measured wheel
-    speed, one encoder count per tick (:func:`cartctl.cart.encoder_quantum_rad_s`): a band
-    narrower than that (2 % of steps below 17.5 rad/s at 10 ms) would judge the encoder rather
-    than the controller. The run summary judges its steps in the same band.
-
-    Parameters
-    ----------
-    step_rad_s : float
-        Step size r (rad/s), non-zero.
-    period_s : float
-        Tick Ts (s), for the default quantum.
-    fraction : float
-        Band as a fraction of |r|, in (0, 1).
-    quantum_rad_s : float, optional
-        The floor q (rad/s, ≥ 0); default one encoder count per tick. 0 gives the fraction alone.
-
-    Returns
-    -------
-    float
-        The band's half-width (rad/s).
-
-    Raises
-    ------
-    InputError
-        A zero or non-finite step, a fraction outside (0, 1), a negative floor, or a step no
-        larger than its own band (it would count as settled at rest: there is no bound to give).
+    InputError for a zero or non-finite step, a fraction outside (0, 1), a negative floor, or a
+    step inside its own band (settled at rest: there is no bound to give).
     """
     if step_rad_s == 0.0 or not math.isfinite(step_rad_s):
         raise InputError(f"step size must be a non-zero number of rad/s, got {step_rad_s}")
@@ -93,18 +61,9 @@ def settling_band_rad_s(
 
 
 def in_settling_band(step: StepAnalysis, period_s: float) -> StepAnalysis:
-    """The same simulated step with its metrics measured in the band of :func:`settling_band_rad_s`.
-
-    Only the settling time can change (rise, overshoot and peak do not depend on the band). This is
-    how a design's step is measured against its :func:`settling_bound`.
-
-    Parameters
-    ----------
-    step : StepAnalysis
-        A step from rest to ``step.reference_rad_s[-1]`` at ``step.time_s[0]``.
-    period_s : float
-        Tick Ts (s), for the encoder quantum.
-    """
+    """The same simulated step (from rest, at ``step.time_s[0]``) with its metrics measured in
+    the band of :func:`settling_band_rad_s`, as against :func:`settling_bound` (only the settling
+    time can change)."""
     r = float(step.reference_rad_s[-1])
     settling_band_rad_s(r, period_s)  # refuses a step inside its own band, as the bound does
     info = step_info(step.time_s, step.speed_rad_s, reference=r, initial=0.0,
@@ -114,23 +73,9 @@ def in_settling_band(step: StepAnalysis, period_s: float) -> StepAnalysis:
 
 @dataclass(frozen=True)
 class SettlingBound:
-    """The time-optimal settling bound of a step on a model (with the design's extra delay).
-
-    Attributes
-    ----------
-    settling_time_s : float
-        Smallest time from the step at which the output can be in the band for good (s).
-    ticks : int
-        The same, in ticks.
-    voltage_v : ndarray, shape (n,)
-        A voltage sequence that achieves it (V).
-    speed_rad_s : ndarray, shape (n,)
-        The delayed plant's response to that sequence (rad/s).
-    loop_delay_ticks : int
-        The loop delay the bound is for: nk − 1 + extra delay (ticks).
-    band_rad_s : float
-        Half-width of the settling band used (rad/s).
-    """
+    """The time-optimal settling bound of a step: the smallest time (s, and ticks) from which
+    the output can stay in the band (half-width ``band_rad_s``), a voltage sequence achieving it
+    and the delayed plant's response, and the loop delay it is for (nk − 1 + extra delay)."""
 
     settling_time_s: float
     ticks: int
@@ -164,38 +109,16 @@ def settling_bound(
     hold_s: float = 2.0,
     max_s: float = 3.0,
 ) -> SettlingBound:
-    """Fastest settling of a speed step from rest that any admissible voltage allows.
-
-    Computed on the model with ``extra_delay_ticks`` more ticks of input delay, the loop a design
-    with that extra delay is for, in the band max(``band`` · |r|, q) (:func:`settling_band_rad_s`).
-    A pure delay shifts every sequence, so the bound with d extra ticks is the bound without plus
-    d ticks.
-
-    Parameters
-    ----------
-    model : ArxModel
-        The motor model (stable, non-zero DC gain).
-    step_rad_s : float
-        Step size r (rad/s), non-zero.
-    voltage_limit_v : float
-        |u| bound (V).
-    extra_delay_ticks : int
-        Ticks of loop delay beyond the model's (a design's ``--extra-delay``).
-    band : float
-        Settling band as a fraction of |r| (0.02: the 2 % criterion).
-    quantum_rad_s : float, optional
-        Narrowest band (rad/s); default one encoder count per tick. 0: the fraction alone.
-    hold_s : float
-        How long the output must stay in the band (s).
-    max_s : float
-        Longest settling time searched (s).
+    """Fastest settling of a step from rest to ``step_rad_s`` that any voltage within
+    ±``voltage_limit_v`` allows, on the model with ``extra_delay_ticks`` more input delay (the
+    bound without plus d ticks), in the band max(``band`` · |r|, ``quantum_rad_s``), held for
+    ``hold_s``, searched up to ``max_s``.
 
     Raises
     ------
     InputError
-        The step cannot be held within the voltage limit at all (|r| − band above the DC gain ×
-        limit), the step lies within its own band, the extra delay is not a whole number >= 0, or
-        the model is unstable.
+        The step cannot be held within the limit at all (|r| − band above the DC gain × limit),
+        lies within its own band, a bad extra delay, or an unstable model.
     """
     return _settling_bound(model, float(step_rad_s), float(voltage_limit_v), extra_delay_ticks,
                            float(band), quantum_rad_s, float(hold_s), float(max_s))  # fmt: skip
@@ -212,9 +135,8 @@ def _settling_bound(
     hold_s: float,
     max_s: float,
 ) -> SettlingBound:
-    """:func:`settling_bound`, cached: a bound is a function of its arguments alone, and design,
-    tune and commission ask for the same one many times (each is a search of linear programs).
-    The arrays it returns are read-only, as every caller shares them."""
+    """:func:`settling_bound`, cached (design, tune and commission ask for the same bound many
+    times); its arrays are read-only, as every caller shares them."""
     plant = model.with_extra_delay(extra_delay_ticks)
     if not plant.is_stable():
         raise InputError("the settling bound needs a stable model")
@@ -261,10 +183,8 @@ def _closest(
     u_max: float,
     fallback: NDArray[np.float64],
 ) -> NDArray[np.float64]:
-    """Among the sequences settling at N, the one with the least Σ|y − r| after N (a clean trace).
-
-    Variables [u (n), t (M)]: minimise Σ t subject to −t ≤ y − r ≤ t and the band.
-    """
+    """Among the sequences settling at N, the one with the least Σ|y − r| after N: variables
+    [u (n), t (M)], minimise Σ t subject to −t ≤ y − r ≤ t and the band."""
     n = n_settle + hold
     t_mat = toeplitz(impulse[:n], np.zeros(n))[n_settle:]
     eye = np.eye(hold)

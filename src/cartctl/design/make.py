@@ -1,10 +1,6 @@
-"""Designs from a request: the controller of each motor, its analysis, and its controller file.
-
-One path for ``cartctl design``, ``cartctl tune`` and the Python API: :func:`design_motor` makes
-one motor's runtime controller with its JSON and file entries; :func:`design_models` adds the
-simulated step against the time-optimal bound for every motor asked for; :func:`controller_file`
-makes the file to save.
-"""
+"""Designs from a request, one path for ``cartctl design``, ``tune`` and the Python API: each
+motor's runtime controller with its JSON and file entries (:func:`design_motor`), the simulated
+step against the time-optimal bound (:func:`design_models`), and the controller file."""
 
 from __future__ import annotations
 
@@ -42,17 +38,8 @@ ANALYSIS_KEYS = (
 
 @dataclass(frozen=True)
 class MotorDesign:
-    """One motor's design.
-
-    Attributes
-    ----------
-    controller : Controller
-        The runtime controller, as ``cartctl run`` builds it from the file.
-    entry : dict
-        The design's figures (gains, margins, poles; the ``design --json`` entry).
-    file_entry : dict
-        The ``[motors.X]`` table of the controller file (without ``analysis``).
-    """
+    """One motor's design: the runtime controller (as ``cartctl run`` builds it from the file),
+    its ``design --json`` entry, and its ``[motors.X]`` file table (without ``analysis``)."""
 
     controller: Controller
     entry: dict[str, Any]
@@ -80,7 +67,7 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
         ctrl = PiController(d.kp, d.ki, model.period_s, voltage_limit_v=request.voltage_limit_v,
                             anti_windup=request.anti_windup,
                             estimator=None if kalman is None else make_estimator(kalman))  # fmt: skip
-        entry = {**d.to_dict(), **d.analysis()}
+        entry = d.to_dict()
         if kalman is not None:
             entry["estimator_poles"] = [[p.real, p.imag] for p in kalman.poles()]
         return MotorDesign(ctrl, entry, pi_entry(d, request.anti_windup, kalman))
@@ -103,13 +90,10 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
     )
     num, den = feedback_tf_coeffs(placement)
     loop = loop_analysis(num, den, model, extra)
+    keys = ("phase_margin_deg", "gain_margin_db", "crossover_hz", "sensitivity_peak")
     entry = {
         **{k: v for k, v in placement.to_dict().items() if k != "estimator"},
-        "phase_margin_deg": loop["phase_margin_deg"],
-        "gain_margin_db": loop["gain_margin_db"],
-        "crossover_hz": loop["crossover_hz"],
-        "sensitivity_peak": loop["sensitivity_peak"],
-        "sensitivity_peak_db": loop["sensitivity_peak_db"],
+        **{k: loop[k] for k in (*keys, "sensitivity_peak_db")},
         "controller_num": num.tolist(),
         "controller_den": den.tolist(),
     }
@@ -150,13 +134,10 @@ def loop_delay_for(
 ) -> tuple[int | None, str | None]:
     """The loop delay a design is for, and a line explaining it where nk and it disagree.
 
-    In order: ``request.loop_delay_ticks`` (``--loop-delay``) if it fits every model
-    (:func:`~cartctl.design.request.check_loop_delay`, InputError otherwise); the loop delay the
-    models' data was recorded in (``recorded``, the model file's ``loop_delay_ticks``) plus the
-    extra delay, when every model's nk is that loop delay or one more (the checks of
-    ``--loop-delay``); else the models' common nk − 1 + extra delay, as for a model file without
-    a loop delay. Motors whose nk differ then give None, or with ``strict`` an InputError: a
-    controller file is for one loop.
+    In order: ``--loop-delay`` if it fits every model (InputError otherwise); the loop delay the
+    models were ``recorded`` in plus the extra delay, when every nk is that or one more; else the
+    models' common nk − 1 + extra delay. Motors whose nk differ then give None, or with
+    ``strict`` an InputError: a controller file is for one loop.
     """
     extra = request.extra_delay_ticks
     nks = {m: mod.nk for m, mod in models.items()}
@@ -185,17 +166,9 @@ def loop_delay_for(
 def check_models(
     models: ModelFile | Mapping[str, ArxModel], motors: tuple[str, ...], name: str | None = None
 ) -> None:
-    """Refuse models no design can use, before any design work (one line naming the file).
-
-    Every motor's model must be stable: a PI needs it, and the simulated step and the settling
-    bound of every design run on it. ``cartctl design`` and ``cartctl tune`` refuse with this line,
-    naming the file as ``name`` (as the user gave it; default the model file's path).
-
-    Raises
-    ------
-    InputError
-        A motor's model has a pole on or outside the unit circle.
-    """
+    """Refuse, before any design work, a motor whose model is unstable (a PI needs a stable one,
+    and every design's simulated step and settling bound run on it): one line naming the file as
+    ``name`` (default the model file's path)."""
     if name is None and isinstance(models, ModelFile) and models.path:
         name = str(models.path)
     where = f"{name}: " if name else ""
@@ -211,24 +184,10 @@ def check_models(
 
 @dataclass(frozen=True)
 class Designs:
-    """The designs of the motors asked for, each with its simulated step.
-
-    Attributes
-    ----------
-    request : DesignRequest
-    models : dict of str to ArxModel
-        The model each motor was designed on.
-    motors : dict of str to MotorDesign
-        With ``entry`` holding the step and the settling bound as well.
-    steps : dict of str to StepAnalysis
-        The simulated step of each motor, in the bound's settling band.
-    loop_delay_ticks : int or None
-        The loop delay the designs are for (None when the motors' model delays differ).
-    recorded_loop_delay_ticks : int or None
-        The loop delay the models' data was recorded in (their model file's), when known.
-    loop_delay_note : str or None
-        One line where the models' nk and the loop delay disagree (:func:`loop_delay_for`).
-    """
+    """The designs of the motors asked for, per motor: the model, the design (its ``entry`` with
+    the step and the settling bound) and the simulated step in the bound's settling band; the
+    loop delay they are for (None when the models' delays differ), the one the models were
+    recorded in, and :func:`loop_delay_for`'s note."""
 
     request: DesignRequest
     models: dict[str, ArxModel]
@@ -280,14 +239,8 @@ def design_models(
 def controller_file(
     designs: Designs, model_path: str | Path, *, command: str, period_s: float
 ) -> ControllerFile:
-    """The controller file of ``designs`` (designed on ``model_path``), ready to save.
-
-    Raises
-    ------
-    InputError
-        The motors' models have different input delays and no recorded loop delay they both
-        fit: one file is for one loop.
-    """
+    """The controller file of ``designs`` (designed on ``model_path``), ready to save;
+    InputError when the motors' models fit no one loop delay."""
     loop_delay, _ = loop_delay_for(designs.request, designs.models,
                                    designs.recorded_loop_delay_ticks, strict=True)  # fmt: skip
     motors = {

@@ -1,20 +1,14 @@
 """Discrete PI speed controller design on an identified ARX model (pure maths, no I/O).
 
-Pipeline: after ``identify`` (a model from ``models/*.toml``), before the runtime
-:class:`cartctl.runtime.pi.PiController`, which runs the gains found here in the 10 ms loop.
-
-The PI form (backward-Euler integral, the error of this tick enters the integral at once)::
+The PI (backward-Euler integral; :class:`cartctl.runtime.pi.PiController` runs it)::
 
     I[k] = I[k−1] + Ki·Ts·e[k],     u[k] = Kp·e[k] + I[k]
+    C(z) = Kp + Ki·Ts·z/(z − 1) = ((Kp + Ki·Ts)·z − Kp) / (z − 1)
 
-    C(z) = U(z)/E(z) = Kp + Ki·Ts·z/(z − 1) = ((Kp + Ki·Ts)·z − Kp) / (z − 1)
-
-with e = reference − speed (rad/s), u the voltage (V), Kp in V/(rad/s), Ki in V/rad, Ts in s.
-The design places one point of the open loop L(z) = C(z)·G(z)·z^−extra on the unit circle at the
-crossover: |L| = 1 and ∠L = −180° + PM. That one complex equation, linear in (Kp, Ki), gives the
-two gains. On a plant with little lag a low crossover leaves more margin than asked (the solution
-needs Kp < 0); at a high one the plant lags too much (it needs Ki ≤ 0, phase lead). Both are refused
-with the range of crossovers that works.
+e = reference − speed (rad/s), u in V, Kp in V/(rad/s), Ki in V/rad, Ts in s. The design puts
+the open loop L = C·G·z^−extra on the unit circle at the crossover with ∠L = −180° + PM: one
+complex equation, linear in (Kp, Ki). Where the solution needs Kp < 0 (a low crossover on a plant
+with little lag) or Ki ≤ 0 (a high one: phase lead) it is refused with the crossovers that work.
 """
 
 from __future__ import annotations
@@ -87,7 +81,7 @@ def _stable(model: ArxModel, kp: float, ki: float, extra: int) -> bool:
 
 
 def _solve(model: ArxModel, pm: float, freq_hz: float, extra: int) -> tuple[float, float, str]:
-    """(Kp, Ki, why a PI cannot meet (pm, freq_hz)); the reason is '' when it can."""
+    """(Kp, Ki, why a PI cannot meet (pm, freq_hz), or '')."""
     kp, ki = (float(v[0]) for v in _gains(model, pm, np.array([freq_hz]), extra))
     return kp, ki, _problem(model, pm, kp, ki, extra)
 
@@ -111,16 +105,9 @@ def _problem(model: ArxModel, pm: float, kp: float, ki: float, extra: int) -> st
 def crossover_range(
     model: ArxModel, *, phase_margin_deg: float, extra_delay_ticks: int = 0
 ) -> tuple[float, float] | None:
-    """The crossovers (Hz) at which a PI gives exactly this phase margin on the model.
-
-    The lowest band of frequencies where the solution has Kp ≥ 0, Ki > 0 and a stable closed
-    loop, its edges refined by bisection to about 1e-6 Hz.
-
-    Returns
-    -------
-    (low_hz, high_hz) or None
-        None when no crossover below Nyquist works.
-    """
+    """(low_hz, high_hz): the lowest band of crossovers at which a PI gives exactly this phase
+    margin with Kp ≥ 0, Ki > 0 and a stable loop, edges bisected to about 1e-6 Hz; None when no
+    crossover below Nyquist works."""
     _check_common(model, phase_margin_deg, extra_delay_ticks)
     nyquist = 0.5 / model.period_s
     grid = np.geomspace(nyquist * 1e-4, nyquist * (1.0 - 1e-6), _GRID_POINTS)
@@ -161,22 +148,8 @@ def design_pi(
     crossover_hz: float,
     extra_delay_ticks: int = 0,
 ) -> PiDesign:
-    """PI gains for an exact phase margin at a given gain-crossover frequency.
-
-    Parameters
-    ----------
-    model : ArxModel
-        Stable motor model, voltage (V) to speed (rad/s).
-    phase_margin_deg : float
-        Phase margin PM in (0, 89] degrees.
-    crossover_hz : float
-        Gain-crossover frequency in (0, Nyquist) Hz.
-    extra_delay_ticks : int
-        Ticks of delay in the loop beyond the model's own (a PC-side serial link, say).
-
-    Returns
-    -------
-    PiDesign
+    """PI gains for an exact phase margin (degrees, in (0, 89]) at a gain crossover (Hz, below
+    Nyquist) on a stable model, with ``extra_delay_ticks`` of loop delay beyond the model's.
 
     Raises
     ------
@@ -207,24 +180,12 @@ def design_pi_bandwidth(
     phase_margin_deg: float = 60.0,
     extra_delay_ticks: int = 0,
 ) -> PiDesign:
-    """PI gains for a closed-loop −3 dB bandwidth at a given phase margin.
+    """PI gains for a closed-loop (reference → speed) −3 dB bandwidth (Hz) at a phase margin.
 
-    The crossover is found with :func:`scipy.optimize.brentq` inside :func:`crossover_range`, on
-    the branch where the bandwidth grows with the crossover (near the top of the range Ki → 0 and
-    the bandwidth falls again); of two crossovers with the same bandwidth, the lower is chosen.
-
-    Parameters
-    ----------
-    bandwidth_hz : float
-        Wanted closed-loop (reference → speed) −3 dB bandwidth (Hz).
-    phase_margin_deg, extra_delay_ticks
-        As in :func:`design_pi`.
-
-    Raises
-    ------
-    InputError
-        As :func:`design_pi`, or a bandwidth that no crossover in range gives (the message says
-        which bandwidths are possible at that margin).
+    The crossover is found by ``brentq`` inside :func:`crossover_range`, on the branch where the
+    bandwidth grows with it (near the top Ki → 0 and it falls again): of two crossovers with the
+    same bandwidth, the lower. InputError as :func:`design_pi`, or for a bandwidth no crossover in
+    range gives (with the bandwidths possible at that margin).
     """
     pm, extra = phase_margin_deg, extra_delay_ticks
     span = crossover_range(model, phase_margin_deg=pm, extra_delay_ticks=extra)
@@ -256,25 +217,8 @@ def design_pi_bandwidth(
 
 @dataclass(frozen=True)
 class PiDesign:
-    """A PI design: the gains, the model and the request it came from.
-
-    Attributes
-    ----------
-    kp : float
-        Proportional gain Kp (V/(rad/s)).
-    ki : float
-        Integral gain Ki (V/rad): volts per radian of accumulated speed error.
-    period_s : float
-        Sample period Ts (s).
-    extra_delay_ticks : int
-        Loop delay assumed beyond the model's own (ticks).
-    model : ArxModel
-        The model designed on.
-    target_phase_margin_deg, target_crossover_hz : float
-        The request (for a bandwidth design, the crossover found for it).
-    target_bandwidth_hz : float or None
-        The requested closed-loop bandwidth, for :func:`design_pi_bandwidth`.
-    """
+    """A PI design: Kp (V/(rad/s)), Ki (V/rad), Ts (s), the extra loop delay (ticks), the model
+    and the request (for a bandwidth design, the crossover found for it, and the bandwidth)."""
 
     kp: float
     ki: float
@@ -305,22 +249,17 @@ class PiDesign:
         num, den = self._loop()
         return control.tf(num, np.polyadd(den, num), dt=self.period_s)
 
-    def _sensitivity(
-        self, freq_hz: NDArray[np.float64]
-    ) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
-        """S = 1/(1 + L) and T = L/(1 + L) at these frequencies (Hz); T = 1 at 0 Hz."""
-        num, den = self._loop()
-        z = np.exp(2j * np.pi * freq_hz * self.period_s)
-        n, d = np.polyval(num, z), np.polyval(den, z)
-        return d / (d + n), n / (d + n)
-
     def bandwidth_hz(self) -> float:
-        """Closed-loop −3 dB bandwidth (Hz): where |T| first falls below 1/√2; Nyquist if never."""
+        """Closed-loop −3 dB bandwidth (Hz): where |T| = |L/(1 + L)| first falls below 1/√2;
+        Nyquist if never."""
+        num, den = self._loop()
         nyquist = 0.5 / self.period_s
         grid = np.linspace(0.0, nyquist, _FREQ_POINTS)
 
         def excess(f: float | NDArray[np.float64]) -> Any:
-            return np.abs(self._sensitivity(np.atleast_1d(f))[1]) - 1.0 / math.sqrt(2.0)
+            z = np.exp(2j * np.pi * np.atleast_1d(f) * self.period_s)
+            n, d = np.polyval(num, z), np.polyval(den, z)
+            return np.abs(n / (d + n)) - 1.0 / math.sqrt(2.0)
 
         below = np.flatnonzero(excess(grid) < 0.0)
         if below.size == 0:
@@ -331,28 +270,16 @@ class PiDesign:
         return float(optimize.brentq(lambda f: float(excess(f)[0]), grid[i - 1], grid[i]))
 
     def analysis(self) -> dict[str, Any]:
-        """Margins, closed-loop poles, sensitivity peak and bandwidth.
-
-        The margins are python-control's ``stability_margins`` (what ``margin`` returns) with
-        the exact polynomial method: ``margin``'s default falls back, for some well-damped
-        low-crossover designs, to a frequency grid that misses the crossover.
-
-        Returns
-        -------
-        dict
-            ``phase_margin_deg``, ``gain_margin_db`` (None when infinite), ``crossover_hz``,
-            ``closed_loop_poles`` ([[re, im], ...]), ``sensitivity_peak`` (max |1/(1+L)|, from
-            python-control's stability margin), ``sensitivity_peak_db``, ``bandwidth_hz``.
-        """
+        """Margins (:func:`~cartctl.design.loop.loop_analysis`), ``closed_loop_poles``
+        ([[re, im], ...]), sensitivity peak and ``bandwidth_hz``."""
         from cartctl.design.loop import loop_analysis
 
         loop = loop_analysis(*self.controller_tf_coeffs(), self.model, self.extra_delay_ticks)
         num, den = self._loop()
         poles = sorted(np.roots(np.polyadd(den, num)), key=lambda p: (abs(p), p.imag))
+        margins = {k: loop[k] for k in ("phase_margin_deg", "gain_margin_db", "crossover_hz")}
         return {
-            "phase_margin_deg": loop["phase_margin_deg"],
-            "gain_margin_db": loop["gain_margin_db"],
-            "crossover_hz": loop["crossover_hz"],
+            **margins,
             "closed_loop_poles": [[float(p.real), float(p.imag)] for p in poles],
             "sensitivity_peak": loop["sensitivity_peak"],
             "sensitivity_peak_db": loop["sensitivity_peak_db"],

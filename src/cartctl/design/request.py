@@ -1,9 +1,6 @@
-"""What a design is asked for: one request, the same from the command line, ``tune`` and Python.
-
-:class:`DesignRequest` holds every option of ``cartctl design`` with its default, checks them, and
-knows both forms it is recorded in: the ``[request]`` table of a controller file and the command
-line that regenerates the file (:meth:`DesignRequest.to_argv`).
-"""
+"""What a design is asked for, the same from the command line, ``tune`` and Python: every option
+of ``cartctl design`` with its default and range, and the two forms it is recorded in (a
+controller file's ``[request]`` table, the command line that regenerates the file). No numpy."""
 
 from __future__ import annotations
 
@@ -59,43 +56,17 @@ OPTIONS: dict[str, str] = {
 
 @dataclass(frozen=True)
 class DesignRequest:
-    """Everything a design is asked for (the options of ``cartctl design``, with their defaults).
+    """Everything a design is asked for: the options of ``cartctl design`` (:data:`OPTIONS`),
+    with their defaults and units.
 
-    Attributes
-    ----------
-    method : {'pi', 'poles'}
-    phase_margin_deg, crossover_hz : float
-        PI: phase margin (deg) at the crossover frequency (Hz).
-    bandwidth_hz : float or None
-        PI: design for this closed-loop bandwidth (Hz) instead of a crossover.
-    anti_windup : {'conditional', 'back-calculation', 'none'}
-        PI: integrator handling at the voltage limit.
-    estimator : {'none', 'kalman'}
-        PI: run on the measurement, or on a Kalman speed estimate.
-    poles : str or None
-        Pole placement: closed-loop poles as given (``0.8,0.7+0.1j,0.7-0.1j``).
-    settling_time_s, overshoot_percent : float
-        Pole placement: the dominant poles' 2 % settling time (s) and overshoot (%).
-    process_noise_std_v, bias_drift_std_v : float
-        The estimator's process noise (V) and its disturbance state's random walk (V per tick).
-    extra_noise_std_rad_s : float
-        Measurement noise beyond the encoder's quantisation (rad/s); the estimator's √R is this
-        and the quantisation noise together.
-    timing_noise_std_ticks : float
-        σ_ε, how uncertain (std, ticks) the moment a command lands is: the estimator
-        adds (σ_ε Δu)² B Bᵀ to its process noise after each command change Δu (see
-        :class:`~cartctl.runtime.kalman.KalmanDesign`); 0 leaves Q fixed.
-    extra_delay_ticks : int
-        Ticks of loop delay beyond the model's (a PC-side loop over serial).
-    loop_delay_ticks : int or None
-        The loop delay the controller is for (ticks from a measurement to its voltage on the
-        motor), when it is not the model's nk − 1 + extra delay: nk + extra delay is allowed too,
-        for a model whose next measurement already sees part of a command (it lands within the
-        tick; :func:`check_loop_delay`). None: nk − 1 + extra delay.
-    voltage_limit_v : float
-        Command saturation (V), at most the 12 V supply.
-    step_rad_s : float
-        Reference step of the simulated response (rad/s).
+    PI: ``phase_margin_deg`` at ``crossover_hz``, or at a closed-loop ``bandwidth_hz``;
+    ``anti_windup``; ``estimator`` 'kalman' runs it on a Kalman speed estimate. Pole placement:
+    ``poles`` as given (``0.8,0.7+0.1j,0.7-0.1j``), or the dominant pair's 2 % settling time and
+    overshoot. The estimator: process noise (V), the disturbance state's random walk (V per
+    tick), ``extra_noise_std_rad_s`` beyond the encoder's quantisation (√R is both together), and
+    σ_ε, how uncertain (std, ticks) the moment a command lands (Q grows by (σ_ε Δu)² B Bᵀ after
+    each command change; 0 leaves Q fixed). ``loop_delay_ticks`` None is nk − 1 + extra delay; nk
+    + extra delay is allowed too (:func:`check_loop_delay`).
     """
 
     method: str
@@ -117,11 +88,8 @@ class DesignRequest:
     step_rad_s: float = 10.0
 
     def check(self) -> DesignRequest:
-        """This request, if its options are in range (one-line :class:`InputError` otherwise).
-
-        Each field the method uses is checked by :func:`check_field` (no model needed, so a
-        request is refused before any design work), then the combinations.
-        """
+        """This request, if each field its method uses is in range (:func:`check_field`: no
+        model needed, so refused before any design work) and they combine; else InputError."""
         if self.method not in METHODS:
             raise InputError(f"method must be one of {', '.join(METHODS)}, got '{self.method}'")
         unused = _POLES_FIELDS if self.method == "pi" else _PI_FIELDS
@@ -167,10 +135,8 @@ class DesignRequest:
         return req
 
     def to_argv(self, model: str, *, always: tuple[str, ...] = ()) -> list[str]:
-        """``cartctl design`` arguments (without the command name) that make this request.
-
-        Options left at their default are left out, except the fields named in ``always``.
-        """
+        """``cartctl design`` arguments (without the command name) that make this request;
+        options at their default are left out, except the fields named in ``always``."""
         argv = [model, "--method", self.method]
         default = DesignRequest(method=self.method)
         for f in fields(self):
@@ -233,24 +199,9 @@ _POLES_FIELDS = frozenset({"settling_time_s", "overshoot_percent"})
 
 
 def check_field(field: str, value: Any, option: str | None = None) -> Any:
-    """``value`` if it is in the range of request field ``field`` (:data:`RANGES`).
-
-    Parameters
-    ----------
-    field : str
-        A key of :data:`RANGES` (``'phase_margin_deg'``, ``'extra_delay_ticks'``, …).
-    value
-        The value asked for, in the field's unit.
-    option : str, optional
-        How the message names what the user gave; default the design option
-        (:data:`OPTIONS`, e.g. ``--phase-margin``). ``cartctl tune`` passes its grid axis
-        (``--grid phase-margin=50:120:5``), so both commands refuse a value in the same words.
-
-    Raises
-    ------
-    InputError
-        Out of range: one line, ``OPTION must be RANGE, got VALUE``.
-    """
+    """``value`` if it is in the range of request field ``field`` (:data:`RANGES`), else the
+    InputError ``OPTION must be RANGE, got VALUE``; ``option`` names what the user gave (default
+    the design option; ``tune`` passes its grid axis, so both refuse in the same words)."""
     test, allowed = RANGES[field]
     if not test(value):
         shown = f"{value:g}" if isinstance(value, float) else str(value)
@@ -263,11 +214,10 @@ def check_field(field: str, value: Any, option: str | None = None) -> Any:
 def check_loop_delay(loop_delay_ticks: int | None, nk: int, extra_delay_ticks: int) -> int:
     """The loop delay of a design on a model with input delay ``nk`` and ``extra_delay_ticks``.
 
-    None gives nk − 1 + extra (the report's timing: a command lands at the tick after the
-    measurement it answers, and shows in the measurement after that). A given loop delay may
-    also be nk + extra: the model's next measurement already sees part of a command that lands
-    within the tick (the measured speed is the tick's average), as a model identified on a cart
-    whose commands land a few ms after the tick has it. Anything else is refused (one line).
+    None gives nk − 1 + extra (a command lands at the tick after the measurement it answers and
+    shows in the measurement after that). A given loop delay may also be nk + extra: the next
+    measurement (the tick's average speed) already sees part of a command that lands within the
+    tick. Anything else is refused (one line).
     """
     derived = int(nk) - 1 + int(extra_delay_ticks)
     if loop_delay_ticks is None:
