@@ -1,14 +1,10 @@
 """The sink interface and the closed-loop trace columns (docs/architecture.md's trace columns).
 
-The loop opens every sink with the column names, writes one row of floats per tick in that order,
-and closes every sink on every exit path. ``write`` runs inside the 10 ms tick, before the tick's
-compute time is taken: it must never block (buffer, hand off to a thread). A problem that loses no
-data (a viewer gone) is recorded and reported at ``close``; a file that cannot be written (a full
-disk) raises :class:`~cartctl.errors.OutputError` from the call that met it, once: the loop gives
-the other sinks their row, then stops through its normal stop path (a fault of the run). A sink may
-also have ``idle()``, which the loop calls after each tick's compute time is taken and before it
-waits for the next deadline (or the cart's next frame): work that need not delay the command
-(formatting, handing a block to a thread) belongs there.
+The loop opens every sink with the column names, writes one row of floats per tick, and closes
+every sink on every exit path. ``write`` runs inside the tick and must never block; an optional
+``idle()`` runs after the tick's compute time is taken, for work that need not delay the command.
+A problem that loses no data is reported at ``close``; a file that cannot be written raises
+:class:`~cartctl.errors.OutputError` once, and the run stops through its normal stop path.
 """
 
 from __future__ import annotations
@@ -19,36 +15,22 @@ from typing import Protocol, runtime_checkable
 from cartctl.data.trace import REQUIRED_COLUMNS
 
 TRACE_COLUMNS: tuple[str, ...] = (
-    *REQUIRED_COLUMNS,
-    "tick",
-    "reference_a",
-    "reference_b",
-    "estimate_a",
-    "estimate_b",
-    "period_error_us",
-    "compute_us",
-)
-"""Columns of a closed-loop trace, in file order: every trace's, then the loop's. Simulated
-plants add ``true_speed_a``, ``true_speed_b`` after these. Row k: the voltage commanded at tick k
-and the speed measured at tick k (as in every trace); ``period_error_us`` is how late tick k
-started against its deadline (µs), ``compute_us`` the time from its start to the command being
-sent (µs)."""
+    *REQUIRED_COLUMNS, "tick", "reference_a", "reference_b", "estimate_a", "estimate_b",
+    "period_error_us", "compute_us",
+)  # fmt: skip
+"""Columns of a closed-loop trace, in file order (simulated plants add :data:`TRUE_SPEED_COLUMNS`):
+``period_error_us`` is how late tick k started (µs), ``compute_us`` its start to the command (µs)."""
 
 TRUE_SPEED_COLUMNS: tuple[str, ...] = ("true_speed_a", "true_speed_b")
 
 
 @runtime_checkable
 class Sink(Protocol):
-    """A consumer of the loop's rows."""
+    """A consumer of the loop's rows: ``open`` before the first tick, ``write`` one tick's values
+    in column order (cheap, non-blocking), ``close`` leaves the files complete."""
 
-    def open(self, columns: Sequence[str]) -> None:
-        """Prepare for rows with these columns (before the first tick)."""
-        ...
+    def open(self, columns: Sequence[str]) -> None: ...
 
-    def write(self, row: Sequence[float]) -> None:
-        """One tick's values, in column order. Cheap and non-blocking."""
-        ...
+    def write(self, row: Sequence[float]) -> None: ...
 
-    def close(self) -> None:
-        """Flush everything; the files are complete and valid afterwards."""
-        ...
+    def close(self) -> None: ...

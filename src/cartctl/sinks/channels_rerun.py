@@ -1,11 +1,5 @@
-"""A Rerun sink for arbitrary labelled channels (``cartctl monitor``), plus the cart's text.
-
-:class:`ChannelsRerunSink` is the :class:`~cartctl.sinks.rerun_sink.RerunSink` (same modes, viewer
-start, batching thread, ``send_columns`` on the ``time`` and ``tick`` timelines, problem reporting)
-with another mapping: every column other than ``time_s`` and ``tick`` is one scalar series under
-``gpio/<column>``, and the layout shows the float channels in one time-series view, the int
-channels in another, and the cart's messages (``cart/print``, ``cart/events``) in a text log.
-"""
+"""The Rerun sink of ``cartctl monitor``: every column but ``time_s`` and ``tick`` is a series
+under ``gpio/<label>``, with the cart's messages under ``cart/``; and review's layouts for them."""
 
 from __future__ import annotations
 
@@ -24,6 +18,7 @@ from cartctl.sinks.rerun_layout import (
     TIME_COLUMN,
     Range,
     SeriesStyle,
+    collapsed,
     padded_range,
 )
 from cartctl.sinks.rerun_sink import RerunSink
@@ -33,35 +28,22 @@ CART_ROOT = "cart"
 
 
 def channels_blueprint(float_labels: Sequence[str], int_labels: Sequence[str]) -> rrb.Blueprint:
-    """The monitor's layout: float channels above int channels, the cart's messages beneath.
-
-    Parameters
-    ----------
-    float_labels, int_labels : sequence of str
-        Labels of the channels, i.e. the entities ``gpio/<label>`` of each view.
-
-    Returns
-    -------
-    rerun.blueprint.Blueprint
-    """
-    floats = rrb.TimeSeriesView(
-        name="Float channels",
-        origin=f"/{GPIO_ROOT}",
-        contents=[f"$origin/{label}" for label in float_labels],
-        plot_legend=rrb.PlotLegend(corner="RightBottom", visible=True),
-    )
-    ints = rrb.TimeSeriesView(
-        name="Int channels",
-        origin=f"/{GPIO_ROOT}",
-        contents=[f"$origin/{label}" for label in int_labels],
-        plot_legend=rrb.PlotLegend(corner="RightBottom", visible=True),
-    )
+    """The monitor's layout: float channels above int channels, the cart's messages beneath."""
+    floats = _channels_view("Float channels", float_labels)
+    ints = _channels_view("Int channels", int_labels)
     texts = rrb.TextLogView(name="Cart messages", origin=f"/{CART_ROOT}")
-    return rrb.Blueprint(
-        rrb.Vertical(floats, ints, texts, row_shares=[3, 2, 1]),
-        rrb.BlueprintPanel(state="collapsed"),
-        rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(state="collapsed", timeline="time"),
+    return collapsed(rrb.Vertical(floats, ints, texts, row_shares=[3, 2, 1]))
+
+
+def _channels_view(
+    name: str, labels: Sequence[str], axis: rrb.ScalarAxis | None = None
+) -> rrb.TimeSeriesView:
+    return rrb.TimeSeriesView(
+        name=name,
+        origin=f"/{GPIO_ROOT}",
+        contents=[f"$origin/{label}" for label in labels],
+        plot_legend=rrb.PlotLegend(corner="RightBottom", visible=True),
+        axis_y=axis,
     )
 
 
@@ -69,16 +51,12 @@ _SPEED_KINDS = ("reference", "speed", "estimate", "true_speed")
 
 
 def _natural(label: str) -> list[object]:
-    """Sort key: FloatIn2 before FloatIn10."""
     return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", label)]
 
 
 def review_styles(labels: Sequence[str]) -> dict[str, SeriesStyle]:
-    """The run's line styles (colour, width) for the labels that name a motor's signals.
-
-    Entity path → style, e.g. ``gpio/speed_a`` drawn as the run draws ``motor/a/speed``. The
-    labels stay the legend's names.
-    """
+    """Entity path → the run's style for labels that name a motor's signals (``gpio/speed_a``
+    drawn as ``motor/a/speed``)."""
     styles: dict[str, SeriesStyle] = {}
     for label in labels:
         for m in ("a", "b"):
@@ -91,22 +69,11 @@ def review_styles(labels: Sequence[str]) -> dict[str, SeriesStyle]:
 def review_blueprint(
     extremes: Mapping[str, Range], whole: Collection[str] = (), *, texts: bool = True
 ) -> rrb.Blueprint:
-    """The layout ``cartctl review`` gives a monitor recording, built from its labels.
+    """The layout ``cartctl review`` gives a monitor recording, from entity path → (min, max).
 
-    Labels that name a motor's signals (``speed_a``, ``reference_a``, ``estimate_a``,
-    ``voltage_a``; case and separators aside, so ``speedA`` too) get the run's arrangement: per
-    motor, speed with reference and estimate above the voltage. The other channels follow, those
-    with fractions in one plot and those holding whole numbers only (int channels, counters) in
-    another; the cart's messages beneath. Every plot's y range spans its values.
-
-    Parameters
-    ----------
-    extremes : mapping of str to (float, float)
-        Entity path (``gpio/<label>``) → the lowest and highest value recorded.
-    whole : collection of str
-        The entity paths whose values are all whole numbers.
-    texts : bool
-        Whether the recording holds the cart's messages (``cart/...``).
+    Labels that name a motor's signals (``speedA`` too) get the run's arrangement; the other
+    channels follow, fractions in one plot and the ``whole``-number paths in another; then the
+    cart's messages when the recording has ``texts``.
     """
     labels = sorted((p.removeprefix(f"{GPIO_ROOT}/") for p in extremes
                      if p.startswith(f"{GPIO_ROOT}/")), key=_natural)  # fmt: skip
@@ -121,13 +88,8 @@ def review_blueprint(
     def view(name: str, chosen: list[str], margin: float = 0.1) -> rrb.TimeSeriesView:
         seen = [extremes[f"{GPIO_ROOT}/{label}"] for label in chosen]
         lo, hi = min(v[0] for v in seen), max(v[1] for v in seen)
-        return rrb.TimeSeriesView(
-            name=name,
-            origin=f"/{GPIO_ROOT}",
-            contents=[f"$origin/{label}" for label in chosen],
-            plot_legend=rrb.PlotLegend(corner="RightBottom", visible=True),
-            axis_y=rrb.ScalarAxis(range=padded_range(lo, hi, margin=margin), zoom_lock=False),
-        )
+        axis = rrb.ScalarAxis(range=padded_range(lo, hi, margin=margin), zoom_lock=False)
+        return _channels_view(name, chosen, axis)
 
     columns = []
     for m in ("a", "b"):
@@ -155,27 +117,12 @@ def review_blueprint(
     if texts:
         rows.append(rrb.TextLogView(name="Cart messages", origin=f"/{CART_ROOT}"))
         shares.append(1.5)
-    return rrb.Blueprint(
-        rrb.Vertical(*rows, row_shares=shares),
-        rrb.BlueprintPanel(state="collapsed"),
-        rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(state="collapsed", timeline="time"),
-    )
+    return collapsed(rrb.Vertical(*rows, row_shares=shares))
 
 
 class ChannelsRerunSink(RerunSink):
-    """Streams labelled channels and the cart's text to a Rerun recording (file and/or viewer).
-
-    Parameters
-    ----------
-    mode, path, connect_url, batch_ticks, strict
-        As for :class:`~cartctl.sinks.rerun_sink.RerunSink`.
-    float_count : int
-        How many of the value columns (after ``time_s`` and ``tick``) are float channels; the rest
-        are int channels (they only go to different views).
-    recording_name : str, optional
-        Name shown in the viewer; defaults to the file's stem.
-    """
+    """A :class:`RerunSink` of labelled channels (the first ``float_count`` are float channels,
+    the rest int channels, shown apart) and the cart's text."""
 
     def __init__(
         self,
@@ -194,7 +141,6 @@ class ChannelsRerunSink(RerunSink):
         self.float_count = int(float_count)
 
     def _entities(self, columns: list[str]) -> tuple[tuple[int, str], ...]:
-        """Every column but ``time_s`` and ``tick`` is a channel, under ``gpio/<label>``."""
         return tuple(
             (i, f"{GPIO_ROOT}/{c}")
             for i, c in enumerate(columns)
@@ -202,7 +148,6 @@ class ChannelsRerunSink(RerunSink):
         )
 
     def _describe(self, rec: rr.RecordingStream) -> None:
-        """Floats and ints in their own views, one series per label; text logs warmed up."""
         labels = [entity.removeprefix(f"{GPIO_ROOT}/") for _, entity in self._signals]
         floats, ints = labels[: self.float_count], labels[self.float_count :]
         rec.send_blueprint(channels_blueprint(floats, ints))

@@ -1,19 +1,12 @@
 """The CSV trace sink: the trace columns of docs/architecture.md, flushed at least once a second.
 
-``write`` keeps the tick's row (a tuple of floats, nothing formatted; a row of another length than
-the header's is a ``ValueError``, never a short row in the file); ``idle``, which the loop calls
-after the tick's compute time is taken, formats the rows kept so far with :func:`csv.writer` and,
-every
-``flush_every`` rows (default 50: twice a second at 10 ms), writes them and flushes the file, so a
-crash loses at most the last block. Everything happens in the loop's thread (a writer thread would
-compete for the GIL and add wake-up jitter); formatting a row costs some 10–30 µs, which the
-command no longer waits for, and a 50-row block formatted at once would have put some 300 µs into
-every 50th tick, the loop's 99th percentile. ``close`` writes whatever is left.
-
-A write that fails (a full disk) is a fault: the file is cut back to its last whole row where the
-system allows (a regular file; ``/dev/full`` holds nothing anyway), later rows are dropped, and
-:class:`~cartctl.errors.OutputError` says how many rows the file holds complete. It is raised once,
-from the call that met it (``open``, ``write``, ``idle`` or ``close``); :attr:`CsvSink.error` keeps it.
+``write`` keeps the row (a row of another length than the header's is a ``ValueError``, never a
+short row); ``idle``, after the tick's compute time, formats the rows kept with
+:func:`csv.writer` (10–30 µs a row, which the command no longer waits for) and writes and
+flushes every ``flush_every`` rows, so a crash loses at most the last block. All in the loop's
+thread: a writer thread would compete for the GIL. A failed write (a full disk) cuts the file
+back to its last whole row and raises :class:`~cartctl.errors.OutputError` once (kept as
+:attr:`CsvSink.error`).
 """
 
 from __future__ import annotations
@@ -29,25 +22,8 @@ from cartctl.errors import OutputError
 
 
 class CsvSink:
-    """Writes the loop's rows to a CSV file (``str`` of each value: shortest exact floats, whole ticks).
-
-    The header and the rows go through one :func:`csv.writer` (``\\n`` line ends, quotes only
-    where a field needs them: never for numbers).
-
-    Parameters
-    ----------
-    path : str or Path
-        The trace file; parent folders are created.
-    flush_every : int
-        Rows per written block (ticks).
-
-    Attributes
-    ----------
-    rows_written : int
-        Rows the file holds complete (the header not counted).
-    error : OutputError or None
-        The write that failed, if one did: the file then holds ``rows_written`` rows.
-    """
+    """Writes the loop's rows to a CSV file (``str`` of each value: shortest exact floats), in
+    blocks of ``flush_every`` rows; ``rows_written`` counts the rows the file holds complete."""
 
     def __init__(self, path: str | Path, *, flush_every: int = 50) -> None:
         self.path = Path(path)
@@ -63,16 +39,7 @@ class CsvSink:
         self.error: OutputError | None = None
 
     def open(self, columns: Sequence[str]) -> None:
-        """Create the file and write the header.
-
-        Raises
-        ------
-        OutputError
-            The header could not be written (the file holds no row).
-        OSError
-            The file cannot be created (its folder is checked before a run: see
-            :func:`cartctl.cli.commands.options.check_output_folder`).
-        """
+        """Create the file (parent folders too) and write the header."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = io.FileIO(self.path, "w")  # unbuffered: each block is one write we can count
         self._width = len(columns)
@@ -80,24 +47,14 @@ class CsvSink:
         self._write(self._take_text(), rows=0)
 
     def write(self, row: Sequence[float]) -> None:
-        """Keep one row: a value for each column of the header.
-
-        Raises
-        ------
-        ValueError
-            The row has another number of fields than the header (nothing is kept).
-        OutputError
-            The block this row completed could not be written.
-        """
+        """Keep one row, a value per column (ValueError otherwise, and nothing kept)."""
         if len(row) != self._width:
             raise ValueError(f"{self.path}: a row of {len(row)} fields under {self._width} columns")
-        rows = self._rows
-        rows.append(row)
-        if len(rows) >= self.flush_every:  # nobody calls idle(): write from here, as before
+        self._rows.append(row)
+        if len(self._rows) >= self.flush_every:  # nobody calls idle(): write from here
             self._flush()
 
     def idle(self) -> None:
-        """Format the rows kept so far; write and flush once a block is complete."""
         self._format()
         if self._formatted >= self.flush_every:
             self._flush()
@@ -109,7 +66,6 @@ class CsvSink:
             self._rows = []
 
     def _take_text(self) -> bytes:
-        """The text formatted so far, encoded; the buffer is emptied."""
         data = self._text.getvalue().encode()
         self._text.seek(0)
         self._text.truncate()
@@ -125,8 +81,8 @@ class CsvSink:
         self._write(data, rows=rows)
 
     def _write(self, data: bytes, *, rows: int) -> None:
-        """Write ``data`` (``rows`` whole rows) in full, or cut the file back to its last whole row
-        and raise :class:`OutputError`."""
+        """Write ``data`` (``rows`` whole rows) in full, or cut the file back to its last whole
+        row and raise :class:`OutputError`."""
         file = self._file
         if file is None:
             return
@@ -151,7 +107,6 @@ class CsvSink:
         self.rows_written += rows
 
     def _fail(self, reason: str) -> None:
-        """Drop what is kept, close the file, and raise the :class:`OutputError` (once)."""
         self._rows = []
         self._take_text()
         file, self._file = self._file, None
@@ -162,13 +117,6 @@ class CsvSink:
         raise self.error
 
     def close(self) -> None:
-        """Write the rows kept and close the file.
-
-        Raises
-        ------
-        OutputError
-            Their write failed (and had not failed before).
-        """
         if self._file is None:
             return
         self._flush()

@@ -1,10 +1,7 @@
-"""The project's Rerun layout: entity paths, series styles and the blueprint.
+"""The project's Rerun layout: entity paths (docs/architecture.md), series styles, blueprints.
 
-The entity paths of the loop's columns are fixed (docs/architecture.md, "Rerun entity paths").
-
-What a recording holds and how it is shown, shared by the run's sink (:mod:`cartctl.sinks.rerun_sink`)
-and ``cartctl review``: per motor, speed with reference and estimate in one plot and the voltage
-beneath, then the loop's timing.
+Shared by the run's sink and ``cartctl review``: per motor, speed with reference and estimate
+above the voltage; the loop's timing beneath.
 """
 
 from __future__ import annotations
@@ -30,8 +27,8 @@ class SeriesStyle:
     width: float = 1.5
 
 
-# The viewer draws a plot's series in entity-path order (estimate, reference, smoothed_speed,
-# speed, true_speed), so the estimate is drawn wider to stay visible under a noisy measured speed.
+# Column <kind>_<m> → entity motor/<m>/<kind>; <name> → loop/<name>. Series are drawn in path
+# order, so the estimate is wider to stay visible under a noisy measured speed.
 _MOTOR_SERIES: Final[dict[str, SeriesStyle]] = {
     "reference": SeriesStyle("reference (rad/s)", (150, 150, 150), 1.5),
     "speed": SeriesStyle("measured speed (rad/s)", (31, 119, 180), 1.0),
@@ -40,12 +37,10 @@ _MOTOR_SERIES: Final[dict[str, SeriesStyle]] = {
     "smoothed_speed": SeriesStyle("smoothed speed (rad/s)", (227, 119, 194), 1.5),
     "voltage": SeriesStyle("voltage (V)", (148, 103, 189), 1.5),
 }
-"""Per motor: trace column ``<kind>_<m>`` → entity ``motor/<m>/<kind>``, drawn in this style."""
 _LOOP_SERIES: Final[dict[str, SeriesStyle]] = {
     "period_error_us": SeriesStyle("period error (µs)", (214, 39, 40), 1.0),
     "compute_us": SeriesStyle("compute time (µs)", (23, 190, 207), 1.0),
 }
-"""The loop's timing: trace column ``<name>`` → entity ``loop/<name>``."""
 
 _TABLE: Final[dict[str, tuple[str, SeriesStyle]]] = {
     **{f"{kind}_{m}": (f"motor/{m}/{kind}", style)
@@ -54,40 +49,26 @@ _TABLE: Final[dict[str, tuple[str, SeriesStyle]]] = {
 }  # fmt: skip
 
 ENTITY_PATHS: Final[dict[str, str]] = {column: path for column, (path, _) in _TABLE.items()}
-"""Trace column → entity path. Those of the columns the loop writes are fixed
-(docs/architecture.md); ``true_speed_*`` (simulated plants only) and ``smoothed_speed_*`` (the
-Kalman RTS smoothed speed, computed after a run from the whole trace,
-:mod:`cartctl.design.smoother`; not a column the loop writes) are extensions."""
+"""Trace column → entity path (docs/architecture.md; ``true_speed_*`` and ``smoothed_speed_*``
+are extensions)."""
 STYLES: Final[dict[str, SeriesStyle]] = {path: style for path, style in _TABLE.values()}
-"""Entity path → how its line is drawn."""
 
 
 Range = tuple[float, float]
-"""A plot's y range (lo, hi), in the plot's unit."""
 
 
 @dataclass(frozen=True)
 class PlotRanges:
-    """The y range of each plot of the layout (None: the viewer's own fit).
-
-    A viewer fitting its axes to a run that has only just started (or to signals that are all 0)
-    shows a range of ±1 labelled "0" alone; explicit ranges make the axes readable from the first
-    tick. :func:`run_ranges` makes them from what a run knows beforehand, the review from the
-    recorded data.
-    """
+    """The y range of each plot, per motor for speed and voltage (None: the viewer's own fit,
+    which shows ±1 labelled "0" alone until the run has data)."""
 
     speed_rad_s: dict[str, Range] = field(default_factory=dict)
-    """Per motor: the speed plot (reference, speed, estimate)."""
     voltage_v: dict[str, Range] = field(default_factory=dict)
-    """Per motor: the voltage plot."""
     timing_us: Range | None = None
-    """The loop timing plot (period error and compute time)."""
 
 
-SPEED_MARGIN = 0.25
-"""Room above and below the reference's span in the speed plot (overshoot), as a fraction of it."""
-VOLTAGE_MARGIN = 0.05
-"""Room beyond the voltage limit in the voltage plot, as a fraction of it."""
+SPEED_MARGIN = 0.25  # room for overshoot, a fraction of the reference's span
+VOLTAGE_MARGIN = 0.05  # beyond the voltage limit
 
 
 def motors_in(entities: Iterable[str]) -> tuple[str, ...]:
@@ -101,11 +82,8 @@ def motors_in(entities: Iterable[str]) -> tuple[str, ...]:
 
 
 def padded_range(lo: float, hi: float, *, margin: float = 0.1, min_span: float = 1.0) -> Range:
-    """A y range holding 0, ``lo`` and ``hi``, widened by ``margin`` of its span on each side.
-
-    The span is at least ``min_span`` (signals that stay at 0 get (−0.1, 1.1) by default, not a
-    range that collapses).
-    """
+    """A y range holding 0, ``lo`` and ``hi``, at least ``min_span`` wide, widened by
+    ``margin`` of its span on each side."""
     lo, hi = min(float(lo), 0.0), max(float(hi), 0.0)
     if hi - lo < min_span:
         hi = lo + min_span if hi > 0.0 or lo == 0.0 else hi
@@ -115,15 +93,8 @@ def padded_range(lo: float, hi: float, *, margin: float = 0.1, min_span: float =
 
 
 def run_ranges(references: dict[str, tuple[float, float]], voltage_limit_v: float) -> PlotRanges:
-    """The plots' ranges before a run: speed from each motor's reference, voltage from the limit.
-
-    Parameters
-    ----------
-    references : dict of str to (float, float)
-        Per motor, the reference's lowest and highest value over the run (rad/s).
-    voltage_limit_v : float
-        The controllers' voltage limit (V): the voltage plot spans ± it.
-    """
+    """The plots' ranges before a run: speed from each motor's (lowest, highest) reference
+    (rad/s), voltage ± the limit (V)."""
     limit = abs(float(voltage_limit_v)) * (1.0 + VOLTAGE_MARGIN)
     return PlotRanges(
         speed_rad_s={
@@ -140,23 +111,7 @@ def _axis(ranged: Range | None) -> rrb.ScalarAxis | None:
 def blueprint(
     motors: Sequence[str] = ("a", "b"), ranges: PlotRanges | None = None
 ) -> rrb.Blueprint:
-    """The project's default layout.
-
-    The motors side by side; for each, speed with its reference and estimate (and the true speed of
-    a simulated plant, the smoothed speed where a run or review made one) above the voltage. The loop timing (period error and compute time) spans the
-    bottom. Side panels start collapsed and the plots follow the ``time`` timeline.
-
-    Parameters
-    ----------
-    motors : sequence of str
-        Motor names, as in the entity paths ``motor/<name>/...``.
-    ranges : PlotRanges, optional
-        The plots' y ranges; without, the viewer fits them.
-
-    Returns
-    -------
-    rerun.blueprint.Blueprint
-    """
+    """The default layout: the motors side by side, the loop timing beneath."""
     ranges = ranges or PlotRanges()
     columns = []
     for m in motors:
@@ -180,8 +135,13 @@ def blueprint(
         plot_legend=rrb.PlotLegend(corner="RightTop", visible=True),
         axis_y=_axis(ranges.timing_us),
     )
+    return collapsed(rrb.Vertical(rrb.Horizontal(*columns), timing, row_shares=[3, 1]))
+
+
+def collapsed(layout: rrb.Container) -> rrb.Blueprint:
+    """``layout`` with the side panels collapsed, on the ``time`` timeline."""
     return rrb.Blueprint(
-        rrb.Vertical(rrb.Horizontal(*columns), timing, row_shares=[3, 1]),
+        layout,
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
         rrb.TimePanel(state="collapsed", timeline="time"),
@@ -189,10 +149,7 @@ def blueprint(
 
 
 def data_ranges(extremes: dict[str, Range], motors: Sequence[str]) -> PlotRanges:
-    """The plots' ranges from the recorded values: ``extremes`` is entity path → (min, max).
-
-    Each plot spans its series' values (and 0) with 10 % to spare.
-    """
+    """The plots' ranges from entity path → (min, max) recorded, with 10 % to spare."""
 
     def over(paths: Sequence[str], **kwargs: float) -> Range | None:
         seen = [extremes[p] for p in paths if p in extremes]

@@ -1,9 +1,4 @@
-"""Series made after a run from all its rows (the smoothed speed), into its Rerun recording.
-
-:func:`send_series` sends one whole scalar series with the project's style for its entity; ``review``
-uses it for a recording it streams (:mod:`cartctl.cli.commands.review.recording`). :class:`HeldRerunSink`
-is the run's sink kept open after the loop has closed it, until those series are in.
-"""
+"""Series made after a run from all its rows (the smoothed speed), into its Rerun recording."""
 
 from __future__ import annotations
 
@@ -17,8 +12,7 @@ from numpy.typing import ArrayLike
 from cartctl.sinks.rerun_layout import STYLES
 from cartctl.sinks.rerun_sink import RerunSink
 
-Series = Mapping[str, tuple[ArrayLike, ArrayLike | None, ArrayLike]]
-"""Entity path → (time (s), tick or None, values), each of shape (N,)."""
+Series = Mapping[str, tuple[ArrayLike, ArrayLike | None, ArrayLike]]  # path: (time, tick, values)
 
 
 def send_series(
@@ -28,20 +22,8 @@ def send_series(
     tick: ArrayLike | None,
     values: ArrayLike,
 ) -> None:
-    """Send ``values`` under ``entity`` on the ``time`` (s) and ``tick`` timelines.
-
-    Parameters
-    ----------
-    rec : rerun.RecordingStream
-    entity : str
-        The entity path; its style (legend name, colour, width) comes from
-        :data:`~cartctl.sinks.rerun_layout.STYLES` when it has one.
-    time_s : array_like, shape (N,)
-        Seconds since the start.
-    tick : array_like, shape (N,), or None
-        Tick numbers; None numbers the values from 0.
-    values : array_like, shape (N,)
-    """
+    """One whole series under ``entity`` (in its :data:`STYLES` style) on the ``time`` (s) and
+    ``tick`` timelines; ``tick`` None numbers the values from 0."""
     y = np.asarray(values, dtype=float)
     ticks = np.arange(y.size) if tick is None else np.asarray(tick)
     style = STYLES.get(entity)
@@ -60,12 +42,8 @@ def send_series(
 
 
 class HeldRerunSink(RerunSink):
-    """A :class:`~cartctl.sinks.rerun_sink.RerunSink` whose ``close`` (the loop's) sends the rows
-    but keeps the recording open for :meth:`send_extra`; :meth:`release` closes it.
-
-    The interpreter's exit releases it too, should the caller never get there: the file is
-    finished and readable whatever happens after the loop.
-    """
+    """The run's :class:`RerunSink` kept open after the loop's ``close`` for :meth:`send_extra`,
+    until :meth:`release` (or the interpreter's exit) closes it."""
 
     _released = False
 
@@ -74,23 +52,18 @@ class HeldRerunSink(RerunSink):
         atexit.register(self.release)
 
     def close(self) -> None:
-        """Send the rows kept; the recording stays open until :meth:`release`."""
         if self._released:
             super().close()
         else:
             self._send_rows()
 
     def release(self) -> None:
-        """Close the recording (as :meth:`RerunSink.close`); safe to call more than once."""
         atexit.unregister(self.release)
         self._released = True
         self.close()
 
     def send_extra(self, series: Series, texts: Mapping[str, str] | None = None) -> None:
-        """Send whole series (:func:`send_series`) and static texts (what they were made from).
-
-        A problem is recorded and reported at :meth:`release` (raised at once with ``strict``).
-        """
+        """Send whole series (:func:`send_series`) and static texts (what they were made from)."""
         rec = self._recording
         if rec is None or self._closed:
             return
@@ -104,13 +77,8 @@ class HeldRerunSink(RerunSink):
 
 
 def warm_up() -> None:
-    """Load what the Rerun sink's first use loads lazily, before a cart is connected.
-
-    pyarrow imports pandas on its first array where pandas is installed (about 0.15 s here);
-    done when the sink opens, that delay would fall between the loop-delay probe and the first
-    command, with the cart ticking on. A throw-away blueprint of the run's layout pays for it
-    (and for the SDK's own first-use work) at a time nothing waits.
-    """
+    """Pay the Rerun SDK's first-use cost (pyarrow importing pandas, 0.15 s) with a throw-away
+    blueprint before a cart is connected, not between the loop-delay probe and the first tick."""
     from cartctl.sinks.rerun_layout import blueprint
 
     blueprint(("a", "b"))

@@ -1,19 +1,12 @@
-"""The Rerun sink: the loop's rows as a ``.rrd`` recording and/or a live viewer, under the fixed
-entity paths of docs/architecture.md.
+"""The Rerun sink: the loop's rows as a ``.rrd`` recording and/or a live viewer, under the
+entity paths of docs/architecture.md, on the ``time`` (s) and ``tick`` timelines.
 
-Sits at the end of the run stage (runtime loop → sinks → logs/ → review). ``write`` only keeps the
-row; ``idle``, which the loop calls after the tick's compute time is taken, copies the rows into a
-preallocated numpy block and, once blocks of ``batch_ticks`` rows are full, sends one entity's
-column of the oldest full block per call with ``send_columns`` on the ``time`` (duration, s) and
-``tick`` (sequence) timelines. Everything runs in the loop's thread, after its tick: a sending
-thread of its own would hold the interpreter lock for the hundred-odd µs of each send, and the
-loop, waking or mid-tick, would wait for it (measured: compute p99 156–163 µs without Rerun,
-190–250 µs with such a thread). The SDK's own threads (batching, the file, the viewer) need no
-interpreter lock. The recording stream is the sink's own, never the
-global one. Logging problems never raise into the loop: they are recorded and reported as one
-warning at ``close`` (or raised there with ``strict=True``). A ``.rrd`` the SDK could not write
-(a full disk) is a fault, not a warning: :class:`~cartctl.errors.OutputError` from ``open`` or
-``close`` (:mod:`cartctl.sinks.rerun_problems` reads the reason; the SDK's own log lines are off).
+``write`` only keeps the row; ``idle`` (after the tick's compute time) packs rows into blocks of
+``batch_ticks`` and sends one entity's column of the oldest full block per call. All in the
+loop's thread: a sending thread would hold the interpreter lock for the ~100 µs of each send
+(compute p99 156–163 µs without Rerun, 190–250 µs with such a thread). Problems never raise into
+the loop: one warning at ``close`` (raised with ``strict``). A ``.rrd`` the SDK could not write
+is a fault: :class:`~cartctl.errors.OutputError` from ``open`` or ``close``.
 """
 
 from __future__ import annotations
@@ -23,7 +16,6 @@ import warnings
 from collections import deque
 from collections.abc import Sequence
 from pathlib import Path
-from types import TracebackType
 from typing import Final
 
 import numpy as np
@@ -44,9 +36,8 @@ from cartctl.sinks.rerun_problems import RecordingError, RecordingWarning, file_
 from cartctl.sinks.viewer import VIEWER_PORT, display_available, viewer_executable, viewer_reachable
 
 RERUN_MODES: Final[tuple[str, ...]] = ("save", "spawn", "connect", "off")
-"""``save``: the ``.rrd`` file only; ``spawn``: the file (if a path is given) and a viewer started
-for the run; ``connect``: the file (if a path is given) and a viewer already running at
-``connect_url``; ``off``: nothing."""
+"""``save``: the ``.rrd`` file; ``spawn``: the file (if a path is given) and a viewer started for
+the run; ``connect``: the file and a viewer already running at ``connect_url``; ``off``: nothing."""
 
 APPLICATION_ID: Final[str] = "cartctl"
 DEFAULT_CONNECT_URL: Final[str] = "rerun+http://127.0.0.1:9876/proxy"
@@ -56,35 +47,12 @@ _FLUSH_TIMEOUT_S = 5.0  # for the SDK to hand everything to the file and the vie
 
 
 class RerunSink:
-    """Streams the loop's rows to a Rerun recording (file and/or viewer) without stalling the loop.
+    """Streams the loop's rows to a Rerun recording (:data:`RERUN_MODES`) without stalling it.
 
-    Parameters
-    ----------
-    mode : {"save", "spawn", "connect", "off"}
-        Where the data goes (see :data:`RERUN_MODES`). ``spawn`` and ``connect`` also write ``path``
-        when it is given.
-    path : Path or None
-        The ``.rrd`` file (parent folders are created). Required for ``save``.
-    application_id : str
-        Rerun application id; the blueprint is stored under it.
-    recording_name : str, optional
-        Name shown in the viewer; defaults to the file's stem.
-    connect_url : str, optional
-        Viewer address for ``connect`` (default ``rerun+http://127.0.0.1:9876/proxy``).
-    batch_ticks : int
-        Rows per block sent (10 ticks = 0.1 s at 10 ms); each full block's entities go out one per
-        ``idle`` call.
-    strict : bool
-        Raise on the first problem (in ``write``) or at ``close`` instead of warning. For tests.
-    ranges : PlotRanges, optional
-        The layout's y ranges (:func:`~cartctl.sinks.rerun_layout.run_ranges`); without, the
-        viewer fits them.
-
-    Notes
-    -----
-    ``open`` does the slow first calls (the blueprint, the static styling: 5–20 ms) before the loop
-    starts. Rows need the ``time_s`` column (s since start); ``tick`` is used when present, the row
-    count otherwise. Columns without an entity path (see :data:`ENTITY_PATHS`) are ignored.
+    ``path`` (required for ``save``) is the ``.rrd`` file; ``batch_ticks`` the rows per block;
+    ``strict`` raises problems instead of warning (for tests); ``ranges`` the plots' y ranges.
+    ``open`` makes the slow first calls (5–20 ms) before the loop starts. Rows need ``time_s``;
+    ``tick`` is used when present; columns without an entity path are ignored.
     """
 
     def __init__(
@@ -127,28 +95,10 @@ class RerunSink:
         self._signals: tuple[tuple[int, str], ...] = ()
         self._sent_rows = 0
         self._closed = False
-        self.error: OutputError | None = None
-        """The recording's file could not be written (raised once, from ``open`` or ``close``)."""
-
-    # -- the Sink protocol ------------------------------------------------------------------
+        self.error: OutputError | None = None  # the file could not be written (raised once)
 
     def open(self, columns: Sequence[str]) -> None:
-        """Start the recording for rows with these columns; makes the slow first calls.
-
-        Parameters
-        ----------
-        columns : sequence of str
-            Column names, in row order (``time_s`` is required).
-
-        Raises
-        ------
-        InputError
-            No ``time_s`` column.
-        OSError
-            The recording's folder cannot be created.
-        OutputError
-            The SDK could not write the file (the run goes on without a recording).
-        """
+        """Start the recording; OutputError when the SDK cannot write the file."""
         columns = list(columns)
         if TIME_COLUMN not in columns:
             raise InputError(f"the Rerun sink needs a '{TIME_COLUMN}' column, got {columns}")
@@ -185,11 +135,9 @@ class RerunSink:
         self._rows = []
 
     def _entities(self, columns: list[str]) -> tuple[tuple[int, str], ...]:
-        """(column index, entity path) of each column recorded: the fixed entity paths."""
         return tuple((i, ENTITY_PATHS[c]) for i, c in enumerate(columns) if c in ENTITY_PATHS)
 
     def _describe(self, rec: rr.RecordingStream) -> None:
-        """Send the layout and the static series styles (before any value)."""
         rec.send_blueprint(blueprint(motors_in(e for _, e in self._signals), self.ranges))
         for _, entity in self._signals:
             style = STYLES[entity]
@@ -201,24 +149,16 @@ class RerunSink:
             )
 
     def write(self, row: Sequence[float]) -> None:
-        """Keep one tick's values (in column order) for :meth:`idle`.
-
-        Never calls Rerun and never raises (unless ``strict``): a bad row is recorded and skipped
-        at ``idle``.
-        """
+        """Keep one tick's values for :meth:`idle`; never calls Rerun (a bad row is skipped there)."""
         if self._block is None:
             return
         rows = self._rows
         rows.append(row)
-        if self.strict or len(rows) >= 2 * self.batch_ticks:  # strict: a bad row raises here;
-            self.idle()  # else nobody calls idle(): pack and hand over from here
+        if self.strict or len(rows) >= 2 * self.batch_ticks:  # strict, or nobody calls idle()
+            self.idle()
 
     def idle(self) -> None:
-        """Copy the kept rows into the block; send one entity of the oldest full block.
-
-        Called by the loop after the tick's compute time is taken. Raises only with ``strict``
-        (a bad row).
-        """
+        """Copy the kept rows into the block; send one entity of the oldest full block."""
         block = self._block
         if block is None:
             return
@@ -240,17 +180,8 @@ class RerunSink:
             self._send_next()
 
     def close(self) -> None:
-        """Send the remaining rows and finish the file (footer written).
-
-        Safe to call more than once, and after a failed ``open``.
-
-        Raises
-        ------
-        OutputError
-            The SDK could not write the whole file (after the other problems are reported).
-        RecordingError
-            Only with ``strict=True``, when anything went wrong while recording.
-        """
+        """Send the remaining rows and finish the file; safe to call again and after a failed
+        ``open``. OutputError when the file is incomplete; RecordingError on problems (strict)."""
         if self._closed:
             return
         self._send_rows()
@@ -271,28 +202,7 @@ class RerunSink:
             self.error = OutputError(self.path or "", failed)
             raise self.error
 
-    # -- extras -----------------------------------------------------------------------------
-
-    @property
-    def problems(self) -> tuple[str, ...]:
-        """Messages of the problems met so far (the first few)."""
-        return tuple(self._problems)
-
-    def __enter__(self) -> RerunSink:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
-
-    # -- internals --------------------------------------------------------------------------
-
     def _send_rows(self) -> None:
-        """Send every row kept (the first part of :meth:`close`)."""
         if self._block is not None:
             self.idle()  # the rows kept, into the blocks
             if self._filled:
@@ -304,39 +214,32 @@ class RerunSink:
 
     def _viewer_url(self, rec: rr.RecordingStream) -> str | None:
         """Start the viewer for ``spawn``; the gRPC address to stream to, or None."""
+        if self.mode not in ("connect", "spawn"):
+            return None
+        url, problem = self.connect_url, None
         if self.mode == "connect":
             # The SDK waits 5 s for an unreachable viewer when the sinks are set, and at close.
-            if not viewer_reachable(self.connect_url):
-                self._problem(f"no viewer is listening at {self.connect_url}", raise_now=True)
-                return None
-            return self.connect_url
-        if self.mode != "spawn":
-            return None
-        if not display_available():
-            self._problem(
-                "no display (DISPLAY/WAYLAND_DISPLAY unset): not opening the viewer", raise_now=True
-            )
-            return None
-        executable = viewer_executable()
-        if executable is None:
-            self._problem(
-                "the 'rerun' viewer executable was not found next to Python or on PATH",
-                raise_now=True,
-            )
-            return None
-        try:
-            rr.spawn(port=VIEWER_PORT, connect=False, executable_path=executable, recording=rec)
-        except Exception as exc:
-            self._problem(f"could not start the viewer ({executable}): {exc}", raise_now=True)
-            return None
-        url = f"rerun+http://127.0.0.1:{VIEWER_PORT}/proxy"
-        if not viewer_reachable(url):
-            self._problem(f"the viewer ({executable}) did not start", raise_now=True)
-            return None
-        return url
+            if not viewer_reachable(url):
+                problem = f"no viewer is listening at {url}"
+        elif not display_available():
+            problem = "no display (DISPLAY/WAYLAND_DISPLAY unset): not opening the viewer"
+        elif (executable := viewer_executable()) is None:
+            problem = "the 'rerun' viewer executable was not found next to Python or on PATH"
+        else:
+            url = f"rerun+http://127.0.0.1:{VIEWER_PORT}/proxy"
+            try:
+                rr.spawn(port=VIEWER_PORT, connect=False, executable_path=executable, recording=rec)
+            except Exception as exc:
+                problem = f"could not start the viewer ({executable}): {exc}"
+            else:
+                if not viewer_reachable(url):
+                    problem = f"the viewer ({executable}) did not start"
+        if problem is None:
+            return url
+        self._problem(problem, raise_now=True)
+        return None
 
     def _indexes(self, block: NDArray[np.float64]) -> list[rr.TimeColumn]:
-        """The ``time`` and ``tick`` timelines of a block (the next rows in order)."""
         if self._tick_index is not None:
             ticks = block[:, self._tick_index].astype(np.int64)
         else:  # the rows in blocks so far are exactly the rows before this block
@@ -349,7 +252,6 @@ class RerunSink:
         ]
 
     def _send_next(self) -> None:
-        """Send the next entity's column of the oldest full block (all sent: drop the block)."""
         if not self._signals:  # no column has an entity path: nothing to send
             self._full.clear()
             return
@@ -373,7 +275,6 @@ class RerunSink:
             self._problem(f"sending {len(block)} rows of {entity} failed: {exc}")
 
     def _problem(self, message: str, *, raise_now: bool = False) -> None:
-        """Record a problem; with ``strict``, raise it at once when ``raise_now``."""
         self._problem_count += 1
         if len(self._problems) < _MAX_PROBLEMS:
             self._problems.append(message)
@@ -394,7 +295,7 @@ class RerunSink:
 
 
 def _warm_up_conversions() -> None:
-    """Run the column conversions once so the first block's sends are not slow."""
+    """The column conversions once, so the first block's sends are not slow."""
     rr.TimeColumn("time", duration=np.zeros(1))
     rr.TimeColumn("tick", sequence=np.zeros(1, dtype=np.int64))
     rr.Scalars.columns(scalars=np.zeros(1))

@@ -1,11 +1,4 @@
-"""A live status line on the terminal during a real-time run: tick, reference, speed, voltage, misses.
-
-A sink (see :mod:`cartctl.sinks.base`): ``write`` keeps the tick's row (one reference, no work) and
-``idle``, which the loop calls after the tick's compute time is taken, rewrites one line on the
-terminal every ``every_s`` seconds of run time (4 times a second by default), so it costs the
-tick nothing. ``cartctl run`` adds it only when stderr is a terminal; the line is ended at
-``close``, before the summary.
-"""
+"""A live status line on the terminal during a real-time run: tick, reference, speed, voltage, misses."""
 
 from __future__ import annotations
 
@@ -13,22 +6,10 @@ import math
 from collections.abc import Sequence
 from typing import TextIO
 
-__all__ = ["StatusLine"]
-
 
 class StatusLine:
-    """One terminal line, rewritten in place with the latest tick's figures.
-
-    Parameters
-    ----------
-    stream : TextIO
-        Where the line goes (a terminal: ``\\r`` moves back to its start).
-    period_s : float
-        The loop's tick (s): a tick is a deadline miss when its start error and compute time
-        together pass it.
-    every_s : float
-        Run time between two refreshes (s).
-    """
+    """A sink that rewrites one terminal line every ``every_s`` of run time, from ``idle`` (so the
+    tick pays nothing); a tick is a miss when its start error and compute time pass ``period_s``."""
 
     def __init__(self, stream: TextIO, *, period_s: float, every_s: float = 0.25) -> None:
         self.stream = stream
@@ -51,7 +32,6 @@ class StatusLine:
             self._misses += 1
 
     def idle(self) -> None:
-        """Rewrite the line when ``every_s`` of run time has passed since the last time."""
         if self._row is None or self._since < self.every_ticks:
             return
         self._since = 0
@@ -60,7 +40,6 @@ class StatusLine:
         self._shown = True
 
     def line(self) -> str:
-        """The status of the latest tick: time, tick, per motor r, y, u, and the misses so far."""
         row, at = self._row, self._index
         if row is None:
             return ""
@@ -79,7 +58,6 @@ class StatusLine:
         return "  ".join(parts)
 
     def close(self) -> None:
-        """End the line, so that what follows starts on a new one."""
         if self._shown:
             self.stream.write("\n")
             self.stream.flush()

@@ -1,21 +1,11 @@
-"""Run metrics, from a trace: the ``run`` summary and ``cartctl review RUN.csv --json`` share this code.
+"""Run metrics from a trace: the ``run`` summary and ``cartctl review RUN.csv --json``.
 
-Per motor: the step metrics of the first reference step, from rest to the reference's first
-non-zero level and until its next change (10–90 % rise, overshoot, settling, steady-state
-error), the RMS tracking error over the whole run and the largest |voltage|. For the
-loop: period error and compute time percentiles, and deadline misses (a tick whose start error
-plus compute time passes the period).
-
-The tracking metrics are measured on the **true speed** (the ``true_speed_a/b`` columns) where
-the plant gives one (the simulators), else on the measured speed; ``metrics_signal`` says which
-('true_speed' or 'speed'). Settling is judged in a band of max(2 % of the step, one encoder
-count per tick = 2π/1792/Ts, 0.3506 rad/s at 10 ms): a measured speed cannot resolve less.
-
-A trace without a true speed (a real cart), or one that came through the serial path, also gets
-the metrics on a *smoothed* speed (:func:`add_smoothed_metrics`; the Kalman RTS smoother of
-:mod:`cartctl.design.smoother`, run by the commands, which know the model): ``motors.<m>.smoothed``
-holds the same keys, judged in the same settling band, and ``smoothed`` says from which model
-(or, with ``model`` None, why there are none). The table shows both, labelled.
+Per motor: the step metrics of the first reference step from rest (10–90 % rise, overshoot,
+settling, steady-state error), the RMS tracking error and the largest |voltage|; for the loop,
+period error and compute time percentiles and deadline misses (start error plus compute time
+beyond the period). Tracking is judged on the true speed where the plant gives one, else the
+measured speed (``metrics_signal``), settling in a band of max(2 % of the step, one encoder
+count per tick); a smoothed speed (Kalman RTS, the commands run it) adds ``motors.<m>.smoothed``.
 """
 
 from __future__ import annotations
@@ -35,10 +25,7 @@ from cartctl.measures.numfmt import column_decimals, format_column, format_fixed
 from cartctl.measures.stepinfo import SETTLING_FRACTION, first_step, step_info
 
 SIGNALS = {"true_speed": "the true speed", "speed": "the measured speed"}
-"""``metrics_signal`` values and how the summary text names them."""
-
 ROW_LABELS = {"true_speed": "true", "speed": "encoder", "smoothed": "smoothed"}
-"""How the table labels a motor's rows when the smoothed metrics stand beside the others."""
 
 
 def motor_metrics(
@@ -49,35 +36,21 @@ def motor_metrics(
     *,
     settling_floor: float = 0.0,
 ) -> dict[str, Any]:
-    """``run --json`` entry of one motor (step metrics None when the reference has no step).
-
-    ``speed`` is the signal judged (rad/s); the settling band is max(2 % of the step,
-    ``settling_floor``) (rad/s).
-    """
-    out: dict[str, Any] = {
-        "overshoot_percent": None,
-        "settling_time_s": None,
-        "rise_time_s": None,
-        "steady_state_error": None,
-        "rms_error": finite_or_none(float(np.sqrt(np.mean((reference - speed) ** 2))))
-        if speed.size
-        else None,
-        "max_abs_voltage": finite_or_none(float(np.max(np.abs(voltage)))) if voltage.size else None,
-    }
-    initial = 0.0  # the loop starts from rest: the first step is the first departure from 0
-    span = first_step(reference, initial=initial)
-    if span is None:
-        return out
-    start, end = span
-    target = float(reference[start])
-    info = step_info(time_s[:end], speed[:end], reference=target, initial=initial,
-                     onset_s=float(time_s[start]), settling_floor=settling_floor)  # fmt: skip
-    out.update(
-        overshoot_percent=finite_or_none(info.overshoot_percent),
-        settling_time_s=finite_or_none(info.settling_time_s),
-        rise_time_s=finite_or_none(info.rise_time_s),
-        steady_state_error=finite_or_none(info.steady_state_error),
+    """``run --json`` entry of one motor, judging ``speed`` (rad/s) in a settling band of
+    max(2 % of the step, ``settling_floor``); step metrics None without a step."""
+    keys = ("overshoot_percent", "settling_time_s", "rise_time_s", "steady_state_error")
+    out: dict[str, Any] = dict.fromkeys(keys)
+    rms = float(np.sqrt(np.mean((reference - speed) ** 2))) if speed.size else None
+    out["rms_error"] = finite_or_none(rms)
+    out["max_abs_voltage"] = (
+        finite_or_none(float(np.max(np.abs(voltage)))) if voltage.size else None
     )
+    span = first_step(reference, initial=0.0)  # the loop starts from rest
+    if span is not None:
+        start, end = span
+        info = step_info(time_s[:end], speed[:end], reference=float(reference[start]), initial=0.0,
+                         onset_s=float(time_s[start]), settling_floor=settling_floor)  # fmt: skip
+        out.update({key: finite_or_none(getattr(info, key)) for key in keys})
     return out
 
 
@@ -85,23 +58,16 @@ def timing_metrics(
     period_error_us: NDArray[np.float64], compute_us: NDArray[np.float64], period_s: float
 ) -> dict[str, Any]:
     """Percentiles of the period error and compute time (µs), and the deadline misses."""
-    if period_error_us.size == 0:
-        return {"deadline_misses": 0, "period_error_us": {"p50": None, "p99": None, "max": None},
-                "compute_us": {"p50": None, "p99": None, "max": None}}  # fmt: skip
+
+    def spread(x: NDArray[np.float64]) -> dict[str, float | None]:
+        if not x.size:
+            return {"p50": None, "p99": None, "max": None}
+        return {"p50": float(np.percentile(x, 50)), "p99": float(np.percentile(x, 99)),
+                "max": float(np.max(x))}  # fmt: skip
+
     misses = int(np.count_nonzero(period_error_us + compute_us > period_s * 1e6))
-    return {
-        "deadline_misses": misses,
-        "period_error_us": {
-            "p50": float(np.percentile(period_error_us, 50)),
-            "p99": float(np.percentile(period_error_us, 99)),
-            "max": float(np.max(period_error_us)),
-        },
-        "compute_us": {
-            "p50": float(np.percentile(compute_us, 50)),
-            "p99": float(np.percentile(compute_us, 99)),
-            "max": float(np.max(compute_us)),
-        },
-    }
+    return {"deadline_misses": misses, "period_error_us": spread(period_error_us),
+            "compute_us": spread(compute_us)}  # fmt: skip
 
 
 def metrics_signal(columns: Mapping[str, NDArray[np.float64]]) -> str:
@@ -114,11 +80,7 @@ def metrics_signal(columns: Mapping[str, NDArray[np.float64]]) -> str:
 
 
 def trace_duration_s(time_s: NDArray[np.float64]) -> float:
-    """A trace's duration (s): from its first row's time to its last's.
-
-    A run of N ticks ends with its stop row at N·Ts, so this is the duration asked for; ``run``
-    and ``review`` report the same figure for the same trace.
-    """
+    """First row's time to last's (s): a run of N ticks ends with its stop row at N·Ts."""
     return float(time_s[-1] - time_s[0]) if time_s.size else 0.0
 
 
@@ -130,7 +92,7 @@ def trace_metrics(columns: Mapping[str, NDArray[np.float64]], period_s: float) -
     t = columns["time_s"]
     signal = metrics_signal(columns)
     quantum = encoder_quantum_rad_s(period_s)
-    out = {
+    return {
         "ticks": int(t.size),
         "duration_s": trace_duration_s(t),
         **timing_metrics(columns["period_error_us"], columns["compute_us"], period_s),
@@ -148,7 +110,6 @@ def trace_metrics(columns: Mapping[str, NDArray[np.float64]], period_s: float) -
             if f"reference_{m}" in columns
         },
     }
-    return out
 
 
 def add_smoothed_metrics(
@@ -157,19 +118,8 @@ def add_smoothed_metrics(
     speeds_rad_s: Mapping[str, NDArray[np.float64]],
     period_s: float,
 ) -> None:
-    """Add each motor's metrics on its smoothed speed to a summary, as ``motors.<m>.smoothed``.
-
-    Parameters
-    ----------
-    summary : dict
-        A summary from :func:`trace_metrics` (changed in place).
-    columns : mapping of str to ndarray
-        The trace's columns it was made from.
-    speeds_rad_s : mapping of str to ndarray
-        Per motor, the smoothed speed at each row (rad/s), shape (N,).
-    period_s : float
-        Ts (s): the settling band's floor, as for the other metrics.
-    """
+    """Add each motor's metrics on its smoothed speed (rad/s, per row) to a
+    :func:`trace_metrics` summary, as ``motors.<m>.smoothed``, in the same settling band."""
     quantum = encoder_quantum_rad_s(period_s)
     for m, speed in speeds_rad_s.items():
         if m in summary["motors"]:
@@ -190,16 +140,11 @@ SUMMARY_COLUMNS = (
     ("rms error (rad/s)", "rms_error", 1.0),
     ("max |V| (V)", "max_abs_voltage", 1.0),
 )
-"""The motor table of the summary: header (with its unit), summary key, factor to the unit."""
 
 
 def motor_table(motors: Mapping[str, Mapping[str, Any]], indent: str = "  ") -> list[str]:
-    """The per-motor table of a summary: units in the headers, one rounding per column.
-
-    Each column has :data:`cartctl.measures.numfmt.SIG_FIGS` significant figures of its largest value;
-    the steady-state error is rounded like the RMS error (its scale), so a numerical zero such as
-    3.6e-15 rad/s prints as 0 (0.000 beside 0.791).
-    """
+    """The per-motor table: units in the headers, one rounding per column; the steady-state
+    error is rounded like the RMS error, so a numerical zero prints as 0.000."""
     names = list(motors)
     errors = ("steady_state_error", "rms_error")
     error_decimals = column_decimals(motors[m].get(k) for m in names for k in errors)
@@ -215,8 +160,7 @@ def motor_table(motors: Mapping[str, Mapping[str, Any]], indent: str = "  ") -> 
 
 
 def timing_text(summary: Mapping[str, Any]) -> str:
-    """The loop timing of a summary: percentiles of period error and compute time (µs), each
-    triple with one rounding, or that the clock was simulated."""
+    """Period error and compute time percentiles (µs), or that the clock was simulated."""
     pe, cu = summary["period_error_us"], summary["compute_us"]
     if pe.get("max") == 0.0 and cu.get("p99") == 0.0:  # a simulated clock: no time passed
         return "timing: simulated clock, no real-time figures"
@@ -226,7 +170,6 @@ def timing_text(summary: Mapping[str, Any]) -> str:
 
 
 def format_summary(summary: Mapping[str, Any]) -> str:
-    """A short table for the terminal (units in every header, one rounding per column)."""
     lines = [
         f"{summary['ticks']} ticks, {summary['duration_s']:.2f} s; deadline misses "
         f"{summary['deadline_misses']}; {timing_text(summary)}",
@@ -275,8 +218,7 @@ def format_summary(summary: Mapping[str, Any]) -> str:
 
 
 def smoothed_lines(summary: Mapping[str, Any]) -> list[str]:
-    """The motor table; with smoothed metrics, each motor's two rows labelled, and a line on the
-    smoothed speed (its model, or why there is none)."""
+    """The motor table; with smoothed metrics, two labelled rows a motor and their model."""
     motors = summary["motors"]
     smoothed = summary.get("smoothed") or {}
     if not any("smoothed" in e for e in motors.values()):
@@ -306,7 +248,6 @@ def host_loss_text(link: Mapping[str, Any]) -> str:
 
 
 def delay_seen_lines(link: Mapping[str, Any]) -> list[str]:
-    """The echo delays of the run and of the probe before it, and a change between them."""
     from cartctl.link.loop_delay import EchoDelays
 
     def spread(counts: Mapping[str, int] | None) -> str:
@@ -325,7 +266,7 @@ def delay_seen_lines(link: Mapping[str, Any]) -> list[str]:
 
 
 def warn_delay_change(link: Mapping[str, Any] | None, command: str) -> None:
-    """One line on stderr when the loop delay changed during the run (from the probe's)."""
+    """One line on stderr when the loop delay changed during the run."""
     if link and link.get("loop_delay_change"):
         print(f"cartctl {command}: warning: {link['loop_delay_change']}", file=sys.stderr)
 
@@ -337,8 +278,7 @@ def warn_host_losses(link: Mapping[str, Any] | None, command: str) -> None:
 
 
 def mark_incomplete(summary: dict[str, Any], incomplete: Sequence[OutputError]) -> None:
-    """``trace_complete``, ``recording_complete`` (None without a recording) and ``incomplete``
-    (path → why) in the summary: its ``trace`` and ``recording`` never pass for whole files."""
+    """Set ``trace_complete``, ``recording_complete`` (None without one) and ``incomplete``."""
     short = {str(e.path): e.detail for e in incomplete}
     summary["incomplete"] = short
     summary["trace_complete"] = summary["trace"] not in short

@@ -1,7 +1,4 @@
-"""The Rerun viewer: whether one can open here, where its executable is, whether one listens.
-
-Used by the run's sink (``--rerun auto|spawn|connect``) and by ``cartctl review``.
-"""
+"""The Rerun viewer: whether one can open here, where its executable is, whether one listens."""
 
 from __future__ import annotations
 
@@ -14,11 +11,9 @@ from typing import Final
 from urllib.parse import urlsplit
 
 VIEWER_PORT: Final[int] = 9876
-"""The port a viewer this tool starts listens on."""
 
 
 def display_available() -> bool:
-    """Whether a native viewer window can open here (``DISPLAY`` or ``WAYLAND_DISPLAY`` is set)."""
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
@@ -30,7 +25,7 @@ def resolve_mode(mode: str) -> str:
 
 
 def viewer_executable() -> str | None:
-    """The ``rerun`` viewer next to the running interpreter (the venv's ``bin``), else on PATH."""
+    """The ``rerun`` viewer next to the running interpreter, else on PATH."""
     name = "rerun.exe" if sys.platform == "win32" else "rerun"
     beside = Path(sys.executable).parent / name
     if beside.is_file():
