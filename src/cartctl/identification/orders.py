@@ -1,28 +1,22 @@
-"""Order and delay selection: ARX fits over a grid of (na, nb, nk) with AIC, FPE and a fit.
+"""Order and delay selection (``--orders``): ARX fits over a grid of (na, nb, nk), compared by
 
-Every combination is fitted by least squares on the same equations: the first row is the largest
-first row of the grid, max over the grid of max(na, nk + nb − 1), so every fit's loss is over the
-same N samples and the criteria compare. With d = na + nb parameters and the loss
+    V = (1/N) Σ ε(k)²,    FPE = V (1 + d/N) / (1 − d/N),    AIC = N ln V + 2d
 
-    V = (1/N) Σ ε(k)²          (equation error, (rad/s)²)
-
-the criteria are Akaike's
-
-    FPE = V (1 + d/N) / (1 − d/N)          ((rad/s)²)
-    AIC = N ln V + 2d
-
-(smaller is better; both penalise parameters that only fit the noise). The fit is the NRMSE fit
-(%) of the model simulated from rest on the validation data when there is any, else on the raw
-estimation data (where it rewards extra parameters).
+(ε the equation error in rad/s, d = na + nb; smaller is better) and by the NRMSE fit (%) of the
+model simulated from rest on the validation data, or else the raw estimation data (where it
+rewards extra parameters). Every fit starts at the grid's largest first row, so all losses are
+over the same N equations and compare.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -47,25 +41,16 @@ MAX_COMBINATIONS = 400
 """More combinations than this are refused (a grid that large is a typing error)."""
 
 MAX_ORDER_WORK = 40_000
-"""The most Σ (na + nb)² over the combinations of ``--orders``. A combination's fit and
-simulation cost about N·(na + nb)²: measured, 1e-4 s per unit of the sum for a motor on a minute
-of data (N = 6000), so this is about 5 s a motor per minute of data (the default grid is 624;
-na = nb = 50 alone is 10 000)."""
+"""The most Σ (na + nb)² over the combinations of ``--orders``: a fit costs about N (na + nb)²,
+measured 1e-4 s per unit on a minute of data, so about 5 s a motor per minute (the default grid
+is 624; na = nb = 50 alone is 10 000)."""
 
 _LOW = {"na": 0, "nb": 1, "nk": 0}
 
 
 def parse_grid(spec: str | None) -> dict[str, tuple[int, ...]]:
-    """Parse ``na=1:3,nb=1:3,nk=1:4``: each key a whole number or an inclusive range lo:hi.
-
-    Keys left out keep :data:`DEFAULT_GRID`'s values; an empty spec or None is the default grid.
-
-    Raises
-    ------
-    InputError
-        An unknown key, a malformed value, a range outside the allowed values, or more than
-        :data:`MAX_COMBINATIONS` combinations.
-    """
+    """Parse ``na=1:3,nb=1:3,nk=1:4`` (each a whole number or an inclusive range); keys left out
+    keep :data:`DEFAULT_GRID`'s values, as does an empty spec or None."""
     grid = dict(DEFAULT_GRID)
     if spec is None or not spec.strip():
         return grid
@@ -105,24 +90,8 @@ def parse_grid(spec: str | None) -> dict[str, tuple[int, ...]]:
 
 @dataclass(frozen=True)
 class OrderRow:
-    """One combination's fit and criteria (``loss`` etc. are NaN when the fit failed).
-
-    Attributes
-    ----------
-    na, nb, nk : int
-    params : int
-        d = na + nb.
-    loss : float
-        V, mean squared equation error ((rad/s)²).
-    aic : float
-    fpe : float
-        (rad/s)².
-    fit_percent : float
-        Simulation fit (%) on the validation data (or estimation data); −inf when unstable.
-    stable : bool
-    error : str or None
-        Why the combination could not be fitted (rank deficient, too few samples).
-    """
+    """One combination's loss V ((rad/s)²), AIC, FPE ((rad/s)²) and simulation fit (%, −inf when
+    unstable); NaN with ``error`` saying why it could not be fitted."""
 
     na: int
     nb: int
@@ -136,61 +105,50 @@ class OrderRow:
     error: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "na": self.na,
-            "nb": self.nb,
-            "nk": self.nk,
-            "params": self.params,
-            "loss": finite_or_none(self.loss),
-            "aic": finite_or_none(self.aic),
-            "fpe": finite_or_none(self.fpe),
-            "fit_percent": finite_or_none(self.fit_percent),
-            "stable": self.stable,
-            "error": self.error,
-        }
+        out = dataclasses.asdict(self)
+        return out | {k: finite_or_none(out[k]) for k in ("loss", "aic", "fpe", "fit_percent")}
+
+    def fit_text(self) -> str:
+        if not self.stable:
+            return "unstable model"
+        return f"{self.fit_percent:.2f}" if math.isfinite(self.fit_percent) else "diverges"
 
 
 @dataclass(frozen=True)
 class OrderTable:
-    """All combinations, the common number of equations, and which data the fit is on.
-
-    Attributes
-    ----------
-    rows : tuple of OrderRow
-    n_equations : int
-        N, the same for every row.
-    fit_on : {'validation', 'estimation'}
-    """
+    """All combinations, the common number of equations N, and the data the fit is on
+    ('validation' or 'estimation')."""
 
     rows: tuple[OrderRow, ...]
     n_equations: int
     fit_on: str
 
-    def best_aic(self) -> OrderRow | None:
-        ok = [r for r in self.rows if math.isfinite(r.aic)]
-        return min(ok, key=lambda r: (r.aic, r.params)) if ok else None
+    @cached_property
+    def _best(self) -> tuple[OrderRow | None, OrderRow | None]:
+        """The row of smallest AIC and that of largest fit of a stable model."""
+        aic = [r for r in self.rows if math.isfinite(r.aic)]
+        fit = [r for r in self.rows if r.stable and math.isfinite(r.fit_percent)]
+        return (
+            min(aic, key=lambda r: (r.aic, r.params)) if aic else None,
+            max(fit, key=lambda r: (r.fit_percent, -r.params)) if fit else None,
+        )
 
-    def best_fit(self) -> OrderRow | None:
-        ok = [r for r in self.rows if r.stable and math.isfinite(r.fit_percent)]
-        return max(ok, key=lambda r: (r.fit_percent, -r.params)) if ok else None
+    def marks(self, row: OrderRow) -> list[str]:
+        """'AIC' and/or 'fit' when ``row`` is the best by that criterion."""
+        return [m for m, b in zip(("AIC", "fit"), self._best, strict=True) if row is b]
 
     def to_dict(self) -> list[dict[str, Any]]:
         """The ``orders`` list of ``identify --json``: one entry per row, the best ones marked."""
-        best_aic, best_fit = self.best_aic(), self.best_fit()
+        common = {"n_equations": self.n_equations, "fit_on": self.fit_on}
         return [
-            row.to_dict()
-            | {
-                "n_equations": self.n_equations,
-                "fit_on": self.fit_on,
-                "best_aic": row is best_aic,
-                "best_fit": row is best_fit,
-            }
-            for row in self.rows
+            r.to_dict()
+            | common
+            | {"best_aic": "AIC" in self.marks(r), "best_fit": "fit" in self.marks(r)}
+            for r in self.rows
         ]
 
     def format(self) -> str:
         """The terminal table, the best rows marked."""
-        best_aic, best_fit = self.best_aic(), self.best_fit()
         fit_head = f"sim fit, {self.fit_on} (%)"
         head = (
             f"    {'na':>3}{'nb':>4}{'nk':>4}{'params':>8}{'loss V (rad/s)²':>17}"
@@ -201,13 +159,9 @@ class OrderTable:
             if r.error is not None:
                 lines.append(f"    {r.na:>3}{r.nb:>4}{r.nk:>4}{r.params:>8}  not fitted: {r.error}")
                 continue
-            fit = f"{r.fit_percent:.2f}" if math.isfinite(r.fit_percent) else "diverges"
-            if not r.stable:
-                fit = "unstable model"
-            marks = [m for m, b in (("AIC", best_aic), ("fit", best_fit)) if r is b]
             lines.append(
                 f"    {r.na:>3}{r.nb:>4}{r.nk:>4}{r.params:>8}{r.loss:>17.4f}{r.aic:>11.1f}"
-                f"{r.fpe:>14.4f}{fit:>26}  {', '.join(marks)}".rstrip()
+                f"{r.fpe:>14.4f}{r.fit_text():>26}  {', '.join(self.marks(r))}".rstrip()
             )
         lines.append(
             f"    N = {self.n_equations} equations for every row; V = mean squared equation error, "
@@ -225,25 +179,8 @@ def order_table(
     eval_segments: Sequence[Segment],
     validation: Sequence[Segment] | None = None,
 ) -> OrderTable:
-    """Fit ARX for every (na, nb, nk) of the grid on common equations (see the module docstring).
-
-    Parameters
-    ----------
-    segments : sequence of (y, u)
-        Estimation experiments (rad/s, V), prefiltered if asked for.
-    grid : dict
-        ``na``, ``nb``, ``nk`` → values (:func:`parse_grid`).
-    period_s : float
-        Sample period (s).
-    eval_segments : sequence of (y, u)
-        Raw estimation data, for the fit when there is no validation data.
-    validation : sequence of (y, u), optional
-        Validation data for the fit.
-
-    Returns
-    -------
-    OrderTable
-    """
+    """Fit ARX for every (na, nb, nk) of ``grid`` on common equations of ``segments`` (rad/s, V;
+    prefiltered, if asked). The fit is on ``validation``, else on ``eval_segments`` (raw data)."""
     combos = list(itertools.product(grid["na"], grid["nb"], grid["nk"]))
     for na, nb, nk in combos:
         check_orders(na, nb, nk)

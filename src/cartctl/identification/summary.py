@@ -158,18 +158,15 @@ def _orders_section(res: MotorIdentification) -> ReportSection | None:
     if diag is None or diag.orders is None:
         return None
     table = diag.orders
-    best_aic, best_fit = table.best_aic(), table.best_fit()
     rows = []
     for r in table.rows:
-        marks = [n for n, b in (("AIC", best_aic), ("fit", best_fit)) if r is b]
-        fit = "unstable model" if not r.stable else _fit_text(r.fit_percent)
         rows.append({
             "na": r.na, "nb": r.nb, "nk": r.nk, "params": r.params,
             "loss V ((rad/s)²)": "" if r.error else f"{r.loss:.4f}",
             "AIC (–)": "" if r.error else f"{r.aic:.1f}",
             "FPE ((rad/s)²)": "" if r.error else f"{r.fpe:.4f}",
-            f"sim fit, {table.fit_on} (%)": r.error or fit,
-            "best": ", ".join(marks),
+            f"sim fit, {table.fit_on} (%)": r.error or r.fit_text(),
+            "best": ", ".join(table.marks(r)),
         })  # fmt: skip
     return ReportSection(
         heading=f"Motor {res.motor}: orders and delay",
