@@ -15,8 +15,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from cartctl.errors import InputError
 
-__all__ = ["average_cycles", "find_period", "periodic_regression_pad", "split_cycles"]
-
 PERIOD_RTOL: float = 1e-9
 """Relative tolerance (of max |u|) within which two input samples count as equal."""
 

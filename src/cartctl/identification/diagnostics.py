@@ -38,8 +38,6 @@ from cartctl.identification.residuals import ResidualTest, prediction_residuals,
 from cartctl.measures.metrics import finite_or_none
 from cartctl.model import ArxModel
 
-__all__ = ["BodeBand", "Diagnostics", "bode_band", "diagnose", "on_validation", "split_segments"]
-
 FitT = TypeVar("FitT", bound=ArxFit)
 
 MIN_PART = 50

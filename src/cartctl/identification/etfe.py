@@ -17,8 +17,6 @@ from cartctl.errors import InputError
 from cartctl.identification.cycles import as_pair, check_whole, split_cycles
 from cartctl.model import ArxModel
 
-__all__ = ["MIN_INPUT_FRACTION", "Etfe", "etfe", "model_response"]
-
 MIN_INPUT_FRACTION: float = 1e-3
 """A bin is excited when its |U| exceeds this fraction of max |U|: the report's square wave has
 no energy at multiples of three times its fundamental, and its weakest harmonic is about 1 %."""

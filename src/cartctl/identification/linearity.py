@@ -19,13 +19,6 @@ from cartctl.data.trace import Trace
 from cartctl.errors import InputError
 from cartctl.measures.stepinfo import StepOnset, final_value, find_step
 
-__all__ = [
-    "AMPLITUDE_ABS_TOLERANCE_V",
-    "AMPLITUDE_REL_TOLERANCE",
-    "LinearityResult",
-    "linearity",
-]
-
 AMPLITUDE_REL_TOLERANCE = 0.02
 """Small + large may differ from the summed step by this fraction of the summed step ..."""
 

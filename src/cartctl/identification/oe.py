@@ -44,8 +44,6 @@ from cartctl.identification.arx import (
 from cartctl.measures.metrics import finite_or_none
 from cartctl.model import MARGINAL_POLE_RADIUS, ArxModel
 
-__all__ = ["POLE_BOUND", "OeFit", "fit_oe", "project_poles"]
-
 MAX_OE_PARAMETERS = 10
 """The most na + nb an output-error refinement takes: measured on a minute of data, one core,
 4 parameters take 0.2 s, 10 take 4 s, 20 take 33 s. A DC motor needs 2 + 2."""

@@ -32,8 +32,6 @@ from cartctl.identification.arx import (
 )
 from cartctl.measures.metrics import finite_or_none
 
-__all__ = ["DEFAULT_GRID", "OrderRow", "OrderTable", "order_table", "parse_grid"]
-
 DEFAULT_GRID = {"na": (1, 2, 3), "nb": (1, 2, 3), "nk": (1, 2, 3, 4)}
 """The grid of ``--orders`` without a spec: 36 combinations."""
 

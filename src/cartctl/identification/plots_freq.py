@@ -25,7 +25,6 @@ if TYPE_CHECKING:
 
     from cartctl.identification.diagnostics import BodeBand
 
-__all__ = ["DPI", "color", "figure", "plot_etfe", "plot_pzmap", "save"]
 
 DPI = 110
 """Resolution of the PNG files (dots per inch); 10 × 6.5 in figures are 1100 × 715 px."""

@@ -34,8 +34,6 @@ from cartctl.identification.arx import Checked, Segment, as_segments, first_row,
 from cartctl.identification.plots_freq import figure, save
 from cartctl.model import ArxModel
 
-__all__ = ["Z_99", "ResidualTest", "plot_residuals", "prediction_residuals", "residual_test"]
-
 Z_99 = 2.576
 """Two-sided 99 % point of the standard normal distribution."""
 

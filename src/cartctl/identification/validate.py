@@ -1,10 +1,7 @@
-"""Model validation: simulate a model on a recorded input and compare with the measured speed.
-
-The last check of the identification stage (report §3.3, figures 6 and 7) and the work of
-``cartctl validate``: the model runs from rest on the trace's commanded voltage (simulation, not
-one-step prediction), and the result says how well it follows the measured speed: the fit (%), the
-absolute error over time, and, when the input is a single step, the step metrics of the measured
-and simulated responses side by side. Pure numpy on a :class:`~cartctl.data.trace.Trace`; no I/O.
+"""Model validation (report §3.3, figures 6 and 7; ``cartctl validate``): the model runs from
+rest on a trace's commanded voltage (a simulation, not a one-step prediction) and is compared with
+the measured speed: the fit (%), the absolute error over time and, for a single step input, the
+step metrics of both responses side by side.
 """
 
 from __future__ import annotations
@@ -23,16 +20,6 @@ from cartctl.measures.metrics import finite_or_none, fit_percent
 from cartctl.measures.stepinfo import StepInfo, find_step, step_info
 from cartctl.model import ArxModel
 
-__all__ = [
-    "PERIOD_TOLERANCE",
-    "ModelValidation",
-    "StepComparison",
-    "ValidationResult",
-    "check_period",
-    "validate",
-    "validate_models",
-]
-
 PERIOD_TOLERANCE = 0.1
 """How far (as a fraction) a trace's median time step may differ from the model's Ts."""
 
@@ -41,36 +28,10 @@ def _where(trace: Trace) -> str:
     return trace.source if trace.source else "the trace"
 
 
-def check_period(trace: Trace, period_s: float) -> None:
-    """Refuse a trace whose tick differs from the model's sample period.
-
-    Raises
-    ------
-    InputError
-        The median time step of ``trace`` differs from ``period_s`` (s) by more than
-        :data:`PERIOD_TOLERANCE`, or the trace has fewer than two ticks.
-    """
-    step_s = trace.period_s
-    if abs(step_s - period_s) > PERIOD_TOLERANCE * period_s:
-        raise InputError(
-            f"{_where(trace)} is sampled every {step_s * 1e3:.4g} ms but the model has "
-            f"Ts = {period_s * 1e3:.4g} ms; record the trace at the model's period"
-        )
-
-
 @dataclass(frozen=True)
 class StepComparison:
-    """Step metrics of the measured and the simulated response to one step of the input.
-
-    Attributes
-    ----------
-    amplitude_v : float
-        The input step (V).
-    onset_s : float
-        When the step is commanded, on the trace's time axis (s).
-    measured, simulated : StepInfo
-        Metrics of each response (speeds in rad/s), from the onset, starting at 0 rad/s.
-    """
+    """Step metrics (speeds in rad/s, from the onset at ``onset_s`` s, starting at 0 rad/s) of the
+    measured and the simulated response to one input step of ``amplitude_v`` V."""
 
     amplitude_v: float
     onset_s: float
@@ -83,7 +44,6 @@ class StepComparison:
         return self.measured.steady_state_value - self.simulated.steady_state_value
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON form: amplitude, onset, both metric sets and the steady-state error."""
         return {
             "amplitude_v": self.amplitude_v,
             "onset_s": self.onset_s,
@@ -95,27 +55,11 @@ class StepComparison:
 
 @dataclass(frozen=True, eq=False)
 class ValidationResult:
-    """A model simulated on one motor's recorded input, against the measured speed.
+    """A model simulated on one motor's recorded input against the measured speed (rad/s, V, s).
 
-    Attributes
-    ----------
-    motor : str
-        'a' or 'b'.
-    fit_simulation_percent : float
-        Normalised-RMSE fit of the simulation (%, 100 is perfect); NaN for a constant speed.
-    time_s : ndarray, shape (n,)
-        The trace's time (s).
-    voltage_v : ndarray, shape (n,)
-        The input the model was driven with (V).
-    measured_rad_s, simulated_rad_s : ndarray, shape (n,)
-        Measured and simulated speed (rad/s).
-    abs_error_rad_s : ndarray, shape (n,)
-        |measured − simulated| (rad/s).
-    step : StepComparison or None
-        Present when the input is a single step from 0 V.
-    unstable_pole : float or None
-        |z| of the model's largest pole when it is unstable (then the simulation runs away and
-        there is no fit: NaN, and no step comparison), else None.
+    ``fit_simulation_percent`` is the NRMSE fit (NaN for a constant speed); ``step`` is present
+    for a single step from 0 V; ``unstable_pole`` is |z| of the largest pole of an unstable
+    model, whose simulation runs away (no fit, no step comparison).
     """
 
     motor: str
@@ -140,7 +84,6 @@ class ValidationResult:
         }
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON form: the fit, the error summary and the step comparison (or None); no arrays."""
         return {
             "fit_simulation_percent": finite_or_none(self.fit_simulation_percent),
             "abs_error": self.error_summary(),
@@ -152,28 +95,17 @@ class ValidationResult:
 def validate(model: ArxModel, trace: Trace, motor: str) -> ValidationResult:
     """Simulate ``model`` from rest on motor ``motor``'s input and compare with its measured speed.
 
-    Parameters
-    ----------
-    model : ArxModel
-        The motor's model (V in, rad/s out).
-    trace : Trace
-        A recorded experiment at the model's sample period.
-    motor : {'a', 'b'}
-        Whose voltage drives the model and whose speed it is compared with.
-
-    Returns
-    -------
-    ValidationResult
-
-    Raises
-    ------
-    InputError
-        An unknown motor, a trace at another sample period, or a motor whose voltage is zero
-        throughout (nothing to validate).
+    Refuses a trace whose tick differs from the model's Ts by more than
+    :data:`PERIOD_TOLERANCE`, and a motor whose voltage is zero throughout.
     """
     voltage = trace.voltage(motor)
     measured = trace.speed(motor)
-    check_period(trace, model.period_s)
+    step_s, period_s = trace.period_s, model.period_s
+    if abs(step_s - period_s) > PERIOD_TOLERANCE * period_s:
+        raise InputError(
+            f"{_where(trace)} is sampled every {step_s * 1e3:.4g} ms but the model has "
+            f"Ts = {period_s * 1e3:.4g} ms; record the trace at the model's period"
+        )
     if not np.any(voltage):
         others = [m for m in MOTORS if m != motor and np.any(trace.voltage(m))]
         hint = f"choose --motor {others[0]}" if others else "the trace drives neither motor"
@@ -183,24 +115,19 @@ def validate(model: ArxModel, trace: Trace, motor: str) -> ValidationResult:
         )
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model may overflow
         simulated = model.simulate(voltage)
-    if not model.is_stable():
-        pole = model.pole_radius()
-        runaway = np.where(np.isfinite(simulated), simulated, np.nan)
-        return ValidationResult(
-            motor=motor, fit_simulation_percent=math.nan, time_s=trace.time_s,
-            voltage_v=voltage, measured_rad_s=measured, simulated_rad_s=runaway,
-            abs_error_rad_s=np.abs(measured - runaway), unstable_pole=pole,
-        )  # fmt: skip
-    abs_error = np.abs(measured - simulated)
+    stable = model.is_stable()
+    if not stable:
+        simulated = np.where(np.isfinite(simulated), simulated, np.nan)
     return ValidationResult(
         motor=motor,
-        fit_simulation_percent=fit_percent(measured, simulated),
+        fit_simulation_percent=fit_percent(measured, simulated) if stable else math.nan,
         time_s=trace.time_s,
         voltage_v=voltage,
         measured_rad_s=measured,
         simulated_rad_s=simulated,
-        abs_error_rad_s=abs_error,
-        step=_compare_step(trace.time_s, voltage, measured, simulated),
+        abs_error_rad_s=np.abs(measured - simulated),
+        step=_compare_step(trace.time_s, voltage, measured, simulated) if stable else None,
+        unstable_pole=None if stable else model.pole_radius(),
     )
 
 
@@ -222,21 +149,8 @@ def _compare_step(
 
 @dataclass(frozen=True, eq=False)
 class ModelValidation:
-    """The models of a model file validated on one trace, per motor.
-
-    Attributes
-    ----------
-    period_s : float
-        The models' sample period Ts (s).
-    data : str or None
-        The trace's source file.
-    model : str or None
-        The model file.
-    results : dict of str to ValidationResult
-        Per validated motor, in motor order.
-    skipped : tuple of str
-        Motors passed over because their voltage is zero throughout the trace.
-    """
+    """The models of a model file (Ts ``period_s``) validated on one trace, per motor; motors
+    passed over for a voltage zero throughout in ``skipped``."""
 
     period_s: float
     data: str | None
@@ -245,7 +159,6 @@ class ModelValidation:
     skipped: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        """The ``validate --json`` object: Ts, data, model, motors (and skipped motors)."""
         return {
             "Ts": self.period_s,
             "data": self.data,
@@ -260,27 +173,8 @@ def validate_models(
 ) -> ModelValidation:
     """Validate each named motor's model on ``trace``.
 
-    Parameters
-    ----------
-    model_file : ModelFile
-        The models; each motor in ``motors`` needs one.
-    trace : Trace
-        The recorded experiment.
-    motors : sequence of {'a', 'b'}
-        The motors to validate, e.g. ``("a", "b")``.
-    skip_idle : bool
-        Pass over (and list in ``skipped``) a motor whose voltage is zero throughout, instead of
-        raising. At least one motor must remain.
-
-    Returns
-    -------
-    ModelValidation
-
-    Raises
-    ------
-    InputError
-        A motor without a model, a trace at another sample period, a motor with zero voltage
-        throughout (unless skipped), or every motor skipped.
+    With ``skip_idle``, a motor whose voltage is zero throughout is passed over instead of
+    refused; at least one must remain.
     """
     if not motors:
         raise InputError("no motor to validate; name 'a', 'b' or both")
