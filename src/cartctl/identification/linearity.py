@@ -1,11 +1,9 @@
-"""The superposition test: do the responses to two steps add up to the response to their sum?
+"""The superposition test (report §3.3, equation 11, figure 8; ``cartctl linearity``): do the
+responses to two steps add up to the response to their sum?
 
-Part of the identification stage (report §3.3, equation 11 and figure 8) and the work of
-``cartctl linearity``. Three step experiments on one motor (say 3 V, 7 V and 10 V) are aligned at
-their step onsets; the responses to the small and the large step are added and compared with the
-response to the summed step. A linear motor gives zero error; Coulomb friction makes the summed
-step's response run above the added ones (each small step loses the friction once, the summed
-step only once in all). Pure numpy on :class:`~cartctl.data.trace.Trace` objects; no I/O.
+Three step experiments on one motor (say 3 V, 7 V and 10 V) are aligned at their onsets and the
+small and large responses added. A linear motor gives zero error; Coulomb friction makes the
+summed step run above the added ones (each small step loses the friction once, the sum only once).
 """
 
 from __future__ import annotations
@@ -35,29 +33,10 @@ def _where(trace: Trace, role: str) -> str:
 
 @dataclass(frozen=True, eq=False)
 class LinearityResult:
-    """The outcome of the superposition test on one motor.
-
-    Attributes
-    ----------
-    motor : str
-        'a' or 'b'.
-    period_s : float
-        The traces' tick (s).
-    sources : tuple of (str or None)
-        The small, large and sum traces' files.
-    amplitudes_v : tuple of float
-        The small, large and summed voltage steps (V).
-    onsets_s : tuple of float
-        When each step is commanded, on its own trace's time axis (s).
-    time_s : ndarray, shape (n,)
-        Time since the onsets (s), over the span all three traces cover.
-    speed_small_rad_s, speed_large_rad_s, speed_sum_rad_s : ndarray, shape (n,)
-        The three measured responses, aligned at their onsets (rad/s).
-    speed_added_rad_s : ndarray, shape (n,)
-        speed_small + speed_large (rad/s).
-    error_rad_s : ndarray, shape (n,)
-        speed_sum − speed_added (rad/s): positive where the summed step runs faster.
-    """
+    """The superposition test on one motor: the small, large and sum traces' files, voltage steps
+    (V) and onsets (s, each on its own trace's axis); over the span all three cover after their
+    onsets, the aligned speeds (rad/s), their sum ``speed_added_rad_s`` = small + large, and
+    ``error_rad_s`` = sum − added (positive where the summed step runs faster)."""
 
     motor: str
     period_s: float
@@ -73,17 +52,14 @@ class LinearityResult:
 
     @property
     def mean_error_rad_s(self) -> float:
-        """Mean of the error (rad/s); positive when the summed step runs above the added ones."""
         return float(np.mean(self.error_rad_s))
 
     @property
     def max_abs_error_rad_s(self) -> float:
-        """Largest |error| (rad/s)."""
         return float(np.max(np.abs(self.error_rad_s)))
 
     @property
     def rms_error_rad_s(self) -> float:
-        """Root mean square of the error (rad/s)."""
         return float(np.sqrt(np.mean(self.error_rad_s**2)))
 
     @property
@@ -104,7 +80,6 @@ class LinearityResult:
         return 100.0 * self.mean_error_rad_s / steady if steady != 0.0 else None
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON form: files, amplitudes, onsets, the error summary and the relative figures."""
         return {
             "motor": self.motor,
             "Ts": self.period_s,
@@ -126,7 +101,6 @@ class LinearityResult:
 
 
 def _onset(trace: Trace, motor: str, role: str) -> StepOnset:
-    """The step in ``motor``'s voltage of one trace, or an error saying what the trace holds."""
     voltage = trace.voltage(motor)
     onset = find_step(voltage)
     if onset is None:
@@ -145,27 +119,11 @@ def _onset(trace: Trace, motor: str, role: str) -> StepOnset:
 
 
 def linearity(small: Trace, large: Trace, total: Trace, motor: str = "a") -> LinearityResult:
-    """Run the superposition test on three step experiments.
+    """Run the superposition test on ``motor``'s responses to steps from 0 V of ``small``,
+    ``large`` and their sum (``total``).
 
-    Parameters
-    ----------
-    small, large : Trace
-        Responses to two steps from 0 V (e.g. 3 V and 7 V).
-    total : Trace
-        Response to the step of their sum (e.g. 10 V).
-    motor : {'a', 'b'}
-        The motor whose voltage steps and whose speed is compared.
-
-    Returns
-    -------
-    LinearityResult
-        Over the longest span after the onsets that all three traces cover.
-
-    Raises
-    ------
-    InputError
-        A trace whose voltage is not one step from 0 V, traces with different ticks, or
-        amplitudes that do not add up (small + large ≠ sum beyond 2 % or 0.1 V).
+    Refuses a trace whose voltage is not one step from 0 V, traces with different ticks, and
+    amplitudes that do not add up (beyond 2 % or 0.1 V).
     """
     traces = (small, large, total)
     onsets = tuple(_onset(t, motor, role) for t, role in zip(traces, _ROLES, strict=True))
