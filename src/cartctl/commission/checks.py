@@ -1,19 +1,15 @@
-"""Commissioning, stage 1: is the cart wired the way the controller will assume?
+"""Commissioning, stage 1: is the cart wired the way the controller will assume? (pure)
 
-One short open-loop experiment (:func:`checks_sequence`, 5.5 s) drives each motor in turn:
+One open-loop experiment (:func:`checks_sequence`, 5.5 s) drives each motor in turn with:
 
-- a **pulse** of :data:`PULSE_V` for 0.2 s: the wheel must turn, and turn so that the measured
-  speed has the voltage's sign. A wheel whose speed goes negative for a positive voltage has its
-  motor leads or its encoder channels the wrong way round; a pulse on one motor that moves only
-  the other motor's encoder means the two motors' connections are crossed. Either stops
-  commissioning (the loop would push the wrong way) with one line saying what to swap.
-- a slow **ramp** from 0 to :data:`RAMP_MAX_V` at 4 V/s: the **breakaway voltage** is where the
-  wheel starts to turn (the first of three ticks in a row with at least one encoder count, less
-  the loop delay and the one tick the speed needs to show it), and the speed at the ramp's end
-  gives a rough gain (rad/s per V above breakaway).
+- a **pulse** of :data:`PULSE_V` for 0.2 s: the wheel must turn so that the measured speed has
+  the voltage's sign; a negative speed means swapped motor leads or encoder channels, motion of
+  only the other encoder means crossed motors; either stops commissioning, saying what to swap;
+- a slow **ramp** to :data:`RAMP_MAX_V` at 4 V/s: the **breakaway voltage** is where the wheel
+  starts to turn (the first of three ticks in a row with an encoder count, less the loop delay
+  and the tick the speed needs to show it); the ramp's end speed gives a rough gain.
 
-:func:`choose_amplitude` turns these into the excitation amplitude. Everything here but
-:func:`run_checks` is pure: traces in, figures out.
+:func:`choose_amplitude` turns these into the excitation amplitude.
 """
 
 from __future__ import annotations
@@ -30,25 +26,17 @@ from cartctl.commission import StageError
 from cartctl.data.trace import Trace
 
 MOTORS = ("a", "b")
-PULSE_V = 4.0
-"""The direction pulse (V): above a cart's breakaway (about 1–2 V), a third of the supply."""
+PULSE_V = 4.0  # above a cart's breakaway (about 1–2 V), a third of the supply
 PULSE_S = 0.2
-RAMP_MAX_V = 6.0
-"""Where the breakaway ramp ends (V): a wheel that has not turned by then is not working."""
-RAMP_RATE_V_S = 4.0
-"""The ramp's slope (V/s): slow against the motors' time constants (tens of ms)."""
+RAMP_MAX_V = 6.0  # a wheel that has not turned by then is not working
+RAMP_RATE_V_S = 4.0  # slow against the motors' time constants (tens of ms)
 REST_S = 0.4
-MIN_COUNTS = 3
-"""Encoder counts a pulse must turn a wheel by to count as a motion (a noise-free tick is one)."""
+MIN_COUNTS = 3  # encoder counts a pulse must turn a wheel by to count as a motion
 
-FULL_SCALE_FRACTION = 0.9
-"""The excitation stays within this fraction of the supply (the controller keeps the rest)."""
-REPORT_AMPLITUDE_V = 10.0
-"""The report's square-wave amplitude (V): the starting point of the amplitude rule."""
-FRICTION_MARGIN = 3.0
-"""The excitation is at least this many times the larger breakaway voltage (friction small)."""
-SPEED_SPAN = 2.0
-"""The excitation's estimated steady speed is at most this many times the verification step."""
+FULL_SCALE_FRACTION = 0.9  # of the supply, for the excitation (the controller keeps the rest)
+REPORT_AMPLITUDE_V = 10.0  # the report's square-wave amplitude: where the rule starts
+FRICTION_MARGIN = 3.0  # the excitation is at least this many times the larger breakaway
+SPEED_SPAN = 2.0  # the excitation's steady speed is at most this many times the step
 
 
 @dataclass(frozen=True)
@@ -65,20 +53,10 @@ class Window:
 class MotorCheck:
     """One motor's figures from the checks.
 
-    Attributes
-    ----------
-    motor : str
-    pulse_turn_rad : float
-        The wheel's rotation during its pulse (measured speed × Ts summed; rad).
-    other_turn_rad : float
-        The other wheel's rotation during this motor's pulse (rad).
-    direction : str
-        'forward' (voltage + gives speed +), 'backward', 'crossed' (the pulse moved only the
-        other encoder), or 'still' (no motion).
-    breakaway_v : float or None
-        The voltage at which the wheel started to turn on the ramp (V); None if it never did.
-    gain_rad_s_v : float or None
-        The ramp's end speed over its voltage above breakaway (rad/s per V), quasi-static.
+    ``pulse_turn_rad`` and ``other_turn_rad`` are its wheel's and the other wheel's rotation during
+    its pulse (rad); ``direction`` is 'forward', 'backward', 'crossed' (only the other encoder
+    moved) or 'still'; ``breakaway_v`` (V) is None if the wheel never turned on the ramp;
+    ``gain_rad_s_v`` is the ramp's end speed over its voltage above breakaway (rad/s per V).
     """
 
     motor: str
@@ -89,7 +67,6 @@ class MotorCheck:
     gain_rad_s_v: float | None
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON form."""
         return {"pulse_turn_rad": self.pulse_turn_rad, "other_turn_rad": self.other_turn_rad,
                 "direction": self.direction, "breakaway_v": self.breakaway_v,
                 "gain_rad_s_v": self.gain_rad_s_v}  # fmt: skip
@@ -98,9 +75,8 @@ class MotorCheck:
 def checks_sequence(
     period_s: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], tuple[Window, ...]]:
-    """The check experiment's voltages (V) per motor and its windows.
-
-    Rest, pulse a, rest, pulse b, rest, ramp a, rest, ramp b, rest.
+    """The check experiment's voltages (V) per motor and its windows: rest, pulse a, rest, pulse b,
+    rest, ramp a, rest, ramp b, rest.
     """
     rest = round(REST_S / period_s)
     pulse = np.full(round(PULSE_S / period_s), PULSE_V)
@@ -146,10 +122,8 @@ def _breakaway(
 def analyse_checks(
     trace: Trace, windows: tuple[Window, ...], loop_delay_ticks: int
 ) -> dict[str, MotorCheck]:
-    """Each motor's direction, breakaway and rough gain from the check experiment.
-
-    The speed of a pulse is counted up to ``loop_delay_ticks + 10`` ticks after the pulse ends
-    (the wheel runs down and the last ticks reach the host late).
+    """Each motor's direction, breakaway and rough gain; a pulse's turn is counted up to
+    ``loop_delay_ticks + 10`` ticks after it ends (the wheel runs down, the last ticks come late).
     """
     period_s = trace.period_s
     n = len(trace)
@@ -204,33 +178,20 @@ def verdict(checks: dict[str, MotorCheck]) -> None:
 
 @dataclass(frozen=True)
 class Amplitude:
-    """The excitation amplitude and how the rule reached it.
-
-    Attributes
-    ----------
-    voltage_v : float
-        The square wave's amplitude (V).
-    floor_v, ceiling_v : float
-        The rule's bounds: friction and supply; and the speed's.
-    rule : str
-        The rule, in words, with its numbers.
-    """
+    """The excitation amplitude (V) and the rule that chose it, in words with its numbers."""
 
     voltage_v: float
-    floor_v: float
-    ceiling_v: float
     rule: str
 
 
 def choose_amplitude(checks: dict[str, MotorCheck], step_rad_s: float) -> Amplitude:
-    """The square excitation's amplitude (V) from the checks (the rule in ``rule``).
+    """The square excitation's amplitude (V) from the checks.
 
-    Start from the report's 10 V; no more than the voltage at which the faster motor's estimated
-    steady speed reaches :data:`SPEED_SPAN` × the verification step (the model is identified over
-    the speeds the controller will meet, and not far beyond, where the cart's nonlinearities are
-    not those of the step), and never beyond :data:`FULL_SCALE_FRACTION` of the supply; at least
-    :data:`FRICTION_MARGIN` × the larger breakaway voltage, so friction stays a small part of the
-    drive. Where the two conflict the friction floor wins (within the supply bound).
+    The report's 10 V, at most the voltage at which the faster motor's estimated steady speed is
+    :data:`SPEED_SPAN` × the verification step (identify over the speeds the controller will meet,
+    not beyond, where the cart's nonlinearities differ) and :data:`FULL_SCALE_FRACTION` of the
+    supply; at least :data:`FRICTION_MARGIN` × the larger breakaway voltage, so friction stays small
+    (the floor wins a conflict, within the supply bound).
     """
     breakaway = max(c.breakaway_v or 0.0 for c in checks.values())
     gains = [c.gain_rad_s_v for c in checks.values() if c.gain_rad_s_v]
@@ -248,4 +209,4 @@ def choose_amplitude(checks: dict[str, MotorCheck], step_rad_s: float) -> Amplit
         f"{max(gains) if gains else math.nan:.2f} rad/s/V), at least {floor:.1f} V "
         f"({FRICTION_MARGIN:g} × the larger breakaway voltage)"
     )
-    return Amplitude(voltage, floor, ceiling, rule)
+    return Amplitude(voltage, rule)

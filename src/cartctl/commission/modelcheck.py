@@ -1,31 +1,18 @@
 """Commissioning, stage 3: identify both motors with a validation split, and judge the models.
 
-The excitation is split in time (:data:`SPLIT`: the first 70 % estimates, the last 30 % — one
-whole square cycle and a half of the report's five — validates), and the model structure is the
-one that holds whatever the cart's actuation timing: ARX with na = 2, nb = 3 and nk equal to the
-loop delay the checks measured (the measurement right after a command already sees part of it
-when it lands within the tick; ``models/ground-timing.toml`` has the same structure). A motor whose
-last numerator term is within :data:`TAIL_SIGMAS` standard deviations of zero is fitted again with
-nb = 2 (:func:`identify_and_judge`): that term is noise, and the zero it puts near the origin
-makes pole placement cancel it with a gain of a hundred volts per rad/s, which ``cartctl run``
-refuses as a switch.
+The first :data:`SPLIT` of the excitation estimates, the rest (one and a half square cycles)
+validates. The structure holds whatever the cart's actuation timing: ARX na = 2, nb = 3, nk the
+measured loop delay. A motor whose last numerator term is within :data:`TAIL_SIGMAS` standard
+deviations of zero is fitted again with nb = 2: that term is noise, and pole placement would
+cancel its zero with a gain ``cartctl run`` refuses.
 
-A model passes (:func:`judge`) when, on the validation part:
-
-- its **simulation fit** is at least :data:`MIN_FIT_PERCENT` (the NRMSE fit of the model run from
-  the voltages alone, as ``cartctl validate``): below, the cart's speed is not what the model
-  says, and a loop tuned on the model meets another cart;
-- it is **stable** with every pole inside :data:`MAX_POLE_RADIUS` (a motor's speed settles; a pole
-  nearer the unit circle is a drift or an integrator the data cannot pin down);
-- its residuals are **not clearly correlated with the input**: no cross-correlation beyond
-  :data:`CROSS_CLEAR_FACTOR` × its 99 % bound. The residual test's own rule (at most 2 of 51 lags
-  outside the bound) fails on a cart whose friction and quantised speed leave a small, long-lag
-  correlation of about 0.2 in the residuals (the virtual cart: 16 of 51 lags just outside a
-  bound of 0.16, with a 98.6 % validation fit); a correlation twice the bound is neither chance
-  nor such a remnant.
-
-Whiteness and the lag counts are reported but do not fail a model: quantised encoder speeds and
-friction leave coloured residuals on any real cart, and the loop is tuned on θ's uncertainty.
+A model passes when, on the validation part, its simulation fit is at least
+:data:`MIN_FIT_PERCENT`, every pole is inside :data:`MAX_POLE_RADIUS`, and no cross-correlation
+of residuals and input exceeds :data:`CROSS_CLEAR_FACTOR` × its 99 % bound. (The residual
+test's own rule, at most 2 of 51 lags outside, fails on carts whose friction and quantised speed
+leave a small long-lag correlation: the virtual cart has 16 of 51 lags just outside, with a
+98.6 % fit.) Whiteness and lag counts are reported only: quantised speeds and friction colour
+the residuals of any real cart, and the loop is tuned on θ's uncertainty.
 """
 
 from __future__ import annotations
@@ -55,22 +42,9 @@ def request_for(loop_delay_ticks: int) -> IdentifyRequest:
 
 @dataclass(frozen=True)
 class MotorVerdict:
-    """One motor's validation figures and whether they pass.
-
-    Attributes
-    ----------
-    fit_percent : float
-        Simulation fit on the validation part (%).
-    pole_radius : float
-        The largest pole's |z|.
-    cross_outside, cross_lags : int
-        Cross-correlation lags outside the 99 % bound, of all lags.
-    cross_ratio : float
-        The largest |cross-correlation| over its 99 % bound.
-    white : bool
-        The whiteness test's result (reported only).
-    problems : tuple of str
-        Why the model fails; empty when it passes.
+    """One motor's validation figures: simulation fit (%), largest pole radius, cross-correlation lags
+    outside the 99 % bound of all lags, the largest over the bound, the whiteness test (reported
+    only), and why the model fails (empty: it passes).
     """
 
     fit_percent: float
@@ -82,7 +56,6 @@ class MotorVerdict:
     problems: tuple[str, ...]
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON form."""
         return {"validation_fit_percent": self.fit_percent, "pole_radius": self.pole_radius,
                 "cross_outside": self.cross_outside, "cross_lags": self.cross_lags,
                 "cross_ratio": self.cross_ratio,
@@ -91,7 +64,7 @@ class MotorVerdict:
 
 
 def judge(result: IdentifyResult) -> dict[str, MotorVerdict]:
-    """Each motor's verdict (see the module docstring for the rules)."""
+    """Each motor's verdict (the rules in the module docstring)."""
     out = {}
     for m, r in result.motors.items():
         fit = float(r.chosen.fit_simulation_percent)
@@ -125,11 +98,7 @@ def _noise_tail(fit: Any) -> bool:
 def identify_and_judge(
     trace: Trace, loop_delay_ticks: int
 ) -> tuple[IdentifyResult, IdentifyRequest, dict[str, MotorVerdict]]:
-    """Identify both motors from the excitation and judge them (no exception for a failure).
-
-    A motor whose last numerator term is noise (:func:`_noise_tail`) is fitted again with one
-    term fewer.
-    """
+    """Identify both motors from the excitation, refit a noise tail with one term fewer, and judge."""
     request = request_for(loop_delay_ticks)
     result = identify([trace], request)
     short = tuple(m for m, r in result.motors.items() if _noise_tail(r.chosen))

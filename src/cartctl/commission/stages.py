@@ -1,10 +1,8 @@
-"""The commissioning stages that drive the plant or write files: the shell around the pure parts.
+"""The commissioning stages that drive the plant or write files.
 
-:class:`Commission` holds what the stages share (the plant name and options, the output folder,
-the report, the results so far) and runs one stage per method. Each stage makes its own plant
-from the name (:func:`cartctl.plants.factory.make_plant`), so a serial cart is connected for its
-experiment and closed (zero volts) at its end; an experiment stopped by Ctrl-C or a plant fault
-keeps its ticks and the plant closed (:func:`cartctl.runtime.experiment.run_experiment`).
+Each stage makes its own plant from the name, so a serial cart is connected for its experiment
+and closed (zero volts) at its end; an experiment stopped by Ctrl-C or a plant fault keeps its
+ticks (:func:`cartctl.runtime.experiment.run_experiment`).
 """
 
 from __future__ import annotations
@@ -23,7 +21,6 @@ from cartctl.commission import StageError, checks, modelcheck, report, tuning, v
 from cartctl.commission.recording import record_stage, trace_series
 from cartctl.commission.timing import later_command
 from cartctl.data.trace import Trace, write_trace
-from cartctl.errors import CartctlError
 from cartctl.plants.base import ClockedPlant
 from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
 from cartctl.runtime.experiment import ExperimentResult, run_experiment
@@ -41,23 +38,12 @@ class StageStoppedError(Exception):
 
 @dataclass
 class Commission:
-    """Commissioning of one plant into ``out`` (see :mod:`cartctl.commission` for the stages).
+    """Commissioning of the plant ``spec`` into ``out``, one method per stage.
 
-    Attributes
-    ----------
-    spec : str
-        The plant name (``virtual``, ``physics``, ``serial:PORT`` …).
-    out : Path
-    plant_options : dict
-        ``preset``, ``noise_std_rad_s``, ``seed``, ``connect_timeout_s`` for ``make_plant``.
-    jobs : int or None
-        Worker processes of the tuning.
-    run_command : callable
-        Runs ``cartctl run`` with the given arguments (without ``cartctl``) and returns its exit
-        code and its ``--json`` summary (None when it printed none): the verification's step,
-        on the path users take. Injected by the command, which owns the CLI.
-    results : dict
-        Each finished stage's figures (for ``--json``).
+    ``plant_options`` go to ``make_plant``; ``jobs`` are the tuning's worker processes;
+    ``run_command`` runs ``cartctl run`` with the given arguments and returns its exit code and
+    ``--json`` summary (injected by the command, which owns the CLI); ``results`` collects each
+    finished stage's figures for ``--json``.
     """
 
     spec: str
@@ -78,8 +64,6 @@ class Commission:
         self.controller_path = self.out / "controller.toml"
         self.tuned: tuning.TuningResult | None = None
         self.current = STAGES[0]
-
-    # -- helpers --------------------------------------------------------------------------------
 
     def say(self, stage: str, text: str) -> None:
         """Progress on stderr: '[2/5] excitation: …'."""
@@ -130,8 +114,6 @@ class Commission:
                                    f"{result.failure or 'interrupted'}; {stage}.csv holds them.")  # fmt: skip
             raise StageStoppedError(stage, result.failure)
         return result.trace
-
-    # -- the stages -----------------------------------------------------------------------------
 
     def run_checks(self) -> None:
         """Stage 1: port, heartbeat, loop delay; direction, encoder sign, breakaway; amplitude."""
@@ -298,10 +280,7 @@ class Commission:
                 f"{checked.limits['settling_time_s'] * 1e3:.0f} ms; see summary.md")  # fmt: skip
 
     def run_all(self) -> None:
-        """Every stage in order (raises :class:`StageError`, :class:`StageStoppedError`, CartctlError)."""
+        """Every stage in order."""
         for stage in STAGES:
             self.current = stage
             getattr(self, f"run_{stage}")()
-
-
-__all__ = ["STAGES", "CartctlError", "Commission", "StageStoppedError"]

@@ -1,20 +1,14 @@
-"""Commissioning, stage 5: a closed-loop step on the cart, measured against the prediction.
+"""Commissioning, stage 5: a closed-loop step on the cart, judged against the prediction.
 
-The step is ``cartctl run`` itself (run in process by the command that drives commissioning: the
-chosen controller, ``step:10`` for 2 s,
-the same plant; ``--fast`` where the plant is simulated), so what commissioning verified is what
-the user will run. :func:`compare` judges it (pure): the worse of motors a and b must have
+The step is ``cartctl run`` itself (the chosen controller, ``step:10`` for 2 s, the same plant,
+``--fast`` where simulated), so what is verified is what the user will run. The worse of motors
+a and b must have:
 
-- overshoot ≤ max(:data:`TARGET_OVERSHOOT_PERCENT`, the predicted nominal overshoot) + a
-  tolerance that depends on the speed measured: :data:`TRUE_SPEED_TOLERANCE_PP` on a simulator's
-  true speed; on a cart, the run's RTS-smoothed speed (``motors.<m>.smoothed`` of its summary,
-  the encoder speed blurred by a whole count being no measure of a few percent) with half an
-  encoder count per tick over the step more (the smoother's error is at most about half a count);
-  one whole count (3.5 % of 10 rad/s) on the bare encoder speed, where the run gives nothing else;
-- settling ≤ max(:data:`TARGET_SETTLING_S`, the predicted nominal settling + two ticks).
-
-The predicted figures are the tuning's for the chosen setting (nominal: the loop on the model;
-worst: over its sampled and timing plants), shown beside the measured ones.
+- overshoot ≤ max(:data:`TARGET_OVERSHOOT_PERCENT`, predicted nominal) + a tolerance:
+  :data:`TRUE_SPEED_TOLERANCE_PP` on a simulator's true speed; on a cart's RTS-smoothed speed
+  (the encoder's whole counts are no measure of a few percent) half an encoder count per tick
+  over the step more; a whole count on the bare encoder speed;
+- settling ≤ max(:data:`TARGET_SETTLING_S`, predicted nominal + two ticks).
 """
 
 from __future__ import annotations
@@ -25,14 +19,14 @@ from pathlib import Path
 from typing import Any
 
 from cartctl.cart import encoder_quantum_rad_s
+from cartctl.tune.grid import worst_metrics
 
 STEP_RAD_S = 10.0
 REFERENCE = f"step:{STEP_RAD_S:g}"
 DURATION_S = 2.0
 TARGET_OVERSHOOT_PERCENT = 5.0
 TARGET_SETTLING_S = 0.15
-TRUE_SPEED_TOLERANCE_PP = 1.0
-"""Overshoot tolerance (percentage points) on a true speed: the loop's own tick-to-tick spread."""
+TRUE_SPEED_TOLERANCE_PP = 1.0  # percentage points: the loop's own tick-to-tick spread
 
 
 def run_argv(plant: str, controller: Path, out: Path, *, fast: bool,
@@ -46,18 +40,9 @@ def run_argv(plant: str, controller: Path, out: Path, *, fast: bool,
 
 @dataclass(frozen=True)
 class Verification:
-    """Measured against predicted, and the verdict.
-
-    Attributes
-    ----------
-    measured : dict
-        ``overshoot_percent`` and ``settling_time_s``, the worse of motors a and b (None: did not
-        settle).
-    predicted : dict
-        The tuning's ``nominal_…`` and ``worst_…`` figures of the chosen setting.
-    limits : dict
-        The pass bounds (``overshoot_percent``, ``settling_time_s``) and the ``speed`` measured on.
-    passed : bool
+    """Measured (worse of motors a and b; None: did not settle) against predicted (the tuning's
+    ``nominal_…`` and ``worst_…`` figures), the pass ``limits`` with the ``speed`` judged, and the
+    verdict.
     """
 
     measured: dict[str, float | None]
@@ -66,25 +51,15 @@ class Verification:
     passed: bool
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON form."""
         return {"measured": self.measured, "predicted": self.predicted, "limits": self.limits,
                 "pass": self.passed}  # fmt: skip
 
 
-def _worse(motors: dict[str, dict[str, Any]], key: str) -> float | None:
-    values = [m.get(key) for m in motors.values()]
-    known = [float(v) for v in values if v is not None]
-    if len(known) < len(values):
-        return None
-    return max(known)
-
-
 def compare(summary: dict[str, Any], predicted: dict[str, float | None],
             smoothed: dict[str, dict[str, Any]] | None = None) -> Verification:  # fmt: skip
-    """Judge a ``cartctl run --json`` summary against the tuning's prediction (module docstring).
-
-    ``smoothed``: per motor, the run's figures on the smoothed speed (``motors.<m>.smoothed`` of
-    its summary), judged instead of the encoder's where the run has no true speed.
+    """Judge a ``cartctl run --json`` summary against the tuning's prediction (module docstring);
+    ``smoothed`` per motor, the run's figures on the smoothed speed, judged where there is no true
+    speed.
     """
     motors = summary.get("motors") or {}
     count_pp = 100.0 * encoder_quantum_rad_s() / STEP_RAD_S
@@ -95,7 +70,8 @@ def compare(summary: dict[str, Any], predicted: dict[str, float | None],
         motors = smoothed
     else:
         speed, tol = "encoder", count_pp
-    measured = {k: _worse(motors, k) for k in ("overshoot_percent", "settling_time_s")}
+    worst = worst_metrics(motors)
+    measured = {k: worst[k] for k in ("overshoot_percent", "settling_time_s")}
     nominal_os = predicted.get("nominal_overshoot_percent") or 0.0
     nominal_ts = predicted.get("nominal_settling_time_s") or 0.0
     max_os = max(TARGET_OVERSHOOT_PERCENT, nominal_os) + tol
