@@ -1,47 +1,23 @@
-"""A truer speed for a recorded trace: a Kalman filter over the whole trace, then an RTS smoother.
+"""A truer speed for a recorded trace: a Kalman filter forward over the whole trace (filterpy's
+``KalmanFilter``), then its RTS smoother back, so every tick's estimate uses the whole trace.
 
-Where it sits: beside the estimator it reuses (:mod:`cartctl.design.kalman`), applied after a
-run to its trace (``run``'s summary, ``review``). A real cart gives only its encoder speed, a whole
-number of counts per tick (q = 2π/1792/Ts = 0.35 rad/s at 10 ms), so a step's overshoot and
-settling are blurred by a count. With the motor model and the voltages that were sent, the speed
-between the counts is well determined: filterpy's ``KalmanFilter`` runs forward over the trace and
-its ``rts_smoother`` runs back, so every tick's estimate uses the whole trace. Pure numerics:
-arrays in, arrays out.
+An encoder speed is a whole number of counts per tick (0.35 rad/s at 10 ms), which blurs a step's
+overshoot and settling; with the model and the voltages sent, the speed between the counts is
+well determined. The state is the design's estimator's (:func:`cartctl.design.kalman.design_kalman`:
+the realisation's x, x_1 the measured mean speed over the last tick, and the input disturbance b,
+V), with its process noise, plus two:
 
-The model. The state is that of the Kalman estimator the design stage builds
-(:func:`cartctl.design.kalman.design_kalman` on the observer-form realisation of the ARX model,
-:mod:`cartctl.design.statespace`): the realisation's states x (x_1 = the modelled *measured*
-speed, the mean over the last tick, rad/s) and the input disturbance b (V: friction, the model's
-DC error). Two states are added here:
+- θ, the counted wheel angle (rad): θ[k+1] = θ[k] + Ts x_1[k+1]. The summed encoder speeds are
+  exactly a floored true angle, an error uniform over one count Δ = 2π/1792 rad: R = Δ²/12, white
+  while the wheel turns. That is the measurement (a speed would be the difference of two such
+  errors, correlated by −½ between neighbours: not white).
+- a constant 1, through which the recorded voltage enters each tick's transition, F[k] =
+  [[A, B u[k]], …]: filterpy's ``rts_smoother`` has no input term. Its variance is 0, so the
+  smoother inverts the predicted covariance with the pseudo-inverse.
 
-- θ, the wheel angle the encoder counted (rad): θ[k+1] = θ[k] + Ts x_1[k+1]. The encoder speeds
-  summed, Ts Σ_{j≤k} speed[j], are exactly the counted angle, a floored true angle: an error
-  uniform over one count Δ = 2π/1792 rad, variance R = Δ²/12, white as long as the wheel turns
-  (its mean Δ/2 is a constant offset, which θ absorbs). That is the measurement. Measuring the
-  speed itself instead would be the difference of two such errors: variance Δ²/6 per tick and
-  neighbours correlated by −½, which a Kalman filter cannot take as white.
-- a constant 1, through which the recorded voltage enters the transition of each tick:
-  F[k] = [[A, B u[k]], …] so x[k+1] = A x[k] + B u[k]. filterpy's ``rts_smoother`` has no input
-  term; with it inside F[k] the smoother is exact for a known input. Its variance is 0, so the
-  predicted covariance is singular in that direction and the smoother inverts it with the
-  pseudo-inverse (filterpy's ``inv`` argument).
-
-The noise. The process noise is that of the design's estimator: an input-equivalent voltage
-w with σ_w = ``process_noise_std_v`` (default 0.1 V: PWM rounding, the fast part of friction and
-model error) and a random-walk bias with step σ_b = ``bias_drift_std_v`` (default 0.03 V per tick),
-both entering where the voltage does; the angle shares x_1's noise. The measurement noise is the
-quantisation alone (the model files record no noise level).
-
-Rows and delays. Row k holds the voltage commanded at tick k and the speed measured at tick k
-(the trace columns): the model applies to the rows as written, with its own nk. A loop slower
-than the one the model was identified on (``extra_delay_ticks``, as in ``design``) adds whole
-ticks of input delay.
-
-The speed at a tick. x̂_1[k] estimates the mean speed over the last tick, about the true speed
-half a tick earlier. The estimate of the true speed at tick k is the mean of x̂_1[k] and x̂_1[k+1]
-(exact for a speed that changes linearly over the two ticks; the same as the design's
-estimator, :mod:`cartctl.design.kalman`); the last row uses the model's prediction of x_1 one tick
-on.
+Row k holds the voltage commanded and the speed measured at tick k; the model applies with its own
+nk, ``extra_delay_ticks`` adding whole ticks for a slower loop. The speed at tick k is the mean of
+x̂_1[k] and x̂_1[k+1] (as the design's estimator), the last row using the model's prediction.
 """
 
 from __future__ import annotations
@@ -66,25 +42,15 @@ METHOD = "kalman-rts"
 
 
 def angle_noise_std_rad(counts_per_rev: int = ENCODER_COUNTS_PER_REV) -> float:
-    """Standard deviation (rad) of a counted angle: one count Δ = 2π/counts_per_rev, Δ/√12."""
+    """Std (rad) of a counted angle: Δ/√12, one count Δ = 2π/counts_per_rev."""
     return 2.0 * math.pi / counts_per_rev / math.sqrt(12.0)
 
 
 @dataclass(frozen=True, eq=False)
 class SmoothedSpeed:
-    """The smoothed speed of one motor over a trace.
-
-    Attributes
-    ----------
-    speed_rad_s : ndarray, shape (N,)
-        The estimate of the true speed at each row's tick (rad/s): comparable with a simulator's
-        ``true_speed``.
-    mean_speed_rad_s : ndarray, shape (N,)
-        The estimate of what the encoder measures at each row, the mean speed over the last tick
-        (rad/s): comparable with ``speed``.
-    bias_v : ndarray, shape (N,)
-        The estimated input disturbance (V).
-    """
+    """The smoothed speed of one motor per row: at the row's tick (rad/s, comparable with a
+    simulator's ``true_speed``), the mean over the last tick (what the encoder measures, comparable
+    with ``speed``), and the input disturbance (V)."""
 
     speed_rad_s: NDArray[np.float64]
     mean_speed_rad_s: NDArray[np.float64]
@@ -109,41 +75,16 @@ def smooth_speed(
     bias_drift_std_v: float = DEFAULT_BIAS_DRIFT_STD_V,
     counts_per_rev: int = ENCODER_COUNTS_PER_REV,
 ) -> SmoothedSpeed:
-    """The RTS-smoothed speed of one motor (see the module docstring for the model).
+    """The RTS-smoothed speed of one motor from the voltage (V) and encoder speed (rad/s) of each
+    row, the noise levels as :func:`~cartctl.design.kalman.design_kalman` takes them.
 
-    Parameters
-    ----------
-    model : ArxModel
-        The motor's model, voltage (V) to measured speed (rad/s), nk >= 1.
-    voltage_v : array_like, shape (N,)
-        The voltage commanded at each row (V).
-    speed_rad_s : array_like, shape (N,)
-        The encoder speed measured at each row (rad/s), a whole number of counts per tick.
-    extra_delay_ticks : int
-        Ticks of loop delay beyond the one the model was identified on (>= 0).
-    process_noise_std_v : float
-        σ_w, the white input-equivalent voltage noise (V), > 0.
-    bias_drift_std_v : float
-        σ_b, the step of the input disturbance's random walk (V per tick), >= 0 (0: no bias state).
-    counts_per_rev : int
-        Encoder counts per wheel revolution (sets the angle's quantisation).
-
-    Returns
-    -------
-    SmoothedSpeed
-
-    Raises
-    ------
-    InputError
-        Arrays of different lengths or with non-finite values; a model with nk = 0; a noise level
-        out of range.
+    InputError for arrays of different lengths or with non-finite values, nk = 0, a noise level
+    out of range.
     """
     u = _finite("the voltage", voltage_v)
     y = _finite("the speed", speed_rad_s)
     if u.size != y.size:
         raise InputError(f"voltage and speed differ in length: {u.size} and {y.size} rows")
-    if not isinstance(counts_per_rev, int | np.integer) or counts_per_rev < 1:
-        raise InputError(f"counts_per_rev must be a whole number >= 1, got {counts_per_rev!r}")
     design = design_kalman(
         model,
         process_noise_std_v=process_noise_std_v,

@@ -311,8 +311,7 @@ def run(args: argparse.Namespace) -> int:
             args.out,
         )
     if args.report:
-        from cartctl.design.analysis_plots import plot_analysis
-        from cartctl.design.plots import write_design_report
+        from cartctl.design.plots import plot_analysis, write_design_report
 
         write_design_report(args.report, args.method, designs.models, motors_json, designs.steps,
                             extra_delay_ticks=request.extra_delay_ticks,
