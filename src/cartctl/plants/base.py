@@ -30,46 +30,38 @@ class Measurement:
 
 @runtime_checkable
 class Plant(Protocol):
-    """Two motors advanced one tick at a time (see the module docstring for the convention)."""
+    """Two motors advanced one tick at a time (``period_s``, s), in the module docstring's order.
+
+    ``reset`` returns the plant to rest and measures tick 0; ``step`` commands the voltages (V) at
+    the current tick, advances one tick and measures; ``close`` leaves the motors at zero volts
+    and releases any resource.
+    """
 
     period_s: float
-    """The tick period (s)."""
 
-    def reset(self) -> Measurement:
-        """Return the plant to rest and give the measurement at tick 0."""
-        ...
+    def reset(self) -> Measurement: ...
 
-    def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
-        """Command these voltages (V) at the current tick, advance one tick, and measure."""
-        ...
+    def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement: ...
 
-    def close(self) -> None:
-        """Leave the motors at zero volts and release any resource."""
-        ...
+    def close(self) -> None: ...
 
 
 @runtime_checkable
 class ClockedPlant(Plant, Protocol):
     """A plant that sets the pace itself: the real cart (or the virtual one) over serial.
 
-    Each :meth:`receive` returns when the cart's next tick arrives, so the loop runs at the cart's
-    10 ms and not on the host's clock. :meth:`step` is :meth:`send` then :meth:`receive`; the loop
-    calls them apart to time its own compute without the wait.
+    ``receive`` returns when the cart's next tick arrives, so the loop runs at the cart's 10 ms,
+    not on the host's clock; ``step`` is ``send`` then ``receive``, called apart by the loop to
+    time its compute without the wait. ``arrival_s``: host time (``time.perf_counter``) when the
+    latest measurement arrived; ``tick_index``: its cart tick, counted from the run's tick 0 (gaps
+    included); ``connect`` opens the line and waits for the cart.
     """
 
     arrival_s: float
-    """Host time (``time.perf_counter``, s) when the latest measurement arrived."""
     tick_index: int
-    """The latest measurement's cart tick, counted from the run's tick 0 (gaps included)."""
 
-    def connect(self) -> None:
-        """Open the line and wait for the cart (raises a clear error if it is not there)."""
-        ...
+    def connect(self) -> None: ...
 
-    def send(self, voltage_a_v: float, voltage_b_v: float) -> None:
-        """Send this tick's voltages (V)."""
-        ...
+    def send(self, voltage_a_v: float, voltage_b_v: float) -> None: ...
 
-    def receive(self) -> Measurement:
-        """Wait for the cart's next tick and return its measurement."""
-        ...
+    def receive(self) -> Measurement: ...

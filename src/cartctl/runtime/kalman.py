@@ -155,10 +155,6 @@ class KalmanSpeedEstimator:
     def state(self) -> NDArray[np.float64]:
         return self._x.copy()
 
-    def state_values(self) -> list[float]:
-        """x̂ as a list of floats, for the per-tick arithmetic of state feedback."""
-        return self._x.tolist()
-
     @property
     def gain(self) -> NDArray[np.float64]:
         """The latest gain L[k]."""

@@ -16,7 +16,6 @@ import ctypes
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
-from dataclasses import dataclass
 
 from cartctl.errors import InputError
 
@@ -28,14 +27,7 @@ except ImportError:  # not on every platform
 _MCL_CURRENT, _MCL_FUTURE, _MCL_ONFAULT = 1, 2, 4  # <sys/mman.h> on Linux
 
 
-@dataclass
-class _Saved:
-    policy: int
-    priority: int
-    memory_locked: bool
-
-
-_saved: _Saved | None = None  # the scheduling to go back to, set by the first enable_realtime
+_saved: dict[str, int] = {}  # policy, priority and locked to go back to (the first enable's)
 
 
 def _lock_memory() -> str:
@@ -64,7 +56,6 @@ def enable_realtime(priority: int = 50, *, lock_memory: bool = True) -> str:
     memory not locked (why)"`` or ``"normal scheduling: SCHED_FIFO not permitted (why)"``.
     InputError for a priority outside the OS's SCHED_FIFO range (a caller's mistake).
     """
-    global _saved
     setscheduler = getattr(os, "sched_setscheduler", None)
     if setscheduler is None or not hasattr(os, "SCHED_FIFO"):
         return "normal scheduling: SCHED_FIFO not available on this platform"
@@ -83,30 +74,30 @@ def enable_realtime(priority: int = 50, *, lock_memory: bool = True) -> str:
         )
     except OSError as exc:
         return f"normal scheduling: SCHED_FIFO not permitted ({exc.strerror or exc})"
-    if _saved is None:
-        _saved = _Saved(policy, current, memory_locked=False)
+    if not _saved:
+        _saved.update(policy=policy, priority=current, locked=0)
     text = f"SCHED_FIFO priority {priority}"
     if not lock_memory:
         return text
-    if _saved.memory_locked:
+    if _saved["locked"]:
         return text + ", memory locked"
     why = _lock_memory()
     if why:
         return f"{text}, memory not locked ({why})"
-    _saved.memory_locked = True
+    _saved["locked"] = 1
     return text + ", memory locked"
 
 
 def restore() -> None:
     """Back to the scheduling and memory state from before :func:`enable_realtime` (from the same
     thread); nothing if real-time scheduling was not obtained. Never raises."""
-    global _saved
-    saved, _saved = _saved, None
-    if saved is None:
+    saved = dict(_saved)
+    _saved.clear()
+    if not saved:
         return
     with suppress(OSError, AttributeError):
-        os.sched_setscheduler(0, saved.policy, os.sched_param(saved.priority))
-    if saved.memory_locked:
+        os.sched_setscheduler(0, saved["policy"], os.sched_param(saved["priority"]))
+    if saved["locked"]:
         with suppress(OSError, AttributeError):
             ctypes.CDLL(None, use_errno=True).munlockall()
 
