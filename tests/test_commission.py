@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.commission import checks, timing, verify
+from cartctl.commission import checks, verify
+from cartctl.commission import tuning as timing
 from cartctl.data.trace import Trace
 from cartctl.model import ArxModel
 from cartctl.plants.physics_params import preset

@@ -19,7 +19,7 @@ from cartctl.cart import PERIOD_S
 from cartctl.cli.progress import ProgressBar
 from cartctl.commission import StageError, checks, modelcheck, report, tuning, verify
 from cartctl.commission.recording import record_stage, trace_series
-from cartctl.commission.timing import later_command
+from cartctl.commission.tuning import later_command
 from cartctl.data.trace import Trace, write_trace
 from cartctl.plants.base import ClockedPlant
 from cartctl.plants.factory import SIMULATED, make_plant, plant_kind

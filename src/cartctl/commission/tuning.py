@@ -1,20 +1,25 @@
 """Commissioning, stage 4: robust tuning on the identified model, and the controller chosen.
 
-``cartctl tune --robust``'s machinery (:mod:`cartctl.tune`) over a small pole-placement grid
-(:data:`GRID`: 5 settling times × 5 overshoots). Each setting is designed on the identified model
-(with the loop delay the checks measured), run in the simulated loop on that model (nominal), and
-scored at once on :data:`PLANTS` plants drawn from the model's own uncertainty
-(:mod:`cartctl.tune.uncertainty`: θ ± its standard deviation, DC gain ±10 %, loop delay ±1 tick)
-and, in the real loop, on the model with its commands landing 2 and 4 ms later
-(:mod:`cartctl.commission.timing`). The physics preset of ``tune --robust`` is left out: it is
-the course's cart, not the one being commissioned.
+``cartctl tune --robust``'s machinery over a small pole-placement grid (:data:`GRID`). Each
+setting is designed on the identified model (for the measured loop delay), run on it (nominal),
+scored on :data:`PLANTS` plants of its uncertainty (:mod:`cartctl.tune.uncertainty`) and, in the
+real loop, on the timing plants: the model with its commands landing later within the tick
+(:func:`later_command`). The physics preset is left out: it is the course's cart, not this one.
 
-The choice is ``tune --choose best --max-overshoot 5``'s (:func:`cartctl.tune.robust_choice.
-choose_best_robust`): among the settings that settle on every plant, with overshoot ≤ 5 % on the
-model and on both timing plants and a nominal settling time ≤ :data:`MAX_SETTLING_S`, the lowest
-worst-case overshoot, then the fastest nominal settling; a setting whose controller file
-``cartctl run`` would refuse (a gain that turns one encoder count into the whole supply) is passed
-over for the next.
+**Timing plants.** On one cart, when a command lands within its tick is fixed by the firmware
+(the bridge applies the newest command at the next ``io()``); what moves it is when the host's
+reply gets through, and the Mega's USB chip passes a reply on at its 4.096 ms timer at the latest
+(a later one misses the tick: a whole tick, which the sampled plants' ±1 tick covers). Landing
+f·Ts late, the motor sees the previous command for a fraction f of the tick; to first order in
+the tick (the motor's ~50 ms time constant is slow against Ts) the tick's speed answers
+(1 − f)·u(k) + f·u(k − 1): B(z) becomes B(z)·((1 − f) + f z⁻¹), same DC gain and poles, the
+phase lag of f ticks at low frequency.
+
+**Choice** (``tune --choose best --max-overshoot 5``'s rule): among the settings that settle on
+every plant, with overshoot ≤ 5 % on the model and the timing plants and nominal settling ≤
+:data:`MAX_SETTLING_S`, the lowest worst-case overshoot, then the fastest nominal settling; a
+setting whose controller file ``cartctl run`` would refuse (a gain that turns one encoder count
+into the whole supply) is passed over for the next.
 """
 
 from __future__ import annotations
@@ -29,9 +34,9 @@ from typing import Any
 import numpy as np
 
 from cartctl.commission import StageError
-from cartctl.commission.timing import LATER_FRACTIONS, later_command
 from cartctl.data.modelfile import ModelFile, load_models
 from cartctl.errors import InputError
+from cartctl.model import ArxModel
 from cartctl.plants.sim import ArxPlant
 from cartctl.tune import engine
 from cartctl.tune import grid as tuning
@@ -40,39 +45,39 @@ from cartctl.tune import robust_choice as choice
 from cartctl.tune.uncertainty import PlantSample, sample_plants
 
 METHOD = "poles"
+# 80–160 ms × 0.1–2.1 % (25 settings). Low overshoot targets: with friction the step overshoots
+# 2–3 points more than the linear model predicts (the physics simulator: 3.3–3.8 % for a 0.5 %
+# design), and beyond one encoder count (3.5 % of 10 rad/s) settling moves from the rise to the
+# decay of the overshoot (115 ms → 160 ms).
 GRID = "settling-time=0.08:0.16:0.02,overshoot=0.1:2.1:0.5"
-"""The grid: settling-time targets 80–160 ms × overshoot targets 0.1–2.1 % (25 settings). Low
-overshoot targets: on a cart with friction the step overshoots 2–3 points more than the linear
-model predicts (the physics simulator: 3.3–3.8 % for a 0.5 % design, 1.8–2.8 % for 0.1 %), and an
-overshoot beyond one encoder count (3.5 % of 10 rad/s) moves settling from the rise to the decay
-of the overshoot (115 ms → 160 ms)."""
-PLANTS = 48
-"""Plants drawn from the model's uncertainty (with the nominal model and 2 timing plants: 51)."""
+PLANTS = 48  # with the nominal model and 2 timing plants: 51
 SEED = 1
 MAX_OVERSHOOT_PERCENT = 5.0
-MAX_SETTLING_S = 0.13
-"""The chosen setting's nominal settling bound (s): 20 ms below the 150 ms a commissioned loop
-must meet, left for the cart's difference from its model."""
+MAX_SETTLING_S = 0.13  # 20 ms below the 150 ms to meet: room for the cart's difference
+# the shipped controllers/poles.toml's estimator noise (not its timing noise: the batch loop
+# cannot run it)
 DESIGN_FIXED = {"process_noise_std_v": 0.05, "bias_drift_std_v": 0.06}
-"""The estimator noise of the shipped ``controllers/poles.toml``: every setting shares it (not its
-timing noise, which the batch loop of the sampled plants cannot run)."""
 REFERENCE = "step:10"
 DURATION_S = 1.0
+LATER_FRACTIONS = (0.2, 0.4)  # of a tick: 2 and 4 ms later at 10 ms
+
+
+def later_command(model: ArxModel, fraction: float) -> ArxModel:
+    """``model`` with every command landing ``fraction`` ∈ [0, 1] of a tick later: numerator
+    (1 − f)·[b, 0] + f·[0, b], same poles, delay and DC gain (module docstring)."""
+    f = float(fraction)
+    if not 0.0 <= f <= 1.0:
+        raise InputError(f"a command can land 0 to 1 tick later here, got {fraction}")
+    b = np.asarray(model.b, dtype=float)
+    blended = (1.0 - f) * np.append(b, 0.0) + f * np.insert(b, 0, 0.0)
+    return ArxModel(tuple(model.ar), tuple(blended), model.nk, model.period_s)
 
 
 @dataclass(frozen=True)
 class CommissionJob:
-    """The grid for :func:`cartctl.tune.engine.run_grid` (picklable).
-
-    Attributes
-    ----------
-    tune : TuneJob
-        Model file, method, reference, duration, the shared design fields (loop delay included).
-    sample : PlantSample
-    items : tuple of (int, dict)
-        The settings.
-    fractions : tuple of float
-        The timing plants' later landing (ticks).
+    """The grid for :func:`cartctl.tune.engine.run_grid` (picklable): the tune job (with the shared
+    design fields, loop delay included), the sampled plants, the settings and the timing plants'
+    fractions of a tick.
     """
 
     tune: engine.TuneJob
@@ -98,25 +103,16 @@ def evaluate(job: CommissionJob, models: ModelFile, index: int,
 
 
 def evaluate_chunk(job: CommissionJob) -> list[robustness.RobustRow]:
-    """Every setting of a chunk (the worker function)."""
+    """The worker function."""
     models = load_models(job.tune.model)
     return [evaluate(job, models, i, s) for i, s in job.items]
 
 
 @dataclass(frozen=True)
 class TuningResult:
-    """The grid's rows and the chosen one.
-
-    Attributes
-    ----------
-    rows : list of RobustRow
-        Every setting, sorted as ``tune --robust`` sorts them.
-    chosen : RobustRow
-    design_fixed : dict
-        The design request fields every setting shares (the loop delay, the estimator's noise).
-    refused : tuple of (int, str)
-        Settings the rule picked first whose controller file ``cartctl run`` would refuse (an
-        absurd gain), with why; the next by the rule was taken.
+    """The grid's rows (sorted as ``tune --robust`` sorts them), the chosen one, the design fields
+    every setting shares, and the settings passed over because ``cartctl run`` would refuse their
+    controller file, with why.
     """
 
     rows: list[robustness.RobustRow]
@@ -174,9 +170,8 @@ def run_tuning(model_path: Path, loop_delay_ticks: int,
 
 def _file_refusal(models: ModelFile, model_path: Path, row: robustness.RobustRow,
                   fixed: dict[str, float]) -> str | None:  # fmt: skip
-    """Why ``cartctl run`` would refuse the setting's controller file (an absurd gain), or None.
-
-    The file is written to a temporary folder and read back as ``run`` reads it.
+    """Why ``cartctl run`` would refuse the setting's controller file (written to a temporary folder
+    and read back), or None.
     """
     import tempfile
 
@@ -198,7 +193,7 @@ def _file_refusal(models: ModelFile, model_path: Path, row: robustness.RobustRow
 
 
 def save_chosen(result: TuningResult, model_path: Path, out: Path) -> str:
-    """Write the chosen setting's controller file, as ``cartctl design`` would; its command."""
+    """Write the chosen setting's controller file, as ``cartctl design`` would; returns its command."""
     from cartctl.design.controllerfile import save_controller
     from cartctl.design.loop_report import analyse_designs
     from cartctl.design.make import controller_file, design_models
@@ -240,7 +235,3 @@ def replace_none(value: Any) -> Any:
     if isinstance(value, float) and not np.isfinite(value):
         return None
     return value
-
-
-__all__ = ["CommissionJob", "TuningResult", "evaluate_chunk", "row_summary", "run_tuning",
-           "save_chosen"]  # fmt: skip
