@@ -1,24 +1,10 @@
-"""A designed controller as C for the cart's ``control()`` (the course template on microOS).
+"""A designed controller as C for the cart's ``control()`` (``cartctl export --arduino``).
 
-Where it sits: after ``design``; ``cartctl export CONTROLLER.toml --arduino`` prints what
-:func:`arduino_source` returns. The C runs the same difference equations, anti-windup and estimator
-as the runtime controllers (:class:`~cartctl.runtime.pi.PiController`,
-:class:`~cartctl.runtime.statefeedback.StateFeedbackController`), line for line and in ``float``
-(the Arduino Mega has no wider type), with these differences:
-
-- the Kalman estimator always runs its steady-state (fixed) gain L, as
-  :class:`~cartctl.runtime.kalman.SteadyStateSpeedEstimator` does; compare it with the runtime
-  controller of :func:`as_steady_state`;
-- a file whose estimator has timing noise (``timing_noise_std_ticks`` > 0, a gain that moves
-  after each command change in cartctl's loop) runs without it: the C keeps the fixed L, which
-  the moving gain returns to while the command holds; the header says so and
-  ``cartctl export`` warns (:func:`timing_noise_note`);
-- float32 arithmetic: the voltages agree with the runtime's to within 1e-4 of the voltage range
-  (a few µV for the PI; up to 0.2 mV for state feedback, which sums terms of tens of volts), and
-  values beyond 3.4e38 overflow sooner (a command that overflows gives 0 V on both).
-
-The text is C99 that is also valid C++ (the template compiles ``robot.cpp`` as C++), uses only
-``<math.h>`` (``isfinite``), and is deterministic: the same file gives the same text.
+The C runs the runtime controllers' difference equations, anti-windup and estimator line for
+line, in ``float`` (the Mega has no wider type): the voltages agree with the runtime's to within
+1e-4 of the voltage range. The estimator always runs its fixed gain L (:func:`as_steady_state`;
+timing noise is left out, :func:`timing_noise_note`). C99, also valid C++, only ``<math.h>``,
+deterministic.
 """
 
 from __future__ import annotations
@@ -75,26 +61,21 @@ def as_steady_state(controller: ControllerFile) -> ControllerFile:
 
 
 def onboard_controllers(path: str | Path) -> dict[str, Controller]:
-    """The controllers of a controller file as the exported C runs them (fixed-gain estimator).
-
-    Raises
-    ------
-    InputError
-        The file was designed for another period than the cart's 10 ms.
-    MissingFileError, DataFileError
-        The file is missing or does not hold a controller.
-    """
+    """The controllers of a controller file as the exported C runs them (fixed-gain estimator)."""
     controller = load_controller(path)
-    if not math.isclose(controller.period_s, PERIOD_S, rel_tol=1e-9):
-        raise InputError(
-            f"{path} was designed for a period of {controller.period_s:g} s; the cart's "
-            f"control() runs every {PERIOD_S:g} s"
-        )
+    _check_period(controller, str(path))
     return build_controllers(as_steady_state(controller))
 
 
+def _check_period(controller: ControllerFile, name: str, advice: str = "") -> None:
+    if not math.isclose(controller.period_s, PERIOD_S, rel_tol=1e-9):
+        raise InputError(
+            f"{name} was designed for a period of {controller.period_s:g} s; the cart's "
+            f"control() runs every {PERIOD_S:g} s{advice}"
+        )
+
+
 def _usage(motors: Sequence[str]) -> list[str]:
-    """The header's example of ``Robot::control()`` for the motors present."""
     lines = ["  void Robot::control() {"]
     channel = IN_REFERENCE
     for m in motors:
@@ -211,44 +192,15 @@ def _header(controller: ControllerFile, command: str) -> list[str]:
 
 
 def arduino_source(controller: ControllerFile, *, command: str = "") -> str:
-    """The controller as C for the course template's ``Robot::control()``.
-
-    Per motor m in the file: a state struct ``cartctl_state_m_t`` with its instance
-    ``cartctl_state_m``, ``void cartctl_reset_m(void)`` and
-    ``float cartctl_step_m(float reference_rad_s, float measured_rad_s)`` returning the voltage.
-
-    Parameters
-    ----------
-    controller : ControllerFile
-        A loaded controller file (``pi`` or ``poles``).
-    command : str
-        The command line that asked for it, quoted in the header.
-
-    Returns
-    -------
-    str
-        The C source, ending with a newline.
-
-    Raises
-    ------
-    InputError
-        The controller was designed for another period than the cart's 10 ms.
-    DataFileError
-        A motor entry misses a key or holds numbers that do not make a controller.
-    """
-    if not math.isclose(controller.period_s, PERIOD_S, rel_tol=1e-9):
-        raise InputError(
-            f"{where(controller)} was designed for a period of {controller.period_s:g} s; the "
-            f"cart's control() runs every {PERIOD_S:g} s, so design on a 10 ms model"
-        )
+    """The controller as C for the course template's ``Robot::control()``, the ``command``
+    quoted in its header: per motor m, a state ``cartctl_state_m``, ``cartctl_reset_m()`` and
+    ``float cartctl_step_m(float reference_rad_s, float measured_rad_s)`` returning the voltage."""
+    _check_period(controller, where(controller), ", so design on a 10 ms model")
     # the checks the loop applies (keys, gains, anti-windup) before any C is written
     build_controllers(as_steady_state(controller))
     lines = _header(controller, command)
+    code = pi_code if controller.method == "pi" else poles_code
     for motor in sorted(controller.motors):
-        entry = controller.motors[motor]
-        if controller.method == "pi":
-            lines += pi_code(controller, motor, entry)
-        else:
-            lines += poles_code(controller, motor, entry)
+        lines += code(controller, motor, controller.motors[motor])
     lines += ["#endif  /* CARTCTL_CONTROLLER_H */", ""]
     return "\n".join(lines)

@@ -1,9 +1,5 @@
-"""C for one motor's controller: the PI or the state feedback, with its fixed-gain estimator.
-
-The per-controller part of ``cartctl export --arduino`` (:mod:`cartctl.export.arduino` writes the
-file around it): float-only C99, valid Arduino C++, that runs as the runtime controllers of
-:mod:`cartctl.runtime` do, checked against them with gcc by the tests.
-"""
+"""C for one motor's controller (the PI or the state feedback, with its fixed-gain estimator),
+for :mod:`cartctl.export.arduino`; the tests check it against the runtime with gcc."""
 
 from __future__ import annotations
 
@@ -24,16 +20,8 @@ _FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 def c_float(value: float) -> str:
-    """A C ``float`` literal that parses to exactly ``float32(value)``.
-
-    Nine significant digits identify a float32 uniquely; negative literals are parenthesised so
-    they are safe inside macros.
-
-    Raises
-    ------
-    InputError
-        ``value`` is not finite or does not fit in a float32.
-    """
+    """A C ``float`` literal that parses to exactly ``float32(value)`` (nine significant digits;
+    negative ones parenthesised for macros); InputError beyond a float32's range."""
     value = float(value)
     if not math.isfinite(value) or abs(value) > _FLOAT32_MAX:
         raise InputError(f"{value!r} does not fit in a C float (finite, |x| <= {_FLOAT32_MAX:g})")
@@ -44,7 +32,6 @@ def c_float(value: float) -> str:
 
 
 def where(controller: ControllerFile) -> str:
-    """The controller file's path for messages."""
     return str(controller.path) if controller.path is not None else "controller file"
 
 
