@@ -1,11 +1,10 @@
 """The host's end of the serial line to a microOS cart: port, framing, sign of life, silence.
 
-:class:`CartLink` owns the pyserial port and the pure framer of :mod:`cartctl.link`. It is shared by
-the serial plant (``--plant serial:PORT``, the PC-side loop) and ``cartctl monitor`` (recording what
-a cart running its own controller sends). It turns every way the line can fail into one clear
-error: a port that cannot be opened (with the ports that exist), no HEARTBEAT within the connect
-timeout, a cart of the other firmware generation, no GPIO for ``silence_timeout_s`` (a pulled cable
-or a stalled cart), and a port that vanishes mid-run.
+:class:`CartLink` owns the pyserial port and a :class:`~cartctl.link.framer.Framer`; the serial
+plant and ``cartctl monitor`` share it. Every way the line can fail becomes one clear error: a port
+that cannot be opened (with the ports that exist), no HEARTBEAT within the connect timeout, a cart
+of the other firmware generation, no GPIO for ``silence_timeout_s`` (a pulled cable or a stalled
+cart), and a port that vanishes mid-run.
 """
 
 from __future__ import annotations
@@ -22,11 +21,13 @@ from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import CartctlError, InputError, PlantError
 from cartctl.link.bridge import BRIDGE_BAUD, LEGACY_BAUD
 from cartctl.link.framer import (
+    Event,
     Framer,
     GenerationBFrame,
     Gpio,
     Heartbeat,
     LineAssembler,
+    LinkStats,
     Message,
     PrintText,
     ThreadInfo,
@@ -35,13 +36,10 @@ from cartctl.link.framer import (
 DEFAULT_SILENCE_TIMEOUT_S = 0.1
 """No GPIO for this long (10 ticks) ends a run: the cart's own watchdog trips at the same age."""
 READ_SLICE_S = 0.005
+"""A read returns after the first byte, or after this long without one."""
 COUNTED_SLICE_S = 2 * READ_SLICE_S
 """Silence counts the time the host listened: a read the PC held up longer (a busy machine, a
 garbage collection, an emulated cart paused with this process) counts as this much."""
-"""A read returns after the first byte, or after this long without one."""
-THREAD_INFO_BYTES = 22
-"""THREAD_INFO's payload: time, total duration, total latency, executions (uint32), the last
-duration and latency (uint16), id and priority (uint8), in that order on the wire."""
 LEGACY_LISTEN_S = 1.5
 """After no HEARTBEAT at the bridge's rate: how long to listen at 115200 baud (a HEARTBEAT every
 1.1 s, a GPIO every 10 ms) to tell an older firmware from no cart at all."""
@@ -51,18 +49,14 @@ class UnsupportedCartError(CartctlError):
     """The cart speaks a firmware generation cartctl does not (exit 2: flash the bridge sketch)."""
 
 
-def present_ports() -> list[str]:
-    """Serial ports the OS lists (``/dev/ttyACM0`` …); empty when none or when listing fails."""
+def _ports_hint() -> str:
+    """``serial ports present: ...`` as the OS lists them (a courtesy: never fails)."""
     try:
         from serial.tools import list_ports
 
-        return sorted(p.device for p in list_ports.comports())
-    except Exception:  # listing is a courtesy in an error message; never fail on it
-        return []
-
-
-def _ports_hint() -> str:
-    ports = present_ports()
+        ports = sorted(p.device for p in list_ports.comports())
+    except Exception:
+        ports = []
     return "serial ports present: " + (", ".join(ports) if ports else "none")
 
 
@@ -72,20 +66,10 @@ def print_to_stderr(line: str) -> None:
 
 
 class CartLink:
-    """A serial connection to a microOS cart (generation A; 500 kbaud for the bridge, 115200 before).
+    """A serial connection to a generation-A microOS cart (500 kbaud for the bridge, 115200 before).
 
-    Parameters
-    ----------
-    port : str
-        Device path, e.g. ``/dev/ttyACM0``.
-    silence_timeout_s : float
-        Longest wait for the next GPIO before :class:`~cartctl.errors.PlantError`.
-    on_print : callable, optional
-        Receives each PRINT line of the cart (default: :func:`print_to_stderr`).
-    serial_factory : callable, optional
-        Opens the port (default ``serial.Serial``); for tests.
-    baud : int
-        The line's rate: the bridge's 500 kbaud by default.
+    ``on_print`` receives each PRINT line (default :func:`print_to_stderr`), ``on_event`` each
+    EVENT, ``serial_factory`` opens the port (default ``serial.Serial``; for tests).
     """
 
     def __init__(
@@ -94,6 +78,7 @@ class CartLink:
         *,
         silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
         on_print: Callable[[str], None] | None = None,
+        on_event: Callable[[Event], None] | None = None,
         serial_factory: Callable[..., Any] | None = None,
         baud: int = BRIDGE_BAUD,
     ) -> None:
@@ -101,12 +86,12 @@ class CartLink:
         self.baud = int(baud)
         self.silence_timeout_s = float(silence_timeout_s)
         self.on_print = on_print or print_to_stderr
+        self.on_event = on_event
         self._factory = serial_factory
         self.framer = Framer()
         self.lines = LineAssembler()
         self._pending: collections.deque[Message] = collections.deque()
         self._serial: Any = None
-        self.heartbeat: Heartbeat | None = None
         self.failure: str | None = None
         """Why the stream stopped (silence or a vanished port); None while it flows."""
         self.vanished = False
@@ -116,11 +101,8 @@ class CartLink:
         the bridge reports its tick's timing and its receive ring this way)."""
 
     @property
-    def stats(self) -> Any:
-        """The framer's :class:`~cartctl.link.LinkStats` (frames, CRC errors, garbage, gaps)."""
+    def stats(self) -> LinkStats:
         return self.framer.stats
-
-    # -- opening -------------------------------------------------------------------------------
 
     def open(self) -> None:
         """Open the port at :attr:`baud` 8N1, no flow control."""
@@ -138,41 +120,31 @@ class CartLink:
             ) from None
 
     def wait_heartbeat(self, timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> Heartbeat:
-        """Read until the cart's HEARTBEAT; PRINT lines are shown on the way.
+        """Read until the cart's HEARTBEAT (PRINT lines are shown on the way).
 
-        Raises
-        ------
-        PlantError
-            No HEARTBEAT within ``timeout_s`` (nothing on the port, or not a microOS cart).
-        UnsupportedCartError
-            The port carries generation-B frames.
+        Raises :class:`~cartctl.errors.PlantError` when none comes within ``timeout_s``, and
+        :class:`UnsupportedCartError` on generation-B frames.
         """
         deadline = time.perf_counter() + timeout_s
-        while True:
-            remaining = deadline - time.perf_counter()
-            if remaining <= 0:
-                seen = self.stats.frames + self.stats.garbage_bytes
-                what = "bytes but no HEARTBEAT" if seen else "nothing"
-                raise PlantError(
-                    f"no HEARTBEAT from a cart on {self.port} within {timeout_s:g} s (received "
-                    f"{what}); is the cart on, running the bridge sketch (firmware/), and on this "
-                    f"port? {_ports_hint()}"
-                )
+        while (remaining := deadline - time.perf_counter()) > 0:
             message = self._next_message(remaining)
             if isinstance(message, Heartbeat):
-                self.heartbeat = message
                 return message
+        what = (
+            "bytes but no HEARTBEAT" if self.stats.frames + self.stats.garbage_bytes else "nothing"
+        )
+        raise PlantError(
+            f"no HEARTBEAT from a cart on {self.port} within {timeout_s:g} s (received "
+            f"{what}); is the cart on, running the bridge sketch (firmware/), and on this "
+            f"port? {_ports_hint()}"
+        )
 
     def wait_heartbeat_any_rate(self, timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> int:
         """:meth:`wait_heartbeat` at :attr:`baud`; failing that, listen at 115200 baud.
 
         Returns the rate the cart answered at (:attr:`baud` then holds it). The port stays open
-        across the change, so a real Mega is not reset again.
-
-        Raises
-        ------
-        PlantError
-            Nothing at either rate (the error of the first wait).
+        across the change, so a real Mega is not reset again. Nothing at either rate raises the
+        first wait's error.
         """
         try:
             self.wait_heartbeat(timeout_s)
@@ -186,43 +158,33 @@ class CartLink:
                 self._pending.clear()
                 deadline = time.perf_counter() + LEGACY_LISTEN_S
                 while (remaining := deadline - time.perf_counter()) > 0:
-                    message = self._next_message(remaining)
-                    if isinstance(message, (Heartbeat, Gpio)):
-                        if isinstance(message, Heartbeat):
-                            self.heartbeat = message
+                    if isinstance(self._next_message(remaining), Heartbeat | Gpio):
                         self.baud = LEGACY_BAUD
                         return LEGACY_BAUD
             except (OSError, ValueError, AttributeError):
                 pass
             raise first from None
 
-    # -- the stream -----------------------------------------------------------------------------
-
     def next_gpio(self, timeout_s: float | None = None) -> tuple[Gpio, float]:
         """The next GPIO and the host time it arrived (``time.perf_counter`` s).
 
-        Raises
-        ------
-        PlantError
-            No GPIO within ``timeout_s`` (default :attr:`silence_timeout_s`) of listening (see
-            :data:`COUNTED_SLICE_S`), or the port vanished.
-        UnsupportedCartError
-            The port carries generation-B frames.
+        Raises :class:`~cartctl.errors.PlantError` after ``timeout_s`` (default
+        :attr:`silence_timeout_s`) of listening without one (see :data:`COUNTED_SLICE_S`), or when
+        the port vanished; :class:`UnsupportedCartError` on generation-B frames.
         """
         wait_s = self.silence_timeout_s if timeout_s is None else timeout_s
         listened_s = 0.0
-        while True:
-            if listened_s >= wait_s:
-                self.failure = (
-                    f"no data from the cart on {self.port} for {wait_s * 1000:.0f} ms "
-                    "(cable pulled, cart stalled or reset)"
-                )
-                raise PlantError(self.failure)
+        while listened_s < wait_s:
             started_s = time.perf_counter()
             message = self._next_message(min(READ_SLICE_S, wait_s - listened_s))
             if isinstance(message, Gpio):
                 return message, time.perf_counter()
             listened_s += min(time.perf_counter() - started_s, COUNTED_SLICE_S)
+        self.failure = (
+            f"no data from the cart on {self.port} for {wait_s * 1000:.0f} ms "
+            "(cable pulled, cart stalled or reset)"
+        )
+        raise PlantError(self.failure)
 
     def gpio_waiting(self, wait_s: float = 0.0) -> bool:
         """Whether another complete GPIO is buffered (the host is behind the cart), or arrives
@@ -244,29 +206,27 @@ class CartLink:
             if remaining <= 0:
                 return None
             self._poll(remaining)
-        return self._pending.popleft()
+        message = self._pending.popleft()
+        if isinstance(message, Event) and self.on_event is not None:
+            self.on_event(message)
+        return message
 
     def _poll(self, timeout_s: float) -> None:
-        """Read what the port has (waiting up to :data:`READ_SLICE_S` for a first byte) and decode it."""
-        ser = self._serial
-        if ser is None:
-            raise PlantError(f"serial port {self.port} is not open")
+        """Read what the port has (waiting up to :data:`READ_SLICE_S` for a first byte), decode it."""
+        ser = self._port()
         try:
             waiting = ser.in_waiting
             data = ser.read(max(1, waiting)) if waiting or timeout_s > 0 else b""
         except Exception as exc:  # pyserial raises SerialException or OSError when the device goes
             raise self._vanish(exc) from None
-        if not data:
-            return
-        for message in self.framer.feed(data):
+        for message in self.framer.feed(data) if data else ():
             if isinstance(message, PrintText):
                 for line in self.lines.feed(message.text):
                     self.on_print(line)
             elif isinstance(message, ThreadInfo):
-                if len(message.payload) == THREAD_INFO_BYTES:  # duration: uint16 at 16, id at 20
-                    duration = message.payload[16] | (message.payload[17] << 8)
-                    thread = message.payload[20]
-                    self.thread_maxima[thread] = max(self.thread_maxima.get(thread, 0), duration)
+                payload = message.payload  # the last duration: uint16 at 16, the thread id at 20
+                duration, thread = payload[16] | (payload[17] << 8), payload[20]
+                self.thread_maxima[thread] = max(self.thread_maxima.get(thread, 0), duration)
             elif isinstance(message, GenerationBFrame):
                 raise UnsupportedCartError(
                     f"the cart on {self.port} speaks microOS generation B (MAVLink 2, GPIOX "
@@ -276,6 +236,11 @@ class CartLink:
             else:
                 self._pending.append(message)
 
+    def _port(self) -> Any:
+        if self._serial is None:
+            raise PlantError(f"serial port {self.port} is not open")
+        return self._serial
+
     def _vanish(self, exc: BaseException) -> PlantError:
         self.vanished = True
         self.failure = f"serial port {self.port} vanished ({exc}); cable pulled?"
@@ -283,10 +248,9 @@ class CartLink:
 
     def send(self, frame: bytes) -> None:
         """Write one frame; a vanished port raises :class:`~cartctl.errors.PlantError`."""
-        if self._serial is None:
-            raise PlantError(f"serial port {self.port} is not open")
+        ser = self._port()
         try:
-            self._serial.write(frame)
+            ser.write(frame)
         except Exception as exc:
             raise self._vanish(exc) from None
 

@@ -1,27 +1,17 @@
 """Passive recording of what a cart sends (``cartctl monitor``): labelled GPIO rows, text, events.
 
-For carts that run their own controller (the exported C, or the course's own code): the monitor
-never sends anything to the cart. It reads the cart's stream through
-:class:`~cartctl.link.cart_link.CartLink` (same framing, silence timeout and port errors as the
-serial plant) and turns each GPIO into one row::
-
-    time_s   cart time since the first GPIO (s): k · Ts, k the cart's tick since the first GPIO
-    tick     0, 1, 2, ...: one per GPIO received (a lost frame shows as a gap in time_s)
-
-The cart sends one GPIO per 10 ms tick, stamped with its ``millis()`` (the GPIO's u32 time field,
-which wraps after 49.7 days). Those stamps jitter by a millisecond, and a firmware that stamps the
-frame when its communication thread sends it can give several frames one stamp and then jump. The
-tick k of each frame is therefore counted, not read: k = max(k_prev + 1, round(Δms / 10 ms)) with
-Δms the stamps' distance from the first's (followed modulo 2³²). Time is strictly increasing and a multiple of
-Ts; a lost frame (a step of about 20 ms in the stamps) leaves a step of two ticks, and a burst of
-equal stamps advances one tick per frame until the stamps catch up.
-    f0..f7, i0..i3 under their labels: those given (``--labels``), else those of cartctl's
-             firmware when its frames carry its marker (the bridge's ``speed_a, voltage_a, ...``,
-             the on-board export's ``speed_a, voltage_a, reference_a, ...``:
-             :mod:`cartctl.link.firmware_id`), else QRoboticsCenter's FloatIn0..7, IntIn0..3
-
-PRINT lines and EVENT messages (QRC's buttons) are stamped with the time and tick of the last GPIO
-before them (0 before the first).
+For carts that run their own controller: the monitor never sends anything. It reads the stream
+through :class:`~cartctl.link.cart_link.CartLink` and turns each GPIO into one row ``time_s, tick,
+<12 labels>``: the labels given (``--labels``), else those of cartctl's firmware when its frames
+carry its marker (:mod:`cartctl.link.firmware_id`), else QRoboticsCenter's FloatIn0..7, IntIn0..3.
+``tick`` counts the rows; ``time_s`` is the cart time since the first GPIO, k · Ts with k the cart's
+tick. The cart stamps each GPIO with its ``millis()`` (u32, wrapping after 49.7 days); the stamps
+jitter by a millisecond, and a firmware that stamps a frame when its communication thread sends it
+can give several frames one stamp and then jump. So k is counted, not read: k = max(k_prev + 1,
+round(Δms / 10 ms)), Δms the stamps' distance from the first's (followed modulo 2³²). A lost
+frame leaves a step of two ticks; a burst of equal stamps advances one tick per frame until the
+stamps catch up. PRINT lines and EVENTs are stamped with the time and tick of the last GPIO before
+them (0 before the first).
 """
 
 from __future__ import annotations
@@ -29,7 +19,7 @@ from __future__ import annotations
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -38,16 +28,16 @@ from cartctl.errors import InputError, PlantError
 from cartctl.link.cart_link import CartLink
 from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT
 from cartctl.link.firmware_id import CH_FIRMWARE_ID, CHANNEL_KEYS, Firmware, recognise_firmware
-from cartctl.link.framer import Event, Gpio, Message
+from cartctl.link.framer import Event, Gpio
 
 FLOAT_CHANNELS = GPIO_FLOAT_COUNT
-INT_CHANNELS = GPIO_INT_COUNT
 DEFAULT_LABELS: tuple[str, ...] = (
-    *(f"FloatIn{i}" for i in range(FLOAT_CHANNELS)),
-    *(f"IntIn{i}" for i in range(INT_CHANNELS)),
+    *(f"FloatIn{i}" for i in range(GPIO_FLOAT_COUNT)),
+    *(f"IntIn{i}" for i in range(GPIO_INT_COUNT)),
 )
 """QRoboticsCenter's default labels, in :data:`CHANNEL_KEYS` order."""
 TIME_COLUMN, TICK_COLUMN = "time_s", "tick"
+PRINT_ENTITY, EVENT_ENTITY = "cart/print", "cart/events"
 _LABEL = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 _TIME_MODULO_MS = 1 << 32  # the GPIO's time field is a u32 of milliseconds
 _PERIOD_MS = PERIOD_S * 1000.0
@@ -56,18 +46,15 @@ RECOGNISE_FRAMES = 10
 """The frames (100 ms) in which one carrying a firmware marker is waited for before the labels
 are chosen: a firmware's first frames may go out before its first ``control()`` filled them."""
 
+MonitorLink = CartLink  # takes ``on_event`` itself now
+
 
 def parse_labels(text: str | None) -> tuple[str, ...]:
     """The 12 channel labels, in :data:`CHANNEL_KEYS` order, from ``f0=speed_a,i0=echo,...``.
 
-    Channels not named keep their default label (:data:`DEFAULT_LABELS`).
-
-    Raises
-    ------
-    InputError
-        An item is not ``key=label``, a key is not f0..f7 or i0..i3 or is given twice, a label is
-        not an identifier (letters, digits, '_', not starting with a digit), or two channels end
-        up with the same label (or one is named ``time_s`` or ``tick``).
+    Channels not named keep their default label (:data:`DEFAULT_LABELS`). Raises
+    :class:`~cartctl.errors.InputError` on an item that is not ``key=label`` with a key f0..f7 or
+    i0..i3 given once and an identifier as label, or when two columns end up with one name.
     """
     labels = dict(zip(CHANNEL_KEYS, DEFAULT_LABELS, strict=True))
     given: set[str] = set()
@@ -97,11 +84,8 @@ def parse_labels(text: str | None) -> tuple[str, ...]:
 
 
 def firmware_labels(firmware: Firmware | None) -> tuple[str, ...]:
-    """The 12 channel labels, in :data:`CHANNEL_KEYS` order, of a firmware's channels.
-
-    The channels it names get its labels (``speed_a``, ``voltage_a``, ...); the others, and
-    every channel of an unknown firmware (None), keep QRoboticsCenter's (:data:`DEFAULT_LABELS`).
-    """
+    """The 12 labels of a firmware's channels; those it does not name (or all, for None) keep
+    QRoboticsCenter's."""
     labels = dict(zip(CHANNEL_KEYS, DEFAULT_LABELS, strict=True))
     if firmware is not None:
         labels.update(firmware.labels)
@@ -111,19 +95,8 @@ def firmware_labels(firmware: Firmware | None) -> tuple[str, ...]:
 def describe_labels(
     firmware: Firmware | None, marker: float | None, labels: Sequence[str], *, given: bool
 ) -> str:
-    """One line: which firmware the cart runs (or that it is not cartctl's) and the labels used.
-
-    Parameters
-    ----------
-    firmware : Firmware or None
-        What :func:`~cartctl.link.firmware_id.recognise_firmware` found; None for another one.
-    marker : float or None
-        The value of float channel 6 it was told by (None: no frame came).
-    labels : sequence of str
-        The 12 labels used, in :data:`CHANNEL_KEYS` order.
-    given : bool
-        Whether they came from ``--labels``.
-    """
+    """One line: the firmware (told by float 6 = ``marker``; None: no frame came) and the labels
+    used (``given``: from ``--labels``)."""
     told = "no frame came" if marker is None else f"float {CH_FIRMWARE_ID} = {marker:g}"
     what = firmware.name if firmware is not None else "not one of cartctl's"
     named = ",".join(
@@ -141,77 +114,37 @@ def describe_labels(
 
 
 class RowSink(Protocol):
-    """Where rows go (``CsvSink``, the channels Rerun sink)."""
-
     def open(self, columns: Sequence[str]) -> None: ...
     def write(self, row: Sequence[float]) -> None: ...
     def close(self) -> None: ...
 
 
 class TextSink(Protocol):
-    """Where the cart's text and events go (the channels Rerun sink)."""
-
     def log_text(self, entity: str, text: str, time_s: float, tick: int, level: str) -> None: ...
-
-
-PRINT_ENTITY, EVENT_ENTITY = "cart/print", "cart/events"
-
-
-class MonitorLink(CartLink):
-    """A :class:`CartLink` that also hands the EVENT messages it reads to ``on_event``.
-
-    ``next_gpio`` (silence timeout, vanished port) skips every message that is not a GPIO; this
-    link reports the EVENTs among them before they are skipped.
-    """
-
-    def __init__(self, port: str, *, on_event: Callable[[Event], None], **kwargs: Any) -> None:
-        super().__init__(port, **kwargs)
-        self.on_event = on_event
-
-    def _next_message(self, timeout_s: float) -> Message | None:
-        message = super()._next_message(timeout_s)
-        if isinstance(message, Event):
-            self.on_event(message)
-        return message
 
 
 @dataclass
 class MonitorResult:
-    """What a monitor run saw, and why it stopped."""
+    """What a monitor run saw (GPIO rows, cart time of the last, texts) and why it stopped
+    (``stopped``: 'duration', 'interrupted' (Ctrl-C) or 'fault', with ``failure``)."""
 
     frames: int = 0
-    """GPIO rows recorded."""
     duration_s: float = 0.0
-    """Cart time of the last row (s since the first)."""
     print_lines: int = 0
     events: int = 0
     stopped: str = "duration"
-    """'duration', 'interrupted' (Ctrl-C) or 'fault'."""
     failure: str | None = None
 
 
 class Monitor:
-    """Reads a connected link and writes one row per GPIO to the sinks (``time_s, tick, labels``).
+    """Reads a connected link and writes one row per GPIO to the sinks.
 
-    The labels are chosen from what the cart sends: the first of its first
-    :data:`RECOGNISE_FRAMES` frames that carries the marker of one of cartctl's firmwares
-    (:func:`~cartctl.link.firmware_id.recognise_firmware`) names the channels
-    (:func:`firmware_labels`); without one they are QRoboticsCenter's. Labels given here override
-    them (the firmware is still told). The sinks are opened once the labels are chosen, with
-    the frames until then written at once, so nothing is lost or re-stamped.
-
-    Parameters
-    ----------
-    rows : sequence of RowSink
-        Opened here with ``time_s, tick, <12 labels>``; closed by the caller.
-    texts : sequence of TextSink
-        Receive the PRINT lines and EVENTs.
-    labels : sequence of str, optional
-        The 12 channel labels (:func:`parse_labels`); None chooses them from the frames.
-    echo : callable, optional
-        Also receives each PRINT line (e.g. to show it on stderr).
-    announce : callable, optional
-        Receives the one line of :func:`describe_labels` once the labels are chosen.
+    The first of the cart's first :data:`RECOGNISE_FRAMES` frames that carries the marker of one
+    of cartctl's firmwares names the channels (:func:`firmware_labels`); without one they are
+    QRoboticsCenter's; ``labels`` (:func:`parse_labels`) override them (the firmware is still
+    told, to ``announce``). The row sinks are opened once the labels are chosen, and the frames
+    and texts held until then are written at once, in order. ``echo`` also receives each PRINT
+    line. The caller closes the sinks.
     """
 
     def __init__(
@@ -226,37 +159,35 @@ class Monitor:
         self.rows, self.texts, self.echo, self.announce = list(rows), list(texts), echo, announce
         self.given_labels = None if labels is None else tuple(labels)
         self.labels: tuple[str, ...] | None = None
-        """The labels in use, once chosen (:meth:`open`, or the first frames)."""
         self.columns: tuple[str, ...] | None = None
         self.firmware: Firmware | None = None
         """The firmware the cart's frames named, once they were looked at (None: not cartctl's)."""
         self.result = MonitorResult()
         self.stop_requested = False
         self._decided = False  # whether the frames were looked at for a firmware
-        self._pending: list[tuple[list[tuple[str, str, str]], Gpio, float]] = []
+        self._looked: list[Gpio] = []  # the frames looked at for a marker
+        self._held: list[Callable[[], None]] = []  # rows and texts to write, in order
         self._last_ms: int | None = None  # the previous GPIO's stamp (ms)
         self._elapsed_ms = 0  # the stamps' distance from the first GPIO's (ms)
         self._cart_tick = -1  # the cart's tick of the last row, since the first GPIO
-        self._time_s = 0.0
-        self._texts: list[tuple[str, str, str]] = []  # (entity, text, level) to stamp and record
 
     def on_print(self, line: str) -> None:
-        """CartLink's PRINT callback: queue the line for the next stamp."""
-        self._texts.append((PRINT_ENTITY, line, "INFO"))
+        """CartLink's PRINT callback."""
         self.result.print_lines += 1
         if self.echo is not None:
             self.echo(line)
+        self._hold(lambda: self._log(PRINT_ENTITY, line))
 
     def on_event(self, event: Event) -> None:
-        """MonitorLink's EVENT callback: queue it for the next stamp."""
+        """CartLink's EVENT callback."""
+        self.result.events += 1
         button = event.button
         text = f"button {button} pressed" if button is not None else f"event {event.type}"
-        self._texts.append((EVENT_ENTITY, text, "INFO"))
-        self.result.events += 1
+        self._hold(lambda: self._log(EVENT_ENTITY, text))
 
     def open(self) -> None:
-        """Open the row sinks with the columns: the labels given, else those chosen so far
-        (QRoboticsCenter's before any frame). Once only; the labels are then fixed."""
+        """Open the row sinks with the labels given, else those chosen so far (QRoboticsCenter's
+        before any frame). Once only; the labels are then fixed."""
         if self.columns is not None:
             return
         self.labels = self.given_labels or self.labels or DEFAULT_LABELS
@@ -267,12 +198,11 @@ class Monitor:
     def run(self, link: CartLink, duration_s: float | None = None) -> MonitorResult:
         """Record until ``duration_s`` of cart time, a stop request or a line fault.
 
-        The GPIO whose cart time (since the first) reaches ``duration_s`` is not recorded, so a
-        run of S seconds holds S / 0.01 rows. A :class:`~cartctl.errors.PlantError` (silence,
-        vanished port) ends the run with ``stopped = 'fault'``; :attr:`stop_requested` (set from a
-        signal handler) or a KeyboardInterrupt with ``'interrupted'``. Nothing is raised for them.
-        However it ends, the sinks are open (labels chosen from the frames that came) and hold
-        every frame kept.
+        The GPIO whose cart time reaches ``duration_s`` is not recorded (S seconds: S / 0.01
+        rows). A :class:`~cartctl.errors.PlantError` ends the run with ``stopped = 'fault'``;
+        :attr:`stop_requested` (set from a signal handler) or a KeyboardInterrupt with
+        ``'interrupted'``; nothing is raised. However it ends, the sinks are open and hold every
+        frame kept.
         """
         result = self.result
         try:
@@ -291,23 +221,25 @@ class Monitor:
         except KeyboardInterrupt:
             result.stopped = "interrupted"
         if not self._decided:
-            last = self._pending[-1][1].floats[CH_FIRMWARE_ID] if self._pending else None
-            self._decide(None, last)
-        self._write_pending()
-        self._flush_texts()
+            self._decide(None, self._looked[-1].floats[CH_FIRMWARE_ID] if self._looked else None)
+        self._write_held()
         return result
 
+    def _hold(self, write: Callable[[], None]) -> None:
+        self._held.append(write)
+        if self._decided:
+            self._write_held()
+
     def _accept(self, gpio: Gpio, time_s: float) -> None:
-        """Keep a frame (with the texts that came before it); write it once the labels are
-        chosen, which the first frames decide."""
-        self._pending.append((self._texts, gpio, time_s))
-        self._texts = []
+        """Hold a frame; the first frames decide the labels, then what is held is written."""
+        self._held.append(lambda: self._record(gpio, time_s))
         if not self._decided:
+            self._looked.append(gpio)
             firmware = recognise_firmware(gpio.floats, gpio.ints)
-            if firmware is None and len(self._pending) < RECOGNISE_FRAMES:
+            if firmware is None and len(self._looked) < RECOGNISE_FRAMES:
                 return
             self._decide(firmware, gpio.floats[CH_FIRMWARE_ID])
-        self._write_pending()
+        self._write_held()
 
     def _decide(self, firmware: Firmware | None, marker: float | None) -> None:
         """Choose the labels (given, the firmware's, or the defaults), say so, open the sinks.
@@ -324,23 +256,32 @@ class Monitor:
             given = self.given_labels is not None
             self.announce(describe_labels(firmware, marker, self.labels, given=given))
 
-    def _write_pending(self) -> None:
-        """Write the frames kept, each after the texts that came before it."""
-        pending, self._pending = self._pending, []
-        later, self._texts = self._texts, []
-        for texts, gpio, time_s in pending:
-            self._texts = texts
-            self._flush_texts()
-            self._record(gpio, time_s)
-        self._texts = later + self._texts
+    def _write_held(self) -> None:
+        held, self._held = self._held, []
+        for write in held:
+            write()
+
+    def _record(self, gpio: Gpio, time_s: float) -> None:
+        # float32 values: their shortest text in the CSV is the float32's own
+        row = [time_s, self.result.frames, *np.asarray(gpio.floats, np.float32), *gpio.ints]
+        for sink in self.rows:
+            sink.write(row)
+        self.result.frames += 1
+        self.result.duration_s = time_s
+
+    def _log(self, entity: str, text: str) -> None:
+        """A text, stamped with the last row's time and tick."""
+        tick = max(0, self.result.frames - 1)
+        for sink in self.texts:
+            sink.log_text(entity, text, self.result.duration_s, tick, "INFO")
 
     def _cart_time_s(self, time_ms: int) -> float:
         """Cart time of this GPIO since the first (s): its tick (see the module) times Ts.
 
         The stamps are followed by their signed difference modulo 2³² from the previous one, so
         the u32 counter's wrap is a step like any other and a stamp a little behind its
-        predecessor is not read as 49 days ahead. Does not advance the tick: :meth:`run`
-        does, for the frames it keeps.
+        predecessor is not read as 49 days ahead. Does not advance the tick: :meth:`run` does,
+        for the frames it keeps.
         """
         if self._last_ms is not None:
             half = _TIME_MODULO_MS // 2
@@ -348,25 +289,6 @@ class Monitor:
         self._last_ms = time_ms
         tick = max(self._cart_tick + 1, round(self._elapsed_ms / _PERIOD_MS))
         return tick / _TICKS_PER_S  # a division: 0.03, not 3 × 0.01 = 0.030000000000000002
-
-    def _record(self, gpio: Gpio, time_s: float) -> None:
-        # float32 values: their shortest text in the CSV is the float32's own
-        row = [time_s, self.result.frames, *np.asarray(gpio.floats, np.float32), *gpio.ints]
-        for sink in self.rows:
-            sink.write(row)
-        self._time_s = time_s
-        self.result.frames += 1
-        self.result.duration_s = time_s
-
-    def _flush_texts(self) -> None:
-        texts = self._texts
-        if not texts:
-            return
-        tick = max(0, self.result.frames - 1)
-        for entity, text, level in texts:
-            for sink in self.texts:
-                sink.log_text(entity, text, self._time_s, tick, level)
-        texts.clear()
 
 
 def wait_started(link: CartLink, timeout_s: float) -> None:
