@@ -1,10 +1,5 @@
-"""The simulated ARX cart: each motor runs the difference equation of a model file.
-
-``--plant sim`` (default model ``models/ground.toml``). The model's own input delay nk is the
-whole delay from command to measurement; nothing else is added. Like the real cart, the commanded
-voltage is saturated at the supply limit (±12 V), and a non-finite command is treated as 0 V.
-Optional measurement noise is white and Gaussian, seeded.
-"""
+"""``--plant sim``: each motor runs the ARX difference equation of a model file, its nk the whole
+delay from command to measurement; commands saturate at ±12 V (non-finite: 0 V), as on the cart."""
 
 from __future__ import annotations
 

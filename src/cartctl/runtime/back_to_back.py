@@ -19,10 +19,8 @@ from cartctl.runtime.executor import TimingStats, check_count, check_period
 
 
 class BackToBackExecutor:
-    """Calls ``tick(k)`` for k = 0, 1, ... back to back; tick k sits at ``k * period_s``.
-
-    Stops after ``max_ticks``; calls ``idle`` every ``idle_every`` ticks and once at the end.
-    ``ticks`` counts the ticks completed by the current or last run.
+    """Calls ``tick(k)`` for k = 0, 1, ... back to back (tick k at ``k * period_s``) up to
+    ``max_ticks``, and ``idle`` every ``idle_every`` ticks and at the end; ``ticks`` counts them.
 
     Examples
     --------

@@ -1,9 +1,6 @@
-"""Open-loop experiments: drive a plant with voltage sequences and record a trace.
+"""Open-loop experiments (``cartctl excite``): drive a plant with voltage sequences, record a trace.
 
-``cartctl excite`` runs here. The plant paces the run: a simulated plant runs as fast as the CPU
-allows, a serial cart at its own 10 ms tick. Whatever happens (an error, Ctrl-C), the plant is left
-at zero volts and the samples recorded so far are returned.
-"""
+The plant paces the run (a simulated one as fast as the CPU allows, a cart at its 10 ms tick)."""
 
 from __future__ import annotations
 

@@ -26,11 +26,7 @@ def run_in_memory(
     period_s: float,
     voltage_limit_v: float,
 ) -> tuple[dict[str, NDArray[np.float64]], LoopState]:
-    """Run the loop on a simulated clock; the trace columns and what happened.
-
-    Arguments as for :class:`~cartctl.runtime.loop.ControlLoop`; a plant fault ends the run early
-    and is in ``state.failure``.
-    """
+    """The trace columns and what happened (a plant fault ends the run, in ``state.failure``)."""
     clock, memory = SimulatedClock(), MemorySink()
     loop = ControlLoop(plant, controllers, references, [memory], now_s=clock.now_s,
                        voltage_limit_v=voltage_limit_v, period_s=period_s)  # fmt: skip

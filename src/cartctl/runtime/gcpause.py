@@ -1,10 +1,6 @@
-"""The garbage collector kept out of the loop.
-
-CPython's cyclic collector runs when allocations pass a threshold, at whatever tick that happens,
-and a full collection walks every object the process holds (hundreds of thousands after importing
-numpy, scipy, python-control and the Rerun SDK): milliseconds, a deadline miss. The tick makes no
-reference cycles, so the loop can run without it.
-"""
+"""The garbage collector kept out of the loop: a full collection walks every object the process
+holds (hundreds of thousands after numpy, scipy, python-control and the Rerun SDK), milliseconds
+at whatever tick it happens; the tick makes no reference cycles, so the loop runs without it."""
 
 from __future__ import annotations
 

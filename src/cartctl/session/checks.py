@@ -65,8 +65,7 @@ def _fitting_controller(controller: ControllerFile, given: str, delay: int) -> s
     def other_method(name: str) -> bool:
         return name.removeprefix("serial-").removesuffix(".toml") != controller.method
 
-    names = sorted(SHIPPED_CONTROLLERS, key=other_method)
-    for name in names:
+    for name in sorted(SHIPPED_CONTROLLERS, key=other_method):
         for folder in folders:
             path = folder / name
             if not path.is_file() or path.resolve() == Path(given).resolve():
