@@ -7,14 +7,12 @@ checks, which loading compares with the gains.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import fields
 from typing import Any
 
-import numpy as np
-from numpy.typing import NDArray
-
 from cartctl.cart import check_voltage_limit
-from cartctl.design.controller_ss import feedback_gains, kalman_from_entry
+from cartctl.design.controller_ss import feedback_gains, feedback_tf_coeffs, kalman_from_entry
 from cartctl.design.controllerfile import ControllerFile
 from cartctl.design.kalman import KalmanDesign
 from cartctl.design.pi import PiDesign
@@ -50,17 +48,9 @@ def pi_entry(design: PiDesign, anti_windup: str, estimator: KalmanDesign | None)
     return entry
 
 
-def poles_entry(
-    design: PolesDesign,
-    controller_num: NDArray[np.float64] | None = None,
-    controller_den: NDArray[np.float64] | None = None,
-) -> dict[str, Any]:
-    """A pole-placement design's ``[motors.X]`` entry, with its feedback C(z) (computed when
-    not given)."""
-    if controller_num is None or controller_den is None:
-        from cartctl.design.controller_ss import feedback_tf_coeffs
-
-        controller_num, controller_den = feedback_tf_coeffs(design)
+def poles_entry(design: PolesDesign) -> dict[str, Any]:
+    """A pole-placement design's ``[motors.X]`` entry, with its feedback C(z)."""
+    controller_num, controller_den = feedback_tf_coeffs(design)
     return {
         "K": design.K,
         "Ki": design.Ki,
@@ -100,26 +90,31 @@ def build_controllers(
     out: dict[str, Controller] = {}
     for motor, entry in controller.motors.items():
         try:
-            if controller.method == "pi":
-                est = entry.get("estimator")
-                out[motor] = PiController(
-                    float(entry["kp"]),
-                    float(entry["ki"]),
-                    controller.period_s,
-                    voltage_limit_v=limit,
-                    anti_windup=str(entry.get("anti_windup", "conditional")),
-                    estimator=None if est is None else make_estimator(kalman_from_entry(est)),
-                )
-            else:
-                gains = feedback_gains(entry, controller.period_s)
-                out[motor] = StateFeedbackController(
-                    gains,
-                    estimator=make_estimator(gains.estimator),
-                    voltage_limit_v=limit,
-                )
+            out[motor] = motor_controller(controller.method, entry, controller.period_s, limit)
         except (KeyError, TypeError, ValueError) as exc:
             why = f" misses {exc.args[0]}" if isinstance(exc, KeyError) else f": {exc}"
             raise DataFileError(
                 controller.path or "controller file", f"[motors.{motor}]{why}"
             ) from None
     return out
+
+
+def motor_controller(
+    method: str, entry: Mapping[str, Any], period_s: float, voltage_limit_v: float
+) -> Controller:
+    """The runtime controller of one ``[motors.X]`` entry; KeyError, TypeError or ValueError for
+    a missing gain or one that is not a number."""
+    if method == "pi":
+        est = entry.get("estimator")
+        return PiController(
+            float(entry["kp"]),
+            float(entry["ki"]),
+            period_s,
+            voltage_limit_v=voltage_limit_v,
+            anti_windup=str(entry.get("anti_windup", "conditional")),
+            estimator=None if est is None else make_estimator(kalman_from_entry(est)),
+        )
+    gains = feedback_gains(entry, period_s)
+    return StateFeedbackController(
+        gains, estimator=make_estimator(gains.estimator), voltage_limit_v=voltage_limit_v
+    )

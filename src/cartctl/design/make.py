@@ -13,8 +13,7 @@ from typing import Any
 from cartctl.cart import nk_fits_loop_delay
 from cartctl.data.modelfile import ModelFile
 from cartctl.design.analysis import StepAnalysis, simulate_step
-from cartctl.design.build import make_estimator, pi_entry, poles_entry
-from cartctl.design.controller_ss import feedback_tf_coeffs
+from cartctl.design.build import motor_controller, pi_entry, poles_entry
 from cartctl.design.controllerfile import ControllerFile, common_loop_delay, file_sha256
 from cartctl.design.kalman import design_kalman
 from cartctl.design.limit import in_settling_band, settling_bound
@@ -25,8 +24,6 @@ from cartctl.design.request import DesignRequest, check_loop_delay
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 from cartctl.runtime.base import Controller
-from cartctl.runtime.pi import PiController
-from cartctl.runtime.statefeedback import StateFeedbackController
 
 ANALYSIS_KEYS = (
     "phase_margin_deg", "gain_margin_db", "crossover_hz", "sensitivity_peak", "closed_loop_poles",
@@ -47,57 +44,52 @@ class MotorDesign:
 
 
 def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
-    """Design one motor's controller as ``request`` asks."""
+    """Design one motor's controller as ``request`` asks; the runtime controller is built from
+    the file entry, as ``cartctl run`` builds it."""
     extra = request.extra_delay_ticks
+    noise: dict[str, Any] = {
+        "process_noise_std_v": request.process_noise_std_v,
+        "bias_drift_std_v": request.bias_drift_std_v,
+        "extra_noise_std_rad_s": request.extra_noise_std_rad_s,
+        "timing_noise_std_ticks": request.timing_noise_std_ticks,
+    }
     if request.method == "pi":
+        pm = request.phase_margin_deg
         if request.bandwidth_hz is not None:
             d = design_pi_bandwidth(model, bandwidth_hz=request.bandwidth_hz,
-                                    phase_margin_deg=request.phase_margin_deg,
-                                    extra_delay_ticks=extra)  # fmt: skip
+                                    phase_margin_deg=pm, extra_delay_ticks=extra)  # fmt: skip
         else:
-            d = design_pi(model, phase_margin_deg=request.phase_margin_deg,
-                          crossover_hz=request.crossover_hz, extra_delay_ticks=extra)  # fmt: skip
+            d = design_pi(model, phase_margin_deg=pm, crossover_hz=request.crossover_hz,
+                          extra_delay_ticks=extra)  # fmt: skip
         kalman = None
-        if request.estimator == "kalman":
-            kalman = design_kalman(model, process_noise_std_v=request.process_noise_std_v,
-                                   bias_drift_std_v=request.bias_drift_std_v,
-                                   extra_noise_std_rad_s=request.extra_noise_std_rad_s,
-                                   extra_delay_ticks=extra,
-                                   timing_noise_std_ticks=request.timing_noise_std_ticks)  # fmt: skip
-        ctrl = PiController(d.kp, d.ki, model.period_s, voltage_limit_v=request.voltage_limit_v,
-                            anti_windup=request.anti_windup,
-                            estimator=None if kalman is None else make_estimator(kalman))  # fmt: skip
         entry = d.to_dict()
-        if kalman is not None:
+        if request.estimator == "kalman":
+            kalman = design_kalman(model, extra_delay_ticks=extra, **noise)
             entry["estimator_poles"] = [[p.real, p.imag] for p in kalman.poles()]
-        return MotorDesign(ctrl, entry, pi_entry(d, request.anti_windup, kalman))
-    poles = request.pole_list()
-    placement = design_poles(
-        model,
-        poles=poles,
-        settling_time_s=None if poles else request.settling_time_s,
-        overshoot_percent=None if poles else request.overshoot_percent,
-        extra_delay_ticks=extra,
-        process_noise_std_v=request.process_noise_std_v,
-        bias_drift_std_v=request.bias_drift_std_v,
-        extra_noise_std_rad_s=request.extra_noise_std_rad_s,
-        timing_noise_std_ticks=request.timing_noise_std_ticks,
-    )
-    feedback = StateFeedbackController(
-        placement,
-        estimator=make_estimator(placement.estimator),
-        voltage_limit_v=request.voltage_limit_v,
-    )
-    num, den = feedback_tf_coeffs(placement)
-    loop = loop_analysis(num, den, model, extra)
-    keys = ("phase_margin_deg", "gain_margin_db", "crossover_hz", "sensitivity_peak")
-    entry = {
-        **{k: v for k, v in placement.to_dict().items() if k != "estimator"},
-        **{k: loop[k] for k in (*keys, "sensitivity_peak_db")},
-        "controller_num": num.tolist(),
-        "controller_den": den.tolist(),
-    }
-    return MotorDesign(feedback, entry, poles_entry(placement, num, den))
+        file_entry = pi_entry(d, request.anti_windup, kalman)
+    else:
+        poles = request.pole_list()
+        placement = design_poles(
+            model,
+            poles=poles,
+            settling_time_s=None if poles else request.settling_time_s,
+            overshoot_percent=None if poles else request.overshoot_percent,
+            extra_delay_ticks=extra,
+            **noise,
+        )
+        file_entry = poles_entry(placement)
+        num, den = file_entry["controller_num"], file_entry["controller_den"]
+        loop = loop_analysis(num, den, model, extra)
+        keys = ("phase_margin_deg", "gain_margin_db", "crossover_hz", "sensitivity_peak")
+        entry = {
+            **{k: v for k, v in placement.to_dict().items() if k != "estimator"},
+            **{k: loop[k] for k in (*keys, "sensitivity_peak_db")},
+            "controller_num": num.tolist(),
+            "controller_den": den.tolist(),
+        }
+    limit = request.voltage_limit_v
+    controller = motor_controller(request.method, file_entry, model.period_s, limit)
+    return MotorDesign(controller, entry, file_entry)
 
 
 def nk_note(nk: Mapping[str, int], loop_delay_ticks: int) -> str | None:
