@@ -1,20 +1,33 @@
-"""Commissioning's ``summary.md`` and its figures: one section per stage, written as stages end.
+"""What commissioning writes: ``summary.md`` (one section per stage), PNG figures, and one Rerun
+recording (``.rrd``) per stage.
 
-:class:`Report` keeps the sections so far and rewrites ``summary.md`` after each stage, so a run
-stopped anywhere (a failed stage, Ctrl-C) leaves a readable summary of what was done. The figures
-are PNGs beside it (matplotlib, no display needed).
+:class:`Report` rewrites ``summary.md`` after each stage, so a run stopped anywhere leaves a
+readable summary. A stage's recording holds its series on the ``time`` timeline and its figures
+as a Markdown note at ``commission/<stage>``; a trace goes under the run's Rerun entity paths with
+the run's layout, so ``cartctl review`` shows it as a run. Recording problems never stop
+commissioning: they come back as text for the summary.
 """
 
 from __future__ import annotations
 
 import math
+import uuid
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import rerun as rr
 from numpy.typing import NDArray
+
+from cartctl.commission import tuning, verify
+from cartctl.data.trace import Trace
+from cartctl.sinks.rerun_layout import ENTITY_PATHS, blueprint
+from cartctl.sinks.rerun_problems import file_failure
+from cartctl.sinks.rerun_sink import APPLICATION_ID
+
+Series = dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]  # name → (time s, values)
 
 
 def fmt(value: float | None, digits: int = 2, scale: float = 1.0, unit: str = "") -> str:
@@ -35,16 +48,7 @@ def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
 
 @dataclass
 class Report:
-    """The summary's sections, rewritten to ``path`` on every :meth:`add`.
-
-    Attributes
-    ----------
-    path : Path
-        ``summary.md``.
-    title : str
-    sections : list of (str, str)
-        (heading, Markdown body) in stage order.
-    """
+    """The summary's sections (heading, Markdown body), rewritten to ``path`` on every :meth:`add`."""
 
     path: Path
     title: str
@@ -57,7 +61,7 @@ class Report:
         self.write()
 
     def write(self) -> None:
-        """Write ``summary.md`` (via a temporary file: the old one stays whole until then)."""
+        """Write ``summary.md`` via a temporary file, so the old one stays whole until then."""
         text = f"# {self.title}\n\n" + "\n\n".join(f"## {h}\n\n{b.strip()}"
                                                   for h, b in self.sections) + "\n"  # fmt: skip
         tmp = self.path.with_suffix(".md.tmp")
@@ -120,3 +124,135 @@ def model_body(result: Any, verdicts: Mapping[str, Any], model_name: str) -> str
                    "white", "verdict"], rows)
             + "".join(f"\n\n{note}." for note in result.notes)
             + f"\n\nFiles: {model_name}, identification.rrd, identification.png.")  # fmt: skip
+
+
+def tuning_body(result: tuning.TuningResult, command: str) -> str:
+    """The tuning section: the rule, the grid's table (worse of motors a and b), the choice."""
+    rows = []
+    for row in result.rows:
+        r = tuning.row_summary(row)
+        s = r["settings"]
+        mark = "**→**" if row.index == result.chosen.index else ("*" if r.get("pareto") else "")
+        if "nominal" not in r:
+            rows.append([mark, str(r["index"]), f"{s['settling-time'] * 1e3:g}",
+                         f"{s['overshoot']:g}", r["status"], "", "", "", "", ""])  # fmt: skip
+            continue
+        nom, worst = r["nominal"], r["worst"]
+        timing = " / ".join(fmt(e["overshoot_percent"], 1) for e in r["timing"])
+        rows.append([mark, str(r["index"]), f"{s['settling-time'] * 1e3:g}", f"{s['overshoot']:g}",
+                     fmt(nom["overshoot_percent"], 1), fmt(nom["settling_time_s"], 0, 1e3),
+                     fmt(worst["overshoot_percent"], 1), fmt(worst["settling_time_s"], 0, 1e3),
+                     timing, fmt(nom["peak_voltage_v"], 1)])  # fmt: skip
+    later = " and ".join(f"{f * 10:g} ms" for f in tuning.LATER_FRACTIONS)
+    headers = ["", "#", "settling target (ms)", "overshoot target (%)", "nominal overshoot (%)",
+               "nominal settling (ms)", "worst overshoot (%)", "worst settling (ms)",
+               f"timing plants overshoot (%) ({later})", "peak voltage (V)"]  # fmt: skip
+    return (
+        f"Pole placement with a Kalman estimator, designed for a loop delay of "
+        f"{result.design_fixed['loop_delay_ticks']} tick(s); each setting run in the simulated "
+        f"loop ({tuning.REFERENCE}, {tuning.DURATION_S:g} s) on the model (nominal), on "
+        f"{tuning.PLANTS} plants drawn from its uncertainty (θ ± its standard deviation, DC gain "
+        f"±10 %, loop delay −1/0/+1 tick; worst = over them, the model and the timing plants) "
+        f"and on the model with each command landing {later} later (timing plants).\n\n"
+        f"Choice: among the settings that settle on every plant, with overshoot ≤ "
+        f"{tuning.MAX_OVERSHOOT_PERCENT:g} % on the model and on the timing plants and nominal "
+        f"settling ≤ {tuning.MAX_SETTLING_S * 1e3:g} ms, the lowest worst-case overshoot, then "
+        f"the fastest nominal settling (`tune --robust --choose best`'s rule).\n\n"
+        + table(headers, rows)
+        + f"\n\n→ chosen; *: on the robust Pareto front. Controller: `{command}`.\n\n"
+        + "".join(f"Setting #{i} passed over: {why}.\n\n" for i, why in result.refused)
+        + "Files: controller.toml, tuning.rrd, tuning.png."
+    )
+
+
+def tuning_steps(controller_path: Path, model_path: Path, png: Path) -> Series:
+    """The chosen controller's simulated step on the model and the timing plants (series, PNG)."""
+    from cartctl.data.modelfile import load_models
+    from cartctl.design.build import build_controllers
+    from cartctl.design.controllerfile import load_controller
+    from cartctl.plants.sim import ArxPlant
+    from cartctl.reference import reference_signal
+    from cartctl.runtime.fast import run_in_memory
+
+    file = load_controller(controller_path)
+    models = load_models(model_path)
+    n = round(tuning.DURATION_S / models.period_s)
+    plants = {"model": [models.motor(m) for m in "ab"]}
+    for f in tuning.LATER_FRACTIONS:
+        plants[f"{f * 10:g} ms later"] = [tuning.later_command(models.motor(m), f) for m in "ab"]
+    series: Series = {}
+    speed, volts = {}, {}
+    for name, (a, b) in plants.items():
+        refs = {m: reference_signal(tuning.REFERENCE, n, models.period_s, m) for m in "ab"}
+        columns, _ = run_in_memory(ArxPlant(a, b), build_controllers(file), refs,
+                                   period_s=models.period_s,
+                                   voltage_limit_v=file.voltage_limit_v)  # fmt: skip
+        t = columns["time_s"]
+        key = name.replace(" ", "_")
+        for m in "ab":
+            series[f"tuning/{key}/speed_{m}"] = (t, columns[f"speed_{m}"])
+            series[f"tuning/{key}/voltage_{m}"] = (t, columns[f"voltage_{m}"])
+        speed[f"motor a, {name}"] = (t, columns["speed_a"])
+        volts[f"motor a, {name}"] = (t, columns["voltage_a"])
+        series["tuning/reference"] = (t, columns["reference_a"])
+    plot_lines(png, "The chosen controller's simulated step", [
+        ("speed (rad/s)", speed), ("voltage (V)", volts)])  # fmt: skip
+    return series
+
+
+def verification_body(checked: verify.Verification, summary: dict[str, Any],
+                      argv: list[str]) -> str:  # fmt: skip
+    """The verification section: measured against predicted, the bounds, pass or fail."""
+    m, p, lim = checked.measured, checked.predicted, checked.limits
+    rows = [
+        ["overshoot (%)", fmt(m["overshoot_percent"], 2), fmt(p.get("nominal_overshoot_percent"), 2),
+         fmt(p.get("worst_overshoot_percent"), 2), f"≤ {lim['overshoot_percent']:.2f}"],
+        ["settling (ms)", fmt(m["settling_time_s"], 0, 1e3),
+         fmt(p.get("nominal_settling_time_s"), 0, 1e3), fmt(p.get("worst_settling_time_s"), 0, 1e3),
+         f"≤ {lim['settling_time_s'] * 1e3:.0f}"],
+    ]  # fmt: skip
+    return (
+        f"`cartctl {' '.join(argv)}` (worse of motors a and b, on the {lim['speed']} speed).\n\n"
+        + table(["", "measured", "predicted nominal", "predicted worst", "pass bound"], rows)
+        + f"\n\n**{'PASS' if checked.passed else 'FAIL'}**. Bounds: overshoot ≤ max("
+        f"{verify.TARGET_OVERSHOOT_PERCENT:g} %, predicted nominal) + a tolerance "
+        f"({verify.TRUE_SPEED_TOLERANCE_PP:g} point on a true speed, half an encoder count per "
+        "tick over the step more on the smoothed speed, a whole count on the bare encoder "
+        f"speed); settling ≤ max({verify.TARGET_SETTLING_S * 1e3:g} ms, "
+        "predicted nominal + 20 ms). The prediction is the linear model's: a cart's friction "
+        "and encoder, which the model leaves out, usually add a point or two of overshoot; the "
+        "bounds are the targets, the prediction is shown beside them.\n\n"
+        f"Files: {Path(str(summary.get('trace'))).name}, "
+        f"{Path(str(summary.get('recording'))).name}."
+    )
+
+
+def trace_series(trace: Trace) -> Series:
+    """A trace's columns under the run's Rerun entity paths."""
+    t = np.asarray(trace.time_s, dtype=float)
+    return {ENTITY_PATHS[c]: (t, np.asarray(v, dtype=float))
+            for c, v in trace.columns().items() if c in ENTITY_PATHS}  # fmt: skip
+
+
+def record_stage(path: Path, series: Series, note: str, stage: str, *,
+                 layout: bool = False) -> str | None:  # fmt: skip
+    """Write ``series`` and ``note`` (Markdown) to ``path``, with the run's layout if ``layout``;
+    returns a problem's description, or None.
+    """
+    try:
+        rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
+        path.parent.mkdir(parents=True, exist_ok=True)
+        rec.set_sinks(rr.FileSink(path))
+        rec.send_recording_name(path.stem)
+        if layout:
+            rec.send_blueprint(blueprint(("a", "b"), None))
+        rec.log(f"commission/{stage}", rr.TextDocument(note, media_type=rr.MediaType.MARKDOWN),
+                static=True)  # fmt: skip
+        for entity, (time_s, values) in series.items():
+            rec.send_columns(entity, indexes=[rr.TimeColumn("time", duration=np.asarray(time_s))],
+                             columns=rr.Scalars.columns(scalars=np.asarray(values, float)))  # fmt: skip
+        rec.flush(timeout_sec=5.0)
+        rec.disconnect()
+    except Exception as exc:  # the SDK's failures: commissioning goes on, the summary says so
+        return f"{path}: {file_failure(exc, path) or exc}"  # the SDK's own log lines are off
+    return None

@@ -18,8 +18,6 @@ import numpy as np
 from cartctl.cart import PERIOD_S
 from cartctl.cli.progress import ProgressBar
 from cartctl.commission import StageError, checks, modelcheck, report, tuning, verify
-from cartctl.commission.recording import record_stage, trace_series
-from cartctl.commission.tuning import later_command
 from cartctl.data.trace import Trace, write_trace
 from cartctl.plants.base import ClockedPlant
 from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
@@ -71,7 +69,7 @@ class Commission:
               file=sys.stderr, flush=True)  # fmt: skip
 
     def _record(self, name: str, series: Any, note: str, *, layout: bool = False) -> None:
-        problem = record_stage(self.out / f"{name}.rrd", series, note, name, layout=layout)
+        problem = report.record_stage(self.out / f"{name}.rrd", series, note, name, layout=layout)
         if problem:
             self.problems.append(problem)
 
@@ -131,7 +129,7 @@ class Commission:
         report.plot_lines(self.out / "checks.png", "Checks: pulses, then ramps", [
             ("voltage (V)", {f"motor {m}": (trace.time_s, trace.voltage(m)) for m in "ab"}),
             ("speed (rad/s)", {f"motor {m}": (trace.time_s, trace.speed(m)) for m in "ab"})])  # fmt: skip
-        self._record("checks", trace_series(trace), body, layout=True)
+        self._record("checks", report.trace_series(trace), body, layout=True)
         self.results["checks"] = {"plant": self.description,
                                   "loop_delay_ticks": self.loop_delay_ticks,
                                   "motors": {m: c.to_dict() for m, c in found.items()},
@@ -158,7 +156,7 @@ class Commission:
                 f"{self.amplitude.voltage_v:g} V on both motors; peak speeds "
                 + ", ".join(f"{m} {np.max(np.abs(trace.speed(m))):.1f} rad/s" for m in "ab")
                 + ".\n\nFiles: excitation.csv, excitation.rrd.")  # fmt: skip
-        self._record("excitation", trace_series(trace), body, layout=True)
+        self._record("excitation", report.trace_series(trace), body, layout=True)
         self.results["excitation"] = {"amplitude_v": self.amplitude.voltage_v, "ticks": len(trace),
                                       "trace": str(self.out / "excitation.csv")}  # fmt: skip
         self.report.add("excitation", body)
@@ -225,12 +223,10 @@ class Commission:
         finally:
             bar.close()
         command = tuning.save_chosen(self.tuned, self.model_path, self.controller_path)
-        from cartctl.commission.tuning_report import tuning_body, tuning_steps
-
         chosen = tuning.row_summary(self.tuned.chosen)
-        body = tuning_body(self.tuned, command)
-        series = tuning_steps(self.controller_path, self.model_path, later_command,
-                              self.out / "tuning.png")  # fmt: skip
+        body = report.tuning_body(self.tuned, command)
+        series = report.tuning_steps(self.controller_path, self.model_path,
+                                     self.out / "tuning.png")  # fmt: skip
         self._record("tuning", series, body)
         self.results["controller"] = {"path": str(self.controller_path), "command": command,
                                       "settings": chosen["settings"],
@@ -259,8 +255,6 @@ class Commission:
                 raise StageStoppedError("verification", None)
             raise StageError(f"verification: the closed-loop run ended with code {code}; see "
                               f"{self.out / 'verification.csv'}")  # fmt: skip
-        from cartctl.commission.tuning_report import verification_body
-
         smoothed = None  # run's figures on the RTS-smoothed speed, where it has no true speed
         if summary.get("metrics_signal") != "true_speed":
             smoothed = {m: f["smoothed"] for m, f in (summary.get("motors") or {}).items()
@@ -269,7 +263,7 @@ class Commission:
         self.results["verification"] = {**checked.to_dict(), "trace": summary.get("trace"),
                                          "recording": summary.get("recording"),
                                          "command": "cartctl " + " ".join(argv)}  # fmt: skip
-        body = verification_body(checked, summary, argv)
+        body = report.verification_body(checked, summary, argv)
         self.report.add("verification", body)
         if not checked.passed:
             raise StageError(
