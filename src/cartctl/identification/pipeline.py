@@ -73,11 +73,11 @@ class MotorIdentification:
     motor: str
     chosen: ArxFit
     arx: ArxFit
+    diagnostics: Diagnostics
     oe: ArxFit | None = None
     unfiltered: ArxFit | None = None
     delay: DelayEstimate | None = None
     cycles_averaged: int | None = None
-    diagnostics: Diagnostics | None = None
 
     def variants(self) -> dict[str, ArxFit]:
         """Every fit made, by label, for tables and plots."""
@@ -100,9 +100,7 @@ class MotorIdentification:
             out["unfiltered"] = self.unfiltered.to_dict()
         out["delay_estimate"] = None if self.delay is None else self.delay.to_dict()
         out["cycles_averaged"] = self.cycles_averaged
-        if self.diagnostics is not None:
-            out |= self.diagnostics.to_dict()
-        return out
+        return out | self.diagnostics.to_dict()
 
 
 @dataclass(frozen=True)
@@ -296,7 +294,7 @@ def model_file(
     for m, r in result.motors.items():
         if r.cycles_averaged:
             notes.append(f"motor {m}: {r.cycles_averaged} cycles averaged")
-        if r.diagnostics is not None and r.diagnostics.fit_on == "validation":
+        if r.diagnostics.fit_on == "validation":
             notes.append(f"motor {m}: fits on validation data")
     provenance = Provenance(
         source=source,

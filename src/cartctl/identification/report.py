@@ -1,10 +1,13 @@
-"""The time-domain figures and the markdown summary of ``cartctl identify --report``: the
-experiment's input and output (the report's figures 3, 11) and the step validation (figures 6, 7);
-the frequency-domain ones live in :mod:`~cartctl.identification.plots_freq`.
+"""``cartctl identify --report DIR``: figures and ``summary.md`` from the results ``--json``
+prints. Here the experiment's input and output (the report's figures 3, 11), measured against
+simulated speed (figures 6, 7), the markdown writer and the report itself: per motor also the ETFE
+against the models' Bode plots and the pole-zero map (:mod:`~cartctl.identification.figures`),
+the residual tests, tables of θ ± σ(θ) and the fits, and the order table.
 """
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -14,10 +17,22 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from cartctl.data.modelfile import ModelFile
 from cartctl.data.trace import Trace
 from cartctl.errors import InputError
-from cartctl.identification.plots_freq import color, figure, plot_etfe, plot_pzmap, save
+from cartctl.identification.cycles import find_period
+from cartctl.identification.etfe import etfe
+from cartctl.identification.figures import (
+    color,
+    figure,
+    plot_etfe,
+    plot_pzmap,
+    plot_residuals,
+    save,
+)
+from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, MotorIdentification
 from cartctl.measures.metrics import fit_percent
+from cartctl.model import ArxModel
 
 __all__ = [
     "ReportSection",
@@ -25,6 +40,7 @@ __all__ = [
     "plot_io",
     "plot_pzmap",
     "plot_step_validation",
+    "write_identify_report",
     "write_summary",
 ]
 
@@ -173,3 +189,182 @@ def write_summary(out_dir: Path, *, title: str, sections: Sequence[ReportSection
     path = out_dir / "summary.md"
     path.write_text("\n".join(lines), encoding="utf-8")
     return path
+
+
+def _fit_text(value: float | None) -> str:
+    return "diverges" if value is None or not math.isfinite(value) else f"{value:.2f}"
+
+
+def _std(std: float, value: float) -> str:
+    return "0" if abs(std) < 1e-9 * abs(value) else f"{std:.2g}"
+
+
+def _row(label: str, model: ArxModel, names: list[str], std: Any, sim: Any, pred: Any) -> dict:
+    row: dict[str, Any] = {"model": label, "nk": model.nk}
+    na = model.na
+    for i, (name, value) in enumerate(zip(names, model.theta, strict=False)):
+        unit = "–" if i < na else "rad/s/V"
+        row[f"{name} ({unit})"] = f"{value:.4g}" + (
+            "" if std is None else f" ± {_std(std[i], value)}"
+        )
+    row["fit sim (%)"] = _fit_text(sim)
+    row["fit pred (%)"] = _fit_text(pred)
+    row["DC gain (rad/s/V)"] = f"{model.dc_gain():.4g}"
+    row["poles (Hz)"] = ", ".join(
+        f"{r.freq_hz:.2f}" for r in model.poles() if r.freq_hz is not None
+    )
+    return row
+
+
+def fit_rows(
+    res: MotorIdentification, compared: Mapping[str, ArxModel] | None = None
+) -> list[dict[str, Any]]:
+    """A table row per fitted variant (θ ± σ, fits, DC gain, pole frequencies), then per
+    compared model (θ, its fits on the same data)."""
+    rows = []
+    names: list[str] = []
+    for label, fit in res.variants().items():
+        names = fit.theta_names()
+        rows.append(_row(label, fit.model, names, fit.theta_std, fit.fit_simulation_percent,
+                         fit.fit_prediction_percent))  # fmt: skip
+    if compared:
+        fits = res.diagnostics.compared_fits(compared)
+        for label, model in compared.items():
+            f = fits[label]
+            own = (
+                names
+                if model.theta.size == len(names)
+                else [f"a{i + 1}" for i in range(model.na)] + [f"b{j}" for j in range(model.nb)]
+            )
+            rows.append(_row(label, model, own, None, f["fit_simulation_percent"],
+                             f["fit_prediction_percent"]))  # fmt: skip
+    return rows
+
+
+def _motor_section(
+    res: MotorIdentification,
+    trace: Trace,
+    out_dir: Path,
+    compare: Mapping[str, ModelFile],
+) -> ReportSection:
+    m = res.motor
+    y, u, ts = trace.speed(m), trace.voltage(m), trace.period_s
+    models: dict[str, ArxModel] = {label: fit.model for label, fit in res.variants().items()}
+    files = {f"{Path(path).stem} ({path})": mf.motors[m] for path, mf in compare.items()
+             if m in mf.motors}  # fmt: skip
+    compared = models | files
+    chosen = next(label for label, fit in res.variants().items() if fit is res.chosen)
+    ordered = {chosen: models[chosen]} | compared
+    diag = res.diagnostics
+    images = []
+    period = find_period(u)
+    response = etfe(y, u, ts, period_ticks=period)
+    images.append(plot_etfe(response, ordered, out_dir / f"etfe_{m}.png",
+                            title=f"Motor {m}: empirical transfer function and models",
+                            band=diag.band))  # fmt: skip
+    images.append(
+        plot_pzmap(compared, out_dir / f"pzmap_{m}.png", title=f"Motor {m}: pole-zero map")
+    )
+    simulated = {label: model.simulate(u) for label, model in compared.items()}
+    images.append(
+        plot_step_validation(trace.time_s, u, y, simulated, out_dir / f"simulation_{m}.png",
+                             title=f"Motor {m}: measured and simulated speed ({trace.source})")
+    )  # fmt: skip
+    on = diag.fit_on
+    text = [
+        "Fits: *sim* is the model simulated from the input alone on the raw data; *pred* is the "
+        "one-step-ahead prediction on the fitted data. ± is one standard deviation."
+        if on == "estimation"
+        else "Fits on the validation data: *sim* simulated from its input alone, *pred* "
+        "predicted one step ahead. ± is one standard deviation.",
+        "",
+        f"Empirical transfer function: {'whole periods of ' + str(period) + ' ticks, averaged over ' + str(response.n_segments) if period else 'the whole record (input not periodic)'}.",
+    ]
+    if res.delay is not None:
+        evidence = ", ".join(
+            f"nk = {nk}: {rms:.4g} rad/s"
+            for nk, rms in zip(res.delay.candidates, res.delay.residual_rms, strict=True)
+        )
+        text += [
+            "",
+            f"Delay estimated as nk = {res.delay.nk}, one for all motors identified, from their joint "
+            f"evidence (this motor's equation-error RMS per candidate: {evidence}"
+            + ("" if res.delay.nk_alone is None else f"; on its own: nk = {res.delay.nk_alone}")
+            + ").",
+        ]
+    if res.cycles_averaged:
+        text += [
+            "",
+            f"{res.cycles_averaged} whole excitation cycles were averaged before the ARX fit.",
+        ]
+    images.append(plot_residuals(diag.residuals, out_dir / f"residuals_{m}.png",
+                                 title=f"Motor {m}: residual tests ({chosen}, {on} data)"))  # fmt: skip
+    text += [
+        "",
+        f"Residual tests of the {chosen} model on the {on} data: {diag.residuals.summary()}.",
+    ]
+    if diag.band is not None:
+        text += ["", f"Bode bands of the {chosen} model: {diag.band.to_dict()['method']}."]
+    return ReportSection(
+        heading=f"Motor {m}",
+        text="\n".join(text),
+        images=[p.relative_to(out_dir) for p in images],
+        table=fit_rows(res, files),
+    )
+
+
+def _orders_section(res: MotorIdentification) -> ReportSection | None:
+    table = res.diagnostics.orders
+    if table is None:
+        return None
+    rows = []
+    for r in table.rows:
+        rows.append({
+            "na": r.na, "nb": r.nb, "nk": r.nk, "params": r.params,
+            "loss V ((rad/s)²)": "" if r.error else f"{r.loss:.4f}",
+            "AIC (–)": "" if r.error else f"{r.aic:.1f}",
+            "FPE ((rad/s)²)": "" if r.error else f"{r.fpe:.4f}",
+            f"sim fit, {table.fit_on} (%)": r.error or r.fit_text(),
+            "best": ", ".join(table.marks(r)),
+        })  # fmt: skip
+    return ReportSection(
+        heading=f"Motor {res.motor}: orders and delay",
+        text=f"ARX fits on N = {table.n_equations} common equations. V is the mean squared "
+        "equation error, AIC = N ln V + 2d, FPE = V (1 + d/N) / (1 − d/N) with d = na + nb; the "
+        f"fit is the simulation's NRMSE on the {table.fit_on} data.",
+        table=rows,
+    )
+
+
+def write_identify_report(
+    out_dir: str | Path,
+    result: IdentifyResult,
+    traces: Sequence[Trace],
+    request: IdentifyRequest,
+    compare: Mapping[str, ModelFile] | None = None,
+) -> Path:
+    """Write the PNG figures (from the first trace that drives each motor) and ``summary.md``
+    into ``out_dir``; returns the summary's path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    first = traces[0]
+    io_png = plot_io(
+        first, list(result.motors), out / "io.png", title=f"Experiment: {first.source}"
+    )
+    what = f"{request.method.upper()} (na = {request.na}, nb = {request.nb})"
+    what += f", prefilter {request.prefilter.describe()}" if request.prefilter else ", no prefilter"
+    sections = [
+        ReportSection(
+            heading="Experiment",
+            text=f"Data: {', '.join(str(t.source) for t in traces)}. Method: {what}. "
+            f"Ts = {result.period_s * 1e3:g} ms.",
+            images=[io_png.relative_to(out)],
+        )
+    ]
+    for motor, res in result.motors.items():
+        trace = next(t for t in traces if (t.voltage(motor) != 0.0).any())
+        sections.append(_motor_section(res, trace, out, compare or {}))
+        orders = _orders_section(res)
+        if orders is not None:
+            sections.append(orders)
+    return write_summary(out, title="Motor identification", sections=sections)

@@ -356,7 +356,7 @@ def run(args: argparse.Namespace) -> int:
         source = command_line("identify")
         save_models(model_file(result, args.files, request, source=source), args.out)
     if args.report:
-        from cartctl.identification.summary import write_identify_report
+        from cartctl.identification.report import write_identify_report
 
         write_identify_report(args.report, result, traces, request, compare)
     if args.json:

@@ -1,5 +1,6 @@
-"""The identification figures: their common style and saving, the ETFE with the models' Bode
-plots (the report's figure 4) and the pole-zero map (figures 5, 12).
+"""The identification figures' common style and saving, and the analysis figures: the ETFE with
+the models' Bode plots (the report's figure 4), the pole-zero map (figures 5, 12) and the
+residual tests.
 
 matplotlib is imported inside the functions (the package import stays light) and figures are
 drawn on their own canvases, without pyplot's global state.
@@ -24,6 +25,7 @@ if TYPE_CHECKING:
     from matplotlib.typing import RcKeyType
 
     from cartctl.identification.diagnostics import BodeBand
+    from cartctl.identification.residuals import ResidualTest
 
 
 DPI = 110
@@ -262,3 +264,39 @@ def _label_poles(ax: Any, labels: list[tuple[complex, str, str]], view_width: fl
             fontweight="bold",
             arrowprops={"arrowstyle": "-", "color": tint, "lw": 0.7, "shrinkA": 0, "shrinkB": 5},
         )
+
+
+def plot_residuals(test: ResidualTest, path: Path, *, title: str) -> Path:
+    """Autocorrelation above, cross-correlation with the input below, 99 % bounds shaded;
+    returns ``path``."""
+    with figure(9.0, 6.2) as fig:
+        ax_a, ax_c = fig.subplots(2, 1)
+        panels = (
+            (ax_a, test.auto_lags, test.auto, test.bound_99, test.white, "white",
+             "autocorrelation of the residuals r_ε(τ)", test.auto_outside),
+            (ax_c, test.cross_lags, test.cross, test.cross_bound_99, test.independent,
+             "independent", "cross-correlation with the input r_εu(τ)", test.cross_outside),
+        )  # fmt: skip
+        for ax, lags, r, bound, ok, word, what, outside in panels:
+            ax.axhspan(-bound, bound, color="tab:blue", alpha=0.15, lw=0, label="99 % bound")
+            ax.axhline(0.0, color="0.3", lw=0.8)
+            inside = np.abs(r) <= bound
+            ax.vlines(lags, 0.0, r, color="0.25", lw=1.2)
+            ax.plot(lags[inside], r[inside], "o", color="0.25", markersize=4)
+            ax.plot(lags[~inside], r[~inside], "o", color="tab:red", markersize=5)
+            reach = max(1.6 * bound, 1.15 * float(np.max(np.abs(r))))
+            ax.set_ylim(-reach, reach)
+            ax.set_xlim(lags[0] - 0.8, lags[-1] + 0.8)
+            ax.set_ylabel("correlation (–)")
+            verdict = word if ok else f"not {word}"
+            ax.set_title(
+                f"{what}: {outside} of {lags.size} lags outside ±{bound:.3f} ({verdict})",
+                fontsize=10,
+            )
+        ax_a.set_xlabel("lag τ (ticks)")
+        ax_c.set_xlabel("lag τ (ticks); τ > 0: input before the residual")
+        ax_a.legend(loc="upper right")
+        if test.negligible:
+            title += "\nresiduals at rounding level (RMS below 1e-6 of the output's): no test"
+        fig.suptitle(title)
+        return save(fig, path)
