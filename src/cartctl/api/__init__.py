@@ -1,21 +1,9 @@
 """cartctl from Python: the functions behind the commands, for notebooks and scripts.
 
-From an experiment to a closed-loop step, with no cart::
-
-    import cartctl
-
-    trace = cartctl.excite(plant="physics", signal="square", amplitude_v=10, cycles=3)
-    ident = cartctl.identify(trace)                    # the report's ARX, nk = 2
-    print(ident)                                       # θ and the fits, one line per motor
-    ident.save("models/mine.toml")
-    design = cartctl.design_pi("models/mine.toml", phase_margin_deg=65, crossover_hz=4)
-    run = cartctl.simulate(design, plant="physics", reference="step:10", duration_s=2)
-    run.plot()                                         # speed, reference and voltage (matplotlib)
-
-Every function is the path the command line takes (``cartctl excite``, ``identify``, ``design``,
-``run --fast``), so a notebook and a shell give the same numbers. Errors are
-:class:`~cartctl.errors.CartctlError` with the one-line messages of the CLI. The results
-(:mod:`cartctl.api.results`) print as a few lines and show as small tables in Jupyter.
+Each function takes the command line's path (``cartctl excite``, ``identify``, ``design``,
+``run --fast``), so a notebook and a shell give the same numbers, and raises
+:class:`~cartctl.errors.CartctlError` with the CLI's one-line messages. The results are in
+:mod:`cartctl.api.results`; the user guide (docs/python-api.md) walks through a session.
 """
 
 from __future__ import annotations
@@ -27,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from cartctl.api.results import Design, Identification, MotorResult, SimulationResult
+from cartctl.api.results import MOTORS, Design, Identification, MotorResult, SimulationResult
 from cartctl.choices import DEFAULT_MODEL
 from cartctl.data.modelfile import ModelFile, load_models, save_models
 from cartctl.data.read import read_trace
@@ -59,15 +47,12 @@ __all__ = [
     "simulate",
 ]
 
-MOTORS = ("a", "b")
-
 
 def load_trace(path: str | Path, map: str | Mapping[str, str] | None = None) -> Trace:
     """Read an experiment: a trace CSV or a QRoboticsCenter log (as every command does).
 
     Parameters
     ----------
-    path : str or Path
     map : str or mapping, optional
         Which log channel is which column: ``"voltage_a=FloatIn2,speed_a=FloatIn0"`` or a dict.
     """
@@ -160,22 +145,17 @@ def identify(
     Parameters
     ----------
     traces : Trace, path, or a sequence of them
-    motors : sequence of {'a', 'b'}
     delay : int or 'auto'
         Input delay nk (2 on board, as in the report), or 'auto' to estimate it.
-    na, nb : int
-        Model orders.
     method : {'arx', 'oe'}
     prefilter_hz : float, optional
         Butterworth prefilter cut-off (Hz); None: no prefilter.
-    prefilter_order : int
-    zero_phase : bool
     average : bool
         Average whole excitation cycles before the fit.
     loop_delay_ticks : int, optional
-        The loop the data was recorded in (ticks from a measurement to the voltage it leads to
-        being on the motor), written into the model for design. Default: from the ``.meta.toml``
-        files beside traces given by path (``cartctl excite`` writes them), else unknown.
+        Ticks from a measurement to the voltage it leads to being on the motor in the loop that
+        recorded the data, written into the model for design. Default: from the ``.meta.toml``
+        beside traces given by path, else unknown.
     """
     from cartctl.data.tracemeta import loop_delay_of
 
@@ -262,7 +242,7 @@ def simulate(
     noise_std_rad_s: float = 0.0,
     seed: int | None = None,
 ) -> SimulationResult:
-    """Run a controller in the simulated loop, as ``cartctl run --fast`` does.
+    """Run a controller in the simulated loop, as ``cartctl run --fast`` does, refusing what it refuses.
 
     Parameters
     ----------
@@ -272,7 +252,6 @@ def simulate(
         physical simulator with ``preset`` (and the actuation timing, ms).
     reference : str
         A reference spec (``step:10``, ``square:8:2``, ``file:ref.csv`` …).
-    duration_s : float
     """
     _check_simulated(plant, "simulate")
     if isinstance(controller, Design):

@@ -1,12 +1,16 @@
 """The results the Python API returns: identified models, designs and simulated runs.
 
-Each prints as a few lines (``print(ident)``) and shows as a small table in Jupyter; the arrays
-and the full results stay in their attributes. :mod:`cartctl.api` makes them.
+Each prints as a title, one table row per motor and a line of hints (:class:`Summary`), and
+shows as the same table in Jupyter; the arrays and full results stay in their attributes.
+matplotlib is imported only when a figure is drawn.
 """
 
 from __future__ import annotations
 
+import html
+import math
 import shlex
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -14,7 +18,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.api.display import Summary, number, numbers, plot_run
 from cartctl.data.modelfile import ModelFile, save_models
 from cartctl.design.controllerfile import ControllerFile, save_controller
 from cartctl.design.make import Designs, controller_file
@@ -22,9 +25,110 @@ from cartctl.design.request import DesignRequest
 from cartctl.errors import InputError
 from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, MotorIdentification
 from cartctl.identification.pipeline import model_file as identified_model_file
+from cartctl.measures.numfmt import MISSING, render_table
 from cartctl.model import ArxModel
 
 __all__ = ["Design", "Identification", "MotorResult", "SimulationResult"]
+
+
+def number(value: float | None, digits: int = 4) -> str:
+    """``value`` with ``digits`` significant figures; a dash for None or NaN."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return MISSING
+    text = f"{float(value):.{digits}g}"
+    return "0" if text == "-0" else text
+
+
+def numbers(values: Iterable[float], digits: int = 4) -> str:
+    """A short list ``[-0.9157, 0.2044, …]`` of ``values`` with ``digits`` significant figures."""
+    return "[" + ", ".join(number(v, digits) for v in values) + "]"
+
+
+@dataclass(frozen=True)
+class Summary:
+    """A result in a few lines: a title, a table (one row per motor, cells formatted, units in the
+    headers) and a line of hints (what else the object offers).
+    """
+
+    title: str
+    headers: tuple[str, ...]
+    rows: tuple[tuple[str, ...], ...]
+    hint: str = ""
+
+    def text(self) -> str:
+        lines = [self.title, *render_table(self.headers, self.rows, indent="  ")]
+        if self.hint:
+            lines.append("  " + self.hint)
+        return "\n".join(lines)
+
+    def html(self) -> str:
+        esc = html.escape
+        head = "".join(f"<th>{esc(h)}</th>" for h in self.headers)
+        body = "".join(
+            "<tr>" + "".join(f"<td>{esc(c)}</td>" for c in row) + "</tr>" for row in self.rows
+        )
+        hint = f"<br><small>{esc(self.hint)}</small>" if self.hint else ""
+        return (
+            f"<div><strong>{esc(self.title)}</strong>"
+            f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>{hint}</div>"
+        )
+
+
+def _drawn(columns: Mapping[str, NDArray[np.float64]], name: str) -> NDArray[np.float64]:
+    """A column without the stop row (the zero-volt command a run ends with)."""
+    values = np.asarray(columns[name], dtype=float)
+    return values[:-1] if values.size > 1 else values
+
+
+def plot_run(
+    columns: Mapping[str, NDArray[np.float64]],
+    motors: Sequence[str],
+    title: str,
+    axes: Any = None,
+) -> Any:
+    """Speed with its reference over voltage, per motor, of a run's ``columns``; returns the figure.
+
+    ``columns`` hold ``time_s`` (s), ``reference_m``, ``speed_m``, optionally ``true_speed_m`` and
+    ``estimate_m`` (rad/s) and ``voltage_m`` (V) per motor m; the stop row is not drawn, so the
+    voltage does not seem to drop to 0 V at the end. ``axes`` (speed axes, voltage axes) draw one
+    motor into given axes; None makes a new figure.
+    """
+    if axes is None:
+        import matplotlib.pyplot as plt
+
+        fig, grid = plt.subplots(2, len(motors), sharex=True, squeeze=False,
+                                 figsize=(4 + 4.5 * len(motors), 6), layout="constrained")  # fmt: skip
+        pairs = [(grid[0][i], grid[1][i]) for i in range(len(motors))]
+    else:
+        if len(motors) != 1 or len(axes) != 2:
+            raise ValueError("axes: give (speed_axes, voltage_axes) for one motor")
+        pairs = [tuple(axes)]
+        fig = pairs[0][0].figure
+    time_s = _drawn(columns, "time_s")
+    for motor, (top, bottom) in zip(motors, pairs, strict=True):
+        top.plot(time_s, _drawn(columns, f"reference_{motor}"), "k--", label="reference")
+        top.plot(time_s, _drawn(columns, f"speed_{motor}"), label="measured speed")
+        for name, label in (("true_speed", "true speed"), ("estimate", "estimate")):
+            values = columns.get(f"{name}_{motor}")
+            if (
+                values is not None
+                and np.isfinite(values).any()
+                and not np.array_equal(values, columns[f"speed_{motor}"])
+            ):
+                top.plot(time_s, _drawn(columns, f"{name}_{motor}"), label=label, alpha=0.8)
+        top.set_title(f"motor {motor}")
+        top.set_ylabel("speed (rad/s)")
+        top.legend(loc="lower right", fontsize="small")
+        top.grid(True, alpha=0.3)
+        bottom.step(time_s, _drawn(columns, f"voltage_{motor}"), where="post", color="C3",
+                    label="commanded voltage")  # fmt: skip
+        bottom.set_ylabel("voltage (V)")
+        bottom.set_xlabel("time (s)")
+        bottom.legend(loc="lower right", fontsize="small")
+        bottom.grid(True, alpha=0.3)
+    fig.suptitle(title)
+    return fig
+
 
 MOTORS = ("a", "b")
 
@@ -51,10 +155,8 @@ class MotorResult(_Shown):
 
     Attributes
     ----------
-    model : ArxModel
     theta, theta_std : ndarray
         The report's θ = [c, d, a, b] (for na = nb = 2) and its standard deviations.
-    fit_simulation_percent, fit_prediction_percent : float
     tf : control.TransferFunction
         The model as python-control's discrete transfer function (dt = Ts).
     details : MotorIdentification
@@ -70,7 +172,6 @@ class MotorResult(_Shown):
     details: MotorIdentification
 
     def row(self, motor: str) -> tuple[str, ...]:
-        """This motor's cells under the identification table's headers."""
         return (motor, str(self.model.nk), numbers(self.theta), numbers(self.theta_std, 2),
                 number(self.fit_simulation_percent), number(self.fit_prediction_percent),
                 number(self.model.pole_radius()))  # fmt: skip
@@ -86,8 +187,7 @@ class MotorResult(_Shown):
 
 @dataclass(frozen=True, repr=False, eq=False)
 class Identification(_Shown):
-    """Per-motor results of :func:`~cartctl.api.identify` (``result["a"]``), saveable as a
-    model file."""
+    """Per-motor results of :func:`~cartctl.api.identify` (``result["a"]``), saveable as a model file."""
 
     motors: dict[str, MotorResult]
     result: IdentifyResult
@@ -139,7 +239,6 @@ class Design(_Shown):
         Per motor: the runtime controller, its figures (``entry``) and its simulated step.
     model_path : Path
         The model file designed on (recorded in the controller file).
-    period_s : float
     """
 
     designs: Designs
@@ -193,11 +292,10 @@ class SimulationResult(_Shown):
     Attributes
     ----------
     columns : dict of str to ndarray
-        The trace's columns (every trace's and the loop's: ``time_s``, ``voltage_a``, ``speed_a``,
-        ``reference_a``, ``estimate_a``, ``true_speed_a`` …); the last row is the stop row.
+        The trace's columns (``time_s``, ``voltage_a``, ``speed_a``, ``reference_a``,
+        ``estimate_a``, ``true_speed_a`` …); the last row is the stop row.
     summary : dict
         The run summary of ``cartctl run --json`` (overshoot, settling, errors per motor).
-    failure : str or None
     controller, plant, reference : str
         What ran, on which plant, following which reference (for titles).
     """
