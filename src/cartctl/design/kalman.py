@@ -32,7 +32,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numpy.typing import NDArray
 
 from cartctl.cart import ENCODER_COUNTS_PER_REV, encoder_quantum_rad_s
 from cartctl.design.request import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOISE_STD_V
@@ -57,12 +56,6 @@ def _nonnegative(name: str, value: float, *, positive: bool = False) -> float:
     return value
 
 
-def _frozen(a: NDArray[np.float64]) -> NDArray[np.float64]:
-    a = np.array(a, dtype=float)
-    a.setflags(write=False)
-    return a
-
-
 def design_kalman(
     plant: ArxModel | StateSpace,
     *,
@@ -73,32 +66,17 @@ def design_kalman(
     extra_delay_ticks: int = 0,
     timing_noise_std_ticks: float = 0.0,
 ) -> KalmanDesign:
-    """Design the steady-state Kalman filter (see the module docstring for the model).
+    """Design the steady-state Kalman filter (the module docstring) on a model, realised with
+    ``extra_delay_ticks`` more input delay, or on a realisation (then with none).
 
-    Parameters
-    ----------
-    plant : ArxModel or StateSpace
-        The motor model, or its realisation (:func:`~cartctl.design.statespace.realise`).
-    process_noise_std_v : float
-        σ_w (V), > 0.
-    bias_drift_std_v : float
-        σ_b (V per tick); 0 leaves the disturbance state out.
-    extra_noise_std_rad_s : float
-        Measurement noise beyond the quantisation (rad/s std, ``--measurement-noise``), added in
-        variance: the result's ``measurement_noise_std_rad_s`` is the total √R.
-    counts_per_rev : int
-        Encoder counts per wheel revolution (the quantisation step).
-    extra_delay_ticks : int
-        With an ArxModel: extra ticks of input delay to realise; 0 with a StateSpace.
-    timing_noise_std_ticks : float
-        σ_ε (ticks), for the time-varying filter's Q[k] = Q + (σ_ε Δu[k])² B Bᵀ
-        (:class:`~cartctl.runtime.kalman.KalmanDesign`); P and L hold while u is constant.
+    σ_w = ``process_noise_std_v`` (V, > 0), σ_b = ``bias_drift_std_v`` (V per tick; 0 leaves the
+    disturbance state out), ``extra_noise_std_rad_s`` beyond the quantisation of
+    ``counts_per_rev`` (added in variance: ``measurement_noise_std_rad_s`` is the total √R), and
+    σ_ε = ``timing_noise_std_ticks`` for the time-varying filter's Q[k] = Q + (σ_ε Δu[k])² B Bᵀ
+    (P and L hold while u is constant).
 
-    Raises
-    ------
-    InputError
-        A noise level negative, non-finite, or zero where it must not be; a bad count; no
-        stabilising DARE solution.
+    InputError for a noise level negative, non-finite or zero where it must not be, a bad count,
+    or no stabilising DARE solution.
     """
     if isinstance(plant, ArxModel):
         plant = realise(plant, extra_delay_ticks=extra_delay_ticks)
@@ -133,14 +111,16 @@ def design_kalman(
         raise InputError(f"no steady-state Kalman gain for this model and noise ({exc})") from None
     P = 0.5 * (P + P.T)
     L = P @ C / (C @ P @ C + R)
+    for array in (A, B, C, Q, P, L):
+        array.setflags(write=False)
     return KalmanDesign(
-        A=_frozen(A),
-        B=_frozen(B),
-        C=_frozen(C),
-        Q=_frozen(Q),
+        A=A,
+        B=B,
+        C=C,
+        Q=Q,
         R=float(R),
-        P=_frozen(P),
-        L=_frozen(L),
+        P=P,
+        L=L,
         n_model_states=n,
         period_s=plant.period_s,
         process_noise_std_v=sw,

@@ -28,15 +28,6 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 
-def _loop_response(
-    entry: Mapping[str, Any], model: ArxModel, extra: int, freq_hz: np.ndarray
-) -> np.ndarray:
-    z = np.exp(2j * np.pi * freq_hz * model.period_s)
-    c = np.polyval(entry["controller_num"], z) / np.polyval(entry["controller_den"], z)
-    g = model.response_at(z)
-    return c * g * z ** (-extra)
-
-
 def design_figure(
     motor: str,
     model: ArxModel,
@@ -46,27 +37,22 @@ def design_figure(
     extra_delay_ticks: int,
     voltage_limit_v: float,
 ) -> Figure:
-    """One motor's figure: |L| and ∠L with the margins, then speed and voltage of the step.
-
-    The step is drawn beside the time-optimal one on the same loop (``extra_delay_ticks`` beyond
-    the model's delay), its settling measured in the bound's band.
-    """
+    """One motor's figure: |L| and ∠L with the margins, the step's speed and voltage beside the
+    time-optimal ones on the same loop, its settling measured in the bound's band."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(11, 8.5), dpi=110, layout="constrained")
     axes = fig.subplots(2, 2, sharex="col")
     freq = np.logspace(-1, np.log10(0.5 / model.period_s * 0.999), 600)
-    loop = _loop_response(entry, model, extra_delay_ticks, freq)
+    z = np.exp(2j * np.pi * freq * model.period_s)
+    c = np.polyval(entry["controller_num"], z) / np.polyval(entry["controller_den"], z)
+    loop = c * model.response_at(z) * z ** (-extra_delay_ticks)
     mag_ax, ph_ax = axes[0, 0], axes[1, 0]
     mag_ax.semilogx(freq, 20 * np.log10(np.abs(loop)), color="tab:blue")
     mag_ax.axhline(0.0, color="0.4", lw=0.8)
     ph_ax.semilogx(freq, np.degrees(np.unwrap(np.angle(loop))), color="tab:blue")
     ph_ax.axhline(-180.0, color="0.4", lw=0.8)
-    fc, pm, gm = (
-        entry.get("crossover_hz"),
-        entry.get("phase_margin_deg"),
-        entry.get("gain_margin_db"),
-    )
+    fc, pm, gm = (entry.get(k) for k in ("crossover_hz", "phase_margin_deg", "gain_margin_db"))
     if fc:
         for ax in (mag_ax, ph_ax):
             ax.axvline(fc, color="tab:red", ls="--", lw=0.9)
@@ -75,12 +61,9 @@ def design_figure(
         # the note in axes coordinates, lower left, where the phase curve never is
         ph_ax.text(0.03, 0.05, f"phase margin {pm:.1f}° at {fc:.2f} Hz", color="tab:red",
                    transform=ph_ax.transAxes, ha="left", va="bottom")  # fmt: skip
-    mag_ax.set_title(
-        f"open loop L = C·G (gain margin {'∞' if gm is None else f'{gm:.1f} dB'})", fontsize=10
-    )
-    mag_ax.set_ylabel("magnitude (dB)")
-    ph_ax.set_ylabel("phase (deg)")
-    ph_ax.set_xlabel("frequency (Hz)")
+    gm_text = "∞" if gm is None else f"{gm:.1f} dB"
+    _dress(mag_ax, None, "magnitude (dB)", f"open loop L = C·G (gain margin {gm_text})")
+    _dress(ph_ax, "frequency (Hz)", "phase (deg)")
     sp_ax, v_ax = axes[0, 1], axes[1, 1]
     r = float(step.reference_rad_s[-1])
     bound = settling_bound(
@@ -93,35 +76,22 @@ def design_figure(
     sp_ax.fill_between(step.time_s, r - band, r + band, color="0.85",
                        label=f"settling band ±{band:.2f} rad/s")  # fmt: skip
     sp_ax.plot(step.time_s, step.speed_rad_s, color="tab:blue", label="speed (model)")
-    sp_ax.plot(
-        step.time_s,
-        step.estimate_rad_s,
-        color="tab:green",
-        lw=0.9,
-        ls="--",
-        label="controller's speed",
-    )
+    sp_ax.plot(step.time_s, step.estimate_rad_s, color="tab:green", lw=0.9, ls="--",
+               label="controller's speed")  # fmt: skip
     sp_ax.plot(t_bound, bound.speed_rad_s, color="tab:orange", lw=0.9,
                label=f"time-optimal, loop delay {bound.loop_delay_ticks} tick(s) "
                      f"({bound.settling_time_s * 1e3:.0f} ms)")  # fmt: skip
     settle = step.info.settling_time_s
-    sp_ax.set_title(
-        f"{r:g} rad/s step: overshoot {step.info.overshoot_percent or 0:.1f} %, settling "
-        + ("—" if settle is None else f"{settle * 1e3:.0f} ms"),
-        fontsize=10,
+    title = f"{r:g} rad/s step: overshoot {step.info.overshoot_percent or 0:.1f} %, settling " + (
+        "—" if settle is None else f"{settle * 1e3:.0f} ms"
     )
-    sp_ax.set_ylabel("speed (rad/s)")
-    sp_ax.legend(loc="lower right", fontsize=8)
+    _dress(sp_ax, None, "speed (rad/s)", title, "lower right")
     v_ax.plot(step.time_s, step.voltage_v, color="tab:purple", label="controller")
     v_ax.plot(t_bound, bound.voltage_v, color="tab:orange", lw=0.9, label="time-optimal")
     for sign in (1, -1):
         v_ax.axhline(sign * voltage_limit_v, color="tab:red", lw=0.8, ls="--")
-    v_ax.set_ylabel("voltage (V)")
-    v_ax.set_xlabel("time (s)")
     v_ax.set_xlim(0, min(step.time_s[-1], 0.5))
-    v_ax.legend(loc="upper right", fontsize=8)
-    for ax in axes.flat:
-        ax.grid(True, which="both", alpha=0.3)
+    _dress(v_ax, "time (s)", "voltage (V)", None, "upper right")
     fig.suptitle(f"Motor {motor}: {entry.get('method', 'controller')} design")
     return fig
 
@@ -143,6 +113,20 @@ def write_design_report(
               Path(out_dir) / f"design_{m}.png")
         for m in entries
     ]  # fmt: skip
+
+
+def _dress(
+    ax: Any, xlabel: str | None, ylabel: str, title: str | None = None, legend: str | None = None
+) -> None:
+    """A panel's labels, title (10 pt), legend (8 pt, at ``legend``) and grid."""
+    if xlabel:
+        ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(title, fontsize=10)
+    if legend:
+        ax.legend(loc=legend, fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
 
 
 def _save(fig: Figure, path: Path) -> Path:
@@ -184,10 +168,8 @@ def analysis_figure(motor: str, method: str, analysis: MotorAnalysis) -> Figure:
     st_ax.axhline(0.0, color="0.4", lw=0.8)
     st_ax.set_ylim(max(-60.0, float(np.min(20 * np.log10(shape.sensitivity))) - 3.0), 12.0)
     st_ax.set_xlim(f_low, f[-1])
-    st_ax.set_xlabel("frequency (Hz)")
-    st_ax.set_ylabel("magnitude (dB)")
-    st_ax.set_title("sensitivity S and complementary sensitivity T", fontsize=10)
-    st_ax.legend(loc="lower right", fontsize=8)
+    _dress(st_ax, "frequency (Hz)", "magnitude (dB)",
+           "sensitivity S and complementary sensitivity T", "lower right")  # fmt: skip
 
     loop = shape.loop
     ny_ax.plot(
@@ -203,10 +185,8 @@ def analysis_figure(motor: str, method: str, analysis: MotorAnalysis) -> Figure:
     ny_ax.set_aspect("equal", adjustable="box")
     ny_ax.axhline(0.0, color="0.6", lw=0.6)
     ny_ax.axvline(0.0, color="0.6", lw=0.6)
-    ny_ax.set_xlabel("Re L")
-    ny_ax.set_ylabel("Im L")
-    ny_ax.set_title("Nyquist curve of the loop L broken at the plant input", fontsize=10)
-    ny_ax.legend(loc="upper left", fontsize=8)
+    _dress(ny_ax, "Re L", "Im L", "Nyquist curve of the loop L broken at the plant input",
+           "upper left")  # fmt: skip
 
     t_ms = dist.time_s * 1e3
     band = dist.recovery_band_rad_s
@@ -222,20 +202,13 @@ def analysis_figure(motor: str, method: str, analysis: MotorAnalysis) -> Figure:
                       label=f"recovery {recovery * 1e3:.0f} ms")  # fmt: skip
     end_ms = min(t_ms[-1], 3.0 * 1e3 * (recovery or dist.time_s[-1] / 3.0))
     dy_ax.set_xlim(0.0, max(end_ms, 100.0))
-    dy_ax.set_xlabel("time since the step (ms)")
-    dy_ax.set_ylabel("speed (rad/s)")
-    dy_ax.set_title(f"load disturbance: {sig(dist.disturbance_v)} V step at the plant input",
-                    fontsize=10)  # fmt: skip
-    dy_ax.legend(loc="upper right", fontsize=8)
+    title = f"load disturbance: {sig(dist.disturbance_v)} V step at the plant input"
+    _dress(dy_ax, "time since the step (ms)", "speed (rad/s)", title, "upper right")
 
     du_ax.plot(t_ms, dist.voltage_v, color="tab:purple", label="controller's voltage u")
     du_ax.axhline(-dist.disturbance_v, color="0.3", ls=":", label="−d (full rejection)")
     du_ax.set_xlim(dy_ax.get_xlim())
-    du_ax.set_xlabel("time since the step (ms)")
-    du_ax.set_ylabel("voltage (V)")
-    du_ax.set_title("the controller's answer", fontsize=10)
-    du_ax.legend(loc="upper right", fontsize=8)
-    for ax in (st_ax, ny_ax, dy_ax, du_ax):
-        ax.grid(True, which="both", alpha=0.3)
+    _dress(du_ax, "time since the step (ms)", "voltage (V)", "the controller's answer",
+           "upper right")  # fmt: skip
     fig.suptitle(f"Motor {motor}: {method} design, loop analysis")
     return fig

@@ -148,30 +148,16 @@ def _poles_text(poles: Sequence[complex] | NDArray[np.inexact]) -> str:
 
 @dataclass(frozen=True, eq=False)
 class PolesDesign:
-    """A pole-placement speed controller with integral action and its Kalman estimator.
+    """A pole-placement speed controller with integral action and its Kalman estimator, on the
+    model's realisation ``plant`` (n states, the extra delay included).
 
-    Attributes
-    ----------
-    plant : StateSpace
-        The model's realisation (n states, the d extra delay ticks included).
-    poles : tuple of complex
-        The placed closed-loop poles (z), sorted by magnitude: n with the disturbance estimate,
-        n + 1 with the error integrator.
-    K : ndarray, shape (m,)
-        Gain on the estimator's whole state x̂ (m states): V per rad/s on the n realisation
-        states, then, with the disturbance state, 1 (V per V) on b̂.
-    Ki : float
-        State gain on the error integrator x_i (V per rad of angle error), u −= Ki x_i:
-        negative, or 0 with the disturbance estimate. Its sign is opposite to a PI's ``ki``.
-    Kr : float
-        Reference gain (V per rad/s): the static gain with the disturbance estimate; −Ki Ts, or
-        0 without feedforward, with the error integrator.
-    method : {'place', 'acker'}
-        How the gains were computed.
-    integral : {'disturbance', 'error'}
-        b̂ fed back (n placed poles, Ki = 0), or the error integrator x_i (n + 1 placed poles).
-    settling_time_s, overshoot_percent : float or None
-        The specification the poles came from, None when the poles were given.
+    ``poles`` are the placed closed-loop poles (z), by magnitude: n with the disturbance
+    estimate (``integral`` 'disturbance', Ki = 0), n + 1 with the error integrator ('error').
+    ``K`` (m,) acts on the estimator's whole state x̂: V per rad/s on the n realisation states,
+    then 1 on b̂. ``Ki`` is the state gain on x_i (V per rad of angle error, u −= Ki x_i: negative,
+    the opposite sign of a PI's ``ki``). ``Kr`` (V per rad/s) is the static gain with b̂; −Ki Ts,
+    or 0, with the error integrator. ``method`` is 'place' or 'acker'; the specification is None
+    when the poles were given.
     """
 
     model: ArxModel
@@ -238,35 +224,20 @@ def design_poles(
 ) -> PolesDesign:
     """Place the closed-loop poles of a speed loop with integral action (module docstring).
 
-    Parameters
-    ----------
-    model : ArxModel
-        Voltage (V) to speed (rad/s), nk ≥ 1.
-    poles : sequence of complex, optional
-        The closed-loop poles (z): one per state of the realisation with the extra delay, plus
-        one for the error integrator when ``bias_drift_std_v`` is 0; inside the unit circle,
-        complex ones with their conjugates, repeats allowed (Ackermann). Or, instead:
-    settling_time_s, overshoot_percent : float, optional
-        2 % settling time (s) and overshoot (%) of the dominant pair.
-    extra_delay_ticks : int
-        Loop delay beyond the model's own (ticks): d more states and poles.
-    fast_pole_ratio : float
-        How many times faster (in decay rate) the first non-dominant pole of a specification is
-        than the dominant pair; the next ones ratio + 1, ratio + 2, ….
-    reference_feedforward : bool
-        Error integrator only: Kr = −Ki Ts (True) or Kr = 0.
-    process_noise_std_v, bias_drift_std_v, extra_noise_std_rad_s, timing_noise_std_ticks : float
-        The estimator's noise levels (:func:`~cartctl.design.kalman.design_kalman`);
-        ``bias_drift_std_v`` > 0 makes b̂ the integral action (n poles), 0 adds an error
-        integrator (n + 1 poles).
+    Give either ``poles`` (z; one per realisation state with the extra delay, plus one for the
+    error integrator when ``bias_drift_std_v`` is 0; conjugate pairs; repeats allowed) or both
+    ``settling_time_s`` (2 %, s) and ``overshoot_percent`` of the dominant pair, whose first fast
+    pole decays ``fast_pole_ratio`` times faster (then ratio + 1, …). ``reference_feedforward``
+    chooses Kr = −Ki Ts over 0 with the error integrator. The noise levels are those of
+    :func:`~cartctl.design.kalman.design_kalman`; ``bias_drift_std_v`` > 0 makes b̂ the integral
+    action.
 
     Raises
     ------
     InputError
         Both or neither pole modes; a bad specification; poles in the wrong number, outside the
         unit circle or without their conjugates; an uncontrollable model (a pole-zero
-        cancellation, or a zero at z = 1 that no integral action can get past); a numerically
-        failed placement; noise levels :func:`design_kalman` refuses.
+        cancellation, or a zero at z = 1); a numerically failed placement; bad noise levels.
     """
     import control
 
