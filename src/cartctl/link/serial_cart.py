@@ -1,26 +1,19 @@
 """The real cart over serial (``--plant serial:PORT``), running the bridge sketch of ``firmware/``.
 
-The loop is clocked by the cart: each GPIO the cart sends (every 10 ms) is one tick. The host
-answers each with the full channel vector of the bridge contract (``docs/serial-protocol.md``):
-voltages A and B, drive = 1 and a sequence number that increases by one per frame. The bridge
-(version 2) writes the newest command as the voltage of its next ``io()`` and echoes the sequence
-number of the command each ``io()`` applied; from that echo the plant measures the loop delay::
+The loop is clocked by the cart: each GPIO it sends (every 10 ms) is one tick. The host answers
+each with the bridge's channel vector (``docs/serial-protocol.md``): voltages A and B, drive = 1
+and a sequence number +1 per frame. The bridge (version 2) writes the newest command as the voltage
+of its next ``io()`` and echoes the sequence number of the command each ``io()`` applied::
 
     tick k      the cart measures, sends GPIO k (1.2 ms on the line at 500 kbaud, then the USB bridge)
     host        computes from GPIO k, sends command s
     tick k+E    io() put s's voltage on the motor: the first GPIO that echoes s
 
-so the loop delay from measurement to applied voltage is E ticks: 1 when the reply reaches the cart
-within the tick, as on-board control (the report's "microOS delay"). A model of the loop has an
-input delay of ``nk = loop_delay_ticks + 1`` (2, as in the report).
-
-The port opens at 500 kbaud. A cart that answers only at 115200 baud (the course's firmware, or a
-bridge before version 2), or that sends another bridge version, is refused with one line naming
-the sketch to flash (:class:`~cartctl.link.cart_link.UnsupportedCartError`).
-
-Faults are counted, not fatal: CRC errors and garbage are skipped by the framer, missing cart ticks
-are counted, and so are the host's frames the cart never saw (the bridge counts the sequence
-numbers it skipped and sends the count back). No GPIO for 100 ms, or a vanished port, raises
+so the loop delay from measurement to applied voltage is E ticks (1 when the reply reaches the cart
+within the tick, as on-board control), and a model of the loop has ``nk = E + 1``. A cart that
+answers only at 115200 baud, or sends another bridge version, is refused with one line naming the
+sketch to flash. Faults are counted, not fatal (CRC errors, garbage, missed cart ticks, host frames
+the cart never saw); no GPIO for 100 ms, or a vanished port, raises
 :class:`~cartctl.errors.PlantError`. :meth:`SerialCart.close` sends drive = 0 with zero volts
 whenever the port still works.
 """
@@ -63,13 +56,9 @@ STOP_FRAMES = 3
 """drive = 0 frames sent on close (one may be lost to line noise)."""
 PROBE_ECHOES = MIN_ECHOES
 """Echoes :meth:`SerialCart.measure_loop_delay` judges first: done when they are clear."""
-PROBE_MAX_ECHOES = 50
-"""Echoes it takes when the first :data:`PROBE_ECHOES` are not clear."""
-PROBE_MAX_TICKS = 100
-"""Longest :meth:`SerialCart.measure_loop_delay` waits for them (ticks, 1 s)."""
-PROBE_SILENCE_S = 0.5
-"""Longest wait for a GPIO during the probe (s), as :meth:`SerialCart.reset` allows: nothing is
-driven yet, and a host held up that long (a loaded PC) is no fault of the cart's."""
+UNDRIVEN_SILENCE_S = 0.5
+"""Longest wait for a GPIO while nothing is driven (s: the first tick, the probe): a host held up
+that long (a loaded PC) is no fault of the cart's."""
 BACKLOG_WAIT_S = 0.006
 """A GPIO that follows the one :meth:`SerialCart.reset` took within this long is a backlog (the
 cart's frames come 10 ms apart, give or take the USB bridge's 5 ms), not the next tick."""
@@ -82,21 +71,11 @@ FLASH_HINT = (
 class SerialCart:
     """A cart on a serial port as a :class:`~cartctl.plants.base.Plant`, clocked by the cart.
 
-    Parameters
-    ----------
-    port : str
-        Device path (``/dev/ttyACM0``, or the virtual cart's ``/dev/pts/N``).
-    connect_timeout_s : float
-        Longest wait for the first HEARTBEAT after opening the port.
-    silence_timeout_s : float
-        Longest wait for a GPIO once running (default 0.1 s).
-    on_print : callable, optional
-        Receives the cart's PRINT lines (default: ``cart: …`` on stderr).
-    serial_factory : callable, optional
-        Opens the port (default ``serial.Serial``).
-
-    Besides the Plant protocol it offers the split :meth:`send` / :meth:`receive` that the
-    cart-clocked loop uses to time its own compute, and :meth:`link_summary` for the run summary.
+    ``connect_timeout_s`` bounds the wait for the first HEARTBEAT, ``silence_timeout_s`` that for
+    a GPIO once running; ``on_print`` and ``serial_factory`` go to the
+    :class:`~cartctl.link.cart_link.CartLink`. Besides the Plant protocol it offers the split
+    :meth:`send` / :meth:`receive` that the cart-clocked loop uses to time its own compute, and
+    :meth:`link_summary` for the run summary.
     """
 
     period_s: float = PERIOD_S
@@ -112,9 +91,13 @@ class SerialCart:
     ) -> None:
         self.port = port
         self.connect_timeout_s = float(connect_timeout_s)
-        self.link = CartLink(port, silence_timeout_s=silence_timeout_s, on_print=on_print,
-                             serial_factory=serial_factory)  # fmt: skip
-        self.encoder = Encoder(sysid=0, compid=0)
+        self.link = CartLink(
+            port,
+            silence_timeout_s=silence_timeout_s,
+            on_print=on_print,
+            serial_factory=serial_factory,
+        )
+        self.encoder = Encoder()
         self.connected = False
         self.sample: CartSample | None = None
         self.arrival_s = 0.0
@@ -135,8 +118,6 @@ class SerialCart:
         self._sent_any = False
         self.reply_latency_s: collections.deque[float] = collections.deque(maxlen=1 << 20)
         """Per tick of the run: from the cart's frame decoded to the host's reply written (s)."""
-
-    # -- connecting -----------------------------------------------------------------------------
 
     def connect(self) -> None:
         """Open the port and wait for the cart's HEARTBEAT (raises a clear error otherwise)."""
@@ -160,20 +141,18 @@ class SerialCart:
     def _port_opened(self) -> None:
         """Between opening the port and waiting for the HEARTBEAT (the virtual cart boots here)."""
 
-    # -- the Plant protocol ---------------------------------------------------------------------
-
     def reset(self) -> Measurement:
         """Connect if needed, drop what waited in the buffer, and take the next GPIO as tick 0."""
         self.connect()
         while self.link.gpio_waiting():  # stale ticks from before the run
             self.link.next_gpio()
-        self.link.next_gpio(max(self.link.silence_timeout_s, 0.5))
+        self.link.next_gpio(max(self.link.silence_timeout_s, UNDRIVEN_SILENCE_S))
         # a backlog still coming in (the port's reader was held up) is not a fresh tick: answering
         # it would put two replies into one tick of the cart, and one of them would be lost. Let
         # it pass, then take the next frame as it arrives: tick 0 is answered while it is fresh.
         while self.link.gpio_waiting(wait_s=BACKLOG_WAIT_S):
             self.link.next_gpio()
-        gpio, arrival = self.link.next_gpio(max(self.link.silence_timeout_s, 0.5))
+        gpio, arrival = self.link.next_gpio(max(self.link.silence_timeout_s, UNDRIVEN_SILENCE_S))
         sample = CartSample.from_gpio(gpio)
         if sample.bridge_version != BRIDGE_VERSION:
             raise UnsupportedCartError(
@@ -210,11 +189,8 @@ class SerialCart:
         self._seq = next_seq(self._seq)
 
     def receive(self) -> Measurement:
-        """Wait for the cart's next tick and return its measurement.
-
-        When the host has fallen behind (more GPIOs already waiting), the older ones are dropped
-        and counted in ``skipped_ticks``: the loop always answers the freshest measurement.
-        """
+        """Wait for the cart's next tick and return its measurement; when the host has fallen
+        behind, the older GPIOs waiting are dropped (``skipped_ticks``): the freshest is answered."""
         if self.link.failure:  # after a fault, do not wait again (zero volts go out at once)
             raise PlantError(self.link.failure)
         self._accept(*self.link.next_gpio())
@@ -243,33 +219,21 @@ class SerialCart:
         self.sample, self.arrival_s = sample, arrival_s
 
     def measure_loop_delay(
-        self,
-        *,
-        echoes: int = PROBE_ECHOES,
-        max_echoes: int = PROBE_MAX_ECHOES,
-        max_ticks: int = PROBE_MAX_TICKS,
+        self, *, echoes: int = PROBE_ECHOES, max_echoes: int = 50, max_ticks: int = 100
     ) -> int:
         """The loop delay (ticks), measured from the echo without driving the motors.
 
-        Connects if needed, then answers each cart tick with drive = 0 and zero volts (the bridge
-        echoes the sequence number whatever drive says) until ``echoes`` echoes came back. When
-        they are clear (:attr:`EchoDelays.clear <cartctl.link.loop_delay.EchoDelays.clear>`) the
-        probe is done; otherwise it goes on to ``max_echoes`` and judges them all. The most
-        frequent delay counts; :attr:`probe_delays` keeps the spread. The echo statistics are then
-        cleared, so the run's own are not mixed with the probe's; a following :meth:`reset` starts
-        the run at the next tick.
-
-        Raises
-        ------
-        PlantError
-            No echo within ``max_ticks`` ticks (the cart does not run the bridge sketch), or a
-            fault of the link.
+        Answers each cart tick with drive = 0 (the bridge echoes whatever drive says) until
+        ``echoes`` echoes came back; when they are not clear (:class:`EchoDelays`), goes on to
+        ``max_echoes`` and judges them all. The most frequent delay counts; :attr:`probe_delays`
+        keeps the spread; the echo statistics are then cleared for the run. No echo within
+        ``max_ticks`` ticks (not the bridge sketch) raises :class:`~cartctl.errors.PlantError`.
         """
         self.reset()
         self.echo_delays.clear()
         judged = False
         silence_s = self.link.silence_timeout_s
-        self.link.silence_timeout_s = max(silence_s, PROBE_SILENCE_S)
+        self.link.silence_timeout_s = max(silence_s, UNDRIVEN_SILENCE_S)
         try:
             for _ in range(max_ticks):
                 self.send(0.0, 0.0, drive=False)
@@ -308,28 +272,18 @@ class SerialCart:
         self.link.close()
         self.connected = False
 
-    # -- what the link measured ------------------------------------------------------------------
-
-    @property
-    def echo_delay_ticks(self) -> int | None:
-        """The most frequent echo delay E (ticks), None before any echo."""
-        if not self.echo_delays:
-            return None
-        return self.echo_delays.most_common(1)[0][0]
-
     @property
     def loop_delay_ticks(self) -> int | None:
-        """Ticks from a measurement to the tick its voltage is on the motor: E (the bridge echoes
-        what ``io()`` applied)."""
-        return self.echo_delay_ticks
+        """Ticks from a measurement to the tick its voltage is on the motor: the most frequent echo
+        delay E (the bridge echoes what ``io()`` applied); None before any echo."""
+        return self.echo_delays.most_common(1)[0][0] if self.echo_delays else None
+
+    echo_delay_ticks = loop_delay_ticks
 
     @property
     def host_frames_lost(self) -> int:
-        """The host's frames the cart never saw since :meth:`reset` (from the cart's count).
-
-        The count comes with the cart's samples, so the last few frames of a run (those sent
-        after the last sample's tick) are not in it.
-        """
+        """The host's frames the cart never saw since :meth:`reset`, by the cart's count (which
+        misses the frames sent after the last sample's tick)."""
         if self.sample is None:
             return 0
         return tick_difference(self._lost_base, self.sample.host_frames_lost)

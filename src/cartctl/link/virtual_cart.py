@@ -1,41 +1,14 @@
 """The virtual cart: the physical simulator behind a pseudo-terminal, speaking like the bridge sketch.
 
-``cartctl virtual-cart`` runs one in the foreground and prints its port; ``--plant virtual`` starts
-one inside the process and drives it through :class:`~cartctl.link.serial_cart.SerialCart`
-(:mod:`cartctl.link.virtual_serial`), so the real serial code path (pyserial, framing, the bridge contract, the faults) runs with no hardware.
-
-It keeps the firmware's schedule within each 10 ms tick (``docs/serial-protocol.md``). The bridge
-sketch (version 2, the default)::
-
-    0 ms       drain the serial port: the host's newest command becomes the stored voltage;
-               io(): the physics advances one tick with that command landing ``actuation_ms``
-               after the previous tick, and the encoders are read; control(): the bridge logic
-               (:class:`~cartctl.link.bridge_firmware.BridgeFirmware`)
-    1.2 ms     one GPIO out with what control() wrote (a HEARTBEAT every 1.1 s as well)
-    every ms   the bridge's own thread drains the serial port: a newer command replaces the
-               stored voltage
-
-The line runs at 500 kbaud and the receive ring holds 255 bytes (the sketch's build flag). The
-Mega's USB bridge is modelled (``usb=off`` turns it off): the cart's bytes reach the PC at the
-ATmega16U2's next 4.096 ms flush and the USB frame after it, the PC's at the next 1 ms USB frame
-(:mod:`cartctl.link.cart_uart`). ``bridge=1`` runs the sketch before version 2: 115200 baud, a
-63-byte ring, microOS's communication thread 1.2 ms into the tick, a drain every 1 ms and right
-before ``control()``, and the voltage stored at ``control()`` (loop delay 3); it sends 0 as its
-version. ``receive=microos`` runs the sketch as it was before its own drains: microOS's
-communication thread alone drains the port, once per tick, and ``control()`` reads what it held.
-Then two replies that reach the cart a little closer together than the tick overflow the ring.
-
-A pseudo-terminal ignores the baud rate, so the writer thread releases outgoing bytes at the line's
-rate, and incoming bytes count as received only once the line could have carried them. When the
-host opens the port at another rate than the cart's, both sides read noise, as on a real line.
-Three threads: ticks, reader, writer. The drains are computed on the cart's clock (tick k starts
-``k × 10 ms`` after boot), whenever the tick thread gets to them, so a busy host machine delays
-the cart's replies but not its view of when bytes arrived.
-
-Faults (:class:`CartFaults`) are injected on the way out: garbage bursts between frames, corrupted
-frames, a stall (the cart stops ticking and sending, the port stays open) and a pulled cable (the
-port vanishes); and on the way in: replies held back by a random delay (``reply_jitter_ms``),
-and stretches of ticks at which the host's commands arrive a tick late (``late``).
+``cartctl virtual-cart`` runs one in the foreground; ``--plant virtual`` runs one in the process
+behind :class:`VirtualSerialCart`, so the real serial path (pyserial, framing, the bridge contract,
+the faults) runs with no hardware. It keeps the firmware's schedule within each 10 ms tick (drains,
+``io()``, ``control()``, the GPIO out 1.2 ms in; ``docs/serial-protocol.md`` §4, §8), the line's
+byte time, the receive ring and the Mega's USB bridge (:mod:`cartctl.link.cart_uart`), and injects
+:class:`~cartctl.link.cart_faults.CartFaults`. Three threads: ticks, reader, writer. The drains are
+computed on the cart's clock (tick k starts ``k × 10 ms`` after boot), whenever the tick thread
+gets to them, so a busy host delays the cart's replies but not its view of when bytes arrived.
+When the host opens the port at another rate than the cart's, both sides read noise.
 """
 
 from __future__ import annotations
@@ -50,10 +23,9 @@ import threading
 import time
 import tty
 from collections.abc import Sequence
-from typing import Protocol, cast
+from typing import Any, Protocol, cast
 
 from cartctl.cart import PERIOD_S
-from cartctl.link import Encoder, encode_gpiox_v2
 from cartctl.link.bridge import BRIDGE_BAUD, CH_BRIDGE_VERSION, LEGACY_BAUD, TIMING_FIRST_ID
 from cartctl.link.bridge_firmware import TICK_MODULO, BridgeFirmware, CartIO
 from cartctl.link.cart_faults import RECEIVE_SCHEDULES, CartFaults
@@ -69,6 +41,9 @@ from cartctl.link.cart_uart import (
     byte_time_s,
     fill_ring,
 )
+from cartctl.link.dialect import Encoder, encode_gpiox_v2
+from cartctl.link.serial_cart import SerialCart
+from cartctl.plants.base import Measurement
 from cartctl.plants.physics import PhysicsPlant
 
 HEARTBEAT_PERIOD_S = 1.1
@@ -90,7 +65,7 @@ _TERMIOS_SPEED = {getattr(termios, f"B{rate}"): rate for rate in (9600, 19200, 3
 
 
 class CartFirmware(Protocol):
-    """What the virtual cart runs in ``control()``, with the GPIO channels it holds and writes."""
+    """What the virtual cart runs in ``control()`` (bridge_firmware, onboard_firmware)."""
 
     in_ints: list[int]
     out_floats: list[float]
@@ -107,26 +82,12 @@ class CartFirmware(Protocol):
 
 
 class VirtualCart:
-    """The physical simulator behind a pseudo-terminal, speaking the bridge contract.
+    """The physical simulator behind a pseudo-terminal (:attr:`port`, ``/dev/pts/N``).
 
-    Parameters
-    ----------
-    preset : str
-        Physics preset, 'ground' or 'air'.
-    noise_std_rad_s : float
-        Extra measurement noise of the simulator (rad/s).
-    seed : int, optional
-        Seeds the simulator's noise and the fault injection.
-    faults : CartFaults, optional
-        Faults to inject (none by default).
-    period_s : float
-        The tick (s), 0.01 as microOS.
-    firmware : CartFirmware, optional
-        What runs in ``control()``: the bridge sketch (default), or a controller on the cart
-        (which reads the channels microOS's communication thread received: ``receive=microos``).
-
-    Use as a context manager, or :meth:`start` and :meth:`stop`. :attr:`port` is the path to
-    open (``/dev/pts/N``).
+    ``preset`` and ``noise_std_rad_s`` (rad/s) go to the simulator, ``seed`` seeds it and the
+    faults; ``firmware`` runs in ``control()``: the bridge sketch by default, or a controller on
+    the cart (which reads what microOS's communication thread received: ``receive=microos``). Use
+    as a context manager, or :meth:`start` and :meth:`stop`.
     """
 
     def __init__(
@@ -392,3 +353,42 @@ class VirtualCart:
             j += 1
             self.ticks = j
         self.state = "stopped"
+
+
+class VirtualSerialCart(SerialCart):
+    """``--plant virtual``: the host side (:class:`~cartctl.link.serial_cart.SerialCart`,
+    unchanged) on a :class:`VirtualCart` of this process, plus what only a simulator knows: the
+    true speed at each cart tick. The cart boots once :meth:`connect` has opened the port, and is
+    switched off on :meth:`close`, after it has taken the host's drive = 0 frames."""
+
+    reports_true_speed = True
+
+    def __init__(self, cart: VirtualCart, **kwargs: Any) -> None:
+        kwargs.setdefault("silence_timeout_s", SILENCE_TIMEOUT_S)
+        super().__init__(cart.port, **kwargs)
+        self.cart = cart
+
+    def _port_opened(self) -> None:
+        if self.cart.state == "idle":  # opening a real cart's port resets it, too
+            self.cart.start()
+
+    def _with_true_speed(self, measured: Measurement) -> Measurement:
+        assert self.sample is not None
+        true_a, true_b = self.cart.true_speeds.get(self.sample.cart_tick, (math.nan, math.nan))
+        return Measurement(measured.speed_a_rad_s, measured.speed_b_rad_s, true_a, true_b)
+
+    def reset(self) -> Measurement:
+        return self._with_true_speed(super().reset())
+
+    def receive(self) -> Measurement:
+        return self._with_true_speed(super().receive())
+
+    def close(self) -> None:
+        was_connected = self.connected and not self.link.failure
+        super().close()
+        if was_connected:  # let the stop frames cross the line and reach control()
+            deadline = time.perf_counter() + 0.2
+            while self.cart.firmware.in_ints[1] != 0 and time.perf_counter() < deadline:
+                time.sleep(0.005)
+            self.cart.wait_ticks(2)
+        self.cart.stop()

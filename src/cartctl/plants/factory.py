@@ -136,8 +136,7 @@ def make_plant(
             timing += f", motor(s) {physics['reversed_motors']} wired backwards"
         return plant, f"physics (preset {preset}{timing})"
     if kind == "virtual":
-        from cartctl.link.virtual_cart import CartFaults, VirtualCart
-        from cartctl.link.virtual_serial import VirtualSerialCart
+        from cartctl.link.virtual_cart import CartFaults, VirtualCart, VirtualSerialCart
 
         faults = CartFaults.parse(options)
         cart = VirtualCart(preset, noise_std_rad_s=noise_std_rad_s, seed=seed, faults=faults)
