@@ -32,7 +32,7 @@ from cartctl.identification.arx import (
     stacked_regression,
 )
 from cartctl.identification.etfe import model_response
-from cartctl.identification.oe import _simulate_with_jacobian
+from cartctl.identification.oe import simulation_error
 from cartctl.identification.orders import OrderTable, order_table
 from cartctl.identification.residuals import ResidualTest, prediction_residuals, residual_test
 from cartctl.measures.metrics import finite_or_none
@@ -59,9 +59,7 @@ def theta_covariance(
     m = fit.model
     data = as_segments(segments)
     if fit.method == "oe":
-        parts = [_simulate_with_jacobian(m.theta, u, m.na, m.nb, m.nk) for _, u in data]
-        jac = np.concatenate([j for _, j in parts])
-        err = np.concatenate([y - y_hat for (y, _), (y_hat, _) in zip(data, parts, strict=True)])
+        err, jac = simulation_error(m.theta, data, m.na, m.nb, m.nk)
     else:
         jac, target = stacked_regression(data, m.na, m.nb, m.nk, start)
         err = target - jac @ m.theta

@@ -90,20 +90,25 @@ def _shift(x: NDArray[np.float64], lag: int) -> NDArray[np.float64]:
     return out
 
 
-def _simulate_with_jacobian(
-    theta: NDArray[np.float64], u: NDArray[np.float64], na: int, nb: int, nk: int
+def simulation_error(
+    theta: NDArray[np.float64], data: Sequence[Checked], na: int, nb: int, nk: int
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """y − ŷ of every experiment simulated from rest, stacked, and the Jacobian ∂ŷ/∂θ."""
     a = np.concatenate([[1.0], theta[:na]])
     b = np.concatenate([np.zeros(nk), theta[na:]])
-    y_hat = signal.lfilter(b, a, u)
-    w = signal.lfilter([1.0], a, y_hat)
-    v = signal.lfilter([1.0], a, u)
-    jac = np.empty((u.size, na + nb))
-    for i in range(na):
-        jac[:, i] = -_shift(w, i + 1)
-    for j in range(nb):
-        jac[:, na + j] = _shift(v, nk + j)
-    return y_hat, jac
+    errors, jacobians = [], []
+    for y, u in data:
+        y_hat = signal.lfilter(b, a, u)
+        w = signal.lfilter([1.0], a, y_hat)
+        v = signal.lfilter([1.0], a, u)
+        jac = np.empty((u.size, na + nb))
+        for i in range(na):
+            jac[:, i] = -_shift(w, i + 1)
+        for j in range(nb):
+            jac[:, na + j] = _shift(v, nk + j)
+        errors.append(y - y_hat)
+        jacobians.append(jac)
+    return np.concatenate(errors), np.concatenate(jacobians)
 
 
 def _step_up(eta: NDArray[Any], rho: float) -> NDArray[Any]:
@@ -171,20 +176,15 @@ def _refine(
         eta0 = _step_down(project_poles(start[:na], rho - _PROJECT_MARGIN), rho)
     if eta0 is None:
         raise IdentificationError(f"cannot start the output-error search from a = {start[:na]}")
-    y_all = np.concatenate([y for y, _ in data])
 
     def theta_of(x: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.concatenate([_step_up(x[:na], rho), x[na:]])
 
     def residual(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        theta = theta_of(x)
-        return y_all - np.concatenate(
-            [_simulate_with_jacobian(theta, u, na, nb, nk)[0] for _, u in data]
-        )
+        return simulation_error(theta_of(x), data, na, nb, nk)[0]
 
     def jacobian(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        theta = theta_of(x)
-        jac = -np.concatenate([_simulate_with_jacobian(theta, u, na, nb, nk)[1] for _, u in data])
+        jac = -simulation_error(theta_of(x), data, na, nb, nk)[1]
         jac[:, :na] = jac[:, :na] @ _d_ar_d_eta(x[:na], rho)
         return jac
 
@@ -285,10 +285,7 @@ def fit_oe(
             "data pull a pole further out"
         )
     fit_data = evaluation if label == "refined on eval" else data
-    y_all = np.concatenate([y for y, _ in fit_data])
-    sims = [_simulate_with_jacobian(theta, u, na, nb, nk) for _, u in fit_data]
-    err = y_all - np.concatenate([s[0] for s in sims])
-    jac = np.concatenate([s[1] for s in sims])
+    err, jac = simulation_error(theta, fit_data, na, nb, nk)
     n, p = jac.shape
     sigma2 = float(err @ err) / max(n - p, 1)
     try:
