@@ -1,29 +1,8 @@
-"""Controller files (TOML): what was asked, what came out, on which model, and when::
-
-    format = "cartctl-controller/2"
-    method = "pi"                      # or "poles"
-    period_s = 0.01
-    voltage_limit_v = 12.0
-    loop_delay_ticks = 1               # ticks from a measurement to its voltage on the motor
-    plant_kind = "onboard"             # where the loop runs: "onboard" (delay 1) or "serial"
-    created = "2026-11-22T15:00:00+00:00"
-    command = "cartctl design models/ground.toml --method pi ..."
-    [model]                            # the model designed on: path relative to this file's
-    path = "../models/ground.toml"     # folder, and the SHA-256 of its bytes
-    sha256 = "…"
-    [request]                          # the user's specification (method-specific)
-    [motors.a]                         # gains, C(z) (descending powers of z), estimator, analysis
-    kp = 0.5
-    ki = 12.0
-    controller_num = [0.62, -0.5]
-    controller_den = [1.0, -1.0]
-
-The loop delay is 1 on board the cart and in the simulators, 3 over the PC serial loop; a design
-with ``--extra-delay d`` is for the model file's recorded loop delay + d, or nk − 1 + d
-(:func:`cartctl.design.make.loop_delay_for`). Version 1 files have version 2's keys and load the
-same way; a file without ``loop_delay_ticks`` (older) gets it from its model's nk. Loading checks
-that a file does not contradict itself: ``plant_kind`` against ``loop_delay_ticks``, each
-motor's C(z) against its gains (:mod:`cartctl.design.controller_ss`).
+"""Controller files (TOML): what was asked, what came out, on which model, and when (the format:
+docs/file-formats.md). The loop delay a file is for is 1 on board the cart and in the simulators,
+3 over the PC serial loop (:func:`cartctl.design.make.loop_delay_for`); loading checks that a file
+does not contradict itself (``plant_kind`` against ``loop_delay_ticks``, each motor's C(z)
+against its gains, :mod:`cartctl.design.controller_ss`).
 """
 
 from __future__ import annotations
@@ -96,7 +75,7 @@ def _short(value: Any) -> str:
 
 @dataclass(frozen=True)
 class ControllerFile:
-    """A designed controller for both motors (the keys of the module docstring).
+    """A designed controller for both motors (the keys of a controller file).
 
     ``model_path`` opens from the working directory (the file stores it relative to its own
     folder); ``path`` is where it was read from; ``loop_delay_ticks`` is None only for a file
