@@ -3,8 +3,7 @@
 Each function takes the command line's path (``cartctl excite``, ``identify``, ``design``,
 ``run --fast``), so a notebook and a shell give the same numbers, and raises
 :class:`~cartctl.errors.CartctlError` with the CLI's one-line messages. The results are in
-:mod:`cartctl.api.results`; the user guide (docs/python-api.md) walks through a session.
-"""
+:mod:`cartctl.api.results`; the user guide (docs/python-api.md) walks through a session."""
 
 from __future__ import annotations
 
@@ -214,8 +213,7 @@ def design_pi(
 
     ``options`` are the fields of :class:`~cartctl.design.request.DesignRequest`:
     ``phase_margin_deg``, ``crossover_hz`` or ``bandwidth_hz``, ``anti_windup``, ``estimator``,
-    ``extra_delay_ticks``, ``voltage_limit_v``, ``step_rad_s`` …
-    """
+    ``extra_delay_ticks``, ``voltage_limit_v``, ``step_rad_s`` …"""
     return _design(model, DesignRequest(method="pi", **options), motors)
 
 
@@ -226,8 +224,7 @@ def design_poles(
 
     ``options``: ``settling_time_s`` and ``overshoot_percent`` or ``poles``, the estimator's
     ``process_noise_std_v``/``bias_drift_std_v``, ``extra_delay_ticks`` … (see
-    :class:`~cartctl.design.request.DesignRequest`).
-    """
+    :class:`~cartctl.design.request.DesignRequest`)."""
     return _design(model, DesignRequest(method="poles", **options), motors)
 
 
@@ -242,7 +239,7 @@ def simulate(
     noise_std_rad_s: float = 0.0,
     seed: int | None = None,
 ) -> SimulationResult:
-    """Run a controller in the simulated loop, as ``cartctl run --fast`` does, refusing what it refuses.
+    """Run a controller in the simulated loop as ``cartctl run --fast`` does (and refuses).
 
     Parameters
     ----------

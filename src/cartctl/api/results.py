@@ -2,8 +2,7 @@
 
 Each prints as a title, one table row per motor and a line of hints (:class:`Summary`), and
 shows as the same table in Jupyter; the arrays and full results stay in their attributes.
-matplotlib is imported only when a figure is drawn.
-"""
+matplotlib is imported only when a figure is drawn."""
 
 from __future__ import annotations
 
@@ -47,8 +46,7 @@ def numbers(values: Iterable[float], digits: int = 4) -> str:
 @dataclass(frozen=True)
 class Summary:
     """A result in a few lines: a title, a table (one row per motor, cells formatted, units in the
-    headers) and a line of hints (what else the object offers).
-    """
+    headers) and a line of hints (what else the object offers)."""
 
     title: str
     headers: tuple[str, ...]
@@ -91,8 +89,7 @@ def plot_run(
     ``columns`` hold ``time_s`` (s), ``reference_m``, ``speed_m``, optionally ``true_speed_m`` and
     ``estimate_m`` (rad/s) and ``voltage_m`` (V) per motor m; the stop row is not drawn, so the
     voltage does not seem to drop to 0 V at the end. ``axes`` (speed axes, voltage axes) draw one
-    motor into given axes; None makes a new figure.
-    """
+    motor into given axes; None makes a new figure."""
     if axes is None:
         import matplotlib.pyplot as plt
 
@@ -187,7 +184,8 @@ class MotorResult(_Shown):
 
 @dataclass(frozen=True, repr=False, eq=False)
 class Identification(_Shown):
-    """Per-motor results of :func:`~cartctl.api.identify` (``result["a"]``), saveable as a model file."""
+    """Per-motor results of :func:`~cartctl.api.identify` (``result["a"]``), saveable as a model
+    file."""
 
     motors: dict[str, MotorResult]
     result: IdentifyResult

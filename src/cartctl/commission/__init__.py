@@ -8,8 +8,7 @@
    timing, and the chosen controller.
 5. :mod:`.verify`: a closed-loop step on the cart against the tuning's prediction.
 
-Only :mod:`.stages` drives the plant or writes files; the rest is numbers in, numbers out.
-"""
+Only :mod:`.stages` drives the plant or writes files; the rest is numbers in, numbers out."""
 
 from __future__ import annotations
 
@@ -18,7 +17,6 @@ from cartctl.errors import CartctlError
 
 class StageError(CartctlError, RuntimeError):
     """A stage found the cart or its model unfit: exit code 1, one line saying which stage, what was
-    measured and what to do.
-    """
+    measured and what to do."""
 
     exit_code = 1

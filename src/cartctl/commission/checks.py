@@ -9,8 +9,7 @@ One open-loop experiment (:func:`checks_sequence`, 5.5 s) drives each motor in t
   starts to turn (the first of three ticks in a row with an encoder count, less the loop delay
   and the tick the speed needs to show it); the ramp's end speed gives a rough gain.
 
-:func:`choose_amplitude` turns these into the excitation amplitude.
-"""
+:func:`choose_amplitude` turns these into the excitation amplitude."""
 
 from __future__ import annotations
 
@@ -56,8 +55,7 @@ class MotorCheck:
     ``pulse_turn_rad`` and ``other_turn_rad`` are its wheel's and the other wheel's rotation during
     its pulse (rad); ``direction`` is 'forward', 'backward', 'crossed' (only the other encoder
     moved) or 'still'; ``breakaway_v`` (V) is None if the wheel never turned on the ramp;
-    ``gain_rad_s_v`` is the ramp's end speed over its voltage above breakaway (rad/s per V).
-    """
+    ``gain_rad_s_v`` is the ramp's end speed over its voltage above breakaway (rad/s per V)."""
 
     motor: str
     pulse_turn_rad: float
@@ -76,8 +74,7 @@ def checks_sequence(
     period_s: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], tuple[Window, ...]]:
     """The check experiment's voltages (V) per motor and its windows: rest, pulse a, rest, pulse b,
-    rest, ramp a, rest, ramp b, rest.
-    """
+    rest, ramp a, rest, ramp b, rest."""
     rest = round(REST_S / period_s)
     pulse = np.full(round(PULSE_S / period_s), PULSE_V)
     ramp_ticks = round(RAMP_MAX_V / RAMP_RATE_V_S / period_s)
@@ -191,8 +188,7 @@ def choose_amplitude(checks: dict[str, MotorCheck], step_rad_s: float) -> Amplit
     :data:`SPEED_SPAN` × the verification step (identify over the speeds the controller will meet,
     not beyond, where the cart's nonlinearities differ) and :data:`FULL_SCALE_FRACTION` of the
     supply; at least :data:`FRICTION_MARGIN` × the larger breakaway voltage, so friction stays small
-    (the floor wins a conflict, within the supply bound).
-    """
+    (the floor wins a conflict, within the supply bound)."""
     breakaway = max(c.breakaway_v or 0.0 for c in checks.values())
     gains = [c.gain_rad_s_v for c in checks.values() if c.gain_rad_s_v]
     supply_cap = FULL_SCALE_FRACTION * SUPPLY_V

@@ -12,8 +12,7 @@ of residuals and input exceeds :data:`CROSS_CLEAR_FACTOR` × its 99 % bound. (Th
 test's own rule, at most 2 of 51 lags outside, fails on carts whose friction and quantised speed
 leave a small long-lag correlation: the virtual cart has 16 of 51 lags just outside, with a
 98.6 % fit.) Whiteness and lag counts are reported only: quantised speeds and friction colour
-the residuals of any real cart, and the loop is tuned on θ's uncertainty.
-"""
+the residuals of any real cart, and the loop is tuned on θ's uncertainty."""
 
 from __future__ import annotations
 
@@ -42,10 +41,9 @@ def request_for(loop_delay_ticks: int) -> IdentifyRequest:
 
 @dataclass(frozen=True)
 class MotorVerdict:
-    """One motor's validation figures: simulation fit (%), largest pole radius, cross-correlation lags
-    outside the 99 % bound of all lags, the largest over the bound, the whiteness test (reported
-    only), and why the model fails (empty: it passes).
-    """
+    """One motor's validation figures: simulation fit (%), largest pole radius, cross-correlation
+    lags outside the 99 % bound of all lags, the largest over the bound, the whiteness test
+    (reported only), and why the model fails (empty: it passes)."""
 
     fit_percent: float
     pole_radius: float

@@ -5,8 +5,7 @@ recording (``.rrd``) per stage.
 readable summary. A stage's recording holds its series on the ``time`` timeline and its figures
 as a Markdown note at ``commission/<stage>``; a trace goes under the run's Rerun entity paths with
 the run's layout, so ``cartctl review`` shows it as a run. Recording problems never stop
-commissioning: they come back as text for the summary.
-"""
+commissioning: they come back as text for the summary."""
 
 from __future__ import annotations
 
@@ -237,8 +236,7 @@ def trace_series(trace: Trace) -> Series:
 def record_stage(path: Path, series: Series, note: str, stage: str, *,
                  layout: bool = False) -> str | None:  # fmt: skip
     """Write ``series`` and ``note`` (Markdown) to ``path``, with the run's layout if ``layout``;
-    returns a problem's description, or None.
-    """
+    returns a problem's description, or None."""
     try:
         rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
         path.parent.mkdir(parents=True, exist_ok=True)

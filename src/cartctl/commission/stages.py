@@ -2,8 +2,7 @@
 
 Each stage makes its own plant from the name, so a serial cart is connected for its experiment
 and closed (zero volts) at its end; an experiment stopped by Ctrl-C or a plant fault keeps its
-ticks (:func:`cartctl.runtime.experiment.run_experiment`).
-"""
+ticks (:func:`cartctl.runtime.experiment.run_experiment`)."""
 
 from __future__ import annotations
 
@@ -41,8 +40,7 @@ class Commission:
     ``plant_options`` go to ``make_plant``; ``jobs`` are the tuning's worker processes;
     ``run_command`` runs ``cartctl run`` with the given arguments and returns its exit code and
     ``--json`` summary (injected by the command, which owns the CLI); ``results`` collects each
-    finished stage's figures for ``--json``.
-    """
+    finished stage's figures for ``--json``."""
 
     spec: str
     out: Path

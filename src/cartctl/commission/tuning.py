@@ -19,8 +19,7 @@ phase lag of f ticks at low frequency.
 every plant, with overshoot ≤ 5 % on the model and the timing plants and nominal settling ≤
 :data:`MAX_SETTLING_S`, the lowest worst-case overshoot, then the fastest nominal settling; a
 setting whose controller file ``cartctl run`` would refuse (a gain that turns one encoder count
-into the whole supply) is passed over for the next.
-"""
+into the whole supply) is passed over for the next."""
 
 from __future__ import annotations
 
@@ -77,8 +76,7 @@ def later_command(model: ArxModel, fraction: float) -> ArxModel:
 class CommissionJob:
     """The grid for :func:`cartctl.tune.engine.run_grid` (picklable): the tune job (with the shared
     design fields, loop delay included), the sampled plants, the settings and the timing plants'
-    fractions of a tick.
-    """
+    fractions of a tick."""
 
     tune: engine.TuneJob
     sample: PlantSample
@@ -112,8 +110,7 @@ def evaluate_chunk(job: CommissionJob) -> list[robustness.RobustRow]:
 class TuningResult:
     """The grid's rows (sorted as ``tune --robust`` sorts them), the chosen one, the design fields
     every setting shares, and the settings passed over because ``cartctl run`` would refuse their
-    controller file, with why.
-    """
+    controller file, with why."""
 
     rows: list[robustness.RobustRow]
     chosen: robustness.RobustRow
@@ -171,8 +168,7 @@ def run_tuning(model_path: Path, loop_delay_ticks: int,
 def _file_refusal(models: ModelFile, model_path: Path, row: robustness.RobustRow,
                   fixed: dict[str, float]) -> str | None:  # fmt: skip
     """Why ``cartctl run`` would refuse the setting's controller file (written to a temporary folder
-    and read back), or None.
-    """
+    and read back), or None."""
     import tempfile
 
     from cartctl.design.controllerfile import load_controller, save_controller

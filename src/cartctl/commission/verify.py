@@ -8,8 +8,7 @@ a and b must have:
   :data:`TRUE_SPEED_TOLERANCE_PP` on a simulator's true speed; on a cart's RTS-smoothed speed
   (the encoder's whole counts are no measure of a few percent) half an encoder count per tick
   over the step more; a whole count on the bare encoder speed;
-- settling ≤ max(:data:`TARGET_SETTLING_S`, predicted nominal + two ticks).
-"""
+- settling ≤ max(:data:`TARGET_SETTLING_S`, predicted nominal + two ticks)."""
 
 from __future__ import annotations
 
@@ -42,8 +41,7 @@ def run_argv(plant: str, controller: Path, out: Path, *, fast: bool,
 class Verification:
     """Measured (worse of motors a and b; None: did not settle) against predicted (the tuning's
     ``nominal_…`` and ``worst_…`` figures), the pass ``limits`` with the ``speed`` judged, and the
-    verdict.
-    """
+    verdict."""
 
     measured: dict[str, float | None]
     predicted: dict[str, float | None]
@@ -59,8 +57,7 @@ def compare(summary: dict[str, Any], predicted: dict[str, float | None],
             smoothed: dict[str, dict[str, Any]] | None = None) -> Verification:  # fmt: skip
     """Judge a ``cartctl run --json`` summary against the tuning's prediction (module docstring);
     ``smoothed`` per motor, the run's figures on the smoothed speed, judged where there is no true
-    speed.
-    """
+    speed."""
     motors = summary.get("motors") or {}
     count_pp = 100.0 * encoder_quantum_rad_s() / STEP_RAD_S
     if summary.get("metrics_signal") == "true_speed":

@@ -1,3 +1,2 @@
 """Figures of merit and how they print: fits (``metrics``), step metrics (``stepinfo``), numbers
-for the terminal (``numfmt``, no numpy, so the parser may import it).
-"""
+for the terminal (``numfmt``, no numpy, so the parser may import it)."""

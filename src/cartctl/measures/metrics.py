@@ -9,11 +9,11 @@ from numpy.typing import ArrayLike
 
 
 def fit_percent(measured: ArrayLike, modelled: ArrayLike) -> float:
-    """Normalised-RMSE fit (%): 100 · (1 − ‖y − ŷ‖ / ‖y − mean(y)‖); NaN for a constant ``measured``.
+    """Normalised-RMSE fit (%): 100 · (1 − ‖y − ŷ‖ / ‖y − mean(y)‖); NaN for a constant
+    ``measured``.
 
     100 % is perfect, 0 % no better than the mean, negative when worse. Used for simulation (ŷ from
-    the input alone) and one-step prediction (ŷ from past measurements); callers label which.
-    """
+    the input alone) and one-step prediction (ŷ from past measurements); callers label which."""
     y = np.asarray(measured, dtype=float)
     y_hat = np.asarray(modelled, dtype=float)
     spread = np.linalg.norm(y - y.mean())

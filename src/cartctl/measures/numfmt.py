@@ -3,8 +3,7 @@
 A column gets the decimals that give its largest magnitude (or a larger ``scale`` the caller
 gives, such as the RMS error beside a steady-state error) :data:`SIG_FIGS` significant figures;
 smaller values show fewer, and one far below the scale prints as an unsigned zero. 1000 and more
-round to tens. No numpy: the parser's modules import it.
-"""
+round to tens. No numpy: the parser's modules import it."""
 
 from __future__ import annotations
 
@@ -29,8 +28,7 @@ def column_decimals(
 ) -> int:
     """Decimals giving the column's largest magnitude (or ``scale``, if larger) ``sig`` significant
     figures, at most ``max_decimals``; negative to round to tens …; 0 for a column of zeros. None,
-    NaN and infinities are left out.
-    """
+    NaN and infinities are left out."""
     top = max(_finite([*values, scale]), default=0.0)
     if top == 0.0:
         return 0
@@ -61,16 +59,16 @@ def format_column(
     factor: float = 1.0,
     max_decimals: int = MAX_DECIMALS,
 ) -> list[str]:
-    """The cells of one column with the column's decimals; ``factor`` converts the values first (1e3:
-    s to ms), ``scale`` is in the printed unit.
-    """
+    """The cells of one column with the column's decimals; ``factor`` converts the values first
+    (1e3: s to ms), ``scale`` is in the printed unit."""
     shown = [None if v is None else float(v) * factor for v in values]
     decimals = column_decimals(shown, sig=sig, scale=scale, max_decimals=max_decimals)
     return [format_fixed(v, decimals) for v in shown]
 
 
 def exact_decimals(values: Iterable[float], max_decimals: int = MAX_DECIMALS) -> int:
-    """The fewest decimals (up to ``max_decimals``) that print every value exactly (0.04, 0.10, 0.16)."""
+    """The fewest decimals (up to ``max_decimals``) that print every value exactly (0.04, 0.10,
+    0.16)."""
     for decimals in range(max_decimals + 1):
         if all(abs(round(v, decimals) - v) <= 1e-9 * max(1.0, abs(v)) for v in values):
             return decimals

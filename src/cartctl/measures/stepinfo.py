@@ -16,8 +16,7 @@ With a reference the metrics judge tracking of it, as ``control.step_info(..., f
 does. Unlike python-control 0.10, times count from the onset, not t = 0; the final value is a
 mean, not the last sample; a sample on the band edge is inside; the response need not start at 0;
 and level crossings are interpolated between samples (``interpolate=False`` gives the sample
-times python-control reports).
-"""
+times python-control reports)."""
 
 from __future__ import annotations
 
@@ -42,8 +41,7 @@ def settling_half_width(
     """Half-width of the settling band: max(fraction · |step_size|, floor), in response units.
 
     ``floor`` (≥ 0) is the narrowest band worth judging (one encoder count per tick for a measured
-    wheel speed); ``fraction`` is in (0, 1).
-    """
+    wheel speed); ``fraction`` is in (0, 1)."""
     if not 0.0 < fraction < 1.0:
         raise InputError(f"settling band must be a fraction in (0, 1), got {fraction}")
     if not (math.isfinite(floor) and floor >= 0.0):
@@ -57,8 +55,7 @@ class StepInfo:
 
     ``rise_time_s`` is None if 90 % is never reached, ``settling_time_s`` if the last sample is
     outside the band; ``steady_state_error`` (reference − final value) is None without a reference;
-    ``step_size`` is (reference or final value) − initial, negative for a step down.
-    """
+    ``step_size`` is (reference or final value) − initial, negative for a step down."""
 
     rise_time_s: float | None
     settling_time_s: float | None
@@ -94,9 +91,9 @@ def final_value(response: ArrayLike) -> float:
 def find_step(
     values: ArrayLike, *, initial: float = 0.0, tolerance: float = 1e-6
 ) -> StepOnset | None:
-    """A single step: ``initial`` up to some sample, then one other level (within ``tolerance``) to the
-    end; a signal at another level from sample 0 steps at index 0. None: no step, or not one clean step.
-    """
+    """A single step: ``initial`` up to some sample, then one other level (within ``tolerance``) to
+    the end; a signal at another level from sample 0 steps at index 0. None: no step, or not one
+    clean step."""
     u = np.asarray(values, dtype=float)
     if u.ndim != 1:
         raise InputError(f"a signal must be 1-D, got shape {u.shape}")
@@ -111,9 +108,8 @@ def find_step(
 
 
 def first_step(reference: NDArray[np.float64], *, initial: float = 0.0) -> tuple[int, int] | None:
-    """``(start, end)`` of the first other level of a reference that starts at ``initial``; None when
-    it never leaves it or holds the level for fewer than :data:`MIN_FINAL_SAMPLES` samples.
-    """
+    """``(start, end)`` of the first other level of a reference that starts at ``initial``; None
+    when it never leaves it or holds the level for fewer than :data:`MIN_FINAL_SAMPLES` samples."""
     moved = np.flatnonzero(np.abs(reference - initial) > 1e-9)
     if moved.size == 0:
         return None
@@ -145,8 +141,7 @@ def step_rows(
 
     ``z`` (N, n) holds each response as a fraction of its step (0 initial, 1 target) at ``time_s``
     (from the onset on); ``band`` is the band's half-width as a fraction of the step (at 1 or more
-    nothing is left to settle, which the caller judges).
-    """
+    nothing is left to settle, which the caller judges)."""
     excess = np.max(z, axis=1) - 1.0
     overshoot = np.where(excess <= _ROUNDING, 0.0, excess) * 100.0
     outside = np.abs(z - 1.0) > band

@@ -10,8 +10,7 @@ around it); the loop's clamp, then the plant's saturation; :func:`~cartctl.plant
 with every plant's input coefficients laid out by lag, so plants of different delays run
 together. A plant whose speed passes :data:`~cartctl.plants.sim.DIVERGED_RAD_S` is marked as run
 away and held at zero. The trace ends with the run's stop row; ``tests/test_control_laws.py``
-checks it against the real loop bit for bit.
-"""
+checks it against the real loop bit for bit."""
 
 from __future__ import annotations
 
@@ -40,9 +39,9 @@ FloatArray = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class ArxBatch:
-    """N ARX plants of one motor: ``ar`` (N, na) and ``b_lags`` (N, L), the coefficient of u[k − l] in
-    y[k + 1] (b_i at l = nk − 1 + i, else 0; rad/s per V), with the plants' saturation (V) and Ts (s).
-    """
+    """N ARX plants of one motor: ``ar`` (N, na) and ``b_lags`` (N, L), the coefficient of u[k − l]
+    in y[k + 1] (b_i at l = nk − 1 + i, else 0; rad/s per V), with the plants' saturation (V) and Ts
+    (s)."""
 
     ar: FloatArray
     b_lags: FloatArray
@@ -103,8 +102,7 @@ class BatchTrace:
 
     ``time_s`` and ``reference`` (n + 1,) in s and rad/s; ``speed`` (N, n + 1), the measured and
     true speed (rad/s); ``voltage`` (N, n + 1), the command sent (V, 0 in the stop row);
-    ``diverged`` (N,), the plants that ran away.
-    """
+    ``diverged`` (N,), the plants that ran away."""
 
     time_s: FloatArray
     reference: FloatArray
@@ -143,7 +141,8 @@ class _PiBatch:
 
 
 class _FeedbackBatch:
-    """:class:`StateFeedbackController`'s :func:`~cartctl.runtime.statefeedback.feedback_law` over N rows."""
+    """:class:`StateFeedbackController`'s :func:`~cartctl.runtime.statefeedback.feedback_law` over N
+    rows."""
 
     def __init__(self, ctrl: StateFeedbackController, n: int) -> None:
         self.ctrl = ctrl
@@ -177,8 +176,7 @@ def simulate_batch(
 ) -> BatchTrace:
     """Run ``controller``'s design (read only: gains, limit, anti-windup, estimator) against every
     plant from rest, with the loop's clamp ``voltage_limit_v`` (V), following ``reference`` (rad/s,
-    one value per tick).
-    """
+    one value per tick)."""
     ref = np.asarray(reference, dtype=float)
     if ref.ndim != 1 or ref.size == 0:
         raise InputError(f"the reference must be a non-empty 1-D array, got shape {ref.shape}")

@@ -4,8 +4,7 @@ A setting is designed per motor by the design command's own path
 (:func:`cartctl.design.make.design_motor`), run in memory and summarised by the run summary's
 ``trace_metrics``; settings are spread over worker processes in chunks, and a refused design is
 a result, not an error. Every setting is scored on the loop it is designed for
-(:func:`scoring_plant`). The grid itself and the result rows are in :mod:`cartctl.tune.grid`.
-"""
+(:func:`scoring_plant`). The grid itself and the result rows are in :mod:`cartctl.tune.grid`."""
 
 from __future__ import annotations
 
@@ -42,8 +41,7 @@ class TuneJob:
     ``make_plant``; ``reference`` a spec of both motors (rad/s); ``duration_s`` per setting;
     ``extra_delay_ticks`` the loop delay beyond the model's, which the designs allow for and the
     scoring plant has; ``items`` the (1-based grid index, axis values); ``design`` request fields
-    every setting shares (``process_noise_std_v`` …).
-    """
+    every setting shares (``process_noise_std_v`` …)."""
 
     model: str
     method: str
@@ -57,7 +55,8 @@ class TuneJob:
 
 
 class DelayedPlant:
-    """A plant whose commands arrive ``ticks`` ticks late (zero volts at first): a PC-side loop's delay."""
+    """A plant whose commands arrive ``ticks`` ticks late (zero volts at first): a PC-side loop's
+    delay."""
 
     def __init__(self, plant: Plant, ticks: int) -> None:
         self.plant = plant
@@ -79,10 +78,9 @@ class DelayedPlant:
 
 
 def scoring_plant(job: TuneJob) -> Plant:
-    """The plant a setting of ``job`` is scored on: ``job.plant`` with ``job.extra_delay_ticks`` more
-    ticks of delay (the sim plant's models with nk + d, as ``design``'s simulated step; the physics
-    plant's commands delayed).
-    """
+    """The plant a setting of ``job`` is scored on: ``job.plant`` with ``job.extra_delay_ticks``
+    more ticks of delay (the sim plant's models with nk + d, as ``design``'s simulated step; the
+    physics plant's commands delayed)."""
     plant, _ = make_plant(job.plant, model_path=job.model, preset=job.preset)
     d = job.extra_delay_ticks
     if d == 0:
@@ -111,7 +109,8 @@ def simulate(
 def design_setting(
     job: TuneJob, models: ModelFile, settings: dict[str, float]
 ) -> tuple[dict[str, Controller], float] | str:
-    """A setting's runtime controller per motor and its voltage limit (V), or why a design was refused."""
+    """A setting's runtime controller per motor and its voltage limit (V), or why a design was
+    refused."""
     request = design_request(job.method, settings, job.extra_delay_ticks, dict(job.design))
     controllers: dict[str, Controller] = {}
     for m in ("a", "b"):
@@ -184,8 +183,7 @@ def run_grid(
     With 1 process everything runs here; otherwise the first setting runs here (its lazy imports
     are paid before the workers fork) and the rest in chunks of about a quarter of a worker's share.
     ``progress`` gets the count done so far; ``evaluate`` maps a chunk to rows (default
-    :func:`evaluate_chunk`).
-    """
+    :func:`evaluate_chunk`)."""
     items = job.items
     results: list[Row] = []
     for item in items if jobs == 1 else items[:1]:

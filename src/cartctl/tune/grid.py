@@ -2,8 +2,7 @@
 
 ``--grid`` holds comma-separated axes, each ``NAME=START:STOP:STEP`` (inclusive, STEP > 0) or
 ``NAME=VALUE``; axes left out keep their default range (:data:`AXES`). NAME is the ``cartctl
-design`` option without its dashes; the older spelling with underscores is accepted too.
-"""
+design`` option without its dashes; the older spelling with underscores is accepted too."""
 
 from __future__ import annotations
 
@@ -35,8 +34,7 @@ RUN_FAILED = "the run failed: "  # how the reason of a setting whose run failed 
 @dataclass(frozen=True)
 class Axis:
     """A tuning axis: its grid ``name`` (the design option without dashes, the settings' key in
-    ``--json`` too), the design request ``field`` it sets, its ``unit`` and default range.
-    """
+    ``--json`` too), the design request ``field`` it sets, its ``unit`` and default range."""
 
     name: str
     field: str
@@ -100,12 +98,12 @@ def _axis_range(item: str, text: str, form: str) -> tuple[float, float, float]:
 
 
 def parse_grid(spec: str | None, method: str) -> dict[str, tuple[float, ...]]:
-    """The values of each axis of ``method``, keyed by the axes' names, defaults where ``spec`` is silent.
+    """The values of each axis of ``method``, keyed by the axes' names, defaults where ``spec`` is
+    silent.
 
     Each value is checked as ``cartctl design`` checks its option (named as the grid item the user
     gave), so an out-of-range value is refused before any design runs; so are unknown or repeated
-    axes, malformed or empty ranges and more than :data:`MAX_TUNE_SETTINGS` settings.
-    """
+    axes, malformed or empty ranges and more than :data:`MAX_TUNE_SETTINGS` settings."""
     spelled = {n: a.name for a in AXES[method] for n in (a.name, a.name.replace("-", "_"))}
     ranges = {a.name: a.default for a in AXES[method]}
     given: dict[str, str] = {}
@@ -150,8 +148,7 @@ def design_request(
 ) -> DesignRequest:
     """A setting's design request: the design defaults, ``fixed`` (shared fields such as
     ``process_noise_std_v``), then the setting's axes. The tuning run and ``--choose`` both use it,
-    so both get the very same controller.
-    """
+    so both get the very same controller."""
     axes: dict[str, Any] = {a.field: float(settings[a.name]) for a in AXES[method]}
     return DesignRequest(method=method, extra_delay_ticks=extra_delay_ticks, **dict(fixed or {}),
                          **axes)  # fmt: skip
@@ -179,8 +176,7 @@ class TuneResult:
     ``index`` is the 1-based place in the grid (first axis slowest), which ``--choose`` takes;
     ``settings`` the axis values by axis name; ``reason`` why it is infeasible (refused design or
     failed run); ``motors`` each motor's run summary entry (as ``run --json``); ``pareto`` and
-    ``pareto_plot`` mark the fronts over :data:`METRICS` and :data:`PLOT_METRICS`.
-    """
+    ``pareto_plot`` mark the fronts over :data:`METRICS` and :data:`PLOT_METRICS`."""
 
     index: int
     settings: dict[str, float]
@@ -222,8 +218,7 @@ def pareto_front(points: ArrayLike) -> NDArray[np.bool_]:
     """Which rows of ``points`` (n, k) are non-dominated, every column minimised.
 
     A row with a NaN is never on the front and dominates nothing; equal rows do not dominate each
-    other.
-    """
+    other."""
     p = np.asarray(points, dtype=float)
     if p.ndim != 2:
         raise InputError(f"points must be a 2-D array (n, k), got shape {p.shape}")
@@ -243,8 +238,7 @@ def _front_over(results: Sequence[TuneResult], metrics: Sequence[str]) -> NDArra
 
 def mark_pareto(results: Sequence[TuneResult]) -> list[TuneResult]:
     """The results with ``pareto`` (the front over :data:`METRICS`) and ``pareto_plot`` (over
-    :data:`PLOT_METRICS`) set, among feasible settings whose metrics are all defined.
-    """
+    :data:`PLOT_METRICS`) set, among feasible settings whose metrics are all defined."""
     front = _front_over(results, METRICS)
     plotted = _front_over(results, PLOT_METRICS)
     return [replace(r, pareto=bool(f), pareto_plot=bool(p))
@@ -261,8 +255,7 @@ def status_counts(results: Sequence[TuneResult]) -> dict[str, int]:
 
 def sort_results(results: Sequence[TuneResult]) -> list[TuneResult]:
     """Pareto front first, then the other settled runs, each by settling then overshoot; then the
-    unsettled (by RMS error), then the infeasible (by index).
-    """
+    unsettled (by RMS error), then the infeasible (by index)."""
 
     def key(r: TuneResult) -> tuple[int, float, float, int]:
         w = r.worst

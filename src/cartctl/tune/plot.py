@@ -3,8 +3,7 @@
 The ringed points are the front over the two plotted metrics (plain: ``pareto_plot``;
 ``--robust``: the robust front), so none is dominated in the plot's own axes. Each carries its
 setting number where it overlaps no other label, point or ring (:func:`place_labels`); one left
-without room is named in a note under the axes, beside the legend.
-"""
+without room is named in a note under the axes, beside the legend."""
 
 from __future__ import annotations
 
@@ -55,13 +54,12 @@ def place_labels(
     obstacles: Sequence[tuple[float, float, float]],
     color: str = "tab:red",
 ) -> list[str]:
-    """Annotate each point (x, y, text; data coordinates) where its text overlaps nothing, and return
-    the texts left without a place.
+    """Annotate each point (x, y, text; data coordinates) where its text overlaps nothing, and
+    return the texts left without a place.
 
     Candidates are offsets of 7 to 90 pt in 16 directions, the first free one taken (with a thin
     line when 18 pt or more away): inside the axes, clear of the labels placed so far and of the
-    ``obstacles`` (x, y, radius in pt). Draws the figure once to fix its layout.
-    """
+    ``obstacles`` (x, y, radius in pt). Draws the figure once to fix its layout."""
     from matplotlib.transforms import Bbox
 
     fig.canvas.draw()
@@ -116,8 +114,7 @@ def _finish(fig: Any, ax: Any, front: Sequence[tuple[float, float, int]],
 
     The labels are placed once the legend is in place (it moves the axes). When some find no room,
     a legend line names them and they are placed again (the new line moves the axes once more); its
-    text then lists the final ones, so the layout holds.
-    """
+    text then lists the final ones, so the layout holds."""
     if front:
         ax.scatter([x for x, _, _ in front], [y for _, y, _ in front], s=RING_AREA_PT2,
                    facecolors="none", edgecolors="tab:red", linewidths=1.5, zorder=4,
@@ -173,9 +170,8 @@ def plot_tuning(path: str, method: str, results: Sequence[TuneResult]) -> None:
 
 
 def plot_robust(path: str, method: str, rows: Sequence[RobustRow], plants: int) -> None:
-    """Nominal settling (ms) against overshoot (%): worst case (colour: p95 settling), nominal (grey,
-    joined to it) and physics (x).
-    """
+    """Nominal settling (ms) against overshoot (%): worst case (colour: p95 settling), nominal
+    (grey, joined to it) and physics (x)."""
     import numpy as np
     from matplotlib import colormaps
 

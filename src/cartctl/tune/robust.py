@@ -13,8 +13,7 @@ Per plant each metric is the worse of motors a and b. The **worst case** is the 
 nominal model, the sampled plants and the actuation runs (a plant that never settles, runs away
 or fails makes it infinite: JSON ``null``, with the counts beside it); ``worst_sampled`` leaves
 the actuation runs out; the **spread** is the 5th, 50th and 95th percentile over the sampled
-plants, each a sampled plant's value (``inverted_cdf``, so infinities stay meaningful).
-"""
+plants, each a sampled plant's value (``inverted_cdf``, so infinities stay meaningful)."""
 
 from __future__ import annotations
 
@@ -51,13 +50,12 @@ SUMMARY_KEYS = {"overshoot_percent": "overshoot_percent", "settling_time_s": "se
 
 
 def step_metrics(trace: BatchTrace, settling_floor: float) -> dict[str, FloatArray]:
-    """Per plant, the run summary's figures of one motor (``sinks.summary.motor_metrics``), vectorised.
+    """Per plant, the run summary's figures of one motor (``sinks.summary.motor_metrics``).
 
-    On the first reference step from rest: overshoot (%) and settling time (s) in the band
-    max(2 % of the step, ``settling_floor``); over the whole trace the RMS error (rad/s) and the peak
+    On the first reference step from rest: overshoot (%) and settling time (s) in the band max(2 %
+    of the step, ``settling_floor``); over the whole trace the RMS error (rad/s) and the peak
     |voltage| (V). Where the summary has None: ``inf`` settling for a run that never settles, NaN
-    for an undefined figure; rows that ran away get ``inf`` for all but the voltage.
-    """
+    for an undefined figure; rows that ran away get ``inf`` for all but the voltage."""
     t, ref, y = trace.time_s, trace.reference, trace.speed
     n = y.shape[0]
     with np.errstate(all="ignore"):
@@ -91,8 +89,7 @@ class RobustScore:
     ``worst_sampled``, ``p5``, ``p50`` and ``p95`` (module docstring). ``plants`` counts the sampled
     plants, ``unsettled`` the plants (nominal and sampled) on which a motor never settles,
     ``diverged`` those that ran away (speed beyond 10⁶ rad/s). ``physics`` is the physics preset's
-    entry and ``actuation`` one per actuation timing (:func:`loop_entry`, with ``actuation_ms``).
-    """
+    entry and ``actuation`` one per actuation timing (:func:`loop_entry`, with ``actuation_ms``)."""
 
     figures: dict[str, dict[str, float | None]]
     plants: int
@@ -138,8 +135,7 @@ def _worse_of_motors(per_motor: Sequence[dict[str, FloatArray]]) -> dict[str, Fl
 
 def _timing_value(entry: dict[str, Any], key: str) -> float:
     """An actuation run's figure for the worst case: ``inf`` for a failed or unsettled run (as a
-    sampled plant that ran away), NaN where undefined.
-    """
+    sampled plant that ran away), NaN where undefined."""
     value = entry.get(key)
     if entry.get("failure") and key != "peak_voltage_v":
         return math.inf
@@ -155,9 +151,8 @@ def score_plants(
     physics: dict[str, Any],
     actuation: Sequence[dict[str, Any]] = (),
 ) -> RobustScore:
-    """Aggregate :func:`step_metrics` of the motors (row 0 the nominal model) with the nominal figures,
-    the physics entry and the actuation runs (:class:`RobustScore`).
-    """
+    """Aggregate :func:`step_metrics` of the motors (row 0 the nominal model) with the nominal
+    figures, the physics entry and the actuation runs (:class:`RobustScore`)."""
     worse = _worse_of_motors(per_motor)
     unsettled_rows = np.isinf(worse["settling_time_s"]) & ~diverged
     figures: dict[str, dict[str, float | None]] = {}
@@ -180,10 +175,9 @@ def score_plants(
 
 @dataclass(frozen=True)
 class RobustJob:
-    """A chunk of settings for the workers (picklable): plain ``tune``'s job (its ``plant`` 'sim', its
-    ``items`` unused), the sampled plants, the settings, and the actuation timings (ms, each in
-    (0, 10]) at which every setting also runs on the physics preset.
-    """
+    """A chunk of settings for the workers (picklable): plain ``tune``'s job (its ``plant`` 'sim',
+    its ``items`` unused), the sampled plants, the settings, and the actuation timings (ms, each in
+    (0, 10]) at which every setting also runs on the physics preset."""
 
     tune: TuneJob
     sample: PlantSample

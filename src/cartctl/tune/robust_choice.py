@@ -1,7 +1,6 @@
 """``cartctl tune --robust`` after the scoring: the robust Pareto front (nominal settling against
 worst-case overshoot, both minimised, among feasible settings where both are finite), the
-``--choose best`` rules (:data:`CHOICE_RULE`, :data:`CHOICE_RULE_NOMINAL`) and the row order.
-"""
+``--choose best`` rules (:data:`CHOICE_RULE`, :data:`CHOICE_RULE_NOMINAL`) and the row order."""
 
 from __future__ import annotations
 
@@ -41,8 +40,7 @@ def mark_robust_pareto(rows: Sequence[RobustRow]) -> list[RobustRow]:
 class Limits:
     """``--max-overshoot`` (%) and ``--max-settling`` (s), None: no bound. ``--choose best`` applies
     them to the nominal run and (with ``--robust``) the physics runs at every actuation timing, not
-    to the sampled plants (whose worst case ranks the settings).
-    """
+    to the sampled plants (whose worst case ranks the settings)."""
 
     overshoot_percent: float | None = None
     settling_time_s: float | None = None
@@ -94,8 +92,7 @@ def _bounded_figures(r: RobustRow) -> list[tuple[float | None, float | None]]:
 
 def choose_best_robust(rows: Sequence[RobustRow], limits: Limits = Limits()) -> RobustRow:
     """``--choose best`` with ``--robust`` (:data:`CHOICE_RULE`), within ``limits``; InputError when
-    no setting qualifies.
-    """
+    no setting qualifies."""
     candidates = [r for r in rows if r.score is not None and r.score.settles_everywhere
                   and math.isfinite(r.score.value("overshoot_percent", "worst"))]  # fmt: skip
     if not candidates:
@@ -117,8 +114,7 @@ def choose_best_robust(rows: Sequence[RobustRow], limits: Limits = Limits()) -> 
 
 def choose_best_nominal(results: Sequence[TuneResult], limits: Limits = Limits()) -> TuneResult:
     """``--choose best`` without ``--robust`` (:data:`CHOICE_RULE_NOMINAL`), within ``limits``;
-    InputError when no setting qualifies.
-    """
+    InputError when no setting qualifies."""
     candidates = [r for r in results if r.feasible and r.worst["settling_time_s"] is not None
                   and r.worst["overshoot_percent"] is not None]  # fmt: skip
     if not candidates:
@@ -135,8 +131,7 @@ def choose_best_nominal(results: Sequence[TuneResult], limits: Limits = Limits()
 
 def sort_robust(rows: Sequence[RobustRow]) -> list[RobustRow]:
     """Robust front first (by nominal settling), then the other scored settings by worst-case
-    overshoot, then the infeasible (by index).
-    """
+    overshoot, then the infeasible (by index)."""
 
     def key(r: RobustRow) -> tuple[int, float, float, int]:
         if r.score is None:

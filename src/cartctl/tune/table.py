@@ -2,8 +2,7 @@
 
 ``design …`` columns are the setting asked of ``cartctl design``, ``run …`` columns what the
 simulated run measured (the worse of motors a and b); each column (or group, with ``--robust``)
-has one rounding (:mod:`cartctl.measures.numfmt`).
-"""
+has one rounding (:mod:`cartctl.measures.numfmt`)."""
 
 from __future__ import annotations
 
@@ -51,8 +50,7 @@ def _counts_line(n_settings: int, c: dict[str, int], outcomes: Sequence[str]) ->
 
 def counts_text(results: Sequence[TuneResult]) -> str:
     """'42 settings: 10 infeasible requests (the design refused them), 0 ran but did not settle,
-    32 settled'.
-    """
+    32 settled'."""
     c = status_counts(results)
     outcomes = [f"{c['not settled']} ran but did not settle", f"{c['settled']} settled"]
     return _counts_line(len(results), c, outcomes)
@@ -97,8 +95,7 @@ def format_table(method: str, results: Sequence[TuneResult]) -> str:
     """The plain table, with the reasons of the settings that did not run below it.
 
     Front marks: ``*`` on the Pareto front over the four run metrics, ``o`` on the front of run
-    settling against run overshoot (the axes of ``--plot``).
-    """
+    settling against run overshoot (the axes of ``--plot``)."""
     heads, cells = _settings_columns(method, results)
     worst = [r.worst for r in results]
     run = [("run overshoot (%)", "overshoot_percent", 1.0),
@@ -122,8 +119,7 @@ def _group(values: Sequence[float | None], factor: float = 1.0) -> int:
 
 def format_robust_table(method: str, rows: Sequence[RobustRow]) -> str:
     """The ``--robust`` table: ``*`` marks the robust front; one rounding per group (overshoot,
-    settling); the reasons of the settings that did not run below it.
-    """
+    settling); the reasons of the settings that did not run below it."""
     heads, cells = _settings_columns(method, [r.result for r in rows])
     scored = [r.score for r in rows]
 

@@ -12,8 +12,7 @@ Each sampled plant is the cart (both motors, one loop) with, from the model:
 
 A θ draw with a pole on or outside the unit circle is drawn again (and counted). All draws come
 from one generator seeded with ``--seed`` in a fixed order, so a seed gives the same plants
-whatever the number of worker processes.
-"""
+whatever the number of worker processes."""
 
 from __future__ import annotations
 
@@ -35,10 +34,9 @@ MAX_DRAWS_PER_PLANT = 100  # θ draws per plant on average before giving up on s
 
 @dataclass(frozen=True)
 class MotorSamples:
-    """The sampled models of one motor: ``ar`` (N, na), ``b`` (N, nb, the gain factor applied), ``nk``
-    (N,), ``gain_factor`` g and ``theta_delta`` δ per plant, the σ used (None when the file has no
-    usable one, ``theta_std_note`` saying why) and the count of unstable draws rejected.
-    """
+    """The sampled models of one motor: ``ar`` (N, na), ``b`` (N, nb, the gain factor applied),
+    ``nk`` (N,), ``gain_factor`` g and ``theta_delta`` δ per plant, the σ used (None when the file
+    has no usable one, ``theta_std_note`` saying why) and the count of unstable draws rejected."""
 
     ar: NDArray[np.float64]
     b: NDArray[np.float64]
@@ -56,7 +54,8 @@ class MotorSamples:
 
 @dataclass(frozen=True)
 class PlantSample:
-    """N plants drawn around a model file: per motor samples, each plant's delay shift s, the seed, Ts."""
+    """N plants drawn around a model file: per motor samples, each plant's delay shift s, the seed,
+    Ts."""
 
     motors: dict[str, MotorSamples]
     delay_shift_ticks: NDArray[np.int_]
@@ -85,8 +84,7 @@ class PlantSample:
 
 def theta_std_of(model: ArxModel, stats: Mapping[str, Any]) -> tuple[NDArray[np.float64] | None, str | None]:  # fmt: skip
     """A motor's σ of θ from its model-file ``stats``: (σ, None), or (None, why not); σ must be
-    na + nb finite numbers ≥ 0 (an output-error fit with a singular Jacobian writes NaN).
-    """
+    na + nb finite numbers ≥ 0 (an output-error fit with a singular Jacobian writes NaN)."""
     raw = stats.get("theta_std")
     if raw is None:
         return None, "no theta_std in the model file: θ kept as it is"
@@ -149,10 +147,9 @@ def _sample_motor(
 def sample_plants(
     models: ModelFile, n_plants: int, seed: int, *, extra_delay_ticks: int = 0
 ) -> PlantSample:
-    """Draw ``n_plants`` ≥ 1 plants around ``models`` with ``seed``, for ``extra_delay_ticks`` beyond
-    the model's delay; refuses a missing or unstable model and a σ so large that stable draws are
-    too rare.
-    """
+    """Draw ``n_plants`` ≥ 1 plants around ``models`` with ``seed``, for ``extra_delay_ticks``
+    beyond the model's delay; refuses a missing or unstable model and a σ so large that stable draws
+    are too rare."""
     if isinstance(n_plants, bool) or not isinstance(n_plants, int) or n_plants < 1:
         raise InputError(f"--plants must be a number of plants >= 1, got {n_plants!r}")
     for name in ("a", "b"):
