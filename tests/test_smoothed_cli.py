@@ -141,7 +141,7 @@ def test_the_runs_recording_holds_the_smoothed_speed(
     tmp_path: Path, physics_run: Path, rrd_rows: Callable[[str | Path], Counter]
 ) -> None:
     from cartctl.cli.commands.review.smoothed import smooth_run
-    from cartctl.sinks.rerun_series import HeldRerunSink
+    from cartctl.sinks.rerun_sink import HeldRerunSink
     from cartctl.sinks.summary import trace_metrics
 
     cart = _without_true_speed(physics_run / "p.csv", tmp_path / "cart.csv")
@@ -168,7 +168,7 @@ def test_a_held_recording_is_readable_when_the_process_ends_before_its_release(
 
     path = tmp_path / "held.rrd"
     script = (
-        "from cartctl.sinks.rerun_series import HeldRerunSink\n"
+        "from cartctl.sinks.rerun_sink import HeldRerunSink\n"
         f"s = HeldRerunSink('save', {str(path)!r}); s.open(['time_s', 'tick', 'speed_a'])\n"
         "for k in range(30): s.write((k * 0.01, k, 1.0))\n"
         "s.close()\n"

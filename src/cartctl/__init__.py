@@ -1,10 +1,6 @@
 """cartctl: identify, design and run velocity control of a two-wheeled DC-motor cart.
 
-Pipeline: ``data`` → ``identify`` → ``models/`` → ``design`` → ``controllers/`` →
-``runtime`` (plant, estimator, controller, sinks) → ``logs/`` → review.
-
-From Python: ``cartctl.load_trace``, ``excite``, ``identify``, ``load_model``, ``save_model``,
-``design_pi``, ``design_poles`` and ``simulate`` (see :mod:`cartctl.api`).
+The Python API (:mod:`cartctl.api`) is importable from here.
 """
 
 __version__ = "0.1.0"
@@ -16,8 +12,7 @@ __all__ = ["TS_S", "__version__", *_API]
 
 
 def __getattr__(name: str) -> object:
-    """The Python API (:mod:`cartctl.api`) and ``TS_S``, imported on first use: ``import cartctl``
-    imports nothing, so the command line routes its stop signals before any other import runs."""
+    """The API and ``TS_S`` on first use: the command line routes its stop signals first."""
     if name == "TS_S":
         from cartctl.cart import PERIOD_S
 

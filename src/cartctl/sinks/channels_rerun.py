@@ -21,7 +21,7 @@ from cartctl.sinks.rerun_layout import (
     collapsed,
     padded_range,
 )
-from cartctl.sinks.rerun_sink import RerunSink
+from cartctl.sinks.rerun_sink import RerunSink, timelines
 
 GPIO_ROOT = "gpio"
 CART_ROOT = "cart"
@@ -166,10 +166,7 @@ class ChannelsRerunSink(RerunSink):
         try:
             rec.send_columns(
                 entity,
-                indexes=[
-                    rr.TimeColumn("time", duration=[time_s]),
-                    rr.TimeColumn("tick", sequence=[tick]),
-                ],
+                indexes=timelines([time_s], [tick]),
                 columns=rr.TextLog.columns(text=[text], level=[level]),
                 strict=True,
             )

@@ -1,5 +1,6 @@
 """The Rerun sink: the loop's rows as a ``.rrd`` recording and/or a live viewer, under the
-entity paths of docs/architecture.md, on the ``time`` (s) and ``tick`` timelines.
+entity paths of docs/architecture.md, on the ``time`` (s) and ``tick`` timelines; and the run's
+sink kept open (:class:`HeldRerunSink`) for series made after it (the smoothed speed).
 
 ``write`` only keeps the row; ``idle`` (after the tick's compute time) packs rows into blocks of
 ``batch_ticks`` and sends one entity's column of the oldest full block per call. All in the
@@ -11,16 +12,17 @@ is a fault: :class:`~cartctl.errors.OutputError` from ``open`` or ``close``.
 
 from __future__ import annotations
 
+import atexit
 import uuid
 import warnings
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Final
 
 import numpy as np
 import rerun as rr
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from cartctl.errors import InputError, OutputError
 from cartctl.sinks.rerun_layout import (
@@ -140,13 +142,7 @@ class RerunSink:
     def _describe(self, rec: rr.RecordingStream) -> None:
         rec.send_blueprint(blueprint(motors_in(e for _, e in self._signals), self.ranges))
         for _, entity in self._signals:
-            style = STYLES[entity]
-            rec.log(
-                entity,
-                rr.SeriesLines(colors=[style.color], names=[style.name], widths=[style.width]),
-                static=True,
-                strict=True,
-            )
+            _log_style(rec, entity)
 
     def write(self, row: Sequence[float]) -> None:
         """Keep one tick's values for :meth:`idle`; never calls Rerun (a bad row is skipped there)."""
@@ -246,10 +242,7 @@ class RerunSink:
             start = self._sent_rows
             ticks = np.arange(start, start + len(block), dtype=np.int64)
         self._sent_rows += len(block)
-        return [
-            rr.TimeColumn("time", duration=block[:, self._time_index]),
-            rr.TimeColumn("tick", sequence=ticks),
-        ]
+        return timelines(block[:, self._time_index], ticks)
 
     def _send_next(self) -> None:
         if not self._signals:  # no column has an entity path: nothing to send
@@ -296,6 +289,81 @@ class RerunSink:
 
 def _warm_up_conversions() -> None:
     """The column conversions once, so the first block's sends are not slow."""
-    rr.TimeColumn("time", duration=np.zeros(1))
-    rr.TimeColumn("tick", sequence=np.zeros(1, dtype=np.int64))
+    timelines(np.zeros(1), np.zeros(1, dtype=np.int64))
     rr.Scalars.columns(scalars=np.zeros(1))
+
+
+def timelines(time_s: ArrayLike, ticks: ArrayLike) -> list[rr.TimeColumn]:
+    """The ``time`` (s) and ``tick`` timelines of a run of rows."""
+    return [rr.TimeColumn("time", duration=time_s), rr.TimeColumn("tick", sequence=ticks)]
+
+
+def _log_style(rec: rr.RecordingStream, entity: str) -> None:
+    style = STYLES[entity]
+    rec.log(entity, rr.SeriesLines(colors=[style.color], names=[style.name],
+                                   widths=[style.width]), static=True, strict=True)  # fmt: skip
+
+
+Series = Mapping[str, tuple[ArrayLike, ArrayLike | None, ArrayLike]]  # path: (time, tick, values)
+
+
+def send_series(
+    rec: rr.RecordingStream,
+    entity: str,
+    time_s: ArrayLike,
+    tick: ArrayLike | None,
+    values: ArrayLike,
+) -> None:
+    """One whole series under ``entity`` (in its :data:`STYLES` style) on the ``time`` (s) and
+    ``tick`` timelines; ``tick`` None numbers the values from 0."""
+    y = np.asarray(values, dtype=float)
+    ticks = np.arange(y.size) if tick is None else np.asarray(tick)
+    if entity in STYLES:
+        _log_style(rec, entity)
+    rec.send_columns(
+        entity,
+        indexes=timelines(np.asarray(time_s, dtype=float), ticks.astype(np.int64)),
+        columns=rr.Scalars.columns(scalars=y),
+        strict=True,
+    )
+
+
+class HeldRerunSink(RerunSink):
+    """The run's :class:`RerunSink` kept open after the loop's ``close`` for :meth:`send_extra`,
+    until :meth:`release` (or the interpreter's exit) closes it."""
+
+    _released = False
+
+    def open(self, columns: Sequence[str]) -> None:
+        super().open(columns)
+        atexit.register(self.release)
+
+    def close(self) -> None:
+        if self._released:
+            super().close()
+        else:
+            self._send_rows()
+
+    def release(self) -> None:
+        atexit.unregister(self.release)
+        self._released = True
+        self.close()
+
+    def send_extra(self, series: Series, texts: Mapping[str, str] | None = None) -> None:
+        """Send whole series (:func:`send_series`) and static texts (what they were made from)."""
+        rec = self._recording
+        if rec is None or self._closed:
+            return
+        try:
+            for entity, (time_s, tick, values) in series.items():
+                send_series(rec, entity, time_s, tick, values)
+            for entity, text in (texts or {}).items():
+                rec.log(entity, rr.TextDocument(text), static=True)
+        except Exception as exc:
+            self._problem(f"sending what was made from the run failed: {exc}", raise_now=True)
+
+
+def warm_up() -> None:
+    """Pay the Rerun SDK's first-use cost (pyarrow importing pandas, 0.15 s) with a throw-away
+    blueprint before a cart is connected, not between the loop-delay probe and the first tick."""
+    blueprint(("a", "b"))

@@ -119,7 +119,7 @@ def _rerun_sink(
     if args.rerun == "off":
         return None
     from cartctl.sinks.rerun_layout import run_ranges
-    from cartctl.sinks.rerun_series import HeldRerunSink  # open for the smoothed speed
+    from cartctl.sinks.rerun_sink import HeldRerunSink  # open for the smoothed speed
     from cartctl.sinks.viewer import resolve_mode
 
     mode = resolve_mode(args.rerun)
@@ -172,7 +172,7 @@ def _prepared(args: argparse.Namespace, given: str, csv_path: Path) -> PreparedR
 
     def warm_up_rerun() -> None:  # the recording's first-use costs, before a cart ticks
         if args.rerun != "off" and not args.fast:
-            from cartctl.sinks.rerun_series import warm_up
+            from cartctl.sinks.rerun_sink import warm_up
 
             warm_up()
 

@@ -125,7 +125,7 @@ def scalar_stats(chunks: Iterable[Chunk]) -> tuple[dict[str, tuple[float, float]
 
 def _send_extra(extra: Series, rec: rr.RecordingStream) -> None:
     """Series made from the recording, on its ``time`` and ``tick`` timelines, with their style."""
-    from cartctl.sinks.rerun_series import send_series
+    from cartctl.sinks.rerun_sink import send_series
 
     for entity, (time_s, tick, values) in extra.items():
         send_series(rec, entity, time_s, tick, values)

@@ -142,7 +142,7 @@ def smooth_run(
 
     ``summary`` must be complete (``link``, ``loop_delay_ticks``,
     ``controller_loop_delay_ticks``). ``recording`` is the run's
-    :class:`~cartctl.sinks.rerun_series.HeldRerunSink` (or None), still open: it gets the series
+    :class:`~cartctl.sinks.rerun_sink.HeldRerunSink` (or None), still open: it gets the series
     ``motor/<m>/smoothed_speed`` and the model's name, and is released here whatever happens.
     """
     try:
