@@ -174,14 +174,11 @@ def plot_pzmap(models: Mapping[str, ArxModel], path: Path, *, title: str) -> Pat
             ax.axhline(0.0, color="0.5", lw=0.8)
             ax.axvline(0.0, color="0.5", lw=0.8)
             ax.set_aspect("equal", adjustable="box")
-            ax.set_xlabel("real part")
-            ax.set_ylabel("imaginary part")
-        ax_full.set_xlim(-reach, reach)
-        ax_full.set_ylim(-reach, reach)
+            ax.set(xlabel="real part", ylabel="imaginary part")
+        ax_full.set(xlim=(-reach, reach), ylim=(-reach, reach))
         ax_full.set_title("unit circle" if reach < 1.2 else "all roots (unit circle dashed)")
         if zoomed:
-            ax_zoom.set_xlim(zoom[0], zoom[1])
-            ax_zoom.set_ylim(zoom[2], zoom[3])
+            ax_zoom.set(xlim=zoom[:2], ylim=zoom[2:])
             ax_zoom.set_title("unit circle" if zoom[1] - zoom[0] > 2.0 else "zoom")
             box = Rectangle((zoom[0], zoom[2]), zoom[1] - zoom[0], zoom[3] - zoom[2], fill=False)
             ax_full.add_patch(box)
@@ -197,9 +194,11 @@ def plot_pzmap(models: Mapping[str, ArxModel], path: Path, *, title: str) -> Pat
                 ax.plot(p.real, p.imag, "x", color=tint, markersize=10, mew=2.2)
                 ax.plot(z.real, z.imag, "o", mfc="none", color=tint, markersize=9, mew=1.8)
             handles.append(Line2D([], [], color=tint, lw=5, label=label))
-            for r in poles:
-                if r.kind != "delay" and r.value.imag >= 0.0 and r.freq_hz is not None:
-                    labels.append((r.value, f"{r.freq_hz:.1f} Hz", tint))
+            labels += [
+                (r.value, f"{r.freq_hz:.1f} Hz", tint)
+                for r in poles
+                if r.kind != "delay" and r.value.imag >= 0.0 and r.freq_hz is not None
+            ]
         if any(delays.values()):
             for ax in panels:
                 ax.plot(0.0, 0.0, "s", color="black", markersize=7, zorder=5)

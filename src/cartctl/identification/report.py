@@ -271,43 +271,43 @@ def _motor_section(
                              title=f"Motor {m}: measured and simulated speed ({trace.source})")
     )  # fmt: skip
     on = diag.fit_on
-    text = [
+    etfe_kind = (
+        f"whole periods of {period} ticks, averaged over {response.n_segments}"
+        if period
+        else "the whole record (input not periodic)"
+    )
+    paragraphs = [
         "Fits: *sim* is the model simulated from the input alone on the raw data; *pred* is the "
         "one-step-ahead prediction on the fitted data. ± is one standard deviation."
         if on == "estimation"
         else "Fits on the validation data: *sim* simulated from its input alone, *pred* "
         "predicted one step ahead. ± is one standard deviation.",
-        "",
-        f"Empirical transfer function: {'whole periods of ' + str(period) + ' ticks, averaged over ' + str(response.n_segments) if period else 'the whole record (input not periodic)'}.",
+        f"Empirical transfer function: {etfe_kind}.",
     ]
-    if res.delay is not None:
+    if (d := res.delay) is not None:
         evidence = ", ".join(
             f"nk = {nk}: {rms:.4g} rad/s"
-            for nk, rms in zip(res.delay.candidates, res.delay.residual_rms, strict=True)
+            for nk, rms in zip(d.candidates, d.residual_rms, strict=True)
         )
-        text += [
-            "",
-            f"Delay estimated as nk = {res.delay.nk}, one for all motors identified, from their joint "
-            f"evidence (this motor's equation-error RMS per candidate: {evidence}"
-            + ("" if res.delay.nk_alone is None else f"; on its own: nk = {res.delay.nk_alone}")
-            + ").",
-        ]
+        alone = "" if d.nk_alone is None else f"; on its own: nk = {d.nk_alone}"
+        paragraphs.append(
+            f"Delay estimated as nk = {d.nk}, one for all motors identified, from their joint "
+            f"evidence (this motor's equation-error RMS per candidate: {evidence}{alone})."
+        )
     if res.cycles_averaged:
-        text += [
-            "",
-            f"{res.cycles_averaged} whole excitation cycles were averaged before the ARX fit.",
-        ]
+        paragraphs.append(
+            f"{res.cycles_averaged} whole excitation cycles were averaged before the ARX fit."
+        )
     images.append(plot_residuals(diag.residuals, out_dir / f"residuals_{m}.png",
                                  title=f"Motor {m}: residual tests ({chosen}, {on} data)"))  # fmt: skip
-    text += [
-        "",
-        f"Residual tests of the {chosen} model on the {on} data: {diag.residuals.summary()}.",
-    ]
+    paragraphs.append(
+        f"Residual tests of the {chosen} model on the {on} data: {diag.residuals.summary()}."
+    )
     if diag.band is not None:
-        text += ["", f"Bode bands of the {chosen} model: {diag.band.to_dict()['method']}."]
+        paragraphs.append(f"Bode bands of the {chosen} model: {diag.band.to_dict()['method']}.")
     return ReportSection(
         heading=f"Motor {m}",
-        text="\n".join(text),
+        text="\n\n".join(paragraphs),
         images=[p.relative_to(out_dir) for p in images],
         table=fit_rows(res, files),
     )
