@@ -1,26 +1,15 @@
-"""The cart's end of the serial line, as the virtual cart models it: line speed, USB bridge, ring, parser.
+"""The cart's end of the serial line, as the virtual cart models it (``docs/serial-protocol.md`` §4).
 
-Four facts of the real cart decide when and whether a frame arrives:
-
-- **the line**: 8N1 carries one byte per ten bit times: 20 µs at the bridge's 500 kbaud (a 60-byte
-  GPIO frame in 1.2 ms), 86.8 µs at the course firmware's 115200 baud (5.2 ms);
-- **the Mega's USB bridge** (an ATmega16U2 running Arduino's usbserial firmware): bytes the cart
-  sends wait in its buffer until its 4.096 ms flush timer (Timer0 at 16 MHz / 256 / 256)
-  overflows, or until more than 96 of them wait; the PC then collects them in the next 1 ms USB
-  frame. So a cart frame reaches the PC up to about 5 ms after its last byte left the AVR
-  (:class:`UsbBridge`). The PC's bytes reach the line at the next USB frame (within 1 ms). A
-  pseudo-terminal shows none of this;
-- **the receive ring**: the Arduino core keeps what the UART received in a ring that holds one
-  byte less than its size (63 bytes by default; the bridge is built with 256, so 255); a byte
-  that arrives while it is full is dropped. Nothing empties it but a *drain*: a call of
-  microOS's communicator ``receive()``, which reads every waiting byte;
-- **the parser**: microOS's MAVLink parser reads a frame by its length byte. A frame with bytes
-  missing swallows the start of the next one, fails its checksum and is dropped whole; the
-  parser does not go back to look for a frame inside it.
-
-:class:`LineReader` and :class:`PacedWriter` are the pseudo-terminal's two directions at line speed
-(a pseudo-terminal delivers at once); :func:`fill_ring`, :class:`UsbBridge` and
-:class:`MicroosParser` are the pure part.
+- the line: 8N1, ten bit times per byte (a 60-byte GPIO takes 1.2 ms at 500 kbaud, 5.2 ms at
+  115200); a pseudo-terminal delivers at once, so :class:`LineReader` and :class:`PacedWriter`
+  pace the two directions;
+- the Mega's USB bridge (ATmega16U2): the cart's bytes wait until its 4.096 ms flush timer
+  overflows or more than 96 wait, then reach the PC at the next 1 ms USB frame; the PC's reach
+  the line at the next USB frame (:class:`UsbBridge`);
+- the receive ring holds one byte less than its size (63, or 255 in the bridge's build) and drops
+  what finds it full; only a drain (microOS's ``receive()``) empties it (:func:`fill_ring`);
+- microOS's parser reads a frame by its length byte: a frame with bytes missing swallows the head
+  of the next, fails its checksum and both are lost (:class:`MicroosParser`).
 """
 
 from __future__ import annotations
@@ -39,20 +28,12 @@ from cartctl.link import Framer, Gpio
 from cartctl.link.bridge import LEGACY_BAUD
 from cartctl.link.dialect import STX_V1
 
-BYTE_TIME_S = 10.0 / LEGACY_BAUD
-"""One byte of 8N1 at 115200 baud (s): 86.8 µs."""
-RX_RING_BYTES = 63
-"""What the ATmega2560's serial receive ring holds with the Arduino core's 64-byte buffer."""
-BRIDGE_RX_RING_BYTES = 255
-"""What it holds in the bridge, built with ``-DSERIAL_RX_BUFFER_SIZE=256``."""
-USB_FLUSH_PERIOD_S = 256 * 256 / 16e6
-"""The ATmega16U2's flush timer: Timer0 overflows every 4.096 ms."""
-USB_FLUSH_BYTES = 96
-"""The ATmega16U2 also flushes once more than this many bytes wait (3/4 of its 128-byte ring)."""
-GPIO_FRAME_BYTES = 60
-"""A GPIO frame on the line: 52 bytes of payload and 8 of MAVLink 1."""
-USB_FRAME_S = 0.001
-"""A full-speed USB frame: the PC collects the bridge's bytes at the next one."""
+RX_RING_BYTES = 63  # the Arduino core's 64-byte ring
+BRIDGE_RX_RING_BYTES = 255  # the bridge is built with -DSERIAL_RX_BUFFER_SIZE=256
+USB_FLUSH_PERIOD_S = 256 * 256 / 16e6  # the 16U2's Timer0 overflows every 4.096 ms
+USB_FLUSH_BYTES = 96  # 3/4 of the 16U2's 128-byte ring
+USB_FRAME_S = 0.001  # a full-speed USB frame
+GPIO_FRAME_BYTES = 60  # 52 bytes of payload and 8 of MAVLink 1
 
 
 def next_on_grid(t: float, phase_s: float, period_s: float) -> float:
@@ -65,14 +46,14 @@ def byte_time_s(baud: int) -> float:
     return 10.0 / float(baud)
 
 
+BYTE_TIME_S = byte_time_s(LEGACY_BAUD)
+
+
 class UsbBridge:
     """When the cart's bytes reach the PC through the Mega's ATmega16U2 (pure; times in s).
 
-    Parameters
-    ----------
-    flush_phase_s, frame_phase_s : float
-        Where the 16U2's flush timer and the PC's USB frames fall on the time axis (a real board
-        has some fixed offset; the virtual cart draws one at random).
+    The phases place the 16U2's flush timer and the PC's USB frames on the time axis (a real board
+    has some fixed offset; the virtual cart draws one at random).
     """
 
     def __init__(self, flush_phase_s: float = 0.0, frame_phase_s: float = 0.0) -> None:
@@ -114,40 +95,16 @@ class UsbBridge:
         return self._collected(at_s), data
 
 
-_V1_OVERHEAD_AFTER_LEN = 4 + 2  # SEQ SYSID COMPID MSGID, then the two CRC bytes
-
-
 def fill_ring(arrived: bytes, capacity: int = RX_RING_BYTES) -> tuple[bytes, int]:
-    """What a drain finds of the bytes that arrived since the previous drain.
-
-    The ring keeps the first ``capacity`` bytes; later ones are dropped, as the Arduino core
-    drops a byte that finds the ring full.
-
-    Returns
-    -------
-    kept : bytes
-    dropped : int
-        How many bytes were dropped.
-    """
-    if len(arrived) <= capacity:
-        return arrived, 0
-    return arrived[:capacity], len(arrived) - capacity
+    """What a drain finds of the bytes that arrived since the previous one, and how many of them
+    the full ring dropped (it keeps the first ``capacity``)."""
+    return arrived[:capacity], max(0, len(arrived) - capacity)
 
 
 class MicroosParser:
-    """microOS's receive side of MAVLink 1: frames by their length byte, no resynchronisation.
-
-    A frame starts at a start byte (0xFE) and ends ``LEN + 8`` bytes later, whatever those bytes
-    are; only then is its checksum looked at (by :class:`~cartctl.link.Framer`). A frame whose
-    bytes were partly dropped therefore takes in the head of the next frame and both are lost.
-
-    Attributes
-    ----------
-    frames : int
-        GPIO frames decoded.
-    bad_frames : int
-        Frames dropped for a wrong checksum or an unknown message.
-    """
+    """microOS's receive side of MAVLink 1: a frame is the ``LEN + 8`` bytes from a start byte,
+    whatever they are; only then is its checksum looked at (by the :class:`Framer`). Counts the
+    GPIO ``frames`` decoded and the ``bad_frames`` dropped."""
 
     def __init__(self) -> None:
         self._frame = bytearray()
@@ -167,7 +124,7 @@ class MicroosParser:
                 continue
             frame.append(byte)
             if len(frame) == 2:  # the length byte
-                self._need = 2 + byte + _V1_OVERHEAD_AFTER_LEN
+                self._need = 2 + byte + 6  # SEQ SYSID COMPID MSGID, payload, CRC
             if len(frame) < self._need:
                 continue
             messages = self._framer.feed(bytes(frame))
@@ -181,17 +138,25 @@ class MicroosParser:
         return out
 
 
-class PacedWriter(threading.Thread):
+class _PtyThread(threading.Thread):
+    """One direction of the line on the pty master, one byte per ``byte_s``."""
+
+    def __init__(self, name: str, fd: int, stop: threading.Event, byte_s: float) -> None:
+        super().__init__(name=name, daemon=True)
+        self.fd = fd
+        self.stop_event = stop
+        self.byte_s = float(byte_s)
+        self._line_free_s = 0.0
+        self.rate_ok: Callable[[], bool] = lambda: True
+        """Whether the host's port runs at the cart's rate now (else the other side reads noise)."""
+
+
+class PacedWriter(_PtyThread):
     """Writes queued bytes to the pty master when the line (and the USB bridge) would deliver them.
 
-    Each item is ``(not_before_s, data)``: the bytes go on the line at ``time.perf_counter()`` no
-    earlier than ``not_before_s`` (when the cart sends them), one per ``byte_s``. Without ``usb``
-    each item reaches the pty once its last byte is through; with it, :class:`UsbBridge` decides.
-
-    Attributes
-    ----------
-    deliveries : collections.deque
-        ``(through_uart_s, at_pc_s)`` of recent items' last bytes: how late the PC got them.
+    Each item goes on the line no earlier than its ``not_before_s`` (``time.perf_counter``), one
+    byte per ``byte_s``; it reaches the pty once its last byte is through, or when ``usb``
+    decides. :attr:`deliveries` keeps ``(through_uart_s, at_pc_s)`` of tracked items.
     """
 
     def __init__(
@@ -202,20 +167,14 @@ class PacedWriter(threading.Thread):
         byte_s: float = BYTE_TIME_S,
         usb: UsbBridge | None = None,
     ) -> None:
-        super().__init__(name="virtual-cart-writer", daemon=True)
-        self.fd = fd
-        self.stop_event = stop
-        self.byte_s = float(byte_s)
+        super().__init__("virtual-cart-writer", fd, stop, byte_s)
         self.usb = usb
         self.queue: queue.SimpleQueue[tuple[float, bytes, bool]] = queue.SimpleQueue()
         self._tracked: list[tuple[int, float]] = []  # (byte count at its end, its end), in the USB
         self._fed = self._passed = 0  # bytes into the USB bridge, and out of it
         self.dropped_bytes = 0
         self.deliveries: collections.deque[tuple[float, float]] = collections.deque(maxlen=4096)
-        self._line_free_s = 0.0
         self._out: collections.deque[tuple[float, bytes]] = collections.deque()
-        self.rate_ok: Callable[[], bool] = lambda: True
-        """Whether the host's port runs at the cart's rate now (else the PC reads noise)."""
 
     def put(self, data: bytes, not_before_s: float = 0.0, *, track: bool = False) -> None:
         """Queue ``data`` to leave no earlier than ``not_before_s``; ``track``: note in
@@ -274,25 +233,10 @@ class PacedWriter(threading.Thread):
             self._take(*item)
 
 
-class LineReader(threading.Thread):
-    """Reads what the host writes and stamps each byte with when the line delivered it.
-
-    Parameters
-    ----------
-    fd : int
-        The pty master.
-    stop : threading.Event
-    reply_jitter_s : float
-        Each write of the host is held back by a random 0 .. ``reply_jitter_s`` before it goes on
-        the line: a host whose replies come late by varying amounts.
-    seed : int, optional
-        Seeds the jitter.
-    byte_s : float
-        One byte on the line (s).
-    usb_frame_phase_s : float or None
-        With the Mega's USB bridge: a write goes on the line at the next 1 ms USB frame (on this
-        phase); None: at once (a pseudo-terminal).
-    """
+class LineReader(_PtyThread):
+    """Reads what the host writes (from the pty master) and stamps each byte with when the line
+    delivered it. Each write is held back a random 0 .. ``reply_jitter_s`` (seeded by ``seed``)
+    and, with the USB bridge (``usb_frame_phase_s``), until the next 1 ms USB frame."""
 
     def __init__(
         self,
@@ -304,18 +248,12 @@ class LineReader(threading.Thread):
         byte_s: float = BYTE_TIME_S,
         usb_frame_phase_s: float | None = None,
     ) -> None:
-        super().__init__(name="virtual-cart-reader", daemon=True)
-        self.byte_s = float(byte_s)
+        super().__init__("virtual-cart-reader", fd, stop, byte_s)
         self.usb_frame_phase_s = usb_frame_phase_s
-        self.rate_ok: Callable[[], bool] = lambda: True
-        """Whether the host's port runs at the cart's rate now (else the cart parses noise)."""
-        self.fd = fd
-        self.stop_event = stop
         self.reply_jitter_s = float(reply_jitter_s)
         self._rng = random.Random(seed)
         self._lock = threading.Lock()
         self._arrived: collections.deque[tuple[float, int]] = collections.deque()
-        self._line_free_s = 0.0
         self.last_byte_at_s: float | None = None
         """``time.perf_counter`` when the last byte the host wrote is (or will be) through."""
         self.through_s: collections.deque[float] = collections.deque(maxlen=1 << 16)

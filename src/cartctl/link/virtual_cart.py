@@ -49,16 +49,12 @@ from cartctl.plants.physics import PhysicsPlant
 HEARTBEAT_PERIOD_S = 1.1
 SILENCE_TIMEOUT_S = 0.5
 """How long a host in this process waits for the virtual cart before it calls it silent (a real
-cart's is 0.1 s): the cart is threads of this process, which a busy PC (or a virtual machine's
-host) can hold up for longer than a real cart is ever quiet. Its stall and pull faults are still
-found, that much later."""
+cart's is 0.1 s): the cart is threads of this process, which a busy PC can hold up for longer than
+a real cart is ever quiet. Its stall and pull faults are still found, that much later."""
 READY_TEXT = "cartctl bridge ready"
 COMM_PHASE_US = 1200
-"""The cart's GPIO goes out this long (µs) after the tick starts: io() and control() take 1.2 ms
-on the Mega (then the bridge sends it; before version 2, microOS's communication thread did)."""
-TICK_BUSY_US, DRAIN_BUSY_US = COMM_PHASE_US, 60
-"""What the virtual cart reports as 200 and 201 (µs): fixed figures, it has no AVR to time; 202
-is the tick on its clock and 203 its model of the ring."""
+"""The cart's GPIO goes out this long (µs) after the tick starts (io() and control() on the Mega)."""
+DRAIN_BUSY_US = 60  # reported as THREAD_INFO 201 (200: COMM_PHASE_US); there is no AVR to time
 _TERMIOS_SPEED = {getattr(termios, f"B{rate}"): rate for rate in (9600, 19200, 38400, 57600,
                   115200, 230400, 250000, 460800, 500000, 576000, 921600, 1000000, 2000000)
                   if hasattr(termios, f"B{rate}")}  # fmt: skip
@@ -109,9 +105,9 @@ class VirtualCart:
         self.firmware: CartFirmware = firmware if firmware is not None else BridgeFirmware()
         self.receive_schedule = self.faults.receive if firmware is None else "microos"
         self.bridge_version = self.faults.bridge if firmware is None else 0
+        """2: the bridge sketch of ``firmware/``; 1: the one before; 0: not the bridge."""
         if self.receive_schedule == "microos" and self.bridge_version == 2:
             self.bridge_version = 1  # microOS's thread alone: the sketch before its own drains
-        """2: the bridge sketch of ``firmware/``; 1: the one before; 0: not the bridge."""
         self.baud = BRIDGE_BAUD if self.bridge_version == 2 else LEGACY_BAUD
         self.ring_bytes = BRIDGE_RX_RING_BYTES if self.bridge_version == 2 else RX_RING_BYTES
         self._rng = random.Random(seed)
@@ -134,26 +130,20 @@ class VirtualCart:
         self._parser = MicroosParser()
         self._ring_high = self._lag_us = 0
         self._held: tuple[list[float], list[int]] = ([0.0] * 8, [0] * 4)
-        self.boot_s = 0.0
-        """``time.perf_counter`` at boot: tick k starts ``k × period_s`` later."""
+        self.boot_s = 0.0  # time.perf_counter at boot: tick k starts k × period_s later
         self._ticker = threading.Thread(target=self._run, name="virtual-cart", daemon=True)
         self.ticks = 0
         self.true_speeds: dict[int, tuple[float, float]] = {}
         """True wheel speeds (rad/s) at each recent tick, by the tick counter the cart sends."""
-        self.frames_received = 0
-        """GPIO frames microOS decoded from the host."""
+        self.frames_received = 0  # GPIO frames microOS decoded from the host
         self.ring_dropped_bytes = 0
-        """Bytes the receive ring dropped (it was full)."""
         self.last_voltage_v: tuple[float, float] = (0.0, 0.0)
         self.applied_log: collections.deque[tuple[float, float, float]] = collections.deque(
             maxlen=1024
-        )
-        """``(time.perf_counter, A, B)``: the voltages io() put on the motors at recent ticks."""
+        )  # (time.perf_counter, A, B): the voltages io() put on the motors at recent ticks
         self.state = "idle"
-        self.first_frame_at_s: float | None = None
-        """``time.perf_counter`` when the host's first GPIO arrived (faults count from there)."""
-        self.fault_at_s: float | None = None
-        """``time.perf_counter`` when the injected stall or pulled cable began."""
+        self.first_frame_at_s: float | None = None  # the host's first GPIO: faults count from it
+        self.fault_at_s: float | None = None  # when the injected stall or pulled cable began
 
     def __enter__(self) -> VirtualCart:
         self.start()
@@ -210,8 +200,6 @@ class VirtualCart:
                     os.close(fd)
                 setattr(self, name, -1)
 
-    # -- the firmware ---------------------------------------------------------------------------
-
     def _send(self, frame: bytes, not_before_s: float, *, track: bool = False) -> None:
         faults, rng = self.faults, self._rng
         if faults.garbage and rng.random() < faults.garbage:
@@ -241,11 +229,10 @@ class VirtualCart:
     def receive_for_tick(self, j: int) -> None:
         """Every drain from the previous tick's ``io()`` up to tick ``j``'s, in order.
 
-        Bridge 2: a drain every 1 ms and one at the tick's start, right before ``io()``, each
-        handing the held channels over (the newest command becomes the stored voltage). Bridge 1:
-        microOS's communication thread drains :data:`COMM_PHASE_US` into each tick and the bridge
-        every 1 ms and right before ``control()``. ``receive='microos'``: the communication
-        thread alone, and ``control()`` is handed what microOS holds.
+        Bridge 2: every 1 ms and right before ``io()``, each handing the held channels over.
+        Bridge 1: microOS's communication thread :data:`COMM_PHASE_US` into each tick, and the
+        bridge every 1 ms and right before ``control()``. ``receive='microos'``: the communication
+        thread alone; ``control()`` is handed what microOS holds.
         """
         period_us = round(self.period_s * 1e6)
         tick_us = j * period_us
@@ -342,7 +329,7 @@ class VirtualCart:
                 self._send(encoder.gpio(time_ms, firmware.out_floats, firmware.out_ints), send_at,
                            track=True)  # fmt: skip
                 if self.bridge_version == 2:  # its tick's timing: 120 bytes, a USB flush at once
-                    reports = (TICK_BUSY_US, DRAIN_BUSY_US, period_us, self._ring_high)
+                    reports = (COMM_PHASE_US, DRAIN_BUSY_US, period_us, self._ring_high)
                     self._ring_high = 0
                     for k, value in enumerate(reports):
                         self._writer.put(encoder.thread_info(time_ms, TIMING_FIRST_ID + k, value,
