@@ -21,10 +21,9 @@ import numpy as np
 import pytest
 
 from cartctl.data.modelfile import load_models
-from cartctl.design.kalman import KalmanDesign, design_kalman, quantisation_std_rad_s
+from cartctl.design.kalman import KalmanDesign, design_kalman, quantisation_std_rad_s, realise
 from cartctl.design.pi import design_pi
 from cartctl.design.poles import design_poles
-from cartctl.design.statespace import realise
 from cartctl.errors import InputError
 from cartctl.identification.arx import fit_arx
 from cartctl.identification.oe import fit_oe

@@ -32,16 +32,8 @@ DEFAULT_DISTURBANCE_V = 1.0
 
 @dataclass(frozen=True)
 class StepAnalysis:
-    """A simulated closed-loop step.
-
-    Attributes
-    ----------
-    time_s, reference_rad_s, speed_rad_s, estimate_rad_s, voltage_v : ndarray, shape (n,)
-        Per tick: time (s), reference, modelled speed, the speed the controller acted on, and
-        the voltage command (V).
-    info : StepInfo
-        Rise, overshoot, settling and steady-state error against the reference.
-    """
+    """A simulated closed-loop step, per tick: time (s), reference, modelled speed, the speed
+    the controller acted on (rad/s) and the command (V); ``info`` its metrics."""
 
     time_s: NDArray[np.float64]
     reference_rad_s: NDArray[np.float64]
@@ -58,11 +50,9 @@ class StepAnalysis:
     def to_dict(self) -> dict[str, Any]:
         """``design --json``'s ``step`` entry."""
         info = self.info.to_dict()
+        keys = ("overshoot_percent", "settling_time_s", "rise_time_s", "steady_state_error")
         return {
-            "overshoot_percent": info["overshoot_percent"],
-            "settling_time_s": info["settling_time_s"],
-            "rise_time_s": info["rise_time_s"],
-            "steady_state_error": info["steady_state_error"],
+            **{k: info[k] for k in keys},
             "peak_voltage_v": self.peak_voltage_v,
             "step_rad_s": float(self.reference_rad_s[-1]),
         }

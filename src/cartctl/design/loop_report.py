@@ -9,7 +9,7 @@ loop it was designed for, broken at the plant input::
 
 Ms = max|S| is python-control's stability margin inverted (:func:`cartctl.design.loop.loop_analysis`);
 Mt = max|T| is found on a frequency grid up to Nyquist, refined by ``minimize_scalar``. The figures
-join each motor's ``design --json`` entry and :mod:`cartctl.design.analysis_plots` draws them.
+join each motor's ``design --json`` entry and :mod:`cartctl.design.plots` draws them.
 """
 
 from __future__ import annotations

@@ -75,11 +75,6 @@ def _gains(
     return kp, ki
 
 
-def _stable(model: ArxModel, kp: float, ki: float, extra: int) -> bool:
-    num, den = _loop_coeffs(model, kp, ki, extra)
-    return bool(np.all(np.abs(np.roots(np.polyadd(den, num))) < 1.0))
-
-
 def _solve(model: ArxModel, pm: float, freq_hz: float, extra: int) -> tuple[float, float, str]:
     """(Kp, Ki, why a PI cannot meet (pm, freq_hz), or '')."""
     kp, ki = (float(v[0]) for v in _gains(model, pm, np.array([freq_hz]), extra))
@@ -97,7 +92,8 @@ def _problem(model: ArxModel, pm: float, kp: float, ki: float, extra: int) -> st
             f"it would need Ki = {ki:.3g} V/rad <= 0: there even a pure gain leaves less than "
             f"{pm:g}° of margin"
         )
-    if not _stable(model, kp, ki, extra):
+    num, den = _loop_coeffs(model, kp, ki, extra)
+    if not np.all(np.abs(np.roots(np.polyadd(den, num))) < 1.0):
         return "the closed loop would be unstable"
     return ""
 

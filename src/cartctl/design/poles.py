@@ -1,6 +1,6 @@
 """Discrete pole placement with integral action, on the observer-form realisation of a model.
 
-The plant is x[k+1] = A x + B u, y = C x of :func:`~cartctl.design.statespace.realise` (n states,
+The plant is x[k+1] = A x + B u, y = C x of :func:`~cartctl.design.kalman.realise` (n states,
 x_1 = speed), the loop's delay in it: nk covers one tick of loop delay, ``extra_delay_ticks`` = d
 more (3 through the PC serial loop) are d more states, and every closed-loop pole is placed, the
 delay's included. :class:`~cartctl.runtime.statefeedback.StateFeedbackController` runs the result.
@@ -38,9 +38,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.design.kalman import KalmanDesign, design_kalman
+from cartctl.design.kalman import (
+    KalmanDesign,
+    StateSpace,
+    design_kalman,
+    realise,
+    uncontrollable_modes,
+)
 from cartctl.design.request import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOISE_STD_V
-from cartctl.design.statespace import StateSpace, realise, uncontrollable_modes
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 
