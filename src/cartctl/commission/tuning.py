@@ -165,38 +165,14 @@ def run_tuning(model_path: Path, loop_delay_ticks: int,
         candidates = [r for r in candidates if r.index != chosen.index]
 
 
-def _file_refusal(models: ModelFile, model_path: Path, row: robustness.RobustRow,
-                  fixed: dict[str, float]) -> str | None:  # fmt: skip
-    """Why ``cartctl run`` would refuse the setting's controller file (written to a temporary folder
-    and read back), or None."""
-    import tempfile
-
-    from cartctl.design.controllerfile import load_controller, save_controller
-    from cartctl.design.make import controller_file, design_models
-    from cartctl.errors import CartctlError
-
-    request = tuning.design_request(METHOD, row.result.settings, 0, fixed)
-    designs = design_models(request, models, ("a", "b"))
-    with tempfile.TemporaryDirectory() as folder:
-        path = Path(folder) / "controller.toml"
-        save_controller(controller_file(designs, model_path, command="cartctl commission",
-                                        period_s=models.period_s), path)  # fmt: skip
-        try:
-            load_controller(path)
-        except CartctlError as exc:
-            return str(exc).replace(str(path), "its controller file")
-    return None
-
-
-def save_chosen(result: TuningResult, model_path: Path, out: Path) -> str:
-    """Write the chosen setting's controller file, as ``cartctl design`` would; returns its command."""
+def _write_controller(models: ModelFile, model_path: Path, settings: dict[str, float],
+                      fixed: dict[str, float], out: Path) -> str:  # fmt: skip
+    """Write a setting's controller file to ``out`` as ``cartctl design --out`` would; its command."""
     from cartctl.design.controllerfile import save_controller
     from cartctl.design.loop_report import analyse_designs
     from cartctl.design.make import controller_file, design_models
 
-    models = load_models(model_path)
-    request = tuning.design_request(METHOD, result.chosen.result.settings, 0,
-                                    result.design_fixed)  # fmt: skip
+    request = tuning.design_request(METHOD, settings, 0, fixed)
     designs = design_models(request, models, ("a", "b"))
     entries = designs.entries()
     for m, analysis in analyse_designs(designs).items():
@@ -207,6 +183,31 @@ def save_chosen(result: TuningResult, model_path: Path, out: Path) -> str:
     save_controller(controller_file(designs, model_path, command=command,
                                     period_s=models.period_s), out)  # fmt: skip
     return command
+
+
+def _file_refusal(models: ModelFile, model_path: Path, row: robustness.RobustRow,
+                  fixed: dict[str, float]) -> str | None:  # fmt: skip
+    """Why ``cartctl run`` would refuse the setting's controller file (read back as ``run`` reads
+    it), or None."""
+    import tempfile
+
+    from cartctl.design.controllerfile import load_controller
+    from cartctl.errors import CartctlError
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "controller.toml"
+        _write_controller(models, model_path, row.result.settings, fixed, path)
+        try:
+            load_controller(path)
+        except CartctlError as exc:
+            return str(exc).replace(str(path), "its controller file")
+    return None
+
+
+def save_chosen(result: TuningResult, model_path: Path, out: Path) -> str:
+    """Write the chosen setting's controller file, as ``cartctl design`` would; its command."""
+    return _write_controller(load_models(model_path), model_path, result.chosen.result.settings,
+                             result.design_fixed, out)  # fmt: skip
 
 
 def row_summary(row: robustness.RobustRow) -> dict[str, Any]:

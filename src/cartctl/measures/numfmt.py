@@ -15,10 +15,6 @@ MAX_DECIMALS = 6
 MISSING = "—"  # a None or NaN
 
 
-def _finite(values: Iterable[float | None]) -> list[float]:
-    return [abs(float(v)) for v in values if v is not None and math.isfinite(v)]
-
-
 def column_decimals(
     values: Iterable[float | None],
     *,
@@ -29,7 +25,8 @@ def column_decimals(
     """Decimals giving the column's largest magnitude (or ``scale``, if larger) ``sig`` significant
     figures, at most ``max_decimals``; negative to round to tens …; 0 for a column of zeros. None,
     NaN and infinities are left out."""
-    top = max(_finite([*values, scale]), default=0.0)
+    top = max((abs(float(v)) for v in [*values, scale] if v is not None and math.isfinite(v)),
+              default=0.0)  # fmt: skip
     if top == 0.0:
         return 0
     decimals = sig - 1 - math.floor(math.log10(top))

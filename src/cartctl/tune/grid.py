@@ -247,10 +247,7 @@ def mark_pareto(results: Sequence[TuneResult]) -> list[TuneResult]:
 
 def status_counts(results: Sequence[TuneResult]) -> dict[str, int]:
     """How many settings have each status of :data:`STATUSES` (all keys)."""
-    counts = dict.fromkeys(STATUSES, 0)
-    for r in results:
-        counts[r.status] += 1
-    return counts
+    return {s: sum(r.status == s for r in results) for s in STATUSES}
 
 
 def sort_results(results: Sequence[TuneResult]) -> list[TuneResult]:

@@ -113,11 +113,8 @@ class RobustScore:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form (infinities become ``null`` in ``--json``; the counts say why)."""
-        return {"nominal": {k: self.figures[k]["nominal"] for k in ROBUST_METRICS},
-                "worst": {k: self.figures[k]["worst"] for k in ROBUST_METRICS},
-                "worst_sampled": {k: self.figures[k]["worst_sampled"] for k in ROBUST_METRICS},
-                **{f"p{p}": {k: self.figures[k][f"p{p}"] for k in ROBUST_METRICS}
-                   for p in PERCENTILES},
+        which = ("nominal", "worst", "worst_sampled", *(f"p{p}" for p in PERCENTILES))
+        return {**{w: {k: self.figures[k][w] for k in ROBUST_METRICS} for w in which},
                 "plants": self.plants, "plants_unsettled": self.unsettled,
                 "plants_diverged": self.diverged, "settles_on_every_plant": self.settles_everywhere,
                 "physics": self.physics, "actuation": list(self.actuation),

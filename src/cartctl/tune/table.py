@@ -64,10 +64,7 @@ def robust_status(row: RobustRow) -> str:
 
 
 def robust_counts(rows: Sequence[RobustRow]) -> dict[str, int]:
-    counts = dict.fromkeys(ROBUST_STATUSES, 0)
-    for r in rows:
-        counts[robust_status(r)] += 1
-    return counts
+    return {s: sum(robust_status(r) == s for r in rows) for s in ROBUST_STATUSES}
 
 
 def robust_counts_text(rows: Sequence[RobustRow]) -> str:
