@@ -128,7 +128,7 @@ def test_a_missing_model_is_one_line_and_exit_2(
 
 
 def test_review_of_a_recording_adds_the_smoothed_series(physics_run: Path) -> None:
-    from cartctl.cli.commands.review.recorded import recording_summary
+    from cartctl.cli.commands.review.smoothed import recording_summary
 
     text, extra = recording_summary(physics_run / "p.rrd", GROUND)
     n = len(read_trace(physics_run / "p.csv"))
@@ -205,8 +205,8 @@ def test_a_serial_path_trace_gets_both_with_the_model_of_the_controller_it_ran(
 def test_review_streams_the_smoothed_series_with_the_recording(
     physics_run: Path, tmp_path: Path, rrd_rows: Callable[[str | Path], Counter]
 ) -> None:
-    from cartctl.cli.commands.review.recorded import recording_summary
     from cartctl.cli.commands.review.recording import new_stream, read_recording, stream
+    from cartctl.cli.commands.review.smoothed import recording_summary
 
     _, extra = recording_summary(physics_run / "p.rrd", GROUND)
     reader, entry = read_recording(physics_run / "p.rrd")

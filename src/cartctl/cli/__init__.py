@@ -1,9 +1,5 @@
-"""The ``cartctl`` command line: parses arguments and turns errors into one clear line.
-
-Each subcommand lives in :mod:`cartctl.cli.commands` as a module with ``add_parser(subparsers)`` and
-``run(args) -> int``. User mistakes (:class:`~cartctl.errors.CartctlError`, bad options) print one
-line on stderr and exit with code 2, with no traceback.
-"""
+"""The ``cartctl`` command line: parses arguments, runs a subcommand of
+:mod:`cartctl.cli.commands`, and turns a user's mistake into one line on stderr and exit code 2."""
 
 import os
 import sys
@@ -12,8 +8,7 @@ from cartctl import stopping
 
 
 def _started_as_cartctl() -> bool:
-    """Whether this process is the ``cartctl`` program (its console script, ``python -m
-    cartctl``), not a Python program that imports the command line."""
+    """Whether this process is the ``cartctl`` program, not a Python program importing it."""
     main = sys.modules.get("__main__")
     spec = getattr(main, "__spec__", None)
     if spec is not None:
@@ -34,11 +29,8 @@ from cartctl.errors import CartctlError  # noqa: E402
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse, but a usage mistake is one line (plus where to look) and exit code 2.
-
-    Arguments no option takes are reported by the subcommand they were given to (``cartctl run:
-    error: unrecognized arguments: …``), not by ``cartctl`` (argparse's own way).
-    """
+    """argparse, but a usage mistake is one line (plus where to look) and exit code 2, and
+    arguments no option takes are reported by their subcommand (``cartctl run: error: …``)."""
 
     subcommands: dict[str, argparse.ArgumentParser] = {}  # noqa: RUF012 - set per instance
 
@@ -59,9 +51,7 @@ def command_name(module: object) -> str:
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
-    """The parser with every subcommand of the command line (docs/architecture.md); with
-    ``command`` (one of them), that subcommand alone: what a command line naming it needs, built
-    in a tenth of the time."""
+    """The parser with every subcommand, or with ``command`` alone (built in a tenth of the time)."""
     parser = _Parser(
         prog="cartctl",
         description=(
@@ -91,11 +81,8 @@ def _warning_printer(command: str) -> Callable[..., None]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the exit code (0 ok, 2 user mistake, 1 runtime failure).
-
-    SIGINT, SIGTERM and SIGHUP end a command through its shutdown path (exit 130, 143, 129); one
-    that arrives while cartctl starts ends it with one line.
-    """
+    """Run the command line; the exit code (0 ok, 2 user mistake, 1 runtime failure, 130, 143 or
+    129 after SIGINT, SIGTERM or SIGHUP)."""
     handlers: dict[int, object] = {}
     try:
         handlers = stopping.install()
@@ -108,13 +95,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def console_main() -> int:
-    """The ``cartctl`` program: :func:`main`, then the exit.
-
-    The stop handlers are in place from the start (:func:`cartctl.stopping.install_at_start`,
-    when this module is imported by the program). Once :func:`main` is over the stop signals are
-    ignored until the process ends: one arriving while the interpreter shuts down (the Rerun SDK
-    flushes at exit) must not cut the exit short, nor turn into a traceback.
-    """
+    """The ``cartctl`` program: :func:`main`, then stop signals ignored until the process ends
+    (one arriving while the Rerun SDK flushes at exit must not cut it short)."""
     stopping.install_at_start()  # already done on import, unless another launcher imported us
     try:
         return main()
@@ -128,8 +110,7 @@ def _main(argv: Sequence[str] | None) -> int:
     try:
         from cartctl.cli.commands import COMMANDS
 
-        # light modules only: a stop signal here is Interrupted. Only the command named is built;
-        # an unknown name, or none (--help), gets the full parser and its list of commands.
+        # only the command named is built; an unknown one, or none, gets the full parser
         known = named in {command_name(module) for module in COMMANDS}
         parser = build_parser(named if known else None)
     except KeyboardInterrupt:

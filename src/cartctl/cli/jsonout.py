@@ -1,10 +1,5 @@
-"""Strict JSON for every ``--json`` output: NaN and infinities become ``null``.
-
-Python's ``json`` writes ``NaN``, ``Infinity`` and ``-Infinity``, which are not JSON: strict parsers
-(JavaScript's ``JSON.parse``, Go, serde) reject the whole document. :func:`dumps` writes ``null``
-in their place, turns numpy scalars and arrays into plain numbers and lists, and refuses (with
-``allow_nan=False``) anything that would still slip through.
-"""
+"""Strict JSON for every ``--json`` output: NaN and infinities become ``null`` (Python's ``NaN``
+and ``Infinity`` are not JSON), numpy values plain numbers and lists."""
 
 from __future__ import annotations
 

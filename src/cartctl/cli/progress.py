@@ -8,19 +8,8 @@ from typing import TextIO
 
 
 class ProgressBar:
-    """Draws ``label [#####-----]  42 %  630/1500`` on one terminal line, at most 10 times a second.
-
-    Parameters
-    ----------
-    total : int
-        Number of steps that make 100 %.
-    label : str
-        Text before the bar.
-    stream : text stream, optional
-        Where to draw (stderr by default).
-    enabled : bool, optional
-        Default: only when ``stream`` is a terminal, so logs and pipes stay clean.
-    """
+    """Draws ``label [#####-----]  42 %  630/1500`` on one line of ``stream`` (stderr), at most 10
+    times a second; by default only when that is a terminal, so logs and pipes stay clean."""
 
     def __init__(
         self,

@@ -1,9 +1,6 @@
-"""The ``cartctl`` subcommands, in the order of the workflow.
-
-Each entry has ``add_parser(subparsers)``; the parser it adds sets ``func`` to a handler
-``run(args) -> int``. Building the parser imports every command module, so their top level and
-``add_parser`` import no numpy, scipy, filterpy, matplotlib, Rerun or serial stack (nor a cartctl
-module that does): ``run`` imports those when the command starts (``tests/test_startup.py``).
+"""The ``cartctl`` subcommands in workflow order, each with ``add_parser(subparsers)`` setting
+``func`` to its ``run(args) -> int``. Their top level loads no numpy, scipy, matplotlib, Rerun or
+serial stack: ``run`` does (``tests/test_startup.py``).
 """
 
 from cartctl.cli.commands import (

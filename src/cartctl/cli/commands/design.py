@@ -25,6 +25,17 @@ from cartctl.runtime.base import ANTI_WINDUP  # light too (no numpy)
 _DEFAULT = DesignRequest(method="pi")
 
 
+def _option(
+    group: Any, field: str, kind: type | None, metavar: str | None, help: str, **more: Any
+) -> None:
+    """The option of a request field (:data:`~cartctl.design.request.OPTIONS`), with the
+    request's default."""
+    default = getattr(_DEFAULT, field)
+    group.add_argument(
+        OPTIONS[field], type=kind, default=default, metavar=metavar, help=help, **more
+    )
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "design",
@@ -43,115 +54,45 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--method", choices=("pi", "poles"), required=True)
     p.add_argument("--motor", choices=("a", "b", "both"), default="both", help="default both")
     pi = p.add_argument_group("PI (--method pi)")
-    pi.add_argument("--phase-margin", type=float, default=_DEFAULT.phase_margin_deg, metavar="DEG",
-                    help=f"in (0, {PM_RANGE_DEG[1]:g}] (default {_DEFAULT.phase_margin_deg:g})")  # fmt: skip
-    pi.add_argument("--crossover-hz", type=float, default=_DEFAULT.crossover_hz, metavar="F",
-                    help=f"default {_DEFAULT.crossover_hz:g}")  # fmt: skip
-    pi.add_argument(
-        "--bandwidth-hz",
-        type=float,
-        metavar="F",
-        help="design for this closed-loop bandwidth instead of a crossover",
-    )
-    pi.add_argument(
-        "--anti-windup",
-        choices=ANTI_WINDUP,
-        default=_DEFAULT.anti_windup,
-        help="integrator handling at the voltage limit",
-    )
-    pi.add_argument(
-        "--estimator",
-        choices=PI_ESTIMATORS,
-        default=_DEFAULT.estimator,
-        help="run the PI on a Kalman speed estimate (default: on the measurement)",
-    )
+    pm = _DEFAULT.phase_margin_deg
+    _option(pi, "phase_margin_deg", float, "DEG", f"in (0, {PM_RANGE_DEG[1]:g}] (default {pm:g})")
+    _option(pi, "crossover_hz", float, "F", f"default {_DEFAULT.crossover_hz:g}")
+    _option(pi, "bandwidth_hz", float, "F",
+            "design for this closed-loop bandwidth instead of a crossover")  # fmt: skip
+    _option(pi, "anti_windup", None, None, "integrator handling at the voltage limit",
+            choices=ANTI_WINDUP)  # fmt: skip
+    _option(pi, "estimator", None, None, "run the PI on a Kalman speed estimate (default: on the "
+            "measurement)", choices=PI_ESTIMATORS)  # fmt: skip
     pl = p.add_argument_group("pole placement (--method poles)")
-    pl.add_argument(
-        "--poles",
-        metavar="Z1,Z2,...",
-        help="closed-loop poles in the z-plane, complex as a+bj (3 for the report's model; 4 with "
-        "--bias-drift-v 0, which adds an error integrator)",
-    )
-    pl.add_argument(
-        "--settling-time",
-        type=float,
-        default=_DEFAULT.settling_time_s,
-        metavar="S",
-        help="2 %% settling time for the dominant poles (default 0.06 s)",
-    )
-    pl.add_argument(
-        "--overshoot",
-        type=float,
-        default=_DEFAULT.overshoot_percent,
-        metavar="P",
-        help="overshoot for the dominant poles in %% (default 1)",
-    )
+    _option(pl, "poles", None, "Z1,Z2,...", "closed-loop poles in the z-plane, complex as a+bj "
+            "(3 for the report's model; 4 with --bias-drift-v 0, which adds an error "
+            "integrator)")  # fmt: skip
+    _option(pl, "settling_time_s", float, "S",
+            "2 %% settling time for the dominant poles (default 0.06 s)")  # fmt: skip
+    _option(pl, "overshoot_percent", float, "P",
+            "overshoot for the dominant poles in %% (default 1)")  # fmt: skip
     est = p.add_argument_group("estimator")
-    est.add_argument(
-        "--process-noise-v",
-        type=float,
-        default=_DEFAULT.process_noise_std_v,
-        metavar="V",
-        help=f"input-equivalent process noise, std in V (default {DEFAULT_PROCESS_NOISE_STD_V:g})",
-    )
-    est.add_argument(
-        "--bias-drift-v",
-        type=float,
-        default=_DEFAULT.bias_drift_std_v,
-        metavar="V",
-        help="random-walk step per tick of the estimator's input-disturbance state (friction, "
-        f"model DC error), the integral action of pole placement (default "
-        f"{DEFAULT_BIAS_DRIFT_STD_V:g}; 0 leaves it out)",
-    )
-    est.add_argument(
-        "--measurement-noise",
-        type=float,
-        default=_DEFAULT.extra_noise_std_rad_s,
-        metavar="RAD_S",
-        help="extra measurement noise on top of the encoder's quantisation, std in rad/s "
-        "(default 0); the file's estimator records the total as measurement_noise_std_rad_s",
-    )
-    est.add_argument(
-        "--timing-noise-ticks",
-        type=float,
-        default=_DEFAULT.timing_noise_std_ticks,
-        metavar="TICKS",
-        help="how uncertain the moment a command lands is (std in ticks): after each command "
-        "change Δu the estimator adds (TICKS·Δu)²·B·Bᵀ to its process noise "
-        "(default 0)",
-    )
-    p.add_argument(
-        "--loop-delay",
-        type=int,
-        default=_DEFAULT.loop_delay_ticks,
-        metavar="N",
-        help="the loop delay the controller is for (ticks from a measurement to its voltage on "
-        "the motor; default the model file's loop_delay_ticks + extra delay, else its nk - 1 + "
-        "extra delay); nk + extra delay for a model whose next measurement already sees part of "
-        f"a command that lands within the tick; at most {MAX_LOOP_DELAY_TICKS}",
-    )
-    p.add_argument(
-        "--extra-delay",
-        type=int,
-        default=_DEFAULT.extra_delay_ticks,
-        metavar="N",
-        help="ticks of loop delay beyond the model's (a PC-side loop over serial), "
-        f"0..{MAX_EXTRA_DELAY_TICKS}",
-    )
-    p.add_argument(
-        "--voltage-limit",
-        type=float,
-        default=_DEFAULT.voltage_limit_v,
-        metavar="V",
-        help="command saturation, at most 12 V (default 12)",
-    )
-    p.add_argument(
-        "--step",
-        type=float,
-        default=_DEFAULT.step_rad_s,
-        metavar="RAD_S",
-        help="reference step for the simulated response (default 10 rad/s)",
-    )
+    _option(est, "process_noise_std_v", float, "V", "input-equivalent process noise, std in V "
+            f"(default {DEFAULT_PROCESS_NOISE_STD_V:g})")  # fmt: skip
+    _option(est, "bias_drift_std_v", float, "V", "random-walk step per tick of the estimator's "
+            "input-disturbance state (friction, model DC error), the integral action of pole "
+            f"placement (default {DEFAULT_BIAS_DRIFT_STD_V:g}; 0 leaves it out)")  # fmt: skip
+    _option(est, "extra_noise_std_rad_s", float, "RAD_S", "extra measurement noise on top of "
+            "the encoder's quantisation, std in rad/s (default 0); the file's estimator records "
+            "the total as measurement_noise_std_rad_s")  # fmt: skip
+    _option(est, "timing_noise_std_ticks", float, "TICKS", "how uncertain the moment a command "
+            "lands is (std in ticks): after each command change Δu the estimator adds "
+            "(TICKS·Δu)²·B·Bᵀ to its process noise (default 0)")  # fmt: skip
+    _option(p, "loop_delay_ticks", int, "N", "the loop delay the controller is for (ticks from a "
+            "measurement to its voltage on the motor; default the model file's loop_delay_ticks "
+            "+ extra delay, else its nk - 1 + extra delay); nk + extra delay for a model whose "
+            "next measurement already sees part of a command that lands within the tick; at most "
+            f"{MAX_LOOP_DELAY_TICKS}")  # fmt: skip
+    _option(p, "extra_delay_ticks", int, "N", "ticks of loop delay beyond the model's (a PC-side "
+            f"loop over serial), 0..{MAX_EXTRA_DELAY_TICKS}")  # fmt: skip
+    _option(p, "voltage_limit_v", float, "V", "command saturation, at most 12 V (default 12)")
+    _option(p, "step_rad_s", float, "RAD_S",
+            "reference step for the simulated response (default 10 rad/s)")  # fmt: skip
     p.add_argument(
         "--disturbance-v",
         type=float,

@@ -10,16 +10,8 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+import cartctl.cli.commands.options as options
 from cartctl import stopping
-from cartctl.cli.commands.options import (
-    SIGNALS,
-    add_plant_options,
-    check_duration,
-    check_finite,
-    check_output_file,
-    check_plant_options,
-    command_line,
-)
 from cartctl.errors import InputError, OutputError
 
 
@@ -35,9 +27,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "'--signal square --amplitude 10': +10 V, 0 V, −10 V for 1 s each, repeated."
         ),
     )
-    add_plant_options(p, what="what to excite")
+    options.add_plant_options(p, what="what to excite")
     p.add_argument(
-        "--signal", choices=SIGNALS, default="square", help="excitation shape (default square)"
+        "--signal",
+        choices=options.SIGNALS,
+        default="square",
+        help="excitation shape (default square)",
     )
     p.add_argument(
         "--amplitude", type=float, required=True, metavar="V", help="peak voltage, at most 12 V"
@@ -77,20 +72,20 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.sinks.summary import host_loss_text, warn_host_losses
 
     check_plant_name(args.plant)
-    amplitude_v = check_finite(args.amplitude, "--amplitude")
+    amplitude_v = options.check_finite(args.amplitude, "--amplitude")
     if amplitude_v > SUPPLY_V:
         raise InputError(
             f"--amplitude {amplitude_v:g} V is beyond the cart's ±{SUPPLY_V:g} V supply"
         )
     if amplitude_v <= 0.0:
         raise InputError(f"--amplitude must be a positive peak voltage (V), got {amplitude_v:g}")
-    check_plant_options(args)
+    options.check_plant_options(args)
     if args.duration is not None and args.signal == "square":
         raise InputError("--duration does not apply to the square signal; use --cycles (3 s each)")
     if args.duration is not None:
-        check_duration(args.duration)
-    check_output_file(args.out, "--out")  # before anything is driven
-    check_output_file(meta_path(args.out), "--out")
+        options.check_duration(args.duration)
+    options.check_output_file(args.out, "--out")  # before anything is driven
+    options.check_output_file(meta_path(args.out), "--out")
     volts = make_signal(args.signal, args.amplitude, cycles=args.cycles, duration_s=args.duration)
     zeros = np.zeros_like(volts)
     ua = volts if args.motor in ("a", "both") else zeros
@@ -128,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
     )  # the simulators know theirs; over serial, the echo's
     try:
         meta = write_trace_meta(path, plant=description, loop_delay_ticks=loop_delay,
-                                command=command_line("excite"))  # fmt: skip
+                                command=options.command_line("excite"))  # fmt: skip
     except OSError as exc:  # the trace is whole; its meta file is not
         raise OutputError(meta_path(path), exc.strerror or str(exc)) from None
     if args.json:
@@ -173,13 +168,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _write_whole(write: Callable[[Path], object], path: str | Path) -> None:
     """``write`` the trace to ``path``; when that fails (a full disk), cut the file back to its last
-    whole row, so no half row is left to pass for data.
-
-    Raises
-    ------
-    OutputError
-        The write failed; it says how many rows the file holds.
-    """
+    whole row, so no half row passes for data, and raise :class:`OutputError` with the rows kept."""
     path = Path(path)
     try:
         write(path)

@@ -1,10 +1,6 @@
-"""``cartctl export FILE.toml --arduino [--out FILE.h] | --mat FILE.mat``: a designed controller as C
-for the cart, or a model or controller as a MATLAB ``.mat`` file.
-
-The C (see :mod:`cartctl.export.arduino`) goes into the course template's ``Robot::control()``,
-where the controller runs with one tick of delay instead of a PC-side loop's several. The ``.mat``
-(:mod:`cartctl.export.mat`, whose docstring shows how to rebuild MATLAB and python-control objects
-from it) takes a model file or a controller file, told apart by their ``format`` line.
+"""``cartctl export FILE.toml --arduino [--out FILE.h] | --mat FILE.mat``: a controller as C for
+the cart's ``Robot::control()`` (:mod:`cartctl.export.arduino`), or a model or controller file
+(told apart by their ``format`` line) as MATLAB ``.mat`` (:mod:`cartctl.export.mat`).
 """
 
 from __future__ import annotations
@@ -58,15 +54,7 @@ def _command(args: argparse.Namespace) -> str:
 
 
 def file_kind(path: str | Path) -> tuple[str, Path]:
-    """('model' or 'controller', the file found) from the file's ``format`` line.
-
-    Raises
-    ------
-    MissingFileError
-        No such file.
-    DataFileError
-        Not TOML, or neither format.
-    """
+    """('model' or 'controller', the file found) from the file's ``format`` line."""
     from cartctl.choices import find_file
     from cartctl.data.tomlfile import read_toml
 

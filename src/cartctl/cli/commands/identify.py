@@ -1,4 +1,4 @@
-"""``cartctl identify FILE...``: fit motor models to recorded experiments (the report's ARX and beyond)."""
+"""``cartctl identify FILE...``: fit motor models to recorded experiments (ARX and beyond)."""
 
 from __future__ import annotations
 
@@ -154,23 +154,19 @@ def parse_delay(text: str) -> int | None:
 def request_from_args(
     args: argparse.Namespace, loop_delay_ticks: int | None = None
 ) -> IdentifyRequest:
-    """Turn the command-line options into an :class:`IdentifyRequest`.
-
-    ``loop_delay_ticks`` is the traces' loop delay (their meta files), used when ``--loop-delay``
-    is not given.
-    """
-    if args.loop_delay is not None:
-        loop_delay_ticks = args.loop_delay
+    """The options as an :class:`IdentifyRequest`; ``loop_delay_ticks`` (the traces' meta files)
+    when ``--loop-delay`` is not given."""
+    from cartctl.identification.orders import parse_grid
     from cartctl.identification.pipeline import IdentifyRequest
     from cartctl.identification.prefilter import Prefilter
 
+    if args.loop_delay is not None:
+        loop_delay_ticks = args.loop_delay
     prefilter = None
     if args.prefilter == "butter":
         prefilter = Prefilter(
             order=args.order, cutoff_hz=args.cutoff_hz, zero_phase=args.zero_phase
         )
-    from cartctl.identification.orders import parse_grid
-
     return IdentifyRequest(
         orders=None if args.orders is None else parse_grid(args.orders),
         split=args.split,
@@ -186,12 +182,11 @@ def request_from_args(
 
 
 def _poles_hz(model: ArxModel) -> str:
-    parts = []
-    for r in model.poles():
-        if r.kind == "delay":
-            continue
-        mark = "" if abs(r.value) < 1.0 else "!"
-        parts.append(f"{r.freq_hz:.2f}{mark}")
+    parts = [
+        f"{r.freq_hz:.2f}{'' if abs(r.value) < 1.0 else '!'}"
+        for r in model.poles()
+        if r.kind != "delay"
+    ]
     return ", ".join(parts) or "—"
 
 
@@ -200,10 +195,13 @@ def std_text(std: float, value: float) -> str:
     return "0" if abs(std) < 1e-9 * abs(value) else f"{std:.2g}"
 
 
-def _fit_cell(value: float | None) -> str:
-    if value is None or not math.isfinite(value):
-        return "diverges"
-    return f"{value:.2f}"
+def _row(label: str, cells: str, sim: float | None, pred: float | None, model: ArxModel) -> str:
+    """A model's row: θ cells, both fits ("diverges" when not finite), DC gain and poles."""
+    fits = "".join(
+        f"{'diverges' if v is None or not math.isfinite(v) else f'{v:.2f}':>13}"
+        for v in (sim, pred)
+    )
+    return f"    {label:<18}{cells}{fits}{model.dc_gain():>19.4g}  {_poles_hz(model)}"
 
 
 def format_motor(res: MotorIdentification, compared: Mapping[str, ArxModel] | None = None) -> str:
@@ -229,9 +227,7 @@ def format_motor(res: MotorIdentification, compared: Mapping[str, ArxModel] | No
             for v, s in zip(fit.model.theta, fit.theta_std, strict=True)
         )
         lines.append(
-            f"    {label:<18}{cells}{_fit_cell(fit.fit_simulation_percent):>13}"
-            f"{_fit_cell(fit.fit_prediction_percent):>13}{fit.model.dc_gain():>19.4g}  "
-            f"{_poles_hz(fit.model)}"
+            _row(label, cells, fit.fit_simulation_percent, fit.fit_prediction_percent, fit.model)
         )
     lines += [f"    OE: {note}" for note in getattr(res.oe, "notes", ())]
     diag = res.diagnostics
@@ -247,11 +243,8 @@ def format_motor(res: MotorIdentification, compared: Mapping[str, ArxModel] | No
                     f"{'(other orders: ' + str(model.na) + ', ' + str(model.nb) + ')':<{20 * len(names)}}"
                 )
             )
-            lines.append(
-                f"    {label:<18}{cells}{_fit_cell(f['fit_simulation_percent']):>13}"
-                f"{_fit_cell(f['fit_prediction_percent']):>13}{model.dc_gain():>19.4g}  "
-                f"{_poles_hz(model)}  (nk = {model.nk})"
-            )
+            sim, pred = f["fit_simulation_percent"], f["fit_prediction_percent"]
+            lines.append(_row(label, cells, sim, pred, model) + f"  (nk = {model.nk})")
     if res.delay is not None:
         d = res.delay
         evidence = ", ".join(

@@ -31,56 +31,37 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def marginal_poles(model: ArxModel) -> list[complex]:
-    """The poles with |z| above :data:`~cartctl.model.MARGINAL_POLE_RADIUS` (slow or marginal)."""
+def _slow(root: Root) -> bool:
+    """A pole with |z| above :data:`~cartctl.model.MARGINAL_POLE_RADIUS` (slow or marginal)."""
     from cartctl.model import MARGINAL_POLE_RADIUS
 
-    return [r.value for r in model.poles() if abs(r.value) > MARGINAL_POLE_RADIUS]
-
-
-def _pole_dict(root: Root) -> dict[str, Any]:
-    """``inspect --json``'s entry of a pole, plus ``magnitude`` |z| and ``slow_or_marginal``
-    (|z| > 0.99)."""
-    from cartctl.model import MARGINAL_POLE_RADIUS
-
-    return root.to_dict() | {
-        "magnitude": abs(root.value),
-        "slow_or_marginal": abs(root.value) > MARGINAL_POLE_RADIUS,
-    }
+    return abs(root.value) > MARGINAL_POLE_RADIUS
 
 
 def outside_zeros(model: ArxModel) -> list[complex]:
-    """The zeros with |z| > 1 (non-minimum-phase), in the order of :meth:`ArxModel.zeros`."""
+    """The zeros with |z| > 1 (non-minimum-phase)."""
     return [r.value for r in model.zeros() if abs(r.value) > 1.0]
 
 
 def model_summary(model: ArxModel) -> dict[str, Any]:
-    """``inspect --json`` entry of one motor (plus nk, num, den, minimum_phase: no zero
-    with |z| > 1, and slow_or_marginal: a pole with |z| > 0.99, with ``flags`` naming both)."""
+    """``inspect --json``'s entry of one motor."""
     from cartctl.measures.metrics import finite_or_none
 
-    marginal = marginal_poles(model)
-    flags = ["slow_or_marginal"] if marginal else []
-    flags += ["non_minimum_phase"] if outside_zeros(model) else []
+    marginal, outside = any(_slow(r) for r in model.poles()), bool(outside_zeros(model))
     return {
-        "minimum_phase": not outside_zeros(model),
-        "slow_or_marginal": bool(marginal),
-        "flags": flags,
-        "poles": [_pole_dict(r) for r in model.poles()],
+        "minimum_phase": not outside,
+        "slow_or_marginal": marginal,
+        "flags": ["slow_or_marginal"] * marginal + ["non_minimum_phase"] * outside,
+        "poles": [
+            r.to_dict() | {"magnitude": abs(r.value), "slow_or_marginal": _slow(r)}
+            for r in model.poles()
+        ],
         "zeros": [r.to_dict() for r in model.zeros()],
         "dc_gain": finite_or_none(model.dc_gain()),
         "stable": model.is_stable(),
         "nk": model.nk,
         "num": model.num().tolist(),
         "den": model.den().tolist(),
-    }
-
-
-def inspect_dict(models: ModelFile) -> dict[str, Any]:
-    """The whole ``inspect --json`` object."""
-    return {
-        "Ts": models.period_s,
-        "motors": {n: model_summary(m) for n, m in models.motors.items()},
     }
 
 
@@ -94,7 +75,7 @@ def _row(root: Root) -> str:
     freq = "—" if root.freq_hz is None else f"{root.freq_hz:.2f}"
     damp = "—" if root.damping is None else f"{root.damping:.3f}"
     flag = "  non-minimum-phase" if root.kind == "zero" and abs(root.value) > 1.0 else ""
-    if root.kind == "pole" and _pole_dict(root)["slow_or_marginal"]:
+    if root.kind == "pole" and _slow(root):
         flag = "  slow or marginal (|z| > 0.99)"
     return (
         f"    {root.kind:<6} {_fmt_z(root.value):>22} {abs(root.value):>8.4f} {freq:>8} "
@@ -103,7 +84,6 @@ def _row(root: Root) -> str:
 
 
 def format_table(models: ModelFile) -> str:
-    """The human-readable report."""
     prov = models.provenance
     lines = [
         f"{models.path}",
@@ -128,9 +108,9 @@ def format_table(models: ModelFile) -> str:
                 f"circle at {where} (a controller must not cancel {'them' if len(outside) > 1 else 'it'})"
             )
         stability = "stable" if m.is_stable() else "UNSTABLE"
-        marginal = marginal_poles(m)
+        marginal = [abs(r.value) for r in m.poles() if _slow(r)]
         if marginal and m.is_stable():
-            radius = max(abs(z) for z in marginal)
+            radius = max(marginal)
             stability += (
                 f" but SLOW OR MARGINAL: a pole at |z| = {radius:.4f} > 0.99 (it decays by "
                 f"{100.0 * (1.0 - radius):.2g} % a tick)"
@@ -150,7 +130,8 @@ def run(args: argparse.Namespace) -> int:
 
     models = load_models(args.model)
     if args.json:
-        print(dumps(inspect_dict(models)))
+        motors = {n: model_summary(m) for n, m in models.motors.items()}
+        print(dumps({"Ts": models.period_s, "motors": motors}))
     else:
         print(format_table(models))
     return 0

@@ -1,14 +1,9 @@
-"""``cartctl linearity STEP_SMALL.csv STEP_LARGE.csv STEP_SUM.csv``: the superposition test.
-
-The shell around :mod:`cartctl.identification.linearity`: reads the three step traces, prints the error
-summary or the JSON object, and with ``--plot`` draws the report's figure 8 (the two responses
-added against the summed step's response, the error beneath).
-"""
+"""``cartctl linearity STEP_SMALL.csv STEP_LARGE.csv STEP_SUM.csv``: the superposition test
+(:mod:`cartctl.identification.linearity`), ``--plot`` the report's figure 8."""
 
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from cartctl.cli.commands.options import add_map_option
@@ -48,13 +43,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def plot_linearity(result: LinearityResult, path: Path) -> None:
-    """Figure 8 of the report: the responses above, the superposition error beneath."""
-    save_png(linearity_figure(result), path)
-
-
 def linearity_figure(result: LinearityResult) -> Figure:
-    """The figure of :func:`plot_linearity`; each legend sits right of its panel, off the data."""
+    """Figure 8 of the report: the responses above, the superposition error beneath; each legend
+    right of its panel, off the data."""
     small_v, large_v, sum_v = result.amplitudes_v
     fig, axes = new_figure(2, 1, width_in=10.0, height_in=6.0)
     top, bottom = axes[0, 0], axes[1, 0]
@@ -89,8 +80,8 @@ def linearity_figure(result: LinearityResult) -> Figure:
     return fig
 
 
+# legends outside the axes, to their right (constrained layout makes room)
 _BESIDE = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "borderaxespad": 0.0}
-"""Legend placement outside the axes, to their right (constrained layout makes room)."""
 
 
 def _pct(value: float | None) -> str:
@@ -98,7 +89,6 @@ def _pct(value: float | None) -> str:
 
 
 def format_text(result: LinearityResult, files: tuple[str, str, str]) -> str:
-    """The human-readable report."""
     small_v, large_v, sum_v = result.amplitudes_v
     lines = [f"superposition test, motor {result.motor}"]
     for role, path, amp, onset in zip(
@@ -129,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
     small, large, total = (read_trace(path, args.map) for path in files)
     result = linearity(small, large, total, args.motor)
     if plot is not None:
-        plot_linearity(result, plot)
+        save_png(linearity_figure(result), plot)
     if args.json:
         print(dumps(result.to_dict()))
     else:

@@ -18,14 +18,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from cartctl.cli.commands.options import (
-    DEFAULT_CONNECT_TIMEOUT_S,
-    FORMS,
-    add_output_options,
-    add_rerun_options,
-    check_duration,
-    check_run_outputs,
-)
+import cartctl.cli.commands.options as options
+from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import InputError, OutputError
 
 if TYPE_CHECKING:  # cartctl.plants loads numpy and scipy: imported where used, not for --help
@@ -64,8 +58,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--duration", type=float, metavar="S",
                    help="stop after S seconds of cart time (default: run until Ctrl-C)")  # fmt: skip
-    add_output_options(p, name_default="monitor-DATE-TIME")
-    add_rerun_options(p)
+    options.add_output_options(p, name_default="monitor-DATE-TIME")
+    options.add_rerun_options(p)
     p.add_argument(
         "--connect-timeout", type=float, default=DEFAULT_CONNECT_TIMEOUT_S, metavar="S",
         help=f"longest wait for the cart's HEARTBEAT (default {DEFAULT_CONNECT_TIMEOUT_S:g} s)",
@@ -78,7 +72,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--reference", metavar="SPEC",
         help=f"with --onboard: the on-board reference of both motors (default {DEFAULT_REFERENCE})"
-        f": {FORMS}",
+        f": {options.FORMS}",
     )  # fmt: skip
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=run)
@@ -92,7 +86,7 @@ def _check(args: argparse.Namespace) -> tuple[str, str]:
     if not (kind == "virtual" or (kind == "serial" and rest)):  # the plant first
         raise InputError(f"unknown plant '{args.plant}'; expected serial:PORT or virtual[:FAULTS]")
     if args.duration is not None:
-        check_duration(args.duration)
+        options.check_duration(args.duration)
     if not (math.isfinite(args.connect_timeout) and args.connect_timeout > 0):
         raise InputError(f"--connect-timeout must be a positive number of seconds, got "
                          f"{args.connect_timeout}")  # fmt: skip
@@ -169,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.sinks.csv_sink import CsvSink
 
     kind, rest = _check(args)
-    csv_path, rrd_path = check_run_outputs(args, "monitor")  # before a cart is connected
+    csv_path, rrd_path = options.check_run_outputs(args, "monitor")  # before a cart is connected
     try:
         labels = parse_labels(args.labels) if args.labels is not None else None
     except InputError as exc:

@@ -1,8 +1,8 @@
-"""Command-line options shared by several subcommands (one definition each).
+"""Command-line options and input/output checks shared by several subcommands.
 
-This module is imported to build the parser, before any command runs: it imports no numpy, scipy
-or module that does (``cartctl --help`` stays fast). The names, limits and defaults the options
-show come from :mod:`cartctl.choices`, where the modules that implement them take them too.
+Imported to build the parser, so it loads no numpy, scipy or module that does (``cartctl
+--help`` stays fast). Names, limits and defaults come from :mod:`cartctl.choices`, where the
+implementations take them too.
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ from cartctl.errors import InputError
 
 __all__ = ["DEFAULT_CONNECT_TIMEOUT_S", "DEFAULT_MODEL", "FORMS", "MAX_DURATION_S", "SIGNALS"]
 
-RERUN_MODES = ("auto", "spawn", "connect", "save", "off")
-"""The choices of ``--rerun``."""
+MAX_JOBS = 64
+"""The most worker processes ``--jobs`` accepts (CPU-bound work, some 100 MB per worker)."""
 
 
 def _mapping_arg(text: str) -> dict[str, str]:
@@ -42,13 +42,7 @@ def _mapping_arg(text: str) -> dict[str, str]:
 
 
 def check_duration(seconds: float, option: str = "--duration") -> float:
-    """``seconds`` if it is a positive number of seconds up to :data:`MAX_DURATION_S`.
-
-    Raises
-    ------
-    InputError
-        Otherwise, in one line naming ``option``.
-    """
+    """``seconds`` if positive and at most :data:`MAX_DURATION_S`, else one line naming ``option``."""
     if not (math.isfinite(seconds) and 0.0 < seconds <= MAX_DURATION_S):
         raise InputError(
             f"{option} must be a positive number of seconds up to {MAX_DURATION_S:g} (24 h), "
@@ -57,19 +51,8 @@ def check_duration(seconds: float, option: str = "--duration") -> float:
     return seconds
 
 
-MAX_JOBS = 64
-"""The most worker processes ``--jobs`` accepts: the work is CPU-bound, so workers beyond the
-cores only add processes (each some 100 MB); 64 covers the largest workstation."""
-
-
 def check_jobs(jobs: int | None, option: str = "--jobs") -> int | None:
-    """``jobs`` if it is None (all cores) or a number of worker processes in 1..:data:`MAX_JOBS`.
-
-    Raises
-    ------
-    InputError
-        Otherwise, in one line naming ``option``.
-    """
+    """``jobs`` if None (all cores) or in 1..:data:`MAX_JOBS`, else one line naming ``option``."""
     if jobs is not None and not 1 <= jobs <= MAX_JOBS:
         raise InputError(f"{option} must be a number of processes in 1..{MAX_JOBS}, got {jobs}")
     return jobs
@@ -96,73 +79,28 @@ def file_stem(text: str) -> str:
     return text
 
 
-def add_name_option(p: argparse.ArgumentParser, *, default: str) -> None:
-    """``--name``: the stem of the trace and recording written into ``--out``."""
-    p.add_argument("--name", type=file_stem, metavar="NAME",
-                   help=f"file name stem, without a folder (default {default})")  # fmt: skip
-
-
 def add_output_options(p: argparse.ArgumentParser, *, name_default: str) -> None:
     """``--out DIR`` and ``--name``: where the trace and the recording go, under which name."""
     p.add_argument("--out", default="logs", metavar="DIR", help="where the trace and recording go")
-    add_name_option(p, default=name_default)
+    p.add_argument("--name", type=file_stem, metavar="NAME",
+                   help=f"file name stem, without a folder (default {name_default})")  # fmt: skip
 
 
 def add_rerun_options(p: argparse.ArgumentParser) -> None:
     """``--rerun MODE`` and ``--connect-url``: the Rerun recording, and the viewer it goes to."""
-    p.add_argument("--rerun", choices=RERUN_MODES, default="auto",
+    p.add_argument("--rerun", choices=("auto", "spawn", "connect", "save", "off"), default="auto",
                    help="auto: record to --out and open the viewer where a display exists; spawn: "
                         "record and open the viewer; connect: record and stream to a running viewer; "
                         "save: record only; off: no recording")  # fmt: skip
     p.add_argument("--connect-url", metavar="URL", help="viewer address for --rerun connect")
 
 
-def output_paths(args: argparse.Namespace, prefix: str) -> tuple[Path, Path]:
-    """The trace (``.csv``) and recording (``.rrd``) paths that ``--out`` and ``--name`` ask for.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        With ``out`` and ``name`` (:func:`add_output_options`).
-    prefix : str
-        Without ``--name`` the files are named ``PREFIX-YYYYmmdd-HHMMSS``, with ``-2``, ``-3`` …
-        added when a trace or recording of that name is already in ``--out``.
-
-    Returns
-    -------
-    tuple of Path
-        The trace and the recording.
-    """
-    out = Path(args.out)
-    stem = args.name or _free_stem(out, datetime.now().strftime(f"{prefix}-%Y%m%d-%H%M%S"))
-    return out / f"{stem}.csv", out / f"{stem}.rrd"
-
-
 def check_output_folder(folder: str | Path, option: str) -> Path:
     """``folder`` when cartctl can create it (if missing) and write files into it.
 
-    The check really writes: the missing folders are made, an empty file is created in the last
-    and everything is removed again, so it answers for permissions, read-only and virtual file
-    systems (``/proc``, ``/sys``) alike, and leaves nothing behind. Run it before anything is
-    driven or computed.
-
-    Parameters
-    ----------
-    folder : str or Path
-        The output folder.
-    option : str
-        The option that named it (``--out``), for the message.
-
-    Returns
-    -------
-    Path
-        ``folder``.
-
-    Raises
-    ------
-    InputError
-        In one line naming ``option``, the folder and why (``is a file, not a folder``,
-        ``cannot create: permission denied``, ``cannot write there: read-only file system`` …).
+    The check really writes (missing folders made, a file created, everything removed again), so
+    it answers for permissions, read-only and virtual file systems alike and leaves nothing
+    behind. Otherwise :class:`InputError`, one line naming ``option``, the folder and why.
     """
     folder = Path(folder)
     why = _unwritable(folder)
@@ -172,20 +110,7 @@ def check_output_folder(folder: str | Path, option: str) -> Path:
 
 
 def check_output_file(path: str | Path, option: str) -> Path:
-    """``path`` when cartctl can write that file: not a folder, in a folder it can write in.
-
-    Parameters
-    ----------
-    path : str or Path
-        The file to be written (it may exist: it is then replaced).
-    option : str
-        The option that named it (``--out``, ``--plot`` …), for the message.
-
-    Raises
-    ------
-    InputError
-        As :func:`check_output_folder`, or ``is a folder, not a file``.
-    """
+    """``path`` when cartctl can write (or replace) that file; else as :func:`check_output_folder`."""
     path = Path(path)
     if path.is_dir():
         raise InputError(f"{option} {path}: is a folder, not a file")
@@ -201,22 +126,27 @@ def check_output_file(path: str | Path, option: str) -> Path:
 
 
 def check_run_outputs(args: argparse.Namespace, prefix: str) -> tuple[Path, Path]:
-    """:func:`output_paths`, each checked (:func:`check_output_folder`, :func:`check_output_file`)."""
-    check_output_folder(args.out, "--out")
-    csv_path, rrd_path = output_paths(args, prefix)
-    for path in (csv_path, rrd_path, csv_path.with_suffix(".meta.toml")):
-        check_output_file(path, "--out")
-    return csv_path, rrd_path
+    """The trace (``.csv``) and recording (``.rrd``) paths ``--out`` and ``--name`` ask for, checked.
+
+    Without ``--name`` the stem is ``PREFIX-YYYYmmdd-HHMMSS``, with ``-2``, ``-3`` … added when a
+    run of that name is already in ``--out``.
+    """
+    out = check_output_folder(args.out, "--out")
+    stem = args.name or datetime.now().strftime(f"{prefix}-%Y%m%d-%H%M%S")
+    candidate, n = stem, 1
+    while not args.name and any((out / f"{candidate}{s}").exists() for s in (".csv", ".rrd")):
+        n += 1
+        candidate = f"{stem}-{n}"
+    for suffix in (".csv", ".rrd", ".meta.toml"):
+        check_output_file(out / f"{candidate}{suffix}", "--out")
+    return out / f"{candidate}.csv", out / f"{candidate}.rrd"
 
 
 def check_outputs(
     args: argparse.Namespace, *, files: tuple[str, ...] = (), folders: tuple[str, ...] = ()
 ) -> None:
-    """The output options given (``args.out``, ``args.plot`` …) checked before any work.
-
-    ``files`` and ``folders`` name ``args`` attributes (``"out"`` is ``--out``); each one given is
-    checked with :func:`check_output_file` or :func:`check_output_folder`.
-    """
+    """The output options given, named by their ``args`` attribute (``"out"`` is ``--out``),
+    checked as files or folders before any work."""
     for names, check in ((files, check_output_file), (folders, check_output_folder)):
         for name in names:
             value = getattr(args, name, None)
@@ -235,10 +165,8 @@ _REASONS = {
 
 
 def _unwritable(folder: Path, there: str = "cannot write there") -> str | None:
-    """None when files can be written in ``folder`` (made for the test and removed), else why.
-
-    ``there`` begins the answer when ``folder`` exists but takes no file.
-    """
+    """None when a file can be written in ``folder`` (made for the test and removed), else why;
+    ``there`` begins the answer when ``folder`` exists but takes no file."""
     existing, missing = folder, []
     while not existing.exists():
         if existing.is_symlink():  # a dangling link: mkdir would fail on it
@@ -248,11 +176,9 @@ def _unwritable(folder: Path, there: str = "cannot write there") -> str | None:
             break
         existing = existing.parent
     if not existing.is_dir():
-        return (
-            "is a file, not a folder"
-            if existing == folder
-            else f"cannot create: {existing} is a file"
-        )
+        if existing == folder:
+            return "is a file, not a folder"
+        return f"cannot create: {existing} is a file"
     made: list[Path] = []
     step = "cannot create"
     try:
@@ -274,21 +200,9 @@ def _unwritable(folder: Path, there: str = "cannot write there") -> str | None:
     return None
 
 
-def _free_stem(out: Path, stem: str) -> str:
-    """``stem``, or ``stem-2``, ``stem-3`` … when a run of that name is already in ``out``."""
-    candidate, n = stem, 1
-    while (out / f"{candidate}.csv").exists() or (out / f"{candidate}.rrd").exists():
-        n += 1
-        candidate = f"{stem}-{n}"
-    return candidate
-
-
 def command_line(command: str) -> str:
-    """The command line being run, as the files it writes record it (their provenance).
-
-    ``cartctl`` and the process's arguments, quoted for a shell; ``cartctl COMMAND`` when the
-    process has no arguments (a call from Python).
-    """
+    """The command line being run, as the files it writes record it (``cartctl COMMAND`` when
+    called from Python without arguments)."""
     return "cartctl " + shlex.join(sys.argv[1:]) if sys.argv[1:] else f"cartctl {command}"
 
 
@@ -303,7 +217,8 @@ def add_map_option(p: argparse.ArgumentParser) -> None:
 
 
 def add_plant_options(p: argparse.ArgumentParser, *, what: str) -> None:
-    """``--plant`` and the simulated plants' ``--model``, ``--preset``, ``--noise``, ``--seed``."""
+    """``--plant`` and the simulated plants' ``--model``, ``--preset``, ``--noise``, ``--seed``,
+    ``--connect-timeout``."""
     p.add_argument(
         "--plant",
         default="sim",
@@ -337,7 +252,7 @@ def add_plant_options(p: argparse.ArgumentParser, *, what: str) -> None:
     p.add_argument(
         "--connect-timeout",
         type=float,
-        default=5.0,
+        default=DEFAULT_CONNECT_TIMEOUT_S,
         metavar="S",
         help="serial and virtual carts: longest wait for the cart's first HEARTBEAT (default 5 s; "
         "opening the port resets the Arduino, which takes 1-2 s)",
@@ -345,25 +260,9 @@ def add_plant_options(p: argparse.ArgumentParser, *, what: str) -> None:
 
 
 def check_input_file(path: str | Path, what: str, option: str | None = None) -> Path:
-    """The file ``path`` names (a shipped file's relative path finds the shipped one), if it is one.
-
-    Run it before the work that needs the file, so a mistake in any file given is the first
-    thing said.
-
-    Parameters
-    ----------
-    path : str or Path
-        The file given.
-    what : str
-        What it should be (``"a model file"``), for the message.
-    option : str, optional
-        The option that named it (``--model``); None for a positional argument.
-
-    Raises
-    ------
-    InputError
-        One line naming ``option`` and ``path``: ``is a directory`` or ``not found``.
-    """
+    """The file ``path`` names (a shipped file's relative path finds the shipped one), checked
+    before the work that needs it; else one line naming ``option`` (None: a positional) and
+    ``path``, ``is a directory`` or ``not found``, and ``what`` it should be."""
     from cartctl.choices import find_file
 
     found = find_file(path)
@@ -385,8 +284,7 @@ def check_finite(value: float, option: str) -> float:
 
 
 def check_plant_options(args: argparse.Namespace) -> None:
-    """``--noise`` and ``--connect-timeout`` (:func:`add_plant_options`) in range, before any plant
-    is made or connected (one line naming the option otherwise)."""
+    """``--noise`` and ``--connect-timeout`` in range, before any plant is made or connected."""
     noise = check_finite(args.noise, "--noise")
     if noise < 0.0:
         raise InputError(f"--noise must be a standard deviation >= 0 rad/s, got {noise:g}")

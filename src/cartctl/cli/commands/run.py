@@ -9,19 +9,9 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import cartctl.cli.commands.options as options
 from cartctl import stopping
 from cartctl.cart import check_voltage_limit
-from cartctl.cli.commands.options import (
-    FORMS,
-    add_output_options,
-    add_plant_options,
-    add_rerun_options,
-    check_duration,
-    check_finite,
-    check_plant_options,
-    check_run_outputs,
-    command_line,
-)
 from cartctl.errors import InputError, OutputError, PlantError
 from cartctl.session.checks import DEFAULT_CONTROLLER
 
@@ -29,12 +19,11 @@ if TYPE_CHECKING:
     from cartctl.runtime.loop import ControlLoop, MemorySink
     from cartctl.session.prepare import PreparedRun
 
-# numpy, scipy and the rest load when the command runs (in the steps of run() and the two
-# functions below), not when the parser is built: cartctl --help stays fast.
+# numpy, scipy and the rest load when the command runs, not when the parser is built
 
 
 def make_plant(*args: Any, **kwargs: Any) -> Any:
-    """:func:`cartctl.plants.factory.make_plant`, imported on the first call."""
+    """:func:`cartctl.plants.factory.make_plant`, imported on the first call (tests replace it)."""
     from cartctl.plants.factory import make_plant
 
     return make_plant(*args, **kwargs)
@@ -57,7 +46,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "controller on the simulated ground model, a 10 rad/s step, 5 s in real time."
         ),
     )
-    add_plant_options(p, what="what to control")
+    options.add_plant_options(p, what="what to control")
     p.add_argument(
         "--controller",
         metavar="CONTROLLER.toml",
@@ -85,7 +74,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--reference",
         default="step:10",
         metavar="SPEC",
-        help=f"speed reference of both motors (default step:10): {FORMS}",
+        help=f"speed reference of both motors (default step:10): {options.FORMS}",
     )
     p.add_argument("--reference-b", metavar="SPEC", help="a different reference for motor b")
     p.add_argument(
@@ -96,8 +85,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="run on a simulated clock, as fast as the CPU allows (simulated plants)",
     )
-    add_rerun_options(p)
-    add_output_options(p, name_default="run-DATE-TIME")
+    options.add_rerun_options(p)
+    options.add_output_options(p, name_default="run-DATE-TIME")
     p.add_argument(
         "--voltage-limit",
         type=float,
@@ -135,37 +124,31 @@ def _rerun_sink(
                          ranges=run_ranges(extremes, limit_v))  # fmt: skip
 
 
-def default_controller(plant: str) -> Path:
-    """The shipped controller for a plant: the PI, on every plant (one loop delay, 1 tick)."""
-    del plant  # the bridge gives the serial loop the on-board delay: one file serves all
-    return DEFAULT_CONTROLLER
-
-
 def _checked_outputs(args: argparse.Namespace) -> tuple[Path, Path]:
-    """Step 1, the refusals that need nothing loaded or driven: duration, voltage limit, plant,
-    references, output files, ``--fast`` on a simulated plant. Returns the trace's and the
-    recording's paths."""
-    check_duration(args.duration)
+    """Step 1, the refusals that need nothing loaded or driven; the trace's and recording's paths."""
+    options.check_duration(args.duration)
     if args.voltage_limit is not None:
-        check_voltage_limit(check_finite(args.voltage_limit, "--voltage-limit"), "--voltage-limit")
+        limit = options.check_finite(args.voltage_limit, "--voltage-limit")
+        check_voltage_limit(limit, "--voltage-limit")
     from cartctl.plants.factory import SIMULATED, check_plant_name
     from cartctl.reference import check_reference
 
     kind = check_plant_name(args.plant)  # first: what is checked next depends on the plant
-    check_plant_options(args)
+    options.check_plant_options(args)
     check_reference(args.reference, "--reference")
     if args.reference_b:
         check_reference(args.reference_b, "--reference-b")
-    csv_path, rrd_path = check_run_outputs(args, "run")  # before anything is loaded or driven
+    csv_path, rrd_path = options.check_run_outputs(
+        args, "run"
+    )  # before anything is loaded or driven
     if args.fast and kind not in SIMULATED:
         raise InputError(f"--fast needs a simulated plant (sim or physics), not '{args.plant}'")
     return csv_path, rrd_path
 
 
 def _prepared(args: argparse.Namespace, given: str, csv_path: Path) -> PreparedRun:
-    """Step 2, the session's run path (:func:`cartctl.session.prepare.prepare_run`: controller,
-    plant, references and every refusal), then the trace's loop beside it, for identify (before
-    the loop: an interrupted run has it too)."""
+    """Step 2, the session's run path (controller, plant, references, every refusal), then the
+    trace's meta file (before the loop: an interrupted run has it too)."""
     from cartctl.choices import find_file
     from cartctl.data.tracemeta import write_trace_meta
     from cartctl.session.prepare import prepare_run
@@ -186,7 +169,7 @@ def _prepared(args: argparse.Namespace, given: str, csv_path: Path) -> PreparedR
     )  # fmt: skip
     try:
         write_trace_meta(csv_path, plant=prepared.description,
-                         loop_delay_ticks=prepared.loop_delay_ticks, command=command_line("run"),
+                         loop_delay_ticks=prepared.loop_delay_ticks, command=options.command_line("run"),
                          controller=prepared.controller_file.path or find_file(given),
                          model=find_file(prepared.controller_file.model_path))  # fmt: skip
     except OSError as exc:  # a full disk: nothing driven yet
@@ -198,9 +181,8 @@ def _prepared(args: argparse.Namespace, given: str, csv_path: Path) -> PreparedR
 def _sinks(
     args: argparse.Namespace, prepared: PreparedRun, csv_path: Path, rrd_path: Path
 ) -> tuple[list[Any], MemorySink, Any]:
-    """Step 3, where the rows go: the CSV trace, memory (for the summary), the Rerun recording
-    unless ``--rerun off``, a live status line on a terminal. Returns the sinks, the memory
-    sink and the Rerun sink (None without one)."""
+    """Step 3, where the rows go: the trace, memory (for the summary), the recording (or None),
+    a status line on a terminal."""
     from cartctl.runtime.loop import MemorySink
     from cartctl.sinks.csv_sink import CsvSink
 
@@ -220,9 +202,8 @@ def _sinks(
 def _run_loop(
     args: argparse.Namespace, prepared: PreparedRun, sinks: list[Any]
 ) -> tuple[ControlLoop, dict[str, Any], str]:
-    """Step 4, the loop on its executor until the last tick, a signal or a fault; the motors
-    get zero volts whatever happens. Returns the loop (its ``state`` says how it ended), the
-    executor's timing figures and how the loop was scheduled."""
+    """Step 4, the loop until the last tick, a signal or a fault (zero volts whatever happens);
+    the loop (its ``state`` says how it ended), the timing figures and the scheduling."""
     from cartctl.plants.base import ClockedPlant
     from cartctl.runtime.back_to_back import BackToBackExecutor
     from cartctl.runtime.cartclock import CartClockedExecutor
@@ -291,9 +272,7 @@ def _summary(
     args: argparse.Namespace, prepared: PreparedRun, loop: ControlLoop, memory: MemorySink,
     rerun: Any, timing: dict[str, Any], run_facts: dict[str, Any],
 ) -> dict[str, Any]:  # fmt: skip
-    """Step 5, the run's summary (``--json``'s object): the trace's metrics, the executor's
-    timing, the link's figures, ``run_facts`` (recording, trace, plant, controller,
-    scheduling), the smoothed speed, and which files are incomplete."""
+    """Step 5, the run's summary (``--json``'s object)."""
     from cartctl.cli.commands.review.smoothed import smooth_run
     from cartctl.sinks.summary import mark_incomplete, trace_metrics
 
@@ -352,13 +331,9 @@ def _report(args: argparse.Namespace, summary: dict[str, Any], loop: ControlLoop
 
 
 def run(args: argparse.Namespace) -> int:
-    """``cartctl run``: checks, the session's run path, sinks, the loop, the summary.
-
-    Returns 0, 1 when the run failed (a plant fault, a file left incomplete) or the exit code
-    of the signal that stopped it.
-    """
+    """0, 1 when the run failed (a plant fault, a file left incomplete), or the signal's code."""
     csv_path, rrd_path = _checked_outputs(args)
-    given = args.controller or str(default_controller(args.plant))
+    given = args.controller or str(DEFAULT_CONTROLLER)  # one file for every plant
     prepared = _prepared(args, given, csv_path)
     sinks, memory, rerun = _sinks(args, prepared, csv_path, rrd_path)
     loop, timing, scheduling = _run_loop(args, prepared, sinks)

@@ -1,25 +1,11 @@
 """``cartctl tune MODEL.toml --method pi|poles``: a grid of designs, each run in the simulated loop.
 
-Between ``design`` and ``run``. The grid and the Pareto front are :mod:`cartctl.tune.grid`;
-designing and running the settings on worker processes is :mod:`cartctl.tune.engine`; what is
-refused before any of that (the options that size the work, then what ``design`` and ``run``
-refuse for every setting alike, in their words) is :mod:`cartctl.cli.commands.tune_checks`. Here: the
-options, the table or JSON, the plot, and ``--choose N --out FILE``, which writes setting N's
-controller file through ``cartctl design`` itself.
-
-Each setting is scored on the loop it is designed for: with ``--extra-delay N`` the simulated
-plant has N more ticks of delay too. Settling is measured in the band of ``cartctl design``'s
-settling bound, max(2 %, one encoder count per tick).
-
-``--robust`` (:mod:`cartctl.tune.robust`) also scores every setting on ``--plants N`` plants drawn
-from the model's uncertainty (:mod:`cartctl.tune.uncertainty`, ``--seed``), simulated all at once
-(:mod:`cartctl.tune.batch`), and on the physics preset, as it is and at each ``--actuation-ms``
-timing (default 3 and 10 ms: when a command lands after its tick, a property of the cart); the
-physics runs at those timings enter the worst case beside the sampled plants. The table,
-``--json`` (key ``robust``, added to each row and at the top) and the plot then show nominal,
-worst case, spread and physics, and the front of nominal settling against worst-case overshoot. ``--choose best`` picks by
-:data:`cartctl.tune.robust_choice.CHOICE_RULE` (with ``--robust``) or
-:data:`~cartctl.tune.robust_choice.CHOICE_RULE_NOMINAL` (without).
+Here: the options, the refusals made before any work (the options that size the work, then what
+``design`` and ``run`` refuse for every setting alike, in their words), the table or JSON, the
+plot, and ``--choose N --out FILE``, which writes setting N's controller as ``cartctl design``
+does. The grid and the Pareto front are :mod:`cartctl.tune.grid`, the runs on worker processes
+:mod:`cartctl.tune.engine`, ``--robust`` :mod:`cartctl.tune.robust`. A setting that only its own
+design refuses stays a row of the table.
 """
 
 from __future__ import annotations
@@ -31,21 +17,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
+import cartctl.cli.commands.tune_checks as checks
 from cartctl.choices import MAX_TUNE_SETTINGS
-from cartctl.cli.commands.options import FORMS, MAX_JOBS, check_outputs, seed
-from cartctl.cli.commands.tune_checks import (
-    DEFAULT_PLANTS,
-    MAX_GRID_TICKS,
-    MAX_PLANTS,
-    MAX_ROBUST_PLANT_TICKS,
-    MAX_TUNE_DURATION_S,
-    actuation_timings,
-    check_inputs,
-    check_options,
-    check_work,
-    choice_limits,
-    design_fixed,
-)
+from cartctl.cli.commands.options import FORMS, MAX_JOBS, seed
 from cartctl.design.request import MAX_EXTRA_DELAY_TICKS, METHODS  # light: no numpy
 from cartctl.errors import InputError
 
@@ -84,8 +58,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--reference", default="step:10", metavar="SPEC",
                    help=f"speed reference of both motors (default step:10): {FORMS}")  # fmt: skip
     p.add_argument("--duration", type=float, default=2.0, metavar="S",
-                   help=f"run time of each setting (default 2 s, at most {MAX_TUNE_DURATION_S:g} "
-                        f"s, and at most {MAX_GRID_TICKS:,} ticks over the grid)")  # fmt: skip
+                   help="run time of each setting (default 2 s, at most "
+                        f"{checks.MAX_TUNE_DURATION_S:g} s, and at most "
+                        f"{checks.MAX_GRID_TICKS:,} ticks over the grid)")  # fmt: skip
     p.add_argument("--extra-delay", type=int, default=0, metavar="N",
                    help="ticks of loop delay beyond the model's, designed for and simulated "
                         f"(a PC-side loop over serial; 0..{MAX_EXTRA_DELAY_TICKS})")  # fmt: skip
@@ -105,8 +80,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "nominal, worst case, spread and the front of nominal settling against "
                         "worst-case overshoot")  # fmt: skip
     p.add_argument("--plants", type=int, metavar="N",
-                   help=f"plants drawn for --robust, 1..{MAX_PLANTS} (default {DEFAULT_PLANTS}; "
-                        f"at most {MAX_ROBUST_PLANT_TICKS:,} plant-ticks over the grid)")  # fmt: skip
+                   help=f"plants drawn for --robust, 1..{checks.MAX_PLANTS} (default "
+                        f"{checks.DEFAULT_PLANTS}; at most {checks.MAX_ROBUST_PLANT_TICKS:,} "
+                        "plant-ticks over the grid)")  # fmt: skip
     p.add_argument("--seed", type=seed, metavar="S", help="seed of the plants drawn for --robust (default 1)")  # fmt: skip
     p.add_argument("--actuation-ms", metavar="X,Y,...",
                    help="with --robust: also run every setting on the physics --preset with each "
@@ -152,16 +128,9 @@ def choose(
     result: tuning.TuneResult,
     results: Sequence[tuning.TuneResult] = (),
 ) -> str:
-    """Write the chosen setting's controller file, as ``cartctl design`` would.
-
-    Returns the design command (``cartctl design ...``), as the file records it.
-
-    Raises
-    ------
-    InputError
-        The setting did not run (an infeasible request, or its run failed); the message names
-        the settings of ``results`` that can be chosen.
-    """
+    """Write the chosen setting's controller file as ``cartctl design`` would; returns the
+    design command the file records. A setting that did not run is refused, naming those of
+    ``results`` that can be chosen."""
     from cartctl.data.modelfile import load_models
     from cartctl.design.controllerfile import save_controller
     from cartctl.design.loop_report import analyse_designs
@@ -177,7 +146,7 @@ def choose(
             f"chosen: {choosable_text(results or [result])}"
         )
     request = tuning.design_request(args.method, result.settings, args.extra_delay,
-                                    design_fixed(args))  # fmt: skip
+                                    checks.design_fixed(args))  # fmt: skip
     argv = ["design", *request.to_argv(str(args.model), always=tuning.request_axes(args.method)),
             "--out", args.out]  # fmt: skip
     models = load_models(args.model)
@@ -191,25 +160,36 @@ def choose(
     return command
 
 
-def _chosen(args: argparse.Namespace, result: tuning.TuneResult, rule: str | None,
-            results: Sequence[tuning.TuneResult]) -> dict[str, Any]:  # fmt: skip
-    command = choose(args, result, results)
-    out: dict[str, Any] = {"index": result.index, "out": args.out, "command": command}
-    if rule is not None:
-        out["rule"] = rule
-    return out
-
-
-def _choice_or_refusal(
-    args: argparse.Namespace, make: Callable[[], dict[str, Any]]
+def _choose(
+    args: argparse.Namespace,
+    results: Sequence[tuning.TuneResult],
+    best: Callable[[], tuning.TuneResult],
+    rule: str,
 ) -> tuple[dict[str, Any] | None, InputError | None]:
     """``--choose``'s entry, or the refusal to raise once the results are printed."""
     if args.choose is None:
         return None, None
     try:
-        return make(), None
+        result = (
+            best() if args.choose == "best" else next(r for r in results if r.index == args.choose)
+        )
+        chosen = {"index": result.index, "out": args.out, "command": choose(args, result, results)}
     except InputError as exc:
         return None, exc
+    if args.choose == "best":
+        chosen["rule"] = rule
+    return chosen, None
+
+
+def _run_grid(args: argparse.Namespace, job: Any, evaluate: Callable[..., Any], label: str) -> Any:
+    from cartctl.cli.progress import ProgressBar
+    from cartctl.tune import engine
+
+    bar = ProgressBar(len(job.items), label)
+    try:
+        return engine.run_grid(job, args.jobs or os.cpu_count() or 1, bar.update, evaluate)
+    finally:
+        bar.close()
 
 
 def _delay_text(args: argparse.Namespace) -> str:
@@ -239,44 +219,32 @@ def _finish(args: argparse.Namespace, chosen: dict[str, Any] | None,
 def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
     """``tune --robust``: the grid on the nominal model, the sampled plants and the physics preset."""
     from cartctl.cli.jsonout import dumps
-    from cartctl.cli.progress import ProgressBar
     from cartctl.data.modelfile import load_models
-    from cartctl.tune import engine, table
     from cartctl.tune import grid as tuning
     from cartctl.tune import robust as robustness
     from cartctl.tune import robust_choice as choice
+    from cartctl.tune import table
     from cartctl.tune.plot import plot_robust
     from cartctl.tune.uncertainty import describe_line, sample_plants
 
-    plants = DEFAULT_PLANTS if args.plants is None else args.plants
-    seed = 1 if args.seed is None else args.seed
-    sample = sample_plants(load_models(args.model), plants, seed,
+    plants = checks.DEFAULT_PLANTS if args.plants is None else args.plants
+    sample = sample_plants(load_models(args.model), plants, 1 if args.seed is None else args.seed,
                            extra_delay_ticks=args.extra_delay)  # fmt: skip
-    timings = actuation_timings(args.actuation_ms)
+    timings = checks.actuation_timings(args.actuation_ms)
     rjob = robustness.RobustJob(job, sample, job.items, timings)
-    bar = ProgressBar(len(job.items), "cartctl tune --robust")
-    try:
-        rows = engine.run_grid(rjob, args.jobs or os.cpu_count() or 1, bar.update,
-                               robustness.evaluate_robust_chunk)  # fmt: skip
-    finally:
-        bar.close()
+    rows = _run_grid(args, rjob, robustness.evaluate_robust_chunk, "cartctl tune --robust")
     marked = tuning.mark_pareto([r.result for r in rows])  # the plain front, for the JSON rows
     rows = [replace(r, result=m) for r, m in zip(rows, marked, strict=True)]
     rows = choice.sort_robust(choice.mark_robust_pareto(rows))
     if args.plot:
         plot_robust(args.plot, args.method, rows, plants)
-    results = [r.result for r in rows]
+    limits = checks.choice_limits(args)
+    rule = choice.rule_text(choice.CHOICE_RULE, limits, choice.LIMITS_WHERE)
 
-    limits = choice_limits(args)
+    def best() -> tuning.TuneResult:
+        return choice.choose_best_robust(rows, limits).result
 
-    def make() -> dict[str, Any]:
-        if args.choose == "best":
-            rule = choice.rule_text(choice.CHOICE_RULE, limits, choice.LIMITS_WHERE)
-            return _chosen(args, choice.choose_best_robust(rows, limits).result, rule,
-                           results)  # fmt: skip
-        return _chosen(args, next(r for r in results if r.index == args.choose), None, results)
-
-    chosen, refusal = _choice_or_refusal(args, make)
+    chosen, refusal = _choose(args, [r.result for r in rows], best, rule)
     timed = ", ".join(f"{ms:g}" for ms in timings)
     worst_over = "the nominal model and the sampled plants" + (
         f" and the physics preset with commands landing {timed} ms after their tick"
@@ -287,7 +255,7 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
             "actuation_ms": list(timings),
             "spread_over": "the sampled plants (percentiles: values of sampled plants)",
             "physics_preset": args.preset, "pareto_of": "nominal settling_time_s against worst-case "
-            "overshoot_percent", "choice_rule": choice.rule_text(choice.CHOICE_RULE, limits, choice.LIMITS_WHERE),
+            "overshoot_percent", "choice_rule": rule,
             "counts": {k.replace(" ", "_"): v for k, v in table.robust_counts(rows).items()},
             "statuses": table.ROBUST_STATUSES}  # fmt: skip
     if args.json:
@@ -317,20 +285,19 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    check_options(args)  # what sets the size of the work, before anything heavy is imported
+    checks.check_options(args)  # what sets the size of the work, before anything heavy is imported
     from cartctl.tune import grid as tuning
 
-    axes = tuning.parse_grid(args.grid, args.method)
-    settings = tuning.grid_settings(axes)
-    check_work(args, len(settings))
-    check_inputs(args, len(settings))
-    check_outputs(args, files=("out", "plot"))
+    settings = tuning.grid_settings(tuning.parse_grid(args.grid, args.method))
+    checks.check_work(args, len(settings))
+    checks.check_inputs(args, len(settings))
+    from cartctl.cli.commands.options import check_outputs
     from cartctl.cli.commands.validate import check_plot_path
 
+    check_outputs(args, files=("out", "plot"))
     check_plot_path(args.plot)  # a PNG: matplotlib would refuse another suffix after the work
 
     from cartctl.cli.jsonout import dumps
-    from cartctl.cli.progress import ProgressBar
     from cartctl.tune import engine, table
     from cartctl.tune import robust_choice as choice
     from cartctl.tune.plot import plot_tuning
@@ -338,30 +305,20 @@ def run(args: argparse.Namespace) -> int:
     job = engine.TuneJob(str(args.model), args.method, args.plant, args.preset, args.reference,
                          float(args.duration), args.extra_delay,
                          tuple(enumerate(settings, start=1)),
-                         tuple(design_fixed(args).items()))  # fmt: skip
+                         tuple(checks.design_fixed(args).items()))  # fmt: skip
     if args.robust:
         return run_robust(args, job)
-    bar = ProgressBar(len(settings), "cartctl tune")
-    try:
-        results = engine.run_grid(
-            job, args.jobs or os.cpu_count() or 1, bar.update, engine.evaluate_chunk
-        )
-    finally:
-        bar.close()
+    results = _run_grid(args, job, engine.evaluate_chunk, "cartctl tune")
     results = tuning.sort_results(tuning.mark_pareto(results))
     if args.plot:
         plot_tuning(args.plot, args.method, results)
+    limits = checks.choice_limits(args)
+    rule = choice.rule_text(choice.CHOICE_RULE_NOMINAL, limits, choice.LIMITS_WHERE_NOMINAL)
 
-    limits = choice_limits(args)
+    def best() -> tuning.TuneResult:
+        return choice.choose_best_nominal(results, limits)
 
-    def make() -> dict[str, Any]:
-        if args.choose == "best":
-            rule = choice.rule_text(choice.CHOICE_RULE_NOMINAL, limits, choice.LIMITS_WHERE_NOMINAL)
-            return _chosen(args, choice.choose_best_nominal(results, limits), rule,
-                           results)  # fmt: skip
-        return _chosen(args, next(r for r in results if r.index == args.choose), None, results)
-
-    chosen, refusal = _choice_or_refusal(args, make)
+    chosen, refusal = _choose(args, results, best, rule)
     front, plotted = sum(r.pareto for r in results), sum(r.pareto_plot for r in results)
     if args.json:
         counts = {k.replace(" ", "_"): v for k, v in tuning.status_counts(results).items()}

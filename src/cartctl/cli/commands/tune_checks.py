@@ -1,11 +1,8 @@
-"""What ``cartctl tune`` refuses before it designs or runs anything.
+"""What ``cartctl tune`` refuses before it designs or runs anything, in two stages.
 
-Two stages, both before any work: :func:`check_options` takes the options alone (no numpy, no
-model) and bounds everything that sets the size of the work (``--extra-delay``, ``--jobs``,
-``--duration``, ``--plants``, the number of settings); :func:`check_inputs` then loads the model
-and the plant and refuses what ``cartctl design`` or ``cartctl run`` would refuse for every
-setting alike (a bad file, an unstable model, a plant of another period, a bad reference), in
-their words. A setting that only its own design refuses stays a row of the table.
+:func:`check_options` takes the options alone (no numpy, no model) and bounds all that sizes the
+work; :func:`check_inputs` then loads the model and the plant and refuses what ``design`` or
+``run`` would refuse for every setting alike, in their words.
 """
 
 from __future__ import annotations
@@ -15,59 +12,34 @@ import math
 from typing import Any
 
 from cartctl.cart import PERIOD_S
-from cartctl.cli.commands.options import check_duration
+from cartctl.cli.commands.options import check_duration, check_jobs
 from cartctl.design.request import check_field  # light: no numpy
 from cartctl.errors import InputError
 
-DEFAULT_PLANTS = 200
-"""Sampled plants of ``--robust`` by default."""
-
+DEFAULT_PLANTS = 200  # sampled plants of --robust
 MAX_PLANTS = 10_000
-"""The most ``--plants`` accepted."""
-
-DEFAULT_ACTUATION_MS = (3.0, 10.0)
-"""``--actuation-ms`` by default with ``--robust``: the presets' calibrated timing and microOS's
-documented order (the next tick's ``io()``)."""
-
+DEFAULT_ACTUATION_MS = (3.0, 10.0)  # the presets' calibrated timing; the next tick's io()
 MAX_ACTUATION_TIMINGS = 20
-"""The most ``--actuation-ms`` timings accepted."""
-
+# (plants + 1) × ticks per motor: four float64 arrays of that size per motor in each worker
 MAX_PLANT_TICKS = 2_000_000
-"""(plants + 1) × ticks per motor beyond which ``--robust`` is refused (memory: four float64
-arrays of that size per motor in each worker, 64 MB each)."""
-
-MAX_TUNE_DURATION_S = 60.0
-"""The longest ``tune --duration`` (s): a setting is scored on a step response, which settles
-within a second on this cart; 60 s (6000 ticks) leaves room for slow references."""
-
+MAX_TUNE_DURATION_S = 60.0  # a step response settles within a second on this cart
+# settings × ticks × runs of a setting: at about 60 µs a tick, some two minutes of one core
 MAX_GRID_TICKS = 2_000_000
-"""Simulated ticks over the grid beyond which ``tune`` is refused: settings × ticks × the runs
-of a setting (1; with ``--robust`` also the physics preset and each ``--actuation-ms``). A tick
-of the simulated loop takes about 60 µs, so this is about two minutes of one core (the default
-grid at 2 s is 8 400; with ``--robust``, 33 600)."""
-
+# settings × (plants + 1) × ticks: at about 0.07 µs a plant-tick, some 15 s of one core
 MAX_ROBUST_PLANT_TICKS = 200_000_000
-"""Settings × (plants + 1) × ticks beyond which ``tune --robust`` is refused: the sampled
-plants run together at about 0.07 µs a plant-tick, so this is about 15 s of one core (the
-default, 42 settings × 201 plants × 200 ticks, is 1.7 million)."""
 
 
-def choice(text: str | None, n_settings: int) -> int | str | None:
-    """``--choose``: None, 'best', or a setting number in 1..n_settings."""
-    if text is None or text.strip() == "best":
-        return None if text is None else "best"
-    try:
-        number = int(text)
-    except ValueError:
-        raise InputError(f"--choose takes a setting number or 'best', got '{text}'") from None
-    if not 1 <= number <= n_settings:
-        raise InputError(f"--choose must be a setting number in 1..{n_settings}, got {number}")
-    return number
+def _ticks(args: argparse.Namespace) -> int:
+    return max(1, round(args.duration / PERIOD_S))
+
+
+def _plants(args: argparse.Namespace) -> int:
+    return DEFAULT_PLANTS if args.plants is None else args.plants
 
 
 def actuation_timings(text: str | None) -> tuple[float, ...]:
-    """``--actuation-ms``: the timings (ms) in the order given; () for 'none'; the default when
-    None. Each checked by ``check_actuation_ms`` (0 < X <= 10, to 0.1 ms); repeats refused."""
+    """``--actuation-ms``: the timings (ms) in the order given, () for 'none', the default for
+    None; each 0 < X <= 10 to 0.1 ms, no repeats."""
     from cartctl.plants.physics_params import check_actuation_ms
 
     if text is None:
@@ -91,8 +63,8 @@ def actuation_timings(text: str | None) -> tuple[float, ...]:
 
 
 def design_fixed(args: argparse.Namespace) -> dict[str, float]:
-    """The design request fields every setting shares (``--process-noise-v``, ``--bias-drift-v``),
-    each checked as ``cartctl design`` checks its option of that name."""
+    """``--process-noise-v`` and ``--bias-drift-v``, the design fields every setting shares,
+    checked as ``cartctl design`` checks them."""
     fixed = {}
     for field, value in (("process_noise_std_v", args.process_noise_v),
                          ("bias_drift_std_v", args.bias_drift_v)):  # fmt: skip
@@ -116,55 +88,34 @@ def choice_limits(args: argparse.Namespace) -> Any:
     return Limits(args.max_overshoot, args.max_settling)
 
 
-def _check_plant(args: argparse.Namespace) -> None:
-    """``--plant``: sim, physics or physics:actuation_ms=X (one line otherwise)."""
-    from cartctl.plants.factory import SIMULATED, physics_options, plant_kind
-
-    if plant_kind(args.plant) not in SIMULATED:
-        raise InputError(f"--plant must be sim, physics or physics:actuation_ms=X, got "
-                         f"'{args.plant}'")  # fmt: skip
-    if args.plant.startswith("physics:"):
-        physics_options(args.plant.partition(":")[2])
-
-
-def _check_robust(args: argparse.Namespace, ticks: int) -> None:
-    if not args.robust:
-        given = [o for o, v in (("--plants", args.plants), ("--seed", args.seed),
-                                ("--actuation-ms", args.actuation_ms)) if v is not None]  # fmt: skip
-        if given:
-            raise InputError(f"{' and '.join(given)} only apply to --robust")
-        return
-    if args.plant != "sim":
-        raise InputError("--robust scores on the model (sim) and the physics --preset (at each "
-                         "--actuation-ms); leave out --plant physics")  # fmt: skip
-    plants = DEFAULT_PLANTS if args.plants is None else args.plants
-    if not 1 <= plants <= MAX_PLANTS:
-        raise InputError(f"--plants must be a number of plants in 1..{MAX_PLANTS}, got {plants}")
-    if (plants + 1) * ticks > MAX_PLANT_TICKS:
-        raise InputError(
-            f"--robust with {plants} plants and --duration {args.duration:g} s simulates "
-            f"{(plants + 1) * ticks} plant-ticks per motor, more than {MAX_PLANT_TICKS}; use fewer "
-            "--plants or a shorter --duration"
-        )
-
-
 def check_options(args: argparse.Namespace) -> None:
-    """The options alone, before the grid is built or anything heavy is imported (one line).
-
-    Bounds every option that sets the size of the work: ``--duration`` (at most
-    :data:`MAX_TUNE_DURATION_S`), ``--extra-delay`` (as ``cartctl design`` bounds it),
-    ``--jobs``, ``--plants`` and the plant-ticks of ``--robust``, ``--actuation-ms``.
-    """
-    from cartctl.cli.commands.options import check_jobs
-
+    """The options that size the work, before the grid is built or numpy imported (one line)."""
     check_duration(args.duration)
     if args.duration > MAX_TUNE_DURATION_S:
         raise InputError(f"--duration of a tuning run must be at most {MAX_TUNE_DURATION_S:g} s "
                          f"(each setting is scored on a step response), got {args.duration:g}")  # fmt: skip
     check_field("extra_delay_ticks", args.extra_delay)
     check_jobs(args.jobs)
-    _check_robust(args, max(1, round(args.duration / PERIOD_S)))
-    if args.robust:
+    if not args.robust:
+        given = [o for o, v in (("--plants", args.plants), ("--seed", args.seed),
+                                ("--actuation-ms", args.actuation_ms)) if v is not None]  # fmt: skip
+        if given:
+            raise InputError(f"{' and '.join(given)} only apply to --robust")
+    else:
+        if args.plant != "sim":
+            raise InputError("--robust scores on the model (sim) and the physics --preset (at "
+                             "each --actuation-ms); leave out --plant physics")  # fmt: skip
+        plants, ticks = _plants(args), _ticks(args)
+        if not 1 <= plants <= MAX_PLANTS:
+            raise InputError(
+                f"--plants must be a number of plants in 1..{MAX_PLANTS}, got {plants}"
+            )
+        if (plants + 1) * ticks > MAX_PLANT_TICKS:
+            raise InputError(
+                f"--robust with {plants} plants and --duration {args.duration:g} s simulates "
+                f"{(plants + 1) * ticks} plant-ticks per motor, more than {MAX_PLANT_TICKS}; use "
+                "fewer --plants or a shorter --duration"
+            )
         actuation_timings(args.actuation_ms)
     if (args.choose is None) != (args.out is None):
         raise InputError("--choose N and --out CONTROLLER.toml go together; give both or neither")
@@ -172,10 +123,9 @@ def check_options(args: argparse.Namespace) -> None:
 
 
 def check_work(args: argparse.Namespace, n_settings: int) -> None:
-    """The grid's size against the work bounds: the simulated ticks of every run
-    (:data:`MAX_GRID_TICKS`) and, with ``--robust``, the plant-ticks of the sampled plants
-    (:data:`MAX_ROBUST_PLANT_TICKS`); one line naming the options to change."""
-    ticks = max(1, round(args.duration / PERIOD_S))
+    """The grid's size against :data:`MAX_GRID_TICKS` and, with ``--robust``,
+    :data:`MAX_ROBUST_PLANT_TICKS` (one line naming the options to change)."""
+    ticks = _ticks(args)
     runs = 2 + len(actuation_timings(args.actuation_ms)) if args.robust else 1
     if n_settings * ticks * runs > MAX_GRID_TICKS:
         what = f"{n_settings} settings" + (f" ({runs} runs each)" if runs > 1 else "")
@@ -184,34 +134,46 @@ def check_work(args: argparse.Namespace, n_settings: int) -> None:
             f"{n_settings * ticks * runs} ticks, more than {MAX_GRID_TICKS}; use a coarser --grid "
             "or a shorter --duration"
         )
-    if args.robust:
-        plants = DEFAULT_PLANTS if args.plants is None else args.plants
-        work = n_settings * (plants + 1) * ticks
-        if work > MAX_ROBUST_PLANT_TICKS:
-            raise InputError(
-                f"--robust with {n_settings} settings, {plants} plants and --duration "
-                f"{args.duration:g} s simulates {work} plant-ticks, more than "
-                f"{MAX_ROBUST_PLANT_TICKS}; use a coarser --grid, fewer --plants or a shorter "
-                "--duration"
-            )
+    work = n_settings * (_plants(args) + 1) * ticks
+    if args.robust and work > MAX_ROBUST_PLANT_TICKS:
+        raise InputError(
+            f"--robust with {n_settings} settings, {_plants(args)} plants and --duration "
+            f"{args.duration:g} s simulates {work} plant-ticks, more than "
+            f"{MAX_ROBUST_PLANT_TICKS}; use a coarser --grid, fewer --plants or a shorter "
+            "--duration"
+        )
+
+
+def _choice(text: str | None, n_settings: int) -> int | str | None:
+    """``--choose``: None, 'best', or a setting number in 1..n_settings."""
+    if text is None or text.strip() == "best":
+        return None if text is None else "best"
+    try:
+        number = int(text)
+    except ValueError:
+        raise InputError(f"--choose takes a setting number or 'best', got '{text}'") from None
+    if not 1 <= number <= n_settings:
+        raise InputError(f"--choose must be a setting number in 1..{n_settings}, got {number}")
+    return number
 
 
 def check_inputs(args: argparse.Namespace, n_settings: int) -> None:
     """The model, the plant and the reference, refused as ``design`` and ``run`` refuse them
-    (a reference beyond what the model's motors reach at 12 V: :func:`check_reach`).
-
-    Sets ``args.choose`` to the setting number or 'best'.
-    """
+    (a reference beyond the motors' reach at 12 V included); sets ``args.choose``."""
     from cartctl.cart import SUPPLY_V
     from cartctl.data.modelfile import load_models
     from cartctl.design.make import check_models
-    from cartctl.plants.factory import make_plant
+    from cartctl.plants.factory import SIMULATED, make_plant, physics_options, plant_kind
     from cartctl.reference import ReferenceSchedule, reference_signal
     from cartctl.session.checks import check_reach
 
-    args.choose = choice(args.choose, n_settings)
+    args.choose = _choice(args.choose, n_settings)
     choice_limits(args)
-    _check_plant(args)
+    if plant_kind(args.plant) not in SIMULATED:
+        raise InputError(f"--plant must be sim, physics or physics:actuation_ms=X, got "
+                         f"'{args.plant}'")  # fmt: skip
+    if args.plant.startswith("physics:"):
+        physics_options(args.plant.partition(":")[2])
     models = load_models(args.model)
     check_models(models, ("a", "b"), str(args.model))  # design's line: no setting could run
     plant, _ = make_plant(args.plant, model_path=args.model, preset=args.preset)

@@ -1,9 +1,6 @@
-"""``cartctl validate MODEL.toml FILE.csv``: a model simulated on recorded input against the measured speed.
-
-The shell around :mod:`cartctl.identification.validate`: reads the model file and the trace, prints a
-table or the JSON object, and with ``--plot`` draws the report's figures 6 and 7 (measured and
-simulated speed, the absolute error beneath). Also home of the ``--plot`` helpers that
-``cartctl linearity`` shares.
+"""``cartctl validate MODEL.toml FILE.csv``: a model simulated on recorded input against the
+measured speed (:mod:`cartctl.identification.validate`), ``--plot`` the report's figures 6 and 7.
+Also the ``--plot`` helpers ``cartctl linearity`` shares.
 """
 
 from __future__ import annotations
@@ -48,16 +45,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-# -- the --plot option, shared with ``cartctl linearity`` ------------------------------------------
-
-
 def add_plot_option(p: argparse.ArgumentParser, what: str) -> None:
-    """The ``--plot FILE.png`` option; ``what`` says what the figure shows."""
     p.add_argument("--plot", metavar="FILE.png", help=f"write a PNG figure: {what}")
 
 
 def check_plot_path(path: str | None) -> Path | None:
-    """The ``--plot`` path, refused early (before any work) unless it names a .png file."""
+    """The ``--plot`` path, refused before any work unless it names a writable .png file."""
     if path is None:
         return None
     out = Path(path)
@@ -80,12 +73,8 @@ def new_figure(rows: int, cols: int, *, width_in: float, height_in: float) -> tu
 
 
 def save_png(fig: Figure, path: Path) -> None:
-    """Write the figure as PNG, creating parent folders."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, format="png", dpi=120)
-
-
-# -- validate -----------------------------------------------------------------------------------
 
 
 def plot_validation(validation: ModelValidation, path: Path) -> None:
@@ -130,7 +119,6 @@ def _step_rows(measured: StepInfo, simulated: StepInfo) -> list[tuple[str, str, 
 
 
 def format_result(r: ValidationResult) -> list[str]:
-    """The lines of one motor's table."""
     if r.unstable_pole is not None:
         return [
             f"motor {r.motor}: the model is unstable (pole at |z| = {r.unstable_pole:.4g}): its "
@@ -160,7 +148,6 @@ def format_result(r: ValidationResult) -> list[str]:
 
 
 def format_table(validation: ModelValidation) -> str:
-    """The human-readable report."""
     lines = [
         f"validate {validation.model} on {validation.data} (Ts = {validation.period_s * 1e3:g} ms)"
     ]

@@ -1,15 +1,9 @@
-"""``cartctl review FILE.rrd [--web] [--screenshot FILE.png]``: a recorded run in the Rerun viewer.
+"""``cartctl review FILE.rrd|RUN.csv``: a recording in the Rerun viewer with the project's layout,
+or the run metrics of CSV traces.
 
-The last stage of the pipeline (run → logs/ → review). The recording is streamed into a viewer
-together with the project's layout (:func:`cartctl.sinks.rerun_layout.blueprint`), so recordings
-made without a layout, or with an older one, show the same plots. ``review RUN.csv [--json]
-[--compare OTHER.csv]`` recomputes the run metrics from CSV traces instead (see
-:mod:`cartctl.sinks.summary`).
-
-Here: the options, the dispatch on the file's suffix and the CSV metrics. The recording read back
-and streamed with the layout is :mod:`~cartctl.cli.commands.review.recording`; the native and web
-viewers are :mod:`~cartctl.cli.commands.review.viewer`; the headless ``--screenshot`` is
-:mod:`~cartctl.cli.commands.review.screenshot`.
+The recording read back and streamed is :mod:`~cartctl.cli.commands.review.recording`, the viewers
+:mod:`~cartctl.cli.commands.review.viewer`, the CSV metrics
+:mod:`~cartctl.cli.commands.review.metrics`.
 """
 
 from __future__ import annotations
@@ -18,28 +12,16 @@ import argparse
 from pathlib import Path
 
 from cartctl.cli.commands.options import add_map_option, check_input_file, check_outputs
-from cartctl.cli.commands.review.recording import read_recording
-from cartctl.cli.commands.review.screenshot import (
-    SCREENSHOT_WINDOW,
+from cartctl.cli.commands.review.viewer import (
     VULKAN_HINT,
+    open_in_viewer,
     screenshot,
+    serve_web,
     vulkan_available,
 )
-from cartctl.cli.commands.review.viewer import ViewerError, open_in_viewer, serve_web
 from cartctl.errors import InputError
 
-__all__ = [
-    "SCREENSHOT_WINDOW",
-    "VULKAN_HINT",
-    "ViewerError",
-    "add_parser",
-    "open_in_viewer",
-    "read_recording",
-    "run",
-    "screenshot",
-    "serve_web",
-    "vulkan_available",
-]
+__all__ = ["add_parser", "run", "serve_web", "vulkan_available"]
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -90,7 +72,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Dispatch on the file's suffix: ``.rrd`` to the viewer, ``.csv`` to the trace metrics."""
     path = Path(args.recording)
     suffix = path.suffix.lower()
     if path.is_dir():
@@ -112,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json or args.compare or args.map:
         raise InputError("--json, --compare and --map apply to CSV traces, not to .rrd recordings")
     check_outputs(args, files=("screenshot",))
-    from cartctl.cli.commands.review.recorded import recording_summary
+    from cartctl.cli.commands.review.smoothed import recording_summary
 
     text, extra = recording_summary(path, args.model)
     if text:
@@ -130,7 +111,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _review_csv(args: argparse.Namespace) -> int:
-    """``cartctl review RUN.csv [--compare OTHER.csv] [--json]``: the run metrics from traces."""
     if args.web or args.screenshot:
         raise InputError("--web and --screenshot apply to .rrd recordings, not to CSV traces")
     from cartctl.cli.commands.review.metrics import (
@@ -139,7 +119,7 @@ def _review_csv(args: argparse.Namespace) -> int:
         format_compare,
         format_csv_summary,
     )
-    from cartctl.cli.commands.review.recorded import smooth_csv
+    from cartctl.cli.commands.review.smoothed import smooth_csv
     from cartctl.cli.jsonout import dumps
 
     summary = smooth_csv(csv_summary(args.recording, args.map), args.recording, args.map,

@@ -1,13 +1,6 @@
-"""``cartctl review RUN.csv``: the run metrics of a trace, of a monitor trace, and of two side by side.
-
-A run trace (``cartctl run``) gets :func:`cartctl.sinks.summary.trace_metrics` as it is. A monitor
-trace (``cartctl monitor``: ``time_s, tick`` and labelled channels, read by their labels, see
-:mod:`cartctl.data.columns`) has no loop timing, since the cart ran its own loop: the same
-tracking metrics, with the timing figures None.
-
-``--compare A B`` sets two summaries side by side: one row per metric (per motor), the values of
-A and B, the difference B − A and, where a ratio means something (a duration, an error, a
-voltage, a time), the relative difference (B − A) / |A| in %.
+"""``cartctl review RUN.csv [--compare OTHER.csv]``: the run metrics of a run's or a monitor's
+trace (a monitor trace has no loop timing: the cart ran its own loop), and of two side by side:
+per metric A, B, B − A and, where a ratio means something, (B − A) / |A| in %.
 """
 
 from __future__ import annotations
@@ -22,6 +15,7 @@ import numpy as np
 from cartctl.data.columns import MONITOR_LABELS_HINT
 from cartctl.data.read import read_trace
 from cartctl.errors import DataFileError
+from cartctl.measures.numfmt import render_table
 from cartctl.sinks.summary import format_summary, timing_metrics, trace_metrics
 
 TIMING_COLUMNS = ("period_error_us", "compute_us")
@@ -29,13 +23,7 @@ TRACKING_COLUMNS = ("reference_a", "speed_a", "voltage_a")
 
 
 def csv_summary(path: str | Path, mapping: Mapping[str, str] | None = None) -> dict[str, Any]:
-    """The run summary of a CSV trace (a run's or a monitor's), with its file name.
-
-    Raises
-    ------
-    DataFileError
-        A trace without the reference, speed and voltage of motor a (names the missing columns).
-    """
+    """The run summary of a CSV trace (a run's or a monitor's), with its file name."""
     trace = read_trace(path, mapping)
     columns = trace.columns()
     missing = [name for name in TRACKING_COLUMNS if name not in columns]
@@ -79,8 +67,6 @@ def format_csv_summary(summary: Mapping[str, Any]) -> str:
     return "\n".join([first, *text.splitlines()[1:]])
 
 
-# -- two runs side by side ---------------------------------------------------------------------
-
 _RUN_ROWS: tuple[tuple[tuple[str, ...], str, str, float, int, bool], ...] = (
     # (key path, label, unit, scale, decimals, relative difference meaningful)
     (("ticks",), "ticks", "", 1.0, 0, True),
@@ -121,10 +107,8 @@ def _slot(value: Any) -> bool:
 
 
 def difference(a: Any, b: Any) -> Any:
-    """B − A over the numeric leaves of two summaries (None where either has no number).
-
-    Dicts are walked key by key (A's keys, then B's); strings, bools and lists are left out.
-    """
+    """B − A over the numeric leaves of two summaries (None where either has no number); dicts
+    walked key by key (A's keys, then B's), strings, bools and lists left out."""
     if isinstance(a, Mapping) and isinstance(b, Mapping):
         walked = {
             key: difference(a.get(key), b.get(key)) for key in [*a, *(k for k in b if k not in a)]
@@ -194,23 +178,11 @@ def format_compare(a: Mapping[str, Any], b: Mapping[str, Any]) -> str:
         ea, eb = a["motors"].get(m, {}), b["motors"].get(m, {})
         for key, label, unit, scale, decimals, rel in _MOTOR_ROWS:
             add(f"motor {m}: {label}", unit, ea.get(key), eb.get(key), scale, decimals, rel)
-    head = ("metric", "A", "B", "B − A", "(B − A)/|A|")
-    width = max(len(head[0]), *(len(r[0]) for r in rows))
-    cols = [max(len(head[i]), *(len(r[i]) for r in rows)) for i in range(1, 5)]
-
-    def line(r: tuple[str, ...]) -> str:
-        return (
-            "  "
-            + f"{r[0]:<{width}}"
-            + "".join(f"  {v:>{w}}" for v, w in zip(r[1:], cols, strict=True))
-        )
-
     lines = [
         f"A: {a.get('trace', 'A')}",
         f"B: {b.get('trace', 'B')}",
         *(_signal_note(s, name) for s, name in ((a, "A"), (b, "B")) if _signal_note(s, name)),
-        line(head),
-        *(line(r) for r in rows),
+        *render_table(("metric", "A", "B", "B − A", "(B − A)/|A|"), rows, indent="  "),
     ]
     return "\n".join(lines)
 

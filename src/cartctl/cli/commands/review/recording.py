@@ -1,9 +1,5 @@
-"""A ``.rrd`` recording read back and streamed, with the project's layout, into a viewer.
-
-Every way ``cartctl review`` shows a recording (native viewer, web viewer, headless screenshot)
-opens the file with :func:`read_recording`, makes a fresh stream with :func:`new_stream` and sends
-the layout and the data with :func:`stream`.
-"""
+"""A ``.rrd`` recording read back (:func:`read_recording`) and streamed with the project's layout
+(:func:`stream`) into a fresh stream (:func:`new_stream`) of any viewer."""
 
 from __future__ import annotations
 
@@ -21,23 +17,14 @@ if TYPE_CHECKING:  # rerun takes ~0.6 s to import: only the review itself loads 
     from numpy.typing import NDArray
     from rerun.chunk import Chunk, RrdReader, StoreEntry
 
-LOAD_TIMEOUT_S = 30.0
-"""Longest wait for a viewer to take in (or show) the whole recording."""
+LOAD_TIMEOUT_S = 30.0  # longest wait for a viewer to take in (or show) the whole recording
 
+# series made from a recording, to stream with it: entity path → (time (s), tick, values)
 Series = Mapping[str, tuple["NDArray[np.float64]", "NDArray[np.float64]", "NDArray[np.float64]"]]
-"""Series made from a recording, to stream with it: entity path → (time (s), tick, values)."""
 
 
 def read_recording(path: Path) -> tuple[RrdReader, StoreEntry]:
-    """Open a ``.rrd`` file and find its (first) recording.
-
-    Raises
-    ------
-    MissingFileError
-        No such file.
-    DataFileError
-        Not a readable recording, or one holding no recording store.
-    """
+    """Open a ``.rrd`` file and find its (first) recording."""
     from rerun.chunk import RrdReader
 
     if path.is_dir():
@@ -59,19 +46,9 @@ def read_recording(path: Path) -> tuple[RrdReader, StoreEntry]:
 def stream(
     reader: RrdReader, entry: StoreEntry, rec: rr.RecordingStream, *, extra: Series | None = None
 ) -> dict[str, int]:
-    """Send the layout, then every chunk of the recording, into ``rec``; waits until sent.
-
-    ``extra`` series (made from the recording: the smoothed speed) follow the chunks, each with
-    its style from :data:`cartctl.sinks.rerun_layout.STYLES`.
-
-    The layout fits the recording (:func:`layout`): the run's for ``motor/...`` entities, one built
-    from the labels for a monitor's ``gpio/...``, with y ranges from the recorded values.
-
-    Returns
-    -------
-    dict of str to int
-        The last time on each timeline (ns for durations, the index for sequences).
-    """
+    """Send the layout (:func:`layout`), every chunk of the recording, then ``extra`` (the
+    smoothed speed, styled) into ``rec``; waits until sent. Returns the last time on each
+    timeline (ns for durations, the index for sequences)."""
     import pyarrow as pa
     import pyarrow.compute as pc
 
@@ -124,7 +101,6 @@ def scalar_stats(chunks: Iterable[Chunk]) -> tuple[dict[str, tuple[float, float]
 
 
 def _send_extra(extra: Series, rec: rr.RecordingStream) -> None:
-    """Series made from the recording, on its ``time`` and ``tick`` timelines, with their style."""
     from cartctl.sinks.rerun_sink import send_series
 
     for entity, (time_s, tick, values) in extra.items():
@@ -168,8 +144,7 @@ def new_stream(entry: StoreEntry) -> rr.RecordingStream:
     """A recording stream for ``entry``'s application, under a fresh recording id."""
     import rerun as rr
 
-    # A fresh recording id: reviewing the same file twice into one viewer gives two recordings
-    # rather than one with every row twice. The file's own properties chunk travels with the data.
+    # reviewing the same file twice into one viewer gives two recordings, not every row twice
     return rr.RecordingStream(
         entry.application_id, recording_id=uuid.uuid4(), send_properties=False
     )

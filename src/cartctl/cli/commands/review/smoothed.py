@@ -1,24 +1,18 @@
-"""The smoothed speed in ``run``'s summary and in ``review``: when, with which model, and where.
+"""The smoothed speed (:func:`cartctl.design.smoother.smooth_speed`) in ``run``'s summary and in
+``review``: when, with which model, and where.
 
-The numerics are :func:`cartctl.design.smoother.smooth_speed`; the metrics on its result are
-:func:`cartctl.sinks.summary.add_smoothed_metrics`. Here: the choices around them.
-
-- When: a trace whose metrics are on the measured speed (no true speed: a real cart, a CSV
-  without ``true_speed_*`` columns), a run through the serial path (``virtual``, ``serial:PORT``:
-  there the smoothed speed stands beside the simulator's true speed), or whenever ``review`` is
-  given ``--model``.
-- Which model: ``run`` takes the model its controller file was designed on; ``review`` takes
-  ``--model``, else the model a ``run`` named in its ``.rrd`` beside the CSV, else the model the
-  trace's meta file names (a run stores its controller and that model there). Without one the
-  summary says, in one line, that the smoothed metrics need a model, and shows the encoder's.
-- The loop delay: the model applies to the rows as written (the trace columns) on the loop it was
-  identified on; a run whose measured loop delay is longer than the one the controller was designed
-  for (its ``loop_delay_ticks``) smooths with the difference as extra input delay, as ``design``
-  would.
+- When: metrics on the measured speed (no true speed: a real cart, a CSV without
+  ``true_speed_*``), a run through the serial path (beside the simulator's true speed), or
+  ``review --model``.
+- Which model: ``run`` takes its controller's; ``review`` takes ``--model``, else the one a run
+  named in its ``.rrd``, else the one the trace's meta file names; without one, a one-line note.
+- Loop delay: a run whose measured loop delay exceeds its controller's smooths with the
+  difference as extra input delay, as ``design`` would.
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -26,14 +20,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from cartctl.cart import PERIOD_S
+from cartctl.cli.commands.review.metrics import TIMING_COLUMNS
+from cartctl.cli.commands.review.recording import Series, read_recording
 from cartctl.data.modelfile import ModelFile, load_models
+from cartctl.data.read import read_trace
 from cartctl.design.smoother import METHOD, smooth_speed
-from cartctl.errors import CartctlError, InputError
-from cartctl.sinks.summary import add_smoothed_metrics
+from cartctl.errors import CartctlError, DataWarning, InputError
+from cartctl.sinks.summary import add_smoothed_metrics, format_summary, trace_metrics
 
-MODEL_ENTITY = "run/model"
-"""The static text entity of a run's ``.rrd`` that names its controller's model (the smoothed
-speed's); not in the layout."""
+MODEL_ENTITY = "run/model"  # the text entity of a run's .rrd naming its model (not in the layout)
 
 NEEDS_MODEL = "smoothed metrics: they need a model (review --model MODEL.toml); encoder only"
 
@@ -52,16 +48,9 @@ def smoothed_speeds(
 ) -> dict[str, NDArray[np.float64]]:
     """Per motor with a reference in the trace, the smoothed speed at each row (rad/s).
 
-    A run's trace (it has the loop's timing columns) ends with its stop row: the zero-volt
-    command sent when the run ended, which acts only after the last measurement. The smoother
-    holds the last tick's voltage there instead, so the smoothed speed of the last row does not
-    bend towards a stop that had not happened yet (that would keep it out of the settling band).
-
-    Raises
-    ------
-    InputError
-        The models tick at another period than the trace; a motor without a model; a column
-        with a non-finite value.
+    A run's trace ends with its stop row, the zero-volt command sent at the end, which acts only
+    after the last measurement: the smoother holds the last tick's voltage there instead, so the
+    last row does not bend towards a stop that had not happened yet.
     """
     if abs(models.period_s - period_s) > 1e-9:
         raise InputError(
@@ -90,21 +79,9 @@ def add_smoothed(
     extra_delay_ticks: int = 0,
     strict: bool = False,
 ) -> dict[str, NDArray[np.float64]]:
-    """Smooth the trace and add the metrics and ``smoothed`` to the summary.
-
-    ``summary["smoothed"]`` becomes ``{"model": path, "method": "kalman-rts",
-    "extra_delay_ticks": d}``, or ``{"model": path or None, "method": ..., "note": why not}``.
-
-    Parameters
-    ----------
-    strict : bool
-        Raise a problem with the model (a model the user named) instead of noting it.
-
-    Returns
-    -------
-    dict of str to ndarray
-        The smoothed speeds per motor (empty when there are none).
-    """
+    """Smooth the trace, add the metrics and ``summary["smoothed"]`` (``{"model", "method",
+    "extra_delay_ticks"}``, or ``{"model", "method", "note": why not}``); returns the speeds per
+    motor. ``strict``: raise a problem with the model (one the user named) instead of noting it."""
     entry: dict[str, Any] = {"model": None if model_path is None else str(model_path),
                              "method": METHOD}  # fmt: skip
     summary["smoothed"] = entry
@@ -138,13 +115,9 @@ def smooth_run(
     model_path: str | Path | None,
     recording: Any = None,
 ) -> None:
-    """``run``'s part: the smoothed metrics when wanted, and the smoothed speed in the recording.
-
-    ``summary`` must be complete (``link``, ``loop_delay_ticks``,
-    ``controller_loop_delay_ticks``). ``recording`` is the run's
-    :class:`~cartctl.sinks.rerun_sink.HeldRerunSink` (or None), still open: it gets the series
-    ``motor/<m>/smoothed_speed`` and the model's name, and is released here whatever happens.
-    """
+    """``run``'s part: the smoothed metrics when wanted (``summary`` complete), and the series
+    ``motor/<m>/smoothed_speed`` and the model's name in ``recording`` (the run's still open
+    :class:`~cartctl.sinks.rerun_sink.HeldRerunSink`, or None), released here whatever happens."""
     try:
         speeds: dict[str, NDArray[np.float64]] = {}
         if wanted(summary, serial_path=bool(summary.get("link"))):
@@ -163,18 +136,9 @@ def smooth_run(
             recording.release()
 
 
-# -- from a recording ---------------------------------------------------------------------------
-
-
 def recording_columns(chunks: Any) -> dict[str, NDArray[np.float64]]:
-    """The trace columns a run's recording holds (the Rerun entity paths back to their columns),
-    one row per recorded tick, with ``time_s`` and ``tick``; empty when it holds no motor.
-
-    Parameters
-    ----------
-    chunks : iterable of rerun.chunk.Chunk
-        The recording's chunks (:func:`cartctl.cli.commands.review.recording.read_recording`).
-    """
+    """The trace columns a run's recording chunks hold, one row per recorded tick, with
+    ``time_s`` and ``tick``; empty when it holds no motor."""
     import pyarrow as pa
     import pyarrow.compute as pc
 
@@ -226,18 +190,8 @@ def recorded_model(chunks: Any) -> str | None:
 
 
 def trace_hints(trace_path: str | Path) -> tuple[bool, str | None, int]:
-    """What a run trace's meta file (:mod:`cartctl.data.tracemeta`) tells the smoother.
-
-    Returns
-    -------
-    serial_path : bool
-        The trace came through the serial path (``virtual``, a cart on a port).
-    model : str or None
-        The model the run's controller was designed on, as the meta file names it; None for a
-        trace whose meta file names none.
-    extra_delay_ticks : int
-        The run's loop delay beyond the controller's (0 when either is unknown).
-    """
+    """What a run trace's meta file tells the smoother: whether it came through the serial path,
+    the model its controller was designed on (or None), and its extra loop delay (ticks)."""
     from cartctl.data.tracemeta import read_trace_meta
     from cartctl.design.controllerfile import load_controller
 
@@ -262,15 +216,64 @@ def trace_hints(trace_path: str | Path) -> tuple[bool, str | None, int]:
 
 
 def recorded_model_of(path: Path) -> str | None:
-    """The model named in a recording file (a run's ``.rrd``), or None (no file, not readable,
-    no model)."""
-    if not path.is_file():
+    """The model named in a run's ``.rrd``, or None (no file, not readable, no model)."""
+    if not path.is_file():  # without loading the Rerun SDK
         return None
     try:
-        from rerun.chunk import RrdReader
-
-        reader = RrdReader(path)
-        entries = reader.recordings()
-        return recorded_model(reader.stream(store=entries[0])) if entries else None
+        reader, entry = read_recording(path)
+        return recorded_model(reader.stream(store=entry))
     except Exception:  # an unreadable recording only means no model from it
         return None
+
+
+def smooth_csv(
+    summary: dict[str, Any],
+    path: str | Path,
+    mapping: Mapping[str, str] | None,
+    model: str | None,
+) -> dict[str, Any]:
+    """A CSV trace's summary with the smoothed metrics where wanted (changed and returned)."""
+    serial, run_model, extra = trace_hints(path)
+    if not wanted(summary, serial_path=serial, asked=model is not None):
+        return summary
+    if model is None:
+        model_path = recorded_model_of(Path(path).with_suffix(".rrd")) or run_model
+    else:
+        model_path, extra = model, 0
+    with warnings.catch_warnings():  # csv_summary has read it once and said what it found
+        warnings.simplefilter("ignore", DataWarning)
+        trace = read_trace(path, mapping)
+    add_smoothed(summary, trace.columns(), trace.period_s, model_path,
+                 extra_delay_ticks=extra, strict=model is not None)  # fmt: skip
+    return summary
+
+
+def recording_summary(path: Path, model: str | None) -> tuple[str, Series | None]:
+    """The metrics table of a run's recording (``""`` for a monitor's), with the smoothed
+    metrics, and the smoothed series to stream with it (None when it has them, or none made)."""
+    reader, entry = read_recording(path)
+    chunks = list(reader.stream(store=entry))
+    columns = recording_columns(chunks)
+    if not columns:
+        return "", None
+    time_s = columns["time_s"]
+    steps = np.diff(time_s[np.isfinite(time_s)])
+    period_s = float(np.round(np.median(steps), 6)) if steps.size else PERIOD_S
+    zeros = np.zeros(time_s.size)
+    columns = {**dict.fromkeys(TIMING_COLUMNS, zeros), **columns}
+    summary = trace_metrics(columns, period_s)
+    summary["recording"] = str(path)
+    extra: Series | None = None
+    recorded = {m: columns[f"smoothed_speed_{m}"] for m in summary["motors"]
+                if f"smoothed_speed_{m}" in columns}  # fmt: skip
+    if recorded and model is None:
+        add_smoothed_metrics(summary, columns, recorded, period_s)
+        summary["smoothed"] = {"model": recorded_model(chunks), "method": METHOD}
+    elif wanted(summary, asked=model is not None):
+        model_path = model if model is not None else recorded_model(chunks)
+        speeds = add_smoothed(summary, columns, period_s, model_path, strict=model is not None)
+        extra = {
+            f"motor/{m}/smoothed_speed": (time_s, columns["tick"], speed)
+            for m, speed in speeds.items()
+        }
+    return format_summary(summary), extra
