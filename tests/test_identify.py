@@ -13,7 +13,7 @@ from cartctl.cli import main
 from cartctl.data.trace import Trace, write_trace
 from cartctl.errors import InputError
 from cartctl.identification.arx import IdentificationError, fit_arx
-from cartctl.identification.delay import delay_evidence
+from cartctl.identification.orders import delay_evidence
 from cartctl.identification.prefilter import Prefilter
 from cartctl.model import ArxModel
 from cartctl.plants.physics import PhysicsPlant

@@ -21,7 +21,7 @@ from cartctl.data.tracemeta import (
     write_trace_meta,
 )
 from cartctl.errors import DataFileError, InputError
-from cartctl.identification.delay import CLOSE_FRACTION, DelayEstimate, joint_delay
+from cartctl.identification.orders import CLOSE_FRACTION, DelayEstimate, joint_delay
 from cartctl.model import ArxModel
 from cartctl.signals import prbs
 
