@@ -1,4 +1,4 @@
-"""Cycle detection and averaging (cartctl.identification.cycles)."""
+"""Cycle detection and averaging (cartctl.identification.etfe)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cartctl.errors import InputError
-from cartctl.identification.cycles import (
+from cartctl.identification.etfe import (
     as_pair,
     average_cycles,
     find_period,

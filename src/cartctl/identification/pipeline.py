@@ -19,8 +19,8 @@ from cartctl.data.modelfile import ModelFile, Provenance
 from cartctl.data.trace import Trace
 from cartctl.errors import InputError
 from cartctl.identification.arx import ArxFit, Segment, check_orders, first_row, fit_arx
-from cartctl.identification.cycles import average_cycles, find_period, periodic_regression_pad
 from cartctl.identification.diagnostics import Diagnostics, diagnose, on_validation, split_segments
+from cartctl.identification.etfe import average_cycles, find_period, periodic_regression_pad
 from cartctl.identification.oe import check_oe_orders, fit_oe
 from cartctl.identification.orders import DelayEstimate, JointDelay, delay_evidence, joint_delay
 from cartctl.identification.prefilter import Prefilter

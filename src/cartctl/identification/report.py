@@ -20,8 +20,7 @@ from numpy.typing import ArrayLike
 from cartctl.data.modelfile import ModelFile
 from cartctl.data.trace import Trace
 from cartctl.errors import InputError
-from cartctl.identification.cycles import find_period
-from cartctl.identification.etfe import etfe
+from cartctl.identification.etfe import etfe, find_period
 from cartctl.identification.figures import (
     color,
     figure,
