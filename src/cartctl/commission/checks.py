@@ -1,15 +1,10 @@
 """Commissioning, stage 1: is the cart wired the way the controller will assume? (pure)
 
-One open-loop experiment (:func:`checks_sequence`, 5.5 s) drives each motor in turn with:
-
-- a **pulse** of :data:`PULSE_V` for 0.2 s: the wheel must turn so that the measured speed has
-  the voltage's sign; a negative speed means swapped motor leads or encoder channels, motion of
-  only the other encoder means crossed motors; either stops commissioning, saying what to swap;
-- a slow **ramp** to :data:`RAMP_MAX_V` at 4 V/s: the **breakaway voltage** is where the wheel
-  starts to turn (the first of three ticks in a row with an encoder count, less the loop delay
-  and the tick the speed needs to show it); the ramp's end speed gives a rough gain.
-
-:func:`choose_amplitude` turns these into the excitation amplitude."""
+One open-loop experiment (:func:`checks_sequence`) gives each motor a pulse (the wheel must turn
+the measured speed's way: else swapped leads or encoder channels, or crossed motors, each
+refused with what to swap) and a slow ramp (the breakaway voltage and a rough gain), from which
+:func:`choose_amplitude` sets the excitation amplitude (docs/commission.md).
+"""
 
 from __future__ import annotations
 

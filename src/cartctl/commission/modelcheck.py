@@ -1,18 +1,12 @@
 """Commissioning, stage 3: identify both motors with a validation split, and judge the models.
 
-The first :data:`SPLIT` of the excitation estimates, the rest (one and a half square cycles)
-validates. The structure holds whatever the cart's actuation timing: ARX na = 2, nb = 3, nk the
-measured loop delay. A motor whose last numerator term is within :data:`TAIL_SIGMAS` standard
-deviations of zero is fitted again with nb = 2: that term is noise, and pole placement would
-cancel its zero with a gain ``cartctl run`` refuses.
-
-A model passes when, on the validation part, its simulation fit is at least
-:data:`MIN_FIT_PERCENT`, every pole is inside :data:`MAX_POLE_RADIUS`, and no cross-correlation
-of residuals and input exceeds :data:`CROSS_CLEAR_FACTOR` × its 99 % bound. (The residual
-test's own rule, at most 2 of 51 lags outside, fails on carts whose friction and quantised speed
-leave a small long-lag correlation: the virtual cart has 16 of 51 lags just outside, with a
-98.6 % fit.) Whiteness and lag counts are reported only: quantised speeds and friction colour
-the residuals of any real cart, and the loop is tuned on θ's uncertainty."""
+ARX na = 2, nb = 3 (nb = 2 for a motor whose last term is within :data:`TAIL_SIGMAS` standard
+deviations of zero: pole placement would cancel its zero with a gain ``run`` refuses), nk the
+measured loop delay, estimated on the first :data:`SPLIT` of the excitation. A model passes on
+the rest with a simulation fit ≥ :data:`MIN_FIT_PERCENT`, poles inside :data:`MAX_POLE_RADIUS`
+and no residual–input cross-correlation beyond :data:`CROSS_CLEAR_FACTOR` × its 99 % bound;
+whiteness is reported only (docs/commission.md says why).
+"""
 
 from __future__ import annotations
 
@@ -96,7 +90,7 @@ def _noise_tail(fit: Any) -> bool:
 def identify_and_judge(
     trace: Trace, loop_delay_ticks: int
 ) -> tuple[IdentifyResult, IdentifyRequest, dict[str, MotorVerdict]]:
-    """Identify both motors from the excitation, refit a noise tail with one term fewer, and judge."""
+    """Identify both motors, refit a noise tail with one term fewer, and judge."""
     request = request_for(loop_delay_ticks)
     result = identify([trace], request)
     short = tuple(m for m, r in result.motors.items() if _noise_tail(r.chosen))

@@ -47,7 +47,7 @@ def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
 
 @dataclass
 class Report:
-    """The summary's sections (heading, Markdown body), rewritten to ``path`` on every :meth:`add`."""
+    """The sections (heading, Markdown body) of ``summary.md``, rewritten on each :meth:`add`."""
 
     path: Path
     title: str

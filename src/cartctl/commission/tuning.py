@@ -1,25 +1,11 @@
 """Commissioning, stage 4: robust tuning on the identified model, and the controller chosen.
 
-``cartctl tune --robust``'s machinery over a small pole-placement grid (:data:`GRID`). Each
-setting is designed on the identified model (for the measured loop delay), run on it (nominal),
-scored on :data:`PLANTS` plants of its uncertainty (:mod:`cartctl.tune.uncertainty`) and, in the
-real loop, on the timing plants: the model with its commands landing later within the tick
-(:func:`later_command`). The physics preset is left out: it is the course's cart, not this one.
-
-**Timing plants.** On one cart, when a command lands within its tick is fixed by the firmware
-(the bridge applies the newest command at the next ``io()``); what moves it is when the host's
-reply gets through, and the Mega's USB chip passes a reply on at its 4.096 ms timer at the latest
-(a later one misses the tick: a whole tick, which the sampled plants' ±1 tick covers). Landing
-f·Ts late, the motor sees the previous command for a fraction f of the tick; to first order in
-the tick (the motor's ~50 ms time constant is slow against Ts) the tick's speed answers
-(1 − f)·u(k) + f·u(k − 1): B(z) becomes B(z)·((1 − f) + f z⁻¹), same DC gain and poles, the
-phase lag of f ticks at low frequency.
-
-**Choice** (``tune --choose best --max-overshoot 5``'s rule): among the settings that settle on
-every plant, with overshoot ≤ 5 % on the model and the timing plants and nominal settling ≤
-:data:`MAX_SETTLING_S`, the lowest worst-case overshoot, then the fastest nominal settling; a
-setting whose controller file ``cartctl run`` would refuse (a gain that turns one encoder count
-into the whole supply) is passed over for the next."""
+``cartctl tune --robust``'s machinery over a small pole-placement grid (:data:`GRID`), scored on
+the model, on :data:`PLANTS` plants of its uncertainty and on the timing plants
+(:func:`later_command`), then ``tune --choose best``'s rule within :data:`MAX_OVERSHOOT_PERCENT`
+and :data:`MAX_SETTLING_S`, passing over a setting whose controller file ``cartctl run`` would
+refuse. The reasoning (why these plants, why these bounds) is in docs/commission.md.
+"""
 
 from __future__ import annotations
 
@@ -167,7 +153,7 @@ def run_tuning(model_path: Path, loop_delay_ticks: int,
 
 def _write_controller(models: ModelFile, model_path: Path, settings: dict[str, float],
                       fixed: dict[str, float], out: Path) -> str:  # fmt: skip
-    """Write a setting's controller file to ``out`` as ``cartctl design --out`` would; its command."""
+    """Write a setting's controller file as ``cartctl design --out`` would; its command."""
     from cartctl.design.controllerfile import save_controller
     from cartctl.design.loop_report import analyse_designs
     from cartctl.design.make import controller_file, design_models

@@ -1,14 +1,8 @@
-"""Commissioning, stage 5: a closed-loop step on the cart, judged against the prediction.
-
-The step is ``cartctl run`` itself (the chosen controller, ``step:10`` for 2 s, the same plant,
-``--fast`` where simulated), so what is verified is what the user will run. The worse of motors
-a and b must have:
-
-- overshoot ≤ max(:data:`TARGET_OVERSHOOT_PERCENT`, predicted nominal) + a tolerance:
-  :data:`TRUE_SPEED_TOLERANCE_PP` on a simulator's true speed; on a cart's RTS-smoothed speed
-  (the encoder's whole counts are no measure of a few percent) half an encoder count per tick
-  over the step more; a whole count on the bare encoder speed;
-- settling ≤ max(:data:`TARGET_SETTLING_S`, predicted nominal + two ticks)."""
+"""Commissioning, stage 5: ``cartctl run``'s closed-loop step on the cart, judged against the
+tuning's prediction: overshoot ≤ max(:data:`TARGET_OVERSHOOT_PERCENT`, predicted nominal) + a
+tolerance for the speed measured on, settling ≤ max(:data:`TARGET_SETTLING_S`, predicted
+nominal + two ticks) (docs/commission.md).
+"""
 
 from __future__ import annotations
 

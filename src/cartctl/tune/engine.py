@@ -158,7 +158,7 @@ def evaluate_chunk(job: TuneJob) -> list[TuneResult]:
 
 
 def one_blas_thread() -> None:
-    """Worker initializer: one BLAS thread per process, else forked workers compete for the cores."""
+    """Worker initializer: one BLAS thread per process (else forked workers compete for cores)."""
     threadpool_limits(limits=1, user_api="blas")
 
 

@@ -142,7 +142,7 @@ def _finish(fig: Any, ax: Any, front: Sequence[tuple[float, float, int]],
 
 
 def plot_tuning(path: str, method: str, results: Sequence[TuneResult]) -> None:
-    """Run settling (ms) against run overshoot (%) of the settings that settled (colour: peak |V|)."""
+    """Run settling (ms) against run overshoot (%) of the settled settings (colour: peak |V|)."""
     from cartctl.tune.table import counts_text
 
     shown: list[TuneResult] = []

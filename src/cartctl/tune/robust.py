@@ -1,19 +1,13 @@
 """``cartctl tune --robust``: each design scored on the nominal model, on plants drawn from the
-model's uncertainty, and on the physics preset.
+model's uncertainty (:mod:`cartctl.tune.uncertainty`, run together by :mod:`cartctl.tune.batch`),
+on the physics preset (reported only) and on the physics preset at each ``--actuation-ms`` (in
+the worst case and the choice).
 
-Per setting (in :func:`cartctl.tune.engine.run_grid`'s workers): the design and its nominal run
-as plain ``tune`` makes them (the row's usual figures); the same controllers against the nominal
-model and the N sampled plants of :mod:`cartctl.tune.uncertainty` at once (the batch loop of
-:mod:`cartctl.tune.batch`), measured by :func:`step_metrics`; the real loop on the physics
-preset, reported only; and the real loop on the physics preset at each ``--actuation-ms`` (when
-a command lands within its tick, which ARX plants of whole-tick delays cannot express), which
-enters the worst case and the choice.
-
-Per plant each metric is the worse of motors a and b. The **worst case** is the maximum over the
-nominal model, the sampled plants and the actuation runs (a plant that never settles, runs away
-or fails makes it infinite: JSON ``null``, with the counts beside it); ``worst_sampled`` leaves
-the actuation runs out; the **spread** is the 5th, 50th and 95th percentile over the sampled
-plants, each a sampled plant's value (``inverted_cdf``, so infinities stay meaningful)."""
+Per plant each metric is the worse of motors a and b. The worst case is the maximum over the
+model, the sampled plants and the actuation runs (infinite, JSON ``null``, where one never
+settles, runs away or fails); ``worst_sampled`` leaves the actuation runs out; the spread is the
+5th, 50th and 95th percentile over the sampled plants (``inverted_cdf``: each a plant's value).
+"""
 
 from __future__ import annotations
 
@@ -195,7 +189,7 @@ class RobustRow:
         return self.result.index
 
     def to_dict(self) -> dict[str, Any]:
-        """The plain row with ``robust``: the score's JSON and ``pareto``, or None when infeasible."""
+        """The plain row with ``robust``: the score's JSON and ``pareto`` (None: infeasible)."""
         row = self.result.to_dict()
         row["robust"] = (None if self.score is None
                          else {**self.score.to_dict(), "pareto": self.pareto})  # fmt: skip

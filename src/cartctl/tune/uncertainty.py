@@ -1,18 +1,10 @@
-"""Plants drawn from a model file's own uncertainty, for ``cartctl tune --robust``.
+"""Plants drawn from a model file's own uncertainty, for ``cartctl tune --robust`` (docs/tuning.md).
 
-Each sampled plant is the cart (both motors, one loop) with, from the model:
-
-- θ = [a_1 … a_na, b_0 … b_nb−1] moved entry by entry by δ ~ uniform[−σ, +σ], σ the entry's
-  ``theta_std`` from identification (uniform and bounded like the other two factors: the file
-  keeps no covariance, so Gaussian tails would weight combinations the data rule out); a motor
-  without ``theta_std`` keeps its θ, and says so;
-- the input coefficients b scaled by a DC gain factor g ~ uniform[0.9, 1.1], one per motor;
-- the input delay nk + d + s, s from {−1, 0, +1} equally likely, one per plant (d:
-  ``--extra-delay``), never below 1.
-
-A θ draw with a pole on or outside the unit circle is drawn again (and counted). All draws come
-from one generator seeded with ``--seed`` in a fixed order, so a seed gives the same plants
-whatever the number of worker processes."""
+Per plant: θ moved entry by entry by δ ~ uniform[−σ, +σ] (σ the file's ``theta_std``; a motor
+without one keeps its θ), b scaled by g ~ uniform[0.9, 1.1] per motor, and nk shifted by −1, 0
+or +1 tick per plant (at least 1). Unstable θ draws are redrawn and counted. One generator seeded
+with ``--seed``, in a fixed order, so a seed gives the same plants whatever the worker count.
+"""
 
 from __future__ import annotations
 
