@@ -1,28 +1,22 @@
-"""A controller file's ``[motors.X]`` entry read back, and the controller as the loop runs it:
-one linear state-space system from (r, y) to u.
-
-Reading back: :func:`kalman_from_entry` (an estimator whose arrays fit together and whose error
-decays) and :func:`feedback_gains`. The LTI form (the one place it is built) serves the
-pole-placement ``controller_num``/``controller_den`` and margins (:func:`feedback_tf_coeffs`),
-the check that a file's stored C(z) agrees with its gains (:func:`consistency_problems`), the
-loop analysis (:mod:`cartctl.design.loop_report`) and ``export --mat``.
+"""A controller file's ``[motors.X]`` entry read back (checked), and the controller as the loop
+runs it, built once as a linear state-space system from (r, y) to u for the pole-placement C(z)
+of the files, the check of a file's C(z) against its gains, the loop analysis and ``export --mat``.
 
 Unsaturated and with the estimator's steady-state gain L, every controller of cartctl is LTI::
 
     s[k+1] = A s[k] + B [r[k], y[k]]ᵀ,     u[k] = C s[k] + D [r[k], y[k]]ᵀ
 
-r the speed reference (rad/s), y the measured speed (rad/s), u the voltage (V). The states, in
-the tick order of :mod:`cartctl.runtime.base` (correct, compute u, predict):
+(r the reference and y the measured speed, rad/s; u in V). The states, in the tick order of
+:mod:`cartctl.runtime.base` (correct, compute u, predict), with e = r − y:
 
-- PI on the measurement: s = [I[k−1]], the integral term (V): I[k] = I[k−1] + Ki·Ts·e[k],
-  u[k] = Kp·e[k] + I[k], e = r − y.
-- PI on the Kalman estimate: s = [x̂[k|k−1] (m states), I[k−1]]; e = r − x̂_1[k|k], with
-  x̂[k|k] = x̂ + L (y − C x̂), and the estimator predicts with u.
-- Pole placement: s = [x̂[k|k−1] (m states), x_i]; u = Kr·r − K·x̂[k|k] − Ki·x_i, x_i⁺ = x_i +
-  Ts (r − y); without Ki (integral action from the disturbance estimate) x_i is left out.
+- PI on the measurement: s = [I[k−1]] (V), I[k] = I[k−1] + Ki·Ts·e[k], u[k] = Kp·e[k] + I[k].
+- PI on the Kalman estimate: s = [x̂[k|k−1] (m states), I[k−1]], e = r − x̂_1[k|k] with
+  x̂[k|k] = x̂ + L (y − C x̂); the estimator predicts with u.
+- Pole placement: s = [x̂[k|k−1], x_i]; u = Kr·r − K·x̂[k|k] − Ki·x_i, x_i⁺ = x_i + Ts (r − y)
+  (x_i left out without Ki, the integral action being the disturbance estimate).
 
-The feedback part C_fb(z) = −U(z)/Y(z) (r = 0) closes the loop as L = C_fb·G·z^(−extra) with
-negative feedback; for the PI on the measurement it is C(z) = Kp + Ki·Ts·z/(z − 1).
+The feedback part C_fb(z) = −U(z)/Y(z) (r = 0) closes the loop as L = C_fb·G·z^(−extra); for the
+PI on the measurement it is C(z) = Kp + Ki·Ts·z/(z − 1).
 """
 
 from __future__ import annotations

@@ -49,7 +49,7 @@ def common_loop_delay(nk: Mapping[str, int], extra_delay_ticks: int) -> int:
 
 
 def file_sha256(path: str | Path) -> str:
-    """SHA-256 of a file's bytes (hex), to tie a controller to the exact model it was designed on."""
+    """SHA-256 (hex) of a file's bytes: ties a controller to the exact model it was designed on."""
     return hashlib.sha256(find_file(path).read_bytes()).hexdigest()
 
 

@@ -83,7 +83,7 @@ class StateSpace:
         return int(self.A.shape[0])
 
     def to_control(self):
-        """The system as a python-control ``StateSpace`` with dt = Ts (B as a column, C as a row)."""
+        """The system as a python-control ``StateSpace`` with dt = Ts."""
         import control
 
         n = self.order

@@ -1,19 +1,13 @@
 """The physical limit: the fastest settling any voltage sequence within ±12 V allows on a model.
 
-The plant is the model with the design's extra delay d (input delay nk + d, loop delay
-nk − 1 + d), as the design's step is simulated. For a step from rest to r the output is linear in
-the voltages, y = T u (T the lower-triangular Toeplitz matrix of the impulse response), so "can
-y be in the band from tick N on?" is a linear feasibility problem::
-
-    find u   with   |u[k]| ≤ U_max                         for all k,
-                    |y[k] − r| ≤ max(0.02 |r|, q)          for N ≤ k < N + M (hold, default 2 s)
-
-with q one encoder count per tick (0.3506 rad/s at 10 ms; :func:`settling_band_rad_s`). The
-smallest feasible N (bisection over HiGHS linear programs) is the bound no controller can beat;
-a controller's settling time, measured in the same band (:func:`in_settling_band`), is reported
-as a ratio to it. Of the sequences settling at N the one closest to r after N (least Σ|y − r|) is
-returned, to draw. The bound is whole ticks while a step's settling time interpolates between
-samples, so a controller matching the bound shows a ratio a little below 1.
+On the model with the design's extra delay (as its step is simulated), y = T u for a step from
+rest (T the Toeplitz matrix of the impulse response), so settling from tick N is a linear
+feasibility problem: |u[k]| ≤ U_max for all k and |y[k] − r| ≤ max(0.02 |r|, q) for
+N ≤ k < N + M (hold, default 2 s; q one encoder count per tick, 0.3506 rad/s at 10 ms). The
+smallest feasible N (bisection over HiGHS linear programs) is the bound no controller beats; a
+step's settling time, measured in the same band (:func:`in_settling_band`), is reported as a ratio
+to it (a little below 1 for a controller matching it: the bound is whole ticks, a settling time
+interpolates). Of the sequences settling at N, the one closest to r after N is returned, to draw.
 """
 
 from __future__ import annotations

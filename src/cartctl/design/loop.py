@@ -17,20 +17,15 @@ from cartctl.model import ArxModel
 def loop_analysis(
     num: NDArray[np.float64], den: NDArray[np.float64], model: ArxModel, extra_delay_ticks: int
 ) -> dict[str, Any]:
-    """Margins, crossover and sensitivity peak of L = C G z^(−extra), from one call of
-    python-control's ``stability_margins``; C(z) as ``num``, ``den`` (descending powers of z), G
-    the model (V → rad/s, its delay nk included).
+    """``phase_margin_deg``, ``gain_margin_db`` (None when infinite), ``crossover_hz`` and
+    ``sensitivity_peak`` Ms = max|1/(1 + L)| (1/sm, the shortest distance from L to −1; with its
+    dB and Hz) of L = C G z^(−extra), C = ``num``/``den`` (descending powers of z), from one call
+    of python-control's ``stability_margins``.
 
-    Returns ``phase_margin_deg``, ``gain_margin_db`` (None when infinite), ``crossover_hz``,
-    ``sensitivity_peak`` (Ms = max|1/(1 + L)| = 1/sm, sm python-control's stability margin: the
-    shortest distance from L to −1), ``sensitivity_peak_db`` and ``sensitivity_peak_hz``.
-
-    The exact polynomial method is asked for: ``margin``'s default falls back, for some
-    well-damped low-crossover designs, to a frequency grid that misses the crossover. On
-    high-order loops (pole placement with its estimator and a serial loop's delay) the
-    polynomial's roots include spurious crossings, so every crossing is checked on L itself
-    (|L| = 1 within 1e-6, or a phase of −180° within 1e-4 rad) before python-control's choice
-    (the smallest |PM|, the GM closest to 1) is made.
+    The exact polynomial method is asked for (``margin``'s default grid misses the crossover of
+    some well-damped designs), and each crossing it finds is checked on L itself (|L| = 1 within
+    1e-6, a phase of −180° within 1e-4 rad: high-order loops give spurious roots) before
+    python-control's choice (the smallest |PM|, the GM closest to 1).
     """
     import control
 

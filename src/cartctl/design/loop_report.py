@@ -1,15 +1,10 @@
 """The robustness analysis of designs, per motor: S and T with their peaks, the load-disturbance
-step, and the damping and natural frequency of each closed-loop pole.
+step, and the damping of each closed-loop pole; for ``design --json`` and the report's figures.
 
-Each controller is taken whole, as the loop runs it (:mod:`cartctl.design.controller_ss`: the PI,
-the PI on its Kalman estimate, or state feedback on the estimate with its integral action), on the
-loop it was designed for, broken at the plant input::
-
-    L(z) = C_fb(z) · G(z) · z^(−extra),     C_fb = −U/Y (r = 0),   S = 1/(1 + L),  T = L/(1 + L)
-
-Ms = max|S| is python-control's stability margin inverted (:func:`cartctl.design.loop.loop_analysis`);
-Mt = max|T| is found on a frequency grid up to Nyquist, refined by ``minimize_scalar``. The figures
-join each motor's ``design --json`` entry and :mod:`cartctl.design.plots` draws them.
+The controller is taken whole, as the loop runs it (:mod:`cartctl.design.controller_ss`), on the
+loop it was designed for, broken at the plant input: L = C_fb·G·z^(−extra), C_fb = −U/Y (r = 0),
+S = 1/(1 + L), T = L/(1 + L). Ms = max|S| is python-control's (:mod:`cartctl.design.loop`); Mt =
+max|T| is found on a frequency grid up to Nyquist, refined by ``minimize_scalar``.
 """
 
 from __future__ import annotations
@@ -172,7 +167,7 @@ class MotorAnalysis:
 
     @property
     def warnings(self) -> list[str]:
-        """Warnings about this loop (a closed-loop pole with ζ < ``LIGHT_DAMPING``), one line each."""
+        """One line per warning about this loop (a closed-loop pole with ζ < ``LIGHT_DAMPING``)."""
         line = damping_warning(self.pole_table, self.motor)
         return [] if line is None else [line]
 

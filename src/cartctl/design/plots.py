@@ -1,13 +1,8 @@
-"""``cartctl design --report DIR``: two PNGs per motor (matplotlib's Agg canvas, every label
-inside its axes).
+"""``cartctl design --report DIR``: two PNGs per motor (matplotlib's Agg canvas).
 
-``design_X.png``: the open-loop Bode plot with its margins, and the simulated step beside the
-time-optimal one on the same loop (the model with the design's extra delay), both judged in the
-band max(2 %, one encoder count per tick) (:mod:`cartctl.design.limit`).
-
-``analysis_X.png``: |S| and |T| with their peaks Ms and Mt; the Nyquist curve of L with −1 and the
-circle of radius 1/Ms it touches; the speed deviation after a load-disturbance step with its peak
-and recovery; the controller's voltage answering it.
+``design_X.png``: the open-loop Bode plot with its margins; the simulated step beside the
+time-optimal one (:mod:`cartctl.design.limit`). ``analysis_X.png``: |S| and |T| with Ms and Mt;
+the Nyquist curve of L with the circle of radius 1/Ms around −1; the load-disturbance step.
 """
 
 from __future__ import annotations

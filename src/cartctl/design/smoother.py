@@ -1,23 +1,21 @@
-"""A truer speed for a recorded trace: a Kalman filter forward over the whole trace (filterpy's
-``KalmanFilter``), then its RTS smoother back, so every tick's estimate uses the whole trace.
+"""A truer speed for a recorded trace: a Kalman filter forward over the whole trace (filterpy),
+then its RTS smoother back, so every tick's estimate uses the whole trace.
 
-An encoder speed is a whole number of counts per tick (0.35 rad/s at 10 ms), which blurs a step's
-overshoot and settling; with the model and the voltages sent, the speed between the counts is
-well determined. The state is the design's estimator's (:func:`cartctl.design.kalman.design_kalman`:
-the realisation's x, x_1 the measured mean speed over the last tick, and the input disturbance b,
-V), with its process noise, plus two:
+An encoder speed is whole counts per tick (0.35 rad/s at 10 ms); with the model and the voltages
+sent, the speed between the counts is well determined. The state is the design's estimator's
+(:func:`cartctl.design.kalman.design_kalman`: x, x_1 the measured mean speed over the last tick,
+and the input disturbance b, V), with its process noise, plus two:
 
-- θ, the counted wheel angle (rad): θ[k+1] = θ[k] + Ts x_1[k+1]. The summed encoder speeds are
-  exactly a floored true angle, an error uniform over one count Δ = 2π/1792 rad: R = Δ²/12, white
-  while the wheel turns. That is the measurement (a speed would be the difference of two such
-  errors, correlated by −½ between neighbours: not white).
+- θ, the counted angle (rad): θ[k+1] = θ[k] + Ts x_1[k+1], measured. The summed encoder speeds
+  are exactly a floored true angle, an error uniform over one count Δ = 2π/1792 rad: R = Δ²/12,
+  white while the wheel turns (a speed's error would be correlated by −½ between neighbours).
 - a constant 1, through which the recorded voltage enters each tick's transition, F[k] =
-  [[A, B u[k]], …]: filterpy's ``rts_smoother`` has no input term. Its variance is 0, so the
-  smoother inverts the predicted covariance with the pseudo-inverse.
+  [[A, B u[k]], …] (``rts_smoother`` has no input term); its variance is 0, so the smoother
+  inverts the predicted covariance with the pseudo-inverse.
 
-Row k holds the voltage commanded and the speed measured at tick k; the model applies with its own
-nk, ``extra_delay_ticks`` adding whole ticks for a slower loop. The speed at tick k is the mean of
-x̂_1[k] and x̂_1[k+1] (as the design's estimator), the last row using the model's prediction.
+Row k holds the voltage commanded and the speed measured at tick k (the model's own nk applies;
+``extra_delay_ticks`` adds ticks for a slower loop). The speed at tick k is the mean of x̂_1[k]
+and x̂_1[k+1] (as the design's estimator), the last row using the model's prediction.
 """
 
 from __future__ import annotations
