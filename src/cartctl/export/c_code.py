@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from string import Template
 from typing import Any
 
 import numpy as np
@@ -71,58 +72,57 @@ def _clamp(dest: str, value: str) -> str:
     return f"{dest} = {value} > {lim} ? {lim} : ({value} < -{lim} ? -{lim} : {value});"
 
 
+_ESTIMATOR = Template("""\
+/* Kalman speed estimator, motor $m: $n states, x[0] the speed (rad/s)$bias. */
+#define CARTCTL_${M}_STATES $n
+static const float CARTCTL_${M}_EST_A[$n][$n] = $A;  /* state transition, per tick */
+static const float CARTCTL_${M}_EST_B_RAD_S_PER_V[$n] = $B;
+static const float CARTCTL_${M}_EST_C[$n] = $C;  /* y = C x */
+static const float CARTCTL_${M}_EST_L[$n] = $L;  /* steady-state filter gain */
+
+/* x += L (y - C x) with the speed measured at this tick (skipped when not finite);
+ * returns the speed estimate x[0] (rad/s). */
+static float cartctl_correct_$m(float measured_rad_s) {
+  float *x = cartctl_state_$m.x;
+  int i;
+  if (isfinite(measured_rad_s)) {
+    float innovation = measured_rad_s;
+    for (i = 0; i < CARTCTL_${M}_STATES; ++i) {
+      innovation -= CARTCTL_${M}_EST_C[i] * x[i];
+    }
+    for (i = 0; i < CARTCTL_${M}_STATES; ++i) {
+      x[i] = x[i] + CARTCTL_${M}_EST_L[i] * innovation;
+    }
+  }
+  return x[0];
+}
+
+/* x <- A x + B u with the voltage sent at this tick (V; not finite counts as 0 V). */
+static void cartctl_predict_$m(float voltage_v) {
+  float u = isfinite(voltage_v) ? voltage_v : 0.0f;
+  float next[CARTCTL_${M}_STATES];
+  int i, j;
+  for (i = 0; i < CARTCTL_${M}_STATES; ++i) {
+    float sum = 0.0f;
+    for (j = 0; j < CARTCTL_${M}_STATES; ++j) {
+      sum += CARTCTL_${M}_EST_A[i][j] * cartctl_state_$m.x[j];
+    }
+    next[i] = sum + CARTCTL_${M}_EST_B_RAD_S_PER_V[i] * u;
+  }
+  for (i = 0; i < CARTCTL_${M}_STATES; ++i) {
+    cartctl_state_$m.x[i] = next[i];
+  }
+}
+""")
+
+
 def _estimator_code(motor: str, design: KalmanDesign) -> list[str]:
     """Constants, correct() and predict() of the fixed-gain Kalman estimator of one motor."""
-    up = motor.upper()
-    m = design.A.shape[0]
-    state = f"cartctl_state_{motor}"
-    return [
-        f"/* Kalman speed estimator, motor {motor}: {m} states, x[0] the speed (rad/s)"
-        + (", the last one an input disturbance (V)" if design.has_bias else "")
-        + ". */",
-        f"#define CARTCTL_{up}_STATES {m}",
-        f"static const float CARTCTL_{up}_EST_A[{m}][{m}] = "
-        f"{_c_matrix(design.A, '')};  /* state transition, per tick */",
-        f"static const float CARTCTL_{up}_EST_B_RAD_S_PER_V[{m}] = {_c_array(design.B)};",
-        f"static const float CARTCTL_{up}_EST_C[{m}] = {_c_array(design.C)};  /* y = C x */",
-        f"static const float CARTCTL_{up}_EST_L[{m}] = "
-        f"{_c_array(design.L)};  /* steady-state filter gain */",
-        "",
-        "/* x += L (y - C x) with the speed measured at this tick (skipped when not finite);",
-        " * returns the speed estimate x[0] (rad/s). */",
-        f"static float cartctl_correct_{motor}(float measured_rad_s) {{",
-        f"  float *x = {state}.x;",
-        "  int i;",
-        "  if (isfinite(measured_rad_s)) {",
-        "    float innovation = measured_rad_s;",
-        f"    for (i = 0; i < CARTCTL_{up}_STATES; ++i) {{",
-        f"      innovation -= CARTCTL_{up}_EST_C[i] * x[i];",
-        "    }",
-        f"    for (i = 0; i < CARTCTL_{up}_STATES; ++i) {{",
-        f"      x[i] = x[i] + CARTCTL_{up}_EST_L[i] * innovation;",
-        "    }",
-        "  }",
-        "  return x[0];",
-        "}",
-        "",
-        "/* x <- A x + B u with the voltage sent at this tick (V; not finite counts as 0 V). */",
-        f"static void cartctl_predict_{motor}(float voltage_v) {{",
-        "  float u = isfinite(voltage_v) ? voltage_v : 0.0f;",
-        f"  float next[CARTCTL_{up}_STATES];",
-        "  int i, j;",
-        f"  for (i = 0; i < CARTCTL_{up}_STATES; ++i) {{",
-        "    float sum = 0.0f;",
-        f"    for (j = 0; j < CARTCTL_{up}_STATES; ++j) {{",
-        f"      sum += CARTCTL_{up}_EST_A[i][j] * {state}.x[j];",
-        "    }",
-        f"    next[i] = sum + CARTCTL_{up}_EST_B_RAD_S_PER_V[i] * u;",
-        "  }",
-        f"  for (i = 0; i < CARTCTL_{up}_STATES; ++i) {{",
-        f"    {state}.x[i] = next[i];",
-        "  }",
-        "}",
-        "",
-    ]
+    bias = ", the last one an input disturbance (V)" if design.has_bias else ""
+    return _ESTIMATOR.substitute(
+        m=motor, M=motor.upper(), n=design.A.shape[0], bias=bias, A=_c_matrix(design.A, ""),
+        B=_c_array(design.B), C=_c_array(design.C), L=_c_array(design.L),
+    ).split("\n")  # fmt: skip
 
 
 def pi_code(controller: ControllerFile, motor: str, entry: Mapping[str, Any]) -> list[str]:
@@ -237,7 +237,6 @@ def pi_code(controller: ControllerFile, motor: str, entry: Mapping[str, Any]) ->
 
 def poles_code(controller: ControllerFile, motor: str, entry: Mapping[str, Any]) -> list[str]:
     """One motor's state feedback: the equations of :class:`StateFeedbackController`."""
-    up = motor.upper()
     path = controller.path or "controller file"
     design = _estimator(controller, motor, entry["estimator"])
     gains = np.asarray(entry["K"], dtype=float).ravel()
@@ -246,75 +245,72 @@ def poles_code(controller: ControllerFile, motor: str, entry: Mapping[str, Any])
         raise DataFileError(
             path, f"[motors.{motor}] K must hold 1..{m} finite gains (one per model state), got {n}"
         )
-    state = f"cartctl_state_{motor}"
-    lines = [
-        f"/* ---- motor {motor}: pole placement, state feedback with integral action on a "
-        "Kalman estimate ---- */",
-        f"#define CARTCTL_{up}_FEEDBACK_STATES {n}",
-        f"static const float CARTCTL_{up}_K[{n}] = {_c_array(gains)};  "
-        "/* V per unit of each model state (rad/s) */",
-        f"#define CARTCTL_{up}_KI_V_PER_RAD {c_float(float(entry['Ki']))}  "
-        "/* on the integral of (r - y) */",
-        f"#define CARTCTL_{up}_KR_V_PER_RAD_S {c_float(float(entry['Kr']))}  "
-        "/* reference feedforward */",
-        "",
-        "typedef struct {",
-        f"  float x[{m}];            /* the estimator's state: x[0] the speed (rad/s) */",
-        "  float integral_rad;    /* x_i, the integral of (r - y) (rad) */",
-        "  float estimate_rad_s;  /* the speed estimate the last step acted on (rad/s) */",
-        "  int saturated;         /* whether the last command hit the limit */",
-        f"}} cartctl_state_{motor}_t;",
-        "",
-        f"cartctl_state_{motor}_t {state};",
-        "",
-        *_estimator_code(motor, design),
-        "/* Integrator cleared, estimator at rest. */",
-        f"void cartctl_reset_{motor}(void) {{",
-        "  int i;",
-        f"  for (i = 0; i < CARTCTL_{up}_STATES; ++i) {{",
-        f"    {state}.x[i] = 0.0f;",
-        "  }",
-        f"  {state}.integral_rad = 0.0f;",
-        f"  {state}.estimate_rad_s = 0.0f;",
-        f"  {state}.saturated = 0;",
-        "}",
-        "",
-        f"/* One tick: the voltage (V) to set for motor {motor.upper()}, within "
-        "+-CARTCTL_VOLTAGE_LIMIT_V.",
-        " * 0 V when the reference or the measurement is not finite (the integrator holds), and",
-        " * 0 V plus a reset when the command overflows. */",
-        f"float cartctl_step_{motor}(float reference_rad_s, float measured_rad_s) {{",
-        f"  cartctl_state_{motor}_t *s = &{state};",
-        "  float u_raw, u, error;",
-        "  int j;",
-        "  if (!isfinite(measured_rad_s) || !isfinite(reference_rad_s)) {",
-        f"    s->estimate_rad_s = cartctl_correct_{motor}(measured_rad_s);"
-        "  /* skips a non-finite y */",
-        "    s->saturated = 0;",
-        f"    cartctl_predict_{motor}(0.0f);",
-        "    return 0.0f;",
-        "  }",
-        f"  s->estimate_rad_s = cartctl_correct_{motor}(measured_rad_s);",
-        f"  u_raw = CARTCTL_{up}_KR_V_PER_RAD_S * reference_rad_s"
-        f" - CARTCTL_{up}_KI_V_PER_RAD * s->integral_rad;",
-        f"  for (j = 0; j < CARTCTL_{up}_FEEDBACK_STATES; ++j) {{",
-        f"    u_raw -= CARTCTL_{up}_K[j] * s->x[j];",
-        "  }",
-        "  if (!isfinite(u_raw)) {  /* overflowed on an absurd value: 0 V and start afresh */",
-        f"    cartctl_reset_{motor}();",
-        f"    cartctl_predict_{motor}(0.0f);",
-        "    return 0.0f;",
-        "  }",
-        "  " + _clamp("u", "u_raw"),
-        "  s->saturated = u != u_raw;",
-        "  error = reference_rad_s - measured_rad_s;",
-        "  /* the integrator moves u by -Ki*Ts*error next tick: hold it if that deepens saturation */",
-        f"  if (!s->saturated || ((u_raw > u) != (-CARTCTL_{up}_KI_V_PER_RAD * error > 0.0f))) {{",
-        "    s->integral_rad += CARTCTL_PERIOD_S * error;",
-        "  }",
-        f"  cartctl_predict_{motor}(u);",
-        "  return u;",
-        "}",
-        "",
-    ]
-    return lines
+    return _POLES.substitute(
+        m=motor, M=motor.upper(), n=n, states=m, K=_c_array(gains), Ki=c_float(float(entry["Ki"])),
+        Kr=c_float(float(entry["Kr"])), estimator="\n".join(_estimator_code(motor, design)),
+        clamp=_clamp("u", "u_raw"),
+    ).split("\n")  # fmt: skip
+
+
+_POLES = Template("""\
+/* ---- motor $m: pole placement, state feedback with integral action on a Kalman estimate ---- */
+#define CARTCTL_${M}_FEEDBACK_STATES $n
+static const float CARTCTL_${M}_K[$n] = $K;  /* V per unit of each model state (rad/s) */
+#define CARTCTL_${M}_KI_V_PER_RAD $Ki  /* on the integral of (r - y) */
+#define CARTCTL_${M}_KR_V_PER_RAD_S $Kr  /* reference feedforward */
+
+typedef struct {
+  float x[$states];            /* the estimator's state: x[0] the speed (rad/s) */
+  float integral_rad;    /* x_i, the integral of (r - y) (rad) */
+  float estimate_rad_s;  /* the speed estimate the last step acted on (rad/s) */
+  int saturated;         /* whether the last command hit the limit */
+} cartctl_state_${m}_t;
+
+cartctl_state_${m}_t cartctl_state_$m;
+
+$estimator
+/* Integrator cleared, estimator at rest. */
+void cartctl_reset_$m(void) {
+  int i;
+  for (i = 0; i < CARTCTL_${M}_STATES; ++i) {
+    cartctl_state_$m.x[i] = 0.0f;
+  }
+  cartctl_state_$m.integral_rad = 0.0f;
+  cartctl_state_$m.estimate_rad_s = 0.0f;
+  cartctl_state_$m.saturated = 0;
+}
+
+/* One tick: the voltage (V) to set for motor $M, within +-CARTCTL_VOLTAGE_LIMIT_V.
+ * 0 V when the reference or the measurement is not finite (the integrator holds), and
+ * 0 V plus a reset when the command overflows. */
+float cartctl_step_$m(float reference_rad_s, float measured_rad_s) {
+  cartctl_state_${m}_t *s = &cartctl_state_$m;
+  float u_raw, u, error;
+  int j;
+  if (!isfinite(measured_rad_s) || !isfinite(reference_rad_s)) {
+    s->estimate_rad_s = cartctl_correct_$m(measured_rad_s);  /* skips a non-finite y */
+    s->saturated = 0;
+    cartctl_predict_$m(0.0f);
+    return 0.0f;
+  }
+  s->estimate_rad_s = cartctl_correct_$m(measured_rad_s);
+  u_raw = CARTCTL_${M}_KR_V_PER_RAD_S * reference_rad_s - CARTCTL_${M}_KI_V_PER_RAD * s->integral_rad;
+  for (j = 0; j < CARTCTL_${M}_FEEDBACK_STATES; ++j) {
+    u_raw -= CARTCTL_${M}_K[j] * s->x[j];
+  }
+  if (!isfinite(u_raw)) {  /* overflowed on an absurd value: 0 V and start afresh */
+    cartctl_reset_$m();
+    cartctl_predict_$m(0.0f);
+    return 0.0f;
+  }
+  $clamp
+  s->saturated = u != u_raw;
+  error = reference_rad_s - measured_rad_s;
+  /* the integrator moves u by -Ki*Ts*error next tick: hold it if that deepens saturation */
+  if (!s->saturated || ((u_raw > u) != (-CARTCTL_${M}_KI_V_PER_RAD * error > 0.0f))) {
+    s->integral_rad += CARTCTL_PERIOD_S * error;
+  }
+  cartctl_predict_$m(u);
+  return u;
+}
+""")
