@@ -16,7 +16,7 @@ import atexit
 import uuid
 import warnings
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Final
 
@@ -293,7 +293,7 @@ def _warm_up_conversions() -> None:
     rr.Scalars.columns(scalars=np.zeros(1))
 
 
-def timelines(time_s: ArrayLike, ticks: ArrayLike) -> list[rr.TimeColumn]:
+def timelines(time_s: Iterable[float], ticks: Iterable[int]) -> list[rr.TimeColumn]:
     """The ``time`` (s) and ``tick`` timelines of a run of rows."""
     return [rr.TimeColumn("time", duration=time_s), rr.TimeColumn("tick", sequence=ticks)]
 
