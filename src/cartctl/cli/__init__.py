@@ -54,10 +54,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser with every subcommand, or with ``command`` alone (built in a tenth of the time)."""
     parser = _Parser(
         prog="cartctl",
-        description=(
-            "Identify, design and run velocity control of a two-wheeled DC-motor cart. "
-            "Workflow: excite → identify → design → run → review."
-        ),
+        description="Identify, design and run velocity control of a two-wheeled DC-motor cart. "
+        "Workflow: excite → identify → design → run → review.",
     )
     parser.add_argument("--version", action="version", version=f"cartctl {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)

@@ -24,18 +24,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "commission",
         help="one command from a connected cart to a verified controller",
-        description=(
-            "Commission a cart in five stages, each written to --out: (1) checks: the port, the "
-            "cart's heartbeat and loop delay, each motor's direction and encoder sign (a short "
-            "pulse) and breakaway voltage (a slow ramp); (2) the report's square excitation at an "
-            "amplitude the checks chose; (3) ARX identification validated on the last 30 % of "
-            "it; (4) robust pole-placement tuning on the model's uncertainty and on its commands "
-            "landing 2 and 4 ms later; (5) a closed-loop 10 rad/s step on the cart with the "
-            "chosen controller, measured against the prediction. Writes model.toml, "
-            "controller.toml, summary.md with tables and figures, and one .rrd per stage. Exit "
-            "0: verified; 1: a stage failed (one line says why; the files so far are kept); 2: "
-            "bad input."
-        ),
+        description="Commission a cart in five stages, each written to --out: (1) checks: the "
+        "port, the cart's heartbeat and loop delay, each motor's direction and encoder sign (a "
+        "short pulse) and breakaway voltage (a slow ramp); (2) the report's square excitation at "
+        "an amplitude the checks chose; (3) ARX identification validated on the last 30 % of it; "
+        "(4) robust pole-placement tuning on the model's uncertainty and on its commands landing "
+        "2 and 4 ms later; (5) a closed-loop 10 rad/s step on the cart with the chosen "
+        "controller, measured against the prediction. Writes model.toml, controller.toml, "
+        "summary.md with tables and figures, and one .rrd per stage. Exit 0: verified; 1: a stage "
+        "failed (one line says why; the files so far are kept); 2: bad input.",
     )
     p.add_argument("plant", metavar="PLANT",
                    help="physics[:OPTIONS] (the simulator, not in real time; physics:reverse_b=1 "

@@ -19,11 +19,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "convert",
         help="check a trace or QRoboticsCenter log, summarise it, and write it as a cartctl CSV",
-        description=(
-            "Read a trace (cartctl CSV, QRC 5 XML log, QRC 6 CSV log), check it (columns, numbers, "
-            "sample spacing) and print a summary. QRC channels are mapped onto cartctl's columns with "
-            "--map; with --out the result is written as a cartctl CSV."
-        ),
+        description="Read a trace (cartctl CSV, QRC 5 XML log, QRC 6 CSV log), check it (columns, "
+        "numbers, sample spacing) and print a summary. QRC channels are mapped onto cartctl's "
+        "columns with --map; with --out the result is written as a cartctl CSV.",
     )
     p.add_argument("file", metavar="FILE", help="trace or QRC log")
     add_map_option(p)

@@ -40,15 +40,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "design",
         help="design PI or pole-placement controllers on a model",
-        description=(
-            "Design a discrete speed controller per motor on a model file: a PI from a phase margin "
-            "and crossover (or a bandwidth), or pole placement with integral action and a Kalman "
-            "speed estimator. Reports margins, the peaks of the sensitivity S and the "
-            "complementary sensitivity T of the loop as it runs (estimator and loop delay "
-            "included), closed-loop poles with damping and natural frequency, a simulated step "
-            "with the voltage limit, the settling time against the fastest that ±12 V allows, and "
-            "the rejection of a load step at the plant input."
-        ),
+        description="Design a discrete speed controller per motor on a model file: a PI from a "
+        "phase margin and crossover (or a bandwidth), or pole placement with integral action and "
+        "a Kalman speed estimator. Reports margins, the peaks of the sensitivity S and the "
+        "complementary sensitivity T of the loop as it runs (estimator and loop delay included), "
+        "closed-loop poles with damping and natural frequency, a simulated step with the voltage "
+        "limit, the settling time against the fastest that ±12 V allows, and the rejection of a "
+        "load step at the plant input.",
     )
     p.add_argument("model", metavar="MODEL.toml", help="model file, e.g. models/ground.toml")
     p.add_argument("--method", choices=("pi", "poles"), required=True)

@@ -19,13 +19,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "excite",
         help="record an excitation experiment (input voltage, measured speed) to CSV",
-        description=(
-            "Drive the motors with an excitation signal and record the commanded voltage and the "
-            "measured speed every 10 ms into a CSV trace (time_s, voltage_a, voltage_b, speed_a, "
-            "speed_b). Simulated plants run as fast as possible, a serial or virtual cart at its own "
-            "10 ms tick (its loop delay is then in the data). The report's experiment is "
-            "'--signal square --amplitude 10': +10 V, 0 V, −10 V for 1 s each, repeated."
-        ),
+        description="Drive the motors with an excitation signal and record the commanded voltage "
+        "and the measured speed every 10 ms into a CSV trace (time_s, voltage_a, voltage_b, "
+        "speed_a, speed_b). Simulated plants run as fast as possible, a serial or virtual cart at "
+        "its own 10 ms tick (its loop delay is then in the data). The report's experiment is "
+        "'--signal square --amplitude 10': +10 V, 0 V, −10 V for 1 s each, repeated.",
     )
     options.add_plant_options(p, what="what to excite")
     p.add_argument(

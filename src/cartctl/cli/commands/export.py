@@ -19,16 +19,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "export",
         help="write a controller as C for the cart's control() (--arduino), or a model or "
         "controller as MATLAB .mat (--mat)",
-        description=(
-            "--arduino: write a controller file as C for the course template's Robot::control() "
-            "on the cart: per motor a state struct, cartctl_reset_a() and cartctl_step_a(reference, "
-            "measured) returning the voltage, with the same difference equations, anti-windup and "
-            "(steady-state) Kalman estimator as cartctl's loop. The header says how to call it. "
-            "--mat: write a model file (per motor num, den, theta, theta_std, nk, Ts) or a "
-            "controller file (per motor the controller's A, B, C, D from [reference; speed] to "
-            "voltage, its feedback transfer function, gains, estimator gain, Ts, loop delay) as a "
-            "MATLAB .mat file (scipy.io.savemat)."
-        ),
+        description="--arduino: write a controller file as C for the course template's "
+        "Robot::control() on the cart: per motor a state struct, cartctl_reset_a() and "
+        "cartctl_step_a(reference, measured) returning the voltage, with the same difference "
+        "equations, anti-windup and (steady-state) Kalman estimator as cartctl's loop. The header "
+        "says how to call it. --mat: write a model file (per motor num, den, theta, theta_std, "
+        "nk, Ts) or a controller file (per motor the controller's A, B, C, D from [reference; "
+        "speed] to voltage, its feedback transfer function, gains, estimator gain, Ts, loop "
+        "delay) as a MATLAB .mat file (scipy.io.savemat).",
     )
     p.add_argument(
         "file",

@@ -22,16 +22,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "identify",
         help="fit ARX motor models to recorded experiments",
-        description=(
-            "Fit the report's ARX model ω[k] = −c ω[k−1] − d ω[k−2] + a v[k−nk] + b v[k−nk−1] to "
-            "recorded experiments by least squares, with parameter standard deviations and fits "
-            "(simulation and one-step prediction). Optionally: a Butterworth prefilter (the fit "
-            "without it is shown beside), delay estimation, cycle averaging, and an output-error "
-            "refinement (shown beside the ARX fit). Every chosen model gets residual tests (the "
-            "one-step prediction errors' autocorrelation and cross-correlation with the input "
-            "against 99 % bounds) and, in the report, 1σ/2σ bands on its Bode plot from θ's "
-            "covariance."
-        ),
+        description="Fit the report's ARX model ω[k] = −c ω[k−1] − d ω[k−2] + a v[k−nk] + b "
+        "v[k−nk−1] to recorded experiments by least squares, with parameter standard deviations "
+        "and fits (simulation and one-step prediction). Optionally: a Butterworth prefilter (the "
+        "fit without it is shown beside), delay estimation, cycle averaging, and an output-error "
+        "refinement (shown beside the ARX fit). Every chosen model gets residual tests (the "
+        "one-step prediction errors' autocorrelation and cross-correlation with the input against "
+        "99 % bounds) and, in the report, 1σ/2σ bands on its Bode plot from θ's covariance.",
     )
     p.add_argument("files", nargs="+", metavar="FILE", help="experiment traces (CSV or QRC logs)")
     add_map_option(p)
@@ -97,11 +94,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         nargs="+",
         default=[],
         metavar="MODEL.toml",
-        help=(
-            "model files to compare with (e.g. models/air.toml): their fits in the table and JSON, "
-            "their Bode plots against the empirical transfer function and their poles and zeros "
-            "in the report"
-        ),
+        help="model files to compare with (e.g. models/air.toml): their fits in the table and "
+        "JSON, their Bode plots against the empirical transfer function and their poles and zeros "
+        "in the report",
     )
     p.add_argument(
         "--orders",
@@ -109,12 +104,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         const="",
         default=None,
         metavar="SPEC",
-        help=(
-            "fit ARX for every na, nb, nk of a grid and print loss, AIC, FPE and the simulation "
-            "fit (on the validation data, if any), marking the best; SPEC like na=1:3,nb=1:3,nk=1:4 (ranges inclusive, "
-            "keys left out keep these defaults; each order up to 50, at most 400 combinations and "
-            "a sum of (na + nb)² over them up to 40000)"
-        ),
+        help="fit ARX for every na, nb, nk of a grid and print loss, AIC, FPE and the simulation "
+        "fit (on the validation data, if any), marking the best; SPEC like na=1:3,nb=1:3,nk=1:4 (ranges inclusive, "
+        "keys left out keep these defaults; each order up to 50, at most 400 combinations and "
+        "a sum of (na + nb)² over them up to 40000)",
     )
     val = p.add_mutually_exclusive_group()
     val.add_argument(
@@ -122,7 +115,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         action="append",
         default=[],
         metavar="FILE",
-        help="an independent experiment to validate on: fits and residual tests are on it (repeatable)",
+        help="an independent experiment to validate on: fits and residual tests are on it "
+        "(repeatable)",
     )
     val.add_argument(
         "--split",
@@ -231,7 +225,7 @@ def format_motor(res: MotorIdentification, compared: Mapping[str, ArxModel] | No
         )
     lines += [f"    OE: {note}" for note in getattr(res.oe, "notes", ())]
     diag = res.diagnostics
-    if compared and diag is not None:
+    if compared:
         fits = diag.compared_fits(compared)
         for label, model in compared.items():
             f = fits[label]
@@ -252,11 +246,10 @@ def format_motor(res: MotorIdentification, compared: Mapping[str, ArxModel] | No
         )
         alone = "" if d.nk_alone is None else f" (on its own: nk = {d.nk_alone})"
         lines.append(f"    delay evidence (equation-error RMS, rad/s): {evidence}{alone}")
-    if diag is not None:
-        lines.append(f"    {diag.residuals.summary()}")
-        if diag.orders is not None:
-            lines.append(f"    orders (ARX; fits on the {diag.orders.fit_on} data):")
-            lines.append(diag.orders.format())
+    lines.append(f"    {diag.residuals.summary()}")
+    if diag.orders is not None:
+        lines.append(f"    orders (ARX; fits on the {diag.orders.fit_on} data):")
+        lines.append(diag.orders.format())
     return "\n".join(lines)
 
 
@@ -306,7 +299,7 @@ def format_result(
         + ("" if not result.motors else _nk_remark(result, delay))
     )
     lines.append("")
-    on = next((r.diagnostics.fit_on for r in result.motors.values() if r.diagnostics), "estimation")
+    on = next((r.diagnostics.fit_on for r in result.motors.values()), "estimation")
     if on == "validation":
         where = "fit sim and fit pred (%): on the validation data, simulated from its input and "
         where += "predicted one step ahead. "
@@ -356,7 +349,7 @@ def run(args: argparse.Namespace) -> int:
         doc = result.to_dict()
         for motor, res in result.motors.items():
             labels = {path: mf.motors[motor] for path, mf in compare.items() if motor in mf.motors}
-            if res.diagnostics is not None and labels:
+            if labels:
                 doc["motors"][motor]["compared"] = res.diagnostics.compared_fits(labels)
         print(dumps(doc))
         return 0

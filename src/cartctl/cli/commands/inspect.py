@@ -15,12 +15,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "inspect",
         help="poles, zeros, continuous-equivalent frequencies and DC gain of a model file",
-        description=(
-            "Show each motor's transfer function, its poles and zeros with their continuous-equivalent "
-            "frequencies f = |ln z| / (2π Ts) and damping, and its DC gain. A pole at z = 0 is a pure "
-            "delay and has no frequency. Zeros outside the unit circle (|z| > 1) are flagged: such "
-            "a model is not minimum phase, and a controller must not cancel those zeros."
-        ),
+        description="Show each motor's transfer function, its poles and zeros with their "
+        "continuous-equivalent frequencies f = |ln z| / (2π Ts) and damping, and its DC gain. A "
+        "pole at z = 0 is a pure delay and has no frequency. Zeros outside the unit circle (|z| > "
+        "1) are flagged: such a model is not minimum phase, and a controller must not cancel "
+        "those zeros.",
     )
     p.add_argument("model", metavar="MODEL.toml", help="model file, e.g. models/ground.toml")
     p.add_argument(

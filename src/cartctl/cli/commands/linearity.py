@@ -1,5 +1,5 @@
 """``cartctl linearity STEP_SMALL.csv STEP_LARGE.csv STEP_SUM.csv``: the superposition test
-(:mod:`cartctl.identification.linearity`), ``--plot`` the report's figure 8."""
+(:mod:`cartctl.identification.validate`), ``--plot`` the report's figure 8."""
 
 from __future__ import annotations
 
@@ -17,19 +17,17 @@ from cartctl.cli.commands.validate import (
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from cartctl.identification.linearity import LinearityResult
+    from cartctl.identification.validate import LinearityResult
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "linearity",
         help="the superposition test: two small steps added against their sum",
-        description=(
-            "Check superposition on one motor (report §3.3, figure 8): align the responses to a "
-            "small and a large voltage step (e.g. 3 V and 7 V) at their onsets, add them, and "
-            "compare with the response to the summed step (10 V). The error is the summed "
-            "step's response minus the added responses; a linear motor gives zero."
-        ),
+        description="Check superposition on one motor (report §3.3, figure 8): align the "
+        "responses to a small and a large voltage step (e.g. 3 V and 7 V) at their onsets, add "
+        "them, and compare with the response to the summed step (10 V). The error is the summed "
+        "step's response minus the added responses; a linear motor gives zero.",
     )
     p.add_argument("small", metavar="STEP_SMALL.csv", help="response to the small step")
     p.add_argument("large", metavar="STEP_LARGE.csv", help="response to the large step")
@@ -112,7 +110,7 @@ def format_text(result: LinearityResult, files: tuple[str, str, str]) -> str:
 def run(args: argparse.Namespace) -> int:
     from cartctl.cli.jsonout import dumps
     from cartctl.data.read import read_trace
-    from cartctl.identification.linearity import linearity
+    from cartctl.identification.validate import linearity
 
     plot = check_plot_path(args.plot)
     files = (args.small, args.large, args.sum)

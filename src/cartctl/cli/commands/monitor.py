@@ -33,15 +33,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "monitor",
         help="record and stream the GPIO channels a cart sends (a cart running its own controller)",
-        description=(
-            "Record every GPIO frame a cart sends to a CSV trace and a Rerun recording (live in "
-            "the viewer), with your channel labels, as QRoboticsCenter does. cartctl's own "
-            "firmware (the bridge sketch, a controller of 'cartctl export --arduino') says so in "
-            "float 6, and its channels are then named as trace columns (speed_a, voltage_a, "
-            "reference_a, ...) without --labels. Passive: nothing is sent to the cart. Stops "
-            "after --duration, on Ctrl-C (exit 0) or on a line fault (100 ms without data, the "
-            "port gone: exit 1, the files hold what came before)."
-        ),
+        description="Record every GPIO frame a cart sends to a CSV trace and a Rerun recording "
+        "(live in the viewer), with your channel labels, as QRoboticsCenter does. cartctl's own "
+        "firmware (the bridge sketch, a controller of 'cartctl export --arduino') says so in "
+        "float 6, and its channels are then named as trace columns (speed_a, voltage_a, "
+        "reference_a, ...) without --labels. Passive: nothing is sent to the cart. Stops after "
+        "--duration, on Ctrl-C (exit 0) or on a line fault (100 ms without data, the port gone: "
+        "exit 1, the files hold what came before).",
     )
     p.add_argument(
         "plant", metavar="PLANT",

@@ -40,11 +40,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "run",
         help="run the 10 ms closed loop against a plant",
-        description=(
-            "Run the designed controller every 10 ms against a plant, record the trace (CSV) and a "
-            "Rerun recording to --out, and print a summary. With no options: the shipped PI "
-            "controller on the simulated ground model, a 10 rad/s step, 5 s in real time."
-        ),
+        description="Run the designed controller every 10 ms against a plant, record the trace "
+        "(CSV) and a Rerun recording to --out, and print a summary. With no options: the shipped "
+        "PI controller on the simulated ground model, a 10 rad/s step, 5 s in real time.",
     )
     options.add_plant_options(p, what="what to control")
     p.add_argument(

@@ -32,17 +32,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "tune",
         help="design a grid of controllers, run each in the simulated loop, show the Pareto front",
-        description=(
-            "Design one controller per grid setting (pi: phase margin × crossover; poles: settling "
-            "time × overshoot), run each like 'cartctl run --fast' against a simulated plant with "
-            "the loop delay the design is for (--extra-delay) and compare overshoot, settling time "
-            "(band: 2 % of the step or one encoder count per tick, whichever is wider), RMS error "
-            "and peak voltage (the worse of motors a and b). Grid: comma-separated "
-            "NAME=START:STOP:STEP (inclusive) or NAME=VALUE, NAME being design's option without "
-            "its dashes; pi axes phase-margin (deg, default 50:75:5), crossover-hz (Hz, "
-            "2:5:0.5); poles axes settling-time (s, 0.04:0.16:0.02), overshoot (%, 0.5:5:1.5). "
-            "The older names phase_margin, crossover_hz, settling_time are accepted too."
-        ),
+        description="Design one controller per grid setting (pi: phase margin × crossover; poles: "
+        "settling time × overshoot), run each like 'cartctl run --fast' against a simulated plant "
+        "with the loop delay the design is for (--extra-delay) and compare overshoot, settling "
+        "time (band: 2 % of the step or one encoder count per tick, whichever is wider), RMS "
+        "error and peak voltage (the worse of motors a and b). Grid: comma-separated "
+        "NAME=START:STOP:STEP (inclusive) or NAME=VALUE, NAME being design's option without its "
+        "dashes; pi axes phase-margin (deg, default 50:75:5), crossover-hz (Hz, 2:5:0.5); poles "
+        "axes settling-time (s, 0.04:0.16:0.02), overshoot (%, 0.5:5:1.5). The older names "
+        "phase_margin, crossover_hz, settling_time are accepted too.",
     )
     p.add_argument("model", metavar="MODEL.toml", help="model to design on (and of the sim plant)")
     p.add_argument("--method", choices=METHODS, required=True)

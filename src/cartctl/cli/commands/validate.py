@@ -24,12 +24,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "validate",
         help="simulate a model on recorded data against the measured speed",
-        description=(
-            "Simulate each motor's model from rest on the trace's commanded voltage and compare "
-            "with the measured speed: the simulation fit (%), the absolute error over time and, "
-            "when the input is a single step, rise time, overshoot, settling time and steady "
-            "state of the measured and simulated responses side by side (report §3.3)."
-        ),
+        description="Simulate each motor's model from rest on the trace's commanded voltage and "
+        "compare with the measured speed: the simulation fit (%), the absolute error over time "
+        "and, when the input is a single step, rise time, overshoot, settling time and steady "
+        "state of the measured and simulated responses side by side (report §3.3).",
     )
     p.add_argument("model", metavar="MODEL.toml", help="model file, e.g. models/ground.toml")
     p.add_argument("data", metavar="FILE.csv", help="recorded experiment (CSV or QRC log)")

@@ -31,13 +31,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "virtual-cart",
         help="serve the simulated cart on a pseudo-terminal, as the bridge firmware would",
-        description=(
-            "Run the physical simulator behind a pseudo-terminal that speaks the cart's microOS "
-            "MAVLink protocol and the bridge contract (firmware/): 100 GPIO frames per second at "
-            "500 kbaud (115200 with --onboard or --faults bridge=1), a HEARTBEAT every 1.1 s, the "
-            "watchdog. Prints the port; point "
-            "'cartctl run --plant serial:PORT', 'excite' or 'monitor' at it. Ctrl-C stops it."
-        ),
+        description="Run the physical simulator behind a pseudo-terminal that speaks the cart's "
+        "microOS MAVLink protocol and the bridge contract (firmware/): 100 GPIO frames per second "
+        "at 500 kbaud (115200 with --onboard or --faults bridge=1), a HEARTBEAT every 1.1 s, the "
+        "watchdog. Prints the port; point 'cartctl run --plant serial:PORT', 'excite' or "
+        "'monitor' at it. Ctrl-C stops it.",
     )
     p.add_argument(
         "--preset", choices=("air", "ground"), default="ground",

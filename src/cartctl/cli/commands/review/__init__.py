@@ -28,15 +28,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "review",
         help="open a recorded run in the Rerun viewer (or the metrics of a CSV trace)",
-        description=(
-            "Open a Rerun recording (.rrd) in the viewer with the project's layout: per motor, "
-            "speed with reference and estimate above the voltage, then the loop timing. --web "
-            "serves the web viewer instead, --screenshot renders the layout headless to a PNG. "
-            "Given a CSV trace, print its run metrics instead (--json, --compare). Where the "
-            "trace has no true speed (a real cart) or came through the serial path, the metrics "
-            "on a Kalman RTS smoothed speed stand beside the encoder's (a recording's are printed "
-            "before the viewer opens, its smoothed speed drawn with the speed)."
-        ),
+        description="Open a Rerun recording (.rrd) in the viewer with the project's layout: per "
+        "motor, speed with reference and estimate above the voltage, then the loop timing. --web "
+        "serves the web viewer instead, --screenshot renders the layout headless to a PNG. Given "
+        "a CSV trace, print its run metrics instead (--json, --compare). Where the trace has no "
+        "true speed (a real cart) or came through the serial path, the metrics on a Kalman RTS "
+        "smoothed speed stand beside the encoder's (a recording's are printed before the viewer "
+        "opens, its smoothed speed drawn with the speed).",
     )
     p.add_argument("recording", metavar="FILE.rrd|RUN.csv", help="a recording or a CSV trace")
     view = p.add_mutually_exclusive_group()
