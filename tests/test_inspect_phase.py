@@ -99,7 +99,7 @@ def test_linearity_legends_sit_beside_the_panels(
     # the figure the command drew: no legend overlaps any panel's data area
     from cartctl.cli.commands.linearity import linearity_figure
     from cartctl.data.read import read_trace
-    from cartctl.identification.linearity import linearity
+    from cartctl.identification.validate import linearity
 
     fig = linearity_figure(linearity(*(read_trace(f) for f in files), "a"))
     fig.canvas.draw()

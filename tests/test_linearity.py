@@ -12,7 +12,7 @@ from cartctl.cli import main
 from cartctl.data.modelfile import load_models
 from cartctl.data.trace import Trace, write_trace
 from cartctl.errors import InputError
-from cartctl.identification.linearity import linearity
+from cartctl.identification.validate import linearity
 from cartctl.plants.physics import PhysicsPlant
 from cartctl.plants.sim import ArxPlant
 from cartctl.runtime.experiment import run_experiment
