@@ -1,16 +1,10 @@
 """The bridge sketch's channel map: how GPIO channels carry commands and measurements.
 
-The PC drives the cart through GPIO frames in both directions (``docs/serial-protocol.md``):
-
-- PC → cart: floats 0, 1 are the requested voltages of motors A, B (V); int 0 is the host sequence
-  number (0..32767, +1 per frame) and int 1 is 1 to drive, 0 to stop.
-- cart → PC: floats 0..5 are the measured speeds (rad/s), the voltages actually applied (V) and the
-  wheel positions (rad) of A, B; int 0 echoes the last host sequence number, int 1 is the cart's
-  tick counter (0..32767), int 2 holds status bits (driving, watchdog tripped) and int 3 counts the
-  host sequence numbers the cart never saw (frames lost on the way in, modulo 32768).
-
-The cart's template helpers are int16, hence the sequence modulo 32768. The cart applies zero volts
-once no new host sequence number has arrived for :data:`WATCHDOG_MS` ms.
+Both directions carry GPIO frames (``docs/serial-protocol.md`` §3): PC → cart the requested
+voltages (V), a host sequence number (+1 per frame) and drive; cart → PC the measured speeds
+(rad/s), the voltages on the H-bridges (V), the wheel positions (rad), the bridge's version, the
+echoed sequence number, the cart's tick, the status bits and the host sequence numbers it never
+saw. The cart's template helpers are int16, hence the counters modulo 32768.
 """
 
 from __future__ import annotations
@@ -45,28 +39,16 @@ TIMING_REPORTS = ("tick_busy_us_max", "drain_us_max", "tick_interval_us_max",
 --json``): the 10 ms thread's drain + io() + control() (µs), the longest 1 ms drain since the
 previous tick (µs), the time since the previous tick started (µs), the most bytes a drain found
 waiting in the receive ring since the previous tick."""
-STATUS_DRIVING = 1
-"""Status bit: the cart applies the requested voltages."""
-STATUS_WATCHDOG = 2
-"""Status bit: the watchdog has tripped, the cart applies zero volts."""
+STATUS_DRIVING = 1  # status bit: the cart applies the requested voltages
+STATUS_WATCHDOG = 2  # status bit: the watchdog has tripped, the cart applies zero volts
 
-# PC → cart
-CH_VOLTAGE_A = 0
-CH_VOLTAGE_B = 1
-CH_SEQ = 0
-CH_DRIVE = 1
-# cart → PC
-CH_SPEED_A = 0
-CH_SPEED_B = 1
-CH_APPLIED_A = 2
-CH_APPLIED_B = 3
-CH_POSITION_A = 4
-CH_POSITION_B = 5
+# PC → cart: float and int channels
+CH_VOLTAGE_A, CH_VOLTAGE_B = 0, 1
+CH_SEQ, CH_DRIVE = 0, 1
+# cart → PC: float and int channels
+CH_SPEED_A, CH_SPEED_B, CH_APPLIED_A, CH_APPLIED_B, CH_POSITION_A, CH_POSITION_B = range(6)
 CH_BRIDGE_VERSION = 6
-CH_ECHO = 0
-CH_TICK = 1
-CH_STATUS = 2
-CH_HOST_LOST = 3
+CH_ECHO, CH_TICK, CH_STATUS, CH_HOST_LOST = range(4)
 
 
 def _version(value: float) -> int:

@@ -81,18 +81,8 @@ def _utf8_chunks(text: str, size: int) -> list[bytes]:
 
 
 class Encoder:
-    """Encodes generation-A (MAVLink 1) frames with a running sequence number.
-
-    Parameters
-    ----------
-    sysid, compid
-        Source system and component written into every frame (QRC and the cart use 0, 0).
-
-    Attributes
-    ----------
-    seq : int
-        Sequence number of the next frame, 0..255; every frame consumes one and it wraps.
-    """
+    """Encodes generation-A (MAVLink 1) frames from ``sysid``, ``compid`` (QRC and the cart use
+    0, 0); :attr:`seq` is the next frame's sequence number, 0..255, +1 per frame."""
 
     def __init__(self, sysid: int = 0, compid: int = 0) -> None:
         self.sysid = sysid

@@ -150,30 +150,14 @@ _WAIT, _REJECT = 0, -1  # a frame check's verdict besides a size: wait for bytes
 
 @dataclass
 class LinkStats:
-    """Counters of a link's receive side.
+    """Counters of a link's receive side."""
 
-    Attributes
-    ----------
-    frames
-        Valid frames decoded (both generations).
-    crc_errors
-        Generation-A frames with a plausible header but a wrong checksum.
-    garbage_bytes
-        Bytes that belong to no valid frame, each counted once.
-    seq_gaps
-        Times the sequence number of a source (sysid, compid) did not advance by exactly one.
-    lost_frames
-        Frames missing according to those gaps.
-    generation_b_frames
-        Valid MAVLink 2 GPIOX frames (a generation-B cart).
-    """
-
-    frames: int = 0
-    crc_errors: int = 0
-    garbage_bytes: int = 0
-    seq_gaps: int = 0
-    lost_frames: int = 0
-    generation_b_frames: int = 0
+    frames: int = 0  # valid frames decoded (both generations)
+    crc_errors: int = 0  # generation-A frames with a plausible header but a wrong checksum
+    garbage_bytes: int = 0  # bytes that belong to no valid frame, each counted once
+    seq_gaps: int = 0  # times a source's (sysid, compid) sequence number did not advance by one
+    lost_frames: int = 0  # frames missing according to those gaps
+    generation_b_frames: int = 0  # valid MAVLink 2 GPIOX frames (a generation-B cart)
 
     def to_dict(self) -> dict[str, int]:
         return asdict(self)
@@ -201,13 +185,8 @@ def _convert(msgid: int, frame: bytes, mav: mavlink.MAVLink, *header: int) -> Me
 
 
 class Framer:
-    """Splits a byte stream into microOS messages, resynchronising after noise.
-
-    Attributes
-    ----------
-    stats : LinkStats
-        Counters, updated by every :meth:`feed`.
-    """
+    """Splits a byte stream into microOS messages, resynchronising after noise; counts in
+    :attr:`stats`."""
 
     def __init__(self) -> None:
         self.stats = LinkStats()

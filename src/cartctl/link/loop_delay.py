@@ -1,10 +1,8 @@
 """The loop delay read from the bridge's echoes: its spread, how sure it is, and when it changes.
 
-Each command the cart applied comes back as an echo, and the ticks between the measurement it
-answered and that echo are the loop delay of that one command (:mod:`cartctl.link.serial_cart`).
-A host that replies late now and then gives a spread of delays. :class:`EchoDelays` holds the count
-per delay and says whether one value is clear; :func:`delay_change` compares a run's echoes with
-the probe's before it. Pure: counts in, verdicts out.
+Each command the cart applied comes back as an echo; the ticks from the measurement it answered
+to that echo are the loop delay of that command (:mod:`cartctl.link.serial_cart`). A host that
+replies late now and then gives a spread of delays. Pure: counts in, verdicts out.
 """
 
 from __future__ import annotations
@@ -13,13 +11,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["CHANGE_SHARE", "CLEAR_SHARE", "MIN_ECHOES", "EchoDelays", "delay_change"]
-
 MIN_ECHOES = 20
 """Echoes a measurement needs before it can be clear."""
 CLEAR_SHARE = 0.85
-"""Share of the echoes that must agree on one delay for the measurement to be clear (at 20
-echoes, 17 of them)."""
+"""Share of the echoes that must agree on one delay for the measurement to be clear (17 of 20)."""
 CHANGE_SHARE = 0.05
 """During a run, more than this share of echoes at another delay than the probe's is a change."""
 
@@ -30,13 +25,7 @@ def _ticks(n: int) -> str:
 
 @dataclass(frozen=True)
 class EchoDelays:
-    """Echo delays counted per value.
-
-    Attributes
-    ----------
-    counts : tuple of (int, int)
-        ``(delay_ticks, echoes)`` pairs, by delay, echoes > 0.
-    """
+    """Echo delays counted per value: ``(delay_ticks, echoes)`` pairs by delay, echoes > 0."""
 
     counts: tuple[tuple[int, int], ...]
 
@@ -47,7 +36,6 @@ class EchoDelays:
 
     @property
     def echoes(self) -> int:
-        """Echoes counted."""
         return sum(n for _, n in self.counts)
 
     @property
@@ -57,34 +45,34 @@ class EchoDelays:
             return None
         return max(self.counts, key=lambda pair: (pair[1], -pair[0]))[0]
 
+    def _share(self, delay_ticks: int) -> float:
+        total = self.echoes
+        return 0.0 if total == 0 else dict(self.counts).get(delay_ticks, 0) / total
+
     @property
     def mode_share(self) -> float:
         """Share of the echoes at :attr:`mode` (0 without echoes)."""
-        total, mode = self.echoes, self.mode
-        return 0.0 if total == 0 or mode is None else dict(self.counts)[mode] / total
+        return 0.0 if self.mode is None else self._share(self.mode)
+
+    def share_not(self, delay_ticks: int) -> float:
+        """Share of the echoes at any other delay than ``delay_ticks`` (0 without echoes)."""
+        return 0.0 if self.echoes == 0 else 1.0 - self._share(delay_ticks)
 
     @property
     def clear(self) -> bool:
         """At least :data:`MIN_ECHOES` echoes and :data:`CLEAR_SHARE` of them at one delay."""
         return self.echoes >= MIN_ECHOES and self.mode_share >= CLEAR_SHARE
 
-    def share_not(self, delay_ticks: int) -> float:
-        """Share of the echoes at any other delay than ``delay_ticks``."""
-        total = self.echoes
-        return 0.0 if total == 0 else 1.0 - dict(self.counts).get(delay_ticks, 0) / total
-
     def describe(self) -> str:
         """``1 tick in 19 of 20 echoes (95 %), 2 ticks in 1``: the mode first, then the rest."""
         mode = self.mode
         if mode is None:
             return "no echoes"
-        counts = dict(self.counts)
-        rest = [f"{_ticks(d)} in {n}" for d, n in self.counts if d != mode]
         head = (
-            f"{_ticks(mode)} in {counts[mode]} of {self.echoes} echoes "
+            f"{_ticks(mode)} in {dict(self.counts)[mode]} of {self.echoes} echoes "
             f"({100.0 * self.mode_share:.0f} %)"
         )
-        return ", ".join([head, *rest])
+        return ", ".join([head, *(f"{_ticks(d)} in {n}" for d, n in self.counts if d != mode)])
 
     def to_dict(self) -> dict[str, Any]:
         """For ``--json``: mode, echoes, the mode's share, range, clear, counts by delay."""

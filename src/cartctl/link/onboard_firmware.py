@@ -1,20 +1,12 @@
 """A designed controller running on the (virtual) cart itself, as the exported C does.
 
-``cartctl export CONTROLLER.toml --arduino`` writes C for the course template's ``control()``;
-:class:`OnboardFirmware` is the same thing in Python for :class:`~cartctl.link.virtual_cart.VirtualCart`
-(``cartctl virtual-cart --onboard``, ``cartctl monitor virtual --onboard``). Per tick::
-
-    io()       the virtual cart applies the voltage returned at the previous tick, reads speeds
-    control()  reference r (see below), u = controller.step(r, measured speed), per motor;
-               u is returned and reaches the motor at the next io(): one tick of delay, as on
-               the real cart, instead of a PC-side loop's several
-
-The channels are :mod:`cartctl.link.firmware_id`'s layout 1, as the export snippet has them: in,
-the references (rad/s) held from the host's last GPIO; out, speeds, the voltages computed at this
-tick and references, and :data:`~cartctl.link.firmware_id.ONBOARD_ID` in float 6; the ints stay 0.
-With a reference spec (``step:8``, :mod:`cartctl.reference`), the references come from it instead,
-tick 0 at the cart's first ``control()``. The controllers run the fixed Kalman gain, as the C does;
-the template's ``controlEnabled()`` (QRC button 0) is not modelled: the controller always runs.
+:class:`OnboardFirmware` is the Python twin of ``cartctl export --arduino``'s ``control()``, for
+the virtual cart (``cartctl virtual-cart --onboard``, ``cartctl monitor virtual --onboard``): per
+tick and motor u = controller.step(r, measured speed), applied at the next ``io()`` (one tick of
+delay, as on the real cart). The channels are :mod:`cartctl.link.firmware_id`'s layout 1. The
+references come from a reference spec (tick 0 at the first ``control()``) or else from the held
+input channels. The controllers run the fixed Kalman gain, as the C does; the template's
+``controlEnabled()`` (QRC button 0) is not modelled.
 """
 
 from __future__ import annotations
@@ -66,16 +58,11 @@ class OnboardFirmware(HeldChannels):
         if unknown:
             raise InputError(f"the cart has motors a and b, not {', '.join(unknown)}")
         self.controllers = dict(controllers)
-        self.reference = reference
-        self.period_s = float(period_s)
-        self._schedules = (
-            None
-            if reference is None
-            else {
-                m: ReferenceSchedule(reference, MAX_TICKS, self.period_s, m)
-                for m in self.controllers
+        self._schedules: dict[str, ReferenceSchedule] = {}
+        if reference is not None:  # else the held input channels
+            self._schedules = {
+                m: ReferenceSchedule(reference, MAX_TICKS, float(period_s), m) for m in controllers
             }
-        )
         self.reset()
 
     def reset(self) -> None:
@@ -85,12 +72,11 @@ class OnboardFirmware(HeldChannels):
             controller.reset()
 
     def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int = 0) -> None:
-        """A GPIO from the host: every input channel is overwritten and then held."""
         self.hold(floats, ints)
 
     def reference_at(self, motor: str) -> float:
         """The reference (rad/s) of ``motor`` at the current tick."""
-        if self._schedules is not None:
+        if self._schedules:
             return self._schedules[motor][min(self.tick, MAX_TICKS - 1)]
         return self.in_floats[IN_REFERENCE[motor]]
 
