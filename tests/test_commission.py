@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.commission import checks, verify
+from cartctl.commission import checks
+from cartctl.commission import checks as verify
 from cartctl.commission import tuning as timing
 from cartctl.data.trace import Trace
 from cartctl.model import ArxModel

@@ -1,15 +1,26 @@
-"""Commissioning, stage 1: is the cart wired the way the controller will assume? (pure)
+"""Commissioning's judgements, numbers in and numbers out (the reasoning: docs/commission.md).
 
-One open-loop experiment (:func:`checks_sequence`) gives each motor a pulse (the wheel must turn
-the measured speed's way: else swapped leads or encoder channels, or crossed motors, each
-refused with what to swap) and a slow ramp (the breakaway voltage and a rough gain), from which
-:func:`choose_amplitude` sets the excitation amplitude (docs/commission.md).
+- Stage 1, the wiring: one open-loop experiment (:func:`checks_sequence`) gives each motor a
+  pulse (the wheel must turn the measured speed's way: else swapped leads or encoder channels,
+  or crossed motors, each refused with what to swap) and a slow ramp (the breakaway voltage and
+  a rough gain), from which :func:`choose_amplitude` sets the excitation amplitude.
+- Stage 3, the model: ARX na = 2, nb = 3 (nb = 2 for a motor whose last term is within
+  :data:`TAIL_SIGMAS` standard deviations of zero: pole placement would cancel its zero with a
+  gain ``run`` refuses), nk the measured loop delay, estimated on the first :data:`SPLIT` of the
+  excitation; it passes on the rest with a simulation fit ≥ :data:`MIN_FIT_PERCENT`, poles
+  inside :data:`MAX_POLE_RADIUS` and no residual–input cross-correlation beyond
+  :data:`CROSS_CLEAR_FACTOR` × its 99 % bound (whiteness is reported only).
+- Stage 5, the closed-loop step (``cartctl run`` itself): overshoot ≤
+  max(:data:`TARGET_OVERSHOOT_PERCENT`, predicted nominal) + a tolerance for the speed measured
+  on, settling ≤ max(:data:`TARGET_SETTLING_S`, predicted nominal + two ticks).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,6 +29,8 @@ from numpy.typing import NDArray
 from cartctl.cart import SUPPLY_V, encoder_quantum_rad_s
 from cartctl.commission import StageError
 from cartctl.data.trace import Trace
+from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, identify
+from cartctl.tune.grid import worst_metrics
 
 MOTORS = ("a", "b")
 PULSE_V = 4.0  # above a cart's breakaway (about 1–2 V), a third of the supply
@@ -201,3 +214,156 @@ def choose_amplitude(checks: dict[str, MotorCheck], step_rad_s: float) -> Amplit
         f"({FRICTION_MARGIN:g} × the larger breakaway voltage)"
     )
     return Amplitude(voltage, rule)
+
+
+SPLIT = 0.7
+NA, NB = 2, 3
+MIN_FIT_PERCENT = 80.0
+MAX_POLE_RADIUS = 0.99
+CROSS_CLEAR_FACTOR = 2.0
+TAIL_SIGMAS = 2.0
+
+
+def request_for(loop_delay_ticks: int) -> IdentifyRequest:
+    """The identification request for a loop of ``loop_delay_ticks`` (nk = that, at least 1)."""
+    return IdentifyRequest(motors=("a", "b"), na=NA, nb=NB, delay=max(1, int(loop_delay_ticks)),
+                           split=SPLIT)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class MotorVerdict:
+    """One motor's validation figures: simulation fit (%), largest pole radius, cross-correlation
+    lags outside the 99 % bound of all lags, the largest over the bound, the whiteness test
+    (reported only), and why the model fails (empty: it passes)."""
+
+    fit_percent: float
+    pole_radius: float
+    cross_outside: int
+    cross_lags: int
+    cross_ratio: float
+    white: bool
+    problems: tuple[str, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"validation_fit_percent": self.fit_percent, "pole_radius": self.pole_radius,
+                "cross_outside": self.cross_outside, "cross_lags": self.cross_lags,
+                "cross_ratio": self.cross_ratio,
+                "white": self.white, "passed": not self.problems,
+                "problems": list(self.problems)}  # fmt: skip
+
+
+def judge(result: IdentifyResult) -> dict[str, MotorVerdict]:
+    """Each motor's verdict (the rules in the module docstring)."""
+    out = {}
+    for m, r in result.motors.items():
+        fit = float(r.chosen.fit_simulation_percent)
+        radius = float(r.chosen.model.pole_radius())
+        d = r.diagnostics
+        test = d.residuals.to_dict() if d is not None else {}
+        cross = np.abs(np.asarray(test.get("cross", []), dtype=float))
+        bound = float(test.get("cross_bound_99") or 0.0)
+        cross_out, lags = int(np.count_nonzero(cross > bound)), int(cross.size)
+        ratio = float(cross.max() / bound) if cross.size and bound > 0.0 else 0.0
+        white = bool(test.get("white", False))
+        problems = []
+        if not fit >= MIN_FIT_PERCENT:
+            problems.append(f"validation fit {fit:.1f} % < {MIN_FIT_PERCENT:g} %")
+        if not radius < MAX_POLE_RADIUS:
+            problems.append(f"a pole at |z| = {radius:.3f} (stable needs < {MAX_POLE_RADIUS:g})")
+        if ratio > CROSS_CLEAR_FACTOR:
+            problems.append(f"residuals correlated with the input (up to {ratio:.1f} × the 99 % "
+                            "bound)")  # fmt: skip
+        out[m] = MotorVerdict(fit, radius, cross_out, lags, ratio, white, tuple(problems))
+    return out
+
+
+def _noise_tail(fit: Any) -> bool:
+    """The last numerator coefficient within :data:`TAIL_SIGMAS` standard deviations of zero."""
+    b_last = float(fit.model.b[-1])
+    std = np.asarray(fit.theta_std, dtype=float)
+    return fit.model.nb > 1 and bool(np.isfinite(std[-1])) and abs(b_last) < TAIL_SIGMAS * std[-1]
+
+
+def identify_and_judge(
+    trace: Trace, loop_delay_ticks: int
+) -> tuple[IdentifyResult, IdentifyRequest, dict[str, MotorVerdict]]:
+    """Identify both motors, refit a noise tail with one term fewer, and judge."""
+    request = request_for(loop_delay_ticks)
+    result = identify([trace], request)
+    short = tuple(m for m, r in result.motors.items() if _noise_tail(r.chosen))
+    if short:
+        again = identify([trace], replace(request, nb=NB - 1, motors=short))
+        motors = {m: again.motors.get(m, r) for m, r in result.motors.items()}
+        note = f"motor(s) {', '.join(short)}: nb = {NB - 1}, the last term being noise"
+        result = IdentifyResult(result.period_s, motors, (*result.notes, note))
+    return result, request, judge(result)
+
+
+def model_verdict(verdicts: dict[str, MotorVerdict], excitation_v: float) -> None:
+    """Raise :class:`StageError` naming the first failing motor and why (one line)."""
+    for m, v in verdicts.items():
+        if v.problems:
+            raise StageError(
+                f"identification: motor {m}'s model fails validation ({'; '.join(v.problems)}); "
+                f"the {excitation_v:g} V excitation does not give a model to tune on: check the "
+                "encoder (noise, loose cable) and that nothing touches the wheels"
+            )
+
+
+STEP_RAD_S = 10.0
+REFERENCE = f"step:{STEP_RAD_S:g}"
+DURATION_S = 2.0
+TARGET_OVERSHOOT_PERCENT = 5.0
+TARGET_SETTLING_S = 0.15
+TRUE_SPEED_TOLERANCE_PP = 1.0  # percentage points: the loop's own tick-to-tick spread
+
+
+def run_argv(plant: str, controller: Path, out: Path, *, fast: bool,
+             plant_options: Sequence[str] = ()) -> list[str]:  # fmt: skip
+    """The ``cartctl run`` arguments of the verification step."""
+    argv = ["run", "--plant", plant, "--controller", str(controller), "--reference", REFERENCE,
+            "--duration", f"{DURATION_S:g}", "--rerun", "save", "--out", str(out),
+            "--name", "verification", "--json", *plant_options]  # fmt: skip
+    return argv + (["--fast"] if fast else [])
+
+
+@dataclass(frozen=True)
+class Verification:
+    """Measured (worse of motors a and b; None: did not settle) against predicted (the tuning's
+    ``nominal_…`` and ``worst_…`` figures), the pass ``limits`` with the ``speed`` judged, and the
+    verdict."""
+
+    measured: dict[str, float | None]
+    predicted: dict[str, float | None]
+    limits: dict[str, Any]
+    passed: bool
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"measured": self.measured, "predicted": self.predicted, "limits": self.limits,
+                "pass": self.passed}  # fmt: skip
+
+
+def compare(summary: dict[str, Any], predicted: dict[str, float | None],
+            smoothed: dict[str, dict[str, Any]] | None = None) -> Verification:  # fmt: skip
+    """Judge a ``cartctl run --json`` summary against the tuning's prediction (module docstring);
+    ``smoothed`` per motor, the run's figures on the smoothed speed, judged where there is no true
+    speed."""
+    motors = summary.get("motors") or {}
+    count_pp = 100.0 * encoder_quantum_rad_s() / STEP_RAD_S
+    if summary.get("metrics_signal") == "true_speed":
+        speed, tol = "true", TRUE_SPEED_TOLERANCE_PP
+    elif smoothed:
+        speed, tol = "smoothed", TRUE_SPEED_TOLERANCE_PP + 0.5 * count_pp
+        motors = smoothed
+    else:
+        speed, tol = "encoder", count_pp
+    worst = worst_metrics(motors)
+    measured = {k: worst[k] for k in ("overshoot_percent", "settling_time_s")}
+    nominal_os = predicted.get("nominal_overshoot_percent") or 0.0
+    nominal_ts = predicted.get("nominal_settling_time_s") or 0.0
+    max_os = max(TARGET_OVERSHOOT_PERCENT, nominal_os) + tol
+    max_ts = max(TARGET_SETTLING_S, nominal_ts + 0.02)
+    limits = {"overshoot_percent": max_os, "settling_time_s": max_ts, "speed": speed}
+    os_, ts = measured["overshoot_percent"], measured["settling_time_s"]
+    passed = os_ is not None and ts is not None and os_ <= max_os and ts <= max_ts
+    return Verification(measured, dict(predicted), limits, bool(passed))

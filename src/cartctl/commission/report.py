@@ -9,7 +9,6 @@ commissioning: they come back as text for the summary."""
 
 from __future__ import annotations
 
-import math
 import uuid
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -20,8 +19,9 @@ import numpy as np
 import rerun as rr
 from numpy.typing import NDArray
 
-from cartctl.commission import tuning, verify
+from cartctl.commission import checks, tuning
 from cartctl.data.trace import Trace
+from cartctl.measures.numfmt import format_fixed
 from cartctl.sinks.rerun_layout import ENTITY_PATHS, blueprint
 from cartctl.sinks.rerun_problems import file_failure
 from cartctl.sinks.rerun_sink import APPLICATION_ID
@@ -29,13 +29,9 @@ from cartctl.sinks.rerun_sink import APPLICATION_ID
 Series = dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]  # name → (time s, values)
 
 
-def fmt(value: float | None, digits: int = 2, scale: float = 1.0, unit: str = "") -> str:
-    """A figure for a table: '—' for None, '∞' for infinity."""
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "—"
-    if math.isinf(value):
-        return "∞"
-    return f"{value * scale:.{digits}f}{unit}"
+def fmt(value: float | None, digits: int = 2, scale: float = 1.0) -> str:
+    """A figure for a table, ``scale`` × ``value`` to ``digits`` decimals ('—' for None)."""
+    return format_fixed(None if value is None else value * scale, digits)
 
 
 def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
@@ -199,7 +195,7 @@ def tuning_steps(controller_path: Path, model_path: Path, png: Path) -> Series:
     return series
 
 
-def verification_body(checked: verify.Verification, summary: dict[str, Any],
+def verification_body(checked: checks.Verification, summary: dict[str, Any],
                       argv: list[str]) -> str:  # fmt: skip
     """The verification section: measured against predicted, the bounds, pass or fail."""
     m, p, lim = checked.measured, checked.predicted, checked.limits
@@ -214,10 +210,10 @@ def verification_body(checked: verify.Verification, summary: dict[str, Any],
         f"`cartctl {' '.join(argv)}` (worse of motors a and b, on the {lim['speed']} speed).\n\n"
         + table(["", "measured", "predicted nominal", "predicted worst", "pass bound"], rows)
         + f"\n\n**{'PASS' if checked.passed else 'FAIL'}**. Bounds: overshoot ≤ max("
-        f"{verify.TARGET_OVERSHOOT_PERCENT:g} %, predicted nominal) + a tolerance "
-        f"({verify.TRUE_SPEED_TOLERANCE_PP:g} point on a true speed, half an encoder count per "
+        f"{checks.TARGET_OVERSHOOT_PERCENT:g} %, predicted nominal) + a tolerance "
+        f"({checks.TRUE_SPEED_TOLERANCE_PP:g} point on a true speed, half an encoder count per "
         "tick over the step more on the smoothed speed, a whole count on the bare encoder "
-        f"speed); settling ≤ max({verify.TARGET_SETTLING_S * 1e3:g} ms, "
+        f"speed); settling ≤ max({checks.TARGET_SETTLING_S * 1e3:g} ms, "
         "predicted nominal + 20 ms). The prediction is the linear model's: a cart's friction "
         "and encoder, which the model leaves out, usually add a point or two of overshoot; the "
         "bounds are the targets, the prediction is shown beside them.\n\n"

@@ -16,7 +16,7 @@ import numpy as np
 
 from cartctl.cart import PERIOD_S
 from cartctl.cli.progress import ProgressBar
-from cartctl.commission import StageError, checks, modelcheck, report, tuning, verify
+from cartctl.commission import StageError, checks, report, tuning
 from cartctl.data.trace import Trace, write_trace
 from cartctl.plants.base import ClockedPlant
 from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
@@ -120,7 +120,7 @@ class Commission:
         failure = None
         try:
             checks.verdict(found)
-            self.amplitude = checks.choose_amplitude(found, verify.STEP_RAD_S)
+            self.amplitude = checks.choose_amplitude(found, checks.STEP_RAD_S)
         except StageError as exc:
             failure = exc
         body = report.checks_body(self.loop_delay_ticks, found, self.description, self.amplitude)
@@ -165,10 +165,10 @@ class Commission:
         from cartctl.identification.pipeline import model_file
 
         assert self.excitation is not None and self.amplitude is not None
-        self.say("identification", f"ARX na={modelcheck.NA} nb={modelcheck.NB} "
+        self.say("identification", f"ARX na={checks.NA} nb={checks.NB} "
                  f"nk={max(1, self.loop_delay_ticks)}, validated on the last "
-                 f"{1 - modelcheck.SPLIT:.0%}")  # fmt: skip
-        result, request, verdicts = modelcheck.identify_and_judge(self.excitation,
+                 f"{1 - checks.SPLIT:.0%}")  # fmt: skip
+        result, request, verdicts = checks.identify_and_judge(self.excitation,
                                                                   self.loop_delay_ticks)  # fmt: skip
         passed = not any(v.problems for v in verdicts.values())
         if not passed:
@@ -198,7 +198,7 @@ class Commission:
                            "dc_gain": r.chosen.model.dc_gain(), **verdicts[m].to_dict()}
                        for m, r in result.motors.items()}}  # fmt: skip
         try:
-            modelcheck.verdict(verdicts, self.amplitude.voltage_v)
+            checks.model_verdict(verdicts, self.amplitude.voltage_v)
         except StageError as exc:
             self.report.add("identification", body + f"\n\n**Stopped:** {exc}")
             raise
@@ -236,10 +236,10 @@ class Commission:
         """Stage 5: ``cartctl run`` of the controller on the plant; measured against predicted."""
         assert self.tuned is not None
         fast = plant_kind(self.spec) in SIMULATED
-        self.say("verification", f"{verify.REFERENCE} for {verify.DURATION_S:g} s with "
+        self.say("verification", f"{checks.REFERENCE} for {checks.DURATION_S:g} s with "
                  f"controller.toml{' (--fast)' if fast else ''}")  # fmt: skip
         opts = self.plant_options
-        argv = verify.run_argv(self.spec, self.controller_path, self.out, fast=fast,
+        argv = checks.run_argv(self.spec, self.controller_path, self.out, fast=fast,
                                plant_options=["--preset", opts["preset"], "--noise",
                                               str(opts["noise_std_rad_s"]), "--connect-timeout",
                                               str(opts["connect_timeout_s"])]
@@ -257,7 +257,7 @@ class Commission:
         if summary.get("metrics_signal") != "true_speed":
             smoothed = {m: f["smoothed"] for m, f in (summary.get("motors") or {}).items()
                         if isinstance(f.get("smoothed"), dict)} or None  # fmt: skip
-        checked = verify.compare(summary, tuning.replace_none(self.tuned.predicted()), smoothed)
+        checked = checks.compare(summary, tuning.replace_none(self.tuned.predicted()), smoothed)
         self.results["verification"] = {**checked.to_dict(), "trace": summary.get("trace"),
                                          "recording": summary.get("recording"),
                                          "command": "cartctl " + " ".join(argv)}  # fmt: skip
