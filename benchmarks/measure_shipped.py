@@ -24,7 +24,7 @@ trace it writes. For each controller file and each plant that has the controller
 Step (``--reference step:10``, 2 s): overshoot and settling of each motor's *true* speed where the
 plant gives one, in the band max(2 % of the step, one encoder count per tick = 0.3506 rad/s), and
 the settling time as a multiple of the time-optimal bound
-(:func:`cartctl.design.limit.settling_bound`) on the model with the same loop delay.
+(:func:`cartctl.design.analysis.settling_bound`) on the model with the same loop delay.
 
 Estimator (``--reference square:8:2``, 10 s, plants with a true speed): RMS(estimate − true speed)
 divided by RMS(measured speed − true speed), over the whole run and over the steady windows alone
@@ -55,8 +55,8 @@ try:
     from cartctl.cart import encoder_quantum_rad_s
     from cartctl.data.modelfile import load_models, save_models
     from cartctl.data.read import read_trace
+    from cartctl.design.analysis import settling_bound
     from cartctl.design.controllerfile import load_controller
-    from cartctl.design.limit import settling_bound
     from cartctl.measures.stepinfo import step_info
     from cartctl.model import ArxModel
 except ModuleNotFoundError:  # not installed: run from a checkout
@@ -64,8 +64,8 @@ except ModuleNotFoundError:  # not installed: run from a checkout
     from cartctl.cart import encoder_quantum_rad_s
     from cartctl.data.modelfile import load_models, save_models
     from cartctl.data.read import read_trace
+    from cartctl.design.analysis import settling_bound
     from cartctl.design.controllerfile import load_controller
-    from cartctl.design.limit import settling_bound
     from cartctl.measures.stepinfo import step_info
     from cartctl.model import ArxModel
 

@@ -10,8 +10,12 @@ import pytest
 from scipy import signal
 
 from cartctl.data.modelfile import load_models
-from cartctl.design.analysis import StepAnalysis
-from cartctl.design.limit import in_settling_band, settling_band_rad_s, settling_bound
+from cartctl.design.analysis import (
+    StepAnalysis,
+    in_settling_band,
+    settling_band_rad_s,
+    settling_bound,
+)
 from cartctl.errors import InputError
 from cartctl.measures.stepinfo import step_info
 from cartctl.model import ArxModel

@@ -37,8 +37,8 @@ import pytest
 from cartctl.cli import main
 from cartctl.data.modelfile import load_models
 from cartctl.data.read import read_trace
+from cartctl.design.analysis import settling_bound
 from cartctl.design.controllerfile import load_controller
-from cartctl.design.limit import settling_bound
 from cartctl.measures.stepinfo import step_info
 from realtime_upsets import link_upsets
 

@@ -1,27 +1,44 @@
-"""Closed-loop simulations of a design: the reference step and the load-disturbance step.
+"""Closed-loop simulations of a design, and the physical limit its step is measured against.
 
 The runtime controller (:mod:`cartctl.runtime`, with its estimator, anti-windup and limit) runs
 against the model as a plant saturated at the supply, in the tick order of
-:mod:`cartctl.runtime.base`. A load torque acts like a voltage d added at the plant input; the
-plant sees v[k] = u[k − extra] + d (a serial link delays the command, not the load), so linear
-and unsaturated Y(z) = G / (1 + L) · D(z) with L = C_fb·G·z^(−extra). Pure: no clock, no I/O.
+:mod:`cartctl.runtime.base`: the reference step, and the load-disturbance step. A load torque acts
+like a voltage d added at the plant input; the plant sees v[k] = u[k − extra] + d (a serial link
+delays the command, not the load), so linear and unsaturated Y(z) = G / (1 + L) · D(z) with
+L = C_fb·G·z^(−extra).
+
+The limit, the fastest settling any voltage within ±12 V allows: on the model with the design's
+extra delay, y = T u for a step from rest (T the Toeplitz matrix of the impulse response), so
+settling from tick N is a linear feasibility problem: |u[k]| ≤ U_max for all k and |y[k] − r| ≤ max(0.02 |r|, q) for
+N ≤ k < N + M (hold, default 2 s; q one encoder count per tick, 0.3506 rad/s at 10 ms). The
+smallest feasible N (bisection over HiGHS linear programs) is the bound no controller beats; a
+step's settling time, measured in the same band (:func:`in_settling_band`), is reported as a ratio
+to it (a little below 1 for a controller matching it: the bound is whole ticks, a settling time
+interpolates). Of the sequences settling at N, the one closest to r after N is returned, to draw.
 """
 
 from __future__ import annotations
 
+import functools
+import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.measures.stepinfo import StepInfo, step_info
+from cartctl.cart import SUPPLY_V, encoder_quantum_rad_s
+from cartctl.errors import InputError
+from cartctl.measures.stepinfo import (
+    SETTLING_FRACTION,
+    StepInfo,
+    settling_half_width,
+    step_info,
+)
 from cartctl.model import ArxModel
 from cartctl.plants.sim import ArxPlant
 from cartctl.runtime.base import Controller
-
-__all__ = ["RECOVERY_FRACTION", "DisturbanceResponse", "simulate_disturbance", "simulate_step"]
 
 RECOVERY_FRACTION = 0.02
 """A disturbance's deviation counts as recovered once it stays within this fraction of its peak."""
@@ -158,3 +175,174 @@ def simulate_disturbance(
     d = float(disturbance_v)
     time_s, speed, _, voltage = _run(controller, model, duration_s, 0.0, d, extra_delay_ticks)
     return DisturbanceResponse(time_s, speed, voltage, d)
+
+
+def settling_band_rad_s(
+    step_rad_s: float,
+    period_s: float,
+    *,
+    fraction: float = SETTLING_FRACTION,
+    quantum_rad_s: float | None = None,
+) -> float:
+    """Half-width (rad/s) of the settling band of a step r: max(fraction · |r|, q)
+    (:func:`~cartctl.measures.stepinfo.settling_half_width`), q by default one encoder count per
+    tick (a narrower band would judge the encoder, not the controller; 0: the fraction alone).
+
+    InputError for a zero or non-finite step, a fraction outside (0, 1), a negative floor, or a
+    step inside its own band (settled at rest: there is no bound to give).
+    """
+    if step_rad_s == 0.0 or not math.isfinite(step_rad_s):
+        raise InputError(f"step size must be a non-zero number of rad/s, got {step_rad_s}")
+    q = encoder_quantum_rad_s(period_s) if quantum_rad_s is None else float(quantum_rad_s)
+    band = settling_half_width(step_rad_s, q, fraction)
+    if band >= abs(step_rad_s):
+        raise InputError(
+            f"a {step_rad_s:g} rad/s step lies within its own settling band (±{band:.4g} rad/s, "
+            "one encoder count per tick): use a larger step"
+        )
+    return band
+
+
+def in_settling_band(step: StepAnalysis, period_s: float) -> StepAnalysis:
+    """The same simulated step (from rest, at ``step.time_s[0]``) with its metrics measured in
+    the band of :func:`settling_band_rad_s`, as against :func:`settling_bound` (only the settling
+    time can change)."""
+    r = float(step.reference_rad_s[-1])
+    settling_band_rad_s(r, period_s)  # refuses a step inside its own band, as the bound does
+    info = step_info(step.time_s, step.speed_rad_s, reference=r, initial=0.0,
+                     onset_s=float(step.time_s[0]), settling_floor=encoder_quantum_rad_s(period_s))  # fmt: skip
+    return replace(step, info=info)
+
+
+@dataclass(frozen=True)
+class SettlingBound:
+    """The time-optimal settling bound of a step: the smallest time (s, and ticks) from which
+    the output can stay in the band (half-width ``band_rad_s``), a voltage sequence achieving it
+    and the delayed plant's response, and the loop delay it is for (nk − 1 + extra delay)."""
+
+    settling_time_s: float
+    ticks: int
+    voltage_v: NDArray[np.float64]
+    speed_rad_s: NDArray[np.float64]
+    loop_delay_ticks: int
+    band_rad_s: float
+
+
+def _feasible(
+    impulse: NDArray[np.float64], n_settle: int, hold: int, r: float, band: float, u_max: float
+) -> NDArray[np.float64] | None:
+    from scipy import optimize
+    from scipy.linalg import toeplitz
+
+    n = n_settle + hold
+    t = toeplitz(impulse[:n], np.zeros(n))[n_settle:]  # rows: y[k] for k in [N, N + M)
+    a_ub = np.vstack([t, -t])
+    b_ub = np.concatenate([np.full(hold, r + band), np.full(hold, -(r - band))])
+    res = optimize.linprog(
+        np.zeros(n), A_ub=a_ub, b_ub=b_ub, bounds=[(-u_max, u_max)] * n, method="highs"
+    )
+    return res.x if res.status == 0 else None
+
+
+def settling_bound(
+    model: ArxModel,
+    step_rad_s: float,
+    *,
+    voltage_limit_v: float = SUPPLY_V,
+    extra_delay_ticks: int = 0,
+    band: float = SETTLING_FRACTION,
+    quantum_rad_s: float | None = None,
+    hold_s: float = 2.0,
+    max_s: float = 3.0,
+) -> SettlingBound:
+    """Fastest settling of a step from rest to ``step_rad_s`` that any voltage within
+    ±``voltage_limit_v`` allows, on the model with ``extra_delay_ticks`` more input delay (the
+    bound without plus d ticks), in the band max(``band`` · |r|, ``quantum_rad_s``), held for
+    ``hold_s``, searched up to ``max_s``.
+
+    Raises
+    ------
+    InputError
+        The step cannot be held within the limit at all (|r| − band above the DC gain × limit),
+        lies within its own band, a bad extra delay, or an unstable model.
+    """
+    return _settling_bound(model, float(step_rad_s), float(voltage_limit_v), extra_delay_ticks,
+                           float(band), quantum_rad_s, float(hold_s), float(max_s))  # fmt: skip
+
+
+@functools.lru_cache(maxsize=256)
+def _settling_bound(
+    model: ArxModel,
+    step_rad_s: float,
+    voltage_limit_v: float,
+    extra_delay_ticks: int,
+    band: float,
+    quantum_rad_s: float | None,
+    hold_s: float,
+    max_s: float,
+) -> SettlingBound:
+    """:func:`settling_bound`, cached (design, tune and commission ask for the same bound many
+    times); its arrays are read-only, as every caller shares them."""
+    plant = model.with_extra_delay(extra_delay_ticks)
+    if not plant.is_stable():
+        raise InputError("the settling bound needs a stable model")
+    gain = plant.dc_gain()
+    tol = settling_band_rad_s(
+        step_rad_s, plant.period_s, fraction=band, quantum_rad_s=quantum_rad_s
+    )
+    if abs(step_rad_s) - tol > abs(gain) * voltage_limit_v:
+        raise InputError(
+            f"a {step_rad_s:g} rad/s step cannot be held within ±{voltage_limit_v:g} V: the model "
+            f"reaches at most {abs(gain) * voltage_limit_v:.3g} rad/s"
+        )
+    ts = plant.period_s
+    hold = max(1, round(hold_s / ts))
+    n_max = max(1, round(max_s / ts))
+    impulse = plant.simulate(np.r_[1.0, np.zeros(n_max + hold)])
+    # feasibility only grows with N (a sequence settling at N settles at N + 1): gallop up from
+    # N = 0 (a bound is a few ticks; small programs are cheap), then bisect the last doubling
+    lo, hi, best = -1, 0, None
+    while (best := _feasible(impulse, hi, hold, step_rad_s, tol, voltage_limit_v)) is None:
+        if hi >= n_max:
+            raise InputError(f"no admissible voltage settles this step within {max_s:g} s")
+        lo, hi = hi, min(n_max, 2 * hi + 1)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        u = _feasible(impulse, mid, hold, step_rad_s, tol, voltage_limit_v)
+        if u is None:
+            lo = mid
+        else:
+            hi, best = mid, u
+    best = _closest(impulse, hi, hold, step_rad_s, tol, voltage_limit_v, best)
+    speed = plant.simulate(best)
+    best.setflags(write=False)
+    speed.setflags(write=False)
+    return SettlingBound(hi * ts, hi, best, speed, plant.nk - 1, tol)
+
+
+def _closest(
+    impulse: NDArray[np.float64],
+    n_settle: int,
+    hold: int,
+    r: float,
+    band: float,
+    u_max: float,
+    fallback: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Among the sequences settling at N, the one with the least Σ|y − r| after N: variables
+    [u (n), t (M)], minimise Σ t subject to −t ≤ y − r ≤ t and the band."""
+    from scipy import optimize
+    from scipy.linalg import toeplitz
+
+    n = n_settle + hold
+    t_mat = toeplitz(impulse[:n], np.zeros(n))[n_settle:]
+    eye = np.eye(hold)
+    zeros = np.zeros((hold, hold))
+    a_ub = np.block([[t_mat, -eye], [-t_mat, -eye], [t_mat, zeros], [-t_mat, zeros]])
+    b_ub = np.concatenate(
+        [np.full(hold, r), np.full(hold, -r), np.full(hold, r + band), np.full(hold, band - r)]
+    )
+    cost = np.concatenate([np.zeros(n), np.ones(hold)])
+    bounds = [(-u_max, u_max)] * n + [(0.0, None)] * hold
+    res = optimize.linprog(cost, A_ub=a_ub, b_ub=b_ub, bounds=bounds, method="highs")
+    return res.x[:n] if res.status == 0 else fallback

@@ -1,10 +1,7 @@
-"""Numbers as the design command prints them, on :mod:`cartctl.measures.numfmt`'s rules.
-
-A single value gets 3 significant figures (``0.178``, ``12.4``); a list of values shares one
-number of decimals, 3 significant figures for its largest (``0.088, -0.011, 0.636`` rather than
-``0.0879, -0.01089, 0.636``); a value far below its scale (a steady-state error of 1.8e-15 rad/s
-after a 10 rad/s step) prints as a zero of that precision (``0.0``), without a sign. Levels in dB
-get two decimals. Pure text, no numpy.
+"""Numbers as the design command prints them (:mod:`cartctl.measures.numfmt`'s rules): 3
+significant figures for a value; one number of decimals for a list (3 figures for its largest);
+a value far below its scale (1.8e-15 after a 10 rad/s step) as an unsigned zero; dB with two
+decimals. Pure text, no numpy.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """``cartctl design --report DIR``: two PNGs per motor (matplotlib's Agg canvas).
 
 ``design_X.png``: the open-loop Bode plot with its margins; the simulated step beside the
-time-optimal one (:mod:`cartctl.design.limit`). ``analysis_X.png``: |S| and |T| with Ms and Mt;
+time-optimal one (:mod:`cartctl.design.analysis`). ``analysis_X.png``: |S| and |T| with Ms and Mt;
 the Nyquist curve of L with the circle of radius 1/Ms around −1; the load-disturbance step.
 """
 
@@ -13,8 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cartctl.design.analysis import StepAnalysis
-from cartctl.design.limit import in_settling_band, settling_bound
+from cartctl.design.analysis import StepAnalysis, in_settling_band, settling_bound
 from cartctl.design.loop_report import MotorAnalysis
 from cartctl.design.numbers import db, sig
 from cartctl.model import ArxModel

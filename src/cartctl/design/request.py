@@ -190,9 +190,8 @@ RANGES: dict[str, tuple[Callable[[Any], bool], str]] = {
     "voltage_limit_v": (_voltage_limit, f"in (0, {SUPPLY_V:g}] V"),
     "step_rad_s": (lambda v: _number(v) and v != 0.0, "a non-zero speed in rad/s"),
 }  # fmt: skip
-"""Per numeric request field: the test its value must pass (no model needed) and the range in
-words. The model-dependent limits (a crossover a PI can reach, a settling time of at least the
-loop's deadbeat time) are the designs' own."""
+"""Per numeric request field: the test its value must pass (no model needed; the model's limits
+are the designs' own) and the range in words."""
 
 _PI_FIELDS = frozenset({"phase_margin_deg", "crossover_hz", "bandwidth_hz"})
 _POLES_FIELDS = frozenset({"settling_time_s", "overshoot_percent"})
