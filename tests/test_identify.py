@@ -14,7 +14,7 @@ from cartctl.data.trace import Trace, write_trace
 from cartctl.errors import InputError
 from cartctl.identification.arx import IdentificationError, fit_arx
 from cartctl.identification.orders import delay_evidence
-from cartctl.identification.prefilter import Prefilter
+from cartctl.identification.pipeline import Prefilter
 from cartctl.model import ArxModel
 from cartctl.plants.physics import PhysicsPlant
 from cartctl.runtime.experiment import run_experiment

@@ -23,9 +23,8 @@ from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.design.make import design_models
 from cartctl.design.request import DesignRequest
 from cartctl.errors import InputError, PlantError
-from cartctl.identification.pipeline import IdentifyRequest
+from cartctl.identification.pipeline import IdentifyRequest, Prefilter
 from cartctl.identification.pipeline import identify as identify_traces
-from cartctl.identification.prefilter import Prefilter
 from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
 from cartctl.runtime.fast import run_in_memory
 from cartctl.session.prepare import prepare_run

@@ -8,12 +8,15 @@ the raw, unaveraged data, so every variant compares on equal terms.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import signal
 
 from cartctl.data.modelfile import ModelFile, Provenance
 from cartctl.data.trace import Trace
@@ -23,9 +26,50 @@ from cartctl.identification.diagnostics import Diagnostics, diagnose, on_validat
 from cartctl.identification.etfe import average_cycles, find_period, periodic_regression_pad
 from cartctl.identification.oe import check_oe_orders, fit_oe
 from cartctl.identification.orders import DelayEstimate, JointDelay, delay_evidence, joint_delay
-from cartctl.identification.prefilter import Prefilter
 
 METHODS = ("arx", "oe")
+
+
+@dataclass(frozen=True)
+class Prefilter:
+    """The report's Butterworth prefilter (§3.2): one low-pass of ``order`` (1..12) with its −3 dB
+    point at ``cutoff_hz`` (Hz) on input and output before the fit, which keeps their ratio, the
+    transfer function, in the pass band. The report: 6th order at 20 Hz, causal (MATLAB's
+    ``filter``); ``zero_phase`` runs it forward and backward (no lag, squared magnitude)."""
+
+    order: int = 6
+    cutoff_hz: float = 20.0
+    zero_phase: bool = False
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.order, int) or not 1 <= self.order <= 12:
+            raise InputError(
+                f"prefilter order (--order) must be a whole number in 1..12, got {self.order!r}"
+            )
+        if math.isnan(self.cutoff_hz):
+            raise InputError("prefilter cut-off (--cutoff-hz) must be a number, got nan")
+        if not (math.isfinite(self.cutoff_hz) and self.cutoff_hz > 0.0):
+            raise InputError(
+                "prefilter cut-off (--cutoff-hz) must be a positive, finite frequency in Hz, got "
+                f"{self.cutoff_hz:g}"
+            )
+
+    def apply(self, x: ArrayLike, period_s: float) -> NDArray[np.float64]:
+        """Filter one signal (one value per tick of ``period_s`` s), starting from rest."""
+        nyquist_hz = 0.5 / period_s
+        if self.cutoff_hz >= nyquist_hz:
+            raise InputError(
+                f"prefilter cut-off (--cutoff-hz) {self.cutoff_hz:g} Hz must lie below the Nyquist frequency "
+                f"{nyquist_hz:g} Hz"
+            )
+        sos = signal.butter(self.order, self.cutoff_hz, fs=1.0 / period_s, output="sos")
+        arr = np.asarray(x, dtype=float)
+        return signal.sosfiltfilt(sos, arr) if self.zero_phase else signal.sosfilt(sos, arr)
+
+    def describe(self) -> str:
+        """For provenance and tables, e.g. 'butter order 6, 20 Hz, causal'."""
+        kind = "zero-phase" if self.zero_phase else "causal"
+        return f"butter order {self.order}, {self.cutoff_hz:g} Hz, {kind}"
 
 
 @dataclass(frozen=True)

@@ -151,8 +151,7 @@ def request_from_args(
     """The options as an :class:`IdentifyRequest`; ``loop_delay_ticks`` (the traces' meta files)
     when ``--loop-delay`` is not given."""
     from cartctl.identification.orders import parse_grid
-    from cartctl.identification.pipeline import IdentifyRequest
-    from cartctl.identification.prefilter import Prefilter
+    from cartctl.identification.pipeline import IdentifyRequest, Prefilter
 
     if args.loop_delay is not None:
         loop_delay_ticks = args.loop_delay
