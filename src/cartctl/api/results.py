@@ -9,7 +9,7 @@ from __future__ import annotations
 import html
 import math
 import shlex
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -76,55 +76,6 @@ def _drawn(columns: Mapping[str, NDArray[np.float64]], name: str) -> NDArray[np.
     """A column without the stop row (the zero-volt command a run ends with)."""
     values = np.asarray(columns[name], dtype=float)
     return values[:-1] if values.size > 1 else values
-
-
-def plot_run(
-    columns: Mapping[str, NDArray[np.float64]],
-    motors: Sequence[str],
-    title: str,
-    axes: Any = None,
-) -> Any:
-    """Speed with its reference over voltage, per motor, of a run's ``columns``; returns the figure.
-
-    ``columns`` hold ``time_s`` (s), ``reference_m``, ``speed_m``, optionally ``true_speed_m`` and
-    ``estimate_m`` (rad/s) and ``voltage_m`` (V) per motor m; the stop row is not drawn, so the
-    voltage does not seem to drop to 0 V at the end. ``axes`` (speed axes, voltage axes) draw one
-    motor into given axes; None makes a new figure."""
-    if axes is None:
-        import matplotlib.pyplot as plt
-
-        fig, grid = plt.subplots(2, len(motors), sharex=True, squeeze=False,
-                                 figsize=(4 + 4.5 * len(motors), 6), layout="constrained")  # fmt: skip
-        pairs = [(grid[0][i], grid[1][i]) for i in range(len(motors))]
-    else:
-        if len(motors) != 1 or len(axes) != 2:
-            raise ValueError("axes: give (speed_axes, voltage_axes) for one motor")
-        pairs = [tuple(axes)]
-        fig = pairs[0][0].figure
-    time_s = _drawn(columns, "time_s")
-    for motor, (top, bottom) in zip(motors, pairs, strict=True):
-        top.plot(time_s, _drawn(columns, f"reference_{motor}"), "k--", label="reference")
-        top.plot(time_s, _drawn(columns, f"speed_{motor}"), label="measured speed")
-        for name, label in (("true_speed", "true speed"), ("estimate", "estimate")):
-            values = columns.get(f"{name}_{motor}")
-            if (
-                values is not None
-                and np.isfinite(values).any()
-                and not np.array_equal(values, columns[f"speed_{motor}"])
-            ):
-                top.plot(time_s, _drawn(columns, f"{name}_{motor}"), label=label, alpha=0.8)
-        top.set_title(f"motor {motor}")
-        top.set_ylabel("speed (rad/s)")
-        top.legend(loc="lower right", fontsize="small")
-        top.grid(True, alpha=0.3)
-        bottom.step(time_s, _drawn(columns, f"voltage_{motor}"), where="post", color="C3",
-                    label="commanded voltage")  # fmt: skip
-        bottom.set_ylabel("voltage (V)")
-        bottom.set_xlabel("time (s)")
-        bottom.legend(loc="lower right", fontsize="small")
-        bottom.grid(True, alpha=0.3)
-    fig.suptitle(title)
-    return fig
 
 
 MOTORS = ("a", "b")
@@ -338,6 +289,8 @@ class SimulationResult(_Shown):
     def plot(self, motor: str = "both", ax: Any = None) -> Any:
         """Speed, reference and voltage over time (matplotlib); returns the figure.
 
+        The stop row is not drawn, so the voltage does not seem to drop to 0 V at the end.
+
         Parameters
         ----------
         motor : {'both', 'a', 'b'}
@@ -348,4 +301,35 @@ class SimulationResult(_Shown):
         motors = self.motors if motor == "both" else (motor,)
         if any(m not in self.motors for m in motors):
             raise InputError(f"motor must be 'a', 'b' or 'both', got {motor!r}")
-        return plot_run(self.columns, motors, "Closed-loop run: " + self.what(sep="\n"), ax)
+        if ax is None:
+            import matplotlib.pyplot as plt
+
+            fig, grid = plt.subplots(2, len(motors), sharex=True, squeeze=False,
+                                     figsize=(4 + 4.5 * len(motors), 6), layout="constrained")  # fmt: skip
+            pairs = [(grid[0][i], grid[1][i]) for i in range(len(motors))]
+        else:
+            if len(motors) != 1 or len(ax) != 2:
+                raise ValueError("axes: give (speed_axes, voltage_axes) for one motor")
+            pairs = [tuple(ax)]
+            fig = pairs[0][0].figure
+        columns = self.columns
+        time_s = _drawn(columns, "time_s")
+        for m, (top, bottom) in zip(motors, pairs, strict=True):
+            top.plot(time_s, _drawn(columns, f"reference_{m}"), "k--", label="reference")
+            top.plot(time_s, _drawn(columns, f"speed_{m}"), label="measured speed")
+            for name, label in (("true_speed", "true speed"), ("estimate", "estimate")):
+                values = columns.get(f"{name}_{m}")
+                if (values is not None and np.isfinite(values).any()
+                        and not np.array_equal(values, columns[f"speed_{m}"])):  # fmt: skip
+                    top.plot(time_s, _drawn(columns, f"{name}_{m}"), label=label, alpha=0.8)
+            top.set_title(f"motor {m}")
+            top.set_ylabel("speed (rad/s)")
+            bottom.step(time_s, _drawn(columns, f"voltage_{m}"), where="post", color="C3",
+                        label="commanded voltage")  # fmt: skip
+            bottom.set_ylabel("voltage (V)")
+            bottom.set_xlabel("time (s)")
+            for axes in (top, bottom):
+                axes.legend(loc="lower right", fontsize="small")
+                axes.grid(True, alpha=0.3)
+        fig.suptitle("Closed-loop run: " + self.what(sep="\n"))
+        return fig
