@@ -33,16 +33,6 @@ from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, Mot
 from cartctl.measures.metrics import fit_percent
 from cartctl.model import ArxModel
 
-__all__ = [
-    "ReportSection",
-    "plot_etfe",
-    "plot_io",
-    "plot_pzmap",
-    "plot_step_validation",
-    "write_identify_report",
-    "write_summary",
-]
-
 
 def plot_io(
     trace: Trace,
