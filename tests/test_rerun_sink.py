@@ -24,8 +24,8 @@ from cartctl.cli.commands import review
 from cartctl.errors import InputError
 from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS, Sink
 from cartctl.sinks.rerun_layout import ENTITY_PATHS, STYLES, blueprint
+from cartctl.sinks.rerun_problems import display_available
 from cartctl.sinks.rerun_sink import RecordingError, RecordingWarning, RerunSink
-from cartctl.sinks.viewer import display_available
 
 CONTRACT_PATHS = (
     "motor/a/reference",

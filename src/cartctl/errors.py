@@ -41,9 +41,6 @@ class MissingFileError(CartctlError, FileNotFoundError):
         self.path = Path(path)
         super().__init__(f"{what} not found: {self.path}")
 
-    def __str__(self) -> str:  # FileNotFoundError would otherwise format (errno, strerror)
-        return one_line(self.args[0])
-
 
 class DataFileError(CartctlError, ValueError):
     """A data or model file whose content is wrong: ``PATH[, line N][, column 'C']: PROBLEM``."""
@@ -85,9 +82,6 @@ class OutputError(CartctlError, OSError):
         after = "" if rows is None else f" (after {rows} row{'' if rows == 1 else 's'})"
         self.detail = f"{reason}{after}"
         super().__init__(f"{self.path} is incomplete: {self.detail}")
-
-    def __str__(self) -> str:  # OSError would otherwise format (errno, strerror)
-        return one_line(self.args[0])
 
 
 class DataWarning(UserWarning):

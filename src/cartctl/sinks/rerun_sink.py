@@ -34,8 +34,15 @@ from cartctl.sinks.rerun_layout import (
     blueprint,
     motors_in,
 )
-from cartctl.sinks.rerun_problems import RecordingError, RecordingWarning, file_failure
-from cartctl.sinks.viewer import VIEWER_PORT, display_available, viewer_executable, viewer_reachable
+from cartctl.sinks.rerun_problems import (
+    VIEWER_PORT,
+    RecordingError,
+    RecordingWarning,
+    display_available,
+    file_failure,
+    viewer_executable,
+    viewer_reachable,
+)
 
 RERUN_MODES: Final[tuple[str, ...]] = ("save", "spawn", "connect", "off")
 """``save``: the ``.rrd`` file; ``spawn``: the file (if a path is given) and a viewer started for

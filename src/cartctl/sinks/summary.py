@@ -164,8 +164,8 @@ def timing_text(summary: Mapping[str, Any]) -> str:
     pe, cu = summary["period_error_us"], summary["compute_us"]
     if pe.get("max") == 0.0 and cu.get("p99") == 0.0:  # a simulated clock: no time passed
         return "timing: simulated clock, no real-time figures"
-    period = "/".join(format_column([pe.get("p50"), pe.get("p99"), pe.get("max")]))
-    compute = "/".join(format_column([cu.get("p50"), cu.get("p99"), cu.get("max")]))
+    period, compute = ("/".join(format_column([x.get(k) for k in ("p50", "p99", "max")]))
+                       for x in (pe, cu))  # fmt: skip
     return f"period error p50/p99/max {period} µs; compute p50/p99/max {compute} µs"
 
 
@@ -177,13 +177,10 @@ def format_summary(summary: Mapping[str, Any]) -> str:
     signal = summary.get("metrics_signal")
     if signal in SIGNALS:
         band = summary.get("settling_band") or {}
-        floor = band.get("floor_rad_s")
-        shown = (
-            ""
-            if floor is None
-            else f", settling band max({band['fraction'] * 100:g} %, {floor:.3g} rad/s)"
-        )
-        lines.append(f"  tracking on {SIGNALS[signal]}{shown}")
+        shown = f"  tracking on {SIGNALS[signal]}"
+        if (floor := band.get("floor_rad_s")) is not None:
+            shown += f", settling band max({band['fraction'] * 100:g} %, {floor:.3g} rad/s)"
+        lines.append(shown)
     lines += smoothed_lines(summary)
     link = summary.get("link")
     delay, designed = summary.get("loop_delay_ticks"), summary.get("controller_loop_delay_ticks")
@@ -193,12 +190,9 @@ def format_summary(summary: Mapping[str, Any]) -> str:
             f"for {'—' if designed is None else designed}"
         )
     if link:
-        delay = summary.get("loop_delay_ticks")
-        shown = (
-            "—"
-            if delay is None
-            else f"{delay} ticks (echo {link['echo_delay_ticks']}; model nk = {delay + 1})"
-        )
+        shown = "—"
+        if delay is not None:
+            shown = f"{delay} ticks (echo {link['echo_delay_ticks']}; model nk = {delay + 1})"
         if designed is not None:
             shown += f", the controller is designed for {designed}"
         lines.append(

@@ -124,7 +124,7 @@ def _rerun_sink(args: argparse.Namespace, path: Path) -> Any:
     if args.rerun == "off":
         return None
     from cartctl.sinks.channels_rerun import ChannelsRerunSink
-    from cartctl.sinks.viewer import resolve_mode
+    from cartctl.sinks.rerun_problems import resolve_mode
 
     return ChannelsRerunSink(resolve_mode(args.rerun), path, float_count=FLOAT_CHANNELS,
                              connect_url=args.connect_url)  # fmt: skip

@@ -107,7 +107,7 @@ def _rerun_sink(
         return None
     from cartctl.sinks.rerun_layout import run_ranges
     from cartctl.sinks.rerun_sink import HeldRerunSink  # open for the smoothed speed
-    from cartctl.sinks.viewer import resolve_mode
+    from cartctl.sinks.rerun_problems import resolve_mode
 
     mode = resolve_mode(args.rerun)
     extremes = {}  # each reference's lowest and highest value: the speed plots' ranges

@@ -45,7 +45,7 @@ class ViewerError(CartctlError, RuntimeError):
 
 def require_viewer() -> str:
     """The Rerun viewer executable (:class:`ViewerError` when there is none)."""
-    from cartctl.sinks.viewer import viewer_executable
+    from cartctl.sinks.rerun_problems import viewer_executable
 
     executable = viewer_executable()
     if executable is None:
@@ -68,7 +68,7 @@ def open_in_viewer(path: Path, *, extra: Series | None = None) -> str:
     smoothed speed) into the native viewer, spawned if none is running; returns its address."""
     import rerun as rr
 
-    from cartctl.sinks.viewer import VIEWER_PORT, display_available, viewer_reachable
+    from cartctl.sinks.rerun_problems import VIEWER_PORT, display_available, viewer_reachable
 
     reader, entry = read_recording(path)
     if not display_available():
