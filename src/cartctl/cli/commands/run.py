@@ -106,8 +106,8 @@ def _rerun_sink(
     if args.rerun == "off":
         return None
     from cartctl.sinks.rerun_layout import run_ranges
-    from cartctl.sinks.rerun_sink import HeldRerunSink  # open for the smoothed speed
     from cartctl.sinks.rerun_problems import resolve_mode
+    from cartctl.sinks.rerun_sink import HeldRerunSink  # open for the smoothed speed
 
     mode = resolve_mode(args.rerun)
     extremes = {}  # each reference's lowest and highest value: the speed plots' ranges
