@@ -83,9 +83,7 @@ class ArxFit:
         }
 
 
-def as_segments(
-    segments: Sequence[Segment],
-) -> list[Checked]:
+def as_segments(segments: Sequence[Segment]) -> list[Checked]:
     """Experiments as float arrays; a clear error for bad shapes or values."""
     out = []
     if not segments:
@@ -109,11 +107,7 @@ def first_row(na: int, nb: int, nk: int) -> int:
 
 
 def augmented_regression(
-    segments: Sequence[Checked],
-    na: int,
-    nb: int,
-    nk: int,
-    start: int | None = None,
+    segments: Sequence[Checked], na: int, nb: int, nk: int, start: int | None = None
 ) -> NDArray[np.float64]:
     """[Φ | y] of all experiments in one Fortran-order array, ready for an in-place QR.
 
@@ -143,11 +137,7 @@ def augmented_regression(
 
 
 def stacked_regression(
-    segments: Sequence[Checked],
-    na: int,
-    nb: int,
-    nk: int,
-    start: int | None = None,
+    segments: Sequence[Checked], na: int, nb: int, nk: int, start: int | None = None
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Φ and target as views of :func:`augmented_regression`'s array."""
     phi_y = augmented_regression(segments, na, nb, nk, start)

@@ -99,12 +99,7 @@ def find_period(u: ArrayLike, *, min_ticks: int = 10) -> int | None:
 
 
 def split_cycles(
-    y: ArrayLike,
-    u: ArrayLike,
-    period_ticks: int,
-    *,
-    skip_first: bool = True,
-    min_cycles: int = 2,
+    y: ArrayLike, u: ArrayLike, period_ticks: int, *, skip_first: bool = True, min_cycles: int = 2
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Output (rad/s) and input (V) cut into whole cycles, shape (n_cycles, period_ticks).
 

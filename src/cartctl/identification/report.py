@@ -231,10 +231,7 @@ def fit_rows(
 
 
 def _motor_section(
-    res: MotorIdentification,
-    trace: Trace,
-    out_dir: Path,
-    compare: Mapping[str, ModelFile],
+    res: MotorIdentification, trace: Trace, out_dir: Path, compare: Mapping[str, ModelFile]
 ) -> ReportSection:
     m = res.motor
     y, u, ts = trace.speed(m), trace.voltage(m), trace.period_s

@@ -162,9 +162,7 @@ def _correlation(pairs: Sequence[Checked], lags: NDArray[np.int_]) -> NDArray[np
 
 
 def residual_test(
-    residuals: Sequence[Checked],
-    max_lags: int = MAX_LAGS,
-    output_rms: float | None = None,
+    residuals: Sequence[Checked], max_lags: int = MAX_LAGS, output_rms: float | None = None
 ) -> ResidualTest:
     """Whiteness and independence tests of (ε, u) per experiment (:func:`prediction_residuals`).
 

@@ -275,10 +275,7 @@ class LinearityResult:
                 "max_abs": self.max_abs_error_rad_s,
                 "rms": self.rms_error_rad_s,
             },
-            "relative_percent": {
-                "rms": self.rms_error_percent,
-                "mean": self.mean_error_percent,
-            },
+            "relative_percent": {"rms": self.rms_error_percent, "mean": self.mean_error_percent},
         }
 
 
