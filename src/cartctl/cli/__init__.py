@@ -51,7 +51,7 @@ def command_name(module: object) -> str:
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
-    """The parser with every subcommand, or with ``command`` alone (built in a tenth of the time)."""
+    """The parser with every subcommand, or with ``command`` alone (a tenth of the time)."""
     parser = _Parser(
         prog="cartctl",
         description="Identify, design and run velocity control of a two-wheeled DC-motor cart. "

@@ -1,9 +1,5 @@
-"""``cartctl commission PLANT [--out DIR]``: from a connected cart to a verified controller.
-
-The stages are :mod:`cartctl.commission`'s; here: the options, the output folder, the exit codes
-(0 every stage passed, 1 a stage failed or the cart stopped, 2 bad input, 128 + signal when
-stopped) and ``--json``.
-"""
+"""``cartctl commission PLANT [--out DIR]``: from a connected cart to a verified controller (the
+stages of :mod:`cartctl.commission`); exit 0 verified, 1 a stage failed, 2 bad input, 128 + signal."""
 
 from __future__ import annotations
 

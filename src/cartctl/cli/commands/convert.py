@@ -1,8 +1,5 @@
-"""``cartctl convert FILE [--map ...] [--out FILE.csv] [--json]``: check, summarise and convert a trace.
-
-Reads a trace CSV or a QRoboticsCenter log (QRC 5 XML, QRC 6 CSV), reports what it holds, and
-with ``--out`` writes it as a trace CSV that every other command reads.
-"""
+"""``cartctl convert FILE [--map ...] [--out FILE.csv]``: check and summarise a trace or a
+QRoboticsCenter log, and write it as the trace CSV every other command reads."""
 
 from __future__ import annotations
 

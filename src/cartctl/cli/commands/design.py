@@ -113,12 +113,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def request_from_args(args: argparse.Namespace) -> DesignRequest:
-    """The design request the options ask for (checked).
-
-    Each request field takes the value of its option in :data:`~cartctl.design.request.OPTIONS`,
-    the table :meth:`~cartctl.design.request.DesignRequest.to_argv` writes design commands from,
-    so a written command parses back to its request.
-    """
+    """The design request the options ask for (checked), field by field through
+    :data:`~cartctl.design.request.OPTIONS`, so a command ``to_argv`` writes parses back to it."""
     # argparse's attribute for an option: '--phase-margin' -> phase_margin
     values = {field: getattr(args, flag[2:].replace("-", "_")) for field, flag in OPTIONS.items()}
     return DesignRequest(method=args.method, **values).check()

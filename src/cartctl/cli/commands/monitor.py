@@ -1,10 +1,6 @@
-"""``cartctl monitor PLANT``: record and stream what a cart running its own controller sends.
-
-Like QRoboticsCenter's plots and logs, but live in Rerun: every GPIO the cart sends is one CSV row
-and one point per channel under ``gpio/<label>``; PRINT lines and QRC button events go to
-``cart/print`` and ``cart/events``. Passive: nothing is ever sent to the cart. See
-:mod:`cartctl.link.cart_monitor` for the row format.
-"""
+"""``cartctl monitor PLANT``: record and stream what a cart running its own controller sends,
+passively (:mod:`cartctl.link.cart_monitor`): each GPIO frame one CSV row and one point per
+channel under ``gpio/<label>``, PRINT lines and button events under ``cart/``."""
 
 from __future__ import annotations
 
@@ -23,7 +19,8 @@ from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import InputError, OutputError
 
 if TYPE_CHECKING:  # cartctl.plants loads numpy and scipy: imported where used, not for --help
-    from cartctl.link.cart_monitor import Monitor, MonitorLink, MonitorResult
+    from cartctl.link.cart_link import CartLink
+    from cartctl.link.cart_monitor import Monitor, MonitorResult
 
 DEFAULT_REFERENCE = "step:10"
 _STOPPED = {"duration": "after --duration", "interrupted": "by Ctrl-C", "fault": "by a line fault"}
@@ -106,7 +103,7 @@ def _check(args: argparse.Namespace) -> tuple[str, str]:
 
 def _virtual_cart(faults_text: str, args: argparse.Namespace) -> Any:
     from cartctl.export.arduino import onboard_controllers
-    from cartctl.link.onboard_firmware import OnboardFirmware
+    from cartctl.link.firmware import OnboardFirmware
     from cartctl.link.virtual_cart import CartFaults, VirtualCart
 
     faults = CartFaults.parse(faults_text)
@@ -119,14 +116,14 @@ def _virtual_cart(faults_text: str, args: argparse.Namespace) -> Any:
 
 
 def _rerun_sink(args: argparse.Namespace, path: Path) -> Any:
-    from cartctl.link.cart_monitor import FLOAT_CHANNELS
+    from cartctl.link.dialect import GPIO_FLOAT_COUNT
 
     if args.rerun == "off":
         return None
     from cartctl.sinks.channels_rerun import ChannelsRerunSink
     from cartctl.sinks.rerun_problems import resolve_mode
 
-    return ChannelsRerunSink(resolve_mode(args.rerun), path, float_count=FLOAT_CHANNELS,
+    return ChannelsRerunSink(resolve_mode(args.rerun), path, float_count=GPIO_FLOAT_COUNT,
                              connect_url=args.connect_url)  # fmt: skip
 
 
@@ -155,8 +152,8 @@ def _stop_on_signals(monitor: Monitor, received: list[int]) -> Iterator[None]:
 
 def run(args: argparse.Namespace) -> int:
     from cartctl.cli.jsonout import dumps
-    from cartctl.link.cart_link import print_to_stderr
-    from cartctl.link.cart_monitor import Monitor, MonitorLink, parse_labels, wait_started
+    from cartctl.link.cart_link import CartLink, print_to_stderr
+    from cartctl.link.cart_monitor import Monitor, parse_labels, wait_started
     from cartctl.runtime.gcpause import gc_paused
     from cartctl.sinks.csv_sink import CsvSink
 
@@ -170,7 +167,7 @@ def run(args: argparse.Namespace) -> int:
     port = cart.port if cart is not None else rest
     monitor = Monitor([], [], labels, echo=print_to_stderr, announce=_to_stderr)
     received: list[int] = []
-    link = MonitorLink(port, on_event=monitor.on_event, on_print=monitor.on_print)
+    link = CartLink(port, on_event=monitor.on_event, on_print=monitor.on_print)
     if cart is not None:  # the virtual cart's rate is known: the bridge's, or the course's
         from cartctl.link.virtual_cart import SILENCE_TIMEOUT_S
 
@@ -227,7 +224,7 @@ def _to_stderr(line: str) -> None:
 
 def _summary(
     result: MonitorResult,
-    link: MonitorLink,
+    link: CartLink,
     plant: str,
     monitor: Monitor,
     csv_path: Path,

@@ -1,9 +1,5 @@
-"""Command-line options and input/output checks shared by several subcommands.
-
-Imported to build the parser, so it loads no numpy, scipy or module that does (``cartctl
---help`` stays fast). Names, limits and defaults come from :mod:`cartctl.choices`, where the
-implementations take them too.
-"""
+"""Options and input/output checks shared by several subcommands. Imported to build the parser:
+no numpy or scipy here; names, limits and defaults come from :mod:`cartctl.choices`."""
 
 from __future__ import annotations
 
@@ -42,7 +38,7 @@ def _mapping_arg(text: str) -> dict[str, str]:
 
 
 def check_duration(seconds: float, option: str = "--duration") -> float:
-    """``seconds`` if positive and at most :data:`MAX_DURATION_S`, else one line naming ``option``."""
+    """``seconds`` if in (0, :data:`MAX_DURATION_S`]; else one line naming ``option``."""
     if not (math.isfinite(seconds) and 0.0 < seconds <= MAX_DURATION_S):
         raise InputError(
             f"{option} must be a positive number of seconds up to {MAX_DURATION_S:g} (24 h), "
@@ -96,12 +92,9 @@ def add_rerun_options(p: argparse.ArgumentParser) -> None:
 
 
 def check_output_folder(folder: str | Path, option: str) -> Path:
-    """``folder`` when cartctl can create it (if missing) and write files into it.
-
-    The check really writes (missing folders made, a file created, everything removed again), so
-    it answers for permissions, read-only and virtual file systems alike and leaves nothing
-    behind. Otherwise :class:`InputError`, one line naming ``option``, the folder and why.
-    """
+    """``folder`` when cartctl can create it and write files into it, else one line naming
+    ``option``, the folder and why. It really writes (and removes again): permissions, read-only
+    and virtual file systems alike."""
     folder = Path(folder)
     why = _unwritable(folder)
     if why is not None:
@@ -110,7 +103,7 @@ def check_output_folder(folder: str | Path, option: str) -> Path:
 
 
 def check_output_file(path: str | Path, option: str) -> Path:
-    """``path`` when cartctl can write (or replace) that file; else as :func:`check_output_folder`."""
+    """``path`` when cartctl can write (or replace) it; else as :func:`check_output_folder`."""
     path = Path(path)
     if path.is_dir():
         raise InputError(f"{option} {path}: is a folder, not a file")
@@ -126,7 +119,7 @@ def check_output_file(path: str | Path, option: str) -> Path:
 
 
 def check_run_outputs(args: argparse.Namespace, prefix: str) -> tuple[Path, Path]:
-    """The trace (``.csv``) and recording (``.rrd``) paths ``--out`` and ``--name`` ask for, checked.
+    """The trace (``.csv``) and recording (``.rrd``) paths of ``--out`` and ``--name``, checked.
 
     Without ``--name`` the stem is ``PREFIX-YYYYmmdd-HHMMSS``, with ``-2``, ``-3`` … added when a
     run of that name is already in ``--out``.

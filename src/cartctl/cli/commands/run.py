@@ -123,7 +123,7 @@ def _rerun_sink(
 
 
 def _checked_outputs(args: argparse.Namespace) -> tuple[Path, Path]:
-    """Step 1, the refusals that need nothing loaded or driven; the trace's and recording's paths."""
+    """Step 1, the refusals that need nothing loaded or driven; the trace and recording paths."""
     options.check_duration(args.duration)
     if args.voltage_limit is not None:
         limit = options.check_finite(args.voltage_limit, "--voltage-limit")
@@ -136,9 +136,8 @@ def _checked_outputs(args: argparse.Namespace) -> tuple[Path, Path]:
     check_reference(args.reference, "--reference")
     if args.reference_b:
         check_reference(args.reference_b, "--reference-b")
-    csv_path, rrd_path = options.check_run_outputs(
-        args, "run"
-    )  # before anything is loaded or driven
+    # before anything is loaded or driven
+    csv_path, rrd_path = options.check_run_outputs(args, "run")
     if args.fast and kind not in SIMULATED:
         raise InputError(f"--fast needs a simulated plant (sim or physics), not '{args.plant}'")
     return csv_path, rrd_path
@@ -167,7 +166,8 @@ def _prepared(args: argparse.Namespace, given: str, csv_path: Path) -> PreparedR
     )  # fmt: skip
     try:
         write_trace_meta(csv_path, plant=prepared.description,
-                         loop_delay_ticks=prepared.loop_delay_ticks, command=options.command_line("run"),
+                         loop_delay_ticks=prepared.loop_delay_ticks,
+                         command=options.command_line("run"),
                          controller=prepared.controller_file.path or find_file(given),
                          model=find_file(prepared.controller_file.model_path))  # fmt: skip
     except OSError as exc:  # a full disk: nothing driven yet

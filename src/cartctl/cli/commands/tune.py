@@ -1,12 +1,6 @@
-"""``cartctl tune MODEL.toml --method pi|poles``: a grid of designs, each run in the simulated loop.
-
-Here: the options, the refusals made before any work (the options that size the work, then what
-``design`` and ``run`` refuse for every setting alike, in their words), the table or JSON, the
-plot, and ``--choose N --out FILE``, which writes setting N's controller as ``cartctl design``
-does. The grid and the Pareto front are :mod:`cartctl.tune.grid`, the runs on worker processes
-:mod:`cartctl.tune.engine`, ``--robust`` :mod:`cartctl.tune.robust`. A setting that only its own
-design refuses stays a row of the table.
-"""
+"""``cartctl tune MODEL.toml --method pi|poles``: a grid of designs, each run in the simulated loop
+(:mod:`cartctl.tune`); the table or JSON, the plot, and ``--choose N --out FILE``, which writes
+setting N's controller as ``cartctl design`` does. The refusals are ``tune_checks``'."""
 
 from __future__ import annotations
 

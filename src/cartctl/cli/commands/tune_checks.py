@@ -1,9 +1,6 @@
-"""What ``cartctl tune`` refuses before it designs or runs anything, in two stages.
-
-:func:`check_options` takes the options alone (no numpy, no model) and bounds all that sizes the
-work; :func:`check_inputs` then loads the model and the plant and refuses what ``design`` or
-``run`` would refuse for every setting alike, in their words.
-"""
+"""What ``cartctl tune`` refuses before any work: :func:`check_options` bounds what sizes the work
+(no numpy, no model), :func:`check_inputs` what ``design`` or ``run`` would refuse for every
+setting alike, in their words (a setting only its own design refuses stays a row)."""
 
 from __future__ import annotations
 

@@ -1,10 +1,5 @@
-"""``cartctl review FILE.rrd|RUN.csv``: a recording in the Rerun viewer with the project's layout,
-or the run metrics of CSV traces.
-
-The recording read back and streamed is :mod:`~cartctl.cli.commands.review.recording`, the viewers
-:mod:`~cartctl.cli.commands.review.viewer`, the CSV metrics
-:mod:`~cartctl.cli.commands.review.metrics`.
-"""
+"""``cartctl review FILE.rrd|RUN.csv``: a recording in the Rerun viewer with the project's layout
+(``recording``, ``viewer``), or the run metrics of CSV traces (``metrics``, ``smoothed``)."""
 
 from __future__ import annotations
 

@@ -1,14 +1,7 @@
 """The smoothed speed (:func:`cartctl.design.smoother.smooth_speed`) in ``run``'s summary and in
-``review``: when, with which model, and where.
-
-- When: metrics on the measured speed (no true speed: a real cart, a CSV without
-  ``true_speed_*``), a run through the serial path (beside the simulator's true speed), or
-  ``review --model``.
-- Which model: ``run`` takes its controller's; ``review`` takes ``--model``, else the one a run
-  named in its ``.rrd``, else the one the trace's meta file names; without one, a one-line note.
-- Loop delay: a run whose measured loop delay exceeds its controller's smooths with the
-  difference as extra input delay, as ``design`` would.
-"""
+``review``: when the metrics are on the measured speed, through the serial path, or asked for
+(``--model``); with ``--model``, else the model a run named in its ``.rrd`` or meta file (its
+controller's); a run's loop delay beyond its controller's as extra input delay, as ``design``."""
 
 from __future__ import annotations
 
