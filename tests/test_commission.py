@@ -12,10 +12,10 @@ import pytest
 from cartctl.cli import main
 from cartctl.commission import checks
 from cartctl.commission import checks as verify
-from cartctl.commission import tuning as timing
 from cartctl.data.trace import Trace
 from cartctl.model import ArxModel
 from cartctl.plants.physics_params import preset
+from cartctl.tune import uncertainty as timing
 
 STAGE_FILES = ("checks", "excitation", "identification", "tuning", "verification")
 

@@ -25,6 +25,7 @@ from cartctl.measures.numfmt import format_fixed
 from cartctl.sinks.rerun_layout import ENTITY_PATHS, blueprint
 from cartctl.sinks.rerun_problems import file_failure
 from cartctl.sinks.rerun_sink import APPLICATION_ID
+from cartctl.tune.uncertainty import later_command
 
 Series = dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]  # name → (time s, values)
 
@@ -174,7 +175,7 @@ def tuning_steps(controller_path: Path, model_path: Path, png: Path) -> Series:
     n = round(tuning.DURATION_S / models.period_s)
     plants = {"model": [models.motor(m) for m in "ab"]}
     for f in tuning.LATER_FRACTIONS:
-        plants[f"{f * 10:g} ms later"] = [tuning.later_command(models.motor(m), f) for m in "ab"]
+        plants[f"{f * 10:g} ms later"] = [later_command(models.motor(m), f) for m in "ab"]
     series: Series = {}
     speed, volts = {}, {}
     for name, (a, b) in plants.items():

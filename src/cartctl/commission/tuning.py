@@ -1,10 +1,11 @@
 """Commissioning, stage 4: robust tuning on the identified model, and the controller chosen.
 
 ``cartctl tune --robust``'s machinery over a small pole-placement grid (:data:`GRID`), scored on
-the model, on :data:`PLANTS` plants of its uncertainty and on the timing plants
-(:func:`later_command`), then ``tune --choose best``'s rule within :data:`MAX_OVERSHOOT_PERCENT`
-and :data:`MAX_SETTLING_S`, passing over a setting whose controller file ``cartctl run`` would
-refuse. The reasoning (why these plants, why these bounds) is in docs/commission.md.
+the model, on :data:`PLANTS` plants of its uncertainty and on the model with its commands landing
+later (:func:`cartctl.tune.uncertainty.later_command`) instead of the physics preset (the course's
+cart, not this one); then ``tune --choose best``'s rule within :data:`MAX_OVERSHOOT_PERCENT` and
+:data:`MAX_SETTLING_S`, passing over a setting whose controller file ``cartctl run`` would refuse.
+The reasoning (why these plants, why these bounds) is in docs/commission.md.
 """
 
 from __future__ import annotations
@@ -21,13 +22,11 @@ import numpy as np
 from cartctl.commission import StageError
 from cartctl.data.modelfile import ModelFile, load_models
 from cartctl.errors import InputError
-from cartctl.model import ArxModel
-from cartctl.plants.sim import ArxPlant
 from cartctl.tune import engine
 from cartctl.tune import grid as tuning
 from cartctl.tune import robust as robustness
 from cartctl.tune import robust_choice as choice
-from cartctl.tune.uncertainty import PlantSample, sample_plants
+from cartctl.tune.uncertainty import sample_plants
 
 METHOD = "poles"
 # 80–160 ms × 0.1–2.1 % (25 settings). Low overshoot targets: with friction the step overshoots
@@ -45,51 +44,6 @@ DESIGN_FIXED = {"process_noise_std_v": 0.05, "bias_drift_std_v": 0.06}
 REFERENCE = "step:10"
 DURATION_S = 1.0
 LATER_FRACTIONS = (0.2, 0.4)  # of a tick: 2 and 4 ms later at 10 ms
-
-
-def later_command(model: ArxModel, fraction: float) -> ArxModel:
-    """``model`` with every command landing ``fraction`` ∈ [0, 1] of a tick later: numerator
-    (1 − f)·[b, 0] + f·[0, b], same poles, delay and DC gain (module docstring)."""
-    f = float(fraction)
-    if not 0.0 <= f <= 1.0:
-        raise InputError(f"a command can land 0 to 1 tick later here, got {fraction}")
-    b = np.asarray(model.b, dtype=float)
-    blended = (1.0 - f) * np.append(b, 0.0) + f * np.insert(b, 0, 0.0)
-    return ArxModel(tuple(model.ar), tuple(blended), model.nk, model.period_s)
-
-
-@dataclass(frozen=True)
-class CommissionJob:
-    """The grid for :func:`cartctl.tune.engine.run_grid` (picklable): the tune job (with the shared
-    design fields, loop delay included), the sampled plants, the settings and the timing plants'
-    fractions of a tick."""
-
-    tune: engine.TuneJob
-    sample: PlantSample
-    items: tuple[tuple[int, dict[str, float]], ...]
-    fractions: tuple[float, ...] = LATER_FRACTIONS
-
-
-def evaluate(job: CommissionJob, models: ModelFile, index: int,
-             settings: dict[str, float]) -> robustness.RobustRow:  # fmt: skip
-    """One setting on the nominal model, the sampled plants and the timing plants."""
-    nominal = engine.evaluate_nominal(job.tune, models, index, settings)
-    if not nominal.result.feasible:
-        return robustness.RobustRow(nominal.result)
-    per_motor, diverged = robustness.sampled_metrics(nominal, models, job.sample, 0)
-    figures = {k: nominal.result.worst[v] for k, v in robustness.SUMMARY_KEYS.items()}
-    timing = [{"later_ms": round(f * models.period_s * 1e3, 3),
-               **robustness.loop_entry(ArxPlant(*(later_command(models.motor(m), f) for m in "ab")),
-                                       nominal, nominal.references)}
-              for f in job.fractions]  # fmt: skip
-    score = robustness.score_plants(per_motor, diverged, figures, {}, timing)
-    return robustness.RobustRow(nominal.result, score)
-
-
-def evaluate_chunk(job: CommissionJob) -> list[robustness.RobustRow]:
-    """The worker function."""
-    models = load_models(job.tune.model)
-    return [evaluate(job, models, i, s) for i, s in job.items]
 
 
 @dataclass(frozen=True)
@@ -114,8 +68,7 @@ class TuningResult:
 
 def run_tuning(model_path: Path, loop_delay_ticks: int,
                progress: Callable[[int], None] | None = None,
-               jobs: int | None = None,
-               fractions: tuple[float, ...] = LATER_FRACTIONS) -> TuningResult:  # fmt: skip
+               jobs: int | None = None) -> TuningResult:  # fmt: skip
     """Tune the grid on ``model_path`` and choose (raises :class:`StageError` if none fits)."""
     models = load_models(model_path)
     fixed = {**DESIGN_FIXED, "loop_delay_ticks": loop_delay_ticks}
@@ -126,8 +79,10 @@ def run_tuning(model_path: Path, loop_delay_ticks: int,
         sample = sample_plants(models, PLANTS, SEED)
     except InputError as exc:
         raise StageError(f"tuning: {exc}") from None
-    job = CommissionJob(tune_job, sample, tuple(enumerate(settings, start=1)), fractions)
-    rows = engine.run_grid(job, jobs or min(2, os.cpu_count() or 1), progress, evaluate_chunk)
+    job = robustness.RobustJob(tune_job, sample, tuple(enumerate(settings, start=1)),
+                               later_fractions=LATER_FRACTIONS)  # fmt: skip
+    rows = engine.run_grid(job, jobs or min(2, os.cpu_count() or 1), progress,
+                           robustness.evaluate_robust_chunk)  # fmt: skip
     rows = choice.sort_robust(choice.mark_robust_pareto(rows))
     limits = choice.Limits(MAX_OVERSHOOT_PERCENT)
     candidates = [r for r in rows if r.score is not None

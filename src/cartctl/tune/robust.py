@@ -23,11 +23,12 @@ from cartctl.cart import encoder_quantum_rad_s
 from cartctl.data.modelfile import ModelFile, load_models
 from cartctl.measures.stepinfo import first_step, settling_half_width, step_rows
 from cartctl.plants.base import Plant
+from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
 from cartctl.tune.batch import ArxBatch, BatchTrace, simulate_batch
 from cartctl.tune.engine import Nominal, TuneJob, evaluate_nominal, scoring_plant, simulate
 from cartctl.tune.grid import TuneResult, worst_metrics
-from cartctl.tune.uncertainty import PlantSample
+from cartctl.tune.uncertainty import PlantSample, later_command
 
 FloatArray = NDArray[np.float64]
 
@@ -174,6 +175,7 @@ class RobustJob:
     sample: PlantSample
     items: tuple[tuple[int, dict[str, float]], ...]
     actuation_ms: tuple[float, ...] = ()
+    later_fractions: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -255,8 +257,15 @@ def evaluate_robust(job: RobustJob, models: ModelFile, index: int,
         return RobustRow(nominal.result)
     per_motor, diverged = sampled_metrics(nominal, models, job.sample, tj.extra_delay_ticks)
     figures = {k: nominal.result.worst[v] for k, v in SUMMARY_KEYS.items()}
-    physics = _physics(tj, nominal)
-    actuation = [_physics(tj, nominal, ms) for ms in job.actuation_ms]
+    if job.later_fractions:  # commissioning: the model with later commands, not the physics
+        physics: dict[str, Any] = {}
+        actuation = [{"later_ms": round(f * models.period_s * 1e3, 3),
+                      **loop_entry(ArxPlant(*(later_command(models.motor(m), f) for m in "ab")),
+                                   nominal, nominal.references)}
+                     for f in job.later_fractions]  # fmt: skip
+    else:
+        physics = _physics(tj, nominal)
+        actuation = [_physics(tj, nominal, ms) for ms in job.actuation_ms]
     return RobustRow(nominal.result, score_plants(per_motor, diverged, figures, physics, actuation))
 
 

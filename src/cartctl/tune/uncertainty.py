@@ -173,3 +173,16 @@ def describe_line(sample: PlantSample, model_path: str) -> str:
     return (f"{sample.size} plants drawn around {model_path} (seed {sample.seed}): "
             + "; ".join(theta) + f"; DC gain × uniform[{lo:g}, {hi:g}] per motor; loop delay "
             "moved by −1, 0 or +1 tick per plant (nk at least 1)")  # fmt: skip
+
+
+def later_command(model: ArxModel, fraction: float) -> ArxModel:
+    """``model`` with every command landing ``fraction`` f ∈ [0, 1] of a tick later: the motor sees
+    the previous command for f of the tick, so to first order in the tick (the motor slow against
+    Ts) the tick's speed answers (1 − f)·u(k) + f·u(k − 1): B(z)·((1 − f) + f z⁻¹), same poles,
+    delay and DC gain, the phase lag of f ticks at low frequency (docs/commission.md)."""
+    f = float(fraction)
+    if not 0.0 <= f <= 1.0:
+        raise InputError(f"a command can land 0 to 1 tick later here, got {fraction}")
+    b = np.asarray(model.b, dtype=float)
+    blended = (1.0 - f) * np.append(b, 0.0) + f * np.insert(b, 0, 0.0)
+    return ArxModel(tuple(model.ar), tuple(blended), model.nk, model.period_s)
