@@ -103,15 +103,18 @@ def format_table(method: str, results: Sequence[TuneResult]) -> str:
         heads.append(head)
         cells.append(format_column([w[key] for w in worst], factor=factor))
     marks = [("*" if r.pareto else "") + ("o" if r.pareto_plot else "") for r in results]
-    columns = [marks, [str(r.index) for r in results], *cells, [r.status for r in results]]
+    return _lines(marks, results, heads, cells, [r.status for r in results])
+
+
+def _lines(marks: list[str], results: Sequence[TuneResult], heads: list[str],
+           cells: list[list[str]], statuses: list[str],
+           groups: Sequence[tuple[str, int, int]] = ()) -> str:  # fmt: skip
+    """The table under its headers, then the reasons of the settings that did not run."""
+    columns = [marks, [str(r.index) for r in results], *cells, statuses]
     lines = render_table(["front", "#", *heads, "status"], list(zip(*columns, strict=True)),
-                         left=(0, len(heads) + 2))  # fmt: skip
+                         left=(0, len(heads) + 2), groups=groups)  # fmt: skip
     lines += [f"  #{r.index}: {r.reason}" for r in results if not r.feasible]
     return "\n".join(lines)
-
-
-def _group(values: Sequence[float | None], factor: float = 1.0) -> int:
-    return column_decimals([None if v is None else v * factor for v in values])
 
 
 def format_robust_table(method: str, rows: Sequence[RobustRow]) -> str:
@@ -127,7 +130,8 @@ def format_robust_table(method: str, rows: Sequence[RobustRow]) -> str:
     groups = []
     for metric, factor, label in (("overshoot_percent", 1.0, "run overshoot (%)"),
                                   ("settling_time_s", 1e3, "run settling (ms)")):  # fmt: skip
-        d = _group([v for w in spread for v in figure(metric, w) if v != float("inf")], factor)
+        d = column_decimals([v * factor for w in spread for v in figure(metric, w)
+                             if v is not None and v != float("inf")])  # fmt: skip
 
         def show(values: list[float | None], f: float = factor, d: int = d) -> list[str]:
             return [format_fixed(None if v is None else v * f, d) for v in values]
@@ -154,14 +158,8 @@ def format_robust_table(method: str, rows: Sequence[RobustRow]) -> str:
         groups.append((label, first, first + 1))
     heads.append("worst peak |V| (V)")
     cells.append(format_column(figure("peak_voltage_v", "worst")))
-    marks = ["*" if r.pareto else "" for r in rows]
-    statuses = [robust_status(r) for r in rows]
-    columns = [marks, [str(r.index) for r in rows], *cells, statuses]
-    blank = [i for i, s in enumerate(scored) if s is None]
-    for col in columns[2 + len(AXES[method]) : -1]:  # the unscored rows: blank figures
-        for i in blank:
-            col[i] = ""
-    lines = render_table(["front", "#", *heads, "status"], list(zip(*columns, strict=True)),
-                         left=(0, len(heads) + 2), groups=groups)  # fmt: skip
-    lines += [f"  #{r.index}: {r.result.reason}" for r in rows if r.score is None]
-    return "\n".join(lines)
+    for col in cells[len(AXES[method]) :]:  # the unscored rows: blank figures
+        for i, s in enumerate(scored):
+            col[i] = col[i] if s is not None else ""
+    return _lines(["*" if r.pareto else "" for r in rows], [r.result for r in rows], heads, cells,
+                  [robust_status(r) for r in rows], groups)  # fmt: skip
