@@ -3,7 +3,7 @@
 ``bridge_logic.h`` is compiled with g++ and a harness that replays a script of ticks (some with a
 GPIO frame from the host received a few ms before, each with what ``io()`` read and the time in
 ms); the same script runs through
-:class:`~cartctl.link.bridge_firmware.BridgeFirmware`, and every voltage and output channel
+:class:`~cartctl.link.firmware.BridgeFirmware`, and every voltage and output channel
 must agree. The sketch's ``robot.cpp`` is compiled too, against a mock of the template's
 ``MECOtron`` helpers (``readFloat``, ``writeInt``, ``setVoltageMotorA``, …), to check its glue.
 Nothing here runs on a real board.
@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cartctl.link.bridge_firmware import (
+from cartctl.link.firmware import (
     STATUS_DRIVING,
     STATUS_WATCHDOG,
     TICK_MODULO,

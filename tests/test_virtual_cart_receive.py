@@ -22,7 +22,7 @@ import pytest
 from cartctl.cli import main
 from cartctl.link import Encoder, Framer, Gpio, HostCommand
 from cartctl.link.bridge import STATUS_WATCHDOG
-from cartctl.link.bridge_firmware import CartIO
+from cartctl.link.firmware import CartIO
 from cartctl.link.cart_uart import (
     BRIDGE_RX_RING_BYTES,
     BYTE_TIME_S,

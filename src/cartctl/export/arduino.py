@@ -20,7 +20,7 @@ from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.errors import InputError
 from cartctl.export.c_code import c_float, pi_code, poles_code, where
-from cartctl.link.firmware_id import (
+from cartctl.link.firmware import (
     CH_FIRMWARE_ID,
     IN_REFERENCE,
     ONBOARD_ID,

@@ -3,7 +3,7 @@
 For carts that run their own controller: the monitor never sends anything. It reads the stream
 through :class:`~cartctl.link.cart_link.CartLink` and turns each GPIO into one row ``time_s, tick,
 <12 labels>``: the labels given (``--labels``), else those of cartctl's firmware when its frames
-carry its marker (:mod:`cartctl.link.firmware_id`), else QRoboticsCenter's FloatIn0..7, IntIn0..3.
+carry its marker (:mod:`cartctl.link.firmware`), else QRoboticsCenter's FloatIn0..7, IntIn0..3.
 ``tick`` counts the rows; ``time_s`` is the cart time since the first GPIO, k · Ts with k the cart's
 tick. The cart stamps each GPIO with its ``millis()`` (u32, wrapping after 49.7 days); the stamps
 jitter by a millisecond, and a firmware that stamps a frame when its communication thread sends it
@@ -27,10 +27,9 @@ from cartctl.cart import PERIOD_S
 from cartctl.errors import InputError, PlantError
 from cartctl.link.cart_link import CartLink
 from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT
-from cartctl.link.firmware_id import CH_FIRMWARE_ID, CHANNEL_KEYS, Firmware, recognise_firmware
+from cartctl.link.firmware import CH_FIRMWARE_ID, CHANNEL_KEYS, Firmware, recognise_firmware
 from cartctl.link.framer import Event, Gpio
 
-FLOAT_CHANNELS = GPIO_FLOAT_COUNT
 DEFAULT_LABELS: tuple[str, ...] = (
     *(f"FloatIn{i}" for i in range(GPIO_FLOAT_COUNT)),
     *(f"IntIn{i}" for i in range(GPIO_INT_COUNT)),
@@ -45,8 +44,6 @@ _TICKS_PER_S = round(1.0 / PERIOD_S)
 RECOGNISE_FRAMES = 10
 """The frames (100 ms) in which one carrying a firmware marker is waited for before the labels
 are chosen: a firmware's first frames may go out before its first ``control()`` filled them."""
-
-MonitorLink = CartLink  # takes ``on_event`` itself now
 
 
 def parse_labels(text: str | None) -> tuple[str, ...]:

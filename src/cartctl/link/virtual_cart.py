@@ -27,7 +27,6 @@ from typing import Any, Protocol, cast
 
 from cartctl.cart import PERIOD_S
 from cartctl.link.bridge import BRIDGE_BAUD, CH_BRIDGE_VERSION, LEGACY_BAUD, TIMING_FIRST_ID
-from cartctl.link.bridge_firmware import TICK_MODULO, BridgeFirmware, CartIO
 from cartctl.link.cart_faults import RECEIVE_SCHEDULES, CartFaults
 from cartctl.link.cart_uart import (
     BRIDGE_RX_RING_BYTES,
@@ -42,6 +41,7 @@ from cartctl.link.cart_uart import (
     fill_ring,
 )
 from cartctl.link.dialect import Encoder, encode_gpiox_v2
+from cartctl.link.firmware import TICK_MODULO, BridgeFirmware, CartIO
 from cartctl.link.serial_cart import SerialCart
 from cartctl.plants.base import Measurement
 from cartctl.plants.physics import PhysicsPlant
@@ -61,7 +61,7 @@ _TERMIOS_SPEED = {getattr(termios, f"B{rate}"): rate for rate in (9600, 19200, 3
 
 
 class CartFirmware(Protocol):
-    """What the virtual cart runs in ``control()`` (bridge_firmware, onboard_firmware)."""
+    """What the virtual cart runs in ``control()`` (:mod:`cartctl.link.firmware`)."""
 
     in_ints: list[int]
     out_floats: list[float]

@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     firmware = None
     if args.onboard:
         from cartctl.export.arduino import onboard_controllers
-        from cartctl.link.onboard_firmware import OnboardFirmware
+        from cartctl.link.firmware import OnboardFirmware
 
         firmware = OnboardFirmware(onboard_controllers(args.onboard), reference=args.reference)
     cart = VirtualCart(args.preset, noise_std_rad_s=args.noise, seed=args.seed, faults=args.faults,

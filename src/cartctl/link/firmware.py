@@ -1,0 +1,297 @@
+"""cartctl's firmwares: how a cart says which one it runs, and their logic in Python.
+
+Float channel 6 (:data:`CH_FIRMWARE_ID`) of every GPIO cartctl's firmware sends says which it is:
+1..999 the bridge sketch of that version (its channel map, :mod:`cartctl.link.bridge`, is known
+for :data:`~cartctl.link.bridge.BRIDGE_VERSION`); ``1000 + n`` a controller of ``cartctl export
+--arduino`` on the cart, channel layout n (:data:`ONBOARD_ID`); anything else (0 from the course's
+own code or a bridge before version 2) is not cartctl's. The labels are the trace's column names,
+so that ``review``, ``validate`` and ``convert`` read a ``cartctl monitor`` trace as it is.
+
+:class:`BridgeFirmware` is the bridge sketch's logic (``firmware/cartctl_bridge/bridge_logic.h``):
+both implement one contract (``docs/serial-protocol.md``) and a test compares them tick by tick,
+so keep them in sync. The sketch's 10 ms thread drains the serial port, runs ``io()`` (writes the
+stored voltage, reads the encoders), then ``control()`` and sends one GPIO; its 1 ms thread drains
+as well. After each drain the held channels go to :meth:`BridgeFirmware.receive`, and
+:attr:`BridgeFirmware.command_v` is the voltage of the next ``io()``: the host's newest command
+acts one tick after the measurement it answers. The requested voltages apply while drive is 1 and
+the host sequence number keeps changing (a request that is not finite counts as 0 V); no new
+sequence number for :data:`WATCHDOG_MS` (checked at every drain and ``control()``) trips the
+watchdog: zero volts until a new one arrives.
+
+:class:`OnboardFirmware` is the Python twin of ``cartctl export --arduino``'s ``control()``, for
+the virtual cart (``--onboard``): per tick and motor u = controller.step(r, measured speed),
+applied at the next ``io()`` (one tick of delay, as on the real cart). The references come from a
+reference spec (tick 0 at the first ``control()``) or else from the held input channels. The
+controllers run the fixed Kalman gain, as the C does; ``controlEnabled()`` is not modelled.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import astuple, dataclass
+from typing import Protocol
+
+from cartctl.cart import PERIOD_S
+from cartctl.choices import MAX_DURATION_S
+from cartctl.errors import InputError
+from cartctl.link.bridge import (
+    BRIDGE_VERSION,
+    CH_APPLIED_A,
+    CH_APPLIED_B,
+    CH_BRIDGE_VERSION,
+    CH_ECHO,
+    CH_HOST_LOST,
+    CH_POSITION_A,
+    CH_POSITION_B,
+    CH_SPEED_A,
+    CH_SPEED_B,
+    CH_STATUS,
+    CH_TICK,
+    SEQ_WINDOW,
+    STATUS_DRIVING,
+    STATUS_WATCHDOG,
+    WATCHDOG_MS,
+    CartSample,
+)
+from cartctl.link.bridge import SEQ_MODULO as TICK_MODULO
+from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT, check_gpio_counts
+from cartctl.reference import ReferenceSchedule
+
+__all__ = ["STATUS_DRIVING", "STATUS_WATCHDOG", "TICK_MODULO", "WATCHDOG_MS"]
+
+CHANNEL_KEYS: tuple[str, ...] = (
+    *(f"f{i}" for i in range(GPIO_FLOAT_COUNT)),
+    *(f"i{i}" for i in range(GPIO_INT_COUNT)),
+)
+"""A GPIO's channels in frame order: float channels f0..f7, then int channels i0..i3."""
+CH_FIRMWARE_ID = CH_BRIDGE_VERSION
+"""The float channel in which cartctl's firmware says which it is (the bridge's version)."""
+ONBOARD_LAYOUT = 1
+ONBOARD_ID = 1000 + ONBOARD_LAYOUT
+"""What the on-board export sends in float :data:`CH_FIRMWARE_ID`: 1000 + its layout."""
+# the on-board export's layout 1: references in from the PC, and out from the first channel of
+# each group: speeds (rad/s), voltages computed at that tick (V), references (rad/s); A, then B
+IN_REFERENCE = {"a": 0, "b": 1}
+OUT_SPEED, OUT_VOLTAGE, OUT_REFERENCE = 0, 2, 4
+
+
+@dataclass(frozen=True)
+class Firmware:
+    """One of cartctl's firmwares: its name and the (channel key, label) of the channels it fills."""
+
+    name: str
+    labels: tuple[tuple[str, str], ...]
+
+
+BRIDGE = Firmware(
+    f"cartctl bridge version {BRIDGE_VERSION}",
+    (
+        (f"f{CH_SPEED_A}", "speed_a"),
+        (f"f{CH_SPEED_B}", "speed_b"),
+        (f"f{CH_APPLIED_A}", "voltage_a"),  # on the H-bridge at that tick (V)
+        (f"f{CH_APPLIED_B}", "voltage_b"),
+        (f"f{CH_POSITION_A}", "position_a_rad"),
+        (f"f{CH_POSITION_B}", "position_b_rad"),
+        (f"f{CH_BRIDGE_VERSION}", "bridge_version"),
+        (f"i{CH_ECHO}", "echo_seq"),
+        (f"i{CH_TICK}", "cart_tick"),
+        (f"i{CH_STATUS}", "status"),
+        (f"i{CH_HOST_LOST}", "host_frames_lost"),
+    ),
+)
+"""The bridge sketch of version :data:`~cartctl.link.bridge.BRIDGE_VERSION`."""
+_ONBOARD_OUT = {"speed": OUT_SPEED, "voltage": OUT_VOLTAGE, "reference": OUT_REFERENCE}
+ONBOARD = Firmware(
+    f"cartctl on-board controller ('cartctl export --arduino', layout {ONBOARD_LAYOUT})",
+    (
+        *(
+            (f"f{first + i}", f"{what}_{m}")
+            for what, first in _ONBOARD_OUT.items()
+            for i, m in enumerate(IN_REFERENCE)
+        ),
+        (f"f{CH_FIRMWARE_ID}", "firmware_id"),
+    ),
+)
+"""A controller of ``cartctl export --arduino`` on the cart (channel layout :data:`ONBOARD_LAYOUT`)."""
+
+
+def recognise_firmware(floats: Sequence[float], ints: Sequence[int]) -> Firmware | None:
+    """Which of cartctl's firmwares sent a GPIO with these channels, or None for another one.
+
+    :data:`BRIDGE` when float :data:`CH_FIRMWARE_ID` is the bridge's version, :data:`ONBOARD`
+    when it is :data:`ONBOARD_ID`. Raises ValueError unless there are 8 floats and 4 ints.
+    """
+    check_gpio_counts(floats, ints)
+    marker = floats[CH_FIRMWARE_ID]
+    return {float(BRIDGE_VERSION): BRIDGE, float(ONBOARD_ID): ONBOARD}.get(marker)
+
+
+@dataclass(frozen=True, slots=True)
+class CartIO:
+    """What ``io()`` read at this tick (rad/s, rad) and wrote to the H-bridges (V)."""
+
+    speed_a_rad_s: float
+    speed_b_rad_s: float
+    applied_a_v: float
+    applied_b_v: float
+    position_a_rad: float
+    position_b_rad: float
+
+
+class HeldChannels:
+    """The GPIO channels a cart firmware holds, as microOS keeps them for ``control()``.
+
+    ``in_*``: those of the host's last GPIO, held until the next; ``out_*``: those the last
+    ``control()`` wrote, which microOS sends; ``tick``: the firmware's tick counter.
+    """
+
+    def reset_channels(self) -> None:
+        """Power-on state of the channels: every one 0, and the tick 0."""
+        self.in_floats: list[float] = [0.0] * GPIO_FLOAT_COUNT
+        self.in_ints: list[int] = [0] * GPIO_INT_COUNT
+        self.out_floats: list[float] = [0.0] * GPIO_FLOAT_COUNT
+        self.out_ints: list[int] = [0] * GPIO_INT_COUNT
+        self.tick = 0
+
+    def hold(self, floats: Sequence[float], ints: Sequence[int]) -> None:
+        """Overwrite every input channel with those of a GPIO from the host."""
+        self.in_floats = [float(v) for v in floats]
+        self.in_ints = [int(v) for v in ints]
+
+
+class BridgeFirmware(HeldChannels):
+    """``control()`` of the bridge sketch and the GPIO channels it holds (pure, no I/O)."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        """Power-on state: every channel 0, tripped until the host's first frame."""
+        self.reset_channels()
+        self._last_seq = 0
+        self._last_new_ms = 0
+        self._seen = False
+        self.frames_lost = 0
+        """Host sequence numbers skipped since power-on (modulo 32768)."""
+        self.driving = False
+        self.tripped = True
+        self.command_v: tuple[float, float] = (0.0, 0.0)
+        """What the next ``io()`` applies (V), as decided at the last drain or ``control()``."""
+        self.command_seq = 0
+        """The host sequence number :attr:`command_v` came with."""
+
+    def _decide(self, now_ms: int) -> None:
+        """What the next ``io()`` applies, from the held channels and the watchdog at ``now_ms``."""
+        age_ms = ((int(now_ms) & 0xFFFFFFFF) - self._last_new_ms) & 0xFFFFFFFF
+        self.tripped = not self._seen or age_ms >= WATCHDOG_MS
+        self.driving = self.in_ints[1] == 1 and not self.tripped
+        finite = [v if math.isfinite(v) else 0.0 for v in self.in_floats[:2]]
+        self.command_v = (finite[0], finite[1]) if self.driving else (0.0, 0.0)
+        self.command_seq = self.in_ints[0]
+
+    def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int) -> None:
+        """After a drain: the held channels from the host's last GPIO, seen at ``now_ms``.
+
+        A sequence number that differs from the last one is a new frame: it feeds the watchdog,
+        and the numbers skipped in between count as lost, unless the jump is backwards or beyond
+        :data:`~cartctl.link.bridge.SEQ_WINDOW` (a new host process).
+        """
+        self.hold(floats, ints)
+        seq = self.in_ints[0]
+        if seq != self._last_seq:
+            step = (seq - self._last_seq) % TICK_MODULO
+            if self._seen and step <= SEQ_WINDOW:
+                self.frames_lost = (self.frames_lost + step - 1) % TICK_MODULO
+            self._last_seq = seq
+            self._last_new_ms = int(now_ms) & 0xFFFFFFFF
+            self._seen = True
+        self._decide(now_ms)
+
+    def control(self, io: CartIO, now_ms: int) -> tuple[float, float]:
+        """One ``control()`` at ``now_ms``, after ``io()`` applied :attr:`command_v`.
+
+        Fills the output channels (the echo is the applied command's sequence number), checks the
+        watchdog again, and returns the voltages (V) for the next ``io()`` (a later drain may
+        replace them with a newer command's).
+        """
+        applied_seq = self.command_seq  # nothing drains between io() and control()
+        self._decide(now_ms)
+        status = (applied_seq, self.tick, self.driving, self.tripped, self.frames_lost)
+        fields = (now_ms, *astuple(io), *status, BRIDGE_VERSION)  # in CartSample's order
+        floats, ints = CartSample(*fields).to_channels()
+        self.out_floats, self.out_ints = list(floats), list(ints)
+        self.tick = (self.tick + 1) % TICK_MODULO
+        return self.command_v
+
+
+MOTORS = tuple(IN_REFERENCE)
+MAX_TICKS = round(MAX_DURATION_S / PERIOD_S)
+"""A reference spec is evaluated over the longest run cartctl takes (24 h), then held."""
+
+
+class _Controller(Protocol):
+    def reset(self) -> None: ...
+    def step(self, reference_rad_s: float, measured_rad_s: float) -> float: ...
+
+
+class OnboardFirmware(HeldChannels):
+    """``control()`` running a runtime controller per motor ('a', 'b'; none: 0 V) on the cart.
+
+    ``reference`` is the reference spec of both motors (None: the held input channels),
+    ``period_s`` the tick the controllers were designed for.
+    """
+
+    ready_text = "cartctl on-board controller ready"
+
+    def __init__(
+        self,
+        controllers: Mapping[str, _Controller],
+        *,
+        reference: str | None = None,
+        period_s: float = PERIOD_S,
+    ) -> None:
+        unknown = sorted(set(controllers) - set(MOTORS))
+        if unknown:
+            raise InputError(f"the cart has motors a and b, not {', '.join(unknown)}")
+        self.controllers = dict(controllers)
+        self._schedules: dict[str, ReferenceSchedule] = {}
+        if reference is not None:  # else the held input channels
+            self._schedules = {
+                m: ReferenceSchedule(reference, MAX_TICKS, float(period_s), m) for m in controllers
+            }
+        self.reset()
+
+    def reset(self) -> None:
+        """Power-on state: channels 0, controllers at rest, tick 0."""
+        self.reset_channels()
+        for controller in self.controllers.values():
+            controller.reset()
+
+    def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int = 0) -> None:
+        self.hold(floats, ints)
+
+    def reference_at(self, motor: str) -> float:
+        """The reference (rad/s) of ``motor`` at the current tick."""
+        if self._schedules:
+            return self._schedules[motor][min(self.tick, MAX_TICKS - 1)]
+        return self.in_floats[IN_REFERENCE[motor]]
+
+    def control(self, io: CartIO, now_ms: int = 0) -> tuple[float, float]:
+        """One ``control()`` call: returns the voltages (V) for the next tick's ``io()``."""
+        measured = {"a": io.speed_a_rad_s, "b": io.speed_b_rad_s}
+        out = [0.0] * 8
+        out[CH_FIRMWARE_ID] = float(ONBOARD_ID)
+        voltage = {"a": 0.0, "b": 0.0}
+        for i, motor in enumerate(MOTORS):
+            controller = self.controllers.get(motor)
+            if controller is None:
+                continue
+            reference = self.reference_at(motor)
+            voltage[motor] = controller.step(reference, measured[motor])
+            out[OUT_SPEED + i] = measured[motor]
+            out[OUT_VOLTAGE + i] = voltage[motor]
+            out[OUT_REFERENCE + i] = reference
+        self.out_floats = out
+        self.tick += 1
+        return voltage["a"], voltage["b"]
