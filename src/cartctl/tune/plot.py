@@ -30,7 +30,10 @@ def _figure() -> tuple[Any, Any]:
 
     fig = Figure(figsize=(8, 6.4), dpi=110, layout="constrained")
     FigureCanvasAgg(fig)
-    return fig, fig.subplots()
+    ax = fig.subplots()
+    ax.set_ylabel("run overshoot (%)")
+    ax.grid(True, color="0.9")
+    return fig, ax
 
 
 def _title(ax: Any, *parts: str) -> None:
@@ -161,9 +164,7 @@ def plot_tuning(path: str, method: str, results: Sequence[TuneResult]) -> None:
     fig.colorbar(points, ax=ax, label="run peak |voltage| (V)")
     front = [(xi, yi, r.index) for xi, yi, r in zip(x, y, shown, strict=True) if r.pareto_plot]
     ax.set_xlabel("run settling time, band max(2 %, one encoder count) (ms)")
-    ax.set_ylabel("run overshoot (%)")
     _title(ax, f"cartctl tune --method {method}, the worse of motors a and b", counts_text(results))
-    ax.grid(True, color="0.9")
     notes = ["the table's *: the front over all four run metrics (RMS error and peak |V| too), "
              "which may hold points not ringed here"]  # fmt: skip
     _finish(fig, ax, front, list(zip(x, y, strict=True)), path, notes)
@@ -208,13 +209,11 @@ def plot_robust(path: str, method: str, rows: Sequence[RobustRow], plants: int) 
                zorder=2, label=f"physics preset {shown[0][2].physics.get('preset') if shown else ''}")  # fmt: skip
     front = sorted((x, y, r.index) for x, y, _, r in shown if r.pareto)
     ax.set_xlabel("nominal settling time, band max(2 %, one encoder count) (ms)")
-    ax.set_ylabel("run overshoot (%)")
     _title(
         ax,
         f"cartctl tune --method {method} --robust, the worse of motors a and b; ringed: "
         "the front of nominal settling against worst-case overshoot",
         robust_counts_text(rows),
     )
-    ax.grid(True, color="0.9")
     everything = [(x, y) for x, y, *_ in shown] + nominal + phys
     _finish(fig, ax, front, everything, path, [])
