@@ -1,5 +1,5 @@
 """``cartctl review FILE.rrd|RUN.csv``: a recording in the Rerun viewer with the project's layout
-(``recording``, ``viewer``), or the run metrics of CSV traces (``metrics``, ``smoothed``)."""
+(``recording``), or the run metrics of CSV traces (``metrics``, ``smoothed``)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import argparse
 from pathlib import Path
 
 from cartctl.cli.commands.options import add_map_option, check_input_file, check_outputs
-from cartctl.cli.commands.review.viewer import (
+from cartctl.cli.commands.review.recording import (
     VULKAN_HINT,
     open_in_viewer,
     screenshot,

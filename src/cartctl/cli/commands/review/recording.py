@@ -1,14 +1,26 @@
 """A ``.rrd`` recording read back (:func:`read_recording`) and streamed with the project's layout
-(:func:`stream`) into a fresh stream (:func:`new_stream`) of any viewer."""
+(:func:`stream`) into a viewer: the native one, the web viewer (``--web``) or a headless one's
+picture (``--screenshot FILE.png``, which needs a Vulkan driver: :func:`vulkan_available`)."""
 
 from __future__ import annotations
 
+import contextlib
+import glob
+import os
+import signal
+import socket
+import subprocess
+import tempfile
+import threading
+import time
 import uuid
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
+from urllib.parse import quote
 
-from cartctl.errors import DataFileError, MissingFileError
+from cartctl.errors import CartctlError, DataFileError, InputError, MissingFileError
+from cartctl.sinks.rerun_problems import viewer_env
 
 if TYPE_CHECKING:  # rerun takes ~0.6 s to import: only the review itself loads it
     import numpy as np
@@ -16,6 +28,7 @@ if TYPE_CHECKING:  # rerun takes ~0.6 s to import: only the review itself loads 
     import rerun.blueprint as rrb
     from numpy.typing import NDArray
     from rerun.chunk import Chunk, RrdReader, StoreEntry
+    from rerun.experimental import ViewerClient
 
 LOAD_TIMEOUT_S = 30.0  # longest wait for a viewer to take in (or show) the whole recording
 
@@ -52,6 +65,8 @@ def stream(
     import pyarrow as pa
     import pyarrow.compute as pc
 
+    from cartctl.sinks.rerun_sink import send_series
+
     ends: dict[str, int] = {}
     chunks = list(reader.stream(store=entry))
     for chunk in chunks:
@@ -65,12 +80,13 @@ def stream(
     rec.send_blueprint(layout(chunks))
     rec.send_chunks(chunks)
     _restyle(chunks, rec)
-    _send_extra(extra or {}, rec)
+    for entity, (time_s, tick, values) in (extra or {}).items():
+        send_series(rec, entity, time_s, tick, values)
     rec.flush(timeout_sec=LOAD_TIMEOUT_S)
     return ends
 
 
-SCALARS = "Scalars:scalars"
+SCALARS = "Scalars:scalars"  # the column of a scalar series' values in a chunk
 
 
 def scalar_stats(chunks: Iterable[Chunk]) -> tuple[dict[str, tuple[float, float]], set[str]]:
@@ -98,13 +114,6 @@ def scalar_stats(chunks: Iterable[Chunk]) -> tuple[dict[str, tuple[float, float]
         if np.any(values != np.round(values)):
             fractional.add(path)
     return extremes, set(extremes) - fractional
-
-
-def _send_extra(extra: Series, rec: rr.RecordingStream) -> None:
-    from cartctl.sinks.rerun_sink import send_series
-
-    for entity, (time_s, tick, values) in extra.items():
-        send_series(rec, entity, time_s, tick, values)
 
 
 def _restyle(chunks: Sequence[Chunk], rec: rr.RecordingStream) -> None:
@@ -148,3 +157,241 @@ def new_stream(entry: StoreEntry) -> rr.RecordingStream:
     return rr.RecordingStream(
         entry.application_id, recording_id=uuid.uuid4(), send_properties=False
     )
+
+
+VULKAN_HINT = "apt-get install mesa-vulkan-drivers libvulkan1"
+SCREENSHOT_WINDOW = "1600x900"  # the headless viewer's window, logical points
+_QUIET = ("--expect-data-soon", "--hide-welcome-screen")  # no welcome screen in the picture
+_VIEWER_START_TIMEOUT_S = 20.0
+_ICD_DIRS = ("/usr/share/vulkan/icd.d", "/usr/local/share/vulkan/icd.d", "/etc/vulkan/icd.d")
+
+
+class ViewerError(CartctlError, RuntimeError):
+    """The viewer could not be started, or could not render."""
+
+
+def require_viewer() -> str:
+    """The Rerun viewer executable (:class:`ViewerError` when there is none)."""
+    from cartctl.sinks.rerun_problems import viewer_executable
+
+    executable = viewer_executable()
+    if executable is None:
+        raise ViewerError(
+            "the Rerun viewer ('rerun') was not found next to Python or on PATH; "
+            "install rerun-sdk in this environment"
+        )
+    return executable
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def open_in_viewer(path: Path, *, extra: Series | None = None) -> str:
+    """Stream the recording, the layout and ``extra`` (series made from the recording: the
+    smoothed speed) into the native viewer, spawned if none is running; returns its address."""
+    import rerun as rr
+
+    from cartctl.sinks.rerun_problems import VIEWER_PORT, display_available, viewer_reachable
+
+    reader, entry = read_recording(path)
+    if not display_available():
+        raise ViewerError(
+            "no display to open the viewer on (DISPLAY/WAYLAND_DISPLAY unset): "
+            "use --web, or --screenshot FILE.png"
+        )
+    executable = require_viewer()
+    url = f"rerun+http://127.0.0.1:{VIEWER_PORT}/proxy"
+    rec = new_stream(entry)
+    try:
+        # Connects to a viewer already listening on the port instead of starting a second one.
+        rr.spawn(port=VIEWER_PORT, connect=False, executable_path=executable, recording=rec)
+        if not viewer_reachable(url):
+            raise ViewerError(f"the viewer ({executable}) did not start on this display")
+        rec.connect_grpc(url)
+        stream(reader, entry, rec, extra=extra)
+    except ViewerError:
+        raise
+    except (RuntimeError, ConnectionError, OSError) as exc:
+        raise ViewerError(f"could not hand the recording to the viewer at {url}: {exc}") from None
+    finally:
+        rec.disconnect()
+    return url
+
+
+def serve_web(
+    path: Path, *, wait: Callable[[str], None] | None = None, extra: Series | None = None
+) -> str:
+    """Serve the recording, the layout and ``extra`` to the web viewer, print its URL and block
+    until Ctrl-C (or until ``wait``, called with the URL, returns); returns the URL."""
+    import rerun as rr
+
+    reader, entry = read_recording(path)
+    rec = new_stream(entry)
+    try:
+        grpc_url = rec.serve_grpc(grpc_port=free_port(), server_memory_limit="25%")
+        stream(reader, entry, rec, extra=extra)
+        web_port = free_port()
+        rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=grpc_url)
+        url = f"http://127.0.0.1:{web_port}/?url={quote(grpc_url, safe='')}"
+        print(f"web viewer: {url}", flush=True)
+        if wait is None:
+            print("serving until Ctrl-C", flush=True)
+            with contextlib.suppress(KeyboardInterrupt):
+                threading.Event().wait()
+        else:
+            wait(url)
+    finally:
+        rec.disconnect()
+    return url
+
+
+def screenshot(
+    path: Path, out: Path, *, window: str = SCREENSHOT_WINDOW, extra: Series | None = None
+) -> Path:
+    """Render the recording, the layout and ``extra`` in a headless viewer (its own session,
+    stopped after), with the time cursor paused at the end, and save the PNG ``out``; returns
+    ``out``, absolute. Takes about 1–3 s."""
+    if out.suffix.lower() != ".png":
+        raise InputError(f"--screenshot writes a PNG picture, got '{out}'")
+    reader, entry = read_recording(path)
+    executable = require_viewer()
+    out = out.resolve()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    port = free_port()
+    url = f"rerun+http://127.0.0.1:{port}/proxy"
+    with tempfile.TemporaryDirectory(prefix="cartctl-review-") as tmp:
+        log_path = Path(tmp) / "viewer.log"
+        with log_path.open("wb") as log:
+            viewer = subprocess.Popen(
+                [executable, "--headless", "--port", str(port), "--window-size", window, *_QUIET],
+                env={**viewer_env(), "RERUN_APP_ONLY": "true"},
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
+        rec = new_stream(entry)
+        try:
+            client = _wait_for_viewer(url, port, viewer, log_path)
+            rec.connect_grpc(url)
+            ends = stream(reader, entry, rec, extra=extra)
+            _pause_at_end(client, ends)
+            client.save_screenshot(str(out))
+        except ViewerError:
+            raise
+        except (RuntimeError, ConnectionError, OSError, TimeoutError) as exc:
+            reason = _viewer_failure(log_path) or str(exc).splitlines()[0]
+            raise ViewerError(
+                f"the headless viewer could not render ({reason}); it needs a Vulkan driver: "
+                f"{VULKAN_HINT}"
+            ) from None
+        finally:
+            rec.disconnect()
+            _stop(viewer)
+    if not out.is_file():
+        raise ViewerError(
+            f"the viewer did not write {out}; it needs a Vulkan driver: {VULKAN_HINT}"
+        )
+    return out
+
+
+def vulkan_available() -> bool:
+    """Whether ``libvulkan`` and a driver manifest (in the standard folders or ``VK_DRIVER_FILES``
+    / ``VK_ICD_FILENAMES``; Mesa's lavapipe counts) are installed, as ``--screenshot`` needs."""
+    import ctypes.util
+
+    if ctypes.util.find_library("vulkan") is None:
+        return False
+    listed = os.environ.get("VK_DRIVER_FILES") or os.environ.get("VK_ICD_FILENAMES")
+    if listed:
+        return any(Path(f).is_file() for f in listed.split(os.pathsep) if f)
+    return any(glob.glob(os.path.join(d, "*.json")) for d in _ICD_DIRS)
+
+
+def _wait_for_viewer(
+    url: str, port: int, viewer: subprocess.Popen[bytes], log_path: Path
+) -> ViewerClient:
+    """Wait until the viewer has drawn a frame, or fail with the reason it gave."""
+    from rerun.experimental import ViewerClient
+
+    deadline = time.monotonic() + _VIEWER_START_TIMEOUT_S
+    client: ViewerClient | None = None
+    while time.monotonic() < deadline:
+        if viewer.poll() is not None:
+            reason = _viewer_failure(log_path) or f"it exited with code {viewer.returncode}"
+            raise ViewerError(
+                f"the headless viewer could not start ({reason}); it needs a Vulkan driver: "
+                f"{VULKAN_HINT}"
+            )
+        try:
+            if client is None:
+                with socket.create_connection(("127.0.0.1", port), timeout=0.2):
+                    pass
+                client = ViewerClient.connect(url)
+            client.take_screenshot(max_size=16)  # answers only once a frame has been drawn
+            return client
+        except (OSError, ConnectionError, RuntimeError):
+            time.sleep(0.05)
+    raise ViewerError(
+        f"the headless viewer did not start within {_VIEWER_START_TIMEOUT_S:g} s; "
+        f"it needs a Vulkan driver: {VULKAN_HINT}"
+    )
+
+
+def _pause_at_end(client: ViewerClient, ends: dict[str, int]) -> None:
+    """Wait until the viewer holds the whole recording (``ends``: :func:`stream`'s), then pause
+    the time cursor at its end."""
+    import numpy as np
+
+    name = "time" if "time" in ends else next(iter(ends), None)
+    deadline = time.monotonic() + LOAD_TIMEOUT_S
+    while name is not None:
+        state = client.get_state()
+        timelines = state.recordings[0].timelines if state.recordings else []
+        shown = next((t for t in timelines if t.name == name), None)
+        if not state.loading and shown is not None and (shown.end or -1) >= ends[name]:
+            if shown.time_type == "sequence":
+                client.set_time(name, sequence=ends[name], play_state="paused")
+            else:
+                client.set_time(
+                    name, duration=np.timedelta64(ends[name], "ns"), play_state="paused"
+                )
+            break
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"the recording did not load within {LOAD_TIMEOUT_S:g} s")
+        time.sleep(0.05)
+    time.sleep(0.8)  # frames for the plots to fit their axes and the start-up notices to fade
+
+
+def _viewer_failure(log_path: Path) -> str | None:
+    """The viewer's own one-line reason for failing, if its log has one."""
+    try:
+        text = log_path.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return None
+    for marker in ("No graphics adapter", "graphics adapter", "Vulkan", "panicked"):
+        for line in text.splitlines():
+            if marker in line:
+                return line.strip()[:200]
+    return None
+
+
+def _stop(viewer: subprocess.Popen[bytes]) -> None:
+    """Stop the viewer this command started: its session (the wrapper script and the binary)."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        try:
+            if os.name == "posix":
+                os.killpg(viewer.pid, sig)
+            else:
+                viewer.kill()
+        except ProcessLookupError:
+            pass
+        try:
+            viewer.wait(5.0)
+            return
+        except subprocess.TimeoutExpired:
+            continue

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from cartctl.cart import PERIOD_S
 from cartctl.cli.commands.review.metrics import TIMING_COLUMNS
-from cartctl.cli.commands.review.recording import Series, read_recording
+from cartctl.cli.commands.review.recording import SCALARS, Series, read_recording
 from cartctl.data.modelfile import ModelFile, load_models
 from cartctl.data.read import read_trace
 from cartctl.design.smoother import METHOD, smooth_speed
@@ -145,11 +145,11 @@ def recording_columns(chunks: Any) -> dict[str, NDArray[np.float64]]:
             continue
         batch = chunk.to_record_batch()
         names = batch.schema.names
-        if not {"tick", "time", "Scalars:scalars"} <= set(names):
+        if not {"tick", "time", SCALARS} <= set(names):
             continue
         tick = batch.column("tick").cast(pa.int64()).to_numpy(zero_copy_only=False)
         time_ns = batch.column("time").cast(pa.int64()).to_numpy(zero_copy_only=False)
-        values = pc.list_element(batch.column("Scalars:scalars"), 0)
+        values = pc.list_element(batch.column(SCALARS), 0)
         parts.setdefault(column, []).append(
             (tick, time_ns, values.to_numpy(zero_copy_only=False).astype(float))
         )
