@@ -41,13 +41,9 @@ class IdentificationError(InputError):
 
 @dataclass(frozen=True)
 class ArxFit:
-    """An identified model with its uncertainty and fits.
-
-    ``theta_std`` is σ̂ √diag((ΦᵀΦ)⁻¹) (ARX; the Jacobian's for OE); the fits are NRMSE (%) of
-    the simulation from rest on the input alone and of the one-step-ahead prediction;
-    ``residual_rms`` (rad/s) of the equation (ARX) or simulation (OE) error over ``n_samples``
-    equations; ``method`` 'arx' or 'oe'.
-    """
+    """An identified model, σ of each θ entry, NRMSE fits (%) of the simulation from rest and of
+    the one-step prediction, and the RMS (rad/s) of the equation (ARX) or simulation (OE) error
+    over ``n_samples`` equations."""
 
     model: ArxModel
     theta_std: NDArray[np.float64]

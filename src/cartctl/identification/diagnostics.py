@@ -1,15 +1,10 @@
-"""The diagnostics of one motor's identification: validation fits, residual tests, θ's
-covariance with the Bode bands it implies, and the order table.
+"""The diagnostics of one motor's identification: fits on validation data (``--validate-on``,
+or the end of each experiment with ``--split``), residual tests, θ's covariance Σ with the Bode
+bands it implies, and the order table.
 
-Validation data is an independent experiment (``--validate-on FILE``) or the end of each
-estimation experiment (``--split F``: the first fraction F estimates); with it the fits and
-residual tests are on it, without on the raw estimation data.
-
-θ's covariance, from the fits' own σ̂ and normal matrix: ARX Σ = σ̂² (ΦᵀΦ)⁻¹ with
-σ̂² = ‖y − Φθ̂‖² / (N − d); OE Σ = σ̂² (JᵀJ)⁻¹, J the simulation's Jacobian at θ̂. The Bode bands
-sample θ ~ N(θ̂, Σ) (seeded) and take, per frequency, the percentiles a normal distribution has
-at ±1σ (15.9, 84.1 %) and ±2σ (2.3, 97.7 %) of the magnitude (dB) and of the phase (deg,
-measured from the nominal model's so no draw jumps a turn).
+Σ = σ̂² (ΦᵀΦ)⁻¹ for ARX, σ̂² (JᵀJ)⁻¹ for OE (J the simulation's Jacobian at θ̂). The bands draw
+θ ~ N(θ̂, Σ) (seeded) and take per frequency the normal percentiles at ±1σ and ±2σ of the
+magnitude (dB) and of the phase (deg, measured from the nominal model's so no draw jumps a turn).
 """
 
 from __future__ import annotations

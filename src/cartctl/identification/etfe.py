@@ -76,13 +76,9 @@ def _repeats(u: NDArray[np.float64], p: int, tol: float) -> bool:
 
 
 def find_period(u: ArrayLike, *, min_ticks: int = 10) -> int | None:
-    """The period of an input (V per tick) that repeats exactly at least twice, in ticks.
-
-    The smallest p ≥ ``min_ticks`` with u[k + p] = u[k] for every k (to :data:`PERIOD_RTOL` of
-    max |u|) and len(u) ≥ 2p; a trailing partial period is allowed. None for a sequence that is
-    not periodic, is constant or holds fewer than two periods. The report's square wave with 1 s
-    holds at 10 ms gives 300.
-    """
+    """The period (ticks) of an input repeating exactly at least twice: the smallest p ≥
+    ``min_ticks`` with u[k + p] = u[k] for every k (to :data:`PERIOD_RTOL` of max |u|), a trailing
+    partial period allowed; None otherwise (the report's square wave with 1 s holds gives 300)."""
     u = as_sequence(u, "input sequence u")
     min_ticks = check_whole(min_ticks, "min_ticks")
     if u.size < 2 * min_ticks:
@@ -167,12 +163,9 @@ no energy at multiples of three times its fundamental, and its weakest harmonic 
 
 @dataclass(frozen=True, eq=False)
 class Etfe:
-    """Y(f) / U(f) at the excited frequencies ``freq_hz`` (increasing, up to 1 / (2 Ts)).
-
-    ``periodic``: from whole periods of a periodic input (no leakage, exact on noise-free data),
-    ``n_segments`` of them averaged; otherwise the whole record (1) or that many Hann segments.
-    ``response_std`` is the standard deviation of ``response`` from the periods' spread (None
-    with one period or a non-periodic estimate). The arrays are read-only.
+    """Y(f) / U(f) at the excited frequencies ``freq_hz`` (increasing, up to 1 / (2 Ts)), from
+    ``n_segments`` whole periods (``periodic``), the whole record (1) or Hann segments;
+    ``response_std`` from the periods' spread (None with one period or non-periodic). Read-only.
     """
 
     freq_hz: NDArray[np.float64]
@@ -230,17 +223,11 @@ def etfe(
 ) -> Etfe:
     """Estimate the frequency response Y(f) / U(f) from one experiment (y in rad/s, u in V).
 
-    With ``period_ticks`` (e.g. from :func:`find_period`): whole
-    periods only, the first dropped when ``skip_first``; the periods are averaged and the ratio
-    kept at the excited harmonics k / (P Ts). Exact on noise-free data of a linear system;
-    averaging n periods divides the noise variance by n.
-
-    Otherwise: with ``segments`` = 1 the ratio of the whole record's FFTs (no window); with more,
-    that many half-overlapping Hann segments and H1 = Σ Y U* / Σ |U|² (scipy.signal.csd over
-    welch, which averages out output noise). Both suffer leakage and the transient from rest.
-
-    Only bins whose |U| exceeds ``min_input_fraction`` of the largest are kept, so DC is dropped
-    for an input without mean.
+    With ``period_ticks``: the whole periods (the first dropped with ``skip_first``) averaged and
+    the ratio kept at the harmonics k / (P Ts), exact on noise-free data. Otherwise the whole
+    record's FFTs (``segments`` = 1, no window) or the H1 estimate Σ Y U* / Σ |U|² over that many
+    half-overlapping Hann segments; both suffer leakage and the transient from rest. Only bins with
+    |U| above ``min_input_fraction`` of the largest are kept.
     """
     if not (isinstance(period_s, int | float) and math.isfinite(period_s) and period_s > 0.0):
         raise InputError(f"period_s must be a positive number of seconds, got {period_s!r}")

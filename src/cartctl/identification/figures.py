@@ -75,10 +75,8 @@ def plot_etfe(
 ) -> Path:
     """ETFE as dots and each model's Bode plot as a line (report, figure 4); returns ``path``.
 
-    Magnitude (dB re 1 rad/s per V) above, phase (deg) below, on a log frequency axis up to the
-    Nyquist frequency. Model phases are unwrapped from low frequency; each ETFE phase is moved by
-    whole turns to the first model's branch (or unwrapped, without models). ``band`` shades the
-    first model's 1σ and 2σ bands (:class:`~cartctl.identification.diagnostics.BodeBand`).
+    Magnitude (dB re 1 rad/s per V) above, phase (deg, each ETFE point moved by whole turns to the
+    first model's branch) below, up to Nyquist; ``band`` shades the first model's 1σ, 2σ bands.
     """
     from matplotlib.ticker import FuncFormatter, LogLocator, MultipleLocator, NullFormatter
 
@@ -145,10 +143,8 @@ def _draw_band(ax_m: Any, ax_p: Any, band: BodeBand, f_lo: float, label: str) ->
 def plot_pzmap(models: Mapping[str, ArxModel], path: Path, *, title: str) -> Path:
     """Pole-zero map of one or more models (report, figures 5 and 12); returns ``path``.
 
-    Poles ×, zeros ○, one colour per model; poles at z = 0 (pure delays) as one black square at
-    the origin with their count; other poles labelled with their continuous-equivalent frequency
-    (Hz), a conjugate pair once. Left the whole unit circle (and any root outside) with the zoom
-    boxed, right the zoom on the roots inside; one panel when those fill the circle.
+    Poles ×, zeros ○, delay poles at z = 0 as one square with their count, the other poles
+    labelled with their frequency (Hz); the whole circle beside a zoom on the roots inside it.
     """
     from matplotlib.lines import Line2D
     from matplotlib.patches import Circle, Rectangle

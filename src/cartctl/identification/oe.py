@@ -1,23 +1,13 @@
-"""Output-error refinement: minimise the simulation error over θ, from the ARX estimate.
+"""Output-error refinement of an ARX estimate (docs/identification.md): minimise
 
-ARX minimises the equation error, which measurement noise biases (the report's dilemma:
-unfiltered too fast, filtered too slow). The output-error criterion
+    V(θ) = Σ_k (y[k] − ŷ(k, θ))²,     ŷ = B(q) q⁻ⁿᵏ / A(q) u    (simulated from rest),
 
-    V(θ) = Σ_k (y[k] − ŷ(k, θ))²,     ŷ = B(q) q⁻ⁿᵏ / A(q) u    (simulated from rest)
-
-is unbiased for white measurement noise. scipy.optimize.least_squares solves it with the exact
-Jacobian, by filtering: ∂ŷ/∂a_i = −q⁻ⁱ ŷ / A(q), ∂ŷ/∂b_j = q⁻⁽ⁿᵏ⁺ʲ⁾ u / A(q).
-
-Two safeguards:
-
-* **Poles inside |z| ≤ ρ** (:data:`POLE_BOUND`). A(q) is searched through its reflection
-  coefficients k_i = tanh(η_i) ∈ (−1, 1) (Schur–Cohn): the Levinson step-up turns any real η
-  into Ã with every root inside the unit circle, and a_i = ã_i ρⁱ scales them by ρ, so no trial
-  model diverges or reaches z = −1 (∂a/∂η by a complex step). A start with a pole beyond ρ is
-  projected to ρ − 0.01 first, B refitted by linear least squares (ŷ is linear in B).
-* **Never worse than the start.** The simulation fit on ``eval_segments`` (the unfiltered data)
-  decides between the start, its refinement on the criterion data and, when they differ, its
-  refinement on the evaluation data; the start is returned (and said so) when none beats it.
+unbiased for white measurement noise where ARX's equation error is not, by
+scipy.optimize.least_squares with the exact Jacobian ∂ŷ/∂a_i = −q⁻ⁱ ŷ / A(q),
+∂ŷ/∂b_j = q⁻⁽ⁿᵏ⁺ʲ⁾ u / A(q). A(q) is searched through reflection coefficients k_i = tanh(η_i)
+(Levinson step-up, every root inside the unit circle) scaled by ρ (a_i = ã_i ρⁱ), so every trial
+model has its poles inside |z| ≤ ρ; a start beyond ρ is projected inside first. The simulation
+fit on the unfiltered data decides, so the result is never worse than its start.
 """
 
 from __future__ import annotations
@@ -213,13 +203,10 @@ def fit_oe(
     eval_segments: Sequence[Segment] | None = None,
     pole_bound: float = POLE_BOUND,
 ) -> OeFit:
-    """Refine ``initial`` (its orders and delay kept) by output-error least squares.
+    """Refine ``initial`` (orders and delay kept) by output-error least squares on ``segments``.
 
-    ``segments`` (rad/s, V) are the criterion's data, each simulated from rest (prefiltered, with
-    a prefilter); ``eval_segments`` the data whose simulation fit decides and is reported
-    (default ``segments``). Every pole of the result has |z| ≤ ``pole_bound`` (in (0, 1]), and
-    its fit is never below the start's; ``theta_std`` is σ̂ √diag((JᵀJ)⁻¹) from the Jacobian in θ.
-    ``max_evaluations`` limits each refinement.
+    ``eval_segments`` (default ``segments``; the unfiltered data when those are prefiltered) decide
+    by simulation fit; every pole ends inside ``pole_bound``; ``theta_std`` is σ̂ √diag((JᵀJ)⁻¹).
     """
     if max_evaluations < 1:
         raise InputError(f"max_evaluations must be at least 1, got {max_evaluations}")

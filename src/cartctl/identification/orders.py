@@ -1,18 +1,11 @@
-"""Structure selection by ARX fits on common equations: each candidate's fit starts at the
-largest first row of all candidates, so every loss is over the same N equations and they compare.
-
-The input delay (``--delay auto``): the report assumes nk = 2 (one sample from the zero-order
-hold, one from microOS); a PC-side loop over serial adds ticks. The smallest equation-error loss
-wins; both motors share one loop, so :func:`joint_delay` picks one delay from their joint
-evidence and says when the best candidates are too close to call.
-
-The orders (``--orders``): a grid of (na, nb, nk) compared by
+"""Structure selection by ARX fits on common equations (each candidate starts at the largest
+first row of all, so every loss is over the same N equations): the input delay (``--delay
+auto``, one for both motors, which share one loop) and the order grid (``--orders``), compared by
 
     V = (1/N) Σ ε(k)²,    FPE = V (1 + d/N) / (1 − d/N),    AIC = N ln V + 2d
 
-(ε the equation error in rad/s, d = na + nb; smaller is better) and by the NRMSE fit (%) of the
-model simulated from rest on the validation data, or else the raw estimation data (where it
-rewards extra parameters).
+(ε the equation error in rad/s, d = na + nb) and by the simulation fit on the validation data, or
+else the raw estimation data.
 """
 
 from __future__ import annotations
@@ -44,12 +37,9 @@ from cartctl.measures.metrics import finite_or_none
 
 @dataclass(frozen=True)
 class DelayEstimate:
-    """One motor's delay evidence: per candidate the equation-error RMS (rad/s) of its ARX fit on
-    the same ``equations`` and its fits (%; the simulation fit NaN for an unstable model).
-
-    ``nk`` is this motor's best, or the joint choice (:func:`joint_delay`), and then
-    ``nk_alone`` is this motor's own best where it differs.
-    """
+    """One motor's delay evidence: each candidate's equation-error RMS (rad/s) on the same
+    ``equations`` and its fits (%; the simulation fit NaN when unstable). ``nk`` is this motor's
+    best or the joint choice, then ``nk_alone`` this motor's own best where it differs."""
 
     nk: int
     candidates: tuple[int, ...]
@@ -98,12 +88,9 @@ def delay_evidence(
     period_s: float = PERIOD_S,
     eval_segments: Sequence[Segment] | None = None,
 ) -> DelayEstimate:
-    """Fit every candidate delay (samples) on common equations: the evidence, and this motor's
-    best (smallest equation error; ties up to 1e-9 of the output's RMS to the smaller delay).
-
-    ``eval_segments`` is the raw data for the simulation fits when ``segments`` is prefiltered.
-    Nothing is refused for being too close (:func:`check_distinct` does that).
-    """
+    """Fit every candidate delay on common equations (simulation fits on ``eval_segments``): the
+    evidence, and the best (smallest equation error; ties up to 1e-9 of the output's RMS to the
+    smaller delay). Refusing indistinct evidence is :func:`check_distinct`'s."""
     cands = tuple(int(c) for c in candidates)
     if not cands:
         raise InputError("no candidate delays to try")
@@ -142,14 +129,12 @@ places by up to 2.5 % between noise realisations, while nk = 3 lies 160 % above 
 
 @dataclass(frozen=True)
 class JointDelay:
-    """One input delay for every motor of a cart (they share one loop), and the evidence.
+    """One input delay for the motors of a cart, and the evidence.
 
-    The joint evidence of a candidate nk (rad/s, smaller is better) is the weighted geometric
-    mean of the motors' equation-error RMS, exp(Σ_m w_m ln RMS_m(nk)), w_m = N_m / Σ N with N_m
-    motor m's equations: scaling one motor's speeds leaves the ranking alone, so a faster or
-    noisier motor does not dominate (up to constants, the log-likelihood of both motors' errors
-    with a noise variance of their own). ``close``: the candidates within
-    :data:`CLOSE_FRACTION` of the best; ``motors``: each motor's own evidence.
+    A candidate's joint evidence (rad/s) is the weighted geometric mean of the motors'
+    equation-error RMS, exp(Σ_m w_m ln RMS_m(nk)) with w_m = N_m / Σ N (N_m: motor m's
+    equations), so scaling one motor's speeds leaves the ranking alone. ``close``: the candidates
+    within :data:`CLOSE_FRACTION` of the best; ``motors``: each motor's own evidence.
     """
 
     nk: int
@@ -198,12 +183,9 @@ class JointDelay:
 
 
 def joint_delay(estimates: Mapping[str, DelayEstimate]) -> JointDelay:
-    """Pick one delay for the motors of ``estimates`` (motor → its :func:`delay_evidence`).
-
-    The smallest joint evidence wins; when others lie within :data:`CLOSE_FRACTION` of it, the
-    largest of those close candidates, as a controller designed for the later answer tolerates an
-    earlier one better than the reverse. Each estimate comes back with ``nk`` set to the choice.
-    """
+    """One delay for the motors of ``estimates``: the smallest joint evidence or, when others lie
+    within :data:`CLOSE_FRACTION` of it, the largest of those (a design for the later answer
+    tolerates an earlier one better). Each estimate comes back with ``nk`` the choice."""
     if not estimates:
         raise InputError("no delay evidence to choose from")
     first = next(iter(estimates.values()))

@@ -74,13 +74,9 @@ class Prefilter:
 
 @dataclass(frozen=True)
 class IdentifyRequest:
-    """What the user asked for (the options of ``cartctl identify``).
-
-    ``delay`` None estimates nk over ``delay_candidates``; ``orders`` is the ``--orders`` grid;
-    ``split`` the estimation fraction of ``--split``; ``loop_delay_ticks`` the loop delay the data
-    was recorded in (ticks from a measurement to its voltage on the motor), written into the model
-    file. A motor without excitation is an error when named alone, else skipped with a note.
-    """
+    """The options of ``cartctl identify``: ``delay`` None estimates nk over ``delay_candidates``;
+    ``loop_delay_ticks`` (measurement to voltage on the motor) goes into the model file. A motor
+    without excitation is an error when named alone, else skipped with a note."""
 
     motors: tuple[str, ...] = ("a", "b")
     na: int = 2

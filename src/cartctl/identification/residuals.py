@@ -1,21 +1,14 @@
-"""Residual tests of an identified model, as MATLAB's ``resid``: whiteness and independence.
-
-The one-step prediction residuals ε(k) = y(k) − ŷ(k | k−1) of a good model are white and
-independent of past inputs. For ARX the predictor is φ(k)ᵀθ (ε is the equation error); an
-output-error model's noise model is 1, so its predictor is the simulation and ε its error.
-Per experiment with its mean removed, summed over experiments (N samples in all):
+"""Residual tests of an identified model, as MATLAB's ``resid`` (docs/identification.md says
+what they mean). On the one-step prediction residuals ε (the equation error for ARX, the
+simulation error for OE) with each experiment's mean removed, summed over experiments (N samples):
 
     r_ε(τ)  = Σ ε(k) ε(k+τ) / Σ ε(k)²,                        τ = 1 … M
     r_εu(τ) = Σ ε(k+τ) u(k) / √(Σ ε(k)² Σ u(k)²),              τ = −M … M
 
-τ > 0 pairs the residual with an earlier input (unexplained), τ < 0 with a later one (feedback).
-The 99 % bound of r_ε is 2.58 / √N. That of r_εu is Ljung's, 2.58 √(P / N) with
-P = Σ_{|τ| ≤ M} r_ε(τ) r_u(τ); this truncated estimate can come out near zero or negative (a
-prefiltered or periodic input, a residual oscillating near Nyquist) and collapse the bound, so
-2.58 √(max(P, 1) / N) is used: never narrower than a white residual's.
-
-A test passes when no more lags are outside than a white, independent residual exceeds with 5 %
-probability, the L lags taken as L independent 1 % chances (binomial): 1 of 25, 2 of 51.
+99 % bounds: 2.58 / √N for r_ε, Ljung's 2.58 √(max(P, 1) / N) for r_εu with
+P = Σ_{|τ| ≤ M} r_ε(τ) r_u(τ) (floored at its white-residual value 1: the truncated estimate can
+collapse). A test passes with no more lags outside than a white, independent residual exceeds
+with 5 % probability (binomial over the lags at 1 % each).
 """
 
 from __future__ import annotations

@@ -1,15 +1,10 @@
 """Models and motors against measured traces (report §3.3).
 
-Validation (figures 6 and 7; ``cartctl validate``): the model runs from rest on a trace's
-commanded voltage (a simulation, not a one-step prediction) and is compared with the measured
-speed: the fit (%), the absolute error over time and, for a single step input, the step metrics
-of both responses side by side.
-
-The superposition test (equation 11, figure 8; ``cartctl linearity``): do the responses to two
-steps add up to the response to their sum? Three step experiments on one motor (say 3 V, 7 V and
-10 V) are aligned at their onsets and the small and large responses added. A linear motor gives
-zero error; Coulomb friction makes the summed step run above the added ones (each small step loses
-the friction once, the sum only once).
+``cartctl validate`` (figures 6, 7): the model simulated from rest on a trace's voltage against
+the measured speed: the fit, the absolute error and, for a single step, both step responses'
+metrics. ``cartctl linearity`` (equation 11, figure 8): the superposition test, whether the
+responses to two steps add up to the response to their sum (Coulomb friction makes the sum run
+above: each small step loses the friction once, the summed step only once).
 """
 
 from __future__ import annotations
