@@ -1,15 +1,7 @@
-"""``cartctl commission``: from a connected cart to a verified controller, in five stages.
-
-1. checks: port, heartbeat and loop delay; each motor's direction, encoder sign and breakaway
-   voltage; the excitation amplitude they allow;
-2. the report's square excitation at that amplitude;
-3. identification with a validation split, and its verdict;
-4. tuning: ``tune --robust``'s machinery over the model's uncertainty and actuation timing;
-5. verification: a closed-loop step on the cart against the tuning's prediction.
-
-:mod:`.stages` drives the plant and writes files (:mod:`.report`); :mod:`.checks` holds the
-judgements and :mod:`.tuning` the tuning, numbers in, numbers out.
-"""
+"""``cartctl commission``: from a connected cart to a verified controller in five stages (checks,
+excitation, identification, tuning, verification; docs/commission.md). :mod:`.stages` drives the
+plant and writes files (:mod:`.report`); :mod:`.checks` holds the judgements and :mod:`.tuning`
+the tuning, numbers in, numbers out."""
 
 from __future__ import annotations
 

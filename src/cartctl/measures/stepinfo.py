@@ -172,30 +172,15 @@ def step_info(
 ) -> StepInfo:
     """Measure a step response (definitions in the module docstring).
 
-    Parameters
-    ----------
-    time_s, response : array_like, shape (n,)
-        Strictly increasing sample times (s), n ≥ 2, and the response (e.g. rad/s).
-    reference : float, optional
-        The value to reach; without one, the final value is the target.
-    initial : float
-        The value the step starts from.
-    onset_s : float, optional
-        When the step is applied (default ``time_s[0]``); earlier samples are ignored.
-    settling_band : float
-        Band half-width as a fraction of the step size (0.02 is 2 %).
-    settling_floor : float
-        The band is never narrower than this (response units); a step no larger than its band has
-        no settling time.
-    interpolate : bool
-        Interpolate the rise and settling instants; False takes the first sample past the level.
+    ``time_s`` (s) strictly increasing and ``response`` (e.g. rad/s), shape (n,), n ≥ 2. Without a
+    ``reference`` the final value is the target; ``initial`` is where the step starts; samples
+    before ``onset_s`` (default ``time_s[0]``) are ignored. The band's half-width is
+    ``settling_band`` of the step (0.02: 2 %), never narrower than ``settling_floor`` (response
+    units); a step no larger than its band has no settling time. ``interpolate=False`` takes the
+    first sample past each level instead of interpolating.
 
-    Raises
-    ------
-    InputError
-        Unequal, short or non-finite arrays; time not increasing; an onset outside the record; a
-        step of size zero; a band not in (0, 1).
-    """
+    Raises InputError for unequal, short or non-finite arrays, time not increasing, an onset outside
+    the record, a step of size zero or a band not in (0, 1)."""
     t = np.asarray(time_s, dtype=float)
     y = np.asarray(response, dtype=float)
     if t.ndim != 1 or y.ndim != 1 or t.shape != y.shape:

@@ -1,16 +1,13 @@
 """One designed controller against N ARX plants at once (``tune --robust``): one Python loop over
 the ticks, each quantity an array over the plants.
 
-Per tick it does, operation for operation, what a tick of ``cartctl run --fast`` does with one
-motor of :class:`~cartctl.plants.sim.ArxPlant` (no measurement noise): the runtime's own control
-laws on arrays (:func:`~cartctl.runtime.pi.pi_law` or
-:func:`~cartctl.runtime.statefeedback.feedback_law`, with the fixed-gain estimator's
-:func:`~cartctl.runtime.kalman.filter_correct`/:func:`~cartctl.runtime.kalman.filter_predict`
-around it); the loop's clamp, then the plant's saturation; :func:`~cartctl.plants.sim.arx_next`
-with every plant's input coefficients laid out by lag, so plants of different delays run
-together. A plant whose speed passes :data:`~cartctl.plants.sim.DIVERGED_RAD_S` is marked as run
-away and held at zero. The trace ends with the run's stop row; ``tests/test_control_laws.py``
-checks it against the real loop bit for bit."""
+Each tick does, operation for operation, what a tick of ``cartctl run --fast`` does with one
+motor of an ``ArxPlant`` without noise: the runtime's own laws on arrays (``pi_law`` or
+``feedback_law``, the fixed-gain estimator's ``filter_correct``/``filter_predict`` around it),
+the loop's clamp, the plant's saturation and ``arx_next`` with every plant's input coefficients
+laid out by lag (so plants of different delays run together). A plant past ``DIVERGED_RAD_S``
+is marked as run away and held at zero. ``tests/test_control_laws.py`` checks the traces against
+the real loop bit for bit."""
 
 from __future__ import annotations
 
