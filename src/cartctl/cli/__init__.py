@@ -136,12 +136,8 @@ def _main(argv: Sequence[str] | None) -> int:
         sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - keeps the interpreter's flush quiet
         return 0
     except OSError as exc:  # a file we could not write or read for a reason the user can fix
-        print(
-            f"cartctl {args.command}: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(
-                ": "
-            ),
-            file=sys.stderr,
-        )
+        reason = f"{exc.strerror or exc}: {exc.filename or ''}".rstrip(": ")
+        print(f"cartctl {args.command}: error: {reason}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"cartctl {args.command}: interrupted", file=sys.stderr)
