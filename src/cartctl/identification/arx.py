@@ -2,9 +2,8 @@
 
     y[k] = φ(k)ᵀ θ + e[k],   φ(k) = [−y[k−1] … −y[k−na], u[k−nk] … u[k−nk−nb+1]]
 
-y in rad/s, u in V. θ comes from one Householder QR of [Φ | y] (not the normal equations), which
-also gives the residual norm and θ's covariance. Experiments (segments) are stacked without
-regressors across their boundaries.
+(y in rad/s, u in V), from one Householder QR of [Φ | y] over all experiments (no regressor
+crosses their boundaries), which also gives the residual norm and θ's covariance.
 """
 
 from __future__ import annotations
@@ -105,12 +104,8 @@ def first_row(na: int, nb: int, nk: int) -> int:
 def augmented_regression(
     segments: Sequence[Checked], na: int, nb: int, nk: int, start: int | None = None
 ) -> NDArray[np.float64]:
-    """[Φ | y] of all experiments in one Fortran-order array, ready for an in-place QR.
-
-    Rows k = ``start`` (default :func:`first_row`) … n − 1 of each experiment; columns
-    −y[k−1] … −y[k−na], u[k−nk] … u[k−nk−nb+1], then y[k]. No regressor crosses a boundary;
-    an experiment not longer than ``start`` gives no rows.
-    """
+    """[Φ | y] of all experiments in one Fortran-order array, ready for an in-place QR: rows
+    k = ``start`` (default :func:`first_row`) … n − 1 of each experiment longer than ``start``."""
     start = first_row(na, nb, nk) if start is None else start
     used = [(y, u) for y, u in segments if y.size > start]
     if not used:
@@ -150,11 +145,9 @@ def check_orders(na: int, nb: int, nk: int) -> None:
 def least_squares(
     phi_y: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], float, NDArray[np.float64]]:
-    """θ, ‖y − Φθ‖ and θ's standard deviations from one QR of [Φ | y] (destroyed).
-
-    With [Φ | y] = Q [[R, z], [0, ρ]] (Q never formed): θ = R⁻¹ z, ‖y − Φθ‖ = |ρ|, and
-    cov θ = σ̂² R⁻¹ R⁻ᵀ with σ̂² = ρ² / (rows − parameters). Refuses fewer than
-    :data:`MIN_ROWS_PER_PARAMETER` equations per parameter and a rank-deficient Φ.
+    """θ, ‖y − Φθ‖ and θ's standard deviations from one QR of [Φ | y] (destroyed): with
+    [Φ | y] = Q [[R, z], [0, ρ]], θ = R⁻¹ z, ‖y − Φθ‖ = |ρ|, cov θ = ρ² / (rows − d) R⁻¹ R⁻ᵀ.
+    Refuses fewer than :data:`MIN_ROWS_PER_PARAMETER` rows per parameter and a rank-deficient Φ.
     """
     n, p = phi_y.shape[0], phi_y.shape[1] - 1
     if n < MIN_ROWS_PER_PARAMETER * p:
@@ -240,12 +233,9 @@ def fit_arx(
     start: int | None = None,
     eval_segments: Sequence[Segment] | None = None,
 ) -> ArxFit:
-    """Fit an ARX model by least squares (the report's method; 2, 2, 2 its structure).
-
-    ``segments`` are (speed rad/s, voltage V) per tick, possibly prefiltered; ``start`` the first
-    regression row (default: the first with all regressors inside). The simulation fit is on
-    ``eval_segments`` when given: the raw data, so fits with and without a filter compare.
-    """
+    """Fit an ARX model by least squares to (speed rad/s, voltage V) experiments, from regression
+    row ``start`` (default: the first with all regressors inside). The simulation fit is on
+    ``eval_segments`` when given: the raw data, so fits with and without a prefilter compare."""
     check_orders(na, nb, nk)
     data = as_segments(segments)
     _check_excited(data)

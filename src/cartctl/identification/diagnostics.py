@@ -162,10 +162,9 @@ def on_validation(fit: FitT, validation: Sequence[Segment]) -> FitT:
 
 @dataclass(frozen=True)
 class Diagnostics:
-    """What the diagnostics found for one motor: which data the fits and residual tests are on
-    ('validation' or 'estimation'), the chosen model's residual tests, Σ of its θ and Bode band
-    (None for a singular Σ), the order table (with ``--orders``), and the raw estimation and
-    validation data (empty without) for fits of other models on the same data."""
+    """One motor's diagnostics: the data the fits and residual tests are on ('validation' or
+    'estimation'), the chosen model's residual tests, Σ and Bode band (None for a singular Σ), the
+    order table, and the raw and validation data for fits of other models on the same data."""
 
     fit_on: str
     residuals: ResidualTest
@@ -212,10 +211,8 @@ def diagnose(
     orders_grid: dict[str, tuple[int, ...]] | None = None,
     order_data: Sequence[Segment] | None = None,
 ) -> Diagnostics:
-    """Residual tests, Σ with its Bode band and, with ``orders_grid``, the order table of one
-    motor's ``chosen`` fit, made on ``fitted`` (from regression row ``start``, ARX). The order
-    table is fitted on ``order_data`` (default ``fitted``); the band spans 1/5000 of Nyquist to
-    just below it."""
+    """The diagnostics of ``chosen``, fitted on ``fitted`` (from regression row ``start``, ARX);
+    the order table (with ``orders_grid``) fitted on ``order_data`` (default ``fitted``)."""
     data = list(validation) or list(raw)
     y_all = np.concatenate([np.asarray(y, dtype=float) for y, _ in data])
     residuals = residual_test(

@@ -97,12 +97,9 @@ def find_period(u: ArrayLike, *, min_ticks: int = 10) -> int | None:
 def split_cycles(
     y: ArrayLike, u: ArrayLike, period_ticks: int, *, skip_first: bool = True, min_cycles: int = 2
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Output (rad/s) and input (V) cut into whole cycles, shape (n_cycles, period_ticks).
-
-    A trailing partial cycle is dropped, and the first (the transient from rest) when
-    ``skip_first``. Refuses fewer than ``min_cycles`` usable cycles and an input whose cycles
-    differ by more than :data:`PERIOD_RTOL` of max |u|.
-    """
+    """Output (rad/s) and input (V) cut into whole cycles, shape (n_cycles, period_ticks), the
+    trailing partial cycle and, with ``skip_first``, the first (the transient from rest) dropped.
+    Refuses fewer than ``min_cycles`` cycles and cycles of the input that differ."""
     y, u = as_pair(y, u)
     p = check_whole(period_ticks, "period_ticks")
     first = 1 if skip_first else 0
@@ -138,12 +135,9 @@ def average_cycles(
 def periodic_regression_pad(
     y_avg: ArrayLike, u_avg: ArrayLike, lags: int
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """An averaged cycle with its last ``lags`` samples prepended, for a regression over it.
-
-    An averaged cycle is one period of the periodic steady state, so y[−1] = y[P − 1] and so on.
-    With ``lags`` = max(na, nk + nb − 1) (3 for the report's structure), the regression over
-    k = lags … lags + P − 1 has exactly P equations, none with made-up initial conditions.
-    """
+    """An averaged cycle with its last ``lags`` samples prepended: one period of the periodic
+    steady state, y[−1] = y[P − 1] and so on, so with ``lags`` = max(na, nk + nb − 1) the
+    regression over the cycle has exactly P equations and no made-up initial conditions."""
     y, u = as_pair(
         y_avg,
         u_avg,

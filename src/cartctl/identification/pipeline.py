@@ -246,11 +246,9 @@ def _identify_motor(
 def identify(
     traces: Sequence[Trace], request: IdentifyRequest, validation: Sequence[Trace] = ()
 ) -> IdentifyResult:
-    """Identify the requested motors from the traces (validated on ``validation``, if any).
-
-    Refuses traces with different sample periods, a motor named alone that no trace excites, and
-    no motor excited at all (a voltage zero, or one constant, throughout).
-    """
+    """Identify the requested motors from the traces (validated on ``validation``, if any);
+    refuses traces with different ticks, a motor named alone that no trace excites, and no motor
+    excited at all."""
     if not traces:
         raise InputError("no traces to identify from")
     period_s = round(traces[0].period_s, 9)
@@ -321,10 +319,8 @@ def model_file(
     *,
     source: str = "cartctl identify",
 ) -> ModelFile:
-    """The chosen models with their provenance and figures, ready to save (``identify --out``).
-
-    ``source`` is what made them (the command line, or the Python call).
-    """
+    """The chosen models with their provenance (``source``: the command line or the Python call)
+    and figures, ready to save (``identify --out``)."""
     notes = []
     if result.delay is not None:
         j = result.delay

@@ -43,10 +43,7 @@ def plot_io(
     zoom_s: tuple[float, float] | None = None,
 ) -> Path:
     """Input and output of an experiment per motor (report, figures 3 and 11); returns ``path``.
-
-    One column per motor: voltage (V) above, speed (rad/s) below; with ``zoom_s`` (start, end in
-    s) a third row repeats the speed over that window, shaded above.
-    """
+    Per motor voltage (V) above speed (rad/s), and the speed again over ``zoom_s`` (s)."""
     if not motors:
         raise InputError("plot_io needs at least one motor, e.g. ('a', 'b')")
     if zoom_s is not None and not zoom_s[0] < zoom_s[1]:
@@ -93,12 +90,8 @@ def plot_step_validation(
     *,
     title: str,
 ) -> Path:
-    """Measured against simulated speed with |error| beneath (report, figures 6, 7); returns
-    ``path``.
-
-    Three panels on one time axis (s): voltage (V); the measured and each ``simulated`` speed
-    (rad/s, label → array, the legend with each simulation fit in %); |measured − simulated|.
-    """
+    """Measured against simulated speed (rad/s, label → array, the legend with each fit in %)
+    above |error|, under the voltage (V) (report, figures 6, 7); returns ``path``."""
     t = np.asarray(time_s, dtype=float)
     series = {"voltage": np.asarray(voltage, dtype=float), "measured": np.asarray(measured, float)}
     series |= {f"simulated[{k!r}]": np.asarray(v, dtype=float) for k, v in simulated.items()}

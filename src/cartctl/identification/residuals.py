@@ -38,11 +38,9 @@ FALSE_ALARM = 0.05
 def prediction_residuals(
     model: ArxModel, segments: Sequence[Segment], method: str = "arx"
 ) -> list[Checked]:
-    """One-step prediction residuals ε (rad/s) and the matching inputs u (V), per experiment.
-
-    'arx': ε(k) = y(k) − φ(k)ᵀθ from the first row with all regressors inside (shorter
-    experiments are left out); 'oe': ε = y − the simulation from rest, all samples.
-    """
+    """One-step prediction residuals ε (rad/s) with their inputs u (V), per experiment: 'arx'
+    from the first row with all regressors inside (shorter experiments left out), 'oe' the
+    simulation error from rest."""
     out = []
     for y, u in as_segments(segments):
         if method == "oe":
@@ -58,12 +56,9 @@ def prediction_residuals(
 
 @dataclass(frozen=True)
 class ResidualTest:
-    """r_ε at lags 1 … M and r_εu at −M … M with their 99 % bounds (module docstring).
-
-    ``cross_variance`` is P as estimated, before the floor; ``*_allowed`` the most lags outside
-    that still pass; ``rms_rad_s`` the residuals' RMS; ``negligible`` residuals below 1e-6 of
-    the output's RMS (rounding, about which the tests say nothing).
-    """
+    """r_ε at lags 1 … M and r_εu at −M … M with their 99 % bounds; ``cross_variance`` is P
+    before the floor, ``*_allowed`` the most lags outside that pass, ``negligible`` residuals
+    below 1e-6 of the output's RMS (rounding, about which the tests say nothing)."""
 
     auto_lags: NDArray[np.int_]
     auto: NDArray[np.float64]
@@ -157,11 +152,8 @@ def _correlation(pairs: Sequence[Checked], lags: NDArray[np.int_]) -> NDArray[np
 def residual_test(
     residuals: Sequence[Checked], max_lags: int = MAX_LAGS, output_rms: float | None = None
 ) -> ResidualTest:
-    """Whiteness and independence tests of (ε, u) per experiment (:func:`prediction_residuals`).
-
-    M = ``max_lags``, lowered to a quarter of the samples for short data; residuals below 1e-6
-    of ``output_rms`` (rad/s) are marked negligible. Refuses fewer than 20 samples.
-    """
+    """Whiteness and independence tests of (ε, u) per experiment, M = ``max_lags`` lowered to a
+    quarter of the samples; refuses fewer than 20 samples."""
     centred = [(e - e.mean(), u - u.mean()) for e, u in residuals if e.size]
     n = sum(e.size for e, _ in centred)
     if n < 20:

@@ -58,12 +58,9 @@ class StepComparison:
 
 @dataclass(frozen=True, eq=False)
 class ValidationResult:
-    """A model simulated on one motor's recorded input against the measured speed (rad/s, V, s).
-
-    ``fit_simulation_percent`` is the NRMSE fit (NaN for a constant speed); ``step`` is present
-    for a single step from 0 V; ``unstable_pole`` is |z| of the largest pole of an unstable
-    model, whose simulation runs away (no fit, no step comparison).
-    """
+    """A model simulated on one motor's recorded input against the measured speed (rad/s, V, s):
+    the NRMSE fit (NaN for a constant speed), the step comparison for a single step from 0 V, and
+    ``unstable_pole`` |z| of an unstable model, whose simulation runs away (no fit, no step)."""
 
     motor: str
     fit_simulation_percent: float
@@ -96,11 +93,8 @@ class ValidationResult:
 
 
 def validate(model: ArxModel, trace: Trace, motor: str) -> ValidationResult:
-    """Simulate ``model`` from rest on motor ``motor``'s input and compare with its measured speed.
-
-    Refuses a trace whose tick differs from the model's Ts by more than
-    :data:`PERIOD_TOLERANCE`, and a motor whose voltage is zero throughout.
-    """
+    """Simulate ``model`` from rest on ``motor``'s voltage and compare with its measured speed;
+    refuses a trace off the model's Ts by :data:`PERIOD_TOLERANCE` and a motor never driven."""
     voltage = trace.voltage(motor)
     measured = trace.speed(motor)
     step_s, period_s = trace.period_s, model.period_s
@@ -174,11 +168,8 @@ class ModelValidation:
 def validate_models(
     model_file: ModelFile, trace: Trace, motors: Sequence[str], *, skip_idle: bool = False
 ) -> ModelValidation:
-    """Validate each named motor's model on ``trace``.
-
-    With ``skip_idle``, a motor whose voltage is zero throughout is passed over instead of
-    refused; at least one must remain.
-    """
+    """Validate each named motor's model on ``trace``; with ``skip_idle`` a motor never driven is
+    passed over instead of refused, but one must remain."""
     if not motors:
         raise InputError("no motor to validate; name 'a', 'b' or both")
     results: dict[str, ValidationResult] = {}
@@ -294,12 +285,9 @@ def _onset(trace: Trace, motor: str, role: str) -> StepOnset:
 
 
 def linearity(small: Trace, large: Trace, total: Trace, motor: str = "a") -> LinearityResult:
-    """Run the superposition test on ``motor``'s responses to steps from 0 V of ``small``,
-    ``large`` and their sum (``total``).
-
-    Refuses a trace whose voltage is not one step from 0 V, traces with different ticks, and
-    amplitudes that do not add up (beyond 2 % or 0.1 V).
-    """
+    """The superposition test of ``motor``'s responses to steps from 0 V of ``small``, ``large``
+    and their sum ``total``; refuses a trace that is not one such step, traces with different
+    ticks and amplitudes that do not add up (beyond 2 % or 0.1 V)."""
     traces = (small, large, total)
     onsets = tuple(_onset(t, motor, role) for t, role in zip(traces, _ROLES, strict=True))
     periods = [t.period_s for t in traces]
