@@ -20,14 +20,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cartctl.link.firmware import (
-    STATUS_DRIVING,
-    STATUS_WATCHDOG,
-    TICK_MODULO,
-    WATCHDOG_MS,
-    BridgeFirmware,
-    CartIO,
-)
+from cartctl.link.bridge import SEQ_MODULO as TICK_MODULO
+from cartctl.link.bridge import STATUS_DRIVING, STATUS_WATCHDOG, WATCHDOG_MS
+from cartctl.link.firmware import BridgeFirmware, CartIO
 
 ROOT = Path(__file__).resolve().parents[1]
 SKETCH = ROOT / "firmware" / "cartctl_bridge"

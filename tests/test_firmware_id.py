@@ -19,7 +19,6 @@ import pytest
 from cartctl.design.controllerfile import load_controller
 from cartctl.export.arduino import arduino_source, onboard_controllers
 from cartctl.link import Gpio
-from cartctl.link.firmware import BridgeFirmware, CartIO
 from cartctl.link.cart_monitor import (
     DEFAULT_LABELS,
     Monitor,
@@ -28,8 +27,15 @@ from cartctl.link.cart_monitor import (
     firmware_labels,
     parse_labels,
 )
-from cartctl.link.firmware import BRIDGE, CHANNEL_KEYS, ONBOARD, recognise_firmware
-from cartctl.link.firmware import OnboardFirmware
+from cartctl.link.firmware import (
+    BRIDGE,
+    CHANNEL_KEYS,
+    ONBOARD,
+    BridgeFirmware,
+    CartIO,
+    OnboardFirmware,
+    recognise_firmware,
+)
 from monitor_stubs import MemoryRows, MemoryTexts, ScriptedLink
 
 ROOT = Path(__file__).resolve().parents[1]

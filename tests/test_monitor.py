@@ -24,7 +24,6 @@ from cartctl.design.controllerfile import load_controller
 from cartctl.errors import InputError
 from cartctl.export.arduino import onboard_controllers
 from cartctl.link import Event, Gpio
-from cartctl.link.firmware import CartIO
 from cartctl.link.cart_monitor import (
     CHANNEL_KEYS,
     DEFAULT_LABELS,
@@ -33,7 +32,7 @@ from cartctl.link.cart_monitor import (
     Monitor,
     parse_labels,
 )
-from cartctl.link.firmware import OnboardFirmware
+from cartctl.link.firmware import CartIO, OnboardFirmware
 from monitor_stubs import MemoryRows, MemoryTexts, ScriptedLink
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -12,8 +12,8 @@ from cartctl.cart import PERIOD_S
 from cartctl.errors import PlantError
 from cartctl.link import Encoder, Framer, Gpio, HostCommand, encode_gpiox_v2
 from cartctl.link.bridge import CH_BRIDGE_VERSION
-from cartctl.link.firmware import BridgeFirmware, CartIO
 from cartctl.link.cart_link import UnsupportedCartError
+from cartctl.link.firmware import BridgeFirmware, CartIO
 from cartctl.link.serial_cart import SerialCart
 from cartctl.plants.physics import PhysicsPlant
 

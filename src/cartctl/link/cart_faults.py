@@ -18,39 +18,10 @@ alone (the bridge sketch before it drained the port itself, and a controller on 
 
 @dataclass(frozen=True)
 class CartFaults:
-    """The firmware, timing and faults of a virtual cart.
-
-    Attributes
-    ----------
-    garbage, corrupt : float
-        Fraction of outgoing frames preceded by a burst of 1-16 random bytes, or with one byte
-        changed (their CRC fails).
-    stall_after_s, pull_after_s : float or None
-        This long (s) after the host's first frame the cart stalls (no ticks, nothing sent, port
-        open), or the cable is pulled (the port vanishes).
-    generation : str
-        'a' (MAVLink 1, GPIO: the bridge sketch) or 'b' (MAVLink 2, GPIOX, which cartctl refuses).
-    reply_jitter_ms : float
-        Each write of the host reaches the line a random 0 .. this many ms late.
-    receive : str
-        'bridge' (the sketch drains the port every 1 ms and before io()) or 'microos' (microOS's
-        communication thread alone, once per tick: the sketch before).
-    bridge : int
-        The sketch's version: 2 (500 kbaud, the newest command at the next io(): loop delay 1) or
-        1 (115200 baud, the voltage stored at control(): loop delay 3).
-    usb : bool
-        Model the Mega's ATmega16U2 USB bridge (the cart's frames reach the PC up to ~5 ms late,
-        the PC's within 1 ms); ``usb=off`` is a bare pseudo-terminal.
-    actuation_ms : float or None
-        When a command lands after its tick in the simulated wheels (ms, (0, 10]); None: the
-        preset's calibrated 3 ms.
-    reverse_a, reverse_b : bool
-        That motor's leads swapped (a wiring fault for ``cartctl commission`` to find).
-    late : float
-        Fraction of ticks (in [0, 1]) at which the host's commands arrive a tick late, in stretches
-        of :data:`LATE_STRETCH_TICKS` (:meth:`late_at`): there the echoes show a loop delay one
-        tick longer, and at a stretch's end one command is overtaken by the next.
-    """
+    """The firmware, timing and faults of a virtual cart, with the defaults of a healthy bridge
+    cart: the keys :meth:`parse` takes and what each does are docs/serial-protocol.md §8's table.
+    ``stall_after_s`` and ``pull_after_s`` count from the host's first frame; ``actuation_ms``
+    None is the preset's calibrated 3 ms."""
 
     garbage: float = 0.0
     corrupt: float = 0.0

@@ -15,8 +15,8 @@ as well. After each drain the held channels go to :meth:`BridgeFirmware.receive`
 :attr:`BridgeFirmware.command_v` is the voltage of the next ``io()``: the host's newest command
 acts one tick after the measurement it answers. The requested voltages apply while drive is 1 and
 the host sequence number keeps changing (a request that is not finite counts as 0 V); no new
-sequence number for :data:`WATCHDOG_MS` (checked at every drain and ``control()``) trips the
-watchdog: zero volts until a new one arrives.
+sequence number for ``WATCHDOG_MS`` (checked at every drain and ``control()``) trips the watchdog:
+zero volts until a new one arrives.
 
 :class:`OnboardFirmware` is the Python twin of ``cartctl export --arduino``'s ``control()``, for
 the virtual cart (``--onboard``): per tick and motor u = controller.step(r, measured speed),
@@ -35,37 +35,16 @@ from typing import Protocol
 from cartctl.cart import PERIOD_S
 from cartctl.choices import MAX_DURATION_S
 from cartctl.errors import InputError
-from cartctl.link.bridge import (
-    BRIDGE_VERSION,
-    CH_APPLIED_A,
-    CH_APPLIED_B,
-    CH_BRIDGE_VERSION,
-    CH_ECHO,
-    CH_HOST_LOST,
-    CH_POSITION_A,
-    CH_POSITION_B,
-    CH_SPEED_A,
-    CH_SPEED_B,
-    CH_STATUS,
-    CH_TICK,
-    SEQ_WINDOW,
-    STATUS_DRIVING,
-    STATUS_WATCHDOG,
-    WATCHDOG_MS,
-    CartSample,
-)
-from cartctl.link.bridge import SEQ_MODULO as TICK_MODULO
+from cartctl.link import bridge
 from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT, check_gpio_counts
 from cartctl.reference import ReferenceSchedule
-
-__all__ = ["STATUS_DRIVING", "STATUS_WATCHDOG", "TICK_MODULO", "WATCHDOG_MS"]
 
 CHANNEL_KEYS: tuple[str, ...] = (
     *(f"f{i}" for i in range(GPIO_FLOAT_COUNT)),
     *(f"i{i}" for i in range(GPIO_INT_COUNT)),
 )
 """A GPIO's channels in frame order: float channels f0..f7, then int channels i0..i3."""
-CH_FIRMWARE_ID = CH_BRIDGE_VERSION
+CH_FIRMWARE_ID = bridge.CH_BRIDGE_VERSION
 """The float channel in which cartctl's firmware says which it is (the bridge's version)."""
 ONBOARD_LAYOUT = 1
 ONBOARD_ID = 1000 + ONBOARD_LAYOUT
@@ -85,19 +64,19 @@ class Firmware:
 
 
 BRIDGE = Firmware(
-    f"cartctl bridge version {BRIDGE_VERSION}",
+    f"cartctl bridge version {bridge.BRIDGE_VERSION}",
     (
-        (f"f{CH_SPEED_A}", "speed_a"),
-        (f"f{CH_SPEED_B}", "speed_b"),
-        (f"f{CH_APPLIED_A}", "voltage_a"),  # on the H-bridge at that tick (V)
-        (f"f{CH_APPLIED_B}", "voltage_b"),
-        (f"f{CH_POSITION_A}", "position_a_rad"),
-        (f"f{CH_POSITION_B}", "position_b_rad"),
-        (f"f{CH_BRIDGE_VERSION}", "bridge_version"),
-        (f"i{CH_ECHO}", "echo_seq"),
-        (f"i{CH_TICK}", "cart_tick"),
-        (f"i{CH_STATUS}", "status"),
-        (f"i{CH_HOST_LOST}", "host_frames_lost"),
+        (f"f{bridge.CH_SPEED_A}", "speed_a"),
+        (f"f{bridge.CH_SPEED_B}", "speed_b"),
+        (f"f{bridge.CH_APPLIED_A}", "voltage_a"),  # on the H-bridge at that tick (V)
+        (f"f{bridge.CH_APPLIED_B}", "voltage_b"),
+        (f"f{bridge.CH_POSITION_A}", "position_a_rad"),
+        (f"f{bridge.CH_POSITION_B}", "position_b_rad"),
+        (f"f{bridge.CH_BRIDGE_VERSION}", "bridge_version"),
+        (f"i{bridge.CH_ECHO}", "echo_seq"),
+        (f"i{bridge.CH_TICK}", "cart_tick"),
+        (f"i{bridge.CH_STATUS}", "status"),
+        (f"i{bridge.CH_HOST_LOST}", "host_frames_lost"),
     ),
 )
 """The bridge sketch of version :data:`~cartctl.link.bridge.BRIDGE_VERSION`."""
@@ -124,7 +103,7 @@ def recognise_firmware(floats: Sequence[float], ints: Sequence[int]) -> Firmware
     """
     check_gpio_counts(floats, ints)
     marker = floats[CH_FIRMWARE_ID]
-    return {float(BRIDGE_VERSION): BRIDGE, float(ONBOARD_ID): ONBOARD}.get(marker)
+    return {float(bridge.BRIDGE_VERSION): BRIDGE, float(ONBOARD_ID): ONBOARD}.get(marker)
 
 
 @dataclass(frozen=True, slots=True)
@@ -184,7 +163,7 @@ class BridgeFirmware(HeldChannels):
     def _decide(self, now_ms: int) -> None:
         """What the next ``io()`` applies, from the held channels and the watchdog at ``now_ms``."""
         age_ms = ((int(now_ms) & 0xFFFFFFFF) - self._last_new_ms) & 0xFFFFFFFF
-        self.tripped = not self._seen or age_ms >= WATCHDOG_MS
+        self.tripped = not self._seen or age_ms >= bridge.WATCHDOG_MS
         self.driving = self.in_ints[1] == 1 and not self.tripped
         finite = [v if math.isfinite(v) else 0.0 for v in self.in_floats[:2]]
         self.command_v = (finite[0], finite[1]) if self.driving else (0.0, 0.0)
@@ -200,9 +179,9 @@ class BridgeFirmware(HeldChannels):
         self.hold(floats, ints)
         seq = self.in_ints[0]
         if seq != self._last_seq:
-            step = (seq - self._last_seq) % TICK_MODULO
-            if self._seen and step <= SEQ_WINDOW:
-                self.frames_lost = (self.frames_lost + step - 1) % TICK_MODULO
+            step = (seq - self._last_seq) % bridge.SEQ_MODULO
+            if self._seen and step <= bridge.SEQ_WINDOW:
+                self.frames_lost = (self.frames_lost + step - 1) % bridge.SEQ_MODULO
             self._last_seq = seq
             self._last_new_ms = int(now_ms) & 0xFFFFFFFF
             self._seen = True
@@ -218,10 +197,10 @@ class BridgeFirmware(HeldChannels):
         applied_seq = self.command_seq  # nothing drains between io() and control()
         self._decide(now_ms)
         status = (applied_seq, self.tick, self.driving, self.tripped, self.frames_lost)
-        fields = (now_ms, *astuple(io), *status, BRIDGE_VERSION)  # in CartSample's order
-        floats, ints = CartSample(*fields).to_channels()
+        fields = (now_ms, *astuple(io), *status, bridge.BRIDGE_VERSION)  # CartSample's order
+        floats, ints = bridge.CartSample(*fields).to_channels()
         self.out_floats, self.out_ints = list(floats), list(ints)
-        self.tick = (self.tick + 1) % TICK_MODULO
+        self.tick = (self.tick + 1) % bridge.SEQ_MODULO
         return self.command_v
 
 

@@ -26,7 +26,13 @@ from collections.abc import Sequence
 from typing import Any, Protocol, cast
 
 from cartctl.cart import PERIOD_S
-from cartctl.link.bridge import BRIDGE_BAUD, CH_BRIDGE_VERSION, LEGACY_BAUD, TIMING_FIRST_ID
+from cartctl.link.bridge import (
+    BRIDGE_BAUD,
+    CH_BRIDGE_VERSION,
+    LEGACY_BAUD,
+    SEQ_MODULO,
+    TIMING_FIRST_ID,
+)
 from cartctl.link.cart_faults import RECEIVE_SCHEDULES, CartFaults
 from cartctl.link.cart_uart import (
     BRIDGE_RX_RING_BYTES,
@@ -41,7 +47,7 @@ from cartctl.link.cart_uart import (
     fill_ring,
 )
 from cartctl.link.dialect import Encoder, encode_gpiox_v2
-from cartctl.link.firmware import TICK_MODULO, BridgeFirmware, CartIO
+from cartctl.link.firmware import BridgeFirmware, CartIO
 from cartctl.link.serial_cart import SerialCart
 from cartctl.plants.base import Measurement
 from cartctl.plants.physics import PhysicsPlant
@@ -314,7 +320,7 @@ class VirtualCart:
                 measurement.true_speed_a_rad_s or 0.0,
                 measurement.true_speed_b_rad_s or 0.0,
             )
-            self.true_speeds.pop((tick_counter - 512) % TICK_MODULO, None)  # keep the recent ones
+            self.true_speeds.pop((tick_counter - 512) % SEQ_MODULO, None)  # keep the recent ones
             voltage = firmware.control(io, tick_us // 1000)
             if self.bridge_version == 1:  # the sketch before version 2 sends 0 there
                 firmware.out_floats[CH_BRIDGE_VERSION] = 0.0
