@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from cartctl.cart import PERIOD_S
+from cartctl.cli.jsonout import strict
 from cartctl.cli.progress import ProgressBar
 from cartctl.commission import StageError, checks, report, tuning
 from cartctl.data.trace import Trace, write_trace
@@ -228,7 +229,7 @@ class Commission:
         self._record("tuning", series, body)
         self.results["controller"] = {"path": str(self.controller_path), "command": command,
                                       "settings": chosen["settings"],
-                                      "predicted": tuning.replace_none(self.tuned.predicted()),
+                                      "predicted": strict(self.tuned.predicted()),
                                       "timing_plants": chosen.get("timing")}  # fmt: skip
         self.report.add("tuning", body)
 
@@ -257,7 +258,7 @@ class Commission:
         if summary.get("metrics_signal") != "true_speed":
             smoothed = {m: f["smoothed"] for m, f in (summary.get("motors") or {}).items()
                         if isinstance(f.get("smoothed"), dict)} or None  # fmt: skip
-        checked = checks.compare(summary, tuning.replace_none(self.tuned.predicted()), smoothed)
+        checked = checks.compare(summary, strict(self.tuned.predicted()), smoothed)
         self.results["verification"] = {**checked.to_dict(), "trace": summary.get("trace"),
                                          "recording": summary.get("recording"),
                                          "command": "cartctl " + " ".join(argv)}  # fmt: skip

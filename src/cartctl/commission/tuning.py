@@ -17,8 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from cartctl.cli.jsonout import strict
 from cartctl.commission import StageError
 from cartctl.data.modelfile import ModelFile, load_models
 from cartctl.errors import InputError
@@ -161,15 +160,4 @@ def row_summary(row: robustness.RobustRow) -> dict[str, Any]:
                 "timing": [{k: e[k] for k in ("later_ms", *robustness.SUMMARY_KEYS, "settled")}
                            for e in row.score.actuation],
                 "pareto": row.pareto}  # fmt: skip
-    return replace_none(out)
-
-
-def replace_none(value: Any) -> Any:
-    """Infinite floats as None (JSON), recursively."""
-    if isinstance(value, dict):
-        return {k: replace_none(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [replace_none(v) for v in value]
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value
+    return strict(out)
