@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -73,9 +73,7 @@ class MotorCheck:
     gain_rad_s_v: float | None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"pulse_turn_rad": self.pulse_turn_rad, "other_turn_rad": self.other_turn_rad,
-                "direction": self.direction, "breakaway_v": self.breakaway_v,
-                "gain_rad_s_v": self.gain_rad_s_v}  # fmt: skip
+        return {k: v for k, v in asdict(self).items() if k != "motor"}
 
 
 def checks_sequence(
