@@ -31,8 +31,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from cartctl.runtime.clock import MonotonicClock, SimulatedClock
-from cartctl.runtime.executor import PeriodicExecutor
+from cartctl.runtime.executor import MonotonicClock, PeriodicExecutor, SimulatedClock
 from cartctl.runtime.realtime import enable_realtime, restore
 
 

@@ -29,8 +29,7 @@ from cartctl.errors import PlantError
 from cartctl.link import Encoder, Framer
 from cartctl.link.serial_cart import SerialCart
 from cartctl.link.virtual_cart import CartFaults, VirtualCart
-from cartctl.runtime.clock import MonotonicClock
-from cartctl.runtime.executor import PeriodicExecutor
+from cartctl.runtime.executor import MonotonicClock, PeriodicExecutor
 
 GPIO_ARGS = (123_456, [1.5, -2.25, 3.0, 0.0, 12.0, -12.0, 0.125, 1e3], [7, -8, 9, 32_767])
 

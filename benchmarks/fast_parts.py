@@ -32,7 +32,7 @@ from cartctl.design.controllerfile import load_controller
 from cartctl.plants.factory import make_plant
 from cartctl.reference import reference_signal
 from cartctl.runtime.back_to_back import BackToBackExecutor
-from cartctl.runtime.clock import SimulatedClock
+from cartctl.runtime.executor import SimulatedClock
 from cartctl.runtime.gcpause import gc_paused
 from cartctl.runtime.loop import ControlLoop, MemorySink
 from cartctl.sinks.csv_sink import CsvSink

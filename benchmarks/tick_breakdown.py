@@ -43,8 +43,7 @@ from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import load_controller
 from cartctl.plants.factory import make_plant
 from cartctl.reference import reference_signal
-from cartctl.runtime.clock import MonotonicClock, SimulatedClock
-from cartctl.runtime.executor import PeriodicExecutor
+from cartctl.runtime.executor import MonotonicClock, PeriodicExecutor, SimulatedClock
 from cartctl.runtime.gcpause import gc_paused
 from cartctl.runtime.loop import ControlLoop, MemorySink
 from cartctl.runtime.realtime import enable_realtime, restore

@@ -15,8 +15,7 @@ from cartctl.errors import InputError
 from cartctl.plants.factory import make_plant
 from cartctl.reference import reference_signal
 from cartctl.runtime.back_to_back import BackToBackExecutor
-from cartctl.runtime.clock import SimulatedClock
-from cartctl.runtime.executor import PeriodicExecutor
+from cartctl.runtime.executor import PeriodicExecutor, SimulatedClock
 from cartctl.runtime.loop import ControlLoop, MemorySink
 
 

@@ -11,8 +11,14 @@ import pytest
 
 from cartctl.errors import InputError
 from cartctl.runtime import realtime
-from cartctl.runtime.clock import Clock, MonotonicClock, SimulatedClock
-from cartctl.runtime.executor import MISS_LOG_LIMIT, PeriodicExecutor, TimingStats
+from cartctl.runtime.executor import (
+    MISS_LOG_LIMIT,
+    Clock,
+    MonotonicClock,
+    PeriodicExecutor,
+    SimulatedClock,
+    TimingStats,
+)
 
 
 class LateClock(SimulatedClock):

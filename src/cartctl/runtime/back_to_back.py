@@ -6,7 +6,7 @@ on its grid point (period error 0), takes no simulated time and cannot miss. So
 :class:`BackToBackExecutor` only counts ticks and lets the sinks do their block work (``idle``)
 every :attr:`~BackToBackExecutor.idle_every` ticks instead of after each: about a quarter of the
 fast loop's time saved (``benchmarks/bench_run.py``). A tick that needs simulated time to pass
-belongs on the periodic executor with a :class:`~cartctl.runtime.clock.SimulatedClock`.
+belongs on the periodic executor with a :class:`~cartctl.runtime.executor.SimulatedClock`.
 """
 
 from __future__ import annotations

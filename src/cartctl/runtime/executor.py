@@ -1,9 +1,9 @@
-"""The periodic executor: calls a tick function on a fixed grid of absolute deadlines.
+"""The loop's heartbeat: clocks, and the executors that call a tick function on their grid.
 
-The same :class:`PeriodicExecutor` runs the real-time loop on a
-:class:`~cartctl.runtime.clock.MonotonicClock` and tests on a
-:class:`~cartctl.runtime.clock.SimulatedClock`, so its per-tick work is a few attribute stores and
-two appends. With ``t0`` the clock's time when ``run`` starts::
+Time enters the runtime only through a :class:`Clock`: :class:`MonotonicClock` for real time,
+:class:`SimulatedClock` (never sleeps) for tests. :class:`PeriodicExecutor` runs on either, so its
+per-tick work is a few attribute stores and two appends. With ``t0`` the clock's time when ``run``
+starts::
 
     grid point m       deadline_m = t0 + m * period_s        (computed, never accumulated: no drift)
     tick k             waits for its deadline, then calls tick(k); k = 0, 1, 2, ... counts ticks
@@ -15,26 +15,97 @@ After a miss the next tick starts at the first grid point not before ``end_k``; 
 over are counted as skipped deadlines and the miss is logged (logger ``cartctl.runtime.executor``)
 and recorded with its tick index, so :attr:`PeriodicExecutor.grid_index` may run ahead of k (tick
 k sits at ``grid_index * period_s`` after ``t0``). The last tick is not checked for a miss.
+
+Against a serial cart, :class:`CartClockedExecutor` starts tick k when the cart's k-th GPIO
+arrives (the cart ticks every 10 ms and the host answers each). There the **period error** of
+tick k is how much later its GPIO arrived than the earliest-arriving tick of the run predicts (the
+line's and the host's jitter, not the constant 5.2 ms transmission); **compute** runs from the
+GPIO's arrival to the command sent; a **miss** is a tick after which the host had fallen behind,
+so older GPIOs were dropped to answer the freshest one.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import time
 from array import array
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from cartctl.errors import InputError
-from cartctl.runtime.clock import Clock
+from cartctl.plants.base import ClockedPlant
 
 _log = logging.getLogger(__name__)
 
 MISS_LOG_LIMIT = 20
 """Misses logged one by one per run; later ones are counted, and summed up at the end."""
+
+
+@runtime_checkable
+class Clock(Protocol):
+    """A monotonic time source (s, arbitrary origin) that can wait for an absolute deadline."""
+
+    def now_s(self) -> float: ...
+
+    def wait_until(self, deadline_s: float) -> None:
+        """Return at or after ``deadline_s``; at once if it has passed."""
+        ...
+
+
+class MonotonicClock:
+    """:func:`time.perf_counter` (``CLOCK_MONOTONIC`` on Linux), with a sleep-then-spin wait.
+
+    ``wait_until`` sleeps until ``spin_s`` (s, >= 0) before the deadline, then busy-waits for the
+    rest: the spin absorbs the sleep's wake-up latency (50-100 µs, outliers of milliseconds on a
+    busy machine), at the price of up to ``spin_s`` of a core per wait (10 % at 1 ms per 10 ms).
+    A thread woken too late still starts late: that is what SCHED_FIFO
+    (:mod:`cartctl.runtime.realtime`) is for. ``spin_s = 0`` is a plain sleep.
+    """
+
+    def __init__(self, spin_s: float = 0.001) -> None:
+        if not (math.isfinite(spin_s) and spin_s >= 0.0):
+            raise InputError(f"spin_s must be a finite time >= 0 s, got {spin_s!r}")
+        self.spin_s = float(spin_s)
+
+    def now_s(self) -> float:
+        return time.perf_counter()
+
+    def wait_until(self, deadline_s: float) -> None:
+        clock = time.perf_counter
+        sleep_s = deadline_s - self.spin_s - clock()
+        if sleep_s > 0.0:
+            time.sleep(sleep_s)
+        while clock() < deadline_s:
+            pass
+
+
+class SimulatedClock:
+    """Simulated time (s), moved only by :meth:`wait_until` (straight to the deadline) and
+    :meth:`advance` (a test's slow work, a simulated plant's own latency)."""
+
+    def __init__(self, start_s: float = 0.0) -> None:
+        if not math.isfinite(start_s):
+            raise InputError(f"start_s must be a finite time in s, got {start_s!r}")
+        self._now_s = float(start_s)
+
+    def now_s(self) -> float:
+        return self._now_s
+
+    def wait_until(self, deadline_s: float) -> None:
+        if deadline_s > self._now_s:
+            self._now_s = deadline_s
+
+    def advance(self, dt_s: float) -> None:
+        """Let ``dt_s`` seconds pass (>= 0, finite)."""
+        if not (math.isfinite(dt_s) and dt_s >= 0.0):
+            raise InputError(
+                f"a simulated clock only moves forward: dt_s must be >= 0 s, got {dt_s!r}"
+            )
+        self._now_s += dt_s
 
 
 def check_period(period_s: float) -> float:
@@ -134,7 +205,6 @@ class PeriodicExecutor:
 
     Examples
     --------
-    >>> from cartctl.runtime.clock import SimulatedClock
     >>> ex = PeriodicExecutor(0.01, SimulatedClock(), max_ticks=3)
     >>> ex.run(lambda k: True).ticks
     3
@@ -232,3 +302,66 @@ class PeriodicExecutor:
             period_s=self.period_s, duration_s=duration,
             miss_ticks=tuple(self._miss_ticks), skipped_deadlines=self._skipped,
         )  # fmt: skip
+
+
+class CartClockedExecutor:
+    """Runs ``tick(k)`` once per cart tick until it returns False or ``max_ticks`` ran.
+
+    ``plant``'s latest measurement must have arrived (the loop's ``start`` resets it);
+    ``compute_us`` gives the loop's compute time of the tick just run (µs); ``now_s`` is the host
+    clock the plant stamps arrivals with (``time.perf_counter``).
+    """
+
+    def __init__(
+        self,
+        plant: ClockedPlant,
+        *,
+        max_ticks: int,
+        compute_us: Callable[[], float],
+        now_s: Callable[[], float],
+    ) -> None:
+        self.plant = plant
+        self.period_s = plant.period_s
+        self.max_ticks = int(max_ticks)
+        self.compute_us = compute_us
+        self.now_s = now_s
+        self.period_error_us = self.start_s = self.time_s = 0.0
+        self._errors_us = array("d")
+        self._compute = array("d")
+        self._misses: list[int] = []
+        self._t0 = self._end = math.nan
+
+    def run(self, tick: Callable[[int], bool]) -> TimingStats:
+        """Run the ticks; an exception from ``tick`` propagates (:meth:`stats` has the ticks done)."""
+        plant, period = self.plant, self.period_s
+        anchor = math.inf
+        self._t0 = plant.arrival_s
+        for k in range(self.max_ticks):
+            arrival = plant.arrival_s
+            base = arrival - plant.tick_index * period
+            anchor = min(anchor, base)
+            self.period_error_us = (base - anchor) * 1e6
+            self.start_s = arrival
+            self.time_s = plant.tick_index * period
+            skipped_before = getattr(plant, "skipped_ticks", 0)
+            keep_going = tick(k)
+            self._end = self.now_s()
+            self._errors_us.append(self.period_error_us)
+            self._compute.append(self.compute_us())
+            if getattr(plant, "skipped_ticks", 0) > skipped_before:
+                self._misses.append(k)
+            if not keep_going:
+                break
+        return self.stats()
+
+    def stats(self) -> TimingStats:
+        """Statistics over the ticks completed so far."""
+        duration = 0.0 if math.isnan(self._end) else self._end - self._t0
+        return TimingStats.from_samples(
+            np.frombuffer(self._errors_us, dtype=np.float64),
+            np.frombuffer(self._compute, dtype=np.float64),
+            period_s=self.period_s,
+            duration_s=duration,
+            miss_ticks=tuple(self._misses),
+            skipped_deadlines=getattr(self.plant, "skipped_ticks", 0),
+        )

@@ -14,7 +14,7 @@ from cartctl.errors import PlantError
 from cartctl.plants.base import Plant
 from cartctl.runtime.back_to_back import BackToBackExecutor
 from cartctl.runtime.base import Controller
-from cartctl.runtime.clock import SimulatedClock
+from cartctl.runtime.executor import SimulatedClock
 from cartctl.runtime.loop import ControlLoop, LoopState, MemorySink, PerTick
 
 

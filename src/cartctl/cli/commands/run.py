@@ -204,9 +204,12 @@ def _run_loop(
     the loop (its ``state`` says how it ended), the timing figures and the scheduling."""
     from cartctl.plants.base import ClockedPlant
     from cartctl.runtime.back_to_back import BackToBackExecutor
-    from cartctl.runtime.cartclock import CartClockedExecutor
-    from cartctl.runtime.clock import MonotonicClock, SimulatedClock
-    from cartctl.runtime.executor import PeriodicExecutor
+    from cartctl.runtime.executor import (
+        CartClockedExecutor,
+        MonotonicClock,
+        PeriodicExecutor,
+        SimulatedClock,
+    )
     from cartctl.runtime.gcpause import gc_paused
     from cartctl.runtime.loop import ControlLoop
 
