@@ -33,8 +33,8 @@ from cartctl.plants.factory import make_plant
 from cartctl.reference import reference_signal
 from cartctl.runtime.back_to_back import BackToBackExecutor
 from cartctl.runtime.executor import SimulatedClock
-from cartctl.runtime.gcpause import gc_paused
 from cartctl.runtime.loop import ControlLoop, MemorySink
+from cartctl.runtime.realtime import gc_paused
 from cartctl.sinks.csv_sink import CsvSink
 from cartctl.sinks.rerun_sink import RerunSink
 

@@ -44,9 +44,8 @@ from cartctl.design.controllerfile import load_controller
 from cartctl.plants.factory import make_plant
 from cartctl.reference import reference_signal
 from cartctl.runtime.executor import MonotonicClock, PeriodicExecutor, SimulatedClock
-from cartctl.runtime.gcpause import gc_paused
 from cartctl.runtime.loop import ControlLoop, MemorySink
-from cartctl.runtime.realtime import enable_realtime, restore
+from cartctl.runtime.realtime import enable_realtime, gc_paused, restore
 from cartctl.sinks.csv_sink import CsvSink
 from cartctl.sinks.rerun_sink import RerunSink
 

@@ -306,7 +306,7 @@ def test_idle_runs_after_each_tick_outside_its_compute_time() -> None:
 def test_gc_paused_freezes_and_restores() -> None:
     import gc
 
-    from cartctl.runtime.gcpause import gc_paused
+    from cartctl.runtime.realtime import gc_paused
 
     seen: list[tuple[bool, int]] = []
 

@@ -8,11 +8,16 @@ limit. The policy is set for the calling thread only, with SCHED_RESET_ON_FORK (
 started later runs normally). ``mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT)`` keeps pages in
 memory without prefaulting every mapping; it is tried only where the locked-memory limit cannot
 make later allocations fail (root, or an unlimited RLIMIT_MEMLOCK).
+
+:func:`gc_paused` keeps the garbage collector out of the loop: a full collection walks every
+object the process holds (hundreds of thousands after numpy, scipy, python-control and the Rerun
+SDK), milliseconds at whatever tick it happens; the tick makes no reference cycles.
 """
 
 from __future__ import annotations
 
 import ctypes
+import gc
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
@@ -110,3 +115,24 @@ def realtime_scheduling(priority: int = 50, *, lock_memory: bool = True) -> Iter
         yield description
     finally:
         restore()
+
+
+@contextmanager
+def gc_paused(*, collect_new: bool = False) -> Iterator[None]:
+    """Within the block: one collection first, the survivors frozen (:func:`gc.freeze`, never
+    walked again) and automatic collection off; both undone afterwards.
+
+    ``collect_new``: keep collecting, but only what the block allocates (a short walk), for loops
+    that may run for hours (``cartctl monitor``).
+    """
+    was_enabled = gc.isenabled()
+    gc.collect()
+    gc.freeze()
+    if not collect_new:
+        gc.disable()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
+        if was_enabled:
+            gc.enable()

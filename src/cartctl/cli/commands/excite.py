@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.data.tracemeta import meta_path, write_trace_meta
     from cartctl.plants.factory import check_plant_name, is_serial, make_plant
     from cartctl.runtime.experiment import run_experiment
-    from cartctl.runtime.gcpause import gc_paused
+    from cartctl.runtime.realtime import gc_paused
     from cartctl.signals import make_signal
     from cartctl.sinks.summary import host_loss_text, warn_host_losses
 

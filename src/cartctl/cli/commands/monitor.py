@@ -154,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.cli.jsonout import dumps
     from cartctl.link.cart_link import CartLink, print_to_stderr
     from cartctl.link.cart_monitor import Monitor, parse_labels, wait_started
-    from cartctl.runtime.gcpause import gc_paused
+    from cartctl.runtime.realtime import gc_paused
     from cartctl.sinks.csv_sink import CsvSink
 
     kind, rest = _check(args)

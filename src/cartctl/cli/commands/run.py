@@ -210,8 +210,8 @@ def _run_loop(
         PeriodicExecutor,
         SimulatedClock,
     )
-    from cartctl.runtime.gcpause import gc_paused
     from cartctl.runtime.loop import ControlLoop
+    from cartctl.runtime.realtime import gc_paused
 
     plant, period_s, n = prepared.plant, prepared.period_s, prepared.ticks
     clocked = isinstance(plant, ClockedPlant)
@@ -245,7 +245,7 @@ def _run_loop(
             time_s = executor.time_s if clocked else executor.grid_index * period_s
             return loop_tick(k, executor.period_error_us, executor.start_s, time_s)
 
-        # no collector pass at a random tick (runtime.gcpause); the simulated clock has no deadline
+        # no collector pass at a random tick (gc_paused); the simulated clock has no deadline
         with contextlib.nullcontext() if fast else gc_paused():
             loop.start()  # after the one collection: a cart ticks on from its reset
             # a cart-clocked loop calls its idle() itself, while it waits for the cart's frame
