@@ -212,7 +212,7 @@ class CartLink:
         return message
 
     def _poll(self, timeout_s: float) -> None:
-        """Read what the port has (waiting up to :data:`READ_SLICE_S` for a first byte), decode it."""
+        """Read what the port has (up to :data:`READ_SLICE_S` for a first byte) and decode it."""
         ser = self._port()
         try:
             waiting = ser.in_waiting

@@ -1,4 +1,4 @@
-"""The cart's end of the serial line, as the virtual cart models it (``docs/serial-protocol.md`` §4).
+"""The cart's end of the serial line as the virtual cart models it (docs/serial-protocol.md §4).
 
 - the line: 8N1, ten bit times per byte (a 60-byte GPIO takes 1.2 ms at 500 kbaud, 5.2 ms at
   115200); a pseudo-terminal delivers at once, so :class:`LineReader` and :class:`PacedWriter`
@@ -198,7 +198,7 @@ class PacedWriter(_PtyThread):
             self._deliver(at_s, chunk)
 
     def _deliver(self, at_s: float, chunk: bytes) -> None:
-        """A flush of the USB bridge: it reaches the PC at ``at_s`` with every tracked item in it."""
+        """A flush of the USB bridge reaches the PC at ``at_s``, with every tracked item in it."""
         self._out.append((at_s, chunk))
         self._passed += len(chunk)
         while self._tracked and self._tracked[0][0] <= self._passed:

@@ -32,10 +32,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import astuple, dataclass
 from typing import Protocol
 
+import cartctl.link.bridge as bridge
 from cartctl.cart import PERIOD_S
 from cartctl.choices import MAX_DURATION_S
 from cartctl.errors import InputError
-from cartctl.link import bridge
 from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT, check_gpio_counts
 from cartctl.reference import ReferenceSchedule
 
@@ -57,7 +57,7 @@ OUT_SPEED, OUT_VOLTAGE, OUT_REFERENCE = 0, 2, 4
 
 @dataclass(frozen=True)
 class Firmware:
-    """One of cartctl's firmwares: its name and the (channel key, label) of the channels it fills."""
+    """One of cartctl's firmwares: its name, and (channel key, label) of the channels it fills."""
 
     name: str
     labels: tuple[tuple[str, str], ...]
@@ -92,7 +92,7 @@ ONBOARD = Firmware(
         (f"f{CH_FIRMWARE_ID}", "firmware_id"),
     ),
 )
-"""A controller of ``cartctl export --arduino`` on the cart (channel layout :data:`ONBOARD_LAYOUT`)."""
+"""A controller of ``cartctl export --arduino`` on the cart (layout :data:`ONBOARD_LAYOUT`)."""
 
 
 def recognise_firmware(floats: Sequence[float], ints: Sequence[int]) -> Firmware | None:

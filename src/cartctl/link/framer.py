@@ -18,19 +18,7 @@ import re
 from dataclasses import asdict, dataclass
 from typing import Any, TypeAlias
 
-from cartctl.link.dialect import (
-    CRC_EXTRA,
-    GPIOX_CRC_EXTRA,
-    GPIOX_PAYLOAD_LENGTH,
-    MSG_EVENT,
-    MSG_GPIO,
-    MSG_GPIOX,
-    MSG_HEARTBEAT,
-    MSG_PRINT,
-    MSG_THREAD_INFO,
-    PAYLOAD_LENGTH,
-    STX_V1,
-)
+import cartctl.link.dialect as dialect
 from cartctl.link.vendor import microos_mavlink as mavlink
 
 BUTTON_EVENT_BASE = 1000
@@ -171,16 +159,16 @@ def _crc_ok(buf: bytearray, start: int, crc_at: int, extra: int) -> bool:
 
 def _convert(msgid: int, frame: bytes, mav: mavlink.MAVLink, *header: int) -> Message:
     """The message of a checked generation-A frame; pymavlink's module unpacks the payload."""
-    if msgid == MSG_THREAD_INFO:
+    if msgid == dialect.MSG_THREAD_INFO:
         return ThreadInfo(frame[_V1_HEADER:-2], *header)
     m: Any = mav.decode(bytearray(frame))
-    if msgid == MSG_GPIO:
+    if msgid == dialect.MSG_GPIO:
         return Gpio(m.time, tuple(m.gpio_float), tuple(m.gpio_int), *header)
-    if msgid == MSG_HEARTBEAT:
+    if msgid == dialect.MSG_HEARTBEAT:
         return Heartbeat(m.time, m.type, bytes(m.data), m.mavlink_version, *header)
-    if msgid == MSG_EVENT:
+    if msgid == dialect.MSG_EVENT:
         return Event(m.type, *header)
-    assert msgid == MSG_PRINT  # PAYLOAD_LENGTH lets no other id through
+    assert msgid == dialect.MSG_PRINT  # PAYLOAD_LENGTH lets no other id through
     return PrintText(m.text, *header)
 
 
@@ -213,7 +201,7 @@ class Framer:
             pos = start
             if match is None:
                 break
-            check = self._frame_v1 if buf[pos] == STX_V1 else self._frame_v2
+            check = self._frame_v1 if buf[pos] == dialect.STX_V1 else self._frame_v2
             size = check(buf, pos, out)
             if size == _WAIT:
                 break
@@ -229,12 +217,12 @@ class Framer:
         if len(buf) - pos < _V1_HEADER:
             return _WAIT
         length, msgid = buf[pos + 1], buf[pos + 5]
-        if PAYLOAD_LENGTH.get(msgid) != length:
+        if dialect.PAYLOAD_LENGTH.get(msgid) != length:
             return _REJECT
         size = _V1_HEADER + length + 2
         if len(buf) - pos < size:
             return _WAIT
-        if not _crc_ok(buf, pos + 1, pos + size - 2, CRC_EXTRA[msgid]):
+        if not _crc_ok(buf, pos + 1, pos + size - 2, dialect.CRC_EXTRA[msgid]):
             self.stats.crc_errors += 1
             return _REJECT
         seq, sysid, compid = buf[pos + 2], buf[pos + 3], buf[pos + 4]
@@ -253,13 +241,17 @@ class Framer:
             return _WAIT
         length, incompat = buf[pos + 1], buf[pos + 2]
         msgid = int.from_bytes(buf[pos + 7 : pos + 10], "little")
-        if msgid != MSG_GPIOX or length > GPIOX_PAYLOAD_LENGTH or incompat & ~_V2_SIGNED:
+        if (
+            msgid != dialect.MSG_GPIOX
+            or length > dialect.GPIOX_PAYLOAD_LENGTH
+            or incompat & ~_V2_SIGNED
+        ):
             return _REJECT
         signature = mavlink.MAVLINK_SIGNATURE_BLOCK_LEN if incompat & _V2_SIGNED else 0
         size = _V2_HEADER + length + 2 + signature
         if len(buf) - pos < size:
             return _WAIT
-        if not _crc_ok(buf, pos + 1, pos + _V2_HEADER + length, GPIOX_CRC_EXTRA):
+        if not _crc_ok(buf, pos + 1, pos + _V2_HEADER + length, dialect.GPIOX_CRC_EXTRA):
             return _REJECT
         self.stats.frames += 1
         self.stats.generation_b_frames += 1

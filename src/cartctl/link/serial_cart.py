@@ -29,19 +29,10 @@ from typing import Any
 
 import numpy as np
 
+import cartctl.link.bridge as bridge
 from cartctl.cart import PERIOD_S
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import PlantError
-from cartctl.link.bridge import (
-    BRIDGE_BAUD,
-    BRIDGE_VERSION,
-    TIMING_FIRST_ID,
-    TIMING_REPORTS,
-    CartSample,
-    HostCommand,
-    next_seq,
-    tick_difference,
-)
 from cartctl.link.cart_link import (
     DEFAULT_SILENCE_TIMEOUT_S,
     CartLink,
@@ -63,7 +54,7 @@ BACKLOG_WAIT_S = 0.006
 """A GPIO that follows the one :meth:`SerialCart.reset` took within this long is a backlog (the
 cart's frames come 10 ms apart, give or take the USB bridge's 5 ms), not the next tick."""
 FLASH_HINT = (
-    f"flash firmware/cartctl_bridge (bridge version {BRIDGE_VERSION}, 500 kbaud; see "
+    f"flash firmware/cartctl_bridge (bridge version {bridge.BRIDGE_VERSION}, 500 kbaud; see "
     "firmware/README.md)"
 )
 
@@ -99,7 +90,7 @@ class SerialCart:
         )
         self.encoder = Encoder()
         self.connected = False
-        self.sample: CartSample | None = None
+        self.sample: bridge.CartSample | None = None
         self.arrival_s = 0.0
         self.tick_index = 0
         self._seq = 1
@@ -127,10 +118,10 @@ class SerialCart:
         self._port_opened()
         try:
             baud = self.link.wait_heartbeat_any_rate(self.connect_timeout_s)
-            if baud != BRIDGE_BAUD:
+            if baud != bridge.BRIDGE_BAUD:
                 raise UnsupportedCartError(
                     f"the cart on {self.port} answers at {baud} baud: it runs the course's "
-                    f"firmware or a cartctl bridge older than version {BRIDGE_VERSION}; "
+                    f"firmware or a cartctl bridge older than version {bridge.BRIDGE_VERSION}; "
                     f"{FLASH_HINT}"
                 )
         except BaseException:
@@ -153,15 +144,15 @@ class SerialCart:
         while self.link.gpio_waiting(wait_s=BACKLOG_WAIT_S):
             self.link.next_gpio()
         gpio, arrival = self.link.next_gpio(max(self.link.silence_timeout_s, UNDRIVEN_SILENCE_S))
-        sample = CartSample.from_gpio(gpio)
-        if sample.bridge_version != BRIDGE_VERSION:
+        sample = bridge.CartSample.from_gpio(gpio)
+        if sample.bridge_version != bridge.BRIDGE_VERSION:
             raise UnsupportedCartError(
                 f"the cart on {self.port} runs bridge version {sample.bridge_version or 'before 2'}"
-                f", cartctl needs {BRIDGE_VERSION}; {FLASH_HINT}"
+                f", cartctl needs {bridge.BRIDGE_VERSION}; {FLASH_HINT}"
             )
         self.sample, self.arrival_s, self.tick_index = sample, arrival, 0
         if not self._sent_any:  # differs from what the cart holds: counts as new, none lost
-            self._seq = next_seq(sample.echo_seq)
+            self._seq = bridge.next_seq(sample.echo_seq)
         self._echo = sample.echo_seq
         self._sent_at.clear()
         self._lost_base = sample.host_frames_lost
@@ -179,18 +170,18 @@ class SerialCart:
     def _send(self, voltage_a_v: float, voltage_b_v: float, drive: bool) -> None:
         if self.link.vanished:
             raise PlantError(self.link.failure)
-        command = HostCommand(float(voltage_a_v), float(voltage_b_v), self._seq, drive)
+        command = bridge.HostCommand(float(voltage_a_v), float(voltage_b_v), self._seq, drive)
         floats, ints = command.to_channels()
         self.link.send(self.encoder.gpio(0, floats, ints))
         self._sent_any = True
         self._sent_at[self._seq] = self.tick_index
         if len(self._sent_at) > 256:  # only the recent ones can still be echoed
             self._sent_at.pop(next(iter(self._sent_at)))
-        self._seq = next_seq(self._seq)
+        self._seq = bridge.next_seq(self._seq)
 
     def receive(self) -> Measurement:
         """Wait for the cart's next tick and return its measurement; when the host has fallen
-        behind, the older GPIOs waiting are dropped (``skipped_ticks``): the freshest is answered."""
+        behind, older GPIOs waiting are dropped (``skipped_ticks``): the freshest is answered."""
         if self.link.failure:  # after a fault, do not wait again (zero volts go out at once)
             raise PlantError(self.link.failure)
         self._accept(*self.link.next_gpio())
@@ -203,10 +194,10 @@ class SerialCart:
 
     def _accept(self, gpio: Gpio, arrival_s: float) -> None:
         """Take one GPIO: count missing cart ticks, watchdog trips and the echo delay."""
-        sample = CartSample.from_gpio(gpio)
+        sample = bridge.CartSample.from_gpio(gpio)
         previous = self.sample
         if previous is not None:
-            gap = tick_difference(previous.cart_tick, sample.cart_tick)
+            gap = bridge.tick_difference(previous.cart_tick, sample.cart_tick)
             self.missed_ticks += max(0, gap - 1)
             self.tick_index += max(1, gap)
             if sample.watchdog_tripped and not previous.watchdog_tripped:
@@ -286,15 +277,15 @@ class SerialCart:
         misses the frames sent after the last sample's tick)."""
         if self.sample is None:
             return 0
-        return tick_difference(self._lost_base, self.sample.host_frames_lost)
+        return bridge.tick_difference(self._lost_base, self.sample.host_frames_lost)
 
     def _cart_timing(self) -> dict[str, int] | None:
         """The maxima of the bridge's own reports over the run, None without any."""
         maxima = self.link.thread_maxima
-        ids = [TIMING_FIRST_ID + k for k in range(len(TIMING_REPORTS))]
+        ids = [bridge.TIMING_FIRST_ID + k for k in range(len(bridge.TIMING_REPORTS))]
         if not any(i in maxima for i in ids):
             return None
-        return {name: maxima.get(i, 0) for i, name in zip(ids, TIMING_REPORTS, strict=True)}
+        return {name: maxima.get(i, 0) for i, name in zip(ids, bridge.TIMING_REPORTS, strict=True)}
 
     def link_summary(self) -> dict[str, Any]:
         """Link figures for the run summary (``run --json``'s ``link``)."""

@@ -25,6 +25,7 @@ import tty
 from collections.abc import Sequence
 from typing import Any, Protocol, cast
 
+import cartctl.link.cart_uart as uart
 from cartctl.cart import PERIOD_S
 from cartctl.link.bridge import (
     BRIDGE_BAUD,
@@ -34,18 +35,6 @@ from cartctl.link.bridge import (
     TIMING_FIRST_ID,
 )
 from cartctl.link.cart_faults import RECEIVE_SCHEDULES, CartFaults
-from cartctl.link.cart_uart import (
-    BRIDGE_RX_RING_BYTES,
-    RX_RING_BYTES,
-    USB_FLUSH_PERIOD_S,
-    USB_FRAME_S,
-    LineReader,
-    MicroosParser,
-    PacedWriter,
-    UsbBridge,
-    byte_time_s,
-    fill_ring,
-)
 from cartctl.link.dialect import Encoder, encode_gpiox_v2
 from cartctl.link.firmware import BridgeFirmware, CartIO
 from cartctl.link.serial_cart import SerialCart
@@ -59,7 +48,7 @@ cart's is 0.1 s): the cart is threads of this process, which a busy PC can hold 
 a real cart is ever quiet. Its stall and pull faults are still found, that much later."""
 READY_TEXT = "cartctl bridge ready"
 COMM_PHASE_US = 1200
-"""The cart's GPIO goes out this long (µs) after the tick starts (io() and control() on the Mega)."""
+"""The cart's GPIO goes out this long (µs) into the tick (io() and control() on the Mega)."""
 DRAIN_BUSY_US = 60  # reported as THREAD_INFO 201 (200: COMM_PHASE_US); there is no AVR to time
 _TERMIOS_SPEED = {getattr(termios, f"B{rate}"): rate for rate in (9600, 19200, 38400, 57600,
                   115200, 230400, 250000, 460800, 500000, 576000, 921600, 1000000, 2000000)
@@ -103,9 +92,13 @@ class VirtualCart:
         firmware: CartFirmware | None = None,
     ) -> None:
         self.faults = faults or CartFaults()
-        self.physics = PhysicsPlant(preset, noise_std_rad_s=noise_std_rad_s, seed=seed,
-                                    actuation_ms=self.faults.actuation_ms,
-                                    reversed_motors=self.faults.reversed_motors)  # fmt: skip
+        self.physics = PhysicsPlant(
+            preset,
+            noise_std_rad_s=noise_std_rad_s,
+            seed=seed,
+            actuation_ms=self.faults.actuation_ms,
+            reversed_motors=self.faults.reversed_motors,
+        )
         self.preset = preset
         self.period_s = float(period_s)
         self.firmware: CartFirmware = firmware if firmware is not None else BridgeFirmware()
@@ -114,26 +107,34 @@ class VirtualCart:
         """2: the bridge sketch of ``firmware/``; 1: the one before; 0: not the bridge."""
         if self.receive_schedule == "microos" and self.bridge_version == 2:
             self.bridge_version = 1  # microOS's thread alone: the sketch before its own drains
-        self.baud = BRIDGE_BAUD if self.bridge_version == 2 else LEGACY_BAUD
-        self.ring_bytes = BRIDGE_RX_RING_BYTES if self.bridge_version == 2 else RX_RING_BYTES
+        bridge2 = self.bridge_version == 2
+        self.baud = BRIDGE_BAUD if bridge2 else LEGACY_BAUD
+        self.ring_bytes = uart.BRIDGE_RX_RING_BYTES if bridge2 else uart.RX_RING_BYTES
         self._rng = random.Random(seed)
-        usb = (UsbBridge(self._rng.uniform(0.0, USB_FLUSH_PERIOD_S),
-                         self._rng.uniform(0.0, USB_FRAME_S))
-               if self.faults.usb else None)  # fmt: skip
+        usb = None
+        if self.faults.usb:
+            phases = (
+                self._rng.uniform(0.0, uart.USB_FLUSH_PERIOD_S),
+                self._rng.uniform(0.0, uart.USB_FRAME_S),
+            )
+            usb = uart.UsbBridge(*phases)
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)  # no echo, no line editing before the host configures the port
         os.set_blocking(self._master, False)
         self.port = os.ttyname(self._slave)
         self._stop = threading.Event()
-        self._writer = PacedWriter(self._master, self._stop, byte_s=byte_time_s(self.baud),
-                                   usb=usb)  # fmt: skip
-        self._reader = LineReader(
-            self._master, self._stop, reply_jitter_s=self.faults.reply_jitter_ms / 1000.0,
-            seed=None if seed is None else seed + 1, byte_s=byte_time_s(self.baud),
+        byte_s = uart.byte_time_s(self.baud)
+        self._writer = uart.PacedWriter(self._master, self._stop, byte_s=byte_s, usb=usb)
+        self._reader = uart.LineReader(
+            self._master,
+            self._stop,
+            reply_jitter_s=self.faults.reply_jitter_ms / 1000.0,
+            seed=None if seed is None else seed + 1,
+            byte_s=byte_s,
             usb_frame_phase_s=None if usb is None else usb.frame_phase_s,
-        )  # fmt: skip
+        )
         self._reader.rate_ok = self._writer.rate_ok = self._host_rate_matches
-        self._parser = MicroosParser()
+        self._parser = uart.MicroosParser()
         self._ring_high = self._lag_us = 0
         self._held: tuple[list[float], list[int]] = ([0.0] * 8, [0] * 4)
         self.boot_s = 0.0  # time.perf_counter at boot: tick k starts k × period_s later
@@ -221,7 +222,9 @@ class VirtualCart:
     def _drain(self, at_us: int, hand_over: bool) -> None:
         """A call of microOS's receive at ``at_us`` after boot; ``hand_over``: the bridge's."""
         until_us = at_us - self._lag_us  # ``late``: what reached the line a tick ago
-        kept, dropped = fill_ring(self._reader.take(self.boot_s + until_us * 1e-6), self.ring_bytes)
+        kept, dropped = uart.fill_ring(
+            self._reader.take(self.boot_s + until_us * 1e-6), self.ring_bytes
+        )
         self._ring_high = max(self._ring_high, len(kept))
         self.ring_dropped_bytes += dropped
         for gpio in self._parser.feed(kept):
@@ -338,8 +341,10 @@ class VirtualCart:
                     reports = (COMM_PHASE_US, DRAIN_BUSY_US, period_us, self._ring_high)
                     self._ring_high = 0
                     for k, value in enumerate(reports):
-                        self._writer.put(encoder.thread_info(time_ms, TIMING_FIRST_ID + k, value,
-                                                             executions=j + 1), send_at)  # fmt: skip
+                        report = encoder.thread_info(
+                            time_ms, TIMING_FIRST_ID + k, value, executions=j + 1
+                        )
+                        self._writer.put(report, send_at)
             if generation_a and now >= next_heartbeat:
                 self._send(encoder.heartbeat(time_ms), send_at)
                 next_heartbeat += HEARTBEAT_PERIOD_S
