@@ -106,21 +106,6 @@ def simulate(
     return trace_metrics(columns, period_s), state.failure
 
 
-def design_setting(
-    job: TuneJob, models: ModelFile, settings: dict[str, float]
-) -> tuple[dict[str, Controller], float] | str:
-    """A setting's runtime controller per motor and its voltage limit (V), or why a design was
-    refused."""
-    request = design_request(job.method, settings, job.extra_delay_ticks, dict(job.design))
-    controllers: dict[str, Controller] = {}
-    for m in ("a", "b"):
-        try:
-            controllers[m] = design_motor(request, models.motor(m)).controller
-        except (CartctlError, np.linalg.LinAlgError) as exc:
-            return f"motor {m}: {exc}"
-    return controllers, request.voltage_limit_v
-
-
 @dataclass(frozen=True)
 class Nominal:
     """A setting scored on its nominal plant, with what it ran with (for more plants)."""
@@ -135,11 +120,16 @@ class Nominal:
 def evaluate_nominal(
     job: TuneJob, models: ModelFile, index: int, settings: dict[str, float]
 ) -> Nominal:
-    """Design one setting and run it on the scoring plant."""
-    designed = design_setting(job, models, settings)
-    if isinstance(designed, str):
-        return Nominal(TuneResult(index, settings, False, designed))
-    controllers, limit_v = designed
+    """Design one setting per motor (a refused design is the result's reason) and run it on the
+    scoring plant."""
+    request = design_request(job.method, settings, job.extra_delay_ticks, dict(job.design))
+    controllers: dict[str, Controller] = {}
+    for m in ("a", "b"):
+        try:
+            controllers[m] = design_motor(request, models.motor(m)).controller
+        except (CartctlError, np.linalg.LinAlgError) as exc:
+            return Nominal(TuneResult(index, settings, False, f"motor {m}: {exc}"))
+    limit_v = request.voltage_limit_v
     plant = scoring_plant(job)
     n = max(1, round(job.duration_s / plant.period_s))
     refs = {m: reference_signal(job.reference, n, plant.period_s, m) for m in ("a", "b")}
