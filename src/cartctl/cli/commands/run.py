@@ -203,13 +203,13 @@ def _run_loop(
     """Step 4, the loop until the last tick, a signal or a fault (zero volts whatever happens);
     the loop (its ``state`` says how it ended), the timing figures and the scheduling."""
     from cartctl.plants.base import ClockedPlant
-    from cartctl.runtime.back_to_back import BackToBackExecutor
     from cartctl.runtime.executor import (
         CartClockedExecutor,
         MonotonicClock,
         PeriodicExecutor,
         SimulatedClock,
     )
+    from cartctl.runtime.fast import BackToBackExecutor
     from cartctl.runtime.loop import ControlLoop
     from cartctl.runtime.realtime import gc_paused
 
