@@ -18,8 +18,8 @@ from scipy import signal
 
 from cartctl.cli import main
 from cartctl.identification.arx import fit_arx
+from cartctl.identification.diagnostics import Z_99, residual_test
 from cartctl.identification.oe import fit_oe
-from cartctl.identification.residuals import Z_99, residual_test
 from cartctl.model import ArxModel
 
 Z99 = 2.576

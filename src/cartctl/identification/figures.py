@@ -24,8 +24,7 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
     from matplotlib.typing import RcKeyType
 
-    from cartctl.identification.diagnostics import BodeBand
-    from cartctl.identification.residuals import ResidualTest
+    from cartctl.identification.diagnostics import BodeBand, ResidualTest
 
 
 DPI = 110

@@ -8,11 +8,12 @@ the raw, unaveraged data, so every variant compares on equal terms.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -21,13 +22,26 @@ from scipy import signal
 from cartctl.data.modelfile import ModelFile, Provenance
 from cartctl.data.trace import Trace
 from cartctl.errors import InputError
-from cartctl.identification.arx import ArxFit, Segment, check_orders, first_row, fit_arx
-from cartctl.identification.diagnostics import Diagnostics, diagnose, on_validation, split_segments
+from cartctl.identification.arx import (
+    ArxFit,
+    Segment,
+    check_orders,
+    first_row,
+    fit_arx,
+    prediction_fit,
+    simulation_fit,
+)
+from cartctl.identification.diagnostics import Diagnostics, diagnose
 from cartctl.identification.etfe import average_cycles, find_period, periodic_regression_pad
 from cartctl.identification.oe import check_oe_orders, fit_oe
 from cartctl.identification.orders import DelayEstimate, JointDelay, delay_evidence, joint_delay
 
 METHODS = ("arx", "oe")
+
+FitT = TypeVar("FitT", bound=ArxFit)
+
+MIN_PART = 50
+"""Fewest samples an estimation or validation part of a ``--split`` may have."""
 
 
 @dataclass(frozen=True)
@@ -192,6 +206,38 @@ def _averaged(
         out.append(periodic_regression_pad(y_avg, u_avg, lags))
         total += n
     return out, total
+
+
+def split_segments(
+    segments: Sequence[Segment], fraction: float
+) -> tuple[list[Segment], list[Segment]]:
+    """Split each experiment: the first ``fraction`` of its samples estimate, the rest validate
+    (each part at least :data:`MIN_PART` samples)."""
+    if not 0.0 < fraction < 1.0:
+        raise InputError(f"--split must be a fraction between 0 and 1 (e.g. 0.7), got {fraction:g}")
+    est: list[Segment] = []
+    val: list[Segment] = []
+    for y_like, u_like in segments:
+        y, u = np.asarray(y_like), np.asarray(u_like)
+        n = len(y)
+        m = round(fraction * n)
+        if min(m, n - m) < MIN_PART:
+            raise InputError(
+                f"--split {fraction:g} leaves {m} estimation and {n - m} validation samples of "
+                f"{n}; each part needs at least {MIN_PART}"
+            )
+        est.append((y[:m], u[:m]))
+        val.append((y[m:], u[m:]))
+    return est, val
+
+
+def on_validation(fit: FitT, validation: Sequence[Segment]) -> FitT:
+    """``fit`` with its simulation and prediction fits recomputed on the validation data."""
+    return dataclasses.replace(
+        fit,
+        fit_simulation_percent=simulation_fit(fit.model, validation),
+        fit_prediction_percent=prediction_fit(fit.model, validation),
+    )
 
 
 def _identify_motor(
