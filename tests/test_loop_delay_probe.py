@@ -22,7 +22,7 @@ from cartctl.design.controllerfile import load_controller
 from cartctl.errors import DataWarning, InputError
 from cartctl.link.cart_faults import LATE_STRETCH_TICKS, CartFaults
 from cartctl.link.loop_delay import CLEAR_SHARE, MIN_ECHOES, EchoDelays, delay_change
-from cartctl.session.checks import check_loop_delay
+from cartctl.session.prepare import check_loop_delay
 
 ROOT = Path(__file__).resolve().parents[1]
 PI = str(ROOT / "controllers" / "pi.toml")  # designed for the on-board loop delay, 1 tick

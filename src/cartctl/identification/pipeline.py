@@ -135,10 +135,15 @@ class MotorIdentification:
 
     def variants(self) -> dict[str, ArxFit]:
         """Every fit made, by label, for tables and plots."""
-        out = {"ARX": self.arx}
+        out: dict[str, ArxFit] = {}
         if self.unfiltered is not None:
-            out = {"ARX, unfiltered": self.unfiltered, "ARX, prefiltered": self.arx}
-        return out | ({} if self.oe is None else {"OE": self.oe})
+            out["ARX, unfiltered"] = self.unfiltered
+            out["ARX, prefiltered"] = self.arx
+        else:
+            out["ARX"] = self.arx
+        if self.oe is not None:
+            out["OE"] = self.oe
+        return out
 
     def to_dict(self) -> dict[str, Any]:
         out = self.chosen.to_dict()

@@ -13,7 +13,7 @@ import cartctl.cli.commands.options as options
 from cartctl import stopping
 from cartctl.cart import check_voltage_limit
 from cartctl.errors import InputError, OutputError, PlantError
-from cartctl.session.checks import DEFAULT_CONTROLLER
+from cartctl.session.prepare import DEFAULT_CONTROLLER
 
 if TYPE_CHECKING:
     from cartctl.runtime.loop import ControlLoop, MemorySink

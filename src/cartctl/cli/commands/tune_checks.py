@@ -162,7 +162,7 @@ def check_inputs(args: argparse.Namespace, n_settings: int) -> None:
     from cartctl.design.make import check_models
     from cartctl.plants.factory import SIMULATED, make_plant, physics_options, plant_kind
     from cartctl.reference import ReferenceSchedule, reference_signal
-    from cartctl.session.checks import check_reach
+    from cartctl.session.prepare import check_reach
 
     args.choose = _choice(args.choose, n_settings)
     choice_limits(args)
