@@ -21,10 +21,9 @@ from cartctl.cli.jsonout import strict
 from cartctl.commission import StageError
 from cartctl.data.modelfile import ModelFile, load_models
 from cartctl.errors import InputError
-from cartctl.tune import engine
+from cartctl.tune import choice, engine
 from cartctl.tune import grid as tuning
 from cartctl.tune import robust as robustness
-from cartctl.tune import robust_choice as choice
 from cartctl.tune.uncertainty import sample_plants
 
 METHOD = "poles"

@@ -146,7 +146,7 @@ def _finish(fig: Any, ax: Any, front: Sequence[tuple[float, float, int]],
 
 def plot_tuning(path: str, method: str, results: Sequence[TuneResult]) -> None:
     """Run settling (ms) against run overshoot (%) of the settled settings (colour: peak |V|)."""
-    from cartctl.tune.table import counts_text
+    from cartctl.tune.choice import counts_text
 
     shown: list[TuneResult] = []
     x: list[float] = []  # settling (ms)
@@ -176,7 +176,7 @@ def plot_robust(path: str, method: str, rows: Sequence[RobustRow], plants: int) 
     import numpy as np
     from matplotlib import colormaps
 
-    from cartctl.tune.table import robust_counts_text
+    from cartctl.tune.choice import robust_counts_text
 
     shown = []
     for r in rows:

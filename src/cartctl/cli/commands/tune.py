@@ -212,10 +212,9 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
     """``tune --robust``: the grid on the nominal model, the sampled plants and the physics preset."""
     from cartctl.cli.jsonout import dumps
     from cartctl.data.modelfile import load_models
+    from cartctl.tune import choice
     from cartctl.tune import grid as tuning
     from cartctl.tune import robust as robustness
-    from cartctl.tune import robust_choice as choice
-    from cartctl.tune import table
     from cartctl.tune.plot import plot_robust
     from cartctl.tune.uncertainty import describe_line, sample_plants
 
@@ -248,14 +247,14 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
             "spread_over": "the sampled plants (percentiles: values of sampled plants)",
             "physics_preset": args.preset, "pareto_of": "nominal settling_time_s against worst-case "
             "overshoot_percent", "choice_rule": rule,
-            "counts": {k.replace(" ", "_"): v for k, v in table.robust_counts(rows).items()},
-            "statuses": table.ROBUST_STATUSES}  # fmt: skip
+            "counts": {k.replace(" ", "_"): v for k, v in choice.robust_counts(rows).items()},
+            "statuses": choice.ROBUST_STATUSES}  # fmt: skip
     if args.json:
         print(dumps({**_json_head(args), "settings": [r.to_dict() for r in rows],
                      "chosen": chosen, "robust": meta}))  # fmt: skip
     else:
         print(f"{args.method} on {args.model}{_delay_text(args)}, {args.reference}, "
-              f"{args.duration:g} s, --robust: {table.robust_counts_text(rows)}; the worse of "
+              f"{args.duration:g} s, --robust: {choice.robust_counts_text(rows)}; the worse of "
               "motors a and b")  # fmt: skip
         print(describe_line(sample, str(args.model)))
         if timings:
@@ -267,11 +266,11 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
             print(f"nominal: the model; worst: over the model and the {plants} plants (∞: a "
                   f"plant never settles); p5–p95: over the plants; physics: preset "
                   f"{args.preset}, not in the worst case")  # fmt: skip
-        print(table.LEGEND)
+        print(choice.LEGEND)
         print(f"*: on the robust Pareto front, nominal settling against worst-case overshoot, the "
               f"axes of --plot, which rings them "
-              f"({table.plural(sum(r.pareto for r in rows), 'setting', 'settings')})")  # fmt: skip
-        print(table.format_robust_table(args.method, rows))
+              f"({choice.plural(sum(r.pareto for r in rows), 'setting', 'settings')})")  # fmt: skip
+        print(choice.format_robust_table(args.method, rows))
     which = "" if chosen is None else f" (setting #{chosen['index']})"
     return _finish(args, chosen, refusal, which)
 
@@ -290,8 +289,7 @@ def run(args: argparse.Namespace) -> int:
     check_plot_path(args.plot)  # a PNG: matplotlib would refuse another suffix after the work
 
     from cartctl.cli.jsonout import dumps
-    from cartctl.tune import engine, table
-    from cartctl.tune import robust_choice as choice
+    from cartctl.tune import choice, engine
     from cartctl.tune.plot import plot_tuning
 
     job = engine.TuneJob(str(args.model), args.method, args.plant, args.preset, args.reference,
@@ -323,12 +321,12 @@ def run(args: argparse.Namespace) -> int:
                      "pareto_plot_of": list(tuning.PLOT_METRICS)}))  # fmt: skip
     else:
         print(f"{args.method} on {args.model}, {args.plant} plant{_delay_text(args)}, "
-              f"{args.reference}, {args.duration:g} s: {table.counts_text(results)}")  # fmt: skip
-        print(table.LEGEND)
+              f"{args.reference}, {args.duration:g} s: {choice.counts_text(results)}")  # fmt: skip
+        print(choice.LEGEND)
         print(f"*: on the Pareto front over the four run metrics "
-              f"({table.plural(front, 'setting', 'settings')}); o: on the front of run settling "
+              f"({choice.plural(front, 'setting', 'settings')}); o: on the front of run settling "
               f"against run overshoot, the axes of --plot, which rings them "
-              f"({table.plural(plotted, 'setting', 'settings')})")  # fmt: skip
-        print(table.format_table(args.method, results))
+              f"({choice.plural(plotted, 'setting', 'settings')})")  # fmt: skip
+        print(choice.format_table(args.method, results))
     which = f" (setting #{chosen['index']})" if chosen is not None and "rule" in chosen else ""
     return _finish(args, chosen, refusal, which)

@@ -71,8 +71,8 @@ def design_fixed(args: argparse.Namespace) -> dict[str, float]:
 
 
 def choice_limits(args: argparse.Namespace) -> Any:
-    """``--max-overshoot`` and ``--max-settling`` as :class:`~cartctl.tune.robust_choice.Limits`."""
-    from cartctl.tune.robust_choice import Limits
+    """``--max-overshoot`` and ``--max-settling`` as :class:`~cartctl.tune.choice.Limits`."""
+    from cartctl.tune.choice import Limits
 
     for option, value in (("--max-overshoot", args.max_overshoot),
                           ("--max-settling", args.max_settling)):  # fmt: skip
