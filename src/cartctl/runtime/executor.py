@@ -305,12 +305,9 @@ class PeriodicExecutor:
 
 
 class CartClockedExecutor:
-    """Runs ``tick(k)`` once per cart tick until it returns False or ``max_ticks`` ran.
-
-    ``plant``'s latest measurement must have arrived (the loop's ``start`` resets it);
-    ``compute_us`` gives the loop's compute time of the tick just run (µs); ``now_s`` is the host
-    clock the plant stamps arrivals with (``time.perf_counter``).
-    """
+    """Runs ``tick(k)`` once per cart tick until it returns False or ``max_ticks`` ran, once the
+    plant's first measurement has arrived; ``compute_us`` gives the loop's compute time of the tick
+    just run (µs), ``now_s`` the clock the plant stamps arrivals with (``time.perf_counter``)."""
 
     def __init__(
         self,

@@ -25,8 +25,8 @@ from cartctl.runtime.loop import ControlLoop, LoopState, MemorySink, PerTick
 
 
 class BackToBackExecutor:
-    """Calls ``tick(k)`` for k = 0, 1, ... back to back (tick k at ``k * period_s``) up to
-    ``max_ticks``, and ``idle`` every ``idle_every`` ticks and at the end; ``ticks`` counts them.
+    """Calls ``tick(k)`` back to back (tick k at ``k * period_s``) up to ``max_ticks``, and
+    ``idle`` every ``idle_every`` ticks and at the end; ``ticks`` counts them.
 
     Examples
     --------
