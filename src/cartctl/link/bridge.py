@@ -86,10 +86,11 @@ class HostCommand:
         """The 8 floats and 4 ints of the GPIO frame."""
         floats = [0.0] * GPIO_FLOAT_COUNT
         ints = [0] * GPIO_INT_COUNT
-        floats[CH_VOLTAGE_A] = float(self.voltage_a_v)
-        floats[CH_VOLTAGE_B] = float(self.voltage_b_v)
-        ints[CH_SEQ] = self.seq
-        ints[CH_DRIVE] = 1 if self.drive else 0
+        floats[CH_VOLTAGE_A], floats[CH_VOLTAGE_B] = (
+            float(self.voltage_a_v),
+            float(self.voltage_b_v),
+        )
+        ints[CH_SEQ], ints[CH_DRIVE] = self.seq, 1 if self.drive else 0
         return tuple(floats), tuple(ints)
 
     @classmethod
@@ -136,18 +137,13 @@ class CartSample:
         """The 8 floats and 4 ints of the GPIO frame."""
         floats = [0.0] * GPIO_FLOAT_COUNT
         ints = [0] * GPIO_INT_COUNT
-        floats[CH_SPEED_A] = float(self.speed_a_rad_s)
-        floats[CH_SPEED_B] = float(self.speed_b_rad_s)
-        floats[CH_APPLIED_A] = float(self.applied_a_v)
-        floats[CH_APPLIED_B] = float(self.applied_b_v)
-        floats[CH_POSITION_A] = float(self.position_a_rad)
-        floats[CH_POSITION_B] = float(self.position_b_rad)
-        floats[CH_BRIDGE_VERSION] = float(self.bridge_version)
-        ints[CH_ECHO] = self.echo_seq
-        ints[CH_TICK] = self.cart_tick
-        ints[CH_STATUS] = self.status
-        ints[CH_HOST_LOST] = self.host_frames_lost
-        return tuple(floats), tuple(ints)
+        floats[CH_SPEED_A], floats[CH_SPEED_B] = self.speed_a_rad_s, self.speed_b_rad_s
+        floats[CH_APPLIED_A], floats[CH_APPLIED_B] = self.applied_a_v, self.applied_b_v
+        floats[CH_POSITION_A], floats[CH_POSITION_B] = self.position_a_rad, self.position_b_rad
+        floats[CH_BRIDGE_VERSION] = self.bridge_version
+        ints[CH_ECHO], ints[CH_TICK] = self.echo_seq, self.cart_tick
+        ints[CH_STATUS], ints[CH_HOST_LOST] = self.status, self.host_frames_lost
+        return tuple(float(v) for v in floats), tuple(ints)
 
     @classmethod
     def from_gpio(cls, gpio: Gpio) -> CartSample:

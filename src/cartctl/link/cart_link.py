@@ -189,27 +189,27 @@ class CartLink:
     def gpio_waiting(self, wait_s: float = 0.0) -> bool:
         """Whether another complete GPIO is buffered (the host is behind the cart), or arrives
         within ``wait_s``."""
-        deadline = time.perf_counter() + wait_s
         self._poll(0.0)
-        while not any(isinstance(m, Gpio) for m in self._pending):
+        return self._wait_for(lambda: any(isinstance(m, Gpio) for m in self._pending), wait_s)
+
+    def _next_message(self, timeout_s: float) -> Message | None:
+        """One decoded message, or None when ``timeout_s`` passed without one."""
+        if not self._wait_for(lambda: bool(self._pending), timeout_s):
+            return None
+        message = self._pending.popleft()
+        if isinstance(message, Event) and self.on_event is not None:
+            self.on_event(message)
+        return message
+
+    def _wait_for(self, ready: Callable[[], bool], timeout_s: float) -> bool:
+        """Poll the port until ``ready()``; False when ``timeout_s`` passed first."""
+        deadline = time.perf_counter() + timeout_s
+        while not ready():
             remaining = deadline - time.perf_counter()
             if remaining <= 0:
                 return False
             self._poll(remaining)
         return True
-
-    def _next_message(self, timeout_s: float) -> Message | None:
-        """One decoded message, or None when ``timeout_s`` passed without one."""
-        deadline = time.perf_counter() + timeout_s
-        while not self._pending:
-            remaining = deadline - time.perf_counter()
-            if remaining <= 0:
-                return None
-            self._poll(remaining)
-        message = self._pending.popleft()
-        if isinstance(message, Event) and self.on_event is not None:
-            self.on_event(message)
-        return message
 
     def _poll(self, timeout_s: float) -> None:
         """Read what the port has (up to :data:`READ_SLICE_S` for a first byte) and decode it."""

@@ -1,17 +1,10 @@
 """Passive recording of what a cart sends (``cartctl monitor``): labelled GPIO rows, text, events.
 
-For carts that run their own controller: the monitor never sends anything. It reads the stream
-through :class:`~cartctl.link.cart_link.CartLink` and turns each GPIO into one row ``time_s, tick,
-<12 labels>``: the labels given (``--labels``), else those of cartctl's firmware when its frames
-carry its marker (:mod:`cartctl.link.firmware`), else QRoboticsCenter's FloatIn0..7, IntIn0..3.
-``tick`` counts the rows; ``time_s`` is the cart time since the first GPIO, k · Ts with k the cart's
-tick. The cart stamps each GPIO with its ``millis()`` (u32, wrapping after 49.7 days); the stamps
-jitter by a millisecond, and a firmware that stamps a frame when its communication thread sends it
-can give several frames one stamp and then jump. So k is counted, not read: k = max(k_prev + 1,
-round(Δms / 10 ms)), Δms the stamps' distance from the first's (followed modulo 2³²). A lost
-frame leaves a step of two ticks; a burst of equal stamps advances one tick per frame until the
-stamps catch up. PRINT lines and EVENTs are stamped with the time and tick of the last GPIO before
-them (0 before the first).
+The monitor never sends anything. Each GPIO becomes a row ``time_s, tick, <12 labels>``: the
+labels given, else those of cartctl's firmware when its frames carry its marker, else
+QRoboticsCenter's. ``tick`` counts the rows; ``time_s`` is k · Ts with the cart's tick k counted
+from the frames' millisecond stamps, k = max(k_prev + 1, round(Δms / 10 ms)) (docs/serial.md).
+PRINT lines and EVENTs get the time and tick of the last row before them (0 before the first).
 """
 
 from __future__ import annotations

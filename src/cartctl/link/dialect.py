@@ -1,14 +1,10 @@
 """The microOS MAVLink dialect: message ids, CRC_EXTRA values and frame encoding.
 
-The dialect is ``microos.xml`` next to this module; pymavlink's mavgen turned it into
-:mod:`cartctl.link.vendor.microos_mavlink` (regenerate with ``tools/regenerate_dialect.py``), whose
-message classes pack the payloads and carry each message's CRC_EXTRA and length.
-
-- Generation A firmware speaks MAVLink 1 (0xFE): HEARTBEAT, THREAD_INFO, GPIO, EVENT and PRINT,
-  packed by :class:`Encoder`. THREAD_INFO (id 1) is not in the XML (its fields are not known);
-  only its length and CRC_EXTRA are, as constants.
-- Generation B firmware speaks MAVLink 2 (0xFD) and sends GPIOX (id 14) instead of GPIO;
-  :func:`encode_gpiox_v2` packs one, so that a virtual cart can impersonate such a cart.
+``microos.xml`` beside this module is made into :mod:`cartctl.link.vendor.microos_mavlink` by
+pymavlink's mavgen (``tools/regenerate_dialect.py``). Generation-A firmware speaks MAVLink 1 (0xFE;
+:class:`Encoder`); THREAD_INFO (id 1) is not in the XML, only its length and CRC_EXTRA are known.
+Generation B speaks MAVLink 2 (0xFD) with GPIOX (id 14): :func:`encode_gpiox_v2` lets a virtual
+cart impersonate one.
 """
 
 from __future__ import annotations

@@ -1,28 +1,15 @@
 """cartctl's firmwares: how a cart says which one it runs, and their logic in Python.
 
-Float channel 6 (:data:`CH_FIRMWARE_ID`) of every GPIO cartctl's firmware sends says which it is:
-1..999 the bridge sketch of that version (its channel map, :mod:`cartctl.link.bridge`, is known
-for :data:`~cartctl.link.bridge.BRIDGE_VERSION`); ``1000 + n`` a controller of ``cartctl export
---arduino`` on the cart, channel layout n (:data:`ONBOARD_ID`); anything else (0 from the course's
-own code or a bridge before version 2) is not cartctl's. The labels are the trace's column names,
-so that ``review``, ``validate`` and ``convert`` read a ``cartctl monitor`` trace as it is.
+Float 6 (:data:`CH_FIRMWARE_ID`) of every GPIO cartctl's firmware sends says which it is
+(docs/serial-protocol.md §3.1): the bridge sketch's version, or ``1000 + layout`` for a controller
+of ``cartctl export --arduino`` (:data:`ONBOARD_ID`); the labels of its channels are the trace's
+column names, so that ``review``, ``validate`` and ``convert`` read a ``cartctl monitor`` trace.
 
-:class:`BridgeFirmware` is the bridge sketch's logic (``firmware/cartctl_bridge/bridge_logic.h``):
-both implement one contract (``docs/serial-protocol.md``) and a test compares them tick by tick,
-so keep them in sync. The sketch's 10 ms thread drains the serial port, runs ``io()`` (writes the
-stored voltage, reads the encoders), then ``control()`` and sends one GPIO; its 1 ms thread drains
-as well. After each drain the held channels go to :meth:`BridgeFirmware.receive`, and
-:attr:`BridgeFirmware.command_v` is the voltage of the next ``io()``: the host's newest command
-acts one tick after the measurement it answers. The requested voltages apply while drive is 1 and
-the host sequence number keeps changing (a request that is not finite counts as 0 V); no new
-sequence number for ``WATCHDOG_MS`` (checked at every drain and ``control()``) trips the watchdog:
-zero volts until a new one arrives.
-
-:class:`OnboardFirmware` is the Python twin of ``cartctl export --arduino``'s ``control()``, for
-the virtual cart (``--onboard``): per tick and motor u = controller.step(r, measured speed),
-applied at the next ``io()`` (one tick of delay, as on the real cart). The references come from a
-reference spec (tick 0 at the first ``control()``) or else from the held input channels. The
-controllers run the fixed Kalman gain, as the C does; ``controlEnabled()`` is not modelled.
+:class:`BridgeFirmware` is the bridge sketch's logic (``firmware/cartctl_bridge/bridge_logic.h``,
+docs/serial-protocol.md §4): a test compares the two tick by tick, so keep them in sync.
+:class:`OnboardFirmware` is the twin of the exported ``control()``: per tick and motor u =
+controller.step(r, measured speed), applied at the next ``io()``, with the fixed Kalman gain as
+the C; the template's ``controlEnabled()`` is not modelled.
 """
 
 from __future__ import annotations

@@ -1,15 +1,10 @@
 """Bytes in, messages out (pure, no I/O): the decoded messages, :class:`Framer` and the text lines.
 
-:class:`Framer` recognises generation A, MAVLink 1 (0xFE: HEARTBEAT, THREAD_INFO, GPIO, EVENT and
-PRINT, each checked against its payload length and CRC_EXTRA) and generation B, MAVLink 2 (0xFD:
-GPIOX only, reported as :class:`GenerationBFrame`). On a header that fits no known message, or a
-CRC mismatch, only the start byte is dropped and the scan resumes at the next byte, so a false start
-in line noise never swallows the real frame that follows (pymavlink's own parser can). Every byte
-outside a valid frame is counted once in :attr:`LinkStats.garbage_bytes`. The generated dialect
-module unpacks the payloads.
-
-Every message carries the frame's ``seq``, ``sysid`` and ``compid`` last, with defaults, so that
-tests and simulators can build messages without a frame.
+:class:`Framer` checks generation-A frames (MAVLink 1) against their payload length and CRC_EXTRA
+and recognises generation-B GPIOX frames (MAVLink 2). On a header that fits no known message, or a
+CRC mismatch, only the start byte is dropped, so a false start in line noise never swallows the
+real frame that follows (pymavlink's own parser can). Every message carries the frame's ``seq``,
+``sysid`` and ``compid`` last, with defaults, so that tests can build messages without a frame.
 """
 
 from __future__ import annotations

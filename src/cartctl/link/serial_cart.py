@@ -1,21 +1,11 @@
 """The real cart over serial (``--plant serial:PORT``), running the bridge sketch of ``firmware/``.
 
-The loop is clocked by the cart: each GPIO it sends (every 10 ms) is one tick. The host answers
-each with the bridge's channel vector (``docs/serial-protocol.md``): voltages A and B, drive = 1
-and a sequence number +1 per frame. The bridge (version 2) writes the newest command as the voltage
-of its next ``io()`` and echoes the sequence number of the command each ``io()`` applied::
-
-    tick k      the cart measures, sends GPIO k (1.2 ms on the line at 500 kbaud, then the USB bridge)
-    host        computes from GPIO k, sends command s
-    tick k+E    io() put s's voltage on the motor: the first GPIO that echoes s
-
-so the loop delay from measurement to applied voltage is E ticks (1 when the reply reaches the cart
-within the tick, as on-board control), and a model of the loop has ``nk = E + 1``. A cart that
-answers only at 115200 baud, or sends another bridge version, is refused with one line naming the
-sketch to flash. Faults are counted, not fatal (CRC errors, garbage, missed cart ticks, host frames
-the cart never saw); no GPIO for 100 ms, or a vanished port, raises
-:class:`~cartctl.errors.PlantError`. :meth:`SerialCart.close` sends drive = 0 with zero volts
-whenever the port still works.
+The loop is clocked by the cart: each GPIO it sends (every 10 ms) is one tick, answered with the
+bridge's channel vector. The bridge echoes the sequence number of the command each ``io()``
+applied: the ticks from a measurement to the first echo of the command that answered it are the
+loop delay E (docs/serial-protocol.md §4.3; a model of the loop has ``nk = E + 1``). Line faults
+are counted, not fatal; silence or a vanished port raises :class:`~cartctl.errors.PlantError`;
+:meth:`SerialCart.close` leaves the cart at drive = 0 and zero volts when the port still works.
 """
 
 from __future__ import annotations
@@ -310,11 +300,8 @@ class SerialCart:
                 "loop_delay_ticks_seen": seen.to_dict()["counts"],
                 "loop_delay_probe": None if probe is None else probe.to_dict(),
                 "loop_delay_change": None if probe is None else delay_change(probe, seen),
-                "frames": stats.frames,
-                "crc_errors": stats.crc_errors,
-                "garbage_bytes": stats.garbage_bytes,
-                "seq_gaps": stats.seq_gaps,
-                "lost_frames": stats.lost_frames,
+                **{k: getattr(stats, k) for k in ("frames", "crc_errors", "garbage_bytes")},
+                **{k: getattr(stats, k) for k in ("seq_gaps", "lost_frames")},
                 "missed_ticks": self.missed_ticks,
                 "skipped_ticks": self.skipped_ticks,
                 "watchdog_trips": self.watchdog_trips,
