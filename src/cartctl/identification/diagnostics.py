@@ -44,14 +44,11 @@ from cartctl.identification.orders import OrderTable, order_table
 from cartctl.measures.metrics import finite_or_none
 from cartctl.model import ArxModel
 
-Z_99 = 2.576
-"""Two-sided 99 % point of the standard normal distribution."""
+Z_99 = 2.576  # two-sided 99 % point of the standard normal distribution
 
-MAX_LAGS = 25
-"""Lags of the autocorrelation (1 … 25) and cross-correlation (−25 … 25), as ``resid``."""
+MAX_LAGS = 25  # lags of the autocorrelation (1 … 25) and cross-correlation (−25 … 25), as ``resid``
 
-FALSE_ALARM = 0.05
-"""Probability with which a white, independent residual may still fail a test."""
+FALSE_ALARM = 0.05  # probability with which a white, independent residual may still fail a test
 
 
 def prediction_residuals(
@@ -202,11 +199,9 @@ def residual_test(
     )
 
 
-DRAWS = 1000
-"""Number of θ draws per band."""
+DRAWS = 1000  # number of θ draws per band
 
-SEED = 0
-"""Seed of the draws: the same data gives the same band."""
+SEED = 0  # seed of the draws: the same data gives the same band
 
 _PERCENTILES = (2.275, 15.866, 50.0, 84.134, 97.725)
 

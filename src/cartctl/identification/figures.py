@@ -27,8 +27,7 @@ if TYPE_CHECKING:
     from cartctl.identification.diagnostics import BodeBand, ResidualTest
 
 
-DPI = 110
-"""Resolution of the PNG files (dots per inch); 10 × 6.5 in figures are 1100 × 715 px."""
+DPI = 110  # resolution of the PNG files (dots per inch); 10 × 6.5 in figures are 1100 × 715 px
 
 _STYLE: dict[RcKeyType, Any] = {
     "font.size": 10,

@@ -44,8 +44,7 @@ POLE_BOUND = MARGINAL_POLE_RADIUS
 _PROJECT_MARGIN = 0.01
 """A start's poles beyond ρ are pulled in to ρ − this, where tanh is not saturated."""
 
-_ACTIVE_TOL = 1e-3
-"""The bound counts as active when the largest pole is within this of ρ."""
+_ACTIVE_TOL = 1e-3  # the bound counts as active when the largest pole is within this of ρ
 
 _COMPLEX_STEP = 1e-20
 

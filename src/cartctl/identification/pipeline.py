@@ -40,8 +40,7 @@ METHODS = ("arx", "oe")
 
 FitT = TypeVar("FitT", bound=ArxFit)
 
-MIN_PART = 50
-"""Fewest samples an estimation or validation part of a ``--split`` may have."""
+MIN_PART = 50  # fewest samples an estimation or validation part of a ``--split`` may have
 
 
 @dataclass(frozen=True)
@@ -135,15 +134,10 @@ class MotorIdentification:
 
     def variants(self) -> dict[str, ArxFit]:
         """Every fit made, by label, for tables and plots."""
-        out: dict[str, ArxFit] = {}
+        out = {"ARX": self.arx}
         if self.unfiltered is not None:
-            out["ARX, unfiltered"] = self.unfiltered
-            out["ARX, prefiltered"] = self.arx
-        else:
-            out["ARX"] = self.arx
-        if self.oe is not None:
-            out["OE"] = self.oe
-        return out
+            out = {"ARX, unfiltered": self.unfiltered, "ARX, prefiltered": self.arx}
+        return out | ({} if self.oe is None else {"OE": self.oe})
 
     def to_dict(self) -> dict[str, Any]:
         out = self.chosen.to_dict()

@@ -192,8 +192,7 @@ def validate_models(
 AMPLITUDE_REL_TOLERANCE = 0.02
 """Small + large may differ from the summed step by this fraction of the summed step ..."""
 
-AMPLITUDE_ABS_TOLERANCE_V = 0.1
-"""... or by this many volts, whichever is larger."""
+AMPLITUDE_ABS_TOLERANCE_V = 0.1  # ... or by this many volts, whichever is larger
 
 _ROLES = ("small", "large", "sum")
 _MIN_ALIGNED_TICKS = 2
