@@ -55,11 +55,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _check(args: argparse.Namespace) -> Path:
+    """Every option, in one line (exit 2) before anything is written; the output folder."""
     import math
 
-    from cartctl.plants.factory import plant_kind
+    from cartctl.link.cart_faults import CartFaults
+    from cartctl.plants.factory import physics_options, plant_kind
 
-    if plant_kind(args.plant) not in COMMISSIONED:
+    kind, plant_options = plant_kind(args.plant), args.plant.partition(":")[2]
+    if kind not in COMMISSIONED:
         raise InputError(f"PLANT must be physics[:OPTIONS], virtual[:OPTIONS] or serial:PORT, "
                          f"got '{args.plant}' (sim is a model already)")  # fmt: skip
     if not (math.isfinite(args.noise) and args.noise >= 0.0):
@@ -74,21 +77,13 @@ def _check(args: argparse.Namespace) -> Path:
     if earlier:
         raise InputError(f"--out {out} already holds {earlier[0]} of an earlier commissioning; "
                          "give another folder")  # fmt: skip
-    return out
-
-
-def _check_plant_options(spec: str) -> None:
-    """A bad plant option is one line (exit 2) before anything is written."""
-    from cartctl.link.cart_faults import CartFaults
-    from cartctl.plants.factory import physics_options, plant_kind
-
-    kind, options = plant_kind(spec), spec.partition(":")[2]
     if kind == "physics":
-        physics_options(options)
+        physics_options(plant_options)
     elif kind == "virtual":
-        CartFaults.parse(options)
-    elif not options:
+        CartFaults.parse(plant_options)
+    elif not plant_options:
         raise InputError("plant 'serial:' needs a port, e.g. serial:/dev/ttyACM0")
+    return out
 
 
 def _json(job: Any, failure: str | None, stage: str | None) -> dict[str, Any]:
@@ -110,7 +105,6 @@ def run(args: argparse.Namespace) -> int:
     out = _check(args)
     options = {"preset": args.preset, "noise_std_rad_s": args.noise, "seed": args.seed,
                "connect_timeout_s": args.connect_timeout}  # fmt: skip
-    _check_plant_options(args.plant)
     out.mkdir(parents=True, exist_ok=True)
     job = Commission(args.plant, out, options, jobs=args.jobs, run_command=run_in_process)
     code, failure = 0, None

@@ -171,19 +171,12 @@ def _write_whole(write: Callable[[Path], object], path: str | Path) -> None:
     try:
         write(path)
     except OSError as exc:
-        kept = _cut_to_whole_rows(path)
+        kept = 0  # rows after the header
+        with contextlib.suppress(OSError):
+            if stat.S_ISREG(os.stat(path).st_mode):  # a device (/dev/full) holds nothing
+                with path.open("r+b") as file:
+                    data = file.read()
+                    whole = data.rfind(b"\n") + 1
+                    file.truncate(whole)
+                kept = max(0, data.count(b"\n", 0, whole) - 1)
         raise OutputError(path, f"{exc.strerror or exc}", rows=kept) from None
-
-
-def _cut_to_whole_rows(path: Path) -> int:
-    """Truncate a regular file after its last line break; the rows (lines after the header) kept."""
-    try:
-        if not stat.S_ISREG(os.stat(path).st_mode):  # a device (/dev/full) holds nothing
-            return 0
-        with path.open("r+b") as file:
-            data = file.read()
-            whole = data.rfind(b"\n") + 1
-            file.truncate(whole)
-        return max(0, data.count(b"\n", 0, whole) - 1)
-    except OSError:
-        return 0

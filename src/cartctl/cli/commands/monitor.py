@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import math
 import signal
 import sys
@@ -165,7 +166,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--labels: {exc}") from None
     cart = _virtual_cart(rest, args) if kind == "virtual" else None
     port = cart.port if cart is not None else rest
-    monitor = Monitor([], [], labels, echo=print_to_stderr, announce=_to_stderr)
+    announce = functools.partial(print, file=sys.stderr, flush=True)
+    monitor = Monitor([], [], labels, echo=print_to_stderr, announce=announce)
     received: list[int] = []
     link = CartLink(port, on_event=monitor.on_event, on_print=monitor.on_print)
     if cart is not None:  # the virtual cart's rate is known: the bridge's, or the course's
@@ -216,10 +218,6 @@ def _close_all(sinks: list[Any]) -> None:
             failed = failed or exc
     if failed is not None:
         raise failed
-
-
-def _to_stderr(line: str) -> None:
-    print(line, file=sys.stderr, flush=True)
 
 
 def _summary(
