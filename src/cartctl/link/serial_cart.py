@@ -23,11 +23,7 @@ import cartctl.link.bridge as bridge
 from cartctl.cart import PERIOD_S
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import PlantError
-from cartctl.link.cart_link import (
-    DEFAULT_SILENCE_TIMEOUT_S,
-    CartLink,
-    UnsupportedCartError,
-)
+from cartctl.link.cart_link import DEFAULT_SILENCE_TIMEOUT_S, CartLink, UnsupportedCartError
 from cartctl.link.dialect import Encoder
 from cartctl.link.framer import Gpio
 from cartctl.link.loop_delay import MIN_ECHOES, EchoDelays, delay_change

@@ -63,13 +63,8 @@ class CartFirmware(Protocol):
     out_ints: list[int]
     tick: int
 
-    def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int) -> None:
-        """The channels held from the host's last GPIO, handed over at ``now_ms``."""
-        ...
-
-    def control(self, io: CartIO, now_ms: int) -> tuple[float, float]:
-        """One tick: returns the voltages (V) for the next ``io()``; fills the output channels."""
-        ...
+    def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int) -> None: ...
+    def control(self, io: CartIO, now_ms: int) -> tuple[float, float]: ...
 
 
 class VirtualCart:
@@ -99,7 +94,6 @@ class VirtualCart:
             actuation_ms=self.faults.actuation_ms,
             reversed_motors=self.faults.reversed_motors,
         )
-        self.preset = preset
         self.period_s = float(period_s)
         self.firmware: CartFirmware = firmware if firmware is not None else BridgeFirmware()
         self.receive_schedule = self.faults.receive if firmware is None else "microos"
