@@ -137,11 +137,12 @@ class ReferenceSchedule:
         if n_ticks:
             self._load(0)
 
-    def _load(self, start: int) -> None:
+    def _chunk(self, start: int) -> NDArray[np.float64]:
         n = min(self.chunk_ticks, self.n_ticks - start)
-        chunk = reference_signal(self.spec, n, self.period_s, self.motor, start_tick=start)
-        self._values = chunk.tolist()
-        self._start = start
+        return reference_signal(self.spec, n, self.period_s, self.motor, start_tick=start)
+
+    def _load(self, start: int) -> None:
+        self._values, self._start = self._chunk(start).tolist(), start
 
     def __len__(self) -> int:
         return self.n_ticks
@@ -158,8 +159,7 @@ class ReferenceSchedule:
     def chunks(self) -> Iterator[NDArray[np.float64]]:
         """The whole reference, chunk by chunk (for checks over the run)."""
         for start in range(0, self.n_ticks, self.chunk_ticks):
-            n = min(self.chunk_ticks, self.n_ticks - start)
-            yield reference_signal(self.spec, n, self.period_s, self.motor, start_tick=start)
+            yield self._chunk(start)
 
     def peak_abs(self) -> float:
         """max |reference| over the run (rad/s), 0 for an empty one."""

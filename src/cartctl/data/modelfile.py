@@ -149,9 +149,7 @@ def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
         entry = motors_tab[name]
         where = f"[motors.{name}]"
         theta = require(entry, "theta", list, path, where)
-        na = require(entry, "na", int, path, where)
-        nb = require(entry, "nb", int, path, where)
-        nk = require(entry, "nk", int, path, where)
+        na, nb, nk = (require(entry, key, int, path, where) for key in ("na", "nb", "nk"))
         if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in theta):
             raise DataFileError(path, f"theta in {where} must be a list of numbers, got {theta!r}")
         if not all(math.isfinite(v) for v in theta):
