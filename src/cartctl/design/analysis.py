@@ -258,13 +258,9 @@ def settling_bound(
     """Fastest settling of a step from rest to ``step_rad_s`` that any voltage within
     ±``voltage_limit_v`` allows, on the model with ``extra_delay_ticks`` more input delay (the
     bound without plus d ticks), in the band max(``band`` · |r|, ``quantum_rad_s``), held for
-    ``hold_s``, searched up to ``max_s``.
-
-    Raises
-    ------
-    InputError
-        The step cannot be held within the limit at all (|r| − band above the DC gain × limit),
-        lies within its own band, a bad extra delay, or an unstable model.
+    ``hold_s``, searched up to ``max_s``. InputError for a step that cannot be held within the
+    limit (|r| − band above the DC gain × limit) or lies within its own band, a bad extra delay,
+    or an unstable model.
     """
     return _settling_bound(model, float(step_rad_s), float(voltage_limit_v), extra_delay_ticks,
                            float(band), quantum_rad_s, float(hold_s), float(max_s))  # fmt: skip

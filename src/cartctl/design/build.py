@@ -75,15 +75,8 @@ def build_controllers(
     controller: ControllerFile, *, voltage_limit_v: float | None = None
 ) -> dict[str, Controller]:
     """The runtime controller of each motor in a controller file, limited to ``voltage_limit_v``
-    (V; at most, and by default, the file's).
-
-    Raises
-    ------
-    DataFileError
-        A motor entry misses a key or holds inconsistent numbers.
-    InputError
-        A voltage limit above the file's, or not in (0, 12] V.
-    """
+    (V; at most, and by default, the file's): DataFileError for a motor entry that misses a key
+    or holds inconsistent numbers, InputError for a limit above the file's."""
     limit = controller.voltage_limit_v
     if voltage_limit_v is not None:  # at most the file's limit
         limit = check_voltage_limit(voltage_limit_v, most_v=limit)

@@ -240,14 +240,10 @@ def load_controller(
 
     ``force`` loads a file whose ``controller_num``/``controller_den`` disagree with its gains
     anyway (the gains are what runs; the disagreements go to ``ignored``). ``period_s``, the
-    plant's tick (s), refuses a file for another period before its coefficients.
-
-    Raises
-    ------
-    MissingFileError, DataFileError
-        No such file; not a controller file; a key missing or of the wrong type; ``plant_kind``
-        against ``loop_delay_ticks``; without ``force``, a C(z) the gains do not give (relative
-        tolerance 1e-6); ``period_s`` not the file's.
+    plant's tick (s), refuses a file for another period before its coefficients. MissingFileError
+    or DataFileError: no such file, not a controller file, a key missing or of the wrong type,
+    ``plant_kind`` against ``loop_delay_ticks``, without ``force`` a C(z) the gains do not give
+    (relative tolerance 1e-6).
     """
     path = find_file(path)  # the working folder's, else the shipped one
     doc = read_toml(path, "controller file")

@@ -81,7 +81,7 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
         loop = loop_analysis(num, den, model, extra)
         keys = ("phase_margin_deg", "gain_margin_db", "crossover_hz", "sensitivity_peak")
         entry = {
-            **{k: v for k, v in placement.to_dict().items() if k != "estimator"},
+            **placement.to_dict(),
             **{k: loop[k] for k in (*keys, "sensitivity_peak_db")},
             "controller_num": num.tolist(),
             "controller_den": den.tolist(),
@@ -156,21 +156,22 @@ def loop_delay_for(
 
 def check_models(
     models: ModelFile | Mapping[str, ArxModel], motors: tuple[str, ...], name: str | None = None
-) -> None:
-    """Refuse, before any design work, a motor whose model is unstable (a PI needs a stable one,
-    and every design's simulated step and settling bound run on it): one line naming the file as
-    ``name`` (default the model file's path)."""
+) -> dict[str, ArxModel]:
+    """The model of each motor, refused before any design work where it is unstable (a PI needs
+    a stable one, and every design's simulated step and settling bound run on it): one line
+    naming the file as ``name`` (default the model file's path)."""
     if name is None and isinstance(models, ModelFile) and models.path:
         name = str(models.path)
     where = f"{name}: " if name else ""
-    for m in motors:
-        model = models.motor(m) if isinstance(models, ModelFile) else models[m]
+    by_motor = {m: models.motor(m) if isinstance(models, ModelFile) else models[m] for m in motors}
+    for m, model in by_motor.items():
         if not model.is_stable():
             raise InputError(
                 f"{where}motor {m}'s model is unstable (pole at |z| = {model.pole_radius():.4g}); "
                 "a design needs a stable model (its simulated step and settling bound run on "
                 "it): identify it again"
             )
+    return by_motor
 
 
 @dataclass(frozen=True)
@@ -198,10 +199,7 @@ def design_models(
 ) -> Designs:
     """Design every motor of ``motors`` on its model, with the simulated step and its bound."""
     request.check()
-    check_models(models, motors)
-    by_motor = {
-        m: (models.motor(m) if isinstance(models, ModelFile) else models[m]) for m in motors
-    }
+    by_motor = check_models(models, motors)
     recorded = models.loop_delay_ticks if isinstance(models, ModelFile) else None
     loop_delay, note = loop_delay_for(request, by_motor, recorded, strict=False)
     designs: dict[str, MotorDesign] = {}

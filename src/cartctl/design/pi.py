@@ -146,12 +146,8 @@ def design_pi(
 ) -> PiDesign:
     """PI gains for an exact phase margin (degrees, in (0, 89]) at a gain crossover (Hz, below
     Nyquist) on a stable model, with ``extra_delay_ticks`` of loop delay beyond the model's.
-
-    Raises
-    ------
-    InputError
-        A value out of range, an unstable model, or a request no PI meets (the message gives the
-        crossovers that work for that margin).
+    InputError for a value out of range, an unstable model, or a request no PI meets (with the
+    crossovers that work for that margin).
     """
     _check_common(model, phase_margin_deg, extra_delay_ticks)
     nyquist = 0.5 / model.period_s

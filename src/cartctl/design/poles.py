@@ -193,7 +193,7 @@ class PolesDesign:
         return A_a - np.outer(B_a, np.append(gain, self.Ki))
 
     def to_dict(self) -> dict[str, object]:
-        """JSON form (``design --json``: ``closed_loop_poles``, ``estimator_poles`` as [re, im])."""
+        """``design --json``'s entry of the design (poles as [re, im]; the estimator is the file's)."""
         return {
             "method": "poles",
             "Ts": self.period_s,
@@ -209,7 +209,6 @@ class PolesDesign:
             "overshoot_percent": self.overshoot_percent,
             "closed_loop_poles": [[float(p.real), float(p.imag)] for p in self.poles],
             "estimator_poles": [[float(p.real), float(p.imag)] for p in self.estimator.poles()],
-            "estimator": self.estimator.to_dict(),
         }
 
 
@@ -235,14 +234,9 @@ def design_poles(
     pole decays ``fast_pole_ratio`` times faster (then ratio + 1, …). ``reference_feedforward``
     chooses Kr = −Ki Ts over 0 with the error integrator. The noise levels are those of
     :func:`~cartctl.design.kalman.design_kalman`; ``bias_drift_std_v`` > 0 makes b̂ the integral
-    action.
-
-    Raises
-    ------
-    InputError
-        Both or neither pole modes; a bad specification; poles in the wrong number, outside the
-        unit circle or without their conjugates; an uncontrollable model (a pole-zero
-        cancellation, or a zero at z = 1); a numerically failed placement; bad noise levels.
+    action. InputError for both or neither pole modes, a bad specification, poles in the wrong
+    number, outside the unit circle or without their conjugates, an uncontrollable model (a
+    pole-zero cancellation, or a zero at z = 1), a failed placement, bad noise levels.
     """
     import control
 
