@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from cartctl.commission import checks, tuning
 from cartctl.data.trace import Trace
-from cartctl.measures.numfmt import format_fixed
+from cartctl.measures.numfmt import format_fixed, markdown_table
 from cartctl.sinks.rerun_layout import ENTITY_PATHS, blueprint
 from cartctl.sinks.rerun_problems import file_failure
 from cartctl.sinks.rerun_sink import APPLICATION_ID
@@ -33,13 +33,6 @@ Series = dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]  # name → 
 def fmt(value: float | None, digits: int = 2, scale: float = 1.0) -> str:
     """A figure for a table, ``scale`` × ``value`` to ``digits`` decimals ('—' for None)."""
     return format_fixed(None if value is None else value * scale, digits)
-
-
-def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    """A Markdown table."""
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines)
 
 
 @dataclass
@@ -97,8 +90,8 @@ def checks_body(loop_delay_ticks: int | None, checks: Mapping[str, Any], plant: 
              fmt(c.breakaway_v, 2), fmt(c.gain_rad_s_v, 2)] for m, c in checks.items()]  # fmt: skip
     body = (f"Plant: {plant}. Loop delay: {loop_delay_ticks} tick(s) (measurement to applied "
             "voltage).\n\n"
-            + table(["motor", "direction", "pulse turn (rad)", "other wheel (rad)",
-                     "breakaway (V)", "gain (rad/s/V)"], rows))  # fmt: skip
+            + markdown_table(["motor", "direction", "pulse turn (rad)", "other wheel (rad)",
+                              "breakaway (V)", "gain (rad/s/V)"], rows))  # fmt: skip
     if amplitude is not None:
         body += (f"\n\nExcitation amplitude: **{amplitude.voltage_v:g} V**. Rule: "
                  f"{amplitude.rule}.")  # fmt: skip
@@ -115,9 +108,9 @@ def model_body(result: Any, verdicts: Mapping[str, Any], model_name: str) -> str
                      fmt(model.dc_gain(), 3), fmt(v.fit_percent, 1), fmt(v.pole_radius, 3),
                      f"{v.cross_outside}/{v.cross_lags} ({v.cross_ratio:.1f}×)", "yes" if v.white else "no",
                      "pass" if not v.problems else "FAIL: " + "; ".join(v.problems)])  # fmt: skip
-    return (table(["motor", "θ = [a1, a2, b0 …]", "nk", "DC gain (rad/s/V)",
-                   "validation fit (%)", "max |pole|", "cross-corr. lags outside (max/bound)",
-                   "white", "verdict"], rows)
+    return (markdown_table(["motor", "θ = [a1, a2, b0 …]", "nk", "DC gain (rad/s/V)",
+                            "validation fit (%)", "max |pole|",
+                            "cross-corr. lags outside (max/bound)", "white", "verdict"], rows)
             + "".join(f"\n\n{note}." for note in result.notes)
             + f"\n\nFiles: {model_name}, identification.rrd, identification.png.")  # fmt: skip
 
@@ -154,7 +147,7 @@ def tuning_body(result: tuning.TuningResult, command: str) -> str:
         f"{tuning.MAX_OVERSHOOT_PERCENT:g} % on the model and on the timing plants and nominal "
         f"settling ≤ {tuning.MAX_SETTLING_S * 1e3:g} ms, the lowest worst-case overshoot, then "
         f"the fastest nominal settling (`tune --robust --choose best`'s rule).\n\n"
-        + table(headers, rows)
+        + markdown_table(headers, rows)
         + f"\n\n→ chosen; *: on the robust Pareto front. Controller: `{command}`.\n\n"
         + "".join(f"Setting #{i} passed over: {why}.\n\n" for i, why in result.refused)
         + "Files: controller.toml, tuning.rrd, tuning.png."
@@ -209,7 +202,9 @@ def verification_body(checked: checks.Verification, summary: dict[str, Any],
     ]  # fmt: skip
     return (
         f"`cartctl {' '.join(argv)}` (worse of motors a and b, on the {lim['speed']} speed).\n\n"
-        + table(["", "measured", "predicted nominal", "predicted worst", "pass bound"], rows)
+        + markdown_table(
+            ["", "measured", "predicted nominal", "predicted worst", "pass bound"], rows
+        )
         + f"\n\n**{'PASS' if checked.passed else 'FAIL'}**. Bounds: overshoot ≤ max("
         f"{checks.TARGET_OVERSHOOT_PERCENT:g} %, predicted nominal) + a tolerance "
         f"({checks.TRUE_SPEED_TOLERANCE_PP:g} point on a true speed, half an encoder count per "

@@ -31,6 +31,7 @@ from cartctl.identification.figures import (
 )
 from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, MotorIdentification
 from cartctl.measures.metrics import fit_percent
+from cartctl.measures.numfmt import markdown_table
 from cartctl.model import ArxModel
 
 
@@ -140,16 +141,13 @@ def _cell(value: Any) -> str:
     return text.replace("|", "\\|").replace("\n", " ")
 
 
-def _table(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+def _table(rows: Sequence[Mapping[str, Any]]) -> str:
     columns: list[str] = []
     for row in rows:
         columns += [str(name) for name in row if str(name) not in columns]
-    lines = ["| " + " | ".join(_cell(c) for c in columns) + " |"]
-    lines.append("|" + "|".join(" --- " for _ in columns) + "|")
-    for row in rows:
-        cells = {str(k): v for k, v in row.items()}
-        lines.append("| " + " | ".join(_cell(cells.get(c)) for c in columns) + " |")
-    return lines
+    cells = [{str(k): v for k, v in row.items()} for row in rows]
+    return markdown_table([_cell(c) for c in columns],
+                          [[_cell(r.get(c)) for c in columns] for r in cells])  # fmt: skip
 
 
 def write_summary(out_dir: Path, *, title: str, sections: Sequence[ReportSection]) -> Path:
@@ -167,7 +165,7 @@ def write_summary(out_dir: Path, *, title: str, sections: Sequence[ReportSection
             rel = Path(os.path.relpath(image, out_dir)) if image.is_absolute() else image
             lines += [f"![{rel.stem}]({rel.as_posix()})", ""]
         if section.table:
-            lines += [*_table(section.table), ""]
+            lines += [_table(section.table), ""]
     path = out_dir / "summary.md"
     path.write_text("\n".join(lines), encoding="utf-8")
     return path

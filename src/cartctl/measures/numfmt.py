@@ -103,3 +103,9 @@ def render_table(
         top += " " * (start - at) + label.center(span(first, last))
         at = start + span(first, last)
     return [*([top.rstrip()] if groups else []), line(headers), *(line(r) for r in rows)]
+
+
+def markdown_table(headers: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
+    """A Markdown table of text cells (``summary.md``)."""
+    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    return "\n".join([*lines, *("| " + " | ".join(r) + " |" for r in rows)])
