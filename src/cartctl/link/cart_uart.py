@@ -225,12 +225,9 @@ class PacedWriter(_PtyThread):
             due = [t - now for t in (next_out, next_flush) if t is not None]
             wait = min([0.05, *due])  # until something is due, or a new item comes
             try:
-                item = (
-                    self.queue.get(timeout=max(wait, 0.0)) if wait > 0 else self.queue.get_nowait()
-                )
+                self._take(*self.queue.get(timeout=max(wait, 0.0)))
             except queue.Empty:
                 continue
-            self._take(*item)
 
 
 class LineReader(_PtyThread):
