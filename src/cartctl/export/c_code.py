@@ -127,112 +127,104 @@ def _estimator_code(motor: str, design: KalmanDesign) -> list[str]:
 
 def pi_code(controller: ControllerFile, motor: str, entry: Mapping[str, Any]) -> list[str]:
     """One motor's PI: the equations and anti-windup of :class:`PiController`."""
-    up = motor.upper()
+    m, M = motor, motor.upper()
     kp, ki = float(entry["kp"]), float(entry["ki"])
     mode = str(entry.get("anti_windup", "conditional"))
-    period_s = controller.period_s
     # the same defaults as PiController: Ki·Ts per tick, tracking gain min(1, Ts·Ki/Kp)
-    ki_ts = ki * period_s
-    kt = min(1.0, period_s * ki / kp) if kp > 0.0 else 1.0
+    kt = min(1.0, controller.period_s * ki / kp) if kp > 0.0 else 1.0
     est = entry.get("estimator")
     design = _estimator(controller, motor, est) if est is not None else None
-    state = f"cartctl_state_{motor}"
-    lines = [
-        f"/* ---- motor {motor}: PI, anti-windup {mode}"
-        + (", on a Kalman speed estimate" if design else "")
-        + " ---- */",
-        f"#define CARTCTL_{up}_KP_V_PER_RAD_S {c_float(kp)}",
-        f"#define CARTCTL_{up}_KI_TS_V_PER_RAD_S {c_float(ki_ts)}  "
-        f"/* Ki*Ts, Ki = {ki:.6g} V/rad: the integral's gain per tick */",
-    ]
-    if mode == "back-calculation":
-        lines.append(
-            f"#define CARTCTL_{up}_KT {c_float(kt)}  /* tracking gain per tick: the fraction of "
-            "the excess over the limit taken off the integral */"
-        )
-    lines += [
-        "",
-        "typedef struct {",
-        "  float integral_v;      /* I, the integral term (V) */",
-        "  float estimate_rad_s;  /* the speed the PI acted on at the last tick (rad/s) */",
-    ]
-    if design is not None:
-        lines.append(f"  float x[{design.A.shape[0]}];            /* the estimator's state */")
-    lines += [
-        f"}} cartctl_state_{motor}_t;",
-        "",
-        f"cartctl_state_{motor}_t {state};",
-        "",
-    ]
-    if design is not None:
-        lines += _estimator_code(motor, design)
-    lines += [
-        f"/* Back to rest: integral 0{', estimator at rest' if design else ''}. */",
-        f"void cartctl_reset_{motor}(void) {{",
-        f"  {state}.integral_v = 0.0f;",
-        f"  {state}.estimate_rad_s = 0.0f;",
-    ]
-    if design is not None:
-        lines += [
-            "  {",
-            "    int i;",
-            f"    for (i = 0; i < CARTCTL_{up}_STATES; ++i) {{",
-            f"      {state}.x[i] = 0.0f;",
-            "    }",
-            "  }",
-        ]
-    lines += [
-        "}",
-        "",
-        "/* One tick: the voltage (V) to set for motor "
-        f"{motor.upper()}, within +-CARTCTL_VOLTAGE_LIMIT_V.",
-        " * 0 V, with the integral unchanged, when the reference or the measurement is not finite. */",
-        f"float cartctl_step_{motor}(float reference_rad_s, float measured_rad_s) {{",
-        f"  cartctl_state_{motor}_t *s = &{state};",
-        "  float y = measured_rad_s;",
-        "  float e, integral, p, u, u_sat;",
-    ]
-    if design is not None:
-        lines += ["  if (isfinite(y)) {", f"    y = cartctl_correct_{motor}(y);", "  }"]
-    lines += [
-        "  s->estimate_rad_s = y;",
-        "  e = reference_rad_s - y;",
-        f"  integral = s->integral_v + CARTCTL_{up}_KI_TS_V_PER_RAD_S * e;",
-        f"  p = CARTCTL_{up}_KP_V_PER_RAD_S * e;",
-        "  u = p + integral;",
-        "  u_sat = 0.0f;",
-        "  if (isfinite(u)) {  /* not finite: a NaN/inf input, or an overflow -> 0 V */",
-        "    " + _clamp("u_sat", "u"),
-    ]
-    if mode == "conditional":
-        lines += [
-            "    if (u_sat != u && e * u > 0.0f) {",
-            "      /* conditional integration: the integral moves at most up to the value that",
-            "       * puts the output on the limit, and never back */",
-            "      float old = s->integral_v;",
-            "      float edge = u_sat - p;",
-            "      if (e > 0.0f) {",
-            "        float lower = edge < integral ? edge : integral;",
-            "        integral = lower > old ? lower : old;",
-            "      } else {",
-            "        float upper = edge > integral ? edge : integral;",
-            "        integral = upper < old ? upper : old;",
-            "      }",
-            "      u = p + integral;",
-            "      " + _clamp("u_sat", "u"),
-            "    }",
-        ]
-    elif mode == "back-calculation":
-        lines += [
-            "    if (u_sat != u) {  /* back-calculation: take the fraction Kt of the excess off */",
-            f"      integral += CARTCTL_{up}_KT * (u_sat - u);",
-            "    }",
-        ]
-    lines += ["    s->integral_v = integral;", "  }"]
-    if design is not None:
-        lines.append(f"  cartctl_predict_{motor}(u_sat);")
-    lines += ["  return u_sat;", "}", ""]
-    return lines
+    windup = {
+        "conditional": _CONDITIONAL.substitute(clamp=_clamp("u_sat", "u")),
+        "back-calculation": f"""\
+    if (u_sat != u) {{  /* back-calculation: take the fraction Kt of the excess off */
+      integral += CARTCTL_{M}_KT * (u_sat - u);
+    }}
+""",
+    }.get(mode, "")
+    kt_line = (
+        f"#define CARTCTL_{M}_KT {c_float(kt)}  /* tracking gain per tick: the fraction of the "
+        "excess over the limit taken off the integral */\n"
+        if mode == "back-calculation"
+        else ""
+    )
+    n = 0 if design is None else design.A.shape[0]
+    return _PI.substitute(
+        m=m, M=M, mode=mode, on_estimate=", on a Kalman speed estimate" if design else "",
+        kp=c_float(kp), ki_ts=c_float(ki * controller.period_s), ki=f"{ki:.6g}",
+        kt=kt_line,
+        x=f"  float x[{n}];            /* the estimator's state */\n" if design else "",
+        estimator="\n".join(_estimator_code(motor, design)) + "\n" if design else "",
+        at_rest=", estimator at rest" if design else "",
+        reset_x=_RESET_X.substitute(M=M, m=m) if design else "",
+        correct=f"  if (isfinite(y)) {{\n    y = cartctl_correct_{m}(y);\n  }}\n" if design else "",
+        clamp=_clamp("u_sat", "u"), windup=windup,
+        predict=f"  cartctl_predict_{m}(u_sat);\n" if design else "",
+    ).split("\n")  # fmt: skip
+
+
+_PI = Template("""\
+/* ---- motor $m: PI, anti-windup $mode$on_estimate ---- */
+#define CARTCTL_${M}_KP_V_PER_RAD_S $kp
+#define CARTCTL_${M}_KI_TS_V_PER_RAD_S $ki_ts  /* Ki*Ts, Ki = $ki V/rad: the integral's gain per tick */
+${kt}
+typedef struct {
+  float integral_v;      /* I, the integral term (V) */
+  float estimate_rad_s;  /* the speed the PI acted on at the last tick (rad/s) */
+${x}} cartctl_state_${m}_t;
+
+cartctl_state_${m}_t cartctl_state_$m;
+
+${estimator}/* Back to rest: integral 0$at_rest. */
+void cartctl_reset_$m(void) {
+  cartctl_state_$m.integral_v = 0.0f;
+  cartctl_state_$m.estimate_rad_s = 0.0f;
+${reset_x}}
+
+/* One tick: the voltage (V) to set for motor $M, within +-CARTCTL_VOLTAGE_LIMIT_V.
+ * 0 V, with the integral unchanged, when the reference or the measurement is not finite. */
+float cartctl_step_$m(float reference_rad_s, float measured_rad_s) {
+  cartctl_state_${m}_t *s = &cartctl_state_$m;
+  float y = measured_rad_s;
+  float e, integral, p, u, u_sat;
+${correct}  s->estimate_rad_s = y;
+  e = reference_rad_s - y;
+  integral = s->integral_v + CARTCTL_${M}_KI_TS_V_PER_RAD_S * e;
+  p = CARTCTL_${M}_KP_V_PER_RAD_S * e;
+  u = p + integral;
+  u_sat = 0.0f;
+  if (isfinite(u)) {  /* not finite: a NaN/inf input, or an overflow -> 0 V */
+    $clamp
+${windup}    s->integral_v = integral;
+  }
+${predict}  return u_sat;
+}
+""")
+_RESET_X = Template("""\
+  {
+    int i;
+    for (i = 0; i < CARTCTL_${M}_STATES; ++i) {
+      cartctl_state_$m.x[i] = 0.0f;
+    }
+  }
+""")
+_CONDITIONAL = Template("""\
+    if (u_sat != u && e * u > 0.0f) {
+      /* conditional integration: the integral moves at most up to the value that
+       * puts the output on the limit, and never back */
+      float old = s->integral_v;
+      float edge = u_sat - p;
+      if (e > 0.0f) {
+        float lower = edge < integral ? edge : integral;
+        integral = lower > old ? lower : old;
+      } else {
+        float upper = edge > integral ? edge : integral;
+        integral = upper < old ? upper : old;
+      }
+      u = p + integral;
+      $clamp
+    }
+""")
 
 
 def poles_code(controller: ControllerFile, motor: str, entry: Mapping[str, Any]) -> list[str]:
