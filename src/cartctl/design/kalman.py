@@ -52,16 +52,7 @@ from cartctl.cart import ENCODER_COUNTS_PER_REV, encoder_quantum_rad_s
 from cartctl.design.request import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOISE_STD_V
 from cartctl.errors import InputError
 from cartctl.model import ArxModel, check_extra_delay_ticks
-from cartctl.runtime.kalman import KalmanDesign
-
-__all__ = [
-    "KalmanDesign",
-    "StateSpace",
-    "design_kalman",
-    "quantisation_std_rad_s",
-    "realise",
-    "uncontrollable_modes",
-]
+from cartctl.runtime.kalman import KalmanDesign as KalmanDesign  # re-exported: a design's result
 
 _PBH_TOL = 1e-9
 """A PBH-test singular value below this fraction of the largest counts as rank loss."""
