@@ -266,13 +266,9 @@ class Monitor:
             sink.log_text(entity, text, self.result.duration_s, tick, "INFO")
 
     def _cart_time_s(self, time_ms: int) -> float:
-        """Cart time of this GPIO since the first (s): its tick (see the module) times Ts.
-
-        The stamps are followed by their signed difference modulo 2³² from the previous one, so
-        the u32 counter's wrap is a step like any other and a stamp a little behind its
-        predecessor is not read as 49 days ahead. Does not advance the tick: :meth:`run` does,
-        for the frames it keeps.
-        """
+        """Cart time of this GPIO since the first (s): its tick (see the module) times Ts. The
+        stamps follow their signed difference modulo 2³² from the previous one, so the u32 wrap is
+        a step like any other; the tick advances in :meth:`run`, for the frames it keeps."""
         if self._last_ms is not None:
             half = _TIME_MODULO_MS // 2
             self._elapsed_ms += (time_ms - self._last_ms + half) % _TIME_MODULO_MS - half
