@@ -110,18 +110,16 @@ def plot_etfe(
         for i, (label, mag_db, phase_deg) in enumerate(curves):
             ax_m.plot(f_grid, mag_db, color=color(i), label=label, linewidth=1.8)
             ax_p.plot(f_grid, phase_deg, color=color(i), linewidth=1.8)
-        ax_m.set_xscale("log")
-        ax_m.set_xlim(f_lo, nyquist_hz)
+        ax_m.set(xscale="log", xlim=(f_lo, nyquist_hz), ylabel="magnitude (dB re 1 rad/s/V)")
+        ax_p.set(ylabel="phase (deg)")
+        ax_p.set_xlabel(f"frequency (Hz), up to the Nyquist frequency {nyquist_hz:g} Hz")
         ax_p.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
         ax_p.xaxis.set_major_formatter(FuncFormatter(lambda x, _pos: f"{x:g}"))
         ax_p.xaxis.set_minor_formatter(NullFormatter())
-        ax_m.set_ylabel("magnitude (dB re 1 rad/s/V)")
-        ax_p.set_ylabel("phase (deg)")
-        ax_p.set_xlabel(f"frequency (Hz), up to the Nyquist frequency {nyquist_hz:g} Hz")
         span = float(np.ptp(np.concatenate([phase_e, *(c[2] for c in curves)])))
         ax_p.yaxis.set_major_locator(MultipleLocator(90.0 if span <= 540.0 else 180.0))
-        ax_m.grid(True, which="minor", alpha=0.12)
-        ax_p.grid(True, which="minor", alpha=0.12)
+        for ax in (ax_m, ax_p):
+            ax.grid(True, which="minor", alpha=0.12)
         ax_m.legend(loc="lower left")
         fig.suptitle(title)
         return save(fig, path)
@@ -157,12 +155,8 @@ def plot_pzmap(models: Mapping[str, ArxModel], path: Path, *, title: str) -> Pat
         zoom = (-1.15, 1.15, -1.15, 1.15)
     zoomed = zoom[1] - zoom[0] < 1.6 or reach > 1.2
     with figure(11.0, 5.8 if zoomed else 6.5) as fig:
-        if zoomed:
-            ax_full, ax_zoom = fig.subplots(1, 2, width_ratios=[1.0, 1.5])
-            panels = [ax_full, ax_zoom]
-        else:
-            ax_full = ax_zoom = fig.subplots(1, 1)
-            panels = [ax_full]
+        panels = list(fig.subplots(1, 2, width_ratios=[1.0, 1.5])) if zoomed else [fig.subplots()]
+        ax_full, ax_zoom = panels[0], panels[-1]
         for ax in panels:
             ax.add_patch(Circle((0, 0), 1.0, fill=False, color="0.4", linestyle="--", lw=1.0))
             ax.axhline(0.0, color="0.5", lw=0.8)
@@ -278,14 +272,11 @@ def plot_residuals(test: ResidualTest, path: Path, *, title: str) -> Path:
             ax.plot(lags[inside], r[inside], "o", color="0.25", markersize=4)
             ax.plot(lags[~inside], r[~inside], "o", color="tab:red", markersize=5)
             reach = max(1.6 * bound, 1.15 * float(np.max(np.abs(r))))
-            ax.set_ylim(-reach, reach)
-            ax.set_xlim(lags[0] - 0.8, lags[-1] + 0.8)
+            ax.set(ylim=(-reach, reach), xlim=(lags[0] - 0.8, lags[-1] + 0.8))
             ax.set_ylabel("correlation (–)")
             verdict = word if ok else f"not {word}"
-            ax.set_title(
-                f"{what}: {outside} of {lags.size} lags outside ±{bound:.3f} ({verdict})",
-                fontsize=10,
-            )
+            what += f": {outside} of {lags.size} lags outside ±{bound:.3f} ({verdict})"
+            ax.set_title(what, fontsize=10)
         ax_a.set_xlabel("lag τ (ticks)")
         ax_c.set_xlabel("lag τ (ticks); τ > 0: input before the residual")
         ax_a.legend(loc="upper right")

@@ -281,11 +281,6 @@ class OrderRow:
         out = dataclasses.asdict(self)
         return out | {k: finite_or_none(out[k]) for k in ("loss", "aic", "fpe", "fit_percent")}
 
-    def fit_text(self) -> str:
-        if not self.stable:
-            return "unstable model"
-        return f"{self.fit_percent:.2f}" if math.isfinite(self.fit_percent) else "diverges"
-
 
 @dataclass(frozen=True)
 class OrderTable:
@@ -320,22 +315,29 @@ class OrderTable:
             for r in self.rows
         ]
 
+    def cells(self, r: OrderRow) -> list[str]:
+        """Loss, AIC, FPE and fit as printed; for a row not fitted, empty numbers and the error."""
+        if r.error is not None:
+            return ["", "", "", r.error]
+        fit = f"{r.fit_percent:.2f}" if math.isfinite(r.fit_percent) else "diverges"
+        fit = fit if r.stable else "unstable model"
+        return [f"{r.loss:.4f}", f"{r.aic:.1f}", f"{r.fpe:.4f}", fit]
+
     def format(self) -> str:
         """The terminal table, the best rows marked."""
         fit_head = f"sim fit, {self.fit_on} (%)"
-        head = (
+        lines = [
             f"    {'na':>3}{'nb':>4}{'nk':>4}{'params':>8}{'loss V (rad/s)²':>17}"
             f"{'AIC (–)':>11}{'FPE (rad/s)²':>14}{fit_head:>26}  best"
-        )
-        lines = [head]
+        ]
         for r in self.rows:
+            head = f"    {r.na:>3}{r.nb:>4}{r.nk:>4}{r.params:>8}"
             if r.error is not None:
-                lines.append(f"    {r.na:>3}{r.nb:>4}{r.nk:>4}{r.params:>8}  not fitted: {r.error}")
+                lines.append(f"{head}  not fitted: {r.error}")
                 continue
-            lines.append(
-                f"    {r.na:>3}{r.nb:>4}{r.nk:>4}{r.params:>8}{r.loss:>17.4f}{r.aic:>11.1f}"
-                f"{r.fpe:>14.4f}{r.fit_text():>26}  {', '.join(self.marks(r))}".rstrip()
-            )
+            loss, aic, fpe, fit = self.cells(r)
+            marks = ", ".join(self.marks(r))
+            lines.append(f"{head}{loss:>17}{aic:>11}{fpe:>14}{fit:>26}  {marks}".rstrip())
         lines.append(
             f"    N = {self.n_equations} equations for every row; V = mean squared equation error, "
             "AIC = N ln V + 2d, FPE = V (1 + d/N) / (1 − d/N), d = na + nb; sim fit: NRMSE of the "

@@ -294,16 +294,12 @@ def _orders_section(res: MotorIdentification) -> ReportSection | None:
     table = res.diagnostics.orders
     if table is None:
         return None
+    heads = ["na", "nb", "nk", "params", "loss V ((rad/s)²)", "AIC (–)", "FPE ((rad/s)²)"]
+    heads += [f"sim fit, {table.fit_on} (%)", "best"]
     rows = []
     for r in table.rows:
-        rows.append({
-            "na": r.na, "nb": r.nb, "nk": r.nk, "params": r.params,
-            "loss V ((rad/s)²)": "" if r.error else f"{r.loss:.4f}",
-            "AIC (–)": "" if r.error else f"{r.aic:.1f}",
-            "FPE ((rad/s)²)": "" if r.error else f"{r.fpe:.4f}",
-            f"sim fit, {table.fit_on} (%)": r.error or r.fit_text(),
-            "best": ", ".join(table.marks(r)),
-        })  # fmt: skip
+        cells = [r.na, r.nb, r.nk, r.params, *table.cells(r), ", ".join(table.marks(r))]
+        rows.append(dict(zip(heads, cells, strict=True)))
     return ReportSection(
         heading=f"Motor {res.motor}: orders and delay",
         text=f"ARX fits on N = {table.n_equations} common equations. V is the mean squared "
