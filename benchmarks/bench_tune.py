@@ -32,10 +32,9 @@ from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
 from cartctl.runtime.fast import run_in_memory
 from cartctl.sinks.summary import trace_metrics
-from cartctl.tune.batch import ArxBatch, simulate_batch
+from cartctl.tune.batch import ArxBatch, sample_plants, simulate_batch
 from cartctl.tune.grid import design_request, grid_settings, parse_grid
 from cartctl.tune.robust import step_metrics
-from cartctl.tune.uncertainty import sample_plants
 
 MODEL = Path(__file__).resolve().parents[1] / "models" / "ground.toml"
 GRIDS = {

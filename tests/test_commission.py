@@ -15,7 +15,7 @@ from cartctl.commission import checks as verify
 from cartctl.data.trace import Trace
 from cartctl.model import ArxModel
 from cartctl.plants.physics_params import preset
-from cartctl.tune import uncertainty as timing
+from cartctl.tune import batch as timing
 
 STAGE_FILES = ("checks", "excitation", "identification", "tuning", "verification")
 

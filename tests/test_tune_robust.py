@@ -37,8 +37,8 @@ from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
 from cartctl.runtime.fast import run_in_memory
 from cartctl.sinks.summary import trace_metrics
+from cartctl.tune.batch import sample_plants
 from cartctl.tune.engine import DelayedPlant
-from cartctl.tune.uncertainty import sample_plants
 
 GROUND = Path(__file__).resolve().parents[1] / "models" / "ground.toml"
 GRID = "phase_margin=65:75:5,crossover_hz=3:5:1"

@@ -1,4 +1,4 @@
-"""Plants drawn around a model file (``cartctl.tune.uncertainty``): properties of the draws.
+"""Plants drawn around a model file (``cartctl.tune.batch``): properties of the draws.
 
 Checked against the model file itself and numpy's roots, never against the sampler's own output:
 θ moves within ±theta_std, the b coefficients carry a gain factor in [0.9, 1.1], the delay moves by
@@ -16,7 +16,7 @@ import pytest
 from cartctl.data.modelfile import ModelFile, Provenance, load_models
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
-from cartctl.tune.uncertainty import sample_plants
+from cartctl.tune.batch import sample_plants
 
 GROUND = Path(__file__).resolve().parents[1] / "models" / "ground.toml"
 STD = [0.02, 0.015, 0.01, 0.02]  # about what identify gives on 25 s of square-wave data

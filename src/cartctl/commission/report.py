@@ -25,7 +25,7 @@ from cartctl.measures.numfmt import format_fixed, markdown_table
 from cartctl.sinks.rerun_layout import ENTITY_PATHS, blueprint
 from cartctl.sinks.rerun_problems import file_failure
 from cartctl.sinks.rerun_sink import APPLICATION_ID
-from cartctl.tune.uncertainty import later_command
+from cartctl.tune.batch import later_command
 
 Series = dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]  # name → (time s, values)
 

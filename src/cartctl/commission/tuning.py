@@ -2,7 +2,7 @@
 
 ``cartctl tune --robust``'s machinery over a small pole-placement grid (:data:`GRID`), scored on
 the model, on :data:`PLANTS` plants of its uncertainty and on the model with its commands landing
-later (:func:`cartctl.tune.uncertainty.later_command`) instead of the physics preset (the course's
+later (:func:`cartctl.tune.batch.later_command`) instead of the physics preset (the course's
 cart, not this one); then ``tune --choose best``'s rule within :data:`MAX_OVERSHOOT_PERCENT` and
 :data:`MAX_SETTLING_S`, passing over a setting whose controller file ``cartctl run`` would refuse.
 The reasoning (why these plants, why these bounds) is in docs/commission.md.
@@ -24,7 +24,7 @@ from cartctl.errors import InputError
 from cartctl.tune import choice, engine
 from cartctl.tune import grid as tuning
 from cartctl.tune import robust as robustness
-from cartctl.tune.uncertainty import sample_plants
+from cartctl.tune.batch import sample_plants
 
 METHOD = "poles"
 # 80–160 ms × 0.1–2.1 % (25 settings). Low overshoot targets: with friction the step overshoots

@@ -1,23 +1,30 @@
-"""One designed controller against N ARX plants at once (``tune --robust``): one Python loop over
-the ticks, each quantity an array over the plants.
+"""N ARX plants at once for ``cartctl tune --robust`` (docs/tuning.md): drawn from a model file's
+uncertainty, then run together against one designed controller.
 
-Each tick does, operation for operation, what a tick of ``cartctl run --fast`` does with one
-motor of an ``ArxPlant`` without noise: the runtime's own laws on arrays (``pi_law`` or
-``feedback_law``, the fixed-gain estimator's ``filter_correct``/``filter_predict`` around it),
-the loop's clamp, the plant's saturation and ``arx_next`` with every plant's input coefficients
-laid out by lag (so plants of different delays run together). A plant past ``DIVERGED_RAD_S``
-is marked as run away and held at zero. ``tests/test_control_laws.py`` checks the traces against
-the real loop bit for bit."""
+The draw, per plant: θ moved entry by entry by δ ~ uniform[−σ, +σ] (σ the file's ``theta_std``; a
+motor without one keeps its θ), b scaled by g ~ uniform[0.9, 1.1] per motor, nk shifted by −1, 0 or
++1 tick (at least 1); unstable θ draws are redrawn and counted. One generator seeded with
+``--seed``, in a fixed order, so a seed gives the same plants whatever the worker count.
+
+The loop: one Python loop over the ticks, each quantity an array over the plants, doing operation
+for operation what a tick of ``cartctl run --fast`` does with one motor of an ``ArxPlant`` without
+noise: the runtime's own laws (``pi_law`` or ``feedback_law``, the fixed-gain estimator's
+``filter_correct``/``filter_predict`` around it), the loop's clamp, the plant's saturation and
+``arx_next`` with the input coefficients laid out by lag (so plants of different delays run
+together). A plant past ``DIVERGED_RAD_S`` is marked as run away and held at zero;
+``tests/test_control_laws.py`` checks the traces against the real loop bit for bit."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cartctl.cart import PERIOD_S, SUPPLY_V, check_voltage_limit
+from cartctl.data.modelfile import ModelFile
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 from cartctl.plants.sim import DIVERGED_RAD_S, arx_next
@@ -32,6 +39,9 @@ from cartctl.runtime.pi import ANTI_WINDUP, PiController, pi_law
 from cartctl.runtime.statefeedback import StateFeedbackController, feedback_law
 
 FloatArray = NDArray[np.float64]
+GAIN_RANGE = (0.9, 1.1)
+DELAY_SHIFTS_TICKS = (-1, 0, 1)
+MAX_DRAWS_PER_PLANT = 100  # θ draws per plant on average before giving up on stable ones
 
 
 @dataclass(frozen=True)
@@ -205,3 +215,167 @@ def simulate_batch(
     time_s[-1] = time_s[-2] + period  # the stop row: the last tick's time + Ts, as the loop logs it
     return BatchTrace(time_s, np.append(ref, ref[-1]), np.ascontiguousarray(y_hist[na:].T),
                       voltage, diverged)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class MotorSamples:
+    """The sampled models of one motor: ``ar`` (N, na), ``b`` (N, nb, the gain factor applied),
+    ``nk`` (N,), ``gain_factor`` g and ``theta_delta`` δ per plant, the σ used (None when the file
+    has no usable one, ``theta_std_note`` saying why) and the count of unstable draws rejected."""
+
+    ar: NDArray[np.float64]
+    b: NDArray[np.float64]
+    nk: NDArray[np.int_]
+    gain_factor: NDArray[np.float64]
+    theta_delta: NDArray[np.float64]
+    theta_std: NDArray[np.float64] | None
+    theta_std_note: str | None
+    rejected_unstable: int
+
+    def model(self, i: int, period_s: float) -> ArxModel:
+        """Plant ``i`` as an :class:`~cartctl.model.ArxModel`."""
+        return ArxModel(tuple(self.ar[i]), tuple(self.b[i]), int(self.nk[i]), period_s)
+
+
+@dataclass(frozen=True)
+class PlantSample:
+    """N plants drawn around a model file: per motor samples, each plant's delay shift s, the seed,
+    Ts."""
+
+    motors: dict[str, MotorSamples]
+    delay_shift_ticks: NDArray[np.int_]
+    seed: int
+    period_s: float
+
+    @property
+    def size(self) -> int:
+        return int(self.delay_shift_ticks.size)
+
+    def describe(self) -> dict[str, Any]:
+        """The sampling for ``--json``."""
+        motors = self.motors.items()
+        return {"plants": self.size, "seed": self.seed,
+                "theta": "θ + δ, δ ~ uniform[−σ, +σ] per entry (σ: the model file's theta_std)",
+                "dc_gain_factor": {"distribution": "uniform", "range": list(GAIN_RANGE),
+                                   "per": "motor"},
+                "delay_shift_ticks": {"values": list(DELAY_SHIFTS_TICKS), "per": "plant",
+                                      "minimum_nk": 1},
+                "theta_std": {m: None if s.theta_std is None else s.theta_std.tolist()
+                              for m, s in motors},
+                "theta_std_available": {m: s.theta_std is not None for m, s in motors},
+                "theta_std_notes": {m: s.theta_std_note for m, s in motors if s.theta_std_note},
+                "rejected_unstable": {m: s.rejected_unstable for m, s in motors}}  # fmt: skip
+
+
+def theta_std_of(model: ArxModel, stats: Mapping[str, Any]) -> tuple[NDArray[np.float64] | None, str | None]:  # fmt: skip
+    """A motor's σ of θ from its model-file ``stats``: (σ, None), or (None, why not); σ must be
+    na + nb finite numbers ≥ 0 (an output-error fit with a singular Jacobian writes NaN)."""
+    raw = stats.get("theta_std")
+    if raw is None:
+        return None, "no theta_std in the model file: θ kept as it is"
+    try:
+        std = np.asarray(raw, dtype=float).ravel()
+    except (TypeError, ValueError):
+        return None, f"theta_std is not a list of numbers ({raw!r}): θ kept as it is"
+    p = model.na + model.nb
+    if std.size != p:
+        return None, f"theta_std has {std.size} values, θ has {p}: θ kept as it is"
+    if not (np.all(np.isfinite(std)) and np.all(std >= 0.0)):
+        return None, "theta_std holds values that are not finite numbers >= 0: θ kept as it is"
+    return std, None
+
+
+def _stable(ar: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Per row of a_1 … a_na: every root of z^na + a_1 z^(na−1) + … + a_na inside |z| < 1."""
+    n, na = ar.shape
+    if na == 0:
+        return np.ones(n, dtype=bool)
+    companion = np.zeros((n, na, na))
+    companion[:, 0, :] = -ar
+    if na > 1:
+        companion[:, np.arange(1, na), np.arange(na - 1)] = 1.0
+    return np.max(np.abs(np.linalg.eigvals(companion)), axis=1) < 1.0
+
+
+def _sample_motor(
+    rng: np.random.Generator,
+    model: ArxModel,
+    stats: Mapping[str, Any],
+    nk: NDArray[np.int_],
+    name: str,
+) -> MotorSamples:
+    n, p = nk.size, model.na + model.nb
+    std, note = theta_std_of(model, stats)
+    theta0 = model.theta
+    gain = rng.uniform(*GAIN_RANGE, size=n)
+    delta = np.zeros((n, p))
+    rejected = 0
+    if std is not None:
+        delta = rng.uniform(-1.0, 1.0, size=(n, p)) * std
+        todo = ~_stable((theta0 + delta)[:, : model.na])
+        while todo.any():
+            rejected += int(todo.sum())
+            if rejected > MAX_DRAWS_PER_PLANT * n:
+                raise InputError(
+                    f"motor {name}: {rejected} of the θ draws within ±theta_std were unstable; "
+                    "the model's uncertainty does not describe a stable motor"
+                )
+            idx = np.flatnonzero(todo)
+            delta[idx] = rng.uniform(-1.0, 1.0, size=(idx.size, p)) * std
+            todo[idx] = ~_stable((theta0 + delta[idx])[:, : model.na])
+    theta = theta0 + delta
+    return MotorSamples(ar=theta[:, : model.na], b=theta[:, model.na :] * gain[:, None], nk=nk,
+                        gain_factor=gain, theta_delta=delta, theta_std=std,
+                        theta_std_note=note, rejected_unstable=rejected)  # fmt: skip
+
+
+def sample_plants(
+    models: ModelFile, n_plants: int, seed: int, *, extra_delay_ticks: int = 0
+) -> PlantSample:
+    """Draw ``n_plants`` ≥ 1 plants around ``models`` with ``seed``, for ``extra_delay_ticks``
+    beyond the model's delay; refuses a missing or unstable model and a σ so large that stable draws
+    are too rare."""
+    if isinstance(n_plants, bool) or not isinstance(n_plants, int) or n_plants < 1:
+        raise InputError(f"--plants must be a number of plants >= 1, got {n_plants!r}")
+    for name in ("a", "b"):
+        model = models.motor(name)
+        if not model.is_stable():
+            raise InputError(
+                f"motor {name}'s model is unstable (a pole at |z| = {model.pole_radius():.4g}): "
+                "plants drawn around it cannot be held to stable ones"
+            )
+    rng = np.random.default_rng(seed)
+    shifts = rng.choice(np.array(DELAY_SHIFTS_TICKS), size=n_plants)
+    motors: dict[str, MotorSamples] = {}
+    for name in ("a", "b"):
+        model = models.motor(name)
+        nk = np.maximum(1, model.nk + extra_delay_ticks + shifts)
+        motors[name] = _sample_motor(rng, model, models.stats.get(name, {}), nk, name)
+    return PlantSample(motors, shifts, int(seed), models.period_s)
+
+
+def describe_line(sample: PlantSample, model_path: str) -> str:
+    """One line for the terminal: how the plants were drawn, and what the file lacked."""
+    theta = []
+    for name, s in sample.motors.items():
+        if s.theta_std is None:
+            theta.append(f"motor {name}: {s.theta_std_note}")
+        else:
+            theta.append(f"motor {name}: θ ± σ (uniform; {s.rejected_unstable} unstable draws redrawn)")  # fmt: skip
+    lo, hi = GAIN_RANGE
+    return (f"{sample.size} plants drawn around {model_path} (seed {sample.seed}): "
+            + "; ".join(theta) + f"; DC gain × uniform[{lo:g}, {hi:g}] per motor; loop delay "
+            "moved by −1, 0 or +1 tick per plant (nk at least 1)")  # fmt: skip
+
+
+def later_command(model: ArxModel, fraction: float) -> ArxModel:
+    """``model`` with every command landing ``fraction`` f ∈ [0, 1] of a tick later: the motor sees
+    the previous command for f of the tick, so to first order in the tick (the motor slow against
+    Ts) the tick's speed answers (1 − f)·u(k) + f·u(k − 1): B(z)·((1 − f) + f z⁻¹), same poles,
+    delay and DC gain, the phase lag of f ticks at low frequency (docs/commission.md)."""
+    f = float(fraction)
+    if not 0.0 <= f <= 1.0:
+        raise InputError(f"a command can land 0 to 1 tick later here, got {fraction}")
+    b = np.asarray(model.b, dtype=float)
+    blended = (1.0 - f) * np.append(b, 0.0) + f * np.insert(b, 0, 0.0)
+    return ArxModel(tuple(model.ar), tuple(blended), model.nk, model.period_s)

@@ -1,5 +1,5 @@
 """``cartctl tune --robust``: each design scored on the nominal model, on plants drawn from the
-model's uncertainty (:mod:`cartctl.tune.uncertainty`, run together by :mod:`cartctl.tune.batch`),
+model's uncertainty (:mod:`cartctl.tune.batch`, which runs them together),
 on the physics preset (reported only) and on the physics preset at each ``--actuation-ms`` (in
 the worst case and the choice).
 
@@ -25,10 +25,9 @@ from cartctl.measures.stepinfo import first_step, settling_half_width, step_rows
 from cartctl.plants.base import Plant
 from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
-from cartctl.tune.batch import ArxBatch, BatchTrace, simulate_batch
+from cartctl.tune.batch import ArxBatch, BatchTrace, PlantSample, later_command, simulate_batch
 from cartctl.tune.engine import Nominal, TuneJob, evaluate_nominal, scoring_plant, simulate
 from cartctl.tune.grid import TuneResult, worst_metrics
-from cartctl.tune.uncertainty import PlantSample, later_command
 
 FloatArray = NDArray[np.float64]
 

@@ -215,8 +215,8 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
     from cartctl.tune import choice
     from cartctl.tune import grid as tuning
     from cartctl.tune import robust as robustness
+    from cartctl.tune.batch import describe_line, sample_plants
     from cartctl.tune.plot import plot_robust
-    from cartctl.tune.uncertainty import describe_line, sample_plants
 
     plants = checks.DEFAULT_PLANTS if args.plants is None else args.plants
     sample = sample_plants(load_models(args.model), plants, 1 if args.seed is None else args.seed,
