@@ -7,7 +7,6 @@ checks, which loading compares with the gains.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import fields
 from typing import Any
 
@@ -83,31 +82,25 @@ def build_controllers(
     out: dict[str, Controller] = {}
     for motor, entry in controller.motors.items():
         try:
-            out[motor] = motor_controller(controller.method, entry, controller.period_s, limit)
+            if controller.method == "pi":
+                est = entry.get("estimator")
+                out[motor] = PiController(
+                    float(entry["kp"]),
+                    float(entry["ki"]),
+                    controller.period_s,
+                    voltage_limit_v=limit,
+                    anti_windup=str(entry.get("anti_windup", "conditional")),
+                    estimator=None if est is None else make_estimator(kalman_from_entry(est)),
+                )
+            else:
+                gains = feedback_gains(entry, controller.period_s)
+                estimator = make_estimator(gains.estimator)
+                out[motor] = StateFeedbackController(
+                    gains, estimator=estimator, voltage_limit_v=limit
+                )
         except (KeyError, TypeError, ValueError) as exc:
             why = f" misses {exc.args[0]}" if isinstance(exc, KeyError) else f": {exc}"
             raise DataFileError(
                 controller.path or "controller file", f"[motors.{motor}]{why}"
             ) from None
     return out
-
-
-def motor_controller(
-    method: str, entry: Mapping[str, Any], period_s: float, voltage_limit_v: float
-) -> Controller:
-    """The runtime controller of one ``[motors.X]`` entry; KeyError, TypeError or ValueError for
-    a missing gain or one that is not a number."""
-    if method == "pi":
-        est = entry.get("estimator")
-        return PiController(
-            float(entry["kp"]),
-            float(entry["ki"]),
-            period_s,
-            voltage_limit_v=voltage_limit_v,
-            anti_windup=str(entry.get("anti_windup", "conditional")),
-            estimator=None if est is None else make_estimator(kalman_from_entry(est)),
-        )
-    gains = feedback_gains(entry, period_s)
-    return StateFeedbackController(
-        gains, estimator=make_estimator(gains.estimator), voltage_limit_v=voltage_limit_v
-    )

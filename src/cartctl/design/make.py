@@ -13,7 +13,7 @@ from typing import Any
 from cartctl.cart import nk_fits_loop_delay
 from cartctl.data.modelfile import ModelFile
 from cartctl.design.analysis import StepAnalysis, in_settling_band, settling_bound, simulate_step
-from cartctl.design.build import motor_controller, pi_entry, poles_entry
+from cartctl.design.build import make_estimator, pi_entry, poles_entry
 from cartctl.design.controllerfile import ControllerFile, common_loop_delay, file_sha256
 from cartctl.design.kalman import design_kalman
 from cartctl.design.loop import loop_analysis
@@ -23,6 +23,8 @@ from cartctl.design.request import DesignRequest, check_loop_delay
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 from cartctl.runtime.base import Controller
+from cartctl.runtime.pi import PiController
+from cartctl.runtime.statefeedback import StateFeedbackController
 
 ANALYSIS_KEYS = (
     "phase_margin_deg", "gain_margin_db", "crossover_hz", "sensitivity_peak", "closed_loop_poles",
@@ -43,9 +45,8 @@ class MotorDesign:
 
 
 def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
-    """Design one motor's controller as ``request`` asks; the runtime controller is built from
-    the file entry, as ``cartctl run`` builds it."""
-    extra = request.extra_delay_ticks
+    """Design one motor's controller as ``request`` asks."""
+    extra, limit = request.extra_delay_ticks, request.voltage_limit_v
     noise: dict[str, Any] = {
         "process_noise_std_v": request.process_noise_std_v,
         "bias_drift_std_v": request.bias_drift_std_v,
@@ -66,6 +67,15 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
             kalman = design_kalman(model, extra_delay_ticks=extra, **noise)
             entry["estimator_poles"] = [[p.real, p.imag] for p in kalman.poles()]
         file_entry = pi_entry(d, request.anti_windup, kalman)
+        estimator = None if kalman is None else make_estimator(kalman)
+        controller: Controller = PiController(
+            d.kp,
+            d.ki,
+            model.period_s,
+            voltage_limit_v=limit,
+            anti_windup=request.anti_windup,
+            estimator=estimator,
+        )
     else:
         poles = request.pole_list()
         placement = design_poles(
@@ -77,6 +87,9 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
             **noise,
         )
         file_entry = poles_entry(placement)
+        controller = StateFeedbackController(
+            placement, estimator=make_estimator(placement.estimator), voltage_limit_v=limit
+        )
         num, den = file_entry["controller_num"], file_entry["controller_den"]
         loop = loop_analysis(num, den, model, extra)
         keys = ("phase_margin_deg", "gain_margin_db", "crossover_hz", "sensitivity_peak")
@@ -86,8 +99,6 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
             "controller_num": num.tolist(),
             "controller_den": den.tolist(),
         }
-    limit = request.voltage_limit_v
-    controller = motor_controller(request.method, file_entry, model.period_s, limit)
     return MotorDesign(controller, entry, file_entry)
 
 
