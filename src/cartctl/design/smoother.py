@@ -87,7 +87,7 @@ def smooth_speed(
         model,
         process_noise_std_v=process_noise_std_v,
         bias_drift_std_v=bias_drift_std_v,
-        counts_per_rev=int(counts_per_rev),
+        counts_per_rev=counts_per_rev,
         extra_delay_ticks=extra_delay_ticks,
     )
     n_rows = u.size
