@@ -1,14 +1,7 @@
-"""The cart's serial link and its emulation (the wire protocol: docs/serial-protocol.md).
+"""The cart's serial link and its emulation (docs/architecture.md maps the modules).
 
-Pure, no I/O: :mod:`~cartctl.link.dialect` (ids, CRC_EXTRA, the :class:`Encoder`, on the generated
-:mod:`~cartctl.link.vendor.microos_mavlink`), :mod:`~cartctl.link.framer` (messages,
-:class:`Framer`, :class:`LineAssembler`), :mod:`~cartctl.link.bridge` (the bridge sketch's channel
-map), :mod:`~cartctl.link.firmware` (which firmware, and the firmwares' logic) and
-:mod:`~cartctl.link.loop_delay`. The host's side of the port: :mod:`~cartctl.link.cart_link`,
-:mod:`~cartctl.link.serial_cart` (the PC-side loop's plant) and :mod:`~cartctl.link.cart_monitor`.
-The cart, emulated: :mod:`~cartctl.link.cart_uart` (its serial port) and
-:mod:`~cartctl.link.virtual_cart`, with its options in :mod:`~cartctl.link.cart_faults`. The
-framing's names are re-exported here.
+The pure framing (dialect, framer, the bridge's channel map) imports nothing of cartctl's; its
+names are re-exported here. The wire protocol is docs/serial-protocol.md.
 """
 
 from cartctl.link.bridge import SEQ_MODULO, CartSample, HostCommand, next_seq, tick_difference

@@ -80,11 +80,7 @@ class CartFaults:
 
     @classmethod
     def parse(cls, text: str) -> CartFaults:
-        """Faults from ``key=value,...``.
-
-        Keys: garbage=0.05, corrupt=0.05, stall=S, pull=S, generation=b, reply_jitter_ms=3,
-        receive=microos, bridge=1, usb=off, actuation_ms=10, reverse_b=1, late=0.3.
-        """
+        """Faults from ``key=value,...``, e.g. ``garbage=0.05,stall=2,usb=off,reverse_b=1``."""
         faults = cls()
         for item in filter(None, (part.strip() for part in text.split(","))):
             key, sep, raw = item.partition("=")

@@ -1,10 +1,7 @@
 """The host's end of the serial line to a microOS cart: port, framing, sign of life, silence.
 
-:class:`CartLink` owns the pyserial port and a :class:`~cartctl.link.framer.Framer`; the serial
-plant and ``cartctl monitor`` share it. Every way the line can fail becomes one clear error: a port
-that cannot be opened (with the ports that exist), no HEARTBEAT within the connect timeout, a cart
-of the other firmware generation, no GPIO for ``silence_timeout_s`` (a pulled cable or a stalled
-cart), and a port that vanishes mid-run.
+:class:`CartLink` turns every way the line can fail into one clear error: a port that cannot be
+opened, no HEARTBEAT, a cart of the other generation, silence, a port that vanishes mid-run.
 """
 
 from __future__ import annotations

@@ -1,15 +1,10 @@
 """The cart's end of the serial line as the virtual cart models it (docs/serial-protocol.md §4).
 
-- the line: 8N1, ten bit times per byte (a 60-byte GPIO takes 1.2 ms at 500 kbaud, 5.2 ms at
-  115200); a pseudo-terminal delivers at once, so :class:`LineReader` and :class:`PacedWriter`
-  pace the two directions;
-- the Mega's USB bridge (ATmega16U2): the cart's bytes wait until its 4.096 ms flush timer
-  overflows or more than 96 wait, then reach the PC at the next 1 ms USB frame; the PC's reach
-  the line at the next USB frame (:class:`UsbBridge`);
-- the receive ring holds one byte less than its size (63, or 255 in the bridge's build) and drops
-  what finds it full; only a drain (microOS's ``receive()``) empties it (:func:`fill_ring`);
-- microOS's parser reads a frame by its length byte: a frame with bytes missing swallows the head
-  of the next, fails its checksum and both are lost (:class:`MicroosParser`).
+The line's byte time (:class:`LineReader`, :class:`PacedWriter`: a pseudo-terminal delivers at
+once), the Mega's USB bridge (:class:`UsbBridge`: the cart's bytes wait for the 16U2's 4.096 ms
+flush or its 96-byte threshold, then the PC's next 1 ms USB frame), the receive ring, which
+drops what finds it full until a drain empties it (:func:`fill_ring`), and microOS's parser,
+which frames by the length byte and does not resynchronise (:class:`MicroosParser`).
 """
 
 from __future__ import annotations

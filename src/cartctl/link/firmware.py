@@ -106,11 +106,8 @@ class CartIO:
 
 
 class HeldChannels:
-    """The GPIO channels a cart firmware holds, as microOS keeps them for ``control()``.
-
-    ``in_*``: those of the host's last GPIO, held until the next; ``out_*``: those the last
-    ``control()`` wrote, which microOS sends; ``tick``: the firmware's tick counter.
-    """
+    """The GPIO channels a firmware holds as microOS keeps them: ``in_*`` from the host's last
+    GPIO, ``out_*`` as the last ``control()`` wrote them (microOS sends those), and a tick."""
 
     def reset_channels(self) -> None:
         """Power-on state of the channels: every one 0, and the tick 0."""

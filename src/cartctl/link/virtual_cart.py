@@ -1,14 +1,11 @@
-"""The virtual cart: the physical simulator behind a pseudo-terminal, speaking like the bridge sketch.
+"""The virtual cart: the physical simulator behind a pseudo-terminal, speaking as the bridge does.
 
 ``cartctl virtual-cart`` runs one in the foreground; ``--plant virtual`` runs one in the process
-behind :class:`VirtualSerialCart`, so the real serial path (pyserial, framing, the bridge contract,
-the faults) runs with no hardware. It keeps the firmware's schedule within each 10 ms tick (drains,
-``io()``, ``control()``, the GPIO out 1.2 ms in; ``docs/serial-protocol.md`` §4, §8), the line's
-byte time, the receive ring and the Mega's USB bridge (:mod:`cartctl.link.cart_uart`), and injects
-:class:`~cartctl.link.cart_faults.CartFaults`. Three threads: ticks, reader, writer. The drains are
-computed on the cart's clock (tick k starts ``k × 10 ms`` after boot), whenever the tick thread
-gets to them, so a busy host delays the cart's replies but not its view of when bytes arrived.
-When the host opens the port at another rate than the cart's, both sides read noise.
+behind :class:`VirtualSerialCart`, so the real serial path runs with no hardware. It keeps the
+firmware's schedule within each tick, its line, ring and USB bridge (docs/serial-protocol.md §4,
+§8; :mod:`cartctl.link.cart_uart`) and injects :class:`~cartctl.link.cart_faults.CartFaults`. The
+drains are computed on the cart's clock (tick k starts ``k × 10 ms`` after boot), so a busy host
+delays the cart's replies but not its view of when bytes arrived.
 """
 
 from __future__ import annotations
