@@ -106,26 +106,17 @@ class ResidualTest:
         return self.cross_outside <= self.cross_allowed
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "auto_outside": self.auto_outside,
-            "auto_lags": int(self.auto_lags.size),
-            "auto_allowed": self.auto_allowed,
-            "auto_max_abs": float(np.max(np.abs(self.auto))),
-            "cross_outside": self.cross_outside,
-            "cross_lags": int(self.cross_lags.size),
-            "cross_allowed": self.cross_allowed,
-            "cross_max_abs": float(np.max(np.abs(self.cross))),
-            "bound_99": self.bound_99,
-            "cross_bound_99": self.cross_bound_99,
-            "cross_variance": self.cross_variance,
-            "n_samples": self.n_samples,
-            "rms_rad_s": self.rms_rad_s,
-            "negligible": self.negligible,
-            "white": self.white,
-            "independent": self.independent,
-            "auto": self.auto.tolist(),
-            "cross": self.cross.tolist(),
-        }
+        out: dict[str, Any] = {}
+        for kind in ("auto", "cross"):
+            r = getattr(self, kind)
+            out[f"{kind}_outside"] = getattr(self, f"{kind}_outside")
+            out[f"{kind}_lags"] = int(r.size)
+            out[f"{kind}_allowed"] = getattr(self, f"{kind}_allowed")
+            out[f"{kind}_max_abs"] = float(np.max(np.abs(r)))
+        scalars = ("bound_99", "cross_bound_99", "cross_variance", "n_samples", "rms_rad_s")
+        flags = ("negligible", "white", "independent")
+        out |= {k: getattr(self, k) for k in (*scalars, *flags)}
+        return out | {"auto": self.auto.tolist(), "cross": self.cross.tolist()}
 
     def summary(self) -> str:
         """One line for the terminal."""
@@ -241,16 +232,13 @@ class BodeBand:
     phase_deg_hi: NDArray[np.float64]
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "method": f"sampling, {DRAWS} draws of θ ~ N(θ̂, Σ), seed {SEED}",
-            "freq_hz": self.freq_hz.tolist(),
-            "mag_db": self.mag_db.tolist(),
-            "mag_db_1sigma": [self.mag_db_lo[0].tolist(), self.mag_db_hi[0].tolist()],
-            "mag_db_2sigma": [self.mag_db_lo[1].tolist(), self.mag_db_hi[1].tolist()],
-            "phase_deg": self.phase_deg.tolist(),
-            "phase_deg_1sigma": [self.phase_deg_lo[0].tolist(), self.phase_deg_hi[0].tolist()],
-            "phase_deg_2sigma": [self.phase_deg_lo[1].tolist(), self.phase_deg_hi[1].tolist()],
-        }
+        out: dict[str, Any] = {"method": f"sampling, {DRAWS} draws of θ ~ N(θ̂, Σ), seed {SEED}"}
+        out["freq_hz"] = self.freq_hz.tolist()
+        for q in ("mag_db", "phase_deg"):
+            lo, hi = getattr(self, f"{q}_lo"), getattr(self, f"{q}_hi")
+            out[q] = getattr(self, q).tolist()
+            out |= {f"{q}_{k + 1}sigma": [lo[k].tolist(), hi[k].tolist()] for k in (0, 1)}
+        return out
 
 
 def bode_band(

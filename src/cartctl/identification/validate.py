@@ -31,6 +31,10 @@ def _where(trace: Trace, unnamed: str = "the trace") -> str:
     return trace.source if trace.source else unnamed
 
 
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(x**2)))
+
+
 @dataclass(frozen=True)
 class StepComparison:
     """Step metrics (speeds in rad/s, from the onset at ``onset_s`` s, starting at 0 rad/s) of the
@@ -47,13 +51,9 @@ class StepComparison:
         return self.measured.steady_state_value - self.simulated.steady_state_value
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "amplitude_v": self.amplitude_v,
-            "onset_s": self.onset_s,
-            "measured": self.measured.to_dict(),
-            "simulated": self.simulated.to_dict(),
-            "steady_state_error": self.steady_state_error_rad_s,
-        }
+        out: dict[str, Any] = {"amplitude_v": self.amplitude_v, "onset_s": self.onset_s}
+        out |= {"measured": self.measured.to_dict(), "simulated": self.simulated.to_dict()}
+        return out | {"steady_state_error": self.steady_state_error_rad_s}
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,14 +74,8 @@ class ValidationResult:
 
     def error_summary(self) -> dict[str, float]:
         """Max, mean and RMS of the absolute error (rad/s)."""
-        e = self.abs_error_rad_s
-        if self.unstable_pole is not None:
-            return {"max": math.nan, "mean": math.nan, "rms": math.nan}
-        return {
-            "max": float(np.max(e)),
-            "mean": float(np.mean(e)),
-            "rms": float(np.sqrt(np.mean(e**2))),
-        }
+        e = np.full(1, math.nan) if self.unstable_pole is not None else self.abs_error_rad_s
+        return {"max": float(np.max(e)), "mean": float(np.mean(e)), "rms": _rms(e)}
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -227,7 +221,7 @@ class LinearityResult:
 
     @property
     def rms_error_rad_s(self) -> float:
-        return float(np.sqrt(np.mean(self.error_rad_s**2)))
+        return _rms(self.error_rad_s)
 
     @property
     def steady_state_sum_rad_s(self) -> float:
@@ -237,7 +231,7 @@ class LinearityResult:
     @property
     def rms_error_percent(self) -> float | None:
         """RMS error over the RMS of the summed step's response (%); None if that is zero."""
-        rms_sum = float(np.sqrt(np.mean(self.speed_sum_rad_s**2)))
+        rms_sum = _rms(self.speed_sum_rad_s)
         return 100.0 * self.rms_error_rad_s / rms_sum if rms_sum > 0.0 else None
 
     @property
