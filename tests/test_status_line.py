@@ -10,7 +10,7 @@ import pytest
 
 from cartctl.cli import main
 from cartctl.sinks.base import TRACE_COLUMNS
-from cartctl.sinks.status import StatusLine
+from cartctl.sinks.summary import StatusLine
 
 
 class Terminal(io.StringIO):

@@ -191,7 +191,7 @@ def _sinks(
     if rerun is not None:
         sinks.append(rerun)
     if not args.fast and sys.stderr.isatty():  # a live line on a terminal, refreshed after ticks
-        from cartctl.sinks.status import StatusLine
+        from cartctl.sinks.summary import StatusLine
 
         sinks.append(StatusLine(sys.stderr, period_s=prepared.period_s))
     return sinks, memory, rerun
