@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING, Any
 
-from cartctl.cli.commands.options import add_map_option, check_outputs
+import cartctl.cli.commands.options as options
 
 if TYPE_CHECKING:
     from cartctl.data.trace import Trace
@@ -21,7 +21,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "columns with --map; with --out the result is written as a cartctl CSV.",
     )
     p.add_argument("file", metavar="FILE", help="trace or QRC log")
-    add_map_option(p)
+    options.add_map_option(p)
     p.add_argument("--out", metavar="FILE.csv", help="write the trace as a cartctl CSV")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=run)
@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.data.read import read_trace
     from cartctl.data.trace import write_trace
 
-    check_outputs(args, files=("out",))
+    options.check_outputs(args, files=("out",))
     trace = read_trace(args.file, args.map)
     info = summary(trace)
     if args.out:

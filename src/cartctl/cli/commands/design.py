@@ -7,8 +7,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import cartctl.cli.commands.options as options
 from cartctl.cart import SUPPLY_V
-from cartctl.cli.commands.options import check_finite, check_outputs, command_line
 from cartctl.design.request import (  # light: the parser's choices and defaults
     DEFAULT_BIAS_DRIFT_STD_V,
     DEFAULT_PROCESS_NOISE_STD_V,
@@ -50,7 +50,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("model", metavar="MODEL.toml", help="model file, e.g. models/ground.toml")
     p.add_argument("--method", choices=("pi", "poles"), required=True)
-    p.add_argument("--motor", choices=("a", "b", "both"), default="both", help="default both")
+    options.add_motor_option(p)
     pi = p.add_argument_group("PI (--method pi)")
     pm = _DEFAULT.phase_margin_deg
     _option(pi, "phase_margin_deg", float, "DEG", f"in (0, {PM_RANGE_DEG[1]:g}] (default {pm:g})")
@@ -106,9 +106,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="write PNGs per motor: design_X.png (Bode, step) and analysis_X.png (S and T, "
         "Nyquist, load disturbance)",
     )
-    p.add_argument(
-        "--json", action="store_true", help="print one JSON object (keys: docs/architecture.md)"
-    )
+    options.add_json_option(p)
     p.set_defaults(func=run)
 
 
@@ -201,7 +199,7 @@ def _format(method: str, motors: dict[str, dict[str, Any]]) -> str:
 
 
 def _disturbance_v(args: argparse.Namespace) -> float:
-    d = check_finite(float(args.disturbance_v), "--disturbance-v")
+    d = options.check_finite(float(args.disturbance_v), "--disturbance-v")
     if not (d != 0.0 and abs(d) <= SUPPLY_V):
         raise InputError(
             f"--disturbance-v must be a non-zero voltage within ±{SUPPLY_V:g} V, got "
@@ -213,7 +211,7 @@ def _disturbance_v(args: argparse.Namespace) -> float:
 def run(args: argparse.Namespace) -> int:
     request = request_from_args(args)  # every option in range before the heavy imports
     disturbance_v = _disturbance_v(args)
-    check_outputs(args, files=("out",), folders=("report",))
+    options.check_outputs(args, files=("out",), folders=("report",))
 
     from cartctl.cli.jsonout import dumps
     from cartctl.data.modelfile import load_models
@@ -240,7 +238,7 @@ def run(args: argparse.Namespace) -> int:
         for warning in analysis.warnings:
             print(f"cartctl design: warning: {warning}", file=sys.stderr)
     if args.out:
-        command = command_line("design")
+        command = options.command_line("design")
         save_controller(
             controller_file(designs, args.model, command=command, period_s=models.period_s),
             args.out,

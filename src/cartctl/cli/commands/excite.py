@@ -44,14 +44,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--duration", type=float, metavar="S", help="length of step, prbs, chirp, multisine (s)"
     )
-    p.add_argument(
-        "--motor",
-        choices=("a", "b", "both"),
-        default="both",
-        help="which motor gets the signal; the other stays at 0 V (default both)",
+    options.add_motor_option(
+        p, "which motor gets the signal; the other stays at 0 V (default both)"
     )
     p.add_argument("--out", required=True, metavar="FILE.csv", help="where to write the trace")
-    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    options.add_json_option(p, "print the result as one JSON object")
     p.set_defaults(func=run)
 
 

@@ -9,7 +9,7 @@ import argparse
 import shlex
 from pathlib import Path
 
-from cartctl.cli.commands.options import check_outputs
+import cartctl.cli.commands.options as options
 from cartctl.data.tomlfile import CONTROLLER_FORMAT, MODEL_FORMAT, READABLE
 from cartctl.errors import DataFileError, InputError
 
@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.out and not args.arduino:
         raise InputError("--out is where --arduino writes its C; for --mat give the file there")
-    check_outputs(args, files=("out", "mat"))
+    options.check_outputs(args, files=("out", "mat"))
     kind, found = file_kind(args.file)
     if args.arduino and kind != "controller":
         raise InputError(

@@ -9,7 +9,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from cartctl.cli.commands.options import add_map_option, check_outputs, command_line
+import cartctl.cli.commands.options as options
 from cartctl.errors import InputError
 
 if TYPE_CHECKING:
@@ -31,8 +31,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "99 % bounds) and, in the report, 1σ/2σ bands on its Bode plot from θ's covariance.",
     )
     p.add_argument("files", nargs="+", metavar="FILE", help="experiment traces (CSV or QRC logs)")
-    add_map_option(p)
-    p.add_argument("--motor", choices=("a", "b", "both"), default="both", help="default both")
+    options.add_map_option(p)
+    options.add_motor_option(p)
     p.add_argument(
         "--prefilter",
         choices=("none", "butter"),
@@ -124,9 +124,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="F",
         help="estimate on the first fraction F of each experiment (e.g. 0.7), validate on the rest",
     )
-    p.add_argument(
-        "--json", action="store_true", help="print one JSON object (keys: docs/architecture.md)"
-    )
+    options.add_json_option(p)
     p.set_defaults(func=run)
 
 
@@ -322,7 +320,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.data.tracemeta import loop_delay_of
     from cartctl.identification.pipeline import identify, model_file
 
-    check_outputs(args, files=("out",), folders=("report",))
+    options.check_outputs(args, files=("out",), folders=("report",))
     recorded = loop_delay_of(args.files)  # the traces' meta files; they must agree
     if args.loop_delay is not None and recorded is not None and recorded != args.loop_delay:
         print(
@@ -338,7 +336,7 @@ def run(args: argparse.Namespace) -> int:
     for note in result.notes:
         print(f"cartctl identify: note: {note}", file=sys.stderr)
     if args.out:
-        source = command_line("identify")
+        source = options.command_line("identify")
         save_models(model_file(result, args.files, request, source=source), args.out)
     if args.report:
         from cartctl.identification.report import write_identify_report

@@ -6,6 +6,8 @@ import argparse
 import math
 from typing import TYPE_CHECKING, Any
 
+import cartctl.cli.commands.options as options
+
 if TYPE_CHECKING:
     from cartctl.data.modelfile import ModelFile
     from cartctl.model import ArxModel, Root
@@ -22,10 +24,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "those zeros.",
     )
     p.add_argument("model", metavar="MODEL.toml", help="model file, e.g. models/ground.toml")
-    p.add_argument(
-        "--json",
-        action="store_true",
-        help="print one JSON object (keys: docs/architecture.md) instead of a table",
+    options.add_json_option(
+        p, "print one JSON object (keys: docs/architecture.md) instead of a table"
     )
     p.set_defaults(func=run)
 

@@ -6,13 +6,8 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
-from cartctl.cli.commands.options import add_map_option
-from cartctl.cli.commands.validate import (
-    add_plot_option,
-    check_plot_path,
-    new_figure,
-    save_png,
-)
+import cartctl.cli.commands.options as options
+from cartctl.cli.commands.validate import check_plot_path, new_figure, save_png
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -32,12 +27,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("small", metavar="STEP_SMALL.csv", help="response to the small step")
     p.add_argument("large", metavar="STEP_LARGE.csv", help="response to the large step")
     p.add_argument("sum", metavar="STEP_SUM.csv", help="response to the step of their sum")
-    p.add_argument(
-        "--motor", choices=("a", "b"), default="a", help="which motor to test (default a)"
+    options.add_motor_option(p, "which motor to test (default a)", "a")
+    options.add_map_option(p)
+    options.add_plot_option(
+        p, "the added responses, the summed step's response, and the error beneath"
     )
-    add_map_option(p)
-    add_plot_option(p, "the added responses, the summed step's response, and the error beneath")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    options.add_json_option(p, "print one JSON object instead of text")
     p.set_defaults(func=run)
 
 

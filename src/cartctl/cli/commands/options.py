@@ -82,6 +82,23 @@ def add_output_options(p: argparse.ArgumentParser, *, name_default: str) -> None
                    help=f"file name stem, without a folder (default {name_default})")  # fmt: skip
 
 
+def add_motor_option(
+    p: argparse.ArgumentParser, help: str = "default both", default: str = "both"
+) -> None:
+    choices = ("a", "b", "both") if default == "both" else ("a", "b")
+    p.add_argument("--motor", choices=choices, default=default, help=help)
+
+
+def add_json_option(
+    p: argparse.ArgumentParser, help: str = "print one JSON object (keys: docs/architecture.md)"
+) -> None:
+    p.add_argument("--json", action="store_true", help=help)
+
+
+def add_plot_option(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--plot", metavar="FILE.png", help=f"write a PNG figure: {what}")
+
+
 def add_rerun_options(p: argparse.ArgumentParser) -> None:
     """``--rerun MODE`` and ``--connect-url``: the Rerun recording, and the viewer it goes to."""
     p.add_argument("--rerun", choices=("auto", "spawn", "connect", "save", "off"), default="auto",
@@ -276,11 +293,14 @@ def check_finite(value: float, option: str) -> float:
     return value
 
 
+def check_noise(noise: float) -> None:
+    if check_finite(noise, "--noise") < 0.0:
+        raise InputError(f"--noise must be a standard deviation >= 0 rad/s, got {noise:g}")
+
+
 def check_plant_options(args: argparse.Namespace) -> None:
     """``--noise`` and ``--connect-timeout`` in range, before any plant is made or connected."""
-    noise = check_finite(args.noise, "--noise")
-    if noise < 0.0:
-        raise InputError(f"--noise must be a standard deviation >= 0 rad/s, got {noise:g}")
+    check_noise(args.noise)
     timeout = check_finite(args.connect_timeout, "--connect-timeout")
     if timeout <= 0.0:
         raise InputError(f"--connect-timeout must be a positive number of seconds, got {timeout:g}")

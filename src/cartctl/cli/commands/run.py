@@ -92,11 +92,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="a lower voltage limit than the controller file's (at most 12 V): the controllers, "
         "their anti-windup and estimators work with it",
     )
-    p.add_argument(
-        "--json",
-        action="store_true",
-        help="print the summary as one JSON object (keys: docs/architecture.md)",
-    )
+    options.add_json_option(p, "print the summary as one JSON object (keys: docs/architecture.md)")
     p.set_defaults(func=run)
 
 

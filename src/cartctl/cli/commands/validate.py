@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from cartctl.cli.commands.options import add_map_option, check_output_file
+import cartctl.cli.commands.options as options
 from cartctl.errors import InputError
 
 if TYPE_CHECKING:
@@ -31,20 +31,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("model", metavar="MODEL.toml", help="model file, e.g. models/ground.toml")
     p.add_argument("data", metavar="FILE.csv", help="recorded experiment (CSV or QRC log)")
-    p.add_argument(
-        "--motor",
-        choices=("a", "b", "both"),
-        default="both",
-        help="which motor to validate (default both; a motor left at 0 V is then skipped)",
+    options.add_motor_option(
+        p, "which motor to validate (default both; a motor left at 0 V is then skipped)"
     )
-    add_map_option(p)
-    add_plot_option(p, "measured and simulated speed with the absolute error beneath")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    options.add_map_option(p)
+    options.add_plot_option(p, "measured and simulated speed with the absolute error beneath")
+    options.add_json_option(p, "print one JSON object instead of a table")
     p.set_defaults(func=run)
-
-
-def add_plot_option(p: argparse.ArgumentParser, what: str) -> None:
-    p.add_argument("--plot", metavar="FILE.png", help=f"write a PNG figure: {what}")
 
 
 def check_plot_path(path: str | None) -> Path | None:
@@ -54,7 +47,7 @@ def check_plot_path(path: str | None) -> Path | None:
     out = Path(path)
     if out.suffix.lower() != ".png":
         raise InputError(f"--plot writes a PNG image; give a file ending in .png, got {path!r}")
-    return check_output_file(out, "--plot")
+    return options.check_output_file(out, "--plot")
 
 
 def new_figure(rows: int, cols: int, *, width_in: float, height_in: float) -> tuple[Figure, Any]:

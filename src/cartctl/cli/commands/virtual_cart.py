@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import TYPE_CHECKING
 
-from cartctl.cli.commands.options import FORMS, check_duration, check_finite, seed
+import cartctl.cli.commands.options as options
 from cartctl.errors import InputError
 
 if TYPE_CHECKING:
@@ -43,7 +43,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--noise", type=float, default=0.0, metavar="RAD_S",
                    help="extra measurement noise, standard deviation in rad/s (default 0)")  # fmt: skip
-    p.add_argument("--seed", type=seed, default=None, help="seed of the noise and the faults")
+    p.add_argument(
+        "--seed", type=options.seed, default=None, help="seed of the noise and the faults"
+    )
     p.add_argument(
         "--faults", type=_faults, default=_NO_FAULTS, metavar="KEY=VALUE,...",
         help="inject faults: garbage=FRACTION (bursts of random bytes before that fraction of "
@@ -63,7 +65,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument(
         "--reference", metavar="SPEC",
-        help=f"with --onboard: the reference of both motors, {FORMS}; default: the float "
+        help=f"with --onboard: the reference of both motors, {options.FORMS}; default: the float "
         "channels 0 (A) and 1 (B) the host sends, held between frames, as the exported C reads them",
     )  # fmt: skip
     p.set_defaults(func=run)
@@ -75,9 +77,8 @@ def run(args: argparse.Namespace) -> int:
     if args.reference and not args.onboard:
         raise InputError("--reference needs --onboard CONTROLLER.toml")
     if args.duration is not None:
-        check_duration(args.duration)
-    if check_finite(args.noise, "--noise") < 0.0:
-        raise InputError(f"--noise must be a standard deviation >= 0 rad/s, got {args.noise:g}")
+        options.check_duration(args.duration)
+    options.check_noise(args.noise)
     if args.reference:
         from cartctl.reference import check_reference
 

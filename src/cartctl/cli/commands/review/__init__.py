@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cartctl.cli.commands.options import add_map_option, check_input_file, check_outputs
+import cartctl.cli.commands.options as options
 from cartctl.cli.commands.review.recording import (
     VULKAN_HINT,
     open_in_viewer,
@@ -43,9 +43,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="FILE.png",
         help=f"render the layout headless and save a picture (needs Vulkan: {VULKAN_HINT})",
     )
-    p.add_argument(
-        "--json", action="store_true", help="CSV traces: print one JSON object instead of a table"
-    )
+    options.add_json_option(p, "CSV traces: print one JSON object instead of a table")
     p.add_argument(
         "--compare",
         metavar="OTHER.csv",
@@ -60,7 +58,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "its recording (RUN.rrd, also beside RUN.csv), else that of the controller its "
         "RUN.meta.toml's command ran",
     )
-    add_map_option(p)
+    options.add_map_option(p)
     p.set_defaults(func=run)
 
 
@@ -74,9 +72,9 @@ def run(args: argparse.Namespace) -> int:
     if args.compare and suffix == ".csv":  # every file given is checked before one is read
         if Path(args.compare).suffix.lower() != ".csv":
             raise InputError(f"--compare takes a second CSV trace, got '{args.compare}'")
-        check_input_file(args.compare, "a CSV trace", "--compare")
+        options.check_input_file(args.compare, "a CSV trace", "--compare")
     if args.model:
-        check_input_file(args.model, "a model file", "--model")
+        options.check_input_file(args.model, "a model file", "--model")
     if suffix == ".csv":
         return _review_csv(args)
     if suffix != ".rrd":
@@ -85,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.json or args.compare or args.map:
         raise InputError("--json, --compare and --map apply to CSV traces, not to .rrd recordings")
-    check_outputs(args, files=("screenshot",))
+    options.check_outputs(args, files=("screenshot",))
     from cartctl.cli.commands.review.smoothed import recording_summary
 
     text, extra = recording_summary(path, args.model)
