@@ -1,18 +1,6 @@
-"""Commissioning's judgements, numbers in and numbers out (the reasoning: docs/commission.md).
-
-- Stage 1, the wiring: one open-loop experiment (:func:`checks_sequence`) gives each motor a
-  pulse (the wheel must turn the measured speed's way: else swapped leads or encoder channels,
-  or crossed motors, each refused with what to swap) and a slow ramp (the breakaway voltage and
-  a rough gain), from which :func:`choose_amplitude` sets the excitation amplitude.
-- Stage 3, the model: ARX na = 2, nb = 3 (nb = 2 for a motor whose last term is within
-  :data:`TAIL_SIGMAS` standard deviations of zero: pole placement would cancel its zero with a
-  gain ``run`` refuses), nk the measured loop delay, estimated on the first :data:`SPLIT` of the
-  excitation; it passes on the rest with a simulation fit ≥ :data:`MIN_FIT_PERCENT`, poles
-  inside :data:`MAX_POLE_RADIUS` and no residual–input cross-correlation beyond
-  :data:`CROSS_CLEAR_FACTOR` × its 99 % bound (whiteness is reported only).
-- Stage 5, the closed-loop step (``cartctl run`` itself): overshoot ≤
-  max(:data:`TARGET_OVERSHOOT_PERCENT`, predicted nominal) + a tolerance for the speed measured
-  on, settling ≤ max(:data:`TARGET_SETTLING_S`, predicted nominal + two ticks).
+"""Commissioning's judgements, numbers in and numbers out: stage 1's wiring checks (a pulse and a
+slow ramp per motor) and the excitation amplitude, stage 3's model and its verdict, stage 5's
+closed-loop step against the tuning's prediction. The rules and their reasons: docs/commission.md.
 """
 
 from __future__ import annotations
@@ -28,11 +16,10 @@ from numpy.typing import NDArray
 
 from cartctl.cart import SUPPLY_V, encoder_quantum_rad_s
 from cartctl.commission import StageError
-from cartctl.data.trace import Trace
+from cartctl.data.trace import MOTORS, Trace
 from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, identify
 from cartctl.tune.grid import worst_metrics
 
-MOTORS = ("a", "b")
 PULSE_V = 4.0  # above a cart's breakaway (about 1–2 V), a third of the supply
 PULSE_S = 0.2
 RAMP_MAX_V = 6.0  # a wheel that has not turned by then is not working
@@ -234,7 +221,7 @@ class MotorVerdict:
     lags outside the 99 % bound of all lags, the largest over the bound, the whiteness test
     (reported only), and why the model fails (empty: it passes)."""
 
-    fit_percent: float
+    validation_fit_percent: float
     pole_radius: float
     cross_outside: int
     cross_lags: int
@@ -243,11 +230,7 @@ class MotorVerdict:
     problems: tuple[str, ...]
 
     def to_dict(self) -> dict[str, Any]:
-        return {"validation_fit_percent": self.fit_percent, "pole_radius": self.pole_radius,
-                "cross_outside": self.cross_outside, "cross_lags": self.cross_lags,
-                "cross_ratio": self.cross_ratio,
-                "white": self.white, "passed": not self.problems,
-                "problems": list(self.problems)}  # fmt: skip
+        return {**asdict(self), "passed": not self.problems, "problems": list(self.problems)}
 
 
 def judge(result: IdentifyResult) -> dict[str, MotorVerdict]:

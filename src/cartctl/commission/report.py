@@ -105,7 +105,7 @@ def model_body(result: Any, verdicts: Mapping[str, Any], model_name: str) -> str
         v = verdicts[m]
         model = r.chosen.model
         rows.append([m, ", ".join(f"{x:.4g}" for x in model.theta), str(model.nk),
-                     fmt(model.dc_gain(), 3), fmt(v.fit_percent, 1), fmt(v.pole_radius, 3),
+                     fmt(model.dc_gain(), 3), fmt(v.validation_fit_percent, 1), fmt(v.pole_radius, 3),
                      f"{v.cross_outside}/{v.cross_lags} ({v.cross_ratio:.1f}×)", "yes" if v.white else "no",
                      "pass" if not v.problems else "FAIL: " + "; ".join(v.problems)])  # fmt: skip
     return (markdown_table(["motor", "θ = [a1, a2, b0 …]", "nk", "DC gain (rad/s/V)",

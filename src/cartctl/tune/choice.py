@@ -71,12 +71,9 @@ class Limits:
 
     def met(self, figures: Sequence[tuple[float | None, float | None]]) -> bool:
         """Every (overshoot %, settling s) within the bounds (None: not met where bounded)."""
-        for overshoot, settling in figures:
-            bounds = ((overshoot, self.overshoot_percent), (settling, self.settling_time_s))
-            for value, bound in bounds:
-                if bound is not None and (value is None or not value <= bound):
-                    return False
-        return True
+        bounds = (self.overshoot_percent, self.settling_time_s)
+        return all(bound is None or (value is not None and value <= bound)
+                   for figure in figures for value, bound in zip(figure, bounds, strict=True))  # fmt: skip
 
 
 def rule_text(rule: str, limits: Limits, where: str) -> str:
@@ -148,10 +145,9 @@ def sort_robust(rows: Sequence[RobustRow]) -> list[RobustRow]:
     def key(r: RobustRow) -> tuple[int, float, float, int]:
         if r.score is None:
             return (3, 0.0, 0.0, r.index)
-        settling = r.score.value("settling_time_s", "nominal")
-        worst = r.score.value("overshoot_percent", "worst")
-        settling = settling if not math.isnan(settling) else math.inf
-        worst = worst if not math.isnan(worst) else math.inf
+        settling, worst = (math.inf if math.isnan(v) else v
+                           for v in (r.score.value("settling_time_s", "nominal"),
+                                     r.score.value("overshoot_percent", "worst")))  # fmt: skip
         if r.pareto:
             return (0, settling, worst, r.index)
         return (1, worst, settling, r.index)

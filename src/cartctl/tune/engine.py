@@ -1,10 +1,7 @@
-"""Running a tuning grid: each setting designed, then run in the loop of ``cartctl run --fast``.
-
-A setting is designed per motor by the design command's own path
-(:func:`cartctl.design.make.design_motor`), run in memory and summarised by the run summary's
-``trace_metrics``; settings are spread over worker processes in chunks, and a refused design is
-a result, not an error. Every setting is scored on the loop it is designed for
-(:func:`scoring_plant`). The grid itself and the result rows are in :mod:`cartctl.tune.grid`."""
+"""Running a tuning grid: each setting designed per motor by the design command's own path
+(:func:`~cartctl.design.make.design_motor`), run in memory in the loop of ``cartctl run --fast`` on
+the loop it is designed for (:func:`scoring_plant`) and summarised by ``trace_metrics``; settings
+are spread over worker processes in chunks, and a refused design is a result, not an error."""
 
 from __future__ import annotations
 
@@ -69,8 +66,7 @@ class DelayedPlant:
         return self.plant.reset()
 
     def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
-        """Queue this tick's command, send the one ``ticks`` ticks old."""
-        self._queue.append((voltage_a_v, voltage_b_v))
+        self._queue.append((voltage_a_v, voltage_b_v))  # sent ``ticks`` ticks from now
         return self.plant.step(*self._queue.popleft())
 
     def close(self) -> None:
@@ -141,14 +137,12 @@ def evaluate_nominal(
     return Nominal(result, controllers, refs, limit_v, plant.period_s)
 
 
-def evaluate_chunk(job: TuneJob) -> list[TuneResult]:
-    """The worker function of the process pool."""
+def evaluate_chunk(job: TuneJob) -> list[TuneResult]:  # the process pool's worker function
     models = load_models(job.model)
     return [evaluate_nominal(job, models, i, s).result for i, s in job.items]
 
 
-def one_blas_thread() -> None:
-    """Worker initializer: one BLAS thread per process (else forked workers compete for cores)."""
+def one_blas_thread() -> None:  # else forked workers compete for cores
     threadpool_limits(limits=1, user_api="blas")
 
 

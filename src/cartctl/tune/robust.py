@@ -1,13 +1,11 @@
-"""``cartctl tune --robust``: each design scored on the nominal model, on plants drawn from the
-model's uncertainty (:mod:`cartctl.tune.batch`, which runs them together),
-on the physics preset (reported only) and on the physics preset at each ``--actuation-ms`` (in
-the worst case and the choice).
+"""``cartctl tune --robust``: each design scored on the nominal model, on plants drawn from its
+uncertainty (:mod:`cartctl.tune.batch`), on the physics preset (reported only) and on the physics
+preset at each ``--actuation-ms`` (in the worst case and the choice).
 
-Per plant each metric is the worse of motors a and b. The worst case is the maximum over the
-model, the sampled plants and the actuation runs (infinite, JSON ``null``, where one never
-settles, runs away or fails); ``worst_sampled`` leaves the actuation runs out; the spread is the
-5th, 50th and 95th percentile over the sampled plants (``inverted_cdf``: each a plant's value).
-"""
+Per plant each metric is the worse of motors a and b. ``worst`` is the maximum over the model, the
+sampled plants and the actuation runs (infinite, JSON ``null``, where one never settles, runs away
+or fails), ``worst_sampled`` without the actuation runs; the spread is the 5th, 50th and 95th
+percentile over the sampled plants (``inverted_cdf``: each a plant's value)."""
 
 from __future__ import annotations
 
@@ -191,10 +189,8 @@ class RobustRow:
 
     def to_dict(self) -> dict[str, Any]:
         """The plain row with ``robust``: the score's JSON and ``pareto`` (None: infeasible)."""
-        row = self.result.to_dict()
-        row["robust"] = (None if self.score is None
-                         else {**self.score.to_dict(), "pareto": self.pareto})  # fmt: skip
-        return row
+        score = None if self.score is None else {**self.score.to_dict(), "pareto": self.pareto}
+        return {**self.result.to_dict(), "robust": score}
 
 
 def physics_spec(actuation_ms: float | None = None) -> str:
@@ -268,7 +264,6 @@ def evaluate_robust(job: RobustJob, models: ModelFile, index: int,
     return RobustRow(nominal.result, score_plants(per_motor, diverged, figures, physics, actuation))
 
 
-def evaluate_robust_chunk(job: RobustJob) -> list[RobustRow]:
-    """The worker function of the process pool."""
+def evaluate_robust_chunk(job: RobustJob) -> list[RobustRow]:  # the process pool's worker
     models = load_models(job.tune.model)
     return [evaluate_robust(job, models, i, s) for i, s in job.items]
