@@ -62,20 +62,13 @@ class ArxFit:
     def to_dict(self) -> dict[str, Any]:
         """``identify --json`` entry of one motor (plus na, nb, method, residual_rms, n_samples)."""
         m = self.model
-        return {
-            "theta": m.theta.tolist(),
-            "nk": m.nk,
-            "na": m.na,
-            "nb": m.nb,
-            "num": m.num().tolist(),
-            "den": m.den().tolist(),
-            "theta_std": self.theta_std.tolist(),
-            "fit_simulation_percent": finite_or_none(self.fit_simulation_percent),
-            "fit_prediction_percent": finite_or_none(self.fit_prediction_percent),
-            "method": self.method,
-            "residual_rms": finite_or_none(self.residual_rms),
-            "n_samples": self.n_samples,
-        }
+        out: dict[str, Any] = {"theta": m.theta.tolist(), "nk": m.nk, "na": m.na, "nb": m.nb}
+        out |= {"num": m.num().tolist(), "den": m.den().tolist()}
+        out |= {"theta_std": self.theta_std.tolist()}
+        fits = ("fit_simulation_percent", "fit_prediction_percent")
+        out |= {k: finite_or_none(getattr(self, k)) for k in fits}
+        out |= {"method": self.method, "residual_rms": finite_or_none(self.residual_rms)}
+        return out | {"n_samples": self.n_samples}
 
 
 def as_segments(segments: Sequence[Segment]) -> list[Checked]:

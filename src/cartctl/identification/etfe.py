@@ -1,11 +1,8 @@
-"""Periodic inputs and the empirical transfer function estimate (ETFE).
-
-The report repeats its ±10 V square wave "to average out the response": averaging n whole cycles
-after the first (the transient from rest) divides the variance of white output noise by n, and the
-ETFE (output over input spectrum, its figure 4) is exact at the harmonics of whole periods on
-noise-free data. :func:`model_response` evaluates a model at the same frequencies. Responses are
-in rad/s per V, frequencies in Hz.
-"""
+"""Periodic inputs and the empirical transfer function estimate (ETFE). The report repeats its
+±10 V square wave "to average out the response": averaging n whole cycles after the first (the
+transient from rest) divides the variance of white output noise by n, and the ETFE (output over
+input spectrum, its figure 4) is exact at the harmonics of whole periods on noise-free data.
+Responses are in rad/s per V, frequencies in Hz."""
 
 from __future__ import annotations
 

@@ -1,10 +1,6 @@
-"""The identification figures' common style and saving, and the analysis figures: the ETFE with
-the models' Bode plots (the report's figure 4), the pole-zero map (figures 5, 12) and the
-residual tests.
-
-matplotlib is imported inside the functions (the package import stays light) and figures are
-drawn on their own canvases, without pyplot's global state.
-"""
+"""The identification figures' style and saving, the ETFE with the models' Bode plots (the
+report's figure 4), the pole-zero map (figures 5, 12) and the residual tests. matplotlib is
+imported inside the functions, and figures have their own canvases (no pyplot state)."""
 
 from __future__ import annotations
 

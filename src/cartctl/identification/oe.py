@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -63,14 +63,10 @@ class OeFit(ArxFit):
     notes: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        return super().to_dict() | {
-            "pole_bound": self.pole_bound,
-            "pole_bound_active": self.pole_bound_active,
-            "start_kept": self.start_kept,
-            "start_projected": self.start_projected,
-            "start_fit_simulation_percent": finite_or_none(self.start_fit_simulation_percent),
-            "notes": list(self.notes),
-        }
+        own = [f.name for f in fields(self) if f.name not in ArxFit.__dataclass_fields__]
+        out = super().to_dict() | {name: getattr(self, name) for name in own}
+        start_fit = finite_or_none(self.start_fit_simulation_percent)
+        return out | {"start_fit_simulation_percent": start_fit, "notes": list(self.notes)}
 
 
 def _shift(x: NDArray[np.float64], lag: int) -> NDArray[np.float64]:

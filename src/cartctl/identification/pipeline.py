@@ -1,10 +1,7 @@
-"""The identification pipeline behind ``cartctl identify``: traces in, one result per motor out.
-
-Per motor: the experiments that drive it, optionally averaged over whole cycles and prefiltered
-(then also fitted without the filter, to show its effect), the delay (given, or estimated jointly
-for both motors), ARX, and optionally its output-error refinement. Simulation fits are always on
-the raw, unaveraged data, so every variant compares on equal terms.
-"""
+"""``cartctl identify``'s pipeline, traces in and one result per motor out: the experiments that
+drive the motor, optionally averaged over whole cycles and prefiltered (then also fitted without
+the filter), the delay (given, or estimated jointly for both motors), ARX and optionally its
+output-error refinement. Simulation fits are on the raw data, so every variant compares alike."""
 
 from __future__ import annotations
 
@@ -380,13 +377,8 @@ def model_file(
         prefilter=request.prefilter.describe() if request.prefilter else "none",
         notes="; ".join(notes),
     )
-    stats = {}
-    for m, r in result.motors.items():
-        d = r.chosen.to_dict()
-        stats[m] = {
-            k: d[k]
-            for k in ("theta_std", "fit_simulation_percent", "fit_prediction_percent")
-            if d[k] is not None
-        }
+    keys = ("theta_std", "fit_simulation_percent", "fit_prediction_percent")
+    dicts = {m: r.chosen.to_dict() for m, r in result.motors.items()}
+    stats = {m: {k: d[k] for k in keys if d[k] is not None} for m, d in dicts.items()}
     return ModelFile({m: r.chosen.model for m, r in result.motors.items()}, provenance, stats,
                      loop_delay_ticks=result.loop_delay_ticks)  # fmt: skip

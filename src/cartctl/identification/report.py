@@ -1,9 +1,6 @@
-"""``cartctl identify --report DIR``: figures and ``summary.md`` from the results ``--json``
-prints. Here the experiment's input and output (the report's figures 3, 11), measured against
-simulated speed (figures 6, 7), the markdown writer and the report itself: per motor also the ETFE
-against the models' Bode plots and the pole-zero map (:mod:`~cartctl.identification.figures`),
-the residual tests, tables of θ ± σ(θ) and the fits, and the order table.
-"""
+"""``cartctl identify --report DIR``: the figures (input and output, measured against simulated
+speed; the analysis figures are in :mod:`~cartctl.identification.figures`) and ``summary.md``
+with the residual tests, θ ± σ(θ), the fits and the order table."""
 
 from __future__ import annotations
 

@@ -1,10 +1,8 @@
-"""Models and motors against measured traces (report §3.3).
-
-``cartctl validate`` (figures 6, 7): the model simulated from rest on a trace's voltage against
-the measured speed: the fit, the absolute error and, for a single step, both step responses'
-metrics. ``cartctl linearity`` (equation 11, figure 8): the superposition test, whether the
-responses to two steps add up to the response to their sum (Coulomb friction makes the sum run
-above: each small step loses the friction once, the summed step only once).
+"""Models and motors against measured traces (report §3.3). ``cartctl validate`` (figures 6, 7):
+the model simulated from rest on a trace's voltage against the measured speed (fit, absolute
+error, and both step responses' metrics for a single step). ``cartctl linearity`` (equation 11,
+figure 8): whether the responses to two steps add up to the response to their sum (Coulomb
+friction makes the sum run above: each small step loses the friction once, the sum only once).
 """
 
 from __future__ import annotations
