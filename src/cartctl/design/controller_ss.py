@@ -257,14 +257,11 @@ def feedback_tf_coeffs(design: FeedbackGains) -> tuple[NDArray[np.float64], NDAr
 
 def _coeffs(values: Iterable[Any]) -> str:
     """Coefficients for a message; an entry that is not a number is shown as it is."""
-    return (
-        "["
-        + ", ".join(
-            f"{v:.10g}" if isinstance(v, int | float) and not isinstance(v, bool) else repr(v)
-            for v in values
-        )
-        + "]"
-    )
+    shown = [
+        f"{v:.10g}" if isinstance(v, int | float) and not isinstance(v, bool) else repr(v)
+        for v in values
+    ]
+    return "[" + ", ".join(shown) + "]"
 
 
 def _disagrees(stored: Any, expected: NDArray[np.float64]) -> bool:

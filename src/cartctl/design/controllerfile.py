@@ -154,9 +154,7 @@ def absurd_gain(controller: ControllerFile) -> str | None:
     q = encoder_quantum_rad_s(controller.period_s)
     for motor, entry in controller.motors.items():
         for key, per_error in (("kp", q), ("Kr", q), ("K", q), ("ki", q * controller.period_s)):
-            values = entry.get(key)
-            if values is None:
-                continue
+            values = entry.get(key, [])
             for value in values if isinstance(values, list) else [values]:
                 if not isinstance(value, int | float) or isinstance(value, bool):
                     continue  # build_controllers names a gain that is not a number
