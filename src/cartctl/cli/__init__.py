@@ -21,7 +21,7 @@ if _started_as_cartctl():  # before any other import: a stop signal from here on
 
 import argparse  # noqa: E402 - the stop handlers come first
 import warnings  # noqa: E402
-from collections.abc import Callable, Sequence  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
 from typing import NoReturn  # noqa: E402
 
 from cartctl import __version__  # noqa: E402
@@ -69,15 +69,6 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
-def _warning_printer(command: str) -> Callable[..., None]:
-    """A ``warnings.showwarning`` that prints one line, ``cartctl COMMAND: warning: …``."""
-
-    def show(message, category, filename, lineno, file=None, line=None) -> None:
-        print(f"cartctl {command}: warning: {message}", file=sys.stderr)
-
-    return show
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; the exit code (0 ok, 2 user mistake, 1 runtime failure, 130, 143 or
     129 after SIGINT, SIGTERM or SIGHUP)."""
@@ -119,7 +110,9 @@ def _main(argv: Sequence[str] | None) -> int:
 
     quiet_sdk_logs()  # before any command loads the Rerun SDK: its failures are ours to say
     previous = warnings.showwarning
-    warnings.showwarning = _warning_printer(args.command)
+    warnings.showwarning = lambda message, *_, **__: print(  # one line: cartctl CMD: warning: …
+        f"cartctl {args.command}: warning: {message}", file=sys.stderr
+    )
     try:
         return int(args.func(args))
     except CartctlError as exc:

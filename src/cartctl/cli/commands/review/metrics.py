@@ -15,7 +15,7 @@ import numpy as np
 from cartctl.data.columns import MONITOR_LABELS_HINT
 from cartctl.data.read import read_trace
 from cartctl.errors import DataFileError
-from cartctl.measures.numfmt import render_table
+from cartctl.measures.numfmt import format_fixed, render_table
 from cartctl.sinks.summary import format_summary, timing_metrics, trace_metrics
 
 TIMING_COLUMNS = ("period_error_us", "compute_us")
@@ -153,22 +153,18 @@ def compare(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
 
 def format_compare(a: Mapping[str, Any], b: Mapping[str, Any]) -> str:
     """One table: per metric (per motor) A, B, B − A and (B − A) / |A|, units in the labels."""
-    rows: list[tuple[str, str, str, str, str]] = []
+    rows: list[tuple[str, ...]] = []
 
     def add(label: str, unit: str, x: Any, y: Any, scale: float, decimals: int, rel: bool) -> None:
         xa, yb = _number(x), _number(y)
         diff = None if xa is None or yb is None else (yb - xa) * scale
+        cells = [_fixed(None if v is None else v * scale, decimals) for v in (xa, yb)]
         percent = _percent(x, y) if rel else None
-        name = f"{label} ({unit})" if unit else label
-        rows.append(
-            (
-                name,
-                _fixed(None if xa is None else xa * scale, decimals),
-                _fixed(None if yb is None else yb * scale, decimals),
-                _fixed(diff, decimals, signed=True),
-                "—" if percent is None else f"{percent:+.1f} %",
-            )
-        )
+        cells += [
+            _fixed(diff, decimals, signed=True),
+            "—" if percent is None else f"{percent:+.1f} %",
+        ]
+        rows.append((f"{label} ({unit})" if unit else label, *cells))
 
     timed = _real_time(a) or _real_time(b)
     for path, label, unit, scale, decimals, rel in _RUN_ROWS:
@@ -230,9 +226,6 @@ def _percent(a: Any, b: Any) -> float | None:
 
 
 def _fixed(value: float | None, decimals: int, *, signed: bool = False) -> str:
-    """Fixed decimals per row (one precision for A, B and B − A); a −0 prints as 0."""
-    if value is None:
-        return "—"
-    if round(value, decimals) == 0.0:
-        value = 0.0
-    return f"{value:+.{decimals}f}" if signed and value != 0.0 else f"{value:.{decimals}f}"
+    """Fixed decimals per row (one precision for A, B and B − A); B − A signed."""
+    text = format_fixed(value, decimals)
+    return "+" + text if signed and value is not None and round(value, decimals) > 0.0 else text

@@ -14,7 +14,7 @@ import tempfile
 import threading
 import time
 import uuid
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import quote
@@ -24,6 +24,7 @@ from cartctl.sinks.rerun_problems import viewer_env
 
 if TYPE_CHECKING:  # rerun takes ~0.6 s to import: only the review itself loads it
     import numpy as np
+    import pyarrow as pa
     import rerun as rr
     import rerun.blueprint as rrb
     from numpy.typing import NDArray
@@ -69,10 +70,7 @@ def stream(
 
     ends: dict[str, int] = {}
     chunks = list(reader.stream(store=entry))
-    for chunk in chunks:
-        if chunk.is_static or chunk.is_empty:
-            continue
-        batch = chunk.to_record_batch()
+    for chunk, batch in batches(chunks):
         for name in chunk.timeline_names:
             last = pc.max(batch.column(name).cast(pa.int64())).as_py()
             if last is not None:
@@ -89,6 +87,13 @@ def stream(
 SCALARS = "Scalars:scalars"  # the column of a scalar series' values in a chunk
 
 
+def batches(chunks: Iterable[Chunk]) -> Iterator[tuple[Chunk, pa.RecordBatch]]:
+    """Each chunk that holds rows on a timeline, with its rows as a record batch."""
+    for chunk in chunks:
+        if not (chunk.is_static or chunk.is_empty):
+            yield chunk, chunk.to_record_batch()
+
+
 def scalar_stats(chunks: Iterable[Chunk]) -> tuple[dict[str, tuple[float, float]], set[str]]:
     """Per entity path of scalar series: the lowest and highest finite value, and the set of
     paths whose values are all whole numbers."""
@@ -97,10 +102,7 @@ def scalar_stats(chunks: Iterable[Chunk]) -> tuple[dict[str, tuple[float, float]
 
     extremes: dict[str, tuple[float, float]] = {}
     fractional: set[str] = set()
-    for chunk in chunks:
-        if chunk.is_static or chunk.is_empty:
-            continue
-        batch = chunk.to_record_batch()
+    for chunk, batch in batches(chunks):
         if SCALARS not in batch.schema.names:
             continue
         values = pc.list_flatten(batch.column(SCALARS)).to_numpy(zero_copy_only=False)

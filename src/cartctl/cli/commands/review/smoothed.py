@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from cartctl.cart import PERIOD_S
 from cartctl.cli.commands.review.metrics import TIMING_COLUMNS
-from cartctl.cli.commands.review.recording import SCALARS, Series, read_recording
+from cartctl.cli.commands.review.recording import SCALARS, Series, batches, read_recording
 from cartctl.data.modelfile import ModelFile, load_models
 from cartctl.data.read import read_trace
 from cartctl.design.smoother import METHOD, smooth_speed
@@ -139,20 +139,14 @@ def recording_columns(chunks: Any) -> dict[str, NDArray[np.float64]]:
 
     column_of = {path: column for column, path in ENTITY_PATHS.items()}
     parts: dict[str, list[tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]]] = {}
-    for chunk in chunks:
+    for chunk, batch in batches(chunks):
         column = column_of.get(chunk.entity_path.lstrip("/"))
-        if column is None or chunk.is_static or chunk.is_empty:
-            continue
-        batch = chunk.to_record_batch()
-        names = batch.schema.names
-        if not {"tick", "time", SCALARS} <= set(names):
+        if column is None or not {"tick", "time", SCALARS} <= set(batch.schema.names):
             continue
         tick = batch.column("tick").cast(pa.int64()).to_numpy(zero_copy_only=False)
         time_ns = batch.column("time").cast(pa.int64()).to_numpy(zero_copy_only=False)
-        values = pc.list_element(batch.column(SCALARS), 0)
-        parts.setdefault(column, []).append(
-            (tick, time_ns, values.to_numpy(zero_copy_only=False).astype(float))
-        )
+        values = pc.list_element(batch.column(SCALARS), 0).to_numpy(zero_copy_only=False)
+        parts.setdefault(column, []).append((tick, time_ns, values.astype(float)))
     if "speed_a" not in parts:
         return {}
     ticks = np.unique(np.concatenate([t for chunks_ in parts.values() for t, _, _ in chunks_]))
