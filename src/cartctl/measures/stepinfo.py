@@ -1,22 +1,20 @@
-"""Step-response metrics of sampled data (any units; times in s), shared by ``validate``,
-``design`` and the run summary.
+"""Step-response metrics of sampled data (any units; times in s from the onset), shared by
+``validate``, ``design``, ``tune`` and the run summary.
 
-``target`` is the reference when given, else the final value; levels are fractions of the way
-from ``initial`` to ``target``, so a step down is measured like a step up.
+The target is the reference when given, else the final value; levels are fractions of the way
+from ``initial`` to the target, so a step down is measured like a step up.
 
 - final value: the mean of the last 5 % of the samples (at least :data:`MIN_FINAL_SAMPLES`);
 - rise time: from the first reach of 10 % to the first reach of 90 %;
 - overshoot: beyond the target, in % of the step size (0 if never);
-- settling time: from the onset until the response stays within ±2 % of the step around the
-  target, or within ``settling_floor`` (response units) where that is wider: for a measured wheel
-  speed, one encoder count per tick (:func:`~cartctl.cart.encoder_quantum_rad_s`);
-- peak: the sample farthest in the step's direction, and its time from the onset.
+- settling time: until the response stays within ±2 % of the step around the target, or within
+  ``settling_floor`` where wider (a measured wheel speed: one encoder count per tick,
+  :func:`~cartctl.cart.encoder_quantum_rad_s`); a sample on the band edge is inside;
+- peak: the sample farthest in the step's direction, and its time.
 
-With a reference the metrics judge tracking of it, as ``control.step_info(..., final_output=r)``
-does. Unlike python-control 0.10, times count from the onset, not t = 0; the final value is a
-mean, not the last sample; a sample on the band edge is inside; the response need not start at 0;
-and level crossings are interpolated between samples (``interpolate=False`` gives the sample
-times python-control reports)."""
+As ``control.step_info(..., final_output=r)``, but times count from the onset, the final value is a
+mean, the response need not start at 0, and level crossings are interpolated between samples
+(``interpolate=False`` gives the sample times python-control 0.10 reports)."""
 
 from __future__ import annotations
 
@@ -38,10 +36,8 @@ _ROUNDING = 1e-12  # an excursion past the target below this fraction of the ste
 def settling_half_width(
     step_size: float, floor: float = 0.0, fraction: float = SETTLING_FRACTION
 ) -> float:
-    """Half-width of the settling band: max(fraction · |step_size|, floor), in response units.
-
-    ``floor`` (≥ 0) is the narrowest band worth judging (one encoder count per tick for a measured
-    wheel speed); ``fraction`` is in (0, 1)."""
+    """Half-width of the settling band: max(fraction · |step_size|, floor ≥ 0), in response units,
+    for a ``fraction`` in (0, 1)."""
     if not 0.0 < fraction < 1.0:
         raise InputError(f"settling band must be a fraction in (0, 1), got {fraction}")
     if not (math.isfinite(floor) and floor >= 0.0):
@@ -122,7 +118,6 @@ def first_step(reference: NDArray[np.float64], *, initial: float = 0.0) -> tuple
 def _crossing(
     time_s: NDArray[np.float64], z: NDArray[np.float64], i: int, level: float, *, interpolate: bool
 ) -> float:
-    """Time at which z reaches ``level`` between samples i − 1 and i."""
     if i == 0 or not interpolate:
         return float(time_s[i])
     frac = (level - z[i - 1]) / (z[i] - z[i - 1])
@@ -170,19 +165,13 @@ def step_info(
     settling_floor: float = 0.0,
     interpolate: bool = True,
 ) -> StepInfo:
-    """Measure a step response (definitions in the module docstring).
-
-    ``time_s`` (s) strictly increasing and ``response`` (e.g. rad/s), shape (n,), n ≥ 2. Without a
-    ``reference`` the final value is the target; ``initial`` is where the step starts; samples
-    before ``onset_s`` (default ``time_s[0]``) are ignored. The band's half-width is
-    ``settling_band`` of the step (0.02: 2 %), never narrower than ``settling_floor`` (response
-    units); a step no larger than its band has no settling time. ``interpolate=False`` takes the
-    first sample past each level instead of interpolating.
-
-    Raises InputError for unequal, short or non-finite arrays, time not increasing, an onset outside
-    the record, a step of size zero or a band not in (0, 1)."""
-    t = np.asarray(time_s, dtype=float)
-    y = np.asarray(response, dtype=float)
+    """Measure a step response (definitions in the module docstring) of ``time_s`` strictly
+    increasing and ``response``, shape (n,), n ≥ 2, ignoring samples before ``onset_s`` (default
+    ``time_s[0]``). The band's half-width is ``settling_band`` of the step, at least
+    ``settling_floor``; a step no larger than its band has no settling time. InputError for
+    unequal, short or non-finite arrays, time not increasing, an onset outside the record, a step
+    of size zero or a band not in (0, 1)."""
+    t, y = np.asarray(time_s, dtype=float), np.asarray(response, dtype=float)
     if t.ndim != 1 or y.ndim != 1 or t.shape != y.shape:
         raise InputError(
             f"time and response must be 1-D arrays of equal length, got shapes {t.shape} and "

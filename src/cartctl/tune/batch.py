@@ -70,24 +70,13 @@ class ArxBatch:
         period_s: float = PERIOD_S,
     ) -> ArxBatch:
         """From ``ar`` (N, na), ``b`` (N, nb) and input delays ``nk`` (N,) ≥ 1."""
-        ar_arr = np.asarray(ar, dtype=float)
-        b_arr = np.asarray(b, dtype=float)
-        nk_arr = np.asarray(nk, dtype=int)
-        n = b_arr.shape[0]
-        if ar_arr.ndim != 2 or b_arr.ndim != 2 or nk_arr.shape != (n,) or ar_arr.shape[0] != n:
-            raise InputError(
-                f"plant arrays must be ar (N, na), b (N, nb), nk (N,); got {ar_arr.shape}, "
-                f"{b_arr.shape}, {nk_arr.shape}"
-            )
+        b_arr, nk_arr = np.asarray(b, dtype=float), np.asarray(nk, dtype=int)
+        (n, nb), nk_max = b_arr.shape, int(nk_arr.max(initial=1))
         if n and int(nk_arr.min()) < 1:
             raise InputError(f"a plant needs an input delay nk >= 1, got {int(nk_arr.min())}")
-        nb = b_arr.shape[1]
-        width = (int(nk_arr.max()) - 1 + nb) if n else nb
-        lags = np.zeros((n, width))
-        rows = np.arange(n)
-        for i in range(nb):
-            lags[rows, nk_arr - 1 + i] = b_arr[:, i]
-        return cls(ar_arr, lags, float(voltage_limit_v), float(period_s))
+        lags = np.zeros((n, nk_max - 1 + nb))
+        np.put_along_axis(lags, nk_arr[:, None] - 1 + np.arange(nb), b_arr, axis=1)
+        return cls(np.asarray(ar, dtype=float), lags, float(voltage_limit_v), float(period_s))
 
     @classmethod
     def from_models(
@@ -127,51 +116,35 @@ def _filter_terms(est: object) -> FilterTerms:
     )
 
 
-class _PiBatch:
-    """:class:`PiController`'s :func:`~cartctl.runtime.pi.pi_law` over N rows."""
+class _Batch:
+    """A controller's runtime law (:func:`~cartctl.runtime.pi.pi_law` or
+    :func:`~cartctl.runtime.statefeedback.feedback_law`) over N rows, inside its estimator."""
 
-    def __init__(self, ctrl: PiController, n: int) -> None:
-        self.gains = (ctrl.kp, ctrl.ki * ctrl.period_s, ctrl.tracking_gain_per_tick,
-                      ANTI_WINDUP.index(ctrl.anti_windup), ctrl.voltage_limit_v)  # fmt: skip
+    def __init__(self, ctrl: Controller, n: int) -> None:
+        if not isinstance(ctrl, PiController | StateFeedbackController):
+            raise InputError(f"the batch loop does not know the controller {type(ctrl).__name__}")
+        self.ctrl = ctrl
+        self.gains = () if not isinstance(ctrl, PiController) else (
+            ctrl.kp, ctrl.ki * ctrl.period_s, ctrl.tracking_gain_per_tick,
+            ANTI_WINDUP.index(ctrl.anti_windup), ctrl.voltage_limit_v)  # fmt: skip
         self.integral: FloatArray = np.zeros(n)
         self.est = None if ctrl.estimator is None else _filter_terms(ctrl.estimator)
         self.x: list[FloatArray] = [np.zeros(n) for _ in (self.est.L if self.est else ())]
 
     def step(self, r: float, y: FloatArray) -> FloatArray:
+        c = self.ctrl
         if self.est is not None:
             self.x = filter_correct(self.est, self.x, y)
-            y = self.x[0]
-        u, self.integral = pi_law(r - y, self.integral, *self.gains)
+        if isinstance(c, PiController):
+            e = r - (y if self.est is None else self.x[0])
+            u, self.integral = pi_law(e, self.integral, *self.gains)
+        else:
+            u_raw, u, self.integral = feedback_law(r, y, self.x, self.integral, c.terms,
+                                                   c.voltage_limit_v)  # fmt: skip
+            u = np.where(np.isfinite(u_raw), u, 0.0)
         if self.est is not None:
             self.x = filter_predict(self.est, self.x, u)
         return u
-
-
-class _FeedbackBatch:
-    """:class:`StateFeedbackController`'s :func:`~cartctl.runtime.statefeedback.feedback_law` over N
-    rows."""
-
-    def __init__(self, ctrl: StateFeedbackController, n: int) -> None:
-        self.ctrl = ctrl
-        self.integral: FloatArray = np.zeros(n)
-        self.est = _filter_terms(ctrl.estimator)
-        self.x: list[FloatArray] = [np.zeros(n) for _ in self.est.L]
-
-    def step(self, r: float, y: FloatArray) -> FloatArray:
-        self.x = filter_correct(self.est, self.x, y)
-        u_raw, u, self.integral = feedback_law(r, y, self.x, self.integral, self.ctrl.terms,
-                                               self.ctrl.voltage_limit_v)  # fmt: skip
-        u = np.where(np.isfinite(u_raw), u, 0.0)
-        self.x = filter_predict(self.est, self.x, u)
-        return u
-
-
-def _controller(ctrl: Controller, n: int) -> _PiBatch | _FeedbackBatch:
-    if isinstance(ctrl, PiController):
-        return _PiBatch(ctrl, n)
-    if isinstance(ctrl, StateFeedbackController):
-        return _FeedbackBatch(ctrl, n)
-    raise InputError(f"the batch loop does not know the controller {type(ctrl).__name__}")
 
 
 def simulate_batch(
@@ -185,11 +158,9 @@ def simulate_batch(
     plant from rest, with the loop's clamp ``voltage_limit_v`` (V), following ``reference`` (rad/s,
     one value per tick)."""
     ref = np.asarray(reference, dtype=float)
-    if ref.ndim != 1 or ref.size == 0:
-        raise InputError(f"the reference must be a non-empty 1-D array, got shape {ref.shape}")
     check_voltage_limit(voltage_limit_v)
     n_ticks, n = ref.size, plants.size
-    ctrl = _controller(controller, n)
+    ctrl = _Batch(controller, n)
     na, width = plants.ar.shape[1], plants.b_lags.shape[1]
     ar, b_lags = list(plants.ar.T), list(plants.b_lags.T)
     # row width − 1 + k of u_hist is u[k] as the plant applies it, row na + k of y_hist is y[k]
