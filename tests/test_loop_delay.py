@@ -13,11 +13,12 @@ import pytest
 
 from cartctl.cli import main
 from cartctl.data.modelfile import ModelFile, Provenance, load_models, save_models
-from cartctl.data.trace import Trace, write_trace
-from cartctl.data.tracemeta import (
+from cartctl.data.trace import (
+    Trace,
     agreed_loop_delay,
     meta_path,
     read_trace_meta,
+    write_trace,
     write_trace_meta,
 )
 from cartctl.errors import DataFileError, InputError

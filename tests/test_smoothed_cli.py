@@ -222,7 +222,7 @@ def test_review_streams_the_smoothed_series_with_the_recording(
 def test_a_runs_meta_file_names_its_controller_and_model(physics_run: Path) -> None:
     """run stores the controller it ran (the shipped default here) and that controller's design
     model beside its trace, so review finds the smoother's model without parsing a command."""
-    from cartctl.data.tracemeta import read_trace_meta
+    from cartctl.data.trace import read_trace_meta
 
     meta = read_trace_meta(physics_run / "p.csv")
     assert meta is not None

@@ -155,7 +155,7 @@ def identify(
         recorded the data, written into the model for design. Default: from the ``.meta.toml``
         beside traces given by path, else unknown.
     """
-    from cartctl.data.tracemeta import loop_delay_of
+    from cartctl.data.trace import loop_delay_of
 
     items = [traces] if isinstance(traces, Trace | str | Path) else list(traces)
     loaded = [t if isinstance(t, Trace) else read_trace(t) for t in items]

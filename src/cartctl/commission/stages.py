@@ -99,7 +99,7 @@ class Commission:
             bar.close()
 
     def _keep(self, stage: str, result: ExperimentResult) -> Trace:
-        from cartctl.data.tracemeta import write_trace_meta
+        from cartctl.data.trace import write_trace_meta
 
         if len(result.trace):
             write_trace(result.trace, self.out / f"{stage}.csv")

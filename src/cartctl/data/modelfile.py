@@ -18,7 +18,7 @@ from typing import Any
 import tomli_w
 
 from cartctl.choices import find_file
-from cartctl.data.tomlfile import MODEL_FORMAT, check_format, read_toml, require
+from cartctl.data.tomlfile import MODEL_FORMAT, check_format, read_loop_delay, read_toml, require
 from cartctl.errors import CartctlError, DataFileError, InputError
 from cartctl.model import ArxModel
 
@@ -121,11 +121,7 @@ def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
     if "format" in doc:  # a model file may leave it out
         check_format(doc, path, MODEL_FORMAT, "model file")
     period_s = float(require(doc, "period_s", (int, float), path, "the top level"))
-    loop_delay = None
-    if "loop_delay_ticks" in doc:
-        loop_delay = require(doc, "loop_delay_ticks", int, path, "the top level")
-        if loop_delay < 0:
-            raise DataFileError(path, f"loop_delay_ticks must be >= 0 ticks, got {loop_delay}")
+    loop_delay = read_loop_delay(doc, path)
     prov_tab = doc.get("provenance", {})
     provenance = Provenance(
         source=str(prov_tab.get("source", "unknown")),

@@ -75,3 +75,13 @@ def require(
     if not isinstance(value, kind) or isinstance(value, bool):
         raise DataFileError(path, f"key '{key}' in {where} has the wrong type: {value!r}")
     return value
+
+
+def read_loop_delay(doc: Mapping[str, Any], path: Path) -> int | None:
+    """A model or meta file's ``loop_delay_ticks`` (None when absent), a whole number >= 0."""
+    if "loop_delay_ticks" not in doc:
+        return None
+    delay = require(doc, "loop_delay_ticks", int, path, "the top level")
+    if delay < 0:
+        raise DataFileError(path, f"loop_delay_ticks must be >= 0 ticks, got {delay}")
+    return int(delay)

@@ -58,8 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.cart import SUPPLY_V
     from cartctl.cli.jsonout import dumps
     from cartctl.cli.progress import ProgressBar
-    from cartctl.data.trace import write_trace
-    from cartctl.data.tracemeta import meta_path, write_trace_meta
+    from cartctl.data.trace import meta_path, write_trace, write_trace_meta
     from cartctl.plants.factory import check_plant_name, is_serial, make_plant
     from cartctl.runtime.experiment import run_experiment
     from cartctl.runtime.realtime import gc_paused

@@ -317,7 +317,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.cli.jsonout import dumps
     from cartctl.data.modelfile import load_models, save_models
     from cartctl.data.read import read_trace
-    from cartctl.data.tracemeta import loop_delay_of
+    from cartctl.data.trace import loop_delay_of
     from cartctl.identification.pipeline import identify, model_file
 
     options.check_outputs(args, files=("out",), folders=("report",))

@@ -143,7 +143,7 @@ def _prepared(args: argparse.Namespace, given: str, csv_path: Path) -> PreparedR
     """Step 2, the session's run path (controller, plant, references, every refusal), then the
     trace's meta file (before the loop: an interrupted run has it too)."""
     from cartctl.choices import find_file
-    from cartctl.data.tracemeta import write_trace_meta
+    from cartctl.data.trace import write_trace_meta
     from cartctl.session.prepare import prepare_run
 
     def warm_up_rerun() -> None:  # the recording's first-use costs, before a cart ticks

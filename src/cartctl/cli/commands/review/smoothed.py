@@ -179,7 +179,7 @@ def recorded_model(chunks: Any) -> str | None:
 def trace_hints(trace_path: str | Path) -> tuple[bool, str | None, int]:
     """What a run trace's meta file tells the smoother: whether it came through the serial path,
     the model its controller was designed on (or None), and its extra loop delay (ticks)."""
-    from cartctl.data.tracemeta import read_trace_meta
+    from cartctl.data.trace import read_trace_meta
     from cartctl.design.controllerfile import load_controller
 
     try:
