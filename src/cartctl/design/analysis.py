@@ -229,8 +229,17 @@ class SettlingBound:
 
 
 def _feasible(
-    impulse: NDArray[np.float64], n_settle: int, hold: int, r: float, band: float, u_max: float
+    impulse: NDArray[np.float64],
+    n_settle: int,
+    hold: int,
+    r: float,
+    band: float,
+    u_max: float,
+    closest: bool = False,
 ) -> NDArray[np.float64] | None:
+    """A voltage sequence (|u| ≤ u_max) whose output is within r ± band for ``hold`` ticks from
+    tick N = ``n_settle``, or None; with ``closest``, the one with the least Σ|y − r| after N
+    (variables [u (n), t (M)]: minimise Σ t subject to −t ≤ y − r ≤ t and the band)."""
     from scipy import optimize
     from scipy.linalg import toeplitz
 
@@ -238,10 +247,16 @@ def _feasible(
     t = toeplitz(impulse[:n], np.zeros(n))[n_settle:]  # rows: y[k] for k in [N, N + M)
     a_ub = np.vstack([t, -t])
     b_ub = np.concatenate([np.full(hold, r + band), np.full(hold, -(r - band))])
-    res = optimize.linprog(
-        np.zeros(n), A_ub=a_ub, b_ub=b_ub, bounds=[(-u_max, u_max)] * n, method="highs"
-    )
-    return res.x if res.status == 0 else None
+    cost = np.zeros(n)
+    bounds: list[tuple[float, float | None]] = [(-u_max, u_max)] * n
+    if closest:
+        eye, zeros = np.eye(hold), np.zeros((hold, hold))
+        a_ub = np.block([[t, -eye], [-t, -eye], [t, zeros], [-t, zeros]])
+        b_ub = np.concatenate([np.full(hold, r), np.full(hold, -r), b_ub])
+        cost = np.concatenate([cost, np.ones(hold)])
+        bounds += [(0.0, None)] * hold
+    res = optimize.linprog(cost, A_ub=a_ub, b_ub=b_ub, bounds=bounds, method="highs")
+    return res.x[:n] if res.status == 0 else None
 
 
 def settling_bound(
@@ -309,36 +324,9 @@ def _settling_bound(
             lo = mid
         else:
             hi, best = mid, u
-    best = _closest(impulse, hi, hold, step_rad_s, tol, voltage_limit_v, best)
+    clean = _feasible(impulse, hi, hold, step_rad_s, tol, voltage_limit_v, closest=True)
+    best = best if clean is None else clean  # of those settling at N, the clean trace
     speed = plant.simulate(best)
     best.setflags(write=False)
     speed.setflags(write=False)
     return SettlingBound(hi * ts, hi, best, speed, plant.nk - 1, tol)
-
-
-def _closest(
-    impulse: NDArray[np.float64],
-    n_settle: int,
-    hold: int,
-    r: float,
-    band: float,
-    u_max: float,
-    fallback: NDArray[np.float64],
-) -> NDArray[np.float64]:
-    """Among the sequences settling at N, the one with the least Σ|y − r| after N: variables
-    [u (n), t (M)], minimise Σ t subject to −t ≤ y − r ≤ t and the band."""
-    from scipy import optimize
-    from scipy.linalg import toeplitz
-
-    n = n_settle + hold
-    t_mat = toeplitz(impulse[:n], np.zeros(n))[n_settle:]
-    eye = np.eye(hold)
-    zeros = np.zeros((hold, hold))
-    a_ub = np.block([[t_mat, -eye], [-t_mat, -eye], [t_mat, zeros], [-t_mat, zeros]])
-    b_ub = np.concatenate(
-        [np.full(hold, r), np.full(hold, -r), np.full(hold, r + band), np.full(hold, band - r)]
-    )
-    cost = np.concatenate([np.zeros(n), np.ones(hold)])
-    bounds = [(-u_max, u_max)] * n + [(0.0, None)] * hold
-    res = optimize.linprog(cost, A_ub=a_ub, b_ub=b_ub, bounds=bounds, method="highs")
-    return res.x[:n] if res.status == 0 else fallback
