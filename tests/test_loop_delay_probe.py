@@ -20,8 +20,8 @@ from hypothesis import strategies as st
 from cartctl.cli import main
 from cartctl.design.controllerfile import load_controller
 from cartctl.errors import DataWarning, InputError
+from cartctl.link.bridge import CLEAR_SHARE, MIN_ECHOES, EchoDelays, delay_change
 from cartctl.link.cart_faults import LATE_STRETCH_TICKS, CartFaults
-from cartctl.link.loop_delay import CLEAR_SHARE, MIN_ECHOES, EchoDelays, delay_change
 from cartctl.session.prepare import check_loop_delay
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -26,12 +26,11 @@ from cartctl.errors import PlantError
 from cartctl.link.cart_link import DEFAULT_SILENCE_TIMEOUT_S, CartLink, UnsupportedCartError
 from cartctl.link.dialect import Encoder
 from cartctl.link.framer import Gpio
-from cartctl.link.loop_delay import MIN_ECHOES, EchoDelays, delay_change
 from cartctl.plants.base import Measurement
 
 STOP_FRAMES = 3
 """drive = 0 frames sent on close (one may be lost to line noise)."""
-PROBE_ECHOES = MIN_ECHOES
+PROBE_ECHOES = bridge.MIN_ECHOES
 """Echoes :meth:`SerialCart.measure_loop_delay` judges first: done when they are clear."""
 UNDRIVEN_SILENCE_S = 0.5
 """Longest wait for a GPIO while nothing is driven (s: the first tick, the probe): a host held up
@@ -84,7 +83,7 @@ class SerialCart:
         self._echo = -1
         self.echo_delays: collections.Counter[int] = collections.Counter()
         """Echoes per delay (ticks) since the probe: every command the cart applied."""
-        self.probe_delays: EchoDelays | None = None
+        self.probe_delays: bridge.EchoDelays | None = None
         """What :meth:`measure_loop_delay` measured, None before it."""
         self.missed_ticks = 0
         self.skipped_ticks = 0
@@ -201,7 +200,7 @@ class SerialCart:
         """The loop delay (ticks), measured from the echo without driving the motors.
 
         Answers each cart tick with drive = 0 (the bridge echoes whatever drive says) until
-        ``echoes`` echoes came back; when they are not clear (:class:`EchoDelays`), goes on to
+        ``echoes`` echoes came back; when they are not clear (:class:`~cartctl.link.bridge.EchoDelays`), goes on to
         ``max_echoes`` and judges them all. The most frequent delay counts; :attr:`probe_delays`
         keeps the spread; the echo statistics are then cleared for the run. No echo within
         ``max_ticks`` ticks (not the bridge sketch) raises :class:`~cartctl.errors.PlantError`.
@@ -220,11 +219,11 @@ class SerialCart:
                     break
                 if total >= echoes and not judged:  # judged once: no stopping at a lucky moment
                     judged = True
-                    if EchoDelays.of(self.echo_delays).clear:
+                    if bridge.EchoDelays.of(self.echo_delays).clear:
                         break
         finally:
             self.link.silence_timeout_s = silence_s
-        self.probe_delays = EchoDelays.of(self.echo_delays)
+        self.probe_delays = bridge.EchoDelays.of(self.echo_delays)
         delay = self.loop_delay_ticks
         if delay is None:
             raise PlantError(
@@ -277,7 +276,7 @@ class SerialCart:
         """Link figures for the run summary (``run --json``'s ``link``)."""
         stats = self.link.stats
         delays = list(self.echo_delays.elements())
-        seen, probe = EchoDelays.of(self.echo_delays), self.probe_delays
+        seen, probe = bridge.EchoDelays.of(self.echo_delays), self.probe_delays
         lost, sent = self.host_frames_lost, self.frames_sent
         latency_us = 1e6 * np.array(self.reply_latency_s)
         p50, p99, top = (
@@ -295,7 +294,7 @@ class SerialCart:
                 "echo_delay_median": statistics.median(delays) if delays else None,
                 "loop_delay_ticks_seen": seen.to_dict()["counts"],
                 "loop_delay_probe": None if probe is None else probe.to_dict(),
-                "loop_delay_change": None if probe is None else delay_change(probe, seen),
+                "loop_delay_change": None if probe is None else bridge.delay_change(probe, seen),
                 **{k: getattr(stats, k) for k in ("frames", "crc_errors", "garbage_bytes")},
                 **{k: getattr(stats, k) for k in ("seq_gaps", "lost_frames")},
                 "missed_ticks": self.missed_ticks,

@@ -21,7 +21,7 @@ from cartctl.errors import CartctlError, DataWarning, InputError
 
 if TYPE_CHECKING:
     from cartctl.design.controllerfile import ControllerFile
-    from cartctl.link.loop_delay import EchoDelays
+    from cartctl.link.bridge import EchoDelays
     from cartctl.model import ArxModel
     from cartctl.plants.base import Plant
     from cartctl.reference import ReferenceSchedule

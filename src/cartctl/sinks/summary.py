@@ -244,7 +244,7 @@ def host_loss_text(link: Mapping[str, Any]) -> str:
 
 
 def delay_seen_lines(link: Mapping[str, Any]) -> list[str]:
-    from cartctl.link.loop_delay import EchoDelays
+    from cartctl.link.bridge import EchoDelays
 
     def spread(counts: Mapping[str, int] | None) -> str:
         return EchoDelays.of({int(d): n for d, n in (counts or {}).items()}).describe()
