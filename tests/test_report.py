@@ -11,14 +11,8 @@ from cartctl.data.modelfile import load_models
 from cartctl.data.trace import Trace
 from cartctl.errors import InputError
 from cartctl.identification.etfe import etfe
-from cartctl.identification.report import (
-    ReportSection,
-    plot_etfe,
-    plot_io,
-    plot_pzmap,
-    plot_step_validation,
-    write_summary,
-)
+from cartctl.identification.figures import plot_etfe, plot_io, plot_pzmap, plot_step_validation
+from cartctl.identification.report import ReportSection, write_summary
 from cartctl.model import ArxModel
 from cartctl.signals import square, step
 

@@ -1,25 +1,29 @@
-"""The identification figures' style and saving, the ETFE with the models' Bode plots (the
-report's figure 4), the pole-zero map (figures 5, 12) and the residual tests. matplotlib is
-imported inside the functions, and figures have their own canvases (no pyplot state)."""
+"""The identification figures, in one style: an experiment's input and output (the report's
+figures 3, 11), measured against simulated speed (6, 7), the ETFE with the models' Bode plots (4),
+the pole-zero map (5, 12) and the residual tests. matplotlib is imported inside the functions,
+and figures have their own canvases (no pyplot state)."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from cartctl.errors import InputError
 from cartctl.identification.etfe import Etfe, model_response
+from cartctl.measures.metrics import fit_percent
 from cartctl.model import ArxModel
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
     from matplotlib.typing import RcKeyType
 
+    from cartctl.data.trace import Trace
     from cartctl.identification.diagnostics import BodeBand, ResidualTest
 
 
@@ -57,6 +61,93 @@ def save(fig: Figure, path: Path) -> Path:
 
 def color(i: int) -> str:
     return _COLORS[i % len(_COLORS)]
+
+
+def plot_io(
+    trace: Trace,
+    motors: Sequence[str],
+    path: Path,
+    *,
+    title: str,
+    zoom_s: tuple[float, float] | None = None,
+) -> Path:
+    """Input and output of an experiment per motor (report, figures 3 and 11); returns ``path``.
+    Per motor voltage (V) above speed (rad/s), and the speed again over ``zoom_s`` (s)."""
+    if not motors:
+        raise InputError("plot_io needs at least one motor, e.g. ('a', 'b')")
+    if zoom_s is not None and not zoom_s[0] < zoom_s[1]:
+        raise InputError(f"zoom window must be (start_s, end_s) with start < end, got {zoom_s}")
+    t = trace.time_s
+    rows = 3 if zoom_s is not None else 2
+    with figure(max(9.0, 5.5 * len(motors) + 0.5), 2.4 * rows + 0.8) as fig:
+        grid = fig.add_gridspec(rows, len(motors), height_ratios=[1.0, 1.4, 1.4][:rows])
+        first = None
+        for j, motor in enumerate(motors):
+            voltage, speed = trace.voltage(motor), trace.speed(motor)
+            ax_v = fig.add_subplot(grid[0, j], sharex=first)
+            first = first or ax_v
+            ax_w = fig.add_subplot(grid[1, j], sharex=first)
+            ax_v.plot(t, voltage, drawstyle="steps-post", color="tab:blue")
+            ax_v.set_title(f"Motor {motor.upper()}")
+            ax_v.set_ylabel("voltage (V)")
+            ax_w.plot(t, speed, color="tab:red", linewidth=1.0)
+            ax_w.set_ylabel("speed (rad/s)")
+            ax_v.tick_params(labelbottom=False)
+            if zoom_s is None:
+                ax_w.set_xlabel("time (s)")
+                continue
+            ax_w.axvspan(*zoom_s, color="0.85", zorder=0)
+            ax_z = fig.add_subplot(grid[2, j])
+            inside = (t >= zoom_s[0]) & (t <= zoom_s[1])
+            ax_z.plot(t[inside], speed[inside], color="tab:red", linewidth=1.2)
+            ax_z.set_xlim(*zoom_s)
+            ax_z.set_ylabel("speed (rad/s)")
+            ax_z.set_xlabel("time (s)")
+            ax_z.set_title(f"zoom {zoom_s[0]:g}–{zoom_s[1]:g} s", fontsize=10)
+        if len(t) and first is not None:
+            first.set_xlim(t[0], t[-1])
+        fig.suptitle(title)
+        return save(fig, path)
+
+
+def plot_step_validation(
+    time_s: ArrayLike,
+    voltage: ArrayLike,
+    measured: ArrayLike,
+    simulated: Mapping[str, ArrayLike],
+    path: Path,
+    *,
+    title: str,
+) -> Path:
+    """Measured against simulated speed (rad/s, label → array, the legend with each fit in %)
+    above |error|, under the voltage (V) (report, figures 6, 7); returns ``path``."""
+    t = np.asarray(time_s, dtype=float)
+    series = {"voltage": np.asarray(voltage, dtype=float), "measured": np.asarray(measured, float)}
+    series |= {f"simulated[{k!r}]": np.asarray(v, dtype=float) for k, v in simulated.items()}
+    for name, values in series.items():
+        if values.ndim != 1 or values.shape != t.shape or t.ndim != 1:
+            raise InputError(
+                f"{name} must be 1-D with one value per time step ({t.shape}), got {values.shape}"
+            )
+    y = series["measured"]
+    with figure(10.0, 7.5) as fig:
+        ax_u, ax_y, ax_e = fig.subplots(3, 1, sharex=True, height_ratios=[1.0, 2.6, 1.6])
+        ax_u.plot(t, series["voltage"], drawstyle="steps-post", color="tab:blue")
+        ax_u.set_ylabel("voltage (V)")
+        ax_y.plot(t, y, color="black", linewidth=2.0, label="measured")
+        for i, (label, given) in enumerate(simulated.items()):
+            sim = np.asarray(given, dtype=float)
+            fit = fit_percent(y, sim)
+            ax_y.plot(t, sim, color=color(i), label=f"{label} (fit {fit:.1f} %)")
+            ax_e.plot(t, np.abs(y - sim), color=color(i))
+        ax_y.set_ylabel("speed (rad/s)")
+        ax_e.set_ylabel("|error| (rad/s)")
+        ax_e.set_xlabel("time (s)")
+        if t.size:
+            ax_e.set_xlim(t[0], t[-1])
+        fig.legend(*ax_y.get_legend_handles_labels(), loc="outside lower center", ncols=3)
+        fig.suptitle(title)
+        return save(fig, path)
 
 
 def plot_etfe(

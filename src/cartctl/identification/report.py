@@ -1,6 +1,5 @@
-"""``cartctl identify --report DIR``: the figures (input and output, measured against simulated
-speed; the analysis figures are in :mod:`~cartctl.identification.figures`) and ``summary.md``
-with the residual tests, θ ± σ(θ), the fits and the order table."""
+"""``cartctl identify --report DIR``: the figures of :mod:`~cartctl.identification.figures` and
+``summary.md`` with the residual tests, θ ± σ(θ), the fits and the order table."""
 
 from __future__ import annotations
 
@@ -12,111 +11,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from cartctl.data.modelfile import ModelFile
 from cartctl.data.trace import Trace
-from cartctl.errors import InputError
+from cartctl.identification import figures
 from cartctl.identification.etfe import etfe, find_period
-from cartctl.identification.figures import (
-    color,
-    figure,
-    plot_etfe,
-    plot_pzmap,
-    plot_residuals,
-    save,
-)
 from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, MotorIdentification
-from cartctl.measures.metrics import fit_percent
 from cartctl.measures.numfmt import markdown_table
 from cartctl.model import ArxModel
-
-
-def plot_io(
-    trace: Trace,
-    motors: Sequence[str],
-    path: Path,
-    *,
-    title: str,
-    zoom_s: tuple[float, float] | None = None,
-) -> Path:
-    """Input and output of an experiment per motor (report, figures 3 and 11); returns ``path``.
-    Per motor voltage (V) above speed (rad/s), and the speed again over ``zoom_s`` (s)."""
-    if not motors:
-        raise InputError("plot_io needs at least one motor, e.g. ('a', 'b')")
-    if zoom_s is not None and not zoom_s[0] < zoom_s[1]:
-        raise InputError(f"zoom window must be (start_s, end_s) with start < end, got {zoom_s}")
-    t = trace.time_s
-    rows = 3 if zoom_s is not None else 2
-    with figure(max(9.0, 5.5 * len(motors) + 0.5), 2.4 * rows + 0.8) as fig:
-        grid = fig.add_gridspec(rows, len(motors), height_ratios=[1.0, 1.4, 1.4][:rows])
-        first = None
-        for j, motor in enumerate(motors):
-            voltage, speed = trace.voltage(motor), trace.speed(motor)
-            ax_v = fig.add_subplot(grid[0, j], sharex=first)
-            first = first or ax_v
-            ax_w = fig.add_subplot(grid[1, j], sharex=first)
-            ax_v.plot(t, voltage, drawstyle="steps-post", color="tab:blue")
-            ax_v.set_title(f"Motor {motor.upper()}")
-            ax_v.set_ylabel("voltage (V)")
-            ax_w.plot(t, speed, color="tab:red", linewidth=1.0)
-            ax_w.set_ylabel("speed (rad/s)")
-            ax_v.tick_params(labelbottom=False)
-            if zoom_s is None:
-                ax_w.set_xlabel("time (s)")
-                continue
-            ax_w.axvspan(*zoom_s, color="0.85", zorder=0)
-            ax_z = fig.add_subplot(grid[2, j])
-            inside = (t >= zoom_s[0]) & (t <= zoom_s[1])
-            ax_z.plot(t[inside], speed[inside], color="tab:red", linewidth=1.2)
-            ax_z.set_xlim(*zoom_s)
-            ax_z.set_ylabel("speed (rad/s)")
-            ax_z.set_xlabel("time (s)")
-            ax_z.set_title(f"zoom {zoom_s[0]:g}–{zoom_s[1]:g} s", fontsize=10)
-        if len(t) and first is not None:
-            first.set_xlim(t[0], t[-1])
-        fig.suptitle(title)
-        return save(fig, path)
-
-
-def plot_step_validation(
-    time_s: ArrayLike,
-    voltage: ArrayLike,
-    measured: ArrayLike,
-    simulated: Mapping[str, ArrayLike],
-    path: Path,
-    *,
-    title: str,
-) -> Path:
-    """Measured against simulated speed (rad/s, label → array, the legend with each fit in %)
-    above |error|, under the voltage (V) (report, figures 6, 7); returns ``path``."""
-    t = np.asarray(time_s, dtype=float)
-    series = {"voltage": np.asarray(voltage, dtype=float), "measured": np.asarray(measured, float)}
-    series |= {f"simulated[{k!r}]": np.asarray(v, dtype=float) for k, v in simulated.items()}
-    for name, values in series.items():
-        if values.ndim != 1 or values.shape != t.shape or t.ndim != 1:
-            raise InputError(
-                f"{name} must be 1-D with one value per time step ({t.shape}), got {values.shape}"
-            )
-    y = series["measured"]
-    with figure(10.0, 7.5) as fig:
-        ax_u, ax_y, ax_e = fig.subplots(3, 1, sharex=True, height_ratios=[1.0, 2.6, 1.6])
-        ax_u.plot(t, series["voltage"], drawstyle="steps-post", color="tab:blue")
-        ax_u.set_ylabel("voltage (V)")
-        ax_y.plot(t, y, color="black", linewidth=2.0, label="measured")
-        for i, (label, given) in enumerate(simulated.items()):
-            sim = np.asarray(given, dtype=float)
-            fit = fit_percent(y, sim)
-            ax_y.plot(t, sim, color=color(i), label=f"{label} (fit {fit:.1f} %)")
-            ax_e.plot(t, np.abs(y - sim), color=color(i))
-        ax_y.set_ylabel("speed (rad/s)")
-        ax_e.set_ylabel("|error| (rad/s)")
-        ax_e.set_xlabel("time (s)")
-        if t.size:
-            ax_e.set_xlim(t[0], t[-1])
-        fig.legend(*ax_y.get_legend_handles_labels(), loc="outside lower center", ncols=3)
-        fig.suptitle(title)
-        return save(fig, path)
 
 
 @dataclass(frozen=True)
@@ -221,30 +123,39 @@ def fit_rows(
 def _motor_section(
     res: MotorIdentification, trace: Trace, out_dir: Path, compare: Mapping[str, ModelFile]
 ) -> ReportSection:
-    m = res.motor
-    y, u, ts = trace.speed(m), trace.voltage(m), trace.period_s
-    models: dict[str, ArxModel] = {label: fit.model for label, fit in res.variants().items()}
-    files = {f"{Path(path).stem} ({path})": mf.motors[m] for path, mf in compare.items()
-             if m in mf.motors}  # fmt: skip
-    compared = models | files
-    chosen = next(label for label, fit in res.variants().items() if fit is res.chosen)
-    ordered = {chosen: models[chosen]} | compared
-    diag = res.diagnostics
-    images = []
+    m, diag, on = res.motor, res.diagnostics, res.diagnostics.fit_on
+    y, u = trace.speed(m), trace.voltage(m)
+    variants = res.variants()
+    files = {f"{Path(p).stem} ({p})": mf.motors[m] for p, mf in compare.items() if m in mf.motors}
+    compared = {label: fit.model for label, fit in variants.items()} | files
+    chosen = next(label for label, fit in variants.items() if fit is res.chosen)
     period = find_period(u)
-    response = etfe(y, u, ts, period_ticks=period)
-    images.append(plot_etfe(response, ordered, out_dir / f"etfe_{m}.png",
-                            title=f"Motor {m}: empirical transfer function and models",
-                            band=diag.band))  # fmt: skip
-    images.append(
-        plot_pzmap(compared, out_dir / f"pzmap_{m}.png", title=f"Motor {m}: pole-zero map")
-    )
+    response = etfe(y, u, trace.period_s, period_ticks=period)
     simulated = {label: model.simulate(u) for label, model in compared.items()}
-    images.append(
-        plot_step_validation(trace.time_s, u, y, simulated, out_dir / f"simulation_{m}.png",
-                             title=f"Motor {m}: measured and simulated speed ({trace.source})")
-    )  # fmt: skip
-    on = diag.fit_on
+    png = {k: out_dir / f"{k}_{m}.png" for k in ("etfe", "pzmap", "simulation", "residuals")}
+    images = [
+        figures.plot_etfe(
+            response,
+            {chosen: compared[chosen]} | compared,
+            png["etfe"],
+            title=f"Motor {m}: empirical transfer function and models",
+            band=diag.band,
+        ),
+        figures.plot_pzmap(compared, png["pzmap"], title=f"Motor {m}: pole-zero map"),
+        figures.plot_step_validation(
+            trace.time_s,
+            u,
+            y,
+            simulated,
+            png["simulation"],
+            title=f"Motor {m}: measured and simulated speed ({trace.source})",
+        ),
+        figures.plot_residuals(
+            diag.residuals,
+            png["residuals"],
+            title=f"Motor {m}: residual tests ({chosen}, {on} data)",
+        ),
+    ]
     etfe_kind = (
         f"whole periods of {period} ticks, averaged over {response.n_segments}"
         if period
@@ -272,8 +183,6 @@ def _motor_section(
         paragraphs.append(
             f"{res.cycles_averaged} whole excitation cycles were averaged before the ARX fit."
         )
-    images.append(plot_residuals(diag.residuals, out_dir / f"residuals_{m}.png",
-                                 title=f"Motor {m}: residual tests ({chosen}, {on} data)"))  # fmt: skip
     paragraphs.append(
         f"Residual tests of the {chosen} model on the {on} data: {diag.residuals.summary()}."
     )
@@ -318,7 +227,7 @@ def write_identify_report(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     first = traces[0]
-    io_png = plot_io(
+    io_png = figures.plot_io(
         first, list(result.motors), out / "io.png", title=f"Experiment: {first.source}"
     )
     what = f"{request.method.upper()} (na = {request.na}, nb = {request.nb})"
