@@ -45,9 +45,7 @@ class KalmanDesign:
     R the measurement variance ((rad/s)²), P the a-priori DARE solution P[k|k−1] and
     L = P Cᵀ (C P Cᵀ + R)⁻¹ the gain. The noise levels the design used: σ_w (V), σ_b (V per
     tick), √R (rad/s, the total: quantisation plus ``design --measurement-noise``) and σ_ε
-    (``timing_noise_std_ticks``): above 0, a command change Δu landing ε ticks early or late acts
-    as an extra input −ε Δu, so each prediction adds (σ_ε Δu[k])² B Bᵀ to Q
-    (:class:`KalmanSpeedEstimator`); P and L stay those of Q.
+    (``timing_noise_std_ticks``, see :class:`KalmanSpeedEstimator`; P and L stay those of Q).
     """
 
     A: NDArray[np.float64]
@@ -113,10 +111,10 @@ class StateEstimator(SpeedEstimator, Protocol):
 class KalmanSpeedEstimator:
     """The Kalman filter with its covariance propagated, for a design with timing noise.
 
-    ``predict(u[k])`` propagates P with Q + (σ_ε (u[k] − u[k−1]))² B Bᵀ (u[−1] = 0 after a reset):
-    a command just sent may land a fraction of a tick early or late, so after a jump the next
-    measurement counts more. ``correct`` uses L[k] = P Cᵀ / (C P Cᵀ + R) and the Joseph form.
-    With σ_ε = 0 the gain stays L, and :class:`SteadyStateSpeedEstimator` is the same, faster.
+    A command change Δu landing ε ticks early or late acts as an extra input −ε Δu, so
+    ``predict(u[k])`` propagates P with Q + (σ_ε Δu[k])² B Bᵀ (u[−1] = 0 after a reset) and after
+    a jump the next measurement counts more. ``correct`` uses L[k] = P Cᵀ / (C P Cᵀ + R) and the
+    Joseph form. With σ_ε = 0 the gain stays L: :class:`SteadyStateSpeedEstimator`, faster.
     """
 
     def __init__(self, design: KalmanDesign) -> None:

@@ -1,16 +1,9 @@
 """The closed loop: one tick reads the plant, runs each motor's controller, sends, and logs.
 
 :class:`ControlLoop` is the per-tick body an executor calls on a real or simulated clock, so the
-real-time run and the fast simulated run are the same code. Per tick k::
-
-    y      = the speeds measured at tick k (kept from the previous plant.step)
-    u_m    = controller_m.step(reference_m[k], y_m)      clamped to ±voltage_limit_v
-    y_next = plant.step(u_a, u_b)                         sends u, measures tick k + 1
-                 (a cart-clocked plant: send u, log, then wait for the cart's next tick,
-                  so the compute time excludes the wait and a fault loses no row)
-    row    = [time, u, y, k, reference, estimate, period error, compute time (, true speed)]
-    every sink gets the row
-
+real-time and the fast simulated run are the same code; docs/architecture.md ("One tick of
+``cartctl run``") walks through a tick. On a cart-clocked plant the tick sends, logs, then waits
+for the cart's next frame, so the compute time excludes the wait and a fault loses no row.
 :meth:`ControlLoop.finish` runs on every exit path: zero volts, plant closed, sinks closed. A sink
 whose file write fails raises :class:`~cartctl.errors.OutputError` once every other sink has had
 its row; the error is kept in :attr:`LoopState.incomplete` and the run ends through ``finish``.

@@ -11,12 +11,11 @@ of :mod:`cartctl.runtime.base`::
     estimate = (x̂_1[k|k] + x̂_1[k+1|k]) / 2                 # the true speed now (rad/s)
 
 With the input-disturbance state, K's last entry is 1 (u carries −b̂, the integral action) and Ki
-is 0 (:mod:`cartctl.design.poles`). The estimate is the true speed at tick k: the measured speed
-is the average over the last tick, which x̂_1[k|k] estimates, and the true speed lies half-way to
-the next tick's average (on ``--plant sim``, whose output is itself a tick average, it leads by
-half a tick). Neither the integrator nor the estimator winds up. A non-finite reference or
-measurement gives 0 V for that tick (integrator held, no correction, prediction with 0 V); a
-command that overflows (after an absurd measurement) gives 0 V and resets the controller.
+is 0 (:mod:`cartctl.design.poles`). The estimate is the speed at tick k, half-way between the
+filtered and the predicted tick averages (on ``--plant sim``, whose output is itself a tick
+average, it leads by half a tick). A non-finite reference or measurement gives 0 V for that tick
+(integrator held, no correction, prediction with 0 V); a command that overflows (an absurd
+measurement) gives 0 V and resets the controller.
 """
 
 from __future__ import annotations
