@@ -1,11 +1,8 @@
-"""What commissioning writes: ``summary.md`` (one section per stage), PNG figures, and one Rerun
-recording (``.rrd``) per stage.
-
-:class:`Report` rewrites ``summary.md`` after each stage, so a run stopped anywhere leaves a
-readable summary. A stage's recording holds its series on the ``time`` timeline and its figures
-as a Markdown note at ``commission/<stage>``; a trace goes under the run's Rerun entity paths with
-the run's layout, so ``cartctl review`` shows it as a run. Recording problems never stop
-commissioning: they come back as text for the summary."""
+"""What commissioning writes: ``summary.md`` (rewritten after each stage, so a run stopped anywhere
+leaves a readable summary), PNG figures, and one Rerun recording per stage: its series on the
+``time`` timeline, its section as a Markdown note at ``commission/<stage>``, a trace under the
+run's entity paths and layout (so ``cartctl review`` shows it as a run). Recording problems never
+stop commissioning: they come back as text for the summary."""
 
 from __future__ import annotations
 
@@ -169,18 +166,16 @@ def tuning_steps(controller_path: Path, model_path: Path, png: Path) -> Series:
     plants = {"model": [models.motor(m) for m in "ab"]}
     for f in tuning.LATER_FRACTIONS:
         plants[f"{f * 10:g} ms later"] = [later_command(models.motor(m), f) for m in "ab"]
+    refs = {m: reference_signal(tuning.REFERENCE, n, models.period_s, m) for m in "ab"}
     series: Series = {}
     speed, volts = {}, {}
     for name, (a, b) in plants.items():
-        refs = {m: reference_signal(tuning.REFERENCE, n, models.period_s, m) for m in "ab"}
         columns, _ = run_in_memory(ArxPlant(a, b), build_controllers(file), refs,
                                    period_s=models.period_s,
                                    voltage_limit_v=file.voltage_limit_v)  # fmt: skip
-        t = columns["time_s"]
-        key = name.replace(" ", "_")
-        for m in "ab":
-            series[f"tuning/{key}/speed_{m}"] = (t, columns[f"speed_{m}"])
-            series[f"tuning/{key}/voltage_{m}"] = (t, columns[f"voltage_{m}"])
+        t, key = columns["time_s"], name.replace(" ", "_")
+        series |= {f"tuning/{key}/{q}_{m}": (t, columns[f"{q}_{m}"])
+                   for m in "ab" for q in ("speed", "voltage")}  # fmt: skip
         speed[f"motor a, {name}"] = (t, columns["speed_a"])
         volts[f"motor a, {name}"] = (t, columns["voltage_a"])
         series["tuning/reference"] = (t, columns["reference_a"])

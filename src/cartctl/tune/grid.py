@@ -33,8 +33,8 @@ RUN_FAILED = "the run failed: "  # how the reason of a setting whose run failed 
 
 @dataclass(frozen=True)
 class Axis:
-    """A tuning axis: its grid ``name`` (the design option without dashes, the settings' key in
-    ``--json`` too), the design request ``field`` it sets, its ``unit`` and default range."""
+    """A tuning axis: its grid ``name`` (the design option without dashes; the settings' key in
+    ``--json``), the design request ``field`` it sets, its ``unit`` and default range."""
 
     name: str
     field: str
@@ -64,7 +64,7 @@ def grid_form(method: str) -> str:
 
 def _count(start: float, stop: float, step: float) -> int:
     span = (stop - start) / step + 1e-9
-    if not math.isfinite(span):  # a step too small for its span (1e-320): never a grid
+    if not math.isfinite(span):  # a step too small for its span (1e-320)
         raise InputError(f"--grid: a step of {step:g} over {start:g}..{stop:g} gives more than "
                          f"{MAX_TUNE_SETTINGS} settings; use coarser steps")  # fmt: skip
     return math.floor(span) + 1
@@ -76,7 +76,6 @@ def inclusive_range(start: float, stop: float, step: float) -> tuple[float, ...]
 
 
 def _axis_range(item: str, text: str, form: str) -> tuple[float, float, float]:
-    """``START:STOP:STEP`` or ``VALUE`` of grid item ``item`` as (start, stop, step)."""
     parts = [p.strip() for p in text.split(":")]
     if len(parts) not in (1, 3) or not all(parts):
         raise InputError(f"--grid {item}: expected START:STOP:STEP or one VALUE after the '='")
@@ -98,12 +97,9 @@ def _axis_range(item: str, text: str, form: str) -> tuple[float, float, float]:
 
 
 def parse_grid(spec: str | None, method: str) -> dict[str, tuple[float, ...]]:
-    """The values of each axis of ``method``, keyed by the axes' names, defaults where ``spec`` is
-    silent.
-
-    Each value is checked as ``cartctl design`` checks its option (named as the grid item the user
-    gave), so an out-of-range value is refused before any design runs; so are unknown or repeated
-    axes, malformed or empty ranges and more than :data:`MAX_TUNE_SETTINGS` settings."""
+    """The values of each axis of ``method`` by axis name, defaults where ``spec`` is silent; each
+    checked as ``cartctl design`` checks its option, before any design runs, and unknown or repeated
+    axes, malformed or empty ranges and more than :data:`MAX_TUNE_SETTINGS` settings refused."""
     spelled = {n: a.name for a in AXES[method] for n in (a.name, a.name.replace("-", "_"))}
     ranges = {a.name: a.default for a in AXES[method]}
     given: dict[str, str] = {}
@@ -147,8 +143,7 @@ def design_request(
     fixed: Mapping[str, Any] | None = None,
 ) -> DesignRequest:
     """A setting's design request: the design defaults, ``fixed`` (shared fields such as
-    ``process_noise_std_v``), then the setting's axes. The tuning run and ``--choose`` both use it,
-    so both get the very same controller."""
+    ``process_noise_std_v``), then the setting's axes (the tuning run's and ``--choose``'s)."""
     axes: dict[str, Any] = {a.field: float(settings[a.name]) for a in AXES[method]}
     return DesignRequest(method=method, extra_delay_ticks=extra_delay_ticks, **dict(fixed or {}),
                          **axes)  # fmt: skip
@@ -205,23 +200,17 @@ class TuneResult:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON row (``peak_voltage_v`` is the worse ``max_abs_voltage``)."""
-        worst = self.worst
+        w = self.worst
         return {"index": self.index, "settings": dict(self.settings), "feasible": self.feasible,
-                "reason": self.reason, "overshoot_percent": worst["overshoot_percent"],
-                "settling_time_s": worst["settling_time_s"], "rms_error": worst["rms_error"],
-                "peak_voltage_v": worst["max_abs_voltage"], "pareto": self.pareto,
-                "motors": self.motors, "status": self.status,
-                "pareto_plot": self.pareto_plot}  # fmt: skip
+                "reason": self.reason, **{k: w[k] for k in METRICS[:3]},
+                "peak_voltage_v": w["max_abs_voltage"], "pareto": self.pareto, "motors": self.motors,
+                "status": self.status, "pareto_plot": self.pareto_plot}  # fmt: skip
 
 
 def pareto_front(points: ArrayLike) -> NDArray[np.bool_]:
-    """Which rows of ``points`` (n, k) are non-dominated, every column minimised.
-
-    A row with a NaN is never on the front and dominates nothing; equal rows do not dominate each
-    other."""
+    """Which rows of ``points`` (n, k) are non-dominated, every column minimised; a row with a NaN is
+    never on the front and dominates nothing, equal rows do not dominate each other."""
     p = np.asarray(points, dtype=float)
-    if p.ndim != 2:
-        raise InputError(f"points must be a 2-D array (n, k), got shape {p.shape}")
     valid = ~np.isnan(p).any(axis=1)
     front = valid.copy()
     q = p[valid]
