@@ -157,6 +157,11 @@ def ramp(
     return out if limit is None else np.clip(out, -abs(limit), abs(limit))
 
 
+_BY_DURATION: dict[str, Callable[..., NDArray[np.float64]]] = {
+    "step": step, "prbs": prbs, "multisine": multisine, "chirp": chirp
+}  # fmt: skip
+
+
 def make_signal(
     name: str,
     amplitude_v: float,
@@ -170,18 +175,7 @@ def make_signal(
     ``cycles`` counts the +A/0/−A cycles of 'square' (default 5) or the 2.56 s periods of
     'multisine' (default 6); ``duration_s`` is the length of the others (s).
     """
-    builders: dict[str, Callable[[], NDArray[np.float64]]] = {
-        "square": lambda: square(amplitude_v, cycles=cycles or 5, period_s=period_s),
-        "step": lambda: step(amplitude_v, duration_s=duration_s or 3.0, period_s=period_s),
-        "prbs": lambda: prbs(amplitude_v, duration_s=duration_s or 15.0, period_s=period_s),
-        "multisine": lambda: multisine(
-            amplitude_v,
-            duration_s=2.56 * cycles if cycles else (duration_s or 15.36),
-            period_s=period_s,
-        ),
-        "chirp": lambda: chirp(amplitude_v, duration_s=duration_s or 20.0, period_s=period_s),
-    }
-    if name not in builders:
+    if name not in SIGNALS:
         raise InputError(f"unknown signal '{name}'; choose one of {', '.join(SIGNALS)}")
     if cycles is not None and cycles < 1:
         raise InputError(f"--cycles must be at least 1, got {cycles}")
@@ -192,4 +186,9 @@ def make_signal(
                 f"--cycles {cycles} of {name} are {cycles * cycle_s:g} s of signal; at most "
                 f"{int(MAX_DURATION_S // cycle_s)} ({MAX_DURATION_S / 3600:g} h)"
             )
-    return builders[name]()
+    if name == "square":
+        return square(amplitude_v, cycles=cycles or 5, period_s=period_s)
+    if name == "multisine" and cycles:
+        duration_s = 2.56 * cycles
+    given = {"duration_s": duration_s} if duration_s else {}  # else each one's default
+    return _BY_DURATION[name](amplitude_v, **given, period_s=period_s)

@@ -130,7 +130,8 @@ class RerunSink:
                 rec.set_sinks(*sinks)
             rec.send_recording_name(self.recording_name)
             self._describe(rec)
-            _warm_up_conversions()
+            timelines(np.zeros(1), np.zeros(1, dtype=np.int64))  # the first block's sends fast
+            rr.Scalars.columns(scalars=np.zeros(1))
         except Exception as exc:  # the SDK's own failures: keep the run going without Rerun
             why = file_failure(exc, self.path)
             if why is not None:  # the file: a fault
@@ -292,12 +293,6 @@ class RerunSink:
         if self.strict:
             raise RecordingError(text)
         warnings.warn(text, RecordingWarning, stacklevel=3)
-
-
-def _warm_up_conversions() -> None:
-    """The column conversions once, so the first block's sends are not slow."""
-    timelines(np.zeros(1), np.zeros(1, dtype=np.int64))
-    rr.Scalars.columns(scalars=np.zeros(1))
 
 
 def timelines(time_s: Iterable[float], ticks: Iterable[int]) -> list[rr.TimeColumn]:
