@@ -1,4 +1,4 @@
-"""Files and formats: traces and their meta files (``trace``, ``read``, ``columns``, ``qrc``), model
+"""Files and formats: traces and their meta files (``trace``, ``read``, ``columns``), model
 files (``modelfile``) and the TOML files' format lines (``tomlfile``).
 
 The package imports nothing: the parser takes the formats' names without loading numpy.

@@ -16,8 +16,7 @@ from typing import TextIO
 import numpy as np
 
 from cartctl.cart import PERIOD_S, SUPPLY_V
-from cartctl.data.columns import check_mapping, plan_columns
-from cartctl.data.qrc import detect, read_qrc5, read_qrc6
+from cartctl.data.columns import check_mapping, detect, plan_columns, read_qrc5, read_qrc6
 from cartctl.data.tomlfile import FORMATS
 from cartctl.data.trace import REQUIRED_COLUMNS, Trace
 from cartctl.errors import DataFileError, DataWarning, MissingFileError
