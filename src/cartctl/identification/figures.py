@@ -83,26 +83,22 @@ def plot_io(
         grid = fig.add_gridspec(rows, len(motors), height_ratios=[1.0, 1.4, 1.4][:rows])
         first = None
         for j, motor in enumerate(motors):
-            voltage, speed = trace.voltage(motor), trace.speed(motor)
+            speed = trace.speed(motor)
             ax_v = fig.add_subplot(grid[0, j], sharex=first)
             first = first or ax_v
-            ax_w = fig.add_subplot(grid[1, j], sharex=first)
-            ax_v.plot(t, voltage, drawstyle="steps-post", color="tab:blue")
-            ax_v.set_title(f"Motor {motor.upper()}")
-            ax_v.set_ylabel("voltage (V)")
+            ax_w = fig.add_subplot(grid[1, j], sharex=first, ylabel="speed (rad/s)")
+            ax_v.plot(t, trace.voltage(motor), drawstyle="steps-post", color="tab:blue")
+            ax_v.set(title=f"Motor {motor.upper()}", ylabel="voltage (V)")
             ax_w.plot(t, speed, color="tab:red", linewidth=1.0)
-            ax_w.set_ylabel("speed (rad/s)")
             ax_v.tick_params(labelbottom=False)
             if zoom_s is None:
                 ax_w.set_xlabel("time (s)")
                 continue
             ax_w.axvspan(*zoom_s, color="0.85", zorder=0)
-            ax_z = fig.add_subplot(grid[2, j])
+            ax_z = fig.add_subplot(grid[2, j], ylabel="speed (rad/s)", xlabel="time (s)")
             inside = (t >= zoom_s[0]) & (t <= zoom_s[1])
             ax_z.plot(t[inside], speed[inside], color="tab:red", linewidth=1.2)
             ax_z.set_xlim(*zoom_s)
-            ax_z.set_ylabel("speed (rad/s)")
-            ax_z.set_xlabel("time (s)")
             ax_z.set_title(f"zoom {zoom_s[0]:g}–{zoom_s[1]:g} s", fontsize=10)
         if len(t) and first is not None:
             first.set_xlim(t[0], t[-1])
@@ -133,16 +129,15 @@ def plot_step_validation(
     with figure(10.0, 7.5) as fig:
         ax_u, ax_y, ax_e = fig.subplots(3, 1, sharex=True, height_ratios=[1.0, 2.6, 1.6])
         ax_u.plot(t, series["voltage"], drawstyle="steps-post", color="tab:blue")
-        ax_u.set_ylabel("voltage (V)")
+        ax_u.set(ylabel="voltage (V)")
         ax_y.plot(t, y, color="black", linewidth=2.0, label="measured")
         for i, (label, given) in enumerate(simulated.items()):
             sim = np.asarray(given, dtype=float)
             fit = fit_percent(y, sim)
             ax_y.plot(t, sim, color=color(i), label=f"{label} (fit {fit:.1f} %)")
             ax_e.plot(t, np.abs(y - sim), color=color(i))
-        ax_y.set_ylabel("speed (rad/s)")
-        ax_e.set_ylabel("|error| (rad/s)")
-        ax_e.set_xlabel("time (s)")
+        ax_y.set(ylabel="speed (rad/s)")
+        ax_e.set(ylabel="|error| (rad/s)", xlabel="time (s)")
         if t.size:
             ax_e.set_xlim(t[0], t[-1])
         fig.legend(*ax_y.get_legend_handles_labels(), loc="outside lower center", ncols=3)
@@ -248,13 +243,12 @@ def plot_pzmap(models: Mapping[str, ArxModel], path: Path, *, title: str) -> Pat
             ax.add_patch(Circle((0, 0), 1.0, fill=False, color="0.4", linestyle="--", lw=1.0))
             ax.axhline(0.0, color="0.5", lw=0.8)
             ax.axvline(0.0, color="0.5", lw=0.8)
-            ax.set_aspect("equal", adjustable="box")
-            ax.set(xlabel="real part", ylabel="imaginary part")
-        ax_full.set(xlim=(-reach, reach), ylim=(-reach, reach))
-        ax_full.set_title("unit circle" if reach < 1.2 else "all roots (unit circle dashed)")
+            ax.set(aspect="equal", adjustable="box", xlabel="real part", ylabel="imaginary part")
+        full = "unit circle" if reach < 1.2 else "all roots (unit circle dashed)"
+        ax_full.set(xlim=(-reach, reach), ylim=(-reach, reach), title=full)
         if zoomed:
-            ax_zoom.set(xlim=zoom[:2], ylim=zoom[2:])
-            ax_zoom.set_title("unit circle" if zoom[1] - zoom[0] > 2.0 else "zoom")
+            what = "unit circle" if zoom[1] - zoom[0] > 2.0 else "zoom"
+            ax_zoom.set(xlim=zoom[:2], ylim=zoom[2:], title=what)
             box = Rectangle((zoom[0], zoom[2]), zoom[1] - zoom[0], zoom[3] - zoom[2], fill=False)
             ax_full.add_patch(box)
         delays: dict[str, int] = {}
