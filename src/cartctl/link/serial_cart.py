@@ -200,10 +200,11 @@ class SerialCart:
         """The loop delay (ticks), measured from the echo without driving the motors.
 
         Answers each cart tick with drive = 0 (the bridge echoes whatever drive says) until
-        ``echoes`` echoes came back; when they are not clear (:class:`~cartctl.link.bridge.EchoDelays`), goes on to
-        ``max_echoes`` and judges them all. The most frequent delay counts; :attr:`probe_delays`
-        keeps the spread; the echo statistics are then cleared for the run. No echo within
-        ``max_ticks`` ticks (not the bridge sketch) raises :class:`~cartctl.errors.PlantError`.
+        ``echoes`` echoes came back; when they are not clear
+        (:class:`~cartctl.link.bridge.EchoDelays`), goes on to ``max_echoes`` and judges them all.
+        The most frequent delay counts; :attr:`probe_delays` keeps the spread; the echo statistics
+        are then cleared for the run. No echo within ``max_ticks`` ticks (not the bridge sketch)
+        raises :class:`~cartctl.errors.PlantError`.
         """
         self.reset()
         self.echo_delays.clear()
