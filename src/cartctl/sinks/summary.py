@@ -81,11 +81,6 @@ def metrics_signal(columns: Mapping[str, NDArray[np.float64]]) -> str:
     return "speed"
 
 
-def trace_duration_s(time_s: NDArray[np.float64]) -> float:
-    """First row's time to last's (s): a run of N ticks ends with its stop row at N·Ts."""
-    return float(time_s[-1] - time_s[0]) if time_s.size else 0.0
-
-
 def trace_metrics(columns: Mapping[str, NDArray[np.float64]], period_s: float) -> dict[str, Any]:
     """The whole summary (without file names) from trace columns (a closed-loop trace's)."""
     for name in ("time_s", "reference_a", "speed_a", "voltage_a", "period_error_us", "compute_us"):
@@ -93,25 +88,29 @@ def trace_metrics(columns: Mapping[str, NDArray[np.float64]], period_s: float) -
             raise InputError(f"the trace has no '{name}' column: it is not a closed-loop run trace")
     t = columns["time_s"]
     signal = metrics_signal(columns)
-    quantum = encoder_quantum_rad_s(period_s)
     return {
         "ticks": int(t.size),
-        "duration_s": trace_duration_s(t),
+        "duration_s": float(t[-1] - t[0]) if t.size else 0.0,  # a run of N ticks: N·Ts
         **timing_metrics(columns["period_error_us"], columns["compute_us"], period_s),
         "metrics_signal": signal,
-        "settling_band": {"fraction": SETTLING_FRACTION, "floor_rad_s": quantum},
+        "settling_band": {
+            "fraction": SETTLING_FRACTION,
+            "floor_rad_s": encoder_quantum_rad_s(period_s),
+        },
         "motors": {
-            m: motor_metrics(
-                t,
-                columns[f"reference_{m}"],
-                columns[f"{signal}_{m}"],
-                columns[f"voltage_{m}"],
-                settling_floor=quantum,
-            )
+            m: _judged(columns, m, columns[f"{signal}_{m}"], period_s)
             for m in ("a", "b")
             if f"reference_{m}" in columns
         },
     }
+
+
+def _judged(
+    columns: Mapping[str, NDArray[np.float64]], m: str, speed: NDArray[np.float64], period_s: float
+) -> dict[str, Any]:
+    """:func:`motor_metrics` of motor ``m`` on ``speed``, settling within one encoder count."""
+    return motor_metrics(columns["time_s"], columns[f"reference_{m}"], speed,
+                         columns[f"voltage_{m}"], settling_floor=encoder_quantum_rad_s(period_s))  # fmt: skip
 
 
 def add_smoothed_metrics(
@@ -122,15 +121,10 @@ def add_smoothed_metrics(
 ) -> None:
     """Add each motor's metrics on its smoothed speed (rad/s, per row) to a
     :func:`trace_metrics` summary, as ``motors.<m>.smoothed``, in the same settling band."""
-    quantum = encoder_quantum_rad_s(period_s)
     for m, speed in speeds_rad_s.items():
         if m in summary["motors"]:
-            summary["motors"][m]["smoothed"] = motor_metrics(
-                columns["time_s"],
-                columns[f"reference_{m}"],
-                np.asarray(speed, dtype=float),
-                columns[f"voltage_{m}"],
-                settling_floor=quantum,
+            summary["motors"][m]["smoothed"] = _judged(
+                columns, m, np.asarray(speed, float), period_s
             )
 
 
