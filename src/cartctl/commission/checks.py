@@ -45,12 +45,11 @@ class Window:
 
 @dataclass(frozen=True)
 class MotorCheck:
-    """One motor's figures from the checks.
-
-    ``pulse_turn_rad`` and ``other_turn_rad`` are its wheel's and the other wheel's rotation during
-    its pulse (rad); ``direction`` is 'forward', 'backward', 'crossed' (only the other encoder
-    moved) or 'still'; ``breakaway_v`` (V) is None if the wheel never turned on the ramp;
-    ``gain_rad_s_v`` is the ramp's end speed over its voltage above breakaway (rad/s per V)."""
+    """One motor's figures from the checks. ``pulse_turn_rad`` and ``other_turn_rad`` are its
+    wheel's and the other wheel's rotation during its pulse (rad); ``direction`` is 'forward',
+    'backward', 'crossed' (only the other encoder moved) or 'still'; ``breakaway_v`` (V) is None if
+    the wheel never turned on the ramp; ``gain_rad_s_v`` is the ramp's end speed over its voltage
+    above breakaway (rad/s per V)."""
 
     motor: str
     pulse_turn_rad: float
@@ -175,13 +174,12 @@ class Amplitude:
 
 
 def choose_amplitude(checks: dict[str, MotorCheck], step_rad_s: float) -> Amplitude:
-    """The square excitation's amplitude (V) from the checks.
-
-    The report's 10 V, at most the voltage at which the faster motor's estimated steady speed is
-    :data:`SPEED_SPAN` × the verification step (identify over the speeds the controller will meet,
-    not beyond, where the cart's nonlinearities differ) and :data:`FULL_SCALE_FRACTION` of the
-    supply; at least :data:`FRICTION_MARGIN` × the larger breakaway voltage, so friction stays small
-    (the floor wins a conflict, within the supply bound)."""
+    """The square excitation's amplitude (V) from the checks. The report's 10 V, at most the voltage
+    at which the faster motor's estimated steady speed is :data:`SPEED_SPAN` × the verification step
+    (identify over the speeds the controller will meet, not beyond, where the cart's nonlinearities
+    differ) and :data:`FULL_SCALE_FRACTION` of the supply; at least :data:`FRICTION_MARGIN` × the
+    larger breakaway voltage, so friction stays small (the floor wins a conflict, within the supply
+    bound)."""
     breakaway = max(c.breakaway_v or 0.0 for c in checks.values())
     gains = [c.gain_rad_s_v for c in checks.values() if c.gain_rad_s_v]
     supply_cap = FULL_SCALE_FRACTION * SUPPLY_V

@@ -48,7 +48,6 @@ def settling_half_width(
 @dataclass(frozen=True)
 class StepInfo:
     """Metrics of one step response: values in the response's units, times in s from the onset.
-
     ``rise_time_s`` is None if 90 % is never reached, ``settling_time_s`` if the last sample is
     outside the band; ``steady_state_error`` (reference − final value) is None without a reference;
     ``step_size`` is (reference or final value) − initial, negative for a step down."""
@@ -132,11 +131,10 @@ def step_rows(
     *,
     interpolate: bool = True,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Overshoot (%) and settling time (s, ``inf`` if not settled) of N responses at once.
-
-    ``z`` (N, n) holds each response as a fraction of its step (0 initial, 1 target) at ``time_s``
-    (from the onset on); ``band`` is the band's half-width as a fraction of the step (at 1 or more
-    nothing is left to settle, which the caller judges)."""
+    """Overshoot (%) and settling time (s, ``inf`` if not settled) of N responses at once. ``z`` (N,
+    n) holds each response as a fraction of its step (0 initial, 1 target) at ``time_s`` (from the
+    onset on); ``band`` is the band's half-width as a fraction of the step (at 1 or more nothing is
+    left to settle, which the caller judges)."""
     excess = np.max(z, axis=1) - 1.0
     overshoot = np.where(excess <= _ROUNDING, 0.0, excess) * 100.0
     outside = np.abs(z - 1.0) > band

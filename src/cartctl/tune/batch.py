@@ -95,7 +95,6 @@ class ArxBatch:
 @dataclass(frozen=True)
 class BatchTrace:
     """One motor's traces over N plants, as ``cartctl run`` logs them (n ticks, then the stop row).
-
     ``time_s`` and ``reference`` (n + 1,) in s and rad/s; ``speed`` (N, n + 1), the measured and
     true speed (rad/s); ``voltage`` (N, n + 1), the command sent (V, 0 in the stop row);
     ``diverged`` (N,), the plants that ran away."""

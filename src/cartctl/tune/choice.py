@@ -226,10 +226,9 @@ def _settings_columns(method: str, results: Sequence[TuneResult]) -> tuple[list[
 
 
 def format_table(method: str, results: Sequence[TuneResult]) -> str:
-    """The plain table, with the reasons of the settings that did not run below it.
-
-    Front marks: ``*`` on the Pareto front over the four run metrics, ``o`` on the front of run
-    settling against run overshoot (the axes of ``--plot``)."""
+    """The plain table, with the reasons of the settings that did not run below it. Front marks:
+    ``*`` on the Pareto front over the four run metrics, ``o`` on the front of run settling against
+    run overshoot (the axes of ``--plot``)."""
     heads, cells = _settings_columns(method, results)
     worst = [r.worst for r in results]
     run = [("run overshoot (%)", "overshoot_percent", 1.0),

@@ -32,13 +32,12 @@ from cartctl.tune.grid import RUN_FAILED, TuneResult, design_request
 
 @dataclass(frozen=True)
 class TuneJob:
-    """A chunk of settings with what they share (picklable, for a worker process).
-
-    ``model`` is designed on and is the sim plant's model; ``plant``/``preset`` as for
-    ``make_plant``; ``reference`` a spec of both motors (rad/s); ``duration_s`` per setting;
-    ``extra_delay_ticks`` the loop delay beyond the model's, which the designs allow for and the
-    scoring plant has; ``items`` the (1-based grid index, axis values); ``design`` request fields
-    every setting shares (``process_noise_std_v`` …)."""
+    """A chunk of settings with what they share (picklable, for a worker process). ``model`` is
+    designed on and is the sim plant's model; ``plant``/``preset`` as for ``make_plant``;
+    ``reference`` a spec of both motors (rad/s); ``duration_s`` per setting; ``extra_delay_ticks``
+    the loop delay beyond the model's, which the designs allow for and the scoring plant has;
+    ``items`` the (1-based grid index, axis values); ``design`` request fields every setting shares
+    (``process_noise_std_v`` …)."""
 
     model: str
     method: str
@@ -163,9 +162,8 @@ def run_grid(
     evaluate: Callable[[Any], list[Row]] = evaluate_chunk,  # type: ignore[assignment]
 ) -> list[Row]:
     """Every setting of ``job`` (a dataclass with ``items``) in grid order, on ``jobs`` processes.
-
-    With 1 process everything runs here; otherwise the first setting runs here (its lazy imports
-    are paid before the workers fork) and the rest in chunks of about a quarter of a worker's share.
+    With 1 process everything runs here; otherwise the first setting runs here (its lazy imports are
+    paid before the workers fork) and the rest in chunks of about a quarter of a worker's share.
     ``progress`` gets the count done so far; ``evaluate`` maps a chunk to rows (default
     :func:`evaluate_chunk`)."""
     items = job.items

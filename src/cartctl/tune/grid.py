@@ -166,12 +166,11 @@ def worst_metrics(motors: Mapping[str, Mapping[str, Any]]) -> dict[str, float | 
 
 @dataclass(frozen=True)
 class TuneResult:
-    """One grid setting: what was asked, whether it was designed and ran, and how it ran.
-
-    ``index`` is the 1-based place in the grid (first axis slowest), which ``--choose`` takes;
-    ``settings`` the axis values by axis name; ``reason`` why it is infeasible (refused design or
-    failed run); ``motors`` each motor's run summary entry (as ``run --json``); ``pareto`` and
-    ``pareto_plot`` mark the fronts over :data:`METRICS` and :data:`PLOT_METRICS`."""
+    """One grid setting: what was asked, whether it was designed and ran, and how it ran. ``index``
+    is the 1-based place in the grid (first axis slowest), which ``--choose`` takes; ``settings``
+    the axis values by axis name; ``reason`` why it is infeasible (refused design or failed run);
+    ``motors`` each motor's run summary entry (as ``run --json``); ``pareto`` and ``pareto_plot``
+    mark the fronts over :data:`METRICS` and :data:`PLOT_METRICS`."""
 
     index: int
     settings: dict[str, float]

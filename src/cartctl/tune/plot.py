@@ -58,11 +58,10 @@ def place_labels(
     color: str = "tab:red",
 ) -> list[str]:
     """Annotate each point (x, y, text; data coordinates) where its text overlaps nothing, and
-    return the texts left without a place.
-
-    Candidates are offsets of 7 to 90 pt in 16 directions, the first free one taken (with a thin
-    line when 18 pt or more away): inside the axes, clear of the labels placed so far and of the
-    ``obstacles`` (x, y, radius in pt). Draws the figure once to fix its layout."""
+    return the texts left without a place. Candidates are offsets of 7 to 90 pt in 16 directions,
+    the first free one taken (with a thin line when 18 pt or more away): inside the axes, clear of
+    the labels placed so far and of the ``obstacles`` (x, y, radius in pt). Draws the figure once to
+    fix its layout."""
     from matplotlib.transforms import Bbox
 
     fig.canvas.draw()
@@ -113,11 +112,10 @@ def _unplaced_note(texts: Sequence[str]) -> str:
 
 def _finish(fig: Any, ax: Any, front: Sequence[tuple[float, float, int]],
             everything: Sequence[tuple[float, float]], path: str, notes: Sequence[str]) -> None:  # fmt: skip
-    """Ring and number the front, put the legend and notes under the axes, and save.
-
-    The labels are placed once the legend is in place (it moves the axes). When some find no room,
-    a legend line names them and they are placed again (the new line moves the axes once more); its
-    text then lists the final ones, so the layout holds."""
+    """Ring and number the front, put the legend and notes under the axes, and save. The labels are
+    placed once the legend is in place (it moves the axes). When some find no room, a legend line
+    names them and they are placed again (the new line moves the axes once more); its text then
+    lists the final ones, so the layout holds."""
     if front:
         ax.scatter([x for x, _, _ in front], [y for _, y, _ in front], s=RING_AREA_PT2,
                    facecolors="none", edgecolors="tab:red", linewidths=1.5, zorder=4,

@@ -42,12 +42,11 @@ SUMMARY_KEYS = {"overshoot_percent": "overshoot_percent", "settling_time_s": "se
 
 
 def step_metrics(trace: BatchTrace, settling_floor: float) -> dict[str, FloatArray]:
-    """Per plant, the run summary's figures of one motor (``sinks.summary.motor_metrics``).
-
-    On the first reference step from rest: overshoot (%) and settling time (s) in the band max(2 %
-    of the step, ``settling_floor``); over the whole trace the RMS error (rad/s) and the peak
-    |voltage| (V). Where the summary has None: ``inf`` settling for a run that never settles, NaN
-    for an undefined figure; rows that ran away get ``inf`` for all but the voltage."""
+    """Per plant, the run summary's figures of one motor (``sinks.summary.motor_metrics``). On the
+    first reference step from rest: overshoot (%) and settling time (s) in the band max(2 % of the
+    step, ``settling_floor``); over the whole trace the RMS error (rad/s) and the peak |voltage|
+    (V). Where the summary has None: ``inf`` settling for a run that never settles, NaN for an
+    undefined figure; rows that ran away get ``inf`` for all but the voltage."""
     t, ref, y = trace.time_s, trace.reference, trace.speed
     n = y.shape[0]
     with np.errstate(all="ignore"):
@@ -75,13 +74,12 @@ def step_metrics(trace: BatchTrace, settling_floor: float) -> dict[str, FloatArr
 
 @dataclass(frozen=True)
 class RobustScore:
-    """One design over the plants.
-
-    ``figures[metric]`` holds ``nominal`` (the real loop on the model), ``worst``,
-    ``worst_sampled``, ``p5``, ``p50`` and ``p95`` (module docstring). ``plants`` counts the sampled
-    plants, ``unsettled`` the plants (nominal and sampled) on which a motor never settles,
-    ``diverged`` those that ran away (speed beyond 10⁶ rad/s). ``physics`` is the physics preset's
-    entry and ``actuation`` one per actuation timing (:func:`loop_entry`, with ``actuation_ms``)."""
+    """One design over the plants. ``figures[metric]`` holds ``nominal`` (the real loop on the
+    model), ``worst``, ``worst_sampled``, ``p5``, ``p50`` and ``p95`` (module docstring). ``plants``
+    counts the sampled plants, ``unsettled`` the plants (nominal and sampled) on which a motor never
+    settles, ``diverged`` those that ran away (speed beyond 10⁶ rad/s). ``physics`` is the physics
+    preset's entry and ``actuation`` one per actuation timing (:func:`loop_entry`, with
+    ``actuation_ms``)."""
 
     figures: dict[str, dict[str, float | None]]
     plants: int
