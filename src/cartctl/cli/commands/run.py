@@ -210,13 +210,12 @@ def _run_loop(
     from cartctl.runtime.realtime import gc_paused
 
     plant, period_s, n = prepared.plant, prepared.period_s, prepared.ticks
-    clocked = isinstance(plant, ClockedPlant)
     clock = SimulatedClock() if args.fast else MonotonicClock()
     loop = ControlLoop(plant, prepared.controllers, prepared.references, sinks,
                        now_s=clock.now_s, voltage_limit_v=prepared.voltage_limit_v,
                        period_s=period_s)  # fmt: skip
     executor: Any
-    if isinstance(plant, ClockedPlant):  # clocked
+    if clocked := isinstance(plant, ClockedPlant):
         executor = CartClockedExecutor(plant, max_ticks=n, now_s=clock.now_s,
                                        compute_us=lambda: loop.last_compute_us)  # fmt: skip
     elif args.fast:  # ticks back to back: nothing that only real time needs
@@ -274,9 +273,8 @@ def _summary(
     from cartctl.sinks.summary import mark_incomplete, trace_metrics
 
     summary = trace_metrics(memory.arrays(), prepared.period_s)
-    timing = dict(timing)
-    del timing["duration_s"]  # the executor's clock span; the trace's own duration stays
-    summary.update(timing)
+    # timing's duration_s is the executor's clock span; the trace's own duration stays
+    summary.update({key: value for key, value in timing.items() if key != "duration_s"})
     summary["ticks"] = loop.state.rows  # as the trace and the recording: the stop row included
     link_summary = getattr(prepared.plant, "link_summary", None)
     if link_summary is not None:
@@ -310,13 +308,11 @@ def _report(args: argparse.Namespace, summary: dict[str, Any], loop: ControlLoop
         print(f"cartctl run: warning: {problem}", file=sys.stderr)
     warn_host_losses(summary.get("link"), "run")
     warn_delay_change(summary.get("link"), "run")
-    if loop.state.incomplete:  # one line: each file and why, the other failure, the motors
-        failed = [str(e) for e in loop.state.incomplete] + [loop.state.failure or ""]
-        stopped = "; the motors were stopped" if loop.state.zero_volts_sent else ""
+    state = loop.state
+    if state.incomplete or state.failure:  # one line: each file and why, the failure, the motors
+        failed = [str(e) for e in state.incomplete] + [state.failure or ""]
+        stopped = "; the motors were stopped" if state.incomplete and state.zero_volts_sent else ""
         print(f"cartctl run: error: {'; '.join(f for f in failed if f)}{stopped}", file=sys.stderr)
-        return 1
-    if loop.state.failure:
-        print(f"cartctl run: error: {loop.state.failure}", file=sys.stderr)
         return 1
     if loop.state.interrupted:
         signum = stopping.received()
