@@ -197,15 +197,13 @@ def _warn_spacing(table: Table, time_s: np.ndarray) -> None:
     )
 
 
+@dataclass
 class Where:
     """Where row i of a file's data is: its line, or its row number when lines are unknown."""
 
-    def __init__(
-        self, path: Path, *, row_lines: list[int] | None = None, header_line: int | None = None
-    ) -> None:
-        self.path = path
-        self.row_lines = row_lines
-        self.header_line = header_line
+    path: Path
+    row_lines: list[int] | None = None
+    header_line: int | None = None  # the lines are read from the file when first asked
 
     def __call__(self, i: int) -> tuple[int | None, str]:
         if self.row_lines is None and self.header_line is not None:
