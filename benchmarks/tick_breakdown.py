@@ -153,13 +153,11 @@ def measure(
         "sink rerun",
     )  # estimator: in controller
     whole_loop = samples["loop"]
-    samples["tick"] = (np.frombuffer(executor._compute_s, dtype=np.float64) * 1e6)[
-        : whole_loop.size
-    ]
+    samples["tick"] = np.frombuffer(executor._compute_us, dtype=np.float64)[: whole_loop.size]
     samples["loop"] = whole_loop - sum(samples[p] for p in inside)
     samples["controller"] = samples["controller"] - samples["estimator"]
     samples["executor"] = samples["tick"] - whole_loop  # with this script's bookkeeping
-    samples["period error"] = (np.frombuffer(executor._period_error_s, dtype=np.float64) * 1e6)[
+    samples["period error"] = np.frombuffer(executor._period_error_us, dtype=np.float64)[
         : whole_loop.size
     ]
     print(f"  ({scheduling}; {stats.ticks} ticks, {stats.misses} deadline misses)")

@@ -1,27 +1,17 @@
 """The loop's heartbeat: clocks, and the executors that call a tick function on their grid.
 
-Time enters the runtime only through a :class:`Clock`: :class:`MonotonicClock` for real time,
-:class:`SimulatedClock` (never sleeps) for tests. :class:`PeriodicExecutor` runs on either, so its
-per-tick work is a few attribute stores and two appends. With ``t0`` the clock's time when ``run``
-starts::
+Time enters the runtime only through a :class:`Clock` (:class:`MonotonicClock`, or
+:class:`SimulatedClock` for tests). :class:`PeriodicExecutor`, with ``t0`` the clock at ``run``:
+tick k waits for grid point m's deadline ``t0 + m * period_s`` (computed, never accumulated);
+its period error is start − deadline, its compute time end − start; it misses when it ends after
+the next grid point. The next tick then starts at the first grid point not before the end, the
+points passed over counted as skipped and the miss logged with its tick index (so ``grid_index``
+may run ahead of k). The last tick is not checked for a miss.
 
-    grid point m       deadline_m = t0 + m * period_s        (computed, never accumulated: no drift)
-    tick k             waits for its deadline, then calls tick(k); k = 0, 1, 2, ... counts ticks
-    period error       start_k - deadline                    (>= 0 on a real clock)
-    compute time       end_k - start_k                       (on the same clock)
-    deadline miss      end_k > the next grid point           (the tick overran its period)
-
-After a miss the next tick starts at the first grid point not before ``end_k``; the points passed
-over are counted as skipped deadlines and the miss is logged (logger ``cartctl.runtime.executor``)
-and recorded with its tick index, so :attr:`PeriodicExecutor.grid_index` may run ahead of k (tick
-k sits at ``grid_index * period_s`` after ``t0``). The last tick is not checked for a miss.
-
-Against a serial cart, :class:`CartClockedExecutor` starts tick k when the cart's k-th GPIO
-arrives (the cart ticks every 10 ms and the host answers each). There the **period error** of
-tick k is how much later its GPIO arrived than the earliest-arriving tick of the run predicts (the
-line's and the host's jitter, not the constant 5.2 ms transmission); **compute** runs from the
-GPIO's arrival to the command sent; a **miss** is a tick after which the host had fallen behind,
-so older GPIOs were dropped to answer the freshest one.
+:class:`CartClockedExecutor` starts tick k when the cart's k-th GPIO arrives. Its period error is
+how much later that GPIO arrived than the run's earliest-arriving tick predicts (jitter, not the
+constant 5.2 ms transmission); compute runs from the arrival to the command sent; a miss is a
+tick after which older GPIOs were dropped to answer the freshest one.
 """
 
 from __future__ import annotations
@@ -196,7 +186,33 @@ class TimingStats:
         }  # fmt: skip
 
 
-class PeriodicExecutor:
+class _Recorder:
+    """The per-tick period errors and compute times (µs) of a run, its misses and its span."""
+
+    period_s: float
+
+    def _clear(self) -> None:
+        self._period_error_us = array("d")
+        self._compute_us = array("d")
+        self._miss_ticks: list[int] = []
+        self._skipped = 0
+        self.t0_s = self._end_s = math.nan
+
+    def _skipped_deadlines(self) -> int:
+        return self._skipped
+
+    def stats(self) -> TimingStats:
+        """Statistics of the current or last run, over the ticks completed so far."""
+        duration = 0.0 if math.isnan(self._end_s) else self._end_s - self.t0_s
+        return TimingStats.from_samples(
+            np.frombuffer(self._period_error_us, dtype=np.float64),
+            np.frombuffer(self._compute_us, dtype=np.float64),
+            period_s=self.period_s, duration_s=duration,
+            miss_ticks=tuple(self._miss_ticks), skipped_deadlines=self._skipped_deadlines(),
+        )  # fmt: skip
+
+
+class PeriodicExecutor(_Recorder):
     """Runs a tick function every ``period_s`` (s) on absolute deadlines of ``clock``.
 
     ``max_ticks``: stop after this many ticks (None: until the tick function returns False).
@@ -218,17 +234,10 @@ class PeriodicExecutor:
                 f"clock must provide now_s() and wait_until(deadline_s), got {type(clock).__name__}"
             )
         self.clock = clock
-        self.t0_s = self.deadline_s = self.start_s = math.nan
+        self.deadline_s = self.start_s = math.nan
         self.tick_index = self.grid_index = 0
         self.period_error_us = 0.0
-        self._reset()
-
-    def _reset(self) -> None:
-        self._period_error_s = array("d")
-        self._compute_s = array("d")
-        self._miss_ticks: list[int] = []
-        self._skipped = 0
-        self._end_s = math.nan
+        self._clear()
 
     def run(
         self, tick: Callable[[int], bool], idle: Callable[[], None] | None = None
@@ -239,10 +248,10 @@ class PeriodicExecutor:
         done). ``idle`` runs after each tick, once its compute time is taken, before the wait:
         work that is not the tick's (past the deadline, it shows as the next period error).
         """
-        self._reset()
+        self._clear()
         now, wait_until = self.clock.now_s, self.clock.wait_until
         period, limit = self.period_s, self.max_ticks
-        err_append, comp_append = self._period_error_s.append, self._compute_s.append
+        err_append, comp_append = self._period_error_us.append, self._compute_us.append
         t0 = self.t0_s = now()
         k = m = 0
         try:
@@ -250,14 +259,13 @@ class PeriodicExecutor:
                 deadline = t0 + m * period
                 wait_until(deadline)
                 start = now()
-                err = start - deadline
                 self.tick_index, self.grid_index = k, m
                 self.deadline_s, self.start_s = deadline, start
-                self.period_error_us = err * 1e6
+                self.period_error_us = err_us = (start - deadline) * 1e6
                 keep_going = tick(k)
                 end = self._end_s = now()
-                err_append(err)
-                comp_append(end - start)
+                err_append(err_us)
+                comp_append((end - start) * 1e6)
                 if idle is not None:
                     idle()
                 k += 1
@@ -293,18 +301,8 @@ class PeriodicExecutor:
             )  # fmt: skip
         return m
 
-    def stats(self) -> TimingStats:
-        """Statistics of the current or last run, over the ticks completed so far."""
-        duration = 0.0 if math.isnan(self._end_s) else self._end_s - self.t0_s
-        return TimingStats.from_samples(
-            np.frombuffer(self._period_error_s, dtype=np.float64) * 1e6,
-            np.frombuffer(self._compute_s, dtype=np.float64) * 1e6,
-            period_s=self.period_s, duration_s=duration,
-            miss_ticks=tuple(self._miss_ticks), skipped_deadlines=self._skipped,
-        )  # fmt: skip
 
-
-class CartClockedExecutor:
+class CartClockedExecutor(_Recorder):
     """Runs ``tick(k)`` once per cart tick until it returns False or ``max_ticks`` ran, once the
     plant's first measurement has arrived; ``compute_us`` gives the loop's compute time of the tick
     just run (µs), ``now_s`` the clock the plant stamps arrivals with (``time.perf_counter``)."""
@@ -323,16 +321,16 @@ class CartClockedExecutor:
         self.compute_us = compute_us
         self.now_s = now_s
         self.period_error_us = self.start_s = self.time_s = 0.0
-        self._errors_us = array("d")
-        self._compute = array("d")
-        self._misses: list[int] = []
-        self._t0 = self._end = math.nan
+        self._clear()
+
+    def _skipped_deadlines(self) -> int:
+        return int(getattr(self.plant, "skipped_ticks", 0))
 
     def run(self, tick: Callable[[int], bool]) -> TimingStats:
         """Run the ticks; an exception from ``tick`` propagates (:meth:`stats` has the ticks done)."""
         plant, period = self.plant, self.period_s
         anchor = math.inf
-        self._t0 = plant.arrival_s
+        self.t0_s = plant.arrival_s
         for k in range(self.max_ticks):
             arrival = plant.arrival_s
             base = arrival - plant.tick_index * period
@@ -340,25 +338,13 @@ class CartClockedExecutor:
             self.period_error_us = (base - anchor) * 1e6
             self.start_s = arrival
             self.time_s = plant.tick_index * period
-            skipped_before = getattr(plant, "skipped_ticks", 0)
+            skipped_before = self._skipped_deadlines()
             keep_going = tick(k)
-            self._end = self.now_s()
-            self._errors_us.append(self.period_error_us)
-            self._compute.append(self.compute_us())
-            if getattr(plant, "skipped_ticks", 0) > skipped_before:
-                self._misses.append(k)
+            self._end_s = self.now_s()
+            self._period_error_us.append(self.period_error_us)
+            self._compute_us.append(self.compute_us())
+            if self._skipped_deadlines() > skipped_before:
+                self._miss_ticks.append(k)
             if not keep_going:
                 break
         return self.stats()
-
-    def stats(self) -> TimingStats:
-        """Statistics over the ticks completed so far."""
-        duration = 0.0 if math.isnan(self._end) else self._end - self._t0
-        return TimingStats.from_samples(
-            np.frombuffer(self._errors_us, dtype=np.float64),
-            np.frombuffer(self._compute, dtype=np.float64),
-            period_s=self.period_s,
-            duration_s=duration,
-            miss_ticks=tuple(self._misses),
-            skipped_deadlines=getattr(self.plant, "skipped_ticks", 0),
-        )
