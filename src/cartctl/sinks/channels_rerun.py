@@ -18,8 +18,9 @@ from cartctl.sinks.rerun_layout import (
     TIME_COLUMN,
     Range,
     SeriesStyle,
+    axis,
     collapsed,
-    padded_range,
+    span_of,
 )
 from cartctl.sinks.rerun_sink import RerunSink, timelines
 
@@ -86,10 +87,8 @@ def review_blueprint(
         return hits
 
     def view(name: str, chosen: list[str], margin: float = 0.1) -> rrb.TimeSeriesView:
-        seen = [extremes[f"{GPIO_ROOT}/{label}"] for label in chosen]
-        lo, hi = min(v[0] for v in seen), max(v[1] for v in seen)
-        axis = rrb.ScalarAxis(range=padded_range(lo, hi, margin=margin), zoom_lock=False)
-        return _channels_view(name, chosen, axis)
+        paths = [f"{GPIO_ROOT}/{label}" for label in chosen]
+        return _channels_view(name, chosen, axis(span_of(extremes, paths, margin=margin)))
 
     columns = []
     for m in ("a", "b"):

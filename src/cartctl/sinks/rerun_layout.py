@@ -6,7 +6,8 @@ above the voltage; the loop's timing beneath.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+import functools
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -104,7 +105,7 @@ def run_ranges(references: dict[str, tuple[float, float]], voltage_limit_v: floa
     )
 
 
-def _axis(ranged: Range | None) -> rrb.ScalarAxis | None:
+def axis(ranged: Range | None) -> rrb.ScalarAxis | None:
     return None if ranged is None else rrb.ScalarAxis(range=ranged, zoom_lock=False)
 
 
@@ -120,20 +121,20 @@ def blueprint(
             origin=f"/motor/{m}",
             contents=["$origin/**", "- $origin/voltage"],
             plot_legend=rrb.PlotLegend(corner="RightBottom", visible=True),
-            axis_y=_axis(ranges.speed_rad_s.get(m)),
+            axis_y=axis(ranges.speed_rad_s.get(m)),
         )
         voltage = rrb.TimeSeriesView(
             name=f"Motor {m.upper()}: voltage (V)",
             origin=f"/motor/{m}/voltage",
             plot_legend=rrb.PlotLegend(visible=False),
-            axis_y=_axis(ranges.voltage_v.get(m)),
+            axis_y=axis(ranges.voltage_v.get(m)),
         )
         columns.append(rrb.Vertical(speed, voltage, row_shares=[3, 2]))
     timing = rrb.TimeSeriesView(
         name="Loop timing (µs)",
         origin="/loop",
         plot_legend=rrb.PlotLegend(corner="RightTop", visible=True),
-        axis_y=_axis(ranges.timing_us),
+        axis_y=axis(ranges.timing_us),
     )
     return collapsed(rrb.Vertical(rrb.Horizontal(*columns), timing, row_shares=[3, 1]))
 
@@ -148,15 +149,17 @@ def collapsed(layout: rrb.Container) -> rrb.Blueprint:
     )
 
 
+def span_of(extremes: Mapping[str, Range], paths: Iterable[str], **kwargs: float) -> Range | None:
+    """:func:`padded_range` over the (min, max) recorded of those ``paths`` that have one."""
+    seen = [extremes[p] for p in paths if p in extremes]
+    if not seen:
+        return None
+    return padded_range(min(lo for lo, _ in seen), max(hi for _, hi in seen), **kwargs)
+
+
 def data_ranges(extremes: dict[str, Range], motors: Sequence[str]) -> PlotRanges:
     """The plots' ranges from entity path → (min, max) recorded, with 10 % to spare."""
-
-    def over(paths: Sequence[str], **kwargs: float) -> Range | None:
-        seen = [extremes[p] for p in paths if p in extremes]
-        if not seen:
-            return None
-        return padded_range(min(lo for lo, _ in seen), max(hi for _, hi in seen), **kwargs)
-
+    over = functools.partial(span_of, extremes)
     speeds = ("reference", "speed", "estimate", "true_speed", "smoothed_speed")
     return PlotRanges(
         speed_rad_s={
