@@ -1,22 +1,18 @@
 """The physical cart simulator: two DC motors with friction, driven and sensed like the real cart.
 
-A plant for ``excite`` and ``run --plant physics`` (and behind the virtual serial cart). Unlike the
-ARX plant it is not linear: Coulomb friction with stiction, saturation, PWM and encoder
-quantisation, and the firmware's timing. Per motor, at the wheel (report eq. 1 plus dry friction)::
+Not linear, unlike the ARX plant: per motor, at the wheel (report eq. 1 plus dry friction)::
 
     J dω/dt + b ω + τ_c sign(ω) = K i          L di/dt + R i = v − K ω
 
 Zero volts brakes (the H-bridge shorts the terminals: ``v = 0``, not ``i = 0``). The speed of tick
-k is the whole-count encoder difference between ticks k−1 and k times ``(2π/1792) / Ts``: the
-average speed over the last tick, quantised to 0.35 rad/s. A command is saturated to ±12 V,
-rounded to the nearest 12/255 V PWM step, and lands ``CartParams.actuation_delay_s`` after its tick
-(3 ms in the presets, a calibration: docs/plants.md says why), so the loop delay is one tick.
+k is the whole-count encoder difference between ticks k−1 and k times ``(2π/1792) / Ts``. A
+command is saturated to ±12 V, rounded to the nearest 12/255 V PWM step, and lands
+``CartParams.actuation_delay_s`` after its tick (docs/plants.md), so the loop delay is one tick.
 
-Integration: with v and the friction torque held, (i, ω, θ) is linear, so each substep (1 ms by
-default) applies the exact zero-order-hold map (a matrix exponential, computed once). When ω
-reaches zero inside a substep, or a stuck wheel's drive torque passes τ_c, the substep switches to
-the closed-form 2×2 exponential and finds the crossing by Newton's method: friction events are
-exact in time, without chattering around zero speed.
+With v and the friction torque held, (i, ω, θ) is linear: each substep applies the exact
+zero-order-hold map (a matrix exponential, computed once). When ω reaches zero inside a substep,
+or a stuck wheel's drive torque passes τ_c, the closed-form 2×2 exponential and Newton's method
+find the crossing: friction events are exact in time, without chattering around zero speed.
 """
 
 from __future__ import annotations
@@ -231,8 +227,8 @@ class PhysicsPlant:
         self.params: CartParams = params
         self.period_s: float = params.period_s
         h = params.period_s / params.substeps
-        self._wheel_a = _Wheel(params.motor_a, params.added_inertia_kg_m2, params.rolling_n_m, h)
-        self._wheel_b = _Wheel(params.motor_b, params.added_inertia_kg_m2, params.rolling_n_m, h)
+        self._wheels = tuple(_Wheel(m, params.added_inertia_kg_m2, params.rolling_n_m, h)
+                             for m in (params.motor_a, params.motor_b))  # fmt: skip
         self._rad_per_count = 2.0 * math.pi / params.counts_per_rev
         self._speed_per_count = self._rad_per_count / params.period_s
         self._delay_substeps = round(params.actuation_delay() / h)
@@ -249,11 +245,8 @@ class PhysicsPlant:
     def reset(self, *, position_rad: tuple[float, float] = (0.0, 0.0)) -> Measurement:
         """Both wheels at rest, no current, 0 V; the measurement of tick 0. ``position_rad``
         places the wheels between encoder edges, as a real wheel's start angle does."""
-        self._ia = self._wa = 0.0
-        self._ib = self._wb = 0.0
-        self._tha, self._thb = (float(x) for x in position_rad)
-        self._count_a = math.floor(self._tha / self._rad_per_count)
-        self._count_b = math.floor(self._thb / self._rad_per_count)
+        self._state = [(0.0, 0.0, float(th)) for th in position_rad]  # (i, ω, θ) per wheel
+        self._counts = [math.floor(th / self._rad_per_count) for _, _, th in self._state]
         self._applied = (0.0, 0.0)
         self._driving = (0.0, 0.0)
         self.tick: int = 0
@@ -261,32 +254,25 @@ class PhysicsPlant:
 
     def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
         """Command voltages (V) at this tick (they land ``actuation_delay_s`` later; non-finite
-        is 0 V), advance one tick, and measure the next tick."""
+        is 0 V), advance one tick, and measure the next tick: io() reads the encoders, the speed
+        is the count difference over the tick."""
         n, nd = self.params.substeps, self._delay_substeps
-        va, vb = self._applied  # on the bridges since the previous command landed
-        ca, cb = self.condition_voltage(voltage_a_v), self.condition_voltage(voltage_b_v)
-        sa, sb = self._sign  # -1 for a motor whose leads are swapped
-        ia, wa, tha = _advance(self._wheel_a, self._ia, self._wa, self._tha, sa * va, nd)
-        ib, wb, thb = _advance(self._wheel_b, self._ib, self._wb, self._thb, sb * vb, nd)
-        if nd < n:  # the new command lands inside this tick
-            ia, wa, tha = _advance(self._wheel_a, ia, wa, tha, sa * ca, n - nd)
-            ib, wb, thb = _advance(self._wheel_b, ib, wb, thb, sb * cb, n - nd)
-        self._ia, self._wa, self._tha = ia, wa, tha
-        self._ib, self._wb, self._thb = ib, wb, thb
-        self._driving = (va, vb)
-        self._applied = (ca, cb)
-        # io() of the new tick: read the encoders; the speed is the count difference over the tick
-        count_a = math.floor(tha / self._rad_per_count)
-        count_b = math.floor(thb / self._rad_per_count)
-        speed_a = (count_a - self._count_a) * self._speed_per_count
-        speed_b = (count_b - self._count_b) * self._speed_per_count
-        self._count_a, self._count_b = count_a, count_b
+        commands = (self.condition_voltage(voltage_a_v), self.condition_voltage(voltage_b_v))
+        speeds = []
+        for m, (wheel, sign) in enumerate(zip(self._wheels, self._sign, strict=True)):
+            i, w, th = _advance(wheel, *self._state[m], sign * self._applied[m], nd)
+            if nd < n:  # the new command lands inside this tick
+                i, w, th = _advance(wheel, i, w, th, sign * commands[m], n - nd)
+            self._state[m] = (i, w, th)
+            count = math.floor(th / self._rad_per_count)
+            speeds.append((count - self._counts[m]) * self._speed_per_count)
+            self._counts[m] = count
+        self._driving, self._applied = self._applied, commands
         if self._rng is not None:
             noise = self._rng.standard_normal(2) * self.params.noise_std_rad_s
-            speed_a += float(noise[0])
-            speed_b += float(noise[1])
+            speeds = [speed + float(e) for speed, e in zip(speeds, noise, strict=True)]
         self.tick += 1
-        return Measurement(speed_a, speed_b, wa, wb)
+        return Measurement(speeds[0], speeds[1], self._state[0][1], self._state[1][1])
 
     def close(self) -> None:
         """Command zero volts (the motors brake); there is no resource to release."""
@@ -308,21 +294,18 @@ class PhysicsPlant:
 
     @property
     def last_interval_voltage_v(self) -> tuple[float, float]:
-        """What drove the motors at the start of the tick just ended, until the newest command
-        landed (V)."""
+        """What drove the motors in the tick just ended until the newest command landed (V)."""
         return self._driving
 
     @property
     def position_rad(self) -> tuple[float, float]:
         """True wheel positions (rad) since the last reset (the encoder floors these)."""
-        return (self._tha, self._thb)
+        return (self._state[0][2], self._state[1][2])
 
     @property
     def encoder_counts(self) -> tuple[int, int]:
-        """Encoder counts at the latest tick."""
-        return (self._count_a, self._count_b)
+        return (self._counts[0], self._counts[1])
 
     @property
     def armature_current_amp(self) -> tuple[float, float]:
-        """True armature currents (A) now."""
-        return (self._ia, self._ib)
+        return (self._state[0][0], self._state[1][0])
