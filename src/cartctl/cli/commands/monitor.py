@@ -12,6 +12,7 @@ import signal
 import sys
 import threading
 from collections.abc import Iterator
+from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -20,8 +21,7 @@ from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import InputError, OutputError
 
 if TYPE_CHECKING:  # cartctl.plants loads numpy and scipy: imported where used, not for --help
-    from cartctl.link.cart_link import CartLink
-    from cartctl.link.cart_monitor import Monitor, MonitorResult
+    from cartctl.link.cart_monitor import Monitor
 
 DEFAULT_REFERENCE = "step:10"
 _STOPPED = {"duration": "after --duration", "interrupted": "by Ctrl-C", "fault": "by a line fault"}
@@ -197,8 +197,18 @@ def run(args: argparse.Namespace) -> int:
         link.close()
         if cart is not None:
             cart.stop()
-    summary = _summary(result, link, args.plant, monitor, csv_path,
-                       rrd_path if rerun is not None else None)  # fmt: skip
+    stats = link.stats.to_dict()
+    stats.pop("generation_b_frames", None)
+    summary = {
+        **asdict(result),
+        "plant": args.plant,
+        "port": link.port,
+        "firmware": monitor.firmware.name if monitor.firmware is not None else None,
+        "labels": list(monitor.labels or ()),
+        "link": stats,
+        "trace": str(csv_path),
+        "recording": str(rrd_path) if rerun is not None else None,
+    }
     print(dumps(summary) if args.json else _format(summary))
     if result.failure:
         print(f"cartctl monitor: error: {result.failure}", file=sys.stderr)
@@ -218,33 +228,6 @@ def _close_all(sinks: list[Any]) -> None:
             failed = failed or exc
     if failed is not None:
         raise failed
-
-
-def _summary(
-    result: MonitorResult,
-    link: CartLink,
-    plant: str,
-    monitor: Monitor,
-    csv_path: Path,
-    rrd_path: Path | None,
-) -> dict[str, Any]:
-    stats = link.stats.to_dict()
-    stats.pop("generation_b_frames", None)
-    return {
-        "frames": result.frames,
-        "duration_s": result.duration_s,
-        "stopped": result.stopped,
-        "failure": result.failure,
-        "plant": plant,
-        "port": link.port,
-        "firmware": monitor.firmware.name if monitor.firmware is not None else None,
-        "labels": list(monitor.labels or ()),
-        "print_lines": result.print_lines,
-        "events": result.events,
-        "link": stats,
-        "trace": str(csv_path),
-        "recording": str(rrd_path) if rrd_path is not None else None,
-    }
 
 
 def _format(summary: dict[str, Any]) -> str:

@@ -13,7 +13,8 @@ from typing import TYPE_CHECKING, Any
 
 import cartctl.cli.commands.tune_checks as checks
 from cartctl.choices import MAX_TUNE_SETTINGS
-from cartctl.cli.commands.options import FORMS, MAX_JOBS, seed
+from cartctl.cli.commands.options import FORMS, MAX_JOBS, check_outputs, seed
+from cartctl.cli.commands.validate import check_plot_path
 from cartctl.design.request import MAX_EXTRA_DELAY_TICKS, METHODS  # light: no numpy
 from cartctl.errors import InputError
 
@@ -282,9 +283,6 @@ def run(args: argparse.Namespace) -> int:
     settings = tuning.grid_settings(tuning.parse_grid(args.grid, args.method))
     checks.check_work(args, len(settings))
     checks.check_inputs(args, len(settings))
-    from cartctl.cli.commands.options import check_outputs
-    from cartctl.cli.commands.validate import check_plot_path
-
     check_outputs(args, files=("out", "plot"))
     check_plot_path(args.plot)  # a PNG: matplotlib would refuse another suffix after the work
 
