@@ -1,12 +1,9 @@
-"""Commissioning, stage 4: robust tuning on the identified model, and the controller chosen.
-
-``cartctl tune --robust``'s machinery over a small pole-placement grid (:data:`GRID`), scored on
-the model, on :data:`PLANTS` plants of its uncertainty and on the model with its commands landing
-later (:func:`cartctl.tune.batch.later_command`) instead of the physics preset (the course's
-cart, not this one); then ``tune --choose best``'s rule within :data:`MAX_OVERSHOOT_PERCENT` and
-:data:`MAX_SETTLING_S`, passing over a setting whose controller file ``cartctl run`` would refuse.
-The reasoning (why these plants, why these bounds) is in docs/commission.md.
-"""
+"""Commissioning, stage 4: ``cartctl tune --robust``'s machinery over a small pole-placement grid
+(:data:`GRID`) on the identified model, scored on the model, :data:`PLANTS` plants of its
+uncertainty and the model with its commands landing later
+(:func:`~cartctl.tune.batch.later_command`, not the course's physics preset); then ``tune --choose
+best``'s rule within the bounds, passing over a setting whose controller file ``cartctl run`` would
+refuse. Why these plants and bounds: docs/commission.md."""
 
 from __future__ import annotations
 

@@ -1,18 +1,9 @@
-"""N ARX plants at once for ``cartctl tune --robust`` (docs/tuning.md): drawn from a model file's
-uncertainty, then run together against one designed controller.
-
-The draw, per plant: θ moved entry by entry by δ ~ uniform[−σ, +σ] (σ the file's ``theta_std``; a
-motor without one keeps its θ), b scaled by g ~ uniform[0.9, 1.1] per motor, nk shifted by −1, 0 or
-+1 tick (at least 1); unstable θ draws are redrawn and counted. One generator seeded with
-``--seed``, in a fixed order, so a seed gives the same plants whatever the worker count.
-
-The loop: one Python loop over the ticks, each quantity an array over the plants, doing operation
-for operation what a tick of ``cartctl run --fast`` does with one motor of an ``ArxPlant`` without
-noise: the runtime's own laws (``pi_law`` or ``feedback_law``, the fixed-gain estimator's
-``filter_correct``/``filter_predict`` around it), the loop's clamp, the plant's saturation and
-``arx_next`` with the input coefficients laid out by lag (so plants of different delays run
-together). A plant past ``DIVERGED_RAD_S`` is marked as run away and held at zero;
-``tests/test_control_laws.py`` checks the traces against the real loop bit for bit."""
+"""N ARX plants at once for ``cartctl tune --robust``: drawn from a model file's uncertainty
+(:func:`sample_plants`; one generator seeded with ``--seed`` in a fixed order, so a seed gives the
+same plants whatever the worker count), then run against one designed controller in one loop over
+the ticks, each quantity an array over the plants (:func:`simulate_batch`: operation for operation
+what ``cartctl run --fast`` does with one motor of an ``ArxPlant`` without noise). The draw and
+the loop in words: docs/tuning.md."""
 
 from __future__ import annotations
 

@@ -1,11 +1,9 @@
 """``cartctl tune`` after the scoring: the fronts' order, the ``--choose best`` rules
-(:data:`CHOICE_RULE`, :data:`CHOICE_RULE_NOMINAL`) and the text (counts, legend, tables).
-
-The robust Pareto front is nominal settling against worst-case overshoot, both minimised, among
-feasible settings where both are finite. In the tables, ``design …`` columns are the setting
-asked of ``cartctl design``, ``run …`` columns what the simulated run measured (the worse of
-motors a and b); each column (or group, with ``--robust``) has one rounding
-(:mod:`cartctl.measures.numfmt`)."""
+(:data:`CHOICE_RULE`, :data:`CHOICE_RULE_NOMINAL`) and the text (counts, legend, tables: ``design
+…`` columns the setting asked of ``cartctl design``, ``run …`` columns what the simulated run
+measured, the worse of motors a and b, one rounding per column or ``--robust`` group). The robust
+Pareto front is nominal settling against worst-case overshoot, among settings where both are
+finite."""
 
 from __future__ import annotations
 
@@ -72,8 +70,11 @@ class Limits:
     def met(self, figures: Sequence[tuple[float | None, float | None]]) -> bool:
         """Every (overshoot %, settling s) within the bounds (None: not met where bounded)."""
         bounds = (self.overshoot_percent, self.settling_time_s)
-        return all(bound is None or (value is not None and value <= bound)
-                   for figure in figures for value, bound in zip(figure, bounds, strict=True))  # fmt: skip
+        return all(
+            bound is None or (value is not None and value <= bound)
+            for figure in figures
+            for value, bound in zip(figure, bounds, strict=True)
+        )
 
 
 def rule_text(rule: str, limits: Limits, where: str) -> str:

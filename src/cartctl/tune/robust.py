@@ -1,11 +1,7 @@
 """``cartctl tune --robust``: each design scored on the nominal model, on plants drawn from its
 uncertainty (:mod:`cartctl.tune.batch`), on the physics preset (reported only) and on the physics
-preset at each ``--actuation-ms`` (in the worst case and the choice).
-
-Per plant each metric is the worse of motors a and b. ``worst`` is the maximum over the model, the
-sampled plants and the actuation runs (infinite, JSON ``null``, where one never settles, runs away
-or fails), ``worst_sampled`` without the actuation runs; the spread is the 5th, 50th and 95th
-percentile over the sampled plants (``inverted_cdf``: each a plant's value)."""
+preset at each ``--actuation-ms``; per plant each metric is the worse of motors a and b. The worst
+case and the spread: docs/tuning.md (percentiles ``inverted_cdf``: each a plant's value)."""
 
 from __future__ import annotations
 
