@@ -179,10 +179,8 @@ def _motor_section(
             f"Delay estimated as nk = {d.nk}, one for all motors identified, from their joint "
             f"evidence (this motor's equation-error RMS per candidate: {evidence}{alone})."
         )
-    if res.cycles_averaged:
-        paragraphs.append(
-            f"{res.cycles_averaged} whole excitation cycles were averaged before the ARX fit."
-        )
+    if n := res.cycles_averaged:
+        paragraphs.append(f"{n} whole excitation cycles were averaged before the ARX fit.")
     paragraphs.append(
         f"Residual tests of the {chosen} model on the {on} data: {diag.residuals.summary()}."
     )
@@ -225,14 +223,13 @@ def write_identify_report(
     """Write the PNG figures (from the first trace that drives each motor) and ``summary.md``
     into ``out_dir``; returns the summary's path."""
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     first = traces[0]
     io_png = figures.plot_io(
         first, list(result.motors), out / "io.png", title=f"Experiment: {first.source}"
     )
     what = f"{request.method.upper()} (na = {request.na}, nb = {request.nb})"
     what += f", prefilter {request.prefilter.describe()}" if request.prefilter else ", no prefilter"
-    sections = [
+    sections: list[ReportSection | None] = [
         ReportSection(
             heading="Experiment",
             text=f"Data: {', '.join(str(t.source) for t in traces)}. Method: {what}. "
@@ -242,8 +239,6 @@ def write_identify_report(
     ]
     for motor, res in result.motors.items():
         trace = next(t for t in traces if (t.voltage(motor) != 0.0).any())
-        sections.append(_motor_section(res, trace, out, compare or {}))
-        orders = _orders_section(res)
-        if orders is not None:
-            sections.append(orders)
-    return write_summary(out, title="Motor identification", sections=sections)
+        sections += [_motor_section(res, trace, out, compare or {}), _orders_section(res)]
+    kept = [s for s in sections if s is not None]
+    return write_summary(out, title="Motor identification", sections=kept)
