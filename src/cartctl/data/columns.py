@@ -169,11 +169,11 @@ def plan_columns(
     For QRC logs ``names`` starts with the time column, which always gives time_s.
     """
     monitor = kind == "CSV" and names[:2] == list(MONITOR_FIRST_COLUMNS)
-    if kind == "CSV" and mapping is None:
+    if kind == "CSV" and mapping is None:  # the trace's own names, or a monitor's labels
         missing = [name for name in REQUIRED_COLUMNS if name not in names]
         if missing and monitor:
-            return plan_columns(path, "CSV", names, monitor_mapping(names[2:]), header_line)
-        if missing:
+            mapping = monitor_mapping(names[2:])
+        elif missing:
             hint = ""
             if len(names) == 1 and (";" in names[0] or "\t" in names[0]):
                 hint = "; the columns seem separated by ';' or tabs, but trace files use ','"
@@ -183,9 +183,6 @@ def plan_columns(
                 f"{', '.join(names)}; a trace needs {', '.join(REQUIRED_COLUMNS)}{hint}",
                 line=header_line,
             )
-        plan: dict[str, int | None] = {name: names.index(name) for name in REQUIRED_COLUMNS}
-        plan |= {n: j for j, n in enumerate(names) if n not in REQUIRED_COLUMNS}
-        return names.index("time_s"), plan
     mapping = mapping or {}
     first = 0 if kind == "CSV" else 1  # QRC: names[0] is the time column
     what = "column" if kind == "CSV" else "channel"
