@@ -16,7 +16,7 @@ skipped (the prediction stands) and a non-finite voltage counts as 0 V (what the
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
@@ -64,7 +64,6 @@ class KalmanDesign:
 
     @property
     def has_bias(self) -> bool:
-        """True when the state ends with the input-disturbance state b."""
         return self.A.shape[0] > self.n_model_states
 
     def _closed(self) -> NDArray[np.float64]:
@@ -81,31 +80,20 @@ class KalmanDesign:
 
     def to_dict(self) -> dict[str, object]:
         """JSON form: the matrices as nested lists, the noise levels and ``estimator_poles``."""
-        matrices = {k: getattr(self, k).tolist() for k in ("A", "B", "C", "Q")}
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
         return {
-            **matrices,
-            "R": self.R,
-            "P": self.P.tolist(),
-            "L": self.L.tolist(),
-            "n_model_states": self.n_model_states,
+            **{k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in out.items()},
             "has_bias": self.has_bias,
-            "period_s": self.period_s,
-            "process_noise_std_v": self.process_noise_std_v,
-            "bias_drift_std_v": self.bias_drift_std_v,
-            "measurement_noise_std_rad_s": self.measurement_noise_std_rad_s,
-            "timing_noise_std_ticks": self.timing_noise_std_ticks,
             "estimator_poles": [[float(p.real), float(p.imag)] for p in self.poles()],
         }
 
 
 @runtime_checkable
 class StateEstimator(SpeedEstimator, Protocol):
-    """A speed estimator that also exposes its whole state, for state feedback."""
+    """A speed estimator that also exposes its whole state x̂, shape (m,), for state feedback."""
 
     @property
-    def state(self) -> NDArray[np.float64]:
-        """x̂, shape (m,): after ``correct``, x̂[k|k]."""
-        ...
+    def state(self) -> NDArray[np.float64]: ...
 
 
 class KalmanSpeedEstimator:
@@ -123,7 +111,6 @@ class KalmanSpeedEstimator:
         self.reset()
 
     def reset(self) -> None:
-        """x̂ = 0, covariance back to the design's P."""
         self._x = np.zeros(self.design.A.shape[0])
         self._P = np.array(self.design.P, dtype=float)
         self._gain = np.array(self.design.L, dtype=float)
@@ -179,8 +166,7 @@ class FilterTerms(NamedTuple):
 
 
 def filter_correct(terms: FilterTerms, x: list[Value], measured_rad_s: Value) -> list[Value]:
-    """x̂[k|k] = x̂[k|k−1] + L (y[k] − C x̂[k|k−1]), on a state of m entries, each a float (one
-    filter) or an array of shape (N,) (N filters, as ``cartctl tune --robust`` runs them)."""
+    """``correct`` on a state of m entries, floats or arrays (:mod:`~cartctl.runtime.elementwise`)."""
     innovation = measured_rad_s
     for j, c in terms.C:
         innovation = innovation - c * x[j]
@@ -188,7 +174,7 @@ def filter_correct(terms: FilterTerms, x: list[Value], measured_rad_s: Value) ->
 
 
 def filter_predict(terms: FilterTerms, x: list[Value], voltage_v: Value) -> list[Value]:
-    """x̂[k+1|k] = A x̂[k|k] + B u[k], on a state as :func:`filter_correct` takes it."""
+    """``predict`` on a state as :func:`filter_correct` takes it."""
     new = []
     for row, b in terms.AB:  # plain loops: a generator per row costs more than the sums
         acc = b * voltage_v
