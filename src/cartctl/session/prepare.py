@@ -1,10 +1,7 @@
-"""Everything a run needs before its first tick, with every refusal, in the order users meet them.
-
-The controller file first (its period before its coefficients), then the plant, then what
-depends on both: the tick, the sim plant's models, the loop delay (measured on a cart), and the
-references against what the motors reach (:func:`check_loop_delay`, :func:`check_reach`, which
-``tune`` uses too). A refusal is an :class:`~cartctl.errors.InputError` whose line names the option
-or file; a plant made before a refusal is closed again.
+"""Everything a run needs before its first tick, with every refusal, in the order users meet them:
+the controller file (its period before its coefficients), the plant, then the tick, the sim
+plant's models, the loop delay and the references' reach (the last two shared with ``tune``).
+A plant made before a refusal (:class:`~cartctl.errors.InputError`) is closed again.
 """
 
 from __future__ import annotations
@@ -38,9 +35,8 @@ __all__ = ["DEFAULT_CONTROLLER", "PreparedRun", "check_loop_delay", "check_reach
 
 @dataclass
 class PreparedRun:
-    """A run ready for its first tick: the plant made (a cart connected), nothing refused; the
-    controllers by motor, the plant in words, and its loop delay (measured on a cart; None where
-    the plant does not know it)."""
+    """A run ready for its first tick: the plant made (a cart connected); its loop delay is
+    measured on a cart, None where the plant does not know it."""
 
     controller_file: ControllerFile
     controllers: dict[str, Any]
@@ -64,8 +60,7 @@ def _load_controller(
     force: bool,
     voltage_limit_v: float | None,
 ) -> tuple[ControllerFile, float]:
-    """The controller file for ``plant`` (refused for another tick before its coefficients are
-    read) and the voltage limit to run it at (refused above the file's)."""
+    """The controller file for ``plant`` and the voltage limit to run it at (at most the file's)."""
     from cartctl.design.controllerfile import ControllerFile, load_controller
     from cartctl.plants.factory import plant_period_s
 
@@ -115,8 +110,8 @@ def check_reach(
     limit_v: float,
     where: str,
 ) -> None:
-    """Refuse a reference no motor can follow, warn (one line) about one reached only saturated:
-    what a motor reaches is its (stable) model's DC gain times the voltage limit."""
+    """Refuse a reference beyond what a motor reaches (its stable model's DC gain times the
+    voltage limit) by :data:`REACH_REFUSE_FACTOR`; warn about one reached only saturated."""
     beyond: list[str] = []
     refuse = False
     for motor, ref in references.items():
@@ -170,10 +165,10 @@ def check_loop_delay(
     allow: bool,
     measured: EchoDelays | None = None,
 ) -> None:
-    """Refuse (InputError) a controller designed for another loop delay than the plant's.
+    """Refuse a controller designed for another loop delay than the plant's (with ``allow``: warn).
 
-    With ``allow`` a warning; an unknown plant delay (None) is not checked; a ``measured`` delay
-    (a serial plant's probe) that is not clear is never refused: the run warns and goes on.
+    An unknown delay (None) is not checked; an unclear ``measured`` one (a serial plant's probe)
+    only warns.
     """
     designed = controller.loop_delay_ticks
     if delay is None or designed is None:
@@ -232,26 +227,20 @@ def prepare_run(
 ) -> PreparedRun:
     """Load, make and check everything a run needs (InputError for whatever it refuses).
 
-    ``given`` names the controller file in messages (the path the user gave); ``plant`` is a
-    ``--plant`` name; the references (specs of motor a, and of b, default a's) are built for
-    ``round(duration_s / Ts)`` ticks; ``model`` is the sim plant's model file (and where an
-    unstable one is named); ``connect_timeout_s`` a serial cart's longest wait for its first
-    HEARTBEAT. ``make_plant`` and ``build_controllers`` default to
-    :func:`cartctl.plants.factory.make_plant` and :func:`cartctl.design.build.build_controllers`
-    (a test's stand-ins). ``before_plant`` runs once everything that needs no plant is checked
-    (the command warms up the Rerun SDK there, before a cart ticks).
+    ``given`` names the controller file in messages; the references (of motor a, and of b,
+    default a's) span ``round(duration_s / Ts)`` ticks; ``model`` is the sim plant's model file.
+    ``make_plant`` and ``build_controllers`` (a test's stand-ins) default to
+    :func:`cartctl.plants.factory.make_plant` and :func:`cartctl.design.build.build_controllers`.
+    ``before_plant`` runs once everything that needs no plant is checked (the command warms up
+    the Rerun SDK there, before a cart ticks).
     """
+    from cartctl.design.build import build_controllers as build_from_file
     from cartctl.plants.base import ClockedPlant
+    from cartctl.plants.factory import make_plant as factory_make_plant
     from cartctl.reference import ReferenceSchedule
 
-    if make_plant is None:
-        from cartctl.plants.factory import make_plant as factory_make_plant
-
-        make_plant = factory_make_plant
-    if build_controllers is None:
-        from cartctl.design.build import build_controllers as build_from_file
-
-        build_controllers = build_from_file
+    make_plant = make_plant or factory_make_plant
+    build_controllers = build_controllers or build_from_file
     given = given if given is not None else str(controller)
     file, limit = _load_controller(controller, given, plant, model, force, voltage_limit_v)
     controllers = build_controllers(file, voltage_limit_v=limit)
