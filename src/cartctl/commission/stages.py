@@ -67,10 +67,15 @@ class Commission:
         print(f"cartctl commission [{STAGES.index(stage) + 1}/{len(STAGES)}] {stage}: {text}",
               file=sys.stderr, flush=True)  # fmt: skip
 
-    def _record(self, name: str, series: Any, note: str, *, layout: bool = False) -> None:
-        problem = report.record_stage(self.out / f"{name}.rrd", series, note, name, layout=layout)
+    def _done(self, stage: str, series: Any, body: str, failure: StageError | None = None, *,
+              layout: bool = False) -> None:  # fmt: skip
+        """Record the stage, write its section (with why it stopped) and raise ``failure``."""
+        problem = report.record_stage(self.out / f"{stage}.rrd", series, body, stage, layout=layout)
         if problem:
             self.problems.append(problem)
+        self.report.add(stage, body + (f"\n\n**Stopped:** {failure}" if failure else ""))
+        if failure is not None:
+            raise failure
 
     def _experiment(self, stage: str, ua: np.ndarray, ub: np.ndarray,
                     probe: bool = False) -> ExperimentResult:  # fmt: skip
@@ -128,16 +133,12 @@ class Commission:
         report.plot_lines(self.out / "checks.png", "Checks: pulses, then ramps", [
             ("voltage (V)", {f"motor {m}": (trace.time_s, trace.voltage(m)) for m in "ab"}),
             ("speed (rad/s)", {f"motor {m}": (trace.time_s, trace.speed(m)) for m in "ab"})])  # fmt: skip
-        self._record("checks", report.trace_series(trace), body, layout=True)
         self.results["checks"] = {"plant": self.description,
                                   "loop_delay_ticks": self.loop_delay_ticks,
                                   "motors": {m: c.to_dict() for m, c in found.items()},
                                   "amplitude_v": None if self.amplitude is None
                                   else self.amplitude.voltage_v}  # fmt: skip
-        if failure is not None:
-            self.report.add("checks", body + f"\n\n**Stopped:** {failure}")
-            raise failure
-        self.report.add("checks", body)
+        self._done("checks", report.trace_series(trace), body, failure, layout=True)
         self.say("checks", f"loop delay {self.loop_delay_ticks} tick(s); breakaway "
                  + ", ".join(f"{m} {c.breakaway_v:.2f} V" for m, c in found.items())
                  + f"; excitation {self.amplitude.voltage_v:g} V")  # type: ignore[union-attr]  # fmt: skip
@@ -155,10 +156,9 @@ class Commission:
                 f"{self.amplitude.voltage_v:g} V on both motors; peak speeds "
                 + ", ".join(f"{m} {np.max(np.abs(trace.speed(m))):.1f} rad/s" for m in "ab")
                 + ".\n\nFiles: excitation.csv, excitation.rrd.")  # fmt: skip
-        self._record("excitation", report.trace_series(trace), body, layout=True)
         self.results["excitation"] = {"amplitude_v": self.amplitude.voltage_v, "ticks": len(trace),
                                       "trace": str(self.out / "excitation.csv")}  # fmt: skip
-        self.report.add("excitation", body)
+        self._done("excitation", report.trace_series(trace), body, layout=True)
 
     def run_identification(self) -> None:
         """Stage 3: ARX with a validation split; the verdict; model.toml (model-failed.toml)."""
@@ -192,18 +192,17 @@ class Commission:
         if panels:
             report.plot_lines(self.out / "identification.png",
                               "Validation: measured speed and the model's simulation", panels)  # fmt: skip
-        self._record("identification", series, body)
         self.results["model"] = {
             "path": str(self.model_path), "passed": passed, "loop_delay_ticks": self.loop_delay_ticks,
             "motors": {m: {"theta": list(r.chosen.model.theta), "nk": r.chosen.model.nk,
                            "dc_gain": r.chosen.model.dc_gain(), **verdicts[m].to_dict()}
                        for m, r in result.motors.items()}}  # fmt: skip
+        failure = None
         try:
             checks.model_verdict(verdicts, self.amplitude.voltage_v)
         except StageError as exc:
-            self.report.add("identification", body + f"\n\n**Stopped:** {exc}")
-            raise
-        self.report.add("identification", body)
+            failure = exc
+        self._done("identification", series, body, failure)
 
     def run_tuning(self) -> None:
         """Stage 4: the robust grid on the model; controller.toml."""
@@ -226,12 +225,11 @@ class Commission:
         body = report.tuning_body(self.tuned, command)
         series = report.tuning_steps(self.controller_path, self.model_path,
                                      self.out / "tuning.png")  # fmt: skip
-        self._record("tuning", series, body)
         self.results["controller"] = {"path": str(self.controller_path), "command": command,
                                       "settings": chosen["settings"],
                                       "predicted": strict(self.tuned.predicted()),
                                       "timing_plants": chosen.get("timing")}  # fmt: skip
-        self.report.add("tuning", body)
+        self._done("tuning", series, body)
 
     def run_verification(self) -> None:
         """Stage 5: ``cartctl run`` of the controller on the plant; measured against predicted."""
