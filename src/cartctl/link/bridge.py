@@ -14,10 +14,10 @@ one value is clear; :func:`delay_change` compares a run's echoes with the probe'
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 from typing import Any
 
-from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT, check_gpio_counts
+from cartctl.link.dialect import check_gpio_counts
 from cartctl.link.framer import Gpio
 
 SEQ_MODULO = 32768
@@ -47,13 +47,12 @@ waiting in the receive ring since the previous tick."""
 STATUS_DRIVING = 1  # status bit: the cart applies the requested voltages
 STATUS_WATCHDOG = 2  # status bit: the watchdog has tripped, the cart applies zero volts
 
-# PC → cart: float and int channels
-CH_VOLTAGE_A, CH_VOLTAGE_B = 0, 1
-CH_SEQ, CH_DRIVE = 0, 1
-# cart → PC: float and int channels
-CH_SPEED_A, CH_SPEED_B, CH_APPLIED_A, CH_APPLIED_B, CH_POSITION_A, CH_POSITION_B = range(6)
-CH_BRIDGE_VERSION = 6
-CH_ECHO, CH_TICK, CH_STATUS, CH_HOST_LOST = range(4)
+# the channel map: PC → cart floats (voltage A, voltage B, 0...) and ints (seq, drive, 0, 0);
+# cart → PC the channels below, in the order of CartSample's fields (labels of a monitor trace)
+SAMPLE_FLOATS = ("speed_a", "speed_b", "voltage_a", "voltage_b", "position_a_rad",
+                 "position_b_rad", "bridge_version")  # fmt: skip
+SAMPLE_INTS = ("echo_seq", "cart_tick", "status", "host_frames_lost")
+CH_BRIDGE_VERSION = SAMPLE_FLOATS.index("bridge_version")
 
 
 def _version(value: float) -> int:
@@ -61,11 +60,6 @@ def _version(value: float) -> int:
     if value == value and 0.0 <= value < 1000.0 and float(int(value)) == value:
         return int(value)
     return 0
-
-
-def status_bits(driving: bool, tripped: bool) -> int:
-    """The status int channel: :data:`STATUS_DRIVING` and :data:`STATUS_WATCHDOG` as set."""
-    return (STATUS_DRIVING if driving else 0) | (STATUS_WATCHDOG if tripped else 0)
 
 
 def next_seq(seq: int) -> int:
@@ -89,25 +83,14 @@ class HostCommand:
 
     def to_channels(self) -> tuple[tuple[float, ...], tuple[int, ...]]:
         """The 8 floats and 4 ints of the GPIO frame."""
-        floats = [0.0] * GPIO_FLOAT_COUNT
-        ints = [0] * GPIO_INT_COUNT
-        floats[CH_VOLTAGE_A], floats[CH_VOLTAGE_B] = (
-            float(self.voltage_a_v),
-            float(self.voltage_b_v),
-        )
-        ints[CH_SEQ], ints[CH_DRIVE] = self.seq, 1 if self.drive else 0
-        return tuple(floats), tuple(ints)
+        floats = (float(self.voltage_a_v), float(self.voltage_b_v), *[0.0] * 6)
+        return floats, (self.seq, int(self.drive), 0, 0)
 
     @classmethod
     def from_channels(cls, floats: Sequence[float], ints: Sequence[int]) -> HostCommand:
         """The command carried by a GPIO frame's channels (drive only if int 1 is exactly 1)."""
         check_gpio_counts(floats, ints)
-        return cls(
-            voltage_a_v=float(floats[CH_VOLTAGE_A]),
-            voltage_b_v=float(floats[CH_VOLTAGE_B]),
-            seq=int(ints[CH_SEQ]),
-            drive=ints[CH_DRIVE] == 1,
-        )
+        return cls(float(floats[0]), float(floats[1]), int(ints[0]), ints[1] == 1)
 
 
 @dataclass(frozen=True)
@@ -136,40 +119,26 @@ class CartSample:
     @property
     def status(self) -> int:
         """The status bits as sent in int channel 2."""
-        return status_bits(self.driving, self.watchdog_tripped)
+        return (STATUS_DRIVING if self.driving else 0) | (
+            STATUS_WATCHDOG if self.watchdog_tripped else 0
+        )
 
     def to_channels(self) -> tuple[tuple[float, ...], tuple[int, ...]]:
-        """The 8 floats and 4 ints of the GPIO frame."""
-        floats = [0.0] * GPIO_FLOAT_COUNT
-        ints = [0] * GPIO_INT_COUNT
-        floats[CH_SPEED_A], floats[CH_SPEED_B] = self.speed_a_rad_s, self.speed_b_rad_s
-        floats[CH_APPLIED_A], floats[CH_APPLIED_B] = self.applied_a_v, self.applied_b_v
-        floats[CH_POSITION_A], floats[CH_POSITION_B] = self.position_a_rad, self.position_b_rad
-        floats[CH_BRIDGE_VERSION] = self.bridge_version
-        ints[CH_ECHO], ints[CH_TICK] = self.echo_seq, self.cart_tick
-        ints[CH_STATUS], ints[CH_HOST_LOST] = self.status, self.host_frames_lost
-        return tuple(float(v) for v in floats), tuple(ints)
+        """The 8 floats and 4 ints of the GPIO frame (the fields are in channel order)."""
+        floats = (*astuple(self)[1:7], self.bridge_version, 0.0)
+        ints = (self.echo_seq, self.cart_tick, self.status, self.host_frames_lost)
+        return tuple(float(v) for v in floats), ints
 
     @classmethod
     def from_gpio(cls, gpio: Gpio) -> CartSample:
         """The sample carried by a GPIO message from the cart."""
         floats, ints = gpio.floats, gpio.ints
         check_gpio_counts(floats, ints)
-        status = ints[CH_STATUS]
+        echo, tick, status, lost = ints
+        driving, tripped = bool(status & STATUS_DRIVING), bool(status & STATUS_WATCHDOG)
+        version = _version(floats[CH_BRIDGE_VERSION])
         return cls(
-            time_ms=gpio.time_ms,
-            speed_a_rad_s=floats[CH_SPEED_A],
-            speed_b_rad_s=floats[CH_SPEED_B],
-            applied_a_v=floats[CH_APPLIED_A],
-            applied_b_v=floats[CH_APPLIED_B],
-            position_a_rad=floats[CH_POSITION_A],
-            position_b_rad=floats[CH_POSITION_B],
-            echo_seq=ints[CH_ECHO],
-            cart_tick=ints[CH_TICK],
-            driving=bool(status & STATUS_DRIVING),
-            watchdog_tripped=bool(status & STATUS_WATCHDOG),
-            host_frames_lost=ints[CH_HOST_LOST] % SEQ_MODULO,
-            bridge_version=_version(floats[CH_BRIDGE_VERSION]),
+            gpio.time_ms, *floats[:6], echo, tick, driving, tripped, lost % SEQ_MODULO, version
         )
 
 

@@ -53,17 +53,8 @@ class Firmware:
 BRIDGE = Firmware(
     f"cartctl bridge version {bridge.BRIDGE_VERSION}",
     (
-        (f"f{bridge.CH_SPEED_A}", "speed_a"),
-        (f"f{bridge.CH_SPEED_B}", "speed_b"),
-        (f"f{bridge.CH_APPLIED_A}", "voltage_a"),  # on the H-bridge at that tick (V)
-        (f"f{bridge.CH_APPLIED_B}", "voltage_b"),
-        (f"f{bridge.CH_POSITION_A}", "position_a_rad"),
-        (f"f{bridge.CH_POSITION_B}", "position_b_rad"),
-        (f"f{bridge.CH_BRIDGE_VERSION}", "bridge_version"),
-        (f"i{bridge.CH_ECHO}", "echo_seq"),
-        (f"i{bridge.CH_TICK}", "cart_tick"),
-        (f"i{bridge.CH_STATUS}", "status"),
-        (f"i{bridge.CH_HOST_LOST}", "host_frames_lost"),
+        *((f"f{i}", label) for i, label in enumerate(bridge.SAMPLE_FLOATS)),
+        *((f"i{i}", label) for i, label in enumerate(bridge.SAMPLE_INTS)),
     ),
 )
 """The bridge sketch of version :data:`~cartctl.link.bridge.BRIDGE_VERSION`."""
