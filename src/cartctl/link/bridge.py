@@ -134,12 +134,11 @@ class CartSample:
         """The sample carried by a GPIO message from the cart."""
         floats, ints = gpio.floats, gpio.ints
         check_gpio_counts(floats, ints)
+        speed_a, speed_b, applied_a, applied_b, position_a, position_b, version, _ = floats
         echo, tick, status, lost = ints
         driving, tripped = bool(status & STATUS_DRIVING), bool(status & STATUS_WATCHDOG)
-        version = _version(floats[CH_BRIDGE_VERSION])
-        return cls(
-            gpio.time_ms, *floats[:6], echo, tick, driving, tripped, lost % SEQ_MODULO, version
-        )
+        return cls(gpio.time_ms, speed_a, speed_b, applied_a, applied_b, position_a, position_b,
+                   echo, tick, driving, tripped, lost % SEQ_MODULO, _version(version))  # fmt: skip
 
 
 MIN_ECHOES = 20
