@@ -55,10 +55,8 @@ def pi_law(
 ) -> tuple[Value, Value]:
     """One tick of the module docstring's law: (u[k] within ±limit_v, I[k]) from e[k] (rad/s) and
     I[k−1] (V), Kp (V/(rad/s)), Ki·Ts (V/(rad/s)), Kt (per tick) and the index of the anti-windup
-    mode in ``ANTI_WINDUP``; where u would not be finite, 0 V and I[k−1].
-
-    Floats (one controller) or arrays of shape (N,) (one setting per element, as ``cartctl tune
-    --robust`` runs them), with the same operations.
+    mode in ``ANTI_WINDUP``; where u would not be finite, 0 V and I[k−1]. Floats or arrays
+    (:mod:`~cartctl.runtime.elementwise`).
     """
     p = kp * error
     integral = integral_v + ki_ts * error
@@ -101,21 +99,6 @@ class PiController:
     speed offset the PI holds).
     """
 
-    __slots__ = (
-        "_ki_ts",
-        "_mode",
-        "anti_windup",
-        "estimate_rad_s",
-        "estimator",
-        "integral_v",
-        "ki",
-        "kp",
-        "period_s",
-        "tracking_gain",
-        "tracking_gain_per_tick",
-        "voltage_limit_v",
-    )
-
     def __init__(
         self,
         kp: float,
@@ -157,7 +140,6 @@ class PiController:
         self.reset()
 
     def reset(self) -> None:
-        """Integral 0, estimator reset."""
         self.integral_v = 0.0
         self.estimate_rad_s = 0.0
         if self.estimator is not None:

@@ -44,10 +44,8 @@ def feedback_law(
     limit_v: float,
 ) -> tuple[Value, Value, Value]:
     """One tick of the module docstring's law: (u_raw, u, x_i after the tick) in V, V, rad, from
-    r[k] and y[k] (rad/s, finite), x̂[k|k] (at least as many entries as K) and x_i (rad).
-
-    Floats (one controller) or arrays of shape (N,) (one setting per element, as ``cartctl tune
-    --robust`` runs them), with the same operations.
+    r[k] and y[k] (rad/s, finite), x̂[k|k] (at least as many entries as K) and x_i (rad). Floats
+    or arrays (:mod:`~cartctl.runtime.elementwise`).
     """
     K, ki, k_r, period_s = gains
     u_raw = k_r * reference_rad_s - ki * integral_rad
