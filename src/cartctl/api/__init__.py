@@ -142,7 +142,6 @@ def identify(
 
     Parameters
     ----------
-    traces : Trace, path, or a sequence of them
     delay : int or 'auto'
         Input delay nk (2 on board, as in the report), or 'auto' to estimate it.
     method : {'arx', 'oe'}
@@ -242,7 +241,6 @@ def simulate(
 
     Parameters
     ----------
-    controller : Design, controller file path or ControllerFile
     plant : {'sim', 'physics', 'physics:actuation_ms=X'}
         The ARX models of ``model`` (default: the model the controller was designed on), or the
         physical simulator with ``preset`` (and the actuation timing, ms).

@@ -36,12 +36,11 @@ class StageStoppedError(Exception):
 
 @dataclass
 class Commission:
-    """Commissioning of the plant ``spec`` into ``out``, one method per stage.
-
-    ``plant_options`` go to ``make_plant``; ``jobs`` are the tuning's worker processes;
-    ``run_command`` runs ``cartctl run`` with the given arguments and returns its exit code and
-    ``--json`` summary (injected by the command, which owns the CLI); ``results`` collects each
-    finished stage's figures for ``--json``."""
+    """Commissioning of the plant ``spec`` into ``out``, one method per stage. ``plant_options`` go
+    to ``make_plant``; ``jobs`` are the tuning's worker processes; ``run_command`` runs ``cartctl
+    run`` with the given arguments and returns its exit code and ``--json`` summary (injected by the
+    command, which owns the CLI); ``results`` collects each finished stage's figures for
+    ``--json``."""
 
     spec: str
     out: Path
