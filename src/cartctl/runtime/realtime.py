@@ -1,17 +1,12 @@
-"""Real-time scheduling for the loop's thread: SCHED_FIFO and locked memory, where permitted.
+"""Real-time scheduling for the loop's thread (SCHED_FIFO, locked memory) and a paused collector.
 
-:func:`enable_realtime` before the first deadline, :func:`restore` afterwards (or
-:func:`realtime_scheduling`); neither raises because the OS said no, and the line returned says
-what was obtained. A SCHED_FIFO thread preempts every normal thread on its core, which removes the
-millisecond wake-up outliers of a sleeping loop; it needs root, CAP_SYS_NICE or an ``rtprio``
-limit. The policy is set for the calling thread only, with SCHED_RESET_ON_FORK (a Rerun viewer
-started later runs normally). ``mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT)`` keeps pages in
-memory without prefaulting every mapping; it is tried only where the locked-memory limit cannot
-make later allocations fail (root, or an unlimited RLIMIT_MEMLOCK).
-
-:func:`gc_paused` keeps the garbage collector out of the loop: a full collection walks every
-object the process holds (hundreds of thousands after numpy, scipy, python-control and the Rerun
-SDK), milliseconds at whatever tick it happens; the tick makes no reference cycles.
+A SCHED_FIFO thread preempts every normal thread on its core, removing a sleeping loop's
+millisecond wake-up outliers; it needs root, CAP_SYS_NICE or an ``rtprio`` limit, and is set for
+the calling thread only, with SCHED_RESET_ON_FORK (a Rerun viewer started later runs normally).
+``mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT)`` is tried only where the locked-memory limit
+cannot make later allocations fail (root, or an unlimited RLIMIT_MEMLOCK). A full garbage
+collection walks every object the process holds (milliseconds after numpy, scipy and the Rerun
+SDK); the tick makes no reference cycles, so :func:`gc_paused` keeps the collector out.
 """
 
 from __future__ import annotations
@@ -36,7 +31,7 @@ _saved: dict[str, int] = {}  # policy, priority and locked to go back to (the fi
 
 
 def _lock_memory() -> str:
-    """Try mlockall; return '' on success, else why not."""
+    """'' once mlockall succeeded, else why not."""
     if resource is None:
         return "no resource limits on this platform"
     soft, _hard = resource.getrlimit(resource.RLIMIT_MEMLOCK)
@@ -45,21 +40,17 @@ def _lock_memory() -> str:
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         if libc.mlockall(_MCL_CURRENT | _MCL_FUTURE | _MCL_ONFAULT) != 0:
-            err = ctypes.get_errno()
-            return f"mlockall: {os.strerror(err)}"
+            return f"mlockall: {os.strerror(ctypes.get_errno())}"
     except (OSError, AttributeError) as exc:
         return f"mlockall unavailable: {exc}"
     return ""
 
 
 def enable_realtime(priority: int = 50, *, lock_memory: bool = True) -> str:
-    """Switch the calling thread to SCHED_FIFO at ``priority`` and lock memory, as far as the OS
-    permits; call it from the thread that runs the executor.
-
-    Staying at or below 50, the priority of interrupt threads on PREEMPT_RT kernels, leaves the
-    kernel's work ahead. Returns one line: ``"SCHED_FIFO priority 50, memory locked"``, ``"…,
-    memory not locked (why)"`` or ``"normal scheduling: SCHED_FIFO not permitted (why)"``.
-    InputError for a priority outside the OS's SCHED_FIFO range (a caller's mistake).
+    """Switch the calling thread (the executor's) to SCHED_FIFO at ``priority`` and lock memory,
+    as far as the OS permits; the line returned says what was obtained (never raises because the
+    OS said no; InputError for a priority outside its range). At or below 50, the priority of
+    interrupt threads on PREEMPT_RT kernels, the kernel's work stays ahead.
     """
     setscheduler = getattr(os, "sched_setscheduler", None)
     if setscheduler is None or not hasattr(os, "SCHED_FIFO"):
@@ -84,9 +75,7 @@ def enable_realtime(priority: int = 50, *, lock_memory: bool = True) -> str:
     text = f"SCHED_FIFO priority {priority}"
     if not lock_memory:
         return text
-    if _saved["locked"]:
-        return text + ", memory locked"
-    why = _lock_memory()
+    why = "" if _saved["locked"] else _lock_memory()
     if why:
         return f"{text}, memory not locked ({why})"
     _saved["locked"] = 1
@@ -94,8 +83,7 @@ def enable_realtime(priority: int = 50, *, lock_memory: bool = True) -> str:
 
 
 def restore() -> None:
-    """Back to the scheduling and memory state from before :func:`enable_realtime` (from the same
-    thread); nothing if real-time scheduling was not obtained. Never raises."""
+    """Back to the state from before :func:`enable_realtime` (same thread); never raises."""
     saved = dict(_saved)
     _saved.clear()
     if not saved:
@@ -119,11 +107,9 @@ def realtime_scheduling(priority: int = 50, *, lock_memory: bool = True) -> Iter
 
 @contextmanager
 def gc_paused(*, collect_new: bool = False) -> Iterator[None]:
-    """Within the block: one collection first, the survivors frozen (:func:`gc.freeze`, never
-    walked again) and automatic collection off; both undone afterwards.
-
-    ``collect_new``: keep collecting, but only what the block allocates (a short walk), for loops
-    that may run for hours (``cartctl monitor``).
+    """Within the block: one collection first, the survivors frozen (:func:`gc.freeze`) and
+    automatic collection off. ``collect_new``: keep collecting what the block allocates (a short
+    walk), for loops that may run for hours (``cartctl monitor``).
     """
     was_enabled = gc.isenabled()
     gc.collect()
