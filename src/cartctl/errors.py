@@ -52,12 +52,9 @@ class DataFileError(CartctlError, ValueError):
         self.problem = problem
         self.line = line
         self.column = column
-        where = str(self.path)
-        if line is not None:
-            where += f", line {line}"
-        if column is not None:
-            where += f", column '{column}'"
-        super().__init__(f"{where}: {problem}")
+        where = "" if line is None else f", line {line}"
+        where += "" if column is None else f", column '{column}'"
+        super().__init__(f"{self.path}{where}: {problem}")
 
 
 class PlantError(CartctlError, RuntimeError):

@@ -122,15 +122,11 @@ def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
         check_format(doc, path, MODEL_FORMAT, "model file")
     period_s = float(require(doc, "period_s", (int, float), path, "the top level"))
     loop_delay = read_loop_delay(doc, path)
-    prov_tab = doc.get("provenance", {})
-    provenance = Provenance(
-        source=str(prov_tab.get("source", "unknown")),
-        created=str(prov_tab.get("created", "unknown")),
-        data=tuple(str(d) for d in prov_tab.get("data", ())),
-        method=str(prov_tab.get("method", "unknown")),
-        prefilter=str(prov_tab.get("prefilter", "none")),
-        notes=str(prov_tab.get("notes", "")),
-    )
+    prov = doc.get("provenance", {})
+    texts = {"source": "unknown", "created": "unknown", "method": "unknown", "prefilter": "none",
+             "notes": ""}  # key: what a file without it says  # fmt: skip
+    provenance = Provenance(**{k: str(prov.get(k, default)) for k, default in texts.items()},
+                            data=tuple(str(d) for d in prov.get("data", ())))  # fmt: skip
     motors_tab = require(doc, "motors", dict, path, "the top level")
     unknown = sorted(set(motors_tab) - {"a", "b"})
     if unknown:

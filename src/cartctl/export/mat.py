@@ -44,10 +44,6 @@ def model_mat(models: ModelFile, source: str = "") -> dict[str, Any]:
     return out
 
 
-def _estimator(entry: Mapping[str, Any]) -> dict[str, Any]:
-    return {k: np.asarray(entry[k], dtype=float) for k in _KALMAN_KEYS if k in entry}
-
-
 def controller_mat(controller: ControllerFile, source: str = "") -> dict[str, Any]:
     """The ``.mat`` variables of a (checked, loaded) controller file."""
     ts = float(controller.period_s)
@@ -82,9 +78,11 @@ def controller_mat(controller: ControllerFile, source: str = "") -> dict[str, An
             motor.update(
                 K=np.asarray(entry["K"], dtype=float), Ki=float(entry["Ki"]), Kr=float(entry["Kr"])
             )
-        if entry.get("estimator") is not None:
-            motor["estimator"] = _estimator(entry["estimator"])
-            motor["L"] = np.asarray(entry["estimator"]["L"], dtype=float)
+        if (estimator := entry.get("estimator")) is not None:
+            motor["estimator"] = {
+                k: np.asarray(estimator[k], float) for k in _KALMAN_KEYS if k in estimator
+            }
+            motor["L"] = np.asarray(estimator["L"], dtype=float)
         out[f"motor_{name}"] = motor
     return out
 
