@@ -46,29 +46,6 @@ def arx_next(
     return y_next
 
 
-class _ArxMotor:
-    """One motor's difference equation, on plain floats."""
-
-    def __init__(self, model: ArxModel) -> None:
-        self.ar = model.ar
-        self.b = model.b
-        self.nk = model.nk
-        self.reset()
-
-    def reset(self) -> None:
-        self.y: deque[float] = deque([0.0] * len(self.ar), maxlen=len(self.ar) or None)
-        n_u = self.nk + len(self.b)
-        self.u: deque[float] = deque([0.0] * n_u, maxlen=n_u)
-
-    def step(self, voltage_v: float) -> float:
-        """Take v[k] (V), return y[k+1] (rad/s)."""
-        self.u.appendleft(voltage_v)  # u[0] = v[k], u[1] = v[k-1], ...
-        y_next = arx_next(self.b, self.u, self.nk - 1, self.ar, self.y)
-        if self.ar:
-            self.y.appendleft(y_next)
-        return y_next
-
-
 class ArxPlant:
     """Two ARX motors behind the :class:`~cartctl.plants.base.Plant` interface.
 
@@ -103,8 +80,8 @@ class ArxPlant:
         self.noise_std_rad_s = float(noise_std_rad_s)
         self.seed = seed
         self.voltage_limit_v = float(voltage_limit_v)
-        self._motors = (_ArxMotor(model_a), _ArxMotor(model_b))
         self._rng = np.random.default_rng(seed)
+        self._rest()
 
     @property
     def loop_delay_ticks(self) -> int:
@@ -124,24 +101,33 @@ class ArxPlant:
             return Measurement(ya + float(na), yb + float(nb), ya, yb)
         return Measurement(ya, yb, ya, yb)
 
+    def _rest(self) -> None:
+        """Each motor's past commands (V) and speeds (rad/s), newest first, all zero."""
+        self._u = [deque([0.0] * (m.nk + len(m.b)), maxlen=m.nk + len(m.b)) for m in self.models]
+        self._y = [deque([0.0] * len(m.ar), maxlen=len(m.ar) or None) for m in self.models]
+
     def reset(self) -> Measurement:
         """Back to rest; the tick-0 measurement. The noise stream carries on (fresh noise for
         each experiment; the same seed and calls reproduce the same results)."""
-        for m in self._motors:
-            m.reset()
+        self._rest()
         return self._measure(0.0, 0.0)
 
     def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
         """Command voltages at tick k (saturated), advance, return the tick k+1 measurement;
         PlantError once a speed passes :data:`DIVERGED_RAD_S` (an unstable model ran away)."""
-        ya = self._motors[0].step(saturate(voltage_a_v, self.voltage_limit_v))
-        yb = self._motors[1].step(saturate(voltage_b_v, self.voltage_limit_v))
-        for motor, y in (("a", ya), ("b", yb)):
-            if not abs(y) < DIVERGED_RAD_S:
+        speeds, voltages = [], (voltage_a_v, voltage_b_v)
+        for model, u, y, v in zip(self.models, self._u, self._y, voltages, strict=True):
+            u.appendleft(saturate(v, self.voltage_limit_v))  # u[0] = v[k], u[1] = v[k-1], ...
+            speeds.append(arx_next(model.b, u, model.nk - 1, model.ar, y))
+            if model.ar:
+                y.appendleft(speeds[-1])
+        for motor, speed in zip("ab", speeds, strict=True):
+            if not abs(speed) < DIVERGED_RAD_S:
                 raise PlantError(
-                    f"the simulated motor {motor} ran away ({y:.3g} rad/s): its model is unstable"
+                    f"the simulated motor {motor} ran away ({speed:.3g} rad/s): its model is "
+                    "unstable"
                 )
-        return self._measure(ya, yb)
+        return self._measure(speeds[0], speeds[1])
 
     def close(self) -> None:
         """Nothing to release; a simulated cart simply stops being stepped."""
