@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import shlex
+import sys
 from pathlib import Path
 
 import cartctl.cli.commands.options as options
@@ -93,8 +94,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _write_mat(kind: str, found: Path, args: argparse.Namespace, *, to_stderr: bool) -> None:
-    import sys
-
     from cartctl.export.mat import controller_mat, model_mat, write_mat
 
     if kind == "model":
@@ -114,8 +113,6 @@ def _write_mat(kind: str, found: Path, args: argparse.Namespace, *, to_stderr: b
 
 
 def _write_arduino(args: argparse.Namespace) -> None:
-    import sys
-
     from cartctl.design.controllerfile import load_controller
     from cartctl.export.arduino import arduino_source, timing_noise_note
 

@@ -151,9 +151,7 @@ def request_from_args(
     from cartctl.identification.orders import parse_grid
     from cartctl.identification.pipeline import IdentifyRequest, Prefilter
 
-    if args.loop_delay is not None:
-        loop_delay_ticks = args.loop_delay
-    prefilter = None
+    prefilter = None  # first: its refusal comes before those of the grid and the delay
     if args.prefilter == "butter":
         prefilter = Prefilter(
             order=args.order, cutoff_hz=args.cutoff_hz, zero_phase=args.zero_phase
@@ -168,7 +166,7 @@ def request_from_args(
         prefilter=prefilter,
         method=args.method,
         average=args.average,
-        loop_delay_ticks=loop_delay_ticks,
+        loop_delay_ticks=loop_delay_ticks if args.loop_delay is None else args.loop_delay,
     )
 
 

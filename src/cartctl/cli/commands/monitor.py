@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import cartctl.cli.commands.options as options
+from cartctl import stopping
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import InputError, OutputError
 
@@ -141,9 +142,7 @@ def _stop_on_signals(monitor: Monitor, received: list[int]) -> Iterator[None]:
         monitor.stop_requested = True
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
-    previous = {
-        s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-    }
+    previous = {s: signal.signal(s, handler) for s in stopping.STOP_SIGNALS}
     try:
         yield
     finally:
