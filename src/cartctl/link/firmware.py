@@ -117,6 +117,8 @@ class HeldChannels:
 class BridgeFirmware(HeldChannels):
     """``control()`` of the bridge sketch and the GPIO channels it holds (pure, no I/O)."""
 
+    ready_text = "cartctl bridge ready"
+
     def __init__(self) -> None:
         self.reset()
 

@@ -1,11 +1,9 @@
 """The virtual cart: the physical simulator behind a pseudo-terminal, speaking as the bridge does.
 
-``cartctl virtual-cart`` runs one in the foreground; ``--plant virtual`` runs one in the process
-behind :class:`VirtualSerialCart`, so the real serial path runs with no hardware. It keeps the
-firmware's schedule within each tick, its line, ring and USB bridge (docs/serial-protocol.md §4,
-§8; :mod:`cartctl.link.cart_uart`) and injects :class:`~cartctl.link.cart_faults.CartFaults`. The
-drains are computed on the cart's clock (tick k starts ``k × 10 ms`` after boot), so a busy host
-delays the cart's replies but not its view of when bytes arrived.
+``cartctl virtual-cart`` runs one in the foreground, ``--plant virtual`` one in this process
+(:class:`VirtualSerialCart`). It keeps the firmware's schedule within each tick, its line, ring and
+USB bridge (docs/serial-protocol.md §4, §8) and injects faults. The drains run on the cart's clock
+(tick k starts ``k × 10 ms`` after boot): a busy host delays the replies, not when bytes arrived.
 """
 
 from __future__ import annotations
@@ -19,8 +17,8 @@ import termios
 import threading
 import time
 import tty
-from collections.abc import Sequence
-from typing import Any, Protocol, cast
+from collections.abc import Callable
+from typing import Any
 
 import cartctl.link.cart_uart as uart
 from cartctl.cart import PERIOD_S
@@ -33,7 +31,7 @@ from cartctl.link.bridge import (
 )
 from cartctl.link.cart_faults import RECEIVE_SCHEDULES, CartFaults
 from cartctl.link.dialect import Encoder, encode_gpiox_v2
-from cartctl.link.firmware import BridgeFirmware, CartIO
+from cartctl.link.firmware import BridgeFirmware, CartIO, OnboardFirmware
 from cartctl.link.serial_cart import SerialCart
 from cartctl.plants.base import Measurement
 from cartctl.plants.physics import PhysicsPlant
@@ -43,7 +41,6 @@ SILENCE_TIMEOUT_S = 0.5
 """How long a host in this process waits for the virtual cart before it calls it silent (a real
 cart's is 0.1 s): the cart is threads of this process, which a busy PC can hold up for longer than
 a real cart is ever quiet. Its stall and pull faults are still found, that much later."""
-READY_TEXT = "cartctl bridge ready"
 COMM_PHASE_US = 1200
 """The cart's GPIO goes out this long (µs) into the tick (io() and control() on the Mega)."""
 DRAIN_BUSY_US = 60  # reported as THREAD_INFO 201 (200: COMM_PHASE_US); there is no AVR to time
@@ -52,16 +49,10 @@ _TERMIOS_SPEED = {getattr(termios, f"B{rate}"): rate for rate in (9600, 19200, 3
                   if hasattr(termios, f"B{rate}")}  # fmt: skip
 
 
-class CartFirmware(Protocol):
-    """What the virtual cart runs in ``control()`` (:mod:`cartctl.link.firmware`)."""
-
-    in_ints: list[int]
-    out_floats: list[float]
-    out_ints: list[int]
-    tick: int
-
-    def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int) -> None: ...
-    def control(self, io: CartIO, now_ms: int) -> tuple[float, float]: ...
+def _wait_until(ready: Callable[[], bool], timeout_s: float, poll_s: float) -> None:
+    deadline = time.perf_counter() + timeout_s
+    while not ready() and time.perf_counter() < deadline:
+        time.sleep(poll_s)
 
 
 class VirtualCart:
@@ -81,7 +72,7 @@ class VirtualCart:
         seed: int | None = None,
         faults: CartFaults | None = None,
         period_s: float = PERIOD_S,
-        firmware: CartFirmware | None = None,
+        firmware: OnboardFirmware | None = None,
     ) -> None:
         self.faults = faults or CartFaults()
         self.physics = PhysicsPlant(
@@ -92,7 +83,7 @@ class VirtualCart:
             reversed_motors=self.faults.reversed_motors,
         )
         self.period_s = float(period_s)
-        self.firmware: CartFirmware = firmware if firmware is not None else BridgeFirmware()
+        self.firmware = firmware or BridgeFirmware()
         self.receive_schedule = self.faults.receive if firmware is None else "microos"
         self.bridge_version = self.faults.bridge if firmware is None else 0
         """2: the bridge sketch of ``firmware/``; 1: the one before; 0: not the bridge."""
@@ -103,10 +94,9 @@ class VirtualCart:
         self.ring_bytes = uart.BRIDGE_RX_RING_BYTES if bridge2 else uart.RX_RING_BYTES
         self._rng = random.Random(seed)
         usb = None
-        if self.faults.usb:
+        if self.faults.usb:  # the phases of the 16U2's flush timer and the PC's USB frames
             phases = (
-                self._rng.uniform(0.0, uart.USB_FLUSH_PERIOD_S),
-                self._rng.uniform(0.0, uart.USB_FRAME_S),
+                self._rng.uniform(0.0, p) for p in (uart.USB_FLUSH_PERIOD_S, uart.USB_FRAME_S)
             )
             usb = uart.UsbBridge(*phases)
         self._master, self._slave = os.openpty()
@@ -186,9 +176,7 @@ class VirtualCart:
     def wait_ticks(self, n: int, timeout_s: float = 0.5) -> None:
         """Block until the cart has run ``n`` more ticks (or stopped, or ``timeout_s`` passed)."""
         target = self.ticks + n
-        deadline = time.perf_counter() + timeout_s
-        while self.ticks < target and self._ticker.is_alive() and time.perf_counter() < deadline:
-            time.sleep(0.002)
+        _wait_until(lambda: self.ticks >= target or not self._ticker.is_alive(), timeout_s, 0.002)
 
     def _close_fds(self) -> None:
         for name in ("_master", "_slave"):
@@ -260,29 +248,23 @@ class VirtualCart:
         return rate is None or rate == self.baud
 
     def _run(self) -> None:
-        encoder = Encoder(sysid=0, compid=0)
-        physics, firmware = self.physics, self.firmware
+        encoder, physics, firmware, faults = Encoder(), self.physics, self.firmware, self.faults
         rad_per_count = 2.0 * math.pi / physics.params.counts_per_rev
         period_us = round(self.period_s * 1e6)
         boot = self.boot_s = time.perf_counter()
         self.state = "running"
-        generation_a = self.faults.generation == "a"
+        generation_a = faults.generation == "a"
         if generation_a:  # a generation-B cart speaks MAVLink 2 only (its GPIOX frames, below)
-            self._writer.put(encoder.heartbeat(0))
-            ready = getattr(self.firmware, "ready_text", READY_TEXT)
-            for frame in encoder.print_text(ready + "\r\n"):
+            for frame in [encoder.heartbeat(0), *encoder.print_text(firmware.ready_text + "\r\n")]:
                 self._writer.put(frame)
         next_heartbeat = boot + HEARTBEAT_PERIOD_S
         measurement = physics.reset()
         voltage = (0.0, 0.0)
         j = 0
-        faults = self.faults
         while not self._stop.is_set():
             tick_us = j * period_us
             deadline = boot + tick_us * 1e-6
-            delay = deadline - time.perf_counter()
-            if delay > 0:
-                time.sleep(delay)
+            time.sleep(max(0.0, deadline - time.perf_counter()))
             now = time.perf_counter()
             driven = 0.0 if self.first_frame_at_s is None else now - self.first_frame_at_s
             if faults.pull_after_s is not None and driven >= faults.pull_after_s:
@@ -297,18 +279,15 @@ class VirtualCart:
                 self._stop.wait()
                 return
             self.receive_for_tick(j)  # on the cart's clock, whenever this thread gets here
-            if self.bridge_version == 2:  # the newest command the drains stored
-                voltage = cast("BridgeFirmware", firmware).command_v
+            if isinstance(firmware, BridgeFirmware) and self.bridge_version == 2:
+                voltage = firmware.command_v  # the newest command the drains stored
             # io(): the stored voltage drives from actuation_ms after the previous tick; encoders
             if j > 0:
                 measurement = physics.step(*voltage)
-            counts = physics.encoder_counts
             applied = physics.applied_voltage_v
-            self.applied_log.append((deadline, applied[0], applied[1]))
-            io = CartIO(
-                measurement.speed_a_rad_s, measurement.speed_b_rad_s, applied[0], applied[1],
-                counts[0] * rad_per_count, counts[1] * rad_per_count,
-            )  # fmt: skip
+            self.applied_log.append((deadline, *applied))
+            positions = (count * rad_per_count for count in physics.encoder_counts)
+            io = CartIO(measurement.speed_a_rad_s, measurement.speed_b_rad_s, *applied, *positions)
             tick_counter = firmware.tick
             self.true_speeds[tick_counter] = (
                 measurement.true_speed_a_rad_s or 0.0,
@@ -376,8 +355,6 @@ class VirtualSerialCart(SerialCart):
         was_connected = self.connected and not self.link.failure
         super().close()
         if was_connected:  # let the stop frames cross the line and reach control()
-            deadline = time.perf_counter() + 0.2
-            while self.cart.firmware.in_ints[1] != 0 and time.perf_counter() < deadline:
-                time.sleep(0.005)
+            _wait_until(lambda: self.cart.firmware.in_ints[1] == 0, 0.2, 0.005)
             self.cart.wait_ticks(2)
         self.cart.stop()
