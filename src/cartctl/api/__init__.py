@@ -14,11 +14,11 @@ from typing import Any
 
 import numpy as np
 
-from cartctl.api.results import MOTORS, Design, Identification, MotorResult, SimulationResult
+from cartctl.api.results import Design, Identification, MotorResult, SimulationResult
 from cartctl.choices import DEFAULT_MODEL
 from cartctl.data.modelfile import ModelFile, load_models, save_models
 from cartctl.data.read import read_trace
-from cartctl.data.trace import Trace, parse_mapping
+from cartctl.data.trace import MOTORS, Trace, parse_mapping
 from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.design.make import design_models
 from cartctl.design.request import DesignRequest

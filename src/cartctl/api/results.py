@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.data.modelfile import ModelFile, save_models
+from cartctl.data.trace import MOTORS
 from cartctl.design.controllerfile import ControllerFile, save_controller
 from cartctl.design.make import Designs, controller_file
 from cartctl.design.request import DesignRequest
@@ -78,9 +79,6 @@ def _drawn(columns: Mapping[str, NDArray[np.float64]], name: str) -> NDArray[np.
     return values[:-1] if values.size > 1 else values
 
 
-MOTORS = ("a", "b")
-
-_METHODS = {"pi": "PI", "poles": "pole placement"}
 _IDENT_HEADERS = ("motor", "nk", "θ", "θ std", "fit sim (%)", "fit pred (%)", "max |pole|")
 
 
@@ -226,7 +224,9 @@ class Design(_Shown):
                          number(e.get("gain_margin_db"), 3), number(e.get("crossover_hz"), 3),
                          number(step.get("overshoot_percent"), 3),
                          number(step.get("settling_time_s"), 3)))  # fmt: skip
-        method = _METHODS.get(self.request.method, self.request.method)
+        method = {"pi": "PI", "poles": "pole placement"}.get(
+            self.request.method, self.request.method
+        )
         title = (f"Design: {method} on {self.model_path}, "
                  f"Ts = {number(self.period_s)} s (step {number(self.request.step_rad_s)} rad/s "
                  f"on the model)")  # fmt: skip
