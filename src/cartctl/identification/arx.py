@@ -206,16 +206,6 @@ def prediction_fit(model: ArxModel, segments: Sequence[Segment]) -> float:
     return fit_percent(target, phi @ model.theta)
 
 
-def _check_excited(data: Sequence[Checked]) -> None:
-    """Refuse an input that is constant over all experiments (it excites nothing)."""
-    inputs = [u for _, u in data if u.size]
-    if inputs and min(float(u.min()) for u in inputs) == max(float(u.max()) for u in inputs):
-        raise IdentificationError(
-            f"the input voltage is constant ({inputs[0][0]:g} V) throughout: it does not excite "
-            "the motor; record an excitation experiment (cartctl excite --signal square)"
-        )
-
-
 def fit_arx(
     segments: Sequence[Segment],
     *,
@@ -231,7 +221,12 @@ def fit_arx(
     ``eval_segments`` when given: the raw data, so fits with and without a prefilter compare."""
     check_orders(na, nb, nk)
     data = as_segments(segments)
-    _check_excited(data)
+    inputs = [u for _, u in data if u.size]
+    if inputs and min(float(u.min()) for u in inputs) == max(float(u.max()) for u in inputs):
+        raise IdentificationError(
+            f"the input voltage is constant ({inputs[0][0]:g} V) throughout: it does not excite "
+            "the motor; record an excitation experiment (cartctl excite --signal square)"
+        )
     phi_y = augmented_regression(data, na, nb, nk, start)
     rows = phi_y.shape[0]
     target = phi_y[:, -1]

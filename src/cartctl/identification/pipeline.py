@@ -359,8 +359,7 @@ def model_file(
     """The chosen models with their provenance (``source``: the command line or the Python call)
     and figures, ready to save (``identify --out``)."""
     notes = []
-    if result.delay is not None:
-        j = result.delay
+    if (j := result.delay) is not None:
         joint = " for both motors, from their joint evidence" if len(j.motors) > 1 else ""
         close = f" (too close to call: {', '.join(map(str, j.close))})" if j.too_close else ""
         notes.append(f"delay nk = {j.nk} estimated over {list(j.candidates)}{joint}{close}")

@@ -87,8 +87,7 @@ class ValidationResult:
 def validate(model: ArxModel, trace: Trace, motor: str) -> ValidationResult:
     """Simulate ``model`` from rest on ``motor``'s voltage and compare with its measured speed;
     refuses a trace off the model's Ts by :data:`PERIOD_TOLERANCE` and a motor never driven."""
-    voltage = trace.voltage(motor)
-    measured = trace.speed(motor)
+    voltage, measured = trace.voltage(motor), trace.speed(motor)
     step_s, period_s = trace.period_s, model.period_s
     if abs(step_s - period_s) > PERIOD_TOLERANCE * period_s:
         raise InputError(
