@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TypedDict
+from typing import Any
 
+from cartctl.cart import PERIOD_S
 from cartctl.choices import DEFAULT_MODEL
 from cartctl.data.modelfile import load_models
 from cartctl.errors import InputError
@@ -29,19 +30,13 @@ def plant_kind(spec: str) -> str:
     return kind if kind in ("physics", "virtual", "serial") else spec
 
 
-class PhysicsOptions(TypedDict, total=False):
-    """The keyword arguments of :class:`~cartctl.plants.physics.PhysicsPlant` a plant name sets."""
-
-    actuation_ms: float
-    reversed_motors: str
-
-
-def physics_options(text: str) -> PhysicsOptions:
-    """The options of ``physics:KEY=VALUE,...``: ``actuation_ms`` (see ``check_actuation_ms``) and
-    ``reverse_a=1`` / ``reverse_b=1`` (that motor's leads swapped: it runs backwards)."""
+def physics_options(text: str) -> dict[str, Any]:
+    """The keyword arguments of :class:`~cartctl.plants.physics.PhysicsPlant` that
+    ``physics:KEY=VALUE,...`` sets: ``actuation_ms`` (see ``check_actuation_ms``) and
+    ``reversed_motors`` from ``reverse_a=1`` / ``reverse_b=1`` (those leads swapped)."""
     from cartctl.plants.physics_params import check_actuation_ms
 
-    options: PhysicsOptions = {}
+    options: dict[str, Any] = {}
     for item in filter(None, (part.strip() for part in text.split(","))):
         key, sep, value = (part.strip() for part in item.partition("="))
         if sep and key in ("reverse_a", "reverse_b"):
@@ -83,11 +78,7 @@ def check_plant_name(spec: str) -> str:
 
 def plant_period_s(spec: str, model_path: str | Path = DEFAULT_MODEL) -> float:
     """The tick (s) of plant ``spec`` before it is made: the sim plant's models', else the cart's."""
-    if spec == "sim":
-        return load_models(model_path).period_s
-    from cartctl.cart import PERIOD_S
-
-    return PERIOD_S
+    return load_models(model_path).period_s if spec == "sim" else PERIOD_S
 
 
 def is_serial(spec: str) -> bool:
