@@ -104,20 +104,17 @@ def run(args: argparse.Namespace) -> int:
 def _review_csv(args: argparse.Namespace) -> int:
     if args.web or args.screenshot:
         raise InputError("--web and --screenshot apply to .rrd recordings, not to CSV traces")
-    from cartctl.cli.commands.review.metrics import (
-        compare,
-        csv_summary,
-        format_compare,
-        format_csv_summary,
-    )
+    from cartctl.cli.commands.review import metrics
     from cartctl.cli.commands.review.smoothed import smooth_csv
     from cartctl.cli.jsonout import dumps
 
-    summary = smooth_csv(csv_summary(args.recording, args.map), args.recording, args.map,
-                         args.model)  # fmt: skip
-    if not args.compare:
-        print(dumps(summary) if args.json else format_csv_summary(summary))
-        return 0
-    other = smooth_csv(csv_summary(args.compare, args.map), args.compare, args.map, args.model)
-    print(dumps(compare(summary, other)) if args.json else format_compare(summary, other))
+    a, *b = [
+        smooth_csv(metrics.csv_summary(path, args.map), path, args.map, args.model)
+        for path in (args.recording, args.compare)
+        if path
+    ]  # b: the --compare run's, if given
+    if args.json:
+        print(dumps(metrics.compare(a, *b) if b else a))
+    else:
+        print(metrics.format_compare(a, *b) if b else metrics.format_csv_summary(a))
     return 0
