@@ -1,11 +1,8 @@
-"""Stop signals: SIGINT, SIGTERM and SIGHUP all end a command through its shutdown path.
-
-:func:`install` makes all three raise :class:`Interrupted` in the main thread, which the commands
-catch like Ctrl-C: zero volts out, files closed, summary printed, exit code 128 + the signal's
-number. Only the first signal interrupts; later ones, and any inside :func:`deferred`, are
-absorbed so the shutdown is never cut short. Before the command line takes over
-(:func:`install_at_start`), a stop signal ends the process with one line, as nothing has been
-done yet; hence this module imports only ``signal``, ``sys`` and ``os``.
+"""Stop signals: SIGINT, SIGTERM and SIGHUP end a command through its shutdown path, like Ctrl-C
+(docs/architecture.md). :func:`install` makes the first raise :class:`Interrupted` in the main
+thread; later ones, and any inside :func:`deferred`, are only noted. Before that
+(:func:`install_at_start`) one ends the process with one line; hence only ``signal``, ``sys``
+and ``os`` are imported here.
 """
 
 import os

@@ -1,12 +1,7 @@
-"""The CSV trace sink: the trace columns of docs/architecture.md, flushed at least once a second.
-
-``write`` keeps the row (a row of another length than the header's is a ``ValueError``, never a
-short row); ``idle``, after the tick's compute time, formats the rows kept with
-:func:`csv.writer` (10–30 µs a row, which the command no longer waits for) and writes and
-flushes every ``flush_every`` rows, so a crash loses at most the last block. All in the loop's
-thread: a writer thread would compete for the GIL. A failed write (a full disk) cuts the file
-back to its last whole row and raises :class:`~cartctl.errors.OutputError` once (kept as
-:attr:`CsvSink.error`).
+"""The CSV trace sink (:func:`csv.writer`, ``str`` of each value): ``write`` keeps the row (another
+length than the header's is a ValueError, never a short row); ``idle`` formats the rows kept and
+writes and flushes every ``flush_every`` rows, in the loop's thread. A failed write cuts the file
+back to its last whole row and raises :class:`~cartctl.errors.OutputError` once (``.error``).
 """
 
 from __future__ import annotations
@@ -97,24 +92,17 @@ class CsvSink:
             whole = data.rfind(b"\n", 0, done) + 1  # bytes of the whole lines that went in
             self.rows_written += max(0, data.count(b"\n", 0, whole) - (rows == 0))
             self._size += whole
-            try:
-                if done > whole:
-                    os.ftruncate(file.fileno(), self._size)  # no half row left behind
-            except OSError:
-                pass  # a device (/dev/full) or a file system that cannot: nothing more to do
-            self._fail(exc.strerror or str(exc))
-        self._size += len(data)
-        self.rows_written += rows
-
-    def _fail(self, reason: str) -> None:
-        self._rows = []
-        self._take_text()
-        file, self._file = self._file, None
-        if file is not None:
+            if done > whole:  # no half row left behind (where the device can be cut: not /dev/full)
+                with contextlib.suppress(OSError):
+                    os.ftruncate(file.fileno(), self._size)
+            self._rows, self._file = [], None
+            self._take_text()
             with contextlib.suppress(OSError):
                 file.close()
-        self.error = OutputError(self.path, reason, rows=self.rows_written)
-        raise self.error
+            self.error = OutputError(self.path, exc.strerror or str(exc), rows=self.rows_written)
+            raise self.error from exc
+        self._size += len(data)
+        self.rows_written += rows
 
     def close(self) -> None:
         if self._file is None:

@@ -1,13 +1,9 @@
-"""The Rerun sink: the loop's rows as a ``.rrd`` recording and/or a live viewer, under the
-entity paths of docs/architecture.md, on the ``time`` (s) and ``tick`` timelines; and the run's
-sink kept open (:class:`HeldRerunSink`) for series made after it (the smoothed speed).
-
-``write`` only keeps the row; ``idle`` (after the tick's compute time) packs rows into blocks of
-``batch_ticks`` and sends one entity's column of the oldest full block per call. All in the
-loop's thread: a sending thread would hold the interpreter lock for the ~100 µs of each send
-(compute p99 156–163 µs without Rerun, 190–250 µs with such a thread). Problems never raise into
-the loop: one warning at ``close`` (raised with ``strict``). A ``.rrd`` the SDK could not write
-is a fault: :class:`~cartctl.errors.OutputError` from ``open`` or ``close``.
+"""The Rerun sink: the loop's rows as a ``.rrd`` recording and/or a live viewer (entity paths of
+docs/architecture.md, timelines ``time`` (s) and ``tick``), and :class:`HeldRerunSink`, kept open
+for series made after the run. ``write`` only keeps the row; ``idle`` sends one entity's column
+of the oldest full block of ``batch_ticks`` rows per call, in the loop's thread (a sending thread
+would hold the GIL ~100 µs a send: compute p99 190–250 µs instead of 156–163 µs). Problems warn
+once at ``close``; a ``.rrd`` the SDK could not write is :class:`~cartctl.errors.OutputError`.
 """
 
 from __future__ import annotations
