@@ -1,26 +1,19 @@
-"""The runtime PI speed controller: one motor, one call per 10 ms tick, plain floats.
+"""The runtime PI speed controller: one motor, one call per tick, plain floats.
 
-Runs the gains of :mod:`cartctl.design.pi` in the loop (and in closed-loop simulation). Unsaturated,
-it is exactly the designed C(z) = Kp + Ki·Ts·z/(z − 1) from error to voltage::
+Unsaturated it is exactly the designed C(z) = Kp + Ki·Ts·z/(z − 1) (:mod:`cartctl.design.pi`)::
 
-    e[k] = r[k] − y[k]
-    I[k] = I[k−1] + Ki·Ts·e[k]
-    u[k] = Kp·e[k] + I[k],   then clamped to ±voltage_limit_v
+    e[k] = r[k] − y[k],   I[k] = I[k−1] + Ki·Ts·e[k],   u[k] = Kp·e[k] + I[k], clamped to ±limit
 
-Anti-windup (what happens to I when the clamp is active):
+Anti-windup, what happens to I while the clamp is active: ``"none"``, I integrates regardless
+(it must unwind after a long saturation: overshoot); ``"conditional"`` (clamping), the update
+stops where it would carry the output further beyond the limit (Kp·e + I[k−1] + Ki·Ts·e beyond
+±limit with e pushing the same way): I moves at most to the value that puts the output on the
+limit, never back, and is frozen if already beyond; ``"back-calculation"``, I[k] ← I[k] +
+Kt·(u_sat − u_unsat) after the clamp (Kt = 1 puts the output back on the limit at once).
 
-- ``"none"``: I integrates regardless; after a long saturation it must unwind (overshoot).
-- ``"conditional"`` (conditional integration, or clamping): the update is skipped whenever it
-  would carry the output further beyond the limit, that is when Kp·e + I[k−1] + Ki·Ts·e lies
-  beyond ±limit and e pushes the same way. The integral then moves at most up to the value that
-  puts the output exactly on the limit, and never back (if it already was beyond, it is frozen).
-- ``"back-calculation"``: after the clamp, I[k] ← I[k] + Kt·(u_sat − u_unsat), so each tick
-  removes the fraction Kt of the excess (Kt = 1 puts the output back on the limit at once).
-
-A non-finite reference or measurement (NaN, ±inf: a lost frame, a bad reference file), or inputs so
-absurd that the output overflows, make that tick's command 0 V, the safe value; the integral is
-left as it was. With an estimator, a finite measurement still corrects it, and the estimator
-always predicts with the command sent.
+A non-finite reference or measurement (a lost frame, a bad reference file), or an output that
+overflows, gives 0 V for that tick and leaves I as it was; an estimator is still corrected by a
+finite measurement and always predicts with the command sent.
 """
 
 from __future__ import annotations
@@ -88,15 +81,13 @@ def _finite(name: str, value: float, unit: str, *, positive: bool = False) -> fl
 
 
 class PiController:
-    """Discrete PI speed controller with output clamp and anti-windup (a
-    :class:`~cartctl.runtime.base.Controller`).
+    """Discrete PI speed controller with output clamp and anti-windup.
 
     Kp ≥ 0 (V/(rad/s)), Ki ≥ 0 (V/rad), Ts (s); ``tracking_gain`` is Kt in (0, 1] per tick, for
     back-calculation only (default min(1, Ts·Ki/Kp), 1 for Kp = 0: a tracking time constant equal
-    to the integral time). With an ``estimator`` the PI acts on its estimate: for the Kalman
-    estimators x̂_1[k|k], the measured (tick-average) speed the PI's design model describes; its
-    input-disturbance state keeps that estimate offset-free (without it, friction shows as a
-    speed offset the PI holds).
+    to the integral time). With an ``estimator`` the PI acts on its estimate (the Kalman
+    estimators' x̂_1[k|k], the tick-average speed of the design model, offset-free with the
+    input-disturbance state).
     """
 
     def __init__(

@@ -1,7 +1,6 @@
 """The pole-placement speed controller: state feedback on a Kalman estimate, with integral action.
 
-One object per motor, running a :class:`~cartctl.design.poles.PolesDesign`. Per tick, in the order
-of :mod:`cartctl.runtime.base`::
+One object per motor, running a :class:`~cartctl.design.poles.PolesDesign`. Per tick::
 
     x̂      = estimator.correct(y[k])                      # x̂[k|k]
     u_raw  = Kr r[k] − K x̂ − Ki x_i                          (V)
@@ -11,11 +10,10 @@ of :mod:`cartctl.runtime.base`::
     estimate = (x̂_1[k|k] + x̂_1[k+1|k]) / 2                 # the true speed now (rad/s)
 
 With the input-disturbance state, K's last entry is 1 (u carries −b̂, the integral action) and Ki
-is 0 (:mod:`cartctl.design.poles`). The estimate is the speed at tick k, half-way between the
-filtered and the predicted tick averages (on ``--plant sim``, whose output is itself a tick
-average, it leads by half a tick). A non-finite reference or measurement gives 0 V for that tick
-(integrator held, no correction, prediction with 0 V); a command that overflows (an absurd
-measurement) gives 0 V and resets the controller.
+is 0. The estimate lies half-way between the filtered and the predicted tick averages (on
+``--plant sim``, whose output is itself a tick average, it leads by half a tick). A non-finite
+reference or measurement gives 0 V for that tick (integrator held, no correction); a command that
+overflows (an absurd measurement) gives 0 V and resets the controller.
 """
 
 from __future__ import annotations
