@@ -116,11 +116,11 @@ class Trace:
                 f"missing required column(s) {', '.join(missing)}; a trace needs "
                 f"{', '.join(REQUIRED_COLUMNS)} (got {', '.join(columns) or 'none'})"
             )
-        given = cast("Mapping[str, np.ndarray]", columns)
-        extra = {name: values for name, values in given.items() if name not in REQUIRED_COLUMNS}
-        required = {name: given[name] for name in REQUIRED_COLUMNS}
-        return cls(**required, extra=extra, source=source,
-                   integer_columns=frozenset(integer_columns))  # fmt: skip
+        extra = dict(cast("Mapping[str, np.ndarray]", columns))
+        required = {name: extra.pop(name) for name in REQUIRED_COLUMNS}
+        return cls(
+            **required, extra=extra, source=source, integer_columns=frozenset(integer_columns)
+        )
 
 
 def _as_column(name: str, values: ArrayLike) -> np.ndarray:

@@ -64,15 +64,11 @@ def file_failure(exc: BaseException, path: Path | None) -> str | None:
         return os.strerror(code) if code else found.group(1)
     if not any(marker in text for marker in _FILE_WRITER):
         return None
-    return "No space left on device" if _disk_full(path) else "the recording's writer stopped"
-
-
-def _disk_full(path: Path) -> bool:
     try:
-        stats = os.statvfs(path if path.exists() else path.parent)
+        full = os.statvfs(path if path.exists() else path.parent).f_bavail == 0
     except OSError:
-        return False
-    return stats.f_bavail == 0
+        full = False
+    return "No space left on device" if full else "the recording's writer stopped"
 
 
 VIEWER_PORT: Final[int] = 9876
