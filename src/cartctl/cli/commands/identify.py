@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from collections.abc import Mapping
 from pathlib import Path
@@ -179,61 +178,30 @@ def _poles_hz(model: ArxModel) -> str:
     return ", ".join(parts) or "—"
 
 
-def std_text(std: float, value: float) -> str:
-    """A standard deviation with 2 significant figures; 0 below 1e-9 of its value (rounding)."""
-    return "0" if abs(std) < 1e-9 * abs(value) else f"{std:.2g}"
-
-
-def _row(label: str, cells: str, sim: float | None, pred: float | None, model: ArxModel) -> str:
-    """A model's row: θ cells, both fits ("diverges" when not finite), DC gain and poles."""
-    fits = "".join(
-        f"{'diverges' if v is None or not math.isfinite(v) else f'{v:.2f}':>13}"
-        for v in (sim, pred)
-    )
-    return f"    {label:<18}{cells}{fits}{model.dc_gain():>19.4g}  {_poles_hz(model)}"
-
-
 def format_motor(res: MotorIdentification, compared: Mapping[str, ArxModel] | None = None) -> str:
-    """The human-readable block of one motor, with the ``--compare`` models' rows."""
-    first = res.chosen
-    names = first.theta_names()
-    na = first.model.na
-    lines = [
-        f"motor {res.motor}:  nk = {first.model.nk}"
-        + (" (estimated)" if res.delay is not None else "")
-    ]
+    """The human-readable block of one motor: the report's fit table
+    (:func:`~cartctl.identification.report.fit_rows`, with the ``--compare`` models' rows), the
+    delay evidence, the residual tests and the orders table."""
+    from cartctl.identification.report import fit_rows
+    from cartctl.measures.numfmt import render_table
+
+    lines = [f"motor {res.motor}:  nk = {res.chosen.model.nk}"]
+    lines[0] += " (estimated)" if res.delay is not None else ""
     if res.cycles_averaged:
         lines[0] += f", {res.cycles_averaged} cycles averaged"
-    units = ["–" if i < na else "rad/s/V" for i in range(len(names))]
-    head = f"    {'':<18}" + "".join(
-        f"{f'{n} ({u})':>20}" for n, u in zip(names, units, strict=True)
-    )
-    head += f"{'fit sim (%)':>13}{'fit pred (%)':>13}{'DC gain (rad/s/V)':>19}  poles (Hz)"
-    lines.append(head)
-    for label, fit in res.variants().items():
-        cells = "".join(
-            f"{v:>11.4g} ±{std_text(s, v):<7}"
-            for v, s in zip(fit.model.theta, fit.theta_std, strict=True)
-        )
-        lines.append(
-            _row(label, cells, fit.fit_simulation_percent, fit.fit_prediction_percent, fit.model)
-        )
+    rows = fit_rows(res, compared)
+    models = [fit.model for fit in res.variants().values()] + list((compared or {}).values())
+    for row, model in zip(rows, models, strict=True):
+        row["poles (Hz)"] = _poles_hz(model)  # '!' on an unstable pole
+    tail = ["fit sim (%)", "fit pred (%)", "DC gain (rad/s/V)", "poles (Hz)"]
+    theta = [
+        k for k in dict.fromkeys(k for r in rows for k in r) if k not in ("model", "nk", *tail)
+    ]
+    headers = ["nk", *sorted(theta, key=lambda k: k.endswith("(rad/s/V)")), *tail]  # outputs first
+    cells = [[row["model"], *(str(row.get(h, "")) for h in headers)] for row in rows]
+    lines += render_table(["", *headers], cells, indent="    ")
     lines += [f"    OE: {note}" for note in getattr(res.oe, "notes", ())]
     diag = res.diagnostics
-    if compared:
-        fits = diag.compared_fits(compared)
-        for label, model in compared.items():
-            f = fits[label]
-            theta = model.theta
-            cells = (
-                "".join(f"{v:>11.4g}{'':9}" for v in theta)
-                if theta.size == len(names)
-                else (
-                    f"{'(other orders: ' + str(model.na) + ', ' + str(model.nb) + ')':<{20 * len(names)}}"
-                )
-            )
-            sim, pred = f["fit_simulation_percent"], f["fit_prediction_percent"]
-            lines.append(_row(label, cells, sim, pred, model) + f"  (nk = {model.nk})")
     if res.delay is not None:
         d = res.delay
         evidence = ", ".join(
