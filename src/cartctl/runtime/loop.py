@@ -1,12 +1,9 @@
 """The closed loop: one tick reads the plant, runs each motor's controller, sends, and logs.
 
-:class:`ControlLoop` is the per-tick body an executor calls on a real or simulated clock, so the
-real-time and the fast simulated run are the same code; docs/architecture.md ("One tick of
-``cartctl run``") walks through a tick. On a cart-clocked plant the tick sends, logs, then waits
-for the cart's next frame, so the compute time excludes the wait and a fault loses no row.
-:meth:`ControlLoop.finish` runs on every exit path: zero volts, plant closed, sinks closed. A sink
-whose file write fails raises :class:`~cartctl.errors.OutputError` once every other sink has had
-its row; the error is kept in :attr:`LoopState.incomplete` and the run ends through ``finish``.
+:class:`ControlLoop` is the per-tick body an executor calls on a real or a simulated clock
+(docs/architecture.md, "One tick of ``cartctl run``"). A sink whose file write fails raises
+:class:`~cartctl.errors.OutputError` once every other sink has had its row; the error is kept in
+:attr:`LoopState.incomplete` and the run ends through :meth:`ControlLoop.finish`.
 """
 
 from __future__ import annotations
@@ -27,12 +24,8 @@ from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS, Sink
 
 
 class MemorySink:
-    """Keeps every row in memory, for the run summary (same numbers as the CSV).
-
-    ``idle`` (after the tick's compute time is taken) packs the rows kept into float64 blocks of
-    :attr:`BLOCK_ROWS` rows, so no Python tuple is kept for long (112 bytes per row of a simulated
-    run: 1 GB for the longest run, 24 h).
-    """
+    """Keeps every row in memory, for the run summary (same numbers as the CSV); ``idle`` packs
+    them into float64 blocks, so no Python tuple is kept for long (1 GB for a 24 h run)."""
 
     BLOCK_ROWS = 1024
 
@@ -159,10 +152,8 @@ class ControlLoop:
         self.columns: tuple[str, ...] = TRACE_COLUMNS
 
     def start(self) -> None:
-        """Reset the controllers and the plant, open the sinks (before the first deadline).
-
-        A cart-clocked plant is reset last: its tick 0 is the GPIO that arrives then, and the
-        sinks' start-up must not make the loop begin behind the cart.
+        """Reset the controllers and the plant, open the sinks (before the first deadline); a
+        cart-clocked plant last, so that the sinks' start-up does not put the loop behind the cart.
         """
         for c in self.controllers.values():
             c.reset()
@@ -212,28 +203,24 @@ class ControlLoop:
         ra, rb = self.ref_a[k], self.ref_b[k]
         ua, ea = self._command("a", ra, y.speed_a_rad_s)
         ub, eb = self._command("b", rb, y.speed_b_rad_s)
+        row = (k * self.period_s if time_s is None else time_s, ua, ub, y.speed_a_rad_s,
+               y.speed_b_rad_s, k, ra, rb, ea, eb, period_error_us)  # fmt: skip
         if self._clocked:  # send, then log the tick, then wait for the cart's next one
             self.plant.send(ua, ub)  # type: ignore[attr-defined]
-            self._log(k, time_s, ua, ub, y, ra, rb, ea, eb, period_error_us, start_s)
+            self._log(row, y, start_s)
             self.idle()  # the cart's frame waits in the port meanwhile
-            y_next = self.plant.receive()  # type: ignore[attr-defined]
+            self._y = self.plant.receive()  # type: ignore[attr-defined]
         else:
-            y_next = self.plant.step(ua, ub)
-            self._log(k, time_s, ua, ub, y, ra, rb, ea, eb, period_error_us, start_s)
-        self._y = y_next
+            self._y = self.plant.step(ua, ub)
+            self._log(row, y, start_s)
         self.state.ticks = k + 1
         return k + 1 < self.n_ticks
 
-    def _log(
-        self, k: int, time_s: float | None, ua: float, ub: float, y: Measurement, ra: float,
-        rb: float, ea: float, eb: float, period_error_us: float, start_s: float,
-    ) -> None:  # fmt: skip
-        compute_us = (self.now_s() - start_s) * 1e6
-        self.last_compute_us = compute_us
-        row: tuple[float, ...] = (
-            k * self.period_s if time_s is None else time_s, ua, ub, y.speed_a_rad_s, y.speed_b_rad_s, k, ra, rb, ea, eb,
-            period_error_us, compute_us,
-        )  # fmt: skip
+    def _log(self, head: tuple[float, ...], y: Measurement, start_s: float) -> None:
+        """Write the row ``head`` (the trace columns up to the period error) with the compute
+        time since ``start_s`` and, where the plant knows them, the true speeds."""
+        self.last_compute_us = (self.now_s() - start_s) * 1e6
+        row = (*head, self.last_compute_us)
         if self._true:
             row += (y.true_speed_a_rad_s, y.true_speed_b_rad_s)  # type: ignore[operator]
         self.state.rows += 1
@@ -241,9 +228,8 @@ class ControlLoop:
         self._each(self._writers, row)
 
     def idle(self) -> None:
-        """The sinks' work that need not delay a command, after a tick: called by the executor
-        once the compute time is taken, or on a cart-clocked plant by the tick itself, between
-        logging and waiting for the cart's next frame."""
+        """The sinks' work that need not delay a command: after a tick's compute time is taken
+        (by the executor, or on a cart-clocked plant by the tick, before waiting for the cart)."""
         self._each(self._idlers)
 
     def finish(self) -> None:
@@ -264,8 +250,8 @@ class ControlLoop:
             last = min(k, self.n_ticks - 1)
             ra, rb = (self.ref_a[last], self.ref_b[last]) if self.n_ticks else (0.0, 0.0)
             try:
-                self._log(k, time_s, 0.0, 0.0, y, ra, rb, y.speed_a_rad_s, y.speed_b_rad_s, 0.0,
-                          self.now_s())  # fmt: skip
+                ya, yb = y.speed_a_rad_s, y.speed_b_rad_s
+                self._log((time_s, 0.0, 0.0, ya, yb, k, ra, rb, ya, yb, 0.0), y, self.now_s())
             except OutputError:
                 pass  # kept in state.incomplete by _log
             except Exception as exc:
