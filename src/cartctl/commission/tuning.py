@@ -8,7 +8,6 @@ refuse. Why these plants and bounds: docs/commission.md."""
 from __future__ import annotations
 
 import os
-import shlex
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,7 +15,7 @@ from typing import Any
 
 from cartctl.cli.jsonout import strict
 from cartctl.commission import StageError
-from cartctl.data.modelfile import ModelFile, load_models
+from cartctl.data.modelfile import load_models
 from cartctl.errors import InputError
 from cartctl.tune import choice, engine
 from cartctl.tune import grid as tuning
@@ -94,34 +93,14 @@ def run_tuning(model_path: Path, loop_delay_ticks: int,
                 f"{' with gains a controller file accepts' if refused else ''}; the model may be "
                 "too uncertain (see identification in summary.md)"
             ) from None
-        problem = _file_refusal(models, model_path, chosen, fixed)
+        problem = _file_refusal(model_path, chosen, fixed)
         if problem is None:
             return TuningResult(rows, chosen, fixed, tuple(refused))
         refused.append((chosen.index, problem))
         candidates = [r for r in candidates if r.index != chosen.index]
 
 
-def _write_controller(models: ModelFile, model_path: Path, settings: dict[str, float],
-                      fixed: dict[str, float], out: Path) -> str:  # fmt: skip
-    """Write a setting's controller file as ``cartctl design --out`` would; its command."""
-    from cartctl.design.controllerfile import save_controller
-    from cartctl.design.loop_report import analyse_designs
-    from cartctl.design.make import controller_file, design_models
-
-    request = tuning.design_request(METHOD, settings, 0, fixed)
-    designs = design_models(request, models, ("a", "b"))
-    entries = designs.entries()
-    for m, analysis in analyse_designs(designs).items():
-        entries[m].update(analysis.entry())
-    argv = ["design", *request.to_argv(str(model_path), always=tuning.request_axes(METHOD)),
-            "--out", str(out)]  # fmt: skip
-    command = "cartctl " + shlex.join(argv)
-    save_controller(controller_file(designs, model_path, command=command,
-                                    period_s=models.period_s), out)  # fmt: skip
-    return command
-
-
-def _file_refusal(models: ModelFile, model_path: Path, row: robustness.RobustRow,
+def _file_refusal(model_path: Path, row: robustness.RobustRow,
                   fixed: dict[str, float]) -> str | None:  # fmt: skip
     """Why ``cartctl run`` would refuse the setting's controller file (read back as ``run`` reads
     it), or None."""
@@ -132,7 +111,7 @@ def _file_refusal(models: ModelFile, model_path: Path, row: robustness.RobustRow
 
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "controller.toml"
-        _write_controller(models, model_path, row.result.settings, fixed, path)
+        engine.save_setting(METHOD, row.result.settings, model_path, path, fixed=fixed)
         try:
             load_controller(path)
         except CartctlError as exc:
@@ -142,8 +121,8 @@ def _file_refusal(models: ModelFile, model_path: Path, row: robustness.RobustRow
 
 def save_chosen(result: TuningResult, model_path: Path, out: Path) -> str:
     """Write the chosen setting's controller file, as ``cartctl design`` would; its command."""
-    return _write_controller(load_models(model_path), model_path, result.chosen.result.settings,
-                             result.design_fixed, out)  # fmt: skip
+    return engine.save_setting(METHOD, result.chosen.result.settings, model_path, out,
+                               fixed=result.design_fixed)  # fmt: skip
 
 
 def row_summary(row: robustness.RobustRow) -> dict[str, Any]:

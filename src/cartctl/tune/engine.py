@@ -6,10 +6,12 @@ are spread over worker processes in chunks, and a refused design is a result, no
 from __future__ import annotations
 
 import math
+import shlex
 from collections import deque
 from collections.abc import Callable, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any, Protocol, TypeVar
 
 import numpy as np
@@ -27,7 +29,7 @@ from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller
 from cartctl.runtime.fast import run_in_memory
 from cartctl.sinks.summary import trace_metrics
-from cartctl.tune.grid import RUN_FAILED, TuneResult, design_request
+from cartctl.tune.grid import RUN_FAILED, TuneResult, design_request, request_axes
 
 
 @dataclass(frozen=True)
@@ -134,6 +136,29 @@ def evaluate_nominal(
         return Nominal(TuneResult(index, settings, False, RUN_FAILED + failure))
     result = TuneResult(index, settings, True, motors=summary["motors"])
     return Nominal(result, controllers, refs, limit_v, plant.period_s)
+
+
+def save_setting(method: str, settings: Mapping[str, float], model_path: str | Path,
+                 out: str | Path, extra_delay_ticks: int = 0,
+                 fixed: Mapping[str, Any] | None = None) -> str:  # fmt: skip
+    """Write a setting's controller file to ``out`` as ``cartctl design --out`` would (with the
+    loop's refined analysis); returns the design command the file records."""
+    from cartctl.design.controllerfile import save_controller
+    from cartctl.design.loop_report import analyse_designs
+    from cartctl.design.make import controller_file, design_models
+
+    request = design_request(method, settings, extra_delay_ticks, fixed)
+    argv = ["design", *request.to_argv(str(model_path), always=request_axes(method)),
+            "--out", str(out)]  # fmt: skip
+    models = load_models(model_path)
+    designs = design_models(request, models, ("a", "b"))
+    entries = designs.entries()
+    for m, analysis in analyse_designs(designs).items():
+        entries[m].update(analysis.entry())
+    command = "cartctl " + shlex.join(argv)
+    save_controller(controller_file(designs, model_path, command=command,
+                                    period_s=models.period_s), out)  # fmt: skip
+    return command
 
 
 def evaluate_chunk(job: TuneJob) -> list[TuneResult]:  # the process pool's worker function

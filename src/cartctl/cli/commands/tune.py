@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shlex
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
@@ -124,11 +123,7 @@ def choose(
     """Write the chosen setting's controller file as ``cartctl design`` would; returns the
     design command the file records. A setting that did not run is refused, naming those of
     ``results`` that can be chosen."""
-    from cartctl.data.modelfile import load_models
-    from cartctl.design.controllerfile import save_controller
-    from cartctl.design.loop_report import analyse_designs
-    from cartctl.design.make import controller_file, design_models
-    from cartctl.tune import grid as tuning
+    from cartctl.tune import engine
 
     if not result.feasible:
         what = ("its run failed" if result.status == "run failed"
@@ -138,19 +133,8 @@ def choose(
             f"reason is listed as #{result.index} with the results); settings that can be "
             f"chosen: {choosable_text(results or [result])}"
         )
-    request = tuning.design_request(args.method, result.settings, args.extra_delay,
-                                    checks.design_fixed(args))  # fmt: skip
-    argv = ["design", *request.to_argv(str(args.model), always=tuning.request_axes(args.method)),
-            "--out", args.out]  # fmt: skip
-    models = load_models(args.model)
-    designs = design_models(request, models, ("a", "b"))
-    entries = designs.entries()  # as cartctl design: the file keeps the loop's refined analysis
-    for m, analysis in analyse_designs(designs).items():
-        entries[m].update(analysis.entry())
-    command = "cartctl " + shlex.join(argv)
-    save_controller(controller_file(designs, args.model, command=command,
-                                    period_s=models.period_s), args.out)  # fmt: skip
-    return command
+    return engine.save_setting(args.method, result.settings, args.model, args.out,
+                               args.extra_delay, checks.design_fixed(args))  # fmt: skip
 
 
 def _choose(
