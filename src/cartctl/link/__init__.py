@@ -1,7 +1,7 @@
 """The cart's serial link and its emulation (docs/architecture.md maps the modules).
 
-The pure framing (dialect, framer, the bridge's channel map) imports nothing of cartctl's; its
-names are re-exported here. The wire protocol is docs/serial-protocol.md.
+The pure framing (dialect, the bridge's channel map) imports nothing of cartctl's; its names are
+re-exported here. The wire protocol is docs/serial-protocol.md.
 """
 
 from cartctl.link.bridge import SEQ_MODULO, CartSample, HostCommand, next_seq, tick_difference
@@ -10,9 +10,6 @@ from cartctl.link.dialect import (
     GPIOX_CRC_EXTRA,
     PAYLOAD_LENGTH,
     Encoder,
-    encode_gpiox_v2,
-)
-from cartctl.link.framer import (
     Event,
     Framer,
     GenerationBFrame,
@@ -23,6 +20,7 @@ from cartctl.link.framer import (
     Message,
     PrintText,
     ThreadInfo,
+    encode_gpiox_v2,
 )
 
 __all__ = [

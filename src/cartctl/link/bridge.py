@@ -17,8 +17,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import astuple, dataclass
 from typing import Any
 
-from cartctl.link.dialect import check_gpio_counts
-from cartctl.link.framer import Gpio
+from cartctl.link.dialect import Gpio, check_gpio_counts
 
 SEQ_MODULO = 32768
 """Host sequence numbers and cart ticks count modulo this (int16 helpers on the cart)."""

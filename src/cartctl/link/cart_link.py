@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import cartctl.link.framer as framer
+import cartctl.link.dialect as dialect
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import CartctlError, InputError, PlantError
 from cartctl.link.bridge import BRIDGE_BAUD, LEGACY_BAUD
@@ -64,7 +64,7 @@ class CartLink:
         *,
         silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
         on_print: Callable[[str], None] | None = None,
-        on_event: Callable[[framer.Event], None] | None = None,
+        on_event: Callable[[dialect.Event], None] | None = None,
         serial_factory: Callable[..., Any] | None = None,
         baud: int = BRIDGE_BAUD,
     ) -> None:
@@ -74,9 +74,9 @@ class CartLink:
         self.on_print = on_print or print_to_stderr
         self.on_event = on_event
         self._factory = serial_factory
-        self.framer = framer.Framer()
-        self.lines = framer.LineAssembler()
-        self._pending: collections.deque[framer.Message] = collections.deque()
+        self.framer = dialect.Framer()
+        self.lines = dialect.LineAssembler()
+        self._pending: collections.deque[dialect.Message] = collections.deque()
         self._serial: Any = None
         self.failure: str | None = None
         """Why the stream stopped (silence or a vanished port); None while it flows."""
@@ -87,7 +87,7 @@ class CartLink:
         the bridge reports its tick's timing and its receive ring this way)."""
 
     @property
-    def stats(self) -> framer.LinkStats:
+    def stats(self) -> dialect.LinkStats:
         return self.framer.stats
 
     def open(self) -> None:
@@ -105,7 +105,7 @@ class CartLink:
                 f"cannot open serial port {self.port}: {reason}; {_ports_hint()}"
             ) from None
 
-    def wait_heartbeat(self, timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> framer.Heartbeat:
+    def wait_heartbeat(self, timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> dialect.Heartbeat:
         """Read until the cart's HEARTBEAT (PRINT lines are shown on the way).
 
         Raises :class:`~cartctl.errors.PlantError` when none comes within ``timeout_s``, and
@@ -114,7 +114,7 @@ class CartLink:
         deadline = time.perf_counter() + timeout_s
         while (remaining := deadline - time.perf_counter()) > 0:
             message = self._next_message(remaining)
-            if isinstance(message, framer.Heartbeat):
+            if isinstance(message, dialect.Heartbeat):
                 return message
         what = (
             "bytes but no HEARTBEAT" if self.stats.frames + self.stats.garbage_bytes else "nothing"
@@ -140,18 +140,18 @@ class CartLink:
                 raise
             try:
                 self._serial.baudrate = LEGACY_BAUD
-                self.framer = framer.Framer()
+                self.framer = dialect.Framer()
                 self._pending.clear()
                 deadline = time.perf_counter() + LEGACY_LISTEN_S
                 while (remaining := deadline - time.perf_counter()) > 0:
-                    if isinstance(self._next_message(remaining), framer.Heartbeat | framer.Gpio):
+                    if isinstance(self._next_message(remaining), dialect.Heartbeat | dialect.Gpio):
                         self.baud = LEGACY_BAUD
                         return LEGACY_BAUD
             except (OSError, ValueError, AttributeError):
                 pass
             raise first from None
 
-    def next_gpio(self, timeout_s: float | None = None) -> tuple[framer.Gpio, float]:
+    def next_gpio(self, timeout_s: float | None = None) -> tuple[dialect.Gpio, float]:
         """The next GPIO and the host time it arrived (``time.perf_counter`` s).
 
         Raises :class:`~cartctl.errors.PlantError` after ``timeout_s`` (default
@@ -163,7 +163,7 @@ class CartLink:
         while listened_s < wait_s:
             started_s = time.perf_counter()
             message = self._next_message(min(READ_SLICE_S, wait_s - listened_s))
-            if isinstance(message, framer.Gpio):
+            if isinstance(message, dialect.Gpio):
                 return message, time.perf_counter()
             listened_s += min(time.perf_counter() - started_s, COUNTED_SLICE_S)
         self.failure = (
@@ -177,15 +177,15 @@ class CartLink:
         within ``wait_s``."""
         self._poll(0.0)
         return self._wait_for(
-            lambda: any(isinstance(m, framer.Gpio) for m in self._pending), wait_s
+            lambda: any(isinstance(m, dialect.Gpio) for m in self._pending), wait_s
         )
 
-    def _next_message(self, timeout_s: float) -> framer.Message | None:
+    def _next_message(self, timeout_s: float) -> dialect.Message | None:
         """One decoded message, or None when ``timeout_s`` passed without one."""
         if not self._wait_for(lambda: bool(self._pending), timeout_s):
             return None
         message = self._pending.popleft()
-        if isinstance(message, framer.Event) and self.on_event is not None:
+        if isinstance(message, dialect.Event) and self.on_event is not None:
             self.on_event(message)
         return message
 
@@ -208,14 +208,14 @@ class CartLink:
         except Exception as exc:  # pyserial raises SerialException or OSError when the device goes
             raise self._vanish(exc) from None
         for message in self.framer.feed(data) if data else ():
-            if isinstance(message, framer.PrintText):
+            if isinstance(message, dialect.PrintText):
                 for line in self.lines.feed(message.text):
                     self.on_print(line)
-            elif isinstance(message, framer.ThreadInfo):
+            elif isinstance(message, dialect.ThreadInfo):
                 payload = message.payload  # the last duration: uint16 at 16, the thread id at 20
                 duration, thread = payload[16] | (payload[17] << 8), payload[20]
                 self.thread_maxima[thread] = max(self.thread_maxima.get(thread, 0), duration)
-            elif isinstance(message, framer.GenerationBFrame):
+            elif isinstance(message, dialect.GenerationBFrame):
                 raise UnsupportedCartError(
                     f"the cart on {self.port} speaks microOS generation B (MAVLink 2, GPIOX "
                     "messages); cartctl speaks generation A (MAVLink 1, GPIO): flash the bridge "

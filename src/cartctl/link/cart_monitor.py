@@ -19,9 +19,8 @@ import numpy as np
 from cartctl.cart import PERIOD_S
 from cartctl.errors import InputError, PlantError
 from cartctl.link.cart_link import CartLink
-from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT
+from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT, Event, Gpio
 from cartctl.link.firmware import CH_FIRMWARE_ID, CHANNEL_KEYS, Firmware, recognise_firmware
-from cartctl.link.framer import Event, Gpio
 
 DEFAULT_LABELS: tuple[str, ...] = (
     *(f"FloatIn{i}" for i in range(GPIO_FLOAT_COUNT)),

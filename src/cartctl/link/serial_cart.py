@@ -24,8 +24,7 @@ from cartctl.cart import PERIOD_S
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import PlantError
 from cartctl.link.cart_link import DEFAULT_SILENCE_TIMEOUT_S, CartLink, UnsupportedCartError
-from cartctl.link.dialect import Encoder
-from cartctl.link.framer import Gpio
+from cartctl.link.dialect import Encoder, Gpio
 from cartctl.plants.base import Measurement
 
 STOP_FRAMES = 3
