@@ -41,19 +41,15 @@ class Clock(Protocol):
 
     def now_s(self) -> float: ...
 
-    def wait_until(self, deadline_s: float) -> None:
-        """Return at or after ``deadline_s``; at once if it has passed."""
-        ...
+    def wait_until(self, deadline_s: float) -> None: ...
 
 
 class MonotonicClock:
     """:func:`time.perf_counter` (``CLOCK_MONOTONIC`` on Linux), with a sleep-then-spin wait.
 
-    ``wait_until`` sleeps until ``spin_s`` (s, >= 0) before the deadline, then busy-waits for the
-    rest: the spin absorbs the sleep's wake-up latency (50-100 µs, outliers of milliseconds on a
-    busy machine), at the price of up to ``spin_s`` of a core per wait (10 % at 1 ms per 10 ms).
-    A thread woken too late still starts late: that is what SCHED_FIFO
-    (:mod:`cartctl.runtime.realtime`) is for. ``spin_s = 0`` is a plain sleep.
+    ``wait_until`` sleeps until ``spin_s`` (s) before the deadline, then busy-waits: the spin
+    absorbs the sleep's wake-up latency (50-100 µs) at up to ``spin_s`` of a core per wait;
+    a thread woken later still starts late (SCHED_FIFO, :mod:`cartctl.runtime.realtime`).
     """
 
     def __init__(self, spin_s: float = 0.001) -> None:
@@ -114,13 +110,9 @@ def check_count(name: str, value: int, minimum: int) -> int:
 
 @dataclass(frozen=True)
 class TimingStats:
-    """Timing of one run of an executor; percentiles are NaN when no tick ran.
-
-    ``ticks`` completed, ``duration_s`` from the first deadline to the end of the last tick,
-    ``misses`` (ticks that ended after the next deadline, at the tick indices ``miss_ticks``),
-    ``skipped_deadlines`` (grid points passed over after misses, at least ``misses``); the period
-    error (start minus deadline) and the compute time of the ticks (µs): median, 99th
-    percentile, maximum.
+    """Timing of one run of an executor (module docstring): ``duration_s`` from the first
+    deadline to the end of the last tick; the period error and compute time (µs) as median, 99th
+    percentile and maximum (NaN when no tick ran).
     """
 
     period_s: float
@@ -218,12 +210,6 @@ class PeriodicExecutor(_Recorder):
     ``max_ticks``: stop after this many ticks (None: until the tick function returns False).
     While a tick runs, ``tick_index`` (k), ``grid_index`` (m), ``deadline_s``, ``start_s`` (s,
     on the clock) and ``period_error_us`` describe it, so the tick can log its own timing.
-
-    Examples
-    --------
-    >>> ex = PeriodicExecutor(0.01, SimulatedClock(), max_ticks=3)
-    >>> ex.run(lambda k: True).ticks
-    3
     """
 
     def __init__(self, period_s: float, clock: Clock, *, max_ticks: int | None = None) -> None:

@@ -1,13 +1,9 @@
 """The fast simulated loop (``run --fast``, ``tune``, the Python API): ticks back to back.
 
-The real-time run's :class:`~cartctl.runtime.loop.ControlLoop`, but nothing waits for a deadline:
-every tick starts on its grid point (period error 0), takes no simulated time and cannot miss. So
-:class:`BackToBackExecutor` only counts ticks and lets the sinks do their block work (``idle``)
-every :attr:`~BackToBackExecutor.idle_every` ticks instead of after each: about a quarter of the
-fast loop's time saved (``benchmarks/bench_run.py``). A tick that needs simulated time to pass
-belongs on the periodic executor with a :class:`~cartctl.runtime.executor.SimulatedClock`.
-:func:`run_in_memory` runs it with a :class:`~cartctl.runtime.loop.MemorySink` instead of files,
-ending, like every run, with the zero-volt stop row.
+The real-time run's :class:`~cartctl.runtime.loop.ControlLoop`, but every tick starts on its grid
+point (period error 0), takes no simulated time and cannot miss, and the sinks' block work
+(``idle``) runs every :attr:`~BackToBackExecutor.idle_every` ticks, not after each (about a
+quarter of the fast loop's time, ``benchmarks/bench_run.py``).
 """
 
 from __future__ import annotations
@@ -26,14 +22,7 @@ from cartctl.runtime.loop import ControlLoop, LoopState, MemorySink, PerTick
 
 class BackToBackExecutor:
     """Calls ``tick(k)`` back to back (tick k at ``k * period_s``) up to ``max_ticks``, and
-    ``idle`` every ``idle_every`` ticks and at the end; ``ticks`` counts them.
-
-    Examples
-    --------
-    >>> ex = BackToBackExecutor(0.01, max_ticks=3)
-    >>> ex.run(lambda k: True).ticks
-    3
-    """
+    ``idle`` every ``idle_every`` ticks and at the end; ``ticks`` counts them."""
 
     def __init__(self, period_s: float, *, max_ticks: int, idle_every: int = 1000) -> None:
         self.period_s = check_period(period_s)
@@ -76,7 +65,8 @@ def run_in_memory(
     period_s: float,
     voltage_limit_v: float,
 ) -> tuple[dict[str, NDArray[np.float64]], LoopState]:
-    """The trace columns and what happened (a plant fault ends the run, in ``state.failure``)."""
+    """Run with a :class:`~cartctl.runtime.loop.MemorySink` (ending, like every run, with the
+    zero-volt stop row): the trace columns and what happened (a plant fault in ``state.failure``)."""
     clock, memory = SimulatedClock(), MemorySink()
     loop = ControlLoop(plant, controllers, references, [memory], now_s=clock.now_s,
                        voltage_limit_v=voltage_limit_v, period_s=period_s)  # fmt: skip
