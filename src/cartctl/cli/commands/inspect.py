@@ -7,6 +7,7 @@ import math
 from typing import TYPE_CHECKING, Any
 
 import cartctl.cli.commands.options as options
+from cartctl.measures.numfmt import format_fixed, render_table
 
 if TYPE_CHECKING:
     from cartctl.data.modelfile import ModelFile
@@ -70,16 +71,12 @@ def _fmt_z(z: complex) -> str:
     return f"{z.real:.4f} {'+' if z.imag > 0 else '−'} {abs(z.imag):.4f}j"
 
 
-def _row(root: Root) -> str:
-    freq = "—" if root.freq_hz is None else f"{root.freq_hz:.2f}"
-    damp = "—" if root.damping is None else f"{root.damping:.3f}"
-    flag = "  non-minimum-phase" if root.kind == "zero" and abs(root.value) > 1.0 else ""
+def _cells(root: Root) -> list[str]:
+    flag = "non-minimum-phase" if root.kind == "zero" and abs(root.value) > 1.0 else ""
     if root.kind == "pole" and _slow(root):
-        flag = "  slow or marginal (|z| > 0.99)"
-    return (
-        f"    {root.kind:<6} {_fmt_z(root.value):>22} {abs(root.value):>8.4f} {freq:>8} "
-        f"{damp:>7}{flag}"
-    )
+        flag = "slow or marginal (|z| > 0.99)"
+    z, freq, damping = root.value, format_fixed(root.freq_hz, 2), format_fixed(root.damping, 3)
+    return [root.kind, _fmt_z(z), f"{abs(z):.4f}", freq, damping, flag]
 
 
 def format_table(models: ModelFile) -> str:
@@ -94,9 +91,10 @@ def format_table(models: ModelFile) -> str:
         lines += [
             "",
             f"  motor {name}:  H(z) = {m.describe()}    (input delay nk = {m.nk})",
-            f"    {'kind':<6} {'z (–)':>22} {'|z| (–)':>8} {'f (Hz)':>8} {'ζ (–)':>7}",
         ]
-        lines += [_row(r) for r in (*m.poles(), *m.zeros())]
+        cells = [_cells(r) for r in (*m.poles(), *m.zeros())]
+        headers = ["kind", "z (–)", "|z| (–)", "f (Hz)", "ζ (–)", ""]
+        lines += render_table(headers, cells, left=(0, 5), indent="    ")
         gain_txt = f"{gain:.4g} rad/s/V" if math.isfinite(gain) else "unbounded (integrator)"
         outside = outside_zeros(m)
         phase = "minimum phase"
