@@ -30,12 +30,8 @@ class Measurement:
 
 @runtime_checkable
 class Plant(Protocol):
-    """Two motors advanced one tick at a time (``period_s``, s), in the module docstring's order.
-
-    ``reset`` returns the plant to rest and measures tick 0; ``step`` commands the voltages (V) at
-    the current tick, advances one tick and measures; ``close`` leaves the motors at zero volts
-    and releases any resource.
-    """
+    """Two motors advanced one tick (``period_s``, s) at a time, in the module docstring's order;
+    ``close`` leaves the motors at zero volts and releases any resource."""
 
     period_s: float
 
@@ -48,13 +44,12 @@ class Plant(Protocol):
 
 @runtime_checkable
 class ClockedPlant(Plant, Protocol):
-    """A plant that sets the pace itself: the real cart (or the virtual one) over serial.
+    """A plant that sets the pace itself: the real or the virtual cart over serial.
 
-    ``receive`` returns when the cart's next tick arrives, so the loop runs at the cart's 10 ms,
-    not on the host's clock; ``step`` is ``send`` then ``receive``, called apart by the loop to
-    time its compute without the wait. ``arrival_s``: host time (``time.perf_counter``) when the
-    latest measurement arrived; ``tick_index``: its cart tick, counted from the run's tick 0 (gaps
-    included); ``connect`` opens the line and waits for the cart.
+    ``receive`` returns when the cart's next tick arrives (``step`` is ``send`` then ``receive``,
+    called apart to time the loop's compute without the wait). ``arrival_s``: host time
+    (``time.perf_counter``) of the latest measurement; ``tick_index``: its cart tick, counted from
+    the run's tick 0 (gaps included); ``connect`` opens the line and waits for the cart.
     """
 
     arrival_s: float

@@ -1,14 +1,9 @@
 """The runtime interfaces: a per-motor controller and a speed estimator, stepped once per tick.
 
-Per motor at tick k (the loop and the closed-loop analysis both follow it)::
-
-    y = measured speed at tick k
-    u = controller.step(reference_k, y)    # voltage for tick k, already within ±voltage_limit_v
-    send u
-
-A controller that runs on an estimate owns its estimator: ``step`` corrects it with y, computes u
-from the estimate, then lets it predict with u; ``estimate_rad_s`` is the speed it acted on (the
-measurement itself without an estimator). Plain floats: no clock, no I/O.
+Per motor at tick k, ``u = controller.step(r[k], y[k])`` is the voltage for tick k, already
+within ±voltage_limit_v. A controller that runs on an estimate owns its estimator: ``step``
+corrects it with y, computes u from the estimate, then lets it predict with u;
+``estimate_rad_s`` is the speed it acted on (the measurement itself without an estimator).
 """
 
 from __future__ import annotations
@@ -44,6 +39,4 @@ class Controller(Protocol):
 
     def reset(self) -> None: ...
 
-    def step(self, reference_rad_s: float, measured_rad_s: float) -> float:
-        """One tick: the voltage command (V), within ±voltage_limit_v."""
-        ...
+    def step(self, reference_rad_s: float, measured_rad_s: float) -> float: ...
