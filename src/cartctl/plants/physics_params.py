@@ -1,11 +1,10 @@
-"""The physical simulator's parameters: one motor, the whole cart, and the shipped presets.
+"""The physical simulator's parameters (every motor quantity at the wheel) and its presets.
 
-Every motor quantity is *at the wheel* (gearbox folded in). The presets are calibrated, not
-measured: ``benchmarks/calibrate_physics.py`` checks that the report's ARX fit on their measured
-speed gives back the report's θ; docs/plants.md has the table of values, their origin and the
-limits of the calibration. K and the rolling friction are set to four digits so that the 10 V
-plateau moves a whole number of encoder counts per tick (60 in the air, 57 on the ground):
-anything that moves the plateau (K, the friction, the PWM rounding) needs the calibration rerun.
+The presets are calibrated, not measured (docs/plants.md: values, origin, limits);
+``benchmarks/calibrate_physics.py`` checks that the report's ARX fit on their speed gives back
+the report's θ. K and the rolling friction have four digits so that the 10 V plateau moves a whole
+number of encoder counts per tick (60 in the air, 57 on the ground): whatever moves the plateau
+(K, the friction, the PWM rounding) needs the calibration rerun.
 """
 
 from __future__ import annotations
@@ -22,7 +21,6 @@ __all__ = ["PRESETS", "CartParams", "MotorParams", "check_actuation_ms", "preset
 
 
 def _require_positive(owner: object, names: tuple[str, ...], *, allow_zero: bool = False) -> None:
-    """Raise InputError unless each named field is finite and > 0 (or ≥ 0 when allowed)."""
     for name in names:
         value = getattr(owner, name)
         if not (math.isfinite(value) and (value >= 0.0 if allow_zero else value > 0.0)):
@@ -32,11 +30,9 @@ def _require_positive(owner: object, names: tuple[str, ...], *, allow_zero: bool
 
 @dataclass(frozen=True, slots=True)
 class MotorParams:
-    """One geared DC motor with its wheel, at the wheel shaft (report eq. 1 plus dry friction).
-
-    ``J dω/dt + b ω + τ_c sign(ω) = K i`` and ``L di/dt + R i = v − K ω``: J (kg·m², rotor times
-    the gear ratio squared plus the wheel), b (N·m·s/rad), τ_c (N·m, also the breakaway torque),
-    K (N·m/A = V·s/rad), R (Ω), L (H).
+    """One geared DC motor with its wheel, at the wheel shaft (the equations in
+    :mod:`cartctl.plants.physics`): J (kg·m², rotor times the gear ratio squared plus the wheel),
+    b (N·m·s/rad), τ_c (N·m, also the breakaway torque), K (N·m/A = V·s/rad), R (Ω), L (H).
     """
 
     inertia_kg_m2: float
@@ -56,14 +52,12 @@ class MotorParams:
 class CartParams:
     """The whole cart: two motors, the ground load, the firmware's limits and the sensor.
 
-    ``added_inertia_kg_m2`` is what the cart body adds to each wheel on the ground (the wheels are
-    not coupled, as in the report); ``rolling_n_m`` adds to each motor's Coulomb friction (so it
-    also resists breakaway); both 0 in the air. Commands saturate at ±``supply_v`` and are rounded
-    to the nearest ``pwm_step_v`` (ties to even). ``substeps`` per tick: the integration is exact
-    for any number, a substep is only the window in which a stop is looked for.
-    ``noise_std_rad_s``: white Gaussian noise on each measured speed. ``actuation_delay_s``: from
-    the tick a command is given at to the moment it drives the motor, a whole number of substeps
-    in [0, period_s]; None is one period (microOS's documented order, the next tick's ``io()``).
+    ``added_inertia_kg_m2`` (each wheel's share of the body, uncoupled as in the report) and
+    ``rolling_n_m`` (added to each motor's Coulomb friction) are 0 in the air. Commands saturate
+    at ±``supply_v``, rounded to the nearest ``pwm_step_v`` (ties to even). The integration is
+    exact for any ``substeps`` per tick (the window in which a stop is looked for).
+    ``actuation_delay_s``: from a command's tick to when it drives the motor, a whole number of
+    substeps in [0, period_s]; None is one period (microOS's documented order).
     """
 
     name: str
