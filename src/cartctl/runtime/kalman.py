@@ -1,16 +1,14 @@
-"""Kalman speed estimators for the 10 ms loop: the fixed-gain one, and one for timing noise.
+"""Kalman speed estimators for the loop: the fixed-gain one, and one for timing noise.
 
-Stepped once per tick by a controller or the loop, ``correct(y[k])`` then ``predict(u[k])``, on a
-:class:`KalmanDesign` (state x = [x_1 … x_n, b], x_1 the speed in rad/s, b an input disturbance
-in V)::
+Per tick ``correct(y[k])`` then ``predict(u[k])`` on a :class:`KalmanDesign` (state x =
+[x_1 … x_n, b], x_1 the speed in rad/s, b an input disturbance in V)::
 
-    correct:  x̂[k|k]   = x̂[k|k−1] + L (y[k] − C x̂[k|k−1])
+    correct:  x̂[k|k]   = x̂[k|k−1] + L (y[k] − C x̂[k|k−1])    returns x̂_1[k|k]
     predict:  x̂[k+1|k] = A x̂[k|k] + B u[k]
 
-``correct`` returns x̂_1[k|k] (C = [1, 0, …]), the estimate of the *measured* speed, an average
-over the last tick; after ``predict``, ``state[0]`` is x̂_1[k+1|k], and the mean of the two
-estimates the true speed at tick k (:mod:`cartctl.design.kalman`). A non-finite measurement is
-skipped (the prediction stands) and a non-finite voltage counts as 0 V (what the cart applies).
+x̂_1[k|k] estimates the *measured* speed (the last tick's average); the mean of it and
+x̂_1[k+1|k] the true speed at tick k (:mod:`cartctl.design.kalman`). A non-finite measurement is
+skipped and a non-finite voltage counts as 0 V (what the cart applies).
 """
 
 from __future__ import annotations
@@ -37,15 +35,12 @@ __all__ = [
 
 @dataclass(frozen=True, eq=False)
 class KalmanDesign:
-    """A steady-state Kalman filter for the speed (names as in the literature; m = n + 1 states
-    with the bias, else n = ``n_model_states``, the realisation's order).
-
-    A (m, m) and B (m,) (rad/s per V; 0 in the bias row) the model, C (m,) the measurement row,
-    Q (m, m) the process noise per tick (σ_w² B_x B_xᵀ on the realisation, σ_b² on the bias),
-    R the measurement variance ((rad/s)²), P the a-priori DARE solution P[k|k−1] and
-    L = P Cᵀ (C P Cᵀ + R)⁻¹ the gain. The noise levels the design used: σ_w (V), σ_b (V per
-    tick), √R (rad/s, the total: quantisation plus ``design --measurement-noise``) and σ_ε
-    (``timing_noise_std_ticks``, see :class:`KalmanSpeedEstimator`; P and L stay those of Q).
+    """A steady-state Kalman filter for the speed: m = n + 1 states with the bias, else
+    n = ``n_model_states``. A (m, m), B (m,) (0 in the bias row), C (m,); Q (m, m) the process
+    noise per tick (σ_w² B_x B_xᵀ, σ_b² on the bias), R the measurement variance ((rad/s)²), P the
+    a-priori DARE solution and L = P Cᵀ (C P Cᵀ + R)⁻¹. Noise levels: σ_w (V), σ_b (V per tick),
+    √R (rad/s: quantisation plus ``design --measurement-noise``), σ_ε (ticks,
+    :class:`KalmanSpeedEstimator`; P and L stay those of Q).
     """
 
     A: NDArray[np.float64]
@@ -97,12 +92,10 @@ class StateEstimator(SpeedEstimator, Protocol):
 
 
 class KalmanSpeedEstimator:
-    """The Kalman filter with its covariance propagated, for a design with timing noise.
-
-    A command change Δu landing ε ticks early or late acts as an extra input −ε Δu, so
-    ``predict(u[k])`` propagates P with Q + (σ_ε Δu[k])² B Bᵀ (u[−1] = 0 after a reset) and after
-    a jump the next measurement counts more. ``correct`` uses L[k] = P Cᵀ / (C P Cᵀ + R) and the
-    Joseph form. With σ_ε = 0 the gain stays L: :class:`SteadyStateSpeedEstimator`, faster.
+    """The Kalman filter with its covariance propagated, for a design with timing noise: a
+    command change Δu landing ε ticks early or late acts as an input −ε Δu, so ``predict``
+    propagates P with Q + (σ_ε Δu[k])² B Bᵀ (u[−1] = 0 after a reset); ``correct`` uses
+    L[k] = P Cᵀ / (C P Cᵀ + R) and the Joseph form.
     """
 
     def __init__(self, design: KalmanDesign) -> None:
@@ -147,9 +140,8 @@ class KalmanSpeedEstimator:
 
 
 class FilterTerms(NamedTuple):
-    """A :class:`KalmanDesign`'s fixed-gain filter as plain floats, its zeros left out: the gain
-    L, C's non-zero entries (state index, value), and per state its row of A's non-zero entries
-    (column, value) with its entry of B."""
+    """A :class:`KalmanDesign`'s fixed-gain filter as plain floats without its zeros: L, C's
+    (index, value) entries, and per state A's row of (column, value) entries with B's entry."""
 
     L: tuple[float, ...]
     C: tuple[tuple[int, float], ...]
