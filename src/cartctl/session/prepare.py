@@ -52,58 +52,6 @@ class PreparedRun:
         return float(self.plant.period_s)
 
 
-def _load_controller(
-    controller: str | Path | ControllerFile,
-    given: str,
-    plant: str,
-    model: str | Path,
-    force: bool,
-    voltage_limit_v: float | None,
-) -> tuple[ControllerFile, float]:
-    """The controller file for ``plant`` and the voltage limit to run it at (at most the file's)."""
-    from cartctl.design.controllerfile import ControllerFile, load_controller
-    from cartctl.plants.factory import plant_period_s
-
-    if isinstance(controller, ControllerFile):
-        file = controller
-    else:
-        file = load_controller(controller, force=force, period_s=plant_period_s(plant, model))
-    if file.ignored:
-        more = f" (and {len(file.ignored) - 1} more)" if len(file.ignored) > 1 else ""
-        warnings.warn(
-            f"--force: {given}: running its gains; ignoring controller_num/controller_den, which "
-            f"disagree with them: {file.ignored[0]}{more}",
-            DataWarning,
-            stacklevel=2,
-        )
-    limit = file.voltage_limit_v
-    if voltage_limit_v is not None:
-        if voltage_limit_v > limit:
-            raise InputError(
-                f"--voltage-limit {voltage_limit_v:g} V is above the {limit:g} V {given} is "
-                "designed for; it can only be lowered"
-            )
-        limit = voltage_limit_v
-    if file.model_changed():
-        warnings.warn(
-            f"{given} was designed on {file.model_path}, which has changed "
-            "since (or is gone); redesign with the command in the file's header",
-            DataWarning,
-            stacklevel=2,
-        )
-    return file, limit
-
-
-def _designed_on(file: ControllerFile) -> dict[str, ArxModel]:
-    """The models the controller was designed on; none when that file is gone or unreadable."""
-    from cartctl.data.modelfile import load_models
-
-    try:
-        return dict(load_models(file.model_path).motors)
-    except (CartctlError, OSError):
-        return {}
-
-
 def check_reach(
     references: dict[str, ReferenceSchedule],
     models: dict[str, ArxModel],
@@ -234,15 +182,44 @@ def prepare_run(
     ``before_plant`` runs once everything that needs no plant is checked (the command warms up
     the Rerun SDK there, before a cart ticks).
     """
+    from cartctl.data.modelfile import load_models
     from cartctl.design.build import build_controllers as build_from_file
+    from cartctl.design.controllerfile import ControllerFile, load_controller
     from cartctl.plants.base import ClockedPlant
     from cartctl.plants.factory import make_plant as factory_make_plant
+    from cartctl.plants.factory import plant_period_s
     from cartctl.reference import ReferenceSchedule
 
     make_plant = make_plant or factory_make_plant
     build_controllers = build_controllers or build_from_file
     given = given if given is not None else str(controller)
-    file, limit = _load_controller(controller, given, plant, model, force, voltage_limit_v)
+    if isinstance(controller, ControllerFile):
+        file = controller
+    else:  # refused for another tick before its coefficients are read
+        file = load_controller(controller, force=force, period_s=plant_period_s(plant, model))
+    if file.ignored:
+        more = f" (and {len(file.ignored) - 1} more)" if len(file.ignored) > 1 else ""
+        warnings.warn(
+            f"--force: {given}: running its gains; ignoring controller_num/controller_den, which "
+            f"disagree with them: {file.ignored[0]}{more}",
+            DataWarning,
+            stacklevel=2,
+        )
+    limit = file.voltage_limit_v
+    if voltage_limit_v is not None:
+        if voltage_limit_v > limit:
+            raise InputError(
+                f"--voltage-limit {voltage_limit_v:g} V is above the {limit:g} V {given} is "
+                "designed for; it can only be lowered"
+            )
+        limit = voltage_limit_v
+    if file.model_changed():
+        warnings.warn(
+            f"{given} was designed on {file.model_path}, which has changed "
+            "since (or is gone); redesign with the command in the file's header",
+            DataWarning,
+            stacklevel=2,
+        )
     controllers = build_controllers(file, voltage_limit_v=limit)
     if before_plant is not None:
         before_plant()
@@ -279,8 +256,12 @@ def prepare_run(
         }
         if own is not None:
             check_reach(references, dict(zip("ab", own, strict=True)), limit, str(model))
-        else:
-            check_reach(references, _designed_on(file), limit, file.model_path)
+        else:  # the models the controller was designed on, if that file is still readable
+            try:
+                designed = dict(load_models(file.model_path).motors)
+            except (CartctlError, OSError):
+                designed = {}
+            check_reach(references, designed, limit, file.model_path)
     except BaseException:
         the_plant.close()
         raise
