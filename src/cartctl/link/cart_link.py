@@ -105,51 +105,47 @@ class CartLink:
                 f"cannot open serial port {self.port}: {reason}; {_ports_hint()}"
             ) from None
 
-    def wait_heartbeat(self, timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> dialect.Heartbeat:
-        """Read until the cart's HEARTBEAT (PRINT lines are shown on the way).
-
-        Raises :class:`~cartctl.errors.PlantError` when none comes within ``timeout_s``, and
-        :class:`UnsupportedCartError` on generation-B frames.
-        """
+    def _listen(self, kinds: tuple[type, ...], timeout_s: float) -> bool:
+        """Read until a message of ``kinds`` (PRINT lines shown on the way); False on timeout."""
         deadline = time.perf_counter() + timeout_s
         while (remaining := deadline - time.perf_counter()) > 0:
-            message = self._next_message(remaining)
-            if isinstance(message, dialect.Heartbeat):
-                return message
-        what = (
-            "bytes but no HEARTBEAT" if self.stats.frames + self.stats.garbage_bytes else "nothing"
-        )
-        raise PlantError(
-            f"no HEARTBEAT from a cart on {self.port} within {timeout_s:g} s (received "
-            f"{what}); is the cart on, running the bridge sketch (firmware/), and on this "
-            f"port? {_ports_hint()}"
-        )
+            if isinstance(self._next_message(remaining), kinds):
+                return True
+        return False
 
     def wait_heartbeat_any_rate(self, timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> int:
-        """:meth:`wait_heartbeat` at :attr:`baud`; failing that, listen at 115200 baud.
+        """Wait for the cart's HEARTBEAT at :attr:`baud`; failing that, listen at 115200 baud.
 
-        Returns the rate the cart answered at (:attr:`baud` then holds it). The port stays open
-        across the change, so a real Mega is not reset again. Nothing at either rate raises the
-        first wait's error.
+        Returns the rate the cart answered at (:attr:`baud` then holds it); the port stays open
+        across the change, so a real Mega is not reset again. Nothing at either rate raises
+        :class:`~cartctl.errors.PlantError` (about the first rate), generation-B frames
+        :class:`UnsupportedCartError`; either way the link is closed.
         """
         try:
-            self.wait_heartbeat(timeout_s)
-            return self.baud
-        except PlantError as first:
-            if self.baud == LEGACY_BAUD or self._serial is None:
-                raise
-            try:
-                self._serial.baudrate = LEGACY_BAUD
-                self.framer = dialect.Framer()
-                self._pending.clear()
-                deadline = time.perf_counter() + LEGACY_LISTEN_S
-                while (remaining := deadline - time.perf_counter()) > 0:
-                    if isinstance(self._next_message(remaining), dialect.Heartbeat | dialect.Gpio):
+            if self._listen((dialect.Heartbeat,), timeout_s):
+                return self.baud
+            what = (
+                "bytes but no HEARTBEAT"
+                if self.stats.frames + self.stats.garbage_bytes
+                else "nothing"
+            )
+            error = PlantError(
+                f"no HEARTBEAT from a cart on {self.port} within {timeout_s:g} s (received "
+                f"{what}); is the cart on, running the bridge sketch (firmware/), and on this "
+                f"port? {_ports_hint()}"
+            )
+            if self.baud != LEGACY_BAUD and self._serial is not None:
+                with contextlib.suppress(OSError, ValueError, AttributeError):
+                    self._serial.baudrate = LEGACY_BAUD
+                    self.framer = dialect.Framer()
+                    self._pending.clear()
+                    if self._listen((dialect.Heartbeat, dialect.Gpio), LEGACY_LISTEN_S):
                         self.baud = LEGACY_BAUD
                         return LEGACY_BAUD
-            except (OSError, ValueError, AttributeError):
-                pass
-            raise first from None
+            raise error
+        except BaseException:
+            self.close()
+            raise
 
     def next_gpio(self, timeout_s: float | None = None) -> tuple[dialect.Gpio, float]:
         """The next GPIO and the host time it arrived (``time.perf_counter`` s).

@@ -274,13 +274,3 @@ class Monitor:
         self._last_ms = time_ms
         tick = max(self._cart_tick + 1, round(self._elapsed_ms / _PERIOD_MS))
         return tick / _TICKS_PER_S  # a division: 0.03, not 3 × 0.01 = 0.030000000000000002
-
-
-def wait_started(link: CartLink, timeout_s: float) -> None:
-    """Wait for the cart's HEARTBEAT at the bridge's 500 kbaud or the course firmware's 115200
-    (:meth:`CartLink.wait_heartbeat_any_rate`), closing the link on failure."""
-    try:
-        link.wait_heartbeat_any_rate(timeout_s)
-    except BaseException:
-        link.close()
-        raise

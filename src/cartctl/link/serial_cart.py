@@ -1,11 +1,10 @@
 """The real cart over serial (``--plant serial:PORT``), running the bridge sketch of ``firmware/``.
 
-The loop is clocked by the cart: each GPIO it sends (every 10 ms) is one tick, answered with the
-bridge's channel vector. The bridge echoes the sequence number of the command each ``io()``
-applied: the ticks from a measurement to the first echo of the command that answered it are the
-loop delay E (docs/serial-protocol.md §4.3; a model of the loop has ``nk = E + 1``). Line faults
-are counted, not fatal; silence or a vanished port raises :class:`~cartctl.errors.PlantError`;
-:meth:`SerialCart.close` leaves the cart at drive = 0 and zero volts when the port still works.
+The cart clocks the loop: each GPIO it sends (every 10 ms) is a tick, answered with a command. The
+bridge echoes the sequence number of the command each ``io()`` applied: the ticks from a
+measurement to that echo are the loop delay E (docs/serial-protocol.md §4.3; a model has
+``nk = E + 1``). Line faults are counted, not fatal; silence or a vanished port raises
+:class:`~cartctl.errors.PlantError`; :meth:`SerialCart.close` leaves the cart at drive = 0, 0 V.
 """
 
 from __future__ import annotations
@@ -27,8 +26,7 @@ from cartctl.link.cart_link import DEFAULT_SILENCE_TIMEOUT_S, CartLink, Unsuppor
 from cartctl.link.dialect import Encoder, Gpio
 from cartctl.plants.base import Measurement
 
-STOP_FRAMES = 3
-"""drive = 0 frames sent on close (one may be lost to line noise)."""
+STOP_FRAMES = 3  # drive = 0 frames sent on close (one may be lost to line noise)
 PROBE_ECHOES = bridge.MIN_ECHOES
 """Echoes :meth:`SerialCart.measure_loop_delay` judges first: done when they are clear."""
 UNDRIVEN_SILENCE_S = 0.5
@@ -100,17 +98,14 @@ class SerialCart:
             return
         self.link.open()
         self._port_opened()
-        try:
-            baud = self.link.wait_heartbeat_any_rate(self.connect_timeout_s)
-            if baud != bridge.BRIDGE_BAUD:
-                raise UnsupportedCartError(
-                    f"the cart on {self.port} answers at {baud} baud: it runs the course's "
-                    f"firmware or a cartctl bridge older than version {bridge.BRIDGE_VERSION}; "
-                    f"{FLASH_HINT}"
-                )
-        except BaseException:
+        baud = self.link.wait_heartbeat_any_rate(self.connect_timeout_s)
+        if baud != bridge.BRIDGE_BAUD:
             self.link.close()
-            raise
+            raise UnsupportedCartError(
+                f"the cart on {self.port} answers at {baud} baud: it runs the course's "
+                f"firmware or a cartctl bridge older than version {bridge.BRIDGE_VERSION}; "
+                f"{FLASH_HINT}"
+            )
         self.connected = True
 
     def _port_opened(self) -> None:
@@ -121,13 +116,14 @@ class SerialCart:
         self.connect()
         while self.link.gpio_waiting():  # stale ticks from before the run
             self.link.next_gpio()
-        self.link.next_gpio(max(self.link.silence_timeout_s, UNDRIVEN_SILENCE_S))
+        undriven_s = max(self.link.silence_timeout_s, UNDRIVEN_SILENCE_S)
+        self.link.next_gpio(undriven_s)
         # a backlog still coming in (the port's reader was held up) is not a fresh tick: answering
         # it would put two replies into one tick of the cart, and one of them would be lost. Let
         # it pass, then take the next frame as it arrives: tick 0 is answered while it is fresh.
         while self.link.gpio_waiting(wait_s=BACKLOG_WAIT_S):
             self.link.next_gpio()
-        gpio, arrival = self.link.next_gpio(max(self.link.silence_timeout_s, UNDRIVEN_SILENCE_S))
+        gpio, arrival = self.link.next_gpio(undriven_s)
         sample = bridge.CartSample.from_gpio(gpio)
         if sample.bridge_version != bridge.BRIDGE_VERSION:
             raise UnsupportedCartError(
@@ -172,9 +168,8 @@ class SerialCart:
         while self.link.gpio_waiting():
             self._accept(*self.link.next_gpio())
             self.skipped_ticks += 1
-        sample = self.sample
-        assert sample is not None
-        return Measurement(sample.speed_a_rad_s, sample.speed_b_rad_s)
+        assert self.sample is not None
+        return Measurement(self.sample.speed_a_rad_s, self.sample.speed_b_rad_s)
 
     def _accept(self, gpio: Gpio, arrival_s: float) -> None:
         """Take one GPIO: count missing cart ticks, watchdog trips and the echo delay."""
@@ -198,12 +193,11 @@ class SerialCart:
     ) -> int:
         """The loop delay (ticks), measured from the echo without driving the motors.
 
-        Answers each cart tick with drive = 0 (the bridge echoes whatever drive says) until
-        ``echoes`` echoes came back; when they are not clear
-        (:class:`~cartctl.link.bridge.EchoDelays`), goes on to ``max_echoes`` and judges them all.
+        Answers each cart tick with drive = 0 (echoed all the same) until ``echoes`` echoes came
+        back, or ``max_echoes`` when those are not clear (:class:`~cartctl.link.bridge.EchoDelays`).
         The most frequent delay counts; :attr:`probe_delays` keeps the spread; the echo statistics
-        are then cleared for the run. No echo within ``max_ticks`` ticks (not the bridge sketch)
-        raises :class:`~cartctl.errors.PlantError`.
+        are then cleared for the run. No echo within ``max_ticks`` ticks raises
+        :class:`~cartctl.errors.PlantError`.
         """
         self.reset()
         self.echo_delays.clear()
@@ -251,8 +245,8 @@ class SerialCart:
     @property
     def loop_delay_ticks(self) -> int | None:
         """Ticks from a measurement to the tick its voltage is on the motor: the most frequent echo
-        delay E (the bridge echoes what ``io()`` applied); None before any echo."""
-        return self.echo_delays.most_common(1)[0][0] if self.echo_delays else None
+        delay E (the shorter on a tie; the bridge echoes what ``io()`` applied); None before any."""
+        return bridge.EchoDelays.of(self.echo_delays).mode
 
     echo_delay_ticks = loop_delay_ticks
 
@@ -267,16 +261,16 @@ class SerialCart:
     def _cart_timing(self) -> dict[str, int] | None:
         """The maxima of the bridge's own reports over the run, None without any."""
         maxima = self.link.thread_maxima
-        ids = [bridge.TIMING_FIRST_ID + k for k in range(len(bridge.TIMING_REPORTS))]
-        if not any(i in maxima for i in ids):
+        ids = range(bridge.TIMING_FIRST_ID, bridge.TIMING_FIRST_ID + len(bridge.TIMING_REPORTS))
+        if maxima.keys().isdisjoint(ids):
             return None
         return {name: maxima.get(i, 0) for i, name in zip(ids, bridge.TIMING_REPORTS, strict=True)}
 
     def link_summary(self) -> dict[str, Any]:
         """Link figures for the run summary (``run --json``'s ``link``)."""
-        stats = self.link.stats
+        stats, probe = self.link.stats, self.probe_delays
+        seen = bridge.EchoDelays.of(self.echo_delays)
         delays = list(self.echo_delays.elements())
-        seen, probe = bridge.EchoDelays.of(self.echo_delays), self.probe_delays
         lost, sent = self.host_frames_lost, self.frames_sent
         latency_us = 1e6 * np.array(self.reply_latency_s)
         p50, p99, top = (
@@ -295,8 +289,7 @@ class SerialCart:
                 "loop_delay_ticks_seen": seen.to_dict()["counts"],
                 "loop_delay_probe": None if probe is None else probe.to_dict(),
                 "loop_delay_change": None if probe is None else bridge.delay_change(probe, seen),
-                **{k: getattr(stats, k) for k in ("frames", "crc_errors", "garbage_bytes")},
-                **{k: getattr(stats, k) for k in ("seq_gaps", "lost_frames")},
+                **{k: v for k, v in stats.to_dict().items() if k != "generation_b_frames"},
                 "missed_ticks": self.missed_ticks,
                 "skipped_ticks": self.skipped_ticks,
                 "watchdog_trips": self.watchdog_trips,

@@ -153,7 +153,7 @@ def _stop_on_signals(monitor: Monitor, received: list[int]) -> Iterator[None]:
 def run(args: argparse.Namespace) -> int:
     from cartctl.cli.jsonout import dumps
     from cartctl.link.cart_link import CartLink, print_to_stderr
-    from cartctl.link.cart_monitor import Monitor, parse_labels, wait_started
+    from cartctl.link.cart_monitor import Monitor, parse_labels
     from cartctl.runtime.realtime import gc_paused
     from cartctl.sinks.csv_sink import CsvSink
 
@@ -178,7 +178,8 @@ def run(args: argparse.Namespace) -> int:
         link.open()  # before the virtual cart boots: its first HEARTBEAT is not flushed away
         if cart is not None:
             cart.start()
-        wait_started(link, args.connect_timeout)  # no file is opened for a cart that is not there
+        # no file is opened for a cart that is not there
+        link.wait_heartbeat_any_rate(args.connect_timeout)
         if cart is not None:  # its faults count from the host's first frame; a monitor sends none
             cart.arm_faults()
         rerun = _rerun_sink(args, rrd_path)
