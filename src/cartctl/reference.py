@@ -89,18 +89,16 @@ def reference_signal(
     parts = rest.split(":") if rest else []
     t = (start_tick + np.arange(n_ticks, dtype=np.float64)) * period_s
     if kind == "step":
-        values = _numbers(spec, parts, 1, 2)
-        amp, delay = values[0], (values[1] if len(values) == 2 else 0.5)
-        return np.where(t >= delay - 1e-12, amp, 0.0)
+        amp, *delay = _numbers(spec, parts, 1, 2)
+        return np.where(t >= (delay[0] if delay else 0.5) - 1e-12, amp, 0.0)
     if kind == "square":
         amp, period = _numbers(spec, parts, 2, 2)
         if period <= 2 * period_s:
             raise InputError(f"reference '{spec}': the period must be longer than two ticks")
         return np.where((t % period) < period / 2, amp, -amp)
     if kind == "ramp":
-        values = _numbers(spec, parts, 1, 2)
-        out = values[0] * t
-        return np.clip(out, -abs(values[1]), abs(values[1])) if len(values) == 2 else out
+        slope, *limit = _numbers(spec, parts, 1, 2)
+        return np.clip(slope * t, -abs(limit[0]), abs(limit[0])) if limit else slope * t
     if kind == "const":
         (amp,) = _numbers(spec, parts, 1, 1)
         return np.full(n_ticks, amp)
