@@ -1,10 +1,6 @@
-"""The cart's end of the serial line as the virtual cart models it (docs/serial-protocol.md §4).
-
-The line's byte time (:class:`LineReader`, :class:`PacedWriter`: a pseudo-terminal delivers at
-once), the Mega's USB bridge (:class:`UsbBridge`: the cart's bytes wait for the 16U2's 4.096 ms
-flush or its 96-byte threshold, then the PC's next 1 ms USB frame), the receive ring, which
-drops what finds it full until a drain empties it (:func:`fill_ring`), and microOS's parser,
-which frames by the length byte and does not resynchronise (:class:`MicroosParser`).
+"""The cart's end of the serial line as the virtual cart models it (docs/serial-protocol.md §4):
+the line's byte time (a pseudo-terminal delivers at once), the Mega's USB bridge, the receive ring
+and microOS's parser.
 """
 
 from __future__ import annotations
@@ -45,30 +41,21 @@ BYTE_TIME_S = byte_time_s(LEGACY_BAUD)
 
 
 class UsbBridge:
-    """When the cart's bytes reach the PC through the Mega's ATmega16U2 (pure; times in s).
-
-    The phases place the 16U2's flush timer and the PC's USB frames on the time axis (a real board
-    has some fixed offset; the virtual cart draws one at random).
-    """
+    """When the cart's bytes reach the PC through the Mega's ATmega16U2 (pure; times in s): they
+    wait for its 4.096 ms flush or its 96-byte threshold, then for the PC's next 1 ms USB frame.
+    The phases place the flush timer and the USB frames on the time axis."""
 
     def __init__(self, flush_phase_s: float = 0.0, frame_phase_s: float = 0.0) -> None:
         self.flush_phase_s = float(flush_phase_s)
         self.frame_phase_s = float(frame_phase_s)
         self._waiting: list[tuple[float, int]] = []  # (through the AVR's UART, byte)
 
-    def _next_flush(self, t: float) -> float:
-        return next_on_grid(t, self.flush_phase_s, USB_FLUSH_PERIOD_S)
-
-    def _collected(self, t: float) -> float:
-        return next_on_grid(t, self.frame_phase_s, USB_FRAME_S)
-
     def feed(self, byte_times: Iterable[tuple[float, int]]) -> list[tuple[float, bytes]]:
         """Bytes through the AVR's UART at the given times, in order; returns ``(at_pc_s, data)``
         for every flush they complete (the rest wait for :meth:`flush_due`)."""
         out: list[tuple[float, bytes]] = []
         for t, byte in byte_times:
-            if self._waiting and self._next_flush(self._waiting[0][0]) <= t:
-                out.append(self._flush(self._next_flush(self._waiting[0][0])))
+            out += self.flush_due(t)
             self._waiting.append((t, byte))
             if len(self._waiting) > USB_FLUSH_BYTES:
                 out.append(self._flush(t))
@@ -77,7 +64,9 @@ class UsbBridge:
     @property
     def pending_flush_s(self) -> float | None:
         """When the bytes waiting now go out (their timer overflow), None when none wait."""
-        return self._next_flush(self._waiting[0][0]) if self._waiting else None
+        if not self._waiting:
+            return None
+        return next_on_grid(self._waiting[0][0], self.flush_phase_s, USB_FLUSH_PERIOD_S)
 
     def flush_due(self, now_s: float) -> list[tuple[float, bytes]]:
         """The waiting bytes, if their flush is due by ``now_s``."""
@@ -87,19 +76,19 @@ class UsbBridge:
     def _flush(self, at_s: float) -> tuple[float, bytes]:
         data = bytes(byte for _, byte in self._waiting)
         self._waiting = []
-        return self._collected(at_s), data
+        return next_on_grid(at_s, self.frame_phase_s, USB_FRAME_S), data  # the PC's next frame
 
 
 def fill_ring(arrived: bytes, capacity: int = RX_RING_BYTES) -> tuple[bytes, int]:
-    """What a drain finds of the bytes that arrived since the previous one, and how many of them
-    the full ring dropped (it keeps the first ``capacity``)."""
+    """What a drain finds of the bytes that arrived since the previous one, and how many the full
+    ring dropped (it keeps the first ``capacity`` until a drain empties it)."""
     return arrived[:capacity], max(0, len(arrived) - capacity)
 
 
 class MicroosParser:
     """microOS's receive side of MAVLink 1: a frame is the ``LEN + 8`` bytes from a start byte,
-    whatever they are; only then is its checksum looked at (by the :class:`Framer`). Counts the
-    GPIO ``frames`` decoded and the ``bad_frames`` dropped."""
+    whatever they are (no resynchronisation); only then is its checksum checked. Counts the GPIO
+    ``frames`` decoded and the ``bad_frames`` dropped."""
 
     def __init__(self) -> None:
         self._frame = bytearray()
@@ -113,11 +102,10 @@ class MicroosParser:
         out: list[Gpio] = []
         for byte in data:
             frame = self._frame
-            if not frame:
-                if byte == STX_V1:
-                    frame.append(byte)
+            if frame or byte == STX_V1:
+                frame.append(byte)
+            if len(frame) < 2:
                 continue
-            frame.append(byte)
             if len(frame) == 2:  # the length byte
                 self._need = 2 + byte + 6  # SEQ SYSID COMPID MSGID, payload, CRC
             if len(frame) < self._need:
@@ -142,17 +130,20 @@ class _PtyThread(threading.Thread):
         self.stop_event = stop
         self.byte_s = float(byte_s)
         self._line_free_s = 0.0
-        self.rate_ok: Callable[[], bool] = lambda: True
-        """Whether the host's port runs at the cart's rate now (else the other side reads noise)."""
+        self.rate_ok: Callable[[], bool] = lambda: True  # the host's port at the cart's rate?
+
+    def _on_line(self, not_before_s: float, data: bytes) -> list[tuple[float, int]]:
+        """Put ``data`` on the line behind what is on it: when each byte is through (s)."""
+        start = max(not_before_s, self._line_free_s)
+        self._line_free_s = start + len(data) * self.byte_s
+        return [(start + (i + 1) * self.byte_s, byte) for i, byte in enumerate(data)]
 
 
 class PacedWriter(_PtyThread):
-    """Writes queued bytes to the pty master when the line (and the USB bridge) would deliver them.
-
-    Each item goes on the line no earlier than its ``not_before_s`` (``time.perf_counter``), one
-    byte per ``byte_s``; it reaches the pty once its last byte is through, or when ``usb``
-    decides. :attr:`deliveries` keeps ``(through_uart_s, at_pc_s)`` of tracked items.
-    """
+    """Writes queued bytes to the pty master when the line (and the USB bridge) would deliver them:
+    each item no earlier than its ``not_before_s`` (``time.perf_counter``), at the pty once its last
+    byte is through, or when ``usb`` decides. :attr:`deliveries`: ``(through_uart_s, at_pc_s)``
+    of tracked items."""
 
     def __init__(
         self,
@@ -167,7 +158,6 @@ class PacedWriter(_PtyThread):
         self.queue: queue.SimpleQueue[tuple[float, bytes, bool]] = queue.SimpleQueue()
         self._tracked: list[tuple[int, float]] = []  # (byte count at its end, its end), in the USB
         self._fed = self._passed = 0  # bytes into the USB bridge, and out of it
-        self.dropped_bytes = 0
         self.deliveries: collections.deque[tuple[float, float]] = collections.deque(maxlen=4096)
         self._out: collections.deque[tuple[float, bytes]] = collections.deque()
 
@@ -177,15 +167,13 @@ class PacedWriter(_PtyThread):
         self.queue.put((not_before_s, data, track))
 
     def _take(self, not_before_s: float, data: bytes, track: bool) -> None:
-        start = max(not_before_s, self._line_free_s)
-        end = start + len(data) * self.byte_s
-        self._line_free_s = end
+        times = self._on_line(not_before_s, data)
+        end = self._line_free_s
         if self.usb is None:
             self._out.append((end, data))
             if track:
                 self.deliveries.append((end, end))
             return
-        times = [(start + (i + 1) * self.byte_s, b) for i, b in enumerate(data)]
         self._fed += len(data)
         if track:
             self._tracked.append((self._fed, end))
@@ -212,7 +200,7 @@ class PacedWriter(_PtyThread):
                 try:
                     os.write(self.fd, data)
                 except BlockingIOError:  # nobody reads the port: the bytes are lost, as on a UART
-                    self.dropped_bytes += len(data)
+                    pass
                 except OSError:
                     return
             next_out = self._out[0][0] if self._out else None
@@ -246,10 +234,9 @@ class LineReader(_PtyThread):
         self._rng = random.Random(seed)
         self._lock = threading.Lock()
         self._arrived: collections.deque[tuple[float, int]] = collections.deque()
-        self.last_byte_at_s: float | None = None
-        """``time.perf_counter`` when the last byte the host wrote is (or will be) through."""
+        self.last_byte_at_s: float | None = None  # when the host's last byte is through the line
+        # when each recent 60-byte frame of the host was through the line (its last byte)
         self.through_s: collections.deque[float] = collections.deque(maxlen=1 << 16)
-        """When each recent 60-byte frame of the host was through the line (its last byte)."""
         self._count = 0
 
     def run(self) -> None:
@@ -274,11 +261,8 @@ class LineReader(_PtyThread):
 
     def deliver(self, data: bytes, written_s: float) -> None:
         """Put ``data``, written by the host at ``written_s``, on the line behind what is on it."""
-        start = max(written_s, self._line_free_s)
         with self._lock:
-            for i, byte in enumerate(data):
-                self._arrived.append((start + (i + 1) * self.byte_s, byte))
-            self._line_free_s = start + len(data) * self.byte_s
+            self._arrived.extend(self._on_line(written_s, data))
             self.last_byte_at_s = self._line_free_s
             self._count += len(data)
             while self._count >= GPIO_FRAME_BYTES:  # the host writes whole 60-byte GPIO frames
