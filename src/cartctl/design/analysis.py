@@ -1,26 +1,23 @@
-"""Closed-loop simulations of a design, and the physical limit its step is measured against.
+"""Closed-loop simulations of a design, its margins, and the physical limit its step is
+measured against.
 
-The runtime controller (:mod:`cartctl.runtime`, with its estimator, anti-windup and limit) runs
-against the model as a plant saturated at the supply, in the tick order of
-:mod:`cartctl.runtime.base`: the reference step, and the load-disturbance step. A load torque acts
-like a voltage d added at the plant input; the plant sees v[k] = u[k − extra] + d (a serial link
-delays the command, not the load), so linear and unsaturated Y(z) = G / (1 + L) · D(z) with
-L = C_fb·G·z^(−extra).
+The runtime controller (estimator, anti-windup and limit included) runs against the model
+saturated at the supply, in the tick order of :mod:`cartctl.runtime.base`: a reference step, and a
+load step d at the plant input, v[k] = u[k − extra] + d (a serial link delays the command, not the
+load). Margins and Ms of L = C_fb·G·z^(−extra) are python-control's (:func:`loop_analysis`).
 
-The limit, the fastest settling any voltage within ±12 V allows: on the model with the design's
-extra delay, y = T u for a step from rest (T the Toeplitz matrix of the impulse response), so
-settling from tick N is a linear feasibility problem: |u[k]| ≤ U_max for all k and |y[k] − r| ≤ max(0.02 |r|, q) for
-N ≤ k < N + M (hold, default 2 s; q one encoder count per tick, 0.3506 rad/s at 10 ms). The
-smallest feasible N (bisection over HiGHS linear programs) is the bound no controller beats; a
-step's settling time, measured in the same band (:func:`in_settling_band`), is reported as a ratio
-to it (a little below 1 for a controller matching it: the bound is whole ticks, a settling time
-interpolates). Of the sequences settling at N, the one closest to r after N is returned, to draw.
+The limit (:func:`settling_bound`): y = T u for a step from rest (T the Toeplitz matrix of the
+impulse response), so settling from tick N is a linear feasibility problem, |u[k]| ≤ U_max and
+|y[k] − r| ≤ max(0.02 |r|, q) for N ≤ k < N + M (q one encoder count per tick). The smallest
+feasible N (HiGHS linear programs, bisected) is the bound no controller beats; a step's settling
+time, measured in the same band (:func:`in_settling_band`), is reported as a ratio to it.
 """
 
 from __future__ import annotations
 
 import functools
 import math
+import warnings
 from collections import deque
 from dataclasses import dataclass, replace
 from typing import Any
@@ -259,6 +256,7 @@ def _feasible(
     return res.x[:n] if res.status == 0 else None
 
 
+@functools.lru_cache(maxsize=256)
 def settling_bound(
     model: ArxModel,
     step_rad_s: float,
@@ -271,29 +269,12 @@ def settling_bound(
     max_s: float = 3.0,
 ) -> SettlingBound:
     """Fastest settling of a step from rest to ``step_rad_s`` that any voltage within
-    ±``voltage_limit_v`` allows, on the model with ``extra_delay_ticks`` more input delay (the
-    bound without plus d ticks), in the band max(``band`` · |r|, ``quantum_rad_s``), held for
-    ``hold_s``, searched up to ``max_s``. InputError for a step that cannot be held within the
-    limit (|r| − band above the DC gain × limit) or lies within its own band, a bad extra delay,
-    or an unstable model.
+    ±``voltage_limit_v`` allows, on the model with ``extra_delay_ticks`` more input delay, in the
+    band max(``band`` · |r|, ``quantum_rad_s``), held for ``hold_s``, searched up to ``max_s``;
+    cached (design, tune and commission ask for the same bound many times), so its arrays are
+    read-only. InputError for a step that cannot be held within the limit (|r| − band above the
+    DC gain × limit) or lies within its own band, a bad extra delay, or an unstable model.
     """
-    return _settling_bound(model, float(step_rad_s), float(voltage_limit_v), extra_delay_ticks,
-                           float(band), quantum_rad_s, float(hold_s), float(max_s))  # fmt: skip
-
-
-@functools.lru_cache(maxsize=256)
-def _settling_bound(
-    model: ArxModel,
-    step_rad_s: float,
-    voltage_limit_v: float,
-    extra_delay_ticks: int,
-    band: float,
-    quantum_rad_s: float | None,
-    hold_s: float,
-    max_s: float,
-) -> SettlingBound:
-    """:func:`settling_bound`, cached (design, tune and commission ask for the same bound many
-    times); its arrays are read-only, as every caller shares them."""
     plant = model.with_extra_delay(extra_delay_ticks)
     if not plant.is_stable():
         raise InputError("the settling bound needs a stable model")
@@ -330,3 +311,78 @@ def _settling_bound(
     best.setflags(write=False)
     speed.setflags(write=False)
     return SettlingBound(hi * ts, hi, best, speed, plant.nk - 1, tol)
+
+
+def loop_analysis(
+    num: NDArray[np.float64], den: NDArray[np.float64], model: ArxModel, extra_delay_ticks: int
+) -> dict[str, Any]:
+    """``phase_margin_deg``, ``gain_margin_db`` (None when infinite), ``crossover_hz`` and
+    ``sensitivity_peak`` Ms = max|1/(1 + L)| (1/sm, the shortest distance from L to −1; with its
+    dB and Hz) of L = C G z^(−extra), C = ``num``/``den`` (descending powers of z), from one call
+    of python-control's ``stability_margins``.
+
+    The exact polynomial method is asked for (``margin``'s default grid misses the crossover of
+    some well-damped designs), and each crossing it finds is checked on L itself (|L| = 1 within
+    1e-6, a phase of −180° within 1e-4 rad: high-order loops give spurious roots) before
+    python-control's choice (the smallest |PM|, the GM closest to 1).
+    """
+    import control
+
+    ts = model.period_s
+    loop = (
+        control.tf(num, den, ts)
+        * model.to_tf()
+        * control.tf([1.0], [1.0] + [0.0] * extra_delay_ticks, ts)
+    )
+    ln, ld = np.squeeze(loop.num[0][0]), np.squeeze(loop.den[0][0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        gms, pms, sms, w180, wcs, wms = control.stability_margins(
+            loop, method="poly", returnall=True
+        )
+    gm, pm, wcp = _checked_margins(ln, ld, ts, gms, pms, w180, wcs)
+    ms = 1.0 / float(np.min(sms))
+    # python-control searches ωTs in [0, 2π]: a peak above Nyquist is the mirror of one below
+    wdt = float(wms[np.argmin(sms)]) * ts % (2.0 * math.pi)
+    return {
+        "sensitivity_peak": ms,
+        "sensitivity_peak_db": 20.0 * math.log10(ms),
+        "sensitivity_peak_hz": min(wdt, 2.0 * math.pi - wdt) / (2.0 * math.pi * ts),
+        "phase_margin_deg": float(pm) if math.isfinite(pm) else None,
+        "gain_margin_db": 20.0 * math.log10(gm) if math.isfinite(gm) and gm > 0 else None,
+        "crossover_hz": float(wcp) / (2.0 * math.pi) if math.isfinite(wcp) else None,
+    }
+
+
+def _checked_margins(
+    ln: NDArray[np.float64],
+    ld: NDArray[np.float64],
+    ts: float,
+    gms: NDArray[np.float64],
+    pms: NDArray[np.float64],
+    w180: NDArray[np.float64],
+    wcs: NDArray[np.float64],
+) -> tuple[float, float, float]:
+    """(GM, PM °, crossover rad/s) from the crossings that L(e^{jωTs}) = ln/ld really has."""
+
+    def at(w: float) -> complex:
+        z = np.exp(1j * w * ts)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return complex(np.polyval(ln, z) / np.polyval(ld, z))
+
+    gain = [
+        (g, w)
+        for g, w in zip(np.atleast_1d(gms), np.atleast_1d(w180), strict=True)
+        if w > 0.0
+        and np.isfinite(at(w))
+        and at(w).real < 0.0
+        and abs(math.atan2(at(w).imag, -at(w).real)) < 1e-4
+    ]
+    phase = [
+        (p, w)
+        for p, w in zip(np.atleast_1d(pms), np.atleast_1d(wcs), strict=True)
+        if np.isfinite(at(w)) and abs(abs(at(w)) - 1.0) < 1e-6
+    ]
+    gm = min(gain, key=lambda gw: abs(math.log(gw[0])))[0] if gain else math.inf
+    pm, wcp = min(phase, key=lambda pw: abs(pw[0])) if phase else (math.inf, math.nan)
+    return float(gm), float(pm), float(wcp)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import MISSING, dataclass, fields
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -164,82 +165,70 @@ def controller_state_space(
     ``estimator`` for a PI; ``K``, ``Ki``, ``Kr`` and ``estimator`` for pole placement); KeyError,
     TypeError or ValueError for a missing gain or one that is not a number."""
     ts = float(period_s)
+    if method != "pi":
+        return state_feedback(feedback_gains(entry, ts))
+    kp, ki = float(entry["kp"]), float(entry["ki"])
+    g, q = kp + ki * ts, ki * ts  # u = g·e + I[k−1], I[k] = I[k−1] + q·e
     est = entry.get("estimator")
-    if method == "pi":
-        kp, ki = float(entry["kp"]), float(entry["ki"])
-        if est is None:
-            g, q = kp + ki * ts, ki * ts
-            return ControllerStateSpace(
-                np.array([[1.0]]),
-                np.array([[q, -q]]),
-                np.array([[1.0]]),
-                np.array([[g, -g]]),
-                ts,
-                ("integral_v",),
-            )
-        return _pi_on_estimate(kp, ki, ts, est)
-    return state_feedback(feedback_gains(entry, ts))
-
-
-def _state_names(n: int, m: int) -> list[str]:
-    """xhat_1 … xhat_n (rad/s) of m estimator states, then bias_v (V) for the disturbance state."""
-    return [f"xhat_{i + 1}" for i in range(min(n, m))] + ["bias_v"] * (m - n)
-
-
-def _pi_on_estimate(
-    kp: float, ki: float, ts: float, est: Mapping[str, Any]
-) -> ControllerStateSpace:
-    a, b, c, gain = (np.asarray(est[k], dtype=float) for k in ("A", "B", "C", "L"))
-    m = a.shape[0]
-    g, q = kp + ki * ts, ki * ts
-    lc = np.eye(m) - np.outer(gain, c)
-    c1 = c @ lc  # x̂_1[k|k] = c1 x̂ + cl y
-    cl = float(c @ gain)
-    big_a = np.zeros((m + 1, m + 1))
-    big_a[:m, :m] = a @ lc - g * np.outer(b, c1)
-    big_a[:m, m] = b
-    big_a[m, :m] = -q * c1
-    big_a[m, m] = 1.0
-    big_b = np.zeros((m + 1, 2))
-    big_b[:m, 0] = g * b
-    big_b[:m, 1] = a @ gain - g * cl * b
-    big_b[m] = [q, -q * cl]
-    big_c = np.zeros((1, m + 1))
-    big_c[0, :m] = -g * c1
-    big_c[0, m] = 1.0
-    big_d = np.array([[g, -g * cl]])
-    states = (*_state_names(int(est.get("n_model_states", m)), m), "integral_v")
-    return ControllerStateSpace(big_a, big_b, big_c, big_d, ts, states)
+    if est is None:  # no x̂: e = r − y
+        none = SimpleNamespace(A=np.zeros((0, 0)), B=np.zeros(0), C=np.zeros(0), L=np.zeros(0))
+        return _law(ts, none, g, np.zeros(0), ky=g, integrator=(1.0, q, 0.0, q, "integral_v"))
+    arrays = {k: np.asarray(est[k], dtype=float) for k in ("A", "B", "C", "L")}
+    x = SimpleNamespace(**arrays, n_model_states=est.get("n_model_states", len(arrays["B"])))
+    return _law(ts, x, g, x.C, gain=g, integrator=(1.0, q, q, 0.0, "integral_v"))
 
 
 def state_feedback(design: FeedbackGains) -> ControllerStateSpace:
     """Pole placement's controller (see the module docstring) from its gains: a fresh
     :class:`~cartctl.design.poles.PolesDesign` or a file's, read back."""
     est = design.estimator
-    a, b, c, gain = est.A, est.B, est.C, est.L
+    k = np.zeros(est.A.shape[0])
+    k[: design.K.size] = design.K
+    ki, ts = float(design.Ki), float(design.period_s)
+    integrator = None if ki == 0.0 else (-ki, ts, 0.0, ts, "integral_rad")
+    return _law(ts, est, float(design.Kr), k, integrator=integrator)
+
+
+def _law(
+    ts: float,
+    est: Any,
+    kr: float,
+    k: NDArray[np.float64],
+    *,
+    gain: float = 1.0,
+    ky: float = 0.0,
+    integrator: tuple[float, float, float, float, str] | None = None,
+) -> ControllerStateSpace:
+    """u = kr·r − gain·k·x̂[k|k] − ky·y + ci·s on the estimator ``est`` (its A, B, C, L and
+    n_model_states), x̂[k|k] = (I − L C) x̂ + L y, x̂⁺ = A x̂[k|k] + B u, and with ``integrator``
+    = (ci, ar, ax, ay, name) the state s⁺ = s + ar·r − ax·k·x̂[k|k] − ay·y."""
+    a, b, c, el = est.A, est.B, est.C, est.L
     m = a.shape[0]
-    k_full = np.zeros(m)
-    k_full[: design.K.size] = design.K
-    ki, kr, ts = float(design.Ki), float(design.Kr), float(design.period_s)
-    lc = np.eye(m) - np.outer(gain, c)
-    kl = float(k_full @ gain)
-    n = m + 1 if ki != 0.0 else m
-    big_a = np.zeros((n, n))
-    big_a[:m, :m] = a @ lc - np.outer(b, k_full @ lc)
-    big_b = np.zeros((n, 2))
+    lc = np.eye(m) - np.outer(el, c)
+    klc, kl = k @ lc, float(k @ el)
+    n = m + (integrator is not None)
+    big_a, big_b, big_c = np.zeros((n, n)), np.zeros((n, 2)), np.zeros((1, n))
+    big_a[:m, :m] = a @ lc - gain * np.outer(b, klc)
     big_b[:m, 0] = kr * b
-    big_b[:m, 1] = a @ gain - kl * b
-    big_c = np.zeros((1, n))
-    big_c[0, :m] = -(k_full @ lc)
-    big_d = np.array([[kr, -kl]])
-    states = _state_names(est.n_model_states, m)
-    if n > m:
-        big_a[:m, m] = -ki * b
+    big_b[:m, 1] = a @ el - (gain * kl + ky) * b
+    big_c[0, :m] = -gain * klc
+    big_d = np.array([[kr, -(gain * kl + ky)]])
+    names = _state_names(int(getattr(est, "n_model_states", 0)), m)
+    if integrator is not None:
+        ci, ar, ax, ay, name = integrator
+        big_a[:m, m] = ci * b
+        if ax:
+            big_a[m, :m] = -ax * klc
         big_a[m, m] = 1.0
-        big_b[m] = [ts, -ts]
-        big_c[0, m] = -ki
-        states.append("integral_rad")
-    return ControllerStateSpace(big_a, big_b, big_c, big_d, ts, tuple(states))
+        big_b[m] = [ar, -(ax * kl + ay)]
+        big_c[0, m] = ci
+        names.append(name)
+    return ControllerStateSpace(big_a, big_b, big_c, big_d, ts, tuple(names))
+
+
+def _state_names(n: int, m: int) -> list[str]:
+    """xhat_1 … xhat_n (rad/s) of m estimator states, then bias_v (V) for the disturbance state."""
+    return [f"xhat_{i + 1}" for i in range(min(n, m))] + ["bias_v"] * (m - n)
 
 
 def feedback_tf_coeffs(design: FeedbackGains) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -1,10 +1,11 @@
-"""The robustness analysis of designs, per motor: S and T with their peaks, the load-disturbance
-step, and the damping of each closed-loop pole; for ``design --json`` and the report's figures.
+"""The loop analysis of designs, per motor: margins, S and T with their peaks, the
+load-disturbance step, and the damping of each closed-loop pole; for ``design --json`` and the
+report's figures.
 
-The controller is taken whole, as the loop runs it (:mod:`cartctl.design.controller_ss`), on the
-loop it was designed for, broken at the plant input: L = C_fb·G·z^(−extra), C_fb = −U/Y (r = 0),
-S = 1/(1 + L), T = L/(1 + L). Ms = max|S| is python-control's (:mod:`cartctl.design.loop`); Mt =
-max|T| is found on a frequency grid up to Nyquist, refined by ``minimize_scalar``.
+The controller is taken whole, as the loop runs it (:mod:`cartctl.design.controller_ss`), broken
+at the plant input: L = C_fb·G·z^(−extra), C_fb = −U/Y (r = 0), S = 1/(1 + L), T = L/(1 + L).
+Margins and Ms = max|S| are python-control's (:func:`~cartctl.design.analysis.loop_analysis`); Mt = max|T| is found on a
+frequency grid up to Nyquist, refined by ``minimize_scalar``.
 """
 
 from __future__ import annotations
@@ -17,13 +18,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.design.analysis import DEFAULT_DISTURBANCE_V, DisturbanceResponse, simulate_disturbance
+from cartctl.design.analysis import (
+    DEFAULT_DISTURBANCE_V,
+    DisturbanceResponse,
+    loop_analysis,
+    simulate_disturbance,
+)
 from cartctl.design.controller_ss import ControllerStateSpace, controller_state_space
-from cartctl.design.loop import loop_analysis
 from cartctl.design.make import Designs
 from cartctl.model import ArxModel, pole_damping
-
-__all__ = ["LIGHT_DAMPING", "MotorAnalysis", "analyse_designs", "damping_warning", "pole_table"]
 
 LIGHT_DAMPING = 0.1
 """A closed-loop pole with a damping ratio ζ below this rings for many periods: a warning."""

@@ -12,11 +12,16 @@ from typing import Any
 
 from cartctl.cart import nk_fits_loop_delay
 from cartctl.data.modelfile import ModelFile
-from cartctl.design.analysis import StepAnalysis, in_settling_band, settling_bound, simulate_step
+from cartctl.design.analysis import (
+    StepAnalysis,
+    in_settling_band,
+    loop_analysis,
+    settling_bound,
+    simulate_step,
+)
 from cartctl.design.build import make_estimator, pi_entry, poles_entry
 from cartctl.design.controllerfile import ControllerFile, common_loop_delay, file_sha256
 from cartctl.design.kalman import design_kalman
-from cartctl.design.loop import loop_analysis
 from cartctl.design.pi import design_pi, design_pi_bandwidth
 from cartctl.design.poles import design_poles
 from cartctl.design.request import DesignRequest, check_loop_delay

@@ -11,8 +11,6 @@ from collections.abc import Iterable
 
 from cartctl.measures.numfmt import format_column, format_fixed
 
-__all__ = ["db", "sig", "sig_list"]
-
 
 def sig(value: float | None, digits: int = 3, *, scale: float | None = None) -> str:
     """``value`` with ``digits`` significant figures (against ``scale`` when it is larger);

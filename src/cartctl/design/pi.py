@@ -262,9 +262,9 @@ class PiDesign:
         return float(optimize.brentq(lambda f: float(excess(f)[0]), grid[i - 1], grid[i]))
 
     def analysis(self) -> dict[str, Any]:
-        """Margins (:func:`~cartctl.design.loop.loop_analysis`), ``closed_loop_poles``
+        """Margins (:func:`~cartctl.design.analysis.loop_analysis`), ``closed_loop_poles``
         ([[re, im], ...]), sensitivity peak and ``bandwidth_hz``."""
-        from cartctl.design.loop import loop_analysis
+        from cartctl.design.analysis import loop_analysis
 
         loop = loop_analysis(*self.controller_tf_coeffs(), self.model, self.extra_delay_ticks)
         num, den = self._loop()

@@ -49,8 +49,6 @@ from cartctl.design.request import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOI
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 
-__all__ = ["PolesDesign", "augment", "design_poles", "spec_poles"]
-
 _CHECK_TOL = 1e-6
 """The placed characteristic polynomial must match the requested one to this (coefficients)."""
 _REPEAT_TOL = 1e-8

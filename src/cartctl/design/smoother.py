@@ -33,8 +33,6 @@ from cartctl.design.request import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOI
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 
-__all__ = ["METHOD", "SmoothedSpeed", "angle_noise_std_rad", "smooth_speed"]
-
 METHOD = "kalman-rts"
 """How the smoothed speed is made, as the JSON summaries name it."""
 
