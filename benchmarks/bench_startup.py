@@ -10,7 +10,7 @@ as the best of ``--repeat`` fresh processes (wall time, measured from this proce
 
 The first tick is seen from outside the package: the child is ``python -c`` with a few lines that
 wrap :meth:`PeriodicExecutor.run <cartctl.runtime.executor.PeriodicExecutor.run>` and
-:meth:`BackToBackExecutor.run <cartctl.runtime.fast.BackToBackExecutor.run>` (``--fast``), in the
+:meth:`BackToBackExecutor.run <cartctl.runtime.executor.BackToBackExecutor.run>` (``--fast``), in the
 child only (nothing in the package is changed), so that the first call of the tick function prints
 ``time.perf_counter()``, then call :func:`cartctl.cli.main` with the command's arguments.
 ``perf_counter`` is the system's monotonic clock on Linux, the same in both processes.

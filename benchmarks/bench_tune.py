@@ -30,7 +30,7 @@ from cartctl.data.modelfile import load_models
 from cartctl.design.make import design_motor
 from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
-from cartctl.runtime.fast import run_in_memory
+from cartctl.runtime.loop import run_in_memory
 from cartctl.sinks.summary import trace_metrics
 from cartctl.tune.batch import ArxBatch, sample_plants, simulate_batch
 from cartctl.tune.grid import design_request, grid_settings, parse_grid

@@ -4,7 +4,7 @@ Run: ``python benchmarks/fast_parts.py [--seconds 120]`` from the repository roo
 ``bench_run.py``. For both shipped controllers on both simulators it builds the loop as
 ``cartctl run --fast`` does (the shipped controller file, the plant, the CSV sink in blocks of
 1000 rows, the memory sink, the Rerun sink saving blocks of 1000 ticks to a file, the
-:class:`~cartctl.runtime.fast.BackToBackExecutor`, the collector paused) and times, in this
+:class:`~cartctl.runtime.executor.BackToBackExecutor`, the collector paused) and times, in this
 process and one after the other:
 
 - ``no sink``: the loop alone (plant, estimators, controllers, the row);
@@ -31,8 +31,7 @@ from cartctl.design.build import build_controllers
 from cartctl.design.controllerfile import load_controller
 from cartctl.plants.factory import make_plant
 from cartctl.reference import reference_signal
-from cartctl.runtime.executor import SimulatedClock
-from cartctl.runtime.fast import BackToBackExecutor
+from cartctl.runtime.executor import BackToBackExecutor, SimulatedClock
 from cartctl.runtime.loop import ControlLoop, MemorySink
 from cartctl.runtime.realtime import gc_paused
 from cartctl.sinks.csv_sink import CsvSink

@@ -14,8 +14,7 @@ from cartctl.design.controllerfile import load_controller
 from cartctl.errors import InputError
 from cartctl.plants.factory import make_plant
 from cartctl.reference import reference_signal
-from cartctl.runtime.executor import PeriodicExecutor, SimulatedClock
-from cartctl.runtime.fast import BackToBackExecutor
+from cartctl.runtime.executor import BackToBackExecutor, PeriodicExecutor, SimulatedClock
 from cartctl.runtime.loop import ControlLoop, MemorySink
 
 

@@ -25,7 +25,7 @@ from cartctl.model import ArxModel
 from cartctl.plants.sim import ArxPlant, arx_next
 from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller
-from cartctl.runtime.fast import run_in_memory
+from cartctl.runtime.loop import run_in_memory
 from cartctl.runtime.pi import ANTI_WINDUP, PiController, pi_law
 from cartctl.runtime.statefeedback import feedback_law
 from cartctl.tune.batch import ArxBatch, simulate_batch

@@ -22,7 +22,7 @@ from cartctl.model import ArxModel
 from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller
-from cartctl.runtime.fast import run_in_memory
+from cartctl.runtime.loop import run_in_memory
 from cartctl.runtime.pi import PiController
 from cartctl.sinks.summary import motor_metrics
 from cartctl.tune.batch import ArxBatch, simulate_batch

@@ -35,7 +35,7 @@ from cartctl.plants.base import Measurement
 from cartctl.plants.physics import PhysicsPlant, preset
 from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
-from cartctl.runtime.fast import run_in_memory
+from cartctl.runtime.loop import run_in_memory
 from cartctl.sinks.summary import trace_metrics
 from cartctl.tune.batch import sample_plants
 from cartctl.tune.engine import DelayedPlant

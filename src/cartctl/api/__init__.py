@@ -26,7 +26,7 @@ from cartctl.errors import InputError, PlantError
 from cartctl.identification.pipeline import IdentifyRequest, Prefilter
 from cartctl.identification.pipeline import identify as identify_traces
 from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
-from cartctl.runtime.fast import run_in_memory
+from cartctl.runtime.loop import run_in_memory
 from cartctl.session.prepare import prepare_run
 from cartctl.sinks.summary import trace_metrics
 

@@ -158,7 +158,7 @@ def tuning_steps(controller_path: Path, model_path: Path, png: Path) -> Series:
     from cartctl.design.controllerfile import load_controller
     from cartctl.plants.sim import ArxPlant
     from cartctl.reference import reference_signal
-    from cartctl.runtime.fast import run_in_memory
+    from cartctl.runtime.loop import run_in_memory
 
     file = load_controller(controller_path)
     models = load_models(model_path)

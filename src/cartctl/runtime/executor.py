@@ -288,6 +288,45 @@ class PeriodicExecutor(_Recorder):
         return m
 
 
+class BackToBackExecutor:
+    """The fast simulated loop's executor (``run --fast``, ``tune``, the Python API): ``tick(k)``
+    back to back (tick k at ``k * period_s``, period error 0, no miss) up to ``max_ticks``, and
+    the sinks' block work ``idle`` every ``idle_every`` ticks and at the end, not after each
+    (about a quarter of the fast loop's time, ``benchmarks/bench_run.py``)."""
+
+    def __init__(self, period_s: float, *, max_ticks: int, idle_every: int = 1000) -> None:
+        self.period_s = check_period(period_s)
+        self.max_ticks = check_count("max_ticks", max_ticks, 0)
+        self.idle_every = check_count("idle_every", idle_every, 1)
+        self.ticks = 0
+
+    def run(
+        self, tick: Callable[[int], bool], idle: Callable[[], None] | None = None
+    ) -> TimingStats:
+        """Call ``tick(k)`` until it returns False or ``max_ticks`` ran; an exception from it
+        propagates (:meth:`stats` counts the ticks completed)."""
+        self.ticks = 0
+        every = self.idle_every
+        for k in range(self.max_ticks):
+            keep_going = tick(k)
+            self.ticks = k + 1
+            if idle is not None and self.ticks % every == 0:
+                idle()
+            if not keep_going:
+                break
+        if idle is not None and self.ticks % every:
+            idle()
+        return self.stats()
+
+    def stats(self) -> TimingStats:
+        """The ticks completed, with zero timing."""
+        zeros = np.zeros(self.ticks)
+        return TimingStats.from_samples(
+            zeros, zeros, period_s=self.period_s,
+            duration_s=max(self.ticks - 1, 0) * self.period_s,
+        )  # fmt: skip
+
+
 class CartClockedExecutor(_Recorder):
     """Runs ``tick(k)`` once per cart tick until it returns False or ``max_ticks`` ran, once the
     plant's first measurement has arrived; ``compute_us`` gives the loop's compute time of the tick

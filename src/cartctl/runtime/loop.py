@@ -1,7 +1,7 @@
 """The closed loop: one tick reads the plant, runs each motor's controller, sends, and logs.
 
 :class:`ControlLoop` is the per-tick body an executor calls on a real or a simulated clock
-(docs/architecture.md, "One tick of ``cartctl run``"). A sink whose file write fails raises
+(docs/architecture.md, "One tick of ``cartctl run``"); :func:`run_in_memory` runs it back to back. A sink whose file write fails raises
 :class:`~cartctl.errors.OutputError` once every other sink has had its row; the error is kept in
 :attr:`LoopState.incomplete` and the run ends through :meth:`ControlLoop.finish`.
 """
@@ -17,9 +17,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.cart import PERIOD_S, SUPPLY_V, check_voltage_limit
-from cartctl.errors import InputError, OutputError
+from cartctl.errors import InputError, OutputError, PlantError
 from cartctl.plants.base import ClockedPlant, Measurement, Plant
 from cartctl.runtime.base import Controller
+from cartctl.runtime.executor import BackToBackExecutor, SimulatedClock
 from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS, Sink
 
 
@@ -267,3 +268,27 @@ class ControlLoop:
                 self.state.output_failed(exc)
             except Exception as exc:  # report, but close the others too
                 self.state.sink_errors.append(f"{type(s).__name__}: {exc}")
+
+
+def run_in_memory(
+    plant: Plant,
+    controllers: Mapping[str, Controller],
+    references: Mapping[str, PerTick],
+    *,
+    period_s: float,
+    voltage_limit_v: float,
+) -> tuple[dict[str, NDArray[np.float64]], LoopState]:
+    """Run with a :class:`~cartctl.runtime.loop.MemorySink` (ending, like every run, with the
+    zero-volt stop row): the trace columns and what happened (a plant fault in ``state.failure``)."""
+    clock, memory = SimulatedClock(), MemorySink()
+    loop = ControlLoop(plant, controllers, references, [memory], now_s=clock.now_s,
+                       voltage_limit_v=voltage_limit_v, period_s=period_s)  # fmt: skip
+    executor, loop_tick = BackToBackExecutor(period_s, max_ticks=loop.n_ticks), loop.tick
+    try:
+        loop.start()
+        executor.run(lambda k: loop_tick(k, 0.0, 0.0, k * period_s), loop.idle)
+    except PlantError as exc:
+        loop.state.failure = str(exc)
+    finally:
+        loop.finish()
+    return memory.arrays(), loop.state

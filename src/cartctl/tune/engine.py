@@ -27,7 +27,7 @@ from cartctl.plants.factory import make_plant
 from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller
-from cartctl.runtime.fast import run_in_memory
+from cartctl.runtime.loop import run_in_memory
 from cartctl.sinks.summary import trace_metrics
 from cartctl.tune.grid import RUN_FAILED, TuneResult, design_request, request_axes
 

@@ -200,12 +200,12 @@ def _run_loop(
     the loop (its ``state`` says how it ended), the timing figures and the scheduling."""
     from cartctl.plants.base import ClockedPlant
     from cartctl.runtime.executor import (
+        BackToBackExecutor,
         CartClockedExecutor,
         MonotonicClock,
         PeriodicExecutor,
         SimulatedClock,
     )
-    from cartctl.runtime.fast import BackToBackExecutor
     from cartctl.runtime.loop import ControlLoop
     from cartctl.runtime.realtime import gc_paused
 
