@@ -9,9 +9,6 @@ import os
 import signal
 import sys
 
-__all__ = ["STOP_SIGNALS", "Interrupted", "deferred", "exit_code", "ignore", "install",
-           "install_at_start", "received", "restore"]  # fmt: skip
-
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 STARTING_LINE = "cartctl: stopped while starting; nothing was done"
 """What a stop signal before the command line took over prints (stderr)."""

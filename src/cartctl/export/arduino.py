@@ -31,8 +31,6 @@ from cartctl.link.firmware import (
 )
 from cartctl.runtime.base import Controller
 
-__all__ = ["arduino_source", "as_steady_state", "c_float", "timing_noise_note"]
-
 
 def timing_noise_note(controller: ControllerFile) -> str | None:
     """One line when the file's estimator has timing noise, which the C does not run; else None."""

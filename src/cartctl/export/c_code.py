@@ -15,8 +15,6 @@ from cartctl.design.controllerfile import ControllerFile
 from cartctl.design.kalman import KalmanDesign
 from cartctl.errors import DataFileError, InputError
 
-__all__ = ["c_float", "pi_code", "poles_code", "where"]
-
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 

@@ -17,8 +17,6 @@ from cartctl.data.modelfile import ModelFile
 from cartctl.design.controller_ss import controller_state_space
 from cartctl.design.controllerfile import ControllerFile
 
-__all__ = ["controller_mat", "model_mat", "write_mat"]
-
 _KALMAN_KEYS = ("A", "B", "C", "Q", "R", "P", "L", "timing_noise_std_ticks")
 
 
