@@ -1,10 +1,9 @@
 """Passive recording of what a cart sends (``cartctl monitor``): labelled GPIO rows, text, events.
 
-The monitor never sends anything. Each GPIO becomes a row ``time_s, tick, <12 labels>``: the
-labels given, else those of cartctl's firmware when its frames carry its marker, else
-QRoboticsCenter's. ``tick`` counts the rows; ``time_s`` is k · Ts with the cart's tick k counted
-from the frames' millisecond stamps, k = max(k_prev + 1, round(Δms / 10 ms)) (docs/serial.md).
-PRINT lines and EVENTs get the time and tick of the last row before them (0 before the first).
+Each GPIO becomes a row ``time_s, tick, <12 labels>``. ``tick`` counts the rows; ``time_s`` is
+k · Ts with the cart's tick k from the frames' millisecond stamps, k = max(k_prev + 1,
+round(Δms / 10 ms)) (docs/serial.md). PRINT lines and EVENTs get the time and tick of the last
+row before them (0 before the first).
 """
 
 from __future__ import annotations
@@ -34,8 +33,8 @@ _TIME_MODULO_MS = 1 << 32  # the GPIO's time field is a u32 of milliseconds
 _PERIOD_MS = PERIOD_S * 1000.0
 _TICKS_PER_S = round(1.0 / PERIOD_S)
 RECOGNISE_FRAMES = 10
-"""The frames (100 ms) in which one carrying a firmware marker is waited for before the labels
-are chosen: a firmware's first frames may go out before its first ``control()`` filled them."""
+"""Frames (100 ms) that may go by without a firmware marker before the labels are chosen (a
+firmware's first frames may go out before its first ``control()`` filled them)."""
 
 
 def parse_labels(text: str | None) -> tuple[str, ...]:
@@ -76,9 +75,7 @@ def firmware_labels(firmware: Firmware | None) -> tuple[str, ...]:
     """The 12 labels of a firmware's channels; those it does not name (or all, for None) keep
     QRoboticsCenter's."""
     labels = dict(zip(CHANNEL_KEYS, DEFAULT_LABELS, strict=True))
-    if firmware is not None:
-        labels.update(firmware.labels)
-    return tuple(labels.values())
+    return tuple({**labels, **dict(firmware.labels if firmware else ())}.values())
 
 
 def describe_labels(
@@ -93,12 +90,10 @@ def describe_labels(
         for key, label, default in zip(CHANNEL_KEYS, labels, DEFAULT_LABELS, strict=True)
         if label != default
     )
+    used = f"labels {'from --labels ' if given else ''}{named}, the others QRoboticsCenter's"
     if not named:
         used = "QRoboticsCenter's labels (FloatIn0..7, IntIn0..3)"
-        if not given:
-            used += "; name the channels with --labels"
-    else:
-        used = f"labels {'from --labels ' if given else ''}{named}, the others QRoboticsCenter's"
+        used += "" if given else "; name the channels with --labels"
     return f"firmware: {what}, by {told}; {used}"
 
 
@@ -126,14 +121,13 @@ class MonitorResult:
 
 
 class Monitor:
-    """Reads a connected link and writes one row per GPIO to the sinks.
+    """Reads a connected link and writes one row per GPIO to the sinks (never sends anything).
 
-    The first of the cart's first :data:`RECOGNISE_FRAMES` frames that carries the marker of one
-    of cartctl's firmwares names the channels (:func:`firmware_labels`); without one they are
-    QRoboticsCenter's; ``labels`` (:func:`parse_labels`) override them (the firmware is still
-    told, to ``announce``). The row sinks are opened once the labels are chosen, and the frames
-    and texts held until then are written at once, in order. ``echo`` also receives each PRINT
-    line. The caller closes the sinks.
+    The first of the first :data:`RECOGNISE_FRAMES` frames that carries the marker of one of
+    cartctl's firmwares names the channels (:func:`firmware_labels`), else QRoboticsCenter's
+    labels do; ``labels`` (:func:`parse_labels`) override both (the firmware is still told, to
+    ``announce``). The row sinks open once the labels are chosen; what was held until then is
+    written at once, in order. ``echo`` also receives each PRINT line. The caller closes the sinks.
     """
 
     def __init__(
@@ -149,8 +143,7 @@ class Monitor:
         self.given_labels = None if labels is None else tuple(labels)
         self.labels: tuple[str, ...] | None = None
         self.columns: tuple[str, ...] | None = None
-        self.firmware: Firmware | None = None
-        """The firmware the cart's frames named, once they were looked at (None: not cartctl's)."""
+        self.firmware: Firmware | None = None  # what the frames named (None: not cartctl's)
         self.result = MonitorResult()
         self.stop_requested = False
         self._decided = False  # whether the frames were looked at for a firmware
@@ -160,15 +153,13 @@ class Monitor:
         self._elapsed_ms = 0  # the stamps' distance from the first GPIO's (ms)
         self._cart_tick = -1  # the cart's tick of the last row, since the first GPIO
 
-    def on_print(self, line: str) -> None:
-        """CartLink's PRINT callback."""
+    def on_print(self, line: str) -> None:  # CartLink's PRINT callback
         self.result.print_lines += 1
         if self.echo is not None:
             self.echo(line)
         self._hold(lambda: self._log(PRINT_ENTITY, line))
 
-    def on_event(self, event: Event) -> None:
-        """CartLink's EVENT callback."""
+    def on_event(self, event: Event) -> None:  # CartLink's EVENT callback
         self.result.events += 1
         button = event.button
         text = f"button {button} pressed" if button is not None else f"event {event.type}"
@@ -185,10 +176,8 @@ class Monitor:
             sink.open(self.columns)
 
     def run(self, link: CartLink, duration_s: float | None = None) -> MonitorResult:
-        """Record until ``duration_s`` of cart time, a stop request or a line fault.
-
-        The GPIO whose cart time reaches ``duration_s`` is not recorded (S seconds: S / 0.01
-        rows). A :class:`~cartctl.errors.PlantError` ends the run with ``stopped = 'fault'``;
+        """Record until ``duration_s`` of cart time (S seconds: S / 0.01 rows), a stop request or
+        a line fault. A :class:`~cartctl.errors.PlantError` ends the run with ``stopped = 'fault'``;
         :attr:`stop_requested` (set from a signal handler) or a KeyboardInterrupt with
         ``'interrupted'``; nothing is raised. However it ends, the sinks are open and hold every
         frame kept.
@@ -221,14 +210,12 @@ class Monitor:
 
     def _accept(self, gpio: Gpio, time_s: float) -> None:
         """Hold a frame; the first frames decide the labels, then what is held is written."""
-        self._held.append(lambda: self._record(gpio, time_s))
         if not self._decided:
             self._looked.append(gpio)
             firmware = recognise_firmware(gpio.floats, gpio.ints)
-            if firmware is None and len(self._looked) < RECOGNISE_FRAMES:
-                return
-            self._decide(firmware, gpio.floats[CH_FIRMWARE_ID])
-        self._write_held()
+            if firmware is not None or len(self._looked) >= RECOGNISE_FRAMES:
+                self._decide(firmware, gpio.floats[CH_FIRMWARE_ID])
+        self._hold(lambda: self._record(gpio, time_s))
 
     def _decide(self, firmware: Firmware | None, marker: float | None) -> None:
         """Choose the labels (given, the firmware's, or the defaults), say so, open the sinks.
