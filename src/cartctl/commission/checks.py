@@ -142,27 +142,20 @@ def verdict(checks: dict[str, MotorCheck]) -> None:
     """Raise :class:`StageError` (one line, what to swap) unless both motors run the right way."""
     for m, c in checks.items():
         other = "b" if m == "a" else "a"
-        if c.direction == "backward":
-            raise StageError(
-                f"checks: motor {m} runs backwards (+{PULSE_V:g} V turned its encoder by "
-                f"{c.pulse_turn_rad:+.2f} rad): if wheel {m} turned forwards, swap its encoder "
-                f"channels A and B; if it turned backwards, swap motor {m}'s two leads"
-            )
-        if c.direction == "crossed":
-            raise StageError(
-                f"checks: a pulse on motor {m} moved only encoder {other} ({c.other_turn_rad:+.2f} "
-                f"rad): the motors' (or the encoders') connections a and b are crossed; swap them"
-            )
-        if c.direction == "still":
-            raise StageError(
-                f"checks: motor {m} did not turn at +{PULSE_V:g} V (its encoder moved "
-                f"{c.pulse_turn_rad:+.3f} rad): check its supply, leads and encoder cable"
-            )
-        if c.breakaway_v is None:
-            raise StageError(
-                f"checks: motor {m} did not keep turning on a ramp up to {RAMP_MAX_V:g} V: check "
-                "for a blocked wheel or a loose encoder"
-            )
+        wrong = {
+            "backward": f"motor {m} runs backwards (+{PULSE_V:g} V turned its encoder by "
+            f"{c.pulse_turn_rad:+.2f} rad): if wheel {m} turned forwards, swap its encoder "
+            f"channels A and B; if it turned backwards, swap motor {m}'s two leads",
+            "crossed": f"a pulse on motor {m} moved only encoder {other} ({c.other_turn_rad:+.2f} "
+            "rad): the motors' (or the encoders') connections a and b are crossed; swap them",
+            "still": f"motor {m} did not turn at +{PULSE_V:g} V (its encoder moved "
+            f"{c.pulse_turn_rad:+.3f} rad): check its supply, leads and encoder cable",
+        }.get(c.direction)
+        if wrong is None and c.breakaway_v is None:
+            wrong = (f"motor {m} did not keep turning on a ramp up to {RAMP_MAX_V:g} V: check for "
+                     "a blocked wheel or a loose encoder")  # fmt: skip
+        if wrong is not None:
+            raise StageError(f"checks: {wrong}")
 
 
 @dataclass(frozen=True)
