@@ -292,27 +292,22 @@ class Diagnostics:
     def compared_fits(self, models: Mapping[str, ArxModel]) -> dict[str, dict[str, Any]]:
         """Fits (%) and DC gain of other models (``--compare``) on the same data as the fits."""
         data = self.validation or self.raw
-        out = {}
-        for label, model in models.items():
-            out[label] = {
+        return {
+            label: {
                 "fit_simulation_percent": finite_or_none(simulation_fit(model, data)),
                 "fit_prediction_percent": finite_or_none(prediction_fit(model, data)),
                 "dc_gain": finite_or_none(model.dc_gain()),
                 "nk": model.nk,
                 "theta": model.theta.tolist(),
             }
-        return out
+            for label, model in models.items()
+        }
 
     def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {
-            "fit_data": self.fit_on,
-            "residuals": self.residuals.to_dict(),
-            "theta_cov": self.theta_cov.tolist(),
-            "bode_band": None if self.band is None else self.band.to_dict(),
-        }
-        if self.orders is not None:
-            out["orders"] = self.orders.to_dict()
-        return out
+        band = None if self.band is None else self.band.to_dict()
+        out: dict[str, Any] = {"fit_data": self.fit_on, "residuals": self.residuals.to_dict()}
+        out |= {"theta_cov": self.theta_cov.tolist(), "bode_band": band}
+        return out if self.orders is None else out | {"orders": self.orders.to_dict()}
 
 
 def diagnose(

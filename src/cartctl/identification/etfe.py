@@ -183,16 +183,10 @@ class Etfe:
         return np.degrees(np.angle(self.response))
 
     def to_dict(self) -> dict[str, Any]:
-        std = None if self.response_std is None else self.response_std.tolist()
-        return {
-            "freq_hz": self.freq_hz.tolist(),
-            "re": self.response.real.tolist(),
-            "im": self.response.imag.tolist(),
-            "periodic": self.periodic,
-            "n_segments": self.n_segments,
-            "period_s": self.period_s,
-            "response_std": std,
-        }
+        h, std = self.response, self.response_std
+        out = {"freq_hz": self.freq_hz.tolist(), "re": h.real.tolist(), "im": h.imag.tolist()}
+        out |= {k: getattr(self, k) for k in ("periodic", "n_segments", "period_s")}
+        return out | {"response_std": None if std is None else std.tolist()}
 
 
 def _excited(amplitude: NDArray[np.float64], fraction: float) -> NDArray[np.bool_]:

@@ -160,12 +160,10 @@ class IdentifyResult:
     loop_delay_ticks: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "Ts": self.period_s,
-            "motors": {m: r.to_dict() for m, r in self.motors.items()},
-            "delay": None if self.delay is None else self.delay.to_dict(),
-            "loop_delay_ticks": self.loop_delay_ticks,
-        }
+        out: dict[str, Any] = {"Ts": self.period_s}
+        out["motors"] = {m: r.to_dict() for m, r in self.motors.items()}
+        out["delay"] = None if self.delay is None else self.delay.to_dict()
+        return out | {"loop_delay_ticks": self.loop_delay_ticks}
 
 
 def _no_excitation(traces: Sequence[Trace], motor: str) -> str | None:

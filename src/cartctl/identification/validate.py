@@ -147,13 +147,9 @@ class ModelValidation:
     skipped: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "Ts": self.period_s,
-            "data": self.data,
-            "model": self.model,
-            "motors": {name: r.to_dict() for name, r in self.results.items()},
-            "skipped": list(self.skipped),
-        }
+        motors = {name: r.to_dict() for name, r in self.results.items()}
+        out = {"Ts": self.period_s, "data": self.data, "model": self.model, "motors": motors}
+        return out | {"skipped": list(self.skipped)}
 
 
 def validate_models(
