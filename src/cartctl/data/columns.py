@@ -115,12 +115,8 @@ def read_qrc6(path: Path) -> QrcLog:
             "expected the column header 'Time, <label>, <label>, ...' on line 2",
             line=2,
         )
-    rows: list[list[str]] = []
-    row_lines: list[int] = []
-    for number, line in enumerate(lines[2:], start=3):
-        if line.strip():
-            rows.append(line.split(","))
-            row_lines.append(number)
+    numbered = [(number, line) for number, line in enumerate(lines[2:], start=3) if line.strip()]
+    rows, row_lines = [line.split(",") for _, line in numbered], [number for number, _ in numbered]
     if not rows:
         raise DataFileError(path, "the log has no data rows after its header (line 2)")
     return QrcLog("QRC 6 CSV", tuple(header[1:]), rows, row_lines)

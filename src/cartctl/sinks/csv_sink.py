@@ -70,10 +70,7 @@ class CsvSink:
     def _flush(self) -> None:
         self._format()
         rows = self._formatted
-        data = self._take_text()
-        if self._file is None or not rows:
-            return
-        self._write(data, rows=rows)
+        self._write(self._take_text(), rows=rows)  # nothing written without rows or a file
 
     def _write(self, data: bytes, *, rows: int) -> None:
         """Write ``data`` (``rows`` whole rows) in full, or cut the file back to its last whole
