@@ -1,15 +1,12 @@
 """cartctl's firmwares: how a cart says which one it runs, and their logic in Python.
 
-Float 6 (:data:`CH_FIRMWARE_ID`) of every GPIO cartctl's firmware sends says which it is
-(docs/serial-protocol.md §3.1): the bridge sketch's version, or ``1000 + layout`` for a controller
-of ``cartctl export --arduino`` (:data:`ONBOARD_ID`); the labels of its channels are the trace's
-column names, so that ``review``, ``validate`` and ``convert`` read a ``cartctl monitor`` trace.
-
-:class:`BridgeFirmware` is the bridge sketch's logic (``firmware/cartctl_bridge/bridge_logic.h``,
-docs/serial-protocol.md §4): a test compares the two tick by tick, so keep them in sync.
-:class:`OnboardFirmware` is the twin of the exported ``control()``: per tick and motor u =
-controller.step(r, measured speed), applied at the next ``io()``, with the fixed Kalman gain as
-the C; the template's ``controlEnabled()`` is not modelled.
+Float 6 of every GPIO cartctl's firmware sends says which it is (docs/serial-protocol.md §3.1);
+the labels of its channels are the trace's column names, so that ``review``, ``validate`` and
+``convert`` read a ``cartctl monitor`` trace. :class:`BridgeFirmware` is the bridge sketch's logic
+(``firmware/cartctl_bridge/bridge_logic.h``; a test compares the two tick by tick, keep them in
+sync); :class:`OnboardFirmware` the twin of the exported ``control()`` (per tick and motor u =
+controller.step(r, measured speed), applied at the next ``io()``; ``controlEnabled()`` is not
+modelled).
 """
 
 from __future__ import annotations
@@ -74,11 +71,8 @@ ONBOARD = Firmware(
 
 
 def recognise_firmware(floats: Sequence[float], ints: Sequence[int]) -> Firmware | None:
-    """Which of cartctl's firmwares sent a GPIO with these channels, or None for another one.
-
-    :data:`BRIDGE` when float :data:`CH_FIRMWARE_ID` is the bridge's version, :data:`ONBOARD`
-    when it is :data:`ONBOARD_ID`. Raises ValueError unless there are 8 floats and 4 ints.
-    """
+    """Which of cartctl's firmwares sent a GPIO with these channels (by float
+    :data:`CH_FIRMWARE_ID`), or None. Raises ValueError unless there are 8 floats and 4 ints."""
     check_gpio_counts(floats, ints)
     marker = floats[CH_FIRMWARE_ID]
     return {float(bridge.BRIDGE_VERSION): BRIDGE, float(ONBOARD_ID): ONBOARD}.get(marker)
@@ -108,8 +102,8 @@ class HeldChannels:
         self.out_ints: list[int] = [0] * GPIO_INT_COUNT
         self.tick = 0
 
-    def hold(self, floats: Sequence[float], ints: Sequence[int]) -> None:
-        """Overwrite every input channel with those of a GPIO from the host."""
+    def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int = 0) -> None:
+        """After a drain: every input channel from the host's last GPIO."""
         self.in_floats = [float(v) for v in floats]
         self.in_ints = [int(v) for v in ints]
 
@@ -128,14 +122,13 @@ class BridgeFirmware(HeldChannels):
         self._last_seq = 0
         self._last_new_ms = 0
         self._seen = False
-        self.frames_lost = 0
-        """Host sequence numbers skipped since power-on (modulo 32768)."""
+        self.frames_lost = 0  # host sequence numbers skipped since power-on (modulo 32768)
         self.driving = False
         self.tripped = True
+        # what the next io() applies (V), as decided at the last drain or control(), and the host
+        # sequence number it came with
         self.command_v: tuple[float, float] = (0.0, 0.0)
-        """What the next ``io()`` applies (V), as decided at the last drain or ``control()``."""
         self.command_seq = 0
-        """The host sequence number :attr:`command_v` came with."""
 
     def _decide(self, now_ms: int) -> None:
         """What the next ``io()`` applies, from the held channels and the watchdog at ``now_ms``."""
@@ -146,14 +139,11 @@ class BridgeFirmware(HeldChannels):
         self.command_v = (finite[0], finite[1]) if self.driving else (0.0, 0.0)
         self.command_seq = self.in_ints[0]
 
-    def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int) -> None:
-        """After a drain: the held channels from the host's last GPIO, seen at ``now_ms``.
-
-        A sequence number that differs from the last one is a new frame: it feeds the watchdog,
-        and the numbers skipped in between count as lost, unless the jump is backwards or beyond
-        :data:`~cartctl.link.bridge.SEQ_WINDOW` (a new host process).
-        """
-        self.hold(floats, ints)
+    def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int = 0) -> None:
+        """After a drain at ``now_ms``: a sequence number that differs from the last one is a new
+        frame: it feeds the watchdog, and the numbers skipped in between count as lost, unless the
+        jump is backwards or beyond :data:`~cartctl.link.bridge.SEQ_WINDOW` (a new host)."""
+        super().receive(floats, ints)
         seq = self.in_ints[0]
         if seq != self._last_seq:
             step = (seq - self._last_seq) % bridge.SEQ_MODULO
@@ -224,9 +214,6 @@ class OnboardFirmware(HeldChannels):
         for controller in self.controllers.values():
             controller.reset()
 
-    def receive(self, floats: Sequence[float], ints: Sequence[int], now_ms: int = 0) -> None:
-        self.hold(floats, ints)
-
     def reference_at(self, motor: str) -> float:
         """The reference (rad/s) of ``motor`` at the current tick."""
         if self._schedules:
@@ -235,19 +222,16 @@ class OnboardFirmware(HeldChannels):
 
     def control(self, io: CartIO, now_ms: int = 0) -> tuple[float, float]:
         """One ``control()`` call: returns the voltages (V) for the next tick's ``io()``."""
-        measured = {"a": io.speed_a_rad_s, "b": io.speed_b_rad_s}
-        out = [0.0] * 8
+        out = [0.0] * GPIO_FLOAT_COUNT
         out[CH_FIRMWARE_ID] = float(ONBOARD_ID)
-        voltage = {"a": 0.0, "b": 0.0}
-        for i, motor in enumerate(MOTORS):
-            controller = self.controllers.get(motor)
-            if controller is None:
-                continue
-            reference = self.reference_at(motor)
-            voltage[motor] = controller.step(reference, measured[motor])
-            out[OUT_SPEED + i] = measured[motor]
-            out[OUT_VOLTAGE + i] = voltage[motor]
-            out[OUT_REFERENCE + i] = reference
+        voltage = [0.0, 0.0]
+        speeds = (io.speed_a_rad_s, io.speed_b_rad_s)
+        for i, (motor, measured) in enumerate(zip(MOTORS, speeds, strict=True)):
+            if (controller := self.controllers.get(motor)) is not None:
+                reference = self.reference_at(motor)
+                voltage[i] = controller.step(reference, measured)
+                out[OUT_SPEED + i], out[OUT_VOLTAGE + i] = measured, voltage[i]
+                out[OUT_REFERENCE + i] = reference
         self.out_floats = out
         self.tick += 1
-        return voltage["a"], voltage["b"]
+        return voltage[0], voltage[1]
