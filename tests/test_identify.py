@@ -17,7 +17,7 @@ from cartctl.identification.orders import delay_evidence
 from cartctl.identification.pipeline import Prefilter
 from cartctl.model import ArxModel
 from cartctl.plants.physics import PhysicsPlant
-from cartctl.runtime.experiment import run_experiment
+from cartctl.runtime.loop import run_experiment
 from cartctl.signals import prbs, square
 
 THETA_A = [-0.9356, 0.2173, 0.6466, -0.07751]

@@ -13,7 +13,7 @@ from cartctl.cli import main
 from cartctl.data.modelfile import load_models
 from cartctl.data.trace import write_trace
 from cartctl.plants.sim import ArxPlant
-from cartctl.runtime.experiment import run_experiment
+from cartctl.runtime.loop import run_experiment
 from cartctl.signals import step
 
 # Motor a: the ground model's poles with b = (0.2, 0.5): zero at −0.5 / 0.2 = −2.5, as an ARX fit

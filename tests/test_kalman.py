@@ -31,8 +31,8 @@ from cartctl.model import ArxModel
 from cartctl.plants.physics import PhysicsPlant
 from cartctl.plants.sim import ArxPlant
 from cartctl.runtime.base import SpeedEstimator
-from cartctl.runtime.experiment import run_experiment
 from cartctl.runtime.kalman import KalmanSpeedEstimator, SteadyStateSpeedEstimator
+from cartctl.runtime.loop import run_experiment
 from cartctl.runtime.pi import PiController
 from cartctl.runtime.statefeedback import StateFeedbackController
 

@@ -15,7 +15,7 @@ from cartctl.errors import InputError
 from cartctl.identification.validate import linearity
 from cartctl.plants.physics import PhysicsPlant
 from cartctl.plants.sim import ArxPlant
-from cartctl.runtime.experiment import run_experiment
+from cartctl.runtime.loop import run_experiment
 from cartctl.signals import step
 
 

@@ -13,7 +13,7 @@ from cartctl.errors import InputError
 from cartctl.model import ArxModel
 from cartctl.plants import Plant
 from cartctl.plants.sim import ArxPlant, saturate
-from cartctl.runtime.experiment import run_experiment
+from cartctl.runtime.loop import run_experiment
 from cartctl.signals import square
 
 GROUND_A = ArxModel.from_theta([-0.9356, 0.2173, 0.6466, -0.07751])

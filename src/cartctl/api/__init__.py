@@ -100,7 +100,7 @@ def excite(
         The trace columns, with ``true_speed_a``/``true_speed_b`` from the simulator.
     """
     from cartctl.cart import SUPPLY_V
-    from cartctl.runtime.experiment import run_experiment
+    from cartctl.runtime.loop import run_experiment
     from cartctl.signals import make_signal
 
     _check_simulated(plant, "excite")

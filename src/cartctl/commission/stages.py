@@ -2,7 +2,7 @@
 
 Each stage makes its own plant from the name, so a serial cart is connected for its experiment
 and closed (zero volts) at its end; an experiment stopped by Ctrl-C or a plant fault keeps its
-ticks (:func:`cartctl.runtime.experiment.run_experiment`)."""
+ticks (:func:`cartctl.runtime.loop.run_experiment`)."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from cartctl.commission import StageError, checks, report, tuning
 from cartctl.data.trace import Trace, write_trace
 from cartctl.plants.base import ClockedPlant
 from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
-from cartctl.runtime.experiment import ExperimentResult, run_experiment
+from cartctl.runtime.loop import ExperimentResult, run_experiment
 
 STAGES = ("checks", "excitation", "identification", "tuning", "verification")
 

@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.cli.progress import ProgressBar
     from cartctl.data.trace import meta_path, write_trace, write_trace_meta
     from cartctl.plants.factory import check_plant_name, is_serial, make_plant
-    from cartctl.runtime.experiment import run_experiment
+    from cartctl.runtime.loop import run_experiment
     from cartctl.runtime.realtime import gc_paused
     from cartctl.signals import make_signal
     from cartctl.sinks.summary import host_loss_text, warn_host_losses
