@@ -101,22 +101,18 @@ def review_blueprint(
             plots.append(view(f"Motor {m.upper()}: voltage (V)", voltages))
         if plots:
             columns.append(rrb.Vertical(*plots, row_shares=[3, 2][: len(plots)]))
-    rows: list[rrb.Container | rrb.View] = []
-    shares: list[float] = []
+    rows: list[tuple[float, rrb.Container | rrb.View]] = []  # (share, view)
     if columns:
-        rows.append(rrb.Horizontal(*columns))
-        shares.append(6)
+        rows.append((6, rrb.Horizontal(*columns)))
     rest = [label for label in labels if label not in taken]
     fractions = [label for label in rest if f"{GPIO_ROOT}/{label}" not in whole]
     counts = [label for label in rest if f"{GPIO_ROOT}/{label}" in whole]
-    for name, chosen in (("Channels", fractions), ("Whole-number channels", counts)):
+    for name, chosen, share in (("Channels", fractions, 2), ("Whole-number channels", counts, 1.5)):
         if chosen:
-            rows.append(view(name, chosen))
-            shares.append(2 if name == "Channels" else 1.5)
+            rows.append((share, view(name, chosen)))
     if texts:
-        rows.append(rrb.TextLogView(name="Cart messages", origin=f"/{CART_ROOT}"))
-        shares.append(1.5)
-    return collapsed(rrb.Vertical(*rows, row_shares=shares))
+        rows.append((1.5, rrb.TextLogView(name="Cart messages", origin=f"/{CART_ROOT}")))
+    return collapsed(rrb.Vertical(*(v for _, v in rows), row_shares=[s for s, _ in rows]))
 
 
 class ChannelsRerunSink(RerunSink):
