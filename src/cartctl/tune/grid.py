@@ -56,12 +56,6 @@ AXES: dict[str, tuple[Axis, ...]] = {
 FIELDS = {a.name: a.field for axes in AXES.values() for a in axes}
 
 
-def grid_form(method: str) -> str:
-    """The expected ``--grid`` form of a method, for help texts and error messages."""
-    a, b = AXES[method]
-    return f"'{a.name}=START:STOP:STEP,{b.name}=START:STOP:STEP' (inclusive; or NAME=VALUE)"
-
-
 def _count(start: float, stop: float, step: float) -> int:
     span = (stop - start) / step + 1e-9
     if not math.isfinite(span):  # a step too small for its span (1e-320)
@@ -103,7 +97,8 @@ def parse_grid(spec: str | None, method: str) -> dict[str, tuple[float, ...]]:
     spelled = {n: a.name for a in AXES[method] for n in (a.name, a.name.replace("-", "_"))}
     ranges = {a.name: a.default for a in AXES[method]}
     given: dict[str, str] = {}
-    form = grid_form(method)
+    form = ",".join(f"{a.name}=START:STOP:STEP" for a in AXES[method])
+    form = f"'{form}' (inclusive; or NAME=VALUE)"
     for item in (spec or "").split(",") if spec and spec.strip() else []:
         typed, eq, text = (s.strip() for s in item.partition("="))
         item = item.strip()

@@ -187,11 +187,6 @@ class RobustRow:
         return {**self.result.to_dict(), "robust": score}
 
 
-def physics_spec(actuation_ms: float | None = None) -> str:
-    """The plant name of the physics simulator, at ``actuation_ms`` (None: the preset's own)."""
-    return "physics" if actuation_ms is None else f"physics:actuation_ms={actuation_ms:g}"
-
-
 def loop_entry(plant: Plant, nominal: Nominal, references: dict[str, FloatArray]) -> dict[str, Any]:
     """A setting's controllers in the real loop on ``plant``: the worse of motors a and b per
     :data:`ROBUST_METRICS`, ``failure``, the ``motors`` entries and ``settled`` (both motors
@@ -206,7 +201,9 @@ def loop_entry(plant: Plant, nominal: Nominal, references: dict[str, FloatArray]
 
 
 def _physics(job: TuneJob, nominal: Nominal, actuation_ms: float | None = None) -> dict[str, Any]:
-    plant = scoring_plant(replace(job, plant=physics_spec(actuation_ms)))
+    """The physics preset's entry, at ``actuation_ms`` (None: the preset's own timing)."""
+    spec = "physics" if actuation_ms is None else f"physics:actuation_ms={actuation_ms:g}"
+    plant = scoring_plant(replace(job, plant=spec))
     n = max(1, round(job.duration_s / plant.period_s))
     refs = {m: reference_signal(job.reference, n, plant.period_s, m) for m in ("a", "b")}
     entry = {"preset": job.preset, **loop_entry(plant, nominal, refs)}
