@@ -1,10 +1,5 @@
-"""The bridge sketch's channel map: how GPIO channels carry commands and measurements.
-
-Both directions carry GPIO frames (``docs/serial-protocol.md`` §3): PC → cart the requested
-voltages (V), a host sequence number (+1 per frame) and drive; cart → PC the measured speeds
-(rad/s), the voltages on the H-bridges (V), the wheel positions (rad), the bridge's version, the
-echoed sequence number, the cart's tick, the status bits and the host sequence numbers it never
-saw. The cart's template helpers are int16, hence the counters modulo 32768.
+"""The bridge sketch's channel map: how GPIO channels carry commands and measurements
+(docs/serial-protocol.md §3), and the echo delays.
 
 Each command the cart applied comes back as an echo; the ticks from the measurement it answered to
 that echo are that command's loop delay. :class:`EchoDelays` counts them per value and says whether
@@ -35,19 +30,18 @@ BRIDGE_BAUD = 500_000
 LEGACY_BAUD = 115_200
 """The line's rate of the course's firmware and of bridges before version 2."""
 TIMING_FIRST_ID = 200
-"""The bridge's THREAD_INFO reports after each GPIO have ids 200 onwards, one per
-:data:`TIMING_REPORTS` entry (the figure in the frame's duration field)."""
+"""The bridge's THREAD_INFO reports after each GPIO have ids 200 onwards, the figure in the
+duration field: the 10 ms thread's drain + io() + control() (µs), the longest 1 ms drain since the
+previous tick (µs), the time since the previous tick started (µs), the most bytes a drain found
+in the receive ring since the previous tick; :data:`TIMING_REPORTS` names their run maxima."""
 TIMING_REPORTS = ("tick_busy_us_max", "drain_us_max", "tick_interval_us_max",
                   "rx_ring_high_water_bytes")  # fmt: skip
-"""What they report, named as their maxima over a run are (``link.cart_timing`` of ``run
---json``): the 10 ms thread's drain + io() + control() (µs), the longest 1 ms drain since the
-previous tick (µs), the time since the previous tick started (µs), the most bytes a drain found
-waiting in the receive ring since the previous tick."""
 STATUS_DRIVING = 1  # status bit: the cart applies the requested voltages
 STATUS_WATCHDOG = 2  # status bit: the watchdog has tripped, the cart applies zero volts
 
-# the channel map: PC → cart floats (voltage A, voltage B, 0...) and ints (seq, drive, 0, 0);
-# cart → PC the channels below, in the order of CartSample's fields (labels of a monitor trace)
+# the channel map: PC → cart floats (voltage A, voltage B (V), 0...) and ints (sequence number,
+# drive, 0, 0); cart → PC the channels below, in the order of CartSample's fields (rad/s, V, rad;
+# the labels of a monitor trace). The cart's helpers are int16: counters modulo 32768.
 SAMPLE_FLOATS = ("speed_a", "speed_b", "voltage_a", "voltage_b", "position_a_rad",
                  "position_b_rad", "bridge_version")  # fmt: skip
 SAMPLE_INTS = ("echo_seq", "cart_tick", "status", "host_frames_lost")
@@ -170,22 +164,16 @@ class EchoDelays:
     @property
     def mode(self) -> int | None:
         """The most frequent delay (ticks; the shorter one on a tie), None without echoes."""
-        if not self.counts:
-            return None
-        return max(self.counts, key=lambda pair: (pair[1], -pair[0]))[0]
+        return max(self.counts, key=lambda pair: (pair[1], -pair[0]), default=(None,))[0]
 
-    def _share(self, delay_ticks: int) -> float:
-        total = self.echoes
-        return 0.0 if total == 0 else dict(self.counts).get(delay_ticks, 0) / total
+    def share(self, delay_ticks: int) -> float:
+        """Share of the echoes at ``delay_ticks`` (0 without echoes)."""
+        return dict(self.counts).get(delay_ticks, 0) / self.echoes if self.counts else 0.0
 
     @property
     def mode_share(self) -> float:
         """Share of the echoes at :attr:`mode` (0 without echoes)."""
-        return 0.0 if self.mode is None else self._share(self.mode)
-
-    def share_not(self, delay_ticks: int) -> float:
-        """Share of the echoes at any other delay than ``delay_ticks`` (0 without echoes)."""
-        return 0.0 if self.echoes == 0 else 1.0 - self._share(delay_ticks)
+        return 0.0 if self.mode is None else self.share(self.mode)
 
     @property
     def clear(self) -> bool:
@@ -225,7 +213,7 @@ def delay_change(probe: EchoDelays, run: EchoDelays) -> str | None:
     expected = probe.mode
     if expected is None or run.mode is None:
         return None
-    other = run.share_not(expected)
+    other = 1.0 - run.share(expected)
     if run.mode == expected and other <= CHANGE_SHARE:
         return None
     what = (
