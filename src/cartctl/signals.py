@@ -80,9 +80,7 @@ def prbs(
     from scipy import signal as sps
 
     bits, _ = sps.max_len_seq(order, state=state)
-    n_bits = -(-n // per_bit)
-    reps = -(-n_bits // bits.size)
-    levels = np.where(np.tile(bits, reps)[:n_bits] > 0, amp, -amp)
+    levels = np.where(np.resize(bits, -(-n // per_bit)) > 0, amp, -amp)  # the sequence repeated
     return np.repeat(levels, per_bit)[:n]
 
 
