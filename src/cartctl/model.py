@@ -185,10 +185,7 @@ class ArxModel:
 
     def den(self) -> NDArray[np.float64]:
         """Denominator in descending powers of z (``[1, c, d, 0]`` for the report)."""
-        den = np.zeros(self.order + 1)
-        den[0] = 1.0
-        den[1 : self.na + 1] = self.ar
-        return den
+        return np.concatenate([[1.0], self.ar, np.zeros(self.order - self.na)])
 
     def response_at(self, z: NDArray[np.complex128]) -> NDArray[np.complex128]:
         """G(z) (rad/s per V) at the points ``z``; at z = exp(j 2π f Ts), the response at f Hz."""
