@@ -330,38 +330,34 @@ def run_experiment(
         raise InputError(
             f"voltage sequences must be 1-D and equally long, got {ua.shape} and {ub.shape}"
         )
-    n = ua.size
-    speed = np.zeros((n, 2))
-    true_speed = np.full((n, 2), np.nan)
-    done = 0
-    interrupted = False
-    failure = None
+    rows: list[Measurement] = []  # row k: the measurement of tick k
+    interrupted, failure = False, None
     try:
         y = plant.reset()
-        for k in range(n):
-            speed[k] = y.speed_a_rad_s, y.speed_b_rad_s
-            if y.true_speed_a_rad_s is not None and y.true_speed_b_rad_s is not None:
-                true_speed[k] = y.true_speed_a_rad_s, y.true_speed_b_rad_s
-            done = k + 1
+        for k in range(ua.size):
+            rows.append(y)
             y = plant.step(float(ua[k]), float(ub[k]))
             if on_tick is not None:
-                on_tick(done)
+                on_tick(k + 1)
     except KeyboardInterrupt:
         interrupted = True
     except PlantError as exc:
-        if done == 0:  # nothing recorded: the plant never worked; say so as such
+        if not rows:  # nothing recorded: the plant never worked; say so as such
             raise
         failure = str(exc)
     finally:
         plant.close()
+    done = len(rows)
+    speeds = [
+        (y.speed_a_rad_s, y.speed_b_rad_s, y.true_speed_a_rad_s, y.true_speed_b_rad_s) for y in rows
+    ]
+    table = np.array(speeds, dtype=float).reshape(done, 4)  # an unknown true speed is NaN
+    keep = 4 if done and not np.isnan(table[:, 2:]).any() else 2
+    names = ("speed_a", "speed_b", "true_speed_a", "true_speed_b")[:keep]
     columns = {
         "time_s": np.arange(done) * plant.period_s,
         "voltage_a": ua[:done],
         "voltage_b": ub[:done],
-        "speed_a": speed[:done, 0],
-        "speed_b": speed[:done, 1],
     }
-    if done and not np.isnan(true_speed[:done]).any():
-        columns["true_speed_a"] = true_speed[:done, 0]
-        columns["true_speed_b"] = true_speed[:done, 1]
+    columns |= {name: table[:, i] for i, name in enumerate(names)}
     return ExperimentResult(Trace.from_columns(columns, source=source), interrupted, failure)
