@@ -135,9 +135,7 @@ def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
         raise DataFileError(path, "[motors] is empty; expected [motors.a] and/or [motors.b]")
     motors: dict[str, ArxModel] = {}
     stats: dict[str, dict[str, Any]] = {}
-    for name in ("a", "b"):
-        if name not in motors_tab:
-            continue
+    for name in [m for m in ("a", "b") if m in motors_tab]:
         entry = motors_tab[name]
         where = f"[motors.{name}]"
         theta = require(entry, "theta", list, path, where)
