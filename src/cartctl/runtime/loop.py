@@ -34,15 +34,12 @@ class MemorySink:
     BLOCK_ROWS = 1024
 
     def __init__(self) -> None:
-        self.columns: tuple[str, ...] = ()
-        self._blocks: list[NDArray[np.float64]] = []
-        self._block: NDArray[np.float64] = np.empty((self.BLOCK_ROWS, 0))
-        self._filled = 0
-        self._rows: list[Sequence[float]] = []
+        self.open(())
 
     def open(self, columns: Sequence[str]) -> None:
         self.columns = tuple(columns)
-        self._blocks, self._rows = [], []
+        self._blocks: list[NDArray[np.float64]] = []
+        self._rows: list[Sequence[float]] = []
         self._block = np.empty((self.BLOCK_ROWS, len(self.columns)))
         self._filled = 0
 
