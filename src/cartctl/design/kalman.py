@@ -1,43 +1,31 @@
 """The realisation of a motor model and the steady-state Kalman speed estimator designed on it.
 
-The realisation has a state with a meaning, so the state fed back (pole placement) is the state
-estimated (here, and the runtime estimators); python-control's ``ss(tf)`` picks none. It is the
-observer canonical form of G(z) = (β_1 z^{n−1} + … + β_n) / (z^n + α_1 z^{n−1} + … + α_n)
-(n = ``model.order``, β the numerator padded to n)::
+The realisation is the observer canonical form of G(z) = (β_1 z^{n−1} + … + β_n) / (z^n + α_1
+z^{n−1} + … + α_n) (n = ``model.order``, β the numerator padded to n), a state with a meaning, so
+the state fed back (pole placement) is the state estimated (python-control's ``ss(tf)`` picks none)::
 
     x[k+1] = A x[k] + B u[k],   y[k] = C x[k],   A = [−α | I_{n−1}; 0],   B = β,   C = [1, 0, …, 0]
 
-x_1[k] = y[k] is the modelled speed and x_j[k] (j ≥ 2) the part of y[k + j − 1] that inputs and
-outputs up to k − 1 already fix, x_j[k] = Σ_{i=j..n} (β_i u[k+j−1−i] − α_i y[k+j−1−i]), all in
-rad/s. For the report's (a z + b) / (z³ + c z² + d z): x_2[k] = y[k+1] + c y[k] (one step of
-prediction) and x_3[k] = b u[k−1] (the delayed input). Always observable; minimal when numerator
-and denominator share no root.
+x_1[k] = y[k] is the modelled speed, x_j[k] (j ≥ 2) the part of y[k + j − 1] that inputs and
+outputs up to k − 1 already fix (rad/s); for (a z + b) / (z³ + c z² + d z), x_2[k] = y[k+1] +
+c y[k] and x_3[k] = b u[k−1]. Always observable; minimal when G has no common root.
 
 The estimator's model is that realisation with the loop's whole delay as states (nk, plus
-``extra_delay_ticks``), so the prediction knows which voltages are on their way, and one
+``extra_delay_ticks``: the prediction knows which voltages are on their way) and one
 input-disturbance state b (V)::
 
     x[k+1] = A x[k] + B (u[k] + b[k] + w[k]),    b[k+1] = b[k] + w_b[k],    y[k] = x_1[k] + v[k]
 
-- w (std ``process_noise_std_v``, default 0.1 V): PWM rounding, the fast part of friction, model
-  error; on the cart simulator 0.05–0.1 V gave the smallest speed error, 0.2 V a third more.
-- b (random walk, step std ``bias_drift_std_v`` per tick, default 0.03 V; 0 leaves it out): dry
-  friction (≈ 0.8 V on the ground, changing sign with the direction) and the model's DC error;
-  it makes the estimate offset-free and is pole placement's integral action. 0.03 V gives its
-  estimator pole ≈ 0.78 (about 40 ms); 0.01 V is slow after each reversal, 0.1 V lets the
-  quantisation in and costs pole placement 15–20° of phase margin.
-- v (variance R): the encoder quantisation. A whole-count speed is the difference of two floored
-  angles, each uniform over one count q = (2π / counts_per_rev) / Ts rad/s (0.3506 rad/s at
-  1792 counts, 10 ms): R = q²/6 + (extra noise)², taken as white (the usual simplification).
+w has std ``process_noise_std_v`` (PWM rounding, the fast part of friction, model error); b is a
+random walk of step std ``bias_drift_std_v`` per tick (0 leaves it out): dry friction and the
+model's DC error, so the estimate is offset-free and b̂ is pole placement's integral action; v is
+the encoder quantisation, R = q²/6 + (extra noise)², q = (2π / counts_per_rev) / Ts (a whole-count
+speed is the difference of two floored angles). x̂_1[k|k] estimates the measured mean speed over
+the last tick; the speed at tick k itself is (x̂_1[k|k] + x̂_1[k+1|k]) / 2.
 
-The measured speed is the mean over the last tick, so x̂_1[k|k] estimates that mean; the speed at
-tick k itself is ω̂[k] = (x̂_1[k|k] + x̂_1[k+1|k]) / 2 (:mod:`cartctl.runtime.statefeedback`
-reports it; the PI acts on x̂_1[k|k]).
-
-The gain is the steady-state *filter* gain L = P Cᵀ (C P Cᵀ + R)⁻¹, P the a priori covariance
-solving the filter DARE P = A P Aᵀ − A P Cᵀ (C P Cᵀ + R)⁻¹ C P Aᵀ + Q; x̂[k|k] = x̂[k|k−1] +
-L (y[k] − C x̂[k|k−1]) (``control.dlqe`` gives the predictor gain A L instead). The error of
-x̂[k|k] evolves with (I − L C) A, whose eigenvalues are the estimator poles.
+The gain is the steady-state filter gain L = P Cᵀ (C P Cᵀ + R)⁻¹, P the a priori covariance of
+the filter DARE (``control.dlqe`` gives the predictor gain A L instead): x̂[k|k] = x̂[k|k−1] +
+L (y[k] − C x̂[k|k−1]), whose error evolves with (I − L C) A (the estimator poles).
 """
 
 from __future__ import annotations
@@ -61,7 +49,7 @@ _PBH_TOL = 1e-9
 @dataclass(frozen=True, eq=False)
 class StateSpace:
     """A discrete SISO system ``x[k+1] = A x + B u``, ``y = C x`` (A (n, n), B (n,) in rad/s per
-    V, C (n,); filterpy's F and H) with sample period Ts (s)."""
+    V, C (n,)) with sample period Ts (s)."""
 
     A: NDArray[np.float64]
     B: NDArray[np.float64]
@@ -70,7 +58,6 @@ class StateSpace:
 
     @property
     def order(self) -> int:
-        """Number of states n."""
         return int(self.A.shape[0])
 
     def to_control(self):
@@ -78,27 +65,16 @@ class StateSpace:
         import control
 
         n = self.order
-        return control.ss(
-            self.A, self.B.reshape(n, 1), self.C.reshape(1, n), [[0.0]], dt=self.period_s
-        )
+        return control.ss(self.A, self.B.reshape(n, 1), self.C.reshape(1, n), 0.0, self.period_s)
 
     def simulate(self, voltage_v: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Output y[k] (rad/s) for the input u[k] (V), shape (N,), from x[0] = 0 (scipy's dlsim)."""
-        import scipy.signal
+        """Output y[k] (rad/s) for the input u[k] (V), shape (N,), from x[0] = 0."""
+        import control
 
         u = np.asarray(voltage_v, dtype=float)
         if u.size == 0:
             return np.empty(0)
-        n = self.order
-        system = (
-            self.A,
-            self.B.reshape(n, 1),
-            self.C.reshape(1, n),
-            np.zeros((1, 1)),
-            self.period_s,
-        )
-        _, y, _ = scipy.signal.dlsim(system, u)
-        return np.asarray(y, dtype=float).ravel()
+        return np.asarray(control.forced_response(self.to_control(), U=u).outputs, dtype=float)
 
     def is_controllable(self) -> bool:
         """True when every mode can be moved by u (PBH test: rank [λI − A, B] = n for each λ)."""
@@ -106,8 +82,7 @@ class StateSpace:
 
 
 def uncontrollable_modes(A: NDArray[np.float64], B: NDArray[np.float64]) -> list[complex]:
-    """Eigenvalues of A (n, n) that u through B (n,) cannot move (PBH test); empty when (A, B)
-    is controllable."""
+    """Eigenvalues of A (n, n) that u through B (n,) cannot move (PBH test)."""
     n = A.shape[0]
     bad: list[complex] = []
     scale = max(1.0, float(np.linalg.norm(A)), float(np.linalg.norm(B)))
@@ -138,9 +113,7 @@ def realise(model: ArxModel, *, extra_delay_ticks: int = 0) -> StateSpace:
     A = np.zeros((n, n))
     A[:, 0] = 0.0 - den[1:]  # "0.0 −" keeps −0.0 out of the matrix
     A[: n - 1, 1:] = np.eye(n - 1)
-    C = np.zeros(n)
-    C[0] = 1.0
-    return StateSpace(A, beta, C, model.period_s)
+    return StateSpace(A, beta, np.eye(1, n).ravel(), model.period_s)
 
 
 def quantisation_std_rad_s(period_s: float, counts_per_rev: int = ENCODER_COUNTS_PER_REV) -> float:
@@ -166,17 +139,14 @@ def design_kalman(
     extra_delay_ticks: int = 0,
     timing_noise_std_ticks: float = 0.0,
 ) -> KalmanDesign:
-    """Design the steady-state Kalman filter (the module docstring) on a model, realised with
+    """The steady-state Kalman filter (the module docstring) on a model, realised with
     ``extra_delay_ticks`` more input delay, or on a realisation (then with none).
 
     σ_w = ``process_noise_std_v`` (V, > 0), σ_b = ``bias_drift_std_v`` (V per tick; 0 leaves the
-    disturbance state out), ``extra_noise_std_rad_s`` beyond the quantisation of
-    ``counts_per_rev`` (added in variance: ``measurement_noise_std_rad_s`` is the total √R), and
-    σ_ε = ``timing_noise_std_ticks`` for the time-varying filter's Q[k] = Q + (σ_ε Δu[k])² B Bᵀ
-    (P and L hold while u is constant).
-
-    InputError for a noise level negative, non-finite or zero where it must not be, a bad count,
-    or no stabilising DARE solution.
+    disturbance state out), ``extra_noise_std_rad_s`` added in variance to the quantisation
+    (``measurement_noise_std_rad_s`` is the total √R), σ_ε = ``timing_noise_std_ticks`` for the
+    time-varying filter's Q[k] = Q + (σ_ε Δu[k])² B Bᵀ. InputError for a noise level negative,
+    non-finite or zero where it must not be, a bad count, or no stabilising DARE solution.
     """
     if isinstance(plant, ArxModel):
         plant = realise(plant, extra_delay_ticks=extra_delay_ticks)
@@ -193,10 +163,7 @@ def design_kalman(
     m = n + (1 if sb > 0.0 else 0)
     A = np.zeros((m, m))
     A[:n, :n] = plant.A
-    B = np.zeros(m)
-    B[:n] = plant.B
-    C = np.zeros(m)
-    C[:n] = plant.C
+    B, C = (np.r_[v, np.zeros(m - n)] for v in (plant.B, plant.C))
     Q = np.zeros((m, m))
     Q[:n, :n] = sw**2 * np.outer(plant.B, plant.B)
     if m > n:

@@ -15,6 +15,7 @@ import numpy as np
 
 from cartctl.design.analysis import StepAnalysis, in_settling_band, settling_bound
 from cartctl.design.loop_report import MotorAnalysis
+from cartctl.design.make import Designs
 from cartctl.design.numbers import db, sig
 from cartctl.model import ArxModel
 
@@ -90,23 +91,23 @@ def design_figure(
     return fig
 
 
-def write_design_report(
+def write_report(
     out_dir: str | Path,
-    method: str,
-    models: Mapping[str, ArxModel],
+    designs: Designs,
     entries: Mapping[str, Mapping[str, Any]],
-    steps: Mapping[str, StepAnalysis],
-    *,
-    extra_delay_ticks: int,
-    voltage_limit_v: float,
+    analyses: Mapping[str, MotorAnalysis],
 ) -> list[Path]:
-    """One PNG per motor (:func:`design_figure`), ``design_a.png`` …; returns their paths."""
-    return [
-        _save(design_figure(m, models[m], {**entries[m], "method": method}, steps[m],
-                            extra_delay_ticks=extra_delay_ticks, voltage_limit_v=voltage_limit_v),
-              Path(out_dir) / f"design_{m}.png")
-        for m in entries
-    ]  # fmt: skip
+    """``design_X.png`` (:func:`design_figure`, on the ``design --json`` ``entries``) and
+    ``analysis_X.png`` (:func:`analysis_figure`) per motor; returns their paths."""
+    request, paths = designs.request, []
+    for m, entry in entries.items():
+        figure = design_figure(m, designs.models[m], {**entry, "method": request.method},
+                               designs.steps[m], extra_delay_ticks=request.extra_delay_ticks,
+                               voltage_limit_v=request.voltage_limit_v)  # fmt: skip
+        paths.append(_save(figure, Path(out_dir) / f"design_{m}.png"))
+        figure = analysis_figure(m, request.method, analyses[m])
+        paths.append(_save(figure, Path(out_dir) / f"analysis_{m}.png"))
+    return paths
 
 
 def _dress(
@@ -131,11 +132,6 @@ def _save(fig: Figure, path: Path) -> Path:
 
 def _db(value: float) -> str:
     return db(20.0 * float(np.log10(value)))
-
-
-def plot_analysis(path: Path, motor: str, method: str, analysis: MotorAnalysis) -> Path:
-    """Write one motor's analysis figure as PNG; returns ``path``."""
-    return _save(analysis_figure(motor, method, analysis), path)
 
 
 def analysis_figure(motor: str, method: str, analysis: MotorAnalysis) -> Figure:

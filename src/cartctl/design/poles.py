@@ -1,32 +1,27 @@
-"""Discrete pole placement with integral action, on the observer-form realisation of a model.
+"""Discrete pole placement with integral action, on the realisation of a model with the loop's
+delay in it (:func:`~cartctl.design.kalman.realise`: n states, x_1 = speed; ``extra_delay_ticks``
+= d more ticks are d more states, so every closed-loop pole is placed, the delay's included).
+:class:`~cartctl.runtime.statefeedback.StateFeedbackController` runs the result.
 
-The plant is x[k+1] = A x + B u, y = C x of :func:`~cartctl.design.kalman.realise` (n states,
-x_1 = speed), the loop's delay in it: nk covers one tick of loop delay, ``extra_delay_ticks`` = d
-more (3 through the PC serial loop) are d more states, and every closed-loop pole is placed, the
-delay's included. :class:`~cartctl.runtime.statefeedback.StateFeedbackController` runs the result.
-
-Integral action, by default, is the estimator's input-disturbance state b̂ (V) of
-:mod:`cartctl.design.kalman` (x[k+1] = A x + B (u + b), b a slow random walk), cancelled::
+Integral action, by default, is the estimator's input-disturbance state b̂ (V), cancelled::
 
     u[k] = Kr r[k] − K x̂[k|k] − b̂[k|k]          (V; then clamped to ±voltage_limit_v)
 
 K places the n eigenvalues of A − B K; Kr = 1 / (C (I − A + B K)⁻¹ B) makes the model's r → y
-exact at DC. In steady state the innovation is zero, so y = C x̂ = r whatever the model's gain or
-the friction; on the model b̂ stays 0 and r → y is the placed loop. The closed loop's eigenvalues
-are the n placed poles and the n + 1 estimator poles (separation). On the ground model this
-loop keeps 75° and 12.5 dB (Ms 1.36) where an error integrator beside b̂ falls to 36° (type 2);
-see docs/design.md.
+exact at DC. In steady state the innovation is zero, so y = r whatever the model's gain or the
+friction; the closed loop's eigenvalues are the n placed poles and the n + 1 estimator poles
+(why this is the default: docs/design.md).
 
-Without the disturbance state (``bias_drift_std_v=0``) an error integrator, the wheel's angle
-error (rad), x_i[k+1] = x_i[k] + Ts (r[k] − y[k]), is added and [K, Ki] place the n + 1
-eigenvalues of [[A, 0], [−Ts C, 1]] − [B; 0] [K, Ki]; u[k] = −K x̂[k|k] − Ki x_i[k] + Kr r[k].
-Ki is negative (the wheel behind raises the voltage). Kr = −Ki Ts (the default) puts the zero of
-r → y, z = 1 + Ki Ts / Kr, at z = 0: the response one tick sooner, same shape; Kr = 0 has none.
+Without the disturbance state (``bias_drift_std_v=0``) an error integrator x_i[k+1] = x_i[k] +
+Ts (r[k] − y[k]) (rad) is added and [K, Ki] place the n + 1 eigenvalues of [[A, 0], [−Ts C, 1]]
+− [B; 0] [K, Ki]; u[k] = −K x̂[k|k] − Ki x_i[k] + Kr r[k], Ki < 0. Kr = −Ki Ts (the default)
+puts the zero of r → y, z = 1 + Ki Ts / Kr, at z = 0 (the same response a tick sooner); Kr = 0
+has none.
 
 Poles from a specification: ζ = −ln(OS) / √(π² + ln²(OS)), ζ ω_n = 4 / T_s (2 % settling), the
 dominant pair s = −ζ ω_n ± j ω_n √(1 − ζ²) mapped by z = exp(s Ts); the rest real, fast and
-distinct for ``control.place``: z_j = exp(−(ratio + j) ζ ω_n Ts), j = 0, 1, …. Given poles that
-repeat are placed with Ackermann's formula (``control.acker``).
+distinct: z_j = exp(−(ratio + j) ζ ω_n Ts), j = 0, 1, …. Repeated poles are placed with
+Ackermann's formula (``control.acker``), the others with ``control.place``.
 """
 
 from __future__ import annotations

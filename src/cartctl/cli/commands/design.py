@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 from typing import Any
 
 import cartctl.cli.commands.options as options
@@ -244,13 +243,9 @@ def run(args: argparse.Namespace) -> int:
             args.out,
         )
     if args.report:
-        from cartctl.design.plots import plot_analysis, write_design_report
+        from cartctl.design.plots import write_report
 
-        write_design_report(args.report, args.method, designs.models, motors_json, designs.steps,
-                            extra_delay_ticks=request.extra_delay_ticks,
-                            voltage_limit_v=request.voltage_limit_v)  # fmt: skip
-        for m, analysis in analyses.items():
-            plot_analysis(Path(args.report) / f"analysis_{m}.png", m, args.method, analysis)
+        write_report(args.report, designs, motors_json, analyses)
     if args.json:
         print(dumps({"method": args.method, "model": str(args.model), "Ts": models.period_s,
                      "loop_delay_ticks": designs.loop_delay_ticks,
