@@ -278,12 +278,9 @@ def label_key(label: str) -> str:
 
 def monitor_mapping(labels: Sequence[str]) -> dict[str, str]:
     """Trace column → the one monitor label equal to its name but for case and separators."""
-    mapping: dict[str, str] = {}
-    for name in MONITOR_NAMES:
-        hits = [label for label in labels if label_key(label) == label_key(name)]
-        if len(hits) == 1:
-            mapping[name] = hits[0]
-    return mapping
+    hits = {name: [label for label in labels if label_key(label) == label_key(name)]
+            for name in MONITOR_NAMES}  # fmt: skip
+    return {name: found[0] for name, found in hits.items() if len(found) == 1}
 
 
 _MOTOR_LETTER = {m: re.compile(rf"(?:(?<![A-Za-z])[{m}{m.upper()}]|(?<=[a-z]){m.upper()})(?![a-z])")
