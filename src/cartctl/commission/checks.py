@@ -200,12 +200,6 @@ CROSS_CLEAR_FACTOR = 2.0
 TAIL_SIGMAS = 2.0
 
 
-def request_for(loop_delay_ticks: int) -> IdentifyRequest:
-    """The identification request for a loop of ``loop_delay_ticks`` (nk = that, at least 1)."""
-    return IdentifyRequest(motors=("a", "b"), na=NA, nb=NB, delay=max(1, int(loop_delay_ticks)),
-                           split=SPLIT)  # fmt: skip
-
-
 @dataclass(frozen=True)
 class MotorVerdict:
     """One motor's validation figures: simulation fit (%), largest pole radius, cross-correlation
@@ -260,7 +254,9 @@ def identify_and_judge(
     trace: Trace, loop_delay_ticks: int
 ) -> tuple[IdentifyResult, IdentifyRequest, dict[str, MotorVerdict]]:
     """Identify both motors, refit a noise tail with one term fewer, and judge."""
-    request = request_for(loop_delay_ticks)
+    request = IdentifyRequest(
+        motors=MOTORS, na=NA, nb=NB, delay=max(1, int(loop_delay_ticks)), split=SPLIT
+    )  # nk: the loop delay, at least 1
     result = identify([trace], request)
     short = tuple(m for m, r in result.motors.items() if _noise_tail(r.chosen))
     if short:

@@ -22,6 +22,7 @@ from cartctl.data.trace import Trace, write_trace
 from cartctl.plants.base import ClockedPlant
 from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
 from cartctl.runtime.loop import ExperimentResult, run_experiment
+from cartctl.tune.engine import save_setting
 
 STAGES = ("checks", "excitation", "identification", "tuning", "verification")
 
@@ -219,7 +220,8 @@ class Commission:
             raise
         finally:
             bar.close()
-        command = tuning.save_chosen(self.tuned, self.model_path, self.controller_path)
+        command = save_setting(tuning.METHOD, self.tuned.chosen.result.settings, self.model_path,
+                               self.controller_path, fixed=self.tuned.design_fixed)  # fmt: skip
         chosen = tuning.row_summary(self.tuned.chosen)
         body = report.tuning_body(self.tuned, command)
         series = report.tuning_steps(self.controller_path, self.model_path,

@@ -119,12 +119,6 @@ def _file_refusal(model_path: Path, row: robustness.RobustRow,
     return None
 
 
-def save_chosen(result: TuningResult, model_path: Path, out: Path) -> str:
-    """Write the chosen setting's controller file, as ``cartctl design`` would; its command."""
-    return engine.save_setting(METHOD, result.chosen.result.settings, model_path, out,
-                               fixed=result.design_fixed)  # fmt: skip
-
-
 def row_summary(row: robustness.RobustRow) -> dict[str, Any]:
     """A row for the summary table and the JSON: settings, nominal, worst, timing plants."""
     out: dict[str, Any] = {"index": row.index, "settings": dict(row.result.settings),

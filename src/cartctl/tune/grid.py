@@ -64,11 +64,6 @@ def _count(start: float, stop: float, step: float) -> int:
     return math.floor(span) + 1
 
 
-def inclusive_range(start: float, stop: float, step: float) -> tuple[float, ...]:
-    """``start, start + step, …`` up to ``stop`` inclusive (to 1e-9 of a step), rounded to 1e-10."""
-    return tuple(round(start + i * step, 10) for i in range(_count(start, stop, step)))
-
-
 def _axis_range(item: str, text: str, form: str) -> tuple[float, float, float]:
     parts = [p.strip() for p in text.split(":")]
     if len(parts) not in (1, 3) or not all(parts):
@@ -115,7 +110,9 @@ def parse_grid(spec: str | None, method: str) -> dict[str, tuple[float, ...]]:
             f"--grid gives {size if size < 10**9 else 'over 10^9'} settings, more than "
             f"{MAX_TUNE_SETTINGS}; use coarser steps"
         )
-    values = {name: inclusive_range(*r) for name, r in ranges.items()}
+    # start, start + step, … up to stop inclusive (to 1e-9 of a step), rounded to 1e-10
+    values = {name: tuple(round(start + i * step, 10) for i in range(_count(start, stop, step)))
+              for name, (start, stop, step) in ranges.items()}  # fmt: skip
     for name, axis_values in values.items():
         option = f"--grid {given[name]}" if name in given else f"the default --grid {name}"
         for v in axis_values:

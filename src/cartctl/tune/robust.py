@@ -107,15 +107,6 @@ class RobustScore:
                 "actuation_unsettled": self.actuation_unsettled}  # fmt: skip
 
 
-def _worse_of_motors(per_motor: Sequence[dict[str, FloatArray]]) -> dict[str, FloatArray]:
-    """Per plant and metric, the larger of the motors; NaN (undefined) wins, then inf."""
-    out = {}
-    for key in ROBUST_METRICS:
-        stack = np.vstack([m[key] for m in per_motor])
-        out[key] = np.where(np.isnan(stack).any(axis=0), np.nan, np.max(stack, axis=0))
-    return out
-
-
 def _timing_value(entry: dict[str, Any], key: str) -> float:
     """An actuation run's figure for the worst case: ``inf`` for a failed or unsettled run (as a
     sampled plant that ran away), NaN where undefined."""
@@ -136,7 +127,10 @@ def score_plants(
 ) -> RobustScore:
     """Aggregate :func:`step_metrics` of the motors (row 0 the nominal model) with the nominal
     figures, the physics entry and the actuation runs (:class:`RobustScore`)."""
-    worse = _worse_of_motors(per_motor)
+    stacks = {key: np.vstack([m[key] for m in per_motor]) for key in ROBUST_METRICS}
+    # per plant and metric the worse motor: NaN (undefined) wins, then inf
+    worse = {key: np.where(np.isnan(s).any(axis=0), np.nan, np.max(s, axis=0))
+             for key, s in stacks.items()}  # fmt: skip
     unsettled_rows = np.isinf(worse["settling_time_s"]) & ~diverged
     figures: dict[str, dict[str, float | None]] = {}
     for key in ROBUST_METRICS:
