@@ -74,12 +74,8 @@ VOLTAGE_MARGIN = 0.05  # beyond the voltage limit
 
 def motors_in(entities: Iterable[str]) -> tuple[str, ...]:
     """Motor names among entity paths (``motor/a/speed`` → ``a``), in order; both when none is."""
-    names: list[str] = []
-    for entity in entities:
-        parts = entity.split("/")
-        if parts[0] == "motor" and len(parts) > 1 and parts[1] not in names:
-            names.append(parts[1])
-    return tuple(names) or ("a", "b")
+    paths = (entity.split("/") for entity in entities)
+    return tuple(dict.fromkeys(p[1] for p in paths if p[0] == "motor" and len(p) > 1)) or ("a", "b")
 
 
 def padded_range(lo: float, hi: float, *, margin: float = 0.1, min_span: float = 1.0) -> Range:
