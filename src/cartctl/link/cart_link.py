@@ -11,7 +11,7 @@ import contextlib
 import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import cartctl.link.dialect as dialect
@@ -21,14 +21,11 @@ from cartctl.link.bridge import BRIDGE_BAUD, LEGACY_BAUD
 
 DEFAULT_SILENCE_TIMEOUT_S = 0.1
 """No GPIO for this long (10 ticks) ends a run: the cart's own watchdog trips at the same age."""
-READ_SLICE_S = 0.005
-"""A read returns after the first byte, or after this long without one."""
+READ_SLICE_S = 0.005  # a read returns after the first byte, or after this long without one
 COUNTED_SLICE_S = 2 * READ_SLICE_S
 """Silence counts the time the host listened: a read the PC held up longer (a busy machine, a
 garbage collection, an emulated cart paused with this process) counts as this much."""
-LEGACY_LISTEN_S = 1.5
-"""After no HEARTBEAT at the bridge's rate: how long to listen at 115200 baud (a HEARTBEAT every
-1.1 s, a GPIO every 10 ms) to tell an older firmware from no cart at all."""
+LEGACY_LISTEN_S = 1.5  # at 115200 baud: a HEARTBEAT every 1.1 s, a GPIO every 10 ms
 
 
 class UnsupportedCartError(CartctlError):
@@ -78,13 +75,11 @@ class CartLink:
         self.lines = dialect.LineAssembler()
         self._pending: collections.deque[dialect.Message] = collections.deque()
         self._serial: Any = None
-        self.failure: str | None = None
-        """Why the stream stopped (silence or a vanished port); None while it flows."""
-        self.vanished = False
-        """True once the port itself is gone (nothing can be sent any more)."""
+        self.failure: str | None = None  # why the stream stopped (silence, a vanished port)
+        self.vanished = False  # the port itself is gone: nothing can be sent any more
+        # per THREAD_INFO id, the largest duration field seen (the bridge's timing reports;
+        # cleared by whoever starts counting)
         self.thread_maxima: dict[int, int] = {}
-        """Per THREAD_INFO id, the largest duration field seen (cleared by whoever starts counting;
-        the bridge reports its tick's timing and its receive ring this way)."""
 
     @property
     def stats(self) -> dialect.LinkStats:
@@ -148,12 +143,9 @@ class CartLink:
             raise
 
     def next_gpio(self, timeout_s: float | None = None) -> tuple[dialect.Gpio, float]:
-        """The next GPIO and the host time it arrived (``time.perf_counter`` s).
-
-        Raises :class:`~cartctl.errors.PlantError` after ``timeout_s`` (default
-        :attr:`silence_timeout_s`) of listening without one (see :data:`COUNTED_SLICE_S`), or when
-        the port vanished; :class:`UnsupportedCartError` on generation-B frames.
-        """
+        """The next GPIO and the host time it arrived (``time.perf_counter`` s). Raises PlantError
+        after ``timeout_s`` (default :attr:`silence_timeout_s`) of listening without one (see
+        :data:`COUNTED_SLICE_S`) or when the port vanished, UnsupportedCartError on generation B."""
         wait_s = self.silence_timeout_s if timeout_s is None else timeout_s
         listened_s = 0.0
         while listened_s < wait_s:
@@ -197,12 +189,9 @@ class CartLink:
 
     def _poll(self, timeout_s: float) -> None:
         """Read what the port has (up to :data:`READ_SLICE_S` for a first byte) and decode it."""
-        ser = self._port()
-        try:
+        with self._port() as ser:
             waiting = ser.in_waiting
             data = ser.read(max(1, waiting)) if waiting or timeout_s > 0 else b""
-        except Exception as exc:  # pyserial raises SerialException or OSError when the device goes
-            raise self._vanish(exc) from None
         for message in self.framer.feed(data) if data else ():
             if isinstance(message, dialect.PrintText):
                 for line in self.lines.feed(message.text):
@@ -220,23 +209,22 @@ class CartLink:
             else:
                 self._pending.append(message)
 
-    def _port(self) -> Any:
+    @contextlib.contextmanager
+    def _port(self) -> Iterator[Any]:
+        """The open port; a failing read or write means it vanished (PlantError)."""
         if self._serial is None:
             raise PlantError(f"serial port {self.port} is not open")
-        return self._serial
-
-    def _vanish(self, exc: BaseException) -> PlantError:
-        self.vanished = True
-        self.failure = f"serial port {self.port} vanished ({exc}); cable pulled?"
-        return PlantError(self.failure)
+        try:
+            yield self._serial
+        except Exception as exc:  # pyserial raises SerialException or OSError when the device goes
+            self.vanished = True
+            self.failure = f"serial port {self.port} vanished ({exc}); cable pulled?"
+            raise PlantError(self.failure) from None
 
     def send(self, frame: bytes) -> None:
         """Write one frame; a vanished port raises :class:`~cartctl.errors.PlantError`."""
-        ser = self._port()
-        try:
+        with self._port() as ser:
             ser.write(frame)
-        except Exception as exc:
-            raise self._vanish(exc) from None
 
     def close(self) -> None:
         """Flush what was written and close the port; never raises."""

@@ -139,7 +139,7 @@ class SerialCart:
         self.frames_sent = 0
         self.reply_latency_s.clear()
         self.link.thread_maxima.clear()
-        return Measurement(sample.speed_a_rad_s, sample.speed_b_rad_s)
+        return self._measured()
 
     def send(self, voltage_a_v: float, voltage_b_v: float, *, drive: bool = True) -> None:
         """Send the channel vector for this tick (voltages, sequence number, drive)."""
@@ -168,6 +168,9 @@ class SerialCart:
         while self.link.gpio_waiting():
             self._accept(*self.link.next_gpio())
             self.skipped_ticks += 1
+        return self._measured()
+
+    def _measured(self) -> Measurement:
         assert self.sample is not None
         return Measurement(self.sample.speed_a_rad_s, self.sample.speed_b_rad_s)
 

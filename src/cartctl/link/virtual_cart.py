@@ -340,16 +340,10 @@ class VirtualSerialCart(SerialCart):
         if self.cart.state == "idle":  # opening a real cart's port resets it, too
             self.cart.start()
 
-    def _with_true_speed(self, measured: Measurement) -> Measurement:
+    def _measured(self) -> Measurement:
         assert self.sample is not None
         true_a, true_b = self.cart.true_speeds.get(self.sample.cart_tick, (math.nan, math.nan))
-        return Measurement(measured.speed_a_rad_s, measured.speed_b_rad_s, true_a, true_b)
-
-    def reset(self) -> Measurement:
-        return self._with_true_speed(super().reset())
-
-    def receive(self) -> Measurement:
-        return self._with_true_speed(super().receive())
+        return Measurement(self.sample.speed_a_rad_s, self.sample.speed_b_rad_s, true_a, true_b)
 
     def close(self) -> None:
         was_connected = self.connected and not self.link.failure
