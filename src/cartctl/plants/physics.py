@@ -198,10 +198,9 @@ def _advance(
 class PhysicsPlant:
     """A simulated cart with two physical DC motors (the module docstring has the model).
 
-    ``cart`` is a preset name (``"air"``, ``"ground"``) or explicit parameters;
-    ``noise_std_rad_s`` (white, on each measured speed) and ``actuation_ms`` (when a command lands
-    after its tick, in (0, 10] ms) override the cart's. The noise stream of ``seed`` is not
-    restarted by :meth:`reset`. ``reversed_motors`` (e.g. ``"b"``): motors wired backwards, so a
+    ``cart``: a preset name or explicit parameters; ``noise_std_rad_s`` (white, on each measured
+    speed; its ``seed``'s stream not restarted by :meth:`reset`) and ``actuation_ms`` (in (0, 10])
+    override the cart's. ``reversed_motors`` (e.g. ``"b"``): motors wired backwards, so a
     positive command turns that wheel (and its encoder) the negative way.
     """
 
@@ -239,16 +238,14 @@ class PhysicsPlant:
         self.reset()
 
     loop_delay_ticks = 1
-    """Ticks from a measurement to its voltage on the motor, as with microOS on the cart: the
-    command of tick k lands within the tick after it (``CartParams.actuation_delay_s``)."""
+    """Ticks from a measurement to its voltage on the motor (as with microOS on the cart)."""
 
     def reset(self, *, position_rad: tuple[float, float] = (0.0, 0.0)) -> Measurement:
         """Both wheels at rest, no current, 0 V; the measurement of tick 0. ``position_rad``
         places the wheels between encoder edges, as a real wheel's start angle does."""
         self._state = [(0.0, 0.0, float(th)) for th in position_rad]  # (i, ω, θ) per wheel
         self._counts = [math.floor(th / self._rad_per_count) for _, _, th in self._state]
-        self._applied = (0.0, 0.0)
-        self._driving = (0.0, 0.0)
+        self._applied = self._driving = (0.0, 0.0)
         self.tick: int = 0
         return Measurement(0.0, 0.0, 0.0, 0.0)
 

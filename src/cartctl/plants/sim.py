@@ -86,9 +86,8 @@ class ArxPlant:
     @property
     def loop_delay_ticks(self) -> int:
         """Ticks from a measurement to its voltage on the motor: the model file's where every
-        model's nk fits it (nk is that delay, the command landing within the tick, or one more, as
-        ``design`` takes it), else the models' nk − 1 (the larger): a model edited to answer later
-        is a longer loop, whatever its file once recorded."""
+        model's nk fits it (as ``design`` takes it), else the larger nk − 1 (a model edited to
+        answer later is a longer loop, whatever its file once recorded)."""
         nk = max(m.nk for m in self.models)
         recorded = self._loop_delay_ticks
         if recorded is not None and all(nk_fits_loop_delay(m.nk, recorded) for m in self.models):

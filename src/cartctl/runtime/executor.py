@@ -162,9 +162,9 @@ class TimingStats:
         """The timing part of ``run --json`` (docs/architecture.md), plus skipped deadlines;
         times in µs except ``duration_s``, null for the percentiles of an empty run."""
 
-        def nums(*xs: float) -> dict[str, float | None]:
-            keys = ("p50", "p99", "max")
-            return {k: None if math.isnan(x) else x for k, x in zip(keys, xs, strict=True)}
+        def nums(name: str) -> dict[str, float | None]:
+            values = {k: getattr(self, f"{name}_{k}") for k in ("p50", "p99", "max")}
+            return {k: None if math.isnan(x) else x for k, x in values.items()}
 
         return {
             "ticks": self.ticks,
@@ -172,10 +172,9 @@ class TimingStats:
             "deadline_misses": self.misses,
             "skipped_deadlines": self.skipped_deadlines,
             "miss_ticks": list(self.miss_ticks),
-            "period_error_us": nums(self.period_error_us_p50, self.period_error_us_p99,
-                                    self.period_error_us_max),
-            "compute_us": nums(self.compute_us_p50, self.compute_us_p99, self.compute_us_max),
-        }  # fmt: skip
+            "period_error_us": nums("period_error_us"),
+            "compute_us": nums("compute_us"),
+        }
 
 
 class _Recorder:
