@@ -58,13 +58,10 @@ def _natural(label: str) -> list[object]:
 def review_styles(labels: Sequence[str]) -> dict[str, SeriesStyle]:
     """Entity path → the run's style for labels that name a motor's signals (``gpio/speed_a``
     drawn as ``motor/a/speed``)."""
-    styles: dict[str, SeriesStyle] = {}
-    for label in labels:
-        for m in ("a", "b"):
-            for kind in (*_SPEED_KINDS, "voltage"):
-                if label_key(label) == label_key(f"{kind}_{m}"):
-                    styles[f"{GPIO_ROOT}/{label}"] = STYLES[f"motor/{m}/{kind}"]
-    return styles
+    run_style = {label_key(f"{kind}_{m}"): STYLES[f"motor/{m}/{kind}"]
+                 for m in ("a", "b") for kind in (*_SPEED_KINDS, "voltage")}  # fmt: skip
+    return {f"{GPIO_ROOT}/{label}": run_style[label_key(label)] for label in labels
+            if label_key(label) in run_style}  # fmt: skip
 
 
 def review_blueprint(
