@@ -1,7 +1,7 @@
-"""The plant interface: what the loop and the experiments talk to.
+"""The plant interface: what the loop and the experiments talk to, one tick at a time.
 
-A plant is advanced one control tick at a time. The tick convention matches a trace's rows (the
-trace CSV): row k holds the voltage *commanded* at tick k and the speed *measured* at tick k.
+As in a trace's rows, row k holds the voltage *commanded* at tick k and the speed *measured* at
+tick k::
 
     y0 = plant.reset()            # speeds measured at tick 0
     for k in range(n):

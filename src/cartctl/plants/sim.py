@@ -32,12 +32,9 @@ def arx_next(
     b: Sequence[float | Value], u: Sequence[Value] | NDArray[np.float64], offset: int,
     ar: Sequence[float | Value], y: Sequence[Value] | NDArray[np.float64],
 ) -> Value:  # fmt: skip
-    """y[k+1] = Σ b_i v[k+1−nk−i] − Σ a_j y[k+1−j], the ARX difference equation.
-
-    ``u`` (V) and ``y`` (rad/s) are newest first (u[0] = v[k], y[0] = y[k]); b_0's command sits at
-    ``u[offset]``, offset = nk − 1. Floats (one motor) or arrays of shape (N,) (N plants, as
-    ``cartctl tune --robust`` runs them), with the same operations.
-    """
+    """y[k+1] = Σ b_i v[k+1−nk−i] − Σ a_j y[k+1−j], the ARX difference equation; ``u`` (V) and
+    ``y`` (rad/s) newest first (u[0] = v[k], y[0] = y[k]), b_0's command at ``u[offset]``,
+    offset = nk − 1. Floats or arrays (:mod:`~cartctl.runtime.elementwise`)."""
     y_next: Any = 0.0  # an array after the first term, for arrays
     for i, b_i in enumerate(b):
         y_next = y_next + b_i * u[offset + i]

@@ -313,13 +313,12 @@ def run_experiment(
     on_tick: Callable[[int], None] | None = None,
     source: str | None = None,
 ) -> ExperimentResult:
-    """Apply the voltage sequences (V per tick) and record them with the measured speeds.
+    """Apply the voltage sequences (V per tick) and record them with the measured speeds (rows
+    as :mod:`cartctl.plants.base` numbers them, so the report's model applies as written).
 
-    Row k holds the voltage commanded at tick k and the speed measured at tick k, so the report's
-    model applies to the trace as written. The plant is reset first and closed (zero volts) on
-    every path; Ctrl-C or a :class:`~cartctl.errors.PlantError` after the first tick ends the run
-    with the ticks recorded so far (a fault before it propagates). ``on_tick`` gets the number of
-    ticks done (a progress bar); ``source`` is recorded as the trace's.
+    The plant is reset first and closed (zero volts) on every path; Ctrl-C or a
+    :class:`~cartctl.errors.PlantError` after the first tick ends the run with the ticks recorded
+    so far. ``on_tick`` gets the number of ticks done (a progress bar).
     """
     ua = np.asarray(voltage_a_v, dtype=float)
     ub = np.asarray(voltage_b_v, dtype=float)
