@@ -1,13 +1,9 @@
 """What the terminal shows of a run: the live :class:`StatusLine`, and the run metrics from a
-trace, for the ``run`` summary and ``cartctl review RUN.csv --json``.
-
-Per motor: the step metrics of the first reference step from rest (10–90 % rise, overshoot,
-settling, steady-state error), the RMS tracking error and the largest |voltage|; for the loop,
-period error and compute time percentiles and deadline misses (start error plus compute time
-beyond the period). Tracking is judged on the true speed where the plant gives one, else the
-measured speed (``metrics_signal``), settling in a band of max(2 % of the step, one encoder
-count per tick); a smoothed speed (Kalman RTS, the commands run it) adds ``motors.<m>.smoothed``.
-"""
+trace, for the ``run`` summary and ``cartctl review RUN.csv --json``: per motor the step metrics
+(:mod:`cartctl.measures.stepinfo`) of the first reference step from rest, the RMS tracking error
+and the largest |voltage|, judged on the true speed where the plant gives one, else the measured
+speed; for the loop, timing percentiles and deadline misses (start error plus compute time beyond
+the period)."""
 
 from __future__ import annotations
 
