@@ -1,11 +1,6 @@
-"""Model files: one identified ARX model per motor, as TOML, with provenance.
-
-``identify --out`` writes them; ``design``, ``inspect``, ``validate`` and the simulated plant read
-them. The keys are in docs/file-formats.md: ``theta`` = [c, d, a, b] per ``[motors.X]`` (extra
-keys such as ``theta_std`` are kept as ``stats``), and ``loop_delay_ticks``, the loop the data
-came from (absent: ``design`` assumes nk − 1). Version 1 and a file without a ``format`` line
-read as version 2.
-"""
+"""Model files: one identified ARX model per motor (``theta`` = [c, d, a, b] per ``[motors.X]``,
+other keys kept as ``stats``), as TOML, with provenance and the loop delay of the data; the keys
+and versions are in docs/file-formats.md."""
 
 from __future__ import annotations
 

@@ -1,11 +1,7 @@
-"""The sink interface and the closed-loop trace columns (docs/architecture.md's trace columns).
-
-The loop opens every sink with the column names, writes one row of floats per tick, and closes
-every sink on every exit path. ``write`` runs inside the tick and must never block; an optional
-``idle()`` runs after the tick's compute time is taken, for work that need not delay the command.
-A problem that loses no data is reported at ``close``; a file that cannot be written raises
-:class:`~cartctl.errors.OutputError` once, and the run stops through its normal stop path.
-"""
+"""The sink interface and the closed-loop trace columns (docs/architecture.md: the trace columns,
+and the tick's order: ``write`` inside the tick never blocks, an optional ``idle()`` after it). A
+problem that loses no data is reported at ``close``; a file that cannot be written raises
+:class:`~cartctl.errors.OutputError` once, and the run stops through its normal stop path."""
 
 from __future__ import annotations
 
