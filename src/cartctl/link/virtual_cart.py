@@ -38,11 +38,10 @@ from cartctl.plants.physics import PhysicsPlant
 
 HEARTBEAT_PERIOD_S = 1.1
 SILENCE_TIMEOUT_S = 0.5
-"""How long a host in this process waits for the virtual cart before it calls it silent (a real
-cart's is 0.1 s): the cart is threads of this process, which a busy PC can hold up for longer than
-a real cart is ever quiet. Its stall and pull faults are still found, that much later."""
-COMM_PHASE_US = 1200
-"""The cart's GPIO goes out this long (µs) into the tick (io() and control() on the Mega)."""
+"""A host in this process calls the virtual cart silent after this long (a real cart's: 0.1 s):
+the cart is threads of this process, which a busy PC can hold up for longer. Its stall and pull
+faults are still found, that much later."""
+COMM_PHASE_US = 1200  # the cart's GPIO goes out this long into the tick (io(), control())
 DRAIN_BUSY_US = 60  # reported as THREAD_INFO 201 (200: COMM_PHASE_US); there is no AVR to time
 _TERMIOS_SPEED = {getattr(termios, f"B{rate}"): rate for rate in (9600, 19200, 38400, 57600,
                   115200, 230400, 250000, 460800, 500000, 576000, 921600, 1000000, 2000000)
@@ -59,9 +58,8 @@ class VirtualCart:
     """The physical simulator behind a pseudo-terminal (:attr:`port`, ``/dev/pts/N``).
 
     ``preset`` and ``noise_std_rad_s`` (rad/s) go to the simulator, ``seed`` seeds it and the
-    faults; ``firmware`` runs in ``control()``: the bridge sketch by default, or a controller on
-    the cart (which reads what microOS's communication thread received: ``receive=microos``). Use
-    as a context manager, or :meth:`start` and :meth:`stop`.
+    faults; ``firmware`` runs in ``control()``: the bridge sketch, or a controller on the cart
+    (``receive=microos``). Use as a context manager, or :meth:`start` and :meth:`stop`.
     """
 
     def __init__(
@@ -85,8 +83,7 @@ class VirtualCart:
         self.period_s = float(period_s)
         self.firmware = firmware or BridgeFirmware()
         self.receive_schedule = self.faults.receive if firmware is None else "microos"
-        self.bridge_version = self.faults.bridge if firmware is None else 0
-        """2: the bridge sketch of ``firmware/``; 1: the one before; 0: not the bridge."""
+        self.bridge_version = self.faults.bridge if firmware is None else 0  # 0: not the bridge
         if self.receive_schedule == "microos" and self.bridge_version == 2:
             self.bridge_version = 1  # microOS's thread alone: the sketch before its own drains
         bridge2 = self.bridge_version == 2
@@ -121,14 +118,12 @@ class VirtualCart:
         self.boot_s = 0.0  # time.perf_counter at boot: tick k starts k × period_s later
         self._ticker = threading.Thread(target=self._run, name="virtual-cart", daemon=True)
         self.ticks = 0
-        self.true_speeds: dict[int, tuple[float, float]] = {}
-        """True wheel speeds (rad/s) at each recent tick, by the tick counter the cart sends."""
+        self.true_speeds: dict[int, tuple[float, float]] = {}  # rad/s, by the cart's tick counter
         self.frames_received = 0  # GPIO frames microOS decoded from the host
         self.ring_dropped_bytes = 0
         self.last_voltage_v: tuple[float, float] = (0.0, 0.0)
-        self.applied_log: collections.deque[tuple[float, float, float]] = collections.deque(
-            maxlen=1024
-        )  # (time.perf_counter, A, B): the voltages io() put on the motors at recent ticks
+        # (time.perf_counter, A, B): the voltages io() put on the motors at recent ticks
+        self.applied_log = collections.deque[tuple[float, float, float]](maxlen=1024)
         self.state = "idle"
         self.first_frame_at_s: float | None = None  # the host's first GPIO: faults count from it
         self.fault_at_s: float | None = None  # when the injected stall or pulled cable began
@@ -169,8 +164,7 @@ class VirtualCart:
         self._ticker.join(timeout=seconds)
 
     @property
-    def last_host_byte_at_s(self) -> float | None:
-        """``time.perf_counter`` when the host's last byte was through the line (None: none yet)."""
+    def last_host_byte_at_s(self) -> float | None:  # time.perf_counter; None: none yet
         return self._reader.last_byte_at_s
 
     def wait_ticks(self, n: int, timeout_s: float = 0.5) -> None:
@@ -201,9 +195,8 @@ class VirtualCart:
     def _drain(self, at_us: int, hand_over: bool) -> None:
         """A call of microOS's receive at ``at_us`` after boot; ``hand_over``: the bridge's."""
         until_us = at_us - self._lag_us  # ``late``: what reached the line a tick ago
-        kept, dropped = uart.fill_ring(
-            self._reader.take(self.boot_s + until_us * 1e-6), self.ring_bytes
-        )
+        arrived = self._reader.take(self.boot_s + until_us * 1e-6)
+        kept, dropped = uart.fill_ring(arrived, self.ring_bytes)
         self._ring_high = max(self._ring_high, len(kept))
         self.ring_dropped_bytes += dropped
         for gpio in self._parser.feed(kept):
@@ -288,12 +281,9 @@ class VirtualCart:
             self.applied_log.append((deadline, *applied))
             positions = (count * rad_per_count for count in physics.encoder_counts)
             io = CartIO(measurement.speed_a_rad_s, measurement.speed_b_rad_s, *applied, *positions)
-            tick_counter = firmware.tick
-            self.true_speeds[tick_counter] = (
-                measurement.true_speed_a_rad_s or 0.0,
-                measurement.true_speed_b_rad_s or 0.0,
-            )
-            self.true_speeds.pop((tick_counter - 512) % SEQ_MODULO, None)  # keep the recent ones
+            true_speeds = (measurement.true_speed_a_rad_s, measurement.true_speed_b_rad_s)
+            self.true_speeds[firmware.tick] = (true_speeds[0] or 0.0, true_speeds[1] or 0.0)
+            self.true_speeds.pop((firmware.tick - 512) % SEQ_MODULO, None)  # keep the recent ones
             voltage = firmware.control(io, tick_us // 1000)
             if self.bridge_version == 1:  # the sketch before version 2 sends 0 there
                 firmware.out_floats[CH_BRIDGE_VERSION] = 0.0
@@ -310,10 +300,8 @@ class VirtualCart:
                 if self.bridge_version == 2:  # its tick's timing: 120 bytes, a USB flush at once
                     reports = (COMM_PHASE_US, DRAIN_BUSY_US, period_us, self._ring_high)
                     self._ring_high = 0
-                    for k, value in enumerate(reports):
-                        report = encoder.thread_info(
-                            time_ms, TIMING_FIRST_ID + k, value, executions=j + 1
-                        )
+                    for thread, value in enumerate(reports, TIMING_FIRST_ID):
+                        report = encoder.thread_info(time_ms, thread, value, executions=j + 1)
                         self._writer.put(report, send_at)
             if generation_a and now >= next_heartbeat:
                 self._send(encoder.heartbeat(time_ms), send_at)
@@ -324,10 +312,9 @@ class VirtualCart:
 
 
 class VirtualSerialCart(SerialCart):
-    """``--plant virtual``: the host side (:class:`~cartctl.link.serial_cart.SerialCart`,
-    unchanged) on a :class:`VirtualCart` of this process, plus what only a simulator knows: the
-    true speed at each cart tick. The cart boots once :meth:`connect` has opened the port, and is
-    switched off on :meth:`close`, after it has taken the host's drive = 0 frames."""
+    """``--plant virtual``: :class:`~cartctl.link.serial_cart.SerialCart` on a :class:`VirtualCart`
+    of this process, plus the true speed at each cart tick. The cart boots once :meth:`connect`
+    has opened the port, and is switched off on :meth:`close`, after the drive = 0 frames."""
 
     reports_true_speed = True
 
