@@ -1,13 +1,7 @@
 """The file side of a trace: QRoboticsCenter (QRC, the course's PC program) GPIO logs read into
-labels and text fields, and which file column becomes which trace column (the trace's own names,
-or a ``--map``, trace column → file column or QRC label, and where it is silent a column named
-like a trace column).
-
-- QRC 5, XML: a ``<QGPIORecord>`` root with ``<labels>`` (``time``, 8 float and 4 int labels) and
-  ``<data>`` holding one tab-separated ``<row>`` per sample: time (ms), 8 floats, 4 ints.
-- QRC 6, CSV: line 1 ``QGPIORecord, QRC v<version>, <date @ time>, ...``, line 2
-  ``Time, <12 labels>``, then one ``", "``-separated line per sample: time (ms) and 12 floats.
-"""
+labels and text fields (the QRC 5 XML and QRC 6 CSV layouts: docs/serial-protocol.md), and which
+file column becomes which trace column (the trace's own names, or a ``--map``, trace column → file
+column or QRC label, and where it is silent a column named like a trace column)."""
 
 from __future__ import annotations
 

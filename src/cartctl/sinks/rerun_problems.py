@@ -1,11 +1,8 @@
-"""The Rerun viewer (can one open here, where is it, does one listen) and what goes wrong with a
-recording: the SDK's own log lines kept quiet, its failures named.
-
-The SDK reports a failed ``.rrd`` write through Rust's logger on stderr, while Python only hears
-"File-writer thread shut down prematurely". :func:`quiet_sdk_logs` turns that logger off and
-:func:`file_failure` names the failure in one line. Nothing heavy is imported here: the command
-line calls it before parsing.
-"""
+"""The Rerun viewer (can one open here, where is it, does one listen) and a recording's failures:
+the SDK reports a failed ``.rrd`` write through Rust's logger on stderr (which
+:func:`quiet_sdk_logs` turns off) while Python only hears "File-writer thread shut down
+prematurely"; :func:`file_failure` names it in one line. Light: the command line calls it before
+parsing."""
 
 from __future__ import annotations
 
