@@ -1,12 +1,7 @@
-"""ARX motor models: parameters, transfer functions, simulation, poles and zeros (pure maths).
-
-The report's structure (na = 2, nb = 2, nk = 2) is
+"""ARX motor models (:class:`ArxModel`, u in V, y in rad/s): parameters, transfer functions,
+simulation, poles and zeros (pure maths). The report's structure (na = 2, nb = 2, nk = 2) is
 
     ω[k] + c ω[k−1] + d ω[k−2] = a v[k−2] + b v[k−3],      θ = [c, d, a, b]
-
-and in general ``A(q) y[k] = B(q) u[k − nk]`` with A(q) = 1 + a_1 q⁻¹ + … + a_na q⁻ⁿᵃ and
-B(q) = b_0 + b_1 q⁻¹ + … + b_{nb−1} q⁻⁽ⁿᵇ⁻¹⁾; θ = [a_1 … a_na, b_0 … b_{nb−1}] in the report's
-order and signs. u in V, y in rad/s.
 """
 
 from __future__ import annotations
