@@ -1,9 +1,5 @@
-"""Models and controllers as MATLAB 5 ``.mat`` files (``cartctl export --mat``).
-
-The variables (one struct per motor, ``Ts`` at the top level, transfer functions in descending
-powers of z, a controller's ``A``, ``B``, ``C``, ``D`` on inputs [r; y]) are built here as
-plain dicts of numpy arrays and described in docs/design.md; :func:`write_mat` writes them.
-"""
+"""Models and controllers as MATLAB 5 ``.mat`` files (``cartctl export --mat``): the variables
+(docs/design.md) as plain dicts of numpy arrays, and :func:`write_mat`."""
 
 from __future__ import annotations
 
