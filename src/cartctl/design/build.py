@@ -1,64 +1,17 @@
-"""From designs to controller-file entries, and from controller files to runtime controllers.
-
-A ``[motors.X]`` entry holds the result itself (gains, estimator matrices), so the loop runs
-exactly what was designed, and C(z) (``controller_num``/``controller_den``) for independent
-checks, which loading compares with the gains.
-"""
+"""From controller files to runtime controllers: a ``[motors.X]`` entry holds the design's
+result itself (gains, estimator matrices), so the loop runs exactly what was designed."""
 
 from __future__ import annotations
 
-from dataclasses import fields
-from typing import Any
-
 from cartctl.cart import check_voltage_limit
-from cartctl.design.controller_ss import feedback_gains, feedback_tf_coeffs, kalman_from_entry
+from cartctl.design.controller_ss import feedback_gains, kalman_from_entry
 from cartctl.design.controllerfile import ControllerFile
 from cartctl.design.kalman import KalmanDesign
-from cartctl.design.pi import PiDesign
-from cartctl.design.poles import PolesDesign
 from cartctl.errors import DataFileError
 from cartctl.runtime.base import Controller
 from cartctl.runtime.kalman import KalmanSpeedEstimator, SteadyStateSpeedEstimator
 from cartctl.runtime.pi import PiController
 from cartctl.runtime.statefeedback import StateFeedbackController
-
-
-def kalman_entry(design: KalmanDesign) -> dict[str, Any]:
-    """The estimator's matrices and noise levels, as a file stores them;
-    ``timing_noise_std_ticks`` only when not 0 (files from before it stay the same)."""
-    entry = {f.name: getattr(design, f.name) for f in fields(design)}
-    if not entry["timing_noise_std_ticks"]:
-        del entry["timing_noise_std_ticks"]
-    return entry
-
-
-def pi_entry(design: PiDesign, anti_windup: str, estimator: KalmanDesign | None) -> dict[str, Any]:
-    """A PI design's ``[motors.X]`` entry."""
-    num, den = design.controller_tf_coeffs()
-    entry: dict[str, Any] = {
-        "kp": design.kp,
-        "ki": design.ki,
-        "anti_windup": anti_windup,
-        "controller_num": num,
-        "controller_den": den,
-    }
-    if estimator is not None:
-        entry["estimator"] = kalman_entry(estimator)
-    return entry
-
-
-def poles_entry(design: PolesDesign) -> dict[str, Any]:
-    """A pole-placement design's ``[motors.X]`` entry, with its feedback C(z)."""
-    controller_num, controller_den = feedback_tf_coeffs(design)
-    return {
-        "K": design.K,
-        "Ki": design.Ki,
-        "Kr": design.Kr,
-        "controller_num": controller_num,
-        "controller_den": controller_den,
-        "closed_loop_poles": [[p.real, p.imag] for p in design.poles],
-        "estimator": kalman_entry(design.estimator),
-    }
 
 
 def make_estimator(design: KalmanDesign) -> KalmanSpeedEstimator | SteadyStateSpeedEstimator:

@@ -1,22 +1,20 @@
 """A controller file's ``[motors.X]`` entry read back (checked), and the controller as the loop
-runs it, built once as a linear state-space system from (r, y) to u for the pole-placement C(z)
-of the files, the check of a file's C(z) against its gains, the loop analysis and ``export --mat``.
+runs it, built once as a linear state space from (r, y) to u: for the loop analysis, the
+pole-placement C(z) of the files, the check of a file's C(z) against its gains and ``export --mat``.
 
 Unsaturated and with the estimator's steady-state gain L, every controller of cartctl is LTI::
 
     s[k+1] = A s[k] + B [r[k], y[k]]ᵀ,     u[k] = C s[k] + D [r[k], y[k]]ᵀ
 
-(r the reference and y the measured speed, rad/s; u in V). The states, in the tick order of
-:mod:`cartctl.runtime.base` (correct, compute u, predict), with e = r − y:
+(r the reference and y the measured speed, rad/s; u in V), the states in the tick order of
+:mod:`cartctl.runtime.base` (correct, compute u, predict), e = r − y, x̂[k|k] = x̂ + L (y − C x̂):
 
 - PI on the measurement: s = [I[k−1]] (V), I[k] = I[k−1] + Ki·Ts·e[k], u[k] = Kp·e[k] + I[k].
-- PI on the Kalman estimate: s = [x̂[k|k−1] (m states), I[k−1]], e = r − x̂_1[k|k] with
-  x̂[k|k] = x̂ + L (y − C x̂); the estimator predicts with u.
+- PI on the Kalman estimate: s = [x̂[k|k−1] (m states), I[k−1]], e = r − x̂_1[k|k].
 - Pole placement: s = [x̂[k|k−1], x_i]; u = Kr·r − K·x̂[k|k] − Ki·x_i, x_i⁺ = x_i + Ts (r − y)
-  (x_i left out without Ki, the integral action being the disturbance estimate).
+  (no x_i without Ki, the integral action being the disturbance estimate).
 
-The feedback part C_fb(z) = −U(z)/Y(z) (r = 0) closes the loop as L = C_fb·G·z^(−extra); for the
-PI on the measurement it is C(z) = Kp + Ki·Ts·z/(z − 1).
+The feedback part C_fb(z) = −U(z)/Y(z) (r = 0) closes the loop as L = C_fb·G·z^(−extra).
 """
 
 from __future__ import annotations
@@ -31,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.design.pi import pi_tf_coeffs
-from cartctl.design.request import MAX_TIMING_NOISE_TICKS
+from cartctl.design.request import MAX_TIMING_NOISE_TICKS, RANGES
 from cartctl.runtime.kalman import KalmanDesign
 from cartctl.runtime.statefeedback import FeedbackGains
 
@@ -56,12 +54,7 @@ def kalman_from_entry(entry: Mapping[str, Any]) -> KalmanDesign:
             raise KeyError(f"estimator.{f.name}")
         value = entry[f.name]
         values[f.name] = np.asarray(value, dtype=float) if f.name in _KALMAN_ARRAYS else value
-    _check_estimator(values)
-    return KalmanDesign(**values)
-
-
-def _check_estimator(values: Mapping[str, Any]) -> None:
-    """Shapes that fit together, finite numbers, covariances, and an error that decays."""
+    # shapes that fit together, finite numbers, covariances, and an error that decays
     A = values["A"]
     m = A.shape[0] if A.ndim == 2 else -1
     shapes = {"A": (m, m), "B": (m,), "C": (m,), "L": (m,), "Q": (m, m), "P": (m, m)}
@@ -87,11 +80,7 @@ def _check_estimator(values: Mapping[str, Any]) -> None:
                 f"entries up to {COVARIANCE_BOUND:g}"
             )
     timing = values.get("timing_noise_std_ticks", 0.0)
-    if (
-        isinstance(timing, bool)
-        or not isinstance(timing, int | float)
-        or not (math.isfinite(timing) and 0.0 <= timing <= MAX_TIMING_NOISE_TICKS)
-    ):
+    if not RANGES["timing_noise_std_ticks"][0](timing):
         raise ValueError(
             "estimator.timing_noise_std_ticks must be a number of ticks in "
             f"[0, {MAX_TIMING_NOISE_TICKS:g}], got {timing!r}"
@@ -103,12 +92,11 @@ def _check_estimator(values: Mapping[str, Any]) -> None:
             f"the estimator's error does not decay (its poles reach |z| = {radius:.4g}); "
             "redesign the controller"
         )
+    return KalmanDesign(**values)
 
 
 @dataclass(frozen=True)
-class _Gains:
-    """A :class:`~cartctl.runtime.statefeedback.FeedbackGains` rebuilt from a controller file."""
-
+class _Gains:  # a FeedbackGains read back from a file
     K: NDArray[np.float64]
     Ki: float
     Kr: float
@@ -126,9 +114,8 @@ def feedback_gains(entry: Mapping[str, Any], period_s: float) -> _Gains:
 
 @dataclass(frozen=True, eq=False)
 class ControllerStateSpace:
-    """A discrete controller ``s⁺ = A s + B [r, y]ᵀ``, ``u = C s + D [r, y]ᵀ`` (see the module):
-    B's and D's columns are r and y (rad/s), u is in V; ``states`` names each state, e.g.
-    ``('xhat_1', 'xhat_2', 'bias_v', 'integral_v')``."""
+    """A discrete controller ``s⁺ = A s + B [r, y]ᵀ``, ``u = C s + D [r, y]ᵀ`` (the module's);
+    ``states`` names each state, e.g. ``('xhat_1', 'xhat_2', 'bias_v', 'integral_v')``."""
 
     A: NDArray[np.float64]
     B: NDArray[np.float64]
@@ -245,7 +232,6 @@ def feedback_tf_coeffs(design: FeedbackGains) -> tuple[NDArray[np.float64], NDAr
 
 
 def _coeffs(values: Iterable[Any]) -> str:
-    """Coefficients for a message; an entry that is not a number is shown as it is."""
     shown = [
         f"{v:.10g}" if isinstance(v, int | float) and not isinstance(v, bool) else repr(v)
         for v in values
@@ -265,33 +251,24 @@ def _disagrees(stored: Any, expected: NDArray[np.float64]) -> bool:
     return bool(np.any(np.abs(got - expected) > CONSISTENCY_RTOL * scale))
 
 
-def expected_tf(
-    controller: Any, entry: Mapping[str, Any]
-) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
-    """C(z) as one motor's gains give it: (num, den, what it was computed from). For pole
-    placement, the feedback C_fb (Kr acts on the reference and is not in it)."""
-    ts = controller.period_s
-    if controller.method == "pi":
-        kp, ki = float(entry["kp"]), float(entry["ki"])
-        num, den = pi_tf_coeffs(kp, ki, ts)
-        return (
-            num,
-            den,
-            f"Kp = {kp:.10g}, Ki = {ki:.10g} and Ts = {ts:g} s give (C(z) = Kp + Ki·Ts·z/(z−1))",
-        )
-    num, den = feedback_tf_coeffs(feedback_gains(entry, ts))
-    return num, den, f"K, Ki, the estimator and Ts = {ts:g} s give"
-
-
 def consistency_problems(controller: Any) -> list[str]:
-    """Where a file's stored C(z) disagrees with its gains, one sentence per key (an entry without
-    C(z), or with gains that are missing or not numbers, is left to ``build_controllers``)."""
+    """Where a file's stored C(z) disagrees with the one its gains give (for pole placement the
+    feedback C_fb: Kr acts on the reference), one sentence per key; an entry without C(z), or
+    with gains that are missing or not numbers, is left to ``build_controllers``."""
     problems: list[str] = []
+    ts = controller.period_s
     for motor, entry in controller.motors.items():
         if "controller_num" not in entry and "controller_den" not in entry:
             continue
         try:
-            num, den, source = expected_tf(controller, entry)
+            if controller.method == "pi":
+                kp, ki = float(entry["kp"]), float(entry["ki"])
+                num, den = pi_tf_coeffs(kp, ki, ts)
+                source = (f"Kp = {kp:.10g}, Ki = {ki:.10g} and Ts = {ts:g} s give "
+                          "(C(z) = Kp + Ki·Ts·z/(z−1))")  # fmt: skip
+            else:
+                num, den = feedback_tf_coeffs(feedback_gains(entry, ts))
+                source = f"K, Ki, the estimator and Ts = {ts:g} s give"
         except (KeyError, TypeError, ValueError, IndexError, np.linalg.LinAlgError):
             continue
         for key, expected in (("controller_num", num), ("controller_den", den)):

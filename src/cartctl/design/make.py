@@ -5,7 +5,7 @@ step against the time-optimal bound (:func:`design_models`), and the controller 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -19,9 +19,10 @@ from cartctl.design.analysis import (
     settling_bound,
     simulate_step,
 )
-from cartctl.design.build import make_estimator, pi_entry, poles_entry
+from cartctl.design.build import make_estimator
+from cartctl.design.controller_ss import feedback_tf_coeffs
 from cartctl.design.controllerfile import ControllerFile, common_loop_delay, file_sha256
-from cartctl.design.kalman import design_kalman
+from cartctl.design.kalman import KalmanDesign, design_kalman
 from cartctl.design.pi import design_pi, design_pi_bandwidth
 from cartctl.design.poles import design_poles
 from cartctl.design.request import DesignRequest, check_loop_delay
@@ -52,12 +53,8 @@ class MotorDesign:
 def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
     """Design one motor's controller as ``request`` asks."""
     extra, limit = request.extra_delay_ticks, request.voltage_limit_v
-    noise: dict[str, Any] = {
-        "process_noise_std_v": request.process_noise_std_v,
-        "bias_drift_std_v": request.bias_drift_std_v,
-        "extra_noise_std_rad_s": request.extra_noise_std_rad_s,
-        "timing_noise_std_ticks": request.timing_noise_std_ticks,
-    }
+    noise = {f: getattr(request, f) for f in ("process_noise_std_v", "bias_drift_std_v",
+             "extra_noise_std_rad_s", "timing_noise_std_ticks")}  # fmt: skip
     if request.method == "pi":
         pm = request.phase_margin_deg
         if request.bandwidth_hz is not None:
@@ -66,21 +63,18 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
         else:
             d = design_pi(model, phase_margin_deg=pm, crossover_hz=request.crossover_hz,
                           extra_delay_ticks=extra)  # fmt: skip
-        kalman = None
+        num, den = d.controller_tf_coeffs()
         entry = d.to_dict()
+        file_entry: dict[str, Any] = {"kp": d.kp, "ki": d.ki, "anti_windup": request.anti_windup,
+                                      "controller_num": num, "controller_den": den}  # fmt: skip
+        estimator = None
         if request.estimator == "kalman":
             kalman = design_kalman(model, extra_delay_ticks=extra, **noise)
             entry["estimator_poles"] = [[p.real, p.imag] for p in kalman.poles()]
-        file_entry = pi_entry(d, request.anti_windup, kalman)
-        estimator = None if kalman is None else make_estimator(kalman)
-        controller: Controller = PiController(
-            d.kp,
-            d.ki,
-            model.period_s,
-            voltage_limit_v=limit,
-            anti_windup=request.anti_windup,
-            estimator=estimator,
-        )
+            file_entry["estimator"] = _kalman_entry(kalman)
+            estimator = make_estimator(kalman)
+        controller: Controller = PiController(d.kp, d.ki, model.period_s, voltage_limit_v=limit,
+                                              anti_windup=request.anti_windup, estimator=estimator)  # fmt: skip
     else:
         poles = request.pole_list()
         placement = design_poles(
@@ -91,11 +85,14 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
             extra_delay_ticks=extra,
             **noise,
         )
-        file_entry = poles_entry(placement)
+        num, den = feedback_tf_coeffs(placement)
+        file_entry = {"K": placement.K, "Ki": placement.Ki, "Kr": placement.Kr,
+                      "controller_num": num, "controller_den": den,
+                      "closed_loop_poles": [[p.real, p.imag] for p in placement.poles],
+                      "estimator": _kalman_entry(placement.estimator)}  # fmt: skip
         controller = StateFeedbackController(
             placement, estimator=make_estimator(placement.estimator), voltage_limit_v=limit
         )
-        num, den = file_entry["controller_num"], file_entry["controller_den"]
         loop = loop_analysis(num, den, model, extra)
         keys = ("phase_margin_deg", "gain_margin_db", "crossover_hz", "sensitivity_peak")
         entry = {
@@ -105,6 +102,15 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
             "controller_den": den.tolist(),
         }
     return MotorDesign(controller, entry, file_entry)
+
+
+def _kalman_entry(design: KalmanDesign) -> dict[str, Any]:
+    """The estimator as a file stores it; ``timing_noise_std_ticks`` only when not 0 (files
+    from before it stay the same)."""
+    entry = {f.name: getattr(design, f.name) for f in fields(design)}
+    if not entry["timing_noise_std_ticks"]:
+        del entry["timing_noise_std_ticks"]
+    return entry
 
 
 def nk_note(nk: Mapping[str, int], loop_delay_ticks: int) -> str | None:

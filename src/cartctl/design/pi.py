@@ -14,7 +14,7 @@ with little lag) or Ki ≤ 0 (a high one: phase lead) it is refused with the cro
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import numpy as np
@@ -281,15 +281,6 @@ class PiDesign:
     def to_dict(self) -> dict[str, Any]:
         """``design --json`` entry of one motor (without the simulated ``step``)."""
         num, den = self.controller_tf_coeffs()
-        return {
-            "kp": self.kp,
-            "ki": self.ki,
-            "period_s": self.period_s,
-            "extra_delay_ticks": self.extra_delay_ticks,
-            "target_phase_margin_deg": self.target_phase_margin_deg,
-            "target_crossover_hz": self.target_crossover_hz,
-            "target_bandwidth_hz": self.target_bandwidth_hz,
-            "controller_num": num.tolist(),
-            "controller_den": den.tolist(),
-            **self.analysis(),
-        }
+        own = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "model"}
+        tf = {"controller_num": num.tolist(), "controller_den": den.tolist()}
+        return {**own, **tf, **self.analysis()}
