@@ -29,13 +29,10 @@ stamps rows with the cart's millis(): 9, 10 and 11 ms are normal, a lost frame g
 def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Trace:
     """Read a trace CSV, a QRC 5 XML log or a QRC 6 CSV log (told by content) as a Trace.
 
-    QRC times (ms) become seconds from the first row; steps off the 10 ms tick by more than
-    :data:`SPACING_TOLERANCE_S` give one :class:`~cartctl.errors.DataWarning`. ``mapping`` is
-    trace column → QRC label or CSV header (:func:`parse_mapping`). Without one, a CSV needs
-    the trace columns, a ``cartctl monitor`` trace is read by its labels (``speedA`` is
-    speed_a) and a QRC log's labels equal to trace column names are used. A motor left
-    unmapped takes the other's counterpart channels (``voltA`` → ``voltB``) or zeros; at least
-    one motor must have both. Other channels are kept as extras under their labels.
+    ``mapping`` is trace column → QRC label or CSV header (:func:`parse_mapping`; the rules
+    without one, and the counterparts of a motor left unmapped: docs/file-formats.md). QRC times
+    (ms) become seconds from the first row; steps off the 10 ms tick by more than
+    :data:`SPACING_TOLERANCE_S` give one :class:`~cartctl.errors.DataWarning`.
     """
     path = Path(path)
     checked = None if mapping is None else check_mapping(mapping)
