@@ -172,6 +172,10 @@ class ViewerError(CartctlError, RuntimeError):
     """The viewer could not be started, or could not render."""
 
 
+def _needs_vulkan(what: str) -> ViewerError:
+    return ViewerError(f"{what}; it needs a Vulkan driver: {VULKAN_HINT}")
+
+
 def require_viewer() -> str:
     """The Rerun viewer executable (:class:`ViewerError` when there is none)."""
     from cartctl.sinks.rerun_problems import viewer_executable
@@ -287,17 +291,12 @@ def screenshot(
             raise
         except (RuntimeError, ConnectionError, OSError, TimeoutError) as exc:
             reason = _viewer_failure(log_path) or str(exc).splitlines()[0]
-            raise ViewerError(
-                f"the headless viewer could not render ({reason}); it needs a Vulkan driver: "
-                f"{VULKAN_HINT}"
-            ) from None
+            raise _needs_vulkan(f"the headless viewer could not render ({reason})") from None
         finally:
             rec.disconnect()
             _stop(viewer)
     if not out.is_file():
-        raise ViewerError(
-            f"the viewer did not write {out}; it needs a Vulkan driver: {VULKAN_HINT}"
-        )
+        raise _needs_vulkan(f"the viewer did not write {out}")
     return out
 
 
@@ -325,10 +324,7 @@ def _wait_for_viewer(
     while time.monotonic() < deadline:
         if viewer.poll() is not None:
             reason = _viewer_failure(log_path) or f"it exited with code {viewer.returncode}"
-            raise ViewerError(
-                f"the headless viewer could not start ({reason}); it needs a Vulkan driver: "
-                f"{VULKAN_HINT}"
-            )
+            raise _needs_vulkan(f"the headless viewer could not start ({reason})")
         try:
             if client is None:
                 with socket.create_connection(("127.0.0.1", port), timeout=0.2):
@@ -338,10 +334,7 @@ def _wait_for_viewer(
             return client
         except (OSError, ConnectionError, RuntimeError):
             time.sleep(0.05)
-    raise ViewerError(
-        f"the headless viewer did not start within {_VIEWER_START_TIMEOUT_S:g} s; "
-        f"it needs a Vulkan driver: {VULKAN_HINT}"
-    )
+    raise _needs_vulkan(f"the headless viewer did not start within {_VIEWER_START_TIMEOUT_S:g} s")
 
 
 def _pause_at_end(client: ViewerClient, ends: dict[str, int]) -> None:
