@@ -60,11 +60,6 @@ def _c_array(values: Sequence[float] | np.ndarray) -> str:
     return "{" + ", ".join(c_float(v) for v in values) + "}"
 
 
-def _c_matrix(rows: np.ndarray, indent: str) -> str:
-    inner = f",\n{indent}    ".join(_c_array(row) for row in rows)
-    return "{\n" + f"{indent}    {inner}\n{indent}}}"
-
-
 def _clamp(dest: str, value: str) -> str:
     lim = "CARTCTL_VOLTAGE_LIMIT_V"
     return f"{dest} = {value} > {lim} ? {lim} : ({value} < -{lim} ? -{lim} : {value});"
@@ -117,8 +112,9 @@ static void cartctl_predict_$m(float voltage_v) {
 def _estimator_code(motor: str, design: KalmanDesign) -> list[str]:
     """Constants, correct() and predict() of the fixed-gain Kalman estimator of one motor."""
     bias = ", the last one an input disturbance (V)" if design.has_bias else ""
+    rows = ",\n    ".join(_c_array(row) for row in design.A)  # one row of A a line
     return _ESTIMATOR.substitute(
-        m=motor, M=motor.upper(), n=design.A.shape[0], bias=bias, A=_c_matrix(design.A, ""),
+        m=motor, M=motor.upper(), n=design.A.shape[0], bias=bias, A=f"{{\n    {rows}\n}}",
         B=_c_array(design.B), C=_c_array(design.C), L=_c_array(design.L),
     ).split("\n")  # fmt: skip
 
