@@ -154,6 +154,9 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.data.trace import MOTORS
     from cartctl.identification.validate import validate_models
 
+    def say(line: str) -> None:
+        print(f"cartctl validate: {line}", file=sys.stderr)
+
     plot = check_plot_path(args.plot)
     models = load_models(args.model)
     trace = read_trace(args.data, args.map)
@@ -161,23 +164,15 @@ def run(args: argparse.Namespace) -> int:
     if args.motor == "both":
         motors = tuple(m for m in MOTORS if m in models.motors)
         for name in sorted(set(MOTORS) - set(motors)):
-            print(
-                f"cartctl validate: note: {args.model} has no model of motor {name}; skipped",
-                file=sys.stderr,
-            )
+            say(f"note: {args.model} has no model of motor {name}; skipped")
     validation = validate_models(models, trace, motors, skip_idle=args.motor == "both")
     for name in validation.skipped:
-        print(
-            f"cartctl validate: note: motor {name}'s voltage is zero throughout {args.data}; "
-            "skipped",
-            file=sys.stderr,
-        )
+        say(f"note: motor {name}'s voltage is zero throughout {args.data}; skipped")
     for r in validation.results.values():
         if r.unstable_pole is not None:
-            print(
-                f"cartctl validate: warning: {args.model}: motor {r.motor}'s model is unstable "
-                f"(pole at |z| = {r.unstable_pole:.4g}); identify it again",
-                file=sys.stderr,
+            say(
+                f"warning: {args.model}: motor {r.motor}'s model is unstable (pole at |z| = "
+                f"{r.unstable_pole:.4g}); identify it again"
             )
     if plot is not None:
         plot_validation(validation, plot)
