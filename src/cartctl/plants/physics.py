@@ -246,7 +246,6 @@ class PhysicsPlant:
         self._state = [(0.0, 0.0, float(th)) for th in position_rad]  # (i, ω, θ) per wheel
         self._counts = [math.floor(th / self._rad_per_count) for _, _, th in self._state]
         self._applied = self._driving = (0.0, 0.0)
-        self.tick: int = 0
         return Measurement(0.0, 0.0, 0.0, 0.0)
 
     def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
@@ -268,7 +267,6 @@ class PhysicsPlant:
         if self._rng is not None:
             noise = self._rng.standard_normal(2) * self.params.noise_std_rad_s
             speeds = [speed + float(e) for speed, e in zip(speeds, noise, strict=True)]
-        self.tick += 1
         return Measurement(speeds[0], speeds[1], self._state[0][1], self._state[1][1])
 
     def close(self) -> None:
