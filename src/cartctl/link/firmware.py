@@ -132,7 +132,7 @@ class BridgeFirmware(HeldChannels):
 
     def _decide(self, now_ms: int) -> None:
         """What the next ``io()`` applies, from the held channels and the watchdog at ``now_ms``."""
-        age_ms = ((int(now_ms) & 0xFFFFFFFF) - self._last_new_ms) & 0xFFFFFFFF
+        age_ms = (int(now_ms) - self._last_new_ms) & 0xFFFFFFFF  # u32 ms, wrapping
         self.tripped = not self._seen or age_ms >= bridge.WATCHDOG_MS
         self.driving = self.in_ints[1] == 1 and not self.tripped
         finite = [v if math.isfinite(v) else 0.0 for v in self.in_floats[:2]]
@@ -146,7 +146,7 @@ class BridgeFirmware(HeldChannels):
         super().receive(floats, ints)
         seq = self.in_ints[0]
         if seq != self._last_seq:
-            step = (seq - self._last_seq) % bridge.SEQ_MODULO
+            step = bridge.tick_difference(self._last_seq, seq)
             if self._seen and step <= bridge.SEQ_WINDOW:
                 self.frames_lost = (self.frames_lost + step - 1) % bridge.SEQ_MODULO
             self._last_seq = seq
@@ -167,7 +167,7 @@ class BridgeFirmware(HeldChannels):
         fields = (now_ms, *astuple(io), *status, bridge.BRIDGE_VERSION)  # CartSample's order
         floats, ints = bridge.CartSample(*fields).to_channels()
         self.out_floats, self.out_ints = list(floats), list(ints)
-        self.tick = (self.tick + 1) % bridge.SEQ_MODULO
+        self.tick = bridge.next_seq(self.tick)
         return self.command_v
 
 

@@ -27,8 +27,7 @@ from cartctl.link.dialect import Encoder, Gpio
 from cartctl.plants.base import Measurement
 
 STOP_FRAMES = 3  # drive = 0 frames sent on close (one may be lost to line noise)
-PROBE_ECHOES = bridge.MIN_ECHOES
-"""Echoes :meth:`SerialCart.measure_loop_delay` judges first: done when they are clear."""
+PROBE_ECHOES = bridge.MIN_ECHOES  # echoes measure_loop_delay judges first: done when clear
 UNDRIVEN_SILENCE_S = 0.5
 """Longest wait for a GPIO while nothing is driven (s: the first tick, the probe): a host held up
 that long (a loaded PC) is no fault of the cart's."""
@@ -46,9 +45,8 @@ class SerialCart:
 
     ``connect_timeout_s`` bounds the wait for the first HEARTBEAT, ``silence_timeout_s`` that for
     a GPIO once running; ``on_print`` and ``serial_factory`` go to the
-    :class:`~cartctl.link.cart_link.CartLink`. Besides the Plant protocol it offers the split
-    :meth:`send` / :meth:`receive` that the cart-clocked loop uses to time its own compute, and
-    :meth:`link_summary` for the run summary.
+    :class:`~cartctl.link.cart_link.CartLink`. Besides the Plant protocol: :meth:`send` and
+    :meth:`receive` apart (the cart-clocked loop times its compute between), :meth:`link_summary`.
     """
 
     period_s: float = PERIOD_S
@@ -78,19 +76,17 @@ class SerialCart:
         self._seq = 1
         self._sent_at: dict[int, int] = {}
         self._echo = -1
+        # echoes per delay (ticks) since the probe, and what measure_loop_delay measured
         self.echo_delays: collections.Counter[int] = collections.Counter()
-        """Echoes per delay (ticks) since the probe: every command the cart applied."""
         self.probe_delays: bridge.EchoDelays | None = None
-        """What :meth:`measure_loop_delay` measured, None before it."""
         self.missed_ticks = 0
         self.skipped_ticks = 0
         self.watchdog_trips = 0
-        self.frames_sent = 0
-        """Frames sent since the last :meth:`reset` (the stop frames of :meth:`close` excluded)."""
+        self.frames_sent = 0  # since the last reset (the stop frames of close excluded)
         self._lost_base = 0
         self._sent_any = False
-        self.reply_latency_s: collections.deque[float] = collections.deque(maxlen=1 << 20)
-        """Per tick of the run: from the cart's frame decoded to the host's reply written (s)."""
+        # per tick of the run: from the cart's frame decoded to the host's reply written (s)
+        self.reply_latency_s = collections.deque[float](maxlen=1 << 20)
 
     def connect(self) -> None:
         """Open the port and wait for the cart's HEARTBEAT (raises a clear error otherwise)."""
@@ -108,8 +104,8 @@ class SerialCart:
             )
         self.connected = True
 
-    def _port_opened(self) -> None:
-        """Between opening the port and waiting for the HEARTBEAT (the virtual cart boots here)."""
+    def _port_opened(self) -> None:  # before the HEARTBEAT is waited for (a virtual cart boots)
+        pass
 
     def reset(self) -> Measurement:
         """Connect if needed, drop what waited in the buffer, and take the next GPIO as tick 0."""

@@ -26,8 +26,8 @@ from cartctl.link.bridge import (
     BRIDGE_BAUD,
     CH_BRIDGE_VERSION,
     LEGACY_BAUD,
-    SEQ_MODULO,
     TIMING_FIRST_ID,
+    tick_difference,
 )
 from cartctl.link.cart_faults import RECEIVE_SCHEDULES, CartFaults
 from cartctl.link.dialect import Encoder, encode_gpiox_v2
@@ -283,7 +283,7 @@ class VirtualCart:
             io = CartIO(measurement.speed_a_rad_s, measurement.speed_b_rad_s, *applied, *positions)
             true_speeds = (measurement.true_speed_a_rad_s, measurement.true_speed_b_rad_s)
             self.true_speeds[firmware.tick] = (true_speeds[0] or 0.0, true_speeds[1] or 0.0)
-            self.true_speeds.pop((firmware.tick - 512) % SEQ_MODULO, None)  # keep the recent ones
+            self.true_speeds.pop(tick_difference(512, firmware.tick), None)  # keep the recent ones
             voltage = firmware.control(io, tick_us // 1000)
             if self.bridge_version == 1:  # the sketch before version 2 sends 0 there
                 firmware.out_floats[CH_BRIDGE_VERSION] = 0.0
