@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from cartctl import stopping
+from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.cli.commands.options import MAX_JOBS, check_jobs, check_output_folder, seed
 from cartctl.errors import CartctlError, InputError
 
@@ -44,7 +45,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--noise", type=float, default=0.0, metavar="RAD_S",
                    help="physics and virtual: extra white measurement noise (rad/s, default 0)")  # fmt: skip
     p.add_argument("--seed", type=seed, default=None, help="seed of the measurement noise")
-    p.add_argument("--connect-timeout", type=float, default=5.0, metavar="S",
+    p.add_argument("--connect-timeout", type=float, default=DEFAULT_CONNECT_TIMEOUT_S, metavar="S",
                    help="serial and virtual carts: longest wait for the first HEARTBEAT "
                         "(default 5 s)")  # fmt: skip
     p.add_argument("--jobs", type=int, metavar="N",
