@@ -1,9 +1,5 @@
-"""The bridge sketch's channel map: how GPIO channels carry commands and measurements
-(docs/serial-protocol.md §3), and the echo delays.
-
-Each command the cart applied comes back as an echo; the ticks from the measurement it answered to
-that echo are that command's loop delay. :class:`EchoDelays` counts them per value and says whether
-one value is clear; :func:`delay_change` compares a run's echoes with the probe's before it.
+"""The bridge sketch's channel map (docs/serial-protocol.md §3) and the echo delays: the ticks
+from a measurement to the echo of the command that answered it (:class:`EchoDelays`).
 """
 
 from __future__ import annotations
@@ -88,12 +84,9 @@ class HostCommand:
 
 @dataclass(frozen=True)
 class CartSample:
-    """One cart → PC measurement frame (one 10 ms tick of the cart), in the channel map's units.
-
+    """One cart → PC measurement frame (one 10 ms tick of the cart), in the channel map's units:
     ``echo_seq`` is the host sequence number of the command applied at this tick,
-    ``host_frames_lost`` the host sequence numbers skipped since boot (modulo 32768; 0 from an
-    older bridge), ``bridge_version`` the sketch's version (float 6; 0 from a bridge before 2).
-    """
+    ``host_frames_lost`` those skipped since boot (modulo 32768; 0 from an older bridge)."""
 
     time_ms: int
     speed_a_rad_s: float

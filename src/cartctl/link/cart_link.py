@@ -1,7 +1,5 @@
-"""The host's end of the serial line to a microOS cart: port, framing, sign of life, silence.
-
-:class:`CartLink` turns every way the line can fail into one clear error: a port that cannot be
-opened, no HEARTBEAT, a cart of the other generation, silence, a port that vanishes mid-run.
+"""The host's end of the serial line to a microOS cart: port, framing, sign of life, silence,
+each way the line can fail turned into one clear error.
 """
 
 from __future__ import annotations

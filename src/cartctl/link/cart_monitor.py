@@ -1,9 +1,7 @@
 """Passive recording of what a cart sends (``cartctl monitor``): labelled GPIO rows, text, events.
 
-Each GPIO becomes a row ``time_s, tick, <12 labels>``. ``tick`` counts the rows; ``time_s`` is
-k · Ts with the cart's tick k from the frames' millisecond stamps, k = max(k_prev + 1,
-round(Δms / 10 ms)) (docs/serial.md). PRINT lines and EVENTs get the time and tick of the last
-row before them (0 before the first).
+A row is ``time_s, tick, <12 labels>``; ``time_s`` is k · Ts with the cart's tick k from the
+frames' millisecond stamps, k = max(k_prev + 1, round(Δms / 10 ms)) (docs/serial.md).
 """
 
 from __future__ import annotations
@@ -123,11 +121,10 @@ class MonitorResult:
 class Monitor:
     """Reads a connected link and writes one row per GPIO to the sinks (never sends anything).
 
-    The first of the first :data:`RECOGNISE_FRAMES` frames that carries the marker of one of
-    cartctl's firmwares names the channels (:func:`firmware_labels`), else QRoboticsCenter's
-    labels do; ``labels`` (:func:`parse_labels`) override both (the firmware is still told, to
-    ``announce``). The row sinks open once the labels are chosen; what was held until then is
-    written at once, in order. ``echo`` also receives each PRINT line. The caller closes the sinks.
+    The channels are named by ``labels`` (:func:`parse_labels`), else by the firmware the first
+    marked frame names (:func:`firmware_labels`), else QRoboticsCenter's; the row sinks open once
+    they are chosen, and what was held until then is written in order. ``echo`` also receives each
+    PRINT line, ``announce`` the firmware told. The caller closes the sinks.
     """
 
     def __init__(
@@ -218,11 +215,8 @@ class Monitor:
         self._hold(lambda: self._record(gpio, time_s))
 
     def _decide(self, firmware: Firmware | None, marker: float | None) -> None:
-        """Choose the labels (given, the firmware's, or the defaults), say so, open the sinks.
-
-        ``marker`` is float 6 of the frame that told the firmware (the last one looked at when
-        none did; None without frames).
-        """
+        """Choose the labels (given, the firmware's, or the defaults), say so (``marker``: float 6
+        of the deciding frame, None without frames), open the sinks."""
         self._decided = True
         self.firmware = firmware
         if self.columns is None:

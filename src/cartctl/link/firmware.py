@@ -1,12 +1,6 @@
-"""cartctl's firmwares: how a cart says which one it runs, and their logic in Python.
-
-Float 6 of every GPIO cartctl's firmware sends says which it is (docs/serial-protocol.md §3.1);
-the labels of its channels are the trace's column names, so that ``review``, ``validate`` and
-``convert`` read a ``cartctl monitor`` trace. :class:`BridgeFirmware` is the bridge sketch's logic
-(``firmware/cartctl_bridge/bridge_logic.h``; a test compares the two tick by tick, keep them in
-sync); :class:`OnboardFirmware` the twin of the exported ``control()`` (per tick and motor u =
-controller.step(r, measured speed), applied at the next ``io()``; ``controlEnabled()`` is not
-modelled).
+"""cartctl's firmwares in Python: how a cart says which it runs (float 6, docs/serial-protocol.md
+§3.1), the bridge sketch's logic (``firmware/cartctl_bridge/bridge_logic.h``: a test compares them
+tick by tick) and the exported on-board ``control()`` (``controlEnabled()`` not modelled).
 """
 
 from __future__ import annotations
@@ -155,12 +149,9 @@ class BridgeFirmware(HeldChannels):
         self._decide(now_ms)
 
     def control(self, io: CartIO, now_ms: int) -> tuple[float, float]:
-        """One ``control()`` at ``now_ms``, after ``io()`` applied :attr:`command_v`.
-
-        Fills the output channels (the echo is the applied command's sequence number), checks the
-        watchdog again, and returns the voltages (V) for the next ``io()`` (a later drain may
-        replace them with a newer command's).
-        """
+        """One ``control()`` at ``now_ms``, after ``io()`` applied :attr:`command_v`: fills the
+        output channels (echoing the applied command), checks the watchdog again, and returns the
+        voltages (V) for the next ``io()`` (a later drain may replace them)."""
         applied_seq = self.command_seq  # nothing drains between io() and control()
         self._decide(now_ms)
         status = (applied_seq, self.tick, self.driving, self.tripped, self.frames_lost)
@@ -182,11 +173,8 @@ class _Controller(Protocol):
 
 
 class OnboardFirmware(HeldChannels):
-    """``control()`` running a runtime controller per motor ('a', 'b'; none: 0 V) on the cart.
-
-    ``reference`` is the reference spec of both motors (None: the held input channels),
-    ``period_s`` the tick the controllers were designed for.
-    """
+    """``control()`` running a runtime controller per motor ('a', 'b'; none: 0 V) on the cart;
+    ``reference`` is both motors' reference spec (None: the held input channels)."""
 
     ready_text = "cartctl on-board controller ready"
 

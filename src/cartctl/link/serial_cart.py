@@ -1,10 +1,6 @@
-"""The real cart over serial (``--plant serial:PORT``), running the bridge sketch of ``firmware/``.
-
-The cart clocks the loop: each GPIO it sends (every 10 ms) is a tick, answered with a command. The
-bridge echoes the sequence number of the command each ``io()`` applied: the ticks from a
-measurement to that echo are the loop delay E (docs/serial-protocol.md §4.3; a model has
-``nk = E + 1``). Line faults are counted, not fatal; silence or a vanished port raises
-:class:`~cartctl.errors.PlantError`; :meth:`SerialCart.close` leaves the cart at drive = 0, 0 V.
+"""The real cart over serial (``--plant serial:PORT``), running the bridge sketch of ``firmware/``:
+the cart clocks the loop, and the echo of each command gives the loop delay E
+(docs/serial-protocol.md §4.3, §7; a model has ``nk = E + 1``).
 """
 
 from __future__ import annotations
@@ -190,14 +186,10 @@ class SerialCart:
     def measure_loop_delay(
         self, *, echoes: int = PROBE_ECHOES, max_echoes: int = 50, max_ticks: int = 100
     ) -> int:
-        """The loop delay (ticks), measured from the echo without driving the motors.
-
-        Answers each cart tick with drive = 0 (echoed all the same) until ``echoes`` echoes came
-        back, or ``max_echoes`` when those are not clear (:class:`~cartctl.link.bridge.EchoDelays`).
-        The most frequent delay counts; :attr:`probe_delays` keeps the spread; the echo statistics
-        are then cleared for the run. No echo within ``max_ticks`` ticks raises
-        :class:`~cartctl.errors.PlantError`.
-        """
+        """The loop delay (ticks), measured from the echo with drive = 0 (echoed all the same):
+        the most frequent delay of ``echoes`` echoes, or of ``max_echoes`` when those are not clear
+        (:class:`~cartctl.link.bridge.EchoDelays`); :attr:`probe_delays` keeps the spread. No echo
+        within ``max_ticks`` ticks raises :class:`~cartctl.errors.PlantError`."""
         self.reset()
         self.echo_delays.clear()
         judged = False

@@ -1,9 +1,6 @@
-"""The virtual cart: the physical simulator behind a pseudo-terminal, speaking as the bridge does.
-
-``cartctl virtual-cart`` runs one in the foreground, ``--plant virtual`` one in this process
-(:class:`VirtualSerialCart`). It keeps the firmware's schedule within each tick, its line, ring and
-USB bridge (docs/serial-protocol.md §4, §8) and injects faults. The drains run on the cart's clock
-(tick k starts ``k × 10 ms`` after boot): a busy host delays the replies, not when bytes arrived.
+"""The virtual cart: the physics simulator behind a pseudo-terminal, speaking as the bridge does
+(docs/serial-protocol.md §8). Its drains run on the cart's clock (tick k starts ``k × 10 ms``
+after boot): a busy host delays the replies, not when bytes arrived.
 """
 
 from __future__ import annotations
@@ -208,13 +205,9 @@ class VirtualCart:
             self.firmware.receive(*self._held, at_us // 1000)
 
     def receive_for_tick(self, j: int) -> None:
-        """Every drain from the previous tick's ``io()`` up to tick ``j``'s, in order.
-
-        Bridge 2: every 1 ms and right before ``io()``, each handing the held channels over.
-        Bridge 1: microOS's communication thread :data:`COMM_PHASE_US` into each tick, and the
-        bridge every 1 ms and right before ``control()``. ``receive='microos'``: the communication
-        thread alone; ``control()`` is handed what microOS holds.
-        """
+        """Every drain from the previous tick's ``io()`` up to tick ``j``'s, in order: bridge 2
+        every 1 ms and right before ``io()``; bridge 1 also microOS's communication thread
+        :data:`COMM_PHASE_US` into each tick; ``receive='microos'`` that thread alone."""
         period_us = round(self.period_s * 1e6)
         tick_us = j * period_us
         self._lag_us = period_us if self.faults.late_at(j) else 0
