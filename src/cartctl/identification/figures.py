@@ -271,12 +271,9 @@ def plot_pzmap(models: Mapping[str, ArxModel], path: Path, *, title: str) -> Pat
         if any(delays.values()):
             for ax in panels:
                 ax.plot(0.0, 0.0, "s", color="black", markersize=7, zorder=5)
-            counts = sorted(set(delays.values()))
-            text = (
-                f"{counts[0]} per model"
-                if len(counts) == 1
-                else ", ".join(f"{k}: {n}" for k, n in delays.items())
-            )
+            counts = set(delays.values())
+            each = ", ".join(f"{k}: {n}" for k, n in delays.items())
+            text = f"{counts.pop()} per model" if len(counts) == 1 else each
             ax_zoom.annotate(
                 f"delay poles at z = 0\n({text})",
                 (0.0, 0.0),

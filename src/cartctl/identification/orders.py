@@ -165,20 +165,16 @@ class JointDelay:
         )
 
     def to_dict(self) -> dict[str, Any]:
+        pairs = zip(self.candidates, self.evidence_rad_s, strict=True)
+        own = {m: e.nk if e.nk_alone is None else e.nk_alone for m, e in self.motors.items()}
         return {
             "nk": self.nk,
             "evidence": "weighted geometric mean of the motors' equation-error RMS (rad/s)",
-            "candidates": [
-                {"nk": c, "joint_rms": e}
-                for c, e in zip(self.candidates, self.evidence_rad_s, strict=True)
-            ],
+            "candidates": [{"nk": c, "joint_rms": e} for c, e in pairs],
             "close": list(self.close),
             "too_close": self.too_close,
             "note": self.note(),
-            "motors": {
-                m: est.nk if est.nk_alone is None else est.nk_alone
-                for m, est in self.motors.items()
-            },
+            "motors": own,
         }
 
 
@@ -239,8 +235,7 @@ def parse_grid(spec: str | None) -> dict[str, tuple[int, ...]]:
             raise InputError(
                 f"--orders: {key}={value} is not a whole number or a range; {expected}"
             )
-        lo = int(match.group(1))
-        hi = int(match.group(2)) if match.group(2) is not None else lo
+        lo, hi = int(match[1]), int(match[2] or match[1])
         if hi < lo or lo < _LOW[key] or hi > 50:
             raise InputError(
                 f"--orders: {key}={value} must be a range lo:hi with {_LOW[key]} <= lo <= hi <= 50"

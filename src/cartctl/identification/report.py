@@ -80,19 +80,13 @@ def _std(std: float, value: float) -> str:
 
 def _row(label: str, model: ArxModel, names: list[str], std: Any, sim: Any, pred: Any) -> dict:
     row: dict[str, Any] = {"model": label, "nk": model.nk}
-    na = model.na
     for i, (name, value) in enumerate(zip(names, model.theta, strict=False)):
-        unit = "–" if i < na else "rad/s/V"
-        row[f"{name} ({unit})"] = f"{value:.4g}" + (
-            "" if std is None else f" ± {_std(std[i], value)}"
-        )
-    row["fit sim (%)"] = _fit_text(sim)
-    row["fit pred (%)"] = _fit_text(pred)
-    row["DC gain (rad/s/V)"] = f"{model.dc_gain():.4g}"
-    row["poles (Hz)"] = ", ".join(
-        f"{r.freq_hz:.2f}" for r in model.poles() if r.freq_hz is not None
-    )
-    return row
+        unit = "–" if i < model.na else "rad/s/V"
+        spread = "" if std is None else f" ± {_std(std[i], value)}"
+        row[f"{name} ({unit})"] = f"{value:.4g}{spread}"
+    row |= {"fit sim (%)": _fit_text(sim), "fit pred (%)": _fit_text(pred)}
+    poles = ", ".join(f"{r.freq_hz:.2f}" for r in model.poles() if r.freq_hz is not None)
+    return row | {"DC gain (rad/s/V)": f"{model.dc_gain():.4g}", "poles (Hz)": poles}
 
 
 def fit_rows(
