@@ -115,44 +115,36 @@ def choosable_text(results: Sequence[tuning.TuneResult]) -> str:
     return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in spans)
 
 
-def choose(
-    args: argparse.Namespace,
-    result: tuning.TuneResult,
-    results: Sequence[tuning.TuneResult] = (),
-) -> str:
-    """Write the chosen setting's controller file as ``cartctl design`` would; returns the
-    design command the file records. A setting that did not run is refused, naming those of
-    ``results`` that can be chosen."""
-    from cartctl.tune import engine
-
-    if not result.feasible:
-        what = ("its run failed" if result.status == "run failed"
-                else "it is an infeasible request: the design refused it")  # fmt: skip
-        raise InputError(
-            f"--choose {result.index}: setting #{result.index} cannot be chosen, {what} (the "
-            f"reason is listed as #{result.index} with the results); settings that can be "
-            f"chosen: {choosable_text(results or [result])}"
-        )
-    return engine.save_setting(args.method, result.settings, args.model, args.out,
-                               args.extra_delay, checks.design_fixed(args))  # fmt: skip
-
-
 def _choose(
     args: argparse.Namespace,
     results: Sequence[tuning.TuneResult],
     best: Callable[[], tuning.TuneResult],
     rule: str,
 ) -> tuple[dict[str, Any] | None, InputError | None]:
-    """``--choose``'s entry, or the refusal to raise once the results are printed."""
+    """``--choose``'s entry, its controller file written as ``cartctl design`` would (a setting
+    that did not run refused, naming those that can be chosen), or the refusal to raise once the
+    results are printed."""
+    from cartctl.tune import engine
+
     if args.choose is None:
         return None, None
     try:
         result = (
             best() if args.choose == "best" else next(r for r in results if r.index == args.choose)
         )
-        chosen = {"index": result.index, "out": args.out, "command": choose(args, result, results)}
+        if not result.feasible:
+            what = ("its run failed" if result.status == "run failed"
+                    else "it is an infeasible request: the design refused it")  # fmt: skip
+            raise InputError(
+                f"--choose {result.index}: setting #{result.index} cannot be chosen, {what} (the "
+                f"reason is listed as #{result.index} with the results); settings that can be "
+                f"chosen: {choosable_text(results)}"
+            )
+        command = engine.save_setting(args.method, result.settings, args.model, args.out,
+                                      args.extra_delay, checks.design_fixed(args))  # fmt: skip
     except InputError as exc:
         return None, exc
+    chosen = {"index": result.index, "out": args.out, "command": command}
     if args.choose == "best":
         chosen["rule"] = rule
     return chosen, None
