@@ -37,11 +37,8 @@ from cartctl.model import ArxModel
 from cartctl.plants.sim import ArxPlant
 from cartctl.runtime.base import Controller
 
-RECOVERY_FRACTION = 0.02
-"""A disturbance's deviation counts as recovered once it stays within this fraction of its peak."""
-
-DEFAULT_DISTURBANCE_V = 1.0
-"""The default load step at the plant input (V)."""
+RECOVERY_FRACTION = 0.02  # a disturbance is recovered once within this fraction of its peak
+DEFAULT_DISTURBANCE_V = 1.0  # the load step at the plant input (V)
 
 
 @dataclass(frozen=True)
@@ -58,7 +55,6 @@ class StepAnalysis:
 
     @property
     def peak_voltage_v(self) -> float:
-        """Largest |voltage| commanded (V)."""
         return float(np.max(np.abs(self.voltage_v)))
 
     def to_dict(self) -> dict[str, Any]:
@@ -125,7 +121,6 @@ class DisturbanceResponse:
 
     @property
     def peak_index(self) -> int:
-        """The tick of the largest |deviation|."""
         return int(np.argmax(np.abs(self.speed_rad_s)))
 
     @property
@@ -135,7 +130,6 @@ class DisturbanceResponse:
 
     @property
     def recovery_band_rad_s(self) -> float:
-        """``RECOVERY_FRACTION`` of the peak |deviation| (rad/s)."""
         return RECOVERY_FRACTION * abs(self.peak_deviation_rad_s)
 
     @property
@@ -181,12 +175,9 @@ def settling_band_rad_s(
     fraction: float = SETTLING_FRACTION,
     quantum_rad_s: float | None = None,
 ) -> float:
-    """Half-width (rad/s) of the settling band of a step r: max(fraction · |r|, q)
-    (:func:`~cartctl.measures.stepinfo.settling_half_width`), q by default one encoder count per
-    tick (a narrower band would judge the encoder, not the controller; 0: the fraction alone).
-
-    InputError for a zero or non-finite step, a fraction outside (0, 1), a negative floor, or a
-    step inside its own band (settled at rest: there is no bound to give).
+    """Half-width (rad/s) of the settling band of a step r: max(fraction · |r|, q), q by default
+    one encoder count per tick (a narrower band would judge the encoder, not the controller).
+    InputError for a zero or non-finite step, or a step inside its own band.
     """
     if step_rad_s == 0.0 or not math.isfinite(step_rad_s):
         raise InputError(f"step size must be a non-zero number of rad/s, got {step_rad_s}")
@@ -201,9 +192,8 @@ def settling_band_rad_s(
 
 
 def in_settling_band(step: StepAnalysis, period_s: float) -> StepAnalysis:
-    """The same simulated step (from rest, at ``step.time_s[0]``) with its metrics measured in
-    the band of :func:`settling_band_rad_s`, as against :func:`settling_bound` (only the settling
-    time can change)."""
+    """The same simulated step with its metrics measured in the band of
+    :func:`settling_band_rad_s`, as :func:`settling_bound` is (only the settling time changes)."""
     r = float(step.reference_rad_s[-1])
     settling_band_rad_s(r, period_s)  # refuses a step inside its own band, as the bound does
     info = step_info(step.time_s, step.speed_rad_s, reference=r, initial=0.0,
@@ -214,8 +204,7 @@ def in_settling_band(step: StepAnalysis, period_s: float) -> StepAnalysis:
 @dataclass(frozen=True)
 class SettlingBound:
     """The time-optimal settling bound of a step: the smallest time (s, and ticks) from which
-    the output can stay in the band (half-width ``band_rad_s``), a voltage sequence achieving it
-    and the delayed plant's response, and the loop delay it is for (nk − 1 + extra delay)."""
+    the output can stay in the band, a voltage sequence achieving it and the response to it."""
 
     settling_time_s: float
     ticks: int

@@ -1,9 +1,5 @@
-"""Controller files (TOML): what was asked, what came out, on which model, and when (the format:
-docs/file-formats.md). The loop delay a file is for is 1 on board the cart and in the simulators,
-3 over the PC serial loop (:func:`cartctl.design.make.loop_delay_for`); loading checks that a file
-does not contradict itself (``plant_kind`` against ``loop_delay_ticks``, each motor's C(z)
-against its gains, :mod:`cartctl.design.controller_ss`).
-"""
+"""Controller files (TOML, docs/file-formats.md): what was asked, what came out, on which model,
+for which loop delay, and when; loading checks that a file does not contradict itself."""
 
 from __future__ import annotations
 
@@ -25,19 +21,18 @@ from cartctl.design.controller_ss import consistency_problems
 from cartctl.design.request import METHODS, check_loop_delay
 from cartctl.errors import CartctlError, DataFileError, InputError
 
-ONBOARD_LOOP_DELAY_TICKS = 1
-"""Loop delay of control on board the cart, and of the simulated plants (ticks)."""
+ONBOARD_LOOP_DELAY_TICKS = 1  # ticks: on board the cart, and in the simulated plants
 
 
 def loop_site(loop_delay_ticks: int) -> str:
-    """Where a loop of this delay runs: 'onboard' for at most one tick (the cart itself, the
-    simulators), else 'serial' (the PC over the serial line); the file's ``plant_kind`` key."""
+    """The file's ``plant_kind``: 'onboard' for at most one tick (the cart itself, the
+    simulators), else 'serial' (the PC over the serial line)."""
     return "onboard" if loop_delay_ticks <= ONBOARD_LOOP_DELAY_TICKS else "serial"
 
 
 def common_loop_delay(nk: Mapping[str, int], extra_delay_ticks: int) -> int:
-    """The one loop delay, nk − 1 + extra, of a design on motors with input delays ``nk`` (motor →
-    nk); ValueError when they differ (a controller file is for one loop)."""
+    """The one loop delay, nk − 1 + extra, of motors with input delays ``nk`` (motor → nk);
+    ValueError when they differ (a controller file is for one loop)."""
     delays = {m: check_loop_delay(None, n, extra_delay_ticks) for m, n in nk.items()}
     if len(set(delays.values())) > 1:
         shown = ", ".join(f"motor {m}: nk = {n}" for m, n in sorted(nk.items()))
@@ -66,8 +61,7 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def _short(value: Any) -> str:
-    """A gain or a list of gains with 4 significant figures."""
+def _short(value: Any) -> str:  # 4 significant figures
     if isinstance(value, list | tuple):
         return "[" + ", ".join(_short(v) for v in value) + "]"
     return f"{value:.4g}" if isinstance(value, float | int) else str(value)
@@ -75,13 +69,9 @@ def _short(value: Any) -> str:
 
 @dataclass(frozen=True)
 class ControllerFile:
-    """A designed controller for both motors (the keys of a controller file).
-
-    ``model_path`` opens from the working directory (the file stores it relative to its own
-    folder); ``path`` is where it was read from; ``loop_delay_ticks`` is None only for a file
-    being built that does not know it yet; ``ignored`` holds the self-contradictions a
-    ``force=True`` load let through.
-    """
+    """A designed controller for both motors (the keys of a controller file). ``model_path``
+    opens from the working directory (the file stores it relative to its own folder); ``ignored``
+    holds the self-contradictions a ``force=True`` load let through."""
 
     method: str
     period_s: float
@@ -97,7 +87,7 @@ class ControllerFile:
     ignored: tuple[str, ...] = field(default=(), compare=False)
 
     def __repr__(self) -> str:
-        """A few lines (not the estimator's matrices): what, for which loop, each motor's gains."""
+        """What, for which loop, each motor's gains (not the estimator's matrices)."""
         where = f" {self.path}" if self.path else ""
         ticks = self.loop_delay_ticks
         delay = "" if ticks is None else f", loop delay {ticks} tick{'s' * (ticks != 1)}"
@@ -114,12 +104,11 @@ class ControllerFile:
 
     @property
     def loop_site(self) -> str | None:
-        """:func:`loop_site` of the loop delay (the ``plant_kind`` key), None without one."""
+        """:func:`loop_site` of the loop delay, None without one."""
         return None if self.loop_delay_ticks is None else loop_site(self.loop_delay_ticks)
 
     def to_toml_dict(self, folder: str | Path | None = None) -> dict[str, Any]:
-        """The document :func:`save_controller` writes, the model path relative to ``folder``
-        (as given when None)."""
+        """The document :func:`save_controller` writes, the model path relative to ``folder``."""
         delay: dict[str, Any] = {}
         if self.loop_delay_ticks is not None:
             delay = {"loop_delay_ticks": self.loop_delay_ticks, "plant_kind": self.loop_site}
@@ -147,9 +136,8 @@ class ControllerFile:
 
 def absurd_gain(controller: ControllerFile) -> str | None:
     """The first gain that is no controller but a switch, or None: a proportional gain (``kp``,
-    ``Kr``, an entry of ``K``) that puts the whole voltage limit on one encoder count per tick
-    (0.35 rad/s at 10 ms), an integral gain (``ki``) that does so in one tick, or not a finite
-    number."""
+    ``Kr``, an entry of ``K``) that puts the whole voltage limit on one encoder count per tick,
+    an integral gain (``ki``) that does so in one tick, or not a finite number."""
     limit = controller.voltage_limit_v
     q = encoder_quantum_rad_s(controller.period_s)
     for motor, entry in controller.motors.items():
@@ -172,8 +160,8 @@ def absurd_gain(controller: ControllerFile) -> str | None:
 
 
 def _relative_to(model_path: str, folder: str | Path) -> str:
-    """``model_path`` (from the working directory) from ``folder``, POSIX separators; a shipped
-    model without a local copy (:func:`~cartctl.choices.find_file`) keeps its shipped name."""
+    """``model_path`` from ``folder``, POSIX separators; a shipped model without a local copy
+    keeps its shipped name."""
     if not Path(model_path).exists() and find_file(model_path) != Path(model_path):
         return Path(model_path).as_posix()
     try:
@@ -184,8 +172,8 @@ def _relative_to(model_path: str, folder: str | Path) -> str:
 
 
 def _resolve_model(stored: str, controller_path: Path, *, legacy: bool) -> str:
-    """The stored ``[model] path`` from the working directory: relative to the controller's
-    folder, or, for an older (``legacy``) file, to the design's working directory."""
+    """The stored ``[model] path`` from the working directory (relative to the controller's
+    folder; an older, ``legacy`` file's to the design's working directory)."""
     if Path(stored).is_absolute():
         return stored
     resolved = os.path.normpath(os.path.join(controller_path.parent, stored))
@@ -197,8 +185,7 @@ def _resolve_model(stored: str, controller_path: Path, *, legacy: bool) -> str:
 
 
 def save_controller(controller: ControllerFile, path: str | Path) -> Path:
-    """Write a controller file, creating parent folders; the model path is written relative to
-    the file's folder."""
+    """Write a controller file (parent folders created, the model path relative to its folder)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     header = f"# cartctl controller ({controller.method}); regenerate with: {controller.command}\n"
@@ -234,14 +221,10 @@ def _derived_loop_delay(
 def load_controller(
     path: str | Path, *, force: bool = False, period_s: float | None = None
 ) -> ControllerFile:
-    """Read a controller file, with one clear error for each way it can be wrong.
-
-    ``force`` loads a file whose ``controller_num``/``controller_den`` disagree with its gains
-    anyway (the gains are what runs; the disagreements go to ``ignored``). ``period_s``, the
-    plant's tick (s), refuses a file for another period before its coefficients. MissingFileError
-    or DataFileError: no such file, not a controller file, a key missing or of the wrong type,
-    ``plant_kind`` against ``loop_delay_ticks``, without ``force`` a C(z) the gains do not give
-    (relative tolerance 1e-6).
+    """Read a controller file, with one clear error (MissingFileError, DataFileError) for each
+    way it can be wrong. ``force`` loads a file whose ``controller_num``/``controller_den``
+    disagree with its gains anyway (the gains are what runs; the disagreements go to
+    ``ignored``); ``period_s``, the plant's tick (s), refuses a file for another period.
     """
     path = find_file(path)  # the working folder's, else the shipped one
     doc = read_toml(path, "controller file")

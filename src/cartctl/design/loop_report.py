@@ -28,19 +28,15 @@ from cartctl.design.controller_ss import ControllerStateSpace, controller_state_
 from cartctl.design.make import Designs
 from cartctl.model import ArxModel, pole_damping
 
-LIGHT_DAMPING = 0.1
-"""A closed-loop pole with a damping ratio ζ below this rings for many periods: a warning."""
-
+LIGHT_DAMPING = 0.1  # a closed-loop pole with a damping ratio ζ below this rings: a warning
 _GRID_POINTS = 2000
-_LOW_HZ = 1e-3
-"""Lowest frequency of the grid (Hz): an integrator puts L's pole at 0 Hz (z = 1)."""
+_LOW_HZ = 1e-3  # the grid's lowest frequency (Hz): an integrator puts L's pole at 0 Hz
 
 
 @dataclass(frozen=True, eq=False)
 class LoopShape:
-    """The open loop L on a frequency grid (``freq_hz``, 1 mHz to Nyquist, log-spaced), with the
-    peaks Ms = max|S| and Mt = max|T| and where they are (Hz; 0 when |T| is largest at 0 Hz, as
-    integral action gives T(1) = 1)."""
+    """The open loop L on a frequency grid (``freq_hz``, 1 mHz to Nyquist), with the peaks
+    Ms = max|S| and Mt = max|T| and where they are (Hz; 0 for T(1) = 1 of integral action)."""
 
     freq_hz: NDArray[np.float64]
     loop: NDArray[np.complex128]
@@ -50,13 +46,11 @@ class LoopShape:
     complementary_peak_hz: float
 
     @property
-    def sensitivity(self) -> NDArray[np.float64]:
-        """|S| on the grid."""
+    def sensitivity(self) -> NDArray[np.float64]:  # |S| on the grid
         return np.abs(1.0 / (1.0 + self.loop))
 
     @property
-    def complementary(self) -> NDArray[np.float64]:
-        """|T| on the grid."""
+    def complementary(self) -> NDArray[np.float64]:  # |T| on the grid
         return np.abs(self.loop / (1.0 + self.loop))
 
     def to_dict(self) -> dict[str, Any]:
@@ -101,8 +95,7 @@ def _peak(
 def loop_shape(
     controller: ControllerStateSpace, model: ArxModel, extra_delay_ticks: int = 0
 ) -> LoopShape:
-    """S and T of the loop a controller was designed for (``extra_delay_ticks`` beyond the
-    model's delay), with their peaks."""
+    """S and T of the loop a controller was designed for, with their peaks."""
     freq = np.geomspace(_LOW_HZ, 0.5 / model.period_s, _GRID_POINTS)
     loop = _loop_response(controller, model, extra_delay_ticks, freq)
 
@@ -117,8 +110,7 @@ def loop_shape(
 
 
 def pole_table(poles: Iterable[list[float]], period_s: float) -> list[dict[str, Any]]:
-    """Per discrete pole [re, im], ``{"re", "im", "damping", "freq_hz"}``
-    (:func:`cartctl.model.pole_damping`)."""
+    """Per discrete pole [re, im], ``{"re", "im", "damping", "freq_hz"}`` (``pole_damping``)."""
     rows = []
     for re, im in poles:
         damping, freq_hz = pole_damping(complex(re, im), period_s)
@@ -127,8 +119,8 @@ def pole_table(poles: Iterable[list[float]], period_s: float) -> list[dict[str, 
 
 
 def damping_warning(pole_table: list[dict[str, Any]], motor: str) -> str | None:
-    """One line naming motor ``motor``'s least damped pole of :func:`pole_table` when its ζ is
-    below ``LIGHT_DAMPING``; None when every ζ is at least that (or undefined: z = 0, z = 1)."""
+    """One line naming motor ``motor``'s least damped pole when its ζ is below ``LIGHT_DAMPING``;
+    None when every ζ is at least that (or undefined: z = 0, z = 1)."""
     light = [r for r in pole_table if r["damping"] is not None and r["damping"] < LIGHT_DAMPING]
     if not light:
         return None
@@ -145,8 +137,8 @@ def damping_warning(pole_table: list[dict[str, Any]], motor: str) -> str | None:
 
 @dataclass(frozen=True, eq=False)
 class MotorAnalysis:
-    """One motor's loop analysis: the controller as the loop runs it, L, S and T on a grid
-    (``shape``), the simulated load-disturbance step, and the pole table."""
+    """One motor's loop analysis: the controller as the loop runs it, L, S and T, the simulated
+    load-disturbance step, and the pole table."""
 
     controller: ControllerStateSpace
     shape: LoopShape
@@ -155,11 +147,8 @@ class MotorAnalysis:
     motor: str = "a"
 
     def entry(self) -> dict[str, Any]:
-        """The keys this analysis adds to (or replaces in) a motor's ``design --json`` entry.
-
-        ``sensitivity_peak`` is that of the loop as it runs: for the PI with ``--estimator
-        kalman`` the PI with its estimator (for the others, the design's own loop: the same).
-        """
+        """The keys this analysis adds to (or replaces in) a motor's ``design --json`` entry;
+        ``sensitivity_peak`` is the loop's as it runs (the PI's with its Kalman estimator)."""
         return {
             "sensitivity_peak": self.shape.sensitivity_peak,
             **self.shape.to_dict(),
@@ -170,7 +159,7 @@ class MotorAnalysis:
 
     @property
     def warnings(self) -> list[str]:
-        """One line per warning about this loop (a closed-loop pole with ζ < ``LIGHT_DAMPING``)."""
+        """One line per warning about this loop."""
         line = damping_warning(self.pole_table, self.motor)
         return [] if line is None else [line]
 

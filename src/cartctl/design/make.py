@@ -32,12 +32,11 @@ from cartctl.runtime.base import Controller
 from cartctl.runtime.pi import PiController
 from cartctl.runtime.statefeedback import StateFeedbackController
 
-ANALYSIS_KEYS = (
+ANALYSIS_KEYS = (  # what a controller file keeps of a motor's design, under ``analysis``
     "phase_margin_deg", "gain_margin_db", "crossover_hz", "sensitivity_peak", "closed_loop_poles",
     "estimator_poles", "step", "settling_bound_s", "settling_ratio",
     "settling_bound_loop_delay_ticks",
 )  # fmt: skip
-"""The entries of a motor's design that its controller file keeps under ``analysis``."""
 
 
 @dataclass(frozen=True)
@@ -179,9 +178,8 @@ def loop_delay_for(
 def check_models(
     models: ModelFile | Mapping[str, ArxModel], motors: tuple[str, ...], name: str | None = None
 ) -> dict[str, ArxModel]:
-    """The model of each motor, refused before any design work where it is unstable (a PI needs
-    a stable one, and every design's simulated step and settling bound run on it): one line
-    naming the file as ``name`` (default the model file's path)."""
+    """The model of each motor, refused before any design work where it is unstable (one line
+    naming the file as ``name``, by default the model file's path)."""
     if name is None and isinstance(models, ModelFile) and models.path:
         name = str(models.path)
     where = f"{name}: " if name else ""
@@ -198,10 +196,9 @@ def check_models(
 
 @dataclass(frozen=True)
 class Designs:
-    """The designs of the motors asked for, per motor: the model, the design (its ``entry`` with
-    the step and the settling bound) and the simulated step in the bound's settling band; the
-    loop delay they are for (None when the models' delays differ), the one the models were
-    recorded in, and :func:`loop_delay_for`'s note."""
+    """The designs of the motors asked for, per motor (model, design, simulated step in the
+    bound's settling band), with :func:`loop_delay_for`'s loop delay (None when the models'
+    delays differ) and note."""
 
     request: DesignRequest
     models: dict[str, ArxModel]

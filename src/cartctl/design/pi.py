@@ -25,8 +25,7 @@ from cartctl.errors import InputError
 from cartctl.model import ArxModel, check_extra_delay_ticks
 
 _GRID_POINTS = 400
-_EDGE_TOL_HZ = 1e-7
-"""How closely :func:`crossover_range` bisects an edge (a tenth of the 1e-6 Hz it promises)."""
+_EDGE_TOL_HZ = 1e-7  # crossover_range's bisection: a tenth of the 1e-6 Hz it promises
 _FREQ_POINTS = 4001
 _BANDWIDTH_GRID = 41
 
@@ -145,10 +144,8 @@ def design_pi(
     extra_delay_ticks: int = 0,
 ) -> PiDesign:
     """PI gains for an exact phase margin (degrees, in (0, 89]) at a gain crossover (Hz, below
-    Nyquist) on a stable model, with ``extra_delay_ticks`` of loop delay beyond the model's.
-    InputError for a value out of range, an unstable model, or a request no PI meets (with the
-    crossovers that work for that margin).
-    """
+    Nyquist) on a stable model, with ``extra_delay_ticks`` of loop delay beyond the model's;
+    InputError for a request no PI meets (with the crossovers that work for that margin)."""
     _check_common(model, phase_margin_deg, extra_delay_ticks)
     nyquist = 0.5 / model.period_s
     if not (math.isfinite(crossover_hz) and 0.0 < crossover_hz < nyquist):
@@ -172,12 +169,10 @@ def design_pi_bandwidth(
     phase_margin_deg: float = 60.0,
     extra_delay_ticks: int = 0,
 ) -> PiDesign:
-    """PI gains for a closed-loop (reference → speed) −3 dB bandwidth (Hz) at a phase margin.
-
-    The crossover is found by ``brentq`` inside :func:`crossover_range`, on the branch where the
-    bandwidth grows with it (near the top Ki → 0 and it falls again): of two crossovers with the
-    same bandwidth, the lower. InputError as :func:`design_pi`, or for a bandwidth no crossover in
-    range gives (with the bandwidths possible at that margin).
+    """PI gains for a closed-loop (reference → speed) −3 dB bandwidth (Hz) at a phase margin:
+    the crossover by ``brentq`` inside :func:`crossover_range`, on the branch where the bandwidth
+    grows with it (of two crossovers with the same bandwidth, the lower). InputError as
+    :func:`design_pi`, or for a bandwidth no crossover gives (with those it can).
     """
     pm, extra = phase_margin_deg, extra_delay_ticks
     span = crossover_range(model, phase_margin_deg=pm, extra_delay_ticks=extra)

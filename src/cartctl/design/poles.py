@@ -44,10 +44,8 @@ from cartctl.design.request import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOI
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 
-_CHECK_TOL = 1e-6
-"""The placed characteristic polynomial must match the requested one to this (coefficients)."""
-_REPEAT_TOL = 1e-8
-"""Poles closer than this (relative) count as repeated: ``place`` cannot take them."""
+_CHECK_TOL = 1e-6  # the placed characteristic polynomial's coefficients against the requested
+_REPEAT_TOL = 1e-8  # poles closer than this (relative) are repeated: ``place`` cannot take them
 
 
 def augment(plant: StateSpace) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -69,12 +67,8 @@ def spec_poles(
     fast_pole_ratio: float,
 ) -> list[complex]:
     """The dominant pair for a settling time and overshoot, then ``count − 2`` fast real poles
-    (the rule in the module docstring).
-
-    Raises InputError for an overshoot outside (0, 100) %, a settling time shorter than ``count``
-    ticks (deadbeat, the fastest a discrete loop of this order settles), a pair oscillating
-    beyond Nyquist, or a ratio below 1.
-    """
+    (the module docstring's rule); InputError for an overshoot outside (0, 100) %, a settling
+    time under ``count`` ticks (deadbeat), a pair beyond Nyquist, or a ratio below 1."""
     os_ = float(overshoot_percent)
     if not (math.isfinite(os_) and 0.0 < os_ < 100.0):
         raise InputError(f"overshoot_percent must lie strictly between 0 and 100, got {os_}")
@@ -146,16 +140,12 @@ def _poles_text(poles: Sequence[complex] | NDArray[np.inexact]) -> str:
 
 @dataclass(frozen=True, eq=False)
 class PolesDesign:
-    """A pole-placement speed controller with integral action and its Kalman estimator, on the
-    model's realisation ``plant`` (n states, the extra delay included).
-
-    ``poles`` are the placed closed-loop poles (z), by magnitude: n with the disturbance
-    estimate (``integral`` 'disturbance', Ki = 0), n + 1 with the error integrator ('error').
-    ``K`` (m,) acts on the estimator's whole state x̂: V per rad/s on the n realisation states,
-    then 1 on b̂. ``Ki`` is the state gain on x_i (V per rad of angle error, u −= Ki x_i: negative,
-    the opposite sign of a PI's ``ki``). ``Kr`` (V per rad/s) is the static gain with b̂; −Ki Ts,
-    or 0, with the error integrator. ``method`` is 'place' or 'acker'; the specification is None
-    when the poles were given.
+    """A pole-placement speed controller and its Kalman estimator, on the model's realisation
+    ``plant`` (n states, the extra delay included). ``poles``: the placed closed-loop poles (z),
+    n with the disturbance estimate (``integral`` 'disturbance', Ki = 0), n + 1 with the error
+    integrator ('error'). ``K`` (m,) acts on the estimator's whole state x̂ (V per rad/s, then 1
+    on b̂); ``Ki`` on x_i (V/rad, negative: the opposite sign of a PI's ``ki``); ``Kr`` (V per
+    rad/s) on r. ``method`` is 'place' or 'acker'.
     """
 
     model: ArxModel
@@ -173,7 +163,6 @@ class PolesDesign:
 
     @property
     def period_s(self) -> float:
-        """Ts (s)."""
         return self.plant.period_s
 
     def closed_loop_matrix(self) -> NDArray[np.float64]:
@@ -221,15 +210,12 @@ def design_poles(
 ) -> PolesDesign:
     """Place the closed-loop poles of a speed loop with integral action (module docstring).
 
-    Give either ``poles`` (z; one per realisation state with the extra delay, plus one for the
-    error integrator when ``bias_drift_std_v`` is 0; conjugate pairs; repeats allowed) or both
-    ``settling_time_s`` (2 %, s) and ``overshoot_percent`` of the dominant pair, whose first fast
-    pole decays ``fast_pole_ratio`` times faster (then ratio + 1, …). ``reference_feedforward``
-    chooses Kr = −Ki Ts over 0 with the error integrator. The noise levels are those of
-    :func:`~cartctl.design.kalman.design_kalman`; ``bias_drift_std_v`` > 0 makes b̂ the integral
-    action. InputError for both or neither pole modes, a bad specification, poles in the wrong
-    number, outside the unit circle or without their conjugates, an uncontrollable model (a
-    pole-zero cancellation, or a zero at z = 1), a failed placement, bad noise levels.
+    Give either ``poles`` (z; one per realisation state, plus one for the error integrator when
+    ``bias_drift_std_v`` is 0; conjugate pairs) or both ``settling_time_s`` (2 %, s) and
+    ``overshoot_percent`` of the dominant pair. ``reference_feedforward`` chooses Kr = −Ki Ts
+    over 0 with the error integrator; the noise levels are
+    :func:`~cartctl.design.kalman.design_kalman`'s. InputError for a request it cannot meet
+    (bad poles or specification, an uncontrollable model, a failed placement).
     """
     import control
 

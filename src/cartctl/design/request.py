@@ -14,22 +14,12 @@ from cartctl.cart import PERIOD_S, SUPPLY_V, check_voltage_limit, nk_fits_loop_d
 from cartctl.errors import InputError
 
 METHODS = ("pi", "poles")
-DEFAULT_PROCESS_NOISE_STD_V = 0.1
-"""The estimator's input-equivalent white voltage disturbance (V std per tick); see
-:mod:`cartctl.design.kalman`."""
-DEFAULT_BIAS_DRIFT_STD_V = 0.03
-"""Random-walk step of the estimator's input-disturbance state (V std per tick); see
-:mod:`cartctl.design.kalman`."""
-PM_RANGE_DEG = (0.0, 89.0)
-"""Phase margins accepted: (0, 89] degrees (at 90° the PI's proportional gain is gone)."""
-MAX_EXTRA_DELAY_TICKS = 50
-"""The most ``--extra-delay`` accepted (ticks). The PC's serial loop adds 3; 50 more (0.5 s) is
-no speed loop any more, and the design's state grows by one per tick (500 took 76 s of CPU)."""
-MAX_LOOP_DELAY_TICKS = 100
-"""The most ``--loop-delay`` accepted (ticks): a recorded loop of at most 50 (as ``identify
---loop-delay`` takes it) plus at most :data:`MAX_EXTRA_DELAY_TICKS`."""
-MAX_TIMING_NOISE_TICKS = 10.0
-"""The most ``--timing-noise-ticks`` accepted (a command landing ±10 ticks late is no loop)."""
+DEFAULT_PROCESS_NOISE_STD_V = 0.1  # V std per tick, the estimator's (cartctl.design.kalman)
+DEFAULT_BIAS_DRIFT_STD_V = 0.03  # V std per tick, its input-disturbance random walk
+PM_RANGE_DEG = (0.0, 89.0)  # (0, 89] degrees: at 90° the PI's proportional gain is gone
+MAX_EXTRA_DELAY_TICKS = 50  # 0.5 s is no speed loop; the design's state grows by one per tick
+MAX_LOOP_DELAY_TICKS = 100  # a recorded loop of at most 50 (identify --loop-delay) + 50 extra
+MAX_TIMING_NOISE_TICKS = 10.0  # a command landing ±10 ticks late is no loop
 PI_ESTIMATORS = ("none", "kalman")
 
 
@@ -56,17 +46,10 @@ OPTIONS: dict[str, str] = {
 
 @dataclass(frozen=True)
 class DesignRequest:
-    """Everything a design is asked for: the options of ``cartctl design`` (:data:`OPTIONS`),
-    with their defaults and units.
-
-    PI: ``phase_margin_deg`` at ``crossover_hz``, or at a closed-loop ``bandwidth_hz``;
-    ``anti_windup``; ``estimator`` 'kalman' runs it on a Kalman speed estimate. Pole placement:
-    ``poles`` as given (``0.8,0.7+0.1j,0.7-0.1j``), or the dominant pair's 2 % settling time and
-    overshoot. The estimator: process noise (V), the disturbance state's random walk (V per
-    tick), ``extra_noise_std_rad_s`` beyond the encoder's quantisation (√R is both together), and
-    σ_ε, how uncertain (std, ticks) the moment a command lands (Q grows by (σ_ε Δu)² B Bᵀ after
-    each command change; 0 leaves Q fixed). ``loop_delay_ticks`` None is nk − 1 + extra delay; nk
-    + extra delay is allowed too (:func:`check_loop_delay`).
+    """Everything a design is asked for: the options of ``cartctl design`` (:data:`OPTIONS`; their
+    help gives the meaning), with their defaults and units. ``poles`` is the text given
+    (``0.8,0.7+0.1j,0.7-0.1j``); ``loop_delay_ticks`` None is nk − 1 + extra delay
+    (:func:`check_loop_delay`).
     """
 
     method: str
@@ -88,8 +71,8 @@ class DesignRequest:
     step_rad_s: float = 10.0
 
     def check(self) -> DesignRequest:
-        """This request, if each field its method uses is in range (:func:`check_field`: no
-        model needed, so refused before any design work) and they combine; else InputError."""
+        """This request, if each field its method uses is in range (:func:`check_field`, before
+        any design work) and they combine; else InputError."""
         if self.method not in METHODS:
             raise InputError(f"method must be one of {', '.join(METHODS)}, got '{self.method}'")
         unused = _POLES_FIELDS if self.method == "pi" else _PI_FIELDS
@@ -105,7 +88,6 @@ class DesignRequest:
         return self
 
     def pole_list(self) -> list[complex] | None:
-        """:attr:`poles` as complex numbers (None when not given)."""
         return None if not self.poles else parse_poles(self.poles)
 
     def file_request(self) -> dict[str, Any]:
@@ -190,8 +172,7 @@ RANGES: dict[str, tuple[Callable[[Any], bool], str]] = {
     "voltage_limit_v": (_voltage_limit, f"in (0, {SUPPLY_V:g}] V"),
     "step_rad_s": (lambda v: _number(v) and v != 0.0, "a non-zero speed in rad/s"),
 }  # fmt: skip
-"""Per numeric request field: the test its value must pass (no model needed; the model's limits
-are the designs' own) and the range in words."""
+"""Per numeric request field: the test its value must pass (no model needed) and the range."""
 
 _PI_FIELDS = frozenset({"phase_margin_deg", "crossover_hz", "bandwidth_hz"})
 _POLES_FIELDS = frozenset({"settling_time_s", "overshoot_percent"})
@@ -199,8 +180,7 @@ _POLES_FIELDS = frozenset({"settling_time_s", "overshoot_percent"})
 
 def check_field(field: str, value: Any, option: str | None = None) -> Any:
     """``value`` if it is in the range of request field ``field`` (:data:`RANGES`), else the
-    InputError ``OPTION must be RANGE, got VALUE``; ``option`` names what the user gave (default
-    the design option; ``tune`` passes its grid axis, so both refuse in the same words)."""
+    InputError ``OPTION must be RANGE, got VALUE``, ``option`` by default the design option."""
     test, allowed = RANGES[field]
     if not test(value):
         shown = f"{value:g}" if isinstance(value, float) else str(value)
@@ -211,13 +191,9 @@ def check_field(field: str, value: Any, option: str | None = None) -> Any:
 
 
 def check_loop_delay(loop_delay_ticks: int | None, nk: int, extra_delay_ticks: int) -> int:
-    """The loop delay of a design on a model with input delay ``nk`` and ``extra_delay_ticks``.
-
-    None gives nk − 1 + extra (a command lands at the tick after the measurement it answers and
-    shows in the measurement after that). A given loop delay may also be nk + extra: the next
-    measurement (the tick's average speed) already sees part of a command that lands within the
-    tick. Anything else is refused (one line).
-    """
+    """The loop delay of a design on a model with input delay ``nk`` and ``extra_delay_ticks``:
+    None gives nk − 1 + extra; a given one may also be nk + extra (the next measurement, the
+    tick's average speed, already sees part of a command that lands within the tick)."""
     derived = int(nk) - 1 + int(extra_delay_ticks)
     if loop_delay_ticks is None:
         return derived
@@ -230,7 +206,7 @@ def check_loop_delay(loop_delay_ticks: int | None, nk: int, extra_delay_ticks: i
     return int(loop_delay_ticks)
 
 
-def _text(value: Any) -> str:
+def _text(value: Any) -> str:  # 10.0 → '10', as typed
     if isinstance(value, float):
         text = repr(value)
         return text[:-2] if text.endswith(".0") else text

@@ -1,21 +1,14 @@
 """A truer speed for a recorded trace: a Kalman filter forward over the whole trace (filterpy),
 then its RTS smoother back, so every tick's estimate uses the whole trace.
 
-An encoder speed is whole counts per tick (0.35 rad/s at 10 ms); with the model and the voltages
-sent, the speed between the counts is well determined. The state is the design's estimator's
-(:func:`cartctl.design.kalman.design_kalman`: x, x_1 the measured mean speed over the last tick,
-and the input disturbance b, V), with its process noise, plus two:
-
-- θ, the counted angle (rad): θ[k+1] = θ[k] + Ts x_1[k+1], measured. The summed encoder speeds
-  are exactly a floored true angle, an error uniform over one count Δ = 2π/1792 rad: R = Δ²/12,
-  white while the wheel turns (a speed's error would be correlated by −½ between neighbours).
-- a constant 1, through which the recorded voltage enters each tick's transition, F[k] =
-  [[A, B u[k]], …] (``rts_smoother`` has no input term); its variance is 0, so the smoother
-  inverts the predicted covariance with the pseudo-inverse.
-
-Row k holds the voltage commanded and the speed measured at tick k (the model's own nk applies;
-``extra_delay_ticks`` adds ticks for a slower loop). The speed at tick k is the mean of x̂_1[k]
-and x̂_1[k+1] (as the design's estimator), the last row using the model's prediction.
+The state is the design's estimator's (:func:`~cartctl.design.kalman.design_kalman`, with its
+process noise) plus two: θ, the counted angle (rad), θ[k+1] = θ[k] + Ts x_1[k+1], measured with
+R = Δ²/12 (the summed encoder speeds are a floored true angle, Δ = 2π/1792 rad: white, where a
+speed's error is correlated between neighbours); and a constant 1 through which the voltage enters
+each tick's transition, F[k] = [[A, B u[k]], …] (``rts_smoother`` has no input term; its variance
+is 0, so the smoother inverts with the pseudo-inverse). Row k holds the voltage commanded and the
+speed measured at tick k; the speed at tick k is the mean of x̂_1[k] and x̂_1[k+1], the last row
+using the model's prediction.
 """
 
 from __future__ import annotations
@@ -33,8 +26,7 @@ from cartctl.design.request import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOI
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 
-METHOD = "kalman-rts"
-"""How the smoothed speed is made, as the JSON summaries name it."""
+METHOD = "kalman-rts"  # how the JSON summaries name the smoothed speed
 
 
 def angle_noise_std_rad(counts_per_rev: int = ENCODER_COUNTS_PER_REV) -> float:
@@ -72,10 +64,8 @@ def smooth_speed(
     counts_per_rev: int = ENCODER_COUNTS_PER_REV,
 ) -> SmoothedSpeed:
     """The RTS-smoothed speed of one motor from the voltage (V) and encoder speed (rad/s) of each
-    row, the noise levels as :func:`~cartctl.design.kalman.design_kalman` takes them.
-
-    InputError for arrays of different lengths or with non-finite values, nk = 0, a noise level
-    out of range.
+    row, the noise levels as :func:`~cartctl.design.kalman.design_kalman` takes them; InputError
+    for arrays of different lengths or with non-finite values, nk = 0, a noise level out of range.
     """
     u = _finite("the voltage", voltage_v)
     y = _finite("the speed", speed_rad_s)
