@@ -76,10 +76,8 @@ class ModelFile:
 
     def to_toml_dict(self) -> dict[str, Any]:
         """The document written by :func:`save_models`."""
-        motors: dict[str, Any] = {}
-        for name, m in self.motors.items():
-            motors[name] = {"theta": [float(v) for v in m.theta], "na": m.na, "nb": m.nb,
-                            "nk": m.nk, **self.stats.get(name, {})}  # fmt: skip
+        motors = {name: {"theta": m.theta.tolist(), "na": m.na, "nb": m.nb, "nk": m.nk,
+                         **self.stats.get(name, {})} for name, m in self.motors.items()}  # fmt: skip
         doc: dict[str, Any] = {"format": MODEL_FORMAT, "period_s": self.period_s}
         if self.loop_delay_ticks is not None:
             doc["loop_delay_ticks"] = int(self.loop_delay_ticks)
