@@ -61,10 +61,9 @@ class CartLink:
         on_print: Callable[[str], None] | None = None,
         on_event: Callable[[dialect.Event], None] | None = None,
         serial_factory: Callable[..., Any] | None = None,
-        baud: int = BRIDGE_BAUD,
     ) -> None:
         self.port = port
-        self.baud = int(baud)
+        self.baud = BRIDGE_BAUD
         self.silence_timeout_s = float(silence_timeout_s)
         self.on_print = on_print or print_to_stderr
         self.on_event = on_event

@@ -18,6 +18,7 @@ from cartctl.errors import InputError, PlantError
 from cartctl.link.cart_link import CartLink
 from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT, Event, Gpio
 from cartctl.link.firmware import CH_FIRMWARE_ID, CHANNEL_KEYS, Firmware, recognise_firmware
+from cartctl.sinks.base import Sink
 
 DEFAULT_LABELS: tuple[str, ...] = (
     *(f"FloatIn{i}" for i in range(GPIO_FLOAT_COUNT)),
@@ -95,12 +96,6 @@ def describe_labels(
     return f"firmware: {what}, by {told}; {used}"
 
 
-class RowSink(Protocol):
-    def open(self, columns: Sequence[str]) -> None: ...
-    def write(self, row: Sequence[float]) -> None: ...
-    def close(self) -> None: ...
-
-
 class TextSink(Protocol):
     def log_text(self, entity: str, text: str, time_s: float, tick: int, level: str) -> None: ...
 
@@ -129,7 +124,7 @@ class Monitor:
 
     def __init__(
         self,
-        rows: Sequence[RowSink],
+        rows: Sequence[Sink],
         texts: Sequence[TextSink],
         labels: Sequence[str] | None = None,
         *,

@@ -82,16 +82,13 @@ def _pack(message: mavlink.MAVLink_message, mav: mavlink.MAVLink, error: str, v1
 
 def _utf8_chunks(text: str, size: int) -> list[bytes]:
     """The UTF-8 bytes of ``text`` in chunks of at most ``size`` bytes, cut on character bounds."""
-    raw = text.encode("utf-8")
-    chunks: list[bytes] = []
-    start = 0
-    while start < len(raw):
-        end = min(start + size, len(raw))
-        while end < len(raw) and end > start + 1 and (raw[end] & 0xC0) == 0x80:
-            end -= 1  # back up over continuation bytes (10xxxxxx)
-        chunks.append(raw[start:end])
-        start = end
-    return chunks
+    chunks = [b""]
+    for char in text:
+        raw = char.encode("utf-8")
+        if len(chunks[-1]) + len(raw) > size:
+            chunks.append(b"")
+        chunks[-1] += raw
+    return [chunk for chunk in chunks if chunk]
 
 
 class Encoder:
