@@ -46,9 +46,7 @@ CH_BRIDGE_VERSION = SAMPLE_FLOATS.index("bridge_version")
 
 def _version(value: float) -> int:
     """A version number from its float channel (0 for anything that is not a small whole number)."""
-    if value == value and 0.0 <= value < 1000.0 and float(int(value)) == value:
-        return int(value)
-    return 0
+    return int(value) if 0.0 <= value < 1000.0 and float(value).is_integer() else 0
 
 
 def next_seq(seq: int) -> int:

@@ -8,7 +8,6 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import astuple, dataclass
-from typing import Protocol
 
 import cartctl.link.bridge as bridge
 from cartctl.cart import PERIOD_S
@@ -16,6 +15,7 @@ from cartctl.choices import MAX_DURATION_S
 from cartctl.errors import InputError
 from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT, check_gpio_counts
 from cartctl.reference import ReferenceSchedule
+from cartctl.runtime.base import Controller
 
 CHANNEL_KEYS: tuple[str, ...] = (
     *(f"f{i}" for i in range(GPIO_FLOAT_COUNT)),
@@ -167,11 +167,6 @@ MAX_TICKS = round(MAX_DURATION_S / PERIOD_S)
 """A reference spec is evaluated over the longest run cartctl takes (24 h), then held."""
 
 
-class _Controller(Protocol):
-    def reset(self) -> None: ...
-    def step(self, reference_rad_s: float, measured_rad_s: float) -> float: ...
-
-
 class OnboardFirmware(HeldChannels):
     """``control()`` running a runtime controller per motor ('a', 'b'; none: 0 V) on the cart;
     ``reference`` is both motors' reference spec (None: the held input channels)."""
@@ -180,7 +175,7 @@ class OnboardFirmware(HeldChannels):
 
     def __init__(
         self,
-        controllers: Mapping[str, _Controller],
+        controllers: Mapping[str, Controller],
         *,
         reference: str | None = None,
         period_s: float = PERIOD_S,
