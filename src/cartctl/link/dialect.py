@@ -72,14 +72,6 @@ def _check_range(name: str, value: int, maximum: int) -> None:
         raise ValueError(f"{name} must be in 0..{maximum}, got {value}")
 
 
-def _pack(message: mavlink.MAVLink_message, mav: mavlink.MAVLink, error: str, v1: bool) -> bytes:
-    """``message`` framed with ``mav``'s header; a value that does not fit raises ValueError."""
-    try:
-        return message.pack(mav, force_mavlink1=v1)
-    except (struct.error, OverflowError) as exc:
-        raise ValueError(f"{error}: {exc}") from exc
-
-
 def _utf8_chunks(text: str, size: int) -> list[bytes]:
     """The UTF-8 bytes of ``text`` in chunks of at most ``size`` bytes, cut on character bounds."""
     chunks = [b""]
@@ -99,9 +91,13 @@ class Encoder:
         self.seq = 0
         self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
 
-    def _pack(self, message: mavlink.MAVLink_message, error: str) -> bytes:
+    def _pack(self, message: mavlink.MAVLink_message, error: str, v1: bool = True) -> bytes:
+        """``message`` framed with :attr:`seq`; a value that does not fit: ValueError(``error``)."""
         self._mav.seq = self.seq
-        frame = _pack(message, self._mav, error, v1=True)
+        try:
+            frame = message.pack(self._mav, force_mavlink1=v1)
+        except (struct.error, OverflowError) as exc:
+            raise ValueError(f"{error}: {exc}") from exc
         self.seq = (self.seq + 1) % 256
         return frame
 
@@ -167,10 +163,10 @@ def encode_gpiox_v2(
     _check_range("time_ms", time_ms, _UINT32_MAX)
     for name, value in (("seq", seq), ("sysid", sysid), ("compid", compid)):
         _check_range(name, value, 0xFF)
-    mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
-    mav.seq = seq
+    encoder = Encoder(sysid, compid)
+    encoder.seq = seq
     message = mavlink.MAVLink_gpiox_message(time_ms, floats)
-    return _pack(message, mav, "GPIOX channel value does not fit float32", v1=False)
+    return encoder._pack(message, "GPIOX channel value does not fit float32", v1=False)
 
 
 BUTTON_EVENT_BASE = 1000  # EVENT type of QRC's button 0; buttons 0..7 are 1000..1007
