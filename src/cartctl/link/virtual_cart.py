@@ -254,14 +254,12 @@ class VirtualCart:
             now = time.perf_counter()
             driven = 0.0 if self.first_frame_at_s is None else now - self.first_frame_at_s
             if faults.pull_after_s is not None and driven >= faults.pull_after_s:
-                self.state = "cable pulled"
-                self.fault_at_s = time.perf_counter()
+                self.state, self.fault_at_s = "cable pulled", time.perf_counter()
                 self._stop.set()
                 self._close_fds()
                 return
             if faults.stall_after_s is not None and driven >= faults.stall_after_s:
-                self.state = "stalled"
-                self.fault_at_s = time.perf_counter()
+                self.state, self.fault_at_s = "stalled", time.perf_counter()
                 self._stop.wait()
                 return
             self.receive_for_tick(j)  # on the cart's clock, whenever this thread gets here
@@ -299,8 +297,7 @@ class VirtualCart:
             if generation_a and now >= next_heartbeat:
                 self._send(encoder.heartbeat(time_ms), send_at)
                 next_heartbeat += HEARTBEAT_PERIOD_S
-            j += 1
-            self.ticks = j
+            self.ticks = j = j + 1
         self.state = "stopped"
 
 
