@@ -197,19 +197,14 @@ def _format(method: str, motors: dict[str, dict[str, Any]]) -> str:
     return "\n".join(lines).rstrip()
 
 
-def _disturbance_v(args: argparse.Namespace) -> float:
-    d = options.check_finite(float(args.disturbance_v), "--disturbance-v")
-    if not (d != 0.0 and abs(d) <= SUPPLY_V):
-        raise InputError(
-            f"--disturbance-v must be a non-zero voltage within ±{SUPPLY_V:g} V, got "
-            f"{args.disturbance_v}"
-        )
-    return d
-
-
 def run(args: argparse.Namespace) -> int:
     request = request_from_args(args)  # every option in range before the heavy imports
-    disturbance_v = _disturbance_v(args)
+    disturbance_v = options.check_finite(float(args.disturbance_v), "--disturbance-v")
+    if not (disturbance_v != 0.0 and abs(disturbance_v) <= SUPPLY_V):
+        raise InputError(
+            f"--disturbance-v must be a non-zero voltage within ±{SUPPLY_V:g} V, "
+            f"got {args.disturbance_v}"
+        )
     options.check_outputs(args, files=("out",), folders=("report",))
 
     from cartctl.cli.jsonout import dumps

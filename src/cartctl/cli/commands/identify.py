@@ -223,14 +223,6 @@ def _nk_remark(result: IdentifyResult, delay: int) -> str:
     return f" (nk = {', '.join(map(str, nks))}; design explains how it treats that)"
 
 
-def _compared_labels(compare: Mapping[str, ModelFile], motor: str) -> dict[str, ArxModel]:
-    return {
-        f"{Path(path).stem} (file)": mf.motors[motor]
-        for path, mf in compare.items()
-        if motor in mf.motors
-    }
-
-
 def format_result(
     result: IdentifyResult,
     files: list[str],
@@ -242,9 +234,13 @@ def format_result(
     if request.prefilter:
         what += f", prefilter {request.prefilter.describe()}"
     lines = [f"identify {' '.join(files)}: {what}, Ts = {result.period_s * 1e3:g} ms", ""]
-    lines += [
-        format_motor(r, _compared_labels(compare or {}, m)) + "\n" for m, r in result.motors.items()
-    ]
+    for m, r in result.motors.items():
+        models = {
+            f"{Path(p).stem} (file)": f.motors[m]
+            for p, f in (compare or {}).items()
+            if m in f.motors
+        }
+        lines.append(format_motor(r, models) + "\n")
     if result.delay is not None:
         j = result.delay
         evidence = ", ".join(

@@ -17,7 +17,6 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from cartctl.identification.validate import ModelValidation, ValidationResult
-    from cartctl.measures.stepinfo import StepInfo
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -95,18 +94,13 @@ def _num(value: float | None, spec: str) -> str:
     return "—" if value is None else format(value, spec)
 
 
-def _step_rows(measured: StepInfo, simulated: StepInfo) -> list[tuple[str, str, str]]:
-    rows = [
-        ("rise time 10–90 % (s)", "rise_time_s", ".3f"),
-        ("overshoot (%)", "overshoot_percent", ".1f"),
-        ("settling time 2 % (s)", "settling_time_s", ".3f"),
-        ("peak (rad/s)", "peak_value", ".3f"),
-        ("steady state (rad/s)", "steady_state_value", ".3f"),
-    ]
-    return [
-        (label, _num(getattr(measured, key), spec), _num(getattr(simulated, key), spec))
-        for label, key, spec in rows
-    ]
+_STEP_ROWS = (  # label, StepInfo field, format
+    ("rise time 10–90 % (s)", "rise_time_s", ".3f"),
+    ("overshoot (%)", "overshoot_percent", ".1f"),
+    ("settling time 2 % (s)", "settling_time_s", ".3f"),
+    ("peak (rad/s)", "peak_value", ".3f"),
+    ("steady state (rad/s)", "steady_state_value", ".3f"),
+)
 
 
 def format_result(r: ValidationResult) -> list[str]:
@@ -128,9 +122,9 @@ def format_result(r: ValidationResult) -> list[str]:
         f"  {f'step of {s.amplitude_v:g} V at {s.onset_s:.2f} s':<26} {'measured':>10} "
         f"{'simulated':>10}"
     )
-    lines += [
-        f"  {label:<26} {m:>10} {sim:>10}" for label, m, sim in _step_rows(s.measured, s.simulated)
-    ]
+    for label, key, spec in _STEP_ROWS:
+        m, sim = (_num(getattr(info, key), spec) for info in (s.measured, s.simulated))
+        lines.append(f"  {label:<26} {m:>10} {sim:>10}")
     lines.append(
         f"  steady-state error of the model (measured − simulated): "
         f"{s.steady_state_error_rad_s:+.3f} rad/s"
