@@ -220,9 +220,16 @@ def etfe(
         raise InputError(f"min_input_fraction must lie in (0, 1), got {min_input_fraction!r}")
     y_arr, u_arr = as_pair(y, u)
     ts = float(period_s)
-    if period_ticks is not None:
-        y_cyc, u_cyc = split_cycles(y_arr, u_arr, period_ticks, skip_first=skip_first, min_cycles=1)
-        n, p = y_cyc.shape
+    periodic = period_ticks is not None
+    if not periodic:
+        segments = check_whole(segments, "segments")
+        if segments == 1 and y_arr.size < 8:
+            raise InputError(f"an ETFE needs at least 8 samples, got {y_arr.size}")
+    if period_ticks is not None or segments == 1:  # whole periods, or the record as one
+        p = y_arr.size if period_ticks is None else period_ticks
+        first = skip_first and periodic
+        y_cyc, u_cyc = split_cycles(y_arr, u_arr, p, skip_first=first, min_cycles=1)
+        n = y_cyc.shape[0]
         y_spectra = np.fft.rfft(y_cyc, axis=1)
         y_mean = y_spectra.mean(axis=0)
         u_spec = np.fft.rfft(u_cyc[0])
@@ -232,15 +239,7 @@ def etfe(
             y_sem = np.sqrt(np.sum(np.abs(y_spectra - y_mean) ** 2, axis=0) / (n - 1) / n)
             std = y_sem[keep] / np.abs(u_spec[keep])
         freq = np.asarray(np.fft.rfftfreq(p, d=ts), dtype=np.float64)
-        return Etfe(freq[keep], y_mean[keep] / u_spec[keep], True, n, ts, std)
-    segments = check_whole(segments, "segments")
-    if segments == 1:
-        if y_arr.size < 8:
-            raise InputError(f"an ETFE needs at least 8 samples, got {y_arr.size}")
-        y_spec, u_spec = np.fft.rfft(y_arr), np.fft.rfft(u_arr)
-        keep = _excited(np.abs(u_spec), min_input_fraction)
-        freq = np.asarray(np.fft.rfftfreq(y_arr.size, d=ts), dtype=np.float64)
-        return Etfe(freq[keep], y_spec[keep] / u_spec[keep], False, 1, ts)
+        return Etfe(freq[keep], y_mean[keep] / u_spec[keep], periodic, n, ts, std)
     # ``segments`` half-overlapping windows of length L cover (segments + 1) L / 2 samples.
     length = 2 * y_arr.size // (segments + 1)
     if length < 8:
