@@ -19,7 +19,7 @@ import pytest
 from cartctl.cli import main
 from cartctl.data.modelfile import load_models
 from cartctl.data.read import read_trace
-from cartctl.design.smoother import smooth_speed
+from cartctl.design.kalman import smooth_speed
 
 ROOT = Path(__file__).resolve().parents[1]
 GROUND = str(ROOT / "models" / "ground.toml")

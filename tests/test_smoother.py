@@ -1,4 +1,4 @@
-"""The RTS-smoothed speed (cartctl.design.smoother) on hand-made traces whose truth is known.
+"""The RTS-smoothed speed (cartctl.design.kalman) on hand-made traces whose truth is known.
 
 A trace made by the model itself is reproduced exactly; a constant input disturbance is found; an
 encoder quantising the model's angle (floor of whole counts, as the cart's) is beaten by more than
@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from cartctl.design.smoother import angle_noise_std_rad, smooth_speed
+from cartctl.design.kalman import angle_noise_std_rad, smooth_speed
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 

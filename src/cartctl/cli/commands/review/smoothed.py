@@ -1,4 +1,4 @@
-"""The smoothed speed (:func:`cartctl.design.smoother.smooth_speed`) in ``run``'s summary and in
+"""The smoothed speed (:func:`cartctl.design.kalman.smooth_speed`) in ``run``'s summary and in
 ``review``: when the metrics are on the measured speed, through the serial path, or asked for
 (``--model``); with ``--model``, else the model a run named in its ``.rrd`` or meta file (its
 controller's); a run's loop delay beyond its controller's as extra input delay, as ``design``."""
@@ -18,7 +18,7 @@ from cartctl.cli.commands.review.metrics import TIMING_COLUMNS
 from cartctl.cli.commands.review.recording import SCALARS, Series, batches, read_recording
 from cartctl.data.modelfile import ModelFile, load_models
 from cartctl.data.read import read_trace
-from cartctl.design.smoother import METHOD, smooth_speed
+from cartctl.design.kalman import METHOD, smooth_speed
 from cartctl.errors import CartctlError, DataWarning, InputError
 from cartctl.sinks.summary import add_smoothed_metrics, format_summary, trace_metrics
 
