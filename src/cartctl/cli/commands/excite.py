@@ -147,16 +147,10 @@ def run(args: argparse.Namespace) -> int:
                 f"{stats['missed_ticks']} cart ticks missed; " + host_loss_text(stats)
             )
         warn_host_losses(stats, "excite")
-    if result.failure:
-        print(f"cartctl excite: error: {result.failure}; the trace holds the ticks recorded so far",
-              file=sys.stderr)  # fmt: skip
-        return 1
-    if result.interrupted:
-        print(
-            "cartctl excite: interrupted; the trace holds the ticks recorded so far",
-            file=sys.stderr,
-        )
-        return stopping.exit_code()
+    if result.failure or result.interrupted:
+        why = f"error: {result.failure}" if result.failure else "interrupted"
+        print(f"cartctl excite: {why}; the trace holds the ticks recorded so far", file=sys.stderr)
+        return 1 if result.failure else stopping.exit_code()
     return 0
 
 
