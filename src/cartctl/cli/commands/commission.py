@@ -87,16 +87,6 @@ def _check(args: argparse.Namespace) -> Path:
     return out
 
 
-def _json(job: Any, failure: str | None, stage: str | None) -> dict[str, Any]:
-    r = job.results
-    return {"out": str(job.out), "plant": job.description, "summary": str(job.out / "summary.md"),
-            "checks": r.get("checks"), "excitation": r.get("excitation"), "model": r.get("model"),
-            "controller": r.get("controller"), "verification": r.get("verification"),
-            "failed_stage": stage, "failure": failure,
-            "recordings": sorted(str(p) for p in job.out.glob("*.rrd")),
-            "recording_problems": job.problems}  # fmt: skip
-
-
 def run(args: argparse.Namespace) -> int:
     from cartctl.cli.jsonout import dumps
     from cartctl.commission import StageError
@@ -128,7 +118,13 @@ def run(args: argparse.Namespace) -> int:
         job.report.add("stopped", f"At stage **{job.current}**: {failure}. The files written so "
                        "far are kept.")  # fmt: skip
     if args.json:
-        print(dumps(_json(job, failure, job.current if failure else None)))
+        stages = ("checks", "excitation", "model", "controller", "verification")
+        print(dumps({"out": str(job.out), "plant": job.description,
+                     "summary": str(job.out / "summary.md"),
+                     **{stage: job.results.get(stage) for stage in stages},
+                     "failed_stage": job.current if failure else None, "failure": failure,
+                     "recordings": sorted(str(p) for p in job.out.glob("*.rrd")),
+                     "recording_problems": job.problems}))  # fmt: skip
     elif failure is None:
         v = job.results["verification"]
         print(f"commissioned {job.description}: {job.controller_path} verified (overshoot "
