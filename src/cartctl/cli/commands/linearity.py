@@ -54,7 +54,6 @@ def linearity_figure(result: LinearityResult) -> Figure:
     top.plot(t, result.speed_sum_rad_s, color="tab:orange", ls="--", label=f"{sum_v:g} V step")
     top.set_ylabel("speed (rad/s)")
     top.set_title(f"motor {result.motor}: responses aligned at their step onsets")
-    top.grid(True, alpha=0.3)
     top.legend(**_BESIDE)
     bottom.plot(t, result.error_rad_s, color="tab:red", label="error (sum step − added)")
     bottom.axhline(0.0, color="0.3", lw=0.8)
@@ -67,7 +66,6 @@ def linearity_figure(result: LinearityResult) -> Figure:
     )
     bottom.set_ylabel("error (rad/s)")
     bottom.set_xlabel("time since the step (s)")
-    bottom.grid(True, alpha=0.3)
     bottom.legend(**_BESIDE)
     fig.suptitle("Superposition test")
     return fig

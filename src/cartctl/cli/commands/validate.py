@@ -50,7 +50,8 @@ def check_plot_path(path: str | None) -> Path | None:
 
 
 def new_figure(rows: int, cols: int, *, width_in: float, height_in: float) -> tuple[Figure, Any]:
-    """A matplotlib figure on the Agg canvas (no GUI, no pyplot state) and its grid of axes."""
+    """A matplotlib figure on the Agg canvas (no GUI, no pyplot state) and its grid of axes, each
+    with a light grid."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -59,6 +60,8 @@ def new_figure(rows: int, cols: int, *, width_in: float, height_in: float) -> tu
     axes = fig.subplots(
         rows, cols, sharex="col", squeeze=False, height_ratios=[2] + [1] * (rows - 1)
     )
+    for ax in axes.flat:
+        ax.grid(True, alpha=0.3)
     return fig, axes
 
 
@@ -77,12 +80,10 @@ def plot_validation(validation: ModelValidation, path: Path) -> None:
         top.plot(r.time_s, r.simulated_rad_s, label="simulated", color="tab:orange", ls="--")
         top.set_title(f"motor {r.motor}: fit {r.fit_simulation_percent:.1f} % (simulation)")
         top.set_ylabel("speed (rad/s)")
-        top.grid(True, alpha=0.3)
         top.legend(loc="best")
         bottom.plot(r.time_s, r.abs_error_rad_s, color="tab:red", label="|measured − simulated|")
         bottom.set_ylabel("|error| (rad/s)")
         bottom.set_xlabel("time (s)")
-        bottom.grid(True, alpha=0.3)
         bottom.legend(loc="best")
     model = Path(validation.model).name if validation.model else "model"
     data = Path(validation.data).name if validation.data else "trace"
