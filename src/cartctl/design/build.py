@@ -3,6 +3,9 @@ result itself (gains, estimator matrices), so the loop runs exactly what was des
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 from cartctl.cart import check_voltage_limit
 from cartctl.design.controller_ss import feedback_gains, kalman_from_entry
 from cartctl.design.controllerfile import ControllerFile
@@ -23,6 +26,26 @@ def make_estimator(design: KalmanDesign) -> KalmanSpeedEstimator | SteadyStateSp
     return SteadyStateSpeedEstimator(design)
 
 
+def build_controller(
+    method: str, entry: Mapping[str, Any], period_s: float, voltage_limit_v: float
+) -> Controller:
+    """One motor's runtime controller from its ``[motors.X]`` entry; KeyError, TypeError or
+    ValueError for a key missing or not fitting."""
+    if method == "pi":
+        est = entry.get("estimator")
+        return PiController(
+            float(entry["kp"]),
+            float(entry["ki"]),
+            period_s,
+            voltage_limit_v=voltage_limit_v,
+            anti_windup=str(entry.get("anti_windup", "conditional")),
+            estimator=None if est is None else make_estimator(kalman_from_entry(est)),
+        )
+    gains = feedback_gains(entry, period_s)
+    estimator = make_estimator(gains.estimator)
+    return StateFeedbackController(gains, estimator=estimator, voltage_limit_v=voltage_limit_v)
+
+
 def build_controllers(
     controller: ControllerFile, *, voltage_limit_v: float | None = None
 ) -> dict[str, Controller]:
@@ -35,22 +58,7 @@ def build_controllers(
     out: dict[str, Controller] = {}
     for motor, entry in controller.motors.items():
         try:
-            if controller.method == "pi":
-                est = entry.get("estimator")
-                out[motor] = PiController(
-                    float(entry["kp"]),
-                    float(entry["ki"]),
-                    controller.period_s,
-                    voltage_limit_v=limit,
-                    anti_windup=str(entry.get("anti_windup", "conditional")),
-                    estimator=None if est is None else make_estimator(kalman_from_entry(est)),
-                )
-            else:
-                gains = feedback_gains(entry, controller.period_s)
-                estimator = make_estimator(gains.estimator)
-                out[motor] = StateFeedbackController(
-                    gains, estimator=estimator, voltage_limit_v=limit
-                )
+            out[motor] = build_controller(controller.method, entry, controller.period_s, limit)
         except (KeyError, TypeError, ValueError) as exc:
             why = f" misses {exc.args[0]}" if isinstance(exc, KeyError) else f": {exc}"
             raise DataFileError(

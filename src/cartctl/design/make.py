@@ -19,7 +19,7 @@ from cartctl.design.analysis import (
     settling_bound,
     simulate_step,
 )
-from cartctl.design.build import make_estimator
+from cartctl.design.build import build_controller
 from cartctl.design.controller_ss import feedback_tf_coeffs
 from cartctl.design.controllerfile import ControllerFile, common_loop_delay, file_sha256
 from cartctl.design.kalman import KalmanDesign, design_kalman
@@ -29,8 +29,6 @@ from cartctl.design.request import DesignRequest, check_loop_delay
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 from cartctl.runtime.base import Controller
-from cartctl.runtime.pi import PiController
-from cartctl.runtime.statefeedback import StateFeedbackController
 
 ANALYSIS_KEYS = (  # what a controller file keeps of a motor's design, under ``analysis``
     "phase_margin_deg", "gain_margin_db", "crossover_hz", "sensitivity_peak", "closed_loop_poles",
@@ -41,7 +39,7 @@ ANALYSIS_KEYS = (  # what a controller file keeps of a motor's design, under ``a
 
 @dataclass(frozen=True)
 class MotorDesign:
-    """One motor's design: the runtime controller (as ``cartctl run`` builds it from the file),
+    """One motor's design: the runtime controller (built from the file entry, as ``cartctl run``),
     its ``design --json`` entry, and its ``[motors.X]`` file table (without ``analysis``)."""
 
     controller: Controller
@@ -66,14 +64,10 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
         entry = d.to_dict()
         file_entry: dict[str, Any] = {"kp": d.kp, "ki": d.ki, "anti_windup": request.anti_windup,
                                       "controller_num": num, "controller_den": den}  # fmt: skip
-        estimator = None
         if request.estimator == "kalman":
             kalman = design_kalman(model, extra_delay_ticks=extra, **noise)
             entry["estimator_poles"] = [[p.real, p.imag] for p in kalman.poles()]
             file_entry["estimator"] = _kalman_entry(kalman)
-            estimator = make_estimator(kalman)
-        controller: Controller = PiController(d.kp, d.ki, model.period_s, voltage_limit_v=limit,
-                                              anti_windup=request.anti_windup, estimator=estimator)  # fmt: skip
     else:
         poles = request.pole_list()
         placement = design_poles(
@@ -89,9 +83,6 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
                       "controller_num": num, "controller_den": den,
                       "closed_loop_poles": [[p.real, p.imag] for p in placement.poles],
                       "estimator": _kalman_entry(placement.estimator)}  # fmt: skip
-        controller = StateFeedbackController(
-            placement, estimator=make_estimator(placement.estimator), voltage_limit_v=limit
-        )
         loop = loop_analysis(num, den, model, extra)
         keys = ("phase_margin_deg", "gain_margin_db", "crossover_hz", "sensitivity_peak")
         entry = {
@@ -100,6 +91,7 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
             "controller_num": num.tolist(),
             "controller_den": den.tolist(),
         }
+    controller = build_controller(request.method, file_entry, model.period_s, limit)
     return MotorDesign(controller, entry, file_entry)
 
 

@@ -99,14 +99,18 @@ def write_report(
 ) -> list[Path]:
     """``design_X.png`` (:func:`design_figure`, on the ``design --json`` ``entries``) and
     ``analysis_X.png`` (:func:`analysis_figure`) per motor; returns their paths."""
-    request, paths = designs.request, []
+    request, out, paths = designs.request, Path(out_dir), []
+    out.mkdir(parents=True, exist_ok=True)
     for m, entry in entries.items():
-        figure = design_figure(m, designs.models[m], {**entry, "method": request.method},
-                               designs.steps[m], extra_delay_ticks=request.extra_delay_ticks,
-                               voltage_limit_v=request.voltage_limit_v)  # fmt: skip
-        paths.append(_save(figure, Path(out_dir) / f"design_{m}.png"))
-        figure = analysis_figure(m, request.method, analyses[m])
-        paths.append(_save(figure, Path(out_dir) / f"analysis_{m}.png"))
+        figures = {
+            "design": design_figure(m, designs.models[m], {**entry, "method": request.method},
+                                    designs.steps[m], extra_delay_ticks=request.extra_delay_ticks,
+                                    voltage_limit_v=request.voltage_limit_v),
+            "analysis": analysis_figure(m, request.method, analyses[m]),
+        }  # fmt: skip
+        for name, figure in figures.items():
+            paths.append(out / f"{name}_{m}.png")
+            figure.savefig(paths[-1])
     return paths
 
 
@@ -122,12 +126,6 @@ def _dress(
     if legend:
         ax.legend(loc=legend, fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
-
-
-def _save(fig: Figure, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    return path
 
 
 def _db(value: float) -> str:
