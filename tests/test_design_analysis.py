@@ -286,9 +286,8 @@ def test_report_writes_both_figures_with_all_text_inside(
 ) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    from cartctl.design.loop_report import analyse_designs
+    from cartctl.design.loop_report import analyse_designs, analysis_figure, design_figure
     from cartctl.design.make import design_models
-    from cartctl.design.plots import analysis_figure, design_figure
     from cartctl.design.request import DesignRequest
 
     out = tmp_path / "report"

@@ -118,7 +118,7 @@ def request_from_args(args: argparse.Namespace) -> DesignRequest:
 
 
 def _gains_line(method: str, e: dict[str, Any]) -> str:
-    from cartctl.design.numbers import sig, sig_list
+    from cartctl.design.loop_report import sig, sig_list
 
     if method == "pi":
         return f"Kp = {sig(e['kp'])} V/(rad/s), Ki = {sig(e['ki'])} V/rad"
@@ -152,7 +152,7 @@ def _pole_lines(e: dict[str, Any]) -> list[str]:
 
 
 def _analysis_lines(e: dict[str, Any]) -> list[str]:
-    from cartctl.design.numbers import db, sig
+    from cartctl.design.loop_report import db, sig
 
     d = e["disturbance"]
     rec = d["recovery_time_s"]
@@ -170,7 +170,7 @@ def _analysis_lines(e: dict[str, Any]) -> list[str]:
 
 
 def _format(method: str, motors: dict[str, dict[str, Any]]) -> str:
-    from cartctl.design.numbers import sig
+    from cartctl.design.loop_report import sig
 
     lines = []
     for m, e in motors.items():
@@ -238,7 +238,7 @@ def run(args: argparse.Namespace) -> int:
             args.out,
         )
     if args.report:
-        from cartctl.design.plots import write_report
+        from cartctl.design.loop_report import write_report
 
         write_report(args.report, designs, motors_json, analyses)
     if args.json:
