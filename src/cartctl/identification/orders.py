@@ -65,20 +65,6 @@ INDISTINCT_FRACTION = 1e-3
 """Candidates whose equation errors all lie within this fraction of the best are indistinct."""
 
 
-def check_distinct(estimates: Mapping[str, DelayEstimate]) -> None:
-    """Refuse evidence whose candidates' equation errors all lie within
-    :data:`INDISTINCT_FRACTION` of the best, for every motor: the data does not show the delay."""
-    rms = [np.asarray(e.residual_rms) for e in estimates.values()]
-    if rms and all(r.size >= 2 and r.max() <= (1.0 + INDISTINCT_FRACTION) * r.min() for r in rms):
-        cands = next(iter(estimates.values())).candidates
-        raise IdentificationError(
-            f"--delay auto cannot tell: the equation errors of nk = "
-            f"{', '.join(map(str, cands))} are within {INDISTINCT_FRACTION:.1%} of each other "
-            f"({min(r.min() for r in rms):.4g} rad/s); the data does not show when the motor "
-            "answers, so give --delay N (2 on board, loop delay + 1 over serial)"
-        )
-
-
 def delay_evidence(
     segments: Sequence[Segment],
     *,
@@ -90,7 +76,7 @@ def delay_evidence(
 ) -> DelayEstimate:
     """Fit every candidate delay on common equations (simulation fits on ``eval_segments``): the
     evidence, and the best (smallest equation error; ties up to 1e-9 of the output's RMS to the
-    smaller delay). Refusing indistinct evidence is :func:`check_distinct`'s."""
+    smaller delay). Refusing indistinct evidence is :func:`joint_delay`'s."""
     cands = tuple(int(c) for c in candidates)
     if not cands:
         raise InputError("no candidate delays to try")
@@ -181,14 +167,21 @@ class JointDelay:
 def joint_delay(estimates: Mapping[str, DelayEstimate]) -> JointDelay:
     """One delay for the motors of ``estimates``: the smallest joint evidence or, when others lie
     within :data:`CLOSE_FRACTION` of it, the largest of those (a design for the later answer
-    tolerates an earlier one better). Each estimate comes back with ``nk`` the choice."""
+    tolerates an earlier one better). Each estimate comes back with ``nk`` the choice. Refuses
+    evidence in which no motor tells the candidates apart (:data:`INDISTINCT_FRACTION`)."""
     if not estimates:
         raise InputError("no delay evidence to choose from")
-    first = next(iter(estimates.values()))
-    cands = first.candidates
+    cands = next(iter(estimates.values())).candidates
     if any(e.candidates != cands for e in estimates.values()):
         raise InputError("the motors' delay evidence covers different candidates")
-    check_distinct(estimates)
+    rms = [np.asarray(e.residual_rms) for e in estimates.values()]
+    if all(r.size >= 2 and r.max() <= (1.0 + INDISTINCT_FRACTION) * r.min() for r in rms):
+        raise IdentificationError(
+            f"--delay auto cannot tell: the equation errors of nk = "
+            f"{', '.join(map(str, cands))} are within {INDISTINCT_FRACTION:.1%} of each other "
+            f"({min(r.min() for r in rms):.4g} rad/s); the data does not show when the motor "
+            "answers, so give --delay N (2 on board, loop delay + 1 over serial)"
+        )
     counts = np.array([max(e.equations, 1) for e in estimates.values()], dtype=float)
     weights = counts / counts.sum()
     logs = np.array([np.log(np.maximum(e.residual_rms, 1e-300)) for e in estimates.values()])

@@ -137,15 +137,11 @@ class MotorIdentification:
         return out | ({} if self.oe is None else {"OE": self.oe})
 
     def to_dict(self) -> dict[str, Any]:
-        out = self.chosen.to_dict()
-        if self.oe is not None:
-            out["arx"] = self.arx.to_dict()
-            out["oe"] = self.oe.to_dict()
-        if self.unfiltered is not None:
-            out["unfiltered"] = self.unfiltered.to_dict()
+        fits = {"arx": self.arx, "oe": self.oe} if self.oe is not None else {}
+        fits |= {} if self.unfiltered is None else {"unfiltered": self.unfiltered}
+        out = self.chosen.to_dict() | {k: fit.to_dict() for k, fit in fits.items()}
         out["delay_estimate"] = None if self.delay is None else self.delay.to_dict()
-        out["cycles_averaged"] = self.cycles_averaged
-        return out | self.diagnostics.to_dict()
+        return out | {"cycles_averaged": self.cycles_averaged} | self.diagnostics.to_dict()
 
 
 @dataclass(frozen=True)
