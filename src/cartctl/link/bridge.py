@@ -10,21 +10,16 @@ from typing import Any
 
 from cartctl.link.dialect import Gpio, check_gpio_counts
 
-SEQ_MODULO = 32768
-"""Host sequence numbers and cart ticks count modulo this (int16 helpers on the cart)."""
-HOST_LOSS_WARN_PERCENT = 1.0
-"""More of the host's frames than this (%) lost on the way to the cart is worth a warning."""
-SEQ_WINDOW = 256
-"""A host sequence number further ahead than this (or behind) is a new host, not lost frames."""
+SEQ_MODULO = 32768  # host sequence numbers and cart ticks wrap here (int16 on the cart)
+HOST_LOSS_WARN_PERCENT = 1.0  # more host frames (%) lost on the way to the cart: a warning
+SEQ_WINDOW = 256  # a host sequence number further off (or behind) is a new host, not losses
 WATCHDOG_MS = 70
 """The cart trips at the first ``control()`` this long (ms) after the last new host sequence
 number: the motors are off at most 90 ms after the host's last frame (the next tick, then io())."""
 BRIDGE_VERSION = 2
 """The bridge sketch's version, sent in float channel :data:`CH_BRIDGE_VERSION` (0 before 2)."""
-BRIDGE_BAUD = 500_000
-"""The line's rate with bridge version 2 (8N1): a 60-byte GPIO frame takes 1.2 ms."""
-LEGACY_BAUD = 115_200
-"""The line's rate of the course's firmware and of bridges before version 2."""
+BRIDGE_BAUD = 500_000  # bridge version 2's line (8N1): a 60-byte GPIO frame takes 1.2 ms
+LEGACY_BAUD = 115_200  # the line of the course's firmware and of bridges before version 2
 TIMING_FIRST_ID = 200
 """The bridge's THREAD_INFO reports after each GPIO have ids 200 onwards, the figure in the
 duration field: the 10 ms thread's drain + io() + control() (µs), the longest 1 ms drain since the
@@ -125,12 +120,9 @@ class CartSample:
                    echo, tick, driving, tripped, lost % SEQ_MODULO, _version(version))  # fmt: skip
 
 
-MIN_ECHOES = 20
-"""Echoes a measurement needs before it can be clear."""
-CLEAR_SHARE = 0.85
-"""Share of the echoes that must agree on one delay for the measurement to be clear (17 of 20)."""
-CHANGE_SHARE = 0.05
-"""During a run, more than this share of echoes at another delay than the probe's is a change."""
+MIN_ECHOES = 20  # echoes a measurement needs before it can be clear
+CLEAR_SHARE = 0.85  # share of the echoes at one delay for a clear measurement (17 of 20)
+CHANGE_SHARE = 0.05  # in a run, more echoes than this at another delay than the probe's
 
 
 def _ticks(n: int) -> str:

@@ -8,8 +8,7 @@ from typing import Any
 
 from cartctl.errors import InputError
 
-LATE_STRETCH_TICKS = 5
-"""With ``late``, the cart takes the host's commands a tick late in stretches of this many ticks."""
+LATE_STRETCH_TICKS = 5  # with ``late``, commands reach the cart a tick late in stretches this long
 
 RECEIVE_SCHEDULES = {"bridge": 1000, "microos": None}
 """Receive schedules: the bridge's drain period (µs), or None for microOS's communication thread

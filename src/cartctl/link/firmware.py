@@ -25,8 +25,7 @@ CHANNEL_KEYS: tuple[str, ...] = (
 CH_FIRMWARE_ID = bridge.CH_BRIDGE_VERSION
 """The float channel in which cartctl's firmware says which it is (the bridge's version)."""
 ONBOARD_LAYOUT = 1
-ONBOARD_ID = 1000 + ONBOARD_LAYOUT
-"""What the on-board export sends in float :data:`CH_FIRMWARE_ID`: 1000 + its layout."""
+ONBOARD_ID = 1000 + ONBOARD_LAYOUT  # the on-board export's marker in float 6: 1000 + its layout
 # the on-board export's layout 1: references in from the PC, and out from the first channel of
 # each group: speeds (rad/s), voltages computed at that tick (V), references (rad/s); A, then B
 IN_REFERENCE = {"a": 0, "b": 1}
@@ -163,8 +162,7 @@ class BridgeFirmware(HeldChannels):
 
 
 MOTORS = tuple(IN_REFERENCE)
-MAX_TICKS = round(MAX_DURATION_S / PERIOD_S)
-"""A reference spec is evaluated over the longest run cartctl takes (24 h), then held."""
+MAX_TICKS = round(MAX_DURATION_S / PERIOD_S)  # a reference spec covers the longest run (24 h)
 
 
 class OnboardFirmware(HeldChannels):
