@@ -341,12 +341,5 @@ def diagnose(
             eval_segments=raw,
             validation=list(validation) or None,
         )
-    return Diagnostics(
-        fit_on="validation" if validation else "estimation",
-        residuals=residuals,
-        theta_cov=cov,
-        band=band,
-        orders=orders,
-        raw=list(raw),
-        validation=list(validation),
-    )
+    fit_on = "validation" if validation else "estimation"
+    return Diagnostics(fit_on, residuals, cov, band, orders, list(raw), list(validation))

@@ -262,15 +262,9 @@ def _identify_motor(
         arx_fit = on_validation(arx_fit, validation)
         oe_fit = on_validation(oe_fit, validation) if oe_fit else None
         unfiltered = on_validation(unfiltered, validation) if unfiltered else None
+    chosen = oe_fit or arx_fit
     return MotorIdentification(
-        motor=motor,
-        chosen=oe_fit or arx_fit,
-        arx=arx_fit,
-        oe=oe_fit,
-        unfiltered=unfiltered,
-        delay=delay,
-        cycles_averaged=cycles,
-        diagnostics=diagnostics,
+        motor, chosen, arx_fit, diagnostics, oe_fit, unfiltered, delay, cycles
     )
 
 
