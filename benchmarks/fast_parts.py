@@ -27,8 +27,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import load_controller
+from cartctl.design.controllerfile import build_controllers, load_controller
 from cartctl.plants.factory import make_plant
 from cartctl.reference import reference_signal
 from cartctl.runtime.executor import BackToBackExecutor, SimulatedClock

@@ -39,8 +39,7 @@ from typing import Any
 import numpy as np
 
 from bench_loop import busy_core
-from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import load_controller
+from cartctl.design.controllerfile import build_controllers, load_controller
 from cartctl.plants.factory import make_plant
 from cartctl.reference import reference_signal
 from cartctl.runtime.executor import MonotonicClock, PeriodicExecutor, SimulatedClock

@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import load_controller
+from cartctl.design.controllerfile import build_controllers, load_controller
 from cartctl.errors import InputError
 from cartctl.plants.factory import make_plant
 from cartctl.reference import reference_signal

@@ -16,8 +16,7 @@ import pytest
 from cartctl.cli import main
 from cartctl.data.modelfile import load_models
 from cartctl.design.analysis import simulate_step
-from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import load_controller
+from cartctl.design.controllerfile import build_controllers, load_controller
 from cartctl.measures.stepinfo import step_info
 
 ROOT = Path(__file__).resolve().parents[1]

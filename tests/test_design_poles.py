@@ -16,8 +16,7 @@ from hypothesis import strategies as st
 
 from cartctl.data.modelfile import load_models
 from cartctl.design.analysis import settling_bound
-from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import load_controller
+from cartctl.design.controllerfile import build_controllers, load_controller
 from cartctl.design.kalman import realise
 from cartctl.design.poles import augment, design_poles, spec_poles
 from cartctl.errors import InputError

@@ -18,8 +18,7 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import load_controller
+from cartctl.design.controllerfile import build_controllers, load_controller
 from cartctl.errors import InputError
 from cartctl.export.arduino import arduino_source, as_steady_state, c_float
 

@@ -16,8 +16,7 @@ import pytest
 import scipy.io
 
 from cartctl.cli import main
-from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import load_controller
+from cartctl.design.controllerfile import build_controllers, load_controller
 from cartctl.export.arduino import as_steady_state
 
 ROOT = Path(__file__).resolve().parents[1]

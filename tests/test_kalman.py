@@ -150,9 +150,8 @@ def test_shipped_time_varying_estimators_match_filterpy(name: str) -> None:
     step where the file has timing noise (poles.toml): the runtime estimator against filterpy."""
     from filterpy.kalman import KalmanFilter
 
-    from cartctl.design.build import build_controllers
     from cartctl.design.controller_ss import kalman_from_entry
-    from cartctl.design.controllerfile import load_controller
+    from cartctl.design.controllerfile import build_controllers, load_controller
 
     controller = load_controller(ROOT / "controllers" / name)
     assert "estimator_gain" not in controller.request
@@ -182,7 +181,7 @@ def test_shipped_time_varying_estimators_match_filterpy(name: str) -> None:
 def test_the_gain_moves_only_with_timing_noise() -> None:
     import dataclasses
 
-    from cartctl.design.build import make_estimator
+    from cartctl.design.controllerfile import make_estimator
 
     design = design_kalman(REPORT_A)
     assert isinstance(make_estimator(design), SteadyStateSpeedEstimator)

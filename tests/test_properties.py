@@ -24,8 +24,7 @@ from cartctl.cli import main
 from cartctl.data.modelfile import load_models
 from cartctl.data.read import read_trace
 from cartctl.data.trace import parse_mapping
-from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import load_controller
+from cartctl.design.controllerfile import build_controllers, load_controller
 from cartctl.errors import CartctlError
 from cartctl.reference import reference_signal
 

@@ -238,7 +238,7 @@ def test_estimator_has_the_loop_delay_and_a_disturbance_state(
 def test_poles_runs_the_timing_model_with_timing_noise() -> None:
     """poles.toml: designed on the timing model for a loop delay of 1, with timing noise in its
     estimator, which ``run`` then runs with its covariance propagated (not the fixed gain)."""
-    from cartctl.design.build import build_controllers
+    from cartctl.design.controllerfile import build_controllers
     from cartctl.runtime.kalman import KalmanSpeedEstimator
 
     controller = load_controller("controllers/poles.toml")

@@ -14,8 +14,7 @@ import scipy.io
 
 from cartctl.cli import main
 from cartctl.data.modelfile import load_models
-from cartctl.design.build import build_controllers, make_estimator
-from cartctl.design.controllerfile import load_controller
+from cartctl.design.controllerfile import build_controllers, load_controller, make_estimator
 from cartctl.design.kalman import design_kalman
 from cartctl.design.request import DesignRequest
 from cartctl.errors import InputError

@@ -20,8 +20,7 @@ from cartctl.cli.commands.design import request_from_args
 from cartctl.data.modelfile import load_models
 from cartctl.data.read import read_trace
 from cartctl.design.analysis import simulate_step
-from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import load_controller
+from cartctl.design.controllerfile import build_controllers, load_controller
 from cartctl.errors import InputError
 from cartctl.measures.stepinfo import step_info
 from cartctl.tune.engine import TuneJob, scoring_plant

@@ -29,8 +29,7 @@ import pytest
 
 from cartctl.cli import main
 from cartctl.data.modelfile import ModelFile, load_models, save_models
-from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import load_controller
+from cartctl.design.controllerfile import build_controllers, load_controller
 from cartctl.plants.base import Measurement
 from cartctl.plants.physics import PhysicsPlant, preset
 from cartctl.plants.sim import ArxPlant

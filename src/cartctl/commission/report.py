@@ -154,8 +154,7 @@ def tuning_body(result: tuning.TuningResult, command: str) -> str:
 def tuning_steps(controller_path: Path, model_path: Path, png: Path) -> Series:
     """The chosen controller's simulated step on the model and the timing plants (series, PNG)."""
     from cartctl.data.modelfile import load_models
-    from cartctl.design.build import build_controllers
-    from cartctl.design.controllerfile import load_controller
+    from cartctl.design.controllerfile import build_controllers, load_controller
     from cartctl.plants.sim import ArxPlant
     from cartctl.reference import reference_signal
     from cartctl.runtime.loop import run_in_memory

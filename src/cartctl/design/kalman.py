@@ -1,14 +1,14 @@
 """The realisation of a motor model and the steady-state Kalman speed estimator designed on it.
 
 The realisation is the observer canonical form of G(z) = (β_1 z^{n−1} + … + β_n) / (z^n + α_1
-z^{n−1} + … + α_n) (n = ``model.order``, β the numerator padded to n), a state with a meaning, so
-the state fed back (pole placement) is the state estimated (python-control's ``ss(tf)`` picks none)::
+z^{n−1} + … + α_n) (β the numerator padded to n), a state with a meaning (the state fed back is
+the state estimated; python-control's ``ss(tf)`` picks none)::
 
     x[k+1] = A x[k] + B u[k],   y[k] = C x[k],   A = [−α | I_{n−1}; 0],   B = β,   C = [1, 0, …, 0]
 
 x_1[k] = y[k] is the modelled speed, x_j[k] (j ≥ 2) the part of y[k + j − 1] that inputs and
 outputs up to k − 1 already fix (rad/s); for (a z + b) / (z³ + c z² + d z), x_2[k] = y[k+1] +
-c y[k] and x_3[k] = b u[k−1]. Always observable; minimal when G has no common root.
+c y[k] and x_3[k] = b u[k−1].
 
 The estimator's model is that realisation with the loop's whole delay as states (nk, plus
 ``extra_delay_ticks``: the prediction knows which voltages are on their way) and one
@@ -16,12 +16,11 @@ input-disturbance state b (V)::
 
     x[k+1] = A x[k] + B (u[k] + b[k] + w[k]),    b[k+1] = b[k] + w_b[k],    y[k] = x_1[k] + v[k]
 
-w has std ``process_noise_std_v`` (PWM rounding, the fast part of friction, model error); b is a
-random walk of step std ``bias_drift_std_v`` per tick (0 leaves it out): dry friction and the
-model's DC error, so the estimate is offset-free and b̂ is pole placement's integral action; v is
-the encoder quantisation, R = q²/6 + (extra noise)², q = (2π / counts_per_rev) / Ts (a whole-count
-speed is the difference of two floored angles). x̂_1[k|k] estimates the measured mean speed over
-the last tick; the speed at tick k itself is (x̂_1[k|k] + x̂_1[k+1|k]) / 2.
+w has std ``process_noise_std_v``; b, a random walk of step std ``bias_drift_std_v`` per tick (0
+leaves it out), is dry friction and the model's DC error: the estimate is offset-free and b̂ is
+pole placement's integral action; v is the encoder quantisation, R = q²/6 + (extra noise)², q one
+count per tick. x̂_1[k|k] estimates the measured mean speed over the last tick; the speed at tick
+k itself is (x̂_1[k|k] + x̂_1[k+1|k]) / 2.
 
 The gain is the steady-state filter gain L = P Cᵀ (C P Cᵀ + R)⁻¹, P the a priori covariance of
 the filter DARE (``control.dlqe`` gives the predictor gain A L instead): x̂[k|k] = x̂[k|k−1] +

@@ -19,9 +19,13 @@ from cartctl.design.analysis import (
     settling_bound,
     simulate_step,
 )
-from cartctl.design.build import build_controller
 from cartctl.design.controller_ss import feedback_tf_coeffs
-from cartctl.design.controllerfile import ControllerFile, common_loop_delay, file_sha256
+from cartctl.design.controllerfile import (
+    ControllerFile,
+    build_controller,
+    common_loop_delay,
+    file_sha256,
+)
 from cartctl.design.kalman import KalmanDesign, design_kalman
 from cartctl.design.pi import design_pi, design_pi_bandwidth
 from cartctl.design.poles import design_poles

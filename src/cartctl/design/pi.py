@@ -233,8 +233,7 @@ class PiDesign:
         """Reference → speed, L / (1 + L), as a python-control ``TransferFunction`` (dt = Ts)."""
         import control
 
-        num, den = self._loop()
-        return control.tf(num, np.polyadd(den, num), dt=self.period_s)
+        return control.feedback(self.open_loop())
 
     def bandwidth_hz(self) -> float:
         """Closed-loop −3 dB bandwidth (Hz): where |T| = |L/(1 + L)| first falls below 1/√2;

@@ -16,8 +16,7 @@ from pathlib import Path
 
 from cartctl import __version__
 from cartctl.cart import PERIOD_S
-from cartctl.design.build import build_controllers
-from cartctl.design.controllerfile import ControllerFile, load_controller
+from cartctl.design.controllerfile import ControllerFile, build_controllers, load_controller
 from cartctl.errors import InputError
 from cartctl.export.c_code import c_float, pi_code, poles_code, where
 from cartctl.link.firmware import (

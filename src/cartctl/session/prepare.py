@@ -183,8 +183,8 @@ def prepare_run(
     the Rerun SDK there, before a cart ticks).
     """
     from cartctl.data.modelfile import load_models
-    from cartctl.design.build import build_controllers as build_from_file
     from cartctl.design.controllerfile import ControllerFile, load_controller
+    from cartctl.design.controllerfile import build_controllers as build_from_file
     from cartctl.plants.base import ClockedPlant
     from cartctl.plants.factory import make_plant as factory_make_plant
     from cartctl.plants.factory import plant_period_s

@@ -31,7 +31,7 @@ def make_plant(*args: Any, **kwargs: Any) -> Any:
 
 def build_controllers(*args: Any, **kwargs: Any) -> Any:
     """:func:`cartctl.design.build.build_controllers`, imported on the first call."""
-    from cartctl.design.build import build_controllers
+    from cartctl.design.controllerfile import build_controllers
 
     return build_controllers(*args, **kwargs)
 
