@@ -33,13 +33,8 @@ from cartctl.design.request import MAX_TIMING_NOISE_TICKS, RANGES
 from cartctl.runtime.kalman import KalmanDesign
 from cartctl.runtime.statefeedback import FeedbackGains
 
-COVARIANCE_BOUND = 1e6
-"""Largest covariance entry (rad²/s², V²) an estimator file may hold; the designs hold below 1."""
-
-CONSISTENCY_RTOL = 1e-6
-"""How far a stored C(z) coefficient may be from the one its gains give, relative to the largest
-coefficient of that polynomial (a file rounds nothing: the rest is floating-point noise)."""
-
+COVARIANCE_BOUND = 1e6  # largest covariance entry (rad²/s², V²) of a file; designs hold below 1
+CONSISTENCY_RTOL = 1e-6  # a stored C(z) against its gains', relative to the largest coefficient
 _KALMAN_ARRAYS = ("A", "B", "C", "Q", "P", "L")
 
 

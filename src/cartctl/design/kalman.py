@@ -49,8 +49,7 @@ from cartctl.errors import InputError
 from cartctl.model import ArxModel, check_extra_delay_ticks
 from cartctl.runtime.kalman import KalmanDesign as KalmanDesign  # re-exported: a design's result
 
-_PBH_TOL = 1e-9
-"""A PBH-test singular value below this fraction of the largest counts as rank loss."""
+_PBH_TOL = 1e-9  # a PBH-test singular value below this fraction of the largest is rank loss
 
 
 @dataclass(frozen=True, eq=False)
