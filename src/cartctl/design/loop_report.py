@@ -122,32 +122,6 @@ def loop_shape(
     return LoopShape(freq, loop, ms, ms_hz, mt, mt_hz)
 
 
-def pole_table(poles: Iterable[list[float]], period_s: float) -> list[dict[str, Any]]:
-    """Per discrete pole [re, im], ``{"re", "im", "damping", "freq_hz"}`` (``pole_damping``)."""
-    rows = []
-    for re, im in poles:
-        damping, freq_hz = pole_damping(complex(re, im), period_s)
-        rows.append({"re": re, "im": im, "damping": damping, "freq_hz": freq_hz})
-    return rows
-
-
-def damping_warning(pole_table: list[dict[str, Any]], motor: str) -> str | None:
-    """One line naming motor ``motor``'s least damped pole when its ζ is below ``LIGHT_DAMPING``;
-    None when every ζ is at least that (or undefined: z = 0, z = 1)."""
-    light = [r for r in pole_table if r["damping"] is not None and r["damping"] < LIGHT_DAMPING]
-    if not light:
-        return None
-    worst = min(light, key=lambda r: r["damping"])
-    z = f"{worst['re']:.4f}" + ("" if worst["im"] == 0.0 else f" ± {abs(worst['im']):.4f}j")
-    freq = "" if worst["freq_hz"] is None else f" at {worst['freq_hz']:.2f} Hz"
-    others = len({(r["re"], abs(r["im"])) for r in light}) - 1
-    more = f" ({others} more pole(s) below {LIGHT_DAMPING:g})" if others else ""
-    return (
-        f"motor {motor}: closed-loop pole z = {z} has damping ζ = {worst['damping']:.3f} < "
-        f"{LIGHT_DAMPING:g}{more}: the loop rings{freq} for many periods"
-    )
-
-
 @dataclass(frozen=True, eq=False)
 class MotorAnalysis:
     """One motor's loop analysis: the controller as the loop runs it, L, S and T, the simulated
@@ -172,9 +146,22 @@ class MotorAnalysis:
 
     @property
     def warnings(self) -> list[str]:
-        """One line per warning about this loop."""
-        line = damping_warning(self.pole_table, self.motor)
-        return [] if line is None else [line]
+        """A line naming the least damped closed-loop pole when its ζ is below ``LIGHT_DAMPING``
+        (an undefined ζ, at z = 0 or z = 1, is none)."""
+        table = self.pole_table
+        light = [r for r in table if r["damping"] is not None and r["damping"] < LIGHT_DAMPING]
+        if not light:
+            return []
+        worst = min(light, key=lambda r: r["damping"])
+        z = f"{worst['re']:.4f}" + ("" if worst["im"] == 0.0 else f" ± {abs(worst['im']):.4f}j")
+        freq = "" if worst["freq_hz"] is None else f" at {worst['freq_hz']:.2f} Hz"
+        others = len({(r["re"], abs(r["im"])) for r in light}) - 1
+        more = f" ({others} more pole(s) below {LIGHT_DAMPING:g})" if others else ""
+        return [
+            f"motor {self.motor}: closed-loop pole z = {z} has damping ζ = "
+            f"{worst['damping']:.3f} < {LIGHT_DAMPING:g}{more}: the loop rings{freq} for many "
+            "periods"
+        ]
 
 
 def analyse_designs(
@@ -189,7 +176,10 @@ def analyse_designs(
         dist = simulate_disturbance(
             made.controller, model, disturbance_v=disturbance_v, extra_delay_ticks=extra
         )
-        table = pole_table(made.entry["closed_loop_poles"], model.period_s)
+        table = []  # per pole: damping and natural frequency of its s = ln(z)/Ts
+        for re, im in made.entry["closed_loop_poles"]:
+            damping, freq_hz = pole_damping(complex(re, im), model.period_s)
+            table.append({"re": re, "im": im, "damping": damping, "freq_hz": freq_hz})
         out[m] = MotorAnalysis(ss, loop_shape(ss, model, extra), dist, table, m)
     return out
 
