@@ -44,6 +44,8 @@ def test_model_exports_its_transfer_function(
     mat = _export(capsys, GROUND, tmp_path / "ground.mat")
     doc = tomllib.loads(GROUND.read_text(encoding="utf-8"))
     assert mat["Ts"] == doc["period_s"] == 0.01
+    assert mat["format"] == doc["format"] == "cartctl-model/2"  # the shipped file's own version
+    assert mat["source"] == str(GROUND)
     for motor in "ab":
         entry, got = doc["motors"][motor], mat[f"motor_{motor}"]
         c, d, a, b = entry["theta"]  # the report's (a z + b) / (z³ + c z² + d z)
@@ -66,6 +68,7 @@ def test_pi_controller_steps_as_its_law_says(
     mat = _export(capsys, CONTROLLERS / f"{name}.toml", tmp_path / f"{name}.mat")
     doc = tomllib.loads((CONTROLLERS / f"{name}.toml").read_text(encoding="utf-8"))
     assert mat["method"] == "pi" and mat["loop_delay_ticks"] == doc["loop_delay_ticks"]
+    assert mat["format"] == doc["format"] == "cartctl-controller/2"
     assert mat["extra_delay_ticks"] == doc["request"]["extra_delay_ticks"]
     n = 50
     k = np.arange(n)

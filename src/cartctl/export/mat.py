@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from cartctl.data.modelfile import ModelFile
+from cartctl.data.tomlfile import CONTROLLER_FORMAT, MODEL_FORMAT
 from cartctl.design.controller_ss import controller_state_space
 from cartctl.design.controllerfile import ControllerFile
 
@@ -20,7 +21,7 @@ def model_mat(models: ModelFile, source: str = "") -> dict[str, Any]:
     """The ``.mat`` variables of a model file."""
     out: dict[str, Any] = {
         "Ts": float(models.period_s),
-        "format": "cartctl-model/1",
+        "format": MODEL_FORMAT,
         "source": source,
     }
     for name, model in models.motors.items():
@@ -47,7 +48,7 @@ def controller_mat(controller: ControllerFile, source: str = "") -> dict[str, An
         "loop_delay_ticks": int(controller.loop_delay_ticks or 0),
         "extra_delay_ticks": int(controller.request.get("extra_delay_ticks", 0)),
         "voltage_limit_v": float(controller.voltage_limit_v),
-        "format": "cartctl-controller/1",
+        "format": CONTROLLER_FORMAT,
         "source": source,
     }
     for name, entry in controller.motors.items():
