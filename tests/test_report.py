@@ -17,19 +17,20 @@ from cartctl.model import ArxModel
 from cartctl.signals import square, step
 
 TS = 0.01
+MODELS = Path(__file__).resolve().parents[1] / "models"
 
 
-@pytest.fixture
-def models(ground_path: Path, air_path: Path) -> dict[str, ArxModel]:
+@pytest.fixture(scope="module")
+def models() -> dict[str, ArxModel]:
     return {
-        "ground (models/ground.toml)": load_models(ground_path).motor("a"),
-        "air (models/air.toml)": load_models(air_path).motor("a"),
+        "ground (models/ground.toml)": load_models(MODELS / "ground.toml").motor("a"),
+        "air (models/air.toml)": load_models(MODELS / "air.toml").motor("a"),
         "OE, complex poles": ArxModel((-1.6, 0.68), (0.3, 0.1), nk=2),
         "zero outside": ArxModel((-0.9, 0.2), (0.2, 0.5), nk=2),
     }
 
 
-@pytest.fixture
+@pytest.fixture(scope="module")
 def trace(models: dict[str, ArxModel]) -> Trace:
     u = square(10.0, cycles=4)
     ground = next(iter(models.values()))
@@ -45,6 +46,29 @@ def trace(models: dict[str, ArxModel]) -> Trace:
         },
         source="synthetic.csv",
     )
+
+
+@pytest.fixture(scope="module")
+def report_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One folder for the figures several tests check: each is drawn once per module."""
+    return tmp_path_factory.mktemp("report")
+
+
+@pytest.fixture(scope="module")
+def etfe_png(report_dir: Path, trace: Trace, models: dict[str, ArxModel]) -> tuple[Path, Path]:
+    """(path asked for, path returned) of the ETFE figure with the models: checked as a PNG by
+    test_plot_etfe and embedded in summary.md by test_report_end_to_end."""
+    e = etfe(trace.speed_a, trace.voltage_a, TS, period_ticks=300)
+    path = report_dir / "etfe_a.png"
+    return path, plot_etfe(e, models, path, title="ETFE")
+
+
+@pytest.fixture(scope="module")
+def pzmap_png(report_dir: Path, models: dict[str, ArxModel]) -> tuple[Path, Path]:
+    """(path asked for, path returned) of the pole-zero map of the models: checked as a PNG by
+    test_plot_pzmap and embedded in summary.md by test_report_end_to_end."""
+    path = report_dir / "pz_a.png"
+    return path, plot_pzmap(models, path, title="poles and zeros")
 
 
 def image_size(path: Path) -> tuple[int, int]:
@@ -103,17 +127,17 @@ def test_plot_io_errors(tmp_path: Path, trace: Trace) -> None:
         plot_io(trace, ("a",), tmp_path / "x.png", title="x", zoom_s=(5.0, 2.0))
 
 
-def test_plot_etfe(tmp_path: Path, trace: Trace, models: dict[str, ArxModel]) -> None:
+def test_plot_etfe(tmp_path: Path, trace: Trace, etfe_png: tuple[Path, Path]) -> None:
+    check_png(*etfe_png)
     e = etfe(trace.speed_a, trace.voltage_a, TS, period_ticks=300)
-    path = tmp_path / "etfe.png"
-    check_png(path, plot_etfe(e, models, path, title="ETFE"))
     bare = tmp_path / "etfe_bare.png"
     check_png(bare, plot_etfe(e, {}, bare, title="ETFE, no models"))
 
 
-def test_plot_pzmap(tmp_path: Path, models: dict[str, ArxModel]) -> None:
-    path = tmp_path / "pz.png"
-    check_png(path, plot_pzmap(models, path, title="poles and zeros"))
+def test_plot_pzmap(
+    tmp_path: Path, models: dict[str, ArxModel], pzmap_png: tuple[Path, Path]
+) -> None:
+    check_png(*pzmap_png)
     inside = {k: v for k, v in models.items() if k != "zero outside"}
     path2 = tmp_path / "pz_inside.png"
     check_png(path2, plot_pzmap(inside, path2, title="zoomed"))
@@ -165,16 +189,18 @@ def test_write_summary(tmp_path: Path) -> None:
     assert set(lines[header + 1].replace(" ", "")) <= set("|-")
 
 
-def test_report_end_to_end(tmp_path: Path, trace: Trace, models: dict[str, ArxModel]) -> None:
-    """The figures of one identification, embedded in summary.md, all exist."""
-    e = etfe(trace.speed_a, trace.voltage_a, TS, period_ticks=300)
-    images = [
-        plot_etfe(e, models, tmp_path / "etfe_a.png", title="etfe"),
-        plot_pzmap(models, tmp_path / "pz_a.png", title="pz"),
-    ]
+def test_report_end_to_end(
+    report_dir: Path,
+    models: dict[str, ArxModel],
+    etfe_png: tuple[Path, Path],
+    pzmap_png: tuple[Path, Path],
+) -> None:
+    """The figures of one identification, embedded in summary.md, all exist (the module's
+    figures, drawn once for this test and the per-plot tests above)."""
+    images = [etfe_png[1], pzmap_png[1]]
     rows = [{"model": k, "DC gain": m.dc_gain()} for k, m in models.items()]
-    section = ReportSection("Motor a", "text", [p.relative_to(tmp_path) for p in images], rows)
-    text = write_summary(tmp_path, title="t", sections=[section]).read_text(encoding="utf-8")
+    section = ReportSection("Motor a", "text", [p.relative_to(report_dir) for p in images], rows)
+    text = write_summary(report_dir, title="t", sections=[section]).read_text(encoding="utf-8")
     for image in images:
         assert f"]({image.name})" in text
         assert image.is_file()
