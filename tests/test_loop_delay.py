@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -129,6 +130,32 @@ def _model_file(tmp_path: Path, nk: int, loop_delay_ticks: int | None) -> Path:
     return path
 
 
+Design = Callable[[pytest.CaptureFixture[str], int, "int | None"], tuple[Path, Path, int, str]]
+
+
+@pytest.fixture(scope="module")
+def poles_design(tmp_path_factory: pytest.TempPathFactory) -> Design:
+    """``cartctl design --method poles`` of the test model with (nk, loop delay), run once per
+    module for each pair: (model file, controller file, exit code, stderr). The (1, 1) design is
+    the one test_design_takes_the_loop_delay_from_the_model checks and the one
+    test_a_design_for_the_models_loop_runs_on_its_sim_plant runs."""
+    folder = tmp_path_factory.mktemp("designs")
+    done: dict[tuple[int, int | None], tuple[Path, Path, int, str]] = {}
+
+    def design(
+        capsys: pytest.CaptureFixture[str], nk: int, recorded: int | None
+    ) -> tuple[Path, Path, int, str]:
+        if (nk, recorded) not in done:
+            model = _model_file(folder, nk, recorded)
+            out = folder / f"c-nk{nk}-loop{recorded}.toml"
+            capsys.readouterr()
+            code = main(["design", str(model), "--method", "poles", "--out", str(out)])
+            done[nk, recorded] = (model, out, code, capsys.readouterr().err)
+        return done[nk, recorded]
+
+    return design
+
+
 @pytest.mark.parametrize(
     ("nk", "recorded", "designed", "note"),
     [
@@ -139,19 +166,15 @@ def _model_file(tmp_path: Path, nk: int, loop_delay_ticks: int | None) -> Path:
     ],
 )
 def test_design_takes_the_loop_delay_from_the_model(
-    tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
+    poles_design: Design,
     nk: int,
     recorded: int | None,
     designed: int,
     note: str | None,
 ) -> None:
-    model = _model_file(tmp_path, nk, recorded)
-    out = tmp_path / "c.toml"
-    assert main(["design", str(model), "--method", "poles", "--out", str(out)]) == 0, (
-        capsys.readouterr().err
-    )
-    err = capsys.readouterr().err
+    _, out, code, err = poles_design(capsys, nk, recorded)
+    assert code == 0, err
     doc = tomllib.loads(out.read_text(encoding="utf-8"))
     assert doc["loop_delay_ticks"] == designed
     if note is None:
@@ -180,12 +203,10 @@ def test_a_model_file_with_a_bad_loop_delay_is_one_line(
 
 
 def test_a_design_for_the_models_loop_runs_on_its_sim_plant(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], poles_design: Design
 ) -> None:
-    model = _model_file(tmp_path, 1, 1)  # nk = 1, loop delay 1: nk - 1 would say 0
-    out = tmp_path / "c.toml"
-    assert main(["design", str(model), "--method", "poles", "--out", str(out)]) == 0
-    capsys.readouterr()
+    model, out, code, _ = poles_design(capsys, 1, 1)  # nk = 1, loop delay 1: nk - 1 would say 0
+    assert code == 0
     argv = ["run", "--plant", "sim", "--model", str(model), "--controller", str(out), "--fast",
             "--rerun", "off", "--duration", "0.5", "--out", str(tmp_path / "logs"), "--json"]  # fmt: skip
     assert main(argv) == 0, capsys.readouterr().err
