@@ -199,6 +199,10 @@ def run_grid(
             progress(len(results))
     rest = items[1:] if jobs > 1 else ()
     if rest:
+        # a feasible setting's design imports python-control (and matplotlib with it); a refused
+        # first setting does not, so it is imported here once, not again in each worker
+        import control  # noqa: F401
+
         size = max(1, math.ceil(len(rest) / (4 * jobs)))
         chunks = [replace(job, items=rest[i : i + size]) for i in range(0, len(rest), size)]
         pool = ProcessPoolExecutor(max_workers=min(jobs, len(chunks)), initializer=one_blas_thread)
