@@ -263,7 +263,7 @@ def test_json_keeps_the_contract_and_adds_the_analysis() -> None:
 
 def _texts_inside(fig) -> None:
     """Everything drawn lies inside the figure, and each axes' own notes inside that axes."""
-    fig.canvas.draw()
+    fig.draw_without_rendering()  # the layout and text extents of a draw, without the pixels
     renderer = fig.canvas.get_renderer()
     tight = fig.get_tightbbox(renderer)  # inches, what is drawn
     width, height = fig.get_size_inches()
