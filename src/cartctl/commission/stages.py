@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from cartctl.cart import PERIOD_S
 from cartctl.cli.jsonout import strict
@@ -272,7 +273,9 @@ class Commission:
                 f"{checked.limits['settling_time_s'] * 1e3:.0f} ms; see summary.md")  # fmt: skip
 
     def run_all(self) -> None:
-        """Every stage in order."""
-        for stage in STAGES:
-            self.current = stage
-            getattr(self, f"run_{stage}")()
+        """Every stage in order, on one BLAS thread: the matrices are a few states wide, and more
+        threads only spin (a third of the CPU on two cores), as in the tuning's workers."""
+        with threadpool_limits(limits=1, user_api="blas"):
+            for stage in STAGES:
+                self.current = stage
+                getattr(self, f"run_{stage}")()
