@@ -1,9 +1,10 @@
 """Every way a run ends is a safe exit: real subprocesses, real signals.
 
-``cartctl run`` on the physics simulator in real time gets SIGINT, SIGTERM or SIGHUP once it
-records (and once while it starts): it must send zero volts and log that command as the trace's
-last row, close the CSV and the recording with as many rows as the summary says, print the summary
-and exit 130, 143 or 129, with one line on stderr and no traceback. All wait on real processes in
+``cartctl run`` in real time gets SIGINT, SIGTERM or SIGHUP once it records (on the model
+simulator: both simulators are stepped plants, the stop is the loop's, and the model starts with
+less CPU) and once while it starts (the physics simulator): it must send zero volts and log that
+command as the trace's last row, close the CSV and the recording with as many rows as the summary
+says, print the summary and exit 130, 143 or 129, with one line on stderr and no traceback. All wait on real processes in
 real time (marked ``realtime``); what they wait for is the run's own progress (its stop handlers
 installed, its first rows written), never a fixed time.
 """
@@ -96,7 +97,7 @@ def _check_stopped_run(workdir: Path, out: str, err: str, name: str, rrd_rows) -
     ids=["SIGINT", "SIGHUP"],
 )
 def test_a_signal_mid_run_ends_it_safely(workdir: Path, signum: int, code: int, rrd_rows) -> None:
-    process = _start(workdir, "run", "--plant", "physics", "--reference", "step:8",
+    process = _start(workdir, "run", "--plant", "sim", "--reference", "step:8",
                      "--duration", "30", "--rerun", "save", "--name", "s", "--json")  # fmt: skip
     _wait_recording(process, workdir / "logs" / "s.csv")
     process.send_signal(signum)
@@ -106,7 +107,7 @@ def test_a_signal_mid_run_ends_it_safely(workdir: Path, signum: int, code: int, 
 
 
 def test_a_second_signal_during_the_shutdown_does_not_cut_it_short(workdir: Path, rrd_rows) -> None:
-    process = _start(workdir, "run", "--plant", "physics", "--reference", "step:8",
+    process = _start(workdir, "run", "--plant", "sim", "--reference", "step:8",
                      "--duration", "30", "--rerun", "save", "--name", "s", "--json")  # fmt: skip
     _wait_recording(process, workdir / "logs" / "s.csv")
     process.send_signal(signal.SIGTERM)
