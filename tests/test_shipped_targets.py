@@ -56,6 +56,21 @@ def cartctl_run(capsys: pytest.CaptureFixture[str], *argv: str) -> dict[str, np.
     return read_trace(json.loads(out)["trace"]).columns()
 
 
+@pytest.fixture(scope="module")
+def fast_run():
+    """:func:`cartctl_run`, each command once per module: the on-board step of poles.toml on the
+    physics cart and its square runs serve the step, the estimate's steady state and the
+    estimate's whole-run tests alike (each test in a copy of the same shipped files)."""
+    done: dict[tuple[str, ...], dict[str, np.ndarray]] = {}
+
+    def run(capsys: pytest.CaptureFixture[str], *argv: str) -> dict[str, np.ndarray]:
+        if argv not in done:
+            done[argv] = cartctl_run(capsys, *argv)
+        return done[argv]
+
+    return run
+
+
 def step_of(columns: dict[str, np.ndarray], motor: str) -> tuple[float, float | None]:
     """(overshoot %, settling s) of the true speed, in the band max(2 %, one count per tick)."""
     band = max(0.02, QUANTUM_RAD_S / STEP_RAD_S)
@@ -79,9 +94,11 @@ ON_BOARD_PLANTS = ["sim", "physics", "physics:actuation_ms=3", "physics:actuatio
 
 @pytest.mark.parametrize(("name", "limit_s"), [("poles", 0.09), ("pi", 0.12)])
 @pytest.mark.parametrize("plant", ON_BOARD_PLANTS)
-def test_on_board_step(capsys, workdir: Path, name: str, limit_s: float, plant: str) -> None:
+def test_on_board_step(
+    capsys, workdir: Path, fast_run, name: str, limit_s: float, plant: str
+) -> None:
     assert load_controller(f"controllers/{name}.toml").loop_delay_ticks == 1
-    columns = cartctl_run(capsys, "--plant", plant, "--controller", f"controllers/{name}.toml",
+    columns = fast_run(capsys, "--plant", plant, "--controller", f"controllers/{name}.toml",
                           "--reference", f"step:{STEP_RAD_S:g}", "--duration", "2")  # fmt: skip
     for motor in ("a", "b"):
         overshoot, settling = step_of(columns, motor)
@@ -169,12 +186,11 @@ def rms(error: np.ndarray, index: np.ndarray | slice = slice(None)) -> float:
 
 
 @pytest.fixture(params=["physics", "physics:actuation_ms=10"])
-def poles_square(request, capsys, workdir: Path) -> dict[str, np.ndarray]:
+def poles_square(request, capsys, workdir: Path, fast_run) -> dict[str, np.ndarray]:
     """poles.toml on the physics cart (3 ms and 10 ms actuation), square 8 rad/s with a 2 s
     period, 10 s."""
-    return cartctl_run(capsys, "--plant", request.param, "--controller",
-                       "controllers/poles.toml", "--reference", "square:8:2",
-                       "--duration", "10")  # fmt: skip
+    return fast_run(capsys, "--plant", request.param, "--controller", "controllers/poles.toml",
+                    "--reference", "square:8:2", "--duration", "10")  # fmt: skip
 
 
 def test_pole_placement_estimate_beats_the_encoder_in_steady_state(poles_square) -> None:
@@ -192,11 +208,11 @@ def test_pole_placement_estimate_beats_the_encoder_in_steady_state(poles_square)
 @pytest.mark.parametrize("plant", ["physics", "physics:actuation_ms=10"])
 @pytest.mark.parametrize("reference", ["square:8:2", "step:10"])
 def test_pole_placement_estimate_halves_the_encoder_error_over_the_whole_run(
-    capsys, workdir: Path, plant: str, reference: str
+    capsys, workdir: Path, fast_run, plant: str, reference: str
 ) -> None:
-    columns = cartctl_run(capsys, "--plant", plant, "--controller", "controllers/poles.toml",
-                          "--reference", reference, "--duration", "10" if "square" in reference
-                          else "2")  # fmt: skip
+    columns = fast_run(capsys, "--plant", plant, "--controller", "controllers/poles.toml",
+                       "--reference", reference, "--duration", "10" if "square" in reference
+                       else "2")  # fmt: skip
     for motor in ("a", "b"):
         est, meas, _ = estimator_errors(columns, motor)
         assert rms(est) <= 0.5 * rms(meas), motor
