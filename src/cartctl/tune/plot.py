@@ -60,11 +60,11 @@ def place_labels(
     """Annotate each point (x, y, text; data coordinates) where its text overlaps nothing, and
     return the texts left without a place. Candidates are offsets of 7 to 90 pt in 16 directions,
     the first free one taken (with a thin line when 18 pt or more away): inside the axes, clear of
-    the labels placed so far and of the ``obstacles`` (x, y, radius in pt). Draws the figure once to
-    fix its layout."""
+    the labels placed so far and of the ``obstacles`` (x, y, radius in pt). Lays the figure out once
+    (a draw without rendering) to fix its layout."""
     from matplotlib.transforms import Bbox
 
-    fig.canvas.draw()
+    fig.draw_without_rendering()  # the layout a draw gives, without its pixels
     renderer = fig.canvas.get_renderer()
     px_per_pt = fig.dpi / 72.0
     frame = ax.get_window_extent(renderer)
