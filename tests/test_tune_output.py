@@ -150,7 +150,7 @@ def test_crowded_labels_are_placed_apart_or_named_as_unplaced() -> None:
     ax.set_ylim(-1, 20)
     left = place_labels(fig, ax, [(a, b, str(i)) for i, (a, b) in enumerate(zip(x, y, strict=True))],
                         [(a, b, 3.0) for a, b in zip(x, y, strict=True)])  # fmt: skip
-    fig.canvas.draw()
+    fig.draw_without_rendering()  # the layout and text extents of a draw, without the pixels
     renderer = fig.canvas.get_renderer()
     placed = [t.get_text() for t in ax.texts]
     assert sorted(placed + left, key=int) == [str(i) for i in range(40)] and placed
