@@ -87,6 +87,9 @@ def console_main() -> int:
     """The ``cartctl`` program: :func:`main`, then stop signals ignored until the process ends
     (one arriving while the Rerun SDK flushes at exit must not cut it short)."""
     stopping.install_at_start()  # already done on import, unless another launcher imported us
+    # one BLAS thread unless the user asks for more, read when numpy loads (later: the parser
+    # loads no numpy): cartctl's matrices are a few states wide, more threads only spin
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     try:
         return main()
     finally:
