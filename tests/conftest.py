@@ -3,8 +3,14 @@ the rows of a Rerun recording; the hypothesis profile of the property tests."""
 
 from __future__ import annotations
 
-import contextlib
 import os
+
+# Numerics run as a cartctl process runs them (cli.console_main): one BLAS thread. On a few cores
+# OpenBLAS's second thread only spins on cartctl's small matrices (about a fifth of the suite's
+# CPU). Set before anything loads numpy; a limit the user set wins.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import contextlib
 import shutil
 import threading
 from collections import Counter

@@ -324,7 +324,9 @@ def test_a_worker_runs_one_blas_thread() -> None:
 
     from cartctl.tune.engine import one_blas_thread
 
-    with threadpool_limits(limits=None):  # restores the pools afterwards
+    # two threads first (the suite runs with one, conftest.py): the initializer must bring it down
+    with threadpool_limits(limits=2, user_api="blas"):  # restores the pools afterwards
+        assert {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"} == {2}
         one_blas_thread()
         blas = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
     assert blas and set(blas) == {1}
