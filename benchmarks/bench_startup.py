@@ -30,7 +30,7 @@ FIRST_TICK_GOAL_S = 1.0
 # The child of a first-tick measurement: the wrapper first, then the command line as usual.
 _CHILD = """
 import sys, time
-from cartctl.runtime import executor as _ex, fast as _vx
+from cartctl.runtime import executor as _ex
 def _wrap(cls):
     orig = cls.run
     def _run(self, tick, idle=None):
@@ -43,7 +43,7 @@ def _wrap(cls):
         return orig(self, wrapped, idle)
     cls.run = _run
 _wrap(_ex.PeriodicExecutor)
-_wrap(_vx.BackToBackExecutor)
+_wrap(_ex.BackToBackExecutor)
 from cartctl.cli import main
 raise SystemExit(main(sys.argv[1:]))
 """
