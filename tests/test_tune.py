@@ -322,7 +322,7 @@ def test_a_worker_runs_one_blas_thread() -> None:
     """The pool's initializer, checked with threadpoolctl's own view of the BLAS pools."""
     from threadpoolctl import threadpool_info, threadpool_limits
 
-    from cartctl.tune.engine import one_blas_thread
+    from cartctl.runtime.realtime import one_blas_thread
 
     # two threads first (the suite runs with one, conftest.py): the initializer must bring it down
     with threadpool_limits(limits=2, user_api="blas"):  # restores the pools afterwards

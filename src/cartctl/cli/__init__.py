@@ -116,12 +116,10 @@ def _main(argv: Sequence[str] | None) -> int:
     warnings.showwarning = lambda message, *_, **__: print(  # one line: cartctl CMD: warning: …
         f"cartctl {args.command}: warning: {message}", file=sys.stderr
     )
-    from threadpoolctl import threadpool_limits
+    from cartctl.runtime.realtime import one_blas_thread
 
     try:
-        # one BLAS thread (restored afterwards): cartctl's matrices are a few states wide, more
-        # threads only spin; a library the command loads later keeps its own default
-        with threadpool_limits(limits=1, user_api="blas"):
+        with one_blas_thread():  # restored afterwards
             return int(args.func(args))
     except CartctlError as exc:
         print(f"cartctl {args.command}: error: {exc}", file=sys.stderr)

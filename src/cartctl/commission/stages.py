@@ -13,7 +13,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from cartctl.cart import PERIOD_S
 from cartctl.cli.jsonout import strict
@@ -23,6 +22,7 @@ from cartctl.data.trace import Trace, write_trace
 from cartctl.plants.base import ClockedPlant
 from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
 from cartctl.runtime.loop import ExperimentResult, run_experiment
+from cartctl.runtime.realtime import one_blas_thread
 from cartctl.tune.engine import save_setting
 
 STAGES = ("checks", "excitation", "identification", "tuning", "verification")
@@ -275,7 +275,7 @@ class Commission:
     def run_all(self) -> None:
         """Every stage in order, on one BLAS thread: the matrices are a few states wide, and more
         threads only spin (a third of the CPU on two cores), as in the tuning's workers."""
-        with threadpool_limits(limits=1, user_api="blas"):
+        with one_blas_thread():
             for stage in STAGES:
                 self.current = stage
                 getattr(self, f"run_{stage}")()

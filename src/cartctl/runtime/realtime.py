@@ -16,6 +16,7 @@ import gc
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
+from typing import Any
 
 from cartctl.errors import InputError
 
@@ -122,3 +123,13 @@ def gc_paused(*, collect_new: bool = False) -> Iterator[None]:
         gc.unfreeze()
         if was_enabled:
             gc.enable()
+
+
+def one_blas_thread() -> Any:
+    """BLAS (OpenBLAS under numpy and SciPy) on one thread, through threadpoolctl: from this call
+    on, or within a ``with`` block (the previous setting restored after it). cartctl's matrices
+    are a few states wide; on a few cores a second thread only spins. Covers the libraries loaded
+    by then: a process sets ``OPENBLAS_NUM_THREADS`` before numpy loads for the rest."""
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")

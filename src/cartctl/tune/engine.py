@@ -16,7 +16,6 @@ from typing import Any, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
-from threadpoolctl import threadpool_limits
 
 from cartctl.data.modelfile import ModelFile, load_models
 from cartctl.design.make import design_motor
@@ -28,6 +27,7 @@ from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller
 from cartctl.runtime.loop import run_in_memory
+from cartctl.runtime.realtime import one_blas_thread
 from cartctl.sinks.summary import trace_metrics
 from cartctl.tune.grid import RUN_FAILED, TuneResult, design_request, request_axes
 
@@ -164,10 +164,6 @@ def save_setting(method: str, settings: Mapping[str, float], model_path: str | P
 def evaluate_chunk(job: TuneJob) -> list[TuneResult]:  # the process pool's worker function
     models = load_models(job.model)
     return [evaluate_nominal(job, models, i, s).result for i, s in job.items]
-
-
-def one_blas_thread() -> None:  # else forked workers compete for cores
-    threadpool_limits(limits=1, user_api="blas")
 
 
 class GridRow(Protocol):
