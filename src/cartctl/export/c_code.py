@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from cartctl.design.controller_ss import kalman_from_entry
+from cartctl.design.controller_ss import feedback_gains, kalman_from_entry
 from cartctl.design.controllerfile import ControllerFile
 from cartctl.design.kalman import KalmanDesign
 from cartctl.errors import DataFileError, InputError
@@ -32,28 +32,6 @@ def c_float(value: float) -> str:
 
 def where(controller: ControllerFile) -> str:
     return str(controller.path) if controller.path is not None else "controller file"
-
-
-def _estimator(controller: ControllerFile, motor: str, entry: Mapping[str, Any]) -> KalmanDesign:
-    """The estimator of one motor, its arrays checked for the shapes the C code indexes."""
-    path = controller.path or "controller file"
-    try:
-        design = kalman_from_entry(entry)
-    except KeyError as exc:
-        raise DataFileError(path, f"[motors.{motor}] misses {exc.args[0]}") from None
-    except (TypeError, ValueError) as exc:
-        raise DataFileError(path, f"[motors.{motor}.estimator]: {exc}") from None
-    m = design.A.shape[0] if design.A.ndim == 2 else -1
-    shapes = {"A": (m, m), "B": (m,), "C": (m,), "L": (m,)}
-    for name, shape in shapes.items():
-        array = getattr(design, name)
-        if m < 1 or array.shape != shape or not np.all(np.isfinite(array)):
-            raise DataFileError(
-                path,
-                f"[motors.{motor}.estimator] {name} must be a finite array of shape {shape} "
-                f"(m = the number of states), got shape {array.shape}",
-            )
-    return design
 
 
 def _c_array(values: Sequence[float] | np.ndarray) -> str:
@@ -127,7 +105,7 @@ def pi_code(controller: ControllerFile, motor: str, entry: Mapping[str, Any]) ->
     # the same defaults as PiController: Ki·Ts per tick, tracking gain min(1, Ts·Ki/Kp)
     kt = min(1.0, controller.period_s * ki / kp) if kp > 0.0 else 1.0
     est = entry.get("estimator")
-    design = _estimator(controller, motor, est) if est is not None else None
+    design = kalman_from_entry(est) if est is not None else None
     windup = {
         "conditional": _CONDITIONAL.substitute(clamp=_clamp("u_sat", "u")),
         "back-calculation": f"""\
@@ -223,17 +201,16 @@ _CONDITIONAL = Template("""\
 
 def poles_code(controller: ControllerFile, motor: str, entry: Mapping[str, Any]) -> list[str]:
     """One motor's state feedback: the equations of :class:`StateFeedbackController`."""
-    path = controller.path or "controller file"
-    design = _estimator(controller, motor, entry["estimator"])
-    gains = np.asarray(entry["K"], dtype=float).ravel()
-    n, m = gains.size, design.A.shape[0]
-    if not 1 <= n <= m or not np.all(np.isfinite(gains)):
+    gains = feedback_gains(entry, controller.period_s)
+    n, m = gains.K.size, gains.estimator.A.shape[0]
+    if not 1 <= n <= m or not np.all(np.isfinite(gains.K)):
         raise DataFileError(
-            path, f"[motors.{motor}] K must hold 1..{m} finite gains (one per model state), got {n}"
+            where(controller),
+            f"[motors.{motor}] K must hold 1..{m} finite gains (one per model state), got {n}",
         )
     return _POLES.substitute(
-        m=motor, M=motor.upper(), n=n, states=m, K=_c_array(gains), Ki=c_float(float(entry["Ki"])),
-        Kr=c_float(float(entry["Kr"])), estimator="\n".join(_estimator_code(motor, design)),
+        m=motor, M=motor.upper(), n=n, states=m, K=_c_array(gains.K), Ki=c_float(gains.Ki),
+        Kr=c_float(gains.Kr), estimator="\n".join(_estimator_code(motor, gains.estimator)),
         clamp=_clamp("u", "u_raw"),
     ).split("\n")  # fmt: skip
 
