@@ -7,11 +7,9 @@ from __future__ import annotations
 import csv
 import re
 import warnings
-from collections.abc import Callable, Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TextIO
 
 import numpy as np
 
@@ -38,9 +36,9 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
     checked = None if mapping is None else check_mapping(mapping)
     kind = _sniff(path)
     if kind == "csv":
-        names, header_line = read_csv_header(path)
+        names, header_line, rows, lines = _read_csv(path)
         time_j, plan = plan_columns(path, "CSV", names, checked, header_line)
-        table = read_csv_rows(path, names, header_line)
+        where, expected = Where(path, lines), f"the header has {len(names)}"
     else:
         log = read_qrc5(path) if kind == "qrc5" else read_qrc6(path)
         if log.truncated:
@@ -50,11 +48,11 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
                 DataWarning,
                 stacklevel=2,
             )
-        names = ["time", *log.labels]
+        names, rows = ["time", *log.labels], log.rows
         time_j, plan = plan_columns(path, log.kind, names, checked, None)
-        where = Where(path, row_lines=log.row_lines)
+        where = Where(path, log.row_lines)
         expected = f"the log has {len(names)} columns (time and {len(log.labels)} channels)"
-        table = Table(path, names, to_floats(where, log.rows, names, expected), where)
+    table = Table(path, names, to_floats(where, rows, names, expected), where)
     _check_finite(table)
     _check_voltages(table, plan)
     time = table.values[:, time_j]
@@ -68,8 +66,7 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
     if kind == "qrc5":  # 8 float then 4 int channels after the time
         integers = {name for name, j in plan.items() if j is not None and j > QRC5_FLOATS}
     else:  # the columns whose every field is written as an integer
-        text = (lambda: _data_lines(path, header_line)[0]) if kind == "csv" else (lambda: log.rows)
-        integers = _integer_text(table, plan, text)
+        integers = _integer_text(table, plan, rows)
     integers -= set(REQUIRED_COLUMNS)
     return Trace.from_columns(columns, source=str(path), integer_columns=integers)
 
@@ -78,16 +75,11 @@ QRC5_FLOATS = 8
 _INTEGER = re.compile(r"\s*[+-]?\d+\s*\Z")
 
 
-def _integer_text(
-    table: Table, plan: Mapping[str, int | None], text: Callable[[], list[list[str]]]
-) -> set[str]:
-    """The extra columns whose every field is an integer's text (``text()`` only when needed)."""
+def _integer_text(table: Table, plan: Mapping[str, int | None], rows: list[list[str]]) -> set[str]:
+    """The extra columns whose every field is an integer's text."""
     values = table.values
     whole = {name: j for name, j in plan.items() if j is not None and name not in REQUIRED_COLUMNS
              and np.all(values[:, j] == np.round(values[:, j]))}  # fmt: skip
-    if not whole:
-        return set()
-    rows = text()
     return {name for name, j in whole.items() if all(_INTEGER.match(row[j]) for row in rows)}
 
 
@@ -200,11 +192,8 @@ class Where:
 
     path: Path
     row_lines: list[int] | None = None
-    header_line: int | None = None  # the lines are read from the file when first asked
 
     def __call__(self, i: int) -> tuple[int | None, str]:
-        if self.row_lines is None and self.header_line is not None:
-            self.row_lines = _data_lines(self.path, self.header_line)[1]
         if self.row_lines is None:
             return None, f"row {i + 1}"
         return self.row_lines[i], f"line {self.row_lines[i]}"
@@ -226,68 +215,37 @@ class Table:
     where: Where
 
 
-def read_csv_header(path: Path) -> tuple[list[str], int]:
-    """The CSV header's names and line; also make sure that data rows follow."""
-    with _open_text(path) as file:
-        number, line = 1, file.readline()
-        while line and not line.strip():
-            number, line = number + 1, file.readline()
-        names = [name.strip() for name in next(csv.reader([line]))]
-        if all(_is_number(name) for name in names):
-            raise DataFileError(
-                path,
-                "no header row: the first row holds numbers; expected column names first, "
-                f"e.g. {','.join(REQUIRED_COLUMNS)}",
-                line=number,
-            )
-        for k, name in enumerate(names):
-            if not name:
-                raise DataFileError(path, f"column {k + 1} of the header has no name", line=number)
-            if names.index(name) != k:
-                raise DataFileError(
-                    path, f"column name {name!r} appears twice; names must be unique", line=number
-                )
-        if not any(line.strip() for line in file):
-            raise DataFileError(path, "no data rows after the header; expected one per 10 ms tick")
-    return names, number
-
-
-def read_csv_rows(path: Path, names: list[str], header_line: int) -> Table:
-    """The numbers after the header: np.loadtxt first, and on failure a scan for the culprit."""
-    with _open_text(path) as file:
-        for _ in range(header_line):
-            file.readline()
-        try:
-            values = np.loadtxt(file, delimiter=",", comments=None, ndmin=2, dtype=np.float64)
-        except ValueError:
-            values = None
-    if values is not None and values.shape[1] == len(names):
-        return Table(path, names, values, Where(path, header_line=header_line))
-    rows, lines = _data_lines(path, header_line)
-    where = Where(path, row_lines=lines)
-    return Table(path, names, to_floats(where, rows, names, f"the header has {len(names)}"), where)
-
-
-def _data_lines(path: Path, header_line: int) -> tuple[list[list[str]], list[int]]:
-    """The non-blank rows after the header (read with :mod:`csv`) and their line numbers."""
+def _read_csv(path: Path) -> tuple[list[str], int, list[list[str]], list[int]]:
+    """The header's names and line, and the non-blank rows after it with their lines."""
     rows: list[list[str]] = []
     lines: list[int] = []
-    with _open_text(path) as file:
-        reader = csv.reader(file)
-        for row in reader:
-            if reader.line_num > header_line and any(cell.strip() for cell in row):
-                rows.append(row)
-                lines.append(reader.line_num)
-    return rows, lines
-
-
-@contextmanager
-def _open_text(path: Path) -> Iterator[TextIO]:
     try:
         with path.open(encoding="utf-8-sig") as file:
-            yield file
+            reader = csv.reader(file)
+            for row in reader:
+                if any(cell.strip() for cell in row) or (not rows and len(row) > 1):
+                    rows.append(row)
+                    lines.append(reader.line_num)
     except UnicodeDecodeError as err:
         raise DataFileError(path, f"not UTF-8 text (byte {err.start}); expected CSV") from err
+    names, number = [name.strip() for name in rows.pop(0)], lines.pop(0)
+    if all(_is_number(name) for name in names):
+        raise DataFileError(
+            path,
+            "no header row: the first row holds numbers; expected column names first, "
+            f"e.g. {','.join(REQUIRED_COLUMNS)}",
+            line=number,
+        )
+    for k, name in enumerate(names):
+        if not name:
+            raise DataFileError(path, f"column {k + 1} of the header has no name", line=number)
+        if names.index(name) != k:
+            raise DataFileError(
+                path, f"column name {name!r} appears twice; names must be unique", line=number
+            )
+    if not rows:
+        raise DataFileError(path, "no data rows after the header; expected one per 10 ms tick")
+    return names, number, rows, lines
 
 
 def _is_number(text: str) -> bool:

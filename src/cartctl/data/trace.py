@@ -247,15 +247,6 @@ class TraceMeta:
     created: str = ""
     path: Path | None = None
 
-    def to_toml_dict(self) -> dict[str, Any]:
-        """The document :func:`write_trace_meta` writes (no key for an unknown loop delay)."""
-        out: dict[str, Any] = {"format": TRACE_META_FORMAT, "plant": self.plant}
-        if self.loop_delay_ticks is not None:
-            out["loop_delay_ticks"] = int(self.loop_delay_ticks)
-        out |= {k: getattr(self, k) for k in ("command", "controller", "model") if getattr(self, k)}
-        out["created"] = self.created or datetime.now(UTC).isoformat(timespec="seconds")
-        return out
-
 
 def meta_path(trace_path: str | Path) -> Path:
     """The meta file of a trace: ``logs/ground.csv`` → ``logs/ground.meta.toml``."""
@@ -275,18 +266,17 @@ def write_trace_meta(
     """Write the meta file beside the trace ``trace_path`` (which need not exist yet)."""
     if loop_delay_ticks is not None and int(loop_delay_ticks) < 0:
         raise InputError(f"loop_delay_ticks must be >= 0 ticks, got {loop_delay_ticks}")
-    meta = TraceMeta(
-        plant=plant,
-        loop_delay_ticks=loop_delay_ticks,
-        command=command,
-        controller="" if controller is None else str(Path(controller).resolve()),
-        model="" if model is None else str(Path(model).resolve()),
-    )
+    doc: dict[str, Any] = {"format": TRACE_META_FORMAT, "plant": plant}
+    if loop_delay_ticks is not None:
+        doc["loop_delay_ticks"] = int(loop_delay_ticks)
+    files = {"controller": controller, "model": model}
+    doc |= {"command": command} if command else {}
+    doc |= {k: str(Path(v).resolve()) for k, v in files.items() if v is not None}
+    doc["created"] = datetime.now(UTC).isoformat(timespec="seconds")
     path = meta_path(trace_path)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(
-        "# cartctl: the loop the trace beside this file was recorded in\n"
-        + tomli_w.dumps(meta.to_toml_dict()),
+        "# cartctl: the loop the trace beside this file was recorded in\n" + tomli_w.dumps(doc),
         encoding="utf-8",
     )
     return path
