@@ -1,6 +1,6 @@
 """The results the Python API returns: identified models, designs and simulated runs.
 
-Each prints as a title, one table row per motor and a line of hints (:class:`Summary`), and
+Each prints as a title, one table row per motor and a line of hints, and
 shows as the same table in Jupyter; the arrays and full results stay in their attributes.
 matplotlib is imported only when a figure is drawn."""
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 import html
 import math
 import shlex
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -44,35 +44,6 @@ def numbers(values: Iterable[float], digits: int = 4) -> str:
     return "[" + ", ".join(number(v, digits) for v in values) + "]"
 
 
-@dataclass(frozen=True)
-class Summary:
-    """A result in a few lines: a title, a table (one row per motor, cells formatted, units in the
-    headers) and a line of hints (what else the object offers)."""
-
-    title: str
-    headers: tuple[str, ...]
-    rows: tuple[tuple[str, ...], ...]
-    hint: str = ""
-
-    def text(self) -> str:
-        lines = [self.title, *render_table(self.headers, self.rows, indent="  ")]
-        if self.hint:
-            lines.append("  " + self.hint)
-        return "\n".join(lines)
-
-    def html(self) -> str:
-        esc = html.escape
-        head = "".join(f"<th>{esc(h)}</th>" for h in self.headers)
-        body = "".join(
-            "<tr>" + "".join(f"<td>{esc(c)}</td>" for c in row) + "</tr>" for row in self.rows
-        )
-        hint = f"<br><small>{esc(self.hint)}</small>" if self.hint else ""
-        return (
-            f"<div><strong>{esc(self.title)}</strong>"
-            f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>{hint}</div>"
-        )
-
-
 def _drawn(columns: Mapping[str, NDArray[np.float64]], name: str) -> NDArray[np.float64]:
     """A column without the stop row (the zero-volt command a run ends with)."""
     values = np.asarray(columns[name], dtype=float)
@@ -82,17 +53,32 @@ def _drawn(columns: Mapping[str, NDArray[np.float64]], name: str) -> NDArray[np.
 _IDENT_HEADERS = ("motor", "nk", "θ", "θ std", "fit sim (%)", "fit pred (%)", "max |pole|")
 
 
-class _Shown:
-    """``repr()`` and Jupyter's display from the class's ``_summary()``."""
+_Table = tuple[str, Sequence[str], Sequence[Sequence[str]], str]  # title, headers, rows, hint
 
-    def _summary(self) -> Summary:
+
+class _Shown:
+    """``repr()`` and Jupyter's display of a result in a few lines, from the class's
+    ``_summary()``: a title, a table (one row per motor, cells formatted, units in the headers)
+    and a line of hints (what else the object offers)."""
+
+    def _summary(self) -> _Table:
         raise NotImplementedError
 
     def __repr__(self) -> str:
-        return self._summary().text()
+        title, headers, rows, hint = self._summary()
+        return "\n".join([title, *render_table(headers, rows, indent="  "), "  " + hint])
 
     def _repr_html_(self) -> str:
-        return self._summary().html()
+        title, headers, rows, hint = self._summary()
+
+        def cells(tag: str, values: Iterable[str]) -> str:
+            return "".join(f"<{tag}>{html.escape(v)}</{tag}>" for v in values)
+
+        body = "".join(f"<tr>{cells('td', row)}</tr>" for row in rows)
+        return (
+            f"<div><strong>{html.escape(title)}</strong><table><thead><tr>{cells('th', headers)}"
+            f"</tr></thead><tbody>{body}</tbody></table><br><small>{html.escape(hint)}</small></div>"
+        )
 
 
 @dataclass(frozen=True, repr=False, eq=False)
@@ -122,13 +108,13 @@ class MotorResult(_Shown):
                 number(self.fit_simulation_percent), number(self.fit_prediction_percent),
                 number(self.model.pole_radius()))  # fmt: skip
 
-    def _summary(self) -> Summary:
+    def _summary(self) -> _Table:
         m = self.model
         title = (f"MotorResult: {self.details.chosen.method.upper()} model of motor "
                  f"{self.details.motor}, na = {len(m.ar)}, nb = {len(m.b)}, "
                  f"Ts = {number(m.period_s)} s")  # fmt: skip
-        return Summary(title, _IDENT_HEADERS, (self.row(self.details.motor),),
-                       ".model, .tf (python-control), .theta, .details")  # fmt: skip
+        hint = ".model, .tf (python-control), .theta, .details"
+        return title, _IDENT_HEADERS, (self.row(self.details.motor),), hint
 
 
 @dataclass(frozen=True, repr=False, eq=False)
@@ -155,7 +141,7 @@ class Identification(_Shown):
         save_models(self.model_file(), path)
         return Path(path)
 
-    def _summary(self) -> Summary:
+    def _summary(self) -> _Table:
         r = self.request
         shown = ", ".join(self.sources[:2]) + (f" and {len(self.sources) - 2} more"
                                                if len(self.sources) > 2 else "")  # fmt: skip
@@ -166,8 +152,17 @@ class Identification(_Shown):
         title = (f"Identification: {r.method.upper()}, na = {r.na}, nb = {r.nb}{prefilter}, "
                  f"Ts = {number(period)} s{loop}, from {shown}")  # fmt: skip
         rows = tuple(result.row(m) for m, result in self.motors.items())
-        return Summary(title, _IDENT_HEADERS, rows,
-                       "ident['a'] for one motor (.tf, .model); .save('models/mine.toml')")  # fmt: skip
+        hint = "ident['a'] for one motor (.tf, .model); .save('models/mine.toml')"
+        return title, _IDENT_HEADERS, rows, hint
+
+
+_DESIGN_COLUMNS = {  # a figure of a motor's entry or of its simulated step: its header
+    "phase_margin_deg": "phase margin (°)",
+    "gain_margin_db": "gain margin (dB)",
+    "crossover_hz": "crossover (Hz)",
+    "overshoot_percent": "overshoot (%)",
+    "settling_time_s": "settling (s)",
+}
 
 
 def _gains(entry: dict[str, Any]) -> str:
@@ -214,24 +209,28 @@ class Design(_Shown):
         save_controller(self.controller_file(), path)
         return Path(path)
 
-    def _summary(self) -> Summary:
-        headers = ("motor", "gains", "phase margin (°)", "gain margin (dB)", "crossover (Hz)",
-                   "overshoot (%)", "settling (s)")  # fmt: skip
+    def _summary(self) -> _Table:
         rows = []
         for m, motor in self.designs.motors.items():
-            e, step = motor.entry, motor.entry.get("step", {})
-            rows.append((m, _gains(e), number(e.get("phase_margin_deg"), 3),
-                         number(e.get("gain_margin_db"), 3), number(e.get("crossover_hz"), 3),
-                         number(step.get("overshoot_percent"), 3),
-                         number(step.get("settling_time_s"), 3)))  # fmt: skip
-        method = {"pi": "PI", "poles": "pole placement"}.get(
-            self.request.method, self.request.method
-        )
+            figures = {**motor.entry, **motor.entry.get("step", {})}
+            cells = (number(figures.get(k), 3) for k in _DESIGN_COLUMNS)
+            rows.append((m, _gains(motor.entry), *cells))
+        method = "PI" if self.request.method == "pi" else "pole placement"
         title = (f"Design: {method} on {self.model_path}, "
                  f"Ts = {number(self.period_s)} s (step {number(self.request.step_rad_s)} rad/s "
                  f"on the model)")  # fmt: skip
-        return Summary(title, tuple(headers), tuple(rows),
-                       f"as `{self.command()}`; design['a'] has every figure; .save(path)")  # fmt: skip
+        hint = f"as `{self.command()}`; design['a'] has every figure; .save(path)"
+        return title, ("motor", "gains", *_DESIGN_COLUMNS.values()), rows, hint
+
+
+_RUN_COLUMNS = {  # a figure of the run summary's motor: its header
+    "overshoot_percent": "overshoot (%)",
+    "settling_time_s": "settling (s)",
+    "rise_time_s": "rise (s)",
+    "steady_state_error": "steady-state error (rad/s)",
+    "rms_error": "RMS error (rad/s)",
+    "max_abs_voltage": "max |V| (V)",
+}
 
 
 @dataclass(frozen=True, repr=False, eq=False)
@@ -263,20 +262,16 @@ class SimulationResult(_Shown):
                  f"reference {self.reference}" if self.reference else ""]  # fmt: skip
         return (self.controller or "a controller") + sep + ", ".join(p for p in where if p)
 
-    def _summary(self) -> Summary:
+    def _summary(self) -> _Table:
         s = self.summary
-        headers = ("motor", "overshoot (%)", "settling (s)", "rise (s)",
-                   "steady-state error (rad/s)", "RMS error (rad/s)", "max |V| (V)")  # fmt: skip
-        keys = ("overshoot_percent", "settling_time_s", "rise_time_s", "steady_state_error",
-                "rms_error", "max_abs_voltage")  # fmt: skip
-        rows = tuple((m, *(number(s["motors"][m].get(k), 3) for k in keys))
-                     for m in self.motors if m in s.get("motors", {}))  # fmt: skip
+        rows = [(m, *(number(s["motors"][m].get(k), 3) for k in _RUN_COLUMNS))
+                for m in self.motors if m in s.get("motors", {})]  # fmt: skip
         failed = f"; stopped early: {self.failure}" if self.failure else ""
         title = (f"SimulationResult: {self.what()}, {s.get('ticks')} ticks "
                  f"({number(s.get('duration_s'))} s){failed}")  # fmt: skip
         on = s.get("metrics_signal", "speed").replace("_", " ")
-        return Summary(title, headers, rows,
-                       f"metrics on the {on}; .plot(), .columns, .to_dataframe()")  # fmt: skip
+        hint = f"metrics on the {on}; .plot(), .columns, .to_dataframe()"
+        return title, ("motor", *_RUN_COLUMNS.values()), rows, hint
 
     def to_dataframe(self) -> Any:
         """The columns as a pandas DataFrame (``pip install "cartctl[pandas]"``)."""
