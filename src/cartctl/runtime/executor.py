@@ -45,12 +45,8 @@ class Clock(Protocol):
 
 
 class MonotonicClock:
-    """:func:`time.perf_counter` (``CLOCK_MONOTONIC`` on Linux), with a sleep-then-spin wait.
-
-    ``wait_until`` sleeps until ``spin_s`` (s) before the deadline, then busy-waits: the spin
-    absorbs the sleep's wake-up latency (50-100 µs) at up to ``spin_s`` of a core per wait;
-    a thread woken later still starts late (SCHED_FIFO, :mod:`cartctl.runtime.realtime`).
-    """
+    """:func:`time.perf_counter`; ``wait_until`` sleeps until ``spin_s`` (s) before the deadline,
+    then busy-waits, absorbing the sleep's 50-100 µs wake-up latency."""
 
     def __init__(self, spin_s: float = 0.001) -> None:
         if not (math.isfinite(spin_s) and spin_s >= 0.0):
@@ -70,8 +66,7 @@ class MonotonicClock:
 
 
 class SimulatedClock:
-    """Simulated time (s), moved only by :meth:`wait_until` (straight to the deadline) and
-    :meth:`advance` (a test's slow work, a simulated plant's own latency)."""
+    """Simulated time (s), moved only by :meth:`wait_until` and :meth:`advance`."""
 
     def __init__(self, start_s: float = 0.0) -> None:
         if not math.isfinite(start_s):
@@ -110,10 +105,9 @@ def check_count(name: str, value: int, minimum: int) -> int:
 
 @dataclass(frozen=True)
 class TimingStats:
-    """Timing of one run of an executor (module docstring): ``duration_s`` from the first
-    deadline to the end of the last tick; the period error and compute time (µs) as median, 99th
-    percentile and maximum (NaN when no tick ran).
-    """
+    """One run's timing (module docstring): ``duration_s`` from the first deadline to the end of
+    the last tick; period error and compute time (µs): median, 99th percentile, maximum (NaN: no
+    tick ran)."""
 
     period_s: float
     ticks: int
@@ -139,7 +133,6 @@ class TimingStats:
         miss_ticks: tuple[int, ...] = (),
         skipped_deadlines: int = 0,
     ) -> TimingStats:
-        """Statistics from the per-tick period errors and compute times (µs, one per tick)."""
         pe = np.asarray(period_error_us, dtype=np.float64)
         cu = np.asarray(compute_us, dtype=np.float64)
         if pe.shape != cu.shape or pe.ndim != 1:
@@ -153,14 +146,12 @@ class TimingStats:
                 return [math.nan] * 3
             return [float(v) for v in (*np.percentile(x, [50.0, 99.0]), x.max())]
 
-        (pe50, pe99, pemax), (cu50, cu99, cumax) = summary(pe), summary(cu)
-        return cls(float(period_s), int(pe.size), float(duration_s), len(miss_ticks),
-                   int(skipped_deadlines), tuple(int(k) for k in miss_ticks),
-                   pe50, pe99, pemax, cu50, cu99, cumax)  # fmt: skip
+        misses = tuple(int(k) for k in miss_ticks)
+        head = (float(period_s), int(pe.size), float(duration_s), len(misses))
+        return cls(*head, int(skipped_deadlines), misses, *summary(pe), *summary(cu))
 
     def to_dict(self) -> dict[str, Any]:
-        """The timing part of ``run --json`` (docs/architecture.md), plus skipped deadlines;
-        times in µs except ``duration_s``, null for the percentiles of an empty run."""
+        """The timing part of ``run --json`` (docs/architecture.md), plus skipped deadlines."""
 
         def nums(name: str) -> dict[str, float | None]:
             values = {k: getattr(self, f"{name}_{k}") for k in ("p50", "p99", "max")}
@@ -178,7 +169,7 @@ class TimingStats:
 
 
 class _Recorder:
-    """The per-tick period errors and compute times (µs) of a run, its misses and its span."""
+    """A run's per-tick period errors and compute times (µs), its misses and its span."""
 
     period_s: float
 
@@ -193,7 +184,7 @@ class _Recorder:
         return self._skipped
 
     def stats(self) -> TimingStats:
-        """Statistics of the current or last run, over the ticks completed so far."""
+        """The current or last run's, over the ticks completed so far."""
         duration = 0.0 if math.isnan(self._end_s) else self._end_s - self.t0_s
         return TimingStats.from_samples(
             np.frombuffer(self._period_error_us, dtype=np.float64),
@@ -204,12 +195,9 @@ class _Recorder:
 
 
 class PeriodicExecutor(_Recorder):
-    """Runs a tick function every ``period_s`` (s) on absolute deadlines of ``clock``.
-
-    ``max_ticks``: stop after this many ticks (None: until the tick function returns False).
-    While a tick runs, ``tick_index`` (k), ``grid_index`` (m), ``deadline_s``, ``start_s`` (s,
-    on the clock) and ``period_error_us`` describe it, so the tick can log its own timing.
-    """
+    """Runs a tick function every ``period_s`` (s) on absolute deadlines of ``clock``, at most
+    ``max_ticks`` times; while a tick runs, ``tick_index`` (k), ``grid_index`` (m), ``deadline_s``,
+    ``start_s`` and ``period_error_us`` describe it."""
 
     def __init__(self, period_s: float, clock: Clock, *, max_ticks: int | None = None) -> None:
         self.period_s = check_period(period_s)
@@ -227,12 +215,9 @@ class PeriodicExecutor(_Recorder):
     def run(
         self, tick: Callable[[int], bool], idle: Callable[[], None] | None = None
     ) -> TimingStats:
-        """Call ``tick(k)`` on a new deadline grid until it returns False or ``max_ticks`` ran.
-
-        An exception from ``tick`` ends the run and propagates (:meth:`stats` has the ticks
-        done). ``idle`` runs after each tick, once its compute time is taken, before the wait:
-        work that is not the tick's (past the deadline, it shows as the next period error).
-        """
+        """Call ``tick(k)`` on a new deadline grid until it returns False or ``max_ticks`` ran (an
+        exception propagates); ``idle`` runs after each tick's compute time is taken, before the
+        wait (past the deadline, it shows as the next period error)."""
         self._clear()
         now, wait_until = self.clock.now_s, self.clock.wait_until
         period, limit = self.period_s, self.max_ticks
@@ -288,10 +273,8 @@ class PeriodicExecutor(_Recorder):
 
 
 class BackToBackExecutor:
-    """The fast simulated loop's executor (``run --fast``, ``tune``, the Python API): ``tick(k)``
-    back to back (tick k at ``k * period_s``, period error 0, no miss) up to ``max_ticks``, and
-    the sinks' block work ``idle`` every ``idle_every`` ticks and at the end, not after each
-    (about a quarter of the fast loop's time, ``benchmarks/bench_run.py``)."""
+    """The fast simulated loop's executor: ``tick(k)`` back to back (at ``k * period_s``, period
+    error 0) up to ``max_ticks``, and ``idle`` every ``idle_every`` ticks and at the end."""
 
     def __init__(self, period_s: float, *, max_ticks: int, idle_every: int = 1000) -> None:
         self.period_s = check_period(period_s)
@@ -302,8 +285,7 @@ class BackToBackExecutor:
     def run(
         self, tick: Callable[[int], bool], idle: Callable[[], None] | None = None
     ) -> TimingStats:
-        """Call ``tick(k)`` until it returns False or ``max_ticks`` ran; an exception from it
-        propagates (:meth:`stats` counts the ticks completed)."""
+        """Call ``tick(k)`` until it returns False or ``max_ticks`` ran."""
         self.ticks = 0
         every = self.idle_every
         for k in range(self.max_ticks):
@@ -327,9 +309,9 @@ class BackToBackExecutor:
 
 
 class CartClockedExecutor(_Recorder):
-    """Runs ``tick(k)`` once per cart tick until it returns False or ``max_ticks`` ran, once the
-    plant's first measurement has arrived; ``compute_us`` gives the loop's compute time of the tick
-    just run (µs), ``now_s`` the clock the plant stamps arrivals with (``time.perf_counter``)."""
+    """Runs ``tick(k)`` once per cart tick until it returns False or ``max_ticks`` ran;
+    ``compute_us`` gives the compute time of the tick just run (µs), ``now_s`` the clock the plant
+    stamps arrivals with."""
 
     def __init__(
         self,
@@ -351,7 +333,6 @@ class CartClockedExecutor(_Recorder):
         return int(getattr(self.plant, "skipped_ticks", 0))
 
     def run(self, tick: Callable[[int], bool]) -> TimingStats:
-        """Run the ticks; an exception from ``tick`` propagates (:meth:`stats` has the ticks done)."""
         plant, period = self.plant, self.period_s
         anchor = math.inf
         self.t0_s = plant.arrival_s

@@ -28,8 +28,8 @@ from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS, Sink
 
 
 class MemorySink:
-    """Keeps every row in memory, for the run summary (same numbers as the CSV); ``idle`` packs
-    them into float64 blocks, so no Python tuple is kept for long (1 GB for a 24 h run)."""
+    """Keeps every row in memory for the run summary; ``idle`` packs them into float64 blocks (no
+    Python tuple kept for long: 1 GB for a 24 h run)."""
 
     BLOCK_ROWS = 1024
 
@@ -71,9 +71,8 @@ class MemorySink:
 
 @dataclass
 class LoopState:
-    """What happened, for the summary and the exit code: ``rows`` written to the sinks (the
-    ticks and the stop row), whether the stop command went out, and ``incomplete``, the files a
-    failed write left incomplete (one error per file: a fault of the run)."""
+    """What happened, for the summary and the exit code: ``rows`` written (the ticks and the stop
+    row) and ``incomplete``, one error per file a failed write left incomplete."""
 
     ticks: int = 0
     rows: int = 0
@@ -98,7 +97,6 @@ class PerTick(Protocol):
 
 
 def _per_tick(reference: PerTick | None, n: int) -> PerTick:
-    """Arrays become lists (fast to index); a ReferenceSchedule stays as it is."""
     if reference is None:
         return [0.0] * n
     if isinstance(reference, np.ndarray | list | tuple):
@@ -153,9 +151,8 @@ class ControlLoop:
         self.columns: tuple[str, ...] = TRACE_COLUMNS
 
     def start(self) -> None:
-        """Reset the controllers and the plant, open the sinks (before the first deadline); a
-        cart-clocked plant last, so that the sinks' start-up does not put the loop behind the cart.
-        """
+        """Reset the controllers and the plant, open the sinks; a cart-clocked plant last, so that
+        the sinks' start-up does not put the loop behind the cart."""
         for c in self.controllers.values():
             c.reset()
         if self._clocked:  # a real cart reports no true speed; the virtual one does
@@ -192,20 +189,16 @@ class ControlLoop:
     def tick(
         self, k: int, period_error_us: float, start_s: float, time_s: float | None = None
     ) -> bool:
-        """Run tick k; returns False after the last tick.
-
-        ``period_error_us`` is how late the tick started (µs), ``start_s`` when it started (clock
-        seconds), ``time_s`` its place on the time axis (default k·Ts; after skipped deadlines the
-        executor's grid time).
-        """
+        """Run tick k (started ``period_error_us`` late, at ``start_s`` on the clock, placed at
+        ``time_s`` on the time axis, default k·Ts); False after the last tick."""
         y = self._y
         if y is None:
             raise InputError("ControlLoop.start() must run before the first tick")
-        ra, rb = self.ref_a[k], self.ref_b[k]
-        ua, ea = self._command("a", ra, y.speed_a_rad_s)
-        ub, eb = self._command("b", rb, y.speed_b_rad_s)
-        row = (k * self.period_s if time_s is None else time_s, ua, ub, y.speed_a_rad_s,
-               y.speed_b_rad_s, k, ra, rb, ea, eb, period_error_us)  # fmt: skip
+        ra, rb, ya, yb = self.ref_a[k], self.ref_b[k], y.speed_a_rad_s, y.speed_b_rad_s
+        ua, ea = self._command("a", ra, ya)
+        ub, eb = self._command("b", rb, yb)
+        t = k * self.period_s if time_s is None else time_s
+        row = (t, ua, ub, ya, yb, k, ra, rb, ea, eb, period_error_us)
         if self._clocked:  # send, then log the tick, then wait for the cart's next one
             self.plant.send(ua, ub)  # type: ignore[attr-defined]
             self._log(row, y, start_s)
@@ -218,8 +211,7 @@ class ControlLoop:
         return k + 1 < self.n_ticks
 
     def _log(self, head: tuple[float, ...], y: Measurement, start_s: float) -> None:
-        """Write the row ``head`` (the trace columns up to the period error) with the compute
-        time since ``start_s`` and, where the plant knows them, the true speeds."""
+        """Write ``head`` with the compute time since ``start_s`` and any true speeds."""
         self.last_compute_us = (self.now_s() - start_s) * 1e6
         row = (*head, self.last_compute_us)
         if self._true:
@@ -229,14 +221,12 @@ class ControlLoop:
         self._each(self._writers, row)
 
     def idle(self) -> None:
-        """The sinks' work that need not delay a command: after a tick's compute time is taken
-        (by the executor, or on a cart-clocked plant by the tick, before waiting for the cart)."""
+        """The sinks' work that need not delay a command, after a tick's compute time is taken."""
         self._each(self._idlers)
 
     def finish(self) -> None:
-        """Zero volts, plant closed, sinks closed: on every exit path; never raises. The zero-volt
-        command is the trace's stop row (tick index = rows so far, 0 V, the measurement at hand,
-        no compute), written only when it went out (not to a vanished port)."""
+        """Zero volts, plant and sinks closed, on every exit path; never raises. The zero-volt
+        command, when it went out, is the trace's stop row (tick = rows so far, 0 V, no compute)."""
         try:  # a cart-clocked plant: send only, the cart's next tick need not be waited for
             self.plant.send(0.0, 0.0) if self._clocked else self.plant.step(0.0, 0.0)  # type: ignore[attr-defined]
             sent = True
@@ -278,8 +268,8 @@ def run_in_memory(
     period_s: float,
     voltage_limit_v: float,
 ) -> tuple[dict[str, NDArray[np.float64]], LoopState]:
-    """Run with a :class:`~cartctl.runtime.loop.MemorySink` (ending, like every run, with the
-    zero-volt stop row): the trace columns and what happened (a plant fault in ``state.failure``)."""
+    """Run into a :class:`MemorySink` (with the stop row): the trace columns and what happened (a
+    plant fault in ``state.failure``)."""
     clock, memory = SimulatedClock(), MemorySink()
     loop = ControlLoop(plant, controllers, references, [memory], now_s=clock.now_s,
                        voltage_limit_v=voltage_limit_v, period_s=period_s)  # fmt: skip
@@ -296,9 +286,8 @@ def run_in_memory(
 
 @dataclass(frozen=True)
 class ExperimentResult:
-    """A recorded experiment: the trace (simulated plants add ``true_speed_a``, ``true_speed_b``),
-    whether Ctrl-C stopped it early, and why the plant did (a cart gone silent, a vanished port);
-    either way the trace holds the ticks done."""
+    """A recorded experiment: the trace of the ticks done (simulated plants add ``true_speed_a``,
+    ``true_speed_b``), whether Ctrl-C stopped it early, and why the plant did."""
 
     trace: Trace
     interrupted: bool
@@ -313,13 +302,10 @@ def run_experiment(
     on_tick: Callable[[int], None] | None = None,
     source: str | None = None,
 ) -> ExperimentResult:
-    """Apply the voltage sequences (V per tick) and record them with the measured speeds (rows
-    as :mod:`cartctl.plants.base` numbers them, so the report's model applies as written).
-
-    The plant is reset first and closed (zero volts) on every path; Ctrl-C or a
-    :class:`~cartctl.errors.PlantError` after the first tick ends the run with the ticks recorded
-    so far. ``on_tick`` gets the number of ticks done (a progress bar).
-    """
+    """Apply the voltage sequences (V per tick) and record them with the measured speeds (rows as
+    :mod:`cartctl.plants.base` numbers them). The plant is reset first and closed on every path;
+    Ctrl-C or a PlantError after the first tick ends the run with the ticks so far. ``on_tick``
+    gets the number of ticks done."""
     ua = np.asarray(voltage_a_v, dtype=float)
     ub = np.asarray(voltage_b_v, dtype=float)
     if ua.ndim != 1 or ua.shape != ub.shape:
