@@ -5,7 +5,7 @@ from a measurement to the echo of the command that answered it (:class:`EchoDela
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 from typing import Any
 
 from cartctl.link.dialect import Gpio, check_gpio_counts
@@ -98,14 +98,11 @@ class CartSample:
     @property
     def status(self) -> int:
         """The status bits as sent in int channel 2."""
-        return (STATUS_DRIVING if self.driving else 0) | (
-            STATUS_WATCHDOG if self.watchdog_tripped else 0
-        )
+        return STATUS_DRIVING * self.driving | STATUS_WATCHDOG * self.watchdog_tripped
 
     def to_channels(self) -> tuple[tuple[float, ...], tuple[int, ...]]:
         """The 8 floats and 4 ints of the GPIO frame (the fields are in channel order)."""
-        floats = (self.speed_a_rad_s, self.speed_b_rad_s, self.applied_a_v, self.applied_b_v,
-                  self.position_a_rad, self.position_b_rad, self.bridge_version, 0.0)  # fmt: skip
+        floats = (*astuple(self)[1:7], self.bridge_version, 0.0)
         ints = (self.echo_seq, self.cart_tick, self.status, self.host_frames_lost)
         return tuple(float(v) for v in floats), ints
 
@@ -115,10 +112,11 @@ class CartSample:
         floats, ints = gpio.floats, gpio.ints
         check_gpio_counts(floats, ints)
         speed_a, speed_b, applied_a, applied_b, position_a, position_b, version, _ = floats
+        measured = (speed_a, speed_b, applied_a, applied_b, position_a, position_b)
         echo, tick, status, lost = ints
         driving, tripped = bool(status & STATUS_DRIVING), bool(status & STATUS_WATCHDOG)
-        return cls(gpio.time_ms, speed_a, speed_b, applied_a, applied_b, position_a, position_b,
-                   echo, tick, driving, tripped, lost % SEQ_MODULO, _version(version))  # fmt: skip
+        lost %= SEQ_MODULO
+        return cls(gpio.time_ms, *measured, echo, tick, driving, tripped, lost, _version(version))
 
 
 MIN_ECHOES = 20  # echoes a measurement needs before it can be clear

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 from cartctl.errors import InputError
@@ -35,9 +35,6 @@ class CartFaults:
     reverse_a: bool = False
     reverse_b: bool = False
     late: float = 0.0
-
-    KEYS = ("garbage", "corrupt", "stall", "pull", "generation", "reply_jitter_ms", "receive",
-            "bridge", "usb", "actuation_ms", "reverse_a", "reverse_b", "late")  # fmt: skip
 
     @property
     def reversed_motors(self) -> str:
@@ -84,10 +81,10 @@ class CartFaults:
         for item in filter(None, (part.strip() for part in text.split(","))):
             key, sep, raw = item.partition("=")
             key, value = key.strip(), raw.strip().lower()
-            if not sep or key not in cls.KEYS:
+            if not sep or key not in _FIELD_OF:
                 raise InputError(
                     f"bad virtual cart option '{item}'; expected key=value with key in "
-                    f"{', '.join(cls.KEYS)}"
+                    f"{', '.join(_FIELD_OF)}"
                 )
             choices = _CHOICES.get(key)
             parsed: Any = value
@@ -101,14 +98,18 @@ class CartFaults:
                 try:
                     parsed = float(raw)
                 except ValueError:
+                    what = f"fault '{key}' needs a number"
                     if key == "actuation_ms":
-                        raise InputError(
-                            f"actuation_ms needs a number of ms in (0, 10], got '{raw}'"
-                        ) from None
-                    raise InputError(f"fault '{key}' needs a number, got '{raw}'") from None
-            field = {"stall": "stall_after_s", "pull": "pull_after_s"}.get(key, key)
-            faults = replace(faults, **{field: parsed})
+                        what = "actuation_ms needs a number of ms in (0, 10]"
+                    raise InputError(f"{what}, got '{raw}'") from None
+            faults = replace(faults, **{_FIELD_OF[key]: parsed})
         return faults
+
+
+_FIELD_OF = {  # option key -> field, in the fields' order
+    {"stall_after_s": "stall", "pull_after_s": "pull"}.get(f.name, f.name): f.name
+    for f in fields(CartFaults)
+}
 
 
 _FLAG = {"0": False, "1": True}

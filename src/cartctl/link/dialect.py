@@ -112,33 +112,22 @@ class Encoder:
         return self._pack(message, "GPIO channel value does not fit its wire type")
 
     def thread_info(
-        self,
-        time_ms: int,
-        thread_id: int,
-        duration_us: int,
-        *,
-        latency_us: int = 0,
-        total_duration_us: int = 0,
-        total_latency_us: int = 0,
-        executions: int = 0,
-        priority: int = 0,
+        self, time_ms: int, thread_id: int, duration_us: int, *, executions: int = 0
     ) -> bytes:
-        """One THREAD_INFO frame (30 bytes): a firmware thread's timing, as microOS packs it."""
-        message = _ThreadInfoMessage(time_ms, total_duration_us, total_latency_us, executions,
-                                     duration_us, latency_us, thread_id, priority)  # fmt: skip
+        """One THREAD_INFO frame (30 bytes): a firmware thread's last duration (µs) and executions,
+        as microOS packs them (latencies, totals and priority 0)."""
+        message = _ThreadInfoMessage(time_ms, 0, 0, executions, duration_us, 0, thread_id, 0)
         return self._pack(message, "THREAD_INFO field does not fit its wire type")
 
     def heartbeat(self, time_ms: int, type: int = 20, data: bytes = bytes(8)) -> bytes:
         """One 22-byte HEARTBEAT frame (``type`` 20 is a car; ``data``: 8 bytes microOS ignores)."""
         if len(data) != 8:
             raise ValueError(f"HEARTBEAT data must be 8 bytes, got {len(data)}")
-        _check_range("time_ms", time_ms, _UINT32_MAX)
         message = mavlink.MAVLink_heartbeat_message(time_ms, type, list(data), 2)
         return self._pack(message, "HEARTBEAT field out of range")
 
     def event(self, type: int) -> bytes:
         """One EVENT frame (``type`` 1000..1007 are QRC's buttons 0..7)."""
-        _check_range("EVENT type", type, 0xFFFF)
         return self._pack(mavlink.MAVLink_event_message(type), "EVENT type out of range")
 
     def print_text(self, text: str) -> list[bytes]:
@@ -333,13 +322,9 @@ class Framer:
         buf, stats, pos = self._buf, self.stats, 0
         buf += data
         out: list[Message] = []
-        while True:
-            match = _START.search(buf, pos)
-            start = len(buf) if match is None else match.start()
-            stats.garbage_bytes += start - pos
-            pos = start
-            if match is None:
-                break
+        while match := _START.search(buf, pos):
+            stats.garbage_bytes += match.start() - pos
+            pos = match.start()
             check = self._frame_v1 if buf[pos] == STX_V1 else self._frame_v2
             size = check(buf, pos, out)
             if size == _WAIT:
@@ -347,6 +332,9 @@ class Framer:
             if size == _REJECT:
                 stats.garbage_bytes += 1
             pos += max(size, 1)
+        else:
+            stats.garbage_bytes += len(buf) - pos
+            pos = len(buf)
         del buf[:pos]
         return out
 

@@ -40,9 +40,7 @@ the cart is threads of this process, which a busy PC can hold up for longer. Its
 faults are still found, that much later."""
 COMM_PHASE_US = 1200  # the cart's GPIO goes out this long into the tick (io(), control())
 DRAIN_BUSY_US = 60  # reported as THREAD_INFO 201 (200: COMM_PHASE_US); there is no AVR to time
-_TERMIOS_SPEED = {getattr(termios, f"B{rate}"): rate for rate in (9600, 19200, 38400, 57600,
-                  115200, 230400, 250000, 460800, 500000, 576000, 921600, 1000000, 2000000)
-                  if hasattr(termios, f"B{rate}")}  # fmt: skip
+_TERMIOS_SPEED = {getattr(termios, n): int(n[1:]) for n in dir(termios) if n[1:].isdigit()}
 
 
 def _wait_until(ready: Callable[[], bool], timeout_s: float, poll_s: float) -> None:
