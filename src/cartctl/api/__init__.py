@@ -111,12 +111,10 @@ def excite(
     if duration_s is not None and signal == "square":
         raise InputError("duration_s does not apply to the square signal; use cycles (3 s each)")
     volts = make_signal(signal, amplitude_v, cycles=cycles, duration_s=duration_s)
-    zeros = np.zeros_like(volts)
     the_plant, description = make_plant(plant, model_path=model or DEFAULT_MODEL, preset=preset,
                                         noise_std_rad_s=noise_std_rad_s, seed=seed)  # fmt: skip
-    result = run_experiment(the_plant, volts if motor in ("a", "both") else zeros,
-                            volts if motor in ("b", "both") else zeros,
-                            source=description)  # fmt: skip
+    per_motor = (volts if motor in (m, "both") else np.zeros_like(volts) for m in MOTORS)
+    result = run_experiment(the_plant, *per_motor, source=description)
     if result.interrupted:  # a notebook's interrupt stops the cell, not just the experiment
         raise KeyboardInterrupt
     if result.failure:
@@ -189,9 +187,7 @@ def load_model(path: str | Path) -> ModelFile:
 
 def save_model(models: ModelFile | Identification, path: str | Path) -> Path:
     """Write a model file (from :func:`load_model` or :func:`identify`); returns its path."""
-    if isinstance(models, Identification):
-        return models.save(path)
-    save_models(models, path)
+    save_models(models.model_file() if isinstance(models, Identification) else models, path)
     return Path(path)
 
 
