@@ -115,8 +115,13 @@ def first_step(reference: NDArray[np.float64], *, initial: float = 0.0) -> tuple
 
 
 def _crossing(
-    time_s: NDArray[np.float64], z: NDArray[np.float64], i: int, level: float, *, interpolate: bool
-) -> float:
+    time_s: NDArray[np.float64], z: NDArray[np.float64], level: float, *, interpolate: bool
+) -> float | None:
+    """When ``z`` first reaches ``level`` (None if never), interpolated from the sample before."""
+    reached = np.flatnonzero(z >= level)
+    if not reached.size:
+        return None
+    i = int(reached[0])
     if i == 0 or not interpolate:
         return float(time_s[i])
     frac = (level - z[i - 1]) / (z[i] - z[i - 1])
@@ -200,14 +205,8 @@ def step_info(
     ts, ys = t[k0:], y[k0:]
     z = (ys - initial) / size  # 0 at the initial value, 1 at the target, whatever the sign
 
-    reached = [np.flatnonzero(z >= level) for level in RISE_LIMITS]
-    rise: float | None = None
-    if reached[1].size:
-        lo, hi = (
-            _crossing(ts, z, int(r[0]), level, interpolate=interpolate)
-            for r, level in zip(reached, RISE_LIMITS, strict=True)
-        )
-        rise = hi - lo
+    lo, hi = (_crossing(ts, z, level, interpolate=interpolate) for level in RISE_LIMITS)
+    rise = None if lo is None or hi is None else hi - lo
 
     band = settling_half_width(size, settling_floor, settling_band) / abs(size)  # of the step
     overshoot, settled = step_rows(ts, z[None, :], band, onset, interpolate=interpolate)
