@@ -130,17 +130,12 @@ class ReferenceSchedule:
                              f"{n_ticks} and {chunk_ticks}")  # fmt: skip
         self.spec, self.n_ticks, self.period_s, self.motor = spec, n_ticks, period_s, motor
         self.chunk_ticks = chunk_ticks
-        self._start = -1
-        self._values: list[float] = []
-        if n_ticks:
-            self._load(0)
+        self._start = 0  # the first tick of the chunk in _values
+        self._values: list[float] = self._chunk(0).tolist() if n_ticks else []
 
     def _chunk(self, start: int) -> NDArray[np.float64]:
         n = min(self.chunk_ticks, self.n_ticks - start)
         return reference_signal(self.spec, n, self.period_s, self.motor, start_tick=start)
-
-    def _load(self, start: int) -> None:
-        self._values, self._start = self._chunk(start).tolist(), start
 
     def __len__(self) -> int:
         return self.n_ticks
@@ -148,11 +143,10 @@ class ReferenceSchedule:
     def __getitem__(self, k: int) -> float:
         if not 0 <= k < self.n_ticks:
             raise IndexError(f"tick {k} is outside the reference's {self.n_ticks} ticks")
-        offset = k - self._start
-        if not 0 <= offset < len(self._values):
-            self._load(k - k % self.chunk_ticks)
-            offset = k - self._start
-        return self._values[offset]
+        start = k - k % self.chunk_ticks
+        if start != self._start:
+            self._start, self._values = start, self._chunk(start).tolist()
+        return self._values[k - start]
 
     def chunks(self) -> Iterator[NDArray[np.float64]]:
         """The whole reference, chunk by chunk (for checks over the run)."""
