@@ -1,6 +1,5 @@
 """The host's end of the serial line to a microOS cart: port, framing, sign of life, silence,
-each way the line can fail turned into one clear error.
-"""
+each way the line can fail turned into one clear error."""
 
 from __future__ import annotations
 
@@ -106,13 +105,10 @@ class CartLink:
         return False
 
     def wait_heartbeat_any_rate(self, timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> int:
-        """Wait for the cart's HEARTBEAT at :attr:`baud`; failing that, listen at 115200 baud.
-
-        Returns the rate the cart answered at (:attr:`baud` then holds it); the port stays open
-        across the change, so a real Mega is not reset again. Nothing at either rate raises
-        :class:`~cartctl.errors.PlantError` (about the first rate), generation-B frames
-        :class:`UnsupportedCartError`; either way the link is closed.
-        """
+        """Wait for the cart's HEARTBEAT at :attr:`baud`, else listen at 115200 baud (the port stays
+        open, so a real Mega is not reset again); return the rate it answered at, now :attr:`baud`.
+        Nothing at either rate raises PlantError (about the first rate), generation-B frames
+        :class:`UnsupportedCartError`; either way the link is closed."""
         try:
             if self._listen((dialect.Heartbeat,), timeout_s):
                 return self.baud
@@ -158,12 +154,9 @@ class CartLink:
         raise PlantError(self.failure)
 
     def gpio_waiting(self, wait_s: float = 0.0) -> bool:
-        """Whether another complete GPIO is buffered (the host is behind the cart), or arrives
-        within ``wait_s``."""
+        """Whether a complete GPIO is buffered (the host is behind the cart) or comes in ``wait_s``."""
         self._poll(0.0)
-        return self._wait_for(
-            lambda: any(isinstance(m, dialect.Gpio) for m in self._pending), wait_s
-        )
+        return self._wait_for(lambda: dialect.Gpio in map(type, self._pending), wait_s)
 
     def _next_message(self, timeout_s: float) -> dialect.Message | None:
         """One decoded message, or None when ``timeout_s`` passed without one."""

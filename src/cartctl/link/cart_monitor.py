@@ -71,8 +71,7 @@ def parse_labels(text: str | None) -> tuple[str, ...]:
 
 
 def firmware_labels(firmware: Firmware | None) -> tuple[str, ...]:
-    """The 12 labels of a firmware's channels; those it does not name (or all, for None) keep
-    QRoboticsCenter's."""
+    """The 12 labels of a firmware's channels, QRoboticsCenter's for those it does not name."""
     labels = dict(zip(CHANNEL_KEYS, DEFAULT_LABELS, strict=True))
     return tuple({**labels, **dict(firmware.labels if firmware else ())}.values())
 
@@ -134,7 +133,6 @@ class Monitor:
         self.rows, self.texts, self.echo, self.announce = list(rows), list(texts), echo, announce
         self.given_labels = None if labels is None else tuple(labels)
         self.labels: tuple[str, ...] | None = None
-        self.columns: tuple[str, ...] | None = None
         self.firmware: Firmware | None = None  # what the frames named (None: not cartctl's)
         self.result = MonitorResult()
         self.stop_requested = False
@@ -157,22 +155,19 @@ class Monitor:
         text = f"button {button} pressed" if button is not None else f"event {event.type}"
         self._hold(lambda: self._log(EVENT_ENTITY, text))
 
-    def open(self) -> None:
-        """Open the row sinks with the labels given, else those chosen so far (QRoboticsCenter's
-        before any frame). Once only; the labels are then fixed."""
-        if self.columns is not None:
+    def open(self, labels: tuple[str, ...] = DEFAULT_LABELS) -> None:
+        """Open the row sinks with the labels given, else ``labels``. Once only; the labels are
+        then fixed."""
+        if self.labels is not None:
             return
-        self.labels = self.given_labels or self.labels or DEFAULT_LABELS
-        self.columns = (TIME_COLUMN, TICK_COLUMN, *self.labels)
+        self.labels = self.given_labels or labels
         for sink in self.rows:
-            sink.open(self.columns)
+            sink.open((TIME_COLUMN, TICK_COLUMN, *self.labels))
 
     def run(self, link: CartLink, duration_s: float | None = None) -> MonitorResult:
-        """Record until ``duration_s`` of cart time (S seconds: S / 0.01 rows), a stop request or
-        a line fault. A :class:`~cartctl.errors.PlantError` ends the run with ``stopped = 'fault'``;
-        :attr:`stop_requested` (set from a signal handler) or a KeyboardInterrupt with
-        ``'interrupted'``; nothing is raised. However it ends, the sinks are open and hold every
-        frame kept.
+        """Record until ``duration_s`` of cart time (S / 0.01 rows), a line fault (PlantError:
+        ``stopped = 'fault'``), :attr:`stop_requested` (set from a signal handler) or Ctrl-C
+        (``'interrupted'``); nothing is raised. The sinks are then open and hold every frame kept.
         """
         result = self.result
         try:
@@ -210,13 +205,9 @@ class Monitor:
         self._hold(lambda: self._record(gpio, time_s))
 
     def _decide(self, firmware: Firmware | None, marker: float | None) -> None:
-        """Choose the labels (given, the firmware's, or the defaults), say so (``marker``: float 6
-        of the deciding frame, None without frames), open the sinks."""
-        self._decided = True
-        self.firmware = firmware
-        if self.columns is None:
-            self.labels = self.given_labels or firmware_labels(firmware)
-        self.open()
+        """Choose the labels, say so (``marker``: float 6 of the deciding frame), open the sinks."""
+        self._decided, self.firmware = True, firmware
+        self.open(firmware_labels(firmware))
         if self.announce is not None and self.labels is not None:
             given = self.given_labels is not None
             self.announce(describe_labels(firmware, marker, self.labels, given=given))

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 
 import cartctl.link.bridge as bridge
 from cartctl.cart import PERIOD_S
@@ -154,9 +154,7 @@ class BridgeFirmware(HeldChannels):
         applied_seq = self.command_seq  # nothing drains between io() and control()
         self._decide(now_ms)
         status = (applied_seq, self.tick, self.driving, self.tripped, self.frames_lost)
-        measured = (io.speed_a_rad_s, io.speed_b_rad_s, io.applied_a_v, io.applied_b_v,
-                    io.position_a_rad, io.position_b_rad)  # fmt: skip
-        fields = (now_ms, *measured, *status, bridge.BRIDGE_VERSION)  # CartSample's order
+        fields = (now_ms, *astuple(io), *status, bridge.BRIDGE_VERSION)  # CartSample's order
         floats, ints = bridge.CartSample(*fields).to_channels()
         self.out_floats, self.out_ints = list(floats), list(ints)
         self.tick = bridge.next_seq(self.tick)

@@ -39,10 +39,9 @@ FLASH_HINT = (
 class SerialCart:
     """A cart on a serial port as a :class:`~cartctl.plants.base.Plant`, clocked by the cart.
 
-    ``connect_timeout_s`` bounds the wait for the first HEARTBEAT, ``silence_timeout_s`` that for
-    a GPIO once running; ``on_print`` and ``serial_factory`` go to the
-    :class:`~cartctl.link.cart_link.CartLink`. Besides the Plant protocol: :meth:`send` and
-    :meth:`receive` apart (the cart-clocked loop times its compute between), :meth:`link_summary`.
+    ``connect_timeout_s`` bounds the wait for the first HEARTBEAT; the rest goes to the
+    :class:`~cartctl.link.cart_link.CartLink`. :meth:`send` and :meth:`receive` split
+    :meth:`step` (the cart-clocked loop times its compute between).
     """
 
     period_s: float = PERIOD_S
@@ -75,9 +74,7 @@ class SerialCart:
         # echoes per delay (ticks) since the probe, and what measure_loop_delay measured
         self.echo_delays: collections.Counter[int] = collections.Counter()
         self.probe_delays: bridge.EchoDelays | None = None
-        self.missed_ticks = 0
-        self.skipped_ticks = 0
-        self.watchdog_trips = 0
+        self.missed_ticks = self.skipped_ticks = self.watchdog_trips = 0
         self.frames_sent = 0  # since the last reset (the stop frames of close excluded)
         self._lost_base = 0
         self._sent_any = False
@@ -110,9 +107,8 @@ class SerialCart:
             self.link.next_gpio()
         undriven_s = max(self.link.silence_timeout_s, UNDRIVEN_SILENCE_S)
         self.link.next_gpio(undriven_s)
-        # a backlog still coming in (the port's reader was held up) is not a fresh tick: answering
-        # it would put two replies into one tick of the cart, and one of them would be lost. Let
-        # it pass, then take the next frame as it arrives: tick 0 is answered while it is fresh.
+        # a backlog still coming in is not a fresh tick: answering it would put two replies into
+        # one cart tick and lose one. Tick 0 is the next frame, answered while it is fresh.
         while self.link.gpio_waiting(wait_s=BACKLOG_WAIT_S):
             self.link.next_gpio()
         gpio, arrival = self.link.next_gpio(undriven_s)
@@ -167,7 +163,7 @@ class SerialCart:
         return Measurement(self.sample.speed_a_rad_s, self.sample.speed_b_rad_s)
 
     def _accept(self, gpio: Gpio, arrival_s: float) -> None:
-        """Take one GPIO: count missing cart ticks, watchdog trips and the echo delay."""
+        """Count missing cart ticks, watchdog trips and the echo delay of one GPIO."""
         sample = bridge.CartSample.from_gpio(gpio)
         previous = self.sample
         if previous is not None:
@@ -178,8 +174,7 @@ class SerialCart:
                 self.watchdog_trips += 1
         if sample.echo_seq != self._echo:
             self._echo = sample.echo_seq
-            sent = self._sent_at.get(sample.echo_seq)
-            if sent is not None:
+            if (sent := self._sent_at.get(sample.echo_seq)) is not None:
                 self.echo_delays[self.tick_index - sent] += 1
         self.sample, self.arrival_s = sample, arrival_s
 
