@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -31,9 +31,8 @@ class Provenance:
     notes: str = ""
 
     def to_dict(self) -> dict[str, Any]:
-        out = {"source": self.source, "created": self.created, "data": list(self.data),
-               "method": self.method, "prefilter": self.prefilter}  # fmt: skip
-        return out | ({"notes": self.notes} if self.notes else {})
+        out = asdict(self) | {"data": list(self.data)}
+        return out if self.notes else {k: v for k, v in out.items() if k != "notes"}
 
 
 @dataclass(frozen=True)
@@ -63,8 +62,8 @@ class ModelFile:
         delay = "" if ticks is None else f", loop delay {ticks} tick{'s' * (ticks != 1)}"
         source = self.provenance.source
         source = source if len(source) <= 100 else source[:99] + "…"
-        lines = [f"ModelFile{where}: Ts = {self.period_s:g} s{delay}, {self.provenance.method} "
-                 f"({source})"]  # fmt: skip
+        head = f"ModelFile{where}: Ts = {self.period_s:g} s{delay}, {self.provenance.method}"
+        lines = [f"{head} ({source})"]
         for name, m in self.motors.items():
             theta = ", ".join(f"{v:.4g}" for v in m.theta)
             lines.append(f"  motor {name}: na = {m.na}, nb = {m.nb}, nk = {m.nk}, θ = [{theta}]")
@@ -76,8 +75,10 @@ class ModelFile:
 
     def to_toml_dict(self) -> dict[str, Any]:
         """The document written by :func:`save_models`."""
-        motors = {name: {"theta": m.theta.tolist(), "na": m.na, "nb": m.nb, "nk": m.nk,
-                         **self.stats.get(name, {})} for name, m in self.motors.items()}  # fmt: skip
+        motors: dict[str, dict[str, Any]] = {}
+        for name, m in self.motors.items():
+            motors[name] = {"theta": m.theta.tolist(), "na": m.na, "nb": m.nb, "nk": m.nk}
+            motors[name] |= self.stats.get(name, {})
         doc: dict[str, Any] = {"format": MODEL_FORMAT, "period_s": self.period_s}
         if self.loop_delay_ticks is not None:
             doc["loop_delay_ticks"] = int(self.loop_delay_ticks)
@@ -116,10 +117,10 @@ def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
     period_s = float(require(doc, "period_s", (int, float), path, "the top level"))
     loop_delay = read_loop_delay(doc, path)
     prov = doc.get("provenance", {})
-    texts = {"source": "unknown", "created": "unknown", "method": "unknown", "prefilter": "none",
-             "notes": ""}  # key: what a file without it says  # fmt: skip
-    provenance = Provenance(**{k: str(prov.get(k, default)) for k, default in texts.items()},
-                            data=tuple(str(d) for d in prov.get("data", ())))  # fmt: skip
+    texts = dict.fromkeys(("source", "created", "method"), "unknown")  # what a file without says
+    texts |= {"prefilter": "none", "notes": ""}
+    texts = {k: str(prov.get(k, default)) for k, default in texts.items()}
+    provenance = Provenance(**texts, data=tuple(str(d) for d in prov.get("data", ())))
     motors_tab = require(doc, "motors", dict, path, "the top level")
     unknown = sorted(set(motors_tab) - {"a", "b"})
     if unknown:
@@ -139,8 +140,8 @@ def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
             raise DataFileError(path, f"theta in {where} must hold finite numbers, got {theta!r}")
         for key, value, low in (("na", na, 0), ("nb", nb, 1), ("nk", nk, 0)):
             if not low <= value <= MAX_MODEL_ORDER:
-                raise DataFileError(path, f"{key} in {where} must be in {low}..{MAX_MODEL_ORDER} "
-                                          f"(as identify fits models), got {value}")  # fmt: skip
+                limits = f"{low}..{MAX_MODEL_ORDER} (as identify fits models)"
+                raise DataFileError(path, f"{key} in {where} must be in {limits}, got {value}")
         motors[name] = ArxModel.from_theta(theta, na=na, nb=nb, nk=nk, period_s=period_s)
         stats[name] = {k: v for k, v in entry.items() if k not in ("theta", "na", "nb", "nk")}
     return ModelFile(motors, provenance, stats, path, loop_delay)

@@ -43,11 +43,8 @@ def _substep_map(
 
 
 class _Wheel:
-    """One wheel's dynamics: the exact substep map for the hot loop, the closed form for events.
-
-    The state is (i [A], ω [rad/s], θ [rad]); the held inputs are v [V] and the friction torque
-    τ [N·m], positive when it opposes positive ω. With both held, ``d(i, ω)/dt = A (i, ω) + g``.
-    """
+    """One wheel: state (i [A], ω [rad/s], θ [rad]), held inputs v [V] and friction torque τ [N·m]
+    (positive against positive ω); with both held, ``d(i, ω)/dt = A (i, ω) + g``."""
 
     def __init__(
         self, motor: MotorParams, added_inertia_kg_m2: float, rolling_n_m: float, h: float
@@ -60,8 +57,8 @@ class _Wheel:
         self.a11, self.a12, self.a21, self.a22 = -R / L, -K / L, K / J, -b / J
         self.det = (R * b + K * K) / (L * J)
         self.half_tr = 0.5 * (self.a11 + self.a22)
-        self.fast = (*_substep_map(self.a11, self.a12, self.a21, self.a22, L, J, h),
-                     K, self.tc, R, h, math.exp(-h * R / L))  # fmt: skip
+        substep = _substep_map(self.a11, self.a12, self.a21, self.a22, L, J, h)
+        self.fast = (*substep, K, self.tc, R, h, math.exp(-h * R / L))
 
     def flow(
         self, i: float, w: float, th: float, v: float, tau: float, t: float
@@ -131,11 +128,8 @@ class _Wheel:
     def _stop_time(
         self, i: float, w: float, v: float, tau: float, s: float, span: float, w_end: float
     ) -> float | None:
-        """Time (s) at which ω, moving in direction s from w or from rest, is back at zero.
-
-        ``w_end`` is ω after ``span`` seconds, no longer in direction s. Newton's method kept inside
-        a shrinking bracket; None when a wheel leaving rest never visibly moves.
-        """
+        """When ω, moving in direction s from w or from rest, is back at zero (s), given ``w_end``
+        after ``span`` s: Newton's method in a shrinking bracket; None if it never visibly moves."""
 
         def along(t: float) -> tuple[float, float]:  # (ω, dω/dt) in direction s
             i_t, w_t, _ = self.flow(i, w, 0.0, v, tau, t)
@@ -198,10 +192,9 @@ def _advance(
 class PhysicsPlant:
     """A simulated cart with two physical DC motors (the module docstring has the model).
 
-    ``cart``: a preset name or explicit parameters; ``noise_std_rad_s`` (white, on each measured
-    speed; its ``seed``'s stream not restarted by :meth:`reset`) and ``actuation_ms`` (in (0, 10])
-    override the cart's. ``reversed_motors`` (e.g. ``"b"``): motors wired backwards, so a
-    positive command turns that wheel (and its encoder) the negative way.
+    ``cart``: a preset name or parameters; ``noise_std_rad_s`` (white, on each measured speed, its
+    ``seed``'s stream not restarted by :meth:`reset`) and ``actuation_ms`` override the cart's.
+    ``reversed_motors`` (e.g. ``"b"``): motors wired backwards (a positive command turns them back).
     """
 
     def __init__(
@@ -226,8 +219,8 @@ class PhysicsPlant:
         self.params: CartParams = params
         self.period_s: float = params.period_s
         h = params.period_s / params.substeps
-        self._wheels = tuple(_Wheel(m, params.added_inertia_kg_m2, params.rolling_n_m, h)
-                             for m in (params.motor_a, params.motor_b))  # fmt: skip
+        load = (params.added_inertia_kg_m2, params.rolling_n_m, h)
+        self._wheels = (_Wheel(params.motor_a, *load), _Wheel(params.motor_b, *load))
         self._rad_per_count = 2.0 * math.pi / params.counts_per_rev
         self._speed_per_count = self._rad_per_count / params.period_s
         self._delay_substeps = round(params.actuation_delay() / h)
@@ -241,17 +234,15 @@ class PhysicsPlant:
     """Ticks from a measurement to its voltage on the motor (as with microOS on the cart)."""
 
     def reset(self, *, position_rad: tuple[float, float] = (0.0, 0.0)) -> Measurement:
-        """Both wheels at rest, no current, 0 V; the measurement of tick 0. ``position_rad``
-        places the wheels between encoder edges, as a real wheel's start angle does."""
+        """Both wheels at rest, no current, 0 V, at ``position_rad``; the tick-0 measurement."""
         self._state = [(0.0, 0.0, float(th)) for th in position_rad]  # (i, ω, θ) per wheel
         self._counts = [math.floor(th / self._rad_per_count) for _, _, th in self._state]
         self._applied = self._driving = (0.0, 0.0)
         return Measurement(0.0, 0.0, 0.0, 0.0)
 
     def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
-        """Command voltages (V) at this tick (they land ``actuation_delay_s`` later; non-finite
-        is 0 V), advance one tick, and measure the next tick: io() reads the encoders, the speed
-        is the count difference over the tick."""
+        """Command voltages (V) at this tick (landing ``actuation_delay_s`` later), advance one
+        tick, and measure the next: the encoder count difference over the tick."""
         n, nd = self.params.substeps, self._delay_substeps
         commands = (self.condition_voltage(voltage_a_v), self.condition_voltage(voltage_b_v))
         speeds = []
@@ -275,7 +266,7 @@ class PhysicsPlant:
 
     def condition_voltage(self, voltage_v: float) -> float:
         """What the firmware makes of a command (V): 0 if non-finite, saturated, rounded to the
-        nearest PWM step (ties to even: 10 V is 212.5 steps, giving 212), never beyond the supply."""
+        nearest PWM step (ties to even: 10 V is 212.5 steps, giving 212)."""
         v = float(voltage_v)
         if not math.isfinite(v):
             return 0.0

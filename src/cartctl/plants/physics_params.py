@@ -43,8 +43,8 @@ class MotorParams:
     inductance_h: float
 
     def __post_init__(self) -> None:
-        _require_positive(self, ("inertia_kg_m2", "torque_constant_n_m_a", "resistance_ohm",
-                                 "inductance_h"))  # fmt: skip
+        positive = ("inertia_kg_m2", "torque_constant_n_m_a", "resistance_ohm", "inductance_h")
+        _require_positive(self, positive)
         _require_positive(self, ("viscous_n_m_s", "coulomb_n_m"), allow_zero=True)
 
 
@@ -53,11 +53,9 @@ class CartParams:
     """The whole cart: two motors, the ground load, the firmware's limits and the sensor.
 
     ``added_inertia_kg_m2`` (each wheel's share of the body, uncoupled as in the report) and
-    ``rolling_n_m`` (added to each motor's Coulomb friction) are 0 in the air. Commands saturate
-    at ±``supply_v``, rounded to the nearest ``pwm_step_v`` (ties to even). The integration is
-    exact for any ``substeps`` per tick (the window in which a stop is looked for).
-    ``actuation_delay_s``: from a command's tick to when it drives the motor, a whole number of
-    substeps in [0, period_s]; None is one period (microOS's documented order).
+    ``rolling_n_m`` (added to each motor's Coulomb friction) are 0 in the air; commands saturate
+    at ±``supply_v``, rounded to the nearest ``pwm_step_v``; ``actuation_delay_s``, from a
+    command's tick to the motor, is a whole number of substeps in [0, period_s] (None: one period).
     """
 
     name: str
@@ -75,8 +73,8 @@ class CartParams:
 
     def __post_init__(self) -> None:
         _require_positive(self, ("supply_v", "pwm_step_v", "period_s"))
-        _require_positive(self, ("added_inertia_kg_m2", "rolling_n_m", "noise_std_rad_s"),
-                          allow_zero=True)  # fmt: skip
+        zero_or_more = ("added_inertia_kg_m2", "rolling_n_m", "noise_std_rad_s")
+        _require_positive(self, zero_or_more, allow_zero=True)
         for name in ("counts_per_rev", "substeps"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
@@ -90,7 +88,7 @@ class CartParams:
             )
 
     def actuation_delay(self) -> float:
-        """The actuation delay (s): ``actuation_delay_s``, or one period when that is None."""
+        """``actuation_delay_s``, or one period when that is None (s)."""
         return self.period_s if self.actuation_delay_s is None else float(self.actuation_delay_s)
 
     def to_dict(self) -> dict[str, Any]:
@@ -98,16 +96,14 @@ class CartParams:
         return asdict(self)
 
     def with_actuation_ms(self, actuation_ms: float) -> CartParams:
-        """A copy whose commands land ``actuation_ms`` after their tick; the substeps refined (to
-        0.1 ms) when the delay is not a whole number of them."""
+        """A copy whose commands land ``actuation_ms`` after their tick, with the substeps refined
+        (to 0.1 ms) when the delay is not a whole number of them."""
         delay_s = check_actuation_ms(actuation_ms) / 1000.0
-        substeps = self.substeps
-        for candidate in (self.substeps, 2 * self.substeps, 5 * self.substeps, 10 * self.substeps):
-            n = delay_s / self.period_s * candidate
+        for substeps in (self.substeps * k for k in (1, 2, 5, 10)):
+            n = delay_s / self.period_s * substeps
             if abs(n - round(n)) < 1e-6:
-                substeps = candidate
-                break
-        return replace(self, actuation_delay_s=delay_s, substeps=substeps)
+                return replace(self, actuation_delay_s=delay_s, substeps=substeps)
+        return replace(self, actuation_delay_s=delay_s)
 
 
 _AIR_A = MotorParams(8.76e-4, 1.6e-3, 0.05, 0.4476, 3.0, 0.992e-3)
@@ -130,10 +126,7 @@ PRESETS: MappingProxyType[str, CartParams] = MappingProxyType(
 
 
 def check_actuation_ms(value: float | str) -> float:
-    """``value`` (ms) if it is a valid actuation timing, in (0, 10] to 0.1 ms; else InputError.
-
-    3 is the presets' calibrated timing (the report's cart), 10 microOS's documented order.
-    """
+    """``value`` (ms) if it is a valid actuation timing, in (0, 10] to 0.1 ms; else InputError."""
     try:
         ms = float(value)
     except (TypeError, ValueError):
