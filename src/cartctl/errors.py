@@ -11,23 +11,17 @@ from pathlib import Path
 from cartctl.stopping import Interrupted
 
 __all__ = ["CartctlError", "DataFileError", "DataWarning", "InputError", "Interrupted",
-           "MissingFileError", "PlantError", "one_line"]  # fmt: skip
-
-
-def one_line(text: str) -> str:
-    """``text`` with line breaks and other control characters shown as escapes (``\\n``)."""
-    if text.isprintable():
-        return text
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+           "MissingFileError", "PlantError"]  # fmt: skip
 
 
 class CartctlError(Exception):
-    """Base of all errors that cartctl reports to the user; its message is always one line."""
+    """Base of all errors that cartctl reports to the user; its message is always one line (line
+    breaks and other control characters show as escapes, ``\\n``)."""
 
     exit_code: int = 2
 
     def __str__(self) -> str:
-        return one_line(super().__str__())
+        return "".join(c if c.isprintable() else repr(c)[1:-1] for c in super().__str__())
 
 
 class InputError(CartctlError, ValueError):

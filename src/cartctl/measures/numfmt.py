@@ -16,15 +16,11 @@ MISSING = "—"  # a None or NaN
 
 
 def column_decimals(
-    values: Iterable[float | None],
-    *,
-    sig: int = SIG_FIGS,
-    scale: float | None = None,
-    max_decimals: int = MAX_DECIMALS,
+    values: Iterable[float | None], *, sig: int = SIG_FIGS, scale: float | None = None
 ) -> int:
     """Decimals giving the column's largest magnitude (or ``scale``, if larger) ``sig`` significant
-    figures, at most ``max_decimals``; negative to round to tens …; 0 for a column of zeros. None,
-    NaN and infinities are left out."""
+    figures, at most :data:`MAX_DECIMALS`; negative to round to tens …; 0 for a column of zeros.
+    None, NaN and infinities are left out."""
     top = max((abs(float(v)) for v in [*values, scale] if v is not None and math.isfinite(v)),
               default=0.0)  # fmt: skip
     if top == 0.0:
@@ -32,7 +28,7 @@ def column_decimals(
     decimals = sig - 1 - math.floor(math.log10(top))
     if abs(round(top, decimals)) >= 10.0 ** (sig - decimals):  # 9.996 rounds up to 10.0
         decimals -= 1
-    return min(decimals, max_decimals)
+    return min(decimals, MAX_DECIMALS)
 
 
 def format_fixed(value: float | None, decimals: int) -> str:
@@ -54,22 +50,21 @@ def format_column(
     sig: int = SIG_FIGS,
     scale: float | None = None,
     factor: float = 1.0,
-    max_decimals: int = MAX_DECIMALS,
 ) -> list[str]:
     """The cells of one column with the column's decimals; ``factor`` converts the values first
     (1e3: s to ms), ``scale`` is in the printed unit."""
     shown = [None if v is None else float(v) * factor for v in values]
-    decimals = column_decimals(shown, sig=sig, scale=scale, max_decimals=max_decimals)
+    decimals = column_decimals(shown, sig=sig, scale=scale)
     return [format_fixed(v, decimals) for v in shown]
 
 
-def exact_decimals(values: Iterable[float], max_decimals: int = MAX_DECIMALS) -> int:
-    """The fewest decimals (up to ``max_decimals``) that print every value exactly (0.04, 0.10,
-    0.16)."""
-    for decimals in range(max_decimals + 1):
+def exact_decimals(values: Iterable[float]) -> int:
+    """The fewest decimals (up to :data:`MAX_DECIMALS`) that print every value exactly (0.04,
+    0.10, 0.16)."""
+    for decimals in range(MAX_DECIMALS + 1):
         if all(abs(round(v, decimals) - v) <= 1e-9 * max(1.0, abs(v)) for v in values):
             return decimals
-    return max_decimals
+    return MAX_DECIMALS
 
 
 def render_table(
