@@ -267,15 +267,16 @@ def identify_and_judge(
     return result, request, judge(result)
 
 
-def model_verdict(verdicts: dict[str, MotorVerdict], excitation_v: float) -> None:
-    """Raise :class:`StageError` naming the first failing motor and why (one line)."""
+def model_failure(verdicts: dict[str, MotorVerdict], excitation_v: float) -> StageError | None:
+    """The :class:`StageError` naming the first failing motor and why (one line), or None."""
     for m, v in verdicts.items():
         if v.problems:
-            raise StageError(
+            return StageError(
                 f"identification: motor {m}'s model fails validation ({'; '.join(v.problems)}); "
                 f"the {excitation_v:g} V excitation does not give a model to tune on: check the "
                 "encoder (noise, loose cable) and that nothing touches the wheels"
             )
+    return None
 
 
 STEP_RAD_S = 10.0

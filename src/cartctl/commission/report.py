@@ -80,18 +80,31 @@ def plot_lines(path: Path, title: str,
     return path
 
 
+def _table(rows: Sequence[Sequence[tuple[str, str]]]) -> str:
+    """A Markdown table of rows of (header, cell); the headers are the first row's."""
+    return markdown_table([h for h, _ in rows[0]], [[cell for _, cell in row] for row in rows])
+
+
 def checks_body(loop_delay_ticks: int | None, checks: Mapping[str, Any], plant: str,
                 amplitude: Any | None) -> str:  # fmt: skip
     """The checks section: the plant, the loop delay, each motor's figures, the amplitude rule."""
-    rows = [[m, c.direction, fmt(c.pulse_turn_rad, 3), fmt(c.other_turn_rad, 3),
-             fmt(c.breakaway_v, 2), fmt(c.gain_rad_s_v, 2)] for m, c in checks.items()]  # fmt: skip
-    body = (f"Plant: {plant}. Loop delay: {loop_delay_ticks} tick(s) (measurement to applied "
-            "voltage).\n\n"
-            + markdown_table(["motor", "direction", "pulse turn (rad)", "other wheel (rad)",
-                              "breakaway (V)", "gain (rad/s/V)"], rows))  # fmt: skip
+    rows = [
+        [
+            ("motor", c.motor),
+            ("direction", c.direction),
+            ("pulse turn (rad)", fmt(c.pulse_turn_rad, 3)),
+            ("other wheel (rad)", fmt(c.other_turn_rad, 3)),
+            ("breakaway (V)", fmt(c.breakaway_v, 2)),
+            ("gain (rad/s/V)", fmt(c.gain_rad_s_v, 2)),
+        ]
+        for c in checks.values()
+    ]
+    body = (
+        f"Plant: {plant}. Loop delay: {loop_delay_ticks} tick(s) (measurement to applied "
+        "voltage).\n\n" + _table(rows)
+    )
     if amplitude is not None:
-        body += (f"\n\nExcitation amplitude: **{amplitude.voltage_v:g} V**. Rule: "
-                 f"{amplitude.rule}.")  # fmt: skip
+        body += f"\n\nExcitation amplitude: **{amplitude.voltage_v:g} V**. Rule: {amplitude.rule}."
     return body + "\n\nFiles: checks.csv, checks.rrd, checks.png."
 
 
@@ -99,40 +112,60 @@ def model_body(result: Any, verdicts: Mapping[str, Any], model_name: str) -> str
     """The identification section: θ, nk, DC gain, validation figures, verdicts."""
     rows = []
     for m, r in result.motors.items():
-        v = verdicts[m]
-        model = r.chosen.model
-        rows.append([m, ", ".join(f"{x:.4g}" for x in model.theta), str(model.nk),
-                     fmt(model.dc_gain(), 3), fmt(v.validation_fit_percent, 1), fmt(v.pole_radius, 3),
-                     f"{v.cross_outside}/{v.cross_lags} ({v.cross_ratio:.1f}×)", "yes" if v.white else "no",
-                     "pass" if not v.problems else "FAIL: " + "; ".join(v.problems)])  # fmt: skip
-    return (markdown_table(["motor", "θ = [a1, a2, b0 …]", "nk", "DC gain (rad/s/V)",
-                            "validation fit (%)", "max |pole|",
-                            "cross-corr. lags outside (max/bound)", "white", "verdict"], rows)
-            + "".join(f"\n\n{note}." for note in result.notes)
-            + f"\n\nFiles: {model_name}, identification.rrd, identification.png.")  # fmt: skip
+        v, model = verdicts[m], r.chosen.model
+        cross = f"{v.cross_outside}/{v.cross_lags} ({v.cross_ratio:.1f}×)"
+        verdict = "pass" if not v.problems else "FAIL: " + "; ".join(v.problems)
+        rows.append(
+            [
+                ("motor", m),
+                ("θ = [a1, a2, b0 …]", ", ".join(f"{x:.4g}" for x in model.theta)),
+                ("nk", str(model.nk)),
+                ("DC gain (rad/s/V)", fmt(model.dc_gain(), 3)),
+                ("validation fit (%)", fmt(v.validation_fit_percent, 1)),
+                ("max |pole|", fmt(v.pole_radius, 3)),
+                ("cross-corr. lags outside (max/bound)", cross),
+                ("white", "yes" if v.white else "no"),
+                ("verdict", verdict),
+            ]
+        )
+    return (
+        _table(rows)
+        + "".join(f"\n\n{note}." for note in result.notes)
+        + f"\n\nFiles: {model_name}, identification.rrd, identification.png."
+    )
+
+
+def _cell(r: dict[str, Any], part: str, key: str, digits: int, scale: float = 1.0) -> str:
+    """A figure of a tuning row's ``part`` ('nominal', 'worst'); blank for an unscored row."""
+    return fmt(r[part][key], digits, scale) if part in r else ""
 
 
 def tuning_body(result: tuning.TuningResult, command: str) -> str:
     """The tuning section: the rule, the grid's table (worse of motors a and b), the choice."""
+    later = " and ".join(f"{f * 10:g} ms" for f in tuning.LATER_FRACTIONS)
     rows = []
     for row in result.rows:
         r = tuning.row_summary(row)
         s = r["settings"]
         mark = "**→**" if row.index == result.chosen.index else ("*" if r.get("pareto") else "")
-        if "nominal" not in r:
-            rows.append([mark, str(r["index"]), f"{s['settling-time'] * 1e3:g}",
-                         f"{s['overshoot']:g}", r["status"], "", "", "", "", ""])  # fmt: skip
-            continue
-        nom, worst = r["nominal"], r["worst"]
-        timing = " / ".join(fmt(e["overshoot_percent"], 1) for e in r["timing"])
-        rows.append([mark, str(r["index"]), f"{s['settling-time'] * 1e3:g}", f"{s['overshoot']:g}",
-                     fmt(nom["overshoot_percent"], 1), fmt(nom["settling_time_s"], 0, 1e3),
-                     fmt(worst["overshoot_percent"], 1), fmt(worst["settling_time_s"], 0, 1e3),
-                     timing, fmt(nom["peak_voltage_v"], 1)])  # fmt: skip
-    later = " and ".join(f"{f * 10:g} ms" for f in tuning.LATER_FRACTIONS)
-    headers = ["", "#", "settling target (ms)", "overshoot target (%)", "nominal overshoot (%)",
-               "nominal settling (ms)", "worst overshoot (%)", "worst settling (ms)",
-               f"timing plants overshoot (%) ({later})", "peak voltage (V)"]  # fmt: skip
+        timing = " / ".join(fmt(e["overshoot_percent"], 1) for e in r.get("timing", ()))
+        rows.append(
+            [
+                ("", mark),
+                ("#", str(r["index"])),
+                ("settling target (ms)", f"{s['settling-time'] * 1e3:g}"),
+                ("overshoot target (%)", f"{s['overshoot']:g}"),
+                (
+                    "nominal overshoot (%)",
+                    _cell(r, "nominal", "overshoot_percent", 1) or r["status"],
+                ),
+                ("nominal settling (ms)", _cell(r, "nominal", "settling_time_s", 0, 1e3)),
+                ("worst overshoot (%)", _cell(r, "worst", "overshoot_percent", 1)),
+                ("worst settling (ms)", _cell(r, "worst", "settling_time_s", 0, 1e3)),
+                (f"timing plants overshoot (%) ({later})", timing),
+                ("peak voltage (V)", _cell(r, "nominal", "peak_voltage_v", 1)),
+            ]
+        )
     return (
         f"Pole placement with a Kalman estimator, designed for a loop delay of "
         f"{result.design_fixed['loop_delay_ticks']} tick(s); each setting run in the simulated "
@@ -144,7 +177,7 @@ def tuning_body(result: tuning.TuningResult, command: str) -> str:
         f"{tuning.MAX_OVERSHOOT_PERCENT:g} % on the model and on the timing plants and nominal "
         f"settling ≤ {tuning.MAX_SETTLING_S * 1e3:g} ms, the lowest worst-case overshoot, then "
         f"the fastest nominal settling (`tune --robust --choose best`'s rule).\n\n"
-        + markdown_table(headers, rows)
+        + _table(rows)
         + f"\n\n→ chosen; *: on the robust Pareto front. Controller: `{command}`.\n\n"
         + "".join(f"Setting #{i} passed over: {why}.\n\n" for i, why in result.refused)
         + "Files: controller.toml, tuning.rrd, tuning.png."
@@ -188,12 +221,18 @@ def verification_body(checked: checks.Verification, summary: dict[str, Any],
     """The verification section: measured against predicted, the bounds, pass or fail."""
     m, p, lim = checked.measured, checked.predicted, checked.limits
     rows = [
-        ["overshoot (%)", fmt(m["overshoot_percent"], 2), fmt(p.get("nominal_overshoot_percent"), 2),
-         fmt(p.get("worst_overshoot_percent"), 2), f"≤ {lim['overshoot_percent']:.2f}"],
-        ["settling (ms)", fmt(m["settling_time_s"], 0, 1e3),
-         fmt(p.get("nominal_settling_time_s"), 0, 1e3), fmt(p.get("worst_settling_time_s"), 0, 1e3),
-         f"≤ {lim['settling_time_s'] * 1e3:.0f}"],
-    ]  # fmt: skip
+        [
+            label,
+            fmt(m[k], digits, scale),
+            fmt(p.get(f"nominal_{k}"), digits, scale),
+            fmt(p.get(f"worst_{k}"), digits, scale),
+            f"≤ {lim[k] * scale:.{digits}f}",
+        ]
+        for label, k, digits, scale in (
+            ("overshoot (%)", "overshoot_percent", 2, 1.0),
+            ("settling (ms)", "settling_time_s", 0, 1e3),
+        )
+    ]
     return (
         f"`cartctl {' '.join(argv)}` (worse of motors a and b, on the {lim['speed']} speed).\n\n"
         + markdown_table(

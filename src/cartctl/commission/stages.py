@@ -21,11 +21,18 @@ from cartctl.commission import StageError, checks, report, tuning
 from cartctl.data.trace import Trace, write_trace
 from cartctl.plants.base import ClockedPlant
 from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
-from cartctl.runtime.loop import ExperimentResult, run_experiment
+from cartctl.runtime.loop import run_experiment
 from cartctl.runtime.realtime import one_blas_thread
 from cartctl.tune.engine import save_setting
 
 STAGES = ("checks", "excitation", "identification", "tuning", "verification")
+# ``cartctl run``'s plant options, by their key in ``Commission.plant_options``
+PLANT_FLAGS = {
+    "--preset": "preset",
+    "--noise": "noise_std_rad_s",
+    "--connect-timeout": "connect_timeout_s",
+    "--seed": "seed",
+}
 
 
 class StageStoppedError(Exception):
@@ -47,8 +54,8 @@ class Commission:
     spec: str
     out: Path
     plant_options: dict[str, Any]
+    run_command: Callable[[list[str]], tuple[int, dict[str, Any] | None]]
     jobs: int | None = None
-    run_command: Callable[[list[str]], tuple[int, dict[str, Any] | None]] | None = None
     results: dict[str, Any] = field(default_factory=dict)
     problems: list[str] = field(default_factory=list)
 
@@ -78,8 +85,11 @@ class Commission:
         if failure is not None:
             raise failure
 
-    def _experiment(self, stage: str, ua: np.ndarray, ub: np.ndarray,
-                    probe: bool = False) -> ExperimentResult:  # fmt: skip
+    def _experiment(self, stage: str, ua: np.ndarray, ub: np.ndarray, probe: bool = False) -> Trace:
+        """Send ``ua``, ``ub`` (V) to a new plant and keep the trace as ``<stage>.csv``; raises
+        :class:`StageStoppedError` after keeping what an early end left."""
+        from cartctl.data.trace import write_trace_meta
+
         plant, self.description = make_plant(self.spec, **self.plant_options)
         try:
             if isinstance(plant, ClockedPlant):
@@ -100,13 +110,9 @@ class Commission:
             raise
         bar = ProgressBar(ua.size, f"cartctl commission {stage}")
         try:
-            return run_experiment(plant, ua, ub, on_tick=bar.update, source=self.description)
+            result = run_experiment(plant, ua, ub, on_tick=bar.update, source=self.description)
         finally:
             bar.close()
-
-    def _keep(self, stage: str, result: ExperimentResult) -> Trace:
-        from cartctl.data.trace import write_trace_meta
-
         if len(result.trace):
             write_trace(result.trace, self.out / f"{stage}.csv")
             write_trace_meta(self.out / f"{stage}.csv", plant=self.description,
@@ -122,7 +128,7 @@ class Commission:
         """Stage 1: port, heartbeat, loop delay; direction, encoder sign, breakaway; amplitude."""
         self.say("checks", "connecting, then a pulse and a slow ramp on each motor (5.5 s)")
         ua, ub, windows = checks.checks_sequence(PERIOD_S)
-        trace = self._keep("checks", self._experiment("checks", ua, ub, probe=True))
+        trace = self._experiment("checks", ua, ub, probe=True)
         found = checks.analyse_checks(trace, windows, self.loop_delay_ticks)
         failure = None
         try:
@@ -151,7 +157,7 @@ class Commission:
         assert self.amplitude is not None
         volts = make_signal("square", self.amplitude.voltage_v)
         self.say("excitation", f"square ±{self.amplitude.voltage_v:g} V, {volts.size / 100:g} s")
-        self.excitation = self._keep("excitation", self._experiment("excitation", volts, volts))
+        self.excitation = self._experiment("excitation", volts, volts)
         trace = self.excitation
         body = (f"The report's square wave (+A, 0, −A for 1 s each, 5 cycles) at A = "
                 f"{self.amplitude.voltage_v:g} V on both motors; peak speeds "
@@ -172,8 +178,8 @@ class Commission:
                  f"{1 - checks.SPLIT:.0%}")  # fmt: skip
         result, request, verdicts = checks.identify_and_judge(self.excitation,
                                                                   self.loop_delay_ticks)  # fmt: skip
-        passed = not any(v.problems for v in verdicts.values())
-        if not passed:
+        failure = checks.model_failure(verdicts, self.amplitude.voltage_v)
+        if failure is not None:
             self.model_path = self.out / "model-failed.toml"
         files = [str(self.out / "excitation.csv")]
         models = model_file(result, files, request, source=f"cartctl commission {self.spec}")
@@ -194,15 +200,10 @@ class Commission:
             report.plot_lines(self.out / "identification.png",
                               "Validation: measured speed and the model's simulation", panels)  # fmt: skip
         self.results["model"] = {
-            "path": str(self.model_path), "passed": passed, "loop_delay_ticks": self.loop_delay_ticks,
+            "path": str(self.model_path), "passed": failure is None, "loop_delay_ticks": self.loop_delay_ticks,
             "motors": {m: {"theta": list(r.chosen.model.theta), "nk": r.chosen.model.nk,
                            "dc_gain": r.chosen.model.dc_gain(), **verdicts[m].to_dict()}
                        for m, r in result.motors.items()}}  # fmt: skip
-        failure = None
-        try:
-            checks.model_verdict(verdicts, self.amplitude.voltage_v)
-        except StageError as exc:
-            failure = exc
         self._done("identification", series, body, failure)
 
     def run_tuning(self) -> None:
@@ -240,13 +241,12 @@ class Commission:
         self.say("verification", f"{checks.REFERENCE} for {checks.DURATION_S:g} s with "
                  f"controller.toml{' (--fast)' if fast else ''}")  # fmt: skip
         opts = self.plant_options
-        argv = checks.run_argv(self.spec, self.controller_path, self.out, fast=fast,
-                               plant_options=["--preset", opts["preset"], "--noise",
-                                              str(opts["noise_std_rad_s"]), "--connect-timeout",
-                                              str(opts["connect_timeout_s"])]
-                               + ([] if opts["seed"] is None else ["--seed", str(opts["seed"])]))  # fmt: skip
-        if self.run_command is None:
-            raise StageError("verification: no way to run the closed loop was given")
+        plant_options = [
+            a for f, k in PLANT_FLAGS.items() if opts[k] is not None for a in (f, str(opts[k]))
+        ]
+        argv = checks.run_argv(
+            self.spec, self.controller_path, self.out, fast=fast, plant_options=plant_options
+        )
         code, summary = self.run_command(argv)
         if summary is None or code not in (0,):
             self.report.add("verification", f"`cartctl {' '.join(argv)}` ended with code {code}.")

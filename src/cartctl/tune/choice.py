@@ -8,8 +8,9 @@ finite."""
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -88,10 +89,6 @@ LIMITS_WHERE = "on the model and on the physics preset at each --actuation-ms"
 LIMITS_WHERE_NOMINAL = "on the plant (worse of motors a and b)"
 
 
-def _rounded(overshoot: float) -> float:
-    return round(overshoot / CHOICE_RESOLUTION_PERCENT)
-
-
 def _bounded_figures(r: RobustRow) -> list[tuple[float | None, float | None]]:
     assert r.score is not None
     nominal = r.score.figures
@@ -100,43 +97,69 @@ def _bounded_figures(r: RobustRow) -> list[tuple[float | None, float | None]]:
     return figures
 
 
+Choosable = TypeVar("Choosable", RobustRow, TuneResult)
+
+
+def _best(
+    candidates: Sequence[Choosable],
+    limits: Limits,
+    figures: Callable[[Choosable], list[tuple[float | None, float | None]]],
+    rank: Callable[[Choosable], tuple[Any, Any]],
+    words: tuple[str, str, str],
+) -> Choosable:
+    """The candidate of least (``rank``'s overshoot to :data:`CHOICE_RESOLUTION_PERCENT`, its
+    settling, index) among those whose ``figures`` (overshoot %, settling s) meet ``limits``;
+    ``words``: what every candidate does, what the bounded ones do, where the limits apply."""
+    if not candidates:
+        raise InputError(
+            f"--choose best: no feasible setting {words[0]}; widen the grid or pick one with "
+            "--choose N"
+        )
+    within = [r for r in candidates if limits.met(figures(r))]
+    if not within:
+        raise InputError(
+            f"--choose best: no setting that {words[1]} has {limits.text()} {words[2]}; widen the "
+            "grid or the limits"
+        )
+
+    def key(r: Choosable) -> tuple[float, float, int]:
+        overshoot, settling = rank(r)
+        return round(overshoot / CHOICE_RESOLUTION_PERCENT), settling, r.index
+
+    return min(within, key=key)
+
+
 def choose_best_robust(rows: Sequence[RobustRow], limits: Limits = Limits()) -> RobustRow:
     """``--choose best`` with ``--robust`` (:data:`CHOICE_RULE`), within ``limits``; InputError when
     no setting qualifies."""
-    candidates = [r for r in rows if r.score is not None and r.score.settles_everywhere
-                  and math.isfinite(r.score.value("overshoot_percent", "worst"))]  # fmt: skip
-    if not candidates:
-        raise InputError("--choose best: no feasible setting settles on every sampled plant "
-                         "and physics run; widen the grid or pick one with --choose N")  # fmt: skip
-    candidates = [r for r in candidates if limits.met(_bounded_figures(r))]
-    if not candidates:
-        raise InputError(f"--choose best: no setting that settles everywhere has "
-                         f"{limits.text()} {LIMITS_WHERE}; widen the grid or the limits")  # fmt: skip
 
-    def key(r: RobustRow) -> tuple[float, float, int]:
+    def rank(r: RobustRow) -> tuple[float, float]:
         assert r.score is not None
         settling = r.score.value("settling_time_s", "nominal")
-        return (_rounded(r.score.value("overshoot_percent", "worst")),
-                settling if math.isfinite(settling) else math.inf, r.index)  # fmt: skip
+        worst = r.score.value("overshoot_percent", "worst")
+        return worst, settling if math.isfinite(settling) else math.inf
 
-    return min(candidates, key=key)
+    candidates = [
+        r
+        for r in rows
+        if r.score is not None
+        and r.score.settles_everywhere
+        and math.isfinite(r.score.value("overshoot_percent", "worst"))
+    ]
+    words = ("settles on every sampled plant and physics run", "settles everywhere", LIMITS_WHERE)
+    return _best(candidates, limits, _bounded_figures, rank, words)
 
 
 def choose_best_nominal(results: Sequence[TuneResult], limits: Limits = Limits()) -> TuneResult:
     """``--choose best`` without ``--robust`` (:data:`CHOICE_RULE_NOMINAL`), within ``limits``;
     InputError when no setting qualifies."""
-    candidates = [r for r in results if r.feasible and r.worst["settling_time_s"] is not None
-                  and r.worst["overshoot_percent"] is not None]  # fmt: skip
-    if not candidates:
-        raise InputError("--choose best: no feasible setting settles; widen the grid or pick one "
-                         "with --choose N")  # fmt: skip
-    candidates = [r for r in candidates
-                  if limits.met([(r.worst["overshoot_percent"], r.worst["settling_time_s"])])]  # fmt: skip
-    if not candidates:
-        raise InputError(f"--choose best: no setting that settles has {limits.text()} "
-                         f"{LIMITS_WHERE_NOMINAL}; widen the grid or the limits")  # fmt: skip
-    return min(candidates, key=lambda r: (_rounded(r.worst["overshoot_percent"]),  # type: ignore[arg-type]
-                                          r.worst["settling_time_s"], r.index))  # fmt: skip
+
+    def figures(r: TuneResult) -> list[tuple[float | None, float | None]]:
+        return [(r.worst["overshoot_percent"], r.worst["settling_time_s"])]
+
+    candidates = [r for r in results if None not in figures(r)[0]]  # (all None if infeasible)
+    words = ("settles", "settles", LIMITS_WHERE_NOMINAL)
+    return _best(candidates, limits, figures, lambda r: figures(r)[0], words)
 
 
 def sort_robust(rows: Sequence[RobustRow]) -> list[RobustRow]:
