@@ -9,7 +9,7 @@ from __future__ import annotations
 import html
 import math
 import shlex
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,12 +42,6 @@ def number(value: float | None, digits: int = 4) -> str:
 def numbers(values: Iterable[float], digits: int = 4) -> str:
     """A short list ``[-0.9157, 0.2044, …]`` of ``values`` with ``digits`` significant figures."""
     return "[" + ", ".join(number(v, digits) for v in values) + "]"
-
-
-def _drawn(columns: Mapping[str, NDArray[np.float64]], name: str) -> NDArray[np.float64]:
-    """A column without the stop row (the zero-volt command a run ends with)."""
-    values = np.asarray(columns[name], dtype=float)
-    return values[:-1] if values.size > 1 else values
 
 
 _IDENT_HEADERS = ("motor", "nk", "θ", "θ std", "fit sim (%)", "fit pred (%)", "max |pole|")
@@ -308,18 +302,20 @@ class SimulationResult(_Shown):
             pairs = [tuple(ax)]
             fig = pairs[0][0].figure
         columns = self.columns
-        time_s = _drawn(columns, "time_s")
+        # without the stop row (the zero-volt command a run ends with)
+        drawn = {k: np.asarray(v, dtype=float)[: max(1, len(v) - 1)] for k, v in columns.items()}
+        time_s = drawn["time_s"]
         for m, (top, bottom) in zip(motors, pairs, strict=True):
-            top.plot(time_s, _drawn(columns, f"reference_{m}"), "k--", label="reference")
-            top.plot(time_s, _drawn(columns, f"speed_{m}"), label="measured speed")
+            top.plot(time_s, drawn[f"reference_{m}"], "k--", label="reference")
+            top.plot(time_s, drawn[f"speed_{m}"], label="measured speed")
             for name, label in (("true_speed", "true speed"), ("estimate", "estimate")):
                 values = columns.get(f"{name}_{m}")
                 if (values is not None and np.isfinite(values).any()
                         and not np.array_equal(values, columns[f"speed_{m}"])):  # fmt: skip
-                    top.plot(time_s, _drawn(columns, f"{name}_{m}"), label=label, alpha=0.8)
+                    top.plot(time_s, drawn[f"{name}_{m}"], label=label, alpha=0.8)
             top.set_title(f"motor {m}")
             top.set_ylabel("speed (rad/s)")
-            bottom.step(time_s, _drawn(columns, f"voltage_{m}"), where="post", color="C3",
+            bottom.step(time_s, drawn[f"voltage_{m}"], where="post", color="C3",
                         label="commanded voltage")  # fmt: skip
             bottom.set_ylabel("voltage (V)")
             bottom.set_xlabel("time (s)")
