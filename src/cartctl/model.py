@@ -245,18 +245,14 @@ _SUPERSCRIPT = str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹")
 
 def format_poly(coeffs: Sequence[float] | NDArray[np.float64], var: str = "z") -> str:
     """A polynomial in descending powers of ``var``, 4 significant digits."""
-    degree = len(coeffs) - 1
-    parts: list[str] = []
-    for i, c in enumerate(coeffs):
+    text = ""
+    for power, c in zip(range(len(coeffs) - 1, -1, -1), coeffs, strict=True):
         if c == 0.0:
             continue
-        power = degree - i
         term = "" if (abs(c) == 1.0 and power > 0) else f"{abs(c):.4g}"
         if power >= 1:
             exponent = str(power).translate(_SUPERSCRIPT) if power > 1 else ""
             term += (" " if term else "") + var + exponent
-        if parts:
-            parts.append(f"{'−' if c < 0 else '+'} {term}")
-        else:
-            parts.append(f"−{term}" if c < 0 else term)
-    return " ".join(parts) if parts else "0"
+        sign = "−" if c < 0 else ("+" if text else "")
+        text += f" {sign} {term}" if text else sign + term
+    return text or "0"
