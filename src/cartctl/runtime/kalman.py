@@ -140,8 +140,8 @@ class KalmanSpeedEstimator:
 
 
 class FilterTerms(NamedTuple):
-    """A :class:`KalmanDesign`'s fixed-gain filter as plain floats without its zeros: L, C's
-    (index, value) entries, and per state A's row of (column, value) entries with B's entry."""
+    """A fixed-gain filter as floats without its zeros: L, C's (index, value) entries, and per
+    state A's row of (column, value) entries with B's entry."""
 
     L: tuple[float, ...]
     C: tuple[tuple[int, float], ...]
@@ -150,15 +150,16 @@ class FilterTerms(NamedTuple):
     @classmethod
     def from_design(cls, design: KalmanDesign) -> FilterTerms:
         """The terms of ``design`` (the observer form has at most three entries per row of A)."""
-        rows = tuple(tuple((j, float(a)) for j, a in enumerate(row) if a != 0.0)
-                     for row in design.A)  # fmt: skip
-        return cls(tuple(float(v) for v in design.L),
-                   tuple((j, float(c)) for j, c in enumerate(design.C) if c != 0.0),
-                   tuple(zip(rows, (float(b) for b in design.B), strict=True)))  # fmt: skip
+
+        def nonzero(values: NDArray[np.float64]) -> tuple[tuple[int, float], ...]:
+            return tuple((j, float(v)) for j, v in enumerate(values) if v != 0.0)
+
+        AB = tuple(zip(map(nonzero, design.A), map(float, design.B), strict=True))
+        return cls(tuple(map(float, design.L)), nonzero(design.C), AB)
 
 
 def filter_correct(terms: FilterTerms, x: list[Value], measured_rad_s: Value) -> list[Value]:
-    """``correct`` on a state of m entries, floats or arrays (:mod:`~cartctl.runtime.elementwise`)."""
+    """``correct`` on a state of m entries, floats or arrays."""
     innovation = measured_rad_s
     for j, c in terms.C:
         innovation = innovation - c * x[j]
@@ -201,5 +202,5 @@ class SteadyStateSpeedEstimator:
         return np.array(self._x)
 
     def state_values(self) -> list[float]:
-        """x̂ as the estimator's own list, not a copy (each step replaces it)."""
+        """x̂ as the estimator's own list (each step replaces it)."""
         return self._x

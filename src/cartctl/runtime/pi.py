@@ -47,10 +47,8 @@ def pi_law(
     limit_v: float,
 ) -> tuple[Value, Value]:
     """One tick of the module docstring's law: (u[k] within ±limit_v, I[k]) from e[k] (rad/s) and
-    I[k−1] (V), Kp (V/(rad/s)), Ki·Ts (V/(rad/s)), Kt (per tick) and the index of the anti-windup
-    mode in ``ANTI_WINDUP``; where u would not be finite, 0 V and I[k−1]. Floats or arrays
-    (:mod:`~cartctl.runtime.elementwise`).
-    """
+    I[k−1] (V), Kp (V/(rad/s)), Ki·Ts (V/(rad/s)), Kt (per tick) and the anti-windup mode's index
+    in ``ANTI_WINDUP``; where u would not be finite, 0 V and I[k−1]. Floats or arrays."""
     p = kp * error
     integral = integral_v + ki_ts * error
     u = p + integral
@@ -60,8 +58,8 @@ def pi_law(
         if mode == CONDITIONAL:  # up to the limit, never further
             held = clamped & (error * u > 0.0)
             edge = u_sat - p
-            moved = select(error > 0.0, larger(integral_v, smaller(integral, edge)),
-                           smaller(integral_v, larger(integral, edge)))  # fmt: skip
+            up = larger(integral_v, smaller(integral, edge))
+            moved = select(error > 0.0, up, smaller(integral_v, larger(integral, edge)))
             integral = select(held, moved, integral)
             u_sat = select(held, clip(p + integral, limit_v), u_sat)
         elif mode == BACK_CALCULATION:
@@ -85,9 +83,7 @@ class PiController:
 
     Kp ≥ 0 (V/(rad/s)), Ki ≥ 0 (V/rad), Ts (s); ``tracking_gain`` is Kt in (0, 1] per tick, for
     back-calculation only (default min(1, Ts·Ki/Kp), 1 for Kp = 0: a tracking time constant equal
-    to the integral time). With an ``estimator`` the PI acts on its estimate (the Kalman
-    estimators' x̂_1[k|k], the tick-average speed of the design model, offset-free with the
-    input-disturbance state).
+    to the integral time). With an ``estimator`` the PI acts on its estimate x̂_1[k|k].
     """
 
     def __init__(
@@ -137,16 +133,16 @@ class PiController:
             self.estimator.reset()
 
     def step(self, reference_rad_s: float, measured_rad_s: float) -> float:
-        """One tick: u[k] (V); 0 V, the integral unchanged, when the reference, the measurement or
-        the estimate is not finite (``estimate_rad_s`` is then that value)."""
+        """One tick: u[k] (V); 0 V, the integral unchanged, when r, y or the estimate is not finite."""
         estimator = self.estimator
         y = measured_rad_s
         if estimator is not None and math.isfinite(y):
             y = estimator.correct(y)
         self.estimate_rad_s = y
-        u_sat, self.integral_v = pi_law(reference_rad_s - y, self.integral_v, self.kp, self._ki_ts,
-                                        self.tracking_gain_per_tick, self._mode,
-                                        self.voltage_limit_v)  # fmt: skip
+        gains = (self.kp, self._ki_ts, self.tracking_gain_per_tick, self._mode)
+        u_sat, self.integral_v = pi_law(
+            reference_rad_s - y, self.integral_v, *gains, self.voltage_limit_v
+        )
         if estimator is not None:
             estimator.predict(u_sat)
         return u_sat

@@ -42,9 +42,7 @@ def feedback_law(
     limit_v: float,
 ) -> tuple[Value, Value, Value]:
     """One tick of the module docstring's law: (u_raw, u, x_i after the tick) in V, V, rad, from
-    r[k] and y[k] (rad/s, finite), x̂[k|k] (at least as many entries as K) and x_i (rad). Floats
-    or arrays (:mod:`~cartctl.runtime.elementwise`).
-    """
+    finite r[k] and y[k] (rad/s), x̂[k|k] and x_i (rad); floats or arrays."""
     K, ki, k_r, period_s = gains
     u_raw = k_r * reference_rad_s - ki * integral_rad
     for k, xk in zip(K, state, strict=False):
@@ -57,8 +55,7 @@ def feedback_law(
 
 
 class FeedbackGains(Protocol):
-    """What the controller needs of a design: a :class:`~cartctl.design.poles.PolesDesign`, or
-    the same numbers read back from a controller file."""
+    """What the controller needs of a design (a PolesDesign, or one read from a file)."""
 
     @property
     def K(self) -> NDArray[np.float64]: ...  # noqa: N802 (the literature's K)
@@ -73,8 +70,7 @@ class FeedbackGains(Protocol):
 
 
 class FeedbackTerms(NamedTuple):
-    """A design's gains as plain floats: K (one per state fed back, V per state unit), Ki
-    (V/rad), Kr (V/(rad/s)) and Ts (s)."""
+    """A design's gains as floats: K (V per state unit), Ki (V/rad), Kr (V/(rad/s)), Ts (s)."""
 
     K: tuple[float, ...]
     Ki: float
@@ -85,9 +81,9 @@ class FeedbackTerms(NamedTuple):
 class StateFeedbackController:
     """Pole-placement speed control with integral action on a Kalman state estimate.
 
-    K, Ki, Kr and Ts come from ``design``. The ``estimator`` is owned (reset with the controller),
-    its state starting with the states K acts on; default a :class:`SteadyStateSpeedEstimator` on
-    ``design.estimator``. ``integral_rad`` is x_i, the integral of r − y (rad of wheel angle).
+    The ``estimator`` is owned (reset with the controller), its state starting with the states K
+    acts on (default: a :class:`SteadyStateSpeedEstimator` on ``design.estimator``);
+    ``integral_rad`` is x_i, the integral of r − y (rad of wheel angle).
     """
 
     def __init__(
@@ -111,8 +107,8 @@ class StateFeedbackController:
         values = getattr(estimator, "state_values", None)  # a list, without a numpy array
         self._state_values = values if callable(values) else lambda: estimator.state.tolist()
         self.voltage_limit_v = limit
-        self.terms = FeedbackTerms(tuple(float(k) for k in design.K), float(design.Ki),
-                                   float(design.Kr), float(design.period_s))  # fmt: skip
+        K = tuple(float(k) for k in design.K)
+        self.terms = FeedbackTerms(K, float(design.Ki), float(design.Kr), float(design.period_s))
         self.reset()
 
     def reset(self) -> None:
@@ -128,8 +124,10 @@ class StateFeedbackController:
             self._predict_and_estimate(float(est.state[0]), 0.0)
             return 0.0
         x1 = est.correct(measured_rad_s)
-        u_raw, u, integral = feedback_law(reference_rad_s, measured_rad_s, self._state_values(),
-                                          self.integral_rad, self.terms, self.voltage_limit_v)  # fmt: skip
+        r, x = reference_rad_s, self._state_values()
+        u_raw, u, integral = feedback_law(
+            r, measured_rad_s, x, self.integral_rad, self.terms, self.voltage_limit_v
+        )
         if not math.isfinite(u_raw):  # overflowed on an absurd value: 0 V and start afresh
             self.reset()
             self._predict_and_estimate(0.0, 0.0)
