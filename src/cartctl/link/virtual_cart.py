@@ -144,19 +144,14 @@ class VirtualCart:
                 thread.join(timeout=1.0)
         self._close_fds()
 
-    def wait(self) -> None:
-        """Block until the cart stops (Ctrl-C, a pulled cable)."""
-        while self._ticker.is_alive():
-            self._ticker.join(timeout=0.2)
+    def wait(self, seconds: float | None = None) -> None:
+        """Block until the cart stops (Ctrl-C, a pulled cable), or for at most ``seconds``."""
+        self._ticker.join(timeout=seconds)
 
     def arm_faults(self) -> None:
         """Start the stall/pull clock now, for a host that never sends (``cartctl monitor``)."""
         if self.first_frame_at_s is None:
             self.first_frame_at_s = time.perf_counter()
-
-    def wait_seconds(self, seconds: float) -> None:
-        """Block for ``seconds`` or until the cart stops."""
-        self._ticker.join(timeout=seconds)
 
     @property
     def last_host_byte_at_s(self) -> float | None:  # time.perf_counter; None: none yet
@@ -168,12 +163,11 @@ class VirtualCart:
         _wait_until(lambda: self.ticks >= target or not self._ticker.is_alive(), timeout_s, 0.002)
 
     def _close_fds(self) -> None:
-        for name in ("_master", "_slave"):
-            fd = getattr(self, name)
+        fds, self._master, self._slave = (self._master, self._slave), -1, -1
+        for fd in fds:
             if fd >= 0:
                 with contextlib.suppress(OSError):
                     os.close(fd)
-                setattr(self, name, -1)
 
     def _send(self, frame: bytes, not_before_s: float, *, track: bool = False) -> None:
         faults, rng = self.faults, self._rng
@@ -284,8 +278,8 @@ class VirtualCart:
                 floats12 = [*firmware.out_floats, *(float(v) for v in firmware.out_ints)]
                 self._send(encode_gpiox_v2(time_ms, floats12, seq=j % 256), send_at)
             else:
-                self._send(encoder.gpio(time_ms, firmware.out_floats, firmware.out_ints), send_at,
-                           track=True)  # fmt: skip
+                frame = encoder.gpio(time_ms, firmware.out_floats, firmware.out_ints)
+                self._send(frame, send_at, track=True)
                 if self.bridge_version == 2:  # its tick's timing: 120 bytes, a USB flush at once
                     reports = (COMM_PHASE_US, DRAIN_BUSY_US, period_us, self._ring_high)
                     self._ring_high = 0

@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--reference needs --onboard CONTROLLER.toml")
     if args.duration is not None:
         options.check_duration(args.duration)
-    options.check_noise(args.noise)
+    options.check_plant_options(args)
     if args.reference:
         from cartctl.reference import check_reference
 
@@ -109,10 +109,7 @@ def run(args: argparse.Namespace) -> int:
     )
     try:
         with cart:
-            if args.duration is not None:
-                cart.wait_seconds(args.duration)
-            else:
-                cart.wait()
+            cart.wait(args.duration)
     except KeyboardInterrupt:
         pass
     print(f"virtual cart stopped ({cart.state}) after {cart.ticks} ticks", file=sys.stderr)
