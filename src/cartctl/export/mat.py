@@ -11,7 +11,7 @@ import numpy as np
 
 from cartctl.data.modelfile import ModelFile
 from cartctl.data.tomlfile import CONTROLLER_FORMAT, MODEL_FORMAT
-from cartctl.design.controller_ss import controller_state_space
+from cartctl.design.controller_ss import controller_state_space, feedback_gains
 from cartctl.design.controllerfile import ControllerFile
 
 _KALMAN_KEYS = ("A", "B", "C", "Q", "R", "P", "L", "timing_noise_std_ticks")
@@ -67,12 +67,11 @@ def controller_mat(controller: ControllerFile, source: str = "") -> dict[str, An
             "Ts": ts,
         }
         if controller.method == "pi":
-            motor.update(kp=float(entry["kp"]), ki=float(entry["ki"]))
-            motor["anti_windup"] = str(entry.get("anti_windup", "conditional"))
+            windup = str(entry.get("anti_windup", "conditional"))
+            motor.update(kp=float(entry["kp"]), ki=float(entry["ki"]), anti_windup=windup)
         else:
-            motor.update(
-                K=np.asarray(entry["K"], dtype=float), Ki=float(entry["Ki"]), Kr=float(entry["Kr"])
-            )
+            gains = feedback_gains(entry, ts)
+            motor.update(K=gains.K, Ki=gains.Ki, Kr=gains.Kr)
         if (estimator := entry.get("estimator")) is not None:
             motor["estimator"] = {
                 k: np.asarray(estimator[k], float) for k in _KALMAN_KEYS if k in estimator
