@@ -1,7 +1,6 @@
 """The cart's end of the serial line as the virtual cart models it (docs/serial-protocol.md §4):
 the line's byte time (a pseudo-terminal delivers at once), the Mega's USB bridge, the receive ring
-and microOS's parser.
-"""
+and microOS's parser."""
 
 from __future__ import annotations
 
@@ -42,8 +41,8 @@ BYTE_TIME_S = byte_time_s(LEGACY_BAUD)
 
 class UsbBridge:
     """When the cart's bytes reach the PC through the Mega's ATmega16U2 (pure; times in s): they
-    wait for its 4.096 ms flush or its 96-byte threshold, then for the PC's next 1 ms USB frame.
-    The phases place the flush timer and the USB frames on the time axis."""
+    wait for its 4.096 ms flush or its 96-byte threshold, then for the PC's next 1 ms USB frame
+    (the phases place both grids)."""
 
     def __init__(self, flush_phase_s: float = 0.0, frame_phase_s: float = 0.0) -> None:
         self.flush_phase_s = float(flush_phase_s)
@@ -51,8 +50,7 @@ class UsbBridge:
         self._waiting: list[tuple[float, int]] = []  # (through the AVR's UART, byte)
 
     def feed(self, byte_times: Iterable[tuple[float, int]]) -> list[tuple[float, bytes]]:
-        """Bytes through the AVR's UART at the given times, in order; returns ``(at_pc_s, data)``
-        for every flush they complete (the rest wait for :meth:`flush_due`)."""
+        """``(at_pc_s, data)`` of the flushes that bytes through the UART at these times complete."""
         out: list[tuple[float, bytes]] = []
         for t, byte in byte_times:
             out += self.flush_due(t)
@@ -87,8 +85,8 @@ def fill_ring(arrived: bytes, capacity: int = RX_RING_BYTES) -> tuple[bytes, int
 
 class MicroosParser:
     """microOS's receive side of MAVLink 1: a frame is the ``LEN + 8`` bytes from a start byte,
-    whatever they are (no resynchronisation); only then is its checksum checked. Counts the GPIO
-    ``frames`` decoded and the ``bad_frames`` dropped."""
+    whatever they are (no resynchronisation), then its checksum is checked; counts GPIO ``frames``
+    and ``bad_frames``."""
 
     def __init__(self) -> None:
         self._frame = bytearray()
@@ -98,7 +96,7 @@ class MicroosParser:
         self.bad_frames = 0
 
     def feed(self, data: bytes) -> list[Gpio]:
-        """Parse ``data``; returns the GPIO messages of the frames it completes."""
+        """The GPIO messages of the frames ``data`` completes."""
         out: list[Gpio] = []
         for byte in data:
             frame = self._frame
@@ -140,18 +138,12 @@ class _PtyThread(threading.Thread):
 
 
 class PacedWriter(_PtyThread):
-    """Writes queued bytes to the pty master when the line (and the USB bridge) would deliver them:
-    each item no earlier than its ``not_before_s`` (``time.perf_counter``), at the pty once its last
-    byte is through, or when ``usb`` decides. :attr:`deliveries`: ``(through_uart_s, at_pc_s)``
-    of tracked items."""
+    """Writes queued bytes to the pty master when the line (and ``usb``) would deliver them, each
+    item no earlier than its ``not_before_s`` (``time.perf_counter``); :attr:`deliveries`:
+    ``(through_uart_s, at_pc_s)`` of tracked items."""
 
     def __init__(
-        self,
-        fd: int,
-        stop: threading.Event,
-        *,
-        byte_s: float = BYTE_TIME_S,
-        usb: UsbBridge | None = None,
+        self, fd: int, stop: threading.Event, byte_s: float, usb: UsbBridge | None
     ) -> None:
         super().__init__("virtual-cart-writer", fd, stop, byte_s)
         self.usb = usb
@@ -162,8 +154,7 @@ class PacedWriter(_PtyThread):
         self._out: collections.deque[tuple[float, bytes]] = collections.deque()
 
     def put(self, data: bytes, not_before_s: float = 0.0, *, track: bool = False) -> None:
-        """Queue ``data`` to leave no earlier than ``not_before_s``; ``track``: note in
-        :attr:`deliveries` when its last byte reaches the PC."""
+        """Queue ``data``; ``track``: note in :attr:`deliveries` when it reaches the PC."""
         self.queue.put((not_before_s, data, track))
 
     def _take(self, not_before_s: float, data: bytes, track: bool) -> None:

@@ -241,23 +241,16 @@ class LineAssembler:
     "\\r" is dropped, so a "\\r\\n" split over two frames still ends exactly one line."""
 
     def __init__(self) -> None:
-        self._partial: list[str] = []
+        self._partial = ""
 
     def feed(self, text: str) -> list[str]:
         """Add a fragment; return the lines it completes (oldest first, without line endings)."""
-        pieces = text.replace("\r", "").split("\n")
-        if len(pieces) == 1:
-            if pieces[0]:
-                self._partial.append(pieces[0])
-            return []
-        lines = ["".join([*self._partial, pieces[0]]), *pieces[1:-1]]
-        self._partial = [pieces[-1]] if pieces[-1] else []
+        *lines, self._partial = (self._partial + text.replace("\r", "")).split("\n")
         return lines
 
     def flush(self) -> str | None:
         """Return and clear the unfinished line, or None if there is none."""
-        partial = "".join(self._partial)
-        self._partial = []
+        partial, self._partial = self._partial, ""
         return partial or None
 
 
