@@ -24,16 +24,14 @@ SIMULATED = ("sim", "physics")
 
 
 def plant_kind(spec: str) -> str:
-    """The kind of a ``--plant`` name: 'sim', 'physics', 'virtual', 'serial', or the name as given
-    (not a controller file's ``plant_kind`` key, which says where a loop runs)."""
+    """The kind of a ``--plant`` name: 'sim', 'physics', 'virtual', 'serial', or the name as given."""
     kind = spec.partition(":")[0]
     return kind if kind in ("physics", "virtual", "serial") else spec
 
 
 def physics_options(text: str) -> dict[str, Any]:
-    """The keyword arguments of :class:`~cartctl.plants.physics.PhysicsPlant` that
-    ``physics:KEY=VALUE,...`` sets: ``actuation_ms`` (see ``check_actuation_ms``) and
-    ``reversed_motors`` from ``reverse_a=1`` / ``reverse_b=1`` (those leads swapped)."""
+    """The PhysicsPlant keyword arguments ``physics:KEY=VALUE,...`` sets: ``actuation_ms`` and
+    ``reversed_motors`` (from ``reverse_a=1`` / ``reverse_b=1``)."""
     from cartctl.plants.physics_params import check_actuation_ms
 
     options: dict[str, Any] = {}
@@ -55,9 +53,7 @@ def physics_options(text: str) -> dict[str, Any]:
 
 
 def check_plant_name(spec: str) -> str:
-    """The kind of plant ``spec`` names, its options parsed, without making it; InputError for an
-    unknown plant, a bad option, or ``serial:`` without a port. Run it before any other check
-    that depends on the plant."""
+    """The kind of plant ``spec`` names, its options checked, without making it (InputError)."""
     kind, _, options = spec.partition(":")
     if spec == "sim":
         return kind
@@ -104,6 +100,7 @@ def make_plant(
     """
     kind = check_plant_name(spec)
     options = spec.partition(":")[2]
+    noise: dict[str, Any] = {"noise_std_rad_s": noise_std_rad_s, "seed": seed}
     if kind == "sim":
         models = load_models(model_path)
         missing = [m for m in ("a", "b") if m not in models.motors]
@@ -113,16 +110,17 @@ def make_plant(
             )
         from cartctl.plants.sim import ArxPlant
 
-        plant: Plant = ArxPlant(models.motors["a"], models.motors["b"], noise_std_rad_s=noise_std_rad_s,
-                         seed=seed, loop_delay_ticks=models.loop_delay_ticks)  # fmt: skip
+        motors, delay = models.motors, models.loop_delay_ticks
+        plant: Plant = ArxPlant(motors["a"], motors["b"], loop_delay_ticks=delay, **noise)
         return plant, f"sim ({model_path})"
     if kind == "physics":
         from cartctl.plants.physics import PhysicsPlant
 
         physics = physics_options(options)
-        plant = PhysicsPlant(preset, noise_std_rad_s=noise_std_rad_s, seed=seed, **physics)
-        timing = (f", command lands {physics['actuation_ms']:g} ms after its tick"
-                  if "actuation_ms" in physics else "")  # fmt: skip
+        plant = PhysicsPlant(preset, **noise, **physics)
+        timing = ""
+        if "actuation_ms" in physics:
+            timing = f", command lands {physics['actuation_ms']:g} ms after its tick"
         if physics.get("reversed_motors"):
             timing += f", motor(s) {physics['reversed_motors']} wired backwards"
         return plant, f"physics (preset {preset}{timing})"
@@ -130,7 +128,7 @@ def make_plant(
         from cartctl.link.virtual_cart import CartFaults, VirtualCart, VirtualSerialCart
 
         faults = CartFaults.parse(options)
-        cart = VirtualCart(preset, noise_std_rad_s=noise_std_rad_s, seed=seed, faults=faults)
+        cart = VirtualCart(preset, faults=faults, **noise)
         shown = f", faults {options}" if faults != CartFaults() else ""
         return VirtualSerialCart(
             cart, connect_timeout_s=connect_timeout_s

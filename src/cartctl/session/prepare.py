@@ -35,8 +35,8 @@ __all__ = ["DEFAULT_CONTROLLER", "PreparedRun", "check_loop_delay", "check_reach
 
 @dataclass
 class PreparedRun:
-    """A run ready for its first tick: the plant made (a cart connected); its loop delay is
-    measured on a cart, None where the plant does not know it."""
+    """A run ready for its first tick: the plant made (a cart connected), its loop delay (None:
+    not known)."""
 
     controller_file: ControllerFile
     controllers: dict[str, Any]
@@ -78,8 +78,8 @@ def check_reach(
     )
     if refuse:
         raise InputError(f"{what}; give a reference within that")
-    warnings.warn(f"{what}: the voltage saturates and the speed will not settle there",
-                  DataWarning, stacklevel=2)  # fmt: skip
+    saturates = f"{what}: the voltage saturates and the speed will not settle there"
+    warnings.warn(saturates, DataWarning, stacklevel=2)
 
 
 def _fitting_controller(controller: ControllerFile, given: str, delay: int) -> str | None:
@@ -113,11 +113,8 @@ def check_loop_delay(
     allow: bool,
     measured: EchoDelays | None = None,
 ) -> None:
-    """Refuse a controller designed for another loop delay than the plant's (with ``allow``: warn).
-
-    An unknown delay (None) is not checked; an unclear ``measured`` one (a serial plant's probe)
-    only warns.
-    """
+    """Refuse a controller designed for another loop delay than the plant's (with ``allow``: warn);
+    an unknown delay (None) is not checked, an unclear ``measured`` one (a probe) only warns."""
     designed = controller.loop_delay_ticks
     if delay is None or designed is None:
         return
@@ -136,8 +133,8 @@ def check_loop_delay(
         f"{delay}" + ("" if measured is None else f" (measured: {measured.describe()})")
     )
     if allow:
-        warnings.warn(f"{problem}; running it anyway (--allow-delay-mismatch)", DataWarning,
-                      stacklevel=2)  # fmt: skip
+        anyway = f"{problem}; running it anyway (--allow-delay-mismatch)"
+        warnings.warn(anyway, DataWarning, stacklevel=2)
         return
     fit = _fitting_controller(controller, given, delay)
     if fit is not None:
@@ -175,12 +172,10 @@ def prepare_run(
 ) -> PreparedRun:
     """Load, make and check everything a run needs (InputError for whatever it refuses).
 
-    ``given`` names the controller file in messages; the references (of motor a, and of b,
-    default a's) span ``round(duration_s / Ts)`` ticks; ``model`` is the sim plant's model file.
-    ``make_plant`` and ``build_controllers`` (a test's stand-ins) default to
-    :func:`cartctl.plants.factory.make_plant` and :func:`cartctl.design.build.build_controllers`.
-    ``before_plant`` runs once everything that needs no plant is checked (the command warms up
-    the Rerun SDK there, before a cart ticks).
+    ``given`` names the controller file in messages; the references (b's default a's) span
+    ``round(duration_s / Ts)`` ticks; ``model`` is the sim plant's model file. ``make_plant`` and
+    ``build_controllers`` replace the factory's and the controller file's; ``before_plant`` runs
+    once everything that needs no plant is checked.
     """
     from cartctl.data.modelfile import load_models
     from cartctl.design.controllerfile import ControllerFile, load_controller
@@ -223,9 +218,9 @@ def prepare_run(
     controllers = build_controllers(file, voltage_limit_v=limit)
     if before_plant is not None:
         before_plant()
-    the_plant, description = make_plant(plant, model_path=model, preset=preset,
-                                        noise_std_rad_s=noise_std_rad_s, seed=seed,
-                                        connect_timeout_s=connect_timeout_s)  # fmt: skip
+    plant_options: dict[str, Any] = {"model_path": model, "preset": preset, "seed": seed}
+    plant_options |= {"noise_std_rad_s": noise_std_rad_s, "connect_timeout_s": connect_timeout_s}
+    the_plant, description = make_plant(plant, **plant_options)
     try:
         period_s = the_plant.period_s
         if abs(period_s - file.period_s) > 1e-9:
@@ -247,8 +242,8 @@ def prepare_run(
             delay = None if measure is None else int(measure())
         else:
             delay = getattr(the_plant, "loop_delay_ticks", None)  # sim and physics know theirs
-        check_loop_delay(file, given, plant, delay, allow=allow_delay_mismatch,
-                         measured=getattr(the_plant, "probe_delays", None))  # fmt: skip
+        measured = getattr(the_plant, "probe_delays", None)
+        check_loop_delay(file, given, plant, delay, allow=allow_delay_mismatch, measured=measured)
         n = max(1, round(duration_s / period_s))
         references = {
             "a": ReferenceSchedule(reference, n, period_s, "a"),
