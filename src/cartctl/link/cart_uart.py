@@ -207,20 +207,19 @@ class PacedWriter(_PtyThread):
 class LineReader(_PtyThread):
     """Reads what the host writes (from the pty master) and stamps each byte with when the line
     delivered it. Each write is held back a random 0 .. ``reply_jitter_s`` (seeded by ``seed``)
-    and, with the USB bridge (``usb_frame_phase_s``), until the next 1 ms USB frame."""
+    and, with the USB bridge, until the next 1 ms USB frame."""
 
     def __init__(
         self,
         fd: int,
         stop: threading.Event,
-        *,
-        reply_jitter_s: float = 0.0,
-        seed: int | None = None,
-        byte_s: float = BYTE_TIME_S,
-        usb_frame_phase_s: float | None = None,
+        byte_s: float,
+        usb: UsbBridge | None,
+        reply_jitter_s: float,
+        seed: int | None,
     ) -> None:
         super().__init__("virtual-cart-reader", fd, stop, byte_s)
-        self.usb_frame_phase_s = usb_frame_phase_s
+        self.usb = usb
         self.reply_jitter_s = float(reply_jitter_s)
         self._rng = random.Random(seed)
         self._lock = threading.Lock()
@@ -244,8 +243,8 @@ class LineReader(_PtyThread):
             now = time.perf_counter()
             if self.reply_jitter_s > 0.0:
                 now += self._rng.uniform(0.0, self.reply_jitter_s)
-            if self.usb_frame_phase_s is not None:  # out at the next USB frame
-                now = next_on_grid(now, self.usb_frame_phase_s, USB_FRAME_S)
+            if self.usb is not None:  # out at the next USB frame
+                now = next_on_grid(now, self.usb.frame_phase_s, USB_FRAME_S)
             if not self.rate_ok():
                 data = bytes(self._rng.getrandbits(8) for _ in data)
             self.deliver(data, now)

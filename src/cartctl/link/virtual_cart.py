@@ -87,25 +87,18 @@ class VirtualCart:
         self._rng = random.Random(seed)
         usb = None
         if self.faults.usb:  # the phases of the 16U2's flush timer and the PC's USB frames
-            phases = (
-                self._rng.uniform(0.0, p) for p in (uart.USB_FLUSH_PERIOD_S, uart.USB_FRAME_S)
-            )
-            usb = uart.UsbBridge(*phases)
+            flush_phase_s = self._rng.uniform(0.0, uart.USB_FLUSH_PERIOD_S)
+            usb = uart.UsbBridge(flush_phase_s, self._rng.uniform(0.0, uart.USB_FRAME_S))
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)  # no echo, no line editing before the host configures the port
         os.set_blocking(self._master, False)
         self.port = os.ttyname(self._slave)
         self._stop = threading.Event()
         byte_s = uart.byte_time_s(self.baud)
-        self._writer = uart.PacedWriter(self._master, self._stop, byte_s=byte_s, usb=usb)
-        self._reader = uart.LineReader(
-            self._master,
-            self._stop,
-            reply_jitter_s=self.faults.reply_jitter_ms / 1000.0,
-            seed=None if seed is None else seed + 1,
-            byte_s=byte_s,
-            usb_frame_phase_s=None if usb is None else usb.frame_phase_s,
-        )
+        self._writer = uart.PacedWriter(self._master, self._stop, byte_s, usb)
+        jitter_s = self.faults.reply_jitter_ms / 1000.0
+        rng_seed = None if seed is None else seed + 1
+        self._reader = uart.LineReader(self._master, self._stop, byte_s, usb, jitter_s, rng_seed)
         self._reader.rate_ok = self._writer.rate_ok = self._host_rate_matches
         self._parser = uart.MicroosParser()
         self._ring_high = self._lag_us = 0
