@@ -50,10 +50,8 @@ def find_file(path: str | Path) -> Path:
     """``path`` if it exists; for a shipped file's relative path, else the copy installed with
     the package (``cartctl/shipped/``) or in the checkout it runs from; else ``path`` as given."""
     given = Path(path)
-    if given.exists() or given.is_absolute() or len(given.parts) != 2:
-        return given
-    folder, name = given.parts
-    if name not in SHIPPED_FILES.get(folder, ()):
+    folder, name = given.parts if len(given.parts) == 2 else ("", "")
+    if given.exists() or given.is_absolute() or name not in SHIPPED_FILES.get(folder, ()):
         return given
     for root in _shipped_roots():
         candidate = root / given
