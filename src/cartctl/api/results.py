@@ -1,8 +1,8 @@
 """The results the Python API returns: identified models, designs and simulated runs.
 
-Each prints as a title, one table row per motor and a line of hints, and
-shows as the same table in Jupyter; the arrays and full results stay in their attributes.
-matplotlib is imported only when a figure is drawn."""
+Each prints as a title, one table row per motor and a line of hints, and shows as the same table
+in Jupyter; the arrays and full results stay in their attributes. matplotlib is imported only
+when a figure is drawn."""
 
 from __future__ import annotations
 
