@@ -290,9 +290,16 @@ TRUE_SPEED_TOLERANCE_PP = 1.0  # percentage points: the loop's own tick-to-tick 
 def run_argv(plant: str, controller: Path, out: Path, *, fast: bool,
              plant_options: Sequence[str] = ()) -> list[str]:  # fmt: skip
     """The ``cartctl run`` arguments of the verification step."""
-    argv = ["run", "--plant", plant, "--controller", str(controller), "--reference", REFERENCE,
-            "--duration", f"{DURATION_S:g}", "--rerun", "save", "--out", str(out),
-            "--name", "verification", "--json", *plant_options]  # fmt: skip
+    options = {
+        "--plant": plant,
+        "--controller": str(controller),
+        "--reference": REFERENCE,
+        "--duration": f"{DURATION_S:g}",
+        "--rerun": "save",
+        "--out": str(out),
+        "--name": "verification",
+    }
+    argv = ["run", *(arg for pair in options.items() for arg in pair), "--json", *plant_options]
     return argv + (["--fast"] if fast else [])
 
 

@@ -277,31 +277,29 @@ def _lines(marks: list[str], results: Sequence[TuneResult], heads: list[str],
     return "\n".join(lines)
 
 
+SPREAD = ("nominal", "worst", "p5", "p95")  # the figures of a --robust table's group
+
+
 def format_robust_table(method: str, rows: Sequence[RobustRow]) -> str:
     """The ``--robust`` table: ``*`` marks the robust front; one rounding per group (overshoot,
     settling); the reasons of the settings that did not run below it."""
     heads, cells = _settings_columns(method, [r.result for r in rows])
     scored = [r.score for r in rows]
+    groups: list[tuple[str, int, int]] = []
 
-    def figure(metric: str, which: str) -> list[float | None]:
-        return [None if s is None else s.figures[metric][which] for s in scored]
+    def group(label: str, columns: dict[str, list[str]]) -> None:
+        groups.append((label, len(heads) + 2, len(heads) + 1 + len(columns)))
+        heads.extend(columns)
+        cells.extend(columns.values())
 
-    spread = ("nominal", "worst", "p5", "p95")
-    groups = []
     for metric, factor, label in (("overshoot_percent", 1.0, "run overshoot (%)"),
                                   ("settling_time_s", 1e3, "run settling (ms)")):  # fmt: skip
-        d = column_decimals([v * factor for w in spread for v in figure(metric, w)
-                             if v is not None and v != float("inf")])  # fmt: skip
-
-        def show(values: list[float | None], f: float = factor, d: int = d) -> list[str]:
-            return [format_fixed(None if v is None else v * f, d) for v in values]
-
-        first = len(heads) + 2
-        heads += ["nominal", "worst", "p5–p95"]
-        cells += [show(figure(metric, "nominal")), show(figure(metric, "worst")),
-                  [f"{a}–{b}" for a, b in zip(show(figure(metric, "p5")),
-                                              show(figure(metric, "p95")), strict=True)]]  # fmt: skip
-        groups.append((label, first, first + 2))
+        figures = [[None if s is None else s.figures[metric][w] for s in scored] for w in SPREAD]
+        scaled = [[None if v is None else v * factor for v in values] for values in figures]
+        d = column_decimals(v for values in scaled for v in values)
+        text = {w: [format_fixed(v, d) for v in vs] for w, vs in zip(SPREAD, scaled, strict=True)}
+        spread = [f"{a}–{b}" for a, b in zip(text["p5"], text["p95"], strict=True)]
+        group(label, {"nominal": text["nominal"], "worst": text["worst"], "p5–p95": spread})
     timings = next((s.actuation for s in scored if s is not None and s.actuation), ())
     # the physics preset, or the physics runs in the worst case: one group each
     runs = (
@@ -311,13 +309,12 @@ def format_robust_table(method: str, rows: Sequence[RobustRow]) -> str:
               [{} if s is None else s.actuation[i] for s in scored])
              for i, t in enumerate(timings)]  # fmt: skip
     for label, entries in runs:
-        first = len(heads) + 2
-        heads += ["overshoot (%)", "settling (ms)"]
-        for metric, factor in (("overshoot_percent", 1.0), ("settling_time_s", 1e3)):
-            cells.append(format_column([e.get(metric) for e in entries], factor=factor))
-        groups.append((label, first, first + 1))
+        overshoot = format_column([e.get("overshoot_percent") for e in entries])
+        settling = format_column([e.get("settling_time_s") for e in entries], factor=1e3)
+        group(label, {"overshoot (%)": overshoot, "settling (ms)": settling})
     heads.append("worst peak |V| (V)")
-    cells.append(format_column(figure("peak_voltage_v", "worst")))
+    peak = [None if s is None else s.figures["peak_voltage_v"]["worst"] for s in scored]
+    cells.append(format_column(peak))
     for col in cells[len(AXES[method]) :]:  # the unscored rows: blank figures
         for i, s in enumerate(scored):
             col[i] = col[i] if s is not None else ""

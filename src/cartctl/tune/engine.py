@@ -23,7 +23,6 @@ from cartctl.errors import CartctlError
 from cartctl.model import check_extra_delay_ticks
 from cartctl.plants.base import Measurement, Plant
 from cartctl.plants.factory import make_plant
-from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
 from cartctl.runtime.base import Controller
 from cartctl.runtime.loop import run_in_memory
@@ -75,18 +74,11 @@ class DelayedPlant:
 
 
 def scoring_plant(job: TuneJob) -> Plant:
-    """The plant a setting of ``job`` is scored on: ``job.plant`` with ``job.extra_delay_ticks``
-    more ticks of delay (the sim plant's models with nk + d, as ``design``'s simulated step; the
-    physics plant's commands delayed)."""
+    """The plant a setting of ``job`` is scored on: ``job.plant`` with its commands
+    ``job.extra_delay_ticks`` ticks late (for the sim plant the same as models with nk + d, as
+    ``design``'s simulated step)."""
     plant, _ = make_plant(job.plant, model_path=job.model, preset=job.preset)
-    d = job.extra_delay_ticks
-    if d == 0:
-        return plant
-    if isinstance(plant, ArxPlant):
-        a, b = (m.with_extra_delay(d) for m in plant.models)
-        return ArxPlant(a, b, noise_std_rad_s=plant.noise_std_rad_s, seed=plant.seed,
-                        voltage_limit_v=plant.voltage_limit_v)  # fmt: skip
-    return DelayedPlant(plant, d)
+    return DelayedPlant(plant, job.extra_delay_ticks) if job.extra_delay_ticks else plant
 
 
 def simulate(

@@ -25,16 +25,15 @@ from cartctl.tune.grid import TuneResult, worst_metrics
 
 FloatArray = NDArray[np.float64]
 
-ROBUST_METRICS = (
-    "overshoot_percent",
-    "settling_time_s",
-    "rms_error",
-    "peak_voltage_v",
-)  # %, s, rad/s, V
+# the robust metrics (%, s, rad/s, V), each with its key in the run summary
+SUMMARY_KEYS = {
+    "overshoot_percent": "overshoot_percent",
+    "settling_time_s": "settling_time_s",
+    "rms_error": "rms_error",
+    "peak_voltage_v": "max_abs_voltage",
+}
+ROBUST_METRICS = tuple(SUMMARY_KEYS)
 PERCENTILES = (5, 50, 95)  # the spread over the sampled plants
-
-SUMMARY_KEYS = {"overshoot_percent": "overshoot_percent", "settling_time_s": "settling_time_s",
-                 "rms_error": "rms_error", "peak_voltage_v": "max_abs_voltage"}  # fmt: skip
 
 
 def step_metrics(trace: BatchTrace, settling_floor: float) -> dict[str, FloatArray]:
@@ -216,10 +215,8 @@ def sampled_metrics(
     per_motor, diverged = [], np.zeros(sample.size + 1, dtype=bool)
     for m in ("a", "b"):
         model, s = models.motor(m).with_extra_delay(extra_delay_ticks), sample.motors[m]
-        plants = ArxBatch.from_arrays(np.vstack([np.asarray(model.ar, float)[None, :], s.ar]),
-                                      np.vstack([np.asarray(model.b, float)[None, :], s.b]),
-                                      np.concatenate([[model.nk], s.nk]),
-                                      period_s=models.period_s)  # fmt: skip
+        rows = [model.ar, *s.ar], [model.b, *s.b], [model.nk, *s.nk]  # row 0: the model
+        plants = ArxBatch.from_arrays(*rows, period_s=models.period_s)
         trace = simulate_batch(nominal.controllers[m], plants, nominal.references[m],
                                voltage_limit_v=nominal.voltage_limit_v)  # fmt: skip
         per_motor.append(step_metrics(trace, floor))
