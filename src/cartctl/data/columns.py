@@ -126,12 +126,9 @@ def _read_text(path: Path) -> str:
 
 
 def column_name(label: str, index: int, kind: str, *, lower: bool = True) -> str:
-    """A QRC channel label as a trace column name: ``"voltage A [V]"`` → ``"voltage_a_v"``.
-
-    Runs of other characters than letters and digits become one ``_``, ``ch_`` goes before a
-    leading digit, and an empty label (at ``index``) gives the QRC 5 default label or
-    ``channel<index>``; ``lower=False`` keeps the case (a channel kept as an extra column).
-    """
+    """A QRC channel label as a trace column name: ``"voltage A [V]"`` → ``"voltage_a_v"`` (``ch_``
+    before a leading digit; for an empty label at ``index``, the QRC 5 default label or
+    ``channel<index>``); ``lower=False`` keeps the case."""
     name = re.sub(r"[^0-9A-Za-z]+", "_", label.lower() if lower else label).strip("_")
     if not name:
         if kind.startswith("QRC 5") and index < len(QRC5_DEFAULT_LABELS):
@@ -154,10 +151,8 @@ def check_mapping(mapping: Mapping[str, str]) -> dict[str, str]:
 def plan_columns(
     path: Path, kind: str, names: list[str], mapping: dict[str, str] | None, header_line: int | None
 ) -> tuple[int, dict[str, int | None]]:
-    """The time column's index and, per trace column, its file column (None: zeros).
-
-    For QRC logs ``names`` starts with the time column, which always gives time_s.
-    """
+    """The time column's index and, per trace column, its file column (None: zeros); a QRC log's
+    ``names`` start with its time column, which always gives time_s."""
     monitor = kind == "CSV" and names[:2] == list(MONITOR_FIRST_COLUMNS)
     if kind == "CSV" and mapping is None:  # the trace's own names, or a monitor's labels
         missing = [name for name in REQUIRED_COLUMNS if name not in names]
@@ -261,8 +256,7 @@ MONITOR_LABELS_HINT = (
     "--labels f0=speed_a,f1=speed_b,f2=voltage_a,f3=voltage_b,f4=reference_a,f5=reference_b "
     "(the out channels of 'cartctl export --arduino')"
 )
-MONITOR_NAMES = (*REQUIRED_COLUMNS[1:], *(f"{k}_{m}" for k in ("reference", "estimate")
-                                          for m in MOTORS))  # fmt: skip
+MONITOR_NAMES = (*REQUIRED_COLUMNS[1:], "reference_a", "reference_b", "estimate_a", "estimate_b")
 
 
 def label_key(label: str) -> str:

@@ -65,22 +65,15 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
     _warn_spacing(table, columns["time_s"])
     if kind == "qrc5":  # 8 float then 4 int channels after the time
         integers = {name for name, j in plan.items() if j is not None and j > QRC5_FLOATS}
-    else:  # the columns whose every field is written as an integer
-        integers = _integer_text(table, plan, rows)
+    else:  # the extras whose every field is written as an integer
+        extras = {n: j for n, j in plan.items() if j is not None and n not in REQUIRED_COLUMNS}
+        integers = {n for n, j in extras.items() if all(_INTEGER.match(row[j]) for row in rows)}
     integers -= set(REQUIRED_COLUMNS)
     return Trace.from_columns(columns, source=str(path), integer_columns=integers)
 
 
 QRC5_FLOATS = 8
 _INTEGER = re.compile(r"\s*[+-]?\d+\s*\Z")
-
-
-def _integer_text(table: Table, plan: Mapping[str, int | None], rows: list[list[str]]) -> set[str]:
-    """The extra columns whose every field is an integer's text."""
-    values = table.values
-    whole = {name: j for name, j in plan.items() if j is not None and name not in REQUIRED_COLUMNS
-             and np.all(values[:, j] == np.round(values[:, j]))}  # fmt: skip
-    return {name for name, j in whole.items() if all(_INTEGER.match(row[j]) for row in rows)}
 
 
 def _sniff(path: Path) -> str:

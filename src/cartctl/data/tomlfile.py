@@ -18,12 +18,12 @@ READABLE: dict[str, tuple[str, ...]] = {
     TRACE_META_FORMAT: (TRACE_META_FORMAT,),
 }
 """Every version read, by the format written (version 1 has version 2's keys)."""
-_KINDS = {MODEL_FORMAT: "a model file", CONTROLLER_FORMAT: "a controller file",
-          TRACE_META_FORMAT: "a trace meta file"}  # fmt: skip
 FORMATS = {
-    version: _KINDS[written] for written, versions in READABLE.items() for version in versions
+    version: f"a {written.removeprefix('cartctl-').partition('/')[0].replace('-', ' ')} file"
+    for written, versions in READABLE.items()
+    for version in versions
 }
-"""What each ``format`` line says a file is, for messages."""
+"""What each ``format`` line says a file is, for messages ("a trace meta file")."""
 
 
 def read_toml(path: str | Path, what: str) -> dict[str, Any]:
@@ -59,8 +59,8 @@ def check_format(doc: Mapping[str, Any], path: Path, expected: str, what: str) -
         raise DataFileError(path, f"is {FORMATS[found]}, not a {what}")
     known = " and ".join(repr(v) for v in readable)
     if isinstance(found, str) and found.startswith(expected.rpartition("/")[0] + "/"):
-        raise DataFileError(path, f"has format {found!r}, a version this cartctl does not read; "
-                                  f"it reads {known}")  # fmt: skip
+        unread = f"a version this cartctl does not read; it reads {known}"
+        raise DataFileError(path, f"has format {found!r}, {unread}")
     shown = "has no 'format' line" if found is None else f"has format {found!r}"
     raise DataFileError(path, f"{shown}; a {what} says format = {expected!r}")
 

@@ -292,8 +292,8 @@ def read_trace_meta(trace_path: str | Path) -> TraceMeta | None:
     if fmt != TRACE_META_FORMAT:
         raise DataFileError(path, f"unknown format {fmt!r}; expected {TRACE_META_FORMAT!r}")
     texts = {k: str(doc.get(k, "")) for k in ("command", "controller", "model", "created")}
-    return TraceMeta(str(doc.get("plant", "unknown")), read_loop_delay(doc, path), **texts,
-                     path=path)  # fmt: skip
+    plant = str(doc.get("plant", "unknown"))
+    return TraceMeta(plant, read_loop_delay(doc, path), **texts, path=path)
 
 
 def agreed_loop_delay(metas: Mapping[str, TraceMeta | None]) -> int | None:
