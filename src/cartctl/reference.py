@@ -40,16 +40,6 @@ def _numbers(spec: str, parts: list[str], low: int, high: int) -> list[float]:
     return values
 
 
-def _from_file(path_text: str, motor: str, time_s: NDArray[np.float64]) -> NDArray[np.float64]:
-    path = Path(path_text)
-    if path.is_dir():
-        raise DataFileError(path, "is a directory; expected a reference file (CSV)")
-    if not path.is_file():
-        raise MissingFileError(path, "reference file")
-    t, r = _read_reference_file(str(path), path.stat().st_mtime_ns, motor)
-    return np.interp(time_s, t, r)
-
-
 @functools.lru_cache(maxsize=8)
 def _read_reference_file(
     path_text: str, mtime_ns: int, motor: str
@@ -103,7 +93,12 @@ def reference_signal(
         (amp,) = _numbers(spec, parts, 1, 1)
         return np.full(n_ticks, amp)
     if kind == "file":
-        return _from_file(rest, motor, t)
+        path = Path(rest)
+        if path.is_dir():
+            raise DataFileError(path, "is a directory; expected a reference file (CSV)")
+        if not path.is_file():
+            raise MissingFileError(path, "reference file")
+        return np.interp(t, *_read_reference_file(str(path), path.stat().st_mtime_ns, motor))
     raise InputError(f"unknown reference '{spec}'; expected {FORMS}")
 
 
