@@ -1,5 +1,6 @@
 """The host's end of the serial line to a microOS cart: port, framing, sign of life, silence,
-each way the line can fail turned into one clear error."""
+each way the line can fail turned into one clear error.
+"""
 
 from __future__ import annotations
 
@@ -112,17 +113,13 @@ class CartLink:
         try:
             if self._listen((dialect.Heartbeat,), timeout_s):
                 return self.baud
-            what = (
-                "bytes but no HEARTBEAT"
-                if self.stats.frames + self.stats.garbage_bytes
-                else "nothing"
-            )
+            heard = self.stats.frames + self.stats.garbage_bytes
             error = PlantError(
                 f"no HEARTBEAT from a cart on {self.port} within {timeout_s:g} s (received "
-                f"{what}); is the cart on, running the bridge sketch (firmware/), and on this "
-                f"port? {_ports_hint()}"
+                f"{'bytes but no HEARTBEAT' if heard else 'nothing'}); is the cart on, running the "
+                f"bridge sketch (firmware/), and on this port? {_ports_hint()}"
             )
-            if self.baud != LEGACY_BAUD and self._serial is not None:
+            if self.baud != LEGACY_BAUD:
                 with contextlib.suppress(OSError, ValueError, AttributeError):
                     self._serial.baudrate = LEGACY_BAUD
                     self.framer = dialect.Framer()

@@ -37,12 +37,9 @@ firmware's first frames may go out before its first ``control()`` filled them)."
 
 
 def parse_labels(text: str | None) -> tuple[str, ...]:
-    """The 12 channel labels, in :data:`CHANNEL_KEYS` order, from ``f0=speed_a,i0=echo,...``.
-
-    Channels not named keep their default label (:data:`DEFAULT_LABELS`). Raises
-    :class:`~cartctl.errors.InputError` on an item that is not ``key=label`` with a key f0..f7 or
-    i0..i3 given once and an identifier as label, or when two columns end up with one name.
-    """
+    """The 12 channel labels, in :data:`CHANNEL_KEYS` order, from ``f0=speed_a,i0=echo,...``
+    (channels not named keep :data:`DEFAULT_LABELS`); InputError on a bad or repeated item, or
+    when two columns end up with one name."""
     labels = dict(zip(CHANNEL_KEYS, DEFAULT_LABELS, strict=True))
     given: set[str] = set()
     for item in filter(None, (part.strip() for part in (text or "").split(","))):
@@ -116,10 +113,9 @@ class Monitor:
     """Reads a connected link and writes one row per GPIO to the sinks (never sends anything).
 
     The channels are named by ``labels`` (:func:`parse_labels`), else by the firmware the first
-    marked frame names (:func:`firmware_labels`), else QRoboticsCenter's; the row sinks open once
-    they are chosen, and what was held until then is written in order. ``echo`` also receives each
-    PRINT line, ``announce`` the firmware told. The caller closes the sinks.
-    """
+    marked frame names, else QRoboticsCenter's; the row sinks open once they are chosen, and what
+    was held until then is written in order. ``echo`` also receives each PRINT line, ``announce``
+    the firmware told. The caller closes the sinks."""
 
     def __init__(
         self,

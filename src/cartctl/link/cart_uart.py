@@ -1,6 +1,7 @@
 """The cart's end of the serial line as the virtual cart models it (docs/serial-protocol.md §4):
 the line's byte time (a pseudo-terminal delivers at once), the Mega's USB bridge, the receive ring
-and microOS's parser."""
+and microOS's parser.
+"""
 
 from __future__ import annotations
 
