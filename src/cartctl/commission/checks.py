@@ -34,16 +34,6 @@ SPEED_SPAN = 2.0  # the excitation's steady speed is at most this many times the
 
 
 @dataclass(frozen=True)
-class Window:
-    """A stretch of the check experiment: which motor, what kind, ticks [start, stop)."""
-
-    motor: str
-    kind: str
-    start: int
-    stop: int
-
-
-@dataclass(frozen=True)
 class MotorCheck:
     """One motor's figures from the checks. ``pulse_turn_rad`` and ``other_turn_rad`` are its
     wheel's and the other wheel's rotation during its pulse (rad); ``direction`` is 'forward',
@@ -62,41 +52,35 @@ class MotorCheck:
         return {k: v for k, v in asdict(self).items() if k != "motor"}
 
 
-def checks_sequence(
-    period_s: float,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], tuple[Window, ...]]:
+Windows = dict[tuple[str, str], slice]  # (motor, 'pulse' or 'ramp') → its ticks
+
+
+def checks_sequence(period_s: float) -> tuple[NDArray[np.float64], NDArray[np.float64], Windows]:
     """The check experiment's voltages (V) per motor and its windows: rest, pulse a, rest, pulse b,
     rest, ramp a, rest, ramp b, rest."""
-    rest = round(REST_S / period_s)
+    rest = np.zeros(round(REST_S / period_s))
     pulse = np.full(round(PULSE_S / period_s), PULSE_V)
     ramp_ticks = round(RAMP_MAX_V / RAMP_RATE_V_S / period_s)
     ramp = np.arange(1, ramp_ticks + 1, dtype=np.float64) * (RAMP_RATE_V_S * period_s)
-    parts: list[tuple[str, str, NDArray[np.float64]]] = [("", "rest", np.zeros(rest))]
+    volts: dict[str, list[NDArray[np.float64]]] = {m: [rest] for m in MOTORS}
+    windows: Windows = {}
     for kind, shape in (("pulse", pulse), ("ramp", ramp)):
         for m in MOTORS:
-            parts += [(m, kind, shape), ("", "rest", np.zeros(rest))]
-    ua, ub, windows, k = [], [], [], 0
-    for m, kind, volts in parts:
-        zeros = np.zeros_like(volts)
-        ua.append(volts if m == "a" else zeros)
-        ub.append(volts if m == "b" else zeros)
-        if m:
-            windows.append(Window(m, kind, k, k + volts.size))
-        k += volts.size
-    return np.concatenate(ua), np.concatenate(ub), tuple(windows)
-
-
-def _turn_rad(speed: NDArray[np.float64], start: int, stop: int, period_s: float) -> float:
-    return float(np.sum(speed[start:stop]) * period_s)
+            start = sum(part.size for part in volts[m])
+            windows[m, kind] = slice(start, start + shape.size)
+            for motor, parts in volts.items():
+                parts += [shape if motor == m else np.zeros_like(shape), rest]
+    return np.concatenate(volts["a"]), np.concatenate(volts["b"]), windows
 
 
 def _breakaway(
-    speed: NDArray[np.float64], volts: NDArray[np.float64], w: Window, loop_delay_ticks: int
+    speed: NDArray[np.float64], volts: NDArray[np.float64], w: slice, loop_delay_ticks: int
 ) -> tuple[float | None, float | None]:
-    """(breakaway V, gain rad/s/V) of one motor's ramp; (None, None) if the wheel never turned."""
-    moving = np.abs(speed[w.start : w.stop]) >= 0.5 * encoder_quantum_rad_s()
+    """(breakaway V, gain rad/s/V) of one motor's ramp; (None, None) if the wheel never turned or
+    the trace ends before the ramp does."""
+    moving = np.abs(speed[w]) >= 0.5 * encoder_quantum_rad_s()
     runs = moving[:-2] & moving[1:-1] & moving[2:]
-    if not runs.any():
+    if w.stop > speed.size or not runs.any():
         return None, None
     first = w.start + int(np.argmax(runs))
     at = max(w.start, first - loop_delay_ticks - 1)
@@ -108,9 +92,7 @@ def _breakaway(
     return breakaway, gain
 
 
-def analyse_checks(
-    trace: Trace, windows: tuple[Window, ...], loop_delay_ticks: int
-) -> dict[str, MotorCheck]:
+def analyse_checks(trace: Trace, windows: Windows, loop_delay_ticks: int) -> dict[str, MotorCheck]:
     """Each motor's direction, breakaway and rough gain; a pulse's turn is counted up to
     ``loop_delay_ticks + 10`` ticks after it ends (the wheel runs down, the last ticks come late).
     """
@@ -120,20 +102,16 @@ def analyse_checks(
     out: dict[str, MotorCheck] = {}
     for m in MOTORS:
         other = "b" if m == "a" else "a"
-        pulse = next(w for w in windows if w.motor == m and w.kind == "pulse")
-        stop = min(n, pulse.stop + loop_delay_ticks + 10)
-        own = _turn_rad(trace.speed(m), pulse.start, stop, period_s)
-        cross = _turn_rad(trace.speed(other), pulse.start, stop, period_s)
+        pulse = windows[m, "pulse"]
+        turn = slice(pulse.start, min(n, pulse.stop + loop_delay_ticks + 10))
+        own, cross = (float(np.sum(trace.speed(x)[turn]) * period_s) for x in (m, other))
         moved, moved_other = (abs(x) >= MIN_COUNTS * quantum_rad for x in (own, cross))
         if moved:
             direction = "forward" if own > 0 else "backward"
         else:
             direction = "crossed" if moved_other else "still"
-        ramp = next(w for w in windows if w.motor == m and w.kind == "ramp")
-        if ramp.stop <= n:
-            breakaway, gain = _breakaway(trace.speed(m), trace.voltage(m), ramp, loop_delay_ticks)
-        else:
-            breakaway, gain = None, None
+        ramp = windows[m, "ramp"]
+        breakaway, gain = _breakaway(trace.speed(m), trace.voltage(m), ramp, loop_delay_ticks)
         out[m] = MotorCheck(m, own, cross, direction, breakaway, gain)
     return out
 
