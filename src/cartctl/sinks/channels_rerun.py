@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import rerun as rr
 import rerun.blueprint as rrb
@@ -116,20 +117,18 @@ class ChannelsRerunSink(RerunSink):
     """A :class:`RerunSink` of labelled channels (the first ``float_count`` are float channels,
     the rest int channels, shown apart) and the cart's text."""
 
+    _default_name = "cartctl monitor"
+
     def __init__(
         self,
         mode: str = "save",
         path: str | Path | None = None,
         *,
         float_count: int = 8,
-        recording_name: str | None = None,
-        connect_url: str | None = None,
         batch_ticks: int = 20,
-        strict: bool = False,
+        **options: Any,
     ) -> None:
-        super().__init__(mode, path, recording_name=recording_name or (
-            Path(path).stem if path is not None else "cartctl monitor"
-        ), connect_url=connect_url, batch_ticks=batch_ticks, strict=strict)  # fmt: skip
+        super().__init__(mode, path, batch_ticks=batch_ticks, **options)
         self.float_count = int(float_count)
 
     def _entities(self, columns: list[str]) -> tuple[tuple[int, str], ...]:

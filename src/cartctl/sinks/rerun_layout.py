@@ -6,9 +6,8 @@ above the voltage; the loop's timing beneath.
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Final
 
 import rerun.blueprint as rrb
@@ -56,17 +55,9 @@ STYLES: Final[dict[str, SeriesStyle]] = {path: style for path, style in _TABLE.v
 
 
 Range = tuple[float, float]
-
-
-@dataclass(frozen=True)
-class PlotRanges:
-    """The y range of each plot, per motor for speed and voltage (None: the viewer's own fit,
-    which shows ±1 labelled "0" alone until the run has data)."""
-
-    speed_rad_s: dict[str, Range] = field(default_factory=dict)
-    voltage_v: dict[str, Range] = field(default_factory=dict)
-    timing_us: Range | None = None
-
+Ranges = Mapping[str, Range | None]
+"""The y range of each plot by its origin (``motor/a``, ``motor/a/voltage``, ``loop``); a plot
+without one takes the viewer's own fit, which shows ±1 labelled "0" alone until the run has data."""
 
 SPEED_MARGIN = 0.25  # room for overshoot, a fraction of the reference's span
 VOLTAGE_MARGIN = 0.05  # beyond the voltage limit
@@ -89,27 +80,23 @@ def padded_range(lo: float, hi: float, *, margin: float = 0.1, min_span: float =
     return lo - pad, hi + pad
 
 
-def run_ranges(references: dict[str, tuple[float, float]], voltage_limit_v: float) -> PlotRanges:
+def run_ranges(references: dict[str, Range], voltage_limit_v: float) -> dict[str, Range]:
     """The plots' ranges before a run: speed from each motor's (lowest, highest) reference
     (rad/s), voltage ± the limit (V)."""
     limit = abs(float(voltage_limit_v)) * (1.0 + VOLTAGE_MARGIN)
-    return PlotRanges(
-        speed_rad_s={
-            m: padded_range(lo, hi, margin=SPEED_MARGIN) for m, (lo, hi) in references.items()
-        },
-        voltage_v={m: (-limit, limit) for m in references},
-    )
+    speeds = {
+        f"motor/{m}": padded_range(*span, margin=SPEED_MARGIN) for m, span in references.items()
+    }
+    return speeds | {f"motor/{m}/voltage": (-limit, limit) for m in references}
 
 
 def axis(ranged: Range | None) -> rrb.ScalarAxis | None:
     return None if ranged is None else rrb.ScalarAxis(range=ranged, zoom_lock=False)
 
 
-def blueprint(
-    motors: Sequence[str] = ("a", "b"), ranges: PlotRanges | None = None
-) -> rrb.Blueprint:
+def blueprint(motors: Sequence[str] = ("a", "b"), ranges: Ranges | None = None) -> rrb.Blueprint:
     """The default layout: the motors side by side, the loop timing beneath."""
-    ranges = ranges or PlotRanges()
+    ranges = ranges or {}
     columns = []
     for m in motors:
         speed = rrb.TimeSeriesView(
@@ -117,20 +104,20 @@ def blueprint(
             origin=f"/motor/{m}",
             contents=["$origin/**", "- $origin/voltage"],
             plot_legend=rrb.PlotLegend(corner="RightBottom", visible=True),
-            axis_y=axis(ranges.speed_rad_s.get(m)),
+            axis_y=axis(ranges.get(f"motor/{m}")),
         )
         voltage = rrb.TimeSeriesView(
             name=f"Motor {m.upper()}: voltage (V)",
             origin=f"/motor/{m}/voltage",
             plot_legend=rrb.PlotLegend(visible=False),
-            axis_y=axis(ranges.voltage_v.get(m)),
+            axis_y=axis(ranges.get(f"motor/{m}/voltage")),
         )
         columns.append(rrb.Vertical(speed, voltage, row_shares=[3, 2]))
     timing = rrb.TimeSeriesView(
         name="Loop timing (µs)",
         origin="/loop",
         plot_legend=rrb.PlotLegend(corner="RightTop", visible=True),
-        axis_y=axis(ranges.timing_us),
+        axis_y=axis(ranges.get("loop")),
     )
     return collapsed(rrb.Vertical(rrb.Horizontal(*columns), timing, row_shares=[3, 1]))
 
@@ -153,14 +140,10 @@ def span_of(extremes: Mapping[str, Range], paths: Iterable[str], **kwargs: float
     return padded_range(min(lo for lo, _ in seen), max(hi for _, hi in seen), **kwargs)
 
 
-def data_ranges(extremes: dict[str, Range], motors: Sequence[str]) -> PlotRanges:
+def data_ranges(extremes: dict[str, Range], motors: Sequence[str]) -> dict[str, Range | None]:
     """The plots' ranges from entity path → (min, max) recorded, with 10 % to spare."""
-    over = functools.partial(span_of, extremes)
     speeds = ("reference", "speed", "estimate", "true_speed", "smoothed_speed")
-    return PlotRanges(
-        speed_rad_s={
-            m: r for m in motors if (r := over([f"motor/{m}/{s}" for s in speeds])) is not None
-        },
-        voltage_v={m: r for m in motors if (r := over([f"motor/{m}/voltage"])) is not None},
-        timing_us=over(["loop/period_error_us", "loop/compute_us"], min_span=10.0),
-    )
+    ranges = {f"motor/{m}": span_of(extremes, [f"motor/{m}/{s}" for s in speeds]) for m in motors}
+    ranges |= {f"motor/{m}/voltage": span_of(extremes, [f"motor/{m}/voltage"]) for m in motors}
+    ranges["loop"] = span_of(extremes, ["loop/period_error_us", "loop/compute_us"], min_span=10.0)
+    return ranges

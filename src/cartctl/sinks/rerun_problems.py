@@ -69,6 +69,7 @@ def file_failure(exc: BaseException, path: Path | None) -> str | None:
 
 
 VIEWER_PORT: Final[int] = 9876
+VIEWER_URL: Final[str] = f"rerun+http://127.0.0.1:{VIEWER_PORT}/proxy"  # the native viewer's
 
 
 def display_available() -> bool:

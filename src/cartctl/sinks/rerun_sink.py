@@ -26,12 +26,13 @@ from cartctl.sinks.rerun_layout import (
     STYLES,
     TICK_COLUMN,
     TIME_COLUMN,
-    PlotRanges,
+    Ranges,
     blueprint,
     motors_in,
 )
 from cartctl.sinks.rerun_problems import (
     VIEWER_PORT,
+    VIEWER_URL,
     RecordingError,
     RecordingWarning,
     display_available,
@@ -45,7 +46,6 @@ RERUN_MODES: Final[tuple[str, ...]] = ("save", "spawn", "connect", "off")
 the run; ``connect``: the file and a viewer already running at ``connect_url``; ``off``: nothing."""
 
 APPLICATION_ID: Final[str] = "cartctl"
-DEFAULT_CONNECT_URL: Final[str] = "rerun+http://127.0.0.1:9876/proxy"
 
 _MAX_PROBLEMS = 10  # messages kept; further problems are only counted
 _FLUSH_TIMEOUT_S = 5.0  # for the SDK to hand everything to the file and the viewer
@@ -60,17 +60,17 @@ class RerunSink:
     ``tick`` is used when present; columns without an entity path are ignored.
     """
 
+    _default_name = "cartctl run"
+
     def __init__(
         self,
         mode: str = "save",
         path: str | Path | None = None,
         *,
-        application_id: str = APPLICATION_ID,
-        recording_name: str | None = None,
         connect_url: str | None = None,
         batch_ticks: int = 10,
         strict: bool = False,
-        ranges: PlotRanges | None = None,
+        ranges: Ranges | None = None,
     ) -> None:
         if mode not in RERUN_MODES:
             raise InputError(f"rerun mode must be one of {', '.join(RERUN_MODES)}, got '{mode}'")
@@ -80,9 +80,8 @@ class RerunSink:
             raise InputError(f"batch_ticks must be at least 1, got {batch_ticks}")
         self.mode = mode
         self.path = None if path is None or mode == "off" else Path(path)
-        self.application_id = application_id
-        self.recording_name = recording_name or (self.path.stem if self.path else "cartctl run")
-        self.connect_url = connect_url or DEFAULT_CONNECT_URL
+        self.recording_name = self.path.stem if self.path else self._default_name
+        self.connect_url = connect_url or VIEWER_URL
         self.batch_ticks = int(batch_ticks)
         self.strict = strict
         self.ranges = ranges
@@ -98,7 +97,6 @@ class RerunSink:
         self._time_index = 0
         self._tick_index: int | None = None
         self._signals: tuple[tuple[int, str], ...] = ()
-        self._sent_rows = 0
         self._closed = False
         self.error: OutputError | None = None  # the file could not be written (raised once)
 
@@ -112,7 +110,7 @@ class RerunSink:
         self._signals = self._entities(columns)
         if self.mode == "off":
             return
-        rec = rr.RecordingStream(self.application_id, recording_id=uuid.uuid4())
+        rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
         self._recording = rec
         sinks: list[rr.FileSink | rr.GrpcSink] = []
         if self.path is not None:
@@ -226,7 +224,7 @@ class RerunSink:
         elif (executable := viewer_executable()) is None:
             problem = "the 'rerun' viewer executable was not found next to Python or on PATH"
         else:
-            url = f"rerun+http://127.0.0.1:{VIEWER_PORT}/proxy"
+            url = VIEWER_URL
             try:
                 rr.spawn(port=VIEWER_PORT, connect=False, executable_path=executable, recording=rec)
             except Exception as exc:
@@ -242,10 +240,8 @@ class RerunSink:
     def _indexes(self, block: NDArray[np.float64]) -> list[rr.TimeColumn]:
         if self._tick_index is not None:
             ticks = block[:, self._tick_index].astype(np.int64)
-        else:  # the rows in blocks so far are exactly the rows before this block
-            start = self._sent_rows
-            ticks = np.arange(start, start + len(block), dtype=np.int64)
-        self._sent_rows += len(block)
+        else:  # the rows counted so far end with this block's
+            ticks = np.arange(self.rows_written - len(block), self.rows_written, dtype=np.int64)
         return timelines(block[:, self._time_index], ticks)
 
     def _send_next(self) -> None:

@@ -124,31 +124,34 @@ def add_smoothed_metrics(
             )
 
 
-SUMMARY_COLUMNS = (
-    ("overshoot (%)", "overshoot_percent", 1.0),
-    ("rise (ms)", "rise_time_s", 1e3),
-    ("settling (ms)", "settling_time_s", 1e3),
-    ("ss error (rad/s)", "steady_state_error", 1.0),
-    ("rms error (rad/s)", "rms_error", 1.0),
-    ("max |V| (V)", "max_abs_voltage", 1.0),
+MOTOR_METRICS: tuple[tuple[str, str, str, str, float, int, bool], ...] = (
+    # key, label in the summary, in a comparison, unit, scale, a comparison's decimals, whether
+    # (B − A)/|A| means something: overshoot is already a percentage (its difference is in
+    # points) and the steady-state error is signed (a ratio across zero misleads)
+    ("overshoot_percent", "overshoot", "overshoot", "%", 1.0, 2, False),
+    ("rise_time_s", "rise", "rise time 10–90 %", "ms", 1e3, 1, True),
+    ("settling_time_s", "settling", "settling time", "ms", 1e3, 1, True),
+    ("steady_state_error", "ss error", "steady-state error", "rad/s", 1.0, 3, False),
+    ("rms_error", "rms error", "rms error", "rad/s", 1.0, 3, True),
+    ("max_abs_voltage", "max |V|", "max |voltage|", "V", 1.0, 2, True),
 )
 
 
 def motor_table(motors: Mapping[str, Mapping[str, Any]], indent: str = "  ") -> list[str]:
     """The per-motor table: units in the headers, one rounding per column; the steady-state
     error is rounded like the RMS error, so a numerical zero prints as 0.000."""
-    names = list(motors)
-    errors = ("steady_state_error", "rms_error")
-    error_decimals = column_decimals(motors[m].get(k) for m in names for k in errors)
+    errors = ("steady_state_error", "rms_error")  # one precision for the two, both in rad/s
+    error_decimals = column_decimals(entry.get(k) for entry in motors.values() for k in errors)
     cells: list[list[str]] = []
-    for _, key, factor in SUMMARY_COLUMNS:
-        values = [motors[m].get(key) for m in names]
-        if key in errors:  # one precision for the two errors, both in rad/s
+    for key, _, _, _, scale, _, _ in MOTOR_METRICS:
+        values = [entry.get(key) for entry in motors.values()]
+        if key in errors:
             cells.append([format_fixed(v, error_decimals) for v in values])
         else:
-            cells.append(format_column(values, factor=factor))
-    rows = [[m, *(c[i] for c in cells)] for i, m in enumerate(names)]
-    return render_table(["motor", *(h for h, _, _ in SUMMARY_COLUMNS)], rows, indent=indent)
+            cells.append(format_column(values, factor=scale))
+    rows = [[m, *(c[i] for c in cells)] for i, m in enumerate(motors)]
+    headers = [f"{label} ({unit})" for _, label, _, unit, *_ in MOTOR_METRICS]
+    return render_table(["motor", *headers], rows, indent=indent)
 
 
 def timing_text(summary: Mapping[str, Any]) -> str:
@@ -162,10 +165,11 @@ def timing_text(summary: Mapping[str, Any]) -> str:
 
 
 def format_summary(summary: Mapping[str, Any]) -> str:
-    lines = [
-        f"{summary['ticks']} ticks, {summary['duration_s']:.2f} s; deadline misses "
-        f"{summary['deadline_misses']}; {timing_text(summary)}",
-    ]
+    if summary.get("trace_kind") == "monitor":
+        timing = "no loop timing (a monitor trace: the cart ran its own loop)"
+    else:
+        timing = f"deadline misses {summary['deadline_misses']}; {timing_text(summary)}"
+    lines = [f"{summary['ticks']} ticks, {summary['duration_s']:.2f} s; {timing}"]
     signal = summary.get("metrics_signal")
     if signal in SIGNALS:
         band = summary.get("settling_band") or {}

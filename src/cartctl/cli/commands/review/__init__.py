@@ -107,6 +107,7 @@ def _review_csv(args: argparse.Namespace) -> int:
     from cartctl.cli.commands.review import metrics
     from cartctl.cli.commands.review.smoothed import smooth_csv
     from cartctl.cli.jsonout import dumps
+    from cartctl.sinks.summary import format_summary
 
     a, *b = [
         smooth_csv(metrics.csv_summary(path, args.map), path, args.map, args.model)
@@ -116,5 +117,5 @@ def _review_csv(args: argparse.Namespace) -> int:
     if args.json:
         print(dumps(metrics.compare(a, *b) if b else a))
     else:
-        print(metrics.format_compare(a, *b) if b else metrics.format_csv_summary(a))
+        print(metrics.format_compare(a, *b) if b else format_summary(a))
     return 0

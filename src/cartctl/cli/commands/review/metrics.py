@@ -16,7 +16,7 @@ from cartctl.data.columns import MONITOR_LABELS_HINT
 from cartctl.data.read import read_trace
 from cartctl.errors import DataFileError
 from cartctl.measures.numfmt import format_fixed, render_table
-from cartctl.sinks.summary import format_summary, timing_metrics, trace_metrics
+from cartctl.sinks.summary import MOTOR_METRICS, timing_metrics, trace_metrics
 
 TIMING_COLUMNS = ("period_error_us", "compute_us")
 TRACKING_COLUMNS = ("reference_a", "speed_a", "voltage_a")
@@ -42,32 +42,19 @@ def csv_summary(path: str | Path, mapping: Mapping[str, str] | None = None) -> d
             f"{', '.join(missing)} (the trace has {', '.join(columns)}); a monitor trace names "
             f"them with {MONITOR_LABELS_HINT}, or give --map reference_a=<column>",
         )
-    if all(name in columns for name in TIMING_COLUMNS):
-        summary = trace_metrics(columns, trace.period_s)
-        summary["trace_kind"] = "run"
-    else:  # the cart's own loop (monitor): tracking metrics, no loop timing
-        zeros = np.zeros(len(trace))
-        summary = trace_metrics({**columns, **dict.fromkeys(TIMING_COLUMNS, zeros)}, trace.period_s)
+    kind = "run" if all(name in columns for name in TIMING_COLUMNS) else "monitor"
+    zeros = dict.fromkeys(TIMING_COLUMNS, np.zeros(len(trace)))
+    summary = trace_metrics({**zeros, **columns}, trace.period_s)
+    if kind == "monitor":  # the cart's own loop: tracking metrics, no loop timing
         empty = np.zeros(0)
         summary.update(timing_metrics(empty, empty, trace.period_s), deadline_misses=None)
-        summary["trace_kind"] = "monitor"
+    summary["trace_kind"] = kind
     summary["trace"] = str(path)
     return summary
 
 
-def format_csv_summary(summary: Mapping[str, Any]) -> str:
-    """The run summary's table; a monitor trace's first line says it has no loop timing."""
-    text = format_summary(summary)
-    if summary.get("trace_kind") != "monitor":
-        return text
-    first = (
-        f"{summary['ticks']} ticks, {summary['duration_s']:.2f} s; no loop timing (a monitor "
-        "trace: the cart ran its own loop)"
-    )
-    return "\n".join([first, *text.splitlines()[1:]])
-
-
-_RUN_ROWS: tuple[tuple[tuple[str, ...], str, str, float, int, bool], ...] = (
+_Row = tuple[tuple[str, ...], str, str, float, int, bool]
+_RUN_ROWS: tuple[_Row, ...] = (
     # (key path, label, unit, scale, decimals, relative difference meaningful)
     (("ticks",), "ticks", "", 1.0, 0, True),
     (("duration_s",), "duration", "s", 1.0, 2, True),
@@ -79,16 +66,19 @@ _RUN_ROWS: tuple[tuple[tuple[str, ...], str, str, float, int, bool], ...] = (
     (("compute_us", "p99"), "compute p99", "µs", 1.0, 0, True),
     (("compute_us", "max"), "compute max", "µs", 1.0, 0, True),
 )
-_MOTOR_ROWS: tuple[tuple[str, str, str, float, int, bool], ...] = (
-    # overshoot is already a percentage: its difference is in points, a ratio of it misleads;
-    # the steady-state error is signed: a ratio across zero misleads
-    ("overshoot_percent", "overshoot", "%", 1.0, 2, False),
-    ("rise_time_s", "rise time 10–90 %", "ms", 1e3, 1, True),
-    ("settling_time_s", "settling time", "ms", 1e3, 1, True),
-    ("steady_state_error", "steady-state error", "rad/s", 1.0, 3, False),
-    ("rms_error", "rms error", "rad/s", 1.0, 3, True),
-    ("max_abs_voltage", "max |voltage|", "V", 1.0, 2, True),
-)
+
+
+def _rows(a: Mapping[str, Any], b: Mapping[str, Any]) -> list[_Row]:
+    """The compared rows, :data:`_RUN_ROWS`' then each motor's (of either summary)."""
+    motors = dict.fromkeys([*a["motors"], *b["motors"]])
+    return [
+        *_RUN_ROWS,
+        *(
+            (("motors", m, key), f"motor {m}: {label}", unit, scale, decimals, rel)
+            for m in motors
+            for key, _, label, unit, scale, decimals, rel in MOTOR_METRICS
+        ),
+    ]
 
 
 def _number(value: Any) -> float | None:
@@ -110,9 +100,7 @@ def difference(a: Any, b: Any) -> Any:
     """B − A over the numeric leaves of two summaries (None where either has no number); dicts
     walked key by key (A's keys, then B's), strings, bools and lists left out."""
     if isinstance(a, Mapping) and isinstance(b, Mapping):
-        walked = {
-            key: difference(a.get(key), b.get(key)) for key in [*a, *(k for k in b if k not in a)]
-        }
+        walked = {key: difference(a.get(key), b.get(key)) for key in {**a, **b}}
         return {key: value for key, value in walked.items() if value is not _SKIP}
     if not (_slot(a) and _slot(b)):
         return _SKIP
@@ -125,18 +113,9 @@ def difference(a: Any, b: Any) -> Any:
 def relative_difference(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any]:
     """(B − A) / |A| in %, for the rows where that ratio means something (None when A is 0)."""
     out: dict[str, Any] = {}
-    for path, _, _, _, _, relative in _RUN_ROWS:
+    for path, *_, relative in _rows(a, b):
         if relative:
             _put(out, path, _percent(_get(a, path), _get(b, path)))
-    motors: dict[str, Any] = {}
-    for m in _motors(a, b):
-        ea, eb = a["motors"].get(m, {}), b["motors"].get(m, {})
-        motors[m] = {
-            key: _percent(ea.get(key), eb.get(key))
-            for key, _, _, _, _, relative in _MOTOR_ROWS
-            if relative
-        }
-    out["motors"] = motors
     return out
 
 
@@ -152,32 +131,28 @@ def compare(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
 
 
 def format_compare(a: Mapping[str, Any], b: Mapping[str, Any]) -> str:
-    """One table: per metric (per motor) A, B, B − A and (B − A) / |A|, units in the labels."""
+    """One table: per metric (per motor) A, B, B − A and (B − A)/|A|, units in the labels."""
     rows: list[tuple[str, ...]] = []
-
-    def add(label: str, unit: str, x: Any, y: Any, scale: float, decimals: int, rel: bool) -> None:
-        xa, yb = _number(x), _number(y)
-        diff = None if xa is None or yb is None else (yb - xa) * scale
-        cells = [_fixed(None if v is None else v * scale, decimals) for v in (xa, yb)]
-        percent = _percent(x, y) if rel else None
-        cells += [
-            _fixed(diff, decimals, signed=True),
-            "—" if percent is None else f"{percent:+.1f} %",
-        ]
-        rows.append((f"{label} ({unit})" if unit else label, *cells))
-
     timed = _real_time(a) or _real_time(b)
-    for path, label, unit, scale, decimals, rel in _RUN_ROWS:
-        if timed or path[0] not in ("period_error_us", "compute_us"):
-            add(label, unit, _get(a, path), _get(b, path), scale, decimals, rel)
-    for m in _motors(a, b):
-        ea, eb = a["motors"].get(m, {}), b["motors"].get(m, {})
-        for key, label, unit, scale, decimals, rel in _MOTOR_ROWS:
-            add(f"motor {m}: {label}", unit, ea.get(key), eb.get(key), scale, decimals, rel)
+    for path, label, unit, scale, decimals, rel in _rows(a, b):
+        if not timed and path[0] in ("period_error_us", "compute_us"):
+            continue
+        x, y = _number(_get(a, path)), _number(_get(b, path))
+        diff = None if x is None or y is None else (y - x) * scale
+        percent = _percent(x, y) if rel else None
+        rows.append(
+            (
+                f"{label} ({unit})" if unit else label,
+                *(_fixed(None if v is None else v * scale, decimals) for v in (x, y)),
+                _fixed(diff, decimals, signed=True),
+                "—" if percent is None else f"{percent:+.1f} %",
+            )
+        )
+    notes = [_signal_note(a, "A"), _signal_note(b, "B")]
     lines = [
         f"A: {a.get('trace', 'A')}",
         f"B: {b.get('trace', 'B')}",
-        *(_signal_note(s, name) for s, name in ((a, "A"), (b, "B")) if _signal_note(s, name)),
+        *(note for note in notes if note),
         *render_table(("metric", "A", "B", "B − A", "(B − A)/|A|"), rows, indent="  "),
     ]
     return "\n".join(lines)
@@ -197,10 +172,6 @@ def _signal_note(summary: Mapping[str, Any], name: str) -> str:
     if not _real_time(summary):
         return f"  {name} ran on a simulated clock: no real-time figures"
     return ""
-
-
-def _motors(a: Mapping[str, Any], b: Mapping[str, Any]) -> list[str]:
-    return [*a["motors"], *(m for m in b["motors"] if m not in a["motors"])]
 
 
 def _get(summary: Mapping[str, Any], path: tuple[str, ...]) -> Any:

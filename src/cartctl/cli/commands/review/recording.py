@@ -14,27 +14,31 @@ import tempfile
 import threading
 import time
 import uuid
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 from cartctl.errors import CartctlError, DataFileError, InputError, MissingFileError
-from cartctl.sinks.rerun_problems import viewer_env
+from cartctl.sinks.rerun_problems import (
+    VIEWER_PORT,
+    VIEWER_URL,
+    display_available,
+    viewer_env,
+    viewer_executable,
+    viewer_reachable,
+)
 
 if TYPE_CHECKING:  # rerun takes ~0.6 s to import: only the review itself loads it
-    import numpy as np
     import pyarrow as pa
     import rerun as rr
     import rerun.blueprint as rrb
-    from numpy.typing import NDArray
     from rerun.chunk import Chunk, RrdReader, StoreEntry
     from rerun.experimental import ViewerClient
 
-LOAD_TIMEOUT_S = 30.0  # longest wait for a viewer to take in (or show) the whole recording
+    from cartctl.sinks.rerun_sink import Series
 
-# series made from a recording, to stream with it: entity path → (time (s), tick, values)
-Series = Mapping[str, tuple["NDArray[np.float64]", "NDArray[np.float64]", "NDArray[np.float64]"]]
+LOAD_TIMEOUT_S = 30.0  # longest wait for a viewer to take in (or show) the whole recording
 
 
 def read_recording(path: Path) -> tuple[RrdReader, StoreEntry]:
@@ -152,10 +156,10 @@ def layout(chunks: Sequence[Chunk]) -> rrb.Blueprint:
 
 
 def new_stream(entry: StoreEntry) -> rr.RecordingStream:
-    """A recording stream for ``entry``'s application, under a fresh recording id."""
+    """A stream for ``entry``'s application under a fresh recording id (a file reviewed twice
+    into one viewer gives two recordings, not every row twice)."""
     import rerun as rr
 
-    # reviewing the same file twice into one viewer gives two recordings, not every row twice
     return rr.RecordingStream(
         entry.application_id, recording_id=uuid.uuid4(), send_properties=False
     )
@@ -178,8 +182,6 @@ def _needs_vulkan(what: str) -> ViewerError:
 
 def require_viewer() -> str:
     """The Rerun viewer executable (:class:`ViewerError` when there is none)."""
-    from cartctl.sinks.rerun_problems import viewer_executable
-
     executable = viewer_executable()
     if executable is None:
         raise ViewerError(
@@ -201,8 +203,6 @@ def open_in_viewer(path: Path, *, extra: Series | None = None) -> str:
     smoothed speed) into the native viewer, spawned if none is running; returns its address."""
     import rerun as rr
 
-    from cartctl.sinks.rerun_problems import VIEWER_PORT, display_available, viewer_reachable
-
     reader, entry = read_recording(path)
     if not display_available():
         raise ViewerError(
@@ -210,22 +210,23 @@ def open_in_viewer(path: Path, *, extra: Series | None = None) -> str:
             "use --web, or --screenshot FILE.png"
         )
     executable = require_viewer()
-    url = f"rerun+http://127.0.0.1:{VIEWER_PORT}/proxy"
     rec = new_stream(entry)
     try:
         # Connects to a viewer already listening on the port instead of starting a second one.
         rr.spawn(port=VIEWER_PORT, connect=False, executable_path=executable, recording=rec)
-        if not viewer_reachable(url):
+        if not viewer_reachable(VIEWER_URL):
             raise ViewerError(f"the viewer ({executable}) did not start on this display")
-        rec.connect_grpc(url)
+        rec.connect_grpc(VIEWER_URL)
         stream(reader, entry, rec, extra=extra)
     except ViewerError:
         raise
     except (RuntimeError, ConnectionError, OSError) as exc:
-        raise ViewerError(f"could not hand the recording to the viewer at {url}: {exc}") from None
+        raise ViewerError(
+            f"could not hand the recording to the viewer at {VIEWER_URL}: {exc}"
+        ) from None
     finally:
         rec.disconnect()
-    return url
+    return VIEWER_URL
 
 
 def serve_web(
@@ -368,25 +369,15 @@ def _viewer_failure(log_path: Path) -> str | None:
         text = log_path.read_text(encoding="utf-8", errors="replace")
     except OSError:
         return None
-    for marker in ("No graphics adapter", "graphics adapter", "Vulkan", "panicked"):
-        for line in text.splitlines():
-            if marker in line:
-                return line.strip()[:200]
-    return None
+    markers = ("No graphics adapter", "graphics adapter", "Vulkan", "panicked")
+    return next((ln.strip()[:200] for m in markers for ln in text.splitlines() if m in ln), None)
 
 
 def _stop(viewer: subprocess.Popen[bytes]) -> None:
     """Stop the viewer this command started: its session (the wrapper script and the binary)."""
     for sig in (signal.SIGTERM, signal.SIGKILL):
-        try:
-            if os.name == "posix":
-                os.killpg(viewer.pid, sig)
-            else:
-                viewer.kill()
-        except ProcessLookupError:
-            pass
-        try:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(viewer.pid, sig)
+        with contextlib.suppress(subprocess.TimeoutExpired):
             viewer.wait(5.0)
             return
-        except subprocess.TimeoutExpired:
-            continue

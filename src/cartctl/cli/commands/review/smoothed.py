@@ -8,19 +8,24 @@ from __future__ import annotations
 import warnings
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.cart import PERIOD_S
 from cartctl.cli.commands.review.metrics import TIMING_COLUMNS
-from cartctl.cli.commands.review.recording import SCALARS, Series, batches, read_recording
+from cartctl.cli.commands.review.recording import SCALARS, batches, read_recording
 from cartctl.data.modelfile import ModelFile, load_models
 from cartctl.data.read import read_trace
 from cartctl.design.kalman import METHOD, smooth_speed
 from cartctl.errors import CartctlError, DataWarning, InputError
 from cartctl.sinks.summary import add_smoothed_metrics, format_summary, trace_metrics
+
+if TYPE_CHECKING:
+    from cartctl.sinks.rerun_sink import Series
+
+Columns = Mapping[str, NDArray[np.float64]]  # trace columns by name
 
 MODEL_ENTITY = "run/model"  # the text entity of a run's .rrd naming its model (not in the layout)
 
@@ -33,7 +38,7 @@ def wanted(summary: Mapping[str, Any], *, serial_path: bool = False, asked: bool
 
 
 def smoothed_speeds(
-    columns: Mapping[str, NDArray[np.float64]],
+    columns: Columns,
     models: ModelFile,
     period_s: float,
     *,
@@ -51,21 +56,20 @@ def smoothed_speeds(
         )
     stop_row = "period_error_us" in columns and "compute_us" in columns
     out: dict[str, NDArray[np.float64]] = {}
-    for m in ("a", "b"):
-        if f"reference_{m}" not in columns:
-            continue
+    for m in (m for m in ("a", "b") if f"reference_{m}" in columns):
         voltage_v = np.array(columns[f"voltage_{m}"], dtype=float)
         if stop_row and voltage_v.size > 1:
             voltage_v[-1] = voltage_v[-2]
-        result = smooth_speed(models.motor(m), voltage_v, columns[f"speed_{m}"],
-                              extra_delay_ticks=extra_delay_ticks)  # fmt: skip
+        result = smooth_speed(
+            models.motor(m), voltage_v, columns[f"speed_{m}"], extra_delay_ticks=extra_delay_ticks
+        )
         out[m] = result.speed_rad_s
     return out
 
 
 def add_smoothed(
     summary: dict[str, Any],
-    columns: Mapping[str, NDArray[np.float64]],
+    columns: Columns,
     period_s: float,
     model_path: str | Path | None,
     *,
@@ -103,7 +107,7 @@ def run_extra_delay(loop_delay_ticks: int | None, designed_ticks: int | None) ->
 
 def smooth_run(
     summary: dict[str, Any],
-    columns: Mapping[str, NDArray[np.float64]],
+    columns: Columns,
     period_s: float,
     model_path: str | Path | None,
     recording: Any = None,
@@ -114,19 +118,21 @@ def smooth_run(
     try:
         speeds: dict[str, NDArray[np.float64]] = {}
         if wanted(summary, serial_path=bool(summary.get("link"))):
-            extra = run_extra_delay(
-                summary.get("loop_delay_ticks"), summary.get("controller_loop_delay_ticks")
-            )
+            delay = summary.get("loop_delay_ticks"), summary.get("controller_loop_delay_ticks")
+            extra = run_extra_delay(*delay)
             speeds = add_smoothed(summary, columns, period_s, model_path, extra_delay_ticks=extra)
         if recording is not None:
-            tick = columns.get("tick")
-            series = {f"motor/{m}/smoothed_speed": (columns["time_s"], tick, speed)
-                      for m, speed in speeds.items()}  # fmt: skip
             texts = {} if model_path is None else {MODEL_ENTITY: str(model_path)}
-            recording.send_extra(series, texts)
+            recording.send_extra(_series(columns, speeds), texts)
     finally:
         if recording is not None:
             recording.release()
+
+
+def _series(columns: Columns, speeds: Columns) -> Series:
+    """The smoothed speeds as series to record (``motor/<m>/smoothed_speed``)."""
+    tick = columns.get("tick")
+    return {f"motor/{m}/smoothed_speed": (columns["time_s"], tick, v) for m, v in speeds.items()}
 
 
 def recording_columns(chunks: Any) -> dict[str, NDArray[np.float64]]:
@@ -149,17 +155,14 @@ def recording_columns(chunks: Any) -> dict[str, NDArray[np.float64]]:
         parts.setdefault(column, []).append((tick, time_ns, values.astype(float)))
     if "speed_a" not in parts:
         return {}
-    ticks = np.unique(np.concatenate([t for chunks_ in parts.values() for t, _, _ in chunks_]))
-    out: dict[str, NDArray[np.float64]] = {"tick": ticks.astype(float)}
-    time_s = np.full(ticks.size, np.nan)
+    ticks = np.unique(np.concatenate([t for pieces in parts.values() for t, _, _ in pieces]))
+    out = {"tick": ticks.astype(float), "time_s": np.full(ticks.size, np.nan)}
     for column, pieces in parts.items():
-        values = np.full(ticks.size, np.nan)
-        for tick, time_ns, v in pieces:
-            where = np.searchsorted(ticks, tick)
-            values[where] = v
-            time_s[where] = time_ns / 1e9
-        out[column] = values
-    out["time_s"] = time_s
+        tick, time_ns, values = (np.concatenate(p) for p in zip(*pieces, strict=True))
+        where = np.searchsorted(ticks, tick)
+        out[column] = np.full(ticks.size, np.nan)
+        out[column][where] = values
+        out["time_s"][where] = time_ns / 1e9
     return out
 
 
@@ -185,21 +188,18 @@ def trace_hints(trace_path: str | Path) -> tuple[bool, str | None, int]:
     try:
         meta = read_trace_meta(trace_path)
     except CartctlError:
-        return False, None, 0
+        meta = None
     if meta is None:
         return False, None, 0
     serial = meta.plant.startswith(("virtual", "cart on"))
-    if not meta.controller:  # an excitation, or a run from an older cartctl
-        return serial, meta.model or None, 0
-    try:
-        design = load_controller(meta.controller)
+    try:  # no controller: an excitation, or a run from an older cartctl
+        design = load_controller(meta.controller) if meta.controller else None
     except (CartctlError, OSError):
+        design = None
+    if design is None:
         return serial, meta.model or None, 0
-    return (
-        serial,
-        meta.model or design.model_path,
-        run_extra_delay(meta.loop_delay_ticks, design.loop_delay_ticks),
-    )
+    extra = run_extra_delay(meta.loop_delay_ticks, design.loop_delay_ticks)
+    return serial, meta.model or design.model_path, extra
 
 
 def recorded_model_of(path: Path) -> str | None:
@@ -259,8 +259,5 @@ def recording_summary(path: Path, model: str | None) -> tuple[str, Series | None
     elif wanted(summary, asked=model is not None):
         model_path = model if model is not None else recorded_model(chunks)
         speeds = add_smoothed(summary, columns, period_s, model_path, strict=model is not None)
-        extra = {
-            f"motor/{m}/smoothed_speed": (time_s, columns["tick"], speed)
-            for m, speed in speeds.items()
-        }
+        extra = _series(columns, speeds)
     return format_summary(summary), extra
