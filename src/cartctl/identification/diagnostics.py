@@ -57,16 +57,14 @@ def prediction_residuals(
     """One-step prediction residuals ε (rad/s) with their inputs u (V), per experiment: 'arx'
     from the first row with all regressors inside (shorter experiments left out), 'oe' the
     simulation error from rest."""
+    start = first_row(model.na, model.nb, model.nk)
     out = []
     for y, u in as_segments(segments):
         if method == "oe":
             out.append((y - model.simulate(u), u))
-            continue
-        start = first_row(model.na, model.nb, model.nk)
-        if y.size <= start:
-            continue
-        phi, target = stacked_regression([(y, u)], model.na, model.nb, model.nk, start)
-        out.append((target - phi @ model.theta, u[start:].copy()))
+        elif y.size > start:
+            phi, target = stacked_regression([(y, u)], model.na, model.nb, model.nk, start)
+            out.append((target - phi @ model.theta, u[start:].copy()))
     return out
 
 
@@ -220,24 +218,21 @@ def theta_covariance(
 
 @dataclass(frozen=True)
 class BodeBand:
-    """A model's Bode plot (dB re 1 rad/s/V, phase in deg unwrapped from low frequency) with the
-    edges of its 1σ (row 0) and 2σ (row 1) bands, at ``freq_hz`` (Hz)."""
+    """A model's Bode plot (dB re 1 rad/s/V, phase in deg unwrapped from low frequency) at
+    ``freq_hz`` (Hz), with ``*_bands[k]`` the (low, high) edges of its (k + 1)σ band."""
 
     freq_hz: NDArray[np.float64]
     mag_db: NDArray[np.float64]
     phase_deg: NDArray[np.float64]
-    mag_db_lo: NDArray[np.float64]
-    mag_db_hi: NDArray[np.float64]
-    phase_deg_lo: NDArray[np.float64]
-    phase_deg_hi: NDArray[np.float64]
+    mag_db_bands: NDArray[np.float64]
+    phase_deg_bands: NDArray[np.float64]
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"method": f"sampling, {DRAWS} draws of θ ~ N(θ̂, Σ), seed {SEED}"}
         out["freq_hz"] = self.freq_hz.tolist()
         for q in ("mag_db", "phase_deg"):
-            lo, hi = getattr(self, f"{q}_lo"), getattr(self, f"{q}_hi")
             out[q] = getattr(self, q).tolist()
-            out |= {f"{q}_{k + 1}sigma": [lo[k].tolist(), hi[k].tolist()] for k in (0, 1)}
+            out |= {f"{q}_{k + 1}sigma": getattr(self, f"{q}_bands")[k].tolist() for k in (0, 1)}
         return out
 
 
@@ -264,15 +259,8 @@ def bode_band(
     phase0 = np.degrees(np.unwrap(np.angle(h0)))
     mag_p = np.nanpercentile(mag, _PERCENTILES, axis=0)
     ph_p = np.nanpercentile(dphase, _PERCENTILES, axis=0) + phase0[None, :]
-    return BodeBand(
-        freq_hz=f,
-        mag_db=20.0 * np.log10(np.abs(h0)),
-        phase_deg=phase0,
-        mag_db_lo=mag_p[[1, 0]],
-        mag_db_hi=mag_p[[3, 4]],
-        phase_deg_lo=ph_p[[1, 0]],
-        phase_deg_hi=ph_p[[3, 4]],
-    )
+    edges = [[1, 3], [0, 4]]  # the percentiles of the 1σ and the 2σ band
+    return BodeBand(f, 20.0 * np.log10(np.abs(h0)), phase0, mag_p[edges], ph_p[edges])
 
 
 @dataclass(frozen=True)

@@ -43,20 +43,18 @@ _COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:
 
 
 @contextmanager
-def figure(width_in: float, height_in: float) -> Iterator[Figure]:
-    """A constrained-layout figure drawn under the report's style (no pyplot, nothing to close)."""
+def figure(width_in: float, height_in: float, path: Path, title: str) -> Iterator[Figure]:
+    """A constrained-layout figure drawn under the report's style (no pyplot, nothing to close),
+    titled and saved to ``path`` at the end of the block."""
     import matplotlib as mpl
     from matplotlib.figure import Figure
 
     with mpl.rc_context(_STYLE):
-        yield Figure(figsize=(width_in, height_in), dpi=DPI, layout="constrained")
-
-
-def save(fig: Figure, path: Path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=DPI)
-    return path
+        fig = Figure(figsize=(width_in, height_in), dpi=DPI, layout="constrained")
+        yield fig
+        fig.suptitle(title)
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=DPI)
 
 
 def color(i: int) -> str:
@@ -79,7 +77,7 @@ def plot_io(
         raise InputError(f"zoom window must be (start_s, end_s) with start < end, got {zoom_s}")
     t = trace.time_s
     rows = 3 if zoom_s is not None else 2
-    with figure(max(9.0, 5.5 * len(motors) + 0.5), 2.4 * rows + 0.8) as fig:
+    with figure(max(9.0, 5.5 * len(motors) + 0.5), 2.4 * rows + 0.8, path, title) as fig:
         grid = fig.add_gridspec(rows, len(motors), height_ratios=[1.0, 1.4, 1.4][:rows])
         first = None
         for j, motor in enumerate(motors):
@@ -102,8 +100,7 @@ def plot_io(
             ax_z.set_title(f"zoom {zoom_s[0]:g}–{zoom_s[1]:g} s", fontsize=10)
         if len(t) and first is not None:
             first.set_xlim(t[0], t[-1])
-        fig.suptitle(title)
-        return save(fig, path)
+    return Path(path)
 
 
 def plot_step_validation(
@@ -126,7 +123,7 @@ def plot_step_validation(
                 f"{name} must be 1-D with one value per time step ({t.shape}), got {values.shape}"
             )
     y = series["measured"]
-    with figure(10.0, 7.5) as fig:
+    with figure(10.0, 7.5, path, title) as fig:
         ax_u, ax_y, ax_e = fig.subplots(3, 1, sharex=True, height_ratios=[1.0, 2.6, 1.6])
         ax_u.plot(t, series["voltage"], drawstyle="steps-post", color="tab:blue")
         ax_u.set(ylabel="voltage (V)")
@@ -141,8 +138,7 @@ def plot_step_validation(
         if t.size:
             ax_e.set_xlim(t[0], t[-1])
         fig.legend(*ax_y.get_legend_handles_labels(), loc="outside lower center", ncols=3)
-        fig.suptitle(title)
-        return save(fig, path)
+    return Path(path)
 
 
 def plot_etfe(
@@ -182,7 +178,7 @@ def plot_etfe(
     kind = f"{n} period{'s' if n != 1 else ''} averaged" if etfe.periodic else "whole record"
     if not etfe.periodic and n > 1:
         kind = f"{n} Hann segments"
-    with figure(10.0, 7.0) as fig:
+    with figure(10.0, 7.0, path, title) as fig:
         ax_m, ax_p = fig.subplots(2, 1, sharex=True)
         style = {"linestyle": "none", "marker": "o", "markersize": 3.5, "color": "0.15"}
         ax_m.plot(f_e, 20.0 * np.log10(np.abs(h_e)), label=f"ETFE ({kind})", **style)
@@ -203,8 +199,7 @@ def plot_etfe(
         for ax in (ax_m, ax_p):
             ax.grid(True, which="minor", alpha=0.12)
         ax_m.legend(loc="lower left")
-        fig.suptitle(title)
-        return save(fig, path)
+    return Path(path)
 
 
 def _draw_band(ax_m: Any, ax_p: Any, band: BodeBand, f_lo: float, label: str) -> None:
@@ -212,10 +207,11 @@ def _draw_band(ax_m: Any, ax_p: Any, band: BodeBand, f_lo: float, label: str) ->
     keep = band.freq_hz >= f_lo
     f = band.freq_hz[keep]
     for row, alpha, name in ((1, 0.15, "2σ"), (0, 0.3, "1σ")):
-        ax_m.fill_between(f, band.mag_db_lo[row][keep], band.mag_db_hi[row][keep], lw=0,
-                          color=color(0), alpha=alpha, label=f"{label}: {name} band")  # fmt: skip
-        ax_p.fill_between(f, band.phase_deg_lo[row][keep], band.phase_deg_hi[row][keep], lw=0,
-                          color=color(0), alpha=alpha)  # fmt: skip
+        style = {"lw": 0, "color": color(0), "alpha": alpha}
+        ax_m.fill_between(
+            f, *band.mag_db_bands[row][:, keep], label=f"{label}: {name} band", **style
+        )
+        ax_p.fill_between(f, *band.phase_deg_bands[row][:, keep], **style)
 
 
 def plot_pzmap(models: Mapping[str, ArxModel], path: Path, *, title: str) -> Path:
@@ -236,7 +232,7 @@ def plot_pzmap(models: Mapping[str, ArxModel], path: Path, *, title: str) -> Pat
     if zoom[1] - zoom[0] >= 1.6:  # the roots inside fill the circle: show all of it
         zoom = (-1.15, 1.15, -1.15, 1.15)
     zoomed = zoom[1] - zoom[0] < 1.6 or reach > 1.2
-    with figure(11.0, 5.8 if zoomed else 6.5) as fig:
+    with figure(11.0, 5.8 if zoomed else 6.5, path, title) as fig:
         panels = list(fig.subplots(1, 2, width_ratios=[1.0, 1.5])) if zoomed else [fig.subplots()]
         ax_full, ax_zoom = panels[0], panels[-1]
         for ax in panels:
@@ -291,8 +287,7 @@ def plot_pzmap(models: Mapping[str, ArxModel], path: Path, *, title: str) -> Pat
             Line2D([], [], ls="none", marker="s", color="black", label="delay pole (z = 0)"),
         ]
         fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4))
-        fig.suptitle(title)
-        return save(fig, path)
+    return Path(path)
 
 
 def _zoom_window(values: np.ndarray) -> tuple[float, float, float, float]:
@@ -334,15 +329,17 @@ def _label_poles(ax: Any, labels: list[tuple[complex, str, str]], view_width: fl
 def plot_residuals(test: ResidualTest, path: Path, *, title: str) -> Path:
     """Autocorrelation above, cross-correlation with the input below, 99 % bounds shaded;
     returns ``path``."""
-    with figure(9.0, 6.2) as fig:
-        ax_a, ax_c = fig.subplots(2, 1)
-        panels = (
-            (ax_a, test.auto_lags, test.auto, test.bound_99, test.white, "white",
-             "autocorrelation of the residuals r_ε(τ)", test.auto_outside),
-            (ax_c, test.cross_lags, test.cross, test.cross_bound_99, test.independent,
-             "independent", "cross-correlation with the input r_εu(τ)", test.cross_outside),
-        )  # fmt: skip
-        for ax, lags, r, bound, ok, word, what, outside in panels:
+    if test.negligible:
+        title += "\nresiduals at rounding level (RMS below 1e-6 of the output's): no test"
+    panels = {
+        "auto": ("white", "autocorrelation of the residuals r_ε(τ)"),
+        "cross": ("independent", "cross-correlation with the input r_εu(τ)"),
+    }
+    with figure(9.0, 6.2, path, title) as fig:
+        ax_a, ax_c = axes = fig.subplots(2, 1)
+        for ax, (kind, (word, what)) in zip(axes, panels.items(), strict=True):
+            lags, r, outside = (getattr(test, kind + k) for k in ("_lags", "", "_outside"))
+            bound = test.bound_99 if kind == "auto" else test.cross_bound_99
             ax.axhspan(-bound, bound, color="tab:blue", alpha=0.15, lw=0, label="99 % bound")
             ax.axhline(0.0, color="0.3", lw=0.8)
             inside = np.abs(r) <= bound
@@ -352,13 +349,10 @@ def plot_residuals(test: ResidualTest, path: Path, *, title: str) -> Path:
             reach = max(1.6 * bound, 1.15 * float(np.max(np.abs(r))))
             ax.set(ylim=(-reach, reach), xlim=(lags[0] - 0.8, lags[-1] + 0.8))
             ax.set_ylabel("correlation (–)")
-            verdict = word if ok else f"not {word}"
+            verdict = word if getattr(test, word) else f"not {word}"
             what += f": {outside} of {lags.size} lags outside ±{bound:.3f} ({verdict})"
             ax.set_title(what, fontsize=10)
         ax_a.set_xlabel("lag τ (ticks)")
         ax_c.set_xlabel("lag τ (ticks); τ > 0: input before the residual")
         ax_a.legend(loc="upper right")
-        if test.negligible:
-            title += "\nresiduals at rounding level (RMS below 1e-6 of the output's): no test"
-        fig.suptitle(title)
-        return save(fig, path)
+    return Path(path)
