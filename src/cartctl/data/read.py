@@ -36,9 +36,10 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
     checked = None if mapping is None else check_mapping(mapping)
     kind = _sniff(path)
     if kind == "csv":
-        names, header_line, rows, lines = _read_csv(path)
+        names, header_line, rows, csv_lines = _read_csv(path)
+        lines: list[int] | None = csv_lines
         time_j, plan = plan_columns(path, "CSV", names, checked, header_line)
-        where, expected = Where(path, lines), f"the header has {len(names)}"
+        expected = f"the header has {len(names)}"
     else:
         log = read_qrc5(path) if kind == "qrc5" else read_qrc6(path)
         if log.truncated:
@@ -50,9 +51,10 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
             )
         names, rows = ["time", *log.labels], log.rows
         time_j, plan = plan_columns(path, log.kind, names, checked, None)
-        where = Where(path, log.row_lines)
+        lines = log.row_lines
         expected = f"the log has {len(names)} columns (time and {len(log.labels)} channels)"
-    table = Table(path, names, to_floats(where, rows, names, expected), where)
+    table = Table(path, names, np.empty((0, len(names))), lines)
+    table.values = to_floats(table, rows, expected)
     _check_finite(table)
     _check_voltages(table, plan)
     time = table.values[:, time_j]
@@ -116,7 +118,7 @@ def _check_voltages(table: Table, plan: Mapping[str, int | None]) -> None:
         volts = np.abs(table.values[:, j])
         if volts.max(initial=0.0) > VOLTAGE_READ_LIMIT_V:
             i = int(np.argmax(volts > VOLTAGE_READ_LIMIT_V))
-            raise table.where.error(
+            raise table.error(
                 i,
                 f"{name} is {table.values[i, j]:g} V, beyond the cart's ±{SUPPLY_V:g} V supply: is "
                 "the column in mV, or another channel (see --map)?",
@@ -128,7 +130,7 @@ def _check_finite(table: Table) -> None:
     bad = ~np.isfinite(table.values)
     if bad.any():
         i, j = np.unravel_index(np.argmax(bad), bad.shape)
-        raise table.where.error(
+        raise table.error(
             int(i),
             f"{table.values[i, j]} is not a finite number; traces hold finite numbers only",
             column=table.names[j],
@@ -140,7 +142,7 @@ def _check_increasing(table: Table, time: np.ndarray, label: str, unit: str) -> 
     back = np.flatnonzero(np.diff(time) <= 0)
     if back.size:
         i = int(back[0]) + 1
-        raise table.where.error(
+        raise table.error(
             i,
             f"time goes from {time[i - 1]:.10g} {unit} to {time[i]:.10g} {unit}; it must "
             "increase from row to row (one row per tick)",
@@ -180,32 +182,25 @@ def _warn_spacing(table: Table, time_s: np.ndarray) -> None:
 
 
 @dataclass
-class Where:
-    """Where row i of a file's data is: its line, or its row number when lines are unknown."""
+class Table:
+    """Numbers read from a file (for QRC, the columns "time" then the channel labels), shape
+    (n, len(names)), and the line of each row (None: rows are counted)."""
 
     path: Path
-    row_lines: list[int] | None = None
+    names: list[str]
+    values: np.ndarray
+    row_lines: list[int] | None
 
-    def __call__(self, i: int) -> tuple[int | None, str]:
+    def where(self, i: int) -> tuple[int | None, str]:
         if self.row_lines is None:
             return None, f"row {i + 1}"
         return self.row_lines[i], f"line {self.row_lines[i]}"
 
     def error(self, i: int, problem: str, column: str | None = None) -> DataFileError:
-        line, label = self(i)
+        line, label = self.where(i)
         if line is None:
             problem = f"{label}: {problem}"
         return DataFileError(self.path, problem, line=line, column=column)
-
-
-@dataclass
-class Table:
-    """Numbers read from a file, before they become trace columns."""
-
-    path: Path
-    names: list[str]  # the file's column names; for QRC, "time" then the channel labels
-    values: np.ndarray  # shape (n, len(names))
-    where: Where
 
 
 def _read_csv(path: Path) -> tuple[list[str], int, list[list[str]], list[int]]:
@@ -249,8 +244,9 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def to_floats(where: Where, rows: list[list[str]], names: list[str], expected: str) -> np.ndarray:
-    """Convert rows of text fields to an (n, len(names)) array, naming the first bad field."""
+def to_floats(table: Table, rows: list[list[str]], expected: str) -> np.ndarray:
+    """Rows of text fields as an (n, len(names)) array; an error names the first bad field."""
+    names = table.names
     try:
         values = np.array(rows, dtype=np.float64)
     except ValueError:
@@ -259,9 +255,9 @@ def to_floats(where: Where, rows: list[list[str]], names: list[str], expected: s
         return values
     for i, fields in enumerate(rows):
         if len(fields) != len(names):
-            raise where.error(i, f"{len(fields)} fields, {expected}")
+            raise table.error(i, f"{len(fields)} fields, {expected}")
         for name, text in zip(names, fields, strict=True):
             if not _is_number(text):
                 value = repr(text.strip()) if text.strip() else "an empty field"
-                raise where.error(i, f"{value} is not a number", column=name)
+                raise table.error(i, f"{value} is not a number", column=name)
     return np.array(rows, dtype=np.float64)

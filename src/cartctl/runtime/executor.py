@@ -301,11 +301,8 @@ class BackToBackExecutor:
 
     def stats(self) -> TimingStats:
         """The ticks completed, with zero timing."""
-        zeros = np.zeros(self.ticks)
-        return TimingStats.from_samples(
-            zeros, zeros, period_s=self.period_s,
-            duration_s=max(self.ticks - 1, 0) * self.period_s,
-        )  # fmt: skip
+        zeros, duration = np.zeros(self.ticks), max(self.ticks - 1, 0) * self.period_s
+        return TimingStats.from_samples(zeros, zeros, period_s=self.period_s, duration_s=duration)
 
 
 class CartClockedExecutor(_Recorder):

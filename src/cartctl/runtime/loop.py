@@ -10,7 +10,6 @@ records a trace; the plant paces it (a simulated one as fast as the CPU allows).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -22,6 +21,7 @@ from cartctl.cart import PERIOD_S, SUPPLY_V, check_voltage_limit
 from cartctl.data.trace import Trace
 from cartctl.errors import InputError, OutputError, PlantError
 from cartctl.plants.base import ClockedPlant, Measurement, Plant
+from cartctl.plants.sim import saturate
 from cartctl.runtime.base import Controller
 from cartctl.runtime.executor import BackToBackExecutor, SimulatedClock
 from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS, Sink
@@ -181,10 +181,7 @@ class ControlLoop:
         ctrl = self.controllers.get(motor)
         if ctrl is None:
             return 0.0, measured
-        u = ctrl.step(reference, measured)
-        if not math.isfinite(u):
-            u = 0.0
-        return min(self.limit, max(-self.limit, u)), ctrl.estimate_rad_s
+        return saturate(ctrl.step(reference, measured), self.limit), ctrl.estimate_rad_s
 
     def tick(
         self, k: int, period_error_us: float, start_s: float, time_s: float | None = None
