@@ -6,6 +6,7 @@ and microOS's parser.
 from __future__ import annotations
 
 import collections
+import contextlib
 import math
 import os
 import queue
@@ -149,8 +150,8 @@ class PacedWriter(_PtyThread):
         super().__init__("virtual-cart-writer", fd, stop, byte_s)
         self.usb = usb
         self.queue: queue.SimpleQueue[tuple[float, bytes, bool]] = queue.SimpleQueue()
-        self._tracked: list[tuple[int, float]] = []  # (byte count at its end, its end), in the USB
-        self._fed = self._passed = 0  # bytes into the USB bridge, and out of it
+        self._tracked: list[tuple[int, float]] = []  # (byte count at its end, its end), in transit
+        self._fed = self._passed = 0  # bytes put on the line, and delivered to the PC
         self.deliveries: collections.deque[tuple[float, float]] = collections.deque(maxlen=4096)
         self._out: collections.deque[tuple[float, bytes]] = collections.deque()
 
@@ -160,20 +161,15 @@ class PacedWriter(_PtyThread):
 
     def _take(self, not_before_s: float, data: bytes, track: bool) -> None:
         times = self._on_line(not_before_s, data)
-        end = self._line_free_s
-        if self.usb is None:
-            self._out.append((end, data))
-            if track:
-                self.deliveries.append((end, end))
-            return
         self._fed += len(data)
         if track:
-            self._tracked.append((self._fed, end))
-        for at_s, chunk in self.usb.feed(times):
+            self._tracked.append((self._fed, self._line_free_s))
+        flushes = [(self._line_free_s, data)] if self.usb is None else self.usb.feed(times)
+        for at_s, chunk in flushes:
             self._deliver(at_s, chunk)
 
     def _deliver(self, at_s: float, chunk: bytes) -> None:
-        """A flush of the USB bridge reaches the PC at ``at_s``, with every tracked item in it."""
+        """``chunk`` (a USB flush) reaches the PC at ``at_s``, with every tracked item in it."""
         self._out.append((at_s, chunk))
         self._passed += len(chunk)
         while self._tracked and self._tracked[0][0] <= self._passed:
@@ -199,10 +195,8 @@ class PacedWriter(_PtyThread):
             next_flush = self.usb.pending_flush_s if self.usb is not None else None
             due = [t - now for t in (next_out, next_flush) if t is not None]
             wait = min([0.05, *due])  # until something is due, or a new item comes
-            try:
+            with contextlib.suppress(queue.Empty):
                 self._take(*self.queue.get(timeout=max(wait, 0.0)))
-            except queue.Empty:
-                continue
 
 
 class LineReader(_PtyThread):
