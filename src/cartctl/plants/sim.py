@@ -47,7 +47,7 @@ class ArxPlant:
     """Two ARX motors behind the :class:`~cartctl.plants.base.Plant` interface.
 
     ``noise_std_rad_s``: white Gaussian measurement noise (0: off), seeded by ``seed``; commands
-    saturate at ±``voltage_limit_v``. ``loop_delay_ticks`` is the model file's (None: nk − 1).
+    saturate at ±12 V. ``loop_delay_ticks`` is the model file's (None: nk − 1).
     """
 
     def __init__(
@@ -57,7 +57,6 @@ class ArxPlant:
         *,
         noise_std_rad_s: float = 0.0,
         seed: int | None = None,
-        voltage_limit_v: float = SUPPLY_V,
         loop_delay_ticks: int | None = None,
     ) -> None:
         if model_a.period_s != model_b.period_s:
@@ -75,8 +74,6 @@ class ArxPlant:
         self.models = (model_a, model_b)
         self._loop_delay_ticks = loop_delay_ticks
         self.noise_std_rad_s = float(noise_std_rad_s)
-        self.seed = seed
-        self.voltage_limit_v = float(voltage_limit_v)
         self._rng = np.random.default_rng(seed)
         self._rest()
 
@@ -113,7 +110,7 @@ class ArxPlant:
         PlantError once a speed passes :data:`DIVERGED_RAD_S` (an unstable model ran away)."""
         speeds, voltages = [], (voltage_a_v, voltage_b_v)
         for model, u, y, v in zip(self.models, self._u, self._y, voltages, strict=True):
-            u.appendleft(saturate(v, self.voltage_limit_v))  # u[0] = v[k], u[1] = v[k-1], ...
+            u.appendleft(saturate(v))  # u[0] = v[k], u[1] = v[k-1], ...
             speeds.append(arx_next(model.b, u, model.nk - 1, model.ar, y))
             if model.ar:
                 y.appendleft(speeds[-1])

@@ -17,7 +17,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cartctl.cart import PERIOD_S, SUPPLY_V, check_voltage_limit
+from cartctl.cart import PERIOD_S, SUPPLY_V
 from cartctl.data.trace import Trace
 from cartctl.errors import InputError, OutputError, PlantError
 from cartctl.plants.base import ClockedPlant, Measurement, Plant
@@ -74,7 +74,6 @@ class LoopState:
     """What happened, for the summary and the exit code: ``rows`` written (the ticks and the stop
     row) and ``incomplete``, one error per file a failed write left incomplete."""
 
-    ticks: int = 0
     rows: int = 0
     interrupted: bool = False
     failure: str | None = None
@@ -123,7 +122,6 @@ class ControlLoop:
         voltage_limit_v: float = SUPPLY_V,
         period_s: float = PERIOD_S,
     ) -> None:
-        check_voltage_limit(voltage_limit_v)
         lengths = {len(r) for r in references.values()}
         if len(lengths) != 1:
             raise InputError(
@@ -148,7 +146,6 @@ class ControlLoop:
         self.last_compute_us = 0.0
         self._true = False
         self._last_time_s: float | None = None
-        self.columns: tuple[str, ...] = TRACE_COLUMNS
 
     def start(self) -> None:
         """Reset the controllers and the plant, open the sinks; a cart-clocked plant last, so that
@@ -160,8 +157,8 @@ class ControlLoop:
         else:
             self._y = self.plant.reset()
             self._true = self._y.true_speed_a_rad_s is not None
-        self.columns = TRACE_COLUMNS + (TRUE_SPEED_COLUMNS if self._true else ())
-        self._each([s.open for s in self.sinks], self.columns)
+        columns = TRACE_COLUMNS + (TRUE_SPEED_COLUMNS if self._true else ())
+        self._each([s.open for s in self.sinks], columns)
         if self._clocked:
             self._y = self.plant.reset()
 
@@ -204,7 +201,6 @@ class ControlLoop:
         else:
             self._y = self.plant.step(ua, ub)
             self._log(row, y, start_s)
-        self.state.ticks = k + 1
         return k + 1 < self.n_ticks
 
     def _log(self, head: tuple[float, ...], y: Measurement, start_s: float) -> None:

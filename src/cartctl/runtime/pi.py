@@ -119,7 +119,6 @@ class PiController:
                 )
         self.voltage_limit_v = limit
         self.anti_windup = anti_windup
-        self.tracking_gain = tracking_gain
         self.tracking_gain_per_tick = kt  # Kt in use: tracking_gain, or its default
         self.estimator = estimator
         self._ki_ts = self.ki * self.period_s
