@@ -1,5 +1,2 @@
 """Files and formats: traces and their meta files (``trace``, ``read``, ``columns``), model
-files (``modelfile``) and the TOML files' format lines (``tomlfile``).
-
-The package imports nothing: the parser takes the formats' names without loading numpy.
-"""
+files (``modelfile``) and the TOML files' format lines (``tomlfile``); imports nothing."""

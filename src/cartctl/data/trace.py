@@ -1,9 +1,6 @@
 """The experiment trace (:class:`Trace`), the ``--map`` form, the CSV writer, and the trace's
-*meta* file (``logs/ground.csv`` → ``logs/ground.meta.toml``): the loop it was recorded in.
-
-``excite`` and ``run`` write the meta file; ``identify`` carries its loop delay (ticks from a
-measurement to the voltage it leads to on the motor) into the model file. A trace without one has
-an unknown loop delay. The keys are in docs/file-formats.md.
+*meta* file (``logs/ground.csv`` → ``logs/ground.meta.toml``, keys in docs/file-formats.md): the
+loop it was recorded in, whose delay ``identify`` carries into the model file (none: unknown).
 """
 
 from __future__ import annotations

@@ -23,11 +23,9 @@ class SpeedEstimator(Protocol):
 
     def correct(self, measured_rad_s: float) -> float:
         """Take this tick's measurement; return this tick's speed estimate (rad/s)."""
-        ...
 
     def predict(self, voltage_v: float) -> None:
         """Propagate to the next tick with the voltage commanded at this tick (V)."""
-        ...
 
 
 @runtime_checkable

@@ -1,9 +1,6 @@
-"""Float-or-array arithmetic, so one control law runs on one setting or on many.
-
-A law written with Python's operators and these helpers (pi_law, feedback_law, the Kalman
-filter's steps, arx_next) runs on plain floats (the loop's tick: no numpy call) and on arrays of
-shape (N,), one setting or plant per element (``cartctl tune --robust``), with the same
-floating-point operations.
+"""Float-or-array arithmetic: a law written with Python's operators and these helpers runs on
+plain floats (the loop's tick: no numpy call) and on arrays of shape (N,), one setting or plant
+per element (``cartctl tune --robust``), with the same floating-point operations.
 """
 
 from __future__ import annotations

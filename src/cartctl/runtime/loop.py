@@ -1,11 +1,7 @@
-"""Driving a plant: the closed loop, and the open-loop experiments of ``cartctl excite``.
-
-:class:`ControlLoop` is the per-tick body an executor calls on a real or a simulated clock
-(docs/architecture.md, "One tick of ``cartctl run``"); :func:`run_in_memory` runs it back to
-back. A sink whose file write fails raises :class:`~cartctl.errors.OutputError` once every other
-sink has had its row; the error is kept in :attr:`LoopState.incomplete` and the run ends through
-:meth:`ControlLoop.finish`. :func:`run_experiment` drives a plant with voltage sequences and
-records a trace; the plant paces it (a simulated one as fast as the CPU allows).
+"""Driving a plant: the closed loop (:class:`ControlLoop`, the per-tick body an executor calls:
+docs/architecture.md, "One tick of ``cartctl run``"), and the open-loop experiments of ``cartctl
+excite`` (:func:`run_experiment`, paced by the plant). A sink whose file write fails raises
+:class:`~cartctl.errors.OutputError` once every other sink has had its row.
 """
 
 from __future__ import annotations
