@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import re
 from collections.abc import Collection, Mapping, Sequence
-from pathlib import Path
 from typing import Any
 
 import rerun as rr
@@ -119,16 +118,8 @@ class ChannelsRerunSink(RerunSink):
 
     _default_name = "cartctl monitor"
 
-    def __init__(
-        self,
-        mode: str = "save",
-        path: str | Path | None = None,
-        *,
-        float_count: int = 8,
-        batch_ticks: int = 20,
-        **options: Any,
-    ) -> None:
-        super().__init__(mode, path, batch_ticks=batch_ticks, **options)
+    def __init__(self, *args: Any, float_count: int = 8, **options: Any) -> None:
+        super().__init__(*args, **{"batch_ticks": 20, **options})  # 20 rows a block unless told
         self.float_count = int(float_count)
 
     def _entities(self, columns: list[str]) -> tuple[tuple[int, str], ...]:

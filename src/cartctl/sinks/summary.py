@@ -22,27 +22,23 @@ from cartctl.measures.metrics import finite_or_none
 from cartctl.measures.numfmt import column_decimals, format_column, format_fixed, render_table
 from cartctl.measures.stepinfo import SETTLING_FRACTION, first_step, step_info
 
+Array = NDArray[np.float64]
+Columns = Mapping[str, Array]  # a trace's columns by name
+
 SIGNALS = {"true_speed": "the true speed", "speed": "the measured speed"}
-ROW_LABELS = {"true_speed": "true", "speed": "encoder", "smoothed": "smoothed"}
+ROW_LABELS = {"true_speed": "true", "speed": "encoder"}
 
 
 def motor_metrics(
-    time_s: NDArray[np.float64],
-    reference: NDArray[np.float64],
-    speed: NDArray[np.float64],
-    voltage: NDArray[np.float64],
-    *,
-    settling_floor: float = 0.0,
+    time_s: Array, reference: Array, speed: Array, voltage: Array, *, settling_floor: float = 0.0
 ) -> dict[str, Any]:
     """``run --json`` entry of one motor, judging ``speed`` (rad/s) in a settling band of
     max(2 % of the step, ``settling_floor``); step metrics None without a step."""
     keys = ("overshoot_percent", "settling_time_s", "rise_time_s", "steady_state_error")
     out: dict[str, Any] = dict.fromkeys(keys)
-    rms = float(np.sqrt(np.mean((reference - speed) ** 2))) if speed.size else None
-    out["rms_error"] = finite_or_none(rms)
-    out["max_abs_voltage"] = (
-        finite_or_none(float(np.max(np.abs(voltage)))) if voltage.size else None
-    )
+    error, size = reference - speed, np.abs(voltage)
+    out["rms_error"] = finite_or_none(float(np.sqrt(np.mean(error**2)))) if error.size else None
+    out["max_abs_voltage"] = finite_or_none(float(np.max(size))) if size.size else None
     span = first_step(reference, initial=0.0)  # the loop starts from rest
     if span is not None:
         start, end = span
@@ -52,23 +48,21 @@ def motor_metrics(
     return out
 
 
-def timing_metrics(
-    period_error_us: NDArray[np.float64], compute_us: NDArray[np.float64], period_s: float
-) -> dict[str, Any]:
+def timing_metrics(period_error_us: Array, compute_us: Array, period_s: float) -> dict[str, Any]:
     """Percentiles of the period error and compute time (µs), and the deadline misses."""
 
-    def spread(x: NDArray[np.float64]) -> dict[str, float | None]:
+    def spread(x: Array) -> dict[str, float | None]:
         if not x.size:
             return {"p50": None, "p99": None, "max": None}
-        return {"p50": float(np.percentile(x, 50)), "p99": float(np.percentile(x, 99)),
-                "max": float(np.max(x))}  # fmt: skip
+        p50, p99 = np.percentile(x, [50, 99])
+        return {"p50": float(p50), "p99": float(p99), "max": float(np.max(x))}
 
     misses = int(np.count_nonzero(period_error_us + compute_us > period_s * 1e6))
     return {"deadline_misses": misses, "period_error_us": spread(period_error_us),
             "compute_us": spread(compute_us)}  # fmt: skip
 
 
-def metrics_signal(columns: Mapping[str, NDArray[np.float64]]) -> str:
+def metrics_signal(columns: Columns) -> str:
     """'true_speed' when every motor of the trace has a finite true-speed column, else 'speed'."""
     motors = [m for m in ("a", "b") if f"reference_{m}" in columns]
     true = [columns.get(f"true_speed_{m}") for m in motors]
@@ -77,7 +71,7 @@ def metrics_signal(columns: Mapping[str, NDArray[np.float64]]) -> str:
     return "speed"
 
 
-def trace_metrics(columns: Mapping[str, NDArray[np.float64]], period_s: float) -> dict[str, Any]:
+def trace_metrics(columns: Columns, period_s: float) -> dict[str, Any]:
     """The whole summary (without file names) from trace columns (a closed-loop trace's)."""
     for name in ("time_s", "reference_a", "speed_a", "voltage_a", "period_error_us", "compute_us"):
         if name not in columns:
@@ -101,27 +95,20 @@ def trace_metrics(columns: Mapping[str, NDArray[np.float64]], period_s: float) -
     }
 
 
-def _judged(
-    columns: Mapping[str, NDArray[np.float64]], m: str, speed: NDArray[np.float64], period_s: float
-) -> dict[str, Any]:
+def _judged(columns: Columns, m: str, speed: Array, period_s: float) -> dict[str, Any]:
     """:func:`motor_metrics` of motor ``m`` on ``speed``, settling within one encoder count."""
     return motor_metrics(columns["time_s"], columns[f"reference_{m}"], speed,
                          columns[f"voltage_{m}"], settling_floor=encoder_quantum_rad_s(period_s))  # fmt: skip
 
 
 def add_smoothed_metrics(
-    summary: dict[str, Any],
-    columns: Mapping[str, NDArray[np.float64]],
-    speeds_rad_s: Mapping[str, NDArray[np.float64]],
-    period_s: float,
+    summary: dict[str, Any], columns: Columns, speeds_rad_s: Columns, period_s: float
 ) -> None:
     """Add each motor's metrics on its smoothed speed (rad/s, per row) to a
     :func:`trace_metrics` summary, as ``motors.<m>.smoothed``, in the same settling band."""
     for m, speed in speeds_rad_s.items():
         if m in summary["motors"]:
-            summary["motors"][m]["smoothed"] = _judged(
-                columns, m, np.asarray(speed, float), period_s
-            )
+            summary["motors"][m]["smoothed"] = _judged(columns, m, speed, period_s)
 
 
 MOTOR_METRICS: tuple[tuple[str, str, str, str, float, int, bool], ...] = (
@@ -219,7 +206,7 @@ def smoothed_lines(summary: Mapping[str, Any]) -> list[str]:
     for m, entry in motors.items():
         rows[f"{m} {label}"] = entry
         if "smoothed" in entry:
-            rows[f"{m} {ROW_LABELS['smoothed']}"] = entry["smoothed"]
+            rows[f"{m} smoothed"] = entry["smoothed"]
     return [
         f"  smoothed: the speed by a Kalman RTS smoother over the trace with the model "
         f"{smoothed.get('model')} and the recorded voltages",

@@ -16,7 +16,7 @@ import time
 import uuid
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 from urllib.parse import quote
 
 from cartctl.errors import CartctlError, DataFileError, InputError, MissingFileError
@@ -33,6 +33,7 @@ if TYPE_CHECKING:  # rerun takes ~0.6 s to import: only the review itself loads 
     import pyarrow as pa
     import rerun as rr
     import rerun.blueprint as rrb
+    from numpy.typing import NDArray
     from rerun.chunk import Chunk, RrdReader, StoreEntry
     from rerun.experimental import ViewerClient
 
@@ -98,28 +99,42 @@ def batches(chunks: Iterable[Chunk]) -> Iterator[tuple[Chunk, pa.RecordBatch]]:
             yield chunk, chunk.to_record_batch()
 
 
+def scalar_series(chunks: Iterable[Chunk]) -> dict[str, tuple[NDArray[Any], ...]]:
+    """Per entity path of a scalar series on both timelines: its ticks, times (ns) and values,
+    in the recording's order."""
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    parts: dict[str, list[tuple[NDArray[Any], ...]]] = {}
+    for chunk, batch in batches(chunks):
+        if {"tick", "time", SCALARS} <= set(batch.schema.names):
+            tick, time_ns = (
+                batch.column(name).cast(pa.int64()).to_numpy(zero_copy_only=False)
+                for name in ("tick", "time")
+            )
+            values = pc.list_element(batch.column(SCALARS), 0).to_numpy(zero_copy_only=False)
+            parts.setdefault(chunk.entity_path.lstrip("/"), []).append((tick, time_ns, values))
+    return {
+        path: tuple(np.concatenate(p) for p in zip(*pieces, strict=True))
+        for path, pieces in parts.items()
+    }
+
+
 def scalar_stats(chunks: Iterable[Chunk]) -> tuple[dict[str, tuple[float, float]], set[str]]:
     """Per entity path of scalar series: the lowest and highest finite value, and the set of
     paths whose values are all whole numbers."""
     import numpy as np
-    import pyarrow.compute as pc
 
     extremes: dict[str, tuple[float, float]] = {}
-    fractional: set[str] = set()
-    for chunk, batch in batches(chunks):
-        if SCALARS not in batch.schema.names:
-            continue
-        values = pc.list_flatten(batch.column(SCALARS)).to_numpy(zero_copy_only=False)
-        values = values[np.isfinite(values)]
-        if not values.size:
-            continue
-        path = chunk.entity_path.lstrip("/")
-        lo, hi = float(values.min()), float(values.max())
-        old = extremes.get(path, (lo, hi))
-        extremes[path] = (min(old[0], lo), max(old[1], hi))
-        if np.any(values != np.round(values)):
-            fractional.add(path)
-    return extremes, set(extremes) - fractional
+    whole: set[str] = set()
+    for path, (_, _, values) in scalar_series(chunks).items():
+        values = values[np.isfinite(values)].astype(float)
+        if values.size:
+            extremes[path] = (float(values.min()), float(values.max()))
+            if np.all(values == np.round(values)):
+                whole.add(path)
+    return extremes, whole
 
 
 def _restyle(chunks: Sequence[Chunk], rec: rr.RecordingStream) -> None:

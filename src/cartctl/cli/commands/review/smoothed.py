@@ -11,21 +11,24 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from cartctl.cart import PERIOD_S
 from cartctl.cli.commands.review.metrics import TIMING_COLUMNS
-from cartctl.cli.commands.review.recording import SCALARS, batches, read_recording
+from cartctl.cli.commands.review.recording import read_recording, scalar_series
 from cartctl.data.modelfile import ModelFile, load_models
 from cartctl.data.read import read_trace
 from cartctl.design.kalman import METHOD, smooth_speed
 from cartctl.errors import CartctlError, DataWarning, InputError
-from cartctl.sinks.summary import add_smoothed_metrics, format_summary, trace_metrics
+from cartctl.sinks.summary import (
+    Array,
+    Columns,
+    add_smoothed_metrics,
+    format_summary,
+    trace_metrics,
+)
 
 if TYPE_CHECKING:
     from cartctl.sinks.rerun_sink import Series
-
-Columns = Mapping[str, NDArray[np.float64]]  # trace columns by name
 
 MODEL_ENTITY = "run/model"  # the text entity of a run's .rrd naming its model (not in the layout)
 
@@ -38,12 +41,8 @@ def wanted(summary: Mapping[str, Any], *, serial_path: bool = False, asked: bool
 
 
 def smoothed_speeds(
-    columns: Columns,
-    models: ModelFile,
-    period_s: float,
-    *,
-    extra_delay_ticks: int = 0,
-) -> dict[str, NDArray[np.float64]]:
+    columns: Columns, models: ModelFile, period_s: float, *, extra_delay_ticks: int = 0
+) -> dict[str, Array]:
     """Per motor with a reference in the trace, the smoothed speed at each row (rad/s).
 
     A run's trace ends with its stop row, the zero-volt command sent at the end, which acts only
@@ -55,7 +54,7 @@ def smoothed_speeds(
             f"the model is for Ts = {models.period_s} s but the trace ticks at {period_s} s"
         )
     stop_row = "period_error_us" in columns and "compute_us" in columns
-    out: dict[str, NDArray[np.float64]] = {}
+    out: dict[str, Array] = {}
     for m in (m for m in ("a", "b") if f"reference_{m}" in columns):
         voltage_v = np.array(columns[f"voltage_{m}"], dtype=float)
         if stop_row and voltage_v.size > 1:
@@ -75,7 +74,7 @@ def add_smoothed(
     *,
     extra_delay_ticks: int = 0,
     strict: bool = False,
-) -> dict[str, NDArray[np.float64]]:
+) -> dict[str, Array]:
     """Smooth the trace, add the metrics and ``summary["smoothed"]`` (``{"model", "method",
     "extra_delay_ticks"}``, or ``{"model", "method", "note": why not}``); returns the speeds per
     motor. ``strict``: raise a problem with the model (one the user named) instead of noting it."""
@@ -116,7 +115,7 @@ def smooth_run(
     ``motor/<m>/smoothed_speed`` and the model's name in ``recording`` (the run's still open
     :class:`~cartctl.sinks.rerun_sink.HeldRerunSink`, or None), released here whatever happens."""
     try:
-        speeds: dict[str, NDArray[np.float64]] = {}
+        speeds: dict[str, Array] = {}
         if wanted(summary, serial_path=bool(summary.get("link"))):
             delay = summary.get("loop_delay_ticks"), summary.get("controller_loop_delay_ticks")
             extra = run_extra_delay(*delay)
@@ -135,30 +134,18 @@ def _series(columns: Columns, speeds: Columns) -> Series:
     return {f"motor/{m}/smoothed_speed": (columns["time_s"], tick, v) for m, v in speeds.items()}
 
 
-def recording_columns(chunks: Any) -> dict[str, NDArray[np.float64]]:
+def recording_columns(chunks: Any) -> dict[str, Array]:
     """The trace columns a run's recording chunks hold, one row per recorded tick, with
     ``time_s`` and ``tick``; empty when it holds no motor."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
     from cartctl.sinks.rerun_layout import ENTITY_PATHS
 
     column_of = {path: column for column, path in ENTITY_PATHS.items()}
-    parts: dict[str, list[tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]]] = {}
-    for chunk, batch in batches(chunks):
-        column = column_of.get(chunk.entity_path.lstrip("/"))
-        if column is None or not {"tick", "time", SCALARS} <= set(batch.schema.names):
-            continue
-        tick = batch.column("tick").cast(pa.int64()).to_numpy(zero_copy_only=False)
-        time_ns = batch.column("time").cast(pa.int64()).to_numpy(zero_copy_only=False)
-        values = pc.list_element(batch.column(SCALARS), 0).to_numpy(zero_copy_only=False)
-        parts.setdefault(column, []).append((tick, time_ns, values.astype(float)))
-    if "speed_a" not in parts:
+    series = {column_of[p]: s for p, s in scalar_series(chunks).items() if p in column_of}
+    if "speed_a" not in series:
         return {}
-    ticks = np.unique(np.concatenate([t for pieces in parts.values() for t, _, _ in pieces]))
+    ticks = np.unique(np.concatenate([tick for tick, _, _ in series.values()]))
     out = {"tick": ticks.astype(float), "time_s": np.full(ticks.size, np.nan)}
-    for column, pieces in parts.items():
-        tick, time_ns, values = (np.concatenate(p) for p in zip(*pieces, strict=True))
+    for column, (tick, time_ns, values) in series.items():
         where = np.searchsorted(ticks, tick)
         out[column] = np.full(ticks.size, np.nan)
         out[column][where] = values
@@ -214,10 +201,7 @@ def recorded_model_of(path: Path) -> str | None:
 
 
 def smooth_csv(
-    summary: dict[str, Any],
-    path: str | Path,
-    mapping: Mapping[str, str] | None,
-    model: str | None,
+    summary: dict[str, Any], path: str | Path, mapping: Mapping[str, str] | None, model: str | None
 ) -> dict[str, Any]:
     """A CSV trace's summary with the smoothed metrics where wanted (changed and returned)."""
     serial, run_model, extra = trace_hints(path)
