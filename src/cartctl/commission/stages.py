@@ -210,10 +210,7 @@ class Commission:
         """Stage 4: the robust grid on the model; controller.toml."""
         self.say("tuning", f"{tuning.GRID}: each on the model, {tuning.PLANTS} plants of its "
                  "uncertainty and commands landing 2 and 4 ms later")  # fmt: skip
-        from cartctl.tune.grid import grid_settings, parse_grid
-
-        n = len(grid_settings(parse_grid(tuning.GRID, tuning.METHOD)))
-        bar = ProgressBar(n, "cartctl commission tuning")
+        bar = ProgressBar(len(tuning.SETTINGS), "cartctl commission tuning")
         try:
             self.tuned = tuning.run_tuning(self.model_path, self.loop_delay_ticks, bar.update,
                                            self.jobs)  # fmt: skip
@@ -254,10 +251,9 @@ class Commission:
                 raise StageStoppedError("verification", None)
             raise StageError(f"verification: the closed-loop run ended with code {code}; see "
                               f"{self.out / 'verification.csv'}")  # fmt: skip
-        smoothed = None  # run's figures on the RTS-smoothed speed, where it has no true speed
-        if summary.get("metrics_signal") != "true_speed":
-            smoothed = {m: f["smoothed"] for m, f in (summary.get("motors") or {}).items()
-                        if isinstance(f.get("smoothed"), dict)} or None  # fmt: skip
+        # run's figures on the RTS-smoothed speed (compare takes them where there is no true speed)
+        smoothed = {m: f["smoothed"] for m, f in (summary.get("motors") or {}).items()
+                    if isinstance(f.get("smoothed"), dict)} or None  # fmt: skip
         checked = checks.compare(summary, strict(self.tuned.predicted()), smoothed)
         self.results["verification"] = {**checked.to_dict(), "trace": summary.get("trace"),
                                          "recording": summary.get("recording"),

@@ -28,6 +28,7 @@ METHOD = "poles"
 # design), and beyond one encoder count (3.5 % of 10 rad/s) settling moves from the rise to the
 # decay of the overshoot (115 ms → 160 ms).
 GRID = "settling-time=0.08:0.16:0.02,overshoot=0.1:2.1:0.5"
+SETTINGS = tuning.grid_settings(tuning.parse_grid(GRID, METHOD))
 PLANTS = 48  # with the nominal model and 2 timing plants: 51
 SEED = 1
 MAX_OVERSHOOT_PERCENT = 5.0
@@ -66,14 +67,13 @@ def run_tuning(model_path: Path, loop_delay_ticks: int,
     """Tune the grid on ``model_path`` and choose (raises :class:`StageError` if none fits)."""
     models = load_models(model_path)
     fixed = {**DESIGN_FIXED, "loop_delay_ticks": loop_delay_ticks}
-    settings = tuning.grid_settings(tuning.parse_grid(GRID, METHOD))
     tune_job = engine.TuneJob(str(model_path), METHOD, "sim", "ground", REFERENCE, DURATION_S, 0,
                               (), tuple(fixed.items()))  # fmt: skip
     try:
         sample = sample_plants(models, PLANTS, SEED)
     except InputError as exc:
         raise StageError(f"tuning: {exc}") from None
-    job = robustness.RobustJob(tune_job, sample, tuple(enumerate(settings, start=1)),
+    job = robustness.RobustJob(tune_job, sample, tuple(enumerate(SETTINGS, start=1)),
                                later_fractions=LATER_FRACTIONS)  # fmt: skip
     rows = engine.run_grid(job, jobs or min(2, os.cpu_count() or 1), progress,
                            robustness.evaluate_robust_chunk)  # fmt: skip

@@ -6,6 +6,7 @@ design`` option without its dashes; the older spelling with underscores is accep
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -122,10 +123,8 @@ def parse_grid(spec: str | None, method: str) -> dict[str, tuple[float, ...]]:
 
 def grid_settings(axes: Mapping[str, Sequence[float]]) -> list[dict[str, float]]:
     """Every combination of the axis values, the first axis varying slowest."""
-    settings: list[dict[str, float]] = [{}]
-    for name, values in axes.items():
-        settings = [{**s, name: float(v)} for s in settings for v in values]
-    return settings
+    combinations = itertools.product(*axes.values())
+    return [{n: float(v) for n, v in zip(axes, c, strict=True)} for c in combinations]
 
 
 def design_request(
