@@ -226,8 +226,11 @@ class PhysicsPlant:
         self._delay_substeps = round(params.actuation_delay() / h)
         self._rng = np.random.default_rng(seed) if params.noise_std_rad_s > 0.0 else None
         limit, step = params.supply_v, params.pwm_step_v
-        top = math.floor(limit / step + 1e-9)  # the last whole PWM step within the supply
-        self._pwm = (limit, step, top)
+        self._pwm = (limit, step, math.floor(limit / step + 1e-9))  # top: the last whole step
+        self.applied_voltage_v: tuple[float, float]
+        """The latest command, saturated and quantised (V): what the bridges hold (and report)."""
+        self.last_interval_voltage_v: tuple[float, float]
+        """What drove the motors in the tick just ended until the newest command landed (V)."""
         self.reset()
 
     loop_delay_ticks = 1
@@ -237,7 +240,7 @@ class PhysicsPlant:
         """Both wheels at rest, no current, 0 V, at ``position_rad``; the tick-0 measurement."""
         self._state = [(0.0, 0.0, float(th)) for th in position_rad]  # (i, ω, θ) per wheel
         self._counts = [math.floor(th / self._rad_per_count) for _, _, th in self._state]
-        self._applied = self._driving = (0.0, 0.0)
+        self.applied_voltage_v = self.last_interval_voltage_v = (0.0, 0.0)
         return Measurement(0.0, 0.0, 0.0, 0.0)
 
     def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
@@ -247,14 +250,14 @@ class PhysicsPlant:
         commands = (self.condition_voltage(voltage_a_v), self.condition_voltage(voltage_b_v))
         speeds = []
         for m, (wheel, sign) in enumerate(zip(self._wheels, self._sign, strict=True)):
-            i, w, th = _advance(wheel, *self._state[m], sign * self._applied[m], nd)
+            i, w, th = _advance(wheel, *self._state[m], sign * self.applied_voltage_v[m], nd)
             if nd < n:  # the new command lands inside this tick
                 i, w, th = _advance(wheel, i, w, th, sign * commands[m], n - nd)
             self._state[m] = (i, w, th)
             count = math.floor(th / self._rad_per_count)
             speeds.append((count - self._counts[m]) * self._speed_per_count)
             self._counts[m] = count
-        self._driving, self._applied = self._applied, commands
+        self.last_interval_voltage_v, self.applied_voltage_v = self.applied_voltage_v, commands
         if self._rng is not None:
             noise = self._rng.standard_normal(2) * self.params.noise_std_rad_s
             speeds = [speed + float(e) for speed, e in zip(speeds, noise, strict=True)]
@@ -262,7 +265,7 @@ class PhysicsPlant:
 
     def close(self) -> None:
         """Command zero volts (the motors brake); there is no resource to release."""
-        self._applied = (0.0, 0.0)
+        self.applied_voltage_v = (0.0, 0.0)
 
     def condition_voltage(self, voltage_v: float) -> float:
         """What the firmware makes of a command (V): 0 if non-finite, saturated, rounded to the
@@ -272,16 +275,6 @@ class PhysicsPlant:
             return 0.0
         limit, step, top = self._pwm
         return min(max(round(min(max(v, -limit), limit) / step), -top), top) * step
-
-    @property
-    def applied_voltage_v(self) -> tuple[float, float]:
-        """The latest command, saturated and quantised (V): what the bridges hold (and report)."""
-        return self._applied
-
-    @property
-    def last_interval_voltage_v(self) -> tuple[float, float]:
-        """What drove the motors in the tick just ended until the newest command landed (V)."""
-        return self._driving
 
     @property
     def position_rad(self) -> tuple[float, float]:
