@@ -9,9 +9,9 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+import cartctl.cli.commands.options as options
 from cartctl import stopping
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
-from cartctl.cli.commands.options import MAX_JOBS, check_jobs, check_output_folder, seed
 from cartctl.errors import CartctlError, InputError
 
 COMMISSIONED = ("physics", "virtual", "serial")
@@ -44,12 +44,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "ground)")  # fmt: skip
     p.add_argument("--noise", type=float, default=0.0, metavar="RAD_S",
                    help="physics and virtual: extra white measurement noise (rad/s, default 0)")  # fmt: skip
-    p.add_argument("--seed", type=seed, default=None, help="seed of the measurement noise")
+    p.add_argument("--seed", type=options.seed, default=None, help="seed of the measurement noise")
     p.add_argument("--connect-timeout", type=float, default=DEFAULT_CONNECT_TIMEOUT_S, metavar="S",
                    help="serial and virtual carts: longest wait for the first HEARTBEAT "
                         "(default 5 s)")  # fmt: skip
     p.add_argument("--jobs", type=int, metavar="N",
-                   help=f"worker processes of the tuning, 1..{MAX_JOBS} (default: 2 at most)")  # fmt: skip
+                   help=f"worker processes of the tuning, 1..{options.MAX_JOBS} (default: 2 at most)")  # fmt: skip
     p.add_argument("--json", action="store_true",
                    help="print one JSON object: model, controller, verification (and the checks)")  # fmt: skip
     p.set_defaults(func=run)
@@ -57,33 +57,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _check(args: argparse.Namespace) -> Path:
     """Every option, in one line (exit 2) before anything is written; the output folder."""
-    import math
+    from cartctl.plants.factory import check_plant_name, plant_kind
 
-    from cartctl.link.cart_faults import CartFaults
-    from cartctl.plants.factory import physics_options, plant_kind
-
-    kind, plant_options = plant_kind(args.plant), args.plant.partition(":")[2]
-    if kind not in COMMISSIONED:
+    if plant_kind(args.plant) not in COMMISSIONED:
         raise InputError(f"PLANT must be physics[:OPTIONS], virtual[:OPTIONS] or serial:PORT, "
                          f"got '{args.plant}' (sim is a model already)")  # fmt: skip
-    if not (math.isfinite(args.noise) and args.noise >= 0.0):
-        raise InputError(f"--noise must be a number of rad/s >= 0, got {args.noise}")
-    if not (math.isfinite(args.connect_timeout) and args.connect_timeout > 0.0):
-        raise InputError(f"--connect-timeout must be a number of seconds > 0, got "
-                         f"{args.connect_timeout}")  # fmt: skip
-    check_jobs(args.jobs)
-    out = check_output_folder(args.out or datetime.now().strftime("logs/commission-%Y%m%d-%H%M%S"),
-                              "--out")  # fmt: skip
+    options.check_plant_options(args)
+    options.check_jobs(args.jobs)
+    default = datetime.now().strftime("logs/commission-%Y%m%d-%H%M%S")
+    out = options.check_output_folder(args.out or default, "--out")
     earlier = [n for n in ("summary.md", "model.toml", "controller.toml") if (out / n).exists()]
     if earlier:
         raise InputError(f"--out {out} already holds {earlier[0]} of an earlier commissioning; "
                          "give another folder")  # fmt: skip
-    if kind == "physics":
-        physics_options(plant_options)
-    elif kind == "virtual":
-        CartFaults.parse(plant_options)
-    elif not plant_options:
-        raise InputError("plant 'serial:' needs a port, e.g. serial:/dev/ttyACM0")
+    check_plant_name(args.plant)  # its options, and the port of serial:PORT
     return out
 
 
@@ -94,10 +81,10 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.errors import PlantError
 
     out = _check(args)
-    options = {"preset": args.preset, "noise_std_rad_s": args.noise, "seed": args.seed,
+    plant_options = {"preset": args.preset, "noise_std_rad_s": args.noise, "seed": args.seed,
                "connect_timeout_s": args.connect_timeout}  # fmt: skip
     out.mkdir(parents=True, exist_ok=True)
-    job = Commission(args.plant, out, options, jobs=args.jobs, run_command=run_in_process)
+    job = Commission(args.plant, out, plant_options, jobs=args.jobs, run_command=run_in_process)
     code, failure = 0, None
     try:
         job.run_all()

@@ -7,7 +7,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import functools
-import math
 import signal
 import sys
 import threading
@@ -84,9 +83,7 @@ def _check(args: argparse.Namespace) -> tuple[str, str]:
         raise InputError(f"unknown plant '{args.plant}'; expected serial:PORT or virtual[:FAULTS]")
     if args.duration is not None:
         options.check_duration(args.duration)
-    if not (math.isfinite(args.connect_timeout) and args.connect_timeout > 0):
-        raise InputError(f"--connect-timeout must be a positive number of seconds, got "
-                         f"{args.connect_timeout}")  # fmt: skip
+    options.check_plant_options(args)
     if args.reference:
         from cartctl.reference import check_reference
 

@@ -293,14 +293,12 @@ def check_finite(value: float, option: str) -> float:
     return value
 
 
-def check_noise(noise: float) -> None:
-    if check_finite(noise, "--noise") < 0.0:
-        raise InputError(f"--noise must be a standard deviation >= 0 rad/s, got {noise:g}")
-
-
 def check_plant_options(args: argparse.Namespace) -> None:
-    """``--noise`` and ``--connect-timeout`` in range, before any plant is made or connected."""
-    check_noise(args.noise)
-    timeout = check_finite(args.connect_timeout, "--connect-timeout")
+    """``--noise`` and ``--connect-timeout`` in range (those the command has), before any plant
+    is made or connected."""
+    noise = check_finite(getattr(args, "noise", 0.0), "--noise")
+    if noise < 0.0:
+        raise InputError(f"--noise must be a standard deviation >= 0 rad/s, got {noise:g}")
+    timeout = check_finite(getattr(args, "connect_timeout", 1.0), "--connect-timeout")
     if timeout <= 0.0:
         raise InputError(f"--connect-timeout must be a positive number of seconds, got {timeout:g}")

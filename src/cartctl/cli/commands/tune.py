@@ -21,6 +21,10 @@ if TYPE_CHECKING:  # the tuning modules load numpy and scipy: imported where use
     from cartctl.tune import engine
     from cartctl.tune import grid as tuning
 
+_Outcome = tuple[list[Any], list[Any], Callable[[], Any], str, dict[str, Any], list[str]]
+"""The rows of ``--json``, the results to choose from, the best of them, the choice rule, the
+JSON keys after ``chosen`` and the text lines."""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -165,29 +169,41 @@ def _delay_text(args: argparse.Namespace) -> str:
     return f", {args.extra_delay} extra tick(s) of loop delay" if args.extra_delay else ""
 
 
-def _json_head(args: argparse.Namespace) -> dict[str, Any]:
-    """The keys that open both ``--json`` documents (plain and ``--robust``)."""
-    return {"method": args.method, "model": str(args.model), "plant": args.plant,
-            "reference": args.reference, "duration_s": args.duration,
-            "extra_delay_ticks": args.extra_delay, "metrics_of": "worse of motors a and b"}  # fmt: skip
+def _nominal(args: argparse.Namespace, job: engine.TuneJob) -> _Outcome:
+    """The grid on the plant."""
+    from cartctl.tune import choice, engine
+    from cartctl.tune import grid as tuning
+    from cartctl.tune.plot import plot_tuning
+
+    results = _run_grid(args, job, engine.evaluate_chunk, "cartctl tune")
+    results = tuning.sort_results(tuning.mark_pareto(results))
+    if args.plot:
+        plot_tuning(args.plot, args.method, results)
+    limits = checks.choice_limits(args)
+    rule = choice.rule_text(choice.CHOICE_RULE_NOMINAL, limits, choice.LIMITS_WHERE_NOMINAL)
+    front, plotted = sum(r.pareto for r in results), sum(r.pareto_plot for r in results)
+    counts = {k.replace(" ", "_"): v for k, v in tuning.status_counts(results).items()}
+    doc = {
+        "counts": {"settings": len(results), **counts, "pareto": front, "pareto_plot": plotted},
+        "statuses": tuning.STATUSES,
+        "pareto_of": list(tuning.METRICS),
+        "pareto_plot_of": list(tuning.PLOT_METRICS),
+    }
+    text = [
+        f"{args.method} on {args.model}, {args.plant} plant{_delay_text(args)}, "
+        f"{args.reference}, {args.duration:g} s: {choice.counts_text(results)}",
+        choice.LEGEND,
+        f"*: on the Pareto front over the four run metrics "
+        f"({choice.plural(front, 'setting', 'settings')}); o: on the front of run settling "
+        f"against run overshoot, the axes of --plot, which rings them "
+        f"({choice.plural(plotted, 'setting', 'settings')})",
+        choice.format_table(args.method, results),
+    ]
+    return results, results, lambda: choice.choose_best_nominal(results, limits), rule, doc, text
 
 
-def _finish(args: argparse.Namespace, chosen: dict[str, Any] | None,
-            refusal: InputError | None, which: str) -> int:  # fmt: skip
-    """Say what was written (without ``--json``), then raise ``--choose``'s refusal, if any."""
-    if not args.json:
-        if args.plot:
-            print(f"wrote {args.plot}")
-        if chosen is not None:
-            print(f"wrote {args.out}{which}: {chosen['command']}")
-    if refusal is not None:
-        raise refusal
-    return 0
-
-
-def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
-    """``tune --robust``: the grid on the nominal model, the sampled plants and the physics preset."""
-    from cartctl.cli.jsonout import dumps
+def _robust(args: argparse.Namespace, job: engine.TuneJob) -> _Outcome:
+    """``--robust``: the grid on the nominal model, the sampled plants and the physics preset."""
     from cartctl.data.modelfile import load_models
     from cartctl.tune import choice
     from cartctl.tune import grid as tuning
@@ -195,10 +211,9 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
     from cartctl.tune.batch import describe_line, sample_plants
     from cartctl.tune.plot import plot_robust
 
-    plants = checks.DEFAULT_PLANTS if args.plants is None else args.plants
-    sample = sample_plants(load_models(args.model), plants, 1 if args.seed is None else args.seed,
+    plants, timings = args.plants, args.timings
+    sample = sample_plants(load_models(args.model), plants, args.seed,
                            extra_delay_ticks=args.extra_delay)  # fmt: skip
-    timings = checks.actuation_timings(args.actuation_ms)
     rjob = robustness.RobustJob(job, sample, job.items, timings)
     rows = _run_grid(args, rjob, robustness.evaluate_robust_chunk, "cartctl tune --robust")
     marked = tuning.mark_pareto([r.result for r in rows])  # the plain front, for the JSON rows
@@ -208,48 +223,47 @@ def run_robust(args: argparse.Namespace, job: engine.TuneJob) -> int:
         plot_robust(args.plot, args.method, rows, plants)
     limits = checks.choice_limits(args)
     rule = choice.rule_text(choice.CHOICE_RULE, limits, choice.LIMITS_WHERE)
-
-    def best() -> tuning.TuneResult:
-        return choice.choose_best_robust(rows, limits).result
-
-    chosen, refusal = _choose(args, [r.result for r in rows], best, rule)
     timed = ", ".join(f"{ms:g}" for ms in timings)
-    worst_over = "the nominal model and the sampled plants" + (
-        f" and the physics preset with commands landing {timed} ms after their tick"
-        if timings else "")  # fmt: skip
+    landing = f"with commands landing {timed} ms after their tick"
+    worst_over = "the nominal model and the sampled plants"
     meta = {**sample.describe(), "nominal": f"the model ({args.model}), as without --robust",
-            "worst_over": worst_over,
-            "worst_sampled_over": "the nominal model and the sampled plants",
+            "worst_over": worst_over + (f" and the physics preset {landing}" if timings else ""),
+            "worst_sampled_over": worst_over,
             "actuation_ms": list(timings),
             "spread_over": "the sampled plants (percentiles: values of sampled plants)",
             "physics_preset": args.preset, "pareto_of": "nominal settling_time_s against worst-case "
             "overshoot_percent", "choice_rule": rule,
             "counts": {k.replace(" ", "_"): v for k, v in choice.robust_counts(rows).items()},
             "statuses": choice.ROBUST_STATUSES}  # fmt: skip
-    if args.json:
-        print(dumps({**_json_head(args), "settings": [r.to_dict() for r in rows],
-                     "chosen": chosen, "robust": meta}))  # fmt: skip
+    if timings:
+        legend = (
+            f"nominal: the model; worst: over the model, the {plants} plants and physics preset "
+            f"{args.preset} {landing} (∞: a plant never settles); p5–p95: over the plants; "
+            "physics run, X ms: those runs"
+        )
     else:
-        print(f"{args.method} on {args.model}{_delay_text(args)}, {args.reference}, "
-              f"{args.duration:g} s, --robust: {choice.robust_counts_text(rows)}; the worse of "
-              "motors a and b")  # fmt: skip
-        print(describe_line(sample, str(args.model)))
-        if timings:
-            print(f"nominal: the model; worst: over the model, the {plants} plants and physics "
-                  f"preset {args.preset} with commands landing {timed} ms after their tick (∞: a "
-                  "plant never settles); p5–p95: over the plants; physics run, X ms: those "
-                  "runs")  # fmt: skip
-        else:
-            print(f"nominal: the model; worst: over the model and the {plants} plants (∞: a "
-                  f"plant never settles); p5–p95: over the plants; physics: preset "
-                  f"{args.preset}, not in the worst case")  # fmt: skip
-        print(choice.LEGEND)
-        print(f"*: on the robust Pareto front, nominal settling against worst-case overshoot, the "
-              f"axes of --plot, which rings them "
-              f"({choice.plural(sum(r.pareto for r in rows), 'setting', 'settings')})")  # fmt: skip
-        print(choice.format_robust_table(args.method, rows))
-    which = "" if chosen is None else f" (setting #{chosen['index']})"
-    return _finish(args, chosen, refusal, which)
+        legend = (
+            f"nominal: the model; worst: over the model and the {plants} plants (∞: a plant never "
+            f"settles); p5–p95: over the plants; physics: preset {args.preset}, not in the worst "
+            "case"
+        )
+    text = [
+        f"{args.method} on {args.model}{_delay_text(args)}, {args.reference}, "
+        f"{args.duration:g} s, --robust: {choice.robust_counts_text(rows)}; the worse of "
+        "motors a and b",
+        describe_line(sample, str(args.model)),
+        legend,
+        choice.LEGEND,
+        f"*: on the robust Pareto front, nominal settling against worst-case overshoot, the "
+        f"axes of --plot, which rings them "
+        f"({choice.plural(sum(r.pareto for r in rows), 'setting', 'settings')})",
+        choice.format_robust_table(args.method, rows),
+    ]
+
+    def best() -> tuning.TuneResult:
+        return choice.choose_best_robust(rows, limits).result
+
+    return rows, [r.result for r in rows], best, rule, {"robust": meta}, text
 
 
 def run(args: argparse.Namespace) -> int:
@@ -263,44 +277,26 @@ def run(args: argparse.Namespace) -> int:
     check_plot_path(args.plot)  # a PNG: matplotlib would refuse another suffix after the work
 
     from cartctl.cli.jsonout import dumps
-    from cartctl.tune import choice, engine
-    from cartctl.tune.plot import plot_tuning
+    from cartctl.tune import engine
 
     job = engine.TuneJob(str(args.model), args.method, args.plant, args.preset, args.reference,
                          float(args.duration), args.extra_delay,
                          tuple(enumerate(settings, start=1)),
                          tuple(checks.design_fixed(args).items()))  # fmt: skip
-    if args.robust:
-        return run_robust(args, job)
-    results = _run_grid(args, job, engine.evaluate_chunk, "cartctl tune")
-    results = tuning.sort_results(tuning.mark_pareto(results))
-    if args.plot:
-        plot_tuning(args.plot, args.method, results)
-    limits = checks.choice_limits(args)
-    rule = choice.rule_text(choice.CHOICE_RULE_NOMINAL, limits, choice.LIMITS_WHERE_NOMINAL)
-
-    def best() -> tuning.TuneResult:
-        return choice.choose_best_nominal(results, limits)
-
+    rows, results, best, rule, doc, text = (_robust if args.robust else _nominal)(args, job)
     chosen, refusal = _choose(args, results, best, rule)
-    front, plotted = sum(r.pareto for r in results), sum(r.pareto_plot for r in results)
     if args.json:
-        counts = {k.replace(" ", "_"): v for k, v in tuning.status_counts(results).items()}
-        print(dumps({**_json_head(args), "settings": [r.to_dict() for r in results],
-                     "chosen": chosen,
-                     "counts": {"settings": len(results), **counts, "pareto": front,
-                                "pareto_plot": plotted},
-                     "statuses": tuning.STATUSES,
-                     "pareto_of": list(tuning.METRICS),
-                     "pareto_plot_of": list(tuning.PLOT_METRICS)}))  # fmt: skip
+        head = {"method": args.method, "model": str(args.model), "plant": args.plant,
+                "reference": args.reference, "duration_s": args.duration,
+                "extra_delay_ticks": args.extra_delay, "metrics_of": "worse of motors a and b"}  # fmt: skip
+        print(dumps({**head, "settings": [r.to_dict() for r in rows], "chosen": chosen, **doc}))
     else:
-        print(f"{args.method} on {args.model}, {args.plant} plant{_delay_text(args)}, "
-              f"{args.reference}, {args.duration:g} s: {choice.counts_text(results)}")  # fmt: skip
-        print(choice.LEGEND)
-        print(f"*: on the Pareto front over the four run metrics "
-              f"({choice.plural(front, 'setting', 'settings')}); o: on the front of run settling "
-              f"against run overshoot, the axes of --plot, which rings them "
-              f"({choice.plural(plotted, 'setting', 'settings')})")  # fmt: skip
-        print(choice.format_table(args.method, results))
-    which = f" (setting #{chosen['index']})" if chosen is not None and "rule" in chosen else ""
-    return _finish(args, chosen, refusal, which)
+        print("\n".join(text))
+        if args.plot:
+            print(f"wrote {args.plot}")
+        if chosen is not None:  # the setting's number where the command does not show it
+            which = f" (setting #{chosen['index']})" if args.robust or "rule" in chosen else ""
+            print(f"wrote {args.out}{which}: {chosen['command']}")
+    if refusal is not None:
+        raise refusal
+    return 0

@@ -30,10 +30,6 @@ def _ticks(args: argparse.Namespace) -> int:
     return max(1, round(args.duration / PERIOD_S))
 
 
-def _plants(args: argparse.Namespace) -> int:
-    return DEFAULT_PLANTS if args.plants is None else args.plants
-
-
 def actuation_timings(text: str | None) -> tuple[float, ...]:
     """``--actuation-ms``: the timings (ms) in the order given, () for 'none', the default for
     None; each 0 < X <= 10 to 0.1 ms, no repeats."""
@@ -86,7 +82,9 @@ def choice_limits(args: argparse.Namespace) -> Any:
 
 
 def check_options(args: argparse.Namespace) -> None:
-    """The options that size the work, before the grid is built or numpy imported (one line)."""
+    """The options that size the work, before the grid is built or numpy imported (one line);
+    sets ``args.timings`` (``--actuation-ms``) and, with ``--robust``, the defaults of
+    ``--plants`` and ``--seed``."""
     check_duration(args.duration)
     if args.duration > MAX_TUNE_DURATION_S:
         raise InputError(f"--duration of a tuning run must be at most {MAX_TUNE_DURATION_S:g} s "
@@ -102,7 +100,9 @@ def check_options(args: argparse.Namespace) -> None:
         if args.plant != "sim":
             raise InputError("--robust scores on the model (sim) and the physics --preset (at "
                              "each --actuation-ms); leave out --plant physics")  # fmt: skip
-        plants, ticks = _plants(args), _ticks(args)
+        plants = args.plants = DEFAULT_PLANTS if args.plants is None else args.plants
+        args.seed = 1 if args.seed is None else args.seed
+        ticks = _ticks(args)
         if not 1 <= plants <= MAX_PLANTS:
             raise InputError(
                 f"--plants must be a number of plants in 1..{MAX_PLANTS}, got {plants}"
@@ -113,7 +113,7 @@ def check_options(args: argparse.Namespace) -> None:
                 f"{(plants + 1) * ticks} plant-ticks per motor, more than {MAX_PLANT_TICKS}; use "
                 "fewer --plants or a shorter --duration"
             )
-        actuation_timings(args.actuation_ms)
+    args.timings = actuation_timings(args.actuation_ms) if args.robust else ()
     if (args.choose is None) != (args.out is None):
         raise InputError("--choose N and --out CONTROLLER.toml go together; give both or neither")
     design_fixed(args)
@@ -123,7 +123,7 @@ def check_work(args: argparse.Namespace, n_settings: int) -> None:
     """The grid's size against :data:`MAX_GRID_TICKS` and, with ``--robust``,
     :data:`MAX_ROBUST_PLANT_TICKS` (one line naming the options to change)."""
     ticks = _ticks(args)
-    runs = 2 + len(actuation_timings(args.actuation_ms)) if args.robust else 1
+    runs = 2 + len(args.timings) if args.robust else 1
     if n_settings * ticks * runs > MAX_GRID_TICKS:
         what = f"{n_settings} settings" + (f" ({runs} runs each)" if runs > 1 else "")
         raise InputError(
@@ -131,10 +131,10 @@ def check_work(args: argparse.Namespace, n_settings: int) -> None:
             f"{n_settings * ticks * runs} ticks, more than {MAX_GRID_TICKS}; use a coarser --grid "
             "or a shorter --duration"
         )
-    work = n_settings * (_plants(args) + 1) * ticks
-    if args.robust and work > MAX_ROBUST_PLANT_TICKS:
+    work = n_settings * (args.plants + 1) * ticks if args.robust else 0
+    if work > MAX_ROBUST_PLANT_TICKS:
         raise InputError(
-            f"--robust with {n_settings} settings, {_plants(args)} plants and --duration "
+            f"--robust with {n_settings} settings, {args.plants} plants and --duration "
             f"{args.duration:g} s simulates {work} plant-ticks, more than "
             f"{MAX_ROBUST_PLANT_TICKS}; use a coarser --grid, fewer --plants or a shorter "
             "--duration"

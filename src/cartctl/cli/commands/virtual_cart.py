@@ -13,11 +13,6 @@ if TYPE_CHECKING:
     from cartctl.link.cart_faults import CartFaults
 
 
-_NO_FAULTS = ""
-"""``--faults`` by default: argparse passes a string default through ``type`` when it parses, so
-the parser is built without cartctl.plants (numpy, scipy) and the default is still ``CartFaults()``."""
-
-
 def _faults(text: str) -> CartFaults:
     from cartctl.link.cart_faults import CartFaults
 
@@ -47,7 +42,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--seed", type=options.seed, default=None, help="seed of the noise and the faults"
     )
     p.add_argument(
-        "--faults", type=_faults, default=_NO_FAULTS, metavar="KEY=VALUE,...",
+        # a string default goes through type when parsed: CartFaults(), without loading numpy here
+        "--faults", type=_faults, default="", metavar="KEY=VALUE,...",
         help="inject faults: garbage=FRACTION (bursts of random bytes before that fraction of "
         "frames), corrupt=FRACTION (frames with a changed byte), stall=S (stop ticking S seconds "
         "after the host's first frame, port open), pull=S (the port vanishes S seconds after the "
@@ -92,18 +88,16 @@ def run(args: argparse.Namespace) -> int:
     cart = VirtualCart(args.preset, noise_std_rad_s=args.noise, seed=args.seed, faults=args.faults,
                        firmware=firmware)  # fmt: skip
     print(cart.port, flush=True)
-    running = (
-        f"controller {args.onboard} on board"
-        if args.onboard
-        else f"the bridge sketch version {cart.bridge_version}"
-    )
-    running += f", {cart.baud} baud, USB chip {'modelled' if cart.faults.usb else 'off'}"
+    running = f"the bridge sketch version {cart.bridge_version}"
+    if args.onboard:
+        running = f"controller {args.onboard} on board"
+    usb = "modelled" if cart.faults.usb else "off"
     timing = cart.physics.params.actuation_delay() * 1000.0
-    running += f", commands land {timing:g} ms after their tick"
     example = "monitor serial:" if args.onboard else "run --plant serial:"
     print(
-        f"virtual cart (physics preset {args.preset}, {running}) on {cart.port}; "
-        f"e.g. cartctl {example}{cart.port}; Ctrl-C stops it",
+        f"virtual cart (physics preset {args.preset}, {running}, {cart.baud} baud, USB chip {usb}, "
+        f"commands land {timing:g} ms after their tick) on {cart.port}; e.g. cartctl "
+        f"{example}{cart.port}; Ctrl-C stops it",
         file=sys.stderr,
         flush=True,
     )
