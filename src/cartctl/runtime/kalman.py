@@ -106,7 +106,7 @@ class KalmanSpeedEstimator:
     def reset(self) -> None:
         self._x = np.zeros(self.design.A.shape[0])
         self._P = np.array(self.design.P, dtype=float)
-        self._gain = np.array(self.design.L, dtype=float)
+        self.gain = np.array(self.design.L, dtype=float)  # the latest L[k]
         self._last_voltage_v = 0.0
 
     def correct(self, measured_rad_s: float) -> float:
@@ -117,7 +117,7 @@ class KalmanSpeedEstimator:
             self._x = self._x + gain * (float(measured_rad_s) - float(d.C @ self._x))
             joseph = self._eye - np.outer(gain, d.C)
             self._P = joseph @ P @ joseph.T + d.R * np.outer(gain, gain)
-            self._gain = gain
+            self.gain = gain
         return float(self._x[0])
 
     def predict(self, voltage_v: float) -> None:
@@ -132,11 +132,6 @@ class KalmanSpeedEstimator:
     @property
     def state(self) -> NDArray[np.float64]:
         return self._x.copy()
-
-    @property
-    def gain(self) -> NDArray[np.float64]:
-        """The latest gain L[k]."""
-        return self._gain.copy()
 
 
 class FilterTerms(NamedTuple):

@@ -104,8 +104,8 @@ class StateFeedbackController:
             )
         self.design = design
         self.estimator = estimator
-        values = getattr(estimator, "state_values", None)  # a list, without a numpy array
-        self._state_values = values if callable(values) else lambda: estimator.state.tolist()
+        # x̂ as a list, without a numpy array where the estimator can
+        self._state_values = getattr(estimator, "state_values", lambda: estimator.state.tolist())
         self.voltage_limit_v = limit
         K = tuple(float(k) for k in design.K)
         self.terms = FeedbackTerms(K, float(design.Ki), float(design.Kr), float(design.period_s))
