@@ -153,7 +153,7 @@ def plan_columns(
 ) -> tuple[int, dict[str, int | None]]:
     """The time column's index and, per trace column, its file column (None: zeros); a QRC log's
     ``names`` start with its time column, which always gives time_s."""
-    monitor = kind == "CSV" and names[:2] == list(MONITOR_FIRST_COLUMNS)
+    monitor = kind == "CSV" and names[:2] == ["time_s", "tick"]
     if kind == "CSV" and mapping is None:  # the trace's own names, or a monitor's labels
         missing = [name for name in REQUIRED_COLUMNS if name not in names]
         if missing and monitor:
@@ -251,7 +251,6 @@ def plan_columns(
     return source["time_s"], plan
 
 
-MONITOR_FIRST_COLUMNS = ("time_s", "tick")
 MONITOR_LABELS_HINT = (
     "--labels f0=speed_a,f1=speed_b,f2=voltage_a,f3=voltage_b,f4=reference_a,f5=reference_b "
     "(the out channels of 'cartctl export --arduino')"
@@ -308,17 +307,13 @@ def _counterparts(
             used.update(found.values())
 
 
-_VOLTAGE_WORDS = ("volt", "voltage", "u_", "pwm")
-_SPEED_WORDS = ("speed", "omega", "vel", "rad_s", "rads")
-
-
 def _guess_mapping(labels: Sequence[str]) -> str:
     """A ``--map`` example from labels whose words say what they are (never by position)."""
 
     def first(words: tuple[str, ...]) -> str | None:
         return next((lab for lab in labels if any(w in lab.lower() for w in words)), None)
 
-    volt, speed = first(_VOLTAGE_WORDS), first(_SPEED_WORDS)
+    volt, speed = first(("volt", "u_", "pwm")), first(("speed", "omega", "vel", "rad_s", "rads"))
     if volt is None or speed is None:
         return "voltage_a=<label>,speed_a=<label> (no label says which channel is which)"
     return f"voltage_a={volt},speed_a={speed}"

@@ -66,7 +66,7 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
         columns["time_s"] = (time - time[0]) / 1000.0
     _warn_spacing(table, columns["time_s"])
     if kind == "qrc5":  # 8 float then 4 int channels after the time
-        integers = {name for name, j in plan.items() if j is not None and j > QRC5_FLOATS}
+        integers = {name for name, j in plan.items() if j is not None and j > 8}
     else:  # the extras whose every field is written as an integer
         extras = {n: j for n, j in plan.items() if j is not None and n not in REQUIRED_COLUMNS}
         integers = {n for n, j in extras.items() if all(_INTEGER.match(row[j]) for row in rows)}
@@ -74,7 +74,6 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
     return Trace.from_columns(columns, source=str(path), integer_columns=integers)
 
 
-QRC5_FLOATS = 8
 _INTEGER = re.compile(r"\s*[+-]?\d+\s*\Z")
 
 

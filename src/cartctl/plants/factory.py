@@ -11,14 +11,6 @@ from cartctl.data.modelfile import load_models
 from cartctl.errors import InputError
 from cartctl.plants.base import Plant
 
-PLANT_NAMES = (
-    "sim",
-    "physics",
-    "physics:actuation_ms=X",
-    "virtual",
-    "virtual:OPTIONS",
-    "serial:PORT",
-)
 SIMULATED = ("sim", "physics")
 """Plant kinds that run in this process on a simulated clock (``--fast``)."""
 
@@ -69,7 +61,8 @@ def check_plant_name(spec: str) -> str:
         if not options:
             raise InputError("plant 'serial:' needs a port, e.g. serial:/dev/ttyACM0")
         return kind
-    raise InputError(f"unknown plant '{spec}'; expected one of {', '.join(PLANT_NAMES)}")
+    names = "sim, physics, physics:actuation_ms=X, virtual, virtual:OPTIONS, serial:PORT"
+    raise InputError(f"unknown plant '{spec}'; expected one of {names}")
 
 
 def plant_period_s(spec: str, model_path: str | Path = DEFAULT_MODEL) -> float:

@@ -25,8 +25,6 @@ if TYPE_CHECKING:
 
 DEFAULT_CONTROLLER = Path("controllers/pi.toml")
 """The default on every plant: the simulators and the bridge (version 2) all have loop delay 1."""
-SHIPPED_CONTROLLERS = ("pi.toml", "poles.toml", "serial-pi.toml", "serial-poles.toml")
-"""Offered when a file does not fit a plant; ``serial-*`` for a serial loop of 3 ticks."""
 REACH_REFUSE_FACTOR = 2.0
 """A reference beyond this many times what a motor reaches at the voltage limit is refused."""
 
@@ -91,7 +89,8 @@ def _fitting_controller(controller: ControllerFile, given: str, delay: int) -> s
     def other_method(name: str) -> bool:
         return name.removeprefix("serial-").removesuffix(".toml") != controller.method
 
-    for name in sorted(SHIPPED_CONTROLLERS, key=other_method):
+    shipped = ("pi.toml", "poles.toml", "serial-pi.toml", "serial-poles.toml")  # serial-*: 3 ticks
+    for name in sorted(shipped, key=other_method):
         for folder in folders:
             path = folder / name
             if not path.is_file() or path.resolve() == Path(given).resolve():
