@@ -318,41 +318,14 @@ def loop_analysis(
     import control
 
     ts = model.period_s
-    loop = (
-        control.tf(num, den, ts)
-        * model.to_tf()
-        * control.tf([1.0], [1.0] + [0.0] * extra_delay_ticks, ts)
-    )
+    delay = control.tf([1.0], [1.0] + [0.0] * extra_delay_ticks, ts)
+    loop = control.tf(num, den, ts) * model.to_tf() * delay
     ln, ld = np.squeeze(loop.num[0][0]), np.squeeze(loop.den[0][0])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         gms, pms, sms, w180, wcs, wms = control.stability_margins(
             loop, method="poly", returnall=True
         )
-    gm, pm, wcp = _checked_margins(ln, ld, ts, gms, pms, w180, wcs)
-    ms = 1.0 / float(np.min(sms))
-    # python-control searches ωTs in [0, 2π]: a peak above Nyquist is the mirror of one below
-    wdt = float(wms[np.argmin(sms)]) * ts % (2.0 * math.pi)
-    return {
-        "sensitivity_peak": ms,
-        "sensitivity_peak_db": 20.0 * math.log10(ms),
-        "sensitivity_peak_hz": min(wdt, 2.0 * math.pi - wdt) / (2.0 * math.pi * ts),
-        "phase_margin_deg": float(pm) if math.isfinite(pm) else None,
-        "gain_margin_db": 20.0 * math.log10(gm) if math.isfinite(gm) and gm > 0 else None,
-        "crossover_hz": float(wcp) / (2.0 * math.pi) if math.isfinite(wcp) else None,
-    }
-
-
-def _checked_margins(
-    ln: NDArray[np.float64],
-    ld: NDArray[np.float64],
-    ts: float,
-    gms: NDArray[np.float64],
-    pms: NDArray[np.float64],
-    w180: NDArray[np.float64],
-    wcs: NDArray[np.float64],
-) -> tuple[float, float, float]:
-    """(GM, PM °, crossover rad/s) from the crossings that L(e^{jωTs}) = ln/ld really has."""
 
     def at(w: float) -> complex:
         z = np.exp(1j * w * ts)
@@ -374,4 +347,14 @@ def _checked_margins(
     ]
     gm = min(gain, key=lambda gw: abs(math.log(gw[0])))[0] if gain else math.inf
     pm, wcp = min(phase, key=lambda pw: abs(pw[0])) if phase else (math.inf, math.nan)
-    return float(gm), float(pm), float(wcp)
+    ms = 1.0 / float(np.min(sms))
+    # python-control searches ωTs in [0, 2π]: a peak above Nyquist is the mirror of one below
+    wdt = float(wms[np.argmin(sms)]) * ts % (2.0 * math.pi)
+    return {
+        "sensitivity_peak": ms,
+        "sensitivity_peak_db": 20.0 * math.log10(ms),
+        "sensitivity_peak_hz": min(wdt, 2.0 * math.pi - wdt) / (2.0 * math.pi * ts),
+        "phase_margin_deg": float(pm) if math.isfinite(pm) else None,
+        "gain_margin_db": 20.0 * math.log10(gm) if math.isfinite(gm) and gm > 0 else None,
+        "crossover_hz": float(wcp) / (2.0 * math.pi) if math.isfinite(wcp) else None,
+    }

@@ -80,14 +80,14 @@ def kalman_from_entry(entry: Mapping[str, Any]) -> KalmanDesign:
             "estimator.timing_noise_std_ticks must be a number of ticks in "
             f"[0, {MAX_TIMING_NOISE_TICKS:g}], got {timing!r}"
         )
-    error_dynamics = (np.eye(m) - np.outer(values["L"], values["C"])) @ A
-    radius = float(np.max(np.abs(np.linalg.eigvals(error_dynamics))))
+    design = KalmanDesign(**values)
+    radius = float(np.max(np.abs(design.poles())))
     if not radius < 1.0:
         raise ValueError(
             f"the estimator's error does not decay (its poles reach |z| = {radius:.4g}); "
             "redesign the controller"
         )
-    return KalmanDesign(**values)
+    return design
 
 
 @dataclass(frozen=True)

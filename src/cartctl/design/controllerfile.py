@@ -39,14 +39,13 @@ def loop_site(loop_delay_ticks: int) -> str:
 def common_loop_delay(nk: Mapping[str, int], extra_delay_ticks: int) -> int:
     """The one loop delay, nk − 1 + extra, of motors with input delays ``nk`` (motor → nk);
     ValueError when they differ (a controller file is for one loop)."""
-    delays = {m: check_loop_delay(None, n, extra_delay_ticks) for m, n in nk.items()}
-    if len(set(delays.values())) > 1:
+    if len(set(nk.values())) > 1:
         shown = ", ".join(f"motor {m}: nk = {n}" for m, n in sorted(nk.items()))
         raise ValueError(
             f"the motors' models have different input delays ({shown}), so one file cannot be "
             "for one loop; identify with one --delay for both or design each motor on its own"
         )
-    return next(iter(delays.values()))
+    return check_loop_delay(None, next(iter(nk.values())), extra_delay_ticks)
 
 
 def file_sha256(path: str | Path) -> str:

@@ -4,19 +4,15 @@ figures of ``design --report DIR`` (matplotlib's Agg canvas) and the numbers as 
 them (:mod:`cartctl.measures.numfmt`'s rules).
 
 The controller is taken whole, as the loop runs it (:mod:`cartctl.design.controller_ss`), broken
-at the plant input: L = C_fb·G·z^(−extra), C_fb = −U/Y (r = 0), S = 1/(1 + L), T = L/(1 + L).
-Margins and Ms = max|S| are python-control's (:func:`~cartctl.design.analysis.loop_analysis`);
-Mt = max|T| is found on a frequency grid up to Nyquist, refined by ``minimize_scalar``.
-
-``design_X.png``: the open-loop Bode plot with its margins; the simulated step beside the
-time-optimal one. ``analysis_X.png``: |S| and |T| with Ms and Mt; the Nyquist curve of L with the
-circle of radius 1/Ms around −1; the load-disturbance step.
+at the plant input: L = C_fb·G·z^(−extra), S = 1/(1 + L), T = L/(1 + L). Margins and Ms = max|S|
+are python-control's (:func:`~cartctl.design.analysis.loop_analysis`); Mt = max|T| is found on a
+frequency grid up to Nyquist, refined by ``minimize_scalar``.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -28,7 +24,6 @@ from cartctl.design.analysis import (
     DEFAULT_DISTURBANCE_V,
     DisturbanceResponse,
     StepAnalysis,
-    in_settling_band,
     loop_analysis,
     settling_bound,
     simulate_disturbance,
@@ -58,14 +53,6 @@ class LoopShape:
     complementary_peak: float
     complementary_peak_hz: float
 
-    @property
-    def sensitivity(self) -> NDArray[np.float64]:  # |S| on the grid
-        return np.abs(1.0 / (1.0 + self.loop))
-
-    @property
-    def complementary(self) -> NDArray[np.float64]:  # |T| on the grid
-        return np.abs(self.loop / (1.0 + self.loop))
-
     def to_dict(self) -> dict[str, Any]:
         """The ``design --json`` keys (added to each motor's entry)."""
         return {
@@ -78,56 +65,42 @@ class LoopShape:
         }
 
 
-def _loop_response(
-    controller: ControllerStateSpace, model: ArxModel, extra: int, freq_hz: NDArray[np.float64]
-) -> NDArray[np.complex128]:
-    z = np.exp(2j * np.pi * np.asarray(freq_hz, dtype=float) * model.period_s)
-    return controller.feedback_response(z) * model.response_at(z) * z ** (-int(extra))
-
-
-def _peak(
-    value: Callable[[float], float], freq_hz: NDArray[np.float64], on_grid: NDArray[np.float64]
-) -> tuple[float, float]:
-    """(max, where) of ``value(f)``: the grid's best point, refined between its neighbours."""
-    from scipy import optimize
-
-    i = int(np.argmax(on_grid))
-    best, where = float(on_grid[i]), float(freq_hz[i])
-    lo, hi = freq_hz[max(i - 1, 0)], freq_hz[min(i + 1, freq_hz.size - 1)]
-    if hi > lo:
-        res = optimize.minimize_scalar(
-            lambda f: -value(f), bounds=(lo, hi), method="bounded", options={"xatol": 1e-9}
-        )
-        if res.success and -res.fun > best:
-            best, where = float(-res.fun), float(res.x)
-    if i == 0:  # largest at the bottom of the grid: at 0 Hz, where the integrator puts it
-        where = 0.0
-    return best, where
-
-
 def loop_shape(
     controller: ControllerStateSpace, model: ArxModel, extra_delay_ticks: int = 0
 ) -> LoopShape:
-    """S and T of the loop a controller was designed for, with their peaks."""
+    """L of the loop a controller was designed for, with the peaks of S and T (Mt at 0 Hz when
+    it is largest at the bottom of the grid, where integral action puts it)."""
+    from scipy import optimize
+
+    def loop_at(freq_hz: NDArray[np.float64]) -> NDArray[np.complex128]:
+        z = np.exp(2j * np.pi * freq_hz * model.period_s)
+        return controller.feedback_response(z) * model.response_at(z) * z ** (-extra_delay_ticks)
+
+    def minus_t(f: float) -> float:
+        ell = loop_at(np.array([f]))[0]
+        return -float(abs(ell / (1.0 + ell)))
+
     freq = np.geomspace(_LOW_HZ, 0.5 / model.period_s, _GRID_POINTS)
-    loop = _loop_response(controller, model, extra_delay_ticks, freq)
-
-    def t_at(f: float) -> float:
-        ell = _loop_response(controller, model, extra_delay_ticks, np.array([f]))[0]
-        return float(abs(ell / (1.0 + ell)))
-
-    mt, mt_hz = _peak(t_at, freq, np.abs(loop / (1.0 + loop)))
+    loop = loop_at(freq)
+    on_grid = np.abs(loop / (1.0 + loop))
+    i = int(np.argmax(on_grid))
+    mt, mt_hz = float(on_grid[i]), float(freq[i])
+    bounds = (freq[max(i - 1, 0)], freq[min(i + 1, freq.size - 1)])
+    res = optimize.minimize_scalar(
+        minus_t, bounds=bounds, method="bounded", options={"xatol": 1e-9}
+    )
+    if res.success and -res.fun > mt:
+        mt, mt_hz = float(-res.fun), float(res.x)
     margins = loop_analysis(*controller.feedback_tf(), model, extra_delay_ticks)
     ms, ms_hz = margins["sensitivity_peak"], margins["sensitivity_peak_hz"]
-    return LoopShape(freq, loop, ms, ms_hz, mt, mt_hz)
+    return LoopShape(freq, loop, ms, ms_hz, mt, 0.0 if i == 0 else mt_hz)
 
 
 @dataclass(frozen=True, eq=False)
 class MotorAnalysis:
-    """One motor's loop analysis: the controller as the loop runs it, L, S and T, the simulated
-    load-disturbance step, and the pole table."""
+    """One motor's loop analysis: L with the peaks of S and T, the simulated load-disturbance
+    step, and the pole table."""
 
-    controller: ControllerStateSpace
     shape: LoopShape
     disturbance: DisturbanceResponse
     pole_table: list[dict[str, Any]]
@@ -180,7 +153,7 @@ def analyse_designs(
         for re, im in made.entry["closed_loop_poles"]:
             damping, freq_hz = pole_damping(complex(re, im), model.period_s)
             table.append({"re": re, "im": im, "damping": damping, "freq_hz": freq_hz})
-        out[m] = MotorAnalysis(ss, loop_shape(ss, model, extra), dist, table, m)
+        out[m] = MotorAnalysis(loop_shape(ss, model, extra), dist, table, m)
     return out
 
 
@@ -245,7 +218,6 @@ def design_figure(
         model, r, voltage_limit_v=voltage_limit_v, extra_delay_ticks=extra_delay_ticks
     )
     band = bound.band_rad_s
-    step = in_settling_band(step, model.period_s)
     t_bound = np.arange(bound.speed_rad_s.size) * model.period_s
     sp_ax.plot(step.time_s, step.reference_rad_s, color="0.3", ls=":", label="reference")
     sp_ax.fill_between(step.time_s, r - band, r + band, color="0.85",
@@ -321,9 +293,10 @@ def analysis_figure(motor: str, method: str, analysis: MotorAnalysis) -> Figure:
     fig = Figure(figsize=(11, 8.5), dpi=100, layout="constrained")
     (st_ax, ny_ax), (dy_ax, du_ax) = fig.subplots(2, 2)
 
-    f = shape.freq_hz
-    st_ax.semilogx(f, 20 * np.log10(shape.sensitivity), color="tab:blue", label="|S| = |1/(1+L)|")
-    st_ax.semilogx(f, 20 * np.log10(shape.complementary), color="tab:orange",
+    f, loop = shape.freq_hz, shape.loop
+    s_db = 20 * np.log10(np.abs(1.0 / (1.0 + loop)))
+    st_ax.semilogx(f, s_db, color="tab:blue", label="|S| = |1/(1+L)|")
+    st_ax.semilogx(f, 20 * np.log10(np.abs(loop / (1.0 + loop))), color="tab:orange",
                    label="|T| = |L/(1+L)|")  # fmt: skip
     ms, ms_hz = shape.sensitivity_peak, shape.sensitivity_peak_hz
     mt, mt_hz = shape.complementary_peak, shape.complementary_peak_hz
@@ -334,12 +307,11 @@ def analysis_figure(motor: str, method: str, analysis: MotorAnalysis) -> Figure:
     st_ax.plot([mt_at], [20 * np.log10(mt)], "s", color="tab:orange", clip_on=False,
                label=f"Mt = {sig(mt)} ({_db(mt)} dB) at {sig(mt_hz)} Hz")  # fmt: skip
     st_ax.axhline(0.0, color="0.4", lw=0.8)
-    st_ax.set_ylim(max(-60.0, float(np.min(20 * np.log10(shape.sensitivity))) - 3.0), 12.0)
+    st_ax.set_ylim(max(-60.0, float(np.min(s_db)) - 3.0), 12.0)
     st_ax.set_xlim(f_low, f[-1])
     _dress(st_ax, "frequency (Hz)", "magnitude (dB)",
            "sensitivity S and complementary sensitivity T", "lower right")  # fmt: skip
 
-    loop = shape.loop
     ny_ax.plot(
         loop.real, loop.imag, color="tab:blue", label="L(z), z = exp(j2πf·Ts), f = 0 → Nyquist"
     )

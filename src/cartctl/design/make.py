@@ -29,7 +29,7 @@ from cartctl.design.controllerfile import (
 from cartctl.design.kalman import KalmanDesign, design_kalman
 from cartctl.design.pi import design_pi, design_pi_bandwidth
 from cartctl.design.poles import design_poles
-from cartctl.design.request import DesignRequest, check_loop_delay
+from cartctl.design.request import DesignRequest, check_loop_delay, parse_poles
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 from cartctl.runtime.base import Controller
@@ -39,6 +39,8 @@ ANALYSIS_KEYS = (  # what a controller file keeps of a motor's design, under ``a
     "estimator_poles", "step", "settling_bound_s", "settling_ratio",
     "settling_bound_loop_delay_ticks",
 )  # fmt: skip
+TIMING = "timing_noise_std_ticks"  # in a file only when not 0: older files stay as they were
+_NOISE_FIELDS = ("process_noise_std_v", "bias_drift_std_v", "extra_noise_std_rad_s", TIMING)
 
 
 @dataclass(frozen=True)
@@ -53,17 +55,15 @@ class MotorDesign:
 
 def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
     """Design one motor's controller as ``request`` asks."""
-    extra, limit = request.extra_delay_ticks, request.voltage_limit_v
-    noise = {f: getattr(request, f) for f in ("process_noise_std_v", "bias_drift_std_v",
-             "extra_noise_std_rad_s", "timing_noise_std_ticks")}  # fmt: skip
+    extra = request.extra_delay_ticks
+    noise = {f: getattr(request, f) for f in _NOISE_FIELDS}
     if request.method == "pi":
         pm = request.phase_margin_deg
+        given: dict[str, Any] = {"phase_margin_deg": pm, "extra_delay_ticks": extra}
         if request.bandwidth_hz is not None:
-            d = design_pi_bandwidth(model, bandwidth_hz=request.bandwidth_hz,
-                                    phase_margin_deg=pm, extra_delay_ticks=extra)  # fmt: skip
+            d = design_pi_bandwidth(model, bandwidth_hz=request.bandwidth_hz, **given)
         else:
-            d = design_pi(model, phase_margin_deg=pm, crossover_hz=request.crossover_hz,
-                          extra_delay_ticks=extra)  # fmt: skip
+            d = design_pi(model, crossover_hz=request.crossover_hz, **given)
         num, den = d.controller_tf_coeffs()
         entry = d.to_dict()
         file_entry: dict[str, Any] = {"kp": d.kp, "ki": d.ki, "anti_windup": request.anti_windup,
@@ -73,14 +73,15 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
             entry["estimator_poles"] = [[p.real, p.imag] for p in kalman.poles()]
             file_entry["estimator"] = _kalman_entry(kalman)
     else:
-        poles = request.pole_list()
+        poles = parse_poles(request.poles) if request.poles else None
+        spec = (None, None) if poles else (request.settling_time_s, request.overshoot_percent)
         placement = design_poles(
             model,
             poles=poles,
-            settling_time_s=None if poles else request.settling_time_s,
-            overshoot_percent=None if poles else request.overshoot_percent,
-            extra_delay_ticks=extra,
+            settling_time_s=spec[0],
+            overshoot_percent=spec[1],
             **noise,
+            extra_delay_ticks=extra,
         )
         num, den = feedback_tf_coeffs(placement)
         file_entry = {"K": placement.K, "Ki": placement.Ki, "Kr": placement.Kr,
@@ -95,6 +96,7 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
             "controller_num": num.tolist(),
             "controller_den": den.tolist(),
         }
+    limit = request.voltage_limit_v
     controller = build_controller(request.method, file_entry, model.period_s, limit)
     return MotorDesign(controller, entry, file_entry)
 
@@ -102,10 +104,8 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
 def _kalman_entry(design: KalmanDesign) -> dict[str, Any]:
     """The estimator as a file stores it; ``timing_noise_std_ticks`` only when not 0 (files
     from before it stay the same)."""
-    entry = {f.name: getattr(design, f.name) for f in fields(design)}
-    if not entry["timing_noise_std_ticks"]:
-        del entry["timing_noise_std_ticks"]
-    return entry
+    timing = design.timing_noise_std_ticks
+    return {f.name: getattr(design, f.name) for f in fields(design) if f.name != TIMING or timing}
 
 
 def nk_note(nk: Mapping[str, int], loop_delay_ticks: int) -> str | None:

@@ -244,28 +244,27 @@ def design_poles(
         extra_noise_std_rad_s=extra_noise_std_rad_s,
         timing_noise_std_ticks=timing_noise_std_ticks,
     )
-    integral = "disturbance" if estimator.has_bias else "error"
+    bias = estimator.has_bias  # the disturbance estimate is the integral action
     n = plant.order
-    count = n if integral == "disturbance" else n + 1
+    count = n if bias else n + 1
     delay = f" with {extra_delay_ticks} extra delay tick(s)" if extra_delay_ticks else ""
     what = f"a model of order {model.order}{delay}" + (
-        " (integral action from the disturbance estimate)"
-        if integral == "disturbance"
-        else " and an error integrator"
+        " (integral action from the disturbance estimate)" if bias else " and an error integrator"
     )
-    spec: tuple[float, float] | None = None  # settling time (s), overshoot (%)
     if poles is not None:
-        wanted = list(poles)
+        try:
+            placed = _check_poles(poles, count, what)
+        except InputError as exc:  # the user's --poles
+            raise InputError(f"--poles: {exc}") from None
     else:
         assert settling_time_s is not None and overshoot_percent is not None  # checked above
-        spec = (float(settling_time_s), float(overshoot_percent))
-        wanted = spec_poles(count, plant.period_s, *spec, fast_pole_ratio)
-    try:
+        settling_time_s, overshoot_percent = float(settling_time_s), float(overshoot_percent)
+        wanted = spec_poles(
+            count, plant.period_s, settling_time_s, overshoot_percent, fast_pole_ratio
+        )
         placed = _check_poles(wanted, count, what)
-    except InputError as exc:  # poles given are the user's --poles
-        raise InputError(f"--poles: {exc}" if poles is not None else str(exc)) from None
 
-    A_p, B_p = (plant.A, plant.B) if integral == "disturbance" else (A_a, B_a)
+    A_p, B_p = (plant.A, plant.B) if bias else (A_a, B_a)
     repeats = any(
         abs(a - b) <= _REPEAT_TOL * max(1.0, abs(a))
         for i, a in enumerate(placed)
@@ -282,7 +281,7 @@ def design_poles(
             f"closed loop would have {_poles_text(np.linalg.eigvals(A_cl))}; choose poles further "
             "apart or less extreme (a shorter --settling-time)"
         )
-    if integral == "disturbance":
+    if bias:
         # u = Kr r − K x̂ − b̂: the model's closed loop C (I − A + B K)⁻¹ B Kr has unit DC gain
         dc = float(plant.C @ np.linalg.solve(np.eye(n) - A_cl, plant.B))
         K = np.append(gains, 1.0)
@@ -302,7 +301,7 @@ def design_poles(
         Kr=Kr,
         estimator=estimator,
         method=method,
-        integral=integral,
-        settling_time_s=None if spec is None else spec[0],
-        overshoot_percent=None if spec is None else spec[1],
+        integral="disturbance" if bias else "error",
+        settling_time_s=settling_time_s,
+        overshoot_percent=overshoot_percent,
     )

@@ -87,9 +87,6 @@ class DesignRequest:
                              "unless --estimator kalman")  # fmt: skip
         return self
 
-    def pole_list(self) -> list[complex] | None:
-        return None if not self.poles else parse_poles(self.poles)
-
     def file_request(self) -> dict[str, Any]:
         """The ``[request]`` table of a controller file: the options this method used."""
         req: dict[str, Any] = {
