@@ -20,6 +20,7 @@ from cartctl.errors import InputError
 from cartctl.model import ArxModel
 from cartctl.plants.sim import DIVERGED_RAD_S, arx_next
 from cartctl.runtime.base import Controller
+from cartctl.runtime.elementwise import clip
 from cartctl.runtime.kalman import (
     FilterTerms,
     SteadyStateSpeedEstimator,
@@ -106,37 +107,6 @@ def _filter_terms(est: object) -> FilterTerms:
     )
 
 
-class _Batch:
-    """A controller's runtime law (:func:`~cartctl.runtime.pi.pi_law` or
-    :func:`~cartctl.runtime.statefeedback.feedback_law`) over N rows, inside its estimator."""
-
-    def __init__(self, ctrl: Controller, n: int) -> None:
-        if not isinstance(ctrl, PiController | StateFeedbackController):
-            raise InputError(f"the batch loop does not know the controller {type(ctrl).__name__}")
-        self.ctrl = ctrl
-        self.gains = () if not isinstance(ctrl, PiController) else (
-            ctrl.kp, ctrl.ki * ctrl.period_s, ctrl.tracking_gain_per_tick,
-            ANTI_WINDUP.index(ctrl.anti_windup), ctrl.voltage_limit_v)  # fmt: skip
-        self.integral: FloatArray = np.zeros(n)
-        self.est = None if ctrl.estimator is None else _filter_terms(ctrl.estimator)
-        self.x: list[FloatArray] = [np.zeros(n) for _ in (self.est.L if self.est else ())]
-
-    def step(self, r: float, y: FloatArray) -> FloatArray:
-        c = self.ctrl
-        if self.est is not None:
-            self.x = filter_correct(self.est, self.x, y)
-        if isinstance(c, PiController):
-            e = r - (y if self.est is None else self.x[0])
-            u, self.integral = pi_law(e, self.integral, *self.gains)
-        else:
-            u_raw, u, self.integral = feedback_law(r, y, self.x, self.integral, c.terms,
-                                                   c.voltage_limit_v)  # fmt: skip
-            u = np.where(np.isfinite(u_raw), u, 0.0)
-        if self.est is not None:
-            self.x = filter_predict(self.est, self.x, u)
-        return u
-
-
 def simulate_batch(
     controller: Controller,
     plants: ArxBatch,
@@ -149,8 +119,22 @@ def simulate_batch(
     one value per tick)."""
     ref = np.asarray(reference, dtype=float)
     check_voltage_limit(voltage_limit_v)
+    c = controller
+    if not isinstance(c, PiController | StateFeedbackController):
+        raise InputError(f"the batch loop does not know the controller {type(c).__name__}")
     n_ticks, n = ref.size, plants.size
-    ctrl = _Batch(controller, n)
+    # the controller's runtime law (pi_law or feedback_law) over the plants, inside its estimator
+    if isinstance(c, PiController):
+        gains = (
+            c.kp,
+            c.ki * c.period_s,
+            c.tracking_gain_per_tick,
+            ANTI_WINDUP.index(c.anti_windup),
+            c.voltage_limit_v,
+        )
+    est = None if c.estimator is None else _filter_terms(c.estimator)
+    x = [np.zeros(n) for _ in (est.L if est else ())]
+    integral = np.zeros(n)
     na, width = plants.ar.shape[1], plants.b_lags.shape[1]
     ar, b_lags = list(plants.ar.T), list(plants.b_lags.T)
     # row width − 1 + k of u_hist is u[k] as the plant applies it, row na + k of y_hist is y[k]
@@ -162,11 +146,20 @@ def simulate_batch(
     loop_lim, plant_lim = float(voltage_limit_v), plants.voltage_limit_v
     with np.errstate(all="ignore"):
         for k in range(n_ticks):
-            u = ctrl.step(float(ref[k]), y_hist[na + k])
-            u = np.minimum(loop_lim, np.maximum(-loop_lim, np.where(np.isfinite(u), u, 0.0)))
+            r, y = float(ref[k]), y_hist[na + k]
+            if est is not None:
+                x = filter_correct(est, x, y)
+            if isinstance(c, PiController):
+                u, integral = pi_law(r - (y if est is None else x[0]), integral, *gains)
+            else:
+                u_raw, u, integral = feedback_law(r, y, x, integral, c.terms, c.voltage_limit_v)
+                u = np.where(np.isfinite(u_raw), u, 0.0)
+            if est is not None:
+                x = filter_predict(est, x, u)
+            u = clip(np.where(np.isfinite(u), u, 0.0), loop_lim)
             voltage[:, k] = u
             base = width - 1 + k
-            u_hist[base] = np.minimum(plant_lim, np.maximum(-plant_lim, u))
+            u_hist[base] = clip(u, plant_lim)
             y_next = arx_next(b_lags, u_hist[base::-1], 0, ar, y_hist[na + k :: -1])
             diverged |= ~(np.abs(y_next) < DIVERGED_RAD_S)
             y_next[diverged] = 0.0

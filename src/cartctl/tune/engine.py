@@ -12,7 +12,7 @@ from collections.abc import Callable, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Protocol, TypeVar
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -84,14 +84,15 @@ def scoring_plant(job: TuneJob) -> Plant:
 def simulate(
     plant: Plant,
     controllers: Mapping[str, Controller],
-    references: Mapping[str, NDArray[np.float64]],
-    *,
-    period_s: float,
-    voltage_limit_v: float,
+    references: Mapping[str, Any],
+    limit_v: float,
 ) -> tuple[dict[str, Any], str | None]:
-    """The loop of ``cartctl run --fast`` in memory: (``trace_metrics`` summary, failure)."""
-    columns, state = run_in_memory(plant, controllers, references, period_s=period_s,
-                                   voltage_limit_v=voltage_limit_v)  # fmt: skip
+    """The loop of ``cartctl run --fast`` in memory at the plant's period, commands clamped to
+    ±``limit_v``: (``trace_metrics`` summary, failure)."""
+    period_s = plant.period_s
+    columns, state = run_in_memory(
+        plant, controllers, references, period_s=period_s, voltage_limit_v=limit_v
+    )
     return trace_metrics(columns, period_s), state.failure
 
 
@@ -122,8 +123,7 @@ def evaluate_nominal(
     plant = scoring_plant(job)
     n = max(1, round(job.duration_s / plant.period_s))
     refs = {m: reference_signal(job.reference, n, plant.period_s, m) for m in ("a", "b")}
-    summary, failure = simulate(plant, controllers, refs, period_s=plant.period_s,
-                                voltage_limit_v=limit_v)  # fmt: skip
+    summary, failure = simulate(plant, controllers, refs, limit_v)
     if failure:
         return Nominal(TuneResult(index, settings, False, RUN_FAILED + failure))
     result = TuneResult(index, settings, True, motors=summary["motors"])
@@ -158,29 +158,19 @@ def evaluate_chunk(job: TuneJob) -> list[TuneResult]:  # the process pool's work
     return [evaluate_nominal(job, models, i, s).result for i, s in job.items]
 
 
-class GridRow(Protocol):
-    """A result of one setting, with its 1-based grid ``index``."""
-
-    @property
-    def index(self) -> int: ...
-
-
-Row = TypeVar("Row", bound=GridRow)
-
-
 def run_grid(
     job: Any,
     jobs: int,
     progress: Callable[[int], None] | None = None,
-    evaluate: Callable[[Any], list[Row]] = evaluate_chunk,  # type: ignore[assignment]
-) -> list[Row]:
+    evaluate: Callable[[Any], list[Any]] = evaluate_chunk,
+) -> list[Any]:
     """Every setting of ``job`` (a dataclass with ``items``) in grid order, on ``jobs`` processes.
     With 1 process everything runs here; otherwise the first setting runs here (its lazy imports are
     paid before the workers fork) and the rest in chunks of about a quarter of a worker's share.
-    ``progress`` gets the count done so far; ``evaluate`` maps a chunk to rows (default
-    :func:`evaluate_chunk`)."""
+    ``progress`` gets the count done so far; ``evaluate`` maps a chunk to rows with their grid
+    ``index`` (default :func:`evaluate_chunk`)."""
     items = job.items
-    results: list[Row] = []
+    results: list[Any] = []
     for item in items if jobs == 1 else items[:1]:
         results += evaluate(replace(job, items=(item,)))
         if progress is not None:

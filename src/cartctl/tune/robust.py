@@ -184,8 +184,7 @@ def loop_entry(plant: Plant, nominal: Nominal, references: dict[str, FloatArray]
     """A setting's controllers in the real loop on ``plant``: the worse of motors a and b per
     :data:`ROBUST_METRICS`, ``failure``, the ``motors`` entries and ``settled`` (both motors
     settled, the run did not fail)."""
-    summary, failure = simulate(plant, nominal.controllers, references, period_s=plant.period_s,
-                                voltage_limit_v=nominal.voltage_limit_v)  # fmt: skip
+    summary, failure = simulate(plant, nominal.controllers, references, nominal.voltage_limit_v)
     motors = summary["motors"]
     worst = worst_metrics(motors) if not failure else dict.fromkeys(SUMMARY_KEYS.values())
     settled = not failure and all(m.get("settling_time_s") is not None for m in motors.values())
