@@ -218,13 +218,11 @@ class ControlLoop:
         command, when it went out, is the trace's stop row (tick = rows so far, 0 V, no compute)."""
         try:  # a cart-clocked plant: send only, the cart's next tick need not be waited for
             self.plant.send(0.0, 0.0) if self._clocked else self.plant.step(0.0, 0.0)  # type: ignore[attr-defined]
-            sent = True
+            self.state.zero_volts_sent = True
         except Exception as exc:  # a vanished port: still close what can be closed
             self.state.failure = self.state.failure or f"could not send zero volts: {exc}"
-            sent = False
-        self.state.zero_volts_sent = sent
         y = self._y
-        if sent and y is not None:
+        if self.state.zero_volts_sent and y is not None:
             k = self.state.rows
             time_s = 0.0 if self._last_time_s is None else self._last_time_s + self.period_s
             last = min(k, self.n_ticks - 1)
