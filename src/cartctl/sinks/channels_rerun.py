@@ -4,7 +4,7 @@ under ``gpio/<label>``, with the cart's messages under ``cart/``; and review's l
 from __future__ import annotations
 
 import re
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from typing import Any
 
 import rerun as rr
@@ -18,8 +18,8 @@ from cartctl.sinks.rerun_layout import (
     TIME_COLUMN,
     Range,
     SeriesStyle,
-    axis,
     collapsed,
+    plot,
     span_of,
 )
 from cartctl.sinks.rerun_sink import RerunSink, timelines
@@ -37,15 +37,9 @@ def channels_blueprint(float_labels: Sequence[str], int_labels: Sequence[str]) -
 
 
 def _channels_view(
-    name: str, labels: Sequence[str], axis: rrb.ScalarAxis | None = None
+    name: str, labels: Sequence[str], ranged: Range | None = None
 ) -> rrb.TimeSeriesView:
-    return rrb.TimeSeriesView(
-        name=name,
-        origin=f"/{GPIO_ROOT}",
-        contents=[f"$origin/{label}" for label in labels],
-        plot_legend=rrb.PlotLegend(corner="RightBottom", visible=True),
-        axis_y=axis,
-    )
+    return plot(name, GPIO_ROOT, ranged, [f"$origin/{label}" for label in labels])
 
 
 _SPEED_KINDS = ("reference", "speed", "estimate", "true_speed")
@@ -55,13 +49,14 @@ def _natural(label: str) -> list[object]:
     return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", label)]
 
 
-def review_styles(labels: Sequence[str]) -> dict[str, SeriesStyle]:
-    """Entity path → the run's style for labels that name a motor's signals (``gpio/speed_a``
-    drawn as ``motor/a/speed``)."""
+def review_styles(paths: Iterable[str]) -> dict[str, SeriesStyle]:
+    """Entity path → the run's style for the paths whose labels name a motor's signals
+    (``gpio/speed_a`` drawn as ``motor/a/speed``), in label order."""
     run_style = {label_key(f"{kind}_{m}"): STYLES[f"motor/{m}/{kind}"]
                  for m in ("a", "b") for kind in (*_SPEED_KINDS, "voltage")}  # fmt: skip
-    return {f"{GPIO_ROOT}/{label}": run_style[label_key(label)] for label in labels
-            if label_key(label) in run_style}  # fmt: skip
+    gpio = sorted({path for path in paths if path.startswith(f"{GPIO_ROOT}/")})
+    styled = {path: run_style.get(label_key(path.removeprefix(f"{GPIO_ROOT}/"))) for path in gpio}
+    return {path: style for path, style in styled.items() if style is not None}
 
 
 def review_blueprint(
@@ -85,7 +80,7 @@ def review_blueprint(
 
     def view(name: str, chosen: list[str], margin: float = 0.1) -> rrb.TimeSeriesView:
         paths = [f"{GPIO_ROOT}/{label}" for label in chosen]
-        return _channels_view(name, chosen, axis(span_of(extremes, paths, margin=margin)))
+        return _channels_view(name, chosen, span_of(extremes, paths, margin=margin))
 
     columns = []
     for m in ("a", "b"):

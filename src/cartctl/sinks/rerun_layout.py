@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, Literal
 
 import rerun.blueprint as rrb
 
@@ -90,8 +90,22 @@ def run_ranges(references: dict[str, Range], voltage_limit_v: float) -> dict[str
     return speeds | {f"motor/{m}/voltage": (-limit, limit) for m in references}
 
 
-def axis(ranged: Range | None) -> rrb.ScalarAxis | None:
-    return None if ranged is None else rrb.ScalarAxis(range=ranged, zoom_lock=False)
+def plot(
+    name: str,
+    origin: str,
+    ranged: Range | None,
+    contents: Sequence[str] | str = "$origin/**",
+    legend: Literal["RightBottom", "RightTop"] | None = "RightBottom",
+) -> rrb.TimeSeriesView:
+    """A time-series view of the entity ``origin``, its y range ``ranged`` (None: the viewer's
+    own fit), its legend in the corner ``legend`` (None: hidden)."""
+    return rrb.TimeSeriesView(
+        name=name,
+        origin=f"/{origin}",
+        contents=contents,
+        plot_legend=rrb.PlotLegend(corner=legend, visible=legend is not None),
+        axis_y=None if ranged is None else rrb.ScalarAxis(range=ranged, zoom_lock=False),
+    )
 
 
 def blueprint(motors: Sequence[str] = ("a", "b"), ranges: Ranges | None = None) -> rrb.Blueprint:
@@ -99,26 +113,12 @@ def blueprint(motors: Sequence[str] = ("a", "b"), ranges: Ranges | None = None) 
     ranges = ranges or {}
     columns = []
     for m in motors:
-        speed = rrb.TimeSeriesView(
-            name=f"Motor {m.upper()}: speed (rad/s)",
-            origin=f"/motor/{m}",
-            contents=["$origin/**", "- $origin/voltage"],
-            plot_legend=rrb.PlotLegend(corner="RightBottom", visible=True),
-            axis_y=axis(ranges.get(f"motor/{m}")),
-        )
-        voltage = rrb.TimeSeriesView(
-            name=f"Motor {m.upper()}: voltage (V)",
-            origin=f"/motor/{m}/voltage",
-            plot_legend=rrb.PlotLegend(visible=False),
-            axis_y=axis(ranges.get(f"motor/{m}/voltage")),
-        )
+        at, volts, title = f"motor/{m}", f"motor/{m}/voltage", f"Motor {m.upper()}"
+        everything_but_voltage = ["$origin/**", "- $origin/voltage"]
+        speed = plot(f"{title}: speed (rad/s)", at, ranges.get(at), everything_but_voltage)
+        voltage = plot(f"{title}: voltage (V)", volts, ranges.get(volts), legend=None)
         columns.append(rrb.Vertical(speed, voltage, row_shares=[3, 2]))
-    timing = rrb.TimeSeriesView(
-        name="Loop timing (µs)",
-        origin="/loop",
-        plot_legend=rrb.PlotLegend(corner="RightTop", visible=True),
-        axis_y=axis(ranges.get("loop")),
-    )
+    timing = plot("Loop timing (µs)", "loop", ranges.get("loop"), legend="RightTop")
     return collapsed(rrb.Vertical(rrb.Horizontal(*columns), timing, row_shares=[3, 1]))
 
 

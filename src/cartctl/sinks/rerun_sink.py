@@ -80,7 +80,6 @@ class RerunSink:
             raise InputError(f"batch_ticks must be at least 1, got {batch_ticks}")
         self.mode = mode
         self.path = None if path is None or mode == "off" else Path(path)
-        self.recording_name = self.path.stem if self.path else self._default_name
         self.connect_url = connect_url or VIEWER_URL
         self.batch_ticks = int(batch_ticks)
         self.strict = strict
@@ -122,7 +121,7 @@ class RerunSink:
         try:
             if sinks:
                 rec.set_sinks(*sinks)
-            rec.send_recording_name(self.recording_name)
+            rec.send_recording_name(self.path.stem if self.path else self._default_name)
             self._describe(rec)
             timelines(np.zeros(1), np.zeros(1, dtype=np.int64))  # the first block's sends fast
             rr.Scalars.columns(scalars=np.zeros(1))
@@ -301,25 +300,20 @@ def _log_style(rec: rr.RecordingStream, entity: str) -> None:
 Series = Mapping[str, tuple[ArrayLike, ArrayLike | None, ArrayLike]]  # path: (time, tick, values)
 
 
-def send_series(
-    rec: rr.RecordingStream,
-    entity: str,
-    time_s: ArrayLike,
-    tick: ArrayLike | None,
-    values: ArrayLike,
-) -> None:
-    """One whole series under ``entity`` (in its :data:`STYLES` style) on the ``time`` (s) and
-    ``tick`` timelines; ``tick`` None numbers the values from 0."""
-    y = np.asarray(values, dtype=float)
-    ticks = np.arange(y.size) if tick is None else np.asarray(tick)
-    if entity in STYLES:
-        _log_style(rec, entity)
-    rec.send_columns(
-        entity,
-        indexes=timelines(np.asarray(time_s, dtype=float), ticks.astype(np.int64)),
-        columns=rr.Scalars.columns(scalars=y),
-        strict=True,
-    )
+def send_series(rec: rr.RecordingStream, series: Series) -> None:
+    """Whole series, each under its entity (in its :data:`STYLES` style) on the ``time`` (s)
+    and ``tick`` timelines; a tick None numbers the values from 0."""
+    for entity, (time_s, tick, values) in series.items():
+        y = np.asarray(values, dtype=float)
+        ticks = np.arange(y.size) if tick is None else np.asarray(tick)
+        if entity in STYLES:
+            _log_style(rec, entity)
+        rec.send_columns(
+            entity,
+            indexes=timelines(np.asarray(time_s, dtype=float), ticks.astype(np.int64)),
+            columns=rr.Scalars.columns(scalars=y),
+            strict=True,
+        )
 
 
 class HeldRerunSink(RerunSink):
@@ -349,8 +343,7 @@ class HeldRerunSink(RerunSink):
         if rec is None or self._closed:
             return
         try:
-            for entity, (time_s, tick, values) in series.items():
-                send_series(rec, entity, time_s, tick, values)
+            send_series(rec, series)
             for entity, text in (texts or {}).items():
                 rec.log(entity, rr.TextDocument(text), static=True)
         except Exception as exc:

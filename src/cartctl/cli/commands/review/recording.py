@@ -46,9 +46,7 @@ def read_recording(path: Path) -> tuple[RrdReader, StoreEntry]:
     """Open a ``.rrd`` file and find its (first) recording."""
     from rerun.chunk import RrdReader
 
-    if path.is_dir():
-        raise DataFileError(path, "is a directory; expected a Rerun recording (.rrd)")
-    if not path.is_file():
+    if not path.is_file():  # a folder: review's own check before
         raise MissingFileError(path, "recording")
     if path.stat().st_size == 0:
         raise DataFileError(path, "the file is empty; expected a Rerun recording (.rrd)")
@@ -83,8 +81,7 @@ def stream(
     rec.send_blueprint(layout(chunks))
     rec.send_chunks(chunks)
     _restyle(chunks, rec)
-    for entity, (time_s, tick, values) in (extra or {}).items():
-        send_series(rec, entity, time_s, tick, values)
+    send_series(rec, extra or {})
     rec.flush(timeout_sec=LOAD_TIMEOUT_S)
     return ends
 
@@ -141,12 +138,9 @@ def _restyle(chunks: Sequence[Chunk], rec: rr.RecordingStream) -> None:
     """A monitor's motor signals drawn in the run's colours (the review's stream only)."""
     import rerun as rr
 
-    from cartctl.sinks.channels_rerun import GPIO_ROOT, review_styles
+    from cartctl.sinks.channels_rerun import review_styles
 
-    prefix = f"{GPIO_ROOT}/"
-    labels = sorted({c.entity_path.lstrip("/").removeprefix(prefix) for c in chunks
-                     if c.entity_path.lstrip("/").startswith(prefix)})  # fmt: skip
-    for entity, style in review_styles(labels).items():
+    for entity, style in review_styles(c.entity_path.lstrip("/") for c in chunks).items():
         rec.log(entity, rr.SeriesLines(colors=[style.color], widths=[style.width]), static=True)
 
 
