@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from cartctl.cart import PERIOD_S
 from cartctl.choices import DEFAULT_MODEL
 from cartctl.data.modelfile import load_models
 from cartctl.errors import InputError
@@ -63,11 +62,6 @@ def check_plant_name(spec: str) -> str:
         return kind
     names = "sim, physics, physics:actuation_ms=X, virtual, virtual:OPTIONS, serial:PORT"
     raise InputError(f"unknown plant '{spec}'; expected one of {names}")
-
-
-def plant_period_s(spec: str, model_path: str | Path = DEFAULT_MODEL) -> float:
-    """The tick (s) of plant ``spec`` before it is made: the sim plant's models', else the cart's."""
-    return load_models(model_path).period_s if spec == "sim" else PERIOD_S
 
 
 def is_serial(spec: str) -> bool:

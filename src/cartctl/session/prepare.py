@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from cartctl.cart import PERIOD_S
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import CartctlError, DataWarning, InputError
 
@@ -181,7 +182,6 @@ def prepare_run(
     from cartctl.design.controllerfile import build_controllers as build_from_file
     from cartctl.plants.base import ClockedPlant
     from cartctl.plants.factory import make_plant as factory_make_plant
-    from cartctl.plants.factory import plant_period_s
     from cartctl.reference import ReferenceSchedule
 
     make_plant = make_plant or factory_make_plant
@@ -189,8 +189,9 @@ def prepare_run(
     given = given if given is not None else str(controller)
     if isinstance(controller, ControllerFile):
         file = controller
-    else:  # refused for another tick before its coefficients are read
-        file = load_controller(controller, force=force, period_s=plant_period_s(plant, model))
+    else:  # refused for another tick (the sim plant's models', else the cart's) before its gains
+        period_s = load_models(model).period_s if plant == "sim" else PERIOD_S
+        file = load_controller(controller, force=force, period_s=period_s)
     if file.ignored:
         more = f" (and {len(file.ignored) - 1} more)" if len(file.ignored) > 1 else ""
         warnings.warn(
