@@ -51,7 +51,8 @@ def command_name(module: object) -> str:
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
-    """The parser with every subcommand, or with ``command`` alone (a tenth of the time)."""
+    """The parser with ``command`` alone (a tenth of the time), or with every subcommand when
+    ``command`` is None or names none."""
     parser = _Parser(
         prog="cartctl",
         description="Identify, design and run velocity control of a two-wheeled DC-motor cart. "
@@ -62,9 +63,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     sub.required = True
     from cartctl.cli.commands import COMMANDS  # light: each command loads numpy & co. when it runs
 
-    for module in COMMANDS:
-        if command is None or command_name(module) == command:
-            module.add_parser(sub)
+    for module in [m for m in COMMANDS if command_name(m) == command] or COMMANDS:
+        module.add_parser(sub)
     parser.subcommands = dict(sub.choices)
     return parser
 
@@ -100,11 +100,7 @@ def _main(argv: Sequence[str] | None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
     named = next((word for word in words if not word.startswith("-")), None)
     try:
-        from cartctl.cli.commands import COMMANDS
-
-        # only the command named is built; an unknown one, or none, gets the full parser
-        known = named in {command_name(module) for module in COMMANDS}
-        parser = build_parser(named if known else None)
+        parser = build_parser(named)  # an unknown command, or none, gets the full parser
     except KeyboardInterrupt:
         print(stopping.STARTING_LINE, file=sys.stderr)
         return stopping.exit_code()

@@ -24,15 +24,13 @@ from cartctl.runtime.base import ANTI_WINDUP  # light too (no numpy)
 _DEFAULT = DesignRequest(method="pi")
 
 
-def _option(
-    group: Any, field: str, kind: type | None, metavar: str | None, help: str, **more: Any
-) -> None:
+def _option(group: Any, field: str, metavar: str | None, help: str, **more: Any) -> None:
     """The option of a request field (:data:`~cartctl.design.request.OPTIONS`), with the
-    request's default."""
+    request's default and its type (give ``type`` where the default is None)."""
     default = getattr(_DEFAULT, field)
-    group.add_argument(
-        OPTIONS[field], type=kind, default=default, metavar=metavar, help=help, **more
-    )
+    if default is not None:
+        more.setdefault("type", type(default))
+    group.add_argument(OPTIONS[field], default=default, metavar=metavar, help=help, **more)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -52,43 +50,48 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     options.add_motor_option(p)
     pi = p.add_argument_group("PI (--method pi)")
     pm = _DEFAULT.phase_margin_deg
-    _option(pi, "phase_margin_deg", float, "DEG", f"in (0, {PM_RANGE_DEG[1]:g}] (default {pm:g})")
-    _option(pi, "crossover_hz", float, "F", f"default {_DEFAULT.crossover_hz:g}")
-    _option(pi, "bandwidth_hz", float, "F",
-            "design for this closed-loop bandwidth instead of a crossover")  # fmt: skip
-    _option(pi, "anti_windup", None, None, "integrator handling at the voltage limit",
+    _option(pi, "phase_margin_deg", "DEG", f"in (0, {PM_RANGE_DEG[1]:g}] (default {pm:g})")
+    _option(pi, "crossover_hz", "F", f"default {_DEFAULT.crossover_hz:g}")
+    _option(
+        pi,
+        "bandwidth_hz",
+        "F",
+        "design for this closed-loop bandwidth instead of a crossover",
+        type=float,
+    )
+    _option(pi, "anti_windup", None, "integrator handling at the voltage limit",
             choices=ANTI_WINDUP)  # fmt: skip
-    _option(pi, "estimator", None, None, "run the PI on a Kalman speed estimate (default: on the "
+    _option(pi, "estimator", None, "run the PI on a Kalman speed estimate (default: on the "
             "measurement)", choices=PI_ESTIMATORS)  # fmt: skip
     pl = p.add_argument_group("pole placement (--method poles)")
-    _option(pl, "poles", None, "Z1,Z2,...", "closed-loop poles in the z-plane, complex as a+bj "
+    _option(pl, "poles", "Z1,Z2,...", "closed-loop poles in the z-plane, complex as a+bj "
             "(3 for the report's model; 4 with --bias-drift-v 0, which adds an error "
             "integrator)")  # fmt: skip
-    _option(pl, "settling_time_s", float, "S",
+    _option(pl, "settling_time_s", "S",
             "2 %% settling time for the dominant poles (default 0.06 s)")  # fmt: skip
-    _option(pl, "overshoot_percent", float, "P",
+    _option(pl, "overshoot_percent", "P",
             "overshoot for the dominant poles in %% (default 1)")  # fmt: skip
     est = p.add_argument_group("estimator")
-    _option(est, "process_noise_std_v", float, "V", "input-equivalent process noise, std in V "
+    _option(est, "process_noise_std_v", "V", "input-equivalent process noise, std in V "
             f"(default {DEFAULT_PROCESS_NOISE_STD_V:g})")  # fmt: skip
-    _option(est, "bias_drift_std_v", float, "V", "random-walk step per tick of the estimator's "
+    _option(est, "bias_drift_std_v", "V", "random-walk step per tick of the estimator's "
             "input-disturbance state (friction, model DC error), the integral action of pole "
             f"placement (default {DEFAULT_BIAS_DRIFT_STD_V:g}; 0 leaves it out)")  # fmt: skip
-    _option(est, "extra_noise_std_rad_s", float, "RAD_S", "extra measurement noise on top of "
+    _option(est, "extra_noise_std_rad_s", "RAD_S", "extra measurement noise on top of "
             "the encoder's quantisation, std in rad/s (default 0); the file's estimator records "
             "the total as measurement_noise_std_rad_s")  # fmt: skip
-    _option(est, "timing_noise_std_ticks", float, "TICKS", "how uncertain the moment a command "
+    _option(est, "timing_noise_std_ticks", "TICKS", "how uncertain the moment a command "
             "lands is (std in ticks): after each command change Δu the estimator adds "
             "(TICKS·Δu)²·B·Bᵀ to its process noise (default 0)")  # fmt: skip
-    _option(p, "loop_delay_ticks", int, "N", "the loop delay the controller is for (ticks from a "
+    _option(p, "loop_delay_ticks", "N", "the loop delay the controller is for (ticks from a "
             "measurement to its voltage on the motor; default the model file's loop_delay_ticks "
             "+ extra delay, else its nk - 1 + extra delay); nk + extra delay for a model whose "
             "next measurement already sees part of a command that lands within the tick; at most "
-            f"{MAX_LOOP_DELAY_TICKS}")  # fmt: skip
-    _option(p, "extra_delay_ticks", int, "N", "ticks of loop delay beyond the model's (a PC-side "
+            f"{MAX_LOOP_DELAY_TICKS}", type=int)  # fmt: skip
+    _option(p, "extra_delay_ticks", "N", "ticks of loop delay beyond the model's (a PC-side "
             f"loop over serial), 0..{MAX_EXTRA_DELAY_TICKS}")  # fmt: skip
-    _option(p, "voltage_limit_v", float, "V", "command saturation, at most 12 V (default 12)")
-    _option(p, "step_rad_s", float, "RAD_S",
+    _option(p, "voltage_limit_v", "V", "command saturation, at most 12 V (default 12)")
+    _option(p, "step_rad_s", "RAD_S",
             "reference step for the simulated response (default 10 rad/s)")  # fmt: skip
     p.add_argument(
         "--disturbance-v",

@@ -120,13 +120,14 @@ def run(args: argparse.Namespace) -> int:
                                 command=options.command_line("excite"))  # fmt: skip
     except OSError as exc:  # the trace is whole; its meta file is not
         raise OutputError(meta_path(path), exc.strerror or str(exc)) from None
+    stopped = "failure" if result.failure else "interrupted" if result.interrupted else None
     if args.json:
         print(dumps({
             "trace": str(path), "ticks": n, "duration_s": n * plant.period_s,
             "signal": args.signal, "amplitude_v": args.amplitude, "motor": args.motor,
             "plant": description, "loop_delay_ticks": loop_delay, "meta": str(meta),
             "link": None if link is None else link["link"],
-            "stopped": "failure" if result.failure else "interrupted" if result.interrupted else None,
+            "stopped": stopped,
             "failure": result.failure or None,
         }))  # fmt: skip
     else:
@@ -147,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
                 f"{stats['missed_ticks']} cart ticks missed; " + host_loss_text(stats)
             )
         warn_host_losses(stats, "excite")
-    if result.failure or result.interrupted:
+    if stopped:
         why = f"error: {result.failure}" if result.failure else "interrupted"
         print(f"cartctl excite: {why}; the trace holds the ticks recorded so far", file=sys.stderr)
         return 1 if result.failure else stopping.exit_code()
