@@ -19,8 +19,6 @@ QRC5_DEFAULT_LABELS: tuple[str, ...] = tuple(f"FloatIn{k}" for k in range(8)) + 
 )
 """The channel labels QRC 5 uses when the user named none."""
 
-_RECORD_KIND = re.compile(r"Q\w*Record")
-
 
 @dataclass(frozen=True)
 class QrcLog:
@@ -33,17 +31,6 @@ class QrcLog:
     rows: list[list[str]]
     row_lines: list[int] | None
     truncated: bool = False
-
-
-def detect(head: str) -> str | None:
-    """``"qrc5"`` for XML, ``"qrc6"`` for a CSV whose first field names a QRC record type, else
-    None, from the start of a file (without byte-order mark and leading white space)."""
-    if head.startswith("<"):
-        return "qrc5"
-    first_field = head.split("\n", 1)[0].split(",", 1)[0].strip()
-    if _RECORD_KIND.fullmatch(first_field):
-        return "qrc6"
-    return None
 
 
 def read_qrc5(path: Path) -> QrcLog:

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from cartctl.cart import PERIOD_S, SUPPLY_V
-from cartctl.data.columns import check_mapping, detect, plan_columns, read_qrc5, read_qrc6
+from cartctl.data.columns import check_mapping, plan_columns, read_qrc5, read_qrc6
 from cartctl.data.tomlfile import FORMATS
 from cartctl.data.trace import REQUIRED_COLUMNS, Trace
 from cartctl.errors import DataFileError, DataWarning, MissingFileError
@@ -94,14 +94,18 @@ def _sniff(path: Path) -> str:
             f"the file is empty; expected a header row ({','.join(REQUIRED_COLUMNS)}) and one "
             "row per 10 ms tick",
         )
-    kind = detect(text)
-    toml = _CARTCTL_TOML.search(text) if kind is None else None
+    if text.startswith("<"):
+        return "qrc5"
+    if _QRC_RECORD.fullmatch(text.split("\n", 1)[0].split(",", 1)[0].strip()):
+        return "qrc6"  # a CSV whose first field names a QRC record type
+    toml = _CARTCTL_TOML.search(text)
     if toml is not None:
         what = FORMATS.get(toml.group(1), "a cartctl TOML file")
         raise DataFileError(path, f"is {what}, not a trace (.csv or a QRC log)")
-    return kind or "csv"
+    return "csv"
 
 
+_QRC_RECORD = re.compile(r"Q\w*Record")
 _CARTCTL_TOML = re.compile(r'^format = "(cartctl-[a-z-]+/\d+)"', re.MULTILINE)
 
 
