@@ -64,9 +64,9 @@ VOLTAGE_MARGIN = 0.05  # beyond the voltage limit
 
 
 def motors_in(entities: Iterable[str]) -> tuple[str, ...]:
-    """Motor names among entity paths (``motor/a/speed`` → ``a``), in order; both when none is."""
+    """Motor names among entity paths (``motor/a/speed`` → ``a``), in order."""
     paths = (entity.split("/") for entity in entities)
-    return tuple(dict.fromkeys(p[1] for p in paths if p[0] == "motor" and len(p) > 1)) or ("a", "b")
+    return tuple(dict.fromkeys(p[1] for p in paths if p[0] == "motor" and len(p) > 2))
 
 
 def padded_range(lo: float, hi: float, *, margin: float = 0.1, min_span: float = 1.0) -> Range:

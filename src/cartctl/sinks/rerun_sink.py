@@ -141,7 +141,8 @@ class RerunSink:
         return tuple((i, ENTITY_PATHS[c]) for i, c in enumerate(columns) if c in ENTITY_PATHS)
 
     def _describe(self, rec: rr.RecordingStream) -> None:
-        rec.send_blueprint(blueprint(motors_in(e for _, e in self._signals), self.ranges))
+        motors = motors_in(entity for _, entity in self._signals) or ("a", "b")
+        rec.send_blueprint(blueprint(motors, self.ranges))
         for _, entity in self._signals:
             _log_style(rec, entity)
 

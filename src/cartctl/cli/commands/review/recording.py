@@ -13,11 +13,11 @@ import subprocess
 import tempfile
 import threading
 import time
-import uuid
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from urllib.parse import quote
+from uuid import uuid4
 
 from cartctl.errors import CartctlError, DataFileError, InputError, MissingFileError
 from cartctl.sinks.rerun_problems import (
@@ -147,14 +147,11 @@ def _restyle(chunks: Sequence[Chunk], rec: rr.RecordingStream) -> None:
 def layout(chunks: Sequence[Chunk]) -> rrb.Blueprint:
     """The layout of a recording: the run's (``motor/...``), the monitor's built from its labels
     (``gpio/...``), each with y ranges from the values; the run's plain layout otherwise."""
-    from cartctl.sinks.rerun_layout import blueprint, data_ranges
+    from cartctl.sinks.rerun_layout import blueprint, data_ranges, motors_in
 
     extremes, whole = scalar_stats(chunks)
     paths = {chunk.entity_path.lstrip("/") for chunk in chunks}
-    motors = sorted(
-        {p.split("/")[1] for p in paths if p.startswith("motor/") and p.count("/") >= 2}
-    )
-    if motors:
+    if motors := sorted(motors_in(paths)):
         return blueprint(motors, data_ranges(extremes, motors))
     if any(p.startswith("gpio/") for p in extremes):
         from cartctl.sinks.channels_rerun import CART_ROOT, review_blueprint
@@ -169,9 +166,7 @@ def new_stream(entry: StoreEntry) -> rr.RecordingStream:
     into one viewer gives two recordings, not every row twice)."""
     import rerun as rr
 
-    return rr.RecordingStream(
-        entry.application_id, recording_id=uuid.uuid4(), send_properties=False
-    )
+    return rr.RecordingStream(entry.application_id, recording_id=uuid4(), send_properties=False)
 
 
 VULKAN_HINT = "apt-get install mesa-vulkan-drivers libvulkan1"
