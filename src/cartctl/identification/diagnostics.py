@@ -40,7 +40,7 @@ from cartctl.identification.arx import (
 )
 from cartctl.identification.etfe import model_response
 from cartctl.identification.oe import simulation_error
-from cartctl.identification.orders import OrderTable, order_table
+from cartctl.identification.orders import OrderTable
 from cartctl.measures.metrics import finite_or_none
 from cartctl.model import ArxModel
 
@@ -301,33 +301,21 @@ class Diagnostics:
 def diagnose(
     chosen: ArxFit,
     fitted: Sequence[Segment],
-    *,
     start: int | None,
     raw: Sequence[Segment],
     validation: Sequence[Segment],
-    period_s: float,
-    orders_grid: dict[str, tuple[int, ...]] | None = None,
-    order_data: Sequence[Segment] | None = None,
+    orders: OrderTable | None,
 ) -> Diagnostics:
-    """The diagnostics of ``chosen``, fitted on ``fitted`` (from regression row ``start``, ARX);
-    the order table (with ``orders_grid``) fitted on ``order_data`` (default ``fitted``)."""
+    """The diagnostics of ``chosen``, fitted on ``fitted`` (from regression row ``start``, ARX),
+    on ``validation`` or else the ``raw`` data; ``orders`` the order table, if asked for."""
     data = list(validation) or list(raw)
     y_all = np.concatenate([np.asarray(y, dtype=float) for y, _ in data])
     residuals = residual_test(
         prediction_residuals(chosen.model, data, chosen.method),
         output_rms=float(np.sqrt(np.mean(y_all**2))),
     )
-    cov = theta_covariance(chosen, fitted, start if chosen.method == "arx" else None)
-    nyquist = 0.5 / period_s
+    cov = theta_covariance(chosen, fitted, start)
+    nyquist = 0.5 / chosen.model.period_s
     band = bode_band(chosen.model, cov, np.geomspace(nyquist / 5000.0, 0.999 * nyquist, 60))
-    orders = None
-    if orders_grid is not None:
-        orders = order_table(
-            order_data if order_data is not None else fitted,
-            orders_grid,
-            period_s=period_s,
-            eval_segments=raw,
-            validation=list(validation) or None,
-        )
     fit_on = "validation" if validation else "estimation"
     return Diagnostics(fit_on, residuals, cov, band, orders, list(raw), list(validation))

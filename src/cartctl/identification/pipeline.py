@@ -10,6 +10,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from functools import partial
 from typing import Any, TypeVar
 
 import numpy as np
@@ -31,7 +32,13 @@ from cartctl.identification.arx import (
 from cartctl.identification.diagnostics import Diagnostics, diagnose
 from cartctl.identification.etfe import average_cycles, find_period, periodic_regression_pad
 from cartctl.identification.oe import check_oe_orders, fit_oe
-from cartctl.identification.orders import DelayEstimate, JointDelay, delay_evidence, joint_delay
+from cartctl.identification.orders import (
+    DelayEstimate,
+    JointDelay,
+    delay_evidence,
+    joint_delay,
+    order_table,
+)
 
 METHODS = ("arx", "oe")
 
@@ -229,35 +236,33 @@ def _identify_motor(
     motor: str,
     raw: list[Segment],
     work: list[Segment],
+    sources: list[str],
+    validation: list[Segment],
     request: IdentifyRequest,
     nk: int,
-    *,
     period_s: float,
-    sources: Sequence[str],
-    validation: Sequence[Segment],
     delay: DelayEstimate | None,
 ) -> MotorIdentification:
-    """The pipeline on one motor's raw and prefiltered (``work``) experiments with delay ``nk``;
-    with ``validation`` data the fits are recomputed on it."""
-    cycles = None
-    fit_data, start = work, None
+    """The pipeline on one motor's raw experiments, the same prefiltered (``work``), their files
+    and the validation data, with delay ``nk``; with validation data the fits are on it."""
+    na, nb = request.na, request.nb
+    fit_data, start, cycles = work, None, None
     if request.average:
-        start = first_row(request.na, request.nb, nk)
+        start = first_row(na, nb, nk)
         fit_data, cycles = _averaged(work, start, sources)
-
-    def arx(data: Sequence[Segment]) -> ArxFit:
-        return fit_arx(data, na=request.na, nb=request.nb, nk=nk, period_s=period_s, start=start,
-                       eval_segments=raw)  # fmt: skip
-
+    arx = partial(fit_arx, na=na, nb=nb, nk=nk, period_s=period_s, start=start, eval_segments=raw)
     arx_fit = arx(fit_data)
     unfiltered = None
     if request.prefilter is not None:
         unfiltered = arx(raw if start is None else _averaged(raw, start, sources)[0])
     oe_fit = fit_oe(work, arx_fit.model, eval_segments=raw) if request.method == "oe" else None
-    diagnostics = diagnose(
-        oe_fit or arx_fit, work if oe_fit else fit_data, start=start, raw=raw,
-        validation=validation, period_s=period_s, orders_grid=request.orders, order_data=work,
-    )  # fmt: skip
+    orders = None
+    if request.orders is not None:
+        orders = order_table(
+            work, request.orders, period_s=period_s, eval_segments=raw, validation=validation
+        )
+    fitted = work if oe_fit else fit_data
+    diagnostics = diagnose(oe_fit or arx_fit, fitted, start, raw, validation, orders)
     if validation:
         arx_fit = on_validation(arx_fit, validation)
         oe_fit = on_validation(oe_fit, validation) if oe_fit else None
@@ -318,7 +323,8 @@ def identify(
         m: [(pf.apply(y, period_s), pf.apply(u, period_s)) for y, u in raw] if pf else raw
         for m, (raw, _, _) in data.items()
     }
-    if request.delay is None:  # one loop, one delay: chosen from both motors' evidence
+    joint, nk = None, request.delay
+    if nk is None:  # one loop, one delay: chosen from both motors' evidence
         joint = joint_delay({
             m: delay_evidence(work[m], na=request.na, nb=request.nb, period_s=period_s,
                               candidates=request.delay_candidates, eval_segments=raw)
@@ -327,13 +333,12 @@ def identify(
         nk = joint.nk
         if (note := joint.note()) is not None:
             notes.append(note)
-    else:
-        joint, nk = None, request.delay
     results = {
-        m: _identify_motor(m, raw, work[m], request, nk, period_s=period_s, sources=sources,
-                           validation=val, delay=joint.motors[m] if joint else None)
-        for m, (raw, sources, val) in data.items()
-    }  # fmt: skip
+        m: _identify_motor(
+            m, raw, work[m], src, val, request, nk, period_s, joint.motors[m] if joint else None
+        )
+        for m, (raw, src, val) in data.items()
+    }
     return IdentifyResult(period_s, results, tuple(notes), joint, request.loop_delay_ticks)
 
 

@@ -41,9 +41,7 @@ def _cell(value: Any) -> str:
 
 
 def _table(rows: Sequence[Mapping[str, Any]]) -> str:
-    columns: list[str] = []
-    for row in rows:
-        columns += [str(name) for name in row if str(name) not in columns]
+    columns = list(dict.fromkeys(str(name) for row in rows for name in row))
     cells = [{str(k): v for k, v in row.items()} for row in rows]
     return markdown_table([_cell(c) for c in columns],
                           [[_cell(r.get(c)) for c in columns] for r in cells])  # fmt: skip
@@ -100,17 +98,13 @@ def fit_rows(
         names = fit.theta_names()
         rows.append(_row(label, fit.model, names, fit.theta_std, fit.fit_simulation_percent,
                          fit.fit_prediction_percent))  # fmt: skip
-    if compared:
-        fits = res.diagnostics.compared_fits(compared)
-        for label, model in compared.items():
-            f = fits[label]
-            own = (
-                names
-                if model.theta.size == len(names)
-                else [f"a{i + 1}" for i in range(model.na)] + [f"b{j}" for j in range(model.nb)]
-            )
-            rows.append(_row(label, model, own, None, f["fit_simulation_percent"],
-                             f["fit_prediction_percent"]))  # fmt: skip
+    compared = compared or {}
+    for label, f in res.diagnostics.compared_fits(compared).items():
+        model = compared[label]
+        general = [f"a{i + 1}" for i in range(model.na)] + [f"b{j}" for j in range(model.nb)]
+        own = names if model.theta.size == len(names) else general
+        rows.append(_row(label, model, own, None, f["fit_simulation_percent"],
+                         f["fit_prediction_percent"]))  # fmt: skip
     return rows
 
 
