@@ -178,7 +178,7 @@ def _poles_hz(model: ArxModel) -> str:
     return ", ".join(parts) or "—"
 
 
-def format_motor(res: MotorIdentification, compared: Mapping[str, ArxModel] | None = None) -> str:
+def format_motor(res: MotorIdentification, compared: Mapping[str, ArxModel]) -> str:
     """The human-readable block of one motor: the report's fit table
     (:func:`~cartctl.identification.report.fit_rows`, with the ``--compare`` models' rows), the
     delay evidence, the residual tests and the orders table."""
@@ -190,7 +190,7 @@ def format_motor(res: MotorIdentification, compared: Mapping[str, ArxModel] | No
     if res.cycles_averaged:
         lines[0] += f", {res.cycles_averaged} cycles averaged"
     rows = fit_rows(res, compared)
-    models = [fit.model for fit in res.variants().values()] + list((compared or {}).values())
+    models = [fit.model for fit in res.variants().values()] + list(compared.values())
     for row, model in zip(rows, models, strict=True):
         row["poles (Hz)"] = _poles_hz(model)  # '!' on an unstable pole
     tail = ["fit sim (%)", "fit pred (%)", "DC gain (rad/s/V)", "poles (Hz)"]
@@ -227,7 +227,7 @@ def format_result(
     result: IdentifyResult,
     files: list[str],
     request: IdentifyRequest,
-    compare: Mapping[str, ModelFile] | None = None,
+    compare: dict[str, ModelFile],
 ) -> str:
     """The whole human-readable output."""
     what = f"{request.method.upper()}, na={request.na} nb={request.nb}"
@@ -236,9 +236,7 @@ def format_result(
     lines = [f"identify {' '.join(files)}: {what}, Ts = {result.period_s * 1e3:g} ms", ""]
     for m, r in result.motors.items():
         models = {
-            f"{Path(p).stem} (file)": f.motors[m]
-            for p, f in (compare or {}).items()
-            if m in f.motors
+            f"{Path(p).stem} (file)": f.motors[m] for p, f in compare.items() if m in f.motors
         }
         lines.append(format_motor(r, models) + "\n")
     if result.delay is not None:
@@ -259,14 +257,13 @@ def format_result(
     )
     lines.append("")
     on = next((r.diagnostics.fit_on for r in result.motors.values()), "estimation")
-    if on == "validation":
-        where = "fit sim and fit pred (%): on the validation data, simulated from its input and "
-        where += "predicted one step ahead. "
-    else:
-        where = (
-            "fit sim (%): simulated from the input alone on the raw data; fit pred (%): "
-            "one-step-ahead prediction on the fitted data. "
-        )
+    where = (
+        "fit sim and fit pred (%): on the validation data, simulated from its input and predicted "
+        "one step ahead. "
+        if on == "validation"
+        else "fit sim (%): simulated from the input alone on the raw data; fit pred (%): "
+        "one-step-ahead prediction on the fitted data. "
+    )
     lines.append(
         where + "± is one standard deviation; θ's first na entries are output coefficients "
         "(–), the rest input coefficients (rad/s/V); '!' marks an unstable pole. Residual "

@@ -160,7 +160,7 @@ def check_inputs(args: argparse.Namespace, n_settings: int) -> None:
     from cartctl.cart import SUPPLY_V
     from cartctl.data.modelfile import load_models
     from cartctl.design.make import check_models
-    from cartctl.plants.factory import SIMULATED, make_plant, physics_options, plant_kind
+    from cartctl.plants.factory import SIMULATED, check_plant_name, plant_kind
     from cartctl.reference import ReferenceSchedule, reference_signal
     from cartctl.session.prepare import check_reach
 
@@ -169,18 +169,16 @@ def check_inputs(args: argparse.Namespace, n_settings: int) -> None:
     if plant_kind(args.plant) not in SIMULATED:
         raise InputError(f"--plant must be sim, physics or physics:actuation_ms=X, got "
                          f"'{args.plant}'")  # fmt: skip
-    if args.plant.startswith("physics:"):
-        physics_options(args.plant.partition(":")[2])
+    check_plant_name(args.plant)  # physics:OPTIONS
     models = load_models(args.model)
     check_models(models, ("a", "b"), str(args.model))  # design's line: no setting could run
-    plant, _ = make_plant(args.plant, model_path=args.model, preset=args.preset)
-    plant.close()
-    if abs(plant.period_s - models.period_s) > 1e-9:
+    period_s = models.period_s if args.plant == "sim" else PERIOD_S  # physics: the cart's tick
+    if abs(period_s - models.period_s) > 1e-9:
         raise InputError(
-            f"the model is for Ts = {models.period_s} s but the plant ticks at {plant.period_s} s"
+            f"the model is for Ts = {models.period_s} s but the plant ticks at {period_s} s"
         )
-    reference_signal(args.reference, 1, plant.period_s)  # a bad spec fails here, once
+    reference_signal(args.reference, 1, period_s)  # a bad spec fails here, once
     # a reference no motor can follow is refused as run refuses it (every setting would saturate)
-    n = max(1, round(args.duration / plant.period_s))
-    references = {m: ReferenceSchedule(args.reference, n, plant.period_s, m) for m in ("a", "b")}
+    n = max(1, round(args.duration / period_s))
+    references = {m: ReferenceSchedule(args.reference, n, period_s, m) for m in ("a", "b")}
     check_reach(references, dict(models.motors), SUPPLY_V, str(args.model))
