@@ -170,8 +170,8 @@ def new_stream(entry: StoreEntry) -> rr.RecordingStream:
 
 
 VULKAN_HINT = "apt-get install mesa-vulkan-drivers libvulkan1"
-SCREENSHOT_WINDOW = "1600x900"  # the headless viewer's window, logical points
-_QUIET = ("--expect-data-soon", "--hide-welcome-screen")  # no welcome screen in the picture
+# the headless viewer's window (1600x900 logical points), no welcome screen in the picture
+_WINDOW = ("--window-size", "1600x900", "--expect-data-soon", "--hide-welcome-screen")
 _VIEWER_START_TIMEOUT_S = 20.0
 _ICD_DIRS = ("/usr/share/vulkan/icd.d", "/usr/local/share/vulkan/icd.d", "/etc/vulkan/icd.d")
 
@@ -260,9 +260,7 @@ def serve_web(
     return url
 
 
-def screenshot(
-    path: Path, out: Path, *, window: str = SCREENSHOT_WINDOW, extra: Series | None = None
-) -> Path:
+def screenshot(path: Path, out: Path, *, extra: Series | None = None) -> Path:
     """Render the recording, the layout and ``extra`` in a headless viewer (its own session,
     stopped after), with the time cursor paused at the end, and save the PNG ``out``; returns
     ``out``, absolute. Takes about 1–3 s."""
@@ -278,7 +276,7 @@ def screenshot(
         log_path = Path(tmp) / "viewer.log"
         with log_path.open("wb") as log:
             viewer = subprocess.Popen(
-                [executable, "--headless", "--port", str(port), "--window-size", window, *_QUIET],
+                [executable, "--headless", "--port", str(port), *_WINDOW],
                 env={**viewer_env(), "RERUN_APP_ONLY": "true"},
                 stdin=subprocess.DEVNULL,
                 stdout=log,
@@ -287,7 +285,7 @@ def screenshot(
             )
         rec = new_stream(entry)
         try:
-            client = _wait_for_viewer(url, port, viewer, log_path)
+            client = _wait_for_viewer(url, viewer, log_path)
             rec.connect_grpc(url)
             ends = stream(reader, entry, rec, extra=extra)
             _pause_at_end(client, ends)
@@ -318,9 +316,7 @@ def vulkan_available() -> bool:
     return any(glob.glob(os.path.join(d, "*.json")) for d in _ICD_DIRS)
 
 
-def _wait_for_viewer(
-    url: str, port: int, viewer: subprocess.Popen[bytes], log_path: Path
-) -> ViewerClient:
+def _wait_for_viewer(url: str, viewer: subprocess.Popen[bytes], log_path: Path) -> ViewerClient:
     """Wait until the viewer has drawn a frame, or fail with the reason it gave."""
     from rerun.experimental import ViewerClient
 
@@ -331,10 +327,7 @@ def _wait_for_viewer(
             reason = _viewer_failure(log_path) or f"it exited with code {viewer.returncode}"
             raise _needs_vulkan(f"the headless viewer could not start ({reason})")
         try:
-            if client is None:
-                with socket.create_connection(("127.0.0.1", port), timeout=0.2):
-                    pass
-                client = ViewerClient.connect(url)
+            client = client or ViewerClient.connect(url)  # ConnectionError at once if none listens
             client.take_screenshot(max_size=16)  # answers only once a frame has been drawn
             return client
         except (OSError, ConnectionError, RuntimeError):
@@ -353,13 +346,12 @@ def _pause_at_end(client: ViewerClient, ends: dict[str, int]) -> None:
         state = client.get_state()
         timelines = state.recordings[0].timelines if state.recordings else []
         shown = next((t for t in timelines if t.name == name), None)
-        if not state.loading and shown is not None and (shown.end or -1) >= ends[name]:
+        end = ends[name]
+        if not state.loading and shown is not None and (shown.end or -1) >= end:
             if shown.time_type == "sequence":
-                client.set_time(name, sequence=ends[name], play_state="paused")
+                client.set_time(name, sequence=end, play_state="paused")
             else:
-                client.set_time(
-                    name, duration=np.timedelta64(ends[name], "ns"), play_state="paused"
-                )
+                client.set_time(name, duration=np.timedelta64(end, "ns"), play_state="paused")
             break
         if time.monotonic() > deadline:
             raise TimeoutError(f"the recording did not load within {LOAD_TIMEOUT_S:g} s")
