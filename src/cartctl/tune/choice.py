@@ -39,10 +39,8 @@ CHOICE_RULE_NOMINAL = (
 
 
 def mark_robust_pareto(rows: Sequence[RobustRow]) -> list[RobustRow]:
-    points = np.array([[math.nan, math.nan] if r.score is None
-                       else [r.score.value("settling_time_s", "nominal"),
-                             r.score.value("overshoot_percent", "worst")]
-                       for r in rows]).reshape(len(rows), 2)  # fmt: skip
+    nan = (math.nan, math.nan)
+    points = np.array([nan if r.score is None else r.score.front_axes for r in rows]).reshape(-1, 2)
     front = pareto_front(np.where(np.isfinite(points), points, np.nan))
     return [replace(r, pareto=bool(f)) for r, f in zip(rows, front, strict=True)]
 
@@ -135,8 +133,7 @@ def choose_best_robust(rows: Sequence[RobustRow], limits: Limits = Limits()) -> 
 
     def rank(r: RobustRow) -> tuple[float, float]:
         assert r.score is not None
-        settling = r.score.value("settling_time_s", "nominal")
-        worst = r.score.value("overshoot_percent", "worst")
+        settling, worst = r.score.front_axes
         return worst, settling if math.isfinite(settling) else math.inf
 
     candidates = [
@@ -169,9 +166,7 @@ def sort_robust(rows: Sequence[RobustRow]) -> list[RobustRow]:
     def key(r: RobustRow) -> tuple[int, float, float, int]:
         if r.score is None:
             return (3, 0.0, 0.0, r.index)
-        settling, worst = (math.inf if math.isnan(v) else v
-                           for v in (r.score.value("settling_time_s", "nominal"),
-                                     r.score.value("overshoot_percent", "worst")))  # fmt: skip
+        settling, worst = (math.inf if math.isnan(v) else v for v in r.score.front_axes)
         if r.pareto:
             return (0, settling, worst, r.index)
         return (1, worst, settling, r.index)

@@ -85,8 +85,8 @@ def place_labels(
                 ox = px + dx * px_per_pt - (0.0 if dx > 0.5 else w if dx < -0.5 else w / 2)
                 oy = py + dy * px_per_pt - (0.0 if dy > 0.5 else h if dy < -0.5 else h / 2)
                 box = Bbox.from_bounds(ox - 1.0, oy - 1.0, w, h)
-                if (frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0
-                        and box.y1 <= frame.y1 and not any(box.overlaps(b) for b in taken)
+                if (frame.contains(box.x0, box.y0) and frame.contains(box.x1, box.y1)
+                        and not any(box.overlaps(b) for b in taken)
                         and not any(_hits_circle(box, *c) for c in circles)):  # fmt: skip
                     place = (dist, dx, dy, box)
                     break
@@ -146,21 +146,19 @@ def plot_tuning(path: str, method: str, results: Sequence[TuneResult]) -> None:
     """Run settling (ms) against run overshoot (%) of the settled settings (colour: peak |V|)."""
     from cartctl.tune.choice import counts_text
 
-    shown: list[TuneResult] = []
-    x: list[float] = []  # settling (ms)
-    y: list[float] = []  # overshoot (%)
-    for r in results:
-        settling_s, overshoot = r.worst["settling_time_s"], r.worst["overshoot_percent"]
-        if r.status == "settled" and settling_s is not None and overshoot is not None:
-            shown.append(r)
-            x.append(settling_s * 1e3)
-            y.append(overshoot)
+    settled = [
+        (r, r.worst["settling_time_s"], r.worst["overshoot_percent"])
+        for r in results
+        if r.status == "settled"
+    ]
+    shown = [(r, s * 1e3, o) for r, s, o in settled if s is not None and o is not None]  # ms, %
+    x, y = [s for _, s, _ in shown], [o for _, _, o in shown]
     fig, ax = _figure()
-    points = ax.scatter(x, y, c=[r.worst["max_abs_voltage"] for r in shown], cmap="viridis",
+    points = ax.scatter(x, y, c=[r.worst["max_abs_voltage"] for r, _, _ in shown], cmap="viridis",
                         s=POINT_AREA_PT2, zorder=3, gid="settings",
                         label="settings that settled (colour: run peak |V|)")  # fmt: skip
     fig.colorbar(points, ax=ax, label="run peak |voltage| (V)")
-    front = [(xi, yi, r.index) for xi, yi, r in zip(x, y, shown, strict=True) if r.pareto_plot]
+    front = [(xi, yi, r.index) for r, xi, yi in shown if r.pareto_plot]
     ax.set_xlabel("run settling time, band max(2 %, one encoder count) (ms)")
     _title(ax, f"cartctl tune --method {method}, the worse of motors a and b", counts_text(results))
     notes = ["the table's *: the front over all four run metrics (RMS error and peak |V| too), "
@@ -176,15 +174,8 @@ def plot_robust(path: str, method: str, rows: Sequence[RobustRow], plants: int) 
 
     from cartctl.tune.choice import robust_counts_text
 
-    shown = []
-    for r in rows:
-        s = r.score
-        if s is None:
-            continue
-        x = s.value("settling_time_s", "nominal")
-        y = s.value("overshoot_percent", "worst")
-        if np.isfinite(x) and np.isfinite(y):
-            shown.append((x * 1e3, y, s, r))
+    scored = [(*r.score.front_axes, r.score, r) for r in rows if r.score is not None]
+    shown = [(x * 1e3, y, s, r) for x, y, s, r in scored if np.isfinite(x) and np.isfinite(y)]
     timed = ", ".join(f"{e['actuation_ms']:g}" for e in shown[0][2].actuation) if shown else ""
     fig, ax = _figure()
     for x, y, s, _ in shown:

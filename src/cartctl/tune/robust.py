@@ -96,6 +96,11 @@ class RobustScore:
     def settles_everywhere(self) -> bool:
         return math.isfinite(self.value("settling_time_s", "worst"))
 
+    @property
+    def front_axes(self) -> tuple[float, float]:
+        """The robust front's (nominal settling s, worst-case overshoot %), NaN where undefined."""
+        return self.value("settling_time_s", "nominal"), self.value("overshoot_percent", "worst")
+
     def to_dict(self) -> dict[str, Any]:
         """JSON form (infinities become ``null`` in ``--json``; the counts say why)."""
         which = ("nominal", "worst", "worst_sampled", *(f"p{p}" for p in PERCENTILES))
