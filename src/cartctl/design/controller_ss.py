@@ -195,7 +195,8 @@ def _law(
     big_b[:m, 1] = a @ el - (gain * kl + ky) * b
     big_c[0, :m] = -gain * klc
     big_d = np.array([[kr, -(gain * kl + ky)]])
-    names = _state_names(int(getattr(est, "n_model_states", 0)), m)
+    n_x = min(int(getattr(est, "n_model_states", 0)), m)  # xhat_i (rad/s), then bias_v (V)
+    names = [f"xhat_{i + 1}" for i in range(n_x)] + ["bias_v"] * (m - n_x)
     if integrator is not None:
         ci, ar, ax, ay, name = integrator
         big_a[:m, m] = ci * b
@@ -206,11 +207,6 @@ def _law(
         big_c[0, m] = ci
         names.append(name)
     return ControllerStateSpace(big_a, big_b, big_c, big_d, ts, tuple(names))
-
-
-def _state_names(n: int, m: int) -> list[str]:
-    """xhat_1 … xhat_n (rad/s) of m estimator states, then bias_v (V) for the disturbance state."""
-    return [f"xhat_{i + 1}" for i in range(min(n, m))] + ["bias_v"] * (m - n)
 
 
 def feedback_tf_coeffs(design: FeedbackGains) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -23,7 +23,6 @@ from numpy.typing import NDArray
 from cartctl.design.analysis import (
     DEFAULT_DISTURBANCE_V,
     DisturbanceResponse,
-    StepAnalysis,
     loop_analysis,
     settling_bound,
     simulate_disturbance,
@@ -41,35 +40,10 @@ _GRID_POINTS = 2000
 _LOW_HZ = 1e-3  # the grid's lowest frequency (Hz): an integrator puts L's pole at 0 Hz
 
 
-@dataclass(frozen=True, eq=False)
-class LoopShape:
-    """The open loop L on a frequency grid (``freq_hz``, 1 mHz to Nyquist), with the peaks
-    Ms = max|S| and Mt = max|T| and where they are (Hz; 0 for T(1) = 1 of integral action)."""
-
-    freq_hz: NDArray[np.float64]
-    loop: NDArray[np.complex128]
-    sensitivity_peak: float
-    sensitivity_peak_hz: float
-    complementary_peak: float
-    complementary_peak_hz: float
-
-    def to_dict(self) -> dict[str, Any]:
-        """The ``design --json`` keys (added to each motor's entry)."""
-        return {
-            "sensitivity_peak_db": 20.0 * math.log10(self.sensitivity_peak),
-            "sensitivity_peak_hz": self.sensitivity_peak_hz,
-            "complementary_peak": self.complementary_peak,
-            "complementary_peak_db": 20.0 * math.log10(self.complementary_peak),
-            "complementary_peak_hz": self.complementary_peak_hz,
-            "sensitivity_distance": 1.0 / self.sensitivity_peak,
-        }
-
-
-def loop_shape(
-    controller: ControllerStateSpace, model: ArxModel, extra_delay_ticks: int = 0
-) -> LoopShape:
-    """L of the loop a controller was designed for, with the peaks of S and T (Mt at 0 Hz when
-    it is largest at the bottom of the grid, where integral action puts it)."""
+def _loop_peaks(
+    controller: ControllerStateSpace, model: ArxModel, extra_delay_ticks: int
+) -> tuple[Any, ...]:
+    """The grid, L on it, Ms and Mt with where they are (:class:`MotorAnalysis`'s first fields)."""
     from scipy import optimize
 
     def loop_at(freq_hz: NDArray[np.float64]) -> NDArray[np.complex128]:
@@ -93,15 +67,21 @@ def loop_shape(
         mt, mt_hz = float(-res.fun), float(res.x)
     margins = loop_analysis(*controller.feedback_tf(), model, extra_delay_ticks)
     ms, ms_hz = margins["sensitivity_peak"], margins["sensitivity_peak_hz"]
-    return LoopShape(freq, loop, ms, ms_hz, mt, 0.0 if i == 0 else mt_hz)
+    return freq, loop, ms, ms_hz, mt, 0.0 if i == 0 else mt_hz  # Mt at 0 Hz: integral action
 
 
 @dataclass(frozen=True, eq=False)
 class MotorAnalysis:
-    """One motor's loop analysis: L with the peaks of S and T, the simulated load-disturbance
-    step, and the pole table."""
+    """One motor's loop analysis: the open loop L on a frequency grid (``freq_hz``, 1 mHz to
+    Nyquist) with the peaks Ms = max|S| and Mt = max|T| and where they are (Hz; 0 for T(1) = 1
+    of integral action), the simulated load-disturbance step, and the pole table."""
 
-    shape: LoopShape
+    freq_hz: NDArray[np.float64]
+    loop: NDArray[np.complex128]
+    sensitivity_peak: float
+    sensitivity_peak_hz: float
+    complementary_peak: float
+    complementary_peak_hz: float
     disturbance: DisturbanceResponse
     pole_table: list[dict[str, Any]]
     motor: str = "a"
@@ -109,9 +89,15 @@ class MotorAnalysis:
     def entry(self) -> dict[str, Any]:
         """The keys this analysis adds to (or replaces in) a motor's ``design --json`` entry;
         ``sensitivity_peak`` is the loop's as it runs (the PI's with its Kalman estimator)."""
+        ms, mt = self.sensitivity_peak, self.complementary_peak
         return {
-            "sensitivity_peak": self.shape.sensitivity_peak,
-            **self.shape.to_dict(),
+            "sensitivity_peak": ms,
+            "sensitivity_peak_db": 20.0 * math.log10(ms),
+            "sensitivity_peak_hz": self.sensitivity_peak_hz,
+            "complementary_peak": mt,
+            "complementary_peak_db": 20.0 * math.log10(mt),
+            "complementary_peak_hz": self.complementary_peak_hz,
+            "sensitivity_distance": 1.0 / ms,
             "disturbance": self.disturbance.to_dict(),
             "closed_loop_pole_table": self.pole_table,
             "warnings": self.warnings,
@@ -153,7 +139,8 @@ def analyse_designs(
         for re, im in made.entry["closed_loop_poles"]:
             damping, freq_hz = pole_damping(complex(re, im), model.period_s)
             table.append({"re": re, "im": im, "damping": damping, "freq_hz": freq_hz})
-        out[m] = MotorAnalysis(loop_shape(ss, model, extra), dist, table, m)
+        freq, loop, ms, ms_hz, mt, mt_hz = _loop_peaks(ss, model, extra)
+        out[m] = MotorAnalysis(freq, loop, ms, ms_hz, mt, mt_hz, dist, table, m)
     return out
 
 
@@ -176,19 +163,13 @@ def db(value_db: float, decimals: int = 2) -> str:
     return format_fixed(value_db, decimals)
 
 
-def design_figure(
-    motor: str,
-    model: ArxModel,
-    entry: Mapping[str, Any],
-    step: StepAnalysis,
-    *,
-    extra_delay_ticks: int,
-    voltage_limit_v: float,
-) -> Figure:
-    """One motor's figure: |L| and ∠L with the margins, the step's speed and voltage beside the
-    time-optimal ones on the same loop, its settling measured in the bound's band."""
+def design_figure(motor: str, designs: Designs, entry: Mapping[str, Any]) -> Figure:
+    """One motor's figure: |L| and ∠L with the margins of its ``design --json`` ``entry``, the
+    simulated step's speed and voltage beside the time-optimal ones on the same loop."""
     from matplotlib.figure import Figure
 
+    model, step, request = designs.models[motor], designs.steps[motor], designs.request
+    extra_delay_ticks, voltage_limit_v = request.extra_delay_ticks, request.voltage_limit_v
     fig = Figure(figsize=(11, 8.5), dpi=110, layout="constrained")
     axes = fig.subplots(2, 2, sharex="col")
     freq = np.logspace(-1, np.log10(0.5 / model.period_s * 0.999), 600)
@@ -239,7 +220,7 @@ def design_figure(
         v_ax.axhline(sign * voltage_limit_v, color="tab:red", lw=0.8, ls="--")
     v_ax.set_xlim(0, min(step.time_s[-1], 0.5))
     _dress(v_ax, "time (s)", "voltage (V)", None, "upper right")
-    fig.suptitle(f"Motor {motor}: {entry.get('method', 'controller')} design")
+    fig.suptitle(f"Motor {motor}: {request.method} design")
     return fig
 
 
@@ -251,15 +232,13 @@ def write_report(
 ) -> list[Path]:
     """``design_X.png`` (:func:`design_figure`, on the ``design --json`` ``entries``) and
     ``analysis_X.png`` (:func:`analysis_figure`) per motor; returns their paths."""
-    request, out, paths = designs.request, Path(out_dir), []
+    out, paths = Path(out_dir), []
     out.mkdir(parents=True, exist_ok=True)
     for m, entry in entries.items():
         figures = {
-            "design": design_figure(m, designs.models[m], {**entry, "method": request.method},
-                                    designs.steps[m], extra_delay_ticks=request.extra_delay_ticks,
-                                    voltage_limit_v=request.voltage_limit_v),
-            "analysis": analysis_figure(m, request.method, analyses[m]),
-        }  # fmt: skip
+            "design": design_figure(m, designs, entry),
+            "analysis": analysis_figure(m, designs.request.method, analyses[m]),
+        }
         for name, figure in figures.items():
             paths.append(out / f"{name}_{m}.png")
             figure.savefig(paths[-1])
@@ -289,7 +268,7 @@ def analysis_figure(motor: str, method: str, analysis: MotorAnalysis) -> Figure:
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle
 
-    shape, dist = analysis.shape, analysis.disturbance
+    shape, dist = analysis, analysis.disturbance
     fig = Figure(figsize=(11, 8.5), dpi=100, layout="constrained")
     (st_ax, ny_ax), (dy_ax, du_ax) = fig.subplots(2, 2)
 

@@ -29,7 +29,7 @@ from cartctl.design.controllerfile import (
 from cartctl.design.kalman import KalmanDesign, design_kalman
 from cartctl.design.pi import design_pi, design_pi_bandwidth
 from cartctl.design.poles import design_poles
-from cartctl.design.request import DesignRequest, check_loop_delay, parse_poles
+from cartctl.design.request import NOISE_FIELDS, DesignRequest, check_loop_delay, parse_poles
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 from cartctl.runtime.base import Controller
@@ -39,8 +39,6 @@ ANALYSIS_KEYS = (  # what a controller file keeps of a motor's design, under ``a
     "estimator_poles", "step", "settling_bound_s", "settling_ratio",
     "settling_bound_loop_delay_ticks",
 )  # fmt: skip
-TIMING = "timing_noise_std_ticks"  # in a file only when not 0: older files stay as they were
-_NOISE_FIELDS = ("process_noise_std_v", "bias_drift_std_v", "extra_noise_std_rad_s", TIMING)
 
 
 @dataclass(frozen=True)
@@ -56,7 +54,7 @@ class MotorDesign:
 def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
     """Design one motor's controller as ``request`` asks."""
     extra = request.extra_delay_ticks
-    noise = {f: getattr(request, f) for f in _NOISE_FIELDS}
+    noise = {f: getattr(request, f) for f in NOISE_FIELDS}
     if request.method == "pi":
         pm = request.phase_margin_deg
         given: dict[str, Any] = {"phase_margin_deg": pm, "extra_delay_ticks": extra}
@@ -105,7 +103,11 @@ def _kalman_entry(design: KalmanDesign) -> dict[str, Any]:
     """The estimator as a file stores it; ``timing_noise_std_ticks`` only when not 0 (files
     from before it stay the same)."""
     timing = design.timing_noise_std_ticks
-    return {f.name: getattr(design, f.name) for f in fields(design) if f.name != TIMING or timing}
+    return {
+        f.name: getattr(design, f.name)
+        for f in fields(design)
+        if timing or f.name != "timing_noise_std_ticks"
+    }
 
 
 def nk_note(nk: Mapping[str, int], loop_delay_ticks: int) -> str | None:

@@ -21,6 +21,12 @@ MAX_EXTRA_DELAY_TICKS = 50  # 0.5 s is no speed loop; the design's state grows b
 MAX_LOOP_DELAY_TICKS = 100  # a recorded loop of at most 50 (identify --loop-delay) + 50 extra
 MAX_TIMING_NOISE_TICKS = 10.0  # a command landing ±10 ticks late is no loop
 PI_ESTIMATORS = ("none", "kalman")
+NOISE_FIELDS = (  # the estimator's, as design_kalman takes them
+    "process_noise_std_v",
+    "bias_drift_std_v",
+    "extra_noise_std_rad_s",
+    "timing_noise_std_ticks",
+)
 
 
 OPTIONS: dict[str, str] = {
@@ -89,29 +95,17 @@ class DesignRequest:
 
     def file_request(self) -> dict[str, Any]:
         """The ``[request]`` table of a controller file: the options this method used."""
-        req: dict[str, Any] = {
-            "extra_delay_ticks": self.extra_delay_ticks, "step_rad_s": self.step_rad_s,
-            "process_noise_std_v": self.process_noise_std_v, "bias_drift_std_v": self.bias_drift_std_v,
-            "extra_noise_std_rad_s": self.extra_noise_std_rad_s,
-        }  # fmt: skip
+        names = ["extra_delay_ticks", "step_rad_s", *NOISE_FIELDS[:3]]
         if self.timing_noise_std_ticks:  # only when used: older files stay as they were
-            req["timing_noise_std_ticks"] = self.timing_noise_std_ticks
+            names.append("timing_noise_std_ticks")
         if self.loop_delay_ticks is not None:
-            req["loop_delay_ticks"] = self.loop_delay_ticks
+            names.append("loop_delay_ticks")
         if self.method == "pi":
-            req.update(phase_margin_deg=self.phase_margin_deg, anti_windup=self.anti_windup,
-                       estimator=self.estimator)  # fmt: skip
-            if self.bandwidth_hz is not None:
-                req["bandwidth_hz"] = self.bandwidth_hz
-            else:
-                req["crossover_hz"] = self.crossover_hz
-        elif self.poles:
-            req["poles"] = self.poles
+            names += ["phase_margin_deg", "anti_windup", "estimator"]
+            names.append("crossover_hz" if self.bandwidth_hz is None else "bandwidth_hz")
         else:
-            req.update(
-                settling_time_s=self.settling_time_s, overshoot_percent=self.overshoot_percent
-            )
-        return req
+            names += ["poles"] if self.poles else ["settling_time_s", "overshoot_percent"]
+        return {name: getattr(self, name) for name in names}
 
     def to_argv(self, model: str, *, always: tuple[str, ...] = ()) -> list[str]:
         """``cartctl design`` arguments (without the command name) that make this request;
