@@ -96,28 +96,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _rerun_sink(
-    args: argparse.Namespace, path: Path, references: dict[str, Any], limit_v: float
-) -> Any:
-    if args.rerun == "off":
-        return None
-    from cartctl.sinks.rerun_layout import run_ranges
-    from cartctl.sinks.rerun_problems import resolve_mode
-    from cartctl.sinks.rerun_sink import HeldRerunSink  # open for the smoothed speed
-
-    mode = resolve_mode(args.rerun)
-    extremes = {}  # each reference's lowest and highest value: the speed plots' ranges
-    for m, ref in references.items():
-        spans = [(float(c.min()), float(c.max())) for c in ref.chunks() if c.size]
-        extremes[m] = (min((lo for lo, _ in spans), default=0.0),
-                       max((hi for _, hi in spans), default=0.0))  # fmt: skip
-    # one send_columns costs ~170 µs whatever its length: batch 20 ticks live (the SDK flushes
-    # every 200 ms anyway), 1000 on the simulated clock
-    return HeldRerunSink(mode, path, connect_url=args.connect_url,
-                         batch_ticks=1000 if args.fast else 20,
-                         ranges=run_ranges(extremes, limit_v))  # fmt: skip
-
-
 def _checked_outputs(args: argparse.Namespace) -> tuple[Path, Path]:
     """Step 1, the refusals that need nothing loaded or driven; the trace and recording paths."""
     options.check_duration(args.duration)
@@ -183,8 +161,26 @@ def _sinks(
     memory = MemorySink()
     # on the simulated clock a second of trace takes milliseconds: write it in bigger blocks
     sinks: list[Any] = [CsvSink(csv_path, flush_every=1000 if args.fast else 50), memory]
-    rerun = _rerun_sink(args, rrd_path, prepared.references, prepared.voltage_limit_v)
-    if rerun is not None:
+    rerun = None
+    if args.rerun != "off":
+        from cartctl.sinks.rerun_layout import run_ranges
+        from cartctl.sinks.rerun_problems import resolve_mode
+        from cartctl.sinks.rerun_sink import HeldRerunSink  # open for the smoothed speed
+
+        extremes = {}  # each reference's lowest and highest value: the speed plots' ranges
+        for m, ref in prepared.references.items():
+            spans = [(float(c.min()), float(c.max())) for c in ref.chunks() if c.size]
+            extremes[m] = (min((lo for lo, _ in spans), default=0.0),
+                           max((hi for _, hi in spans), default=0.0))  # fmt: skip
+        # one send_columns costs ~170 µs whatever its length: batch 20 ticks live (the SDK
+        # flushes every 200 ms anyway), 1000 on the simulated clock
+        rerun = HeldRerunSink(
+            resolve_mode(args.rerun),
+            rrd_path,
+            connect_url=args.connect_url,
+            batch_ticks=1000 if args.fast else 20,
+            ranges=run_ranges(extremes, prepared.voltage_limit_v),
+        )
         sinks.append(rerun)
     if not args.fast and sys.stderr.isatty():  # a live line on a terminal, refreshed after ticks
         from cartctl.sinks.summary import StatusLine

@@ -212,8 +212,9 @@ def _robust(args: argparse.Namespace, job: engine.TuneJob) -> _Outcome:
     from cartctl.tune.plot import plot_robust
 
     plants, timings = args.plants, args.timings
-    sample = sample_plants(load_models(args.model), plants, args.seed,
-                           extra_delay_ticks=args.extra_delay)  # fmt: skip
+    sample = sample_plants(
+        load_models(args.model), plants, args.seed, extra_delay_ticks=args.extra_delay
+    )
     rjob = robustness.RobustJob(job, sample, job.items, timings)
     rows = _run_grid(args, rjob, robustness.evaluate_robust_chunk, "cartctl tune --robust")
     marked = tuning.mark_pareto([r.result for r in rows])  # the plain front, for the JSON rows
@@ -226,15 +227,19 @@ def _robust(args: argparse.Namespace, job: engine.TuneJob) -> _Outcome:
     timed = ", ".join(f"{ms:g}" for ms in timings)
     landing = f"with commands landing {timed} ms after their tick"
     worst_over = "the nominal model and the sampled plants"
-    meta = {**sample.describe(), "nominal": f"the model ({args.model}), as without --robust",
-            "worst_over": worst_over + (f" and the physics preset {landing}" if timings else ""),
-            "worst_sampled_over": worst_over,
-            "actuation_ms": list(timings),
-            "spread_over": "the sampled plants (percentiles: values of sampled plants)",
-            "physics_preset": args.preset, "pareto_of": "nominal settling_time_s against worst-case "
-            "overshoot_percent", "choice_rule": rule,
-            "counts": {k.replace(" ", "_"): v for k, v in choice.robust_counts(rows).items()},
-            "statuses": choice.ROBUST_STATUSES}  # fmt: skip
+    meta = {
+        **sample.describe(),
+        "nominal": f"the model ({args.model}), as without --robust",
+        "worst_over": worst_over + (f" and the physics preset {landing}" if timings else ""),
+        "worst_sampled_over": worst_over,
+        "actuation_ms": list(timings),
+        "spread_over": "the sampled plants (percentiles: values of sampled plants)",
+        "physics_preset": args.preset,
+        "pareto_of": "nominal settling_time_s against worst-case overshoot_percent",
+        "choice_rule": rule,
+        "counts": {k.replace(" ", "_"): v for k, v in choice.robust_counts(rows).items()},
+        "statuses": choice.ROBUST_STATUSES,
+    }
     if timings:
         legend = (
             f"nominal: the model; worst: over the model, the {plants} plants and physics preset "
@@ -286,9 +291,15 @@ def run(args: argparse.Namespace) -> int:
     rows, results, best, rule, doc, text = (_robust if args.robust else _nominal)(args, job)
     chosen, refusal = _choose(args, results, best, rule)
     if args.json:
-        head = {"method": args.method, "model": str(args.model), "plant": args.plant,
-                "reference": args.reference, "duration_s": args.duration,
-                "extra_delay_ticks": args.extra_delay, "metrics_of": "worse of motors a and b"}  # fmt: skip
+        head = {
+            "method": args.method,
+            "model": str(args.model),
+            "plant": args.plant,
+            "reference": args.reference,
+            "duration_s": args.duration,
+            "extra_delay_ticks": args.extra_delay,
+            "metrics_of": "worse of motors a and b",
+        }
         print(dumps({**head, "settings": [r.to_dict() for r in rows], "chosen": chosen, **doc}))
     else:
         print("\n".join(text))
