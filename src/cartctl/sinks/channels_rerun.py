@@ -129,8 +129,7 @@ class ChannelsRerunSink(RerunSink):
         floats, ints = labels[: self.float_count], labels[self.float_count :]
         rec.send_blueprint(channels_blueprint(floats, ints))
         for label in labels:
-            rec.log(f"{GPIO_ROOT}/{label}", rr.SeriesLines(names=[label]), static=True,
-                    strict=True)  # fmt: skip
+            rec.log(f"{GPIO_ROOT}/{label}", rr.SeriesLines(names=[label]), static=True, strict=True)
         rr.TextLog.columns(text=[""], level=["INFO"])
 
     def log_text(

@@ -294,8 +294,8 @@ def timelines(time_s: Iterable[float], ticks: Iterable[int]) -> list[rr.TimeColu
 
 def _log_style(rec: rr.RecordingStream, entity: str) -> None:
     style = STYLES[entity]
-    rec.log(entity, rr.SeriesLines(colors=[style.color], names=[style.name],
-                                   widths=[style.width]), static=True, strict=True)  # fmt: skip
+    lines = rr.SeriesLines(colors=[style.color], names=[style.name], widths=[style.width])
+    rec.log(entity, lines, static=True, strict=True)
 
 
 Series = Mapping[str, tuple[ArrayLike, ArrayLike | None, ArrayLike]]  # path: (time, tick, values)

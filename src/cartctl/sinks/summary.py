@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from cartctl.cart import encoder_quantum_rad_s
 from cartctl.errors import InputError, OutputError
-from cartctl.link.bridge import HOST_LOSS_WARN_PERCENT
+from cartctl.link.bridge import HOST_LOSS_WARN_PERCENT, EchoDelays
 from cartctl.measures.metrics import finite_or_none
 from cartctl.measures.numfmt import column_decimals, format_column, format_fixed, render_table
 from cartctl.measures.stepinfo import SETTLING_FRACTION, first_step, step_info
@@ -97,8 +97,10 @@ def trace_metrics(columns: Columns, period_s: float) -> dict[str, Any]:
 
 def _judged(columns: Columns, m: str, speed: Array, period_s: float) -> dict[str, Any]:
     """:func:`motor_metrics` of motor ``m`` on ``speed``, settling within one encoder count."""
-    return motor_metrics(columns["time_s"], columns[f"reference_{m}"], speed,
-                         columns[f"voltage_{m}"], settling_floor=encoder_quantum_rad_s(period_s))  # fmt: skip
+    time_s, reference, voltage = (columns[k] for k in ("time_s", f"reference_{m}", f"voltage_{m}"))
+    return motor_metrics(
+        time_s, reference, speed, voltage, settling_floor=encoder_quantum_rad_s(period_s)
+    )
 
 
 def add_smoothed_metrics(
@@ -225,8 +227,6 @@ def host_loss_text(link: Mapping[str, Any]) -> str:
 
 
 def delay_seen_lines(link: Mapping[str, Any]) -> list[str]:
-    from cartctl.link.bridge import EchoDelays
-
     def spread(counts: Mapping[str, int] | None) -> str:
         return EchoDelays.of({int(d): n for d, n in (counts or {}).items()}).describe()
 

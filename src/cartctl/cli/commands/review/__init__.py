@@ -90,14 +90,12 @@ def run(args: argparse.Namespace) -> int:
     if text:
         print(text)
     if args.screenshot:
-        out = screenshot(path, Path(args.screenshot), extra=extra)
-        print(f"saved {out}")
-        return 0
-    if args.web:
+        print(f"saved {screenshot(path, Path(args.screenshot), extra=extra)}")
+    elif args.web:
         serve_web(path, extra=extra)
-        return 0
-    url = open_in_viewer(path, extra=extra)
-    print(f"opened {path} in the Rerun viewer ({url})")
+    else:
+        url = open_in_viewer(path, extra=extra)
+        print(f"opened {path} in the Rerun viewer ({url})")
     return 0
 
 

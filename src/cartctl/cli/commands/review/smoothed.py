@@ -78,8 +78,8 @@ def add_smoothed(
     """Smooth the trace, add the metrics and ``summary["smoothed"]`` (``{"model", "method",
     "extra_delay_ticks"}``, or ``{"model", "method", "note": why not}``); returns the speeds per
     motor. ``strict``: raise a problem with the model (one the user named) instead of noting it."""
-    entry: dict[str, Any] = {"model": None if model_path is None else str(model_path),
-                             "method": METHOD}  # fmt: skip
+    model = None if model_path is None else str(model_path)
+    entry: dict[str, Any] = {"model": model, "method": METHOD}
     summary["smoothed"] = entry
     if model_path is None:
         entry["note"] = NEEDS_MODEL
