@@ -83,10 +83,6 @@ class RobustScore:
     physics: dict[str, Any] = field(default_factory=dict)
     actuation: tuple[dict[str, Any], ...] = ()
 
-    @property
-    def actuation_unsettled(self) -> int:
-        return sum(not entry["settled"] for entry in self.actuation)
-
     def value(self, metric: str, which: str) -> float:
         """A figure as a float: NaN where undefined (``worst`` may be ``inf``)."""
         v = self.figures[metric][which]
@@ -108,7 +104,7 @@ class RobustScore:
                 "plants": self.plants, "plants_unsettled": self.unsettled,
                 "plants_diverged": self.diverged, "settles_on_every_plant": self.settles_everywhere,
                 "physics": self.physics, "actuation": list(self.actuation),
-                "actuation_unsettled": self.actuation_unsettled}  # fmt: skip
+                "actuation_unsettled": sum(not e["settled"] for e in self.actuation)}  # fmt: skip
 
 
 def _timing_value(entry: dict[str, Any], key: str) -> float:
@@ -131,24 +127,21 @@ def score_plants(
 ) -> RobustScore:
     """Aggregate :func:`step_metrics` of the motors (row 0 the nominal model) with the nominal
     figures, the physics entry and the actuation runs (:class:`RobustScore`)."""
-    stacks = {key: np.vstack([m[key] for m in per_motor]) for key in ROBUST_METRICS}
     # per plant and metric the worse motor: NaN (undefined) wins, then inf
-    worse = {key: np.where(np.isnan(s).any(axis=0), np.nan, np.max(s, axis=0))
-             for key, s in stacks.items()}  # fmt: skip
+    worse = {key: np.max([m[key] for m in per_motor], axis=0) for key in ROBUST_METRICS}
     unsettled_rows = np.isinf(worse["settling_time_s"]) & ~diverged
     figures: dict[str, dict[str, float | None]] = {}
     for key in ROBUST_METRICS:
-        values = worse[key]
+        values, sampled = worse[key], worse[key][1:]
+        everything = np.concatenate([values, [_timing_value(entry, key) for entry in actuation]])
         row: dict[str, float | None] = {"nominal": nominal.get(key)}
-        row["worst_sampled"] = None if np.isnan(values).any() else float(np.max(values))
-        timed = [_timing_value(entry, key) for entry in actuation]
-        everything = np.concatenate([values, timed])
-        row["worst"] = None if np.isnan(everything).any() else float(np.max(everything))
-        sampled = values[1:]
+        for which, v in (("worst_sampled", values), ("worst", everything)):
+            row[which] = None if np.isnan(v).any() else float(np.max(v))
+        spread = sampled.size > 0 and not np.isnan(sampled).any()
         for p in PERCENTILES:
-            v = (math.nan if not sampled.size or np.isnan(sampled).any()
-                 else float(np.percentile(sampled, p, method="inverted_cdf")))  # fmt: skip
-            row[f"p{p}"] = None if math.isnan(v) else v
+            row[f"p{p}"] = (
+                float(np.percentile(sampled, p, method="inverted_cdf")) if spread else None
+            )
         figures[key] = row
     return RobustScore(figures, int(diverged.size - 1), int(np.count_nonzero(unsettled_rows)),
                        int(np.count_nonzero(diverged)), physics, tuple(actuation))  # fmt: skip
