@@ -1,7 +1,6 @@
 """The ``cartctl`` subcommands in workflow order, each with ``add_parser(subparsers)`` setting
 ``func`` to its ``run(args) -> int``. Their top level loads no numpy, scipy, matplotlib, Rerun or
-serial stack: ``run`` does (``tests/test_startup.py``).
-"""
+serial stack: ``run`` does (``tests/test_startup.py``)."""
 
 from cartctl.cli.commands import (
     commission,

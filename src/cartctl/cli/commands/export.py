@@ -1,7 +1,6 @@
 """``cartctl export FILE.toml --arduino [--out FILE.h] | --mat FILE.mat``: a controller as C for
 the cart's ``Robot::control()`` (:mod:`cartctl.export.arduino`), or a model or controller file
-(told apart by their ``format`` line) as MATLAB ``.mat`` (:mod:`cartctl.export.mat`).
-"""
+(told apart by their ``format`` line) as MATLAB ``.mat`` (:mod:`cartctl.export.mat`)."""
 
 from __future__ import annotations
 

@@ -179,9 +179,8 @@ def _poles_hz(model: ArxModel) -> str:
 
 
 def format_motor(res: MotorIdentification, compared: Mapping[str, ArxModel]) -> str:
-    """The human-readable block of one motor: the report's fit table
-    (:func:`~cartctl.identification.report.fit_rows`, with the ``--compare`` models' rows), the
-    delay evidence, the residual tests and the orders table."""
+    """One motor's block: the report's fit table (with the ``--compare`` models' rows), the delay
+    evidence, the residual tests and the orders table."""
     from cartctl.identification.report import fit_rows
     from cartctl.measures.numfmt import render_table
 

@@ -136,11 +136,8 @@ def check_output_file(path: str | Path, option: str) -> Path:
 
 
 def check_run_outputs(args: argparse.Namespace, prefix: str) -> tuple[Path, Path]:
-    """The trace (``.csv``) and recording (``.rrd``) paths of ``--out`` and ``--name``, checked.
-
-    Without ``--name`` the stem is ``PREFIX-YYYYmmdd-HHMMSS``, with ``-2``, ``-3`` … added when a
-    run of that name is already in ``--out``.
-    """
+    """The trace (``.csv``) and recording (``.rrd``) paths of ``--out`` and ``--name``, checked;
+    without ``--name`` ``PREFIX-YYYYmmdd-HHMMSS``, with ``-2``, ``-3`` … when that run exists."""
     out = check_output_folder(args.out, "--out")
     stem = args.name or datetime.now().strftime(f"{prefix}-%Y%m%d-%H%M%S")
     candidate, n = stem, 1

@@ -19,8 +19,6 @@ if TYPE_CHECKING:
     from cartctl.runtime.loop import ControlLoop, MemorySink
     from cartctl.session.prepare import PreparedRun
 
-# numpy, scipy and the rest load when the command runs, not when the parser is built
-
 
 def make_plant(*args: Any, **kwargs: Any) -> Any:
     """:func:`cartctl.plants.factory.make_plant`, imported on the first call (tests replace it)."""
@@ -110,7 +108,6 @@ def _checked_outputs(args: argparse.Namespace) -> tuple[Path, Path]:
     check_reference(args.reference, "--reference")
     if args.reference_b:
         check_reference(args.reference_b, "--reference-b")
-    # before anything is loaded or driven
     csv_path, rrd_path = options.check_run_outputs(args, "run")
     if args.fast and kind not in SIMULATED:
         raise InputError(f"--fast needs a simulated plant (sim or physics), not '{args.plant}'")

@@ -8,6 +8,7 @@ import argparse
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import replace
+from itertools import groupby
 from typing import TYPE_CHECKING, Any
 
 import cartctl.cli.commands.tune_checks as checks
@@ -110,13 +111,9 @@ def choosable_text(results: Sequence[tuning.TuneResult]) -> str:
     indices = sorted(r.index for r in results if r.feasible)
     if not indices:
         return "none: no setting of the grid could be designed and run; widen the grid"
-    spans: list[list[int]] = []
-    for i in indices:
-        if spans and i == spans[-1][1] + 1:
-            spans[-1][1] = i
-        else:
-            spans.append([i, i])
-    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in spans)
+    # consecutive numbers share their offset from their position: one group, one range
+    runs = [[i for _, i in run] for _, run in groupby(enumerate(indices), lambda t: t[1] - t[0])]
+    return ", ".join(str(r[0]) if len(r) == 1 else f"{r[0]}-{r[-1]}" for r in runs)
 
 
 def _choose(
@@ -125,9 +122,8 @@ def _choose(
     best: Callable[[], tuning.TuneResult],
     rule: str,
 ) -> tuple[dict[str, Any] | None, InputError | None]:
-    """``--choose``'s entry, its controller file written as ``cartctl design`` would (a setting
-    that did not run refused, naming those that can be chosen), or the refusal to raise once the
-    results are printed."""
+    """``--choose``'s entry and its controller file, written as ``cartctl design`` would, or the
+    refusal to raise once the results are printed (a setting that did not run)."""
     from cartctl.tune import engine
 
     if args.choose is None:

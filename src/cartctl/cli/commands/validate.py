@@ -1,7 +1,6 @@
 """``cartctl validate MODEL.toml FILE.csv``: a model simulated on recorded input against the
 measured speed (:mod:`cartctl.identification.validate`), ``--plot`` the report's figures 6 and 7.
-Also the ``--plot`` helpers ``cartctl linearity`` shares.
-"""
+Also the ``--plot`` helpers ``cartctl linearity`` shares."""
 
 from __future__ import annotations
 
