@@ -43,6 +43,9 @@ def _channels_view(
 
 
 _SPEED_KINDS = ("reference", "speed", "estimate", "true_speed")
+# a monitor label that names a motor's signal (``speedA`` too) → the run's entity of that signal
+_RUN_ENTITY = {label_key(f"{kind}_{m}"): f"motor/{m}/{kind}"
+               for m in ("a", "b") for kind in (*_SPEED_KINDS, "voltage")}  # fmt: skip
 
 
 def _natural(label: str) -> list[object]:
@@ -52,11 +55,9 @@ def _natural(label: str) -> list[object]:
 def review_styles(paths: Iterable[str]) -> dict[str, SeriesStyle]:
     """Entity path → the run's style for the paths whose labels name a motor's signals
     (``gpio/speed_a`` drawn as ``motor/a/speed``), in label order."""
-    run_style = {label_key(f"{kind}_{m}"): STYLES[f"motor/{m}/{kind}"]
-                 for m in ("a", "b") for kind in (*_SPEED_KINDS, "voltage")}  # fmt: skip
     gpio = sorted({path for path in paths if path.startswith(f"{GPIO_ROOT}/")})
-    styled = {path: run_style.get(label_key(path.removeprefix(f"{GPIO_ROOT}/"))) for path in gpio}
-    return {path: style for path, style in styled.items() if style is not None}
+    run = {path: _RUN_ENTITY.get(label_key(path.removeprefix(f"{GPIO_ROOT}/"))) for path in gpio}
+    return {path: STYLES[entity] for path, entity in run.items() if entity is not None}
 
 
 def review_blueprint(
@@ -70,13 +71,7 @@ def review_blueprint(
     """
     labels = sorted((p.removeprefix(f"{GPIO_ROOT}/") for p in extremes
                      if p.startswith(f"{GPIO_ROOT}/")), key=_natural)  # fmt: skip
-    taken: set[str] = set()
-
-    def pick(keys: Sequence[str]) -> list[str]:
-        wanted = {label_key(k) for k in keys}
-        hits = [label for label in labels if label_key(label) in wanted and label not in taken]
-        taken.update(hits)
-        return hits
+    run = {label: _RUN_ENTITY.get(label_key(label), "") for label in labels}
 
     def view(name: str, chosen: list[str], margin: float = 0.1) -> rrb.TimeSeriesView:
         paths = [f"{GPIO_ROOT}/{label}" for label in chosen]
@@ -84,8 +79,10 @@ def review_blueprint(
 
     columns = []
     for m in ("a", "b"):
-        speeds = pick([f"{k}_{m}" for k in _SPEED_KINDS])
-        voltages = pick([f"voltage_{m}"])
+        speeds = [
+            label for label in labels if run[label].removeprefix(f"motor/{m}/") in _SPEED_KINDS
+        ]
+        voltages = [label for label in labels if run[label] == f"motor/{m}/voltage"]
         plots = []
         if speeds:
             plots.append(view(f"Motor {m.upper()}: speed (rad/s)", speeds, SPEED_MARGIN))
@@ -96,7 +93,7 @@ def review_blueprint(
     rows: list[tuple[float, rrb.Container | rrb.View]] = []  # (share, view)
     if columns:
         rows.append((6, rrb.Horizontal(*columns)))
-    rest = [label for label in labels if label not in taken]
+    rest = [label for label in labels if not run[label]]
     fractions = [label for label in rest if f"{GPIO_ROOT}/{label}" not in whole]
     counts = [label for label in rest if f"{GPIO_ROOT}/{label}" in whole]
     for name, chosen, share in (("Channels", fractions, 2), ("Whole-number channels", counts, 1.5)):
