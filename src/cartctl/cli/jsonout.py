@@ -15,17 +15,13 @@ __all__ = ["dumps", "strict"]
 
 def strict(value: Any) -> Any:
     """``value`` with every non-finite float replaced by None and numpy types made plain."""
-    if isinstance(value, bool | None | str | int) and not isinstance(value, np.generic):
-        return value
     if isinstance(value, float | np.floating):
         number = float(value)
         return number if math.isfinite(number) else None
-    if isinstance(value, np.integer | np.bool_):
-        return value.item()
+    if isinstance(value, np.generic | np.ndarray):  # numpy's own: plain Python values and lists
+        return strict(value.tolist())
     if isinstance(value, Mapping):
         return {str(k): strict(v) for k, v in value.items()}
-    if isinstance(value, np.ndarray):
-        return strict(value.tolist())
     if isinstance(value, list | tuple):
         return [strict(v) for v in value]
     return value
