@@ -90,7 +90,7 @@ def breakdown(y: NDArray[np.float64], u: NDArray[np.float64], repeats: int) -> d
             "check the data (finite, excited)": validate,
             "build [Φ | y] (one array, in place)": lambda: arx.augmented_regression(data, 2, 2, 2),
             "target spread (prediction fit)": spread,
-            "simulation fit (lfilter, norms)": lambda: arx._simulation_fit(model, data),
+            "simulation fit (lfilter, norms)": lambda: arx.simulation_fit(model, data),
         },
         repeats,
     )

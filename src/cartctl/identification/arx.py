@@ -177,8 +177,11 @@ def _fit_from_norms(error_norm: float, spread: float) -> float:
     return float(100.0 * (1.0 - error_norm / spread))
 
 
-def _simulation_fit(model: ArxModel, data: Sequence[Checked]) -> float:
-    """:func:`simulation_fit` of checked experiments, without concatenating them."""
+def simulation_fit(model: ArxModel, segments: Sequence[Segment]) -> float:
+    """NRMSE fit (%) of ``model`` simulated from rest on each experiment, over all of them
+    together (without concatenating them); −inf when the simulation diverges, NaN for a constant
+    output."""
+    data = as_segments(segments)
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model may diverge
         sims = [model.simulate(u) for _, u in data]
         if not all(np.isfinite(sim).all() for sim in sims):
@@ -192,12 +195,6 @@ def _simulation_fit(model: ArxModel, data: Sequence[Checked]) -> float:
             np.subtract(y, mean, out=work)
             spread2 += _sum_squares(work)
         return _fit_from_norms(np.sqrt(error2), np.sqrt(spread2))
-
-
-def simulation_fit(model: ArxModel, segments: Sequence[Segment]) -> float:
-    """NRMSE fit (%) of ``model`` simulated from rest on each experiment, over all of them
-    together; −inf when the simulation diverges, NaN for a constant output."""
-    return _simulation_fit(model, as_segments(segments))
 
 
 def prediction_fit(model: ArxModel, segments: Sequence[Segment]) -> float:
@@ -236,9 +233,7 @@ def fit_arx(
     return ArxFit(
         model=model,
         theta_std=theta_std,
-        fit_simulation_percent=(
-            simulation_fit(model, eval_segments) if eval_segments else _simulation_fit(model, data)
-        ),
+        fit_simulation_percent=simulation_fit(model, eval_segments or data),
         fit_prediction_percent=_fit_from_norms(residual_norm, spread),
         residual_rms=float(residual_norm / np.sqrt(rows)),
         n_samples=int(rows),

@@ -247,10 +247,9 @@ def etfe(
             f"{segments} segments of {y_arr.size} samples are {length} samples long; "
             "use fewer segments (each needs at least 8)"
         )
-    spectra: dict[str, Any] = {"fs": 1.0 / ts, "window": "hann", "nperseg": length,
-                               "noverlap": length - length // 2, "detrend": False}  # fmt: skip
-    freq, cross = scipy.signal.csd(u_arr, y_arr, **spectra)  # Σ conj(U) Y: the H1 numerator
-    _, power = scipy.signal.welch(u_arr, **spectra)  # Σ |U|²
+    hann = {"window": "hann", "nperseg": length, "noverlap": length - length // 2}
+    freq, cross = scipy.signal.csd(u_arr, y_arr, 1.0 / ts, detrend=False, **hann)  # Σ conj(U) Y
+    _, power = scipy.signal.welch(u_arr, 1.0 / ts, detrend=False, **hann)  # Σ |U|²
     keep = _excited(np.sqrt(power), min_input_fraction)
     return Etfe(freq[keep], cross[keep] / power[keep], False, segments, ts)
 

@@ -137,9 +137,8 @@ def project_poles(ar: Sequence[float] | NDArray[np.float64], radius: float) -> N
 
 
 def _refit_b(
-    ar: NDArray[np.float64], data: Sequence[Checked],
-    nb: int, nk: int,
-) -> NDArray[np.float64]:  # fmt: skip
+    ar: NDArray[np.float64], data: Sequence[Checked], nb: int, nk: int
+) -> NDArray[np.float64]:
     """B minimising the simulation error with A fixed (ŷ is linear in B)."""
     a = np.concatenate([[1.0], ar])
     cols, target = [], []
@@ -151,11 +150,11 @@ def _refit_b(
 
 
 def _refine(
-    start: NDArray[np.float64],
-    data: Sequence[Checked],
-    na: int, nb: int, nk: int, rho: float, max_evaluations: int,
-) -> NDArray[np.float64]:  # fmt: skip
-    """θ minimising the simulation error on ``data`` over poles inside ρ, from θ ``start``."""
+    start: NDArray[np.float64], data: Sequence[Checked], na: int, nk: int, rho: float, evals: int
+) -> NDArray[np.float64]:
+    """θ minimising the simulation error on ``data`` over poles inside ρ, from θ ``start``, with
+    at most ``evals`` evaluations."""
+    nb = start.size - na
     eta0 = _step_down(start[:na], rho)
     if eta0 is None:  # a start on the bound itself: from just inside
         eta0 = _step_down(project_poles(start[:na], rho - _PROJECT_MARGIN), rho)
@@ -175,7 +174,7 @@ def _refine(
 
     x0 = np.concatenate([eta0, start[na:]])
     result = optimize.least_squares(
-        residual, x0, jac=jacobian, method="trf", x_scale="jac", max_nfev=max_evaluations
+        residual, x0, jac=jacobian, method="trf", x_scale="jac", max_nfev=evals
     )
     return theta_of(result.x)
 
@@ -235,15 +234,10 @@ def fit_oe(
     if na == 0:  # an FIR model: ŷ is linear in B, its least squares is the optimum
         candidates.append(("refined", _refit_b(start[:0], data, nb, nk)))
     else:
-        candidates.append(("refined", _refine(start, data, na, nb, nk, rho, max_evaluations)))
-        same = len(evaluation) == len(data) and all(
-            np.array_equal(y1, y2) and np.array_equal(u1, u2)
-            for (y1, u1), (y2, u2) in zip(evaluation, data, strict=True)
-        )
-        if not same:
-            candidates.append(
-                ("refined on eval", _refine(start, evaluation, na, nb, nk, rho, max_evaluations))
-            )
+        candidates.append(("refined", _refine(start, data, na, nk, rho, max_evaluations)))
+        if eval_segments is not None and eval_segments is not segments:
+            refined = _refine(start, evaluation, na, nk, rho, max_evaluations)
+            candidates.append(("refined on eval", refined))
     fits = [fit_of(theta) for _, theta in candidates]
     best = max(range(len(candidates)), key=lambda i: (fits[i], i > 0))
     label, theta = candidates[best]

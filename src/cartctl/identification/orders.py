@@ -16,7 +16,7 @@ import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
-from functools import cached_property
+from functools import cached_property, partial
 from typing import Any
 
 import numpy as np
@@ -51,8 +51,7 @@ class DelayEstimate:
 
     def to_dict(self) -> dict[str, Any]:
         keys = ("nk", "residual_rms", "fit_prediction_percent", "fit_simulation_percent")
-        rows = zip(self.candidates, self.residual_rms, self.fit_prediction_percent,
-                   self.fit_simulation_percent, strict=True)  # fmt: skip
+        rows = zip(self.candidates, *(getattr(self, k) for k in keys[1:]), strict=True)
         return {
             "nk": self.nk,
             "nk_alone": self.nk if self.nk_alone is None else self.nk_alone,
@@ -84,11 +83,11 @@ def delay_evidence(
         check_orders(na, nb, c)
     data = as_segments(segments)
     start = max(first_row(na, nb, c) for c in cands)
+    fit = partial(fit_arx, data, period_s=period_s, start=start, eval_segments=eval_segments)
     fits = []
     for c in cands:
         try:
-            fits.append(fit_arx(data, na=na, nb=nb, nk=c, period_s=period_s, start=start,
-                                eval_segments=eval_segments))  # fmt: skip
+            fits.append(fit(na=na, nb=nb, nk=c))
         except IdentificationError as exc:
             raise IdentificationError(f"delay estimation, candidate nk = {c}: {exc}") from None
     rms = np.array([f.residual_rms for f in fits])
@@ -348,19 +347,18 @@ def order_table(
     for na, nb, nk in combos:
         check_orders(na, nb, nk)
     start = max(first_row(na, nb, nk) for na, nb, nk in combos)
+    arx = partial(fit_arx, segments, period_s=period_s, start=start, eval_segments=eval_segments)
     rows = []
     n_eq = 0
     for na, nb, nk in combos:
         d = na + nb
         try:
-            fit = fit_arx(segments, na=na, nb=nb, nk=nk, period_s=period_s, start=start,
-                          eval_segments=eval_segments)  # fmt: skip
+            fit = arx(na=na, nb=nb, nk=nk)
         except IdentificationError as err:
             nan = float("nan")
             rows.append(OrderRow(na, nb, nk, d, nan, nan, nan, nan, False, str(err)))
             continue
-        n = fit.n_samples
-        n_eq = n
+        n_eq = n = fit.n_samples
         v = fit.residual_rms**2
         fit_pct = (
             simulation_fit(fit.model, validation) if validation else fit.fit_simulation_percent

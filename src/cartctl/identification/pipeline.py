@@ -372,5 +372,5 @@ def model_file(
     keys = ("theta_std", "fit_simulation_percent", "fit_prediction_percent")
     dicts = {m: r.chosen.to_dict() for m, r in result.motors.items()}
     stats = {m: {k: d[k] for k in keys if d[k] is not None} for m, d in dicts.items()}
-    return ModelFile({m: r.chosen.model for m, r in result.motors.items()}, provenance, stats,
-                     loop_delay_ticks=result.loop_delay_ticks)  # fmt: skip
+    models = {m: r.chosen.model for m, r in result.motors.items()}
+    return ModelFile(models, provenance, stats, loop_delay_ticks=result.loop_delay_ticks)

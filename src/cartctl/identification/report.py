@@ -43,8 +43,8 @@ def _cell(value: Any) -> str:
 def _table(rows: Sequence[Mapping[str, Any]]) -> str:
     columns = list(dict.fromkeys(str(name) for row in rows for name in row))
     cells = [{str(k): v for k, v in row.items()} for row in rows]
-    return markdown_table([_cell(c) for c in columns],
-                          [[_cell(r.get(c)) for c in columns] for r in cells])  # fmt: skip
+    body = [[_cell(r.get(c)) for c in columns] for r in cells]
+    return markdown_table([_cell(c) for c in columns], body)
 
 
 def write_summary(out_dir: Path, *, title: str, sections: Sequence[ReportSection]) -> Path:
@@ -76,12 +76,13 @@ def _std(std: float, value: float) -> str:
     return "0" if abs(std) < 1e-9 * abs(value) else f"{std:.2g}"
 
 
-def _row(label: str, model: ArxModel, names: list[str], std: Any, sim: Any, pred: Any) -> dict:
+def _row(label: str, model: ArxModel, names: list[str], std: Any, fits: Mapping[str, Any]) -> dict:
     row: dict[str, Any] = {"model": label, "nk": model.nk}
     for i, (name, value) in enumerate(zip(names, model.theta, strict=False)):
         unit = "–" if i < model.na else "rad/s/V"
         spread = "" if std is None else f" ± {_std(std[i], value)}"
         row[f"{name} ({unit})"] = f"{value:.4g}{spread}"
+    sim, pred = fits["fit_simulation_percent"], fits["fit_prediction_percent"]
     row |= {"fit sim (%)": _fit_text(sim), "fit pred (%)": _fit_text(pred)}
     poles = ", ".join(f"{r.freq_hz:.2f}" for r in model.poles() if r.freq_hz is not None)
     return row | {"DC gain (rad/s/V)": f"{model.dc_gain():.4g}", "poles (Hz)": poles}
@@ -96,15 +97,13 @@ def fit_rows(
     names: list[str] = []
     for label, fit in res.variants().items():
         names = fit.theta_names()
-        rows.append(_row(label, fit.model, names, fit.theta_std, fit.fit_simulation_percent,
-                         fit.fit_prediction_percent))  # fmt: skip
+        rows.append(_row(label, fit.model, names, fit.theta_std, fit.to_dict()))
     compared = compared or {}
     for label, f in res.diagnostics.compared_fits(compared).items():
         model = compared[label]
         general = [f"a{i + 1}" for i in range(model.na)] + [f"b{j}" for j in range(model.nb)]
         own = names if model.theta.size == len(names) else general
-        rows.append(_row(label, model, own, None, f["fit_simulation_percent"],
-                         f["fit_prediction_percent"]))  # fmt: skip
+        rows.append(_row(label, model, own, None, f))
     return rows
 
 

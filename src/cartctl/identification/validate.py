@@ -25,10 +25,6 @@ PERIOD_TOLERANCE = 0.1
 """How far (as a fraction) a trace's median time step may differ from the model's Ts."""
 
 
-def _where(trace: Trace, unnamed: str = "the trace") -> str:
-    return trace.source if trace.source else unnamed
-
-
 def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x**2)))
 
@@ -88,18 +84,18 @@ def validate(model: ArxModel, trace: Trace, motor: str) -> ValidationResult:
     """Simulate ``model`` from rest on ``motor``'s voltage and compare with its measured speed;
     refuses a trace off the model's Ts by :data:`PERIOD_TOLERANCE` and a motor never driven."""
     voltage, measured = trace.voltage(motor), trace.speed(motor)
+    where = trace.source or "the trace"
     step_s, period_s = trace.period_s, model.period_s
     if abs(step_s - period_s) > PERIOD_TOLERANCE * period_s:
         raise InputError(
-            f"{_where(trace)} is sampled every {step_s * 1e3:.4g} ms but the model has "
+            f"{where} is sampled every {step_s * 1e3:.4g} ms but the model has "
             f"Ts = {period_s * 1e3:.4g} ms; record the trace at the model's period"
         )
     if not np.any(voltage):
         others = [m for m in MOTORS if m != motor and np.any(trace.voltage(m))]
         hint = f"choose --motor {others[0]}" if others else "the trace drives neither motor"
         raise InputError(
-            f"motor {motor}'s voltage is zero throughout {_where(trace)}; nothing to validate "
-            f"— {hint}"
+            f"motor {motor}'s voltage is zero throughout {where}; nothing to validate — {hint}"
         )
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model may overflow
         simulated = model.simulate(voltage)
@@ -169,7 +165,7 @@ def validate_models(
         results[name] = validate(model, trace, name)
     if not results:
         raise InputError(
-            f"the voltage of motor(s) {', '.join(skipped)} is zero throughout {_where(trace)}; "
+            f"the voltage of motor(s) {', '.join(skipped)} is zero throughout {trace.source or 'the trace'}; "
             "nothing to validate"
         )
     path = None if model_file.path is None else str(model_file.path)
@@ -254,7 +250,7 @@ class LinearityResult:
 def _onset(trace: Trace, motor: str, role: str) -> StepOnset:
     voltage = trace.voltage(motor)
     onset = find_step(voltage)
-    where = _where(trace, f"the {role} step trace")
+    where = trace.source or f"the {role} step trace"
     if onset is None:
         held = "zero throughout" if not np.any(voltage) else "not a single step from 0 V"
         raise InputError(
