@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cartctl.cart import PERIOD_S, SUPPLY_V, check_voltage_limit
+from cartctl.cart import SUPPLY_V, check_voltage_limit
 from cartctl.data.modelfile import ModelFile
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
@@ -39,27 +39,16 @@ MAX_DRAWS_PER_PLANT = 100  # θ draws per plant on average before giving up on s
 @dataclass(frozen=True)
 class ArxBatch:
     """N ARX plants of one motor: ``ar`` (N, na) and ``b_lags`` (N, L), the coefficient of u[k − l]
-    in y[k + 1] (b_i at l = nk − 1 + i, else 0; rad/s per V), with the plants' saturation (V) and Ts
-    (s)."""
+    in y[k + 1] (b_i at l = nk − 1 + i, else 0; rad/s per V), and Ts (s); their commands saturate
+    at the supply, as :class:`~cartctl.plants.sim.ArxPlant`'s."""
 
     ar: FloatArray
     b_lags: FloatArray
-    voltage_limit_v: float = SUPPLY_V
-    period_s: float = PERIOD_S
-
-    @property
-    def size(self) -> int:
-        return int(self.b_lags.shape[0])
+    period_s: float
 
     @classmethod
     def from_arrays(
-        cls,
-        ar: ArrayLike,
-        b: ArrayLike,
-        nk: ArrayLike,
-        *,
-        voltage_limit_v: float = SUPPLY_V,
-        period_s: float = PERIOD_S,
+        cls, ar: ArrayLike, b: ArrayLike, nk: ArrayLike, *, period_s: float
     ) -> ArxBatch:
         """From ``ar`` (N, na), ``b`` (N, nb) and input delays ``nk`` (N,) ≥ 1."""
         b_arr, nk_arr = np.asarray(b, dtype=float), np.asarray(nk, dtype=int)
@@ -68,20 +57,15 @@ class ArxBatch:
             raise InputError(f"a plant needs an input delay nk >= 1, got {int(nk_arr.min())}")
         lags = np.zeros((n, nk_max - 1 + nb))
         np.put_along_axis(lags, nk_arr[:, None] - 1 + np.arange(nb), b_arr, axis=1)
-        return cls(np.asarray(ar, dtype=float), lags, float(voltage_limit_v), float(period_s))
+        return cls(np.asarray(ar, dtype=float), lags, float(period_s))
 
     @classmethod
-    def from_models(
-        cls, models: Sequence[ArxModel], *, voltage_limit_v: float = SUPPLY_V
-    ) -> ArxBatch:
+    def from_models(cls, models: Sequence[ArxModel]) -> ArxBatch:
         """From ARX models of equal orders and period (their delays may differ)."""
-        if not models:
-            raise InputError("a plant batch needs at least one model")
         if len({(m.na, m.nb, m.period_s) for m in models}) != 1:
             raise InputError("the models of a plant batch must share na, nb and the period")
-        return cls.from_arrays([m.ar for m in models], [m.b for m in models],
-                               [m.nk for m in models], voltage_limit_v=voltage_limit_v,
-                               period_s=models[0].period_s)  # fmt: skip
+        columns = ([m.ar for m in models], [m.b for m in models], [m.nk for m in models])
+        return cls.from_arrays(*columns, period_s=models[0].period_s)
 
 
 @dataclass(frozen=True)
@@ -122,7 +106,7 @@ def simulate_batch(
     c = controller
     if not isinstance(c, PiController | StateFeedbackController):
         raise InputError(f"the batch loop does not know the controller {type(c).__name__}")
-    n_ticks, n = ref.size, plants.size
+    n_ticks, n = ref.size, plants.b_lags.shape[0]
     # the controller's runtime law (pi_law or feedback_law) over the plants, inside its estimator
     if isinstance(c, PiController):
         gains = (
@@ -143,7 +127,7 @@ def simulate_batch(
     y_hist = np.zeros((na + n_ticks + 1, n))
     voltage = np.zeros((n, n_ticks + 1))
     diverged = np.zeros(n, dtype=bool)
-    loop_lim, plant_lim = float(voltage_limit_v), plants.voltage_limit_v
+    loop_lim = float(voltage_limit_v)
     with np.errstate(all="ignore"):
         for k in range(n_ticks):
             r, y = float(ref[k]), y_hist[na + k]
@@ -159,7 +143,7 @@ def simulate_batch(
             u = clip(np.where(np.isfinite(u), u, 0.0), loop_lim)
             voltage[:, k] = u
             base = width - 1 + k
-            u_hist[base] = clip(u, plant_lim)
+            u_hist[base] = clip(u, SUPPLY_V)
             y_next = arx_next(b_lags, u_hist[base::-1], 0, ar, y_hist[na + k :: -1])
             diverged |= ~(np.abs(y_next) < DIVERGED_RAD_S)
             y_next[diverged] = 0.0
@@ -246,8 +230,7 @@ def _stable(ar: NDArray[np.float64]) -> NDArray[np.bool_]:
         return np.ones(n, dtype=bool)
     companion = np.zeros((n, na, na))
     companion[:, 0, :] = -ar
-    if na > 1:
-        companion[:, np.arange(1, na), np.arange(na - 1)] = 1.0
+    companion[:, np.arange(1, na), np.arange(na - 1)] = 1.0  # (nothing for na = 1)
     return np.max(np.abs(np.linalg.eigvals(companion)), axis=1) < 1.0
 
 

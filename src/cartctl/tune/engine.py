@@ -59,7 +59,6 @@ class DelayedPlant:
         self.plant = plant
         self.ticks = check_extra_delay_ticks(ticks)
         self.period_s = plant.period_s
-        self._queue: deque[tuple[float, float]] = deque()
 
     def reset(self) -> Measurement:
         self._queue = deque([(0.0, 0.0)] * self.ticks)
@@ -104,7 +103,6 @@ class Nominal:
     controllers: dict[str, Controller] = field(default_factory=dict)
     references: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     voltage_limit_v: float = 0.0
-    period_s: float = 0.0
 
 
 def evaluate_nominal(
@@ -127,7 +125,7 @@ def evaluate_nominal(
     if failure:
         return Nominal(TuneResult(index, settings, False, RUN_FAILED + failure))
     result = TuneResult(index, settings, True, motors=summary["motors"])
-    return Nominal(result, controllers, refs, limit_v, plant.period_s)
+    return Nominal(result, controllers, refs, limit_v)
 
 
 def save_setting(method: str, settings: Mapping[str, float], model_path: str | Path,
@@ -144,9 +142,8 @@ def save_setting(method: str, settings: Mapping[str, float], model_path: str | P
             "--out", str(out)]  # fmt: skip
     models = load_models(model_path)
     designs = design_models(request, models, ("a", "b"))
-    entries = designs.entries()
-    for m, analysis in analyse_designs(designs).items():
-        entries[m].update(analysis.entry())
+    for m, analysis in analyse_designs(designs).items():  # the file's analysis: the loop's Ms
+        designs.motors[m].entry.update(analysis.entry())
     command = "cartctl " + shlex.join(argv)
     save_controller(controller_file(designs, model_path, command=command,
                                     period_s=models.period_s), out)  # fmt: skip

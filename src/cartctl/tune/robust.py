@@ -208,7 +208,7 @@ def sampled_metrics(
 ) -> tuple[list[dict[str, FloatArray]], NDArray[np.bool_]]:
     """:func:`step_metrics` per motor of a setting on the nominal model (row 0) and the sampled
     plants (batch loop), and which rows ran away."""
-    floor = encoder_quantum_rad_s(nominal.period_s)
+    floor = encoder_quantum_rad_s(models.period_s)  # the sim plant's period
     per_motor, diverged = [], np.zeros(sample.size + 1, dtype=bool)
     for m in ("a", "b"):
         model, s = models.motor(m).with_extra_delay(extra_delay_ticks), sample.motors[m]
