@@ -80,11 +80,10 @@ def make_plant(
 ) -> tuple[Plant, str]:
     """The plant named ``spec`` (docs/plants.md) and one line saying what it is.
 
-    ``model_path``: the ``sim`` plant's models; ``preset``: ``air`` or ``ground`` for the physics
-    simulator; ``noise_std_rad_s``: extra white measurement noise of a simulated plant (0: off);
+    ``model_path``: the ``sim`` plant's models; ``preset``: ``air`` or ``ground`` (physics);
+    ``noise_std_rad_s``: extra white measurement noise of a simulated plant (0: off);
     ``connect_timeout_s``: a serial cart's longest wait for its first HEARTBEAT (s). A serial
-    plant is returned unconnected: its ``connect()`` (or first ``reset()``) opens the port.
-    """
+    plant is returned unconnected (``connect()`` opens the port)."""
     kind = check_plant_name(spec)
     options = spec.partition(":")[2]
     noise: dict[str, Any] = {"noise_std_rad_s": noise_std_rad_s, "seed": seed}

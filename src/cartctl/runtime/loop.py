@@ -100,12 +100,9 @@ def _per_tick(reference: PerTick | None, n: int) -> PerTick:
 
 
 class ControlLoop:
-    """The per-tick body of the closed loop over both motors.
-
-    ``controllers`` and ``references`` (rad/s per tick, equally long: the ticks to run) by motor
-    ``a``, ``b``; a motor without a controller gets 0 V. ``now_s`` is the clock that times each
-    tick's compute; ``voltage_limit_v`` clamps every command (a controller's own may be lower).
-    """
+    """The per-tick body of the closed loop over both motors: ``controllers`` and ``references``
+    (rad/s per tick, equally long) by motor (none: 0 V); ``now_s`` times each tick's compute;
+    ``voltage_limit_v`` clamps every command (a controller's own may be lower)."""
 
     def __init__(
         self,
