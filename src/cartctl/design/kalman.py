@@ -49,8 +49,6 @@ from cartctl.errors import InputError
 from cartctl.model import ArxModel, check_extra_delay_ticks
 from cartctl.runtime.kalman import KalmanDesign as KalmanDesign  # re-exported: a design's result
 
-_PBH_TOL = 1e-9  # a PBH-test singular value below this fraction of the largest is rank loss
-
 
 @dataclass(frozen=True, eq=False)
 class StateSpace:
@@ -94,7 +92,7 @@ def uncontrollable_modes(A: NDArray[np.float64], B: NDArray[np.float64]) -> list
     scale = max(1.0, float(np.linalg.norm(A)), float(np.linalg.norm(B)))
     for lam in np.linalg.eigvals(A):
         pbh = np.hstack([lam * np.eye(n) - A, B.reshape(n, 1)])
-        if np.linalg.svd(pbh, compute_uv=False)[-1] < _PBH_TOL * scale:
+        if np.linalg.svd(pbh, compute_uv=False)[-1] < 1e-9 * scale:  # rank lost
             bad.append(complex(lam))
     return bad
 

@@ -36,8 +36,6 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 LIGHT_DAMPING = 0.1  # a closed-loop pole with a damping ratio ζ below this rings: a warning
-_GRID_POINTS = 2000
-_LOW_HZ = 1e-3  # the grid's lowest frequency (Hz): an integrator puts L's pole at 0 Hz
 
 
 def _loop_peaks(
@@ -54,7 +52,7 @@ def _loop_peaks(
         ell = loop_at(np.array([f]))[0]
         return -float(abs(ell / (1.0 + ell)))
 
-    freq = np.geomspace(_LOW_HZ, 0.5 / model.period_s, _GRID_POINTS)
+    freq = np.geomspace(1e-3, 0.5 / model.period_s, 2000)  # from 1 mHz: integral action is at 0
     loop = loop_at(freq)
     on_grid = np.abs(loop / (1.0 + loop))
     i = int(np.argmax(on_grid))

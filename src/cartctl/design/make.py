@@ -5,7 +5,7 @@ step against the time-optimal bound (:func:`design_models`), and the controller 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -201,10 +201,9 @@ class Designs:
     request: DesignRequest
     models: dict[str, ArxModel]
     motors: dict[str, MotorDesign]
-    steps: dict[str, StepAnalysis] = field(default_factory=dict)
-    loop_delay_ticks: int | None = None
-    recorded_loop_delay_ticks: int | None = None
-    loop_delay_note: str | None = None
+    steps: dict[str, StepAnalysis]
+    loop_delay_ticks: int | None
+    loop_delay_note: str | None
 
     def entries(self) -> dict[str, dict[str, Any]]:
         """Per motor, the figures of ``design --json``."""
@@ -229,17 +228,16 @@ def design_models(
                                extra_delay_ticks=request.extra_delay_ticks)  # fmt: skip
         step = in_settling_band(step, model.period_s)  # the bound's band: max(2 %, one count)
         settle = step.info.settling_time_s
-        entry = made.entry
-        entry["step"] = step.to_dict()
-        entry["settling_bound_s"] = bound.settling_time_s
-        entry["settling_ratio"] = None if settle is None else settle / bound.settling_time_s
+        made.entry["step"] = step.to_dict()
+        made.entry["settling_bound_s"] = bound.settling_time_s
+        made.entry["settling_ratio"] = None if settle is None else settle / bound.settling_time_s
         # the loop the design is for (the model's recorded loop, or nk − 1, plus the extra delay)
-        entry["settling_bound_loop_delay_ticks"] = (
+        made.entry["settling_bound_loop_delay_ticks"] = (
             bound.loop_delay_ticks if loop_delay is None else loop_delay
         )
         designs[m] = made
         steps[m] = step
-    return Designs(request, by_motor, designs, steps, loop_delay, recorded, note)
+    return Designs(request, by_motor, designs, steps, loop_delay, note)
 
 
 def controller_file(
@@ -247,8 +245,9 @@ def controller_file(
 ) -> ControllerFile:
     """The controller file of ``designs`` (designed on ``model_path``), ready to save;
     InputError when the motors' models fit no one loop delay."""
-    loop_delay, _ = loop_delay_for(designs.request, designs.models,
-                                   designs.recorded_loop_delay_ticks, strict=True)  # fmt: skip
+    loop_delay = designs.loop_delay_ticks
+    if loop_delay is None:  # the models' delays differ: the reason, as an InputError
+        loop_delay_for(designs.request, designs.models)
     motors = {
         m: {**d.file_entry, "analysis": {k: v for k, v in d.entry.items() if k in ANALYSIS_KEYS}}
         for m, d in designs.motors.items()

@@ -24,11 +24,6 @@ from cartctl.design.request import PM_RANGE_DEG
 from cartctl.errors import InputError
 from cartctl.model import ArxModel, check_extra_delay_ticks
 
-_GRID_POINTS = 400
-_EDGE_TOL_HZ = 1e-7  # crossover_range's bisection: a tenth of the 1e-6 Hz it promises
-_FREQ_POINTS = 4001
-_BANDWIDTH_GRID = 41
-
 
 def _check_common(model: ArxModel, phase_margin_deg: float, extra_delay_ticks: int) -> None:
     if not model.is_stable():
@@ -105,7 +100,7 @@ def crossover_range(
     crossover below Nyquist works."""
     _check_common(model, phase_margin_deg, extra_delay_ticks)
     nyquist = 0.5 / model.period_s
-    grid = np.geomspace(nyquist * 1e-4, nyquist * (1.0 - 1e-6), _GRID_POINTS)
+    grid = np.geomspace(nyquist * 1e-4, nyquist * (1.0 - 1e-6), 400)
     kp, ki = _gains(model, phase_margin_deg, grid, extra_delay_ticks)  # the whole grid at once
     ok = [not _problem(model, phase_margin_deg, float(p), float(i), extra_delay_ticks)
           for p, i in zip(kp, ki, strict=True)]  # fmt: skip
@@ -115,7 +110,7 @@ def crossover_range(
     last = ok.index(False, first) - 1 if False in ok[first:] else len(ok) - 1
 
     def edge(good: float, bad: float) -> float:
-        while abs(good - bad) > _EDGE_TOL_HZ:
+        while abs(good - bad) > 1e-7:  # a tenth of the 1e-6 Hz promised
             mid = 0.5 * (good + bad)
             if not _solve(model, phase_margin_deg, mid, extra_delay_ticks)[2]:
                 good = mid
@@ -185,7 +180,7 @@ def design_pi_bandwidth(
     def at(fc: float) -> PiDesign:
         return design_pi(model, phase_margin_deg=pm, crossover_hz=fc, extra_delay_ticks=extra)
 
-    grid = np.linspace(low, high, _BANDWIDTH_GRID)
+    grid = np.linspace(low, high, 41)
     widths = [at(fc).bandwidth_hz() for fc in grid]
     top = int(np.argmax(widths))
     if not widths[0] <= bandwidth_hz <= widths[top]:
@@ -240,7 +235,7 @@ class PiDesign:
         Nyquist if never."""
         num, den = self._loop()
         nyquist = 0.5 / self.period_s
-        grid = np.linspace(0.0, nyquist, _FREQ_POINTS)
+        grid = np.linspace(0.0, nyquist, 4001)
 
         def excess(f: float | NDArray[np.float64]) -> Any:
             z = np.exp(2j * np.pi * np.atleast_1d(f) * self.period_s)

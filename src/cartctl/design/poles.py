@@ -44,9 +44,6 @@ from cartctl.design.request import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOI
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 
-_CHECK_TOL = 1e-6  # the placed characteristic polynomial's coefficients against the requested
-_REPEAT_TOL = 1e-8  # poles closer than this (relative) are repeated: ``place`` cannot take them
-
 
 def augment(plant: StateSpace) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(A_a, B_a): the plant with the error integrator x_i[k+1] = x_i[k] − Ts y[k] (r enters
@@ -266,7 +263,7 @@ def design_poles(
 
     A_p, B_p = (plant.A, plant.B) if bias else (A_a, B_a)
     repeats = any(
-        abs(a - b) <= _REPEAT_TOL * max(1.0, abs(a))
+        abs(a - b) <= 1e-8 * max(1.0, abs(a))  # repeated: ``place`` cannot take them
         for i, a in enumerate(placed)
         for b in placed[i + 1 :]
     )
@@ -275,7 +272,7 @@ def design_poles(
     gains = np.asarray(place(A_p, B_p.reshape(count, 1), placed), dtype=float).ravel()
     A_cl = A_p - np.outer(B_p, gains)
     got, target = np.poly(A_cl), np.real(np.poly(placed))
-    if not np.allclose(got, target, rtol=0.0, atol=_CHECK_TOL):
+    if not np.allclose(got, target, rtol=0.0, atol=1e-6):  # the characteristic polynomials
         raise InputError(
             f"pole placement is numerically ill-conditioned for poles {_poles_text(placed)}: the "
             f"closed loop would have {_poles_text(np.linalg.eigvals(A_cl))}; choose poles further "
