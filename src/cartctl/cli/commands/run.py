@@ -200,7 +200,7 @@ def _run_loop(
         SimulatedClock,
     )
     from cartctl.runtime.loop import ControlLoop
-    from cartctl.runtime.realtime import gc_paused
+    from cartctl.runtime.realtime import enable_realtime, gc_paused, restore
 
     plant, period_s, n = prepared.plant, prepared.period_s, prepared.ticks
     clock = SimulatedClock() if args.fast else MonotonicClock()
@@ -220,8 +220,6 @@ def _run_loop(
     stats = None
     try:
         if not args.fast:  # before the start: locking memory takes a while, and a cart ticks on
-            from cartctl.runtime.realtime import enable_realtime
-
             scheduling = enable_realtime()
             sys.setswitchinterval(1e-4)  # any other thread must hand the GIL back within 0.1 ms
 
@@ -251,15 +249,13 @@ def _run_loop(
             loop.finish()
             sys.setswitchinterval(switch_interval)
             if not args.fast:
-                from cartctl.runtime.realtime import restore
-
                 restore()
     return loop, (stats or executor.stats()).to_dict(), scheduling
 
 
 def _summary(
-    args: argparse.Namespace, prepared: PreparedRun, loop: ControlLoop, memory: MemorySink,
-    rerun: Any, timing: dict[str, Any], run_facts: dict[str, Any],
+    prepared: PreparedRun, loop: ControlLoop, memory: MemorySink, rerun: Any,
+    timing: dict[str, Any], run_facts: dict[str, Any],
 ) -> dict[str, Any]:  # fmt: skip
     """Step 5, the run's summary (``--json``'s object)."""
     from cartctl.cli.commands.review.smoothed import smooth_run
@@ -285,8 +281,7 @@ def _summary(
     return summary
 
 
-def _report(args: argparse.Namespace, summary: dict[str, Any], loop: ControlLoop,
-            run_facts: dict[str, Any]) -> int:  # fmt: skip
+def _report(args: argparse.Namespace, summary: dict[str, Any], loop: ControlLoop) -> int:
     """Step 6, the summary on stdout, warnings and the error line on stderr; the exit code."""
     from cartctl.cli.jsonout import dumps
     from cartctl.sinks.summary import format_summary, warn_delay_change, warn_host_losses
@@ -295,8 +290,8 @@ def _report(args: argparse.Namespace, summary: dict[str, Any], loop: ControlLoop
         print(dumps(summary))
     else:
         print(format_summary(summary))
-        print(f"  plant {run_facts['plant']}; controller {run_facts['controller']}; "
-              f"{run_facts['scheduling']}")  # fmt: skip
+        print(f"  plant {summary['plant']}; controller {summary['controller']}; "
+              f"{summary['scheduling']}")  # fmt: skip
     for problem in loop.state.sink_errors:
         print(f"cartctl run: warning: {problem}", file=sys.stderr)
     warn_host_losses(summary.get("link"), "run")
@@ -326,5 +321,5 @@ def run(args: argparse.Namespace) -> int:
     run_facts = {"recording": str(rrd_path) if rerun is not None else None,
                  "trace": str(csv_path), "plant": prepared.description, "controller": given,
                  "scheduling": scheduling}  # fmt: skip
-    summary = _summary(args, prepared, loop, memory, rerun, timing, run_facts)
-    return _report(args, summary, loop, run_facts)
+    summary = _summary(prepared, loop, memory, rerun, timing, run_facts)
+    return _report(args, summary, loop)
