@@ -24,7 +24,8 @@ from cartctl.sinks.rerun_problems import file_failure
 from cartctl.sinks.rerun_sink import APPLICATION_ID
 from cartctl.tune.batch import later_command
 
-Series = dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]  # name → (time s, values)
+Line = tuple[NDArray[np.float64], NDArray[np.float64]]  # (time s, values)
+Series = dict[str, Line]  # by entity path
 
 
 def fmt(value: float | None, digits: int = 2, scale: float = 1.0) -> str:
@@ -34,30 +35,24 @@ def fmt(value: float | None, digits: int = 2, scale: float = 1.0) -> str:
 
 @dataclass
 class Report:
-    """The sections (heading, Markdown body) of ``summary.md``, rewritten on each :meth:`add`."""
+    """The sections (heading: Markdown body) of ``summary.md``, rewritten on each :meth:`add`."""
 
     path: Path
     title: str
-    sections: list[tuple[str, str]] = field(default_factory=list)
+    sections: dict[str, str] = field(default_factory=dict)
 
     def add(self, heading: str, body: str) -> None:
-        """Add (or replace) a section and rewrite the file."""
-        self.sections = [(h, b) for h, b in self.sections if h != heading]
-        self.sections.append((heading, body))
-        self.write()
-
-    def write(self) -> None:
-        """Write ``summary.md`` via a temporary file, so the old one stays whole until then."""
-        text = f"# {self.title}\n\n" + "\n\n".join(f"## {h}\n\n{b.strip()}"
-                                                  for h, b in self.sections) + "\n"  # fmt: skip
+        """Add a section (or replace it, moving it last) and rewrite the file, via a temporary one
+        so that the old one stays whole until then."""
+        self.sections.pop(heading, None)
+        self.sections[heading] = body
+        parts = [f"# {self.title}", *(f"## {h}\n\n{b.strip()}" for h, b in self.sections.items())]
         tmp = self.path.with_suffix(".md.tmp")
-        tmp.write_text(text, encoding="utf-8")
+        tmp.write_text("\n\n".join(parts) + "\n", encoding="utf-8")
         tmp.replace(self.path)
 
 
-def plot_lines(path: Path, title: str,
-               panels: Sequence[tuple[str, Mapping[str, tuple[NDArray[np.float64], NDArray[np.float64]]]]],
-               xlabel: str = "time (s)") -> Path:  # fmt: skip
+def plot_lines(path: Path, title: str, panels: Sequence[tuple[str, Mapping[str, Line]]]) -> None:
     """Stacked panels of labelled lines: ``panels`` = [(y label, {legend: (x, y)}), ...]."""
     import matplotlib
 
@@ -72,12 +67,11 @@ def plot_lines(path: Path, title: str,
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best", fontsize=8)
-    axes[-1, 0].set_xlabel(xlabel)
+    axes[-1, 0].set_xlabel("time (s)")
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
-    return path
 
 
 def _table(rows: Sequence[Sequence[tuple[str, str]]]) -> str:
@@ -264,11 +258,10 @@ def record_stage(path: Path, series: Series, note: str, stage: str, *,
     returns a problem's description, or None."""
     try:
         rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
-        path.parent.mkdir(parents=True, exist_ok=True)
         rec.set_sinks(rr.FileSink(path))
         rec.send_recording_name(path.stem)
         if layout:
-            rec.send_blueprint(blueprint(("a", "b"), None))
+            rec.send_blueprint(blueprint())
         rec.log(f"commission/{stage}", rr.TextDocument(note, media_type=rr.MediaType.MARKDOWN),
                 static=True)  # fmt: skip
         for entity, (time_s, values) in series.items():

@@ -183,9 +183,7 @@ class TuneResult:
 
     @property
     def worst(self) -> dict[str, float | None]:
-        """The worse of the motors per metric; all None when infeasible."""
-        if not self.feasible:
-            return dict.fromkeys(METRICS)
+        """The worse of the motors per metric; all None when infeasible (no motors)."""
         return worst_metrics(self.motors)
 
     def to_dict(self) -> dict[str, Any]:
