@@ -88,13 +88,11 @@ def _check(args: argparse.Namespace) -> tuple[str, str]:
         from cartctl.reference import check_reference
 
         check_reference(args.reference)
-    if kind == "serial":
-        if args.onboard or args.reference:
-            raise InputError(
-                "--onboard and --reference set up the virtual cart; a real cart runs the C of "
-                "'cartctl export CONTROLLER.toml --arduino' with its own references"
-            )
-        return kind, rest
+    if kind == "serial" and (args.onboard or args.reference):
+        raise InputError(
+            "--onboard and --reference set up the virtual cart; a real cart runs the C of "
+            "'cartctl export CONTROLLER.toml --arduino' with its own references"
+        )
     if args.reference and not args.onboard:
         raise InputError("--reference needs --onboard CONTROLLER.toml")
     return kind, rest
