@@ -142,8 +142,8 @@ def span_of(extremes: Mapping[str, Range], paths: Iterable[str], **kwargs: float
 
 def data_ranges(extremes: dict[str, Range], motors: Sequence[str]) -> dict[str, Range | None]:
     """The plots' ranges from entity path → (min, max) recorded, with 10 % to spare."""
-    speeds = ("reference", "speed", "estimate", "true_speed", "smoothed_speed")
+    speeds = [kind for kind in _MOTOR_SERIES if kind != "voltage"]
     ranges = {f"motor/{m}": span_of(extremes, [f"motor/{m}/{s}" for s in speeds]) for m in motors}
     ranges |= {f"motor/{m}/voltage": span_of(extremes, [f"motor/{m}/voltage"]) for m in motors}
-    ranges["loop"] = span_of(extremes, ["loop/period_error_us", "loop/compute_us"], min_span=10.0)
+    ranges["loop"] = span_of(extremes, [f"loop/{name}" for name in _LOOP_SERIES], min_span=10.0)
     return ranges

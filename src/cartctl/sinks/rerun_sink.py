@@ -134,8 +134,6 @@ class RerunSink:
             self._problem(f"could not start the recording: {exc}", raise_now=True)
             return
         self._block = np.empty((self.batch_ticks, len(columns)))
-        self._filled = 0
-        self._rows = []
 
     def _entities(self, columns: list[str]) -> tuple[tuple[int, str], ...]:
         return tuple((i, ENTITY_PATHS[c]) for i, c in enumerate(columns) if c in ENTITY_PATHS)
