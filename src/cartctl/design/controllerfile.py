@@ -114,9 +114,6 @@ class ControllerFile:
 
     def to_toml_dict(self, folder: str | Path | None = None) -> dict[str, Any]:
         """The document :func:`save_controller` writes, the model path relative to ``folder``."""
-        delay: dict[str, Any] = {}
-        if self.loop_delay_ticks is not None:
-            delay = {"loop_delay_ticks": self.loop_delay_ticks, "plant_kind": self.loop_site}
         model_path = self.model_path if folder is None else _relative_to(self.model_path, folder)
         return _plain(
             {
@@ -124,7 +121,8 @@ class ControllerFile:
                 "method": self.method,
                 "period_s": self.period_s,
                 "voltage_limit_v": self.voltage_limit_v,
-                **delay,
+                "loop_delay_ticks": self.loop_delay_ticks,  # both dropped when None
+                "plant_kind": self.loop_site,
                 "created": self.created,
                 "command": self.command,
                 "model": {"path": model_path, "sha256": self.model_sha256},
