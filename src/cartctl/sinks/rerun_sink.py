@@ -225,11 +225,10 @@ class RerunSink:
             url = VIEWER_URL
             try:
                 rr.spawn(port=VIEWER_PORT, connect=False, executable_path=executable, recording=rec)
+                if not viewer_reachable(url):  # never raises
+                    problem = f"the viewer ({executable}) did not start"
             except Exception as exc:
                 problem = f"could not start the viewer ({executable}): {exc}"
-            else:
-                if not viewer_reachable(url):
-                    problem = f"the viewer ({executable}) did not start"
         if problem is None:
             return url
         self._problem(problem, raise_now=True)
