@@ -85,10 +85,7 @@ def find_period(u: ArrayLike, *, min_ticks: int = 10) -> int | None:
         return None
     # Candidates must at least match the first sample; the block check rejects the rest quickly.
     lags = np.arange(min_ticks, u.size // 2 + 1)
-    for p in lags[np.abs(u[lags] - u[0]) <= tol]:
-        if _repeats(u, int(p), tol):
-            return int(p)
-    return None
+    return next((int(p) for p in lags[np.abs(u[lags] - u[0]) <= tol] if _repeats(u, p, tol)), None)
 
 
 def split_cycles(
@@ -135,12 +132,8 @@ def periodic_regression_pad(
     """An averaged cycle with its last ``lags`` samples prepended: one period of the periodic
     steady state, y[−1] = y[P − 1] and so on, so with ``lags`` = max(na, nk + nb − 1) the
     regression over the cycle has exactly P equations and no made-up initial conditions."""
-    y, u = as_pair(
-        y_avg,
-        u_avg,
-        names=("averaged output y_avg", "averaged input u_avg"),
-        pair="averaged output and input",
-    )
+    names = ("averaged output y_avg", "averaged input u_avg")
+    y, u = as_pair(y_avg, u_avg, names=names, pair="averaged output and input")
     if not is_whole(lags) or not 0 <= lags <= y.size:
         raise InputError(f"lags must be a whole number in 0..{y.size} (the cycle), got {lags!r}")
     n = int(lags)

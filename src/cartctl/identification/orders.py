@@ -186,8 +186,9 @@ def joint_delay(estimates: Mapping[str, DelayEstimate]) -> JointDelay:
     logs = np.array([np.log(np.maximum(e.residual_rms, 1e-300)) for e in estimates.values()])
     evidence = np.exp(weights @ logs)
     best = float(evidence.min())
-    close = tuple(c for c, e in zip(cands, evidence, strict=True)
-                  if e <= (1.0 + CLOSE_FRACTION) * best)  # fmt: skip
+    close = tuple(
+        c for c, e in zip(cands, evidence, strict=True) if e <= (1.0 + CLOSE_FRACTION) * best
+    )
     nk = max(close)
     motors = {
         m: replace(e, nk=nk, nk_alone=None if e.nk == nk else e.nk) for m, e in estimates.items()
@@ -294,12 +295,9 @@ class OrderTable:
 
     def to_dict(self) -> list[dict[str, Any]]:
         """The ``orders`` list of ``identify --json``: one entry per row, the best ones marked."""
-        common = {"n_equations": self.n_equations, "fit_on": self.fit_on}
+        (aic, fit), common = self._best, {"n_equations": self.n_equations, "fit_on": self.fit_on}
         return [
-            r.to_dict()
-            | common
-            | {"best_aic": "AIC" in self.marks(r), "best_fit": "fit" in self.marks(r)}
-            for r in self.rows
+            r.to_dict() | common | {"best_aic": r is aic, "best_fit": r is fit} for r in self.rows
         ]
 
     def cells(self, r: OrderRow) -> list[str]:

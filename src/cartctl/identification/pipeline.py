@@ -325,9 +325,9 @@ def identify(
     }
     joint, nk = None, request.delay
     if nk is None:  # one loop, one delay: chosen from both motors' evidence
+        evidence = partial(delay_evidence, na=request.na, nb=request.nb, period_s=period_s)
         joint = joint_delay({
-            m: delay_evidence(work[m], na=request.na, nb=request.nb, period_s=period_s,
-                              candidates=request.delay_candidates, eval_segments=raw)
+            m: evidence(work[m], candidates=request.delay_candidates, eval_segments=raw)
             for m, (raw, _, _) in data.items()
         })  # fmt: skip
         nk = joint.nk
