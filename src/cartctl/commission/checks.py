@@ -202,13 +202,9 @@ def judge(result: IdentifyResult) -> dict[str, MotorVerdict]:
     for m, r in result.motors.items():
         fit = float(r.chosen.fit_simulation_percent)
         radius = float(r.chosen.model.pole_radius())
-        d = r.diagnostics
-        test = d.residuals.to_dict() if d is not None else {}
-        cross = np.abs(np.asarray(test.get("cross", []), dtype=float))
-        bound = float(test.get("cross_bound_99") or 0.0)
-        cross_out, lags = int(np.count_nonzero(cross > bound)), int(cross.size)
+        test = r.diagnostics.residuals
+        cross, bound = np.abs(test.cross), test.cross_bound_99
         ratio = float(cross.max() / bound) if cross.size and bound > 0.0 else 0.0
-        white = bool(test.get("white", False))
         problems = []
         if not fit >= MIN_FIT_PERCENT:
             problems.append(f"validation fit {fit:.1f} % < {MIN_FIT_PERCENT:g} %")
@@ -217,7 +213,9 @@ def judge(result: IdentifyResult) -> dict[str, MotorVerdict]:
         if ratio > CROSS_CLEAR_FACTOR:
             problems.append(f"residuals correlated with the input (up to {ratio:.1f} × the 99 % "
                             "bound)")  # fmt: skip
-        out[m] = MotorVerdict(fit, radius, cross_out, lags, ratio, white, tuple(problems))
+        out[m] = MotorVerdict(
+            fit, radius, test.cross_outside, cross.size, ratio, test.white, tuple(problems)
+        )
     return out
 
 

@@ -157,8 +157,7 @@ class Commission:
         assert self.amplitude is not None
         volts = make_signal("square", self.amplitude.voltage_v)
         self.say("excitation", f"square ±{self.amplitude.voltage_v:g} V, {volts.size / 100:g} s")
-        self.excitation = self._experiment("excitation", volts, volts)
-        trace = self.excitation
+        trace = self.excitation = self._experiment("excitation", volts, volts)
         body = (f"The report's square wave (+A, 0, −A for 1 s each, 5 cycles) at A = "
                 f"{self.amplitude.voltage_v:g} V on both motors; peak speeds "
                 + ", ".join(f"{m} {np.max(np.abs(trace.speed(m))):.1f} rad/s" for m in "ab")
@@ -187,10 +186,9 @@ class Commission:
         body = report.model_body(result, verdicts, self.model_path.name)
         series, panels = {}, []
         for m, r in result.motors.items():
-            d = r.diagnostics
-            if d is None or not d.validation:
+            if not r.diagnostics.validation:
                 continue
-            y, u = (np.asarray(part, dtype=np.float64) for part in d.validation[0])
+            y, u = (np.asarray(part, dtype=np.float64) for part in r.diagnostics.validation[0])
             t = np.arange(y.size, dtype=np.float64) * result.period_s
             sim = r.chosen.model.simulate(u)
             series[f"identification/{m}/measured"] = (t, y)

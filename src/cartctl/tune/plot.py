@@ -129,10 +129,8 @@ def _finish(fig: Any, ax: Any, front: Sequence[tuple[float, float, int]],
     labels = [(x, y, str(i)) for x, y, i in front]
     unplaced = place_labels(fig, ax, labels, obstacles)
     if unplaced:
-        for text in list(ax.texts):
-            text.remove()
-        for legend in list(fig.legends):
-            legend.remove()
+        for artist in [*ax.texts, *fig.legends]:
+            artist.remove()
         ax.plot([], [], " ", label=_unplaced_note(unplaced))
         legend = fig.legend(loc="outside lower center", ncols=1, fontsize=8)
         unplaced = place_labels(fig, ax, labels, obstacles)

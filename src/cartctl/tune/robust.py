@@ -43,28 +43,21 @@ def step_metrics(trace: BatchTrace, settling_floor: float) -> dict[str, FloatArr
     (V). Where the summary has None: ``inf`` settling for a run that never settles, NaN for an
     undefined figure; rows that ran away get ``inf`` for all but the voltage."""
     t, ref, y = trace.time_s, trace.reference, trace.speed
-    n = y.shape[0]
-    with np.errstate(all="ignore"):
-        out = {
-            "overshoot_percent": np.full(n, np.nan),
-            "settling_time_s": np.full(n, np.nan),
-            "rms_error": np.sqrt(np.mean((ref - y) ** 2, axis=1)),
-            "peak_voltage_v": np.max(np.abs(trace.voltage), axis=1),
-        }
+    overshoot = settling = np.full(y.shape[0], np.nan)
     span = first_step(ref)
-    if span is not None:
-        start, end = span
-        size = float(ref[start])
-        half_width = settling_half_width(size, settling_floor)
-        with np.errstate(all="ignore"):
-            overshoot, settling = step_rows(t[start:end], y[:, start:end] / size,
-                                            half_width / abs(size), float(t[start]))  # fmt: skip
-        out["overshoot_percent"] = overshoot
-        if half_width < abs(size):  # else the band reaches back to rest: nothing to settle
-            out["settling_time_s"] = settling
-    for key in ("overshoot_percent", "settling_time_s", "rms_error"):
-        out[key] = np.where(trace.diverged, np.inf, out[key])
-    return out
+    with np.errstate(all="ignore"):
+        rms = np.sqrt(np.mean((ref - y) ** 2, axis=1))
+        if span is not None:
+            start, end = span
+            size = float(ref[start])
+            half_width = settling_half_width(size, settling_floor)
+            overshoot, settled = step_rows(t[start:end], y[:, start:end] / size,
+                                           half_width / abs(size), float(t[start]))  # fmt: skip
+            if half_width < abs(size):  # else the band reaches back to rest: nothing to settle
+                settling = settled
+    out = {"overshoot_percent": overshoot, "settling_time_s": settling, "rms_error": rms}
+    out = {key: np.where(trace.diverged, np.inf, v) for key, v in out.items()}
+    return out | {"peak_voltage_v": np.max(np.abs(trace.voltage), axis=1)}
 
 
 @dataclass(frozen=True)
