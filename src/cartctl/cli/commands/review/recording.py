@@ -96,22 +96,23 @@ def batches(chunks: Iterable[Chunk]) -> Iterator[tuple[Chunk, pa.RecordBatch]]:
             yield chunk, chunk.to_record_batch()
 
 
-def scalar_series(chunks: Iterable[Chunk]) -> dict[str, tuple[NDArray[Any], ...]]:
-    """Per entity path of a scalar series on both timelines: its ticks, times (ns) and values,
-    in the recording's order."""
+def scalar_series(
+    chunks: Iterable[Chunk], timelines: Sequence[str] = ("tick", "time")
+) -> dict[str, tuple[NDArray[Any], ...]]:
+    """Per entity path of a scalar series with rows on ``timelines``: the rows' place on each
+    (ns for a time) and their values, in the recording's order."""
     import numpy as np
     import pyarrow as pa
     import pyarrow.compute as pc
 
     parts: dict[str, list[tuple[NDArray[Any], ...]]] = {}
     for chunk, batch in batches(chunks):
-        if {"tick", "time", SCALARS} <= set(batch.schema.names):
-            tick, time_ns = (
-                batch.column(name).cast(pa.int64()).to_numpy(zero_copy_only=False)
-                for name in ("tick", "time")
-            )
+        if {*timelines, SCALARS} <= set(batch.schema.names):
+            at = [
+                batch.column(n).cast(pa.int64()).to_numpy(zero_copy_only=False) for n in timelines
+            ]
             values = pc.list_element(batch.column(SCALARS), 0).to_numpy(zero_copy_only=False)
-            parts.setdefault(chunk.entity_path.lstrip("/"), []).append((tick, time_ns, values))
+            parts.setdefault(chunk.entity_path.lstrip("/"), []).append((*at, values))
     return {
         path: tuple(np.concatenate(p) for p in zip(*pieces, strict=True))
         for path, pieces in parts.items()
@@ -125,7 +126,7 @@ def scalar_stats(chunks: Iterable[Chunk]) -> tuple[dict[str, tuple[float, float]
 
     extremes: dict[str, tuple[float, float]] = {}
     whole: set[str] = set()
-    for path, (_, _, values) in scalar_series(chunks).items():
+    for path, (values,) in scalar_series(chunks, timelines=()).items():
         values = values[np.isfinite(values)].astype(float)
         if values.size:
             extremes[path] = (float(values.min()), float(values.max()))
