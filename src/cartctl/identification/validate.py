@@ -284,13 +284,12 @@ def linearity(small: Trace, large: Trace, total: Trace, motor: str = "a") -> Lin
             f"{amp_small + amp_large:g} V, but the sum step is {amp_sum:g} V (tolerance "
             f"{tolerance:.3g} V); give the small, the large and their sum, in that order"
         )
-    n = min(len(t) - o.index for t, o in zip(traces, onsets, strict=True))
-    speeds = [t.speed(motor)[o.index : o.index + n] for t, o in zip(traces, onsets, strict=True)]
+    pairs = list(zip(traces, onsets, strict=True))
+    n = min(len(t) - o.index for t, o in pairs)
+    speeds = [t.speed(motor)[o.index : o.index + n] for t, o in pairs]
     added = speeds[0] + speeds[1]
     period_s = float(f"{np.median(periods):.9g}")  # 0.01, not 0.010000000000000009
-    on_small, on_large, on_sum = (
-        float(t.time_s[o.index]) for t, o in zip(traces, onsets, strict=True)
-    )
+    on_small, on_large, on_sum = (float(t.time_s[o.index]) for t, o in pairs)
     return LinearityResult(
         motor=motor,
         period_s=period_s,
