@@ -243,23 +243,20 @@ def _sample_motor(
 ) -> MotorSamples:
     n, p = nk.size, model.na + model.nb
     std, note = theta_std_of(model, stats)
-    theta0 = model.theta
+    theta0, sigma = model.theta, np.zeros(p) if std is None else std
     gain = rng.uniform(*GAIN_RANGE, size=n)
-    delta = np.zeros((n, p))
-    rejected = 0
-    if std is not None:
-        delta = rng.uniform(-1.0, 1.0, size=(n, p)) * std
-        todo = ~_stable((theta0 + delta)[:, : model.na])
-        while todo.any():
-            rejected += int(todo.sum())
-            if rejected > MAX_DRAWS_PER_PLANT * n:
-                raise InputError(
-                    f"motor {name}: {rejected} of the θ draws within ±theta_std were unstable; "
-                    "the model's uncertainty does not describe a stable motor"
-                )
-            idx = np.flatnonzero(todo)
-            delta[idx] = rng.uniform(-1.0, 1.0, size=(idx.size, p)) * std
-            todo[idx] = ~_stable((theta0 + delta[idx])[:, : model.na])
+    delta, rejected = np.zeros((n, p)), 0
+    todo = np.full(n, std is not None)  # the plants to draw: all, then those drawn unstable
+    while todo.any():
+        idx = np.flatnonzero(todo)
+        delta[idx] = rng.uniform(-1.0, 1.0, size=(idx.size, p)) * sigma
+        todo[idx] = ~_stable((theta0 + delta[idx])[:, : model.na])
+        rejected += int(todo.sum())
+        if rejected > MAX_DRAWS_PER_PLANT * n:
+            raise InputError(
+                f"motor {name}: {rejected} of the θ draws within ±theta_std were unstable; "
+                "the model's uncertainty does not describe a stable motor"
+            )
     theta = theta0 + delta
     return MotorSamples(ar=theta[:, : model.na], b=theta[:, model.na :] * gain[:, None], nk=nk,
                         gain_factor=gain, theta_delta=delta, theta_std=std,

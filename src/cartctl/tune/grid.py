@@ -232,12 +232,11 @@ def sort_results(results: Sequence[TuneResult]) -> list[TuneResult]:
     unsettled (by RMS error), then the infeasible (by index)."""
 
     def key(r: TuneResult) -> tuple[int, float, float, int]:
-        w = r.worst
+        w = {k: math.inf if v is None else v for k, v in r.worst.items()}  # (no settling: inf)
         if not r.feasible:
             return (3, 0.0, 0.0, r.index)
-        if w["settling_time_s"] is None:
-            return (2, w["rms_error"] if w["rms_error"] is not None else math.inf, 0.0, r.index)
-        overshoot = w["overshoot_percent"] if w["overshoot_percent"] is not None else math.inf
-        return (0 if r.pareto else 1, w["settling_time_s"], overshoot, r.index)
+        if w["settling_time_s"] == math.inf:
+            return (2, w["rms_error"], 0.0, r.index)
+        return (0 if r.pareto else 1, w["settling_time_s"], w["overshoot_percent"], r.index)
 
     return sorted(results, key=key)
