@@ -313,5 +313,5 @@ def format_robust_table(method: str, rows: Sequence[RobustRow]) -> str:
     for col in cells[len(AXES[method]) :]:  # the unscored rows: blank figures
         for i, s in enumerate(scored):
             col[i] = col[i] if s is not None else ""
-    return _lines(["*" if r.pareto else "" for r in rows], [r.result for r in rows], heads, cells,
-                  [robust_status(r) for r in rows], groups)  # fmt: skip
+    marks, statuses = ["*" if r.pareto else "" for r in rows], [robust_status(r) for r in rows]
+    return _lines(marks, [r.result for r in rows], heads, cells, statuses, groups)

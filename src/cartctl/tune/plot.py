@@ -19,12 +19,14 @@ RING_AREA_PT2 = 150.0  # marker areas (pt²)
 POINT_AREA_PT2 = 36.0
 TITLE_CHARS = 100  # 9-point text across the axes of the 8-inch figure
 
-_DISTANCES_PT = (7.0, 12.0, 18.0, 26.0, 36.0, 48.0, 62.0, 76.0, 90.0)
-_ANGLES_DEG = (45.0, -45.0, 135.0, -135.0, 90.0, -90.0, 0.0, 180.0, 20.0, -20.0, 160.0, -160.0,
-               65.0, -65.0, 115.0, -115.0)  # fmt: skip
+_DISTANCES_PT = (7, 12, 18, 26, 36, 48, 62, 76, 90)
+_ANGLES_DEG = (45, -45, 135, -135, 90, -90, 0, 180, 20, -20, 160, -160, 65, -65, 115, -115)
 
 
-def _figure() -> tuple[Any, Any]:
+def _figure(*title: str) -> tuple[Any, Any]:
+    """A figure and its axes, titled with ``title``'s parts in lines of :data:`TITLE_CHARS`."""
+    import textwrap
+
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -33,15 +35,9 @@ def _figure() -> tuple[Any, Any]:
     ax = fig.subplots()
     ax.set_ylabel("run overshoot (%)")
     ax.grid(True, color="0.9")
-    return fig, ax
-
-
-def _title(ax: Any, *parts: str) -> None:
-    """A title of short lines (wrapped at :data:`TITLE_CHARS`)."""
-    import textwrap
-
-    lines = [line for part in parts for line in textwrap.wrap(part, TITLE_CHARS)]
+    lines = [line for part in title for line in textwrap.wrap(part, TITLE_CHARS)]
     ax.set_title("\n".join(lines), fontsize=9)
+    return fig, ax
 
 
 def _hits_circle(box: Any, cx: float, cy: float, r: float) -> bool:
@@ -151,14 +147,14 @@ def plot_tuning(path: str, method: str, results: Sequence[TuneResult]) -> None:
     ]
     shown = [(r, s * 1e3, o) for r, s, o in settled if s is not None and o is not None]  # ms, %
     x, y = [s for _, s, _ in shown], [o for _, _, o in shown]
-    fig, ax = _figure()
+    title = f"cartctl tune --method {method}, the worse of motors a and b"
+    fig, ax = _figure(title, counts_text(results))
     points = ax.scatter(x, y, c=[r.worst["max_abs_voltage"] for r, _, _ in shown], cmap="viridis",
                         s=POINT_AREA_PT2, zorder=3, gid="settings",
                         label="settings that settled (colour: run peak |V|)")  # fmt: skip
     fig.colorbar(points, ax=ax, label="run peak |voltage| (V)")
     front = [(xi, yi, r.index) for r, xi, yi in shown if r.pareto_plot]
     ax.set_xlabel("run settling time, band max(2 %, one encoder count) (ms)")
-    _title(ax, f"cartctl tune --method {method}, the worse of motors a and b", counts_text(results))
     notes = ["the table's *: the front over all four run metrics (RMS error and peak |V| too), "
              "which may hold points not ringed here"]  # fmt: skip
     _finish(fig, ax, front, list(zip(x, y, strict=True)), path, notes)
@@ -175,7 +171,11 @@ def plot_robust(path: str, method: str, rows: Sequence[RobustRow], plants: int) 
     scored = [(*r.score.front_axes, r.score, r) for r in rows if r.score is not None]
     shown = [(x * 1e3, y, s, r) for x, y, s, r in scored if np.isfinite(x) and np.isfinite(y)]
     timed = ", ".join(f"{e['actuation_ms']:g}" for e in shown[0][2].actuation) if shown else ""
-    fig, ax = _figure()
+    title = (
+        f"cartctl tune --method {method} --robust, the worse of motors a and b; ringed: the "
+        "front of nominal settling against worst-case overshoot"
+    )
+    fig, ax = _figure(title, robust_counts_text(rows))
     for x, y, s, _ in shown:
         ax.plot([x, x], [s.value("overshoot_percent", "nominal"), y], color="0.8", lw=1, zorder=1)
     xs = [x for x, *_ in shown]
@@ -196,11 +196,5 @@ def plot_robust(path: str, method: str, rows: Sequence[RobustRow], plants: int) 
                zorder=2, label=f"physics preset {shown[0][2].physics.get('preset') if shown else ''}")  # fmt: skip
     front = sorted((x, y, r.index) for x, y, _, r in shown if r.pareto)
     ax.set_xlabel("nominal settling time, band max(2 %, one encoder count) (ms)")
-    _title(
-        ax,
-        f"cartctl tune --method {method} --robust, the worse of motors a and b; ringed: "
-        "the front of nominal settling against worst-case overshoot",
-        robust_counts_text(rows),
-    )
     everything = [(x, y) for x, y, *_ in shown] + nominal + phys
     _finish(fig, ax, front, everything, path, [])

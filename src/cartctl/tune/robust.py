@@ -136,8 +136,10 @@ def score_plants(
                 float(np.percentile(sampled, p, method="inverted_cdf")) if spread else None
             )
         figures[key] = row
-    return RobustScore(figures, int(diverged.size - 1), int(np.count_nonzero(unsettled_rows)),
-                       int(np.count_nonzero(diverged)), physics, tuple(actuation))  # fmt: skip
+    plants, unsettled = int(diverged.size - 1), int(np.count_nonzero(unsettled_rows))
+    return RobustScore(
+        figures, plants, unsettled, int(np.count_nonzero(diverged)), physics, tuple(actuation)
+    )
 
 
 @dataclass(frozen=True)
