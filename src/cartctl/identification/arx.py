@@ -230,12 +230,7 @@ def fit_arx(
     spread = float(np.sqrt(_sum_squares(target - target.mean())))  # before the QR overwrites phi_y
     theta, residual_norm, theta_std = least_squares(phi_y)
     model = ArxModel.from_theta(theta, na=na, nb=nb, nk=nk, period_s=period_s)
-    return ArxFit(
-        model=model,
-        theta_std=theta_std,
-        fit_simulation_percent=simulation_fit(model, eval_segments or data),
-        fit_prediction_percent=_fit_from_norms(residual_norm, spread),
-        residual_rms=float(residual_norm / np.sqrt(rows)),
-        n_samples=int(rows),
-        method="arx",
-    )
+    simulated = simulation_fit(model, eval_segments or data)
+    predicted = _fit_from_norms(residual_norm, spread)
+    rms = float(residual_norm / np.sqrt(rows))
+    return ArxFit(model, theta_std, simulated, predicted, rms, int(rows))

@@ -94,16 +94,10 @@ def delay_evidence(
     y_scale = float(np.sqrt(np.mean(np.concatenate([y for y, _ in data]) ** 2)))
     tie = rms.min() + 1e-9 * (rms.min() + y_scale)  # equal up to rounding: the smaller delay wins
     best = int(np.flatnonzero(rms <= tie)[0])
-    return DelayEstimate(
-        nk=cands[best],
-        candidates=cands,
-        residual_rms=tuple(float(r) for r in rms),
-        fit_prediction_percent=tuple(f.fit_prediction_percent for f in fits),
-        fit_simulation_percent=tuple(
-            f.fit_simulation_percent if f.model.is_stable() else math.nan for f in fits
-        ),
-        equations=sum(max(0, len(y) - start) for y, _ in data),
-    )
+    predicted = tuple(f.fit_prediction_percent for f in fits)
+    simulated = tuple(f.fit_simulation_percent if f.model.is_stable() else math.nan for f in fits)
+    rms_rad_s = tuple(float(r) for r in rms)
+    return DelayEstimate(cands[best], cands, rms_rad_s, predicted, simulated, fits[0].n_samples)
 
 
 CLOSE_FRACTION = 0.03
