@@ -76,8 +76,7 @@ def checks_sequence(period_s: float) -> tuple[NDArray[np.float64], NDArray[np.fl
 def _breakaway(
     speed: NDArray[np.float64], volts: NDArray[np.float64], w: slice, loop_delay_ticks: int
 ) -> tuple[float | None, float | None]:
-    """(breakaway V, gain rad/s/V) of one motor's ramp; (None, None) if the wheel never turned or
-    the trace ends before the ramp does."""
+    """(breakaway V, gain rad/s/V) of a ramp; (None, None) if the wheel never turned or it is cut."""
     moving = np.abs(speed[w]) >= 0.5 * encoder_quantum_rad_s()
     runs = moving[:-2] & moving[1:-1] & moving[2:]
     if w.stop > speed.size or not runs.any():
@@ -291,8 +290,9 @@ class Verification:
     passed: bool
 
     def to_dict(self) -> dict[str, Any]:
-        return {"measured": self.measured, "predicted": self.predicted, "limits": self.limits,
-                "pass": self.passed}  # fmt: skip
+        out = asdict(self)
+        out["pass"] = out.pop("passed")
+        return out
 
 
 def compare(summary: dict[str, Any], predicted: dict[str, float | None],

@@ -262,8 +262,8 @@ def record_stage(path: Path, series: Series, note: str, stage: str, *,
         rec.send_recording_name(path.stem)
         if layout:
             rec.send_blueprint(blueprint())
-        rec.log(f"commission/{stage}", rr.TextDocument(note, media_type=rr.MediaType.MARKDOWN),
-                static=True)  # fmt: skip
+        markdown = rr.TextDocument(note, media_type=rr.MediaType.MARKDOWN)
+        rec.log(f"commission/{stage}", markdown, static=True)
         for entity, (time_s, values) in series.items():
             rec.send_columns(entity, indexes=[rr.TimeColumn("time", duration=np.asarray(time_s))],
                              columns=rr.Scalars.columns(scalars=np.asarray(values, float)))  # fmt: skip

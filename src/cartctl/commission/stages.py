@@ -72,8 +72,8 @@ class Commission:
 
     def say(self, stage: str, text: str) -> None:
         """Progress on stderr: '[2/5] excitation: …'."""
-        print(f"cartctl commission [{STAGES.index(stage) + 1}/{len(STAGES)}] {stage}: {text}",
-              file=sys.stderr, flush=True)  # fmt: skip
+        step = f"[{STAGES.index(stage) + 1}/{len(STAGES)}]"
+        print(f"cartctl commission {step} {stage}: {text}", file=sys.stderr, flush=True)
 
     def _done(self, stage: str, series: Any, body: str, failure: StageError | None = None, *,
               layout: bool = False) -> None:  # fmt: skip
@@ -86,8 +86,7 @@ class Commission:
             raise failure
 
     def _experiment(self, stage: str, ua: np.ndarray, ub: np.ndarray, probe: bool = False) -> Trace:
-        """Send ``ua``, ``ub`` (V) to a new plant and keep the trace as ``<stage>.csv``; raises
-        :class:`StageStoppedError` after keeping what an early end left."""
+        """Send ``ua``, ``ub`` (V) to a new plant; keep the trace as <stage>.csv, even if cut short."""
         from cartctl.data.trace import write_trace_meta
 
         plant, self.description = make_plant(self.spec, **self.plant_options)

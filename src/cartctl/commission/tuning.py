@@ -8,6 +8,7 @@ refuse. Why these plants and bounds: docs/commission.md."""
 from __future__ import annotations
 
 import os
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,7 +17,7 @@ from typing import Any
 from cartctl.cli.jsonout import strict
 from cartctl.commission import StageError
 from cartctl.data.modelfile import load_models
-from cartctl.errors import InputError
+from cartctl.errors import CartctlError, InputError
 from cartctl.tune import choice, engine
 from cartctl.tune import grid as tuning
 from cartctl.tune import robust as robustness
@@ -79,8 +80,7 @@ def run_tuning(model_path: Path, loop_delay_ticks: int,
                            robustness.evaluate_robust_chunk)  # fmt: skip
     rows = choice.sort_robust(choice.mark_robust_pareto(rows))
     limits = choice.Limits(MAX_OVERSHOOT_PERCENT)
-    candidates = [r for r in rows if r.score is not None
-                  and r.score.value("settling_time_s", "nominal") <= MAX_SETTLING_S]  # fmt: skip
+    candidates = [r for r in rows if r.score and r.score.front_axes[0] <= MAX_SETTLING_S]
     refused: list[tuple[int, str]] = []
     while True:
         try:
@@ -104,10 +104,7 @@ def _file_refusal(model_path: Path, row: robustness.RobustRow,
                   fixed: dict[str, float]) -> str | None:  # fmt: skip
     """Why ``cartctl run`` would refuse the setting's controller file (read back as ``run`` reads
     it), or None."""
-    import tempfile
-
     from cartctl.design.controllerfile import load_controller
-    from cartctl.errors import CartctlError
 
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "controller.toml"

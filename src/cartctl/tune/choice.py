@@ -105,9 +105,8 @@ def _best(
     rank: Callable[[Choosable], tuple[Any, Any]],
     words: tuple[str, str, str],
 ) -> Choosable:
-    """The candidate of least (``rank``'s overshoot to :data:`CHOICE_RESOLUTION_PERCENT`, its
-    settling, index) among those whose ``figures`` (overshoot %, settling s) meet ``limits``;
-    ``words``: what every candidate does, what the bounded ones do, where the limits apply."""
+    """The best of ``candidates`` by ``rank``'s overshoot (to :data:`CHOICE_RESOLUTION_PERCENT`),
+    settling and index, of those whose ``figures`` meet ``limits``; ``words`` word the refusals."""
     if not candidates:
         raise InputError(
             f"--choose best: no feasible setting {words[0]}; widen the grid or pick one with "
