@@ -121,9 +121,9 @@ def row_summary(row: robustness.RobustRow) -> dict[str, Any]:
     out: dict[str, Any] = {"index": row.index, "settings": dict(row.result.settings),
                            "status": row.result.status}  # fmt: skip
     if row.score is not None:
-        out |= {"nominal": {k: row.score.figures[k]["nominal"] for k in robustness.SUMMARY_KEYS},
-                "worst": {k: row.score.figures[k]["worst"] for k in robustness.SUMMARY_KEYS},
-                "timing": [{k: e[k] for k in ("later_ms", *robustness.SUMMARY_KEYS, "settled")}
-                           for e in row.score.actuation],
-                "pareto": row.pareto}  # fmt: skip
+        keys = robustness.SUMMARY_KEYS
+        out |= {w: {k: row.score.figures[k][w] for k in keys} for w in ("nominal", "worst")}
+        timing = ("later_ms", *keys, "settled")
+        out["timing"] = [{k: e[k] for k in timing} for e in row.score.actuation]
+        out["pareto"] = row.pareto
     return strict(out)

@@ -109,13 +109,8 @@ def simulate_batch(
     n_ticks, n = ref.size, plants.b_lags.shape[0]
     # the controller's runtime law (pi_law or feedback_law) over the plants, inside its estimator
     if isinstance(c, PiController):
-        gains = (
-            c.kp,
-            c.ki * c.period_s,
-            c.tracking_gain_per_tick,
-            ANTI_WINDUP.index(c.anti_windup),
-            c.voltage_limit_v,
-        )
+        mode = ANTI_WINDUP.index(c.anti_windup)
+        gains = (c.kp, c.ki * c.period_s, c.tracking_gain_per_tick, mode, c.voltage_limit_v)
     est = None if c.estimator is None else _filter_terms(c.estimator)
     x = [np.zeros(n) for _ in (est.L if est else ())]
     integral = np.zeros(n)

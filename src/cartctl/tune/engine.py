@@ -138,13 +138,12 @@ def save_setting(method: str, settings: Mapping[str, float], model_path: str | P
     from cartctl.design.make import controller_file, design_models
 
     request = design_request(method, settings, extra_delay_ticks, fixed)
-    argv = ["design", *request.to_argv(str(model_path), always=request_axes(method)),
-            "--out", str(out)]  # fmt: skip
+    options = request.to_argv(str(model_path), always=request_axes(method))
     models = load_models(model_path)
     designs = design_models(request, models, ("a", "b"))
     for m, analysis in analyse_designs(designs).items():  # the file's analysis: the loop's Ms
         designs.motors[m].entry.update(analysis.entry())
-    command = "cartctl " + shlex.join(argv)
+    command = "cartctl " + shlex.join(["design", *options, "--out", str(out)])
     save_controller(controller_file(designs, model_path, command=command,
                                     period_s=models.period_s), out)  # fmt: skip
     return command

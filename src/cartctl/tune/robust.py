@@ -179,10 +179,10 @@ def loop_entry(plant: Plant, nominal: Nominal, references: dict[str, FloatArray]
     settled, the run did not fail)."""
     summary, failure = simulate(plant, nominal.controllers, references, nominal.voltage_limit_v)
     motors = summary["motors"]
-    worst = worst_metrics(motors) if not failure else dict.fromkeys(SUMMARY_KEYS.values())
-    settled = not failure and all(m.get("settling_time_s") is not None for m in motors.values())
-    return {**{k: worst[v] for k, v in SUMMARY_KEYS.items()}, "failure": failure,
-            "motors": motors, "settled": settled}  # fmt: skip
+    worst = worst_metrics({} if failure else motors)  # all None for a failed run
+    entry = {k: worst[v] for k, v in SUMMARY_KEYS.items()}
+    settled = entry["settling_time_s"] is not None
+    return entry | {"failure": failure, "motors": motors, "settled": settled}
 
 
 def _physics(job: TuneJob, nominal: Nominal, actuation_ms: float | None = None) -> dict[str, Any]:
