@@ -155,6 +155,8 @@ def _refine(
     """θ minimising the simulation error on ``data`` over poles inside ρ, from θ ``start``, with
     at most ``evals`` evaluations."""
     nb = start.size - na
+    if na == 0:  # an FIR model: ŷ is linear in B, its least squares is the optimum
+        return _refit_b(start[:0], data, nb, nk)
     eta0 = _step_down(start[:na], rho)
     if eta0 is None:  # a start on the bound itself: from just inside
         eta0 = _step_down(project_poles(start[:na], rho - _PROJECT_MARGIN), rho)
@@ -230,14 +232,10 @@ def fit_oe(
             f"the ARX start has a pole at |z| = {initial.pole_radius():.4f}, beyond the bound "
             f"{rho:g}: projected inside (|z| ≤ {rho - _PROJECT_MARGIN:g}) before refining"
         )
-    candidates = [("start", start)]
-    if na == 0:  # an FIR model: ŷ is linear in B, its least squares is the optimum
-        candidates.append(("refined", _refit_b(start[:0], data, nb, nk)))
-    else:
-        candidates.append(("refined", _refine(start, data, na, nk, rho, max_evaluations)))
-        if eval_segments is not None and eval_segments is not segments:
-            refined = _refine(start, evaluation, na, nk, rho, max_evaluations)
-            candidates.append(("refined on eval", refined))
+    candidates = [("start", start), ("refined", _refine(start, data, na, nk, rho, max_evaluations))]
+    if na > 0 and eval_segments is not None and eval_segments is not segments:
+        refined = _refine(start, evaluation, na, nk, rho, max_evaluations)
+        candidates.append(("refined on eval", refined))
     fits = [fit_of(theta) for _, theta in candidates]
     best = max(range(len(candidates)), key=lambda i: (fits[i], i > 0))
     label, theta = candidates[best]

@@ -352,11 +352,8 @@ def order_table(
             continue
         n_eq = n = fit.n_samples
         v = fit.residual_rms**2
-        fit_pct = (
-            simulation_fit(fit.model, validation) if validation else fit.fit_simulation_percent
-        )
-        with np.errstate(divide="ignore"):
-            aic = n * float(np.log(v)) + 2.0 * d if v > 0.0 else -math.inf
+        pct = simulation_fit(fit.model, validation) if validation else fit.fit_simulation_percent
+        aic = n * float(np.log(v)) + 2.0 * d if v > 0.0 else -math.inf
         fpe = v * (1.0 + d / n) / (1.0 - d / n)
-        rows.append(OrderRow(na, nb, nk, d, v, aic, fpe, fit_pct, fit.model.is_stable()))
+        rows.append(OrderRow(na, nb, nk, d, v, aic, fpe, pct, fit.model.is_stable()))
     return OrderTable(tuple(rows), n_eq, "validation" if validation else "estimation")
