@@ -1,8 +1,6 @@
 """``cartctl commission`` (docs/commission.md): :mod:`.stages` drives the plant and writes files
 (:mod:`.report`); :mod:`.checks` and :mod:`.tuning` judge and tune, numbers in, numbers out."""
 
-from __future__ import annotations
-
 from cartctl.errors import CartctlError
 
 

@@ -174,9 +174,7 @@ def sort_robust(rows: Sequence[RobustRow]) -> list[RobustRow]:
 
 
 ROBUST_STATUSES = {
-    "infeasible": STATUSES["infeasible"],
-    "run failed": STATUSES["run failed"],
-    "no step": STATUSES["no step"],
+    **{s: STATUSES[s] for s in ("infeasible", "run failed", "no step")},
     "not settled": "ran, but did not settle on the model",
     "settled on some": "settled on the model, not on every sampled plant and physics run",
     "settled on all": "settled on the model, every sampled plant and every physics run",

@@ -228,10 +228,11 @@ def evaluate_robust(job: RobustJob, models: ModelFile, index: int,
     figures = {k: nominal.result.worst[v] for k, v in SUMMARY_KEYS.items()}
     if job.later_fractions:  # commissioning: the model with later commands, not the physics
         physics: dict[str, Any] = {}
-        actuation = [{"later_ms": round(f * models.period_s * 1e3, 3),
-                      **loop_entry(ArxPlant(*(later_command(models.motor(m), f) for m in "ab")),
-                                   nominal, nominal.references)}
-                     for f in job.later_fractions]  # fmt: skip
+        actuation: list[dict[str, Any]] = []
+        for f in job.later_fractions:
+            plant = ArxPlant(*(later_command(models.motor(m), f) for m in "ab"))
+            entry = loop_entry(plant, nominal, nominal.references)
+            actuation.append({"later_ms": round(f * models.period_s * 1e3, 3), **entry})
     else:
         physics = _physics(tj, nominal)
         actuation = [_physics(tj, nominal, ms) for ms in job.actuation_ms]
