@@ -198,10 +198,7 @@ def check_loop_delay(loop_delay_ticks: int | None, nk: int, extra_delay_ticks: i
 
 
 def _text(value: Any) -> str:  # 10.0 → '10', as typed
-    if isinstance(value, float):
-        text = repr(value)
-        return text[:-2] if text.endswith(".0") else text
-    return str(value)
+    return repr(value).removesuffix(".0") if isinstance(value, float) else str(value)
 
 
 def parse_poles(text: str) -> list[complex]:
