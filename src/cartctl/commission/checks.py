@@ -311,10 +311,8 @@ def compare(summary: dict[str, Any], predicted: dict[str, float | None],
         speed, tol = "encoder", count_pp
     worst = worst_metrics(motors)
     measured = {k: worst[k] for k in ("overshoot_percent", "settling_time_s")}
-    nominal_os = predicted.get("nominal_overshoot_percent") or 0.0
-    nominal_ts = predicted.get("nominal_settling_time_s") or 0.0
-    max_os = max(TARGET_OVERSHOOT_PERCENT, nominal_os) + tol
-    max_ts = max(TARGET_SETTLING_S, nominal_ts + 0.02)
+    max_os = max(TARGET_OVERSHOOT_PERCENT, predicted.get("nominal_overshoot_percent") or 0.0) + tol
+    max_ts = max(TARGET_SETTLING_S, (predicted.get("nominal_settling_time_s") or 0.0) + 0.02)
     limits = {"overshoot_percent": max_os, "settling_time_s": max_ts, "speed": speed}
     os_, ts = measured["overshoot_percent"], measured["settling_time_s"]
     passed = os_ is not None and ts is not None and os_ <= max_os and ts <= max_ts

@@ -285,12 +285,11 @@ def sample_plants(
 
 def describe_line(sample: PlantSample, model_path: str) -> str:
     """One line for the terminal: how the plants were drawn, and what the file lacked."""
-    theta = []
-    for name, s in sample.motors.items():
-        if s.theta_std is None:
-            theta.append(f"motor {name}: {s.theta_std_note}")
-        else:
-            theta.append(f"motor {name}: θ ± σ (uniform; {s.rejected_unstable} unstable draws redrawn)")  # fmt: skip
+    drawn = "θ ± σ (uniform; {} unstable draws redrawn)"  # else the note says why not
+    theta = [
+        f"motor {m}: {s.theta_std_note or drawn.format(s.rejected_unstable)}"
+        for m, s in sample.motors.items()
+    ]
     lo, hi = GAIN_RANGE
     return (f"{sample.size} plants drawn around {model_path} (seed {sample.seed}): "
             + "; ".join(theta) + f"; DC gain × uniform[{lo:g}, {hi:g}] per motor; loop delay "
