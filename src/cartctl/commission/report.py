@@ -214,6 +214,7 @@ def verification_body(checked: checks.Verification, summary: dict[str, Any],
                       argv: list[str]) -> str:  # fmt: skip
     """The verification section: measured against predicted, the bounds, pass or fail."""
     m, p, lim = checked.measured, checked.predicted, checked.limits
+    heads = ["", "measured", "predicted nominal", "predicted worst", "pass bound"]
     rows = [
         [
             label,
@@ -229,9 +230,7 @@ def verification_body(checked: checks.Verification, summary: dict[str, Any],
     ]
     return (
         f"`cartctl {' '.join(argv)}` (worse of motors a and b, on the {lim['speed']} speed).\n\n"
-        + markdown_table(
-            ["", "measured", "predicted nominal", "predicted worst", "pass bound"], rows
-        )
+        + markdown_table(heads, rows)
         + f"\n\n**{'PASS' if checked.passed else 'FAIL'}**. Bounds: overshoot ≤ max("
         f"{checks.TARGET_OVERSHOOT_PERCENT:g} %, predicted nominal) + a tolerance "
         f"({checks.TRUE_SPEED_TOLERANCE_PP:g} point on a true speed, half an encoder count per "

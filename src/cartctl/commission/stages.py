@@ -15,7 +15,6 @@ from typing import Any
 import numpy as np
 
 from cartctl.cart import PERIOD_S
-from cartctl.cli.jsonout import strict
 from cartctl.cli.progress import ProgressBar
 from cartctl.commission import StageError, checks, report, tuning
 from cartctl.data.trace import Trace, write_trace
@@ -224,7 +223,7 @@ class Commission:
                                      self.out / "tuning.png")  # fmt: skip
         self.results["controller"] = {"path": str(self.controller_path), "command": command,
                                       "settings": chosen["settings"],
-                                      "predicted": strict(self.tuned.predicted()),
+                                      "predicted": self.tuned.predicted(),
                                       "timing_plants": chosen.get("timing")}  # fmt: skip
         self._done("tuning", series, body)
 
@@ -251,7 +250,7 @@ class Commission:
         # run's figures on the RTS-smoothed speed (compare takes them where there is no true speed)
         smoothed = {m: f["smoothed"] for m, f in (summary.get("motors") or {}).items()
                     if isinstance(f.get("smoothed"), dict)} or None  # fmt: skip
-        checked = checks.compare(summary, strict(self.tuned.predicted()), smoothed)
+        checked = checks.compare(summary, self.tuned.predicted(), smoothed)
         self.results["verification"] = {**checked.to_dict(), "trace": summary.get("trace"),
                                          "recording": summary.get("recording"),
                                          "command": "cartctl " + " ".join(argv)}  # fmt: skip

@@ -54,12 +54,11 @@ class TuningResult:
     refused: tuple[tuple[int, str], ...] = ()
 
     def predicted(self) -> dict[str, float | None]:
-        """The chosen setting's nominal and worst-case overshoot (%) and settling (s)."""
+        """The chosen setting's nominal and worst-case overshoot (%) and settling (s), JSON-safe."""
         score = self.chosen.score
         assert score is not None
-        return {f"{which}_{k}": score.figures[k][which]
-                for which in ("nominal", "worst") for k in ("overshoot_percent",
-                                                            "settling_time_s")}  # fmt: skip
+        keys = ("overshoot_percent", "settling_time_s")
+        return strict({f"{w}_{k}": score.figures[k][w] for w in ("nominal", "worst") for k in keys})
 
 
 def run_tuning(model_path: Path, loop_delay_ticks: int,

@@ -102,7 +102,7 @@ def simulate_batch(
     plant from rest, with the loop's clamp ``voltage_limit_v`` (V), following ``reference`` (rad/s,
     one value per tick)."""
     ref = np.asarray(reference, dtype=float)
-    check_voltage_limit(voltage_limit_v)
+    loop_lim = check_voltage_limit(voltage_limit_v)
     c = controller
     if not isinstance(c, PiController | StateFeedbackController):
         raise InputError(f"the batch loop does not know the controller {type(c).__name__}")
@@ -122,7 +122,6 @@ def simulate_batch(
     y_hist = np.zeros((na + n_ticks + 1, n))
     voltage = np.zeros((n, n_ticks + 1))
     diverged = np.zeros(n, dtype=bool)
-    loop_lim = float(voltage_limit_v)
     with np.errstate(all="ignore"):
         for k in range(n_ticks):
             r, y = float(ref[k]), y_hist[na + k]

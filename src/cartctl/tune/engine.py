@@ -165,12 +165,11 @@ def run_grid(
     paid before the workers fork) and the rest in chunks of about a quarter of a worker's share.
     ``progress`` gets the count done so far; ``evaluate`` maps a chunk to rows with their grid
     ``index`` (default :func:`evaluate_chunk`)."""
-    items = job.items
+    items, done = job.items, progress or (lambda count: None)
     results: list[Any] = []
     for item in items if jobs == 1 else items[:1]:
         results += evaluate(replace(job, items=(item,)))
-        if progress is not None:
-            progress(len(results))
+        done(len(results))
     rest = items[1:] if jobs > 1 else ()
     if rest:
         # a feasible setting's design imports python-control (and matplotlib with it); a refused
@@ -183,8 +182,7 @@ def run_grid(
         try:
             for future in as_completed([pool.submit(evaluate, c) for c in chunks]):
                 results += future.result()
-                if progress is not None:
-                    progress(len(results))
+                done(len(results))
         finally:
             pool.shutdown(cancel_futures=True)
     return sorted(results, key=lambda r: r.index)
