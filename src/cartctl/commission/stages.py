@@ -17,11 +17,14 @@ import numpy as np
 from cartctl.cart import PERIOD_S
 from cartctl.cli.progress import ProgressBar
 from cartctl.commission import StageError, checks, report, tuning
-from cartctl.data.trace import Trace, write_trace
+from cartctl.data.modelfile import save_models
+from cartctl.data.trace import Trace, write_trace, write_trace_meta
+from cartctl.identification.pipeline import model_file
 from cartctl.plants.base import ClockedPlant
 from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
 from cartctl.runtime.loop import run_experiment
 from cartctl.runtime.realtime import one_blas_thread
+from cartctl.signals import make_signal
 from cartctl.tune.engine import save_setting
 
 STAGES = ("checks", "excitation", "identification", "tuning", "verification")
@@ -86,8 +89,6 @@ class Commission:
 
     def _experiment(self, stage: str, ua: np.ndarray, ub: np.ndarray, probe: bool = False) -> Trace:
         """Send ``ua``, ``ub`` (V) to a new plant; keep the trace as <stage>.csv, even if cut short."""
-        from cartctl.data.trace import write_trace_meta
-
         plant, self.description = make_plant(self.spec, **self.plant_options)
         try:
             if isinstance(plant, ClockedPlant):
@@ -150,8 +151,6 @@ class Commission:
 
     def run_excitation(self) -> None:
         """Stage 2: the report's square wave at the chosen amplitude on both motors."""
-        from cartctl.signals import make_signal
-
         assert self.amplitude is not None
         volts = make_signal("square", self.amplitude.voltage_v)
         self.say("excitation", f"square ±{self.amplitude.voltage_v:g} V, {volts.size / 100:g} s")
@@ -166,9 +165,6 @@ class Commission:
 
     def run_identification(self) -> None:
         """Stage 3: ARX with a validation split; the verdict; model.toml (model-failed.toml)."""
-        from cartctl.data.modelfile import save_models
-        from cartctl.identification.pipeline import model_file
-
         assert self.excitation is not None and self.amplitude is not None
         self.say("identification", f"ARX na={checks.NA} nb={checks.NB} "
                  f"nk={max(1, self.loop_delay_ticks)}, validated on the last "
