@@ -119,12 +119,8 @@ def _step_down(ar: NDArray[np.float64], rho: float) -> NDArray[np.float64] | Non
 
 def _d_ar_d_eta(eta: NDArray[np.float64], rho: float) -> NDArray[np.float64]:
     """∂(a_1 … a_na)/∂η, shape (na, na), by a complex step."""
-    cols = []
-    for j in range(eta.size):
-        step = eta.astype(complex)
-        step[j] += 1j * _COMPLEX_STEP
-        cols.append(_step_up(step, rho).imag / _COMPLEX_STEP)
-    return np.array(cols).T.reshape(eta.size, eta.size)
+    steps = eta.astype(complex) + 1j * _COMPLEX_STEP * np.eye(eta.size)  # row j: η_j stepped
+    return np.array([_step_up(step, rho).imag / _COMPLEX_STEP for step in steps]).T
 
 
 def project_poles(ar: Sequence[float] | NDArray[np.float64], radius: float) -> NDArray[np.float64]:

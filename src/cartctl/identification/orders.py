@@ -289,7 +289,8 @@ class OrderTable:
 
     def to_dict(self) -> list[dict[str, Any]]:
         """The ``orders`` list of ``identify --json``: one entry per row, the best ones marked."""
-        (aic, fit), common = self._best, {"n_equations": self.n_equations, "fit_on": self.fit_on}
+        aic, fit = self._best
+        common = {"n_equations": self.n_equations, "fit_on": self.fit_on}
         return [
             r.to_dict() | common | {"best_aic": r is aic, "best_fit": r is fit} for r in self.rows
         ]
