@@ -10,7 +10,7 @@ import pytest
 
 import cartctl
 from cartctl.cli import main
-from cartctl.errors import InputError
+from cartctl.errors import CartctlError
 
 
 def _run_line(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
@@ -22,7 +22,7 @@ def _run_line(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
 
 
 def _simulate_line(controller: str, **options: object) -> str:
-    with pytest.raises(InputError) as refused:
+    with pytest.raises(CartctlError) as refused:
         cartctl.simulate(controller, **options)  # type: ignore[arg-type]
     return str(refused.value)
 
@@ -54,3 +54,17 @@ def test_an_unstable_model_on_the_sim_plant(
     line = _run_line(capsys, "--model", str(unstable), "--controller", "controllers/pi.toml")
     assert "unstable" in line and str(unstable) in line
     assert _simulate_line("controllers/pi.toml", model=str(unstable)) == line
+
+
+def test_a_controller_for_another_tick(capsys: pytest.CaptureFixture[str], workdir: Path) -> None:
+    # the shipped ground model at Ts = 20 ms gives a controller that no 10 ms plant may run
+    text = (workdir / "models" / "ground.toml").read_text(encoding="utf-8")
+    assert "\nperiod_s = 0.01\n" in text
+    slow = workdir / "models" / "slow.toml"
+    slow.write_text(text.replace("\nperiod_s = 0.01\n", "\nperiod_s = 0.02\n"), encoding="utf-8")
+    assert main(["design", str(slow), "--method", "pi", "--out", "slow-pi.toml"]) == 0
+    capsys.readouterr()
+    for plant, model in (("sim", "models/ground.toml"), ("physics", str(slow))):
+        line = _run_line(capsys, "--plant", plant, "--model", model, "--controller", "slow-pi.toml")
+        assert "designed for Ts = 0.02 s" in line and "ticks every 0.01 s" in line
+        assert _simulate_line("slow-pi.toml", plant=plant, model=model) == line

@@ -221,6 +221,17 @@ def _derived_loop_delay(
         ) from None
 
 
+def check_period(where: str | Path, file_period_s: float, period_s: float) -> None:
+    """Refuse a controller designed for Ts = ``file_period_s`` on a plant ticking every
+    ``period_s`` (s), naming ``where`` (its file, or what the caller calls it)."""
+    if abs(file_period_s - period_s) > 1e-9:
+        raise DataFileError(
+            where,
+            f"is designed for Ts = {file_period_s:g} s but the plant ticks every {period_s:g} s; "
+            "design it on a model of the plant's period",
+        )
+
+
 def load_controller(
     path: str | Path, *, force: bool = False, period_s: float | None = None
 ) -> ControllerFile:
@@ -233,9 +244,8 @@ def load_controller(
     doc = read_toml(path, "controller file")
     check_format(doc, path, CONTROLLER_FORMAT, "controller file")
     file_period_s = float(require(doc, "period_s", (int, float), path, "the top level"))
-    if period_s is not None and abs(file_period_s - period_s) > 1e-9:
-        raise DataFileError(path, f"is designed for Ts = {file_period_s:g} s but the plant ticks "
-                            f"every {period_s:g} s; design it on a model of the plant's period")  # fmt: skip
+    if period_s is not None:
+        check_period(path, file_period_s, period_s)
     method = require(doc, "method", str, path, "the top level")
     if method not in METHODS:
         raise DataFileError(path, f"unknown method {method!r}; expected one of {', '.join(METHODS)}")  # fmt: skip

@@ -178,7 +178,7 @@ def prepare_run(
     once everything that needs no plant is checked.
     """
     from cartctl.data.modelfile import load_models
-    from cartctl.design.controllerfile import ControllerFile, load_controller
+    from cartctl.design.controllerfile import ControllerFile, check_period, load_controller
     from cartctl.design.controllerfile import build_controllers as build_from_file
     from cartctl.plants.base import ClockedPlant
     from cartctl.plants.factory import make_plant as factory_make_plant
@@ -223,10 +223,7 @@ def prepare_run(
     the_plant, description = make_plant(plant, **plant_options)
     try:
         period_s = the_plant.period_s
-        if abs(period_s - file.period_s) > 1e-9:
-            raise InputError(
-                f"the controller is for Ts = {file.period_s} s but the plant ticks at {period_s} s"
-            )
+        check_period(file.path or given, file.period_s, period_s)  # a file given as loaded
         own = getattr(the_plant, "models", None)  # the sim plant's
         checked = own if own is not None and not allow_unstable else ()
         for motor, m in zip("ab", checked, strict=False):
