@@ -168,9 +168,8 @@ def residual_test(
     cross_lags = np.arange(-m, m + 1)
     auto = _correlation([(e, e) for e, _ in centred], auto_lags)
     cross = _correlation(centred, cross_lags)
-    r_e = np.concatenate([[1.0], auto])
     r_u = _correlation([(u, u) for _, u in centred], np.arange(0, m + 1))
-    p = float(r_e[0] * r_u[0] + 2.0 * np.sum(r_e[1:] * r_u[1:]))
+    p = float(r_u[0] + 2.0 * np.sum(auto * r_u[1:]))  # r_ε(0) = 1
     rms = float(np.sqrt(sum(float(np.einsum("i,i->", e, e)) for e, _ in centred) / n))
     return ResidualTest(
         auto_lags=auto_lags,

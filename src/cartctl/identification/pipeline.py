@@ -115,8 +115,7 @@ class IdentifyRequest:
         check_orders(self.na, self.nb, 0 if self.delay is None else self.delay)  # before the data
         if self.method == "oe":
             check_oe_orders(self.na, self.nb)
-        bad = [m for m in self.motors if m not in ("a", "b")]
-        if bad or not self.motors:
+        if not self.motors or not set(self.motors) <= {"a", "b"}:
             raise InputError(f"motors must be 'a' and/or 'b', got {list(self.motors)}")
 
 
