@@ -14,6 +14,7 @@ from cartctl.design.controller_ss import feedback_gains, kalman_from_entry
 from cartctl.design.controllerfile import ControllerFile
 from cartctl.design.kalman import KalmanDesign
 from cartctl.errors import DataFileError, InputError
+from cartctl.runtime.pi import default_tracking_gain
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 
@@ -102,8 +103,7 @@ def pi_code(controller: ControllerFile, motor: str, entry: Mapping[str, Any]) ->
     m, M = motor, motor.upper()
     kp, ki = float(entry["kp"]), float(entry["ki"])
     mode = str(entry.get("anti_windup", "conditional"))
-    # the same defaults as PiController: Ki·Ts per tick, tracking gain min(1, Ts·Ki/Kp)
-    kt = min(1.0, controller.period_s * ki / kp) if kp > 0.0 else 1.0
+    kt = default_tracking_gain(kp, ki, controller.period_s)  # as PiController's
     est = entry.get("estimator")
     design = kalman_from_entry(est) if est is not None else None
     windup = {

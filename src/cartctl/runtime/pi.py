@@ -78,6 +78,12 @@ def _finite(name: str, value: float, unit: str, *, positive: bool = False) -> fl
     return value
 
 
+def default_tracking_gain(kp: float, ki: float, period_s: float) -> float:
+    """Kt per tick when none is given: min(1, Ts·Ki/Kp), 1 for Kp = 0 (a tracking time constant
+    equal to the integral time Kp/Ki)."""
+    return min(1.0, period_s * ki / kp) if kp > 0.0 else 1.0
+
+
 class PiController:
     """Discrete PI speed controller with output clamp and anti-windup.
 
@@ -106,7 +112,7 @@ class PiController:
                 f"unknown anti-windup {anti_windup!r}; expected one of {', '.join(ANTI_WINDUP)}"
             )
         if tracking_gain is None:
-            kt = min(1.0, self.period_s * self.ki / self.kp) if self.kp > 0.0 else 1.0
+            kt = default_tracking_gain(self.kp, self.ki, self.period_s)
         elif anti_windup != "back-calculation":
             raise InputError(
                 f"tracking_gain applies only to anti_windup='back-calculation', not {anti_windup!r}"
