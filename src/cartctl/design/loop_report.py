@@ -124,7 +124,9 @@ class MotorAnalysis:
 def analyse_designs(
     designs: Designs, *, disturbance_v: float = DEFAULT_DISTURBANCE_V
 ) -> dict[str, MotorAnalysis]:
-    """The analysis of every motor of ``designs``, with a load step of ``disturbance_v`` (V)."""
+    """The analysis of every motor of ``designs``, with a load step of ``disturbance_v`` (V); its
+    keys (:meth:`MotorAnalysis.entry`) go into each motor's ``design --json`` entry, and so into
+    the controller file's ``analysis`` (the loop's Ms as it runs)."""
     extra = designs.request.extra_delay_ticks
     out: dict[str, MotorAnalysis] = {}
     for m, made in designs.motors.items():
@@ -139,6 +141,7 @@ def analyse_designs(
             table.append({"re": re, "im": im, "damping": damping, "freq_hz": freq_hz})
         freq, loop, ms, ms_hz, mt, mt_hz = _loop_peaks(ss, model, extra)
         out[m] = MotorAnalysis(freq, loop, ms, ms_hz, mt, mt_hz, dist, table, m)
+        made.entry.update(out[m].entry())
     return out
 
 
@@ -156,17 +159,13 @@ def sig_list(values: Iterable[float], digits: int = 3) -> str:
     return ", ".join(format_column(list(values), sig=digits))
 
 
-def db(value_db: float, decimals: int = 2) -> str:
-    """A level in dB with ``decimals``; a level that rounds to 0 is ``0.00``, not ``-0.00``."""
-    return format_fixed(value_db, decimals)
-
-
-def design_figure(motor: str, designs: Designs, entry: Mapping[str, Any]) -> Figure:
-    """One motor's figure: |L| and ∠L with the margins of its ``design --json`` ``entry``, the
+def design_figure(motor: str, designs: Designs) -> Figure:
+    """One motor's figure: |L| and ∠L with the margins of its ``design --json`` entry, the
     simulated step's speed and voltage beside the time-optimal ones on the same loop."""
     from matplotlib.figure import Figure
 
     model, step, request = designs.models[motor], designs.steps[motor], designs.request
+    entry = designs.motors[motor].entry
     extra_delay_ticks, voltage_limit_v = request.extra_delay_ticks, request.voltage_limit_v
     fig = Figure(figsize=(11, 8.5), dpi=110, layout="constrained")
     axes = fig.subplots(2, 2, sharex="col")
@@ -223,19 +222,16 @@ def design_figure(motor: str, designs: Designs, entry: Mapping[str, Any]) -> Fig
 
 
 def write_report(
-    out_dir: str | Path,
-    designs: Designs,
-    entries: Mapping[str, Mapping[str, Any]],
-    analyses: Mapping[str, MotorAnalysis],
+    out_dir: str | Path, designs: Designs, analyses: Mapping[str, MotorAnalysis]
 ) -> list[Path]:
-    """``design_X.png`` (:func:`design_figure`, on the ``design --json`` ``entries``) and
-    ``analysis_X.png`` (:func:`analysis_figure`) per motor; returns their paths."""
+    """``design_X.png`` (:func:`design_figure`) and ``analysis_X.png`` (:func:`analysis_figure`)
+    per motor; returns their paths."""
     out, paths = Path(out_dir), []
     out.mkdir(parents=True, exist_ok=True)
-    for m, entry in entries.items():
+    for m, analysis in analyses.items():
         figures = {
-            "design": design_figure(m, designs, entry),
-            "analysis": analysis_figure(m, designs.request.method, analyses[m]),
+            "design": design_figure(m, designs),
+            "analysis": analysis_figure(m, designs.request.method, analysis),
         }
         for name, figure in figures.items():
             paths.append(out / f"{name}_{m}.png")
@@ -258,7 +254,7 @@ def _dress(
 
 
 def _db(value: float) -> str:
-    return db(20.0 * float(np.log10(value)))
+    return format_fixed(20.0 * float(np.log10(value)), 2)
 
 
 def analysis_figure(motor: str, method: str, analysis: MotorAnalysis) -> Figure:

@@ -141,8 +141,7 @@ def save_setting(method: str, settings: Mapping[str, float], model_path: str | P
     options = request.to_argv(str(model_path), always=request_axes(method))
     models = load_models(model_path)
     designs = design_models(request, models, ("a", "b"))
-    for m, analysis in analyse_designs(designs).items():  # the file's analysis: the loop's Ms
-        designs.motors[m].entry.update(analysis.entry())
+    analyse_designs(designs)  # the file's analysis: the loop's Ms
     command = "cartctl " + shlex.join(["design", *options, "--out", str(out)])
     save_controller(controller_file(designs, model_path, command=command,
                                     period_s=models.period_s), out)  # fmt: skip

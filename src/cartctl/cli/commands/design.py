@@ -155,15 +155,16 @@ def _pole_lines(e: dict[str, Any]) -> list[str]:
 
 
 def _analysis_lines(e: dict[str, Any]) -> list[str]:
-    from cartctl.design.loop_report import db, sig
+    from cartctl.design.loop_report import sig
+    from cartctl.measures.numfmt import format_fixed
 
     d = e["disturbance"]
     rec = d["recovery_time_s"]
     ms_db, mt_db = e["sensitivity_peak_db"], e["complementary_peak_db"]
     return [
-        f"  sensitivity peak Ms = {sig(e['sensitivity_peak'])} ({db(ms_db)} dB) at "
+        f"  sensitivity peak Ms = {sig(e['sensitivity_peak'])} ({format_fixed(ms_db, 2)} dB) at "
         f"{sig(e['sensitivity_peak_hz'])} Hz; complementary peak Mt = "
-        f"{sig(e['complementary_peak'])} ({db(mt_db)} dB) at "
+        f"{sig(e['complementary_peak'])} ({format_fixed(mt_db, 2)} dB) at "
         f"{sig(e['complementary_peak_hz'])} Hz",
         f"  {sig(d['step_v'])} V load step at the plant input: peak {sig(d['peak_deviation_rad_s'])} "
         f"rad/s at {d['peak_time_s'] * 1e3:.0f} ms, recovered (within 2 % of the peak) "
@@ -230,9 +231,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"cartctl design: note: {designs.loop_delay_note}", file=sys.stderr)
     analyses = analyse_designs(designs, disturbance_v=disturbance_v)
     motors_json = designs.entries()
-    for m, analysis in analyses.items():  # before the file: its analysis keeps the loop's Ms
-        motors_json[m].update(analysis.entry())
-        for warning in analysis.warnings:
+    for e in motors_json.values():
+        for warning in e["warnings"]:
             print(f"cartctl design: warning: {warning}", file=sys.stderr)
     if args.out:
         command = options.command_line("design")
@@ -243,7 +243,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from cartctl.design.loop_report import write_report
 
-        write_report(args.report, designs, motors_json, analyses)
+        write_report(args.report, designs, analyses)
     if args.json:
         print(dumps({"method": args.method, "model": str(args.model), "Ts": models.period_s,
                      "loop_delay_ticks": designs.loop_delay_ticks,
