@@ -155,6 +155,7 @@ def test_csv_one_row_and_utf8_bom(tmp_path: Path) -> None:
         (HEADER + "\n" + csv_rows(3) + "0.02,1,0,0,0\n", 5, "time_s", ["time goes from 0.02"]),
         (HEADER + "\n0.01,1,0,0,0\n0.0,1,0,0,0\n", 3, "time_s", ["must increase"]),
         (HEADER + "\n\n0,1,0,0,0\n\n\n0.01,1,0,inf,0\n", 6, "speed_a", ["inf is not"]),
+        ('""\n', 1, None, ["column 1 of the header has no name"]),
     ],
 )
 def test_csv_errors_name_file_line_and_column(
@@ -171,6 +172,45 @@ def test_csv_errors_name_file_line_and_column(
         assert f"line {line}" in message
     for needle in needles:
         assert needle in message
+
+
+def test_csv_header_is_checked_before_bytes_that_are_not_utf8(tmp_path: Path) -> None:
+    """A byte that is not UTF-8 past the first 8 KiB read (a Latin-1 note late in a file) is
+    reported only once the header has passed its checks, as it was before the single pass."""
+    rows = csv_rows(2000).encode() + b"20,0,0,0,0 caf\xe9\n"
+    path = tmp_path / "trace.csv"
+    path.write_bytes(b"time_s,voltage_a,speed_a,speed_b\n" + rows)
+    with pytest.raises(DataFileError, match="missing required column") as caught:
+        read_trace(path)
+    assert caught.value.line == 1
+    path.write_bytes(HEADER.encode() + b",speed_a\n" + rows)
+    with pytest.raises(DataFileError, match="'speed_a' appears twice"):
+        read_trace(path)
+    path.write_bytes(HEADER.encode() + b"\n" + rows)
+    with pytest.raises(DataFileError, match="not UTF-8 text"):
+        read_trace(path)
+
+
+def test_csv_read_at_once_or_row_by_row_gives_the_same_trace(tmp_path: Path) -> None:
+    """A plain file (np.loadtxt reads it at once) and the same rows with a blank line (the csv
+    module reads them row by row): bit-identical columns, integer columns, error lines."""
+    rows = [
+        f"{k / 100!r},{k % 7 - 3}.25,0,{float(np.sin(k))!r},{k**0.5!r},{k}, {k}.0"
+        for k in range(300)
+    ]
+    head = HEADER + ",tick,whole"
+    plain = read_trace(write(tmp_path, "\n".join([head, *rows]) + "\n", "plain.csv"))
+    spaced = "\n".join([head, *rows[:100], "", *rows[100:]]) + "\n"
+    blank = read_trace(write(tmp_path, spaced, "blank.csv"))
+    assert list(plain.columns()) == list(blank.columns())
+    for name, values in plain.columns().items():
+        assert blank.column(name).view(np.uint64).tolist() == values.view(np.uint64).tolist()
+    assert plain.integer_columns == blank.integer_columns == {"tick"}
+    rows[150] = rows[150].replace(",0,", ",inf,", 1)
+    for name, text, line in (("plain", [head, *rows], 152), ("blank", [head, "", *rows], 153)):
+        with pytest.raises(DataFileError, match="inf is not a finite") as caught:
+            read_trace(write(tmp_path, "\n".join(text) + "\n", f"{name}.csv"))
+        assert (caught.value.line, caught.value.column) == (line, "voltage_b")
 
 
 def test_binary_file_and_directory_are_data_errors(tmp_path: Path) -> None:
