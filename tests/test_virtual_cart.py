@@ -236,3 +236,23 @@ def test_identified_delay_matches_the_echo(
         residual = {c["nk"]: c["residual_rms"] for c in estimate["candidates"]}
         best = min(residual.values())
         assert all(r > 3 * best for nk, r in residual.items() if nk < echo_delay)
+
+
+@pytest.mark.parametrize(
+    ("faults", "host_rate", "heard"),
+    [("", 500_000, True), ("", 115_200, False), ("", 4800, False), ("", 1_500_000, False),
+     ("bridge=1", 115_200, True), ("bridge=1", 500_000, False)],
+)  # fmt: skip
+def test_a_host_at_another_rate_reads_noise(faults: str, host_rate: int, heard: bool) -> None:
+    """Like a Mega's 16U2 (which runs its UART at whatever rate the host asks for), the virtual
+    cart understands a host only at its own line rate: any other rate termios has is noise."""
+    import termios
+
+    cart = VirtualCart(faults=CartFaults.parse(faults))
+    try:
+        attrs = termios.tcgetattr(cart._slave)
+        attrs[4] = attrs[5] = getattr(termios, f"B{host_rate}")
+        termios.tcsetattr(cart._slave, termios.TCSANOW, attrs)
+        assert cart._reader.rate_ok() is heard
+    finally:
+        cart.stop()

@@ -114,8 +114,9 @@ class Encoder:
     def thread_info(
         self, time_ms: int, thread_id: int, duration_us: int, *, executions: int = 0
     ) -> bytes:
-        """One THREAD_INFO frame (30 bytes): a firmware thread's last duration (µs) and executions,
-        as microOS packs them (latencies, totals and priority 0)."""
+        """One THREAD_INFO frame (30 bytes) as the bridge sketch sends its timing reports through
+        microOS's sendThreadInfo: a value in the duration field, the executions, and priority,
+        latency and totals 0 (microOS's own thread reports fill those; nothing here sends one)."""
         message = _ThreadInfoMessage(time_ms, 0, 0, executions, duration_us, 0, thread_id, 0)
         return self._pack(message, "THREAD_INFO field does not fit its wire type")
 
@@ -241,16 +242,22 @@ class LineAssembler:
     "\\r" is dropped, so a "\\r\\n" split over two frames still ends exactly one line."""
 
     def __init__(self) -> None:
-        self._partial = ""
+        self._partial: list[str] = []  # pieces, joined once the line ends: no copy per fragment
 
     def feed(self, text: str) -> list[str]:
         """Add a fragment; return the lines it completes (oldest first, without line endings)."""
-        *lines, self._partial = (self._partial + text.replace("\r", "")).split("\n")
+        *lines, last = text.replace("\r", "").split("\n")
+        if lines:
+            lines[0] = "".join([*self._partial, lines[0]])
+            self._partial = []
+        if last:
+            self._partial.append(last)
         return lines
 
     def flush(self) -> str | None:
         """Return and clear the unfinished line, or None if there is none."""
-        partial, self._partial = self._partial, ""
+        partial = "".join(self._partial)
+        self._partial = []
         return partial or None
 
 
