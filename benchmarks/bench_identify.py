@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from scipy.linalg import qr, solve_triangular
 
 from cartctl.identification import arx
+from cartctl.measures.metrics import sum_squares
 from cartctl.model import ArxModel
 from cartctl.signals import square
 
@@ -83,7 +84,7 @@ def breakdown(y: NDArray[np.float64], u: NDArray[np.float64], repeats: int) -> d
 
     def spread() -> float:
         target = phi_y[:, -1]
-        return np.sqrt(arx._sum_squares(target - target.mean()))
+        return np.sqrt(sum_squares(target - target.mean()))
 
     parts = best_of(
         {

@@ -182,3 +182,21 @@ def test_cli_missing_data_file(
     code, _, err = _cli(capsys, "validate", str(ground_path), str(tmp_path / "nope.csv"))
     assert code == 2
     assert len(err.strip().splitlines()) == 1 and "not found" in err
+
+
+def test_an_unstable_model_has_one_fit_in_validate_and_identify(sim_step: Trace) -> None:
+    """One answer for an unstable model on both paths: −inf (worse than any model, null in JSON),
+    whether its simulation overflows within the data or stays finite over it."""
+    from cartctl.identification.arx import simulation_fit
+    from cartctl.model import ArxModel
+
+    u, y = sim_step.voltage("a"), sim_step.speed("a")
+    slow = ArxModel.from_theta([-1.05, 0.0, 0.1, 0.0])  # a pole at 1.05: finite over 2.2 s
+    wild = ArxModel.from_theta([-1000.0, 0.0, 0.1, 0.0])  # a pole at 1000: overflows
+    assert np.isfinite(slow.simulate(u)).all()
+    for model in (slow, wild):
+        assert simulation_fit(model, [(y, u)]) == -np.inf  # identify, its orders and delays
+        result = validate(model, sim_step, "a")
+        assert result.fit_simulation_percent == -np.inf
+        assert result.to_dict()["fit_simulation_percent"] is None
+        assert result.to_dict()["stable"] is False

@@ -18,7 +18,7 @@ from scipy.linalg import qr, solve_triangular
 
 from cartctl.cart import PERIOD_S
 from cartctl.errors import InputError
-from cartctl.measures.metrics import finite_or_none, fit_percent
+from cartctl.measures.metrics import finite_or_none, fit_from_norms, fit_percent, sum_squares
 from cartctl.model import ArxModel
 
 Segment = tuple[ArrayLike, ArrayLike]
@@ -135,11 +135,24 @@ def check_orders(na: int, nb: int, nk: int) -> None:
             raise InputError(f"{name} must be a whole number in {low}..50, got {value!r}")
 
 
+def theta_covariance(r: ArrayLike, residual_ss: float, rows: int) -> NDArray[np.float64]:
+    """Σ = σ̂² (JᵀJ)⁻¹ = σ̂² R⁻¹ R⁻ᵀ of a least-squares θ̂ (J = Φ for ARX, the simulation's
+    Jacobian for OE), from the triangular R of J = QR and the residual sum of squares over
+    ``rows`` equations, σ̂² = Σ e² / (rows − d); NaN throughout when R is singular."""
+    r = np.asarray(r, dtype=float)
+    d = r.shape[0]
+    try:
+        r_inv = solve_triangular(r, np.eye(d), check_finite=False)
+    except np.linalg.LinAlgError:
+        return np.full((d, d), np.nan)
+    return residual_ss / max(rows - d, 1) * (r_inv @ r_inv.T)
+
+
 def least_squares(
     phi_y: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], float, NDArray[np.float64]]:
     """θ, ‖y − Φθ‖ and θ's standard deviations from one QR of [Φ | y] (destroyed): with
-    [Φ | y] = Q [[R, z], [0, ρ]], θ = R⁻¹ z, ‖y − Φθ‖ = |ρ|, cov θ = ρ² / (rows − d) R⁻¹ R⁻ᵀ.
+    [Φ | y] = Q [[R, z], [0, ρ]], θ = R⁻¹ z, ‖y − Φθ‖ = |ρ|, σ of :func:`theta_covariance`.
     Refuses fewer than :data:`MIN_ROWS_PER_PARAMETER` rows per parameter and a rank-deficient Φ.
     """
     n, p = phi_y.shape[0], phi_y.shape[1] - 1
@@ -159,30 +172,19 @@ def least_squares(
             "excite this model; use a richer excitation (square, prbs, multisine) or lower orders"
         )
     theta = solve_triangular(r, z, check_finite=False)
-    r_inv = solve_triangular(r, np.eye(p), check_finite=False)
-    theta_std = rho / np.sqrt(n - p) * np.sqrt(np.sum(r_inv**2, axis=1))
+    theta_std = np.sqrt(np.diag(theta_covariance(r, rho**2, n)))
     return theta, rho, theta_std
-
-
-def _sum_squares(x: NDArray[np.float64]) -> float:
-    """Σ x² in numpy's own loops: between scipy's QR calls a BLAS dot product left the two
-    libraries' OpenBLAS threads fighting for the cores (3× slower on 2 cores)."""
-    return float(np.einsum("i,i->", x, x))
-
-
-def _fit_from_norms(error_norm: float, spread: float) -> float:
-    """100 (1 − ‖y − ŷ‖ / ‖y − mean(y)‖) from the two norms; NaN for no spread."""
-    if spread == 0.0:
-        return float("nan")
-    return float(100.0 * (1.0 - error_norm / spread))
 
 
 def simulation_fit(model: ArxModel, segments: Sequence[Segment]) -> float:
     """NRMSE fit (%) of ``model`` simulated from rest on each experiment, over all of them
-    together (without concatenating them); −inf when the simulation diverges, NaN for a constant
-    output."""
+    together (without concatenating them); NaN for a constant output, and −inf, worse than any
+    model, for an unstable model (a pole on or outside the unit circle) or a simulation that
+    overflows: an unstable model runs away, within the data or after it, so it has no fit."""
     data = as_segments(segments)
-    with np.errstate(over="ignore", invalid="ignore"):  # an unstable model may diverge
+    if not model.is_stable():
+        return float("-inf")
+    with np.errstate(over="ignore", invalid="ignore"):  # a marginal model may still overflow
         sims = [model.simulate(u) for _, u in data]
         if not all(np.isfinite(sim).all() for sim in sims):
             return float("-inf")
@@ -191,10 +193,10 @@ def simulation_fit(model: ArxModel, segments: Sequence[Segment]) -> float:
         error2 = spread2 = 0.0
         for (y, _), work in zip(data, sims, strict=True):  # each simulation is reused as work space
             np.subtract(y, work, out=work)
-            error2 += _sum_squares(work)
+            error2 += sum_squares(work)
             np.subtract(y, mean, out=work)
-            spread2 += _sum_squares(work)
-        return _fit_from_norms(np.sqrt(error2), np.sqrt(spread2))
+            spread2 += sum_squares(work)
+        return fit_from_norms(np.sqrt(error2), np.sqrt(spread2))
 
 
 def prediction_fit(model: ArxModel, segments: Sequence[Segment]) -> float:
@@ -227,10 +229,10 @@ def fit_arx(
     phi_y = augmented_regression(data, na, nb, nk, start)
     rows = phi_y.shape[0]
     target = phi_y[:, -1]
-    spread = float(np.sqrt(_sum_squares(target - target.mean())))  # before the QR overwrites phi_y
+    spread = float(np.sqrt(sum_squares(target - target.mean())))  # before the QR overwrites phi_y
     theta, residual_norm, theta_std = least_squares(phi_y)
     model = ArxModel.from_theta(theta, na=na, nb=nb, nk=nk, period_s=period_s)
     simulated = simulation_fit(model, eval_segments or data)
-    predicted = _fit_from_norms(residual_norm, spread)
+    predicted = fit_from_norms(residual_norm, spread)
     rms = float(residual_norm / np.sqrt(rows))
     return ArxFit(model, theta_std, simulated, predicted, rms, int(rows))

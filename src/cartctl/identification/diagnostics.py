@@ -37,6 +37,7 @@ from cartctl.identification.arx import (
     prediction_fit,
     simulation_fit,
     stacked_regression,
+    theta_covariance,
 )
 from cartctl.identification.etfe import model_response
 from cartctl.identification.oe import simulation_error
@@ -194,7 +195,7 @@ SEED = 0  # seed of the draws: the same data gives the same band
 _PERCENTILES = (2.275, 15.866, 50.0, 84.134, 97.725)
 
 
-def theta_covariance(
+def fit_covariance(
     fit: ArxFit, segments: Sequence[Segment], start: int | None = None
 ) -> NDArray[np.float64]:
     """Σ of θ̂ from the data the fit saw (``start``: the ARX fit's first row); NaN when singular."""
@@ -205,14 +206,7 @@ def theta_covariance(
     else:
         jac, target = stacked_regression(data, m.na, m.nb, m.nk, start)
         err = target - jac @ m.theta
-    n, d = jac.shape
-    sigma2 = float(err @ err) / max(n - d, 1)
-    r = np.linalg.qr(jac, mode="r")
-    try:
-        r_inv = np.linalg.solve(r, np.eye(d))
-    except np.linalg.LinAlgError:
-        return np.full((d, d), np.nan)
-    return sigma2 * (r_inv @ r_inv.T)
+    return theta_covariance(np.linalg.qr(jac, mode="r"), float(err @ err), jac.shape[0])
 
 
 @dataclass(frozen=True)
@@ -313,7 +307,7 @@ def diagnose(
         prediction_residuals(chosen.model, data, chosen.method),
         output_rms=float(np.sqrt(np.mean(y_all**2))),
     )
-    cov = theta_covariance(chosen, fitted, start)
+    cov = fit_covariance(chosen, fitted, start)
     nyquist = 0.5 / chosen.model.period_s
     band = bode_band(chosen.model, cov, np.geomspace(nyquist / 5000.0, 0.999 * nyquist, 60))
     fit_on = "validation" if validation else "estimation"

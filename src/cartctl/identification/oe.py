@@ -30,6 +30,7 @@ from cartctl.identification.arx import (
     as_segments,
     prediction_fit,
     simulation_fit,
+    theta_covariance,
 )
 from cartctl.measures.metrics import finite_or_none
 from cartctl.model import MARGINAL_POLE_RADIUS, ArxModel
@@ -198,7 +199,8 @@ def fit_oe(
     """Refine ``initial`` (orders and delay kept) by output-error least squares on ``segments``.
 
     ``eval_segments`` (default ``segments``; the unfiltered data when those are prefiltered) decide
-    by simulation fit; every pole ends inside ``pole_bound``; ``theta_std`` is σ̂ √diag((JᵀJ)⁻¹).
+    by simulation fit; every pole ends inside ``pole_bound``; ``theta_std`` is σ̂ √diag((JᵀJ)⁻¹)
+    (:func:`~cartctl.identification.arx.theta_covariance`).
     """
     if max_evaluations < 1:
         raise InputError(f"max_evaluations must be at least 1, got {max_evaluations}")
@@ -256,15 +258,11 @@ def fit_oe(
         )
     fit_data = evaluation if label == "refined on eval" else data
     err, jac = simulation_error(theta, fit_data, na, nb, nk)
-    n, p = jac.shape
-    sigma2 = float(err @ err) / max(n - p, 1)
-    try:
-        theta_std = np.sqrt(np.clip(np.diag(sigma2 * np.linalg.inv(jac.T @ jac)), 0.0, None))
-    except np.linalg.LinAlgError:
-        theta_std = np.full(p, np.nan)
+    n = jac.shape[0]
+    cov = theta_covariance(np.linalg.qr(jac, mode="r"), float(err @ err), n)
     return OeFit(
         model=model,
-        theta_std=theta_std,
+        theta_std=np.sqrt(np.diag(cov)),
         fit_simulation_percent=simulation_fit(model, evaluation),
         fit_prediction_percent=prediction_fit(model, data),
         residual_rms=float(np.sqrt(np.mean(err**2))),

@@ -38,7 +38,7 @@ from cartctl.measures.metrics import finite_or_none
 @dataclass(frozen=True)
 class DelayEstimate:
     """One motor's delay evidence: each candidate's equation-error RMS (rad/s) on the same
-    ``equations`` and its fits (%; the simulation fit NaN when unstable). ``nk`` is this motor's
+    ``equations`` and its fits (%; the simulation fit −inf when unstable). ``nk`` is this motor's
     best or the joint choice, then ``nk_alone`` this motor's own best where it differs."""
 
     nk: int
@@ -95,7 +95,7 @@ def delay_evidence(
     tie = rms.min() + 1e-9 * (rms.min() + y_scale)  # equal up to rounding: the smaller delay wins
     best = int(np.flatnonzero(rms <= tie)[0])
     predicted = tuple(f.fit_prediction_percent for f in fits)
-    simulated = tuple(f.fit_simulation_percent if f.model.is_stable() else math.nan for f in fits)
+    simulated = tuple(f.fit_simulation_percent for f in fits)
     rms_rad_s = tuple(float(r) for r in rms)
     return DelayEstimate(cands[best], cands, rms_rad_s, predicted, simulated, fits[0].n_samples)
 

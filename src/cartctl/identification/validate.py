@@ -17,7 +17,8 @@ import numpy as np
 from cartctl.data.modelfile import ModelFile
 from cartctl.data.trace import MOTORS, Trace
 from cartctl.errors import InputError
-from cartctl.measures.metrics import finite_or_none, fit_percent
+from cartctl.identification.arx import simulation_fit
+from cartctl.measures.metrics import finite_or_none
 from cartctl.measures.stepinfo import StepInfo, StepOnset, final_value, find_step, step_info
 from cartctl.model import ArxModel
 
@@ -53,7 +54,8 @@ class StepComparison:
 @dataclass(frozen=True, eq=False)
 class ValidationResult:
     """A model simulated on one motor's recorded input against the measured speed (rad/s, V, s):
-    the NRMSE fit (NaN for a constant speed), the step comparison for a single step from 0 V, and
+    the NRMSE fit of :func:`~cartctl.identification.arx.simulation_fit` (NaN for a constant speed,
+    −inf for an unstable model), the step comparison for a single step from 0 V, and
     ``unstable_pole`` |z| of an unstable model, whose simulation runs away (no fit, no step)."""
 
     motor: str
@@ -104,7 +106,7 @@ def validate(model: ArxModel, trace: Trace, motor: str) -> ValidationResult:
         simulated = np.where(np.isfinite(simulated), simulated, np.nan)
     return ValidationResult(
         motor=motor,
-        fit_simulation_percent=fit_percent(measured, simulated) if stable else math.nan,
+        fit_simulation_percent=simulation_fit(model, [(measured, voltage)]),
         time_s=trace.time_s,
         voltage_v=voltage,
         measured_rad_s=measured,
