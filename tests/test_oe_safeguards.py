@@ -223,3 +223,37 @@ def test_design_warns_on_a_lightly_damped_closed_loop(
     assert code == 0
     assert "warning" not in err
     assert all(e["warnings"] == [] for e in json.loads(out)["motors"].values())
+
+
+def test_oe_refined_on_the_unfiltered_data_has_one_covariance(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A prefiltered OE fit refined on the raw data: theta_std and the diagnostics' Σ are one
+    matrix, σ̂² (JᵀJ)⁻¹ on the raw data (J by central differences of lfilter here)."""
+    from cartctl.data.read import read_trace
+
+    data = tmp_path / "sq.csv"
+    code, _, _ = _run(capsys, "excite", "--plant", "physics", "--signal", "square",
+                      "--amplitude", "10", "--out", str(data))  # fmt: skip
+    assert code == 0
+    code, out, _ = _run(capsys, "identify", str(data), "--method", "oe", "--prefilter", "butter",
+                        "--motor", "a", "--json")  # fmt: skip
+    doc = json.loads(out)["motors"]["a"]
+    assert any("refined on the unfiltered data" in note for note in doc["notes"])
+    cov = np.asarray(doc["theta_cov"])
+    np.testing.assert_allclose(doc["theta_std"], np.sqrt(np.diag(cov)), rtol=1e-12)
+    trace = read_trace(data)
+    y, u = trace.speed("a"), trace.voltage("a")
+    theta, nk = np.asarray(doc["theta"]), doc["nk"]
+
+    def y_hat(th: np.ndarray) -> np.ndarray:
+        return signal.lfilter(np.concatenate([np.zeros(nk), th[2:]]), np.r_[1.0, th[:2]], u)
+
+    steps = 1e-6 * np.maximum(np.abs(theta), 1.0)
+    jac = np.column_stack([
+        (y_hat(theta + h * e) - y_hat(theta - h * e)) / (2.0 * h)
+        for h, e in zip(steps, np.eye(theta.size), strict=True)
+    ])  # fmt: skip
+    err = y - y_hat(theta)
+    by_hand = float(err @ err) / (y.size - theta.size) * np.linalg.inv(jac.T @ jac)
+    np.testing.assert_allclose(np.diag(cov), np.diag(by_hand), rtol=1e-4)

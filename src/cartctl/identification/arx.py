@@ -40,17 +40,22 @@ class IdentificationError(InputError):
 
 @dataclass(frozen=True)
 class ArxFit:
-    """An identified model, σ of each θ entry, NRMSE fits (%) of the simulation from rest and of
-    the one-step prediction, and the RMS (rad/s) of the equation (ARX) or simulation (OE) error
-    over ``n_samples`` equations."""
+    """An identified model, θ's covariance Σ (:func:`theta_covariance`, on the data the fit is
+    on), NRMSE fits (%) of the simulation from rest and of the one-step prediction, and the RMS
+    (rad/s) of the equation (ARX) or simulation (OE) error over ``n_samples`` equations."""
 
     model: ArxModel
-    theta_std: NDArray[np.float64]
+    theta_cov: NDArray[np.float64]
     fit_simulation_percent: float
     fit_prediction_percent: float
     residual_rms: float
     n_samples: int
     method: str = "arx"
+
+    @property
+    def theta_std(self) -> NDArray[np.float64]:
+        """σ of each θ entry: √diag Σ."""
+        return np.sqrt(np.diag(self.theta_cov))
 
     def theta_names(self) -> list[str]:
         """Names of the θ entries: the report's c, d, a, b for its structure; a1…, b0… otherwise."""
@@ -151,8 +156,8 @@ def theta_covariance(r: ArrayLike, residual_ss: float, rows: int) -> NDArray[np.
 def least_squares(
     phi_y: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], float, NDArray[np.float64]]:
-    """θ, ‖y − Φθ‖ and θ's standard deviations from one QR of [Φ | y] (destroyed): with
-    [Φ | y] = Q [[R, z], [0, ρ]], θ = R⁻¹ z, ‖y − Φθ‖ = |ρ|, σ of :func:`theta_covariance`.
+    """θ, ‖y − Φθ‖ and θ's covariance from one QR of [Φ | y] (destroyed): with
+    [Φ | y] = Q [[R, z], [0, ρ]], θ = R⁻¹ z, ‖y − Φθ‖ = |ρ|, Σ of :func:`theta_covariance`.
     Refuses fewer than :data:`MIN_ROWS_PER_PARAMETER` rows per parameter and a rank-deficient Φ.
     """
     n, p = phi_y.shape[0], phi_y.shape[1] - 1
@@ -172,8 +177,7 @@ def least_squares(
             "excite this model; use a richer excitation (square, prbs, multisine) or lower orders"
         )
     theta = solve_triangular(r, z, check_finite=False)
-    theta_std = np.sqrt(np.diag(theta_covariance(r, rho**2, n)))
-    return theta, rho, theta_std
+    return theta, rho, theta_covariance(r, rho**2, n)
 
 
 def simulation_fit(model: ArxModel, segments: Sequence[Segment]) -> float:
@@ -230,9 +234,9 @@ def fit_arx(
     rows = phi_y.shape[0]
     target = phi_y[:, -1]
     spread = float(np.sqrt(sum_squares(target - target.mean())))  # before the QR overwrites phi_y
-    theta, residual_norm, theta_std = least_squares(phi_y)
+    theta, residual_norm, theta_cov = least_squares(phi_y)
     model = ArxModel.from_theta(theta, na=na, nb=nb, nk=nk, period_s=period_s)
     simulated = simulation_fit(model, eval_segments or data)
     predicted = fit_from_norms(residual_norm, spread)
     rms = float(residual_norm / np.sqrt(rows))
-    return ArxFit(model, theta_std, simulated, predicted, rms, int(rows))
+    return ArxFit(model, theta_cov, simulated, predicted, rms, int(rows))

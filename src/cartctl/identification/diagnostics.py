@@ -2,7 +2,8 @@
 Bode bands, and the order table, on validation data when there is any; docs/identification.md
 says what they mean.
 
-Σ = σ̂² (ΦᵀΦ)⁻¹ for ARX, σ̂² (JᵀJ)⁻¹ for OE (J the simulation's Jacobian at θ̂); the bands draw
+Σ = σ̂² (ΦᵀΦ)⁻¹ for ARX, σ̂² (JᵀJ)⁻¹ for OE (J the simulation's Jacobian at θ̂), the fit's own
+(on the data it was fitted on: θ_std is √diag Σ); the bands draw
 θ ~ N(θ̂, Σ) (seeded) and take per frequency the normal percentiles at ±1σ and ±2σ of the
 magnitude (dB) and of the phase (deg, from the nominal model's so no draw jumps a turn).
 
@@ -37,10 +38,8 @@ from cartctl.identification.arx import (
     prediction_fit,
     simulation_fit,
     stacked_regression,
-    theta_covariance,
 )
 from cartctl.identification.etfe import model_response
-from cartctl.identification.oe import simulation_error
 from cartctl.identification.orders import OrderTable
 from cartctl.measures.metrics import finite_or_none
 from cartctl.model import ArxModel
@@ -195,20 +194,6 @@ SEED = 0  # seed of the draws: the same data gives the same band
 _PERCENTILES = (2.275, 15.866, 50.0, 84.134, 97.725)
 
 
-def fit_covariance(
-    fit: ArxFit, segments: Sequence[Segment], start: int | None = None
-) -> NDArray[np.float64]:
-    """Σ of θ̂ from the data the fit saw (``start``: the ARX fit's first row); NaN when singular."""
-    m = fit.model
-    data = as_segments(segments)
-    if fit.method == "oe":
-        err, jac = simulation_error(m.theta, data, m.na, m.nb, m.nk)
-    else:
-        jac, target = stacked_regression(data, m.na, m.nb, m.nk, start)
-        err = target - jac @ m.theta
-    return theta_covariance(np.linalg.qr(jac, mode="r"), float(err @ err), jac.shape[0])
-
-
 @dataclass(frozen=True)
 class BodeBand:
     """A model's Bode plot (dB re 1 rad/s/V, phase in deg unwrapped from low frequency) at
@@ -293,21 +278,19 @@ class Diagnostics:
 
 def diagnose(
     chosen: ArxFit,
-    fitted: Sequence[Segment],
-    start: int | None,
     raw: Sequence[Segment],
     validation: Sequence[Segment],
     orders: OrderTable | None,
 ) -> Diagnostics:
-    """The diagnostics of ``chosen``, fitted on ``fitted`` (from regression row ``start``, ARX),
-    on ``validation`` or else the ``raw`` data; ``orders`` the order table, if asked for."""
+    """The diagnostics of ``chosen`` (its Σ its own) on ``validation`` or else the ``raw`` data;
+    ``orders`` the order table, if asked for."""
     data = list(validation) or list(raw)
     y_all = np.concatenate([np.asarray(y, dtype=float) for y, _ in data])
     residuals = residual_test(
         prediction_residuals(chosen.model, data, chosen.method),
         output_rms=float(np.sqrt(np.mean(y_all**2))),
     )
-    cov = fit_covariance(chosen, fitted, start)
+    cov = chosen.theta_cov
     nyquist = 0.5 / chosen.model.period_s
     band = bode_band(chosen.model, cov, np.geomspace(nyquist / 5000.0, 0.999 * nyquist, 60))
     fit_on = "validation" if validation else "estimation"

@@ -199,8 +199,8 @@ def fit_oe(
     """Refine ``initial`` (orders and delay kept) by output-error least squares on ``segments``.
 
     ``eval_segments`` (default ``segments``; the unfiltered data when those are prefiltered) decide
-    by simulation fit; every pole ends inside ``pole_bound``; ``theta_std`` is σ̂ √diag((JᵀJ)⁻¹)
-    (:func:`~cartctl.identification.arx.theta_covariance`).
+    by simulation fit; every pole ends inside ``pole_bound``; Σ is σ̂² (JᵀJ)⁻¹ on the data the
+    chosen θ was refined on (:func:`~cartctl.identification.arx.theta_covariance`).
     """
     if max_evaluations < 1:
         raise InputError(f"max_evaluations must be at least 1, got {max_evaluations}")
@@ -259,10 +259,9 @@ def fit_oe(
     fit_data = evaluation if label == "refined on eval" else data
     err, jac = simulation_error(theta, fit_data, na, nb, nk)
     n = jac.shape[0]
-    cov = theta_covariance(np.linalg.qr(jac, mode="r"), float(err @ err), n)
     return OeFit(
         model=model,
-        theta_std=np.sqrt(np.diag(cov)),
+        theta_cov=theta_covariance(np.linalg.qr(jac, mode="r"), float(err @ err), n),
         fit_simulation_percent=simulation_fit(model, evaluation),
         fit_prediction_percent=prediction_fit(model, data),
         residual_rms=float(np.sqrt(np.mean(err**2))),

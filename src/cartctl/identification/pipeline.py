@@ -260,8 +260,7 @@ def _identify_motor(
         orders = order_table(
             work, request.orders, period_s=period_s, eval_segments=raw, validation=validation
         )
-    fitted = work if oe_fit else fit_data
-    diagnostics = diagnose(oe_fit or arx_fit, fitted, start, raw, validation, orders)
+    diagnostics = diagnose(oe_fit or arx_fit, raw, validation, orders)
     if validation:
         arx_fit = on_validation(arx_fit, validation)
         oe_fit = on_validation(oe_fit, validation) if oe_fit else None
