@@ -315,3 +315,24 @@ def test_verification_takes_the_smoothed_speed_over_the_encoder() -> None:
                             {"a": smoothed, "b": smoothed})  # fmt: skip
     assert result.passed and result.measured == smoothed and result.limits["speed"] == "smoothed"
     assert result.limits["overshoot_percent"] == pytest.approx(5.0 + 1.0 + quantum / 2)
+
+
+def test_an_unstable_model_fails_validation_in_words() -> None:
+    """An unstable model's simulation fit is −inf (identification.arx.simulation_fit); the verdict
+    says the simulation diverges rather than printing "-inf %"."""
+    from types import SimpleNamespace
+
+    from cartctl.identification.arx import simulation_fit
+
+    model = ArxModel.from_theta([-1.05, 0.0, 0.1, 0.0])  # a pole at 1.05
+    fit = simulation_fit(model, [(np.ones(200), np.ones(200))])
+    residuals = SimpleNamespace(cross=np.zeros(5), cross_bound_99=1.0, cross_outside=0, white=True)
+    motor = SimpleNamespace(
+        chosen=SimpleNamespace(fit_simulation_percent=fit, model=model),
+        diagnostics=SimpleNamespace(residuals=residuals),
+    )
+    (verdict,) = checks.judge(SimpleNamespace(motors={"a": motor})).values()  # type: ignore[arg-type]
+    assert verdict.problems[0] == (
+        f"validation fit: the simulation diverges (needs >= {checks.MIN_FIT_PERCENT:g} %)"
+    )
+    assert "inf" not in " ".join(verdict.problems)

@@ -205,7 +205,11 @@ def judge(result: IdentifyResult) -> dict[str, MotorVerdict]:
         cross, bound = np.abs(test.cross), test.cross_bound_99
         ratio = float(cross.max() / bound) if cross.size and bound > 0.0 else 0.0
         problems = []
-        if not fit >= MIN_FIT_PERCENT:
+        if fit == -math.inf:  # an unstable model's simulation runs away
+            problems.append(
+                f"validation fit: the simulation diverges (needs >= {MIN_FIT_PERCENT:g} %)"
+            )
+        elif not fit >= MIN_FIT_PERCENT:
             problems.append(f"validation fit {fit:.1f} % < {MIN_FIT_PERCENT:g} %")
         if not radius < MAX_POLE_RADIUS:
             problems.append(f"a pole at |z| = {radius:.3f} (stable needs < {MAX_POLE_RADIUS:g})")
