@@ -123,16 +123,24 @@ def scalar_stats(chunks: Iterable[Chunk]) -> tuple[dict[str, tuple[float, float]
     """Per entity path of scalar series: the lowest and highest finite value, and the set of
     paths whose values are all whole numbers."""
     import numpy as np
+    import pyarrow.compute as pc
 
     extremes: dict[str, tuple[float, float]] = {}
-    whole: set[str] = set()
-    for path, (values,) in scalar_series(chunks, timelines=()).items():
-        values = values[np.isfinite(values)].astype(float)
-        if values.size:
-            extremes[path] = (float(values.min()), float(values.max()))
-            if np.all(values == np.round(values)):
-                whole.add(path)
-    return extremes, whole
+    fractional: set[str] = set()
+    for chunk, batch in batches(chunks):  # every value of a row (a row may hold none, or two)
+        if SCALARS not in batch.schema.names:
+            continue
+        values = pc.list_flatten(batch.column(SCALARS)).to_numpy(zero_copy_only=False)
+        values = values[np.isfinite(values)]
+        if not values.size:
+            continue
+        path = chunk.entity_path.lstrip("/")
+        lo, hi = float(values.min()), float(values.max())
+        old = extremes.get(path, (lo, hi))
+        extremes[path] = (min(old[0], lo), max(old[1], hi))
+        if np.any(values != np.round(values)):
+            fractional.add(path)
+    return extremes, set(extremes) - fractional
 
 
 def _restyle(chunks: Sequence[Chunk], rec: rr.RecordingStream) -> None:

@@ -140,7 +140,8 @@ def recording_columns(chunks: Any) -> dict[str, Array]:
     from cartctl.sinks.rerun_layout import ENTITY_PATHS
 
     column_of = {path: column for column, path in ENTITY_PATHS.items()}
-    series = {column_of[p]: s for p, s in scalar_series(chunks).items() if p in column_of}
+    ours = [chunk for chunk in chunks if chunk.entity_path.lstrip("/") in column_of]
+    series = {column_of[p]: s for p, s in scalar_series(ours).items()}
     if "speed_a" not in series:
         return {}
     ticks = np.unique(np.concatenate([tick for tick, _, _ in series.values()]))
