@@ -48,3 +48,11 @@ def test_recording_columns_ignore_other_entities(tmp_path: Path) -> None:
     columns = recording_columns(_chunks(_odd_recording(tmp_path / "odd.rrd")))
     assert list(columns["speed_a"]) == [0.0, 1.0, 2.0, 3.0, 4.0]
     assert list(columns["tick"]) == [0.0, 1.0, 2.0, 3.0, 4.0]
+
+
+def test_read_recording_says_a_folder_is_a_folder(tmp_path: Path) -> None:
+    from cartctl.cli.commands.review.recording import read_recording
+    from cartctl.errors import DataFileError
+
+    with pytest.raises(DataFileError, match="is a directory"):
+        read_recording(tmp_path)

@@ -46,7 +46,9 @@ def read_recording(path: Path) -> tuple[RrdReader, StoreEntry]:
     """Open a ``.rrd`` file and find its (first) recording."""
     from rerun.chunk import RrdReader
 
-    if not path.is_file():  # a folder: review's own check before
+    if path.is_dir():
+        raise DataFileError(path, "is a directory; expected a Rerun recording (.rrd)")
+    if not path.is_file():
         raise MissingFileError(path, "recording")
     if path.stat().st_size == 0:
         raise DataFileError(path, "the file is empty; expected a Rerun recording (.rrd)")
