@@ -32,7 +32,8 @@ def fit_percent(measured: ArrayLike, modelled: ArrayLike) -> float:
     y_hat = np.asarray(modelled, dtype=float)
     if not np.isfinite(y_hat).all():
         return float("-inf")
-    return fit_from_norms(math.sqrt(sum_squares(y - y_hat)), math.sqrt(sum_squares(y - y.mean())))
+    error, spread = np.ravel(y - y_hat), np.ravel(y - y.mean())  # any shape, as norm took
+    return fit_from_norms(math.sqrt(sum_squares(error)), math.sqrt(sum_squares(spread)))
 
 
 def finite_or_none(value: float | None) -> float | None:

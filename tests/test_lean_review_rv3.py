@@ -1,0 +1,26 @@
+"""Behaviour kept through the lean pass (issue 25 item 10): tune, commission, api, export,
+measures and the root modules."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cartctl.measures.metrics import fit_percent
+
+
+@pytest.mark.parametrize(
+    ("measured", "modelled"),
+    [
+        (np.arange(6.0).reshape(3, 2), np.arange(6.0).reshape(3, 2) + 0.1),  # 2-D
+        (np.arange(6.0).reshape(6, 1), np.arange(6.0).reshape(6, 1) + 0.1),  # a column
+    ],
+)
+def test_fit_percent_takes_arrays_of_any_shape(measured: np.ndarray, modelled: np.ndarray) -> None:
+    flat = fit_percent(measured.ravel(), modelled.ravel())
+    assert fit_percent(measured, modelled) == pytest.approx(flat, rel=1e-12)
+    assert fit_percent(measured.tolist(), modelled.tolist()) == pytest.approx(flat, rel=1e-12)
+
+
+def test_fit_percent_of_a_scalar_is_nan_as_for_any_constant() -> None:
+    assert np.isnan(fit_percent(3.0, 2.0))
