@@ -120,13 +120,14 @@ class ControllerStateSpace:
     states: tuple[str, ...]
 
     def feedback_response(self, z: NDArray[np.complex128]) -> NDArray[np.complex128]:
-        """C_fb(z) = −U(z)/Y(z) with r = 0, at the points ``z`` (complex, 1-D)."""
-        n = self.A.shape[0]
+        """C_fb(z) = −U(z)/Y(z) with r = 0, at the points ``z`` (complex, any shape)."""
+        z = np.asarray(z, dtype=complex)
+        flat, n = z.ravel(), self.A.shape[0]
         # (z I − A) X = B_y for every z at once: a stack of n×n systems
-        lhs = z[:, None, None] * np.eye(n) - self.A[None, :, :]
-        rhs = np.broadcast_to(self.B[:, 1].astype(complex), (z.size, n))[..., None]
+        lhs = flat[:, None, None] * np.eye(n) - self.A[None, :, :]
+        rhs = np.broadcast_to(self.B[:, 1].astype(complex), (flat.size, n))[..., None]
         x = np.linalg.solve(lhs, rhs)[..., 0]
-        return -(x @ self.C[0] + self.D[0, 1])
+        return -(x @ self.C[0] + self.D[0, 1]).reshape(z.shape)
 
     def feedback_tf(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """C_fb(z) as (num, den), descending powers of z, den monic (common roots not cancelled)."""

@@ -115,7 +115,7 @@ class IdentifyRequest:
         check_orders(self.na, self.nb, 0 if self.delay is None else self.delay)  # before the data
         if self.method == "oe":
             check_oe_orders(self.na, self.nb)
-        if not self.motors or not set(self.motors) <= {"a", "b"}:
+        if not self.motors or any(m not in ("a", "b") for m in self.motors):
             raise InputError(f"motors must be 'a' and/or 'b', got {list(self.motors)}")
 
 
@@ -255,12 +255,12 @@ def _identify_motor(
     if request.prefilter is not None:
         unfiltered = arx(raw if start is None else _averaged(raw, start, sources)[0])
     oe_fit = fit_oe(work, arx_fit.model, eval_segments=raw) if request.method == "oe" else None
-    orders = None
-    if request.orders is not None:
+    diagnostics = diagnose(oe_fit or arx_fit, raw, validation, None)
+    if request.orders is not None:  # after the residual tests, which refuse too few samples
         orders = order_table(
             work, request.orders, period_s=period_s, eval_segments=raw, validation=validation
         )
-    diagnostics = diagnose(oe_fit or arx_fit, raw, validation, orders)
+        diagnostics = dataclasses.replace(diagnostics, orders=orders)
     if validation:
         arx_fit = on_validation(arx_fit, validation)
         oe_fit = on_validation(oe_fit, validation) if oe_fit else None
