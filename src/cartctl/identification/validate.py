@@ -106,7 +106,11 @@ def validate(model: ArxModel, trace: Trace, motor: str) -> ValidationResult:
         simulated = np.where(np.isfinite(simulated), simulated, np.nan)
     return ValidationResult(
         motor=motor,
-        fit_simulation_percent=simulation_fit(model, [(measured, voltage)]),
+        fit_simulation_percent=(  # NaN, not simulation_fit's refusal, for a non-finite trace
+            simulation_fit(model, [(measured, voltage)])
+            if np.isfinite(measured).all() and np.isfinite(voltage).all()
+            else math.nan
+        ),
         time_s=trace.time_s,
         voltage_v=voltage,
         measured_rad_s=measured,
