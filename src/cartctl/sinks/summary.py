@@ -36,8 +36,9 @@ def motor_metrics(
     max(2 % of the step, ``settling_floor``); step metrics None without a step."""
     keys = ("overshoot_percent", "settling_time_s", "rise_time_s", "steady_state_error")
     out: dict[str, Any] = dict.fromkeys(keys)
-    error, magnitude = reference - speed, np.abs(voltage)
-    out["rms_error"] = finite_or_none(float(np.sqrt(np.mean(error**2)))) if error.size else None
+    rms = float(np.sqrt(np.mean((reference - speed) ** 2))) if speed.size else None
+    out["rms_error"] = finite_or_none(rms)  # no speed: step_info's InputError below
+    magnitude = np.abs(voltage)
     out["max_abs_voltage"] = finite_or_none(float(np.max(magnitude))) if magnitude.size else None
     span = first_step(reference, initial=0.0)  # the loop starts from rest
     if span is not None:
