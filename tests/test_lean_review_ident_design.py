@@ -75,3 +75,18 @@ def test_validate_on_a_trace_with_a_non_finite_speed_gives_a_nan_fit(bad: float)
     odd = Trace(trace.time_s, trace.voltage("a"), z, speed, z, source="odd.csv")
     result = validate(model, odd, "a")
     assert math.isnan(result.fit_simulation_percent)
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_fit_oe_on_fewer_samples_than_parameters_is_an_identification_error() -> None:
+    # the Python API: 3 samples for 4 parameters is identification's 'too few samples', as before
+    # the one θ covariance (whose R of the Jacobian is then wide: not a ValueError 'expected
+    # square matrix')
+    from cartctl.identification.arx import IdentificationError
+    from cartctl.identification.oe import fit_oe
+    from cartctl.model import ArxModel
+
+    model = ArxModel.from_theta([-0.9356, 0.2173, 0.6466, -0.07751], na=2, nb=2, nk=2)
+    u = np.array([6.0, -6.0, 6.0])
+    with pytest.raises(IdentificationError, match="too few samples"):
+        fit_oe([(model.simulate(u) + 0.01, u)], model)

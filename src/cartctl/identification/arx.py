@@ -145,7 +145,9 @@ def theta_covariance(r: ArrayLike, residual_ss: float, rows: int) -> NDArray[np.
     Jacobian for OE), from the triangular R of J = QR and the residual sum of squares over
     ``rows`` equations, σ̂² = Σ e² / (rows − d); NaN throughout when R is singular."""
     r = np.asarray(r, dtype=float)
-    d = r.shape[0]
+    d = r.shape[1]
+    if r.shape[0] < d:  # fewer equations than parameters: a wide R, singular
+        return np.full((d, d), np.nan)
     try:
         r_inv = solve_triangular(r, np.eye(d), check_finite=False)
     except np.linalg.LinAlgError:
