@@ -21,7 +21,10 @@ class CartctlError(Exception):
     exit_code: int = 2
 
     def __str__(self) -> str:
-        return "".join(c if c.isprintable() else repr(c)[1:-1] for c in super().__str__())
+        text = super().__str__()
+        if text.isprintable():  # the usual message: as it is, not rebuilt character by character
+            return text
+        return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 class InputError(CartctlError, ValueError):
