@@ -1,6 +1,7 @@
-"""Behaviour the lean pass (issue 25 item 10) kept in identification and design: the order of
-errors for a request with two faults, refusals of odd motor names through the Python API, and a
-controller's frequency response at points of any shape."""
+"""Behaviour the lean pass (issue 25 item 10) and the one simulation fit / θ covariance kept in
+identification and design: the order of errors for a request with two faults, refusals of odd
+motor names through the Python API, a controller's frequency response at points of any shape,
+validate's NaN fit on a non-finite Trace, and fit_oe's refusal of too few samples."""
 
 from __future__ import annotations
 
