@@ -146,3 +146,33 @@ def test_wrong_files_and_options_are_one_line(
     assert code == 2 and out == ""
     assert len(err.strip().splitlines()) == 1 and expected in err, err
     assert not (tmp_path / "x.mat").exists()
+
+
+@pytest.mark.parametrize(
+    ("shipped", "line", "replacement", "expected"),
+    [
+        ("poles.toml", "Ki = ", None, "misses Ki"),
+        ("pi.toml", "ki = ", 'ki = "x"', "could not convert string to float"),
+        ("pi.toml", "anti_windup = ", 'anti_windup = "sometimes"', "anti-windup"),
+    ],
+)
+def test_a_broken_controller_file_is_one_line_for_mat(
+    capsys: pytest.CaptureFixture[str],
+    tmp_path: Path,
+    shipped: str,
+    line: str,
+    replacement: str | None,
+    expected: str,
+) -> None:
+    """--mat checks a controller file as the loop (and --arduino) do: no traceback, no file."""
+    lines = (ROOT / "controllers" / shipped).read_text(encoding="utf-8").splitlines()
+    motor_a = lines.index("[motors.a]")
+    at = next(i for i, text in enumerate(lines) if i > motor_a and text.startswith(line))
+    lines[at : at + 1] = [] if replacement is None else [replacement]
+    broken = tmp_path / "broken.toml"
+    broken.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    code = main(["export", str(broken), "--mat", str(tmp_path / "x.mat")])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1 and expected in err and str(broken) in err, err
+    assert not (tmp_path / "x.mat").exists()

@@ -12,7 +12,7 @@ import numpy as np
 from cartctl.data.modelfile import ModelFile
 from cartctl.data.tomlfile import CONTROLLER_FORMAT, MODEL_FORMAT
 from cartctl.design.controller_ss import controller_state_space, feedback_gains
-from cartctl.design.controllerfile import ControllerFile
+from cartctl.design.controllerfile import ControllerFile, build_controllers
 
 _KALMAN_KEYS = ("A", "B", "C", "Q", "R", "P", "L", "timing_noise_std_ticks")
 
@@ -40,7 +40,9 @@ def model_mat(models: ModelFile, source: str = "") -> dict[str, Any]:
 
 
 def controller_mat(controller: ControllerFile, source: str = "") -> dict[str, Any]:
-    """The ``.mat`` variables of a (checked, loaded) controller file."""
+    """The ``.mat`` variables of a loaded controller file, after the checks the loop applies (keys,
+    gains, anti-windup, estimator: one line naming the file and the entry)."""
+    build_controllers(controller)
     ts = float(controller.period_s)
     out: dict[str, Any] = {
         "Ts": ts,
