@@ -1,7 +1,6 @@
-"""Behaviour the lean pass (issue 25 item 10) and the one simulation fit / θ covariance kept in
-identification and design: the order of errors for a request with two faults, refusals of odd
-motor names through the Python API, a controller's frequency response at points of any shape,
-validate's NaN fit on a non-finite Trace, and fit_oe's refusal of too few samples."""
+"""Edges of identification and design through the Python API: the order of errors for a request
+with two faults, refusals of odd motor names, a controller's frequency response at points of any
+shape, validate's NaN fit on a non-finite Trace, and fit_oe's refusal of too few samples."""
 
 from __future__ import annotations
 
@@ -28,7 +27,7 @@ def _trace(n: int, seed: int = 0) -> Trace:
 
 def test_too_short_validation_is_refused_before_the_order_table() -> None:
     # two faults: validation data too short for the residual tests and an order grid with a
-    # combination check_orders refuses; the residual tests come first, as before the lean pass
+    # combination check_orders refuses; the residual tests come first
     # (which also spared a long grid's fits before that refusal)
     request = IdentifyRequest(motors=("a",), orders={"na": (1,), "nb": (0,), "nk": (1,)})
     with pytest.raises(InputError, match="too few residual samples"):
