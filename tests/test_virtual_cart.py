@@ -256,3 +256,20 @@ def test_a_host_at_another_rate_reads_noise(faults: str, host_rate: int, heard: 
         assert cart._reader.rate_ok() is heard
     finally:
         cart.stop()
+
+
+@pytest.mark.realtime
+def test_stop_waits_for_the_ticker_even_when_join_says_it_ended() -> None:
+    """On Python 3.11 a Ctrl-C inside ``Thread.join`` can leave a running thread marked as
+    stopped (``is_alive()`` False, ``join()`` returning at once): ``cartctl virtual-cart`` then
+    closed the pseudo-terminal under a ticking cart and said "stopped (running)". stop() waits for
+    the ticker's own end instead; here every thread's ``join`` and ``is_alive`` are made to lie
+    as after that (the other threads' joins would otherwise give the ticker time to end)."""
+    cart = VirtualCart(seed=1)
+    cart.start()
+    cart.wait_ticks(3)
+    for thread in (cart._ticker, cart._writer, cart._reader):
+        thread.is_alive = lambda: False  # type: ignore[method-assign]
+        thread.join = lambda timeout=None: None  # type: ignore[method-assign]
+    cart.stop()
+    assert cart.state == "stopped"

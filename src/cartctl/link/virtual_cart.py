@@ -104,7 +104,10 @@ class VirtualCart:
         self._ring_high = self._lag_us = 0
         self._held: tuple[list[float], list[int]] = ([0.0] * 8, [0] * 4)
         self.boot_s = 0.0  # time.perf_counter at boot: tick k starts k × period_s later
-        self._ticker = threading.Thread(target=self._run, name="virtual-cart", daemon=True)
+        self._ticker = threading.Thread(
+            target=self._tick_until_stopped, name="virtual-cart", daemon=True
+        )
+        self._ended = threading.Event()  # set as the ticker ends (see stop)
         self.ticks = 0
         self.true_speeds: dict[int, tuple[float, float]] = {}  # rad/s, by the cart's tick counter
         self.frames_received = 0  # GPIO frames microOS decoded from the host
@@ -132,7 +135,11 @@ class VirtualCart:
     def stop(self) -> None:
         """Stop the threads and close the pseudo-terminal."""
         self._stop.set()
-        for thread in (self._ticker, self._writer, self._reader):
+        # the ticker's own event, not join(): on Python 3.11 a Ctrl-C inside join() can mark a
+        # running thread as stopped, and the pseudo-terminal would close under it
+        if self._ticker.ident is not None and self._ticker is not threading.current_thread():
+            self._ended.wait(timeout=1.0)
+        for thread in (self._writer, self._reader):
             if thread.is_alive() and thread is not threading.current_thread():
                 thread.join(timeout=1.0)
         self._close_fds()
@@ -217,6 +224,12 @@ class VirtualCart:
             return True
         rate = _TERMIOS_SPEED.get(speed)
         return rate is None or rate == self.baud
+
+    def _tick_until_stopped(self) -> None:
+        try:
+            self._run()
+        finally:
+            self._ended.set()
 
     def _run(self) -> None:
         encoder, physics, firmware, faults = Encoder(), self.physics, self.firmware, self.faults
