@@ -1,6 +1,8 @@
 """Stop signals: SIGINT, SIGTERM and SIGHUP end a command through its shutdown path, like Ctrl-C
 (docs/architecture.md). :func:`install` makes the first raise :class:`Interrupted` in the main
-thread; later ones, and any inside :func:`deferred`, are only noted. Before that
+thread; later ones, and any inside :func:`deferred`, are only noted. Inside :func:`held` (a
+loop's tick: its rows, sinks and timing stay whole) the first is held and raised as the block
+ends. Before that
 (:func:`install_at_start`) one ends the process with one line; hence only ``signal``, ``sys``
 and ``os`` are imported here.
 """
@@ -17,6 +19,8 @@ _STARTING, _RUNNING, _ENDING = "starting", "running", "ending"
 _phase = _RUNNING
 _first: int | None = None
 _deferred = 0
+_holding = 0
+_held = False
 
 
 class Interrupted(KeyboardInterrupt):
@@ -32,7 +36,7 @@ class Interrupted(KeyboardInterrupt):
 
 
 def _handler(signum: int, frame: object) -> None:
-    global _first
+    global _first, _held
     if _phase == _STARTING:  # nothing done yet: one line, the signal's exit code, no unwinding
         try:
             sys.stderr.write(STARTING_LINE + "\n")
@@ -44,6 +48,9 @@ def _handler(signum: int, frame: object) -> None:
             _first = signum
         return
     _first = signum
+    if _holding:  # mid-tick: raised as the tick ends (held)
+        _held = True
+        return
     raise Interrupted(signum)
 
 
@@ -68,8 +75,8 @@ def install_at_start() -> None:
 
 def install() -> dict[int, object]:
     """Route the stop signals to :class:`Interrupted`; returns the handlers replaced."""
-    global _first, _deferred, _phase
-    _first, _deferred = None, 0
+    global _first, _deferred, _phase, _held
+    _first, _deferred, _held = None, 0, False
     previous = _route(_handler)
     _phase = _RUNNING
     return previous
@@ -109,3 +116,20 @@ class deferred:  # noqa: N801 - used as a function: ``with stopping.deferred():`
     def __exit__(self, *exc: object) -> None:
         global _deferred
         _deferred -= 1
+
+
+class held:  # noqa: N801 - used as a function: ``with stopping.held():``
+    """Within the block the first stop signal is held: it raises :class:`Interrupted` as the block
+    ends (unless another exception is on its way out), so what the block does is done whole."""
+
+    def __enter__(self) -> None:
+        global _holding
+        _holding += 1
+
+    def __exit__(self, kind: object, *exc: object) -> None:
+        global _holding, _held
+        _holding -= 1
+        if _held and not _holding:
+            _held = False
+            if kind is None and _first is not None:
+                raise Interrupted(_first)

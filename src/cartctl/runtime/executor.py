@@ -28,6 +28,7 @@ import numpy as np
 
 from cartctl.errors import InputError
 from cartctl.plants.base import ClockedPlant
+from cartctl.stopping import held
 
 _log = logging.getLogger(__name__)
 
@@ -227,23 +228,24 @@ class PeriodicExecutor(_Recorder):
         try:
             while limit is None or k < limit:
                 deadline = t0 + m * period
-                wait_until(deadline)
-                start = now()
-                self.tick_index, self.grid_index = k, m
-                self.deadline_s, self.start_s = deadline, start
-                self.period_error_us = err_us = (start - deadline) * 1e6
-                keep_going = tick(k)
-                end = self._end_s = now()
-                err_append(err_us)
-                comp_append((end - start) * 1e6)
-                if idle is not None:
-                    idle()
-                k += 1
-                if not keep_going or k == limit:  # the last tick: no next deadline to check
-                    break
-                m += 1
-                if end > t0 + m * period:
-                    m = self._realign(k - 1, m, end)
+                wait_until(deadline)  # a stop signal ends the run here, or as its tick ends
+                with held():
+                    start = now()
+                    self.tick_index, self.grid_index = k, m
+                    self.deadline_s, self.start_s = deadline, start
+                    self.period_error_us = err_us = (start - deadline) * 1e6
+                    keep_going = tick(k)
+                    end = self._end_s = now()
+                    err_append(err_us)
+                    comp_append((end - start) * 1e6)
+                    if idle is not None:
+                        idle()
+                    k += 1
+                    if not keep_going or k == limit:  # the last tick: no next deadline to check
+                        break
+                    m += 1
+                    if end > t0 + m * period:
+                        m = self._realign(k - 1, m, end)
         finally:
             if self._miss_ticks:
                 _log.warning(
@@ -289,12 +291,13 @@ class BackToBackExecutor:
         self.ticks = 0
         every = self.idle_every
         for k in range(self.max_ticks):
-            keep_going = tick(k)
-            self.ticks = k + 1
-            if idle is not None and self.ticks % every == 0:
-                idle()
-            if not keep_going:
-                break
+            with held():
+                keep_going = tick(k)
+                self.ticks = k + 1
+                if idle is not None and self.ticks % every == 0:
+                    idle()
+                if not keep_going:
+                    break
         if idle is not None and self.ticks % every:
             idle()
         return self.stats()
@@ -340,13 +343,14 @@ class CartClockedExecutor(_Recorder):
             self.period_error_us = (base - anchor) * 1e6
             self.start_s = arrival
             self.time_s = plant.tick_index * period
-            skipped_before = self._skipped_deadlines()
-            keep_going = tick(k)
-            self._end_s = self.now_s()
-            self._period_error_us.append(self.period_error_us)
-            self._compute_us.append(self.compute_us())
-            if self._skipped_deadlines() > skipped_before:
-                self._miss_ticks.append(k)
-            if not keep_going:
-                break
+            with held():  # the wait for the cart's next frame included: 10 ms, or a fault
+                skipped_before = self._skipped_deadlines()
+                keep_going = tick(k)
+                self._end_s = self.now_s()
+                self._period_error_us.append(self.period_error_us)
+                self._compute_us.append(self.compute_us())
+                if self._skipped_deadlines() > skipped_before:
+                    self._miss_ticks.append(k)
+                if not keep_going:
+                    break
         return self.stats()
