@@ -30,6 +30,7 @@ from cartctl.runtime.executor import (
     SimulatedClock,
 )
 from cartctl.runtime.loop import ControlLoop, MemorySink
+from cartctl.sinks.base import TRACE_COLUMNS
 from cartctl.sinks.csv_sink import CsvSink
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -142,3 +143,58 @@ def test_a_signal_inside_the_csv_sink_ends_the_run_after_that_tick(
     assert (trace.voltage_a[-1], trace.voltage_b[-1]) == (0.0, 0.0)
     stats = ex.stats()  # whole ticks only: one period error and one compute time each
     assert stats.ticks == SIGNAL_AT_TICK + 1
+
+
+class _InterruptAfterWriterows(_SignalAfterWriterows):
+    """Raises KeyboardInterrupt right after the rows of tick ``SIGNAL_AT_TICK`` are formatted: a
+    Ctrl-C with Python's own handler (``monitor``'s second Ctrl-C, a script's loop)."""
+
+    def writerows(self, rows: list) -> None:
+        self.writer.writerows(rows)  # type: ignore[attr-defined]
+        if not self.sent and any(int(r[5]) == SIGNAL_AT_TICK for r in rows):
+            self.sent = True
+            raise KeyboardInterrupt
+
+
+def test_a_csv_sink_interrupted_inside_its_formatting_never_writes_a_row_twice(
+    tmp_path: Path,
+) -> None:
+    """Outside a held tick, an interrupt may cost the row being formatted, never duplicate it (a
+    trace with a row twice does not read back at all)."""
+    sink = CsvSink(tmp_path / "s.csv", flush_every=10)
+    sink.open(TRACE_COLUMNS)
+    sink._writer = _InterruptAfterWriterows(sink._writer)
+
+    def record() -> None:
+        for k in range(TICKS):
+            sink.write((k * 0.01, 1.0, 1.0, 2.0, 2.0, k, 3.0, 3.0, 2.0, 2.0, 0.0, 5.0))
+            sink.idle()
+
+    with pytest.raises(KeyboardInterrupt):
+        record()
+    sink.close()
+    trace = read_trace(tmp_path / "s.csv")
+    assert len(trace) == SIGNAL_AT_TICK + 1
+    np.testing.assert_array_equal(trace.time_s, np.arange(SIGNAL_AT_TICK + 1) * 0.01)
+
+
+def test_a_memory_sink_interrupted_while_packing_never_keeps_a_row_twice() -> None:
+    memory = MemorySink()
+    memory.open(("time_s", "tick"))
+    rows = [(k * 0.01, float(k)) for k in range(5)]
+    for row in rows:
+        memory.write(row)
+
+    class Interrupting(list):
+        raised = False
+
+        def __iter__(self):
+            yield from super().__iter__()
+            if not Interrupting.raised:  # after the last row is packed, before it is let go
+                Interrupting.raised = True
+                raise KeyboardInterrupt
+
+    memory._rows = Interrupting(memory._rows)
+    with pytest.raises(KeyboardInterrupt):
+        memory.idle()
+    np.testing.assert_array_equal(memory.arrays()["tick"], np.arange(5.0))

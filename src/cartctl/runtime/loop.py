@@ -46,14 +46,14 @@ class MemorySink:
             self.idle()
 
     def idle(self) -> None:
-        for row in self._rows:
+        rows, self._rows = self._rows, []  # taken first: an interrupt never packs one twice
+        for row in rows:
             self._block[self._filled] = row
             self._filled += 1
             if self._filled == self.BLOCK_ROWS:
                 self._blocks.append(self._block)
                 self._block = np.empty_like(self._block)
                 self._filled = 0
-        self._rows = []
 
     def close(self) -> None:
         pass

@@ -56,9 +56,9 @@ class CsvSink:
 
     def _format(self) -> None:
         if self._rows:  # str of each value: exact floats (numpy's too), whole ticks
-            self._writer.writerows(self._rows)
-            self._formatted += len(self._rows)
-            self._rows = []
+            rows, self._rows = self._rows, []  # taken first: an interrupt never formats one twice
+            self._writer.writerows(rows)
+            self._formatted += len(rows)
 
     def _take_text(self) -> bytes:
         data = self._text.getvalue().encode()
