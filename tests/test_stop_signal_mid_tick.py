@@ -198,3 +198,34 @@ def test_a_memory_sink_interrupted_while_packing_never_keeps_a_row_twice() -> No
     with pytest.raises(KeyboardInterrupt):
         memory.idle()
     np.testing.assert_array_equal(memory.arrays()["tick"], np.arange(5.0))
+
+
+class _SignalOnOpen:
+    """A sink that sends SIGTERM to this process as it opens (before the sinks after it do)."""
+
+    def open(self, columns) -> None:
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    def write(self, row) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_signal_while_the_sinks_open_waits_until_every_file_has_its_header(
+    tmp_path: Path, stop_handlers
+) -> None:
+    controllers = build_controllers(load_controller(ROOT / "controllers" / "pi.toml"))
+    plant, _ = make_plant("sim")
+    csv_sink, clock = CsvSink(tmp_path / "s.csv"), SimulatedClock()
+    loop = ControlLoop(plant, controllers, {"a": [8.0] * 10, "b": [8.0] * 10},
+                       [_SignalOnOpen(), csv_sink], now_s=clock.now_s)  # fmt: skip
+    with pytest.raises(stopping.Interrupted):
+        loop.start()
+    with stopping.deferred():
+        loop.finish()
+    assert loop.state.sink_errors == []
+    trace = read_trace(tmp_path / "s.csv")  # the header, then the stop row
+    assert len(trace) == loop.state.rows == 1
+    assert (trace.voltage_a[0], trace.voltage_b[0]) == (0.0, 0.0)

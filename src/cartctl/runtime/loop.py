@@ -21,6 +21,7 @@ from cartctl.plants.sim import saturate
 from cartctl.runtime.base import Controller
 from cartctl.runtime.executor import BackToBackExecutor, SimulatedClock
 from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS, Sink
+from cartctl.stopping import held
 
 
 class MemorySink:
@@ -151,7 +152,8 @@ class ControlLoop:
             self._y = self.plant.reset()
             self._true = self._y.true_speed_a_rad_s is not None
         columns = TRACE_COLUMNS + (TRUE_SPEED_COLUMNS if self._true else ())
-        self._each([s.open for s in self.sinks], columns)
+        with held():  # a stop signal waits until every file has its header
+            self._each([s.open for s in self.sinks], columns)
         if self._clocked:
             self._y = self.plant.reset()
 
