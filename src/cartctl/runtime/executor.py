@@ -12,6 +12,9 @@ may run ahead of k). The last tick is not checked for a miss.
 how much later that GPIO arrived than the run's earliest-arriving tick predicts (jitter, not the
 constant 5.2 ms transmission); compute runs from the arrival to the command sent; a miss is a
 tick after which older GPIOs were dropped to answer the freshest one.
+
+Every executor runs a tick, its bookkeeping and ``idle`` inside :class:`cartctl.stopping.held`: a
+stop signal that comes meanwhile is raised as the tick ends, never inside it.
 """
 
 from __future__ import annotations
