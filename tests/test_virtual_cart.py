@@ -147,6 +147,31 @@ def test_the_serial_plant_notices_a_fault(fault: str) -> None:
 
 
 @pytest.mark.realtime
+def test_a_pulled_cable_closes_the_port_only_once_the_line_threads_have_stopped() -> None:
+    """The ticker that pulls the cable closed the pseudo-terminal while the reader and writer
+    still ran: the reader then asked termios about descriptor -1 (a ValueError in its thread,
+    seen in the suite under load), and either could have used a number reused since."""
+    alive_at_close: list[tuple[bool, bool]] = []
+    with VirtualCart(faults=CartFaults.parse("pull=0.2")) as cart:
+        close_fds = cart._close_fds
+
+        def noting_close() -> None:
+            alive_at_close.append((cart._reader.is_alive(), cart._writer.is_alive()))
+            close_fds()
+
+        cart._close_fds = noting_close  # type: ignore[method-assign]
+        plant = SerialCart(cart.port, on_print=lambda line: None)
+        plant.reset()
+        with pytest.raises(PlantError):  # noqa: PT012
+            for _ in range(300):
+                plant.step(1.0, 1.0)
+        plant.close()
+        assert cart.state == "cable pulled"
+    assert alive_at_close[0] == (False, False)
+    assert cart._host_rate_matches()  # a closed port reads as the right rate, and raises nothing
+
+
+@pytest.mark.realtime
 def test_a_silent_port_is_a_clear_timeout(
     capsys: pytest.CaptureFixture[str], workdir: Path
 ) -> None:

@@ -139,6 +139,11 @@ class VirtualCart:
         # running thread as stopped, and the pseudo-terminal would close under it
         if self._ticker.ident is not None and self._ticker is not threading.current_thread():
             self._ended.wait(timeout=1.0)
+        self._cut_line()
+
+    def _cut_line(self) -> None:
+        """Close the pseudo-terminal once the writer and reader have seen the stop (a thread still
+        at it could read or write a closed descriptor's number, or one reused since)."""
         for thread in (self._writer, self._reader):
             if thread.is_alive() and thread is not threading.current_thread():
                 thread.join(timeout=1.0)
@@ -220,7 +225,7 @@ class VirtualCart:
         """Whether the host opened the port at the cart's rate (else both sides read noise)."""
         try:
             speed = termios.tcgetattr(self._slave)[5]
-        except (OSError, termios.error):
+        except (OSError, ValueError, termios.error):  # ValueError: closed (-1)
             return True
         rate = _TERMIOS_SPEED.get(speed)
         return rate is None or rate == self.baud
@@ -254,7 +259,7 @@ class VirtualCart:
             if faults.pull_after_s is not None and driven >= faults.pull_after_s:
                 self.state, self.fault_at_s = "cable pulled", time.perf_counter()
                 self._stop.set()
-                self._close_fds()
+                self._cut_line()
                 return
             if faults.stall_after_s is not None and driven >= faults.stall_after_s:
                 self.state, self.fault_at_s = "stalled", time.perf_counter()
