@@ -144,6 +144,9 @@ def _prepared(args: argparse.Namespace, given: str, csv_path: Path) -> PreparedR
     except OSError as exc:  # a full disk: nothing driven yet
         prepared.plant.close()
         raise OutputError(exc.filename or csv_path, exc.strerror or str(exc)) from None
+    except BaseException:  # a stop signal: nothing driven yet either
+        prepared.plant.close()
+        raise
     return prepared
 
 
@@ -187,10 +190,11 @@ def _sinks(
 
 
 def _run_loop(
-    args: argparse.Namespace, prepared: PreparedRun, sinks: list[Any]
+    args: argparse.Namespace, prepared: PreparedRun, sinks: list[Any], after: contextlib.ExitStack
 ) -> tuple[ControlLoop, dict[str, Any], str]:
     """Step 4, the loop until the last tick, a signal or a fault (zero volts whatever happens);
-    the loop (its ``state`` says how it ended), the timing figures and the scheduling."""
+    the loop (its ``state`` says how it ended), the timing figures and the scheduling. From the
+    loop's end until ``after`` closes, a stop signal is only noted."""
     from cartctl.plants.base import ClockedPlant
     from cartctl.runtime.executor import (
         BackToBackExecutor,
@@ -244,13 +248,14 @@ def _run_loop(
         loop.state.failure = str(exc)
     except Exception as exc:  # a fault of cartctl itself: the motors still get zero volts
         loop.state.failure = f"internal error: {type(exc).__name__}: {exc}"
-    finally:
-        with stopping.deferred():  # a second signal must not cut the shutdown short
-            loop.finish()
-            sys.setswitchinterval(switch_interval)
-            if not args.fast:
-                restore()
-    return loop, (stats or executor.stats()).to_dict(), scheduling
+    finally:  # a second signal must not cut the shutdown short, nor one now the summary
+        after.enter_context(stopping.deferred())
+        loop.finish()
+        sys.setswitchinterval(switch_interval)
+        if not args.fast:
+            restore()
+        timing = (stats or executor.stats()).to_dict()
+    return loop, timing, scheduling
 
 
 def _summary(
@@ -302,7 +307,7 @@ def _report(args: argparse.Namespace, summary: dict[str, Any], loop: ControlLoop
         stopped = "; the motors were stopped" if state.incomplete and state.zero_volts_sent else ""
         print(f"cartctl run: error: {'; '.join(f for f in failed if f)}{stopped}", file=sys.stderr)
         return 1
-    if loop.state.interrupted:
+    if loop.state.interrupted or stopping.received() is not None:  # during the run or after it
         signum = stopping.received()
         why = "interrupted" if signum is None else f"stopped by {signal.Signals(signum).name}"
         print(f"cartctl run: {why}; zero volts sent, the trace and recording hold the run so far",
@@ -316,10 +321,15 @@ def run(args: argparse.Namespace) -> int:
     csv_path, rrd_path = _checked_outputs(args)
     given = args.controller or str(DEFAULT_CONTROLLER)  # one file for every plant
     prepared = _prepared(args, given, csv_path)
-    sinks, memory, rerun = _sinks(args, prepared, csv_path, rrd_path)
-    loop, timing, scheduling = _run_loop(args, prepared, sinks)
-    run_facts = {"recording": str(rrd_path) if rerun is not None else None,
-                 "trace": str(csv_path), "plant": prepared.description, "controller": given,
-                 "scheduling": scheduling}  # fmt: skip
-    summary = _summary(prepared, loop, memory, rerun, timing, run_facts)
-    return _report(args, summary, loop)
+    try:  # the loop closes the plant; until it runs, a stop signal closes it here
+        sinks, memory, rerun = _sinks(args, prepared, csv_path, rrd_path)
+    except BaseException:
+        prepared.plant.close()
+        raise
+    with contextlib.ExitStack() as after:  # a signal after the loop: the summary, then its code
+        loop, timing, scheduling = _run_loop(args, prepared, sinks, after)
+        run_facts = {"recording": str(rrd_path) if rerun is not None else None,
+                     "trace": str(csv_path), "plant": prepared.description, "controller": given,
+                     "scheduling": scheduling}  # fmt: skip
+        summary = _summary(prepared, loop, memory, rerun, timing, run_facts)
+        return _report(args, summary, loop)
