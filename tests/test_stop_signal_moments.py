@@ -5,8 +5,9 @@ handlers (``cli.main`` installs them).
 
 Found by stopping commands at random moments (SIGINT, SIGTERM, SIGHUP, single and in bursts):
 ``run --fast`` stopped after its last tick printed no summary, only 'cartctl run: interrupted',
-over a whole trace; a signal between ``run``'s preparation and its loop left the plant open (a
-virtual cart's threads ticking on).
+over a whole trace; ``excite`` stopped while writing its trace left a cut trace (626 of 18000
+ticks), no meta file and no word of it; a signal between ``run``'s preparation and its loop left
+the plant open (a virtual cart's threads ticking on).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import pytest
 from cartctl.cli import main
 from cartctl.cli.commands import run as run_command
 from cartctl.data.read import read_trace
+from cartctl.data.trace import meta_path
 
 
 def _signalling(call: Callable[..., Any], signum: int = signal.SIGTERM) -> Callable[..., Any]:
@@ -56,6 +58,19 @@ def test_run_a_signal_after_the_last_tick_still_prints_the_summary(
     assert (trace.voltage_a[-1], trace.voltage_b[-1]) == (0.0, 0.0)
 
 
+def test_run_a_signal_during_a_completed_runs_shutdown_is_not_swallowed(
+    workdir: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from cartctl.runtime.loop import ControlLoop
+
+    monkeypatch.setattr(ControlLoop, "finish", _signalling(ControlLoop.finish))
+    code = main(["run", "--fast", "--duration", "1", "--rerun", "off", "--name", "s", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 143  # was 0: the signal noted during the shutdown, then forgotten
+    assert len(_lines(err)) == 1 and "stopped by SIGTERM" in err
+    assert json.loads(out)["ticks"] == len(read_trace(workdir / "logs" / "s.csv")) == 101
+
+
 def test_run_a_signal_before_the_loop_closes_the_plant(
     workdir: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -76,3 +91,60 @@ def test_run_a_signal_before_the_loop_closes_the_plant(
     assert len(_lines(err)) == 1 and "Traceback" not in err
     assert closed == [True]
     assert not (workdir / "logs" / "s.csv").exists()  # nothing driven, no trace
+
+
+def test_excite_a_signal_while_the_trace_is_written_leaves_it_whole(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import cartctl.data.trace as trace_module
+
+    monkeypatch.setattr(trace_module, "_WRITE_CHUNK_ROWS", 100)  # the signal between two blocks
+    original = trace_module.csv.writer
+
+    class Writer:
+        def __init__(self, file: Any, **kwargs: Any) -> None:
+            self.writer, self.blocks = original(file, **kwargs), 0
+
+        def writerow(self, row: Any) -> None:
+            self.writer.writerow(row)
+
+        def writerows(self, rows: Any) -> None:
+            self.writer.writerows(rows)
+            self.blocks += 1
+            if self.blocks == 2:
+                os.kill(os.getpid(), signal.SIGINT)
+
+    monkeypatch.setattr(trace_module.csv, "writer", Writer)
+    out = tmp_path / "x.csv"
+    code = main(["excite", "--plant", "physics", "--amplitude", "10", "--cycles", "1",
+                 "--out", str(out), "--json"])  # fmt: skip
+    stdout, err = capsys.readouterr()
+    assert code == 130
+    assert len(_lines(err)) == 1 and "Traceback" not in err
+    assert len(read_trace(out)) == json.loads(stdout)["ticks"] == 300  # the whole experiment
+    assert meta_path(out).is_file()
+
+
+def test_commission_a_signal_while_a_stage_trace_is_written_leaves_it_whole(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from cartctl.commission import stages
+
+    written: list[Path] = []
+
+    def write_trace(trace: Any, path: Path, **kwargs: Any) -> None:
+        os.kill(os.getpid(), signal.SIGTERM)  # the checks' experiment is over: its trace
+        original(trace, path, **kwargs)
+        written.append(path)
+
+    original = stages.write_trace
+    monkeypatch.setattr(stages, "write_trace", write_trace)
+    out = tmp_path / "c"
+    code = main(["commission", "physics", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 143
+    assert "Traceback" not in err
+    assert written == [out / "checks.csv"]
+    assert len(read_trace(out / "checks.csv")) == 540  # the whole checks sequence
+    assert meta_path(out / "checks.csv").is_file()
+    assert "checks: interrupted; zero volts sent" in _lines(err)[-1]

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from cartctl import stopping
 from cartctl.cart import PERIOD_S
 from cartctl.cli.progress import ProgressBar
 from cartctl.commission import StageError, checks, report, tuning
@@ -112,12 +113,13 @@ class Commission:
             result = run_experiment(plant, ua, ub, on_tick=bar.update, source=self.description)
         finally:
             bar.close()
-        if len(result.trace):
-            write_trace(result.trace, self.out / f"{stage}.csv")
-            write_trace_meta(self.out / f"{stage}.csv", plant=self.description,
-                             loop_delay_ticks=self.loop_delay_ticks,
-                             command=f"cartctl commission {self.spec}")  # fmt: skip
-        if result.interrupted or result.failure:
+        with stopping.deferred():  # the experiment is over: a stop signal waits for its trace
+            if len(result.trace):
+                write_trace(result.trace, self.out / f"{stage}.csv")
+                write_trace_meta(self.out / f"{stage}.csv", plant=self.description,
+                                 loop_delay_ticks=self.loop_delay_ticks,
+                                 command=f"cartctl commission {self.spec}")  # fmt: skip
+        if result.interrupted or result.failure or stopping.received() is not None:
             self.report.add(stage, f"StageStoppedError after {len(result.trace)} ticks: "
                                    f"{result.failure or 'interrupted'}; {stage}.csv holds them.")  # fmt: skip
             raise StageStoppedError(stage, result.failure)

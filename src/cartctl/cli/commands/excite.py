@@ -9,6 +9,7 @@ import stat
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import cartctl.cli.commands.options as options
 from cartctl import stopping
@@ -56,14 +57,12 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from cartctl.cart import SUPPLY_V
-    from cartctl.cli.jsonout import dumps
     from cartctl.cli.progress import ProgressBar
-    from cartctl.data.trace import meta_path, write_trace, write_trace_meta
+    from cartctl.data.trace import meta_path
     from cartctl.plants.factory import check_plant_name, is_serial, make_plant
     from cartctl.runtime.loop import run_experiment
     from cartctl.runtime.realtime import gc_paused
     from cartctl.signals import make_signal
-    from cartctl.sinks.summary import host_loss_text, warn_host_losses
 
     check_plant_name(args.plant)
     amplitude_v = options.check_finite(args.amplitude, "--amplitude")
@@ -104,6 +103,16 @@ def run(args: argparse.Namespace) -> int:
     finally:
         sys.setswitchinterval(switch_interval)
         bar.close()
+    with stopping.deferred():  # the experiment is over: a stop signal waits for its files
+        return _save(args, result, plant, description)
+
+
+def _save(args: argparse.Namespace, result: Any, plant: Any, description: str) -> int:
+    """The trace and its meta file written, what was done printed; the exit code."""
+    from cartctl.cli.jsonout import dumps
+    from cartctl.data.trace import meta_path, write_trace, write_trace_meta
+    from cartctl.sinks.summary import host_loss_text, warn_host_losses
+
     n = len(result.trace)
     if n == 0:
         print("cartctl excite: interrupted before the first tick; nothing written", file=sys.stderr)
@@ -120,7 +129,8 @@ def run(args: argparse.Namespace) -> int:
                                 command=options.command_line("excite"))  # fmt: skip
     except OSError as exc:  # the trace is whole; its meta file is not
         raise OutputError(meta_path(path), exc.strerror or str(exc)) from None
-    stopped = "failure" if result.failure else "interrupted" if result.interrupted else None
+    interrupted = result.interrupted or stopping.received() is not None  # during it or after
+    stopped = "failure" if result.failure else "interrupted" if interrupted else None
     if args.json:
         print(dumps({
             "trace": str(path), "ticks": n, "duration_s": n * plant.period_s,
