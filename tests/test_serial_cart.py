@@ -4,17 +4,21 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
+import signal
 import time
+from collections.abc import Iterator
 
 import pytest
 
+from cartctl import stopping
 from cartctl.cart import PERIOD_S
 from cartctl.errors import PlantError
 from cartctl.link import Encoder, Framer, Gpio, HostCommand, encode_gpiox_v2
 from cartctl.link.bridge import CH_BRIDGE_VERSION
 from cartctl.link.cart_link import UnsupportedCartError
 from cartctl.link.firmware import BridgeFirmware, CartIO
-from cartctl.link.serial_cart import SerialCart
+from cartctl.link.serial_cart import STOP_FRAMES, SerialCart
 from cartctl.plants.physics import PhysicsPlant
 
 
@@ -323,3 +327,71 @@ def test_the_bridge_sends_version_2_in_float_6() -> None:
     plant.reset()
     assert plant.sample.bridge_version == 2  # type: ignore[union-attr]
     plant.close()
+
+
+class _SignalAtFirstStopFrame(ScriptedCart):
+    """Sends ``signum`` to this process from inside the write of the first drive = 0 frame that
+    follows a driving one (:meth:`SerialCart.close`'s first stop frame)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(1)
+        self.signum = signum
+        self.stop_frames = 0
+        self.closed = False
+        self._drove = False
+
+    def write(self, data: bytes) -> int:
+        written = super().write(data)
+        (message,) = Framer().feed(data)
+        assert isinstance(message, Gpio)
+        drive = HostCommand.from_channels(message.floats, message.ints).drive
+        self._drove |= drive
+        if self._drove and not drive:
+            self.stop_frames += 1
+            if self.stop_frames == 1:
+                os.kill(os.getpid(), self.signum)
+        return written
+
+    def close(self) -> None:
+        self.closed = True
+
+
+@pytest.fixture
+def stop_handlers() -> Iterator[None]:
+    previous = stopping.install()
+    try:
+        yield
+    finally:
+        stopping.restore(previous)
+
+
+def test_a_stop_signal_during_close_waits_for_the_stop_frames_and_the_closed_port(
+    stop_handlers: None,
+) -> None:
+    """A SIGTERM that came as close() wrote its first drive = 0 frame was raised there: the
+    other stop frames (one may be lost to line noise) were never sent and the port stayed open.
+    With cartctl's handlers it is held until the port is closed, then raised."""
+    cart = _SignalAtFirstStopFrame(signal.SIGTERM)
+    plant = _plant(cart)
+    plant.reset()
+    plant.step(3.0, -3.0)
+    with pytest.raises(stopping.Interrupted):
+        plant.close()
+    assert cart.stop_frames == STOP_FRAMES
+    assert cart.closed and not plant.connected
+
+
+def test_ctrl_c_during_close_still_closes_the_port() -> None:
+    """Without cartctl's handlers (the Python API), Ctrl-C is a KeyboardInterrupt where it lands:
+    the port is closed all the same."""
+    cart = _SignalAtFirstStopFrame(signal.SIGINT)
+    plant = _plant(cart)
+    plant.reset()
+    plant.step(3.0, -3.0)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            plant.close()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert cart.closed and not plant.connected

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import tty
 from pathlib import Path
 
@@ -18,11 +19,13 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
+from cartctl import stopping
 from cartctl.cli import main
 from cartctl.data.read import read_trace
 from cartctl.errors import PlantError
+from cartctl.link import Framer, Gpio, HostCommand
 from cartctl.link.serial_cart import PROBE_ECHOES, SerialCart
-from cartctl.link.virtual_cart import CartFaults, VirtualCart
+from cartctl.link.virtual_cart import CartFaults, VirtualCart, VirtualSerialCart
 from realtime_upsets import link_upsets
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -298,3 +301,50 @@ def test_stop_waits_for_the_ticker_even_when_join_says_it_ended() -> None:
         thread.join = lambda timeout=None: None  # type: ignore[method-assign]
     cart.stop()
     assert cart.state == "stopped"
+
+
+@pytest.mark.realtime
+@pytest.mark.parametrize("handlers", ["cartctl", "python"])
+def test_a_stop_signal_as_the_virtual_plant_closes_still_switches_the_cart_off(
+    handlers: str,
+) -> None:
+    """A SIGTERM that came as ``--plant virtual`` closed (here: as its first stop frame went out)
+    was raised before the cart was switched off: its threads ticked on and its pseudo-terminal
+    stayed open. With cartctl's handlers the signal waits until the cart is off; without them
+    (the Python API: Ctrl-C is a KeyboardInterrupt where it lands) the cart is switched off all
+    the same."""
+    cart = VirtualCart(seed=3)
+    plant = VirtualSerialCart(cart, on_print=lambda line: None)
+    send, drove = plant.link.send, []
+    signum = signal.SIGTERM if handlers == "cartctl" else signal.SIGINT
+
+    def signalling_send(frame: bytes) -> None:
+        send(frame)
+        (message,) = Framer().feed(frame)
+        assert isinstance(message, Gpio)
+        drive = HostCommand.from_channels(message.floats, message.ints).drive
+        if drive:
+            drove.append(True)
+        elif drove and len(drove) < 2:  # the first stop frame
+            drove.append(False)
+            os.kill(os.getpid(), signum)
+
+    plant.link.send = signalling_send  # type: ignore[method-assign]
+    if handlers == "cartctl":
+        installed = stopping.install()
+    else:
+        previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        plant.reset()
+        plant.step(3.0, -3.0)
+        with pytest.raises(KeyboardInterrupt):  # stopping.Interrupted is one
+            plant.close()
+        off = (cart.state, cart._master, cart._ticker.is_alive())
+    finally:
+        if handlers == "cartctl":
+            stopping.restore(installed)
+        else:
+            signal.signal(signal.SIGINT, previous)
+        cart.stop()  # the old code left it running
+    assert drove == [True, False]
+    assert off == ("stopped", -1, False)

@@ -21,6 +21,7 @@ from cartctl.errors import PlantError
 from cartctl.link.cart_link import DEFAULT_SILENCE_TIMEOUT_S, CartLink, UnsupportedCartError
 from cartctl.link.dialect import Encoder, Gpio
 from cartctl.plants.base import Measurement
+from cartctl.stopping import held
 
 STOP_FRAMES = 3  # drive = 0 frames sent on close (one may be lost to line noise)
 PROBE_ECHOES = bridge.MIN_ECHOES  # echoes measure_loop_delay judges first: done when clear
@@ -220,13 +221,18 @@ class SerialCart:
         return self.receive()
 
     def close(self) -> None:
-        """Send drive = 0 with zero volts (if the port still works), then close it."""
-        if self.connected and not self.link.vanished:
-            with contextlib.suppress(PlantError):
-                for _ in range(STOP_FRAMES):
-                    self._send(0.0, 0.0, drive=False)
-        self.link.close()
-        self.connected = False
+        """Send drive = 0 with zero volts (if the port still works), then close it. A stop signal
+        meanwhile waits until the port is closed (:class:`~cartctl.stopping.held`); a Ctrl-C where
+        that is not installed still closes it."""
+        with held():
+            try:
+                if self.connected and not self.link.vanished:
+                    with contextlib.suppress(PlantError):
+                        for _ in range(STOP_FRAMES):
+                            self._send(0.0, 0.0, drive=False)
+            finally:
+                self.link.close()
+                self.connected = False
 
     @property
     def loop_delay_ticks(self) -> int | None:

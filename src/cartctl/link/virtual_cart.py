@@ -32,6 +32,7 @@ from cartctl.link.firmware import BridgeFirmware, CartIO, OnboardFirmware
 from cartctl.link.serial_cart import SerialCart
 from cartctl.plants.base import Measurement
 from cartctl.plants.physics import PhysicsPlant
+from cartctl.stopping import held
 
 HEARTBEAT_PERIOD_S = 1.1
 SILENCE_TIMEOUT_S = 0.5
@@ -326,9 +327,12 @@ class VirtualSerialCart(SerialCart):
         return Measurement(self.sample.speed_a_rad_s, self.sample.speed_b_rad_s, true_a, true_b)
 
     def close(self) -> None:
-        was_connected = self.connected and not self.link.failure
-        super().close()
-        if was_connected:  # let the stop frames cross the line and reach control()
-            _wait_until(lambda: self.cart.firmware.in_ints[1] == 0, 0.2, 0.005)
-            self.cart.wait_ticks(2)
-        self.cart.stop()
+        with held():  # a stop signal meanwhile: raised once the cart is off (see SerialCart.close)
+            try:
+                was_connected = self.connected and not self.link.failure
+                super().close()
+                if was_connected:  # let the stop frames cross the line and reach control()
+                    _wait_until(lambda: self.cart.firmware.in_ints[1] == 0, 0.2, 0.005)
+                    self.cart.wait_ticks(2)
+            finally:
+                self.cart.stop()
