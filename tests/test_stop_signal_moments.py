@@ -148,3 +148,63 @@ def test_commission_a_signal_while_a_stage_trace_is_written_leaves_it_whole(
     assert len(read_trace(out / "checks.csv")) == 540  # the whole checks sequence
     assert meta_path(out / "checks.csv").is_file()
     assert "checks: interrupted; zero volts sent" in _lines(err)[-1]
+
+
+class _Thing:
+    """An object to hang a weakref callback on."""
+
+
+def test_a_signal_inside_a_weakref_callback_is_raised_in_the_code_around(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Python cannot raise an exception out of a weakref callback: it prints 'Exception ignored in'
+    with a traceback and goes on. The stop signal is sent again, and raised where it can be."""
+    import weakref
+
+    from cartctl import stopping
+
+    previous = stopping.install()
+    try:
+
+        def drop_then_wait() -> None:
+            thing = _Thing()
+            ref = weakref.ref(thing, lambda _: os.kill(os.getpid(), signal.SIGHUP))
+            del thing  # the callback runs here, and the handler raises inside it
+            assert ref() is None
+            stopping._redelivered.acquire()  # type: ignore[attr-defined]
+            stopping.received()  # any call: the signal sent again is raised by now
+
+        with pytest.raises(stopping.Interrupted) as raised:
+            drop_then_wait()
+        assert raised.value.signum == signal.SIGHUP
+        assert stopping.received() == signal.SIGHUP
+    finally:
+        stopping.restore(previous)
+    assert "Exception ignored" not in capsys.readouterr().err
+
+
+def test_commission_a_signal_lost_in_a_weakref_callback_still_stops_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """As a figure of the checks is drawn (matplotlib's weakref callbacks): the signal was lost,
+    and with it every later one; the excitation and the rest ran on, and exit 0."""
+    import weakref
+
+    from cartctl.commission import report
+
+    def plot_lines(*args: Any, **kwargs: Any) -> None:
+        thing = _Thing()
+        ref = weakref.ref(thing, lambda _: os.kill(os.getpid(), signal.SIGINT))
+        del thing
+        assert ref() is None
+        original(*args, **kwargs)
+
+    original = report.plot_lines
+    monkeypatch.setattr(report, "plot_lines", plot_lines)
+    out = tmp_path / "c"
+    code = main(["commission", "physics", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 130
+    assert "Exception ignored" not in err and "Traceback" not in err
+    assert "interrupted; zero volts sent" in _lines(err)[-1]
+    assert not (out / "controller.toml").exists()

@@ -21,6 +21,8 @@ _first: int | None = None
 _deferred = 0
 _holding = 0
 _held = False
+_hook_replaced = sys.unraisablehook
+_redelivered: object = None  # a lock, released once the latest signal is sent again
 
 
 class Interrupted(KeyboardInterrupt):
@@ -54,6 +56,29 @@ def _handler(signum: int, frame: object) -> None:
     raise Interrupted(signum)
 
 
+def _unraisable(unraisable: object) -> None:
+    """The stop signal raised where Python cannot raise it (in a weakref callback, a ``__del__``, a
+    generator closed as it is freed: it prints 'Exception ignored in …' and goes on) is sent again,
+    from a thread, to be raised in the code around; lost, it would also have made every later
+    signal look like a shutdown under way. Anything else goes to the hook this one replaced."""
+    global _first, _redelivered
+    exc = getattr(unraisable, "exc_value", None)
+    if not isinstance(exc, Interrupted) or exc.signum != _first or _phase != _RUNNING:
+        _hook_replaced(unraisable)  # type: ignore[arg-type]
+        return
+    import _thread  # not threading: Thread.start() waits, and the handler would raise in here
+
+    _first = None
+    _redelivered = _thread.allocate_lock()
+    _redelivered.acquire()
+    _thread.start_new_thread(_send_again, (exc.signum, _redelivered))
+
+
+def _send_again(signum: int, done: object) -> None:
+    signal.raise_signal(signum)
+    done.release()  # type: ignore[attr-defined]
+
+
 def _route(handler: object) -> dict[int, object]:
     """Set ``handler`` for every stop signal; the handlers replaced ({} outside the main thread)."""
     previous: dict[int, object] = {}
@@ -75,9 +100,11 @@ def install_at_start() -> None:
 
 def install() -> dict[int, object]:
     """Route the stop signals to :class:`Interrupted`; returns the handlers replaced."""
-    global _first, _deferred, _phase, _held
+    global _first, _deferred, _phase, _held, _hook_replaced
     _first, _deferred, _held = None, 0, False
     previous = _route(_handler)
+    if previous and sys.unraisablehook is not _unraisable:
+        _hook_replaced, sys.unraisablehook = sys.unraisablehook, _unraisable
     _phase = _RUNNING
     return previous
 
@@ -88,6 +115,8 @@ def restore(previous: dict[int, object]) -> None:
     _phase = _ENDING
     for signum, handler in previous.items():
         signal.signal(signum, handler)  # type: ignore[arg-type]
+    if previous and sys.unraisablehook is _unraisable:
+        sys.unraisablehook = _hook_replaced
 
 
 def ignore() -> None:
