@@ -65,21 +65,29 @@ def enable_realtime(priority: int = 50, *, lock_memory: bool = True) -> str:
         policy, current = os.sched_getscheduler(0), os.sched_getparam(0).sched_priority
     except OSError as exc:
         return f"normal scheduling: cannot read the current policy ({exc})"
+    # what to undo is noted before each change: a stop signal raised right after one still
+    # finds it (restore)
+    first = not _saved
+    if first:
+        _saved.update(policy=policy, priority=current, locked=0)
     try:
         setscheduler(
             0, os.SCHED_FIFO | getattr(os, "SCHED_RESET_ON_FORK", 0), os.sched_param(priority)
         )
     except OSError as exc:
+        if first:
+            _saved.clear()
         return f"normal scheduling: SCHED_FIFO not permitted ({exc.strerror or exc})"
-    if not _saved:
-        _saved.update(policy=policy, priority=current, locked=0)
     text = f"SCHED_FIFO priority {priority}"
     if not lock_memory:
         return text
-    why = "" if _saved["locked"] else _lock_memory()
-    if why:
-        return f"{text}, memory not locked ({why})"
+    if _saved["locked"]:
+        return text + ", memory locked"
     _saved["locked"] = 1
+    why = _lock_memory()
+    if why:
+        _saved["locked"] = 0
+        return f"{text}, memory not locked ({why})"
     return text + ", memory locked"
 
 
@@ -99,9 +107,8 @@ def restore() -> None:
 @contextmanager
 def realtime_scheduling(priority: int = 50, *, lock_memory: bool = True) -> Iterator[str]:
     """:func:`enable_realtime` for the ``with`` block (yielding its line), then :func:`restore`."""
-    description = enable_realtime(priority, lock_memory=lock_memory)
     try:
-        yield description
+        yield enable_realtime(priority, lock_memory=lock_memory)
     finally:
         restore()
 
