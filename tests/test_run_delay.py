@@ -13,6 +13,7 @@ import pytest
 from cartctl.cli import main
 from cartctl.cli.commands import run as run_command
 from cartctl.data.read import read_trace
+from cartctl.errors import DataWarning
 
 ROOT = Path(__file__).resolve().parents[1]
 MISMATCH = (
@@ -134,16 +135,27 @@ def test_serial_controller_on_the_virtual_cart_stops_before_driving(
         return plant, description
 
     monkeypatch.setattr(run_command, "make_plant", recording_make_plant)
-    code, _out, err = _run(capsys, "--plant", "virtual", "--controller",
-                          "controllers/serial-pi.toml", "--rerun", "off")  # fmt: skip
-    assert code == 2
-    # serial-pi.toml is the fallback for a serial loop of 3 ticks; the bridge's loop has 1
-    expected = MISMATCH.format(given="serial-pi.toml", designed=3, plant="virtual", delay=1,
-                               fit="pi.toml")  # fmt: skip
-    # a measured delay says how sure it is: the probe's echoes (clear, or it would only warn)
-    head, _, tail = expected.partition("; ")
-    (line,) = _errors(err)
-    assert line.startswith(head + " (measured: 1 tick in ") and line.endswith("; " + tail), line
+    unclear: DataWarning | None = None
+    try:
+        code, _out, err = _run(capsys, "--plant", "virtual", "--controller",
+                              "controllers/serial-pi.toml", "--rerun", "off")  # fmt: skip
+    except DataWarning as warning:
+        unclear = warning
+    if unclear is not None:
+        # A loaded machine can answer some of the probe's ticks late (1 run in 10 with both
+        # cores busy: 1 tick in 37 of 50 echoes, 2 in 13): the delay is then not clear, and the
+        # run only warns (test_loop_delay_probe.py), an error here, raised before driving too.
+        # The refusal below needs a clear probe, which no test on a busy machine can promise.
+        assert "is not clear" in str(unclear)
+    else:
+        assert code == 2
+        # serial-pi.toml is the fallback for a serial loop of 3 ticks; the bridge's loop has 1
+        expected = MISMATCH.format(given="serial-pi.toml", designed=3, plant="virtual", delay=1,
+                                   fit="pi.toml")  # fmt: skip
+        # a measured delay says how sure it is: the probe's echoes (clear, or it would only warn)
+        head, _, tail = expected.partition("; ")
+        (line,) = _errors(err)
+        assert line.startswith(head + " (measured: 1 tick in ") and line.endswith("; " + tail)
     assert sent, "the echo was measured by sending"
     assert all(not drive and a == 0.0 and b == 0.0 for a, b, drive in sent)
     assert _nothing_written(workdir)
