@@ -208,3 +208,36 @@ def test_commission_a_signal_lost_in_a_weakref_callback_still_stops_it(
     assert "Exception ignored" not in err and "Traceback" not in err
     assert "interrupted; zero volts sent" in _lines(err)[-1]
     assert not (out / "controller.toml").exists()
+
+
+def _burst_while_blocked(*signums: int) -> None:
+    """Send ``signums`` one after the other from another thread, while this one waits in a lock
+    (no bytecode): Python then runs their handlers together, in the order of their numbers."""
+    import _thread
+
+    done = _thread.allocate_lock()
+    done.acquire()
+
+    def burst() -> None:
+        for signum in signums:
+            signal.raise_signal(signum)
+        done.release()
+
+    _thread.start_new_thread(burst, ())
+    done.acquire()  # the handlers run as this returns
+
+
+def test_the_first_signal_counts_when_python_runs_the_handlers_of_a_burst_together() -> None:
+    """``tune --jobs 2`` (its pool's thread holding the interpreter) or ``identify`` (in numpy)
+    sent SIGTERM then SIGINT 0-10 ms apart exited 130, not 143: Python runs the pending handlers
+    by signal number, SIGINT's first."""
+    from cartctl import stopping
+
+    previous = stopping.install()
+    try:
+        with pytest.raises(stopping.Interrupted) as raised:
+            _burst_while_blocked(signal.SIGTERM, signal.SIGINT)
+        assert raised.value.signum == signal.SIGTERM
+        assert stopping.exit_code() == 143
+    finally:
+        stopping.restore(previous)

@@ -23,6 +23,8 @@ _holding = 0
 _held = False
 _hook_replaced = sys.unraisablehook
 _redelivered: object = None  # a lock, released once the latest signal is sent again
+_order: tuple[int, int] | None = None  # a pipe the signals' numbers go to as they come
+_fd_replaced = -1
 
 
 class Interrupted(KeyboardInterrupt):
@@ -47,13 +49,27 @@ def _handler(signum: int, frame: object) -> None:
             os._exit(128 + signum)
     if _first is not None or _deferred or _phase == _ENDING:  # a shutdown is under way
         if _first is None:
-            _first = signum
+            _first = _came_first(signum)
         return
-    _first = signum
+    _first = signum = _came_first(signum)
     if _holding:  # mid-tick: raised as the tick ends (held)
         _held = True
         return
     raise Interrupted(signum)
+
+
+def _came_first(signum: int) -> int:
+    """The stop signal that came first of those whose handlers Python runs now: it runs them by
+    number (SIGINT's before that of a SIGTERM that came earlier, in a burst that came while the
+    main thread was in a long call or without the interpreter), their numbers reach the pipe as
+    they come."""
+    if _order is None:
+        return signum
+    try:
+        came = os.read(_order[0], 512)
+    except OSError:  # nothing there (EAGAIN)
+        return signum
+    return next((s for s in came if s in STOP_SIGNALS), signum)
 
 
 def _unraisable(unraisable: object) -> None:
@@ -105,18 +121,35 @@ def install() -> dict[int, object]:
     previous = _route(_handler)
     if previous and sys.unraisablehook is not _unraisable:
         _hook_replaced, sys.unraisablehook = sys.unraisablehook, _unraisable
+    if previous and _order is None:
+        _watch_order()
     _phase = _RUNNING
     return previous
 
 
+def _watch_order() -> None:
+    """Have each signal's number written to a pipe as it comes (``signal.set_wakeup_fd``)."""
+    global _order, _fd_replaced
+    pipe = os.pipe()
+    for fd in pipe:
+        os.set_blocking(fd, False)
+    _fd_replaced = signal.set_wakeup_fd(pipe[1], warn_on_full_buffer=False)
+    _order = pipe
+
+
 def restore(previous: dict[int, object]) -> None:
     """Put back the handlers :func:`install` replaced; a signal from now on is only noted."""
-    global _phase
+    global _phase, _order
     _phase = _ENDING
     for signum, handler in previous.items():
         signal.signal(signum, handler)  # type: ignore[arg-type]
     if previous and sys.unraisablehook is _unraisable:
         sys.unraisablehook = _hook_replaced
+    if previous and _order is not None:
+        signal.set_wakeup_fd(_fd_replaced)
+        for fd in _order:
+            os.close(fd)
+        _order = None
 
 
 def ignore() -> None:
