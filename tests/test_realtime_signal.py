@@ -4,7 +4,8 @@
 process's memory) before it noted what to undo, so a signal that landed right after the change was
 raised before the note: :func:`~cartctl.runtime.realtime.restore` found nothing to undo, and the
 thread stayed SCHED_FIFO (the memory locked) for whatever the process did next (the Python API, a
-commissioning that runs ``cartctl run`` in process, this test session). Here the signal is sent from
+commissioning that runs ``cartctl run`` in process, this test session). The garbage collector's
+pause (:func:`~cartctl.runtime.realtime.gc_paused`) did the same. Here the signal is sent from
 inside the change itself, with cartctl's handlers installed.
 """
 
@@ -109,3 +110,24 @@ def test_a_stop_signal_as_the_memory_is_locked_is_undone(
         _enable_then_restore(lock_memory=True)
     assert locked == [True, False]
     assert _scheduling()[0] != os.SCHED_FIFO
+
+
+@pytest.mark.parametrize("call", ["freeze", "disable"])
+def test_a_stop_signal_as_the_collector_is_paused_is_undone(
+    stop_handlers: None, monkeypatch: pytest.MonkeyPatch, call: str
+) -> None:
+    """gc_paused froze the objects and switched the collector off before its ``try``: a signal
+    raised right after either left them so for the rest of the process."""
+    import gc
+
+    assert gc.isenabled()
+    monkeypatch.setattr(gc, call, _signalling(getattr(gc, call)))
+    try:
+        with pytest.raises(stopping.Interrupted), realtime.gc_paused():
+            pass
+        after = (gc.isenabled(), gc.get_freeze_count())
+    finally:
+        monkeypatch.undo()
+        gc.unfreeze()
+        gc.enable()
+    assert after == (True, 0)

@@ -121,10 +121,10 @@ def gc_paused(*, collect_new: bool = False) -> Iterator[None]:
     """
     was_enabled = gc.isenabled()
     gc.collect()
-    gc.freeze()
-    if not collect_new:
-        gc.disable()
-    try:
+    try:  # a stop signal raised right after the freeze or the switch still undoes them
+        gc.freeze()
+        if not collect_new:
+            gc.disable()
         yield
     finally:
         gc.unfreeze()
