@@ -93,6 +93,23 @@ def test_run_a_signal_before_the_loop_closes_the_plant(
     assert not (workdir / "logs" / "s.csv").exists()  # nothing driven, no trace
 
 
+def test_run_a_signal_before_the_sinks_open_is_one_line(
+    workdir: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """As the loop starts (a real-time run locks its memory and collects first): the summary of no
+    rows was an error, 'the trace has no 'time_s' column', and exit 2."""
+    from cartctl.runtime.loop import ControlLoop
+
+    monkeypatch.setattr(ControlLoop, "start", _signalling(ControlLoop.start))
+    code = main(["run", "--fast", "--duration", "1", "--rerun", "off", "--name", "s", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 143
+    assert _lines(err) == ["cartctl run: stopped by SIGTERM before the first tick; zero volts "
+                           "sent, nothing recorded"]  # fmt: skip
+    assert out == ""
+    assert not (workdir / "logs" / "s.csv").exists()
+
+
 def test_excite_a_signal_while_the_trace_is_written_leaves_it_whole(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -316,6 +316,20 @@ def _report(args: argparse.Namespace, summary: dict[str, Any], loop: ControlLoop
     return 0
 
 
+def _unrecorded(loop: ControlLoop) -> int:
+    """A run stopped before its first tick (a signal, a plant fault as it started): one line, the
+    exit code."""
+    state = loop.state
+    if state.failure:
+        print(f"cartctl run: error: {state.failure}", file=sys.stderr)
+        return 1
+    signum = stopping.received()
+    why = "interrupted" if signum is None else f"stopped by {signal.Signals(signum).name}"
+    print(f"cartctl run: {why} before the first tick; zero volts sent, nothing recorded",
+          file=sys.stderr)  # fmt: skip
+    return stopping.exit_code()
+
+
 def run(args: argparse.Namespace) -> int:
     """0, 1 when the run failed (a plant fault, a file left incomplete), or the signal's code."""
     csv_path, rrd_path = _checked_outputs(args)
@@ -328,6 +342,8 @@ def run(args: argparse.Namespace) -> int:
         raise
     with contextlib.ExitStack() as after:  # a signal after the loop: the summary, then its code
         loop, timing, scheduling = _run_loop(args, prepared, sinks, after)
+        if not memory.columns:  # it stopped before the sinks opened: no rows, no summary
+            return _unrecorded(loop)
         run_facts = {"recording": str(rrd_path) if rerun is not None else None,
                      "trace": str(csv_path), "plant": prepared.description, "controller": given,
                      "scheduling": scheduling}  # fmt: skip
