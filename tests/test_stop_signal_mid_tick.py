@@ -229,3 +229,24 @@ def test_a_signal_while_the_sinks_open_waits_until_every_file_has_its_header(
     trace = read_trace(tmp_path / "s.csv")  # the header, then the stop row
     assert len(trace) == loop.state.rows == 1
     assert (trace.voltage_a[0], trace.voltage_b[0]) == (0.0, 0.0)
+
+
+def test_a_signal_while_a_cart_clocked_loop_starts_still_leaves_the_stop_row(
+    tmp_path: Path, stop_handlers
+) -> None:
+    """A cart's first measurement comes after the sinks open (so that their start-up does not put
+    the loop behind the cart): a signal while they opened was raised before it, and the trace
+    held its header alone, which read_trace refuses ('no data rows'; seen in ``run --plant
+    virtual`` stopped at random moments)."""
+    controllers = build_controllers(load_controller(ROOT / "controllers" / "pi.toml"))
+    plant, _ = make_plant("sim")
+    csv_sink, clock = CsvSink(tmp_path / "s.csv"), SimulatedClock()
+    loop = ControlLoop(_CartClocked(plant), controllers, {"a": [8.0] * 10, "b": [8.0] * 10},
+                       [_SignalOnOpen(), csv_sink], now_s=clock.now_s)  # fmt: skip
+    with pytest.raises(stopping.Interrupted):
+        loop.start()
+    with stopping.deferred():
+        loop.finish()
+    trace = read_trace(tmp_path / "s.csv")  # the header, then the stop row
+    assert len(trace) == loop.state.rows == 1
+    assert (trace.voltage_a[0], trace.voltage_b[0]) == (0.0, 0.0)

@@ -152,10 +152,10 @@ class ControlLoop:
             self._y = self.plant.reset()
             self._true = self._y.true_speed_a_rad_s is not None
         columns = TRACE_COLUMNS + (TRUE_SPEED_COLUMNS if self._true else ())
-        with held():  # a stop signal waits until every file has its header
-            self._each([s.open for s in self.sinks], columns)
-        if self._clocked:
-            self._y = self.plant.reset()
+        with held():  # a stop signal waits until every file has its header, and a cart's first
+            self._each([s.open for s in self.sinks], columns)  # measurement, for the stop row
+            if self._clocked:
+                self._y = self.plant.reset()
 
     def _each(self, calls: Sequence[Callable[..., None]], *args: object) -> None:
         """Call each with ``args``; a failed file write is kept and raised once all have run."""
