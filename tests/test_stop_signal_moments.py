@@ -258,3 +258,22 @@ def test_the_first_signal_counts_when_python_runs_the_handlers_of_a_burst_togeth
         assert stopping.exit_code() == 143
     finally:
         stopping.restore(previous)
+
+
+def test_monitor_the_first_signal_of_a_burst_counts() -> None:
+    """``monitor`` has handlers of its own (stop after the frame): SIGTERM then SIGINT, run
+    together, was taken for Ctrl-C first and exited 0 instead of 143."""
+    from types import SimpleNamespace
+
+    from cartctl import stopping
+    from cartctl.cli.commands.monitor import _stop_on_signals
+
+    monitor, received = SimpleNamespace(stop_requested=False), []
+    previous = stopping.install()
+    try:
+        with _stop_on_signals(monitor, received):  # type: ignore[arg-type]
+            _burst_while_blocked(signal.SIGTERM, signal.SIGINT)
+    finally:
+        stopping.restore(previous)
+    assert monitor.stop_requested
+    assert received[0] == signal.SIGTERM

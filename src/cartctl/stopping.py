@@ -49,20 +49,20 @@ def _handler(signum: int, frame: object) -> None:
             os._exit(128 + signum)
     if _first is not None or _deferred or _phase == _ENDING:  # a shutdown is under way
         if _first is None:
-            _first = _came_first(signum)
+            _first = came_first(signum)
         return
-    _first = signum = _came_first(signum)
+    _first = signum = came_first(signum)
     if _holding:  # mid-tick: raised as the tick ends (held)
         _held = True
         return
     raise Interrupted(signum)
 
 
-def _came_first(signum: int) -> int:
-    """The stop signal that came first of those whose handlers Python runs now: it runs them by
-    number (SIGINT's before that of a SIGTERM that came earlier, in a burst that came while the
-    main thread was in a long call or without the interpreter), their numbers reach the pipe as
-    they come."""
+def came_first(signum: int) -> int:
+    """The stop signal that came first of those whose handlers Python runs now, for a handler
+    called with ``signum``: Python runs them by number (SIGINT's before that of a SIGTERM that came
+    earlier, when both came while the main thread was in a long call or waited for the
+    interpreter); after :func:`install` their numbers reach a pipe in the order they came."""
     if _order is None:
         return signum
     try:

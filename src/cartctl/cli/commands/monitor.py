@@ -133,7 +133,7 @@ def _stop_on_signals(monitor: Monitor, received: list[int]) -> Iterator[None]:
         return
 
     def handler(signum: int, frame: Any) -> None:
-        received.append(signum)
+        received.append(signum if received else stopping.came_first(signum))
         monitor.stop_requested = True
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
