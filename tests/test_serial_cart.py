@@ -6,6 +6,7 @@ import itertools
 import math
 import os
 import signal
+import threading
 import time
 from collections.abc import Iterator
 
@@ -395,3 +396,45 @@ def test_ctrl_c_during_close_still_closes_the_port() -> None:
     finally:
         signal.signal(signal.SIGINT, previous)
     assert cart.closed and not plant.connected
+
+
+class _SignalAndWaitForIt(_SignalAtFirstStopFrame):
+    """As :class:`_SignalAtFirstStopFrame`, then waits in that write until the main thread has
+    run the handler (the write is in a worker thread here)."""
+
+    def write(self, data: bytes) -> int:
+        written = super().write(data)
+        deadline = time.monotonic() + 10.0
+        while self.stop_frames == 1 and stopping.received() is None:
+            assert time.monotonic() < deadline, "the main thread never ran the handler"
+            time.sleep(0.001)
+        return written
+
+
+def test_a_port_closed_in_another_thread_leaves_the_signal_to_the_main_thread(
+    stop_handlers: None,
+) -> None:
+    """A stop signal is the main thread's: held in another thread's close, it was raised there
+    (an exception in that thread) and never in the main thread."""
+    cart = _SignalAndWaitForIt(signal.SIGTERM)
+    plant = _plant(cart)
+    plant.reset()
+    plant.step(3.0, -3.0)
+    failed: list[BaseException] = []
+
+    def close() -> None:
+        try:
+            plant.close()
+        except BaseException as exc:  # what the thread would die of
+            failed.append(exc)
+
+    def start_and_wait(worker: threading.Thread) -> None:  # the signal lands in either
+        worker.start()
+        worker.join()
+
+    worker = threading.Thread(target=close)
+    with pytest.raises(stopping.Interrupted):
+        start_and_wait(worker)
+    worker.join()
+    assert failed == []
+    assert cart.stop_frames == STOP_FRAMES and cart.closed
