@@ -277,3 +277,28 @@ def test_monitor_the_first_signal_of_a_burst_counts() -> None:
         stopping.restore(previous)
     assert monitor.stop_requested
     assert received[0] == signal.SIGTERM
+
+
+@pytest.mark.realtime
+def test_monitor_a_signal_while_its_files_close_keeps_them_whole(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    rrd_rows: Callable[[Path], Any],
+) -> None:
+    """Once the monitor's own handlers are gone (its duration is over): the signal cut the
+    closing short, the recording kept 20 of 100 frames, and no summary was printed."""
+    import csv
+
+    from cartctl.sinks.csv_sink import CsvSink
+
+    monkeypatch.setattr(CsvSink, "close", _signalling(CsvSink.close))
+    code = main(["monitor", "virtual", "--duration", "1", "--rerun", "save", "--out",
+                 str(tmp_path), "--name", "m", "--json"])  # fmt: skip
+    out, err = capsys.readouterr()
+    assert code == 143, err
+    assert "Traceback" not in err
+    frames = json.loads(out)["frames"]
+    with open(tmp_path / "m.csv", newline="", encoding="utf-8") as file:
+        assert len(list(csv.reader(file))) == 1 + frames
+    assert rrd_rows(tmp_path / "m.rrd")["gpio/speed_a"] == frames

@@ -146,6 +146,12 @@ def _stop_on_signals(monitor: Monitor, received: list[int]) -> Iterator[None]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """0 (also after Ctrl-C), 1 on a fault, 128 + another stop signal's number."""
+    with contextlib.ExitStack() as after:  # from the monitor's end to its summary: signals noted
+        return _monitor(args, after)
+
+
+def _monitor(args: argparse.Namespace, after: contextlib.ExitStack) -> int:
     from cartctl.cli.jsonout import dumps
     from cartctl.link.cart_link import CartLink, print_to_stderr
     from cartctl.link.cart_monitor import Monitor, parse_labels
@@ -186,7 +192,8 @@ def run(args: argparse.Namespace) -> int:
             # the sinks open at the first frames; a collection walks only the objects made meanwhile
             with _stop_on_signals(monitor, received), gc_paused(collect_new=True):
                 result = monitor.run(link, args.duration)
-        finally:
+        finally:  # its own handlers are gone: a signal must not cut the closing short
+            after.enter_context(stopping.deferred())
             _close_all(monitor.rows)
     finally:
         link.close()
@@ -208,8 +215,9 @@ def run(args: argparse.Namespace) -> int:
     if result.failure:
         print(f"cartctl monitor: error: {result.failure}", file=sys.stderr)
         return 1
-    if received and received[0] != signal.SIGINT:  # Ctrl-C is the normal way to stop a monitor
-        return 128 + received[0]
+    signum = received[0] if received else stopping.received()  # while it ran, or after it
+    if signum is not None and signum != signal.SIGINT:  # Ctrl-C is the normal way to stop it
+        return 128 + signum
     return 0
 
 
