@@ -302,3 +302,31 @@ def test_monitor_a_signal_while_its_files_close_keeps_them_whole(
     with open(tmp_path / "m.csv", newline="", encoding="utf-8") as file:
         assert len(list(csv.reader(file))) == 1 + frames
     assert rrd_rows(tmp_path / "m.rrd")["gpio/speed_a"] == frames
+
+
+def test_excite_a_signal_as_the_plant_closes_still_stops_the_motors(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """At the experiment's end the plant is closed (zero volts, a serial cart's stop frames): a
+    signal there cut the closing short, the motors kept the last voltage of the signal (−10 V of
+    the square wave) and the whole experiment was lost."""
+    import cartctl.plants.factory as factory
+
+    made: list[Any] = []
+    original = factory.make_plant
+
+    def make_plant(*args: Any, **kwargs: Any) -> Any:
+        plant, description = original(*args, **kwargs)
+        made.append(plant)
+        plant.close = _signalling(plant.close)
+        return plant, description
+
+    monkeypatch.setattr(factory, "make_plant", make_plant)
+    out = tmp_path / "x.csv"
+    code = main(["excite", "--plant", "physics", "--amplitude", "10", "--cycles", "1",
+                 "--out", str(out), "--json"])  # fmt: skip
+    stdout, err = capsys.readouterr()
+    assert code == 143
+    assert len(_lines(err)) == 1 and "Traceback" not in err
+    assert made[0].applied_voltage_v == (0.0, 0.0)
+    assert len(read_trace(out)) == json.loads(stdout)["ticks"] == 300

@@ -21,7 +21,7 @@ from cartctl.plants.sim import saturate
 from cartctl.runtime.base import Controller
 from cartctl.runtime.executor import BackToBackExecutor, SimulatedClock
 from cartctl.sinks.base import TRACE_COLUMNS, TRUE_SPEED_COLUMNS, Sink
-from cartctl.stopping import held
+from cartctl.stopping import deferred, held
 
 
 class MemorySink:
@@ -289,9 +289,10 @@ def run_experiment(
     source: str | None = None,
 ) -> ExperimentResult:
     """Apply the voltage sequences (V per tick) and record them with the measured speeds (rows as
-    :mod:`cartctl.plants.base` numbers them). The plant is reset first and closed on every path;
-    Ctrl-C or a PlantError after the first tick ends the run with the ticks so far. ``on_tick``
-    gets the number of ticks done."""
+    :mod:`cartctl.plants.base` numbers them). The plant is reset first and closed on every path
+    (a stop signal meanwhile is only noted: :func:`cartctl.stopping.received`); Ctrl-C or a
+    PlantError after the first tick ends the run with the ticks so far. ``on_tick`` gets the
+    number of ticks done."""
     ua = np.asarray(voltage_a_v, dtype=float)
     ub = np.asarray(voltage_b_v, dtype=float)
     if ua.ndim != 1 or ua.shape != ub.shape:
@@ -314,7 +315,8 @@ def run_experiment(
             raise
         failure = str(exc)
     finally:
-        plant.close()
+        with deferred():  # zero volts and the port closed whole; the caller sees the signal
+            plant.close()
     done = len(rows)
     speeds = [
         (y.speed_a_rad_s, y.speed_b_rad_s, y.true_speed_a_rad_s, y.true_speed_b_rad_s) for y in rows
