@@ -330,3 +330,27 @@ def test_excite_a_signal_as_the_plant_closes_still_stops_the_motors(
     assert len(_lines(err)) == 1 and "Traceback" not in err
     assert made[0].applied_voltage_v == (0.0, 0.0)
     assert len(read_trace(out)) == json.loads(stdout)["ticks"] == 300
+
+
+def test_review_a_signal_a_library_turns_into_another_error_is_still_an_interruption(
+    workdir: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """pyarrow's compute functions, stopped inside their compiled code, raised TypeError ('Got
+    unexpected argument type <class 'int'> for compute function'): review printed a traceback and
+    exited 1 after SIGHUP. Here a stand-in for that library turns the interrupt into that error."""
+    from cartctl.cli.commands.review import smoothed
+
+    assert main(["run", "--fast", "--duration", "0.5", "--name", "r"]) == 0
+    capsys.readouterr()
+
+    def scalar_series(*args: Any, **kwargs: Any) -> Any:
+        try:
+            os.kill(os.getpid(), signal.SIGHUP)
+        except KeyboardInterrupt:
+            raise TypeError("Got unexpected argument type <class 'int'>") from None
+
+    monkeypatch.setattr(smoothed, "scalar_series", scalar_series)
+    code = main(["review", "logs/r.rrd"])
+    err = capsys.readouterr().err
+    assert code == 129
+    assert _lines(err) == ["cartctl review: interrupted"]

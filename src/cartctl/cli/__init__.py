@@ -137,6 +137,13 @@ def _main(argv: Sequence[str] | None) -> int:
     except KeyboardInterrupt:
         print(f"cartctl {args.command}: interrupted", file=sys.stderr)
         return stopping.exit_code()
+    except Exception:
+        # A library that turns the interrupt into an error of its own (pyarrow's compiled code:
+        # a TypeError): after a stop signal, that error is the interruption.
+        if stopping.received() is None:
+            raise
+        print(f"cartctl {args.command}: interrupted", file=sys.stderr)
+        return stopping.exit_code()
     finally:
         warnings.showwarning = previous
 
