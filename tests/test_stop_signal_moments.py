@@ -44,9 +44,7 @@ def _lines(err: str) -> list[str]:
 def test_run_a_signal_after_the_last_tick_still_prints_the_summary(
     workdir: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    import cartctl.sinks.summary as summary_module
-
-    monkeypatch.setattr(summary_module, "trace_metrics", _signalling(summary_module.trace_metrics))
+    monkeypatch.setattr(run_command, "_summary", _signalling(run_command._summary))
     code = main(["run", "--fast", "--duration", "1", "--rerun", "off", "--name", "s", "--json"])
     out, err = capsys.readouterr()
     assert code == 143
@@ -354,3 +352,39 @@ def test_review_a_signal_a_library_turns_into_another_error_is_still_an_interrup
     err = capsys.readouterr().err
     assert code == 129
     assert _lines(err) == ["cartctl review: interrupted"]
+
+
+@pytest.mark.realtime
+def test_review_screenshot_a_signal_once_the_viewer_started_stops_it(
+    workdir: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The headless viewer runs in its own session (a terminal's Ctrl-C does not reach it): a
+    signal between its start and the block that stops it left it running after cartctl exited."""
+    import subprocess
+
+    from cartctl.cli.commands.review import recording
+
+    if not recording.vulkan_available():
+        pytest.skip("--screenshot needs Vulkan (mesa-vulkan-drivers)")
+    assert main(["run", "--fast", "--duration", "0.5", "--name", "r"]) == 0
+    capsys.readouterr()
+    started: list[subprocess.Popen[bytes]] = []
+
+    class Popen(subprocess.Popen):  # type: ignore[type-arg]
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            started.append(self)
+
+    monkeypatch.setattr(subprocess, "Popen", Popen)
+    monkeypatch.setattr(recording, "new_stream", _signalling(recording.new_stream))
+    try:
+        code = main(["review", "logs/r.rrd", "--screenshot", "shot.png"])
+        err = capsys.readouterr().err
+        assert code == 143
+        assert _lines(err) == ["cartctl review: interrupted"]
+        assert len(started) == 1 and started[0].poll() is not None  # stopped, not left running
+    finally:
+        for viewer in started:
+            if viewer.poll() is None:
+                os.killpg(viewer.pid, signal.SIGKILL)
+                viewer.wait()

@@ -28,6 +28,7 @@ from cartctl.sinks.rerun_problems import (
     viewer_executable,
     viewer_reachable,
 )
+from cartctl.stopping import held
 
 if TYPE_CHECKING:  # rerun takes ~0.6 s to import: only the review itself loads it
     import pyarrow as pa
@@ -285,17 +286,19 @@ def screenshot(path: Path, out: Path, *, extra: Series | None = None) -> Path:
     url = f"rerun+http://127.0.0.1:{port}/proxy"
     with tempfile.TemporaryDirectory(prefix="cartctl-review-") as tmp:
         log_path = Path(tmp) / "viewer.log"
-        with log_path.open("wb") as log:
-            viewer = subprocess.Popen(
-                [executable, "--headless", "--port", str(port), *_WINDOW],
-                env={**viewer_env(), "RERUN_APP_ONLY": "true"},
-                stdin=subprocess.DEVNULL,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                start_new_session=True,
-            )
-        rec = new_stream(entry)
+        viewer: subprocess.Popen[bytes] | None = None
+        rec: rr.RecordingStream | None = None
         try:
+            with held(), log_path.open("wb") as log:  # a stop signal waits until it is known
+                viewer = subprocess.Popen(
+                    [executable, "--headless", "--port", str(port), *_WINDOW],
+                    env={**viewer_env(), "RERUN_APP_ONLY": "true"},
+                    stdin=subprocess.DEVNULL,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    start_new_session=True,
+                )
+            rec = new_stream(entry)
             client = _wait_for_viewer(url, viewer, log_path)
             rec.connect_grpc(url)
             ends = stream(reader, entry, rec, extra=extra)
@@ -304,11 +307,16 @@ def screenshot(path: Path, out: Path, *, extra: Series | None = None) -> Path:
         except ViewerError:
             raise
         except (RuntimeError, ConnectionError, OSError, TimeoutError) as exc:
+            if viewer is None:  # it could not be started: the system's own error
+                raise
             reason = _viewer_failure(log_path) or str(exc).splitlines()[0]
             raise _needs_vulkan(f"the headless viewer could not render ({reason})") from None
-        finally:
-            rec.disconnect()
-            _stop(viewer)
+        finally:  # the viewer is in a session of its own: a Ctrl-C does not reach it
+            with held():
+                if rec is not None:
+                    rec.disconnect()
+                if viewer is not None:
+                    _stop(viewer)
     if not out.is_file():
         raise _needs_vulkan(f"the viewer did not write {out}")
     return out
