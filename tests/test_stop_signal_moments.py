@@ -17,6 +17,7 @@ import os
 import signal
 from collections.abc import Callable
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import pytest
@@ -129,7 +130,8 @@ def test_excite_a_signal_while_the_trace_is_written_leaves_it_whole(
             if self.blocks == 2:
                 os.kill(os.getpid(), signal.SIGINT)
 
-    monkeypatch.setattr(trace_module.csv, "writer", Writer)
+    # the trace module's csv alone: the csv module itself stays as it is for everything else
+    monkeypatch.setattr(trace_module, "csv", SimpleNamespace(writer=Writer))
     out = tmp_path / "x.csv"
     code = main(["excite", "--plant", "physics", "--amplitude", "10", "--cycles", "1",
                  "--out", str(out), "--json"])  # fmt: skip
@@ -261,8 +263,6 @@ def test_the_first_signal_counts_when_python_runs_the_handlers_of_a_burst_togeth
 def test_monitor_the_first_signal_of_a_burst_counts() -> None:
     """``monitor`` has handlers of its own (stop after the frame): SIGTERM then SIGINT, run
     together, was taken for Ctrl-C first and exited 0 instead of 143."""
-    from types import SimpleNamespace
-
     from cartctl import stopping
     from cartctl.cli.commands.monitor import _stop_on_signals
 
