@@ -250,3 +250,31 @@ def test_a_signal_while_a_cart_clocked_loop_starts_still_leaves_the_stop_row(
     trace = read_trace(tmp_path / "s.csv")  # the header, then the stop row
     assert len(trace) == loop.state.rows == 1
     assert (trace.voltage_a[0], trace.voltage_b[0]) == (0.0, 0.0)
+
+
+def test_a_block_held_in_another_thread_leaves_the_signal_to_the_main_one(stop_handlers) -> None:
+    """Python runs the handlers in the main thread: a block held in another thread (a plant closed
+    there) must not hold the main thread's signal, nor raise it in its own thread."""
+    import threading
+
+    inside, release = threading.Event(), threading.Event()
+    raised_in_thread: list[BaseException] = []
+
+    def close_elsewhere() -> None:
+        try:
+            with stopping.held():
+                inside.set()
+                release.wait(5.0)
+        except BaseException as exc:  # what the thread would have raised
+            raised_in_thread.append(exc)
+
+    worker = threading.Thread(target=close_elsewhere)
+    worker.start()
+    assert inside.wait(5.0)
+    try:
+        with pytest.raises(stopping.Interrupted):
+            os.kill(os.getpid(), signal.SIGTERM)
+    finally:
+        release.set()
+        worker.join(5.0)
+    assert raised_in_thread == []

@@ -2,11 +2,11 @@
 (docs/architecture.md). :func:`install` makes the first raise :class:`Interrupted` in the main
 thread; later ones, and any inside :func:`deferred`, are only noted. Inside :func:`held` (a
 loop's tick: its rows, sinks and timing stay whole) the first is held and raised as the block
-ends. Before that
-(:func:`install_at_start`) one ends the process with one line; hence only ``signal``, ``sys``
-and ``os`` are imported here.
+ends. Before that (:func:`install_at_start`) one ends the process with one line; hence only
+``signal``, ``sys``, ``os`` and ``_thread`` are imported here.
 """
 
+import _thread
 import os
 import signal
 import sys
@@ -25,6 +25,7 @@ _hook_replaced = sys.unraisablehook
 _redelivered: object = None  # a lock, released once the latest signal is sent again
 _order: tuple[int, int] | None = None  # a pipe the signals' numbers go to as they come
 _fd_replaced = -1
+_main_ident: int | None = None  # the thread install() routed the signals in: the main one
 
 
 class Interrupted(KeyboardInterrupt):
@@ -82,8 +83,7 @@ def _unraisable(unraisable: object) -> None:
     if not isinstance(exc, Interrupted) or exc.signum != _first or _phase != _RUNNING:
         _hook_replaced(unraisable)  # type: ignore[arg-type]
         return
-    import _thread  # not threading: Thread.start() waits, and the handler would raise in here
-
+    # _thread, not threading: Thread.start() waits, and the handler would raise in here
     _first = None
     _redelivered = _thread.allocate_lock()
     _redelivered.acquire()
@@ -116,9 +116,11 @@ def install_at_start() -> None:
 
 def install() -> dict[int, object]:
     """Route the stop signals to :class:`Interrupted`; returns the handlers replaced."""
-    global _first, _deferred, _phase, _held, _hook_replaced
+    global _first, _deferred, _phase, _held, _hook_replaced, _main_ident
     _first, _deferred, _held = None, 0, False
     previous = _route(_handler)
+    if previous:
+        _main_ident = _thread.get_ident()
     if previous and sys.unraisablehook is not _unraisable:
         _hook_replaced, sys.unraisablehook = sys.unraisablehook, _unraisable
     if previous and _order is None:
@@ -182,14 +184,19 @@ class deferred:  # noqa: N801 - used as a function: ``with stopping.deferred():`
 
 class held:  # noqa: N801 - used as a function: ``with stopping.held():``
     """Within the block the first stop signal is held: it raises :class:`Interrupted` as the block
-    ends (unless another exception is on its way out), so what the block does is done whole."""
+    ends (unless another exception is on its way out), so what the block does is done whole. In
+    a thread other than the main one (where Python runs the handlers) it does nothing: held
+    there, the signal would be raised in that thread and never in the main one."""
 
     def __enter__(self) -> None:
         global _holding
-        _holding += 1
+        self._here = _thread.get_ident() == _main_ident
+        _holding += self._here
 
     def __exit__(self, kind: object, *exc: object) -> None:
         global _holding, _held
+        if not self._here:
+            return
         _holding -= 1
         if _held and not _holding:
             _held = False

@@ -8,7 +8,6 @@ from __future__ import annotations
 import collections
 import contextlib
 import statistics
-import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -36,14 +35,6 @@ FLASH_HINT = (
     f"flash firmware/cartctl_bridge (bridge version {bridge.BRIDGE_VERSION}, 500 kbaud; see "
     "firmware/README.md)"
 )
-
-
-def held_here() -> contextlib.AbstractContextManager[None]:
-    """:class:`cartctl.stopping.held` in the main thread, which Python raises stop signals in;
-    nothing in another (held there, the signal was raised in that thread, never in the main one)."""
-    if threading.current_thread() is threading.main_thread():
-        return held()
-    return contextlib.nullcontext()
 
 
 class SerialCart:
@@ -231,9 +222,9 @@ class SerialCart:
 
     def close(self) -> None:
         """Send drive = 0 with zero volts (if the port still works), then close it. A stop signal
-        meanwhile waits until the port is closed (:func:`held_here`); a Ctrl-C where that is not
+        meanwhile waits until the port is closed (:class:`cartctl.stopping.held`); a Ctrl-C where that is not
         installed still closes it."""
-        with held_here():
+        with held():
             try:
                 if self.connected and not self.link.vanished:
                     with contextlib.suppress(PlantError):

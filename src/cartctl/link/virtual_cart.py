@@ -29,9 +29,10 @@ from cartctl.link.bridge import (
 from cartctl.link.cart_faults import RECEIVE_SCHEDULES, CartFaults
 from cartctl.link.dialect import Encoder, encode_gpiox_v2
 from cartctl.link.firmware import BridgeFirmware, CartIO, OnboardFirmware
-from cartctl.link.serial_cart import SerialCart, held_here
+from cartctl.link.serial_cart import SerialCart
 from cartctl.plants.base import Measurement
 from cartctl.plants.physics import PhysicsPlant
+from cartctl.stopping import held
 
 HEARTBEAT_PERIOD_S = 1.1
 SILENCE_TIMEOUT_S = 0.5
@@ -326,7 +327,7 @@ class VirtualSerialCart(SerialCart):
         return Measurement(self.sample.speed_a_rad_s, self.sample.speed_b_rad_s, true_a, true_b)
 
     def close(self) -> None:
-        with held_here():  # a stop signal meanwhile: raised once the cart is off (SerialCart.close)
+        with held():  # a stop signal meanwhile: raised once the cart is off (SerialCart.close)
             try:
                 was_connected = self.connected and not self.link.failure
                 super().close()

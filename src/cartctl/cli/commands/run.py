@@ -249,11 +249,13 @@ def _run_loop(
     except Exception as exc:  # a fault of cartctl itself: the motors still get zero volts
         loop.state.failure = f"internal error: {type(exc).__name__}: {exc}"
     finally:  # a second signal must not cut the shutdown short, nor one now the summary
-        after.enter_context(stopping.deferred())
-        loop.finish()
-        sys.setswitchinterval(switch_interval)
-        if not args.fast:
-            restore()
+        try:
+            after.enter_context(stopping.deferred())
+        finally:  # zero volts even for a first signal raised before the deferral began
+            loop.finish()
+            sys.setswitchinterval(switch_interval)
+            if not args.fast:
+                restore()
         timing = (stats or executor.stats()).to_dict()
     return loop, timing, scheduling
 
