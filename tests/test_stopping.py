@@ -143,3 +143,22 @@ def test_monitor_stops_after_its_frame_on_sigterm(workdir: Path) -> None:
     assert "Traceback" not in err and "frames" in out
     lines = csv.read_text(encoding="utf-8").splitlines()
     assert len(lines) > 10 and len({len(line.split(",")) for line in lines}) == 1  # whole rows
+
+
+@pytest.mark.parametrize(("signum", "code"), [(signal.SIGINT, 0), (signal.SIGTERM, 143)])
+def test_the_virtual_cart_stops_on_a_signal_and_says_which(
+    workdir: Path, signum: int, code: int
+) -> None:
+    """Ctrl-C is how a virtual cart is meant to stop (0, as monitor); SIGTERM and SIGHUP stop it as
+    well, with their exit codes (it exited 0 on every signal)."""
+    process = _start(workdir, "virtual-cart")
+    assert process.stdout is not None
+    port = process.stdout.readline().strip()  # printed once the cart is built: its handlers too
+    assert port.startswith("/dev/"), port
+    _wait_stop_handlers(process)
+    process.send_signal(signum)
+    _, err = process.communicate(timeout=30)
+    assert process.returncode == code, err
+    assert "Traceback" not in err, err
+    # stopped before it booted (idle) or after; never "(running)": a cart left ticking
+    assert "virtual cart stopped (stopped)" in err or "virtual cart stopped (idle)" in err, err

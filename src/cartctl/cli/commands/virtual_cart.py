@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from typing import TYPE_CHECKING
 
 import cartctl.cli.commands.options as options
+from cartctl import stopping
 from cartctl.errors import InputError
 
 if TYPE_CHECKING:
@@ -107,4 +109,5 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         pass
     print(f"virtual cart stopped ({cart.state}) after {cart.ticks} ticks", file=sys.stderr)
-    return 0
+    signum = stopping.received()  # Ctrl-C is the way to stop it; SIGTERM, SIGHUP say so, as monitor
+    return 0 if signum in (None, signal.SIGINT) else 128 + signum
