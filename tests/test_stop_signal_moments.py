@@ -388,3 +388,19 @@ def test_review_screenshot_a_signal_once_the_viewer_started_stops_it(
             if viewer.poll() is None:
                 os.killpg(viewer.pid, signal.SIGKILL)
                 viewer.wait()
+
+
+def test_commission_a_signal_in_its_verification_run_is_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The verification runs ``cartctl run`` in process: a signal after its loop gave the run's
+    own 'cartctl run: stopped by SIGTERM' line and then commission's, naming the stage."""
+    monkeypatch.setattr(run_command, "_summary", _signalling(run_command._summary))
+    out = tmp_path / "c"
+    code = main(["commission", "physics", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 143, err
+    assert "Traceback" not in err
+    assert not [line for line in _lines(err) if line.startswith("cartctl run:")], err
+    assert "verification: interrupted; zero volts sent" in _lines(err)[-1]
+    assert len(read_trace(out / "verification.csv")) > 100  # the run's trace, whole

@@ -134,6 +134,7 @@ def run_in_process(argv: list[str]) -> tuple[int, dict[str, Any] | None]:
     parser = argparse.ArgumentParser(prog="cartctl")
     add_run_parser(parser.add_subparsers())
     args = parser.parse_args(argv)
+    args.say_stopped = False  # a stop signal: commission's own line names the stage
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
         code = int(args.func(args))

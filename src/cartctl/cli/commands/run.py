@@ -91,7 +91,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "their anti-windup and estimators work with it",
     )
     options.add_json_option(p, "print the summary as one JSON object (keys: docs/architecture.md)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, say_stopped=True)  # commission's in-process run: it says so itself
 
 
 def _checked_outputs(args: argparse.Namespace) -> tuple[Path, Path]:
@@ -312,13 +312,14 @@ def _report(args: argparse.Namespace, summary: dict[str, Any], loop: ControlLoop
     if loop.state.interrupted or stopping.received() is not None:  # during the run or after it
         signum = stopping.received()
         why = "interrupted" if signum is None else f"stopped by {signal.Signals(signum).name}"
-        print(f"cartctl run: {why}; zero volts sent, the trace and recording hold the run so far",
-              file=sys.stderr)  # fmt: skip
+        if args.say_stopped:
+            print(f"cartctl run: {why}; zero volts sent, the trace and recording hold the run so "
+                  "far", file=sys.stderr)  # fmt: skip
         return stopping.exit_code()
     return 0
 
 
-def _unrecorded(loop: ControlLoop) -> int:
+def _unrecorded(args: argparse.Namespace, loop: ControlLoop) -> int:
     """A run stopped before its first tick (a signal, a plant fault as it started): one line, the
     exit code."""
     state = loop.state
@@ -327,8 +328,9 @@ def _unrecorded(loop: ControlLoop) -> int:
         return 1
     signum = stopping.received()
     why = "interrupted" if signum is None else f"stopped by {signal.Signals(signum).name}"
-    print(f"cartctl run: {why} before the first tick; zero volts sent, nothing recorded",
-          file=sys.stderr)  # fmt: skip
+    if args.say_stopped:
+        print(f"cartctl run: {why} before the first tick; zero volts sent, nothing recorded",
+              file=sys.stderr)  # fmt: skip
     return stopping.exit_code()
 
 
@@ -345,7 +347,7 @@ def run(args: argparse.Namespace) -> int:
     with contextlib.ExitStack() as after:  # a signal after the loop: the summary, then its code
         loop, timing, scheduling = _run_loop(args, prepared, sinks, after)
         if not memory.columns:  # it stopped before the sinks opened: no rows, no summary
-            return _unrecorded(loop)
+            return _unrecorded(args, loop)
         run_facts = {"recording": str(rrd_path) if rerun is not None else None,
                      "trace": str(csv_path), "plant": prepared.description, "controller": given,
                      "scheduling": scheduling}  # fmt: skip
