@@ -95,6 +95,7 @@ class VirtualCart:
         os.set_blocking(self._master, False)
         self.port = os.ttyname(self._slave)
         self._stop = threading.Event()
+        self._fds_lock = threading.Lock()  # the ticker (a pulled cable) and stop() may both close
         byte_s = uart.byte_time_s(self.baud)
         self._writer = uart.PacedWriter(self._master, self._stop, byte_s, usb)
         jitter_s = self.faults.reply_jitter_ms / 1000.0
@@ -169,7 +170,8 @@ class VirtualCart:
         _wait_until(lambda: self.ticks >= target or not self._ticker.is_alive(), timeout_s, 0.002)
 
     def _close_fds(self) -> None:
-        fds, self._master, self._slave = (self._master, self._slave), -1, -1
+        with self._fds_lock:  # each descriptor closed once, never a number reused since
+            fds, self._master, self._slave = (self._master, self._slave), -1, -1
         for fd in fds:
             if fd >= 0:
                 with contextlib.suppress(OSError):
