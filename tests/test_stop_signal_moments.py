@@ -404,3 +404,27 @@ def test_commission_a_signal_in_its_verification_run_is_one_line(
     assert not [line for line in _lines(err) if line.startswith("cartctl run:")], err
     assert "verification: interrupted; zero volts sent" in _lines(err)[-1]
     assert len(read_trace(out / "verification.csv")) > 100  # the run's trace, whole
+
+
+def test_virtual_cart_a_signal_as_it_boots_still_switches_it_off(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``cartctl virtual-cart`` booted its cart with ``with cart:``: a signal raised inside the
+    boot (``__enter__``) skipped ``__exit__``, and the cart ticked on ('stopped (running)')."""
+    from cartctl.link.virtual_cart import VirtualCart
+
+    carts: list[VirtualCart] = []
+    original = VirtualCart.start
+
+    def start(self: VirtualCart) -> None:
+        carts.append(self)
+        original(self)
+        os.kill(os.getpid(), signal.SIGTERM)  # the threads started, the boot not yet returned
+
+    monkeypatch.setattr(VirtualCart, "start", start)
+    code = main(["virtual-cart", "--duration", "30"])
+    err = capsys.readouterr().err
+    assert code == 143, err
+    assert "Traceback" not in err and "virtual cart stopped (stopped)" in err, err
+    (cart,) = carts
+    assert not cart._ticker.is_alive() and cart._master == -1  # off, its port closed

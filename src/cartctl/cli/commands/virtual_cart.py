@@ -89,25 +89,28 @@ def run(args: argparse.Namespace) -> int:
         firmware = OnboardFirmware(onboard_controllers(args.onboard), reference=args.reference)
     cart = VirtualCart(args.preset, noise_std_rad_s=args.noise, seed=args.seed, faults=args.faults,
                        firmware=firmware)  # fmt: skip
-    print(cart.port, flush=True)
-    running = f"the bridge sketch version {cart.bridge_version}"
-    if args.onboard:
-        running = f"controller {args.onboard} on board"
-    usb = "modelled" if cart.faults.usb else "off"
-    timing = cart.physics.params.actuation_delay() * 1000.0
-    example = "monitor serial:" if args.onboard else "run --plant serial:"
-    print(
-        f"virtual cart (physics preset {args.preset}, {running}, {cart.baud} baud, USB chip {usb}, "
-        f"commands land {timing:g} ms after their tick) on {cart.port}; e.g. cartctl "
-        f"{example}{cart.port}; Ctrl-C stops it",
-        file=sys.stderr,
-        flush=True,
-    )
-    try:
-        with cart:
-            cart.wait(args.duration)
+    try:  # a stop signal from the port's line on: the cart's own stop line too
+        print(cart.port, flush=True)
+        running = f"the bridge sketch version {cart.bridge_version}"
+        if args.onboard:
+            running = f"controller {args.onboard} on board"
+        usb = "modelled" if cart.faults.usb else "off"
+        timing = cart.physics.params.actuation_delay() * 1000.0
+        example = "monitor serial:" if args.onboard else "run --plant serial:"
+        print(
+            f"virtual cart (physics preset {args.preset}, {running}, {cart.baud} baud, USB chip "
+            f"{usb}, commands land {timing:g} ms after their tick) on {cart.port}; e.g. cartctl "
+            f"{example}{cart.port}; Ctrl-C stops it",
+            file=sys.stderr,
+            flush=True,
+        )
+        cart.start()  # not ``with cart``: a signal inside start() would skip its stop()
+        cart.wait(args.duration)
     except KeyboardInterrupt:
         pass
+    finally:
+        with stopping.deferred():  # a signal now waits until the cart is off
+            cart.stop()
     print(f"virtual cart stopped ({cart.state}) after {cart.ticks} ticks", file=sys.stderr)
     signum = stopping.received()  # Ctrl-C is the way to stop it; SIGTERM, SIGHUP say so, as monitor
     return 0 if signum in (None, signal.SIGINT) else 128 + signum
