@@ -82,7 +82,10 @@ def test_closed_loop_tracks_8_rad_s_reports_the_delay_and_ends_at_zero_volts(
     upset = link_upsets(summary["link"])  # a busy machine: then the speed has to come back
     for m in "ab":
         speed = trace.columns()[f"speed_{m}"]
-        assert abs(np.mean(speed[-50:]) - 8.0) < 0.4, m
+        # held up past the watchdog, the motors stop for a few ticks (seen: 0, 0, 1.1, 5.6 rad/s
+        # in the last 0.5 s under a busy core): then the median, not the mean, must be on 8
+        centre = np.median if upset else np.mean
+        assert abs(centre(speed[-50:]) - 8.0) < 0.4, (m, summary["link"])
         assert upset or summary["motors"][m]["overshoot_percent"] < 25.0, summary["link"]
     RrdReader(workdir / "logs/v.rrd").store()
 
