@@ -14,7 +14,7 @@ import contextlib
 import shutil
 import threading
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -170,3 +170,15 @@ def blueprint_views() -> Callable[[str | Path], dict[str, dict]]:
         return {view["name"]: view for view in fields.values() if "name" in view}
 
     return views
+
+
+@pytest.fixture
+def stop_handlers() -> Iterator[None]:
+    """cartctl's stop-signal handlers installed, as ``cli.main`` installs them, for the test."""
+    from cartctl import stopping
+
+    previous = stopping.install()
+    try:
+        yield
+    finally:
+        stopping.restore(previous)

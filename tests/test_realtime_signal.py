@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import os
 import signal
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 import pytest
 
@@ -33,15 +33,6 @@ def fifo() -> None:
 
 def _scheduling() -> tuple[int, int]:
     return os.sched_getscheduler(0), os.sched_getparam(0).sched_priority
-
-
-@pytest.fixture
-def stop_handlers() -> Iterator[None]:
-    previous = stopping.install()
-    try:
-        yield
-    finally:
-        stopping.restore(previous)
 
 
 def _signalling(call: Callable[..., object]) -> Callable[..., object]:

@@ -8,7 +8,6 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Iterator
 
 import pytest
 
@@ -355,15 +354,6 @@ class _SignalAtFirstStopFrame(ScriptedCart):
 
     def close(self) -> None:
         self.closed = True
-
-
-@pytest.fixture
-def stop_handlers() -> Iterator[None]:
-    previous = stopping.install()
-    try:
-        yield
-    finally:
-        stopping.restore(previous)
 
 
 def test_a_stop_signal_during_close_waits_for_the_stop_frames_and_the_closed_port(

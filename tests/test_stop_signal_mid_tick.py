@@ -89,15 +89,6 @@ class _CartClocked:
         self.plant.close()
 
 
-@pytest.fixture
-def stop_handlers():
-    previous = stopping.install()
-    try:
-        yield
-    finally:
-        stopping.restore(previous)
-
-
 @pytest.mark.parametrize("executor", ["periodic", "back-to-back", "cart-clocked"])
 def test_a_signal_inside_the_csv_sink_ends_the_run_after_that_tick(
     tmp_path: Path, executor: str, stop_handlers
