@@ -222,8 +222,8 @@ class SerialCart:
 
     def close(self) -> None:
         """Send drive = 0 with zero volts (if the port still works), then close it. A stop signal
-        meanwhile waits until the port is closed (:class:`cartctl.stopping.held`); a Ctrl-C where that is not
-        installed still closes it."""
+        meanwhile waits until the port is closed (:class:`cartctl.stopping.held`); a Ctrl-C where
+        that is not installed still closes it."""
         with held():
             try:
                 if self.connected and not self.link.vanished:
