@@ -428,3 +428,18 @@ def test_virtual_cart_a_signal_as_it_boots_still_switches_it_off(
     assert "Traceback" not in err and "virtual cart stopped (stopped)" in err, err
     (cart,) = carts
     assert not cart._ticker.is_alive() and cart._master == -1  # off, its port closed
+
+
+def test_a_forked_worker_does_not_take_the_parents_signal_order(stop_handlers) -> None:
+    """``tune --jobs`` forks its workers with the handlers installed: a worker that took a Ctrl-C
+    read the parent's pipe of signal numbers, took the SIGTERM byte that came first, and the
+    parent then exited 130, not 143 (2 of 13 bursts)."""
+    from cartctl import stopping
+
+    os.write(stopping._order[1], bytes([signal.SIGTERM]))  # what the C handler writes on SIGTERM
+    pid = os.fork()
+    if pid == 0:  # the worker: its own order only
+        os._exit(stopping.came_first(signal.SIGINT))
+    _, status = os.waitpid(pid, 0)
+    assert os.waitstatus_to_exitcode(status) == signal.SIGINT
+    assert stopping.came_first(signal.SIGINT) == signal.SIGTERM  # the parent's, still there

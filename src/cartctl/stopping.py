@@ -139,6 +139,23 @@ def _watch_order() -> None:
     _order = pipe
 
 
+def _forget_order_in_child() -> None:
+    """In a forked child (``tune --jobs``' workers): neither read the parent's signal order nor
+    feed it; the pipe's bytes are the parent's."""
+    global _order
+    if _order is not None:
+        fds, _order = _order, None
+        try:  # noqa: SIM105 - no contextlib here: this module loads before anything else
+            signal.set_wakeup_fd(-1)
+        except ValueError:  # forked from another thread than the main one: no wakeup fd to drop
+            pass
+        for fd in fds:
+            os.close(fd)
+
+
+os.register_at_fork(after_in_child=_forget_order_in_child)
+
+
 def restore(previous: dict[int, object]) -> None:
     """Put back the handlers :func:`install` replaced; a signal from now on is only noted."""
     global _phase, _order
