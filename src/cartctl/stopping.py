@@ -139,36 +139,35 @@ def _watch_order() -> None:
     _order = pipe
 
 
-def _forget_order_in_child() -> None:
-    """In a forked child (``tune --jobs``' workers): neither read the parent's signal order nor
-    feed it; the pipe's bytes are the parent's."""
+def _unwatch_order(wakeup_fd: int) -> None:
+    """Close the order pipe and put ``wakeup_fd`` back as the wakeup fd (:func:`restore`; -1 in a
+    forked child, ``tune --jobs``' workers, which must neither read the parent's order nor feed
+    it)."""
     global _order
-    if _order is not None:
-        fds, _order = _order, None
-        try:  # noqa: SIM105 - no contextlib here: this module loads before anything else
-            signal.set_wakeup_fd(-1)
-        except ValueError:  # forked from another thread than the main one: no wakeup fd to drop
-            pass
-        for fd in fds:
-            os.close(fd)
+    if _order is None:
+        return
+    fds, _order = _order, None
+    try:  # noqa: SIM105 - no contextlib here: this module loads before anything else
+        signal.set_wakeup_fd(wakeup_fd)
+    except ValueError:  # forked from another thread than the main one: no wakeup fd to drop
+        pass
+    for fd in fds:
+        os.close(fd)
 
 
-os.register_at_fork(after_in_child=_forget_order_in_child)
+os.register_at_fork(after_in_child=lambda: _unwatch_order(-1))
 
 
 def restore(previous: dict[int, object]) -> None:
     """Put back the handlers :func:`install` replaced; a signal from now on is only noted."""
-    global _phase, _order
+    global _phase
     _phase = _ENDING
     for signum, handler in previous.items():
         signal.signal(signum, handler)  # type: ignore[arg-type]
     if previous and sys.unraisablehook is _unraisable:
         sys.unraisablehook = _hook_replaced
-    if previous and _order is not None:
-        signal.set_wakeup_fd(_fd_replaced)
-        for fd in _order:
-            os.close(fd)
-        _order = None
+    if previous:
+        _unwatch_order(_fd_replaced)
 
 
 def ignore() -> None:
