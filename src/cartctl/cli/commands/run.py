@@ -310,13 +310,18 @@ def _report(args: argparse.Namespace, summary: dict[str, Any], loop: ControlLoop
         print(f"cartctl run: error: {'; '.join(f for f in failed if f)}{stopped}", file=sys.stderr)
         return 1
     if loop.state.interrupted or stopping.received() is not None:  # during the run or after it
-        signum = stopping.received()
-        why = "interrupted" if signum is None else f"stopped by {signal.Signals(signum).name}"
-        if args.say_stopped:
-            print(f"cartctl run: {why}; zero volts sent, the trace and recording hold the run so "
-                  "far", file=sys.stderr)  # fmt: skip
-        return stopping.exit_code()
+        return _stopped(args, "; zero volts sent, the trace and recording hold the run so far")
     return 0
+
+
+def _stopped(args: argparse.Namespace, what: str) -> int:
+    """The stop signal's line (``what`` after its name; left to commission when it runs ``run``
+    in process) and its exit code."""
+    signum = stopping.received()
+    why = "interrupted" if signum is None else f"stopped by {signal.Signals(signum).name}"
+    if args.say_stopped:
+        print(f"cartctl run: {why}{what}", file=sys.stderr)
+    return stopping.exit_code()
 
 
 def _unrecorded(args: argparse.Namespace, loop: ControlLoop) -> int:
@@ -326,12 +331,7 @@ def _unrecorded(args: argparse.Namespace, loop: ControlLoop) -> int:
     if state.failure:
         print(f"cartctl run: error: {state.failure}", file=sys.stderr)
         return 1
-    signum = stopping.received()
-    why = "interrupted" if signum is None else f"stopped by {signal.Signals(signum).name}"
-    if args.say_stopped:
-        print(f"cartctl run: {why} before the first tick; zero volts sent, nothing recorded",
-              file=sys.stderr)  # fmt: skip
-    return stopping.exit_code()
+    return _stopped(args, " before the first tick; zero volts sent, nothing recorded")
 
 
 def run(args: argparse.Namespace) -> int:
