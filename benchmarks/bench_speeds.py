@@ -26,7 +26,7 @@ from pathlib import Path
 
 from cartctl.cli import main
 from cartctl.errors import PlantError
-from cartctl.link import Encoder, Framer
+from cartctl.link.dialect import Encoder, Framer
 from cartctl.link.serial_cart import SerialCart
 from cartctl.link.virtual_cart import CartFaults, VirtualCart
 from cartctl.runtime.executor import MonotonicClock, PeriodicExecutor

@@ -5,8 +5,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from cartctl.errors import PlantError
-from cartctl.link import Event, Gpio
 from cartctl.link.cart_monitor import Monitor
+from cartctl.link.dialect import Event, Gpio
 
 
 class MemoryRows:

@@ -18,7 +18,6 @@ import pytest
 
 from cartctl.design.controllerfile import load_controller
 from cartctl.export.arduino import arduino_source, onboard_controllers
-from cartctl.link import Gpio
 from cartctl.link.cart_monitor import (
     DEFAULT_LABELS,
     Monitor,
@@ -27,6 +26,7 @@ from cartctl.link.cart_monitor import (
     firmware_labels,
     parse_labels,
 )
+from cartctl.link.dialect import Gpio
 from cartctl.link.firmware import (
     BRIDGE,
     CHANNEL_KEYS,

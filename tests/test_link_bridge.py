@@ -6,16 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cartctl.link import (
-    SEQ_MODULO,
-    CartSample,
-    Encoder,
-    Framer,
-    Gpio,
-    HostCommand,
-    next_seq,
-    tick_difference,
-)
+from cartctl.link.bridge import SEQ_MODULO, CartSample, HostCommand, next_seq, tick_difference
+from cartctl.link.dialect import Encoder, Framer, Gpio
 
 f32 = st.floats(width=32, allow_nan=False)
 seqs = st.integers(0, SEQ_MODULO - 1)

@@ -7,7 +7,13 @@ import sys
 
 import pytest
 
-from cartctl.link import CRC_EXTRA, GPIOX_CRC_EXTRA, PAYLOAD_LENGTH, Encoder, encode_gpiox_v2
+from cartctl.link.dialect import (
+    CRC_EXTRA,
+    GPIOX_CRC_EXTRA,
+    PAYLOAD_LENGTH,
+    Encoder,
+    encode_gpiox_v2,
+)
 
 # docs/serial-protocol.md §5 (MAVLink 1, sysid 0, compid 0, seq 0)
 EVENT_1000 = bytes.fromhex("fe 02 00 00 00 04 e8 03 a1 33")

@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.generator.mavcrc import x25crc
 
-from cartctl.link import (
+from cartctl.link.dialect import (
     Encoder,
     Event,
     Framer,

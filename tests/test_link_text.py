@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from cartctl.link import LineAssembler
+from cartctl.link.dialect import LineAssembler
 
 
 def test_lines_are_stitched_across_fragments() -> None:

@@ -23,7 +23,6 @@ from cartctl.cli import main
 from cartctl.design.controllerfile import load_controller
 from cartctl.errors import InputError
 from cartctl.export.arduino import onboard_controllers
-from cartctl.link import Event, Gpio
 from cartctl.link.cart_monitor import (
     CHANNEL_KEYS,
     DEFAULT_LABELS,
@@ -32,6 +31,7 @@ from cartctl.link.cart_monitor import (
     Monitor,
     parse_labels,
 )
+from cartctl.link.dialect import Event, Gpio
 from cartctl.link.firmware import CartIO, OnboardFirmware
 from monitor_stubs import MemoryRows, MemoryTexts, ScriptedLink
 

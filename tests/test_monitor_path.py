@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.link import Gpio
 from cartctl.link.cart_monitor import Monitor, parse_labels
+from cartctl.link.dialect import Gpio
 
 ROOT = Path(__file__).resolve().parents[1]
 PI = ROOT / "controllers" / "pi.toml"

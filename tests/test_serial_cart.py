@@ -14,9 +14,9 @@ import pytest
 from cartctl import stopping
 from cartctl.cart import PERIOD_S
 from cartctl.errors import PlantError
-from cartctl.link import Encoder, Framer, Gpio, HostCommand, encode_gpiox_v2
-from cartctl.link.bridge import CH_BRIDGE_VERSION
+from cartctl.link.bridge import CH_BRIDGE_VERSION, HostCommand
 from cartctl.link.cart_link import UnsupportedCartError
+from cartctl.link.dialect import Encoder, Framer, Gpio, encode_gpiox_v2
 from cartctl.link.firmware import BridgeFirmware, CartIO
 from cartctl.link.serial_cart import STOP_FRAMES, SerialCart
 from cartctl.plants.physics import PhysicsPlant

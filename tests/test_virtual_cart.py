@@ -23,7 +23,8 @@ from cartctl import stopping
 from cartctl.cli import main
 from cartctl.data.read import read_trace
 from cartctl.errors import PlantError
-from cartctl.link import Framer, Gpio, HostCommand
+from cartctl.link.bridge import HostCommand
+from cartctl.link.dialect import Framer, Gpio
 from cartctl.link.serial_cart import PROBE_ECHOES, SerialCart
 from cartctl.link.virtual_cart import CartFaults, VirtualCart, VirtualSerialCart
 from realtime_upsets import link_upsets

@@ -20,8 +20,7 @@ from pathlib import Path
 import pytest
 
 from cartctl.cli import main
-from cartctl.link import Encoder, Framer, Gpio, HostCommand
-from cartctl.link.bridge import STATUS_WATCHDOG
+from cartctl.link.bridge import STATUS_WATCHDOG, HostCommand
 from cartctl.link.cart_uart import (
     BRIDGE_RX_RING_BYTES,
     BYTE_TIME_S,
@@ -30,6 +29,7 @@ from cartctl.link.cart_uart import (
     UsbBridge,
     fill_ring,
 )
+from cartctl.link.dialect import Encoder, Framer, Gpio
 from cartctl.link.firmware import CartIO
 from cartctl.link.serial_cart import SerialCart
 from cartctl.link.virtual_cart import CartFaults, VirtualCart

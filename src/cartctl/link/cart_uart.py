@@ -16,9 +16,8 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 
-from cartctl.link import Framer, Gpio
 from cartctl.link.bridge import LEGACY_BAUD
-from cartctl.link.dialect import STX_V1
+from cartctl.link.dialect import STX_V1, Framer, Gpio
 
 RX_RING_BYTES = 63  # the Arduino core's 64-byte ring
 BRIDGE_RX_RING_BYTES = 255  # the bridge is built with -DSERIAL_RX_BUFFER_SIZE=256
