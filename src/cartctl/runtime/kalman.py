@@ -15,22 +15,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import NamedTuple, Protocol, runtime_checkable
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from cartctl.runtime.base import SpeedEstimator
 from cartctl.runtime.elementwise import Value
-
-__all__ = [
-    "FilterTerms",
-    "KalmanSpeedEstimator",
-    "StateEstimator",
-    "SteadyStateSpeedEstimator",
-    "filter_correct",
-    "filter_predict",
-]
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,14 +71,6 @@ class KalmanDesign:
             "has_bias": self.has_bias,
             "estimator_poles": [[float(p.real), float(p.imag)] for p in self.poles()],
         }
-
-
-@runtime_checkable
-class StateEstimator(SpeedEstimator, Protocol):
-    """A speed estimator that also exposes its whole state x̂, shape (m,), for state feedback."""
-
-    @property
-    def state(self) -> NDArray[np.float64]: ...
 
 
 class KalmanSpeedEstimator:

@@ -26,9 +26,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.cart import SUPPLY_V, check_voltage_limit
-from cartctl.errors import InputError
 from cartctl.runtime.elementwise import Value, clip, select
-from cartctl.runtime.kalman import KalmanDesign, StateEstimator, SteadyStateSpeedEstimator
+from cartctl.runtime.kalman import KalmanDesign, KalmanSpeedEstimator, SteadyStateSpeedEstimator
 
 __all__ = ["StateFeedbackController", "feedback_law"]
 
@@ -90,18 +89,12 @@ class StateFeedbackController:
         self,
         design: FeedbackGains,
         *,
-        estimator: StateEstimator | None = None,
+        estimator: SteadyStateSpeedEstimator | KalmanSpeedEstimator | None = None,
         voltage_limit_v: float = SUPPLY_V,
     ) -> None:
         limit = check_voltage_limit(voltage_limit_v, "voltage_limit_v")
         if estimator is None:
             estimator = SteadyStateSpeedEstimator(design.estimator)
-        n = design.K.size
-        if not isinstance(estimator, StateEstimator) or estimator.state.size < n:
-            raise InputError(
-                f"the estimator must expose a state of at least {n} values (the design's "
-                f"realisation), got {type(estimator).__name__}"
-            )
         self.design = design
         self.estimator = estimator
         # x̂ as a list, without a numpy array where the estimator can
