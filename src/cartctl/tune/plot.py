@@ -73,25 +73,19 @@ def place_labels(
         probe.remove()
         w, h = size.width + 2.0, size.height + 2.0  # a pixel of margin all round
         px, py = ax.transData.transform((x, y))
-        place = None
-        for dist in _DISTANCES_PT:
-            for angle in _ANGLES_DEG:
-                dx = dist * math.cos(math.radians(angle))
-                dy = dist * math.sin(math.radians(angle))
-                ox = px + dx * px_per_pt - (0.0 if dx > 0.5 else w if dx < -0.5 else w / 2)
-                oy = py + dy * px_per_pt - (0.0 if dy > 0.5 else h if dy < -0.5 else h / 2)
-                box = Bbox.from_bounds(ox - 1.0, oy - 1.0, w, h)
-                if (frame.contains(box.x0, box.y0) and frame.contains(box.x1, box.y1)
-                        and not any(box.overlaps(b) for b in taken)
-                        and not any(_hits_circle(box, *c) for c in circles)):  # fmt: skip
-                    place = (dist, dx, dy, box)
-                    break
-            if place is not None:
+        for dist, angle in ((d, a) for d in _DISTANCES_PT for a in _ANGLES_DEG):
+            dx = dist * math.cos(math.radians(angle))
+            dy = dist * math.sin(math.radians(angle))
+            ox = px + dx * px_per_pt - (0.0 if dx > 0.5 else w if dx < -0.5 else w / 2)
+            oy = py + dy * px_per_pt - (0.0 if dy > 0.5 else h if dy < -0.5 else h / 2)
+            box = Bbox.from_bounds(ox - 1.0, oy - 1.0, w, h)
+            if (frame.contains(box.x0, box.y0) and frame.contains(box.x1, box.y1)
+                    and not any(box.overlaps(b) for b in taken)
+                    and not any(_hits_circle(box, *c) for c in circles)):  # fmt: skip
                 break
-        if place is None:
+        else:  # no free place
             left.append(text)
             continue
-        dist, dx, dy, box = place
         taken.append(box)
         ha = "left" if dx > 0.5 else "right" if dx < -0.5 else "center"
         va = "bottom" if dy > 0.5 else "top" if dy < -0.5 else "center"
