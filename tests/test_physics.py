@@ -14,7 +14,8 @@ from scipy.signal import cont2discrete
 
 from cartctl.errors import InputError
 from cartctl.plants.base import Measurement, Plant
-from cartctl.plants.physics import PRESETS, CartParams, MotorParams, PhysicsPlant, preset
+from cartctl.plants.physics import PhysicsPlant
+from cartctl.plants.physics_params import PRESETS, CartParams, MotorParams, preset
 
 TS_S = 0.01
 SPEED_STEP_RAD_S = 2.0 * math.pi / 1792 / TS_S

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
-from cartctl.plants import Plant
+from cartctl.plants.base import Plant
 from cartctl.plants.sim import ArxPlant, saturate
 from cartctl.runtime.loop import run_experiment
 from cartctl.signals import square

@@ -31,7 +31,8 @@ from cartctl.cli import main
 from cartctl.data.modelfile import ModelFile, load_models, save_models
 from cartctl.design.controllerfile import build_controllers, load_controller
 from cartctl.plants.base import Measurement
-from cartctl.plants.physics import PhysicsPlant, preset
+from cartctl.plants.physics import PhysicsPlant
+from cartctl.plants.physics_params import preset
 from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
 from cartctl.runtime.loop import run_in_memory

@@ -64,11 +64,6 @@ def check_plant_name(spec: str) -> str:
     raise InputError(f"unknown plant '{spec}'; expected one of {names}")
 
 
-def is_serial(spec: str) -> bool:
-    """Whether a plant name is one reached over the serial line ('virtual…', 'serial:…')."""
-    return spec == "virtual" or spec.startswith(("virtual:", "serial:"))
-
-
 def make_plant(
     spec: str,
     *,

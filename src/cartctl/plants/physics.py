@@ -26,9 +26,7 @@ from scipy.linalg import expm
 
 from cartctl.errors import InputError
 from cartctl.plants.base import Measurement
-from cartctl.plants.physics_params import PRESETS, CartParams, MotorParams, preset
-
-__all__ = ["PRESETS", "CartParams", "MotorParams", "PhysicsPlant", "preset"]
+from cartctl.plants.physics_params import CartParams, MotorParams, preset
 
 
 @functools.lru_cache(maxsize=64)

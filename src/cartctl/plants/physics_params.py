@@ -17,8 +17,6 @@ from typing import Any
 from cartctl.cart import ENCODER_COUNTS_PER_REV, PERIOD_S, PWM_STEP_V, SUPPLY_V
 from cartctl.errors import InputError
 
-__all__ = ["PRESETS", "CartParams", "MotorParams", "check_actuation_ms", "preset"]
-
 
 def _require_positive(owner: object, names: tuple[str, ...], *, allow_zero: bool = False) -> None:
     for name in names:

@@ -59,12 +59,12 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.cart import SUPPLY_V
     from cartctl.cli.progress import ProgressBar
     from cartctl.data.trace import meta_path
-    from cartctl.plants.factory import check_plant_name, is_serial, make_plant
+    from cartctl.plants.factory import check_plant_name, make_plant
     from cartctl.runtime.loop import run_experiment
     from cartctl.runtime.realtime import gc_paused
     from cartctl.signals import make_signal
 
-    check_plant_name(args.plant)
+    serial = check_plant_name(args.plant) in ("virtual", "serial")
     amplitude_v = options.check_finite(args.amplitude, "--amplitude")
     if amplitude_v > SUPPLY_V:
         raise InputError(
@@ -93,12 +93,12 @@ def run(args: argparse.Namespace) -> int:
     )
     bar = ProgressBar(volts.size, f"excite {args.signal}")
     switch_interval = sys.getswitchinterval()
-    if is_serial(args.plant):  # answer each cart tick at once: threads hand the GIL back quickly
+    if serial:  # answer each cart tick at once: threads hand the GIL back quickly
         sys.setswitchinterval(1e-4)
     try:
         # no collector pass at a random tick of a cart: a late answer raises the echo (a
         # simulated plant has no deadline)
-        with gc_paused() if is_serial(args.plant) else contextlib.nullcontext():
+        with gc_paused() if serial else contextlib.nullcontext():
             result = run_experiment(plant, ua, ub, on_tick=bar.update, source=description)
     finally:
         sys.setswitchinterval(switch_interval)
