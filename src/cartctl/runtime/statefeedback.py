@@ -110,13 +110,10 @@ class StateFeedbackController:
         self.estimate_rad_s = 0.0
 
     def step(self, reference_rad_s: float, measured_rad_s: float) -> float:
-        est = self.estimator
+        x1 = self.estimator.correct(measured_rad_s)  # a non-finite y corrects nothing
         if not math.isfinite(measured_rad_s) or not math.isfinite(reference_rad_s):
-            if math.isfinite(measured_rad_s):
-                est.correct(measured_rad_s)
-            self._predict_and_estimate(float(est.state[0]), 0.0)
+            self._predict_and_estimate(x1, 0.0)
             return 0.0
-        x1 = est.correct(measured_rad_s)
         r, x = reference_rad_s, self._state_values()
         u_raw, u, integral = feedback_law(
             r, measured_rad_s, x, self.integral_rad, self.terms, self.voltage_limit_v
