@@ -12,6 +12,7 @@ from dataclasses import astuple, dataclass
 import cartctl.link.bridge as bridge
 from cartctl.cart import PERIOD_S
 from cartctl.choices import MAX_DURATION_S
+from cartctl.data.trace import MOTORS
 from cartctl.errors import InputError
 from cartctl.link.dialect import GPIO_FLOAT_COUNT, GPIO_INT_COUNT, check_gpio_counts
 from cartctl.reference import ReferenceSchedule
@@ -161,7 +162,6 @@ class BridgeFirmware(HeldChannels):
         return self.command_v
 
 
-MOTORS = tuple(IN_REFERENCE)
 MAX_TICKS = round(MAX_DURATION_S / PERIOD_S)  # a reference spec covers the longest run (24 h)
 
 

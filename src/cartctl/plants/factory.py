@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from cartctl.choices import DEFAULT_MODEL
+from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S, DEFAULT_MODEL
 from cartctl.data.modelfile import load_models
 from cartctl.errors import InputError
 from cartctl.plants.base import Plant
@@ -71,7 +71,7 @@ def make_plant(
     preset: str = "ground",
     noise_std_rad_s: float = 0.0,
     seed: int | None = None,
-    connect_timeout_s: float = 5.0,
+    connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S,
 ) -> tuple[Plant, str]:
     """The plant named ``spec`` (docs/plants.md) and one line saying what it is.
 
