@@ -107,11 +107,8 @@ def _review_csv(args: argparse.Namespace) -> int:
     from cartctl.cli.jsonout import dumps
     from cartctl.sinks.summary import format_summary
 
-    a, *b = [
-        smooth_csv(metrics.csv_summary(path, args.map), path, args.map, args.model)
-        for path in (args.recording, args.compare)
-        if path
-    ]  # b: the --compare run's, if given
+    paths = [p for p in (args.recording, args.compare) if p]
+    a, *b = [smooth_csv(path, args.map, args.model) for path in paths]  # b: --compare's run
     if args.json:
         print(dumps(metrics.compare(a, *b) if b else a))
     else:

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from cartctl.data.columns import MONITOR_LABELS_HINT
-from cartctl.data.read import read_trace
+from cartctl.data.trace import Trace
 from cartctl.errors import DataFileError
 from cartctl.measures.numfmt import format_fixed, render_table
 from cartctl.sinks.summary import MOTOR_METRICS, timing_metrics, trace_metrics
@@ -22,9 +22,8 @@ TIMING_COLUMNS = ("period_error_us", "compute_us")
 TRACKING_COLUMNS = ("reference_a", "speed_a", "voltage_a")
 
 
-def csv_summary(path: str | Path, mapping: Mapping[str, str] | None = None) -> dict[str, Any]:
-    """The run summary of a CSV trace (a run's or a monitor's), with its file name."""
-    trace = read_trace(path, mapping)
+def csv_summary(trace: Trace, path: str | Path) -> dict[str, Any]:
+    """The run summary of the CSV trace ``path`` (a run's or a monitor's), with its file name."""
     columns = trace.columns()
     missing = [name for name in TRACKING_COLUMNS if name not in columns]
     if missing == ["reference_a"]:  # speed and voltage named: a trace with no controller in it

@@ -5,7 +5,6 @@ controller's); a run's loop delay beyond its controller's as extra input delay, 
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -13,12 +12,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from cartctl.cart import PERIOD_S
-from cartctl.cli.commands.review.metrics import TIMING_COLUMNS
+from cartctl.cli.commands.review.metrics import TIMING_COLUMNS, csv_summary
 from cartctl.cli.commands.review.recording import read_recording, scalar_series
 from cartctl.data.modelfile import ModelFile, load_models
 from cartctl.data.read import read_trace
 from cartctl.design.kalman import METHOD, smooth_speed
-from cartctl.errors import CartctlError, DataWarning, InputError
+from cartctl.errors import CartctlError, InputError
 from cartctl.sinks.summary import (
     Array,
     Columns,
@@ -202,9 +201,12 @@ def recorded_model_of(path: Path) -> str | None:
 
 
 def smooth_csv(
-    summary: dict[str, Any], path: str | Path, mapping: Mapping[str, str] | None, model: str | None
+    path: str | Path, mapping: Mapping[str, str] | None, model: str | None
 ) -> dict[str, Any]:
-    """A CSV trace's summary with the smoothed metrics where wanted (changed and returned)."""
+    """A CSV trace's summary (:func:`~.metrics.csv_summary`) with the smoothed metrics where
+    wanted."""
+    trace = read_trace(path, mapping)
+    summary = csv_summary(trace, path)
     serial, run_model, extra = trace_hints(path)
     if not wanted(summary, serial_path=serial, asked=model is not None):
         return summary
@@ -212,9 +214,6 @@ def smooth_csv(
         model_path = recorded_model_of(Path(path).with_suffix(".rrd")) or run_model
     else:
         model_path, extra = model, 0
-    with warnings.catch_warnings():  # csv_summary has read it once and said what it found
-        warnings.simplefilter("ignore", DataWarning)
-        trace = read_trace(path, mapping)
     add_smoothed(summary, trace.columns(), trace.period_s, model_path,
                  extra_delay_ticks=extra, strict=model is not None)  # fmt: skip
     return summary
