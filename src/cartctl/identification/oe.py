@@ -136,14 +136,11 @@ def project_poles(ar: Sequence[float] | NDArray[np.float64], radius: float) -> N
 def _refit_b(
     ar: NDArray[np.float64], data: Sequence[Checked], nb: int, nk: int
 ) -> NDArray[np.float64]:
-    """B minimising the simulation error with A fixed (ŷ is linear in B)."""
-    a = np.concatenate([[1.0], ar])
-    cols, target = [], []
-    for y, u in data:
-        v = signal.lfilter([1.0], a, u)
-        cols.append(np.column_stack([_shift(v, nk + j) for j in range(nb)]))
-        target.append(y)
-    return np.linalg.lstsq(np.vstack(cols), np.concatenate(target), rcond=None)[0]
+    """B minimising the simulation error with A fixed: ŷ is linear in B, its columns of the
+    Jacobian (which do not depend on B) the regressors."""
+    jac = simulation_error(np.concatenate([ar, np.zeros(nb)]), data, ar.size, nb, nk)[1]
+    target = np.concatenate([y for y, _ in data])
+    return np.linalg.lstsq(jac[:, ar.size :], target, rcond=None)[0]
 
 
 def _refine(

@@ -127,13 +127,17 @@ class MotorIdentification:
     diagnostics."""
 
     motor: str
-    chosen: ArxFit
     arx: ArxFit
     diagnostics: Diagnostics
     oe: ArxFit | None = None
     unfiltered: ArxFit | None = None
     delay: DelayEstimate | None = None
     cycles_averaged: int | None = None
+
+    @property
+    def chosen(self) -> ArxFit:
+        """The fit of the requested method: the OE refinement if made, else ARX."""
+        return self.oe or self.arx
 
     def variants(self) -> dict[str, ArxFit]:
         """Every fit made, by label, for tables and plots."""
@@ -265,10 +269,7 @@ def _identify_motor(
         arx_fit = on_validation(arx_fit, validation)
         oe_fit = on_validation(oe_fit, validation) if oe_fit else None
         unfiltered = on_validation(unfiltered, validation) if unfiltered else None
-    chosen = oe_fit or arx_fit
-    return MotorIdentification(
-        motor, chosen, arx_fit, diagnostics, oe_fit, unfiltered, delay, cycles
-    )
+    return MotorIdentification(motor, arx_fit, diagnostics, oe_fit, unfiltered, delay, cycles)
 
 
 def identify(
