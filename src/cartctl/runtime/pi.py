@@ -127,8 +127,8 @@ class PiController:
         self.anti_windup = anti_windup
         self.tracking_gain_per_tick = kt  # Kt in use: tracking_gain, or its default
         self.estimator = estimator
-        self._ki_ts = self.ki * self.period_s
-        self._mode = ANTI_WINDUP.index(anti_windup)
+        # pi_law's Kp, Ki·Ts, Kt and mode (the batch loop of tune --robust takes them too)
+        self.gains = (self.kp, self.ki * self.period_s, kt, ANTI_WINDUP.index(anti_windup))
         self.reset()
 
     def reset(self) -> None:
@@ -144,10 +144,8 @@ class PiController:
         if estimator is not None and math.isfinite(y):
             y = estimator.correct(y)
         self.estimate_rad_s = y
-        gains = (self.kp, self._ki_ts, self.tracking_gain_per_tick, self._mode)
-        u_sat, self.integral_v = pi_law(
-            reference_rad_s - y, self.integral_v, *gains, self.voltage_limit_v
-        )
+        error, limit = reference_rad_s - y, self.voltage_limit_v
+        u_sat, self.integral_v = pi_law(error, self.integral_v, *self.gains, limit)
         if estimator is not None:
             estimator.predict(u_sat)
         return u_sat

@@ -27,7 +27,7 @@ from cartctl.runtime.kalman import (
     filter_correct,
     filter_predict,
 )
-from cartctl.runtime.pi import ANTI_WINDUP, PiController, pi_law
+from cartctl.runtime.pi import PiController, pi_law
 from cartctl.runtime.statefeedback import StateFeedbackController, feedback_law
 
 FloatArray = NDArray[np.float64]
@@ -108,9 +108,6 @@ def simulate_batch(
         raise InputError(f"the batch loop does not know the controller {type(c).__name__}")
     n_ticks, n = ref.size, plants.b_lags.shape[0]
     # the controller's runtime law (pi_law or feedback_law) over the plants, inside its estimator
-    if isinstance(c, PiController):
-        mode = ANTI_WINDUP.index(c.anti_windup)
-        gains = (c.kp, c.ki * c.period_s, c.tracking_gain_per_tick, mode, c.voltage_limit_v)
     est = None if c.estimator is None else _filter_terms(c.estimator)
     x = [np.zeros(n) for _ in (est.L if est else ())]
     integral = np.zeros(n)
@@ -128,7 +125,8 @@ def simulate_batch(
             if est is not None:
                 x = filter_correct(est, x, y)
             if isinstance(c, PiController):
-                u, integral = pi_law(r - (y if est is None else x[0]), integral, *gains)
+                error = r - (y if est is None else x[0])
+                u, integral = pi_law(error, integral, *c.gains, c.voltage_limit_v)
             else:
                 u_raw, u, integral = feedback_law(r, y, x, integral, c.terms, c.voltage_limit_v)
                 u = np.where(np.isfinite(u_raw), u, 0.0)
