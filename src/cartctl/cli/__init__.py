@@ -120,13 +120,6 @@ def _main(argv: Sequence[str] | None) -> int:
     except CartctlError as exc:
         print(f"cartctl {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
-    except ImportError:
-        # The command's heavy imports come first in its run(): a stop signal inside an extension
-        # module's initialisation surfaces as its ImportError, before anything was done.
-        if stopping.received() is None:
-            raise
-        print("cartctl: stopped while starting; nothing was done", file=sys.stderr)
-        return stopping.exit_code()
     except BrokenPipeError:  # output piped into a command that stopped reading (| head)
         sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - keeps the interpreter's flush quiet
         return 0
@@ -134,15 +127,15 @@ def _main(argv: Sequence[str] | None) -> int:
         reason = f"{exc.strerror or exc}: {exc.filename or ''}".rstrip(": ")
         print(f"cartctl {args.command}: error: {reason}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"cartctl {args.command}: interrupted", file=sys.stderr)
-        return stopping.exit_code()
-    except Exception:
-        # A library that turns the interrupt into an error of its own (pyarrow's compiled code:
-        # a TypeError): after a stop signal, that error is the interruption.
-        if stopping.received() is None:
+    except (KeyboardInterrupt, Exception) as exc:
+        # Ctrl-C or a stop signal; after a stop signal, also a library's error of its own (pyarrow's
+        # compiled code: a TypeError), or an ImportError: the command's heavy imports come first
+        # in its run(), and a signal inside an extension module's initialisation surfaces as its
+        # ImportError, before anything was done.
+        if not isinstance(exc, KeyboardInterrupt) and stopping.received() is None:
             raise
-        print(f"cartctl {args.command}: interrupted", file=sys.stderr)
+        line = f"cartctl {args.command}: interrupted"
+        print(stopping.STARTING_LINE if isinstance(exc, ImportError) else line, file=sys.stderr)
         return stopping.exit_code()
     finally:
         warnings.showwarning = previous

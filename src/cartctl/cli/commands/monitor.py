@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 import cartctl.cli.commands.options as options
 from cartctl import stopping
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
+from cartctl.cli.commands.virtual_cart import check_cart_options, onboard_firmware
 from cartctl.errors import InputError, OutputError
 
 if TYPE_CHECKING:  # cartctl.plants loads numpy and scipy: imported where used, not for --help
@@ -81,13 +82,7 @@ def _check(args: argparse.Namespace) -> tuple[str, str]:
         raise InputError("plant 'serial:' needs a port, e.g. serial:/dev/ttyACM0")
     if not (kind == "virtual" or (kind == "serial" and rest)):  # the plant first
         raise InputError(f"unknown plant '{args.plant}'; expected serial:PORT or virtual[:FAULTS]")
-    if args.duration is not None:
-        options.check_duration(args.duration)
-    options.check_plant_options(args)
-    if args.reference:
-        from cartctl.reference import check_reference
-
-        check_reference(args.reference)
+    check_cart_options(args)
     if kind == "serial" and (args.onboard or args.reference):
         raise InputError(
             "--onboard and --reference set up the virtual cart; a real cart runs the C of "
@@ -99,17 +94,12 @@ def _check(args: argparse.Namespace) -> tuple[str, str]:
 
 
 def _virtual_cart(faults_text: str, args: argparse.Namespace) -> Any:
-    from cartctl.export.arduino import onboard_controllers
-    from cartctl.link.firmware import OnboardFirmware
     from cartctl.link.virtual_cart import CartFaults, VirtualCart
 
     faults = CartFaults.parse(faults_text)
-    firmware = None
-    if args.onboard:
-        firmware = OnboardFirmware(
-            onboard_controllers(args.onboard), reference=args.reference or DEFAULT_REFERENCE
-        )
-    return VirtualCart(faults=faults, firmware=firmware)
+    return VirtualCart(
+        faults=faults, firmware=onboard_firmware(args, args.reference or DEFAULT_REFERENCE)
+    )
 
 
 def _rerun_sink(args: argparse.Namespace, path: Path) -> Any:

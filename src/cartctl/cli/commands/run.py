@@ -114,11 +114,8 @@ def _checked_outputs(args: argparse.Namespace) -> tuple[Path, Path]:
     return csv_path, rrd_path
 
 
-def _prepared(args: argparse.Namespace, given: str, csv_path: Path) -> PreparedRun:
-    """Step 2, the session's run path (controller, plant, references, every refusal), then the
-    trace's meta file (before the loop: an interrupted run has it too)."""
-    from cartctl.choices import find_file
-    from cartctl.data.trace import write_trace_meta
+def _prepared(args: argparse.Namespace, given: str) -> PreparedRun:
+    """Step 2, the session's run path (controller, plant, references, every refusal)."""
     from cartctl.session.prepare import prepare_run
 
     def warm_up_rerun() -> None:  # the recording's first-use costs, before a cart ticks
@@ -127,7 +124,7 @@ def _prepared(args: argparse.Namespace, given: str, csv_path: Path) -> PreparedR
 
             warm_up()
 
-    prepared = prepare_run(
+    return prepare_run(
         given, given=given, plant=args.plant, duration_s=args.duration, reference=args.reference,
         reference_b=args.reference_b, model=args.model, preset=args.preset,
         noise_std_rad_s=args.noise, seed=args.seed, connect_timeout_s=args.connect_timeout,
@@ -135,6 +132,19 @@ def _prepared(args: argparse.Namespace, given: str, csv_path: Path) -> PreparedR
         allow_delay_mismatch=args.allow_delay_mismatch, make_plant=make_plant,
         build_controllers=build_controllers, before_plant=warm_up_rerun,
     )  # fmt: skip
+
+
+def _sinks(
+    args: argparse.Namespace, prepared: PreparedRun, given: str, csv_path: Path, rrd_path: Path
+) -> tuple[list[Any], MemorySink, Any]:
+    """Step 3, the trace's meta file (before the loop: an interrupted run has it too), then where
+    the rows go: the trace, memory (for the summary), the recording (or None), a status line on
+    a terminal."""
+    from cartctl.choices import find_file
+    from cartctl.data.trace import write_trace_meta
+    from cartctl.runtime.loop import MemorySink
+    from cartctl.sinks.csv_sink import CsvSink
+
     try:
         write_trace_meta(csv_path, plant=prepared.description,
                          loop_delay_ticks=prepared.loop_delay_ticks,
@@ -142,22 +152,7 @@ def _prepared(args: argparse.Namespace, given: str, csv_path: Path) -> PreparedR
                          controller=prepared.controller_file.path or find_file(given),
                          model=find_file(prepared.controller_file.model_path))  # fmt: skip
     except OSError as exc:  # a full disk: nothing driven yet
-        prepared.plant.close()
         raise OutputError(exc.filename or csv_path, exc.strerror or str(exc)) from None
-    except BaseException:  # a stop signal: nothing driven yet either
-        prepared.plant.close()
-        raise
-    return prepared
-
-
-def _sinks(
-    args: argparse.Namespace, prepared: PreparedRun, csv_path: Path, rrd_path: Path
-) -> tuple[list[Any], MemorySink, Any]:
-    """Step 3, where the rows go: the trace, memory (for the summary), the recording (or None),
-    a status line on a terminal."""
-    from cartctl.runtime.loop import MemorySink
-    from cartctl.sinks.csv_sink import CsvSink
-
     memory = MemorySink()
     # on the simulated clock a second of trace takes milliseconds: write it in bigger blocks
     sinks: list[Any] = [CsvSink(csv_path, flush_every=1000 if args.fast else 50), memory]
@@ -338,9 +333,9 @@ def run(args: argparse.Namespace) -> int:
     """0, 1 when the run failed (a plant fault, a file left incomplete), or the signal's code."""
     csv_path, rrd_path = _checked_outputs(args)
     given = args.controller or str(DEFAULT_CONTROLLER)  # one file for every plant
-    prepared = _prepared(args, given, csv_path)
-    try:  # the loop closes the plant; until it runs, a stop signal closes it here
-        sinks, memory, rerun = _sinks(args, prepared, csv_path, rrd_path)
+    prepared = _prepared(args, given)
+    try:  # the loop closes the plant; until it runs, a failure or a stop signal closes it here
+        sinks, memory, rerun = _sinks(args, prepared, given, csv_path, rrd_path)
     except BaseException:
         prepared.plant.close()
         raise

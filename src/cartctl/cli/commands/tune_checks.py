@@ -161,7 +161,7 @@ def check_inputs(args: argparse.Namespace, n_settings: int) -> None:
     from cartctl.data.modelfile import load_models
     from cartctl.design.make import check_models
     from cartctl.plants.factory import SIMULATED, check_plant_name, plant_kind
-    from cartctl.reference import ReferenceSchedule, reference_signal
+    from cartctl.reference import ReferenceSchedule
     from cartctl.session.prepare import check_reach
 
     args.choose = _choice(args.choose, n_settings)
@@ -177,8 +177,8 @@ def check_inputs(args: argparse.Namespace, n_settings: int) -> None:
         raise InputError(
             f"the model is for Ts = {models.period_s} s but the plant ticks at {period_s} s"
         )
-    reference_signal(args.reference, 1, period_s)  # a bad spec fails here, once
-    # a reference no motor can follow is refused as run refuses it (every setting would saturate)
+    # a bad spec fails here, and one no motor can follow is refused as run refuses it (every
+    # setting would saturate)
     n = max(1, round(args.duration / period_s))
     references = {m: ReferenceSchedule(args.reference, n, period_s, m) for m in ("a", "b")}
     check_reach(references, dict(models.motors), SUPPLY_V, str(args.model))

@@ -13,6 +13,7 @@ from cartctl.errors import InputError
 
 if TYPE_CHECKING:
     from cartctl.link.cart_faults import CartFaults
+    from cartctl.link.firmware import OnboardFirmware
 
 
 def _faults(text: str) -> CartFaults:
@@ -69,11 +70,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    from cartctl.link.virtual_cart import VirtualCart
-
-    if args.reference and not args.onboard:
-        raise InputError("--reference needs --onboard CONTROLLER.toml")
+def check_cart_options(args: argparse.Namespace) -> None:
+    """``--duration``, the plant's options and ``--reference`` (``monitor`` checks them too)."""
     if args.duration is not None:
         options.check_duration(args.duration)
     options.check_plant_options(args)
@@ -81,14 +79,26 @@ def run(args: argparse.Namespace) -> int:
         from cartctl.reference import check_reference
 
         check_reference(args.reference)
-    firmware = None
-    if args.onboard:
-        from cartctl.export.arduino import onboard_controllers
-        from cartctl.link.firmware import OnboardFirmware
 
-        firmware = OnboardFirmware(onboard_controllers(args.onboard), reference=args.reference)
+
+def onboard_firmware(args: argparse.Namespace, reference: str | None) -> OnboardFirmware | None:
+    """The firmware running ``--onboard``'s controller with ``reference`` (None: the bridge's)."""
+    if not args.onboard:
+        return None
+    from cartctl.export.arduino import onboard_controllers
+    from cartctl.link.firmware import OnboardFirmware
+
+    return OnboardFirmware(onboard_controllers(args.onboard), reference=reference)
+
+
+def run(args: argparse.Namespace) -> int:
+    from cartctl.link.virtual_cart import VirtualCart
+
+    if args.reference and not args.onboard:
+        raise InputError("--reference needs --onboard CONTROLLER.toml")
+    check_cart_options(args)
     cart = VirtualCart(args.preset, noise_std_rad_s=args.noise, seed=args.seed, faults=args.faults,
-                       firmware=firmware)  # fmt: skip
+                       firmware=onboard_firmware(args, args.reference))  # fmt: skip
     try:  # a stop signal from the port's line on: the cart's own stop line too
         print(cart.port, flush=True)
         running = f"the bridge sketch version {cart.bridge_version}"
