@@ -9,8 +9,8 @@ crosses their boundaries), which also gives the residual norm and θ's covarianc
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, replace
+from typing import Any, Self
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -56,6 +56,14 @@ class ArxFit:
     def theta_std(self) -> NDArray[np.float64]:
         """σ of each θ entry: √diag Σ."""
         return np.sqrt(np.diag(self.theta_cov))
+
+    def on(self, segments: Sequence[Segment]) -> Self:
+        """This fit with its simulation and prediction fits on other data (validation)."""
+        return replace(
+            self,
+            fit_simulation_percent=simulation_fit(self.model, segments),
+            fit_prediction_percent=prediction_fit(self.model, segments),
+        )
 
     def theta_names(self) -> list[str]:
         """Names of the θ entries: the report's c, d, a, b for its structure; a1…, b0… otherwise."""

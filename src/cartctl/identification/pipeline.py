@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from functools import partial
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -20,15 +20,7 @@ from scipy import signal
 from cartctl.data.modelfile import ModelFile, Provenance
 from cartctl.data.trace import Trace
 from cartctl.errors import InputError
-from cartctl.identification.arx import (
-    ArxFit,
-    Segment,
-    check_orders,
-    first_row,
-    fit_arx,
-    prediction_fit,
-    simulation_fit,
-)
+from cartctl.identification.arx import ArxFit, Segment, check_orders, first_row, fit_arx
 from cartctl.identification.diagnostics import Diagnostics, diagnose
 from cartctl.identification.etfe import average_cycles, find_period, periodic_regression_pad
 from cartctl.identification.oe import check_oe_orders, fit_oe
@@ -41,8 +33,6 @@ from cartctl.identification.orders import (
 )
 
 METHODS = ("arx", "oe")
-
-FitT = TypeVar("FitT", bound=ArxFit)
 
 MIN_PART = 50  # fewest samples an estimation or validation part of a ``--split`` may have
 
@@ -226,15 +216,6 @@ def split_segments(
     return est, val
 
 
-def on_validation(fit: FitT, validation: Sequence[Segment]) -> FitT:
-    """``fit`` with its simulation and prediction fits recomputed on the validation data."""
-    return dataclasses.replace(
-        fit,
-        fit_simulation_percent=simulation_fit(fit.model, validation),
-        fit_prediction_percent=prediction_fit(fit.model, validation),
-    )
-
-
 def _identify_motor(
     motor: str,
     raw: list[Segment],
@@ -266,9 +247,9 @@ def _identify_motor(
         )
         diagnostics = dataclasses.replace(diagnostics, orders=orders)
     if validation:
-        arx_fit = on_validation(arx_fit, validation)
-        oe_fit = on_validation(oe_fit, validation) if oe_fit else None
-        unfiltered = on_validation(unfiltered, validation) if unfiltered else None
+        arx_fit = arx_fit.on(validation)
+        oe_fit = oe_fit.on(validation) if oe_fit else None
+        unfiltered = unfiltered.on(validation) if unfiltered else None
     return MotorIdentification(motor, arx_fit, diagnostics, oe_fit, unfiltered, delay, cycles)
 
 
