@@ -67,14 +67,13 @@ def run_tuning(model_path: Path, loop_delay_ticks: int,
     """Tune the grid on ``model_path`` and choose (raises :class:`StageError` if none fits)."""
     models = load_models(model_path)
     fixed = {**DESIGN_FIXED, "loop_delay_ticks": loop_delay_ticks}
-    tune_job = engine.TuneJob(str(model_path), METHOD, "sim", "ground", REFERENCE, DURATION_S, 0,
-                              (), tuple(fixed.items()))  # fmt: skip
     try:
         sample = sample_plants(models, PLANTS, SEED)
     except InputError as exc:
         raise StageError(f"tuning: {exc}") from None
-    job = robustness.RobustJob(tune_job, sample, tuple(enumerate(SETTINGS, start=1)),
-                               later_fractions=LATER_FRACTIONS)  # fmt: skip
+    job = robustness.RobustJob(str(model_path), METHOD, "sim", "ground", REFERENCE, DURATION_S, 0,
+                               tuple(enumerate(SETTINGS, start=1)), tuple(fixed.items()),
+                               sample=sample, later_fractions=LATER_FRACTIONS)  # fmt: skip
     rows = engine.run_grid(job, jobs or min(2, os.cpu_count() or 1), progress,
                            robustness.evaluate_robust_chunk)  # fmt: skip
     rows = choice.sort_robust(choice.mark_robust_pareto(rows))

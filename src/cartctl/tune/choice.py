@@ -54,9 +54,6 @@ class Limits:
     overshoot_percent: float | None = None
     settling_time_s: float | None = None
 
-    def __bool__(self) -> bool:
-        return self.overshoot_percent is not None or self.settling_time_s is not None
-
     def text(self) -> str:
         """'overshoot <= 5 %, settling <= 120 ms' (the bounds given)."""
         parts = []
@@ -78,7 +75,7 @@ class Limits:
 
 def rule_text(rule: str, limits: Limits, where: str) -> str:
     """``rule`` with the bounds of ``limits`` (where they apply) in front of it."""
-    if not limits:
+    if not limits.text():  # no bounds
         return rule
     return f"among the settings with {limits.text()} {where}: {rule}"
 

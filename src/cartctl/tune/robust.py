@@ -142,15 +142,13 @@ def score_plants(
     )
 
 
-@dataclass(frozen=True)
-class RobustJob:
-    """A chunk of settings for the workers (picklable): plain ``tune``'s job (its ``plant`` 'sim',
-    its ``items`` unused), the sampled plants, the settings, and the actuation timings (ms, each in
-    (0, 10]) at which every setting also runs on the physics preset."""
+@dataclass(frozen=True, kw_only=True)
+class RobustJob(TuneJob):
+    """Plain ``tune``'s job (its ``plant`` 'sim') with the sampled plants and the actuation timings
+    (ms, each in (0, 10]) at which every setting also runs on the physics preset, or (commission)
+    the fractions of a tick by which the model's commands land later."""
 
-    tune: TuneJob
     sample: PlantSample
-    items: tuple[tuple[int, dict[str, float]], ...]
     actuation_ms: tuple[float, ...] = ()
     later_fractions: tuple[float, ...] = ()
 
@@ -220,11 +218,10 @@ def evaluate_robust(job: RobustJob, models: ModelFile, index: int,
                     settings: dict[str, float]) -> RobustRow:  # fmt: skip
     """One setting on the nominal model, the sampled plants, the physics preset and the physics
     preset at each of ``job.actuation_ms``."""
-    tj = job.tune
-    nominal = evaluate_nominal(tj, models, index, settings)
+    nominal = evaluate_nominal(job, models, index, settings)
     if not nominal.result.feasible:
         return RobustRow(nominal.result)
-    per_motor, diverged = sampled_metrics(nominal, models, job.sample, tj.extra_delay_ticks)
+    per_motor, diverged = sampled_metrics(nominal, models, job.sample, job.extra_delay_ticks)
     figures = {k: nominal.result.worst[v] for k, v in SUMMARY_KEYS.items()}
     if job.later_fractions:  # commissioning: the model with later commands, not the physics
         physics: dict[str, Any] = {}
@@ -234,11 +231,11 @@ def evaluate_robust(job: RobustJob, models: ModelFile, index: int,
             entry = loop_entry(plant, nominal, nominal.references)
             actuation.append({"later_ms": round(f * models.period_s * 1e3, 3), **entry})
     else:
-        physics = _physics(tj, nominal)
-        actuation = [_physics(tj, nominal, ms) for ms in job.actuation_ms]
+        physics = _physics(job, nominal)
+        actuation = [_physics(job, nominal, ms) for ms in job.actuation_ms]
     return RobustRow(nominal.result, score_plants(per_motor, diverged, figures, physics, actuation))
 
 
 def evaluate_robust_chunk(job: RobustJob) -> list[RobustRow]:  # the process pool's worker
-    models = load_models(job.tune.model)
+    models = load_models(job.model)
     return [evaluate_robust(job, models, i, s) for i, s in job.items]

@@ -211,7 +211,7 @@ def _robust(args: argparse.Namespace, job: engine.TuneJob) -> _Outcome:
     sample = sample_plants(
         load_models(args.model), plants, args.seed, extra_delay_ticks=args.extra_delay
     )
-    rjob = robustness.RobustJob(job, sample, job.items, timings)
+    rjob = robustness.RobustJob(**vars(job), sample=sample, actuation_ms=timings)
     rows = _run_grid(args, rjob, robustness.evaluate_robust_chunk, "cartctl tune --robust")
     marked = tuning.mark_pareto([r.result for r in rows])  # the plain front, for the JSON rows
     rows = [replace(r, result=m) for r, m in zip(rows, marked, strict=True)]
