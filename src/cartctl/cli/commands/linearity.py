@@ -7,7 +7,7 @@ import argparse
 from typing import TYPE_CHECKING
 
 import cartctl.cli.commands.options as options
-from cartctl.cli.commands.validate import check_plot_path, new_figure, save_png
+from cartctl.cli.commands.validate import check_plot_path, new_figure, show
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -101,20 +101,13 @@ def format_text(result: LinearityResult, files: tuple[str, str, str]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cartctl.cli.jsonout import dumps
     from cartctl.data.read import read_trace
     from cartctl.identification.validate import linearity
 
-    plot = check_plot_path(args.plot)
+    check_plot_path(args.plot)
     files = (args.small, args.large, args.sum)
     small, large, total = (read_trace(path, args.map) for path in files)
     result = linearity(small, large, total, args.motor)
-    if plot is not None:
-        save_png(linearity_figure(result), plot)
-    if args.json:
-        print(dumps(result.to_dict()))
-    else:
-        print(format_text(result, files))
-        if plot is not None:
-            print(f"\nwrote {plot}")
-    return 0
+    return show(
+        args, result.to_dict(), format_text(result, files), lambda: linearity_figure(result)
+    )

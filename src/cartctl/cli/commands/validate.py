@@ -64,12 +64,22 @@ def new_figure(rows: int, cols: int, *, width_in: float, height_in: float) -> tu
     return fig, axes
 
 
-def save_png(fig: Figure, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, format="png", dpi=120)
+def show(args: argparse.Namespace, doc: dict[str, Any], text: str, figure: Any) -> int:
+    """``figure()`` saved to ``--plot`` (if given), then ``doc`` as JSON or ``text`` and where the
+    figure went (validate's and linearity's output)."""
+    from cartctl.cli.jsonout import dumps
+
+    path = None if args.plot is None else Path(args.plot)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        figure().savefig(path, format="png", dpi=120)
+    print(dumps(doc) if args.json else text)
+    if path is not None and not args.json:
+        print(f"\nwrote {path}")
+    return 0
 
 
-def plot_validation(validation: ModelValidation, path: Path) -> None:
+def validation_figure(validation: ModelValidation) -> Figure:
     """Figures 6 and 7 of the report in one PNG: per motor, speeds above and |error| beneath."""
     results = list(validation.results.values())
     fig, axes = new_figure(2, len(results), width_in=6.0 * len(results), height_in=6.0)
@@ -87,7 +97,7 @@ def plot_validation(validation: ModelValidation, path: Path) -> None:
     model = Path(validation.model).name if validation.model else "model"
     data = Path(validation.data).name if validation.data else "trace"
     fig.suptitle(f"Validation of {model} on {data}")
-    save_png(fig, path)
+    return fig
 
 
 def _num(value: float | None, spec: str) -> str:
@@ -142,7 +152,6 @@ def format_table(validation: ModelValidation) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cartctl.cli.jsonout import dumps
     from cartctl.data.modelfile import load_models
     from cartctl.data.read import read_trace
     from cartctl.data.trace import MOTORS
@@ -151,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
     def say(line: str) -> None:
         print(f"cartctl validate: {line}", file=sys.stderr)
 
-    plot = check_plot_path(args.plot)
+    check_plot_path(args.plot)
     models = load_models(args.model)
     trace = read_trace(args.data, args.map)
     motors: tuple[str, ...] = (args.motor,)
@@ -168,12 +177,5 @@ def run(args: argparse.Namespace) -> int:
                 f"warning: {args.model}: motor {r.motor}'s model is unstable (pole at |z| = "
                 f"{r.unstable_pole:.4g}); identify it again"
             )
-    if plot is not None:
-        plot_validation(validation, plot)
-    if args.json:
-        print(dumps(validation.to_dict()))
-    else:
-        print(format_table(validation))
-        if plot is not None:
-            print(f"\nwrote {plot}")
-    return 0
+    text = format_table(validation)
+    return show(args, validation.to_dict(), text, lambda: validation_figure(validation))
