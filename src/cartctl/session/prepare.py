@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable
+from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -77,8 +78,12 @@ def check_reach(
     )
     if refuse:
         raise InputError(f"{what}; give a reference within that")
-    saturates = f"{what}: the voltage saturates and the speed will not settle there"
-    warnings.warn(saturates, DataWarning, stacklevel=2)
+    _warn(f"{what}: the voltage saturates and the speed will not settle there")
+
+
+def _warn(text: str) -> None:
+    """A DataWarning located at the line that called the caller (prepare_run's, or its caller's)."""
+    warnings.warn(text, DataWarning, stacklevel=3)
 
 
 def _fitting_controller(controller: ControllerFile, given: str, delay: int) -> str | None:
@@ -86,21 +91,15 @@ def _fitting_controller(controller: ControllerFile, given: str, delay: int) -> s
     from cartctl.design.controllerfile import load_controller
 
     folders = dict.fromkeys([DEFAULT_CONTROLLER.parent, Path(given).parent])
-
-    def other_method(name: str) -> bool:
-        return name.removeprefix("serial-").removesuffix(".toml") != controller.method
-
     shipped = ("pi.toml", "poles.toml", "serial-pi.toml", "serial-poles.toml")  # serial-*: 3 ticks
-    for name in sorted(shipped, key=other_method):
-        for folder in folders:
-            path = folder / name
-            if not path.is_file() or path.resolve() == Path(given).resolve():
-                continue
-            try:
-                if load_controller(path).loop_delay_ticks == delay:
-                    return str(path)
-            except CartctlError:
-                continue
+    for name in sorted(  # the same method first
+        shipped, key=lambda n: n.removeprefix("serial-").removesuffix(".toml") != controller.method
+    ):
+        for path in (folder / name for folder in folders):
+            if path.is_file() and path.resolve() != Path(given).resolve():
+                with suppress(CartctlError):
+                    if load_controller(path).loop_delay_ticks == delay:
+                        return str(path)
     return None
 
 
@@ -119,11 +118,9 @@ def check_loop_delay(
     if delay is None or designed is None:
         return
     if measured is not None and not measured.clear:
-        warnings.warn(
+        _warn(
             f"the loop delay of the plant '{plant}' is not clear: {measured.describe()}; "
-            f"{given} is designed for {designed}: running it, watching the delay",
-            DataWarning,
-            stacklevel=2,
+            f"{given} is designed for {designed}: running it, watching the delay"
         )
         return
     if designed == delay:
@@ -133,8 +130,7 @@ def check_loop_delay(
         f"{delay}" + ("" if measured is None else f" (measured: {measured.describe()})")
     )
     if allow:
-        anyway = f"{problem}; running it anyway (--allow-delay-mismatch)"
-        warnings.warn(anyway, DataWarning, stacklevel=2)
+        _warn(f"{problem}; running it anyway (--allow-delay-mismatch)")
         return
     fit = _fitting_controller(controller, given, delay)
     if fit is not None:
@@ -194,11 +190,9 @@ def prepare_run(
         file = load_controller(controller, force=force, period_s=period_s)
     if file.ignored:
         more = f" (and {len(file.ignored) - 1} more)" if len(file.ignored) > 1 else ""
-        warnings.warn(
+        _warn(
             f"--force: {given}: running its gains; ignoring controller_num/controller_den, which "
-            f"disagree with them: {file.ignored[0]}{more}",
-            DataWarning,
-            stacklevel=2,
+            f"disagree with them: {file.ignored[0]}{more}"
         )
     limit = file.voltage_limit_v
     if voltage_limit_v is not None:
@@ -209,11 +203,9 @@ def prepare_run(
             )
         limit = voltage_limit_v
     if file.model_changed():
-        warnings.warn(
+        _warn(
             f"{given} was designed on {file.model_path}, which has changed "
-            "since (or is gone); redesign with the command in the file's header",
-            DataWarning,
-            stacklevel=2,
+            "since (or is gone); redesign with the command in the file's header"
         )
     controllers = build_controllers(file, voltage_limit_v=limit)
     if before_plant is not None:
