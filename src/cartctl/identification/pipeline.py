@@ -61,17 +61,27 @@ class Prefilter:
                 f"{self.cutoff_hz:g}"
             )
 
-    def apply(self, x: ArrayLike, period_s: float) -> NDArray[np.float64]:
-        """Filter one signal (one value per tick of ``period_s`` s), starting from rest."""
+    def _sos(self, period_s: float) -> NDArray[np.float64]:
         nyquist_hz = 0.5 / period_s
         if self.cutoff_hz >= nyquist_hz:
             raise InputError(
                 f"prefilter cut-off (--cutoff-hz) {self.cutoff_hz:g} Hz must lie below the Nyquist frequency "
                 f"{nyquist_hz:g} Hz"
             )
-        sos = signal.butter(self.order, self.cutoff_hz, fs=1.0 / period_s, output="sos")
-        arr = np.asarray(x, dtype=float)
+        return signal.butter(self.order, self.cutoff_hz, fs=1.0 / period_s, output="sos")
+
+    def apply(self, x: ArrayLike, period_s: float) -> NDArray[np.float64]:
+        """Filter one signal (one value per tick of ``period_s`` s), starting from rest."""
+        sos, arr = self._sos(period_s), np.asarray(x, dtype=float)
         return signal.sosfiltfilt(sos, arr) if self.zero_phase else signal.sosfilt(sos, arr)
+
+    def apply_periodic(self, cycle: ArrayLike, period_s: float) -> NDArray[np.float64]:
+        """Filter one cycle of a periodic signal: the filter's periodic steady state (no start
+        from rest), exact on the cycle's DFT bins; zero-phase multiplies by |H|² instead of H."""
+        x = np.asarray(cycle, dtype=float)
+        w_rad = 2.0 * np.pi * np.fft.rfftfreq(x.size)
+        h = signal.sosfreqz(self._sos(period_s), worN=w_rad)[1]
+        return np.fft.irfft(np.fft.rfft(x) * (np.abs(h) ** 2 if self.zero_phase else h), n=x.size)
 
     def describe(self) -> str:
         """For provenance and tables, e.g. 'butter order 6, 20 Hz, causal'."""
@@ -177,8 +187,14 @@ def _segments(traces: Sequence[Trace], motor: str) -> list[Segment]:
 
 
 def _averaged(
-    segments: Sequence[Segment], lags: int, sources: Sequence[str]
+    segments: Sequence[Segment],
+    lags: int,
+    sources: Sequence[str],
+    prefilter: Prefilter | None = None,
+    period_s: float = 0.0,
 ) -> tuple[list[Segment], int]:
+    """The raw experiments' whole cycles averaged (the period found on the raw input, which a
+    prefilter's transient would hide), then prefiltered as periodic signals."""
     out: list[Segment] = []
     total = 0
     for (y, u), src in zip(segments, sources, strict=True):
@@ -188,6 +204,8 @@ def _averaged(
                 f"--average needs a periodic input with at least two whole cycles; {src}'s is not"
             )
         y_avg, u_avg, n = average_cycles(y, u, period)
+        if prefilter is not None:
+            y_avg, u_avg = (prefilter.apply_periodic(x, period_s) for x in (y_avg, u_avg))
         out.append(periodic_regression_pad(y_avg, u_avg, lags))
         total += n
     return out, total
@@ -233,7 +251,7 @@ def _identify_motor(
     fit_data, start, cycles = work, None, None
     if request.average:
         start = first_row(na, nb, nk)
-        fit_data, cycles = _averaged(work, start, sources)
+        fit_data, cycles = _averaged(raw, start, sources, request.prefilter, period_s)
     arx = partial(fit_arx, na=na, nb=nb, nk=nk, period_s=period_s, start=start, eval_segments=raw)
     arx_fit = arx(fit_data)
     unfiltered = None
