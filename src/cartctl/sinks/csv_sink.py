@@ -39,7 +39,7 @@ class CsvSink:
         self._file = io.FileIO(self.path, "w")  # unbuffered: each block is one write we can count
         self._width = len(columns)
         self._writer.writerow(columns)
-        self._write(self._take_text(), rows=0)
+        self._flush()  # the header alone
 
     def write(self, row: Sequence[float]) -> None:
         """Keep one row, a value per column (ValueError otherwise, and nothing kept)."""
@@ -68,14 +68,11 @@ class CsvSink:
         return data
 
     def _flush(self) -> None:
+        """Write the text formatted (``rows`` whole rows, 0: the header) in full, or cut the file
+        back to its last whole row and raise :class:`OutputError`."""
         self._format()
-        rows = self._formatted
-        self._write(self._take_text(), rows=rows)  # nothing written without rows or a file
-
-    def _write(self, data: bytes, *, rows: int) -> None:
-        """Write ``data`` (``rows`` whole rows) in full, or cut the file back to its last whole
-        row and raise :class:`OutputError`."""
-        file = self._file
+        file, rows = self._file, self._formatted
+        data = self._take_text()
         if file is None:
             return
         done = 0

@@ -58,12 +58,11 @@ _RUN_ROWS: tuple[_Row, ...] = (
     (("ticks",), "ticks", "", 1.0, 0, True),
     (("duration_s",), "duration", "s", 1.0, 2, True),
     (("deadline_misses",), "deadline misses", "", 1.0, 0, True),
-    (("period_error_us", "p50"), "period error p50", "µs", 1.0, 0, True),
-    (("period_error_us", "p99"), "period error p99", "µs", 1.0, 0, True),
-    (("period_error_us", "max"), "period error max", "µs", 1.0, 0, True),
-    (("compute_us", "p50"), "compute p50", "µs", 1.0, 0, True),
-    (("compute_us", "p99"), "compute p99", "µs", 1.0, 0, True),
-    (("compute_us", "max"), "compute max", "µs", 1.0, 0, True),
+    *(
+        ((key, p), f"{name} {p}", "µs", 1.0, 0, True)
+        for key, name in (("period_error_us", "period error"), ("compute_us", "compute"))
+        for p in ("p50", "p99", "max")
+    ),
 )
 
 
@@ -109,23 +108,19 @@ def difference(a: Any, b: Any) -> Any:
     return int(y - x) if isinstance(a, int) and isinstance(b, int) else y - x
 
 
-def relative_difference(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any]:
-    """(B − A) / |A| in %, for the rows where that ratio means something (None when A is 0)."""
-    out: dict[str, Any] = {}
+def compare(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
+    """``review --compare --json``: both summaries, B − A and (B − A) / |A| in % (for the rows
+    where that ratio means something; None when A is 0)."""
+    percent: dict[str, Any] = {}
     for path, *_, relative in _rows(a, b):
         if relative:
-            _put(out, path, _percent(_get(a, path), _get(b, path)))
-    return out
-
-
-def compare(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
-    """``review --compare --json``: both summaries, B − A and (B − A) / |A| in %."""
+            _put(percent, path, _percent(_get(a, path), _get(b, path)))
     return {
         "runs": [a, b],
         "a": a,
         "b": b,
         "difference": difference(a, b),
-        "difference_percent": relative_difference(a, b),
+        "difference_percent": percent,
     }
 
 
