@@ -1,148 +1,22 @@
-"""The loop analysis of designs, per motor, and its report: margins, S and T with their peaks,
-the load-disturbance step, and the damping of each closed-loop pole; for ``design --json``, the
+"""The report of a design's loop analysis (:func:`~cartctl.design.make.analyse_motor`): the
 figures of ``design --report DIR`` (matplotlib's Agg canvas) and the numbers as the command prints
-them (:mod:`cartctl.measures.numfmt`'s rules).
-
-The controller is taken whole, as the loop runs it (:mod:`cartctl.design.controller_ss`), broken
-at the plant input: L = C_fb·G·z^(−extra), S = 1/(1 + L), T = L/(1 + L). Margins and Ms = max|S|
-are python-control's (:func:`~cartctl.design.analysis.loop_analysis`); Mt = max|T| is found on a
-frequency grid up to Nyquist, refined by ``minimize_scalar``.
-"""
+them (:mod:`cartctl.measures.numfmt`'s rules)."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import NDArray
 
-from cartctl.design.analysis import (
-    DEFAULT_DISTURBANCE_V,
-    DisturbanceResponse,
-    loop_analysis,
-    settling_bound,
-    simulate_disturbance,
-)
-from cartctl.design.controller_ss import ControllerStateSpace, controller_state_space
-from cartctl.design.make import Designs
+from cartctl.design.analysis import settling_bound
+from cartctl.design.make import Designs, MotorAnalysis
 from cartctl.measures.numfmt import format_column, format_fixed
-from cartctl.model import ArxModel, pole_damping
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
-
-LIGHT_DAMPING = 0.1  # a closed-loop pole with a damping ratio ζ below this rings: a warning
-
-
-def _loop_peaks(
-    controller: ControllerStateSpace, model: ArxModel, extra_delay_ticks: int
-) -> tuple[Any, ...]:
-    """The grid, L on it, Ms and Mt with where they are (:class:`MotorAnalysis`'s first fields)."""
-    from scipy import optimize
-
-    def loop_at(freq_hz: NDArray[np.float64]) -> NDArray[np.complex128]:
-        z = np.exp(2j * np.pi * freq_hz * model.period_s)
-        return controller.feedback_response(z) * model.response_at(z) * z ** (-extra_delay_ticks)
-
-    def minus_t(f: float) -> float:
-        ell = loop_at(np.array([f]))[0]
-        return -float(abs(ell / (1.0 + ell)))
-
-    freq = np.geomspace(1e-3, 0.5 / model.period_s, 2000)  # from 1 mHz: integral action is at 0
-    loop = loop_at(freq)
-    on_grid = np.abs(loop / (1.0 + loop))
-    i = int(np.argmax(on_grid))
-    mt, mt_hz = float(on_grid[i]), float(freq[i])
-    bounds = (freq[max(i - 1, 0)], freq[min(i + 1, freq.size - 1)])
-    res = optimize.minimize_scalar(
-        minus_t, bounds=bounds, method="bounded", options={"xatol": 1e-9}
-    )
-    if res.success and -res.fun > mt:
-        mt, mt_hz = float(-res.fun), float(res.x)
-    margins = loop_analysis(*controller.feedback_tf(), model, extra_delay_ticks)
-    ms, ms_hz = margins["sensitivity_peak"], margins["sensitivity_peak_hz"]
-    return freq, loop, ms, ms_hz, mt, 0.0 if i == 0 else mt_hz  # Mt at 0 Hz: integral action
-
-
-@dataclass(frozen=True, eq=False)
-class MotorAnalysis:
-    """One motor's loop analysis: the open loop L on a frequency grid (``freq_hz``, 1 mHz to
-    Nyquist) with the peaks Ms = max|S| and Mt = max|T| and where they are (Hz; 0 for T(1) = 1
-    of integral action), the simulated load-disturbance step, and the pole table."""
-
-    freq_hz: NDArray[np.float64]
-    loop: NDArray[np.complex128]
-    sensitivity_peak: float
-    sensitivity_peak_hz: float
-    complementary_peak: float
-    complementary_peak_hz: float
-    disturbance: DisturbanceResponse
-    pole_table: list[dict[str, Any]]
-    motor: str = "a"
-
-    def entry(self) -> dict[str, Any]:
-        """The keys this analysis adds to (or replaces in) a motor's ``design --json`` entry;
-        ``sensitivity_peak`` is the loop's as it runs (the PI's with its Kalman estimator)."""
-        ms, mt = self.sensitivity_peak, self.complementary_peak
-        return {
-            "sensitivity_peak": ms,
-            "sensitivity_peak_db": 20.0 * math.log10(ms),
-            "sensitivity_peak_hz": self.sensitivity_peak_hz,
-            "complementary_peak": mt,
-            "complementary_peak_db": 20.0 * math.log10(mt),
-            "complementary_peak_hz": self.complementary_peak_hz,
-            "sensitivity_distance": 1.0 / ms,
-            "disturbance": self.disturbance.to_dict(),
-            "closed_loop_pole_table": self.pole_table,
-            "warnings": self.warnings,
-        }
-
-    @property
-    def warnings(self) -> list[str]:
-        """A line naming the least damped closed-loop pole when its ζ is below ``LIGHT_DAMPING``
-        (an undefined ζ, at z = 0 or z = 1, is none)."""
-        table = self.pole_table
-        light = [r for r in table if r["damping"] is not None and r["damping"] < LIGHT_DAMPING]
-        if not light:
-            return []
-        worst = min(light, key=lambda r: r["damping"])
-        z = f"{worst['re']:.4f}" + ("" if worst["im"] == 0.0 else f" ± {abs(worst['im']):.4f}j")
-        freq = "" if worst["freq_hz"] is None else f" at {worst['freq_hz']:.2f} Hz"
-        others = len({(r["re"], abs(r["im"])) for r in light}) - 1
-        more = f" ({others} more pole(s) below {LIGHT_DAMPING:g})" if others else ""
-        return [
-            f"motor {self.motor}: closed-loop pole z = {z} has damping ζ = "
-            f"{worst['damping']:.3f} < {LIGHT_DAMPING:g}{more}: the loop rings{freq} for many "
-            "periods"
-        ]
-
-
-def analyse_designs(
-    designs: Designs, *, disturbance_v: float = DEFAULT_DISTURBANCE_V
-) -> dict[str, MotorAnalysis]:
-    """The analysis of every motor of ``designs``, with a load step of ``disturbance_v`` (V); its
-    keys (:meth:`MotorAnalysis.entry`) go into each motor's ``design --json`` entry, and so into
-    the controller file's ``analysis`` (the loop's Ms as it runs)."""
-    extra = designs.request.extra_delay_ticks
-    out: dict[str, MotorAnalysis] = {}
-    for m, made in designs.motors.items():
-        model = designs.models[m]
-        ss = controller_state_space(designs.request.method, made.file_entry, model.period_s)
-        dist = simulate_disturbance(
-            made.controller, model, disturbance_v=disturbance_v, extra_delay_ticks=extra
-        )
-        table = []  # per pole: damping and natural frequency of its s = ln(z)/Ts
-        for re, im in made.entry["closed_loop_poles"]:
-            damping, freq_hz = pole_damping(complex(re, im), model.period_s)
-            table.append({"re": re, "im": im, "damping": damping, "freq_hz": freq_hz})
-        freq, loop, ms, ms_hz, mt, mt_hz = _loop_peaks(ss, model, extra)
-        out[m] = MotorAnalysis(freq, loop, ms, ms_hz, mt, mt_hz, dist, table, m)
-        made.entry.update(out[m].entry())
-    return out
 
 
 def sig(value: float | None, digits: int = 3, *, scale: float | None = None) -> str:
@@ -221,14 +95,12 @@ def design_figure(motor: str, designs: Designs) -> Figure:
     return fig
 
 
-def write_report(
-    out_dir: str | Path, designs: Designs, analyses: Mapping[str, MotorAnalysis]
-) -> list[Path]:
+def write_report(out_dir: str | Path, designs: Designs) -> list[Path]:
     """``design_X.png`` (:func:`design_figure`) and ``analysis_X.png`` (:func:`analysis_figure`)
     per motor; returns their paths."""
     out, paths = Path(out_dir), []
     out.mkdir(parents=True, exist_ok=True)
-    for m, analysis in analyses.items():
+    for m, analysis in designs.analyses.items():
         figures = {
             "design": design_figure(m, designs),
             "analysis": analysis_figure(m, designs.request.method, analysis),

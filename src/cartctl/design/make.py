@@ -1,25 +1,33 @@
 """Designs from a request, one path for ``cartctl design``, ``tune`` and the Python API: each
 motor's runtime controller with its JSON and file entries (:func:`design_motor`), the simulated
-step against the time-optimal bound (:func:`design_models`), and the controller file."""
+step against the time-optimal bound and the loop analysis (:func:`design_models`), and the
+controller file."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from cartctl.cart import nk_fits_loop_delay
 from cartctl.data.modelfile import ModelFile
 from cartctl.design.analysis import (
+    DEFAULT_DISTURBANCE_V,
+    DisturbanceResponse,
     StepAnalysis,
     in_settling_band,
     loop_analysis,
     settling_bound,
+    simulate_disturbance,
     simulate_step,
 )
-from cartctl.design.controller_ss import feedback_tf_coeffs
+from cartctl.design.controller_ss import controller_state_space, feedback_tf_coeffs
 from cartctl.design.controllerfile import (
     ControllerFile,
     build_controller,
@@ -31,8 +39,10 @@ from cartctl.design.pi import design_pi, design_pi_bandwidth
 from cartctl.design.poles import design_poles
 from cartctl.design.request import NOISE_FIELDS, DesignRequest, check_loop_delay, parse_poles
 from cartctl.errors import InputError
-from cartctl.model import ArxModel
+from cartctl.model import ArxModel, pole_damping
 from cartctl.runtime.base import Controller
+
+LIGHT_DAMPING = 0.1  # a closed-loop pole with a damping ratio ζ below this rings: a warning
 
 ANALYSIS_KEYS = (  # what a controller file keeps of a motor's design, under ``analysis``
     "phase_margin_deg", "gain_margin_db", "crossover_hz", "sensitivity_peak", "closed_loop_poles",
@@ -108,6 +118,107 @@ def _kalman_entry(design: KalmanDesign) -> dict[str, Any]:
         for f in fields(design)
         if timing or f.name != "timing_noise_std_ticks"
     }
+
+
+@dataclass(frozen=True, eq=False)
+class MotorAnalysis:
+    """One motor's loop analysis (:func:`analyse_motor`): the open loop L on a frequency grid
+    (``freq_hz``, 1 mHz to Nyquist) with the peaks Ms = max|S| and Mt = max|T| and where they are
+    (Hz; 0 for T(1) = 1 of integral action), the simulated load-disturbance step, and the pole
+    table."""
+
+    freq_hz: NDArray[np.float64]
+    loop: NDArray[np.complex128]
+    sensitivity_peak: float
+    sensitivity_peak_hz: float
+    complementary_peak: float
+    complementary_peak_hz: float
+    disturbance: DisturbanceResponse
+    pole_table: list[dict[str, Any]]
+    motor: str = "a"
+
+    def entry(self) -> dict[str, Any]:
+        """The keys this analysis adds to (or replaces in) a motor's ``design --json`` entry;
+        ``sensitivity_peak`` is the loop's as it runs (the PI's with its Kalman estimator)."""
+        ms, mt = self.sensitivity_peak, self.complementary_peak
+        return {
+            "sensitivity_peak": ms,
+            "sensitivity_peak_db": 20.0 * math.log10(ms),
+            "sensitivity_peak_hz": self.sensitivity_peak_hz,
+            "complementary_peak": mt,
+            "complementary_peak_db": 20.0 * math.log10(mt),
+            "complementary_peak_hz": self.complementary_peak_hz,
+            "sensitivity_distance": 1.0 / ms,
+            "disturbance": self.disturbance.to_dict(),
+            "closed_loop_pole_table": self.pole_table,
+            "warnings": self.warnings,
+        }
+
+    @property
+    def warnings(self) -> list[str]:
+        """A line naming the least damped closed-loop pole when its ζ is below ``LIGHT_DAMPING``
+        (an undefined ζ, at z = 0 or z = 1, is none)."""
+        table = self.pole_table
+        light = [r for r in table if r["damping"] is not None and r["damping"] < LIGHT_DAMPING]
+        if not light:
+            return []
+        worst = min(light, key=lambda r: r["damping"])
+        z = f"{worst['re']:.4f}" + ("" if worst["im"] == 0.0 else f" ± {abs(worst['im']):.4f}j")
+        freq = "" if worst["freq_hz"] is None else f" at {worst['freq_hz']:.2f} Hz"
+        others = len({(r["re"], abs(r["im"])) for r in light}) - 1
+        more = f" ({others} more pole(s) below {LIGHT_DAMPING:g})" if others else ""
+        return [
+            f"motor {self.motor}: closed-loop pole z = {z} has damping ζ = "
+            f"{worst['damping']:.3f} < {LIGHT_DAMPING:g}{more}: the loop rings{freq} for many "
+            "periods"
+        ]
+
+
+def analyse_motor(
+    made: MotorDesign, model: ArxModel, request: DesignRequest, disturbance_v: float, motor: str
+) -> MotorAnalysis:
+    """The loop analysis of one motor's design, with a load step of ``disturbance_v`` (V).
+
+    The controller is taken whole, as the loop runs it (:mod:`cartctl.design.controller_ss`),
+    broken at the plant input: L = C_fb·G·z^(−extra), S = 1/(1 + L), T = L/(1 + L). Margins and
+    Ms = max|S| are python-control's (:func:`~cartctl.design.analysis.loop_analysis`); Mt =
+    max|T| is found on a frequency grid up to Nyquist, refined by ``minimize_scalar``.
+    """
+    from scipy import optimize
+
+    extra = request.extra_delay_ticks
+    controller = controller_state_space(request.method, made.file_entry, model.period_s)
+
+    def loop_at(freq_hz: NDArray[np.float64]) -> NDArray[np.complex128]:
+        z = np.exp(2j * np.pi * freq_hz * model.period_s)
+        return controller.feedback_response(z) * model.response_at(z) * z ** (-extra)
+
+    def minus_t(f: float) -> float:
+        ell = loop_at(np.array([f]))[0]
+        return -float(abs(ell / (1.0 + ell)))
+
+    freq = np.geomspace(1e-3, 0.5 / model.period_s, 2000)  # from 1 mHz: integral action is at 0
+    loop = loop_at(freq)
+    on_grid = np.abs(loop / (1.0 + loop))
+    i = int(np.argmax(on_grid))
+    mt, mt_hz = float(on_grid[i]), float(freq[i])
+    bounds = (freq[max(i - 1, 0)], freq[min(i + 1, freq.size - 1)])
+    res = optimize.minimize_scalar(
+        minus_t, bounds=bounds, method="bounded", options={"xatol": 1e-9}
+    )
+    if res.success and -res.fun > mt:
+        mt, mt_hz = float(-res.fun), float(res.x)
+    margins = loop_analysis(*controller.feedback_tf(), model, extra)
+    dist = simulate_disturbance(
+        made.controller, model, disturbance_v=disturbance_v, extra_delay_ticks=extra
+    )
+    table = []  # per pole: damping and natural frequency of its s = ln(z)/Ts
+    for re, im in made.entry["closed_loop_poles"]:
+        damping, freq_hz = pole_damping(complex(re, im), model.period_s)
+        table.append({"re": re, "im": im, "damping": damping, "freq_hz": freq_hz})
+    ms, ms_hz = margins["sensitivity_peak"], margins["sensitivity_peak_hz"]
+    mt_hz = 0.0 if i == 0 else mt_hz  # Mt at 0 Hz: integral action
+    return MotorAnalysis(freq, loop, ms, ms_hz, mt, mt_hz, dist, table, motor)
 
 
 def nk_note(nk: Mapping[str, int], loop_delay_ticks: int) -> str | None:
@@ -195,13 +306,14 @@ def check_models(
 @dataclass(frozen=True)
 class Designs:
     """The designs of the motors asked for, per motor (model, design, simulated step in the
-    bound's settling band), with :func:`loop_delay_for`'s loop delay (None when the models'
-    delays differ) and note."""
+    bound's settling band, loop analysis), with :func:`loop_delay_for`'s loop delay (None when
+    the models' delays differ) and note."""
 
     request: DesignRequest
     models: dict[str, ArxModel]
     motors: dict[str, MotorDesign]
     steps: dict[str, StepAnalysis]
+    analyses: dict[str, MotorAnalysis]
     loop_delay_ticks: int | None
     loop_delay_note: str | None
 
@@ -211,15 +323,23 @@ class Designs:
 
 
 def design_models(
-    request: DesignRequest, models: ModelFile | dict[str, ArxModel], motors: tuple[str, ...]
+    request: DesignRequest,
+    models: ModelFile | dict[str, ArxModel],
+    motors: tuple[str, ...],
+    *,
+    disturbance_v: float = DEFAULT_DISTURBANCE_V,
 ) -> Designs:
-    """Design every motor of ``motors`` on its model, with the simulated step and its bound."""
+    """Design every motor of ``motors`` on its model, with the simulated step and its bound, and
+    analyse its loop (:func:`analyse_motor`, a load step of ``disturbance_v`` V); the analysis
+    keys go into each motor's ``design --json`` entry, and so into the controller file's
+    ``analysis`` (the loop's Ms as it runs)."""
     request.check()
     by_motor = check_models(models, motors)
     recorded = models.loop_delay_ticks if isinstance(models, ModelFile) else None
     loop_delay, note = loop_delay_for(request, by_motor, recorded, strict=False)
     designs: dict[str, MotorDesign] = {}
     steps: dict[str, StepAnalysis] = {}
+    analyses: dict[str, MotorAnalysis] = {}
     for m, model in by_motor.items():
         made = design_motor(request, model)
         step = simulate_step(made.controller, model, step_rad_s=request.step_rad_s,
@@ -235,9 +355,11 @@ def design_models(
         made.entry["settling_bound_loop_delay_ticks"] = (
             bound.loop_delay_ticks if loop_delay is None else loop_delay
         )
+        analyses[m] = analyse_motor(made, model, request, disturbance_v, m)
+        made.entry.update(analyses[m].entry())
         designs[m] = made
         steps[m] = step
-    return Designs(request, by_motor, designs, steps, loop_delay, note)
+    return Designs(request, by_motor, designs, steps, analyses, loop_delay, note)
 
 
 def controller_file(

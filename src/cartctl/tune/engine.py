@@ -134,14 +134,12 @@ def save_setting(method: str, settings: Mapping[str, float], model_path: str | P
     """Write a setting's controller file to ``out`` as ``cartctl design --out`` would (with the
     loop's refined analysis); returns the design command the file records."""
     from cartctl.design.controllerfile import save_controller
-    from cartctl.design.loop_report import analyse_designs
     from cartctl.design.make import controller_file, design_models
 
     request = design_request(method, settings, extra_delay_ticks, fixed)
     options = request.to_argv(str(model_path), always=request_axes(method))
     models = load_models(model_path)
     designs = design_models(request, models, ("a", "b"))
-    analyse_designs(designs)  # the file's analysis: the loop's Ms
     command = "cartctl " + shlex.join(["design", *options, "--out", str(out)])
     save_controller(controller_file(designs, model_path, command=command,
                                     period_s=models.period_s), out)  # fmt: skip

@@ -214,7 +214,6 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.cli.jsonout import dumps
     from cartctl.data.modelfile import load_models
     from cartctl.design.controllerfile import save_controller
-    from cartctl.design.loop_report import analyse_designs
     from cartctl.design.make import check_models, controller_file, design_models, loop_delay_for
 
     models = load_models(args.model)
@@ -226,10 +225,9 @@ def run(args: argparse.Namespace) -> int:
             loop_delay_for(request, {m: models.motor(m) for m in names}, models.loop_delay_ticks)
         except InputError as exc:
             raise InputError(str(exc) if given else f"--out: {exc}") from None
-    designs = design_models(request, models, names)
+    designs = design_models(request, models, names, disturbance_v=disturbance_v)
     if designs.loop_delay_note is not None:
         print(f"cartctl design: note: {designs.loop_delay_note}", file=sys.stderr)
-    analyses = analyse_designs(designs, disturbance_v=disturbance_v)
     motors_json = designs.entries()
     for e in motors_json.values():
         for warning in e["warnings"]:
@@ -243,7 +241,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from cartctl.design.loop_report import write_report
 
-        write_report(args.report, designs, analyses)
+        write_report(args.report, designs)
     if args.json:
         print(dumps({"method": args.method, "model": str(args.model), "Ts": models.period_s,
                      "loop_delay_ticks": designs.loop_delay_ticks,
