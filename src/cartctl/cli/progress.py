@@ -8,21 +8,14 @@ from typing import TextIO
 
 
 class ProgressBar:
-    """Draws ``label [#####-----]  42 %  630/1500`` on one line of ``stream`` (stderr), at most 10
-    times a second; by default only when that is a terminal, so logs and pipes stay clean."""
+    """Draws ``label [#####-----]  42 %  630/1500`` on one line of stderr, at most 10 times a
+    second, and only when that is a terminal, so logs and pipes stay clean."""
 
-    def __init__(
-        self,
-        total: int,
-        label: str = "",
-        *,
-        stream: TextIO | None = None,
-        enabled: bool | None = None,
-    ) -> None:
+    def __init__(self, total: int, label: str = "") -> None:
         self.total = max(1, total)
         self.label = label
-        self.stream = stream if stream is not None else sys.stderr
-        self.enabled = self.stream.isatty() if enabled is None else enabled
+        self.stream: TextIO = sys.stderr
+        self.enabled = self.stream.isatty()
         self._last_draw = 0.0
         self._drawn = False
 

@@ -80,9 +80,7 @@ def run(args: argparse.Namespace) -> int:
     options.check_output_file(args.out, "--out")  # before anything is driven
     options.check_output_file(meta_path(args.out), "--out")
     volts = make_signal(args.signal, args.amplitude, cycles=args.cycles, duration_s=args.duration)
-    zeros = np.zeros_like(volts)
-    ua = volts if args.motor in ("a", "both") else zeros
-    ub = volts if args.motor in ("b", "both") else zeros
+    ua, ub = (volts if args.motor in (m, "both") else np.zeros_like(volts) for m in "ab")
     plant, description = make_plant(
         args.plant,
         model_path=args.model,
