@@ -1,17 +1,20 @@
 """The project's Rerun layout: entity paths (docs/architecture.md), series styles, blueprints.
 
 Shared by the run's sink and ``cartctl review``: per motor, speed with reference and estimate
-above the voltage; the loop's timing beneath.
+above the voltage; the loop's timing beneath. ``cartctl monitor``'s channels are series under
+``gpio/<label>``, the cart's messages under ``cart/``; review lays them out from their labels.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+import re
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Final, Literal
 
 import rerun.blueprint as rrb
 
+from cartctl.data.columns import label_key
 from cartctl.data.trace import MOTORS
 
 TIME_COLUMN: Final[str] = "time_s"
@@ -140,10 +143,96 @@ def span_of(extremes: Mapping[str, Range], paths: Iterable[str], **kwargs: float
     return padded_range(min(lo for lo, _ in seen), max(hi for _, hi in seen), **kwargs)
 
 
-def data_ranges(extremes: dict[str, Range], motors: Sequence[str]) -> dict[str, Range | None]:
+def data_ranges(extremes: Mapping[str, Range], motors: Sequence[str]) -> dict[str, Range | None]:
     """The plots' ranges from entity path → (min, max) recorded, with 10 % to spare."""
     speeds = [kind for kind in _MOTOR_SERIES if kind != "voltage"]
     ranges = {f"motor/{m}": span_of(extremes, [f"motor/{m}/{s}" for s in speeds]) for m in motors}
     ranges |= {f"motor/{m}/voltage": span_of(extremes, [f"motor/{m}/voltage"]) for m in motors}
     ranges["loop"] = span_of(extremes, [f"loop/{name}" for name in _LOOP_SERIES], min_span=10.0)
     return ranges
+
+
+GPIO_ROOT = "gpio"
+CART_ROOT = "cart"
+
+
+def channels_blueprint(float_labels: Sequence[str], int_labels: Sequence[str]) -> rrb.Blueprint:
+    """The monitor's layout: float channels above int channels, the cart's messages beneath."""
+    floats = _channels_view("Float channels", float_labels)
+    ints = _channels_view("Int channels", int_labels)
+    texts = rrb.TextLogView(name="Cart messages", origin=f"/{CART_ROOT}")
+    return collapsed(rrb.Vertical(floats, ints, texts, row_shares=[3, 2, 1]))
+
+
+def _channels_view(
+    name: str, labels: Sequence[str], ranged: Range | None = None
+) -> rrb.TimeSeriesView:
+    return plot(name, GPIO_ROOT, ranged, [f"$origin/{label}" for label in labels])
+
+
+_SPEED_KINDS = ("reference", "speed", "estimate", "true_speed")
+# a monitor label that names a motor's signal (``speedA`` too) → the run's entity of that signal
+_RUN_ENTITY = {label_key(f"{kind}_{m}"): f"motor/{m}/{kind}"
+               for m in ("a", "b") for kind in (*_SPEED_KINDS, "voltage")}  # fmt: skip
+
+
+def _natural(label: str) -> list[object]:
+    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", label)]
+
+
+def review_styles(paths: Iterable[str]) -> dict[str, SeriesStyle]:
+    """Entity path → the run's style for the paths whose labels name a motor's signals
+    (``gpio/speed_a`` drawn as ``motor/a/speed``), in label order."""
+    gpio = sorted({path for path in paths if path.startswith(f"{GPIO_ROOT}/")})
+    run = {path: _RUN_ENTITY.get(label_key(path.removeprefix(f"{GPIO_ROOT}/"))) for path in gpio}
+    return {path: STYLES[entity] for path, entity in run.items() if entity is not None}
+
+
+def review_blueprint(
+    extremes: Mapping[str, Range], whole: Collection[str], paths: Collection[str]
+) -> rrb.Blueprint:
+    """The layout ``cartctl review`` gives a recording of entity ``paths``, with y ranges from
+    entity path → (min, max): a run's (``motor/...``); a monitor's built from its labels
+    (``gpio/...``); the run's plain layout otherwise.
+
+    A monitor's labels that name a motor's signals (``speedA`` too) get the run's arrangement;
+    the other channels follow, fractions in one plot and the ``whole``-number paths in another;
+    then the cart's messages when the recording has texts.
+    """
+    if motors := sorted(motors_in(paths)):
+        return blueprint(motors, data_ranges(extremes, motors))
+    labels = sorted((p.removeprefix(f"{GPIO_ROOT}/") for p in extremes
+                     if p.startswith(f"{GPIO_ROOT}/")), key=_natural)  # fmt: skip
+    if not labels:
+        return blueprint()
+    run = {label: _RUN_ENTITY.get(label_key(label), "") for label in labels}
+
+    def view(name: str, chosen: list[str], margin: float = 0.1) -> rrb.TimeSeriesView:
+        entities = [f"{GPIO_ROOT}/{label}" for label in chosen]
+        return _channels_view(name, chosen, span_of(extremes, entities, margin=margin))
+
+    columns = []
+    for m in ("a", "b"):
+        speeds = [
+            label for label in labels if run[label].removeprefix(f"motor/{m}/") in _SPEED_KINDS
+        ]
+        voltages = [label for label in labels if run[label] == f"motor/{m}/voltage"]
+        plots = []
+        if speeds:
+            plots.append(view(f"Motor {m.upper()}: speed (rad/s)", speeds, SPEED_MARGIN))
+        if voltages:
+            plots.append(view(f"Motor {m.upper()}: voltage (V)", voltages))
+        if plots:
+            columns.append(rrb.Vertical(*plots, row_shares=[3, 2][: len(plots)]))
+    rows: list[tuple[float, rrb.Container | rrb.View]] = []  # (share, view)
+    if columns:
+        rows.append((6, rrb.Horizontal(*columns)))
+    rest = [label for label in labels if not run[label]]
+    fractions = [label for label in rest if f"{GPIO_ROOT}/{label}" not in whole]
+    counts = [label for label in rest if f"{GPIO_ROOT}/{label}" in whole]
+    for name, chosen, share in (("Channels", fractions, 2), ("Whole-number channels", counts, 1.5)):
+        if chosen:
+            rows.append((share, view(name, chosen)))
+    if any(p.startswith(f"{CART_ROOT}/") for p in paths):
+        rows.append((1.5, rrb.TextLogView(name="Cart messages", origin=f"/{CART_ROOT}")))
+    return collapsed(rrb.Vertical(*(v for _, v in rows), row_shares=[s for s, _ in rows]))

@@ -150,7 +150,7 @@ def _restyle(chunks: Sequence[Chunk], rec: rr.RecordingStream) -> None:
     """A monitor's motor signals drawn in the run's colours (the review's stream only)."""
     import rerun as rr
 
-    from cartctl.sinks.channels_rerun import review_styles
+    from cartctl.sinks.rerun_layout import review_styles
 
     for entity, style in review_styles(c.entity_path.lstrip("/") for c in chunks).items():
         rec.log(entity, rr.SeriesLines(colors=[style.color], widths=[style.width]), static=True)
@@ -159,18 +159,10 @@ def _restyle(chunks: Sequence[Chunk], rec: rr.RecordingStream) -> None:
 def layout(chunks: Sequence[Chunk]) -> rrb.Blueprint:
     """The layout of a recording: the run's (``motor/...``), the monitor's built from its labels
     (``gpio/...``), each with y ranges from the values; the run's plain layout otherwise."""
-    from cartctl.sinks.rerun_layout import blueprint, data_ranges, motors_in
+    from cartctl.sinks.rerun_layout import review_blueprint
 
     extremes, whole = scalar_stats(chunks)
-    paths = {chunk.entity_path.lstrip("/") for chunk in chunks}
-    if motors := sorted(motors_in(paths)):
-        return blueprint(motors, data_ranges(extremes, motors))
-    if any(p.startswith("gpio/") for p in extremes):
-        from cartctl.sinks.channels_rerun import CART_ROOT, review_blueprint
-
-        texts = any(p.startswith(f"{CART_ROOT}/") for p in paths)
-        return review_blueprint(extremes, whole, texts=texts)
-    return blueprint()
+    return review_blueprint(extremes, whole, {chunk.entity_path.lstrip("/") for chunk in chunks})
 
 
 def new_stream(entry: StoreEntry) -> rr.RecordingStream:
