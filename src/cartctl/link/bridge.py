@@ -5,7 +5,7 @@ from a measurement to the echo of the command that answered it (:class:`EchoDela
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 from typing import Any
 
 from cartctl.link.dialect import Gpio, check_gpio_counts
@@ -102,16 +102,7 @@ class CartSample:
 
     def to_channels(self) -> tuple[tuple[float, ...], tuple[int, ...]]:
         """The 8 floats and 4 ints of the GPIO frame."""
-        floats = (
-            self.speed_a_rad_s,
-            self.speed_b_rad_s,
-            self.applied_a_v,
-            self.applied_b_v,
-            self.position_a_rad,
-            self.position_b_rad,
-            self.bridge_version,
-            0.0,
-        )
+        floats = (*astuple(self)[1:7], self.bridge_version, 0.0)  # the fields' order, as sent
         ints = (self.echo_seq, self.cart_tick, self.status, self.host_frames_lost)
         return tuple(float(v) for v in floats), ints
 

@@ -20,6 +20,7 @@ from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import PlantError
 from cartctl.link.cart_link import DEFAULT_SILENCE_TIMEOUT_S, CartLink, UnsupportedCartError
 from cartctl.link.dialect import Encoder, Gpio
+from cartctl.measures.metrics import spread
 from cartctl.plants.base import Measurement
 from cartctl.stopping import held
 
@@ -264,13 +265,6 @@ class SerialCart:
         seen = bridge.EchoDelays.of(self.echo_delays)
         delays = list(self.echo_delays.elements())
         lost, sent = self.host_frames_lost, self.frames_sent
-        latency_us = 1e6 * np.array(self.reply_latency_s)
-        p50, p99, top = (
-            (float(v) for v in (*np.percentile(latency_us, [50.0, 99.0]), latency_us.max()))
-            if latency_us.size
-            else (None, None, None)
-        )  # as the executor's timing figures
-
         return {
             "loop_delay_ticks": self.loop_delay_ticks,
             "link": {
@@ -288,7 +282,7 @@ class SerialCart:
                 "host_frames_sent": sent,
                 "host_frames_lost": lost,
                 "host_frames_lost_percent": 100.0 * lost / sent if sent else 0.0,
-                "reply_latency_us": {"p50": p50, "p99": p99, "max": top},
+                "reply_latency_us": spread(1e6 * np.array(self.reply_latency_s)),
                 "cart_timing": self._cart_timing(),
             },
         }

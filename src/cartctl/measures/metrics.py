@@ -41,3 +41,13 @@ def finite_or_none(value: float | None) -> float | None:
     if value is None or not math.isfinite(value):
         return None
     return float(value)
+
+
+def spread(values: ArrayLike) -> dict[str, float | None]:
+    """The median, 99th percentile and largest of ``values`` (timing figures, µs) as ``p50``,
+    ``p99`` and ``max``; None for each when there are no values."""
+    x = np.asarray(values, dtype=np.float64)
+    if not x.size:
+        return {"p50": None, "p99": None, "max": None}
+    p50, p99 = np.percentile(x, [50.0, 99.0])
+    return {"p50": float(p50), "p99": float(p99), "max": float(x.max())}

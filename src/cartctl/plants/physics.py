@@ -27,6 +27,7 @@ from scipy.linalg import expm
 from cartctl.errors import InputError
 from cartctl.plants.base import Measurement
 from cartctl.plants.physics_params import CartParams, MotorParams, preset
+from cartctl.plants.sim import saturate
 
 
 @functools.lru_cache(maxsize=64)
@@ -268,11 +269,8 @@ class PhysicsPlant:
     def condition_voltage(self, voltage_v: float) -> float:
         """What the firmware makes of a command (V): 0 if non-finite, saturated, rounded to the
         nearest PWM step (ties to even: 10 V is 212.5 steps, giving 212)."""
-        v = float(voltage_v)
-        if not math.isfinite(v):
-            return 0.0
         limit, step, top = self._pwm
-        return min(max(round(min(max(v, -limit), limit) / step), -top), top) * step
+        return min(max(round(saturate(float(voltage_v), limit) / step), -top), top) * step
 
     @property
     def position_rad(self) -> tuple[float, float]:

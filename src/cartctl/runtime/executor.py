@@ -30,6 +30,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from cartctl.errors import InputError
+from cartctl.measures.metrics import spread
 from cartctl.plants.base import ClockedPlant
 from cartctl.stopping import held
 
@@ -144,15 +145,10 @@ class TimingStats:
                 f"period_error_us and compute_us must be 1-D and equally long, got shapes "
                 f"{pe.shape} and {cu.shape}"
             )
-
-        def summary(x: np.ndarray) -> list[float]:
-            if not x.size:
-                return [math.nan] * 3
-            return [float(v) for v in (*np.percentile(x, [50.0, 99.0]), x.max())]
-
+        figures = [math.nan if v is None else v for x in (pe, cu) for v in spread(x).values()]
         misses = tuple(int(k) for k in miss_ticks)
         head = (float(period_s), int(pe.size), float(duration_s), len(misses))
-        return cls(*head, int(skipped_deadlines), misses, *summary(pe), *summary(cu))
+        return cls(*head, int(skipped_deadlines), misses, *figures)
 
     def to_dict(self) -> dict[str, Any]:
         """The timing part of ``run --json`` (docs/architecture.md), plus skipped deadlines."""
