@@ -90,8 +90,8 @@ class RerunSink:
         self._recording: rr.RecordingStream | None = None
         self._block: NDArray[np.float64] | None = None
         self._filled = 0
-        self._full: deque[tuple[NDArray[np.float64], list[rr.TimeColumn]]] = deque()
-        self._next_signal = 0  # of the oldest full block: the entity idle() sends next
+        # (entity, values, timelines): the full blocks' sends, oldest first, one per idle()
+        self._sends: deque[tuple[str, NDArray[np.float64], list[rr.TimeColumn]]] = deque()
         self._rows: list[Sequence[float]] = []  # written, not yet in a block (see idle())
         self._time_index = 0
         self._tick_index: int | None = None
@@ -169,10 +169,10 @@ class RerunSink:
                 self._filled += 1
                 self.rows_written += 1
                 if self._filled == self.batch_ticks:
-                    self._full.append((block, self._indexes(block)))
+                    self._queue(block)
                     self._block = block = np.empty_like(block)
                     self._filled = 0
-        if self._full:
+        if self._sends:
             self._send_next()
 
     def close(self) -> None:
@@ -202,9 +202,8 @@ class RerunSink:
         if self._block is not None:
             self.idle()  # the rows kept, into the blocks
             if self._filled:
-                rest = self._block[: self._filled].copy()
-                self._full.append((rest, self._indexes(rest)))
-            while self._full:
+                self._queue(self._block[: self._filled].copy())
+            while self._sends:
                 self._send_next()
         self._block = None
 
@@ -234,35 +233,25 @@ class RerunSink:
         self._problem(problem, raise_now=True)
         return None
 
-    def _indexes(self, block: NDArray[np.float64]) -> list[rr.TimeColumn]:
+    def _queue(self, block: NDArray[np.float64]) -> None:
+        """A send for each entity of a block of rows, on the block's timelines."""
         if self._tick_index is not None:
             ticks = block[:, self._tick_index].astype(np.int64)
         else:  # the rows counted so far end with this block's
             ticks = np.arange(self.rows_written - len(block), self.rows_written, dtype=np.int64)
-        return timelines(block[:, self._time_index], ticks)
+        indexes = timelines(block[:, self._time_index], ticks)
+        self._sends.extend((entity, block[:, column], indexes) for column, entity in self._signals)
 
     def _send_next(self) -> None:
-        if not self._signals:  # no column has an entity path: nothing to send
-            self._full.clear()
-            return
-        block, indexes = self._full[0]
-        column, entity = self._signals[self._next_signal]
-        self._next_signal += 1
-        if self._next_signal == len(self._signals):
-            self._full.popleft()
-            self._next_signal = 0
+        entity, values, indexes = self._sends.popleft()
         rec = self._recording
         if rec is None:
             return
         try:
-            rec.send_columns(
-                entity,
-                indexes=indexes,
-                columns=rr.Scalars.columns(scalars=block[:, column]),
-                strict=True,
-            )
+            scalars = rr.Scalars.columns(scalars=values)
+            rec.send_columns(entity, indexes=indexes, columns=scalars, strict=True)
         except Exception as exc:
-            self._problem(f"sending {len(block)} rows of {entity} failed: {exc}")
+            self._problem(f"sending {len(values)} rows of {entity} failed: {exc}")
 
     def _problem(self, message: str, *, raise_now: bool = False) -> None:
         self._problem_count += 1
