@@ -111,7 +111,7 @@ def check_count(name: str, value: int, minimum: int) -> int:
 @dataclass(frozen=True)
 class TimingStats:
     """One run's timing (module docstring): ``duration_s`` from the first deadline to the end of
-    the last tick; period error and compute time (µs): median, 99th percentile, maximum (NaN: no
+    the last tick; period error and compute time (µs): median, 99th percentile, maximum (None: no
     tick ran)."""
 
     period_s: float
@@ -120,12 +120,12 @@ class TimingStats:
     misses: int
     skipped_deadlines: int
     miss_ticks: tuple[int, ...]
-    period_error_us_p50: float
-    period_error_us_p99: float
-    period_error_us_max: float
-    compute_us_p50: float
-    compute_us_p99: float
-    compute_us_max: float
+    period_error_us_p50: float | None
+    period_error_us_p99: float | None
+    period_error_us_max: float | None
+    compute_us_p50: float | None
+    compute_us_p99: float | None
+    compute_us_max: float | None
 
     @classmethod
     def from_samples(
@@ -145,7 +145,7 @@ class TimingStats:
                 f"period_error_us and compute_us must be 1-D and equally long, got shapes "
                 f"{pe.shape} and {cu.shape}"
             )
-        figures = [math.nan if v is None else v for x in (pe, cu) for v in spread(x).values()]
+        figures = (*spread(pe).values(), *spread(cu).values())
         misses = tuple(int(k) for k in miss_ticks)
         head = (float(period_s), int(pe.size), float(duration_s), len(misses))
         return cls(*head, int(skipped_deadlines), misses, *figures)
@@ -154,8 +154,7 @@ class TimingStats:
         """The timing part of ``run --json`` (docs/architecture.md), plus skipped deadlines."""
 
         def nums(name: str) -> dict[str, float | None]:
-            values = {k: getattr(self, f"{name}_{k}") for k in ("p50", "p99", "max")}
-            return {k: None if math.isnan(x) else x for k, x in values.items()}
+            return {k: getattr(self, f"{name}_{k}") for k in ("p50", "p99", "max")}
 
         return {
             "ticks": self.ticks,
