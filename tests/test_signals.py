@@ -82,6 +82,8 @@ def test_make_signal_every_name(name: str) -> None:
         (lambda: multisine(5.0, f_max_hz=60.0), "band"),
         (lambda: chirp(5.0, f_end_hz=80.0), "chirp frequencies"),
         (lambda: make_signal("sawtooth", 5.0), "unknown signal 'sawtooth'"),
+        (lambda: make_signal("chirp", 5.0, cycles=2), "--cycles does not apply to the chirp"),
+        (lambda: make_signal("multisine", 5.0, cycles=2, duration_s=3.0), "give one"),
     ],
 )
 def test_bad_requests_are_refused(call, message: str) -> None:

@@ -177,7 +177,11 @@ def make_signal(
         raise InputError(f"unknown signal '{name}'; choose one of {', '.join(SIGNALS)}")
     if cycles is not None and cycles < 1:
         raise InputError(f"--cycles must be at least 1, got {cycles}")
-    if cycles is not None and name in ("square", "multisine"):
+    if cycles is not None and name not in ("square", "multisine"):
+        raise InputError(f"--cycles does not apply to the {name} signal; use --duration")
+    if cycles is not None and duration_s is not None:
+        raise InputError(f"--cycles and --duration both set the {name} signal's length; give one")
+    if cycles is not None:
         cycle_s = 3.0 if name == "square" else 2.56
         if cycles * cycle_s > MAX_DURATION_S:
             raise InputError(
