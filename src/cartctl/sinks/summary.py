@@ -153,13 +153,11 @@ def format_summary(summary: Mapping[str, Any]) -> str:
     else:
         timing = f"deadline misses {summary['deadline_misses']}; {timing_text(summary)}"
     lines = [f"{summary['ticks']} ticks, {summary['duration_s']:.2f} s; {timing}"]
-    signal = summary.get("metrics_signal")
-    if signal in SIGNALS:
-        band = summary.get("settling_band") or {}
-        shown = f"  tracking on {SIGNALS[signal]}"
-        if (floor := band.get("floor_rad_s")) is not None:
-            shown += f", settling band max({band['fraction'] * 100:g} %, {floor:.3g} rad/s)"
-        lines.append(shown)
+    band = summary["settling_band"]
+    lines.append(
+        f"  tracking on {SIGNALS[summary['metrics_signal']]}, settling band "
+        f"max({band['fraction'] * 100:g} %, {band['floor_rad_s']:.3g} rad/s)"
+    )
     lines += smoothed_lines(summary)
     link = summary.get("link")
     delay, designed = summary.get("loop_delay_ticks"), summary.get("controller_loop_delay_ticks")

@@ -7,13 +7,7 @@ import argparse
 from pathlib import Path
 
 import cartctl.cli.commands.options as options
-from cartctl.cli.commands.review.recording import (
-    VULKAN_HINT,
-    open_in_viewer,
-    screenshot,
-    serve_web,
-    vulkan_available,
-)
+from cartctl.cli.commands.review.recording import VULKAN_HINT, serve_web, vulkan_available
 from cartctl.errors import InputError
 
 __all__ = ["add_parser", "run", "serve_web", "vulkan_available"]
@@ -84,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json or args.compare or args.map:
         raise InputError("--json, --compare and --map apply to CSV traces, not to .rrd recordings")
     options.check_outputs(args, files=("screenshot",))
+    from cartctl.cli.commands.review.recording import open_in_viewer, screenshot
     from cartctl.cli.commands.review.smoothed import recording_summary
 
     text, extra = recording_summary(path, args.model)
