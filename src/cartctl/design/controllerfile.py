@@ -18,6 +18,7 @@ import tomli_w
 
 from cartctl.cart import check_voltage_limit, encoder_quantum_rad_s
 from cartctl.choices import find_file
+from cartctl.data import tomlfile
 from cartctl.data.tomlfile import CONTROLLER_FORMAT, check_format, read_toml, require
 from cartctl.design.controller_ss import consistency_problems, feedback_gains, kalman_from_entry
 from cartctl.design.request import METHODS, check_loop_delay
@@ -263,12 +264,9 @@ def load_controller(
         str(require(model, "path", str, path, "[model]")), path, legacy=legacy
     )
     request = dict(doc.get("request", {}))
-    if legacy:
+    delay = tomlfile.read_loop_delay(doc, path)
+    if delay is None:  # a file from an older cartctl
         delay = _derived_loop_delay(path, model_path, request, motors)
-    else:
-        delay = require(doc, "loop_delay_ticks", int, path, "the top level")
-        if delay < 0:
-            raise DataFileError(path, f"loop_delay_ticks must be >= 0 ticks, got {delay}")
     site = doc.get("plant_kind", loop_site(delay))
     if site != loop_site(delay):
         raise DataFileError(
