@@ -114,7 +114,11 @@ def compare(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
     percent: dict[str, Any] = {}
     for path, *_, relative in _rows(a, b):
         if relative:
-            _put(percent, path, _percent(_get(a, path), _get(b, path)))
+            *parents, leaf = path
+            node = percent
+            for key in parents:
+                node = node.setdefault(key, {})
+            node[leaf] = _percent(_get(a, path), _get(b, path))
     return {
         "runs": [a, b],
         "a": a,
@@ -175,12 +179,6 @@ def _get(summary: Mapping[str, Any], path: tuple[str, ...]) -> Any:
             return None
         value = value.get(key)
     return value
-
-
-def _put(out: dict[str, Any], path: tuple[str, ...], value: Any) -> None:
-    for key in path[:-1]:
-        out = out.setdefault(key, {})
-    out[path[-1]] = value
 
 
 def _percent(a: Any, b: Any) -> float | None:

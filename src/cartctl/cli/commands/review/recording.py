@@ -66,12 +66,15 @@ def read_recording(path: Path) -> tuple[RrdReader, StoreEntry]:
 def stream(
     reader: RrdReader, entry: StoreEntry, rec: rr.RecordingStream, *, extra: Series | None = None
 ) -> dict[str, int]:
-    """Send the layout (:func:`layout`), every chunk of the recording, then ``extra`` (the
-    smoothed speed, styled) into ``rec``; waits until sent. Returns the last time on each
+    """Send the layout (:func:`layout`), every chunk of the recording (a monitor's motor signals
+    in the run's styles), then ``extra`` (the smoothed speed, styled) into ``rec``; waits until
+    sent. Returns the last time on each
     timeline (ns for durations, the index for sequences)."""
     import pyarrow as pa
     import pyarrow.compute as pc
+    import rerun as rr
 
+    from cartctl.sinks.rerun_layout import review_styles
     from cartctl.sinks.rerun_sink import send_series
 
     ends: dict[str, int] = {}
@@ -83,7 +86,9 @@ def stream(
                 ends[name] = max(ends.get(name, last), last)
     rec.send_blueprint(layout(chunks))
     rec.send_chunks(chunks)
-    _restyle(chunks, rec)
+    # a monitor's motor signals drawn in the run's colours
+    for entity, style in review_styles(c.entity_path.lstrip("/") for c in chunks).items():
+        rec.log(entity, rr.SeriesLines(colors=[style.color], widths=[style.width]), static=True)
     send_series(rec, extra or {})
     rec.flush(timeout_sec=LOAD_TIMEOUT_S)
     return ends
@@ -144,16 +149,6 @@ def scalar_stats(chunks: Iterable[Chunk]) -> tuple[dict[str, tuple[float, float]
         if np.any(values != np.round(values)):
             fractional.add(path)
     return extremes, set(extremes) - fractional
-
-
-def _restyle(chunks: Sequence[Chunk], rec: rr.RecordingStream) -> None:
-    """A monitor's motor signals drawn in the run's colours (the review's stream only)."""
-    import rerun as rr
-
-    from cartctl.sinks.rerun_layout import review_styles
-
-    for entity, style in review_styles(c.entity_path.lstrip("/") for c in chunks).items():
-        rec.log(entity, rr.SeriesLines(colors=[style.color], widths=[style.width]), static=True)
 
 
 def layout(chunks: Sequence[Chunk]) -> rrb.Blueprint:
