@@ -68,3 +68,13 @@ def test_a_controller_for_another_tick(capsys: pytest.CaptureFixture[str], workd
         line = _run_line(capsys, "--plant", plant, "--model", model, "--controller", "slow-pi.toml")
         assert "designed for Ts = 0.02 s" in line and "ticks every 0.01 s" in line
         assert _simulate_line("slow-pi.toml", plant=plant, model=model) == line
+
+
+@pytest.mark.parametrize("duration", ["-1", "0", "nan", "1e9"])
+def test_a_duration_out_of_range(
+    capsys: pytest.CaptureFixture[str], workdir: Path, duration: str
+) -> None:
+    # simulate once ran 2 ticks for -1 s and raised numpy's ValueError for NaN
+    line = _run_line(capsys, "--duration", duration)
+    assert line.startswith("--duration must be a positive number of seconds")
+    assert _simulate_line("controllers/pi.toml", duration_s=float(duration)) == line

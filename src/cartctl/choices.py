@@ -6,11 +6,25 @@ The parser is built from these before any command runs, so this module imports n
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from types import MappingProxyType
 
+from cartctl.errors import InputError
+
 MAX_DURATION_S = 24 * 3600.0
 """The longest signal, run or recording cartctl takes: 24 h (8.64 million ticks of 10 ms)."""
+
+
+def check_duration(seconds: float, option: str = "--duration") -> float:
+    """``seconds`` if in (0, :data:`MAX_DURATION_S`]; else one line naming ``option``."""
+    if not (math.isfinite(seconds) and 0.0 < seconds <= MAX_DURATION_S):
+        raise InputError(
+            f"{option} must be a positive number of seconds up to {MAX_DURATION_S:g} (24 h), "
+            f"got {seconds:g}"
+        )
+    return seconds
+
 
 MAX_TUNE_SETTINGS = 1_000
 """The largest ``cartctl tune --grid``: about a minute of work per core at 50 ms a setting."""

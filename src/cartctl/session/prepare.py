@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cartctl.cart import PERIOD_S
-from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
+from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S, check_duration
 from cartctl.errors import CartctlError, DataWarning, InputError
 
 if TYPE_CHECKING:
@@ -180,6 +180,7 @@ def prepare_run(
     from cartctl.plants.factory import make_plant as factory_make_plant
     from cartctl.reference import ReferenceSchedule
 
+    check_duration(duration_s)
     make_plant = make_plant or factory_make_plant
     build_controllers = build_controllers or build_from_file
     given = given if given is not None else str(controller)

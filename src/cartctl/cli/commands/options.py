@@ -19,10 +19,18 @@ from cartctl.choices import (
     FORMS,
     MAX_DURATION_S,
     SIGNALS,
+    check_duration,
 )
 from cartctl.errors import InputError
 
-__all__ = ["DEFAULT_CONNECT_TIMEOUT_S", "DEFAULT_MODEL", "FORMS", "MAX_DURATION_S", "SIGNALS"]
+__all__ = [
+    "DEFAULT_CONNECT_TIMEOUT_S",
+    "DEFAULT_MODEL",
+    "FORMS",
+    "MAX_DURATION_S",
+    "SIGNALS",
+    "check_duration",
+]
 
 MAX_JOBS = 64
 """The most worker processes ``--jobs`` accepts (CPU-bound work, some 100 MB per worker)."""
@@ -35,16 +43,6 @@ def _mapping_arg(text: str) -> dict[str, str]:
         return parse_mapping(text)
     except InputError as exc:  # argparse shows an ArgumentTypeError's own message
         raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def check_duration(seconds: float, option: str = "--duration") -> float:
-    """``seconds`` if in (0, :data:`MAX_DURATION_S`]; else one line naming ``option``."""
-    if not (math.isfinite(seconds) and 0.0 < seconds <= MAX_DURATION_S):
-        raise InputError(
-            f"{option} must be a positive number of seconds up to {MAX_DURATION_S:g} (24 h), "
-            f"got {seconds:g}"
-        )
-    return seconds
 
 
 def check_jobs(jobs: int | None, option: str = "--jobs") -> int | None:
