@@ -176,7 +176,6 @@ class OnboardFirmware(HeldChannels):
         controllers: Mapping[str, Controller],
         *,
         reference: str | None = None,
-        period_s: float = PERIOD_S,
     ) -> None:
         unknown = sorted(set(controllers) - set(MOTORS))
         if unknown:
@@ -185,7 +184,7 @@ class OnboardFirmware(HeldChannels):
         self._schedules: dict[str, ReferenceSchedule] = {}
         if reference is not None:  # else the held input channels
             self._schedules = {
-                m: ReferenceSchedule(reference, MAX_TICKS, float(period_s), m) for m in controllers
+                m: ReferenceSchedule(reference, MAX_TICKS, motor=m) for m in controllers
             }
         self.reset()
 

@@ -65,7 +65,6 @@ class VirtualCart:
         noise_std_rad_s: float = 0.0,
         seed: int | None = None,
         faults: CartFaults | None = None,
-        period_s: float = PERIOD_S,
         firmware: OnboardFirmware | None = None,
     ) -> None:
         self.faults = faults or CartFaults()
@@ -76,7 +75,7 @@ class VirtualCart:
             actuation_ms=self.faults.actuation_ms,
             reversed_motors=self.faults.reversed_motors,
         )
-        self.period_s = float(period_s)
+        self.period_s = PERIOD_S
         self.firmware = firmware or BridgeFirmware()
         self.receive_schedule = self.faults.receive if firmware is None else "microos"
         self.bridge_version = self.faults.bridge if firmware is None else 0  # 0: not the bridge
