@@ -20,7 +20,7 @@ from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import PlantError
 from cartctl.link.cart_link import DEFAULT_SILENCE_TIMEOUT_S, CartLink, UnsupportedCartError
 from cartctl.link.dialect import Encoder, Gpio
-from cartctl.measures.metrics import spread
+from cartctl.measures.metrics import percentiles
 from cartctl.plants.base import Measurement
 from cartctl.stopping import held
 
@@ -282,7 +282,7 @@ class SerialCart:
                 "host_frames_sent": sent,
                 "host_frames_lost": lost,
                 "host_frames_lost_percent": 100.0 * lost / sent if sent else 0.0,
-                "reply_latency_us": spread(1e6 * np.array(self.reply_latency_s)),
+                "reply_latency_us": percentiles(1e6 * np.array(self.reply_latency_s)),
                 "cart_timing": self._cart_timing(),
             },
         }

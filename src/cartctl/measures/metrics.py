@@ -43,7 +43,7 @@ def finite_or_none(value: float | None) -> float | None:
     return float(value)
 
 
-def spread(values: ArrayLike) -> dict[str, float | None]:
+def percentiles(values: ArrayLike) -> dict[str, float | None]:
     """The median, 99th percentile and largest of ``values`` (timing figures, µs) as ``p50``,
     ``p99`` and ``max``; None for each when there are no values."""
     x = np.asarray(values, dtype=np.float64)

@@ -30,7 +30,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from cartctl.errors import InputError
-from cartctl.measures.metrics import spread
+from cartctl.measures.metrics import percentiles
 from cartctl.plants.base import ClockedPlant
 from cartctl.stopping import held
 
@@ -145,7 +145,7 @@ class TimingStats:
                 f"period_error_us and compute_us must be 1-D and equally long, got shapes "
                 f"{pe.shape} and {cu.shape}"
             )
-        figures = (*spread(pe).values(), *spread(cu).values())
+        figures = (*percentiles(pe).values(), *percentiles(cu).values())
         misses = tuple(int(k) for k in miss_ticks)
         head = (float(period_s), int(pe.size), float(duration_s), len(misses))
         return cls(*head, int(skipped_deadlines), misses, *figures)

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from cartctl.cart import encoder_quantum_rad_s
 from cartctl.errors import InputError, OutputError
 from cartctl.link.bridge import HOST_LOSS_WARN_PERCENT, EchoDelays
-from cartctl.measures.metrics import finite_or_none, spread
+from cartctl.measures.metrics import finite_or_none, percentiles
 from cartctl.measures.numfmt import column_decimals, format_column, format_fixed, render_table
 from cartctl.measures.stepinfo import SETTLING_FRACTION, first_step, step_info
 
@@ -52,8 +52,8 @@ def motor_metrics(
 def timing_metrics(period_error_us: Array, compute_us: Array, period_s: float) -> dict[str, Any]:
     """Percentiles of the period error and compute time (µs), and the deadline misses."""
     misses = int(np.count_nonzero(period_error_us + compute_us > period_s * 1e6))
-    return {"deadline_misses": misses, "period_error_us": spread(period_error_us),
-            "compute_us": spread(compute_us)}  # fmt: skip
+    return {"deadline_misses": misses, "period_error_us": percentiles(period_error_us),
+            "compute_us": percentiles(compute_us)}  # fmt: skip
 
 
 def metrics_signal(columns: Columns) -> str:
