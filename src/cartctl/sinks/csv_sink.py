@@ -68,8 +68,8 @@ class CsvSink:
         return data
 
     def _flush(self) -> None:
-        """Write the text formatted (``rows`` whole rows, 0: the header) in full, or cut the file
-        back to its last whole row and raise :class:`OutputError`."""
+        """Write the rows formatted (or the header) in full, or cut the file back to its last
+        whole row and raise :class:`OutputError`."""
         self._format()
         file, rows = self._file, self._formatted
         data = self._take_text()
