@@ -10,14 +10,14 @@ import math
 from pathlib import Path
 from types import MappingProxyType
 
-from cartctl.errors import InputError
-
 MAX_DURATION_S = 24 * 3600.0
 """The longest signal, run or recording cartctl takes: 24 h (8.64 million ticks of 10 ms)."""
 
 
 def check_duration(seconds: float, option: str = "--duration") -> float:
     """``seconds`` if in (0, :data:`MAX_DURATION_S`]; else one line naming ``option``."""
+    from cartctl.errors import InputError  # here: setup.py reads this file without the package
+
     if not (math.isfinite(seconds) and 0.0 < seconds <= MAX_DURATION_S):
         raise InputError(
             f"{option} must be a positive number of seconds up to {MAX_DURATION_S:g} (24 h), "
