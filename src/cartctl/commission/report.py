@@ -54,13 +54,10 @@ class Report:
 
 def plot_lines(path: Path, title: str, panels: Sequence[tuple[str, Mapping[str, Line]]]) -> None:
     """Stacked panels of labelled lines: ``panels`` = [(y label, {legend: (x, y)}), ...]."""
-    import matplotlib
+    from matplotlib.figure import Figure  # no pyplot: no global state, the Agg canvas on saving
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(8, 2.6 * len(panels)),
-                             squeeze=False)  # fmt: skip
+    fig = Figure(figsize=(8, 2.6 * len(panels)))
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)
     for ax, (ylabel, lines) in zip(axes[:, 0], panels, strict=True):
         for label, (x, y) in lines.items():
             ax.plot(x, y, label=label, lw=1.2)
@@ -71,7 +68,6 @@ def plot_lines(path: Path, title: str, panels: Sequence[tuple[str, Mapping[str, 
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 def _table(rows: Sequence[Sequence[tuple[str, str]]]) -> str:
