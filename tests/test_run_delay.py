@@ -54,6 +54,24 @@ def test_serial_controller_on_a_simulator_stops_before_driving(
     assert _nothing_written(workdir)
 
 
+def test_from_a_folder_without_controllers_the_refusal_names_the_shipped_file_that_fits(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Outside a checkout the shipped names resolve to the package's copies, and so does the
+    file the refusal offers (it named none and advised a redesign)."""
+    monkeypatch.chdir(tmp_path)
+    code, out, err = _run(
+        capsys, "--fast", "--controller", "controllers/serial-pi.toml", "--rerun", "off"
+    )
+    assert code == 2
+    assert out == ""
+    expected = MISMATCH.format(
+        given="serial-pi.toml", designed=3, plant="sim", delay=1, fit="pi.toml"
+    )
+    assert err.strip().splitlines() == [expected]
+    assert _nothing_written(tmp_path)
+
+
 @pytest.mark.filterwarnings("always::cartctl.errors.DataWarning")  # the CLI prints it
 def test_allow_delay_mismatch_runs_with_one_warning(
     capsys: pytest.CaptureFixture[str], workdir: Path

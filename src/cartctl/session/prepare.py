@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cartctl.cart import PERIOD_S
-from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S, check_duration
+from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S, check_duration, find_file
 from cartctl.errors import CartctlError, DataWarning, InputError
 
 if TYPE_CHECKING:
@@ -96,9 +96,10 @@ def _fitting_controller(controller: ControllerFile, given: str, delay: int) -> s
         shipped, key=lambda n: n.removeprefix("serial-").removesuffix(".toml") != controller.method
     ):
         for path in (folder / name for folder in folders):
-            if path.is_file() and path.resolve() != Path(given).resolve():
+            found = find_file(path)  # a shipped name: also the package's copy
+            if found.is_file() and found.resolve() != find_file(given).resolve():
                 with suppress(CartctlError):
-                    if load_controller(path).loop_delay_ticks == delay:
+                    if load_controller(found).loop_delay_ticks == delay:
                         return str(path)
     return None
 
