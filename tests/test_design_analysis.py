@@ -173,6 +173,44 @@ def test_pi_on_its_estimate_is_analysed_with_the_estimator_in_the_loop(
         assert abs(e["sensitivity_peak"] - np.max(np.abs(bare(z)))) > 1e-3
 
 
+@pytest.mark.parametrize("extra", [0, 2])
+def test_pi_on_its_estimate_reports_the_margins_of_that_loop(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, extra: int
+) -> None:
+    """The margins line of ``--estimator kalman`` is of the loop as it runs, as Ms is: the PI on
+    the estimate, built here from the file's estimator (corrected first, then the PI on C·x̂,
+    then the prediction with the command), python-control's margins on it."""
+    path = tmp_path / "pi-kalman.toml"
+    argv = [str(ROOT / "models" / "ground.toml"), "--method", "pi", "--estimator", "kalman",
+            "--extra-delay", str(extra)]  # fmt: skip
+    assert main(["design", *argv, "--out", str(path)]) == 0
+    capsys.readouterr()
+    doc = _design(capsys, *argv)
+    shipped = load_controller(path)
+    for motor, e in doc["motors"].items():
+        est = {k: np.asarray(v, dtype=float) for k, v in shipped.motors[motor]["estimator"].items()
+               if k in ("A", "B", "C", "L")}  # fmt: skip
+        a, b, c, gain = est["A"], est["B"], est["C"], est["L"]
+        g, q = e["kp"] + e["ki"] * TS, e["ki"] * TS  # u = g·e + I[k−1], I[k] = I[k−1] + q·e
+        m = np.eye(b.size) - np.outer(gain, c)  # x̂c = m·x̂p + L·y; error e = −C·x̂c (r = 0)
+        ce, de = -c @ m, -(c @ gain)
+        ac = np.block(
+            [[a @ m + np.outer(b, g * ce), b[:, None]], [q * ce[None, :], np.ones((1, 1))]]
+        )
+        bc = np.r_[a @ gain + b * g * de, q * de][:, None]
+        feedback = control.ss(ac, bc, -np.r_[g * ce, 1.0][None, :], [[-g * de]], TS)  # −U/Y
+        model = load_models(ROOT / "models" / "ground.toml").motor(motor)
+        delay = control.tf([1.0], [1.0] + [0.0] * extra, TS)
+        loop = control.tf(feedback) * control.tf(model.num(), model.den(), TS) * delay
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            gm, pm, _, wc = control.margin(loop)
+        assert e["phase_margin_deg"] == pytest.approx(pm, abs=1e-6)
+        assert e["crossover_hz"] == pytest.approx(wc / (2 * np.pi), rel=1e-6)
+        assert e["gain_margin_db"] == pytest.approx(20 * np.log10(gm), abs=1e-6)
+        assert abs(e["phase_margin_deg"] - e["target_phase_margin_deg"]) > 1.0  # not the bare PI's
+
+
 @pytest.mark.parametrize(("name", "extra"), [("pi", 0), ("serial-pi", 2)])
 def test_pi_rejects_a_load_step_as_python_control_simulates_it(
     capsys: pytest.CaptureFixture[str], name: str, extra: int

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from cartctl.design.analysis import settling_bound
+from cartctl.design.controller_ss import controller_state_space
 from cartctl.design.make import Designs, MotorAnalysis
 from cartctl.measures.numfmt import format_column, format_fixed
 
@@ -45,7 +46,9 @@ def design_figure(motor: str, designs: Designs) -> Figure:
     axes = fig.subplots(2, 2, sharex="col")
     freq = np.logspace(-1, np.log10(0.5 / model.period_s * 0.999), 600)
     z = np.exp(2j * np.pi * freq * model.period_s)
-    c = np.polyval(entry["controller_num"], z) / np.polyval(entry["controller_den"], z)
+    c = controller_state_space(  # the whole controller: a PI's estimator too
+        request.method, designs.motors[motor].file_entry, model.period_s
+    ).feedback_response(z)
     loop = c * model.response_at(z) * z ** (-extra_delay_ticks)
     mag_ax, ph_ax = axes[0, 0], axes[1, 0]
     mag_ax.semilogx(freq, 20 * np.log10(np.abs(loop)), color="tab:blue")

@@ -80,6 +80,10 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
             kalman = design_kalman(model, extra_delay_ticks=extra, **noise)
             entry["estimator_poles"] = [[p.real, p.imag] for p in kalman.poles()]
             file_entry["estimator"] = _kalman_entry(kalman)
+            # the margins of the loop as it runs (the PI on its estimate), not the bare PI's
+            whole = controller_state_space("pi", file_entry, model.period_s).feedback_tf()
+            margins = loop_analysis(*whole, model, extra)
+            entry |= {k: margins[k] for k in ("phase_margin_deg", "gain_margin_db", "crossover_hz")}
     else:
         poles = parse_poles(request.poles) if request.poles else None
         spec = (None, None) if poles else (request.settling_time_s, request.overshoot_percent)
