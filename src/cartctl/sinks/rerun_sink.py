@@ -1,9 +1,10 @@
 """The Rerun sink: the loop's rows as a ``.rrd`` recording and/or a live viewer (entity paths of
-docs/architecture.md, timelines ``time`` (s) and ``tick``), and :class:`HeldRerunSink`, kept open
-for series made after the run. ``write`` only keeps the row; ``idle`` sends one entity's column
-of the oldest full block of ``batch_ticks`` rows per call, in the loop's thread (a sending thread
-would hold the GIL ~100 µs a send: compute p99 190–250 µs instead of 156–163 µs). Problems warn
-once at ``close``; a ``.rrd`` the SDK could not write is :class:`~cartctl.errors.OutputError`.
+docs/architecture.md, timelines ``time`` (s) and ``tick``), :class:`HeldRerunSink`, kept open
+for series made after the run, and ``cartctl monitor``'s :class:`ChannelsRerunSink`. ``write``
+only keeps the row; ``idle`` sends one entity's column of the oldest full block of
+``batch_ticks`` rows per call, in the loop's thread (a sending thread would hold the GIL ~100 µs
+a send: compute p99 190–250 µs instead of 156–163 µs). Problems warn once at ``close``; a
+``.rrd`` the SDK could not write is :class:`~cartctl.errors.OutputError`.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import warnings
 from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 import rerun as rr
@@ -23,11 +24,13 @@ from numpy.typing import ArrayLike, NDArray
 from cartctl.errors import InputError, OutputError
 from cartctl.sinks.rerun_layout import (
     ENTITY_PATHS,
+    GPIO_ROOT,
     STYLES,
     TICK_COLUMN,
     TIME_COLUMN,
     Ranges,
     blueprint,
+    channels_blueprint,
     motors_in,
 )
 from cartctl.sinks.rerun_problems import (
@@ -335,6 +338,49 @@ class HeldRerunSink(RerunSink):
                 rec.log(entity, rr.TextDocument(text), static=True)
         except Exception as exc:
             self._problem(f"sending what was made from the run failed: {exc}", raise_now=True)
+
+
+class ChannelsRerunSink(RerunSink):
+    """A :class:`RerunSink` of labelled channels (the first ``float_count`` are float channels,
+    the rest int channels, shown apart) and the cart's text."""
+
+    _default_name = "cartctl monitor"
+
+    def __init__(self, *args: Any, float_count: int = 8, **options: Any) -> None:
+        super().__init__(*args, **{"batch_ticks": 20, **options})  # 20 rows a block unless told
+        self.float_count = int(float_count)
+
+    def _entities(self, columns: list[str]) -> tuple[tuple[int, str], ...]:
+        return tuple(
+            (i, f"{GPIO_ROOT}/{c}")
+            for i, c in enumerate(columns)
+            if c not in (TIME_COLUMN, TICK_COLUMN)
+        )
+
+    def _describe(self, rec: rr.RecordingStream) -> None:
+        labels = [entity.removeprefix(f"{GPIO_ROOT}/") for _, entity in self._signals]
+        floats, ints = labels[: self.float_count], labels[self.float_count :]
+        rec.send_blueprint(channels_blueprint(floats, ints))
+        for label in labels:
+            rec.log(f"{GPIO_ROOT}/{label}", rr.SeriesLines(names=[label]), static=True, strict=True)
+        rr.TextLog.columns(text=[""], level=["INFO"])
+
+    def log_text(
+        self, entity: str, text: str, time_s: float, tick: int, level: str = "INFO"
+    ) -> None:
+        """One line of text (a ``TextLog``) at a time and tick; never raises unless ``strict``."""
+        rec = self._recording
+        if rec is None or self._closed:
+            return
+        try:
+            rec.send_columns(
+                entity,
+                indexes=timelines([time_s], [tick]),
+                columns=rr.TextLog.columns(text=[text], level=[level]),
+                strict=True,
+            )
+        except Exception as exc:
+            self._problem(f"logging text to {entity} failed: {exc}", raise_now=True)
 
 
 def warm_up() -> None:

@@ -107,8 +107,8 @@ def _rerun_sink(args: argparse.Namespace, path: Path) -> Any:
 
     if args.rerun == "off":
         return None
-    from cartctl.sinks.channels_rerun import ChannelsRerunSink
     from cartctl.sinks.rerun_problems import resolve_mode
+    from cartctl.sinks.rerun_sink import ChannelsRerunSink
 
     return ChannelsRerunSink(resolve_mode(args.rerun), path, float_count=GPIO_FLOAT_COUNT,
                              connect_url=args.connect_url)  # fmt: skip
