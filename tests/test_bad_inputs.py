@@ -132,6 +132,8 @@ CASES = [
           "--measurement-noise", NAN),
     _case("design models/ground.toml --method poles --process-noise-v -1", "--process-noise-v"),
     _case("design models/ground.toml --method poles --bias-drift-v nan", "--bias-drift-v", NAN),
+    _case("design models/ground.toml --method pi --process-noise-v 0.2 --measurement-noise 1",
+          "--process-noise-v and --measurement-noise are for an estimator", "--estimator kalman"),
     _case("design models/ground.toml --method pi --voltage-limit nan", "--voltage-limit", NAN),
     _case("design models/ground.toml --method pi --voltage-limit 20", "--voltage-limit", "12"),
     _case("design models/ground.toml --method poles --settling-time -1", "--settling-time"),
@@ -210,6 +212,8 @@ CASES = [
     _case("tune models/ground.toml --method pi --plot x.txt", "--plot", ".png"),
     _case("tune models/ground.toml --method pi --robust --seed -3", "--seed"),
     _case("tune models/ground.toml --method poles --process-noise-v -1", "--process-noise-v"),
+    _case("tune models/ground.toml --method pi --bias-drift-v 0.1", "--bias-drift-v",
+          "--method poles"),
     # convert
     _case("convert missing.csv", "missing.csv", MISSING),
     _case("convert folder.csv", "folder.csv", DIR),

@@ -87,10 +87,14 @@ class DesignRequest:
         for f in fields(self):
             if f.name in RANGES and f.name not in unused:
                 check_field(f.name, getattr(self, f.name))
-        timing = self.timing_noise_std_ticks
-        if timing > 0.0 and self.method == "pi" and self.estimator != "kalman":
-            raise InputError("--timing-noise-ticks is for an estimator; the PI runs without one "
-                             "unless --estimator kalman")  # fmt: skip
+        given = [
+            OPTIONS[f.name]
+            for f in fields(self)
+            if f.name in NOISE_FIELDS and getattr(self, f.name) != f.default
+        ]
+        if given and self.method == "pi" and self.estimator != "kalman":
+            raise InputError(f"{' and '.join(given)} {'is' if len(given) == 1 else 'are'} for an "
+                             "estimator; the PI runs without one unless --estimator kalman")  # fmt: skip
         return self
 
     def file_request(self) -> dict[str, Any]:

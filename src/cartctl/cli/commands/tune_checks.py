@@ -10,7 +10,7 @@ from typing import Any
 
 from cartctl.cart import PERIOD_S
 from cartctl.cli.commands.options import check_duration, check_jobs
-from cartctl.design.request import check_field  # light: no numpy
+from cartctl.design.request import OPTIONS, check_field  # light: no numpy
 from cartctl.errors import InputError
 
 DEFAULT_PLANTS = 200  # sampled plants of --robust
@@ -63,6 +63,8 @@ def design_fixed(args: argparse.Namespace) -> dict[str, float]:
                          ("bias_drift_std_v", args.bias_drift_v)):  # fmt: skip
         if value is not None:
             fixed[field] = float(check_field(field, value))
+    if fixed and args.method == "pi":  # tune's PI runs on the measurement
+        raise InputError(f"{' and '.join(OPTIONS[f] for f in fixed)} only apply to --method poles")
     return fixed
 
 
