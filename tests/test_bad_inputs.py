@@ -68,6 +68,8 @@ CASES = [
     _case("identify empty.csv", "empty.csv", EMPTY),
     _case("identify models/ground.toml", "models/ground.toml", "is a model file, not a trace"),
     _case("identify trace.csv --report file.txt", "--report file.txt", "is a file, not a folder"),
+    _case("identify trace.csv --cutoff-hz 5 --zero-phase", "--cutoff-hz and --zero-phase",
+          "need --prefilter butter"),
     _case("identify trace.csv --out folder", "--out folder", "is a folder, not a file"),
     _case("identify trace.csv --out file.txt/m.toml", "--out", "file.txt is a file"),
     _case("identify trace.csv --prefilter butter --order 0", "--order", "1..12"),

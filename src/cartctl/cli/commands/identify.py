@@ -151,6 +151,10 @@ def request_from_args(
     from cartctl.identification.pipeline import IdentifyRequest, Prefilter
 
     prefilter = None  # first: its refusal comes before those of the grid and the delay
+    shape = (("--order", "order"), ("--cutoff-hz", "cutoff_hz"), ("--zero-phase", "zero_phase"))
+    given = [o for o, f in shape if getattr(args, f) != getattr(Prefilter, f)]  # not the default
+    if args.prefilter != "butter" and given:
+        raise InputError(f"{' and '.join(given)} need --prefilter butter")
     if args.prefilter == "butter":
         prefilter = Prefilter(
             order=args.order, cutoff_hz=args.cutoff_hz, zero_phase=args.zero_phase
