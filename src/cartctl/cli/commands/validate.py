@@ -49,11 +49,13 @@ def check_plot_path(path: str | None) -> Path | None:
 
 
 def new_figure(rows: int, cols: int, *, width_in: float, height_in: float) -> tuple[Figure, Any]:
-    """A matplotlib figure (no GUI, no pyplot state; the Agg canvas draws it when saved) and its
-    grid of axes, each with a light grid."""
+    """A matplotlib figure on the Agg canvas (no GUI, no pyplot state) and its grid of axes, each
+    with a light grid."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(width_in, height_in), layout="constrained")
+    FigureCanvasAgg(fig)
     axes = fig.subplots(
         rows, cols, sharex="col", squeeze=False, height_ratios=[2] + [1] * (rows - 1)
     )
