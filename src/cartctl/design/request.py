@@ -87,15 +87,31 @@ class DesignRequest:
         for f in fields(self):
             if f.name in RANGES and f.name not in unused:
                 check_field(f.name, getattr(self, f.name))
-        given = [
-            OPTIONS[f.name]
-            for f in fields(self)
-            if f.name in NOISE_FIELDS and getattr(self, f.name) != f.default
+        default = DesignRequest(method=self.method)
+        idle = [
+            (f, why) for f, why in self._idle().items() if getattr(self, f) != getattr(default, f)
         ]
-        if given and self.method == "pi" and self.estimator != "kalman":
-            raise InputError(f"{' and '.join(given)} {'is' if len(given) == 1 else 'are'} for an "
-                             "estimator; the PI runs without one unless --estimator kalman")  # fmt: skip
+        if idle:  # an option given that this request does not use: refused, not ignored
+            names = [OPTIONS[f] for f, why in idle if why == idle[0][1]]
+            are = "is" if len(names) == 1 else "are"
+            raise InputError(f"{' and '.join(names)} {are} for {idle[0][1]}")
         return self
+
+    def _idle(self) -> dict[str, str]:
+        """The fields this request leaves unused, each with what would use it."""
+        spec = ("settling_time_s", "overshoot_percent")
+        if self.method == "poles":  # (--estimator: pole placement always has one)
+            pi_only = ("phase_margin_deg", "crossover_hz", "bandwidth_hz", "anti_windup")
+            idle = dict.fromkeys(pi_only, "--method pi")
+            why = "placing poles from a specification, not with --poles"
+            return idle | dict.fromkeys(spec if self.poles else (), why)
+        idle = dict.fromkeys(("poles", *spec), "--method poles")
+        if self.bandwidth_hz is not None:
+            idle["crossover_hz"] = "a PI without --bandwidth-hz"
+        if self.estimator != "kalman":
+            why = "an estimator; the PI runs without one unless --estimator kalman"
+            idle |= dict.fromkeys(NOISE_FIELDS, why)
+        return idle
 
     def file_request(self) -> dict[str, Any]:
         """The ``[request]`` table of a controller file: the options this method used."""
