@@ -24,7 +24,7 @@ from cartctl.data.modelfile import load_models
 from cartctl.design.kalman import KalmanDesign, design_kalman, quantisation_std_rad_s, realise
 from cartctl.design.pi import design_pi
 from cartctl.design.poles import design_poles
-from cartctl.errors import InputError
+from cartctl.errors import DataFileError, InputError
 from cartctl.identification.arx import fit_arx
 from cartctl.identification.oe import fit_oe
 from cartctl.model import ArxModel
@@ -225,6 +225,20 @@ def test_state_feedback_reports_the_speed_between_two_tick_averages(ground) -> N
     measured.append(y.speed_a_rad_s)
     m = np.array(measured)
     np.testing.assert_allclose(estimate, 0.5 * (m[:-1] + m[1:]), atol=1e-9)
+
+
+def test_a_file_with_more_gains_than_estimator_states_is_refused(tmp_path: Path) -> None:
+    """A hand-edited poles file whose K holds a gain more than its estimator has states is
+    refused at loading (the extra gain would act on no state), not run without that gain."""
+    from cartctl.design.controllerfile import build_controllers, load_controller
+
+    text = (ROOT / "controllers" / "poles.toml").read_text(encoding="utf-8")
+    edited = text.replace("    1.0,\n]\nKi = 0.0", "    1.0,\n    0.5,\n]\nKi = 0.0", 1)
+    assert edited != text
+    path = tmp_path / "five.toml"
+    path.write_text(edited, encoding="utf-8")
+    with pytest.raises(DataFileError, match=r"state of at least 5 values"):
+        build_controllers(load_controller(path))
 
 
 class OffsetPlant(ArxPlant):

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.cart import SUPPLY_V, check_voltage_limit
+from cartctl.errors import InputError
 from cartctl.runtime.elementwise import Value, clip, select
 from cartctl.runtime.kalman import KalmanDesign, KalmanSpeedEstimator, SteadyStateSpeedEstimator
 
@@ -95,6 +96,11 @@ class StateFeedbackController:
         limit = check_voltage_limit(voltage_limit_v, "voltage_limit_v")
         if estimator is None:
             estimator = SteadyStateSpeedEstimator(design.estimator)
+        if estimator.state.size < design.K.size:
+            raise InputError(
+                f"the estimator must expose a state of at least {design.K.size} values (the "
+                f"design's realisation), got {type(estimator).__name__}"
+            )
         self.design = design
         self.estimator = estimator
         # x̂ as a list, without a numpy array where the estimator can
