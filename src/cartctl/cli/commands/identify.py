@@ -154,7 +154,8 @@ def request_from_args(
     shape = (("--order", "order"), ("--cutoff-hz", "cutoff_hz"), ("--zero-phase", "zero_phase"))
     given = [o for o, f in shape if getattr(args, f) != getattr(Prefilter, f)]  # not the default
     if args.prefilter != "butter" and given:
-        raise InputError(f"{' and '.join(given)} need --prefilter butter")
+        need = "needs" if len(given) == 1 else "need"
+        raise InputError(f"{' and '.join(given)} {need} --prefilter butter")
     if args.prefilter == "butter":
         prefilter = Prefilter(
             order=args.order, cutoff_hz=args.cutoff_hz, zero_phase=args.zero_phase
