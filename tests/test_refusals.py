@@ -261,6 +261,74 @@ def test_a_gain_that_saturates_on_one_count_is_refused(
     assert not (workdir / "logs").exists()
 
 
+# an ARX model (na = 2, nb = 3, nk = 1) commissioned on the physics cart's air preset: its third
+# input term puts a zero near the origin that pole placement answers with large gains on the
+# estimator's states (|K| up to 48 V per rad/s), though the controller barely answers the speed
+AIR3_THETA = [-0.24448299334785445, -0.08661246025730783, 0.3235761691391532,
+              0.8804609306853032, 0.2043903172696777]  # fmt: skip
+QUANTUM = 2 * np.pi / 1792 / 0.01  # one encoder count per tick (rad/s)
+
+
+def _reaction_from_file(path: Path, motor: str = "a") -> float:
+    """|u[0]| (V per rad/s) of the stored C_fb(z) = controller_num/controller_den (measured speed
+    to voltage) for a unit impulse of the speed: its answer in the tick the change arrives."""
+    import tomllib
+
+    from scipy import signal
+
+    entry = tomllib.loads(path.read_text(encoding="utf-8"))["motors"][motor]
+    impulse = np.zeros(8)
+    impulse[0] = 1.0
+    return abs(float(signal.lfilter(entry["controller_num"], entry["controller_den"], impulse)[0]))
+
+
+def test_a_state_feedback_is_judged_by_its_answer_to_the_measured_speed(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    rows = "\n".join(f"[motors.{m}]\ntheta = {AIR3_THETA}\nna = 2\nnb = 3\nnk = 1\n" for m in "ab")
+    model = workdir / "models" / "air3.toml"
+    model.write_text(f'format = "cartctl-model/2"\nperiod_s = 0.01\nloop_delay_ticks = 1\n\n'
+                     f"{rows}", encoding="utf-8")  # fmt: skip
+    code, _, err = _run(capsys, "design", str(model), "--method", "poles", "--settling-time",
+                        "0.1", "--overshoot", "1.1", "--out", "air3-poles.toml")  # fmt: skip
+    assert code == 0, err
+    import tomllib
+
+    gains = tomllib.loads((workdir / "air3-poles.toml").read_text(encoding="utf-8"))
+    # an entry of K alone would put the whole 12 V on one count (12 / 0.3506 = 34.2 V per rad/s)
+    assert max(abs(k) for k in gains["motors"]["a"]["K"]) * QUANTUM > 12.0
+    # but the controller answers a count in its tick with well under a volt
+    assert _reaction_from_file(workdir / "air3-poles.toml") * QUANTUM < 1.0
+    code, out, err = _run(capsys, "run", "--fast", "--controller", "air3-poles.toml", "--model",
+                          str(model), "--duration", "1", "--rerun", "off", "--json")  # fmt: skip
+    assert code == 0, err
+    assert json.loads(out)["motors"]["a"]["overshoot_percent"] < 5.0
+
+
+def test_a_state_feedback_that_switches_on_one_count_is_refused(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    shipped = workdir / "controllers" / "poles.toml"
+    assert _reaction_from_file(shipped) * QUANTUM < 12.0
+    text = shipped.read_text(encoding="utf-8")
+    # 1e5 on K's first entry: with the estimator's L, K·L puts thousands of volts on one count
+    switching = re.sub(r"(\[motors\.a\]\nK = \[\n    )[^,]+,", r"\g<1>1e5,", text, count=1)
+    import tomllib
+
+    entry = tomllib.loads(switching)["motors"]["a"]
+    assert abs(np.dot(entry["K"], entry["estimator"]["L"])) * QUANTUM > 12.0
+    (workdir / "controllers" / "switch.toml").write_text(switching, encoding="utf-8")
+    code, _, err = _run(capsys, "run", "--fast", "--controller", "controllers/switch.toml",
+                        "--rerun", "off")  # fmt: skip
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1
+    assert (
+        "[motors.a] K with the estimator's L answers one encoder count" in lines[0]
+        and "switch" in lines[0]
+    )
+    assert not (workdir / "logs").exists()
+
+
 @pytest.fixture
 def unstable_model(workdir: Path) -> Path:
     text = (workdir / "models" / "ground.toml").read_text(encoding="utf-8")

@@ -20,7 +20,12 @@ from cartctl.cart import check_voltage_limit, encoder_quantum_rad_s
 from cartctl.choices import find_file
 from cartctl.data import tomlfile
 from cartctl.data.tomlfile import CONTROLLER_FORMAT, check_format, read_toml, require
-from cartctl.design.controller_ss import consistency_problems, feedback_gains, kalman_from_entry
+from cartctl.design.controller_ss import (
+    consistency_problems,
+    controller_state_space,
+    feedback_gains,
+    kalman_from_entry,
+)
 from cartctl.design.request import METHODS, check_loop_delay
 from cartctl.errors import CartctlError, DataFileError, InputError
 from cartctl.runtime.base import Controller
@@ -138,14 +143,26 @@ class ControllerFile:
         return not path.is_file() or file_sha256(path) != self.model_sha256
 
 
+def reaction_gain(method: str, entry: Mapping[str, Any], period_s: float) -> float:
+    """The voltage step (V per rad/s) one motor's controller makes in the tick a change of the
+    measured speed arrives (its feedthrough from y to u; K·L for a state feedback, whose entries
+    of K weigh estimator states); NaN when the entry cannot be built (the builder names why)."""
+    try:
+        return abs(float(controller_state_space(method, entry, period_s).D[0, 1]))
+    except (KeyError, TypeError, ValueError, np.linalg.LinAlgError):
+        return math.nan
+
+
 def absurd_gain(controller: ControllerFile) -> str | None:
     """The first gain that is no controller but a switch, or None: a proportional gain (``kp``,
-    ``Kr``, an entry of ``K``) that puts the whole voltage limit on one encoder count per tick,
-    an integral gain (``ki``) that does so in one tick, or not a finite number."""
+    ``Kr``) that puts the whole voltage limit on one encoder count per tick, an integral gain
+    (``ki``) that does so in one tick, a state feedback whose :func:`reaction_gain` does so, or
+    not a finite number."""
     limit = controller.voltage_limit_v
     q = encoder_quantum_rad_s(controller.period_s)
     for motor, entry in controller.motors.items():
-        for key, per_error in (("kp", q), ("Kr", q), ("K", q), ("ki", q * controller.period_s)):
+        gains = (("kp", q), ("Kr", q), ("ki", q * controller.period_s), ("K", 0.0))
+        for key, per_error in gains:  # K: only finite here, its switch test follows
             values = entry.get(key, [])
             for value in values if isinstance(values, list) else [values]:
                 if not isinstance(value, int | float) or isinstance(value, bool):
@@ -160,6 +177,14 @@ def absurd_gain(controller: ControllerFile) -> str | None:
                         f"{' for one tick' if key == 'ki' else ''}): that is a switch, not a "
                         f"controller; keep |{key}| below {limit / per_error:.3g}"
                     )
+        gain = reaction_gain(controller.method, entry, controller.period_s) if "K" in entry else 0
+        if gain * q >= limit:
+            return (
+                f"[motors.{motor}] K with the estimator's L answers one encoder count "
+                f"({q:.3g} rad/s) with {gain * q:.3g} V in the tick it arrives, the whole "
+                f"{limit:g} V or more: that is a switch, not a controller; keep |K·L| below "
+                f"{limit / q:.3g} V per rad/s"
+            )
     return None
 
 
