@@ -170,3 +170,27 @@ def test_trace_has_one_row_per_tick_with_true_speed(
     trace = read_trace(summary["trace"])
     np.testing.assert_allclose(np.diff(trace.time_s), 0.01)
     assert "true_speed_a" in trace.columns()
+
+
+def test_a_one_motor_controller_holds_the_other_motor_at_rest(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    # it asked motor b for 10 rad/s it never drove, and reported 10 rad/s of steady-state error
+    code = main(["design", "models/ground.toml", "--method", "pi", "--motor", "a",
+                 "--out", "a-only.toml"])  # fmt: skip
+    assert code == 0
+    capsys.readouterr()
+    code, summary, err = _run(capsys, "--fast", "--controller", "a-only.toml", "--duration", "1",
+                              "--rerun", "off", "--json", "--name", "one")  # fmt: skip
+    assert code == 0, err
+    assert isinstance(summary, dict)
+    trace = read_trace(summary["trace"])
+    assert np.all(trace.column("reference_b") == 0.0) and np.all(trace.voltage_b == 0.0)
+    assert trace.column("reference_a")[-2] == 10.0  # the last row is the stop row
+    b = summary["motors"]["b"]
+    assert b["steady_state_error"] is None and b["rms_error"] == 0.0
+    code, _, err = _run(capsys, "--fast", "--controller", "a-only.toml", "--reference-b", "step:3",
+                        "--rerun", "off")  # fmt: skip
+    assert code == 2 and err.strip().splitlines() == [
+        "cartctl run: error: --reference-b: a-only.toml has no controller for motor b"
+    ]

@@ -236,9 +236,12 @@ def prepare_run(
         measured = getattr(the_plant, "probe_delays", None)
         check_loop_delay(file, given, plant, delay, allow=allow_delay_mismatch, measured=measured)
         n = max(1, round(duration_s / period_s))
-        references = {
-            "a": ReferenceSchedule(reference, n, period_s, "a"),
-            "b": ReferenceSchedule(reference_b or reference, n, period_s, "b"),
+        if reference_b and "b" not in controllers:
+            raise InputError(f"--reference-b: {given} has no controller for motor b")
+        specs = {"a": reference, "b": reference_b or reference}
+        references = {  # a motor the file has no controller for is held at 0 V: nothing to follow
+            m: ReferenceSchedule(spec if m in controllers else "const:0", n, period_s, m)
+            for m, spec in specs.items()
         }
         if own is not None:
             check_reach(references, dict(zip("ab", own, strict=True)), limit, str(model))
