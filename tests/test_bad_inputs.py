@@ -221,8 +221,10 @@ CASES = [
     _case("tune models/ground.toml --method pi --plot x.txt", "--plot", ".png"),
     _case("tune models/ground.toml --method pi --robust --seed -3", "--seed"),
     _case("tune models/ground.toml --method poles --process-noise-v -1", "--process-noise-v"),
-    _case("tune models/ground.toml --method pi --bias-drift-v 0.1", "--bias-drift-v",
-          "--method poles"),
+    _case("tune models/ground.toml --method pi --bias-drift-v 0.1",
+          "--bias-drift-v only applies to --method poles"),
+    _case("tune models/ground.toml --method pi --process-noise-v 0.1 --bias-drift-v 0.1",
+          "--process-noise-v and --bias-drift-v only apply to --method poles"),
     # convert
     _case("convert missing.csv", "missing.csv", MISSING),
     _case("convert folder.csv", "folder.csv", DIR),

@@ -64,7 +64,8 @@ def design_fixed(args: argparse.Namespace) -> dict[str, float]:
         if value is not None:
             fixed[field] = float(check_field(field, value))
     if fixed and args.method == "pi":  # tune's PI runs on the measurement
-        raise InputError(f"{' and '.join(OPTIONS[f] for f in fixed)} only apply to --method poles")
+        verb = "applies" if len(fixed) == 1 else "apply"
+        raise InputError(f"{' and '.join(OPTIONS[f] for f in fixed)} only {verb} to --method poles")
     return fixed
 
 
