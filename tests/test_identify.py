@@ -268,6 +268,24 @@ def test_prefilter_and_average_together_fit_the_periodic_steady_state(
         np.testing.assert_allclose(motor["theta"], THETA_A, atol=1e-6)
 
 
+def test_the_order_table_of_an_averaged_fit_is_on_the_averaged_cycle(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    # it was fitted on the raw record, so its row of the chosen orders disagreed with the model
+    rng = np.random.default_rng(5)
+    u = square(10.0, cycles=6)
+    y = ArxModel.from_theta(THETA_A).simulate(u) + rng.normal(0.0, 0.2, u.size)
+    path = _trace(tmp_path / "sq.csv", u, y)
+    doc = _identify_json(capsys, str(path), "--average", "--orders", "na=1:2,nb=1:3,nk=1:2")
+    motor = doc["motors"]["a"]
+    period = u.size // 6
+    assert motor["n_samples"] == period
+    rows = {(r["na"], r["nb"], r["nk"]): r for r in motor["orders"]}
+    assert {r["n_equations"] for r in rows.values()} == {period}  # one equation per tick of it
+    own = rows[(motor["na"], motor["nb"], motor["nk"])]
+    assert own["fit_percent"] == pytest.approx(motor["fit_simulation_percent"], abs=1e-9)
+
+
 def test_periodic_prefilter_is_the_filters_steady_state() -> None:
     from scipy import signal
 

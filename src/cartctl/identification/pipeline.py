@@ -260,8 +260,12 @@ def _identify_motor(
     oe_fit = fit_oe(work, arx_fit.model, eval_segments=raw) if request.method == "oe" else None
     diagnostics = diagnose(oe_fit or arx_fit, raw, validation, None)
     if request.orders is not None:  # after the residual tests, which refuse too few samples
+        table_data = work
+        if request.average:  # the same averaged cycles, padded for the grid's longest lags
+            lags = first_row(*(max(request.orders[k]) for k in ("na", "nb", "nk")))
+            table_data = _averaged(raw, lags, sources, request.prefilter, period_s)[0]
         orders = order_table(
-            work, request.orders, period_s=period_s, eval_segments=raw, validation=validation
+            table_data, request.orders, period_s=period_s, eval_segments=raw, validation=validation
         )
         diagnostics = dataclasses.replace(diagnostics, orders=orders)
     if validation:
