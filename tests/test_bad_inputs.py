@@ -139,6 +139,11 @@ CASES = [
     _case("design models/ground.toml --method pi --poles 0.5,0.5,0.5", "--poles is for --method poles"),
     _case("design models/ground.toml --method poles --phase-margin 40 --anti-windup none",
           "--phase-margin and --anti-windup are for --method pi"),
+    # given at their defaults (0.1 V, 65°): refused all the same
+    _case("design models/ground.toml --method pi --process-noise-v 0.1",
+          "--process-noise-v is for an estimator"),
+    _case("design models/ground.toml --method poles --phase-margin 65",
+          "--phase-margin is for --method pi"),
     _case("design models/ground.toml --method pi --bandwidth-hz 5 --crossover-hz 2",
           "--crossover-hz is for a PI without --bandwidth-hz"),
     _case("design models/ground.toml --method poles --poles 0.5,0.5,0.5 --overshoot 2",

@@ -5,7 +5,7 @@ controller file's ``[request]`` table, the command line that regenerates the fil
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, fields
 from numbers import Integral, Real
 from typing import Any
@@ -76,9 +76,10 @@ class DesignRequest:
     voltage_limit_v: float = SUPPLY_V
     step_rad_s: float = 10.0
 
-    def check(self) -> DesignRequest:
+    def check(self, given: Collection[str] | None = None) -> DesignRequest:
         """This request, if each field its method uses is in range (:func:`check_field`, before
-        any design work) and they combine; else InputError."""
+        any design work) and they combine; else InputError. A field it does not use is refused
+        when in ``given`` (the options on a command line), else when it is not its default."""
         if self.method not in METHODS:
             raise InputError(f"method must be one of {', '.join(METHODS)}, got '{self.method}'")
         unused = _POLES_FIELDS if self.method == "pi" else _PI_FIELDS
@@ -89,7 +90,9 @@ class DesignRequest:
                 check_field(f.name, getattr(self, f.name))
         default = DesignRequest(method=self.method)
         idle = [
-            (f, why) for f, why in self._idle().items() if getattr(self, f) != getattr(default, f)
+            (f, why)
+            for f, why in self._idle().items()
+            if (f in given if given is not None else getattr(self, f) != getattr(default, f))
         ]
         if idle:  # an option given that this request does not use: refused, not ignored
             names = [OPTIONS[f] for f, why in idle if why == idle[0][1]]
