@@ -64,10 +64,14 @@ def test_a_controller_for_another_tick(capsys: pytest.CaptureFixture[str], workd
     slow.write_text(text.replace("\nperiod_s = 0.01\n", "\nperiod_s = 0.02\n"), encoding="utf-8")
     assert main(["design", str(slow), "--method", "pi", "--out", "slow-pi.toml"]) == 0
     capsys.readouterr()
-    for plant, model in (("sim", "models/ground.toml"), ("physics", str(slow))):
-        line = _run_line(capsys, "--plant", plant, "--model", model, "--controller", "slow-pi.toml")
+    for plant, model in (
+        ("sim", {"model": "models/ground.toml"}),
+        ("physics", {}),
+    ):  # --model: sim's
+        argv = [a for k, v in model.items() for a in (f"--{k}", v)]
+        line = _run_line(capsys, "--plant", plant, *argv, "--controller", "slow-pi.toml")
         assert "designed for Ts = 0.02 s" in line and "ticks every 0.01 s" in line
-        assert _simulate_line("slow-pi.toml", plant=plant, model=model) == line
+        assert _simulate_line("slow-pi.toml", plant=plant, **model) == line
 
 
 @pytest.mark.parametrize("duration", ["-1", "0", "nan", "1e9"])

@@ -172,6 +172,11 @@ CASES = [
     _case("run --plant moon --rerun off", "unknown plant 'moon'"),
     _case("run --fast --plant moon", "unknown plant 'moon'"),
     _case("run --fast --plant virtual", "--fast needs a simulated plant"),
+    # a plant option the plant does not use: it was silently ignored
+    _case("run --fast --plant physics --model models/air.toml", "--model is for the sim plant"),
+    _case("run --fast --connect-timeout 3", "--connect-timeout is for the virtual and serial plants"),
+    _case("excite --plant sim --preset air --signal step --amplitude 5 --out x.csv",
+          "--preset is for the physics and virtual plants", "--plant sim does not use it"),
     _case("run --fast --controller missing.toml", "missing.toml", MISSING),
     _case("run --fast --controller folder.toml", "folder.toml", DIR),
     _case("run --fast --controller trace.csv", "trace.csv", "is a CSV file, not a controller"),

@@ -22,7 +22,7 @@ from cartctl.data.modelfile import save_models
 from cartctl.data.trace import Trace, write_trace, write_trace_meta
 from cartctl.identification.pipeline import model_file
 from cartctl.plants.base import ClockedPlant
-from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
+from cartctl.plants.factory import PLANTS_USING, SIMULATED, make_plant, plant_kind
 from cartctl.runtime.loop import run_experiment
 from cartctl.runtime.realtime import one_blas_thread
 from cartctl.signals import make_signal
@@ -232,8 +232,12 @@ class Commission:
         self.say("verification", f"{checks.REFERENCE} for {checks.DURATION_S:g} s with "
                  f"controller.toml{' (--fast)' if fast else ''}")  # fmt: skip
         opts = self.plant_options
+        kind = plant_kind(self.spec)
         plant_options = [
-            a for f, k in PLANT_FLAGS.items() if opts[k] is not None for a in (f, str(opts[k]))
+            a
+            for f, k in PLANT_FLAGS.items()
+            if opts[k] is not None and kind in PLANTS_USING[f]
+            for a in (f, str(opts[k]))
         ]
         argv = checks.run_argv(
             self.spec, self.controller_path, self.out, fast=fast, plant_options=plant_options

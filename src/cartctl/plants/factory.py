@@ -14,6 +14,16 @@ SIMULATED = ("sim", "physics")
 """Plant kinds that run in this process on a simulated clock (``--fast``)."""
 
 
+PLANTS_USING = {
+    "--model": ("sim",),
+    "--preset": ("physics", "virtual"),
+    "--noise": ("sim", "physics", "virtual"),
+    "--seed": ("sim", "physics", "virtual"),
+    "--connect-timeout": ("virtual", "serial"),
+}
+"""The plant kinds that use each plant option of the command line (:func:`make_plant`'s)."""
+
+
 def plant_kind(spec: str) -> str:
     """The kind of a ``--plant`` name: 'sim', 'physics', 'virtual', 'serial', or the name as given."""
     kind = spec.partition(":")[0]

@@ -12,6 +12,7 @@ import shlex
 import sys
 from datetime import datetime
 from pathlib import Path
+from typing import Any
 
 from cartctl.choices import (
     DEFAULT_CONNECT_TIMEOUT_S,
@@ -221,6 +222,15 @@ def add_map_option(p: argparse.ArgumentParser) -> None:
     )
 
 
+class _Given(argparse.Action):
+    """Store the value and note the option in ``args.given``: an option a plant does not use is
+    refused only when it was given (its default is still in the namespace)."""
+
+    def __call__(self, parser: Any, namespace: Any, values: Any, option: Any = None) -> None:
+        setattr(namespace, self.dest, values)
+        namespace.given = getattr(namespace, "given", frozenset()) | {self.option_strings[0]}
+
+
 def add_plant_options(p: argparse.ArgumentParser, *, what: str) -> None:
     """``--plant`` and the simulated plants' ``--model``, ``--preset``, ``--noise``, ``--seed``,
     ``--connect-timeout``."""
@@ -236,26 +246,32 @@ def add_plant_options(p: argparse.ArgumentParser, *, what: str) -> None:
     )
     p.add_argument(
         "--model",
+        action=_Given,
         default=str(DEFAULT_MODEL),
         metavar="MODEL.toml",
         help=f"model file of the sim plant (default {DEFAULT_MODEL})",
     )
     p.add_argument(
         "--preset",
+        action=_Given,
         choices=("air", "ground"),
         default="ground",
         help="physics plant: wheels in the air or cart on the ground (default ground)",
     )
     p.add_argument(
         "--noise",
+        action=_Given,
         type=float,
         default=0.0,
         metavar="RAD_S",
         help="extra white measurement noise, standard deviation in rad/s (default 0: off)",
     )
-    p.add_argument("--seed", type=seed, default=None, help="seed of the measurement noise")
+    p.add_argument(
+        "--seed", type=seed, default=None, action=_Given, help="seed of the measurement noise"
+    )
     p.add_argument(
         "--connect-timeout",
+        action=_Given,
         type=float,
         default=DEFAULT_CONNECT_TIMEOUT_S,
         metavar="S",
@@ -289,11 +305,19 @@ def check_finite(value: float, option: str) -> float:
 
 
 def check_plant_options(args: argparse.Namespace) -> None:
-    """``--noise`` and ``--connect-timeout`` in range (those the command has), before any plant
-    is made or connected."""
+    """``--noise`` and ``--connect-timeout`` in range (those the command has), and no plant option
+    given that ``--plant`` does not use, before any plant is made or connected."""
     noise = check_finite(getattr(args, "noise", 0.0), "--noise")
     if noise < 0.0:
         raise InputError(f"--noise must be a standard deviation >= 0 rad/s, got {noise:g}")
     timeout = check_finite(getattr(args, "connect_timeout", 1.0), "--connect-timeout")
     if timeout <= 0.0:
         raise InputError(f"--connect-timeout must be a positive number of seconds, got {timeout:g}")
+    from cartctl.plants.factory import PLANTS_USING, plant_kind
+
+    kind = plant_kind(getattr(args, "plant", ""))
+    for option in sorted(getattr(args, "given", ())):  # after the ranges: those say more
+        if kind not in PLANTS_USING[option]:
+            *others, last = PLANTS_USING[option]
+            uses = f"{', '.join(others)} and {last} plants" if others else f"{last} plant"
+            raise InputError(f"{option} is for the {uses}; --plant {args.plant} does not use it")
