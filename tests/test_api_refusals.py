@@ -82,3 +82,12 @@ def test_a_duration_out_of_range(
     line = _run_line(capsys, "--duration", duration)
     assert line.startswith("--duration must be a positive number of seconds")
     assert _simulate_line("controllers/pi.toml", duration_s=float(duration)) == line
+
+
+def test_a_model_for_a_plant_that_has_none(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    # the physics plant runs its preset: a model file given for it was silently ignored
+    line = _run_line(capsys, "--plant", "physics", "--model", "models/air.toml")
+    assert line == "--model is for the sim plant; --plant physics does not use it"
+    assert _simulate_line("controllers/pi.toml", plant="physics", model="models/air.toml") == line

@@ -25,7 +25,7 @@ from cartctl.design.request import DesignRequest
 from cartctl.errors import InputError, PlantError
 from cartctl.identification.pipeline import IdentifyRequest, Prefilter
 from cartctl.identification.pipeline import identify as identify_traces
-from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
+from cartctl.plants.factory import SIMULATED, check_option_used, make_plant, plant_kind
 from cartctl.runtime.loop import run_in_memory
 from cartctl.session.prepare import prepare_run
 from cartctl.sinks.summary import trace_metrics
@@ -244,6 +244,8 @@ def simulate(
         A reference spec (``step:10``, ``square:8:2``, ``file:ref.csv`` …).
     """
     _check_simulated(plant, "simulate")
+    if model is not None:
+        check_option_used("--model", plant)
     if isinstance(controller, Design):
         file = replace(controller.controller_file(), path=None)
         name = f"{controller.request.method.upper()} designed on {controller.model_path}"

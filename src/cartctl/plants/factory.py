@@ -30,6 +30,14 @@ def plant_kind(spec: str) -> str:
     return kind if kind in ("physics", "virtual", "serial") else spec
 
 
+def check_option_used(option: str, spec: str) -> None:
+    """InputError if the plant ``spec`` names does not use the plant option ``option``."""
+    *others, last = PLANTS_USING[option]
+    if plant_kind(spec) not in (*others, last):
+        uses = f"{', '.join(others)} and {last} plants" if others else f"{last} plant"
+        raise InputError(f"{option} is for the {uses}; --plant {spec} does not use it")
+
+
 def physics_options(text: str) -> dict[str, Any]:
     """The PhysicsPlant keyword arguments ``physics:KEY=VALUE,...`` sets: ``actuation_ms`` and
     ``reversed_motors`` (from ``reverse_a=1`` / ``reverse_b=1``)."""

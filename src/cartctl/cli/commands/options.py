@@ -313,11 +313,7 @@ def check_plant_options(args: argparse.Namespace) -> None:
     timeout = check_finite(getattr(args, "connect_timeout", 1.0), "--connect-timeout")
     if timeout <= 0.0:
         raise InputError(f"--connect-timeout must be a positive number of seconds, got {timeout:g}")
-    from cartctl.plants.factory import PLANTS_USING, plant_kind
+    from cartctl.plants.factory import check_option_used
 
-    kind = plant_kind(getattr(args, "plant", ""))
     for option in sorted(getattr(args, "given", ())):  # after the ranges: those say more
-        if kind not in PLANTS_USING[option]:
-            *others, last = PLANTS_USING[option]
-            uses = f"{', '.join(others)} and {last} plants" if others else f"{last} plant"
-            raise InputError(f"{option} is for the {uses}; --plant {args.plant} does not use it")
+        check_option_used(option, args.plant)
