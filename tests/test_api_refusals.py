@@ -91,3 +91,43 @@ def test_a_model_for_a_plant_that_has_none(
     line = _run_line(capsys, "--plant", "physics", "--model", "models/air.toml")
     assert line == "--model is for the sim plant; --plant physics does not use it"
     assert _simulate_line("controllers/pi.toml", plant="physics", model="models/air.toml") == line
+
+
+def _excite_line(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
+    code = main(["excite", "--amplitude", "10", "--out", "x.csv", *argv])
+    _, err = capsys.readouterr()
+    assert code == 2, err
+    return err.strip().removeprefix("cartctl excite: error: ")
+
+
+@pytest.mark.parametrize(
+    ("argv", "options"),
+    [
+        (
+            ["--plant", "physics", "--model", "models/air.toml"],
+            {"plant": "physics", "model": "models/air.toml"},
+        ),
+        (["--plant", "sim", "--preset", "air"], {"plant": "sim", "preset": "air"}),
+        (["--signal", "step", "--duration", "0"], {"signal": "step", "duration_s": 0.0}),
+        (["--signal", "step", "--duration", "1e9"], {"signal": "step", "duration_s": 1e9}),
+    ],
+)
+def test_excite_refuses_what_the_command_refuses(
+    capsys: pytest.CaptureFixture[str], workdir: Path, argv: list[str], options: dict[str, object]
+) -> None:
+    # cartctl.excite ignored a model for physics and a preset for sim, ran 0 s and tried to
+    # allocate 10¹¹ samples for 10⁹ s
+    line = _excite_line(capsys, *argv)
+    with pytest.raises(CartctlError) as refused:
+        cartctl.excite(**options)  # type: ignore[arg-type]
+    assert str(refused.value) == line
+    assert not Path("x.csv").exists()
+
+
+def test_a_preset_for_a_plant_that_has_none(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    # the sim plant runs its models: a preset given for it was silently ignored
+    line = _run_line(capsys, "--plant", "sim", "--preset", "air")
+    assert line == "--preset is for the physics and virtual plants; --plant sim does not use it"
+    assert _simulate_line("controllers/pi.toml", plant="sim", preset="air") == line

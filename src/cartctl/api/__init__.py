@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from cartctl.api.results import Design, Identification, MotorResult, SimulationResult
-from cartctl.choices import DEFAULT_MODEL
+from cartctl.choices import DEFAULT_MODEL, check_duration
 from cartctl.data.modelfile import ModelFile, load_models, save_models
 from cartctl.data.read import read_trace
 from cartctl.data.trace import MOTORS, Trace, parse_mapping
@@ -58,9 +58,12 @@ def load_trace(path: str | Path, map: str | Mapping[str, str] | None = None) -> 
     return read_trace(path, mapping)
 
 
-def _check_simulated(plant: str, what: str) -> None:
+def _check_simulated(plant: str, what: str, model: object, preset: str) -> None:
     if plant_kind(plant) not in SIMULATED:
         raise InputError(f"{what} runs on 'sim' or 'physics[:actuation_ms=X]', not '{plant}'")
+    for option, given in (("--model", model is not None), ("--preset", preset != "ground")):
+        if given:  # refused with the command line's line, not ignored
+            check_option_used(option, plant)
 
 
 def excite(
@@ -103,13 +106,15 @@ def excite(
     from cartctl.runtime.loop import run_experiment
     from cartctl.signals import make_signal
 
-    _check_simulated(plant, "excite")
+    _check_simulated(plant, "excite", model, preset)
     if motor not in ("a", "b", "both"):
         raise InputError(f"motor must be 'a', 'b' or 'both', got {motor!r}")
     if not amplitude_v <= SUPPLY_V:
         raise InputError(f"amplitude_v {amplitude_v} V is beyond the cart's ±{SUPPLY_V:g} V supply")
     if duration_s is not None and signal == "square":
         raise InputError("duration_s does not apply to the square signal; use cycles (3 s each)")
+    if duration_s is not None:
+        check_duration(duration_s)
     volts = make_signal(signal, amplitude_v, cycles=cycles, duration_s=duration_s)
     the_plant, description = make_plant(plant, model_path=model or DEFAULT_MODEL, preset=preset,
                                         noise_std_rad_s=noise_std_rad_s, seed=seed)  # fmt: skip
@@ -243,9 +248,7 @@ def simulate(
     reference : str
         A reference spec (``step:10``, ``square:8:2``, ``file:ref.csv`` …).
     """
-    _check_simulated(plant, "simulate")
-    if model is not None:
-        check_option_used("--model", plant)
+    _check_simulated(plant, "simulate", model, preset)
     if isinstance(controller, Design):
         file = replace(controller.controller_file(), path=None)
         name = f"{controller.request.method.upper()} designed on {controller.model_path}"
