@@ -131,3 +131,24 @@ def test_a_preset_for_a_plant_that_has_none(
     line = _run_line(capsys, "--plant", "sim", "--preset", "air")
     assert line == "--preset is for the physics and virtual plants; --plant sim does not use it"
     assert _simulate_line("controllers/pi.toml", plant="sim", preset="air") == line
+
+
+@pytest.mark.parametrize(
+    ("options", "line"),
+    [
+        ({"zero_phase": True}, "zero_phase needs prefilter_hz"),
+        ({"prefilter_order": 4}, "prefilter_order needs prefilter_hz"),
+        (
+            {"prefilter_order": 4, "zero_phase": True},
+            "prefilter_order and zero_phase need prefilter_hz",
+        ),
+    ],
+)
+def test_identify_refuses_a_prefilter_shape_without_a_prefilter(
+    capsys: pytest.CaptureFixture[str], workdir: Path, options: dict[str, object], line: str
+) -> None:
+    # the fit ran unfiltered, the options silently ignored (cartctl identify refuses them)
+    trace = cartctl.excite(plant="physics", cycles=2)
+    with pytest.raises(CartctlError) as refused:
+        cartctl.identify(trace, **options)  # type: ignore[arg-type]
+    assert str(refused.value) == line

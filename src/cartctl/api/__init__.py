@@ -165,6 +165,10 @@ def identify(
         loop_delay_ticks = loop_delay_of([t for t in items if not isinstance(t, Trace)])
     if delay != "auto" and not isinstance(delay, int):
         raise InputError(f"delay must be a whole number of ticks or 'auto', got {delay!r}")
+    shape = {"prefilter_order": prefilter_order != Prefilter.order, "zero_phase": zero_phase}
+    if prefilter_hz is None and any(shape.values()):  # as identify's --order without --prefilter
+        given = [name for name, differs in shape.items() if differs]
+        raise InputError(f"{' and '.join(given)} need{'s' * (len(given) == 1)} prefilter_hz")
     request = IdentifyRequest(
         motors=tuple(motors), na=na, nb=nb, delay=None if delay == "auto" else int(delay),
         prefilter=None if prefilter_hz is None else Prefilter(
