@@ -152,3 +152,24 @@ def test_identify_refuses_a_prefilter_shape_without_a_prefilter(
     with pytest.raises(CartctlError) as refused:
         cartctl.identify(trace, **options)  # type: ignore[arg-type]
     assert str(refused.value) == line
+
+
+@pytest.mark.parametrize(
+    ("design", "options", "line"),
+    [
+        ("pi", {"estimator": "Kalman"}, "unknown estimator 'Kalman'; expected one of none, kalman"),
+        (
+            "poles",
+            {"poles": [0.5, 0.5]},
+            "--poles must be text like '0.8,0.7+0.1j,0.7-0.1j', got [0.5, 0.5]",
+        ),
+    ],
+)
+def test_a_design_field_of_the_wrong_kind(
+    workdir: Path, design: str, options: dict[str, object], line: str
+) -> None:
+    # estimator='Kalman' designed a PI without an estimator and saved a file whose command line
+    # ('--estimator Kalman') the CLI refuses; a list of poles raised AttributeError
+    with pytest.raises(CartctlError) as refused:
+        getattr(cartctl, f"design_{design}")("models/ground.toml", **options)
+    assert str(refused.value) == line

@@ -82,6 +82,13 @@ class DesignRequest:
         when in ``given`` (the options on a command line), else when it is not its default."""
         if self.method not in METHODS:
             raise InputError(f"method must be one of {', '.join(METHODS)}, got '{self.method}'")
+        if self.estimator not in PI_ESTIMATORS:  # (the command line's choices)
+            allowed = ", ".join(PI_ESTIMATORS)
+            raise InputError(f"unknown estimator {self.estimator!r}; expected one of {allowed}")
+        if not isinstance(self.poles, str | None):
+            raise InputError(
+                f"--poles must be text like '0.8,0.7+0.1j,0.7-0.1j', got {self.poles!r}"
+            )
         unused = _POLES_FIELDS if self.method == "pi" else _PI_FIELDS
         if self.method == "poles" and self.poles:
             unused = unused | _POLES_FIELDS  # the poles are given: no settling time or overshoot
