@@ -4,12 +4,14 @@ the API on the same files; the line must be one and the same, and say the thing 
 
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 
 import pytest
 
 import cartctl
 from cartctl.cli import main
+from cartctl.design.controllerfile import load_controller
 from cartctl.errors import CartctlError
 
 
@@ -173,3 +175,20 @@ def test_a_design_field_of_the_wrong_kind(
     with pytest.raises(CartctlError) as refused:
         getattr(cartctl, f"design_{design}")("models/ground.toml", **options)
     assert str(refused.value) == line
+
+
+def test_a_design_of_one_motor_records_its_command(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    # Design.command() (the saved file's regenerate line) left out --motor: it made both motors
+    design = cartctl.design_pi("models/ground.toml", motors=("b",), crossover_hz=4)
+    assert design.command().endswith(" --motor b")
+    design.save("api.toml")
+    argv = shlex.split(design.command())[1:]
+    assert main([*argv, "--out", "cli.toml"]) == 0
+    capsys.readouterr()
+    api, cli = (load_controller(name) for name in ("api.toml", "cli.toml"))
+    assert set(api.motors) == set(cli.motors) == {"b"}
+    assert api.motors["b"]["kp"] == cli.motors["b"]["kp"]
+    with pytest.raises(CartctlError, match=r"motors must be 'a' and/or 'b', got \[\]"):
+        cartctl.design_pi("models/ground.toml", motors=())

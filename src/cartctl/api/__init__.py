@@ -205,6 +205,8 @@ def _design(model: str | Path | ModelFile, request: DesignRequest, motors: Seque
         if model.path is None:
             raise InputError("design from a saved model file: give its path (save_model first)")
         model = model.path
+    if not motors or not set(motors) <= set(MOTORS):
+        raise InputError(f"motors must be 'a' and/or 'b', got {list(motors)}")
     models = load_models(model)
     return Design(design_models(request, models, tuple(motors)), Path(model), models.period_s)
 

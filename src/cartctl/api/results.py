@@ -191,7 +191,10 @@ class Design(_Shown):
 
     def command(self) -> str:
         """The ``cartctl design`` command that makes this design."""
-        return "cartctl " + shlex.join(["design", *self.request.to_argv(str(self.model_path))])
+        argv = ["design", *self.request.to_argv(str(self.model_path))]
+        if len(self.designs.motors) == 1:  # one motor: the command's --motor
+            argv += ["--motor", *self.designs.motors]
+        return "cartctl " + shlex.join(argv)
 
     def controller_file(self) -> ControllerFile:
         """The controller file, as ``cartctl design --out`` writes it."""
