@@ -192,3 +192,12 @@ def test_a_design_of_one_motor_records_its_command(
     assert api.motors["b"]["kp"] == cli.motors["b"]["kp"]
     with pytest.raises(CartctlError, match=r"motors must be 'a' and/or 'b', got \[\]"):
         cartctl.design_pi("models/ground.toml", motors=())
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, "3"])
+def test_a_seed_that_is_no_seed(workdir: Path, seed: object) -> None:
+    # simulate raised numpy's ValueError or TypeError; excite on physics took -1 and 1.5
+    for call in (cartctl.excite, lambda **kw: cartctl.simulate("controllers/pi.toml", **kw)):
+        with pytest.raises(CartctlError) as refused:
+            call(seed=seed)
+        assert str(refused.value) == f"a seed is a whole number >= 0, got {seed!r}"

@@ -58,9 +58,12 @@ def load_trace(path: str | Path, map: str | Mapping[str, str] | None = None) -> 
     return read_trace(path, mapping)
 
 
-def _check_simulated(plant: str, what: str, model: object, preset: str) -> None:
+def _check_simulated(plant: str, what: str, model: object, preset: str, seed: Any) -> None:
     if plant_kind(plant) not in SIMULATED:
         raise InputError(f"{what} runs on 'sim' or 'physics[:actuation_ms=X]', not '{plant}'")
+    whole = isinstance(seed, int | np.integer) and not isinstance(seed, bool)
+    if seed is not None and not (whole and seed >= 0):  # as --seed (numpy's error otherwise)
+        raise InputError(f"a seed is a whole number >= 0, got {seed!r}")
     for option, given in (("--model", model is not None), ("--preset", preset != "ground")):
         if given:  # refused with the command line's line, not ignored
             check_option_used(option, plant)
@@ -106,7 +109,7 @@ def excite(
     from cartctl.runtime.loop import run_experiment
     from cartctl.signals import make_signal
 
-    _check_simulated(plant, "excite", model, preset)
+    _check_simulated(plant, "excite", model, preset, seed)
     if motor not in ("a", "b", "both"):
         raise InputError(f"motor must be 'a', 'b' or 'both', got {motor!r}")
     if not amplitude_v <= SUPPLY_V:
@@ -254,7 +257,7 @@ def simulate(
     reference : str
         A reference spec (``step:10``, ``square:8:2``, ``file:ref.csv`` …).
     """
-    _check_simulated(plant, "simulate", model, preset)
+    _check_simulated(plant, "simulate", model, preset, seed)
     if isinstance(controller, Design):
         file = replace(controller.controller_file(), path=None)
         name = f"{controller.request.method.upper()} designed on {controller.model_path}"
