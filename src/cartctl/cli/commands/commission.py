@@ -39,13 +39,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", metavar="DIR",
                    help="folder for everything written (default logs/commission-DATE-TIME); "
                         "must not hold an earlier commissioning")  # fmt: skip
-    p.add_argument("--preset", choices=("air", "ground"), default="ground",
+    p.add_argument("--preset", action=options.Given, choices=("air", "ground"), default="ground",
                    help="physics and virtual: wheels in the air or cart on the ground (default "
                         "ground)")  # fmt: skip
-    p.add_argument("--noise", type=float, default=0.0, metavar="RAD_S",
+    p.add_argument("--noise", action=options.Given, type=float, default=0.0, metavar="RAD_S",
                    help="physics and virtual: extra white measurement noise (rad/s, default 0)")  # fmt: skip
-    p.add_argument("--seed", type=options.seed, default=None, help="seed of the measurement noise")
-    p.add_argument("--connect-timeout", type=float, default=DEFAULT_CONNECT_TIMEOUT_S, metavar="S",
+    p.add_argument(
+        "--seed",
+        action=options.Given,
+        type=options.seed,
+        default=None,
+        help="seed of the measurement noise",
+    )
+    p.add_argument("--connect-timeout", action=options.Given, type=float, metavar="S",
+                   default=DEFAULT_CONNECT_TIMEOUT_S,
                    help="serial and virtual carts: longest wait for the first HEARTBEAT "
                         "(default 5 s)")  # fmt: skip
     p.add_argument("--jobs", type=int, metavar="N",

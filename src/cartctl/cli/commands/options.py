@@ -222,7 +222,7 @@ def add_map_option(p: argparse.ArgumentParser) -> None:
     )
 
 
-class _Given(argparse.Action):
+class Given(argparse.Action):
     """Store the value and note the option in ``args.given``: an option a plant does not use is
     refused only when it was given (its default is still in the namespace)."""
 
@@ -246,32 +246,32 @@ def add_plant_options(p: argparse.ArgumentParser, *, what: str) -> None:
     )
     p.add_argument(
         "--model",
-        action=_Given,
+        action=Given,
         default=str(DEFAULT_MODEL),
         metavar="MODEL.toml",
         help=f"model file of the sim plant (default {DEFAULT_MODEL})",
     )
     p.add_argument(
         "--preset",
-        action=_Given,
+        action=Given,
         choices=("air", "ground"),
         default="ground",
         help="physics plant: wheels in the air or cart on the ground (default ground)",
     )
     p.add_argument(
         "--noise",
-        action=_Given,
+        action=Given,
         type=float,
         default=0.0,
         metavar="RAD_S",
         help="extra white measurement noise, standard deviation in rad/s (default 0: off)",
     )
     p.add_argument(
-        "--seed", type=seed, default=None, action=_Given, help="seed of the measurement noise"
+        "--seed", type=seed, default=None, action=Given, help="seed of the measurement noise"
     )
     p.add_argument(
         "--connect-timeout",
-        action=_Given,
+        action=Given,
         type=float,
         default=DEFAULT_CONNECT_TIMEOUT_S,
         metavar="S",
