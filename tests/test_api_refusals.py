@@ -201,3 +201,14 @@ def test_a_seed_that_is_no_seed(workdir: Path, seed: object) -> None:
         with pytest.raises(CartctlError) as refused:
             call(seed=seed)
         assert str(refused.value) == f"a seed is a whole number >= 0, got {seed!r}"
+
+
+def test_a_motor_a_result_does_not_have(workdir: Path) -> None:
+    # a one-motor design or identification raised a bare KeyError: 'a'
+    design = cartctl.design_pi("models/ground.toml", motors=("b",))
+    with pytest.raises(CartctlError, match=r"^no motor 'a' in this design; it has motor\(s\) b$"):
+        design["a"]
+    ident = cartctl.identify(cartctl.excite(plant="physics", cycles=2, motor="a"), motors=("a",))
+    with pytest.raises(CartctlError, match=r"^no motor 'b' in this identification; it has motor"):
+        ident["b"]
+    assert design["b"]["kp"] > 0 and ident["a"].model.nk == 2

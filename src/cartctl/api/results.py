@@ -9,7 +9,7 @@ from __future__ import annotations
 import html
 import math
 import shlex
-from collections.abc import Iterable, Sequence
+from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,6 +42,13 @@ def number(value: float | None, digits: int = 4) -> str:
 def numbers(values: Iterable[float], digits: int = 4) -> str:
     """A short list ``[-0.9157, 0.2044, …]`` of ``values`` with ``digits`` significant figures."""
     return "[" + ", ".join(number(v, digits) for v in values) + "]"
+
+
+def _has(motors: Collection[str], motor: str, what: str) -> str:
+    """``motor`` if a result of ``motors`` has it; else InputError (not a bare KeyError)."""
+    if motor not in motors:
+        raise InputError(f"no motor {motor!r} in this {what}; it has motor(s) {', '.join(motors)}")
+    return motor
 
 
 _IDENT_HEADERS = ("motor", "nk", "θ", "θ std", "fit sim (%)", "fit pred (%)", "max |pole|")
@@ -122,7 +129,7 @@ class Identification(_Shown):
     sources: tuple[str, ...]
 
     def __getitem__(self, motor: str) -> MotorResult:
-        return self.motors[motor]
+        return self.motors[_has(self.motors, motor, "identification")]
 
     def model_file(self) -> ModelFile:
         """The models with their provenance, as ``identify --out`` writes them."""
@@ -187,7 +194,7 @@ class Design(_Shown):
 
     def __getitem__(self, motor: str) -> dict[str, Any]:
         """One motor's figures: gains, margins, closed-loop poles, the simulated step."""
-        return self.designs.motors[motor].entry
+        return self.designs.motors[_has(self.designs.motors, motor, "design")].entry
 
     def command(self) -> str:
         """The ``cartctl design`` command that makes this design."""
