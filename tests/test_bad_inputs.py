@@ -269,6 +269,11 @@ CASES = [
     _case("monitor serial: --duration 0.1", "needs a port"),
     _case("monitor virtual --duration nan", "--duration"),
     _case("monitor virtual --duration 0.1 --out file.txt", "--out file.txt", "is a file"),
+    # --connect-url without --rerun connect: it was silently ignored
+    _case("monitor virtual --duration 0.1 --connect-url rerun+http://127.0.0.1:9/proxy",
+          "--connect-url is for --rerun connect", "not --rerun auto"),
+    _case("run --fast --rerun save --connect-url rerun+http://127.0.0.1:9/proxy",
+          "--connect-url is for --rerun connect", "not --rerun save"),
     _case("monitor virtual --duration 0.1 --onboard missing.toml", "missing.toml", MISSING),
     _case("monitor virtual --duration 0.1 --onboard controllers/pi.toml --reference x",
           "--reference", "'x'"),

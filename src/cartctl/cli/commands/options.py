@@ -136,7 +136,10 @@ def check_output_file(path: str | Path, option: str) -> Path:
 
 def check_run_outputs(args: argparse.Namespace, prefix: str) -> tuple[Path, Path]:
     """The trace (``.csv``) and recording (``.rrd``) paths of ``--out`` and ``--name``, checked;
-    without ``--name`` ``PREFIX-YYYYmmdd-HHMMSS``, with ``-2``, ``-3`` … when that run exists."""
+    without ``--name`` ``PREFIX-YYYYmmdd-HHMMSS``, with ``-2``, ``-3`` … when that run exists;
+    ``--connect-url`` only with ``--rerun connect``."""
+    if args.connect_url and args.rerun != "connect":
+        raise InputError(f"--connect-url is for --rerun connect, not --rerun {args.rerun}")
     out = check_output_folder(args.out, "--out")
     stem = args.name or datetime.now().strftime(f"{prefix}-%Y%m%d-%H%M%S")
     candidate, n = stem, 1
