@@ -212,3 +212,20 @@ def test_a_motor_a_result_does_not_have(workdir: Path) -> None:
     with pytest.raises(CartctlError, match=r"^no motor 'b' in this identification; it has motor"):
         ident["b"]
     assert design["b"]["kp"] > 0 and ident["a"].model.nk == 2
+
+
+@pytest.mark.parametrize(
+    ("options", "line"),
+    [
+        ({"amplitude_v": float("nan")}, "amplitude must be a positive finite number, got nan"),
+        ({"cycles": 2.5}, "--cycles must be a whole number, got 2.5"),
+        ({"cycles": float("nan")}, "--cycles must be a whole number, got nan"),
+    ],
+)
+def test_excite_refuses_a_value_of_the_wrong_kind(
+    workdir: Path, options: dict[str, object], line: str
+) -> None:
+    # a NaN amplitude was said to be beyond the supply; cycles=2.5 raised numpy's TypeError
+    with pytest.raises(CartctlError) as refused:
+        cartctl.excite(**options)  # type: ignore[arg-type]
+    assert str(refused.value) == line

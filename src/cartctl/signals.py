@@ -175,6 +175,8 @@ def make_signal(
     """
     if name not in SIGNALS:
         raise InputError(f"unknown signal '{name}'; choose one of {', '.join(SIGNALS)}")
+    if cycles is not None and not isinstance(cycles, int | np.integer):
+        raise InputError(f"--cycles must be a whole number, got {cycles!r}")
     if cycles is not None and cycles < 1:
         raise InputError(f"--cycles must be at least 1, got {cycles}")
     if cycles is not None and name not in ("square", "multisine"):

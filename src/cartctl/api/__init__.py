@@ -112,7 +112,7 @@ def excite(
     _check_simulated(plant, "excite", model, preset, seed)
     if motor not in ("a", "b", "both"):
         raise InputError(f"motor must be 'a', 'b' or 'both', got {motor!r}")
-    if not amplitude_v <= SUPPLY_V:
+    if amplitude_v > SUPPLY_V:  # (NaN: make_signal's line)
         raise InputError(f"amplitude_v {amplitude_v} V is beyond the cart's ±{SUPPLY_V:g} V supply")
     if duration_s is not None and signal == "square":
         raise InputError("duration_s does not apply to the square signal; use cycles (3 s each)")
