@@ -246,3 +246,22 @@ def test_the_stop_row_does_not_bend_the_last_smoothed_speed(physics_run: Path) -
     smoothed = smoothed_speeds(columns, models, trace.period_s)["a"]
     error = np.abs(smoothed - columns["true_speed_a"])
     assert error[-1] <= 0.1  # rad/s, a third of a count (0.18 when it follows the stop)
+
+
+def test_a_model_for_a_monitors_recording_is_refused(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A monitor's recording holds channels, not a run's motors: review shows it without metrics,
+    so --model has nothing to smooth (it was silently ignored)."""
+    from cartctl.sinks.rerun_sink import ChannelsRerunSink
+
+    sink = ChannelsRerunSink("save", tmp_path / "m.rrd")
+    sink.open(["time_s", "tick", "speed_a", "voltage_a", "reference_a"])
+    for k in range(5):
+        sink.write([k * 0.01, k, float(k), 2.0, 10.0])
+    sink.close()
+    shot = tmp_path / "shot.png"
+    argv = ["review", str(tmp_path / "m.rrd"), "--model", GROUND, "--screenshot", str(shot)]
+    code, out, err = _cli(capsys, *argv)
+    assert code == 2 and out == "" and not shot.exists()
+    assert len(err.strip().splitlines()) == 1 and "--model" in err and "m.rrd" in err

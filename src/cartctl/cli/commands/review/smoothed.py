@@ -226,6 +226,11 @@ def recording_summary(path: Path, model: str | None) -> tuple[str, Series | None
     chunks = list(reader.stream(store=entry))
     columns = recording_columns(chunks)
     if not columns:
+        if model is not None:
+            raise InputError(
+                f"--model: {path} is not a run's recording (a monitor's or a commissioning "
+                "stage's): it has no metrics to smooth (a monitor's CSV trace takes --model)"
+            )
         return "", None
     time_s = columns["time_s"]
     steps = np.diff(time_s[np.isfinite(time_s)])
