@@ -229,3 +229,18 @@ def test_excite_refuses_a_value_of_the_wrong_kind(
     with pytest.raises(CartctlError) as refused:
         cartctl.excite(**options)  # type: ignore[arg-type]
     assert str(refused.value) == line
+
+
+def test_save_where_no_file_can_be(capsys: pytest.CaptureFixture[str], workdir: Path) -> None:
+    # Design.save, Identification.save and save_model raised IsADirectoryError for a folder
+    (workdir / "folder").mkdir()
+    assert main(["design", "models/ground.toml", "--method", "pi", "--out", "folder"]) == 2
+    assert "--out folder: is a folder, not a file" in capsys.readouterr().err
+    design = cartctl.design_pi("models/ground.toml")
+    ident = cartctl.identify(cartctl.excite(plant="physics", cycles=2))
+    for save in (design.save, ident.save, lambda p: cartctl.save_model(ident, p)):
+        with pytest.raises(CartctlError, match=r"^save folder: is a folder, not a file$"):
+            save("folder")
+    with pytest.raises(CartctlError, match="save_model takes load_model's or identify's result"):
+        cartctl.save_model("models/ground.toml", "x.toml")  # type: ignore[arg-type]
+    assert not list((workdir / "folder").iterdir())

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from cartctl.api.results import Design, Identification, MotorResult, SimulationResult
+from cartctl.api.results import Design, Identification, MotorResult, SimulationResult, writable
 from cartctl.choices import DEFAULT_MODEL, check_duration
 from cartctl.data.modelfile import ModelFile, load_models, save_models
 from cartctl.data.read import read_trace
@@ -199,7 +199,11 @@ def load_model(path: str | Path) -> ModelFile:
 
 def save_model(models: ModelFile | Identification, path: str | Path) -> Path:
     """Write a model file (from :func:`load_model` or :func:`identify`); returns its path."""
-    save_models(models.model_file() if isinstance(models, Identification) else models, path)
+    if not isinstance(models, ModelFile | Identification):
+        raise InputError(f"save_model takes load_model's or identify's result, not {models!r}")
+    save_models(
+        models.model_file() if isinstance(models, Identification) else models, writable(path)
+    )
     return Path(path)
 
 

@@ -51,6 +51,13 @@ def _has(motors: Collection[str], motor: str, what: str) -> str:
     return motor
 
 
+def writable(path: str | Path) -> Path:
+    """``path`` if a file can be written there, as ``--out`` is checked; else InputError."""
+    from cartctl.cli.commands.options import check_output_file
+
+    return check_output_file(path, "save")
+
+
 _IDENT_HEADERS = ("motor", "nk", "θ", "θ std", "fit sim (%)", "fit pred (%)", "max |pole|")
 
 
@@ -139,7 +146,7 @@ class Identification(_Shown):
 
     def save(self, path: str | Path) -> Path:
         """Write the model file; returns its path."""
-        save_models(self.model_file(), path)
+        save_models(self.model_file(), writable(path))
         return Path(path)
 
     def _summary(self) -> _Table:
@@ -210,7 +217,7 @@ class Design(_Shown):
 
     def save(self, path: str | Path) -> Path:
         """Write the controller file; ``cartctl run --controller PATH`` runs it."""
-        save_controller(self.controller_file(), path)
+        save_controller(self.controller_file(), writable(path))
         return Path(path)
 
     def _summary(self) -> _Table:
