@@ -183,6 +183,7 @@ def test_a_design_of_one_motor_records_its_command(
     # Design.command() (the saved file's regenerate line) left out --motor: it made both motors
     design = cartctl.design_pi("models/ground.toml", motors=("b",), crossover_hz=4)
     assert design.command().endswith(" --motor b")
+    assert "; design['b'] has every figure" in repr(design)  # its hint named design['a']
     design.save("api.toml")
     argv = shlex.split(design.command())[1:]
     assert main([*argv, "--out", "cli.toml"]) == 0
@@ -208,10 +209,11 @@ def test_a_motor_a_result_does_not_have(workdir: Path) -> None:
     design = cartctl.design_pi("models/ground.toml", motors=("b",))
     with pytest.raises(CartctlError, match=r"^no motor 'a' in this design; it has motor\(s\) b$"):
         design["a"]
-    ident = cartctl.identify(cartctl.excite(plant="physics", cycles=2, motor="a"), motors=("a",))
-    with pytest.raises(CartctlError, match=r"^no motor 'b' in this identification; it has motor"):
-        ident["b"]
-    assert design["b"]["kp"] > 0 and ident["a"].model.nk == 2
+    ident = cartctl.identify(cartctl.excite(plant="physics", cycles=2, motor="b"), motors=("b",))
+    with pytest.raises(CartctlError, match=r"^no motor 'a' in this identification; it has motor"):
+        ident["a"]
+    assert "ident['b'] for one motor" in repr(ident)  # its hint named ident['a']
+    assert design["b"]["kp"] > 0 and ident["b"].model.nk == 2
 
 
 @pytest.mark.parametrize(

@@ -160,7 +160,7 @@ class Identification(_Shown):
         title = (f"Identification: {r.method.upper()}, na = {r.na}, nb = {r.nb}{prefilter}, "
                  f"Ts = {number(period)} s{loop}, from {shown}")  # fmt: skip
         rows = tuple(result.row(m) for m, result in self.motors.items())
-        hint = "ident['a'] for one motor (.tf, .model); .save('models/mine.toml')"
+        hint = f"ident[{min(self.motors)!r}] for one motor (.tf, .model); .save('models/mine.toml')"
         return title, _IDENT_HEADERS, rows, hint
 
 
@@ -230,7 +230,8 @@ class Design(_Shown):
         title = (f"Design: {method} on {self.model_path}, "
                  f"Ts = {number(self.period_s)} s (step {number(self.request.step_rad_s)} rad/s "
                  f"on the model)")  # fmt: skip
-        hint = f"as `{self.command()}`; design['a'] has every figure; .save(path)"
+        first = min(self.designs.motors)
+        hint = f"as `{self.command()}`; design[{first!r}] has every figure; .save(path)"
         return title, ("motor", "gains", *_DESIGN_COLUMNS.values()), rows, hint
 
 
