@@ -246,3 +246,12 @@ def test_save_where_no_file_can_be(capsys: pytest.CaptureFixture[str], workdir: 
     with pytest.raises(CartctlError, match="save_model takes load_model's or identify's result"):
         cartctl.save_model("models/ground.toml", "x.toml")  # type: ignore[arg-type]
     assert not list((workdir / "folder").iterdir())
+
+
+@pytest.mark.parametrize("ticks", [1.5, True])
+def test_identify_refuses_a_loop_delay_that_is_not_whole(workdir: Path, ticks: object) -> None:
+    # 1.5 was shown in the summary and written as 1 into the model file (--loop-delay is an int)
+    trace = cartctl.excite(plant="physics", cycles=2)
+    with pytest.raises(CartctlError) as refused:
+        cartctl.identify(trace, loop_delay_ticks=ticks)  # type: ignore[arg-type]
+    assert str(refused.value) == f"--loop-delay must be in 0..50 ticks, got {ticks}"

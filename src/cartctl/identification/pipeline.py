@@ -108,7 +108,9 @@ class IdentifyRequest:
     loop_delay_ticks: int | None = None
 
     def __post_init__(self) -> None:
-        if self.loop_delay_ticks is not None and not 0 <= self.loop_delay_ticks <= 50:
+        ticks = self.loop_delay_ticks  # whole: the model file keeps int(ticks)
+        whole = isinstance(ticks, int | np.integer) and not isinstance(ticks, bool)
+        if ticks is not None and not (whole and 0 <= ticks <= 50):
             raise InputError(f"--loop-delay must be in 0..50 ticks, got {self.loop_delay_ticks}")
         if self.method not in METHODS:
             raise InputError(f"unknown method '{self.method}'; choose one of {', '.join(METHODS)}")
