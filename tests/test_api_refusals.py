@@ -7,6 +7,7 @@ from __future__ import annotations
 import shlex
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import cartctl
@@ -255,3 +256,16 @@ def test_identify_refuses_a_loop_delay_that_is_not_whole(workdir: Path, ticks: o
     with pytest.raises(CartctlError) as refused:
         cartctl.identify(trace, loop_delay_ticks=ticks)  # type: ignore[arg-type]
     assert str(refused.value) == f"--loop-delay must be in 0..50 ticks, got {ticks}"
+
+
+def test_identify_takes_numpy_whole_numbers_and_refuses_a_bool(workdir: Path) -> None:
+    # delay=np.int64(2) and prefilter_order=np.int64(4) were refused as not whole; delay=True ran
+    # as nk = 1
+    trace = cartctl.excite(plant="physics", cycles=2)
+    given = cartctl.identify(trace, delay=np.int64(2), prefilter_hz=15, prefilter_order=np.int64(4))
+    plain = cartctl.identify(trace, delay=2, prefilter_hz=15, prefilter_order=4)
+    np.testing.assert_array_equal(given["a"].theta, plain["a"].theta)
+    with pytest.raises(
+        CartctlError, match=r"^delay must be a whole number of ticks or 'auto', got True$"
+    ):
+        cartctl.identify(trace, delay=True)

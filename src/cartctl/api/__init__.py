@@ -166,7 +166,7 @@ def identify(
     loaded = [t if isinstance(t, Trace) else read_trace(t) for t in items]
     if loop_delay_ticks is None:
         loop_delay_ticks = loop_delay_of([t for t in items if not isinstance(t, Trace)])
-    if delay != "auto" and not isinstance(delay, int):
+    if delay != "auto" and (not isinstance(delay, int | np.integer) or isinstance(delay, bool)):
         raise InputError(f"delay must be a whole number of ticks or 'auto', got {delay!r}")
     shape = {"prefilter_order": prefilter_order != Prefilter.order, "zero_phase": zero_phase}
     if prefilter_hz is None and any(shape.values()):  # as identify's --order without --prefilter

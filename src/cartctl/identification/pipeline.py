@@ -49,7 +49,7 @@ class Prefilter:
     zero_phase: bool = False
 
     def __post_init__(self) -> None:
-        if not isinstance(self.order, int) or not 1 <= self.order <= 12:
+        if not isinstance(self.order, int | np.integer) or not 1 <= self.order <= 12:
             raise InputError(
                 f"prefilter order (--order) must be a whole number in 1..12, got {self.order!r}"
             )
