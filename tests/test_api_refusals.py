@@ -269,3 +269,18 @@ def test_identify_takes_numpy_whole_numbers_and_refuses_a_bool(workdir: Path) ->
         CartctlError, match=r"^delay must be a whole number of ticks or 'auto', got True$"
     ):
         cartctl.identify(trace, delay=True)
+
+
+def test_a_design_or_run_of_something_else(workdir: Path) -> None:
+    # an Identification given to design_pi or simulate raised TypeError from pathlib
+    ident = cartctl.identify(cartctl.excite(plant="physics", cycles=2))
+    for design in (cartctl.design_pi, cartctl.design_poles):
+        with pytest.raises(CartctlError, match=r"^design from a saved model file: give its path"):
+            design(ident)  # type: ignore[arg-type]
+    with pytest.raises(CartctlError) as refused:
+        cartctl.simulate(ident)  # type: ignore[arg-type]
+    assert str(refused.value) == (
+        "simulate runs a Design, a controller file or its path, not Identification"
+    )
+    model = cartctl.load_model("models/ground.toml")  # a model file read from a path designs
+    assert cartctl.design_pi(model).model_path == model.path

@@ -208,10 +208,10 @@ def save_model(models: ModelFile | Identification, path: str | Path) -> Path:
 
 
 def _design(model: str | Path | ModelFile, request: DesignRequest, motors: Sequence[str]) -> Design:
-    if isinstance(model, ModelFile):
-        if model.path is None:
-            raise InputError("design from a saved model file: give its path (save_model first)")
+    if isinstance(model, ModelFile) and model.path is not None:
         model = model.path
+    if not isinstance(model, str | Path):  # an unsaved model file, an Identification …
+        raise InputError("design from a saved model file: give its path (save_model first)")
     if not motors or not set(motors) <= set(MOTORS):
         raise InputError(f"motors must be 'a' and/or 'b', got {list(motors)}")
     models = load_models(model)
@@ -268,9 +268,12 @@ def simulate(
     elif isinstance(controller, ControllerFile):
         file = controller
         name = str(file.path) if file.path else f"{file.method.upper()} controller"
-    else:
+    elif isinstance(controller, str | Path):
         file = load_controller(controller)
         name = str(controller)
+    else:
+        kind = type(controller).__name__
+        raise InputError(f"simulate runs a Design, a controller file or its path, not {kind}")
     # what cartctl run refuses, refused here with the same line (cartctl.session)
     prepared = prepare_run(file, given=name, plant=plant, duration_s=float(duration_s),
                            reference=reference, model=model or file.model_path, preset=preset,
