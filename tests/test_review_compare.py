@@ -106,3 +106,33 @@ def test_compare_refuses_a_recording(
     assert code == 2 and out == ""
     (line,) = err.strip().splitlines()
     assert "--compare takes a second CSV trace" in line
+
+
+def test_compare_shows_the_smoothed_metrics(
+    two_runs: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """With --model (or a trace without a true speed) each run has smoothed metrics: the table
+    shows them beside the others (it dropped them, so --model changed nothing in it)."""
+    a_path, b_path = two_runs
+    model = str(ROOT / "models" / "ground.toml")
+    single = []
+    for path in (a_path, b_path):
+        code, out, err = _cli(capsys, "review", str(path), "--model", model, "--json")
+        assert code == 0, err
+        single.append(json.loads(out)["motors"])
+    code, out, err = _cli(capsys, "review", str(a_path), "--compare", str(b_path), "--model", model)
+    assert code == 0, err
+    rows = {}
+    for line in out.splitlines():
+        label, *cells = re.split(r"\s{2,}", line.strip())
+        rows[label] = cells
+    for m in ("a", "b"):
+        ra, rb = (s[m]["smoothed"]["rise_time_s"] * 1e3 for s in single)
+        assert rows[f"motor {m} smoothed: rise time 10–90 % (ms)"][:2] == [f"{ra:.1f}", f"{rb:.1f}"]
+        assert f"motor {m}: rise time 10–90 % (ms)" in rows  # the true speed's, as before
+    argv = ["review", str(a_path), "--compare", str(b_path), "--model", model, "--json"]
+    code, out, err = _cli(capsys, *argv)
+    assert code == 0, err
+    ea, eb = (s["a"]["smoothed"]["rms_error"] for s in single)
+    smoothed = json.loads(out)["difference_percent"]["motors"]["a"]["smoothed"]
+    assert smoothed["rms_error"] == pytest.approx((eb - ea) / abs(ea) * 100)

@@ -67,16 +67,19 @@ _RUN_ROWS: tuple[_Row, ...] = (
 
 
 def _rows(a: Mapping[str, Any], b: Mapping[str, Any]) -> list[_Row]:
-    """The compared rows, :data:`_RUN_ROWS`' then each motor's (of either summary)."""
+    """The compared rows, :data:`_RUN_ROWS`' then each motor's (of either summary), followed by
+    its smoothed speed's where either summary has them."""
     motors = dict.fromkeys([*a["motors"], *b["motors"]])
-    return [
-        *_RUN_ROWS,
-        *(
-            (("motors", m, key), f"motor {m}: {label}", unit, scale, decimals, rel)
-            for m in motors
+    smoothed = {m for m in motors if any("smoothed" in s["motors"].get(m, {}) for s in (a, b))}
+    speeds = [(m, sub) for m in motors for sub in ((), ("smoothed",)) if not sub or m in smoothed]
+    rows = list(_RUN_ROWS)
+    for m, sub in speeds:
+        name = " ".join(("motor", m, *sub))
+        rows += [
+            (("motors", m, *sub, key), f"{name}: {label}", unit, scale, decimals, rel)
             for key, _, label, unit, scale, decimals, rel in MOTOR_METRICS
-        ),
-    ]
+        ]
+    return rows
 
 
 def _number(value: Any) -> float | None:
