@@ -284,3 +284,29 @@ def test_a_design_or_run_of_something_else(workdir: Path) -> None:
     )
     model = cartctl.load_model("models/ground.toml")  # a model file read from a path designs
     assert cartctl.design_pi(model).model_path == model.path
+
+
+@pytest.mark.parametrize(
+    ("argv", "options"),
+    [
+        (["--noise", "-1"], {"noise_std_rad_s": -1.0}),
+        (["--noise", "nan"], {"noise_std_rad_s": float("nan")}),
+        (["--reference", "bogus"], {"reference": "bogus"}),
+        (["--reference", "square:8:0"], {"reference": "square:8:0"}),
+    ],
+)
+def test_simulate_names_the_noise_and_reference_as_run_does(
+    capsys: pytest.CaptureFixture[str], workdir: Path, argv: list[str], options: dict[str, object]
+) -> None:
+    # simulate said 'noise must be ...' (its NaN 'a standard deviation') and left out run's
+    # '--reference: ' before the reference's line
+    line = _run_line(capsys, "--controller", "controllers/pi.toml", *argv)
+    assert line.startswith(argv[0])
+    assert _simulate_line("controllers/pi.toml", **options) == line
+    assert _excite_line(capsys, "--noise", "-1") == _excite_error(noise_std_rad_s=-1.0)
+
+
+def _excite_error(**options: object) -> str:
+    with pytest.raises(CartctlError) as refused:
+        cartctl.excite(**options)  # type: ignore[arg-type]
+    return str(refused.value)

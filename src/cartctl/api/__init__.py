@@ -25,7 +25,8 @@ from cartctl.design.request import DesignRequest
 from cartctl.errors import InputError, PlantError
 from cartctl.identification.pipeline import IdentifyRequest, Prefilter
 from cartctl.identification.pipeline import identify as identify_traces
-from cartctl.plants.factory import SIMULATED, check_option_used, make_plant, plant_kind
+from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
+from cartctl.reference import check_reference
 from cartctl.runtime.loop import run_in_memory
 from cartctl.session.prepare import prepare_run
 from cartctl.sinks.summary import trace_metrics
@@ -58,15 +59,23 @@ def load_trace(path: str | Path, map: str | Mapping[str, str] | None = None) -> 
     return read_trace(path, mapping)
 
 
-def _check_simulated(plant: str, what: str, model: object, preset: str, seed: Any) -> None:
+def _check_simulated(
+    plant: str, what: str, model: object, preset: str, noise: float, seed: Any
+) -> None:
+    from argparse import Namespace
+
+    from cartctl.cli.commands.options import check_plant_options
+
     if plant_kind(plant) not in SIMULATED:
         raise InputError(f"{what} runs on 'sim' or 'physics[:actuation_ms=X]', not '{plant}'")
     whole = isinstance(seed, int | np.integer) and not isinstance(seed, bool)
     if seed is not None and not (whole and seed >= 0):  # as --seed (numpy's error otherwise)
         raise InputError(f"a seed is a whole number >= 0, got {seed!r}")
-    for option, given in (("--model", model is not None), ("--preset", preset != "ground")):
-        if given:  # refused with the command line's line, not ignored
-            check_option_used(option, plant)
+    given = [
+        o for o, on in (("--model", model is not None), ("--preset", preset != "ground")) if on
+    ]
+    # the command line's lines: --noise in range, no plant option its plant does not use
+    check_plant_options(Namespace(plant=plant, noise=noise, given=given))
 
 
 def excite(
@@ -109,7 +118,7 @@ def excite(
     from cartctl.runtime.loop import run_experiment
     from cartctl.signals import make_signal
 
-    _check_simulated(plant, "excite", model, preset, seed)
+    _check_simulated(plant, "excite", model, preset, noise_std_rad_s, seed)
     if motor not in ("a", "b", "both"):
         raise InputError(f"motor must be 'a', 'b' or 'both', got {motor!r}")
     if amplitude_v > SUPPLY_V:  # (NaN: make_signal's line)
@@ -261,7 +270,8 @@ def simulate(
     reference : str
         A reference spec (``step:10``, ``square:8:2``, ``file:ref.csv`` …).
     """
-    _check_simulated(plant, "simulate", model, preset, seed)
+    _check_simulated(plant, "simulate", model, preset, noise_std_rad_s, seed)
+    check_reference(reference)  # named as run names it
     if isinstance(controller, Design):
         file = replace(controller.controller_file(), path=None)
         name = f"{controller.request.method.upper()} designed on {controller.model_path}"
