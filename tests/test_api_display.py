@@ -196,3 +196,15 @@ def test_plot_leaves_no_figure_open_in_pyplot(results: dict[str, Any], tmp_path:
         results["run (pi, physics)"].plot(motor).savefig(tmp_path / f"{motor}.png")
     assert plt.get_fignums() == before
     assert (tmp_path / "a.png").read_bytes().startswith(b"\x89PNG")
+
+
+def test_plot_refuses_axes_it_cannot_draw_in(results: dict[str, Any]) -> None:
+    """Axes for both motors, one Axes or three raised ValueError or TypeError (no len())."""
+    from matplotlib.figure import Figure
+
+    top, bottom = Figure().subplots(2)
+    run = results["run (pi, physics)"]
+    for motor, ax in (("both", (top, bottom)), ("a", top), ("a", (top, bottom, top))):
+        with pytest.raises(cartctl.errors.InputError, match=r"^axes: give \(speed_axes"):
+            run.plot(motor, ax=ax)
+    assert run.plot("a", ax=np.array([top, bottom])) is top.figure  # as plt.subplots(2) gives

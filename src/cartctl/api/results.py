@@ -316,8 +316,8 @@ class SimulationResult(_Shown):
             grid = fig.subplots(2, len(motors), sharex=True, squeeze=False)
             pairs = [(grid[0][i], grid[1][i]) for i in range(len(motors))]
         else:
-            if len(motors) != 1 or len(ax) != 2:
-                raise ValueError("axes: give (speed_axes, voltage_axes) for one motor")
+            if len(motors) != 1 or np.shape(ax) != (2,):
+                raise InputError("axes: give (speed_axes, voltage_axes) for one motor")
             pairs = [tuple(ax)]
             fig = pairs[0][0].figure
         columns = self.columns
