@@ -265,3 +265,33 @@ def test_a_model_for_a_monitors_recording_is_refused(
     code, out, err = _cli(capsys, *argv)
     assert code == 2 and out == "" and not shot.exists()
     assert len(err.strip().splitlines()) == 1 and "--model" in err and "m.rrd" in err
+
+
+def test_a_runs_loop_delay_beyond_the_models_is_the_smoothers_extra_delay(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A PI designed with --extra-delay 1 on ground.toml (loop delay 1) runs in a loop of 2 ticks
+    (a sim plant of nk = 3): the smoother's model is ground.toml with one tick more, not with none
+    (the controller, designed for 2, matched the run, so it took 0; on the virtual cart with
+    late=1 that put 1 % of overshoot on the smoothed speed that the true speed had not)."""
+    text = (ROOT / "models" / "ground.toml").read_text()
+    plant = tmp_path / "ground-2.toml"
+    plant.write_text(
+        text.replace("loop_delay_ticks = 1", "loop_delay_ticks = 2").replace("nk = 2", "nk = 3")
+    )
+    pi = str(tmp_path / "pi2.toml")
+    assert (
+        _cli(capsys, "design", GROUND, "--method", "pi", "--extra-delay", "1", "--out", pi)[0] == 0
+    )
+    argv = ["run", "--fast", "--plant", "sim", "--model", str(plant), "--controller", pi,
+            "--duration", "1", "--noise", "0.3", "--seed", "1", "--rerun", "off",
+            "--out", str(tmp_path), "--name", "r"]  # fmt: skip
+    assert _cli(capsys, *argv)[0] == 0
+    cart = _without_true_speed(tmp_path / "r.csv", tmp_path / "c.csv")
+    (tmp_path / "c.meta.toml").write_text((tmp_path / "r.meta.toml").read_text())
+    for extra in ([], ["--model", GROUND]):
+        code, out, err = _cli(capsys, "review", str(cart), "--json", *extra)
+        assert code == 0, err
+        smoothed = json.loads(out)["smoothed"]
+        assert Path(smoothed["model"]).resolve() == Path(GROUND).resolve()
+        assert smoothed["extra_delay_ticks"] == 1

@@ -1,7 +1,7 @@
 """The smoothed speed (:func:`cartctl.design.kalman.smooth_speed`) in ``run``'s summary and in
 ``review``: when the metrics are on the measured speed, through the serial path, or asked for
 (``--model``); with ``--model``, else the model a run named in its ``.rrd`` or meta file (its
-controller's); a run's loop delay beyond its controller's as extra input delay, as ``design``."""
+controller's); a run's loop delay beyond the model's own as extra input delay, as ``design``."""
 
 from __future__ import annotations
 
@@ -71,12 +71,12 @@ def add_smoothed(
     period_s: float,
     model_path: str | Path | None,
     *,
-    extra_delay_ticks: int = 0,
+    loop_delay_ticks: int | None = None,
     strict: bool = False,
 ) -> dict[str, Array]:
     """Smooth the trace, add the metrics and ``summary["smoothed"]`` (``{"model", "method",
     "extra_delay_ticks"}``, or ``{"model", "method", "note": why not}``); returns the speeds per
-    motor. ``strict``: raise a problem with the model (one the user named) instead of noting it."""
+    motor. The ticks of the run's ``loop_delay_ticks`` beyond the model's are extra input delay. ``strict``: raise a problem with the model (one the user named) instead of noting it."""
     model = None if model_path is None else str(model_path)
     entry: dict[str, Any] = {"model": model, "method": METHOD}
     summary["smoothed"] = entry
@@ -85,22 +85,23 @@ def add_smoothed(
         return {}
     try:
         models = load_models(model_path)
-        speeds = smoothed_speeds(columns, models, period_s, extra_delay_ticks=extra_delay_ticks)
+        extra = run_extra_delay(loop_delay_ticks, models.loop_delay_ticks)
+        speeds = smoothed_speeds(columns, models, period_s, extra_delay_ticks=extra)
     except CartctlError as exc:
         if strict:
             raise
         entry["note"] = f"smoothed metrics: none ({exc})"
         return {}
     add_smoothed_metrics(summary, columns, speeds, period_s)
-    entry["extra_delay_ticks"] = extra_delay_ticks
+    entry["extra_delay_ticks"] = extra
     return speeds
 
 
-def run_extra_delay(loop_delay_ticks: int | None, designed_ticks: int | None) -> int:
-    """Ticks of loop delay a run had beyond the one its controller was designed for (>= 0)."""
-    if loop_delay_ticks is None or designed_ticks is None:
+def run_extra_delay(loop_delay_ticks: int | None, model_ticks: int | None) -> int:
+    """Ticks of loop delay a run had beyond the one its model was fitted in (>= 0)."""
+    if loop_delay_ticks is None or model_ticks is None:
         return 0
-    return max(0, int(loop_delay_ticks) - int(designed_ticks))
+    return max(0, int(loop_delay_ticks) - int(model_ticks))
 
 
 def smooth_run(
@@ -116,9 +117,8 @@ def smooth_run(
     try:
         speeds: dict[str, Array] = {}
         if wanted(summary, serial_path=bool(summary.get("link"))):
-            delay = summary.get("loop_delay_ticks"), summary.get("controller_loop_delay_ticks")
-            extra = run_extra_delay(*delay)
-            speeds = add_smoothed(summary, columns, period_s, model_path, extra_delay_ticks=extra)
+            delay = summary.get("loop_delay_ticks")
+            speeds = add_smoothed(summary, columns, period_s, model_path, loop_delay_ticks=delay)
         if recording is not None:
             texts = {} if model_path is None else {MODEL_ENTITY: str(model_path)}
             recording.send_extra(_series(columns, speeds), texts)
@@ -166,9 +166,9 @@ def recorded_model(chunks: Any) -> str | None:
     return None
 
 
-def trace_hints(trace_path: str | Path) -> tuple[bool, str | None, int]:
+def trace_hints(trace_path: str | Path) -> tuple[bool, str | None, int | None]:
     """What a run trace's meta file tells the smoother: whether it came through the serial path,
-    the model its controller was designed on (or None), and its extra loop delay (ticks)."""
+    the model its controller was designed on (or None), and its loop delay (ticks, or None)."""
     from cartctl.data.trace import read_trace_meta
     from cartctl.design.controllerfile import load_controller
 
@@ -177,16 +177,14 @@ def trace_hints(trace_path: str | Path) -> tuple[bool, str | None, int]:
     except CartctlError:
         meta = None
     if meta is None:
-        return False, None, 0
+        return False, None, None
     serial = meta.plant.startswith(("virtual", "cart on"))
     try:  # no controller: an excitation, or a run from an older cartctl
         design = load_controller(meta.controller) if meta.controller else None
     except (CartctlError, OSError):
         design = None
-    if design is None:
-        return serial, meta.model or None, 0
-    extra = run_extra_delay(meta.loop_delay_ticks, design.loop_delay_ticks)
-    return serial, meta.model or design.model_path, extra
+    model = meta.model or (design.model_path if design is not None else None)
+    return serial, model or None, meta.loop_delay_ticks
 
 
 def recorded_model_of(path: Path) -> str | None:
@@ -207,15 +205,12 @@ def smooth_csv(
     wanted."""
     trace = read_trace(path, mapping)
     summary = csv_summary(trace, path)
-    serial, run_model, extra = trace_hints(path)
+    serial, run_model, delay = trace_hints(path)
     if not wanted(summary, serial_path=serial, asked=model is not None):
         return summary
-    if model is None:
-        model_path = recorded_model_of(Path(path).with_suffix(".rrd")) or run_model
-    else:
-        model_path, extra = model, 0
+    model_path = model or recorded_model_of(Path(path).with_suffix(".rrd")) or run_model
     add_smoothed(summary, trace.columns(), trace.period_s, model_path,
-                 extra_delay_ticks=extra, strict=model is not None)  # fmt: skip
+                 loop_delay_ticks=delay, strict=model is not None)  # fmt: skip
     return summary
 
 
