@@ -120,7 +120,7 @@ class Commission:
                                  loop_delay_ticks=self.loop_delay_ticks,
                                  command=f"cartctl commission {self.spec}")  # fmt: skip
         if result.interrupted or result.failure or stopping.received() is not None:
-            self.report.add(stage, f"StageStoppedError after {len(result.trace)} ticks: "
+            self.report.add(stage, f"**Stopped** after {len(result.trace)} ticks: "
                                    f"{result.failure or 'interrupted'}; {stage}.csv holds them.")  # fmt: skip
             raise StageStoppedError(stage, result.failure)
         return result.trace
