@@ -188,7 +188,7 @@ def test_file_summaries_hold_the_gains_and_theta(results: dict[str, Any]) -> Non
 
 def test_plot_leaves_no_figure_open_in_pyplot(results: dict[str, Any], tmp_path: Path) -> None:
     """The documented ``run.plot().savefig(path)`` kept each figure open in pyplot: a sweep warned
-    'More than 20 figures have been opened' and held them all."""
+    'More than 20 figures have been opened' and held them all (and Jupyter showed each twice)."""
     import matplotlib.pyplot as plt
 
     before = plt.get_fignums()
