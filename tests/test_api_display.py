@@ -186,18 +186,6 @@ def test_file_summaries_hold_the_gains_and_theta(results: dict[str, Any]) -> Non
         np.testing.assert_allclose(_listed(line, "θ ="), models.motor(motor).theta, rtol=1e-3)
 
 
-def test_plot_leaves_no_figure_open_in_pyplot(results: dict[str, Any], tmp_path: Path) -> None:
-    """The documented ``run.plot().savefig(path)`` kept each figure open in pyplot: a sweep warned
-    'More than 20 figures have been opened' and held them all (and Jupyter showed each twice)."""
-    import matplotlib.pyplot as plt
-
-    before = plt.get_fignums()
-    for motor in ("both", "a"):
-        results["run (pi, physics)"].plot(motor).savefig(tmp_path / f"{motor}.png")
-    assert plt.get_fignums() == before
-    assert (tmp_path / "a.png").read_bytes().startswith(b"\x89PNG")
-
-
 def test_plot_refuses_axes_it_cannot_draw_in(results: dict[str, Any]) -> None:
     """Axes for both motors, one Axes or three raised ValueError or TypeError (no len())."""
     from matplotlib.figure import Figure

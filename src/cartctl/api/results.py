@@ -294,8 +294,7 @@ class SimulationResult(_Shown):
         return pd.DataFrame(self.columns)
 
     def plot(self, motor: str = "both", ax: Any = None) -> Any:
-        """Speed, reference and voltage over time; returns the matplotlib Figure (made without
-        pyplot, so none stays open: Jupyter shows it, ``.savefig(path)`` writes it).
+        """Speed, reference and voltage over time (matplotlib); returns the figure.
 
         The stop row is not drawn, so the voltage does not seem to drop to 0 V at the end.
 
@@ -309,11 +308,11 @@ class SimulationResult(_Shown):
         motors = self.motors if motor == "both" else (motor,)
         if any(m not in self.motors for m in motors):
             raise InputError(f"motor must be 'a', 'b' or 'both', got {motor!r}")
-        if ax is None:  # no pyplot: nothing left open in its figure list after a savefig
-            from matplotlib.figure import Figure
+        if ax is None:
+            import matplotlib.pyplot as plt
 
-            fig = Figure(figsize=(4 + 4.5 * len(motors), 6), layout="constrained")
-            grid = fig.subplots(2, len(motors), sharex=True, squeeze=False)
+            fig, grid = plt.subplots(2, len(motors), sharex=True, squeeze=False,
+                                     figsize=(4 + 4.5 * len(motors), 6), layout="constrained")  # fmt: skip
             pairs = [(grid[0][i], grid[1][i]) for i in range(len(motors))]
         else:
             if len(motors) != 1 or np.shape(ax) != (2,):
