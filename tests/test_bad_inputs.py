@@ -144,6 +144,9 @@ CASES = [
           "--process-noise-v is for an estimator"),
     _case("design models/ground.toml --method poles --phase-margin 65",
           "--phase-margin is for --method pi"),
+    # pole placement always runs on its Kalman estimate: --estimator none was ignored
+    _case("design models/ground.toml --method poles --estimator none",
+          "--estimator is for --method pi"),
     _case("design models/ground.toml --method pi --bandwidth-hz 5 --crossover-hz 2",
           "--crossover-hz is for a PI without --bandwidth-hz"),
     _case("design models/ground.toml --method poles --poles 0.5,0.5,0.5 --overshoot 2",

@@ -110,9 +110,9 @@ class DesignRequest:
     def _idle(self) -> dict[str, str]:
         """The fields this request leaves unused, each with what would use it."""
         spec = ("settling_time_s", "overshoot_percent")
-        if self.method == "poles":  # (--estimator: pole placement always has one)
+        if self.method == "poles":  # --estimator too: pole placement always has its Kalman one
             pi_only = ("phase_margin_deg", "crossover_hz", "bandwidth_hz", "anti_windup")
-            idle = dict.fromkeys(pi_only, "--method pi")
+            idle = dict.fromkeys((*pi_only, "estimator"), "--method pi")
             why = "placing poles from a specification, not with --poles"
             return idle | dict.fromkeys(spec if self.poles else (), why)
         idle = dict.fromkeys(("poles", *spec), "--method poles")
