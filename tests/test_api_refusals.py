@@ -310,3 +310,9 @@ def _excite_error(**options: object) -> str:
     with pytest.raises(CartctlError) as refused:
         cartctl.excite(**options)  # type: ignore[arg-type]
     return str(refused.value)
+
+
+def test_motors_given_as_the_command_lines_word() -> None:
+    # the message spelled the string out letter by letter: ['b', 'o', 't', 'h']
+    with pytest.raises(CartctlError, match=r"^motors must be 'a' and/or 'b', got 'both'$"):
+        cartctl.design_pi("models/ground.toml", motors="both")

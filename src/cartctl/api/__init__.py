@@ -222,7 +222,8 @@ def _design(model: str | Path | ModelFile, request: DesignRequest, motors: Seque
     if not isinstance(model, str | Path):  # an unsaved model file, an Identification …
         raise InputError("design from a saved model file: give its path (save_model first)")
     if not motors or not set(motors) <= set(MOTORS):
-        raise InputError(f"motors must be 'a' and/or 'b', got {list(motors)}")
+        given = motors if isinstance(motors, str) else list(motors)  # 'both' as itself
+        raise InputError(f"motors must be 'a' and/or 'b', got {given!r}")
     models = load_models(model)
     return Design(design_models(request, models, tuple(motors)), Path(model), models.period_s)
 
