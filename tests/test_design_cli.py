@@ -290,3 +290,29 @@ def test_the_settling_bound_names_the_loop_the_design_is_for(
     doc = _design(capsys, str(timing), "--method", "poles")
     for motor in ("a", "b"):
         assert doc["motors"][motor]["settling_bound_loop_delay_ticks"] == 1
+
+
+def test_pole_placement_from_the_specification_on_a_first_order_model(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """na = nb = nk = 1 in a loop of 1 tick: one state, one placed pole. The default settling
+    time and overshoot were refused ('needs 1 closed-loop poles, got 2': the dominant pair); the
+    one pole is the pair's decay exp(−4 Ts / 0.06 s), and the loop (the file's controller_num/den
+    on the model, with the estimator's poles) closes on it."""
+    path = tmp_path / "first.toml"
+    path.write_text(
+        'format = "cartctl-model/2"\nperiod_s = 0.01\nloop_delay_ticks = 1\n\n[provenance]\n'
+        'source = "t"\ncreated = "2026-01-01"\ndata = []\nmethod = "arx"\nprefilter = "none"\n'
+        'notes = ""\n\n[motors.a]\ntheta = [-0.9, 0.2]\nna = 1\nnb = 1\nnk = 1\n'
+    )
+    entry = _design(capsys, str(path), "--method", "poles", "--motor", "a", "--step", "5")
+    entry = entry["motors"]["a"]
+    pole = math.exp(-4.0 * 0.01 / 0.06)
+    np.testing.assert_allclose(entry["closed_loop_poles"], [[pole, 0.0]], atol=1e-12)
+    expected = [complex(re, im) for re, im in entry["closed_loop_poles"] + entry["estimator_poles"]]
+    num, den = entry["controller_num"], entry["controller_den"]
+    model = load_models(path).motor("a")
+    loop = np.roots(np.polyadd(np.polymul(den, model.den()), np.polymul(num, model.num())))
+    for p in expected:
+        assert np.min(np.abs(loop - p)) < 1e-6
+    assert entry["step"]["overshoot_percent"] <= 1.0

@@ -20,8 +20,9 @@ has none.
 
 Poles from a specification: ζ = −ln(OS) / √(π² + ln²(OS)), ζ ω_n = 4 / T_s (2 % settling), the
 dominant pair s = −ζ ω_n ± j ω_n √(1 − ζ²) mapped by z = exp(s Ts); the rest real, fast and
-distinct: z_j = exp(−(ratio + j) ζ ω_n Ts), j = 0, 1, …. Repeated poles are placed with
-Ackermann's formula (``control.acker``), the others with ``control.place``.
+distinct: z_j = exp(−(ratio + j) ζ ω_n Ts), j = 0, 1, … (a loop of one pole: exp(−ζ ω_n Ts)).
+Repeated poles are placed with Ackermann's formula (``control.acker``), the others with
+``control.place``.
 """
 
 from __future__ import annotations
@@ -64,7 +65,7 @@ def spec_poles(
     fast_pole_ratio: float,
 ) -> list[complex]:
     """The dominant pair for a settling time and overshoot, then ``count − 2`` fast real poles
-    (the module docstring's rule); InputError for an overshoot outside (0, 100) %, a settling
+    (the module docstring's rule; one pole: the pair's decay e^(−ζ ω_n Ts) alone); InputError for an overshoot outside (0, 100) %, a settling
     time under ``count`` ticks (deadbeat), a pair beyond Nyquist, or a ratio below 1."""
     os_ = float(overshoot_percent)
     if not (math.isfinite(os_) and 0.0 < os_ < 100.0):
@@ -81,6 +82,8 @@ def spec_poles(
     log_os = math.log(os_ / 100.0)
     zeta = -log_os / math.hypot(math.pi, log_os)
     sigma = 4.0 / ts  # ζ ω_n (1/s)
+    if count == 1:  # a first-order loop has no pair: its one pole settles like the pair's envelope
+        return [complex(math.exp(-sigma * period_s))]
     omega_d = sigma / zeta * math.sqrt(1.0 - zeta * zeta)
     if omega_d * period_s >= math.pi:
         raise InputError(
