@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from cartctl.data.read import read_trace
-from cartctl.errors import CartctlError, PlantError
+from cartctl.errors import CartctlError, DataWarning, PlantError
 from cartctl.model import ArxModel
 from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
@@ -202,3 +203,53 @@ def test_csv_rows_reach_the_file_a_block_at_a_time_with_idle(tmp_path: Path) -> 
     sink.idle()
     assert lines() == 51  # one block of 50, flushed: a crash from here loses nothing
     sink.close()
+
+
+class _SkippingCart:
+    """A physics plant paced like a cart over serial whose frames of cart ticks 4 and 7 were lost:
+    its ``tick_index`` jumps there, as :class:`~cartctl.link.serial_cart.SerialCart`'s does."""
+
+    def __init__(self, plant, description: str) -> None:
+        self.plant, self.description = plant, description
+        self.period_s, self.tick_index, self._row = plant.period_s, 0, 0
+        self.loop_delay_ticks = 1
+
+    def reset(self):
+        self.tick_index = self._row = 0
+        return self.plant.reset()
+
+    def step(self, voltage_a_v: float, voltage_b_v: float):
+        self._row += 1
+        self.tick_index += 2 if self._row in (4, 6) else 1
+        return self.plant.step(voltage_a_v, voltage_b_v)
+
+    def close(self) -> None:
+        self.plant.close()
+
+
+def test_an_excitation_keeps_the_cart_ticks_it_lost(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``excite`` over serial writes each row at its cart tick, as ``run`` and ``monitor`` do (it
+    wrote k·Ts, so a lost frame vanished from the trace and ``identify`` could not warn of it)."""
+    import cartctl.plants.factory as factory
+    from cartctl.cli import main
+
+    make = factory.make_plant
+
+    def skipping(spec: str, **options):
+        cart = _SkippingCart(*make(spec, **options))
+        return cart, cart.description
+
+    monkeypatch.setattr(factory, "make_plant", skipping)
+    out = tmp_path / "e.csv"
+    assert main(["excite", "--plant", "physics", "--amplitude", "6", "--out", str(out)]) == 0
+    with pytest.warns(DataWarning, match=r"about 2 row\(s\) are missing"):
+        time_s = read_trace(out).columns()["time_s"]
+    steps = np.round(np.diff(time_s) / 0.01).astype(int)
+    assert list(np.flatnonzero(steps == 2)) == [3, 5] and np.all(steps[steps != 2] == 1)
+    capsys.readouterr()
+    with warnings.catch_warnings():  # as on the command line: one line on stderr
+        warnings.simplefilter("always")
+        assert main(["identify", str(out)]) == 0
+    assert "about 2 row(s) are missing" in capsys.readouterr().err

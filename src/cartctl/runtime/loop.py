@@ -300,11 +300,13 @@ def run_experiment(
             f"voltage sequences must be 1-D and equally long, got {ua.shape} and {ub.shape}"
         )
     rows: list[Measurement] = []  # row k: the measurement of tick k
+    ticks: list[int] = []  # its tick: k, or a cart's count from its first (lost frames skipped)
     interrupted, failure = False, None
     try:
         y = plant.reset()
         for k in range(ua.size):
             rows.append(y)
+            ticks.append(getattr(plant, "tick_index", k))
             y = plant.step(float(ua[k]), float(ub[k]))
             if on_tick is not None:
                 on_tick(k + 1)
@@ -325,7 +327,7 @@ def run_experiment(
     keep = 4 if done and not np.isnan(table[:, 2:]).any() else 2
     names = ("speed_a", "speed_b", "true_speed_a", "true_speed_b")[:keep]
     columns = {
-        "time_s": np.arange(done) * plant.period_s,
+        "time_s": np.asarray(ticks, dtype=float) * plant.period_s,
         "voltage_a": ua[:done],
         "voltage_b": ub[:done],
     }
