@@ -13,6 +13,7 @@ import contextlib
 import io
 import json
 import re
+import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -330,3 +331,29 @@ def test_a_reference_without_a_step_is_said_so_not_called_unsettled() -> None:
         "2 settings: 0 infeasible requests (the design refused them), 2 ran without a step in "
         "the reference to measure, 0 ran but did not settle, 0 settled"
     )
+
+
+def test_choose_out_designs_for_the_step_tuned_on(tmp_path: Path) -> None:
+    """A model that reaches 9.7 rad/s at 12 V, tuned on step:5: the settings ran and settled,
+    but --out designed the file for design's default 10 rad/s step and refused it ('a 10 rad/s
+    step cannot be held within ±12 V', exit 2, no file). The file is now for the 5 rad/s step,
+    and its analysis's step is the chosen row's run (motor a)."""
+    model = tmp_path / "weak.toml"
+    motor = "theta = [-0.9356, 0.2173, 0.25864, -0.031004]\nna = 2\nnb = 2\nnk = 2\n"
+    model.write_text(
+        'format = "cartctl-model/2"\nperiod_s = 0.01\nloop_delay_ticks = 1\n\n[provenance]\n'
+        'source = "t"\ncreated = "2026-01-01"\ndata = []\nmethod = "arx"\nprefilter = "none"\n'
+        f'notes = ""\n\n[motors.a]\n{motor}\n[motors.b]\n{motor}'
+    )
+    out = tmp_path / "c.toml"
+    code, text, err = _cli("tune", str(model), "--method", "poles", "--grid",
+                           "settling-time=0.1,overshoot=1", "--reference", "step:5", "--jobs", "1",
+                           "--choose", "1", "--out", str(out), "--json")  # fmt: skip
+    assert code == 0, err
+    row = json.loads(text)["settings"][0]["motors"]["a"]
+    doc = tomllib.loads(out.read_text())
+    assert "--step 5" in doc["command"]
+    step = doc["motors"]["a"]["analysis"]["step"]
+    assert step["step_rad_s"] == 5.0
+    assert step["overshoot_percent"] == pytest.approx(row["overshoot_percent"], rel=1e-9)
+    assert step["settling_time_s"] == pytest.approx(row["settling_time_s"], rel=1e-9)

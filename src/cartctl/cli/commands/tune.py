@@ -140,8 +140,12 @@ def _choose(
                 f"reason is listed as #{result.index} with the results); settings that can be "
                 f"chosen: {choosable_text(results)}"
             )
+        fixed = checks.design_fixed(args)
+        kind, *parts = args.reference.split(":")
+        if kind == "step" and float(parts[0]) != 0.0:  # the file's step: the one tuned on
+            fixed["step_rad_s"] = float(parts[0])
         command = engine.save_setting(args.method, result.settings, args.model, args.out,
-                                      args.extra_delay, checks.design_fixed(args))  # fmt: skip
+                                      args.extra_delay, fixed)  # fmt: skip
     except InputError as exc:
         return None, exc
     chosen = {"index": result.index, "out": args.out, "command": command}
