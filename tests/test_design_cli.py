@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import tomllib
 import warnings
 from pathlib import Path
@@ -316,3 +317,18 @@ def test_pole_placement_from_the_specification_on_a_first_order_model(
     for p in expected:
         assert np.min(np.abs(loop - p)) < 1e-6
     assert entry["step"]["overshoot_percent"] <= 1.0
+
+
+def test_a_refused_bandwidth_names_a_range_whose_ends_can_be_asked_for(
+    capsys: pytest.CaptureFixture[str], ground_path: Path
+) -> None:
+    """Motor a of models/ground.toml at 65°: 4.003 Hz to 21.785 Hz. The refusal of 4 Hz said 'it
+    gives 4.00 Hz to 21.79 Hz', two values it refused too; the ends are now rounded inwards."""
+    argv = [str(ground_path), "--method", "pi", "--motor", "a", "--json"]
+    assert main(["design", *argv, "--bandwidth-hz", "4"]) == 2
+    err = capsys.readouterr().err
+    ends = re.search(r"it gives ([\d.]+) Hz to ([\d.]+) Hz", err)
+    assert ends, err
+    for end in ends.groups():
+        doc = _design(capsys, *argv[:-1], "--bandwidth-hz", end)
+        assert doc["motors"]["a"]["bandwidth_hz"] == pytest.approx(float(end), rel=1e-6)

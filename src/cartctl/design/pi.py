@@ -184,9 +184,10 @@ def design_pi_bandwidth(
     widths = [at(fc).bandwidth_hz() for fc in grid]
     top = int(np.argmax(widths))
     if not widths[0] <= bandwidth_hz <= widths[top]:
-        raise InputError(
+        low_text, high_text = math.ceil(widths[0] * 100.0), math.floor(widths[top] * 100.0)
+        raise InputError(  # the ends rounded inwards, as _range_text's: both can be asked for
             f"a PI with {pm:g}° phase margin cannot give a {bandwidth_hz:g} Hz closed-loop "
-            f"bandwidth on this model; it gives {widths[0]:.2f} Hz to {widths[top]:.2f} Hz"
+            f"bandwidth on this model; it gives {low_text / 100:.2f} Hz to {high_text / 100:.2f} Hz"
         )
     fc = float(grid[top])
     if bandwidth_hz < widths[top]:
