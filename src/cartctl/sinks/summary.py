@@ -33,7 +33,8 @@ def motor_metrics(
     time_s: Array, reference: Array, speed: Array, voltage: Array, *, settling_floor: float = 0.0
 ) -> dict[str, Any]:
     """``run --json`` entry of one motor, judging ``speed`` (rad/s) in a settling band of
-    max(2 % of the step, ``settling_floor``); step metrics None without a step."""
+    max(2 % of the step, ``settling_floor``); step metrics None without a step from rest (a
+    speed at its onset of half the step or more: a trace begun after it)."""
     keys = ("overshoot_percent", "settling_time_s", "rise_time_s", "steady_state_error")
     out: dict[str, Any] = dict.fromkeys(keys)
     rms = float(np.sqrt(np.mean((reference - speed) ** 2))) if speed.size else None
@@ -41,6 +42,8 @@ def motor_metrics(
     magnitude = np.abs(voltage)
     out["max_abs_voltage"] = finite_or_none(float(np.max(magnitude))) if magnitude.size else None
     span = first_step(reference, initial=0.0)  # the loop starts from rest
+    if span is not None and span[0] < speed.size:  # half way at the onset: begun mid-run
+        span = span if 2 * abs(speed[span[0]]) < abs(reference[span[0]]) else None
     if span is not None:
         start, end = span
         info = step_info(time_s[:end], speed[:end], reference=float(reference[start]), initial=0.0,
