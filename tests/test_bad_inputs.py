@@ -259,6 +259,11 @@ CASES = [
     _case("virtual-cart --noise -1 --duration 0.1", "--noise", ">= 0"),
     _case("virtual-cart --noise nan --duration 0.1", "--noise", NAN),
     _case("virtual-cart --faults moon=1 --duration 0.1", "--faults", "'moon=1'"),
+    # the bridge sketch's version with an on-board controller: it was silently ignored
+    _case("virtual-cart --onboard controllers/pi.toml --faults bridge=1 --duration 0.1",
+          "bridge=1 sets up the bridge sketch", "on-board controller"),
+    _case("monitor virtual:bridge=1 --onboard controllers/pi.toml --duration 0.1",
+          "bridge=1 sets up the bridge sketch", "on-board controller"),
     _case("virtual-cart --duration nan", "--duration"),
     _case("virtual-cart --seed x --duration 0.1", "--seed"),
     _case("virtual-cart --onboard missing.toml --duration 0.1", "missing.toml", MISSING),

@@ -19,6 +19,7 @@ from typing import Any
 
 import cartctl.link.cart_uart as uart
 from cartctl.cart import PERIOD_S
+from cartctl.errors import InputError
 from cartctl.link.bridge import (
     BRIDGE_BAUD,
     CH_BRIDGE_VERSION,
@@ -68,6 +69,10 @@ class VirtualCart:
         firmware: OnboardFirmware | None = None,
     ) -> None:
         self.faults = faults or CartFaults()
+        if firmware is not None and self.faults.bridge != 2:
+            raise InputError(
+                "bridge=1 sets up the bridge sketch; an on-board controller runs without it"
+            )
         self.physics = PhysicsPlant(
             preset,
             noise_std_rad_s=noise_std_rad_s,
