@@ -136,3 +136,24 @@ def test_compare_shows_the_smoothed_metrics(
     ea, eb = (s["a"]["smoothed"]["rms_error"] for s in single)
     smoothed = json.loads(out)["difference_percent"]["motors"]["a"]["smoothed"]
     assert smoothed["rms_error"] == pytest.approx((eb - ea) / abs(ea) * 100)
+
+
+def test_compare_says_when_the_runs_are_judged_on_different_speeds(
+    two_runs: tuple[Path, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A simulator's run is judged on its true speed, a cart's on the measured one: the table
+    says so when A and B differ (it set the two side by side without a word)."""
+    import csv
+
+    a_path, b_path = two_runs
+    with b_path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    keep = [i for i, name in enumerate(rows[0]) if not name.startswith("true_speed")]
+    cart = tmp_path / "cart.csv"  # B as a real cart's trace: no true speed
+    with cart.open("w", newline="") as f:
+        csv.writer(f).writerows([[row[i] for i in keep] for row in rows])
+    code, out, err = _cli(capsys, "review", str(a_path), "--compare", str(cart))
+    assert code == 0, err
+    assert "  tracking on the true speed in A, on the measured speed in B" in out.splitlines()
+    code, out, err = _cli(capsys, "review", str(a_path), "--compare", str(b_path))
+    assert code == 0 and "tracking on" not in out

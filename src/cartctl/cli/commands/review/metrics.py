@@ -16,7 +16,7 @@ from cartctl.data.columns import MONITOR_LABELS_HINT
 from cartctl.data.trace import Trace
 from cartctl.errors import DataFileError
 from cartctl.measures.numfmt import format_fixed, render_table
-from cartctl.sinks.summary import MOTOR_METRICS, timing_metrics, trace_metrics
+from cartctl.sinks.summary import MOTOR_METRICS, SIGNALS, timing_metrics, trace_metrics
 
 TIMING_COLUMNS = ("period_error_us", "compute_us")
 TRACKING_COLUMNS = ("reference_a", "speed_a", "voltage_a")
@@ -150,6 +150,9 @@ def format_compare(a: Mapping[str, Any], b: Mapping[str, Any]) -> str:
             )
         )
     notes = [_signal_note(a, "A"), _signal_note(b, "B")]
+    judged = [SIGNALS[s.get("metrics_signal", "speed")] for s in (a, b)]
+    if judged[0] != judged[1]:
+        notes.append(f"  tracking on {judged[0]} in A, on {judged[1]} in B")
     lines = [
         f"A: {a.get('trace', 'A')}",
         f"B: {b.get('trace', 'B')}",
