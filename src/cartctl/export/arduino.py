@@ -113,7 +113,7 @@ _HEADER = """\
 // computed in float.
 {estimator}//
 // Delay: here the controller runs with one tick of delay (the voltage set at tick k reaches
-// the motor at tick k+1: nk = 2, the report's model); a PC-side loop over serial has several.
+// the motor at tick k+1: a loop delay of 1 tick); a PC-side loop over serial has several.
 {extra}//
 // Motor A: the template's getSpeedMotorA() already carries motor A's sign flip, so a
 // positive voltage gives a positive speed on both motors.
