@@ -204,7 +204,7 @@ def test_header_says_where_it_came_from_and_how_to_call_it() -> None:
         "0.01 s",
         "+-12 V",
         "steady-state (fixed) gain",
-        "nk = 2",
+        "a loop delay of 1 tick",
         "--extra-delay 2",
         "conservative",
         "readFloat(0)",
