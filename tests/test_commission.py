@@ -288,6 +288,11 @@ def test_amplitude_rule_by_hand() -> None:
     # much friction: at least 3 × 3 V, within 90 % of 12 V
     assert checks.choose_amplitude({"a": motor(3.0, 4.0)}, 10.0).voltage_v == 9.0
     assert checks.choose_amplitude({"a": motor(5.0, 4.0)}, 10.0).voltage_v == 10.8
+    # 0.48 + 20 / 2.19 = 9.612 V: 9.6 V, and the rule says the same (it rounded to 9.6 V while
+    # the amplitude was cut to 9.5 V for a ceiling of 9.5997 V)
+    for gain, cut in ((2.19, 9.6), (2.2, 9.5)):  # 0.48 + 20 / 2.2 = 9.5709 V
+        amplitude = checks.choose_amplitude({"a": motor(0.48, gain)}, 10.0)
+        assert amplitude.voltage_v == cut and f"at most {cut:.1f} V" in amplitude.rule
 
 
 @pytest.mark.parametrize(

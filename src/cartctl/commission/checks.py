@@ -157,7 +157,8 @@ def choose_amplitude(checks: dict[str, MotorCheck], step_rad_s: float) -> Amplit
     ceiling = min(supply_cap, speed_cap)
     floor = min(supply_cap, FRICTION_MARGIN * breakaway)
     voltage = max(floor, min(REPORT_AMPLITUDE_V, ceiling))
-    voltage = math.floor(voltage * 10.0) / 10.0  # to 0.1 V: a number a person can repeat
+    # down to 0.1 V (a number a person can repeat), the ceiling shown as the voltage is cut
+    voltage, ceiling = (math.floor(v * 10.0) / 10.0 for v in (voltage, ceiling))
     rule = (
         f"the report's {REPORT_AMPLITUDE_V:g} V, at most {ceiling:.1f} V (the lower of "
         f"{FULL_SCALE_FRACTION:.0%} of the {SUPPLY_V:g} V supply and the voltage whose estimated "
