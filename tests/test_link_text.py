@@ -46,3 +46,44 @@ def test_a_long_unfinished_line_costs_each_fragment_only_its_own_size() -> None:
         tracemalloc.stop()
     assert peak < 50_000, f"one fragment allocated {peak} bytes with 0.5 MB held"
     assert lines.feed("\n") == ["p" * 31 * 16_001]
+
+
+class _Port:
+    """pyserial's surface over a fixed byte string (what the cart sent before the host closed)."""
+
+    def __init__(self, data: bytes) -> None:
+        self.data = bytearray(data)
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self.data)
+
+    def read(self, size: int = 1) -> bytes:
+        out = bytes(self.data[:size])
+        del self.data[:size]
+        return out
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_last_print_without_a_newline_is_shown_when_the_link_closes() -> None:
+    # the link kept it as an unfinished line and dropped it when the port closed
+    from cartctl.link.cart_link import CartLink
+    from cartctl.link.dialect import Encoder
+
+    encoder = Encoder()
+    sent = b"".join([*encoder.print_text("ready\n"), *encoder.print_text("stopped"),
+                     encoder.heartbeat(0)])  # fmt: skip
+    shown: list[str] = []
+    link = CartLink("/dev/fake", on_print=shown.append, serial_factory=lambda *a, **k: _Port(sent))
+    link.open()
+    assert link.wait_heartbeat_any_rate(1.0)
+    assert shown == ["ready"]
+    link.close()
+    assert shown == ["ready", "stopped"]
+    link.close()  # a second close shows nothing twice
+    assert shown == ["ready", "stopped"]

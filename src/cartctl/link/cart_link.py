@@ -214,7 +214,8 @@ class CartLink:
             ser.write(frame)
 
     def close(self) -> None:
-        """Flush what was written and close the port; never raises."""
+        """Flush what was written, close the port and show the cart's unfinished PRINT line (a last
+        text without a newline); never raises."""
         ser, self._serial = self._serial, None
         if ser is None:
             return
@@ -223,3 +224,6 @@ class CartLink:
                 ser.flush()
         with contextlib.suppress(Exception):
             ser.close()
+        with contextlib.suppress(Exception):
+            if (rest := self.lines.flush()) is not None:
+                self.on_print(rest)
