@@ -14,6 +14,17 @@ MAX_DURATION_S = 24 * 3600.0
 """The longest signal, run or recording cartctl takes: 24 h (8.64 million ticks of 10 ms)."""
 
 
+def check_finite(value: float, option: str) -> float:
+    """``value`` if it is a finite number; else one line: ``OPTION must be a number, got nan``."""
+    from cartctl.errors import InputError  # here: setup.py reads this file without the package
+
+    if math.isnan(value):
+        raise InputError(f"{option} must be a number, got nan")
+    if math.isinf(value):
+        raise InputError(f"{option} must be finite, got {value:g}")
+    return value
+
+
 def check_duration(seconds: float, option: str = "--duration") -> float:
     """``seconds`` if in (0, :data:`MAX_DURATION_S`]; else one line naming ``option``."""
     from cartctl.errors import InputError  # here: setup.py reads this file without the package

@@ -25,7 +25,7 @@ from cartctl.design.request import DesignRequest
 from cartctl.errors import InputError, PlantError
 from cartctl.identification.pipeline import IdentifyRequest, Prefilter
 from cartctl.identification.pipeline import identify as identify_traces
-from cartctl.plants.factory import SIMULATED, make_plant, plant_kind
+from cartctl.plants.factory import SIMULATED, check_plant_options, make_plant, plant_kind
 from cartctl.reference import check_reference
 from cartctl.runtime.loop import run_in_memory
 from cartctl.session.prepare import prepare_run
@@ -62,10 +62,6 @@ def load_trace(path: str | Path, map: str | Mapping[str, str] | None = None) -> 
 def _check_simulated(
     plant: str, what: str, model: object, preset: str, noise: float, seed: Any
 ) -> None:
-    from argparse import Namespace
-
-    from cartctl.cli.commands.options import check_plant_options
-
     if plant_kind(plant) not in SIMULATED:
         raise InputError(f"{what} runs on 'sim' or 'physics[:actuation_ms=X]', not '{plant}'")
     whole = isinstance(seed, int | np.integer) and not isinstance(seed, bool)
@@ -75,7 +71,7 @@ def _check_simulated(
         o for o, on in (("--model", model is not None), ("--preset", preset != "ground")) if on
     ]
     # the command line's lines: --noise in range, no plant option its plant does not use
-    check_plant_options(Namespace(plant=plant, noise=noise, given=given))
+    check_plant_options(plant, noise_std_rad_s=noise, given=given)
 
 
 def excite(

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S, DEFAULT_MODEL
+from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S, DEFAULT_MODEL, check_finite
 from cartctl.data.modelfile import load_models
 from cartctl.errors import InputError
 from cartctl.plants.base import Plant
@@ -36,6 +37,26 @@ def check_option_used(option: str, spec: str) -> None:
     if plant_kind(spec) not in (*others, last):
         uses = f"{', '.join(others)} and {last} plants" if others else f"{last} plant"
         raise InputError(f"{option} is for the {uses}; --plant {spec} does not use it")
+
+
+def check_plant_options(
+    spec: str,
+    *,
+    noise_std_rad_s: float = 0.0,
+    connect_timeout_s: float = 1.0,
+    given: Iterable[str] = (),
+) -> None:
+    """The plant options' refusals, in the command line's words, before a plant is made: the
+    noise (rad/s) and the connect timeout (s) in range, and no option in ``given`` (its name on
+    the command line) that the plant ``spec`` names does not use."""
+    noise = check_finite(noise_std_rad_s, "--noise")
+    if noise < 0.0:
+        raise InputError(f"--noise must be a standard deviation >= 0 rad/s, got {noise:g}")
+    timeout = check_finite(connect_timeout_s, "--connect-timeout")
+    if timeout <= 0.0:
+        raise InputError(f"--connect-timeout must be a positive number of seconds, got {timeout:g}")
+    for option in sorted(given):  # after the ranges: those say more
+        check_option_used(option, spec)
 
 
 def physics_options(text: str) -> dict[str, Any]:

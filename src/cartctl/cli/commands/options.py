@@ -6,7 +6,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import errno
-import math
 import os
 import shlex
 import sys
@@ -21,6 +20,7 @@ from cartctl.choices import (
     MAX_DURATION_S,
     SIGNALS,
     check_duration,
+    check_finite,
 )
 from cartctl.errors import InputError
 
@@ -31,6 +31,7 @@ __all__ = [
     "MAX_DURATION_S",
     "SIGNALS",
     "check_duration",
+    "check_finite",
 ]
 
 MAX_JOBS = 64
@@ -298,25 +299,10 @@ def check_input_file(path: str | Path, what: str, option: str | None = None) -> 
     return found
 
 
-def check_finite(value: float, option: str) -> float:
-    """``value`` if it is a finite number; else one line: ``OPTION must be a number, got nan``."""
-    if math.isnan(value):
-        raise InputError(f"{option} must be a number, got nan")
-    if math.isinf(value):
-        raise InputError(f"{option} must be finite, got {value:g}")
-    return value
-
-
 def check_plant_options(args: argparse.Namespace) -> None:
-    """``--noise`` and ``--connect-timeout`` in range (those the command has), and no plant option
-    given that ``--plant`` does not use, before any plant is made or connected."""
-    noise = check_finite(getattr(args, "noise", 0.0), "--noise")
-    if noise < 0.0:
-        raise InputError(f"--noise must be a standard deviation >= 0 rad/s, got {noise:g}")
-    timeout = check_finite(getattr(args, "connect_timeout", 1.0), "--connect-timeout")
-    if timeout <= 0.0:
-        raise InputError(f"--connect-timeout must be a positive number of seconds, got {timeout:g}")
-    from cartctl.plants.factory import check_option_used
+    """:func:`cartctl.plants.factory.check_plant_options` on the options the command has."""
+    from cartctl.plants.factory import check_plant_options as check
 
-    for option in sorted(getattr(args, "given", ())):  # after the ranges: those say more
-        check_option_used(option, args.plant)
+    noise, timeout = getattr(args, "noise", 0.0), getattr(args, "connect_timeout", 1.0)
+    given = getattr(args, "given", ())  # (virtual-cart has no --plant, so nothing given here)
+    check(getattr(args, "plant", ""), noise_std_rad_s=noise, connect_timeout_s=timeout, given=given)
