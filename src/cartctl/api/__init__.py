@@ -23,6 +23,7 @@ from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.design.make import design_models
 from cartctl.design.request import DesignRequest
 from cartctl.errors import InputError, PlantError
+from cartctl.identification.etfe import is_whole
 from cartctl.identification.pipeline import IdentifyRequest, Prefilter
 from cartctl.identification.pipeline import identify as identify_traces
 from cartctl.plants.factory import SIMULATED, check_plant_options, make_plant, plant_kind
@@ -64,8 +65,7 @@ def _check_simulated(
 ) -> None:
     if plant_kind(plant) not in SIMULATED:
         raise InputError(f"{what} runs on 'sim' or 'physics[:actuation_ms=X]', not '{plant}'")
-    whole = isinstance(seed, int | np.integer) and not isinstance(seed, bool)
-    if seed is not None and not (whole and seed >= 0):  # as --seed (numpy's error otherwise)
+    if seed is not None and not (is_whole(seed) and seed >= 0):  # as --seed (else numpy's error)
         raise InputError(f"a seed is a whole number >= 0, got {seed!r}")
     given = [
         o for o, on in (("--model", model is not None), ("--preset", preset != "ground")) if on
@@ -171,7 +171,7 @@ def identify(
     loaded = [t if isinstance(t, Trace) else read_trace(t) for t in items]
     if loop_delay_ticks is None:
         loop_delay_ticks = loop_delay_of([t for t in items if not isinstance(t, Trace)])
-    if delay != "auto" and (not isinstance(delay, int | np.integer) or isinstance(delay, bool)):
+    if delay != "auto" and not is_whole(delay):
         raise InputError(f"delay must be a whole number of ticks or 'auto', got {delay!r}")
     shape = {"prefilter_order": prefilter_order != Prefilter.order, "zero_phase": zero_phase}
     if prefilter_hz is None and any(shape.values()):  # as identify's --order without --prefilter

@@ -22,7 +22,12 @@ from cartctl.data.trace import Trace
 from cartctl.errors import InputError
 from cartctl.identification.arx import ArxFit, Segment, check_orders, first_row, fit_arx
 from cartctl.identification.diagnostics import Diagnostics, diagnose
-from cartctl.identification.etfe import average_cycles, find_period, periodic_regression_pad
+from cartctl.identification.etfe import (
+    average_cycles,
+    find_period,
+    is_whole,
+    periodic_regression_pad,
+)
 from cartctl.identification.oe import check_oe_orders, fit_oe
 from cartctl.identification.orders import (
     DelayEstimate,
@@ -109,8 +114,7 @@ class IdentifyRequest:
 
     def __post_init__(self) -> None:
         ticks = self.loop_delay_ticks  # whole: the model file keeps int(ticks)
-        whole = isinstance(ticks, int | np.integer) and not isinstance(ticks, bool)
-        if ticks is not None and not (whole and 0 <= ticks <= 50):
+        if ticks is not None and not (is_whole(ticks) and 0 <= ticks <= 50):
             raise InputError(f"--loop-delay must be in 0..50 ticks, got {self.loop_delay_ticks}")
         if self.method not in METHODS:
             raise InputError(f"unknown method '{self.method}'; choose one of {', '.join(METHODS)}")
