@@ -25,14 +25,14 @@ _DEFAULT = DesignRequest(method="pi")
 
 
 def _option(group: Any, field: str, metavar: str | None, help: str, **more: Any) -> None:
-    """The option of a request field (:data:`~cartctl.design.request.OPTIONS`) with the type of
-    the request's default (give ``type`` where it is None); left out, it is not in the namespace,
-    so the request takes its default and knows which options were given."""
+    """The option of a request field (:data:`~cartctl.design.request.OPTIONS`), with the
+    request's default and its type (give ``type`` where the default is None), noted in
+    ``args.given`` when given (:class:`~cartctl.cli.commands.options.Given`)."""
     default = getattr(_DEFAULT, field)
     if default is not None:
         more.setdefault("type", type(default))
     group.add_argument(
-        OPTIONS[field], default=argparse.SUPPRESS, metavar=metavar, help=help, **more
+        OPTIONS[field], action=options.Given, default=default, metavar=metavar, help=help, **more
     )
 
 
@@ -119,9 +119,9 @@ def request_from_args(args: argparse.Namespace) -> DesignRequest:
     """The design request the options ask for (checked), field by field through
     :data:`~cartctl.design.request.OPTIONS`, so a command ``to_argv`` writes parses back to it."""
     # argparse's attribute for an option: '--phase-margin' -> phase_margin
-    dests = {field: flag[2:].replace("-", "_") for field, flag in OPTIONS.items()}
-    values = {field: getattr(args, d) for field, d in dests.items() if hasattr(args, d)}
-    return DesignRequest(method=args.method, **values).check(given=values)
+    values = {field: getattr(args, flag[2:].replace("-", "_")) for field, flag in OPTIONS.items()}
+    given = [field for field, flag in OPTIONS.items() if flag in getattr(args, "given", ())]
+    return DesignRequest(method=args.method, **values).check(given=given)
 
 
 def _gains_line(method: str, e: dict[str, Any]) -> str:

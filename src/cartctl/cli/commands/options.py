@@ -227,8 +227,8 @@ def add_map_option(p: argparse.ArgumentParser) -> None:
 
 
 class Given(argparse.Action):
-    """Store the value and note the option in ``args.given``: an option a plant does not use is
-    refused only when it was given (its default is still in the namespace)."""
+    """Store the value and note the option in ``args.given``: an option the command does not use
+    (the plant's, the design method's) is refused only when given, even at its default value."""
 
     def __call__(self, parser: Any, namespace: Any, values: Any, option: Any = None) -> None:
         setattr(namespace, self.dest, values)
