@@ -87,13 +87,21 @@ def test_a_duration_out_of_range(
     assert _simulate_line("controllers/pi.toml", duration_s=float(duration)) == line
 
 
-def test_a_model_for_a_plant_that_has_none(
-    capsys: pytest.CaptureFixture[str], workdir: Path
-) -> None:
-    # the physics plant runs its preset: a model file given for it was silently ignored
-    line = _run_line(capsys, "--plant", "physics", "--model", "models/air.toml")
-    assert line == "--model is for the sim plant; --plant physics does not use it"
-    assert _simulate_line("controllers/pi.toml", plant="physics", model="models/air.toml") == line
+@pytest.mark.parametrize(
+    ("plant", "option", "value", "line"),
+    [  # physics runs its preset, sim its models: the other given was silently ignored
+        ("physics", "model", "models/air.toml",
+         "--model is for the sim plant; --plant physics does not use it"),
+        ("sim", "preset", "air",
+         "--preset is for the physics and virtual plants; --plant sim does not use it"),
+    ],
+)  # fmt: skip
+def test_a_plant_option_for_a_plant_that_has_none(
+    capsys: pytest.CaptureFixture[str], workdir: Path, plant: str, option: str, value: str,
+    line: str,
+) -> None:  # fmt: skip
+    assert _run_line(capsys, "--plant", plant, f"--{option}", value) == line
+    assert _simulate_line("controllers/pi.toml", plant=plant, **{option: value}) == line
 
 
 def _excite_line(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
@@ -125,15 +133,6 @@ def test_excite_refuses_what_the_command_refuses(
         cartctl.excite(**options)  # type: ignore[arg-type]
     assert str(refused.value) == line
     assert not Path("x.csv").exists()
-
-
-def test_a_preset_for_a_plant_that_has_none(
-    capsys: pytest.CaptureFixture[str], workdir: Path
-) -> None:
-    # the sim plant runs its models: a preset given for it was silently ignored
-    line = _run_line(capsys, "--plant", "sim", "--preset", "air")
-    assert line == "--preset is for the physics and virtual plants; --plant sim does not use it"
-    assert _simulate_line("controllers/pi.toml", plant="sim", preset="air") == line
 
 
 @pytest.mark.parametrize(
