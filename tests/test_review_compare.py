@@ -157,3 +157,29 @@ def test_compare_says_when_the_runs_are_judged_on_different_speeds(
     assert "  tracking on the true speed in A, on the measured speed in B" in out.splitlines()
     code, out, err = _cli(capsys, "review", str(a_path), "--compare", str(b_path))
     assert code == 0 and "tracking on" not in out
+
+
+def test_compare_takes_map_to_the_trace_whose_columns_it_names(
+    two_runs: tuple[Path, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """An own run beside a foreign log (QRC's default labels): --map goes to the trace holding
+    the columns it names, in either order (it went to both, and the own run lacked them)."""
+    a_path, b_path = two_runs
+    labels = {"speed_a": "FloatIn0", "speed_b": "FloatIn1", "voltage_a": "FloatIn2",
+              "voltage_b": "FloatIn3", "reference_a": "FloatIn4", "reference_b": "FloatIn5"}  # fmt: skip
+    lines = b_path.read_text().splitlines(keepends=True)
+    foreign = tmp_path / "foreign.csv"
+    foreign.write_text(",".join(labels.get(n, n) for n in lines[0].strip().split(",")) + "\n"
+                       + "".join(lines[1:]))  # fmt: skip
+    mapping = ",".join(f"{n}={label}" for n, label in labels.items())
+    a, b = _single(capsys, a_path), _single(capsys, b_path)
+    for first, second in ((a_path, foreign), (foreign, a_path)):
+        argv = ["review", str(first), "--compare", str(second), "--map", mapping, "--json"]
+        code, out, err = _cli(capsys, *argv)
+        assert code == 0, err
+        runs = [{k: v for k, v in run.items() if k != "trace"} for run in json.loads(out)["runs"]]
+        expected = [{k: v for k, v in run.items() if k != "trace"} for run in (a, b)]
+        assert runs == (expected if first == a_path else expected[::-1])
+    code, out, err = _cli(capsys, "review", str(a_path), "--compare", str(b_path), "--map", mapping)
+    assert code == 2 and out == "" and len(err.strip().splitlines()) == 1  # neither has them
+    assert "FloatIn" in err

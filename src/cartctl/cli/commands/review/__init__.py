@@ -8,7 +8,7 @@ from pathlib import Path
 
 import cartctl.cli.commands.options as options
 from cartctl.cli.commands.review.recording import VULKAN_HINT, serve_web, vulkan_available
-from cartctl.errors import InputError
+from cartctl.errors import DataFileError, InputError
 
 __all__ = ["add_parser", "run", "serve_web", "vulkan_available"]
 
@@ -98,14 +98,35 @@ def _review_csv(args: argparse.Namespace) -> int:
     if args.web or args.screenshot:
         raise InputError("--web and --screenshot apply to .rrd recordings, not to CSV traces")
     from cartctl.cli.commands.review import metrics
-    from cartctl.cli.commands.review.smoothed import smooth_csv
     from cartctl.cli.jsonout import dumps
     from cartctl.sinks.summary import format_summary
 
     paths = [p for p in (args.recording, args.compare) if p]
-    a, *b = [smooth_csv(path, args.map, args.model) for path in paths]  # b: --compare's run
+    a, *b = _summaries(paths, args)  # b: --compare's run
     if args.json:
         print(dumps(metrics.compare(a, *b) if b else a))
     else:
         print(metrics.format_compare(a, *b) if b else format_summary(a))
     return 0
+
+
+def _summaries(paths: list[str], args: argparse.Namespace) -> list[dict]:
+    """With --compare, --map goes to the trace(s) holding the columns it names (an own run beside a
+    foreign log): one lacking them is read as it is, and refused only when neither has them."""
+    from cartctl.cli.commands.review.smoothed import smooth_csv
+
+    summaries, lacking = [], []
+    for path in paths:
+        try:
+            summaries.append(smooth_csv(path, args.map, args.model))
+        except DataFileError as err:
+            if len(paths) == 1 or not err.problem.startswith("the mapping "):
+                raise
+            lacking.append(err)
+            try:
+                summaries.append(smooth_csv(path, None, args.model))
+            except DataFileError:
+                raise err from None
+    if len(lacking) == len(paths):
+        raise lacking[0]
+    return summaries
