@@ -23,7 +23,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cartctl.cli import main
-from cartctl.cli.commands.options import check_output_folder
+from cartctl.data.outputs import check_output_folder
 from cartctl.errors import InputError, OutputError
 from cartctl.model import ArxModel
 from cartctl.plants.sim import ArxPlant

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.data.modelfile import ModelFile, save_models
+from cartctl.data.outputs import check_output_file
 from cartctl.data.trace import MOTORS
 from cartctl.design.controllerfile import ControllerFile, save_controller
 from cartctl.design.make import Designs, controller_file
@@ -53,8 +54,6 @@ def _has(motors: Collection[str], motor: str, what: str) -> str:
 
 def writable(path: str | Path) -> Path:
     """``path`` if a file can be written there, as ``--out`` is checked; else InputError."""
-    from cartctl.cli.commands.options import check_output_file
-
     return check_output_file(path, "save")
 
 

@@ -1,2 +1,3 @@
 """Files and formats: traces and their meta files (``trace``, ``read``, ``columns``), model
-files (``modelfile``) and the TOML files' format lines (``tomlfile``); imports nothing."""
+files (``modelfile``), the TOML files' format lines (``tomlfile``) and the checks of output
+paths (``outputs``); imports nothing."""

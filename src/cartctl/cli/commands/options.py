@@ -4,9 +4,6 @@ no numpy or scipy here; names, limits and defaults come from :mod:`cartctl.choic
 from __future__ import annotations
 
 import argparse
-import contextlib
-import errno
-import os
 import shlex
 import sys
 from datetime import datetime
@@ -22,6 +19,7 @@ from cartctl.choices import (
     check_duration,
     check_finite,
 )
+from cartctl.data.outputs import check_output_file, check_output_folder
 from cartctl.errors import InputError
 
 __all__ = [
@@ -32,6 +30,8 @@ __all__ = [
     "SIGNALS",
     "check_duration",
     "check_finite",
+    "check_output_file",
+    "check_output_folder",
 ]
 
 MAX_JOBS = 64
@@ -108,33 +108,6 @@ def add_rerun_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--connect-url", metavar="URL", help="viewer address for --rerun connect")
 
 
-def check_output_folder(folder: str | Path, option: str) -> Path:
-    """``folder`` when cartctl can create it and write files into it, else one line naming
-    ``option``, the folder and why. It really writes (and removes again): permissions, read-only
-    and virtual file systems alike."""
-    folder = Path(folder)
-    why = _unwritable(folder)
-    if why is not None:
-        raise InputError(f"{option} {folder}: {why}")
-    return folder
-
-
-def check_output_file(path: str | Path, option: str) -> Path:
-    """``path`` when cartctl can write (or replace) it; else as :func:`check_output_folder`."""
-    path = Path(path)
-    if path.is_dir():
-        raise InputError(f"{option} {path}: is a folder, not a file")
-    parent = path.parent
-    if parent.exists() and not parent.is_dir():
-        raise InputError(f"{option} {path}: cannot create: {parent} is a file")
-    why = _unwritable(parent, there="cannot create")
-    if why is None and path.exists() and not os.access(path, os.W_OK):
-        why = "cannot write: permission denied"
-    if why is not None:
-        raise InputError(f"{option} {path}: {why}")
-    return path
-
-
 def check_run_outputs(args: argparse.Namespace, prefix: str) -> tuple[Path, Path]:
     """The trace (``.csv``) and recording (``.rrd``) paths of ``--out`` and ``--name``, checked;
     without ``--name`` ``PREFIX-YYYYmmdd-HHMMSS``, with ``-2``, ``-3`` … when that run exists;
@@ -162,52 +135,6 @@ def check_outputs(
             value = getattr(args, name, None)
             if value:
                 check(value, "--" + name.replace("_", "-"))
-
-
-_REASONS = {
-    errno.EACCES: "permission denied",
-    errno.EPERM: "permission denied",
-    errno.EROFS: "read-only file system",
-    errno.ENOSPC: "no space left on device",
-    errno.EDQUOT: "disk quota exceeded",
-    errno.ENAMETOOLONG: "file name too long",
-}
-
-
-def _unwritable(folder: Path, there: str = "cannot write there") -> str | None:
-    """None when a file can be written in ``folder`` (made for the test and removed), else why;
-    ``there`` begins the answer when ``folder`` exists but takes no file."""
-    existing, missing = folder, []
-    while not existing.exists():
-        if existing.is_symlink():  # a dangling link: mkdir would fail on it
-            return f"cannot create: {existing} is a broken link"
-        missing.append(existing)
-        if existing.parent == existing:
-            break
-        existing = existing.parent
-    if not existing.is_dir():
-        if existing == folder:
-            return "is a file, not a folder"
-        return f"cannot create: {existing} is a file"
-    made: list[Path] = []
-    step = "cannot create"
-    try:
-        for path in reversed(missing):
-            path.mkdir()
-            made.append(path)
-        step = there if not made else step
-        probe = folder / f".cartctl-write-test-{os.getpid()}"
-        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
-        os.unlink(probe)
-    except OSError as exc:
-        if exc.errno == errno.ENOENT:  # its parent is there, yet it cannot be made: /proc
-            return f"{step}: {existing} takes no new files or folders"
-        return f"{step}: {_REASONS.get(exc.errno or 0, (exc.strerror or str(exc)).lower())}"
-    finally:
-        for path in reversed(made):
-            with contextlib.suppress(OSError):
-                path.rmdir()
-    return None
 
 
 def command_line(command: str) -> str:
