@@ -92,6 +92,19 @@ def test_imports_go_down_or_sideways_only() -> None:
     assert wrong == []
 
 
+def test_the_api_imports_nothing_of_the_command_line() -> None:
+    """The API and the commands are one layer, side by side: the API's checks live below both."""
+    graph = _graph()
+    wrong = [
+        f"{m} -> {t}"
+        for m in graph
+        if _group(m) == "api"
+        for t in graph[m]
+        if _group(t).startswith("cli")
+    ]
+    assert wrong == []
+
+
 def test_no_circles() -> None:
     graph = _graph()
     state: dict[str, int] = {}
