@@ -32,6 +32,16 @@ def check_extra_delay_ticks(ticks: object, name: str = "extra delay") -> int:
     return int(ticks)
 
 
+def check_input_delay(nk: int, where: str = "") -> None:
+    """Refuse nk < 1 (the one line of design, tune and the sim plant; ``where`` prefixes it)."""
+    if nk < 1:
+        raise InputError(
+            f"{where}the model has no input delay (nk = {nk}); a controller computes u[k] after "
+            "measuring y[k], so a design or a simulated plant needs nk >= 1 (identify --delay 1 "
+            "or more)"
+        )
+
+
 def pole_damping(z: complex, period_s: float) -> tuple[float | None, float | None]:
     """Damping ratio ζ and natural frequency f_n (Hz) of a discrete root, as ``control.damp``.
 

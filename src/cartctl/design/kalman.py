@@ -46,7 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 from cartctl.cart import ENCODER_COUNTS_PER_REV, encoder_quantum_rad_s
 from cartctl.design.request import DEFAULT_BIAS_DRIFT_STD_V, DEFAULT_PROCESS_NOISE_STD_V
 from cartctl.errors import InputError
-from cartctl.model import ArxModel, check_extra_delay_ticks
+from cartctl.model import ArxModel, check_extra_delay_ticks, check_input_delay
 from cartctl.runtime.kalman import KalmanDesign as KalmanDesign  # re-exported: a design's result
 
 
@@ -103,11 +103,7 @@ def realise(model: ArxModel, *, extra_delay_ticks: int = 0) -> StateSpace:
     max(na, nk + d + nb − 1) (``model.order + d`` for the report's structure); InputError for
     nk = 0 or a bad extra delay."""
     check_extra_delay_ticks(extra_delay_ticks, "extra_delay_ticks")
-    if model.nk < 1:
-        raise InputError(
-            f"the model has no input delay (nk = {model.nk}); the controller needs nk >= 1 because "
-            "it computes u[k] after measuring y[k]"
-        )
+    check_input_delay(model.nk)
     delayed = model.with_extra_delay(extra_delay_ticks)
     den = delayed.den()  # [1, α_1 … α_n]
     num = delayed.num()  # degree n − nk < n: strictly proper

@@ -39,7 +39,7 @@ from cartctl.design.pi import design_pi, design_pi_bandwidth
 from cartctl.design.poles import design_poles
 from cartctl.design.request import NOISE_FIELDS, DesignRequest, check_loop_delay, parse_poles
 from cartctl.errors import InputError
-from cartctl.model import ArxModel, pole_damping
+from cartctl.model import ArxModel, check_input_delay, pole_damping
 from cartctl.runtime.base import Controller
 
 LIGHT_DAMPING = 0.1  # a closed-loop pole with a damping ratio ζ below this rings: a warning
@@ -298,6 +298,7 @@ def check_models(
     where = f"{name}: " if name else ""
     by_motor = {m: models.motor(m) if isinstance(models, ModelFile) else models[m] for m in motors}
     for m, model in by_motor.items():
+        check_input_delay(model.nk, f"{where}motor {m}'s model: ")
         if not model.is_stable():
             raise InputError(
                 f"{where}motor {m}'s model is unstable (pole at |z| = {model.pole_radius():.4g}); "

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 from cartctl.cart import SUPPLY_V, nk_fits_loop_delay
 from cartctl.errors import InputError, PlantError
-from cartctl.model import ArxModel
+from cartctl.model import ArxModel, check_input_delay
 from cartctl.plants.base import Measurement
 from cartctl.runtime.elementwise import Value
 
@@ -63,9 +63,8 @@ class ArxPlant:
             raise InputError(
                 f"motor models have different sample periods: {model_a.period_s} s and {model_b.period_s} s"
             )
-        for m in (model_a, model_b):
-            if m.nk < 1:
-                raise InputError(f"a plant model needs an input delay nk >= 1, got nk = {m.nk}")
+        for motor, m in (("a", model_a), ("b", model_b)):
+            check_input_delay(m.nk, f"motor {motor}'s model: ")
         if not (math.isfinite(noise_std_rad_s) and noise_std_rad_s >= 0.0):
             raise InputError(
                 f"noise must be a standard deviation >= 0 rad/s, got {noise_std_rad_s}"

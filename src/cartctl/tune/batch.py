@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 from cartctl.cart import SUPPLY_V, check_voltage_limit
 from cartctl.data.modelfile import ModelFile
 from cartctl.errors import InputError
-from cartctl.model import ArxModel
+from cartctl.model import ArxModel, check_input_delay
 from cartctl.plants.sim import DIVERGED_RAD_S, arx_next
 from cartctl.runtime.base import Controller
 from cartctl.runtime.elementwise import clip
@@ -53,8 +53,8 @@ class ArxBatch:
         """From ``ar`` (N, na), ``b`` (N, nb) and input delays ``nk`` (N,) ≥ 1."""
         b_arr, nk_arr = np.asarray(b, dtype=float), np.asarray(nk, dtype=int)
         (n, nb), nk_max = b_arr.shape, int(nk_arr.max(initial=1))
-        if n and int(nk_arr.min()) < 1:
-            raise InputError(f"a plant needs an input delay nk >= 1, got {int(nk_arr.min())}")
+        if n:
+            check_input_delay(int(nk_arr.min()))
         lags = np.zeros((n, nk_max - 1 + nb))
         np.put_along_axis(lags, nk_arr[:, None] - 1 + np.arange(nb), b_arr, axis=1)
         return cls(np.asarray(ar, dtype=float), lags, float(period_s))

@@ -224,6 +224,8 @@ def _nk_remark(result: IdentifyResult, delay: int) -> str:
     nks = sorted({r.chosen.model.nk for r in result.motors.values()})
     if nks == [delay + 1]:
         return f" (nk = {delay + 1} = loop delay + 1: the report's timing)"
+    if 0 in nks:
+        return " (nk = 0: design, tune and the sim plant refuse it; they need nk >= 1)"
     return f" (nk = {', '.join(map(str, nks))}; design explains how it treats that)"
 
 
