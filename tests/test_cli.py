@@ -130,6 +130,37 @@ def test_excite_other_signals_one_motor(
     assert np.max(np.abs(trace.voltage_b)) == pytest.approx(6.0)
 
 
+@pytest.mark.parametrize("motor", ["a", "b"])
+def test_excite_one_motor_model_drives_its_motor(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, ground_path: Path, motor: str
+) -> None:
+    """A one-motor model file drives its motor, the other at 0 V (it was refused: the sim plant
+    wanted both motors' models); the motor it lacks cannot be driven."""
+    import dataclasses
+
+    import cartctl
+    from cartctl.data.modelfile import load_models, save_models
+
+    models = load_models(ground_path)
+    one = save_models(dataclasses.replace(models, motors={motor: models.motor(motor)}),
+                      tmp_path / "one.toml")  # fmt: skip
+    out_csv = tmp_path / "x.csv"
+    argv = ["excite", "--model", str(one), "--motor", motor, "--amplitude", "10", "--cycles", "1"]
+    code, _, err = _run(capsys, *argv, "--out", str(out_csv))
+    assert code == 0, err
+    trace = read_trace(out_csv)
+    np.testing.assert_allclose(trace.speed(motor), _report_eq12(trace.voltage(motor), motor),
+                               atol=1e-9)  # fmt: skip
+    other = "b" if motor == "a" else "a"
+    assert np.all(trace.speed(other) == 0.0) and np.all(trace.voltage(other) == 0.0)
+    api = cartctl.excite(plant="sim", model=one, motor=motor, cycles=1)
+    np.testing.assert_array_equal(api.speed(motor), trace.speed(motor))
+    for driven in (other, "both"):
+        code, out, err = _run(capsys, *argv[:4], driven, *argv[5:], "--out", str(out_csv))
+        assert code == 2 and out == "" and f"lacks ['{other}']" in err
+        assert len(err.strip().splitlines()) == 1
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [

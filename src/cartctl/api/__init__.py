@@ -8,7 +8,8 @@ Each function takes the command line's path (``cartctl excite``, ``identify``, `
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import replace
+from contextlib import suppress
+from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -125,7 +126,8 @@ def excite(
         check_duration(duration_s)
     volts = make_signal(signal, amplitude_v, cycles=cycles, duration_s=duration_s)
     the_plant, description = make_plant(plant, model_path=model or DEFAULT_MODEL, preset=preset,
-                                        noise_std_rad_s=noise_std_rad_s, seed=seed)  # fmt: skip
+                                        noise_std_rad_s=noise_std_rad_s, seed=seed,
+                                        motors="ab" if motor == "both" else motor)  # fmt: skip
     per_motor = (volts if motor in (m, "both") else np.zeros_like(volts) for m in MOTORS)
     result = run_experiment(the_plant, *per_motor, source=description)
     if result.interrupted:  # a notebook's interrupt stops the cell, not just the experiment
@@ -224,6 +226,17 @@ def _design(model: str | Path | ModelFile, request: DesignRequest, motors: Seque
     return Design(design_models(request, models, tuple(motors)), Path(model), models.period_s)
 
 
+def _request(method: str, options: dict[str, Any]) -> DesignRequest:
+    """The request of ``options``, a whole number given for a number of the command line as the
+    float it parses (``8`` is ``8.0``, in the controller file too; bools stay, to be refused)."""
+    floats = {f.name for f in fields(DesignRequest) if str(f.type).startswith("float")}
+    for name, value in options.items():
+        if name in floats and is_whole(value):
+            with suppress(OverflowError):  # beyond any float: its range refuses it
+                options[name] = float(value)
+    return DesignRequest(method=method, **options)
+
+
 def design_pi(
     model: str | Path | ModelFile, *, motors: Sequence[str] = MOTORS, **options: Any
 ) -> Design:
@@ -232,7 +245,7 @@ def design_pi(
     ``options`` are the fields of :class:`~cartctl.design.request.DesignRequest`:
     ``phase_margin_deg``, ``crossover_hz`` or ``bandwidth_hz``, ``anti_windup``, ``estimator``,
     ``extra_delay_ticks``, ``voltage_limit_v``, ``step_rad_s`` …"""
-    return _design(model, DesignRequest(method="pi", **options), motors)
+    return _design(model, _request("pi", options), motors)
 
 
 def design_poles(
@@ -243,7 +256,7 @@ def design_poles(
     ``options``: ``settling_time_s`` and ``overshoot_percent`` or ``poles``, the estimator's
     ``process_noise_std_v``/``bias_drift_std_v``, ``extra_delay_ticks`` … (see
     :class:`~cartctl.design.request.DesignRequest`)."""
-    return _design(model, DesignRequest(method="poles", **options), motors)
+    return _design(model, _request("poles", options), motors)
 
 
 def simulate(

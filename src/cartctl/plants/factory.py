@@ -111,27 +111,29 @@ def make_plant(
     noise_std_rad_s: float = 0.0,
     seed: int | None = None,
     connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S,
+    motors: str = "ab",
 ) -> tuple[Plant, str]:
     """The plant named ``spec`` (docs/plants.md) and one line saying what it is.
 
     ``model_path``: the ``sim`` plant's models; ``preset``: ``air`` or ``ground`` (physics);
     ``noise_std_rad_s``: extra white measurement noise of a simulated plant (0: off);
-    ``connect_timeout_s``: a serial cart's longest wait for its first HEARTBEAT (s). A serial
+    ``connect_timeout_s``: a serial cart's longest wait for its first HEARTBEAT (s); ``motors``:
+    those driven (a ``sim`` model file may lack the others, which stay at rest). A serial
     plant is returned unconnected (``connect()`` opens the port)."""
     kind = check_plant_name(spec)
     options = spec.partition(":")[2]
     noise: dict[str, Any] = {"noise_std_rad_s": noise_std_rad_s, "seed": seed}
     if kind == "sim":
         models = load_models(model_path)
-        missing = [m for m in ("a", "b") if m not in models.motors]
+        missing = [m for m in motors if m not in models.motors]
         if missing:
-            raise InputError(
-                f"the sim plant needs models of both motors; {model_path} lacks {missing}"
-            )
+            what = "models of both motors" if len(motors) == 2 else f"a model of motor {motors}"
+            raise InputError(f"the sim plant needs {what}; {model_path} lacks {missing}")
         from cartctl.plants.sim import ArxPlant
 
-        motors, delay = models.motors, models.loop_delay_ticks
-        plant: Plant = ArxPlant(motors["a"], motors["b"], loop_delay_ticks=delay, **noise)
+        have, delay = models.motors, models.loop_delay_ticks
+        a, b = (have.get(m) or next(iter(have.values())) for m in "ab")  # idle: 0 V stays 0 rad/s
+        plant: Plant = ArxPlant(a, b, loop_delay_ticks=delay, **noise)
         return plant, f"sim ({model_path})"
     if kind == "physics":
         from cartctl.plants.physics import PhysicsPlant

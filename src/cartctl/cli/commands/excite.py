@@ -88,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
         noise_std_rad_s=args.noise,
         seed=args.seed,
         connect_timeout_s=args.connect_timeout,
+        motors="ab" if args.motor == "both" else args.motor,
     )
     bar = ProgressBar(volts.size, f"excite {args.signal}")
     switch_interval = sys.getswitchinterval()
