@@ -131,6 +131,30 @@ def test_design_and_simulate_agree_with_design_and_run(
     assert run.failure is None
 
 
+@pytest.mark.parametrize(
+    ("method", "argv", "options"),
+    [("pi", ["--phase-margin", "60", "--crossover-hz", "4", "--voltage-limit", "10", "--step", "8"],
+      {"phase_margin_deg": 60, "crossover_hz": 4, "voltage_limit_v": 10, "step_rad_s": 8}),
+     ("poles", ["--settling-time", "1", "--overshoot", "2"],
+      {"settling_time_s": 1, "overshoot_percent": 2})],
+)  # fmt: skip
+def test_design_save_writes_the_file_design_out_writes(
+    method: str, argv: list[str], options: dict, workdir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Whole numbers given to the API are the floats the command line parses (8.0, not 8), and
+    the header's command writes the file again (its --out); the creation time aside."""
+    out = "controllers/same.toml"
+    args = ["design", "models/ground.toml", "--method", method, *argv, "--out", out]
+    monkeypatch.setattr(sys, "argv", ["cartctl", *args])
+    assert main(args) == 0
+    cli = Path(out).read_text(encoding="utf-8")
+    design = cartctl.design_pi if method == "pi" else cartctl.design_poles
+    design("models/ground.toml", **options).save(out)
+    api = Path(out).read_text(encoding="utf-8")
+    created = re.compile(r"^created = .*$", flags=re.M)
+    assert created.sub("", api) == created.sub("", cli)
+
+
 def test_to_dataframe_gives_the_columns(workdir: Path) -> None:
     pd = pytest.importorskip("pandas")  # the dev extra installs it
     run = cartctl.simulate("controllers/pi.toml", duration_s=0.3)

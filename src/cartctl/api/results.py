@@ -209,14 +209,16 @@ class Design(_Shown):
             argv += ["--motor", *self.designs.motors]
         return "cartctl " + shlex.join(argv)
 
-    def controller_file(self) -> ControllerFile:
-        """The controller file, as ``cartctl design --out`` writes it."""
-        return controller_file(self.designs, self.model_path, command=self.command(),
+    def controller_file(self, out: str | Path | None = None) -> ControllerFile:
+        """The controller file, as ``cartctl design --out OUT`` writes it (its header's command
+        with ``--out OUT`` when ``out`` is given)."""
+        command = self.command() + ("" if out is None else " " + shlex.join(["--out", str(out)]))
+        return controller_file(self.designs, self.model_path, command=command,
                                period_s=self.period_s)  # fmt: skip
 
     def save(self, path: str | Path) -> Path:
         """Write the controller file; ``cartctl run --controller PATH`` runs it."""
-        save_controller(self.controller_file(), writable(path))
+        save_controller(self.controller_file(path), writable(path))
         return Path(path)
 
     def _summary(self) -> _Table:
