@@ -8,11 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cartctl.cart import encoder_quantum_rad_s
 from cartctl.cli import main
 from cartctl.data.modelfile import load_models
 from cartctl.data.trace import Trace, write_trace
 from cartctl.errors import InputError
 from cartctl.identification.validate import validate, validate_models
+from cartctl.measures.stepinfo import step_info
 from cartctl.plants.physics import PhysicsPlant
 from cartctl.plants.sim import ArxPlant
 from cartctl.runtime.loop import run_experiment
@@ -200,3 +202,20 @@ def test_an_unstable_model_has_one_fit_in_validate_and_identify(sim_step: Trace)
         assert result.fit_simulation_percent == -np.inf
         assert result.to_dict()["fit_simulation_percent"] is None
         assert result.to_dict()["stable"] is False
+
+
+@pytest.mark.parametrize("amplitude_v", [1.0, 2.0, 4.0])
+def test_step_settles_in_the_band_run_and_review_use(air_path: Path, amplitude_v: float) -> None:
+    # a small step on the physics plant: 2 % of it is narrower than one encoder count per tick,
+    # so a bare 2 % band judged the quantisation (settled after seconds, or never)
+    trace = _step_a(PhysicsPlant("air"), amplitude_v)
+    result = validate(load_models(air_path).motor("a"), trace, "a")
+    assert result.step is not None
+    band = {"settling_floor": encoder_quantum_rad_s(trace.period_s), "onset_s": 0.2}
+    for info, speed in ((result.step.measured, trace.speed("a")),
+                        (result.step.simulated, result.simulated_rad_s)):  # fmt: skip
+        assert info.settling_time_s == pytest.approx(
+            step_info(trace.time_s, speed, **band).settling_time_s
+        )
+    settled = result.step.measured.settling_time_s
+    assert settled is not None and settled < 0.3

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from cartctl.cart import encoder_quantum_rad_s
 from cartctl.data.modelfile import ModelFile
 from cartctl.data.trace import MOTORS, Trace
 from cartctl.errors import InputError
@@ -116,22 +117,29 @@ def validate(model: ArxModel, trace: Trace, motor: str) -> ValidationResult:
         measured_rad_s=measured,
         simulated_rad_s=simulated,
         abs_error_rad_s=np.abs(measured - simulated),
-        step=_compare_step(trace.time_s, voltage, measured, simulated) if stable else None,
+        step=_compare_step(trace.time_s, voltage, measured, simulated, period_s)
+        if stable
+        else None,
         unstable_pole=None if stable else model.pole_radius(),
     )
 
 
 def _compare_step(
-    time_s: np.ndarray, voltage: np.ndarray, measured: np.ndarray, simulated: np.ndarray
+    time_s: np.ndarray,
+    voltage: np.ndarray,
+    measured: np.ndarray,
+    simulated: np.ndarray,
+    period_s: float,
 ) -> StepComparison | None:
-    """Step metrics of both responses, when the input is one step from 0 V with samples after it."""
+    """Step metrics of both responses, when the input is one step from 0 V with samples after it;
+    settling in run's and review's band, max(2 % of the step, one encoder count per tick)."""
     onset = find_step(voltage)
     if onset is None or onset.index > len(time_s) - 2:
         return None
-    onset_s = float(time_s[onset.index])
+    onset_s, floor = float(time_s[onset.index]), encoder_quantum_rad_s(period_s)
     try:
-        measured_info = step_info(time_s, measured, onset_s=onset_s)
-        simulated_info = step_info(time_s, simulated, onset_s=onset_s)
+        measured_info = step_info(time_s, measured, onset_s=onset_s, settling_floor=floor)
+        simulated_info = step_info(time_s, simulated, onset_s=onset_s, settling_floor=floor)
     except InputError:  # a response that ends where it starts has no step metrics
         return None
     return StepComparison(onset.amplitude, onset_s, measured_info, simulated_info)

@@ -107,7 +107,7 @@ def _num(value: float | None, spec: str) -> str:
 _STEP_ROWS = (  # label, StepInfo field, format
     ("rise time 10–90 % (s)", "rise_time_s", ".3f"),
     ("overshoot (%)", "overshoot_percent", ".1f"),
-    ("settling time 2 % (s)", "settling_time_s", ".3f"),
+    ("settling time (s)", "settling_time_s", ".3f"),
     ("peak (rad/s)", "peak_value", ".3f"),
     ("steady state (rad/s)", "steady_state_value", ".3f"),
 )
@@ -148,6 +148,14 @@ def format_table(validation: ModelValidation) -> str:
     ]
     for r in validation.results.values():
         lines += ["", *format_result(r)]
+    if any(r.step is not None for r in validation.results.values()):
+        from cartctl.cart import encoder_quantum_rad_s
+
+        q = encoder_quantum_rad_s(validation.period_s)
+        lines += [
+            "",
+            f"settling band: max(2 % of the step, one encoder count per tick = {q:.3g} rad/s)",
+        ]
     return "\n".join(lines)
 
 
