@@ -177,6 +177,21 @@ def test_a_design_field_of_the_wrong_kind(
     assert str(refused.value) == line
 
 
+@pytest.mark.parametrize(
+    ("option", "line"),
+    [
+        ("crossover_hz", "--crossover-hz must be in (0, 50) Hz"),
+        ("step_rad_s", "--step must be a non-zero speed in rad/s"),
+        ("voltage_limit_v", "--voltage-limit must be in (0, 12] V"),
+    ],
+)
+def test_a_whole_number_beyond_any_float(workdir: Path, option: str, line: str) -> None:
+    # 10**400 raised OverflowError (int too large to convert to float) from the range checks
+    with pytest.raises(CartctlError) as refused:
+        cartctl.design_pi("models/ground.toml", **{option: 10**400})
+    assert str(refused.value).startswith(line) and ", got 1000" in str(refused.value)
+
+
 def test_a_design_of_one_motor_records_its_command(
     capsys: pytest.CaptureFixture[str], workdir: Path
 ) -> None:

@@ -153,15 +153,22 @@ class DesignRequest:
 
 
 def _number(value: Any) -> bool:
-    return isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
+    if not isinstance(value, Real) or isinstance(value, bool):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # a whole number beyond any float
+        return False
 
 
 def _voltage_limit(value: Any) -> bool:
+    if not _number(value):  # first: a huge whole number overflows the limit's float
+        return False
     try:
         check_voltage_limit(value)
     except InputError:
         return False
-    return _number(value)
+    return True
 
 
 def _whole(value: Any, high: int) -> bool:
