@@ -116,11 +116,12 @@ def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
         check_format(doc, path, MODEL_FORMAT, "model file")
     period_s = float(require(doc, "period_s", (int, float), path, "the top level"))
     loop_delay = read_loop_delay(doc, path)
-    prov = doc.get("provenance", {})
+    prov = require(doc, "provenance", dict, path, "the top level") if "provenance" in doc else {}
     texts = dict.fromkeys(("source", "created", "method"), "unknown")  # what a file without says
     texts |= {"prefilter": "none", "notes": ""}
     texts = {k: str(prov.get(k, default)) for k, default in texts.items()}
-    provenance = Provenance(**texts, data=tuple(str(d) for d in prov.get("data", ())))
+    data = require(prov, "data", list, path, "[provenance]") if "data" in prov else ()
+    provenance = Provenance(**texts, data=tuple(str(d) for d in data))
     motors_tab = require(doc, "motors", dict, path, "the top level")
     unknown = sorted(set(motors_tab) - {"a", "b"})
     if unknown:

@@ -1,0 +1,63 @@
+"""Malformed files and out-of-range values a user may give, through the command line: one line
+``cartctl COMMAND: error: …`` naming the file or option, exit 2, no traceback, nothing written
+(test_bad_inputs.py holds the table of wrong paths, kinds of file and options)."""
+
+from __future__ import annotations
+
+import shlex
+from pathlib import Path
+
+import pytest
+
+from cartctl.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+GROUND = (ROOT / "models" / "ground.toml").read_text(encoding="utf-8")
+
+
+def _edit(text: str, old: str, new: str) -> str:
+    assert old in text
+    return text.replace(old, new, 1)
+
+
+FILES = {  # name: content, each a file a user could have edited by hand
+    "prov.toml": _edit(GROUND, "[provenance]\n", "provenance = 'notes'\n[other]\n"),
+    "data.toml": _edit(GROUND, "data = []", "data = 'run.csv'"),
+}
+
+# fmt: off
+CASES = [
+    # a model file's [provenance] that is not a table: AttributeError
+    ("inspect prov.toml", "prov.toml", "'provenance'", "wrong type"),
+    ("design prov.toml --method pi", "prov.toml", "'provenance'"),
+    ("inspect data.toml", "data.toml", "'data' in [provenance]", "wrong type"),  # was split
+]
+# fmt: on
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("bad_files")
+    for name, text in FILES.items():
+        (root / name).write_text(text, encoding="utf-8")
+    return root
+
+
+@pytest.mark.parametrize(("argv", "says"), [pytest.param(c[0], c[1:], id=c[0]) for c in CASES])
+def test_one_line_naming_the_mistake(
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    folder: Path,
+    argv: str,
+    says: tuple[str, ...],
+) -> None:
+    monkeypatch.chdir(folder)
+    before = sorted(folder.rglob("*"))
+    words = shlex.split(argv)
+    code = main(words)
+    out, err = capsys.readouterr()
+    assert (code, out) == (2, ""), err
+    (line,) = err.splitlines()
+    assert line.startswith(f"cartctl {words[0]}: error: "), line
+    assert all(text in line for text in says), line
+    assert sorted(folder.rglob("*")) == before
