@@ -285,6 +285,27 @@ def test_identify_takes_numpy_whole_numbers_and_refuses_a_bool(workdir: Path) ->
         cartctl.identify(trace, delay=True)
 
 
+@pytest.mark.parametrize(
+    ("options", "line"),
+    [
+        ({"na": True}, "na (--na) must be a whole number in 0..50, got True"),
+        ({"nb": True}, "nb (--nb) must be a whole number in 1..50, got True"),
+        (
+            {"prefilter_hz": 15, "prefilter_order": True},
+            "prefilter order (--order) must be a whole number in 1..12, got True",
+        ),
+    ],
+)
+def test_identify_refuses_a_bool_for_an_order(
+    workdir: Path, options: dict[str, object], line: str
+) -> None:
+    # na=True, nb=True and prefilter_order=True ran as 1 (choices.is_whole refuses bools)
+    trace = cartctl.excite(plant="physics", cycles=1)
+    with pytest.raises(CartctlError) as refused:
+        cartctl.identify(trace, **options)  # type: ignore[arg-type]
+    assert str(refused.value) == line
+
+
 def test_a_design_or_run_of_something_else(workdir: Path) -> None:
     # an Identification given to design_pi or simulate raised TypeError from pathlib
     ident = cartctl.identify(cartctl.excite(plant="physics", cycles=2))

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cartctl.choices import is_whole
 from cartctl.errors import InputError
 from cartctl.identification.etfe import (
     as_pair,
     average_cycles,
     find_period,
-    is_whole,
     periodic_regression_pad,
     split_cycles,
 )

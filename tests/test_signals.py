@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -89,3 +91,30 @@ def test_make_signal_every_name(name: str) -> None:
 def test_bad_requests_are_refused(call, message: str) -> None:
     with pytest.raises(InputError, match=message):
         call()
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (
+            lambda: make_signal("square", 5.0, cycles=True),
+            "--cycles must be a whole number, got True",
+        ),
+        (lambda: make_signal("multisine", 5.0, cycles=np.bool_(True)), "--cycles must be a whole"),
+        (lambda: square(5.0, cycles=True), "cycles must be a whole number >= 1, got True"),
+        (lambda: square(5.0, cycles=2.5), "cycles must be a whole number >= 1, got 2.5"),
+        (lambda: prbs(5.0, order=8.0), "PRBS order must be a whole number in 2..32, got 8.0"),
+        (lambda: prbs(5.0, seed=True), "PRBS seed must be a whole number, got True"),
+    ],
+)
+def test_a_count_that_is_not_whole_is_refused(call, message: str) -> None:
+    # cycles=True ran as 1 cycle (the project's rule, choices.is_whole, refuses bools); 2.5 and
+    # 8.0 raised numpy's or range's TypeError
+    with pytest.raises(InputError, match=re.escape(message)):
+        call()
+
+
+def test_numpy_whole_numbers_are_counts() -> None:
+    np.testing.assert_array_equal(make_signal("square", 5.0, cycles=np.int64(2)),
+                                  square(5.0, cycles=2))  # fmt: skip
+    np.testing.assert_array_equal(prbs(5.0, order=np.int32(8), seed=np.int64(1)), prbs(5.0))

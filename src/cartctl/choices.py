@@ -7,11 +7,22 @@ The parser is built from these before any command runs, so this module imports n
 from __future__ import annotations
 
 import math
+from numbers import Integral
 from pathlib import Path
 from types import MappingProxyType
+from typing import TYPE_CHECKING, TypeGuard
+
+if TYPE_CHECKING:
+    import numpy as np
 
 MAX_DURATION_S = 24 * 3600.0
 """The longest signal, run or recording cartctl takes: 24 h (8.64 million ticks of 10 ms)."""
+
+
+def is_whole(value: object) -> TypeGuard[int | np.integer]:
+    """True for a Python or numpy integer; False for anything else, booleans included (numpy's
+    integers are ``numbers.Integral``: no numpy import here)."""
+    return isinstance(value, Integral) and not isinstance(value, bool)
 
 
 def check_finite(value: float, option: str) -> float:

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cartctl.cart import PERIOD_S
-from cartctl.choices import MAX_DURATION_S, SIGNALS
+from cartctl.choices import MAX_DURATION_S, SIGNALS, is_whole
 from cartctl.errors import InputError
 
 
@@ -38,8 +38,8 @@ def square(
 ) -> NDArray[np.float64]:
     """The report's excitation: +A, 0, −A for ``hold_s`` each, ``cycles`` times (no DC)."""
     amp, n = _start(amplitude_v, hold_s, period_s, "hold time")
-    if cycles < 1:
-        raise InputError(f"cycles must be at least 1, got {cycles}")
+    if not is_whole(cycles) or cycles < 1:
+        raise InputError(f"cycles must be a whole number >= 1, got {cycles!r}")
     one = np.concatenate([np.full(n, amp), np.zeros(n), np.full(n, -amp)])
     return np.tile(one, cycles)
 
@@ -72,14 +72,16 @@ def prbs(
     """
     amp, n = _start(amplitude_v, duration_s, period_s, "duration")
     per_bit = _ticks(bit_s, period_s, "bit duration")
-    if not 2 <= order <= 32:
-        raise InputError(f"PRBS order must be in 2..32, got {order}")
+    if not (is_whole(order) and 2 <= order <= 32):
+        raise InputError(f"PRBS order must be a whole number in 2..32, got {order!r}")
+    if not is_whole(seed):
+        raise InputError(f"PRBS seed must be a whole number, got {seed!r}")
     state = np.array([(seed >> i) & 1 for i in range(order)], dtype=np.int8)
     if not state.any():
         raise InputError("PRBS seed must have a non-zero low-order bit pattern")
     from scipy import signal as sps
 
-    bits, _ = sps.max_len_seq(order, state=state)
+    bits, _ = sps.max_len_seq(int(order), state=state)
     levels = np.where(np.resize(bits, -(-n // per_bit)) > 0, amp, -amp)  # the sequence repeated
     return np.repeat(levels, per_bit)[:n]
 
@@ -175,7 +177,7 @@ def make_signal(
     """
     if name not in SIGNALS:
         raise InputError(f"unknown signal '{name}'; choose one of {', '.join(SIGNALS)}")
-    if cycles is not None and not isinstance(cycles, int | np.integer):
+    if cycles is not None and not is_whole(cycles):
         raise InputError(f"--cycles must be a whole number, got {cycles!r}")
     if cycles is not None and cycles < 1:
         raise InputError(f"--cycles must be at least 1, got {cycles}")
@@ -191,7 +193,7 @@ def make_signal(
                 f"{int(MAX_DURATION_S // cycle_s)} ({MAX_DURATION_S / 3600:g} h)"
             )
     if name == "square":
-        return square(amplitude_v, cycles=cycles or 5, period_s=period_s)
+        return square(amplitude_v, cycles=int(cycles or 5), period_s=period_s)
     if name == "multisine" and cycles:
         duration_s = 2.56 * cycles
     given = {"duration_s": duration_s} if duration_s else {}  # else each one's default

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from cartctl.api.results import Design, Identification, MotorResult, SimulationResult, writable
-from cartctl.choices import DEFAULT_MODEL, check_duration
+from cartctl.choices import DEFAULT_MODEL, check_duration, is_whole
 from cartctl.data.modelfile import ModelFile, load_models, save_models
 from cartctl.data.read import read_trace
 from cartctl.data.trace import MOTORS, Trace, parse_mapping
@@ -24,7 +24,6 @@ from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.design.make import design_models
 from cartctl.design.request import DesignRequest
 from cartctl.errors import InputError, PlantError
-from cartctl.identification.etfe import is_whole
 from cartctl.identification.pipeline import IdentifyRequest, Prefilter
 from cartctl.identification.pipeline import identify as identify_traces
 from cartctl.plants.factory import SIMULATED, check_plant_options, make_plant, plant_kind

@@ -17,6 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import qr, solve_triangular
 
 from cartctl.cart import PERIOD_S
+from cartctl.choices import is_whole
 from cartctl.errors import InputError
 from cartctl.measures.metrics import finite_or_none, fit_from_norms, fit_percent, sum_squares
 from cartctl.model import ArxModel
@@ -144,7 +145,7 @@ def stacked_regression(
 def check_orders(na: int, nb: int, nk: int) -> None:
     """Refuse nonsense orders with a message naming the parameter (and its option)."""
     for name, value, low in (("na (--na)", na, 0), ("nb (--nb)", nb, 1), ("nk (--delay)", nk, 0)):
-        if not isinstance(value, int | np.integer) or value < low or value > 50:
+        if not is_whole(value) or value < low or value > 50:
             raise InputError(f"{name} must be a whole number in {low}..50, got {value!r}")
 
 

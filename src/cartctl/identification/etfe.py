@@ -8,22 +8,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, TypeGuard
+from typing import Any
 
 import numpy as np
 import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
+from cartctl.choices import is_whole
 from cartctl.errors import InputError
 from cartctl.model import ArxModel
 
 PERIOD_RTOL: float = 1e-9
 """Relative tolerance (of max |u|) within which two input samples count as equal."""
-
-
-def is_whole(value: object) -> TypeGuard[int | np.integer]:
-    """True for a Python or numpy integer; False for anything else, booleans included."""
-    return isinstance(value, int | np.integer) and not isinstance(value, bool)
 
 
 def check_whole(value: object, name: str) -> int:

@@ -17,17 +17,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import signal
 
+from cartctl.choices import is_whole
 from cartctl.data.modelfile import ModelFile, Provenance
 from cartctl.data.trace import Trace
 from cartctl.errors import InputError
 from cartctl.identification.arx import ArxFit, Segment, check_orders, first_row, fit_arx
 from cartctl.identification.diagnostics import Diagnostics, diagnose
-from cartctl.identification.etfe import (
-    average_cycles,
-    find_period,
-    is_whole,
-    periodic_regression_pad,
-)
+from cartctl.identification.etfe import average_cycles, find_period, periodic_regression_pad
 from cartctl.identification.oe import check_oe_orders, fit_oe
 from cartctl.identification.orders import (
     DelayEstimate,
@@ -54,7 +50,7 @@ class Prefilter:
     zero_phase: bool = False
 
     def __post_init__(self) -> None:
-        if not isinstance(self.order, int | np.integer) or not 1 <= self.order <= 12:
+        if not is_whole(self.order) or not 1 <= self.order <= 12:
             raise InputError(
                 f"prefilter order (--order) must be a whole number in 1..12, got {self.order!r}"
             )
