@@ -343,3 +343,27 @@ def test_an_unstable_model_fails_validation_in_words() -> None:
         f"validation fit: the simulation diverges (needs >= {checks.MIN_FIT_PERCENT:g} %)"
     )
     assert "inf" not in " ".join(verdict.problems)
+
+
+def test_a_verification_that_never_settles_says_so(tmp_path) -> None:
+    """A step that is still outside its band when the run ends: the stage's line and summary.md
+    say 'not settled' (JSON: null, as run's), not 'settling — ms'; the line names only the bound
+    missed."""
+    from types import SimpleNamespace
+
+    from cartctl.commission import StageError, stages
+
+    figures = {"overshoot_percent": 0.0, "settling_time_s": None}
+    summary = {"metrics_signal": "true_speed", "motors": {m: dict(figures) for m in "ab"},
+               "trace": str(tmp_path / "verification.csv"), "recording": None}  # fmt: skip
+    job = stages.Commission("physics", tmp_path, dict.fromkeys(stages.PLANT_FLAGS.values()),
+                            lambda argv: (0, summary))  # fmt: skip
+    predicted = {"nominal_overshoot_percent": 0.1, "nominal_settling_time_s": 0.12}
+    job.tuned = SimpleNamespace(predicted=lambda: predicted)
+    with pytest.raises(StageError) as failed:
+        job.run_verification()
+    line = str(failed.value)
+    assert "not settled" in line and "—" not in line and "overshoot" not in line
+    assert job.results["verification"]["measured"]["settling_time_s"] is None
+    table = (tmp_path / "summary.md").read_text(encoding="utf-8")
+    assert "| settling (ms) | not settled |" in table

@@ -206,23 +206,46 @@ def tuning_steps(controller_path: Path, model_path: Path, png: Path) -> Series:
     return series
 
 
+_VERIFIED = (
+    ("overshoot", "overshoot_percent", "%", 2, 1.0),
+    ("settling", "settling_time_s", "ms", 0, 1e3),
+)
+
+
+def _measured(checked: checks.Verification, key: str, digits: int, scale: float) -> str:
+    """A measured figure; a settling time of None (JSON null, as in run's) is 'not settled'."""
+    value = checked.measured[key]
+    return (
+        "not settled" if value is None and key == "settling_time_s" else fmt(value, digits, scale)
+    )
+
+
+def missed_bounds(checked: checks.Verification) -> str:
+    """The figures beyond their pass bound, e.g. 'settling: not settled (bound ≤ 150 ms)'."""
+    missed = []
+    for label, key, unit, digits, scale in _VERIFIED:
+        value, bound = checked.measured[key], checked.limits[key]
+        if value is None or value > bound:
+            shown = _measured(checked, key, digits, scale)
+            shown = f": {shown}" if value is None else f" {shown} {unit}"
+            missed.append(f"{label}{shown} (bound ≤ {bound * scale:.{digits}f} {unit})")
+    return ", ".join(missed)
+
+
 def verification_body(checked: checks.Verification, summary: dict[str, Any],
                       argv: list[str]) -> str:  # fmt: skip
     """The verification section: measured against predicted, the bounds, pass or fail."""
-    m, p, lim = checked.measured, checked.predicted, checked.limits
+    p, lim = checked.predicted, checked.limits
     heads = ["", "measured", "predicted nominal", "predicted worst", "pass bound"]
     rows = [
         [
-            label,
-            fmt(m[k], digits, scale),
+            f"{label} ({unit})",
+            _measured(checked, k, digits, scale),
             fmt(p.get(f"nominal_{k}"), digits, scale),
             fmt(p.get(f"worst_{k}"), digits, scale),
             f"≤ {lim[k] * scale:.{digits}f}",
         ]
-        for label, k, digits, scale in (
-            ("overshoot (%)", "overshoot_percent", 2, 1.0),
-            ("settling (ms)", "settling_time_s", 0, 1e3),
-        )
+        for label, k, unit, digits, scale in _VERIFIED
     ]
     return (
         f"`cartctl {' '.join(argv)}` (worse of motors a and b, on the {lim['speed']} speed).\n\n"

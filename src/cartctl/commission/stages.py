@@ -259,12 +259,8 @@ class Commission:
         body = report.verification_body(checked, summary, argv)
         self.report.add("verification", body)
         if not checked.passed:
-            raise StageError(
-                f"verification: the step on the cart gave overshoot "
-                f"{report.fmt(checked.measured['overshoot_percent'], 1)} % and settling "
-                f"{report.fmt(checked.measured['settling_time_s'], 0, 1e3)} ms, beyond "
-                f"{checked.limits['overshoot_percent']:.1f} % / "
-                f"{checked.limits['settling_time_s'] * 1e3:.0f} ms; see summary.md")  # fmt: skip
+            raise StageError(f"verification: the step on the cart missed its bounds: "
+                             f"{report.missed_bounds(checked)}; see summary.md")  # fmt: skip
 
     def run_all(self) -> None:
         """Every stage in order, on one BLAS thread: the matrices are a few states wide, and more
