@@ -24,6 +24,10 @@ MARGINAL_POLE_RADIUS = 0.99
 """A pole with |z| above this is slow or marginally stable: ``inspect`` flags it and
 output-error refinement keeps its poles within it."""
 
+UNIT_CIRCLE_TOLERANCE = 1e-9
+"""A pole within this of |z| = 1 is on the unit circle (an integrator of a model file, at z = 1,
+comes out of the root finder within about 1e-15): not stable (:meth:`ArxModel.stability`)."""
+
 
 def check_extra_delay_ticks(ticks: object, name: str = "extra delay") -> int:
     """``ticks`` as a whole number >= 0 of extra loop delay, else InputError naming ``name``."""
@@ -224,7 +228,19 @@ class ArxModel:
         return max((abs(r.value) for r in self.poles()), default=0.0)
 
     def is_stable(self) -> bool:
-        return self.pole_radius() < 1.0
+        """Every pole inside the unit circle (:data:`UNIT_CIRCLE_TOLERANCE` away from it)."""
+        return self.pole_radius() < 1.0 - UNIT_CIRCLE_TOLERANCE
+
+    def stability(self) -> Literal["stable", "marginally stable", "unstable"]:
+        """'stable' (:meth:`is_stable`), 'marginally stable' (the other poles on the unit circle
+        and simple: an integrator at z = 1, an undamped oscillation) or 'unstable' (a pole
+        outside, or a repeated one on it: two closer than 1e-4)."""
+        if self.is_stable():
+            return "stable"
+        edge = [r.value for r in self.poles() if abs(r.value) >= 1.0 - UNIT_CIRCLE_TOLERANCE]
+        simple = all(abs(p - q) > 1e-4 for i, p in enumerate(edge) for q in edge[:i])
+        inside = self.pole_radius() <= 1.0 + UNIT_CIRCLE_TOLERANCE
+        return "marginally stable" if simple and inside else "unstable"
 
     def simulate(self, voltage_v: ArrayLike) -> NDArray[np.float64]:
         """The output y[k] (rad/s) from rest for the input u[k] (V), shape (n,) both."""

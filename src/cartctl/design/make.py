@@ -301,9 +301,10 @@ def check_models(
         check_input_delay(model.nk, f"{where}motor {m}'s model: ")
         if not model.is_stable():
             raise InputError(
-                f"{where}motor {m}'s model is unstable (pole at |z| = {model.pole_radius():.4g}); "
-                "a design needs a stable model (its simulated step and settling bound run on "
-                "it): identify it again"
+                f"{where}motor {m}'s model is {model.stability()} (pole at |z| = "
+                f"{model.pole_radius():.4g}); a design needs a stable model, every pole inside "
+                "the unit circle (its simulated step and settling bound run on it): identify it "
+                "again"
             )
     return by_motor
 

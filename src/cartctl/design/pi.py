@@ -28,8 +28,8 @@ from cartctl.model import ArxModel, check_extra_delay_ticks
 def _check_common(model: ArxModel, phase_margin_deg: float, extra_delay_ticks: int) -> None:
     if not model.is_stable():
         raise InputError(
-            "the model is unstable (a pole on or outside the unit circle); this PI design needs "
-            "a stable model"
+            f"the model is {model.stability()} (a pole on or outside the unit circle); this PI "
+            "design needs a stable model"
         )
     if not (math.isfinite(phase_margin_deg) and 0.0 < phase_margin_deg <= PM_RANGE_DEG[1]):
         raise InputError(

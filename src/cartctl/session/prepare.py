@@ -223,7 +223,7 @@ def prepare_run(
         for motor, m in zip("ab", checked, strict=False):
             if not m.is_stable():  # it runs away: refused (--allow-unstable overrides)
                 raise InputError(
-                    f"{model}: motor {motor}'s model is unstable (pole at |z| = "
+                    f"{model}: motor {motor}'s model is {m.stability()} (pole at |z| = "
                     f"{m.pole_radius():.4g}): a simulation of it runs away whatever the "
                     "controller does; identify it again, or pass --allow-unstable"
                 )

@@ -267,7 +267,7 @@ def sample_plants(
         model = models.motor(name)
         if not model.is_stable():
             raise InputError(
-                f"motor {name}'s model is unstable (a pole at |z| = {model.pole_radius():.4g}): "
+                f"motor {name}'s model is {model.stability()} (a pole at |z| = {model.pole_radius():.4g}): "
                 "plants drawn around it cannot be held to stable ones"
             )
     rng = np.random.default_rng(seed)

@@ -72,9 +72,15 @@ def _fmt_z(z: complex) -> str:
 
 
 def _cells(root: Root) -> list[str]:
+    from cartctl.model import UNIT_CIRCLE_TOLERANCE
+
     flag = "non-minimum-phase" if root.kind == "zero" and abs(root.value) > 1.0 else ""
     if root.kind == "pole" and _slow(root):
         flag = "slow or marginal (|z| > 0.99)"
+        if abs(abs(root.value) - 1.0) <= UNIT_CIRCLE_TOLERANCE:
+            flag = "on the unit circle"
+        elif abs(root.value) > 1.0:
+            flag = "unstable (|z| > 1)"
     z, freq, damping = root.value, format_fixed(root.freq_hz, 2), format_fixed(root.damping, 3)
     return [root.kind, _fmt_z(z), f"{abs(z):.4f}", freq, damping, flag]
 
@@ -104,7 +110,8 @@ def format_table(models: ModelFile) -> str:
                 f"NOT minimum phase: zero{'s' if len(outside) > 1 else ''} outside the unit "
                 f"circle at {where} (a controller must not cancel {'them' if len(outside) > 1 else 'it'})"
             )
-        stability = "stable" if m.is_stable() else "UNSTABLE"
+        kind = m.stability()  # marginally: simple poles on the unit circle, none outside
+        stability = kind if kind == "stable" else kind.upper()
         marginal = [abs(r.value) for r in m.poles() if _slow(r)]
         if marginal and m.is_stable():
             radius = max(marginal)
@@ -116,7 +123,8 @@ def format_table(models: ModelFile) -> str:
     lines.append("")
     lines.append(
         "  f = |ln z| / (2π Ts); a delay pole (z = 0) has no frequency; ζ is the damping ratio; "
-        "a zero with |z| > 1 is non-minimum-phase; a pole with |z| > 0.99 is slow or marginal."
+        "a zero with |z| > 1 is non-minimum-phase; a pole with |z| > 0.99 is slow or marginal, "
+        "simple poles on the unit circle are marginally stable."
     )
     return "\n".join(lines)
 
