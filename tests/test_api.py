@@ -3,6 +3,7 @@ with the CLI."""
 
 from __future__ import annotations
 
+import inspect
 import json
 import re
 import sys
@@ -14,7 +15,7 @@ import numpy as np
 import pytest
 
 import cartctl
-from cartctl.cli import main
+from cartctl.cli import build_parser, main
 
 matplotlib.use("Agg")
 ROOT = Path(__file__).resolve().parents[1]
@@ -153,6 +154,29 @@ def test_design_save_writes_the_file_design_out_writes(
     api = Path(out).read_text(encoding="utf-8")
     created = re.compile(r"^created = .*$", flags=re.M)
     assert created.sub("", api) == created.sub("", cli)
+
+
+def test_simulate_with_runs_defaults_gives_runs_numbers(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    """The guide names the defaults where simulate differs from run (2 s on the model designed
+    on; run: 5 s on models/ground.toml): given run's, a design on another model gives the same."""
+    simulate = inspect.signature(cartctl.simulate).parameters
+    run_defaults = build_parser("run").parse_args(["run"])
+    assert (simulate["duration_s"].default, run_defaults.duration) == (2.0, 5.0)
+    assert run_defaults.model == "models/ground.toml"
+    guide = " ".join(API_PAGE.read_text(encoding="utf-8").split())
+    assert "`simulate` runs 2 s on the model the controller was designed on" in guide
+    assert "`--duration 5` on `--model models/ground.toml`" in guide
+    cartctl.design_pi("models/air.toml", crossover_hz=4).save("controllers/air.toml")
+    api = cartctl.simulate("controllers/air.toml", duration_s=5, model="models/ground.toml")
+    assert main(["run", "--fast", "--controller", "controllers/air.toml", "--rerun", "off",
+                 "--json", "--name", "air"]) == 0  # fmt: skip
+    cli = json.loads(capsys.readouterr().out)
+    assert api.summary["ticks"] == cli["ticks"] == 501
+    for m in "ab":
+        for key, value in api.summary["motors"][m].items():
+            assert cli["motors"][m][key] == pytest.approx(value, rel=1e-9, abs=1e-12), key
 
 
 def test_to_dataframe_gives_the_columns(workdir: Path) -> None:

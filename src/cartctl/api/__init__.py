@@ -92,7 +92,8 @@ def excite(
     Parameters
     ----------
     plant : {'physics', 'physics:actuation_ms=X', 'sim'}
-        The physical simulator (with ``preset``) or the ARX models of ``model``.
+        The physical simulator (with ``preset``; ``cartctl excite`` defaults to sim) or the ARX
+        models of ``model``.
     signal : {'square', 'step', 'prbs', 'multisine', 'chirp'}
     amplitude_v : float
         Peak voltage (V), at most the supply's 12 V.
@@ -274,10 +275,13 @@ def simulate(
     Parameters
     ----------
     plant : {'sim', 'physics', 'physics:actuation_ms=X'}
-        The ARX models of ``model`` (default: the model the controller was designed on), or the
-        physical simulator with ``preset`` (and the actuation timing, ms).
+        The ARX models of ``model`` (default: the model the controller was designed on, where
+        ``cartctl run`` takes models/ground.toml), or the physical simulator with ``preset``
+        (and the actuation timing, ms).
     reference : str
         A reference spec (``step:10``, ``square:8:2``, ``file:ref.csv`` …).
+    duration_s : float
+        Run time (s); ``cartctl run`` runs 5 s by default.
     """
     _check_simulated(plant, "simulate", model, preset, noise_std_rad_s, seed)
     check_reference(reference)  # named as run names it
