@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import shlex
+import shutil
 from pathlib import Path
 
 import pytest
@@ -13,6 +14,7 @@ from cartctl.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 GROUND = (ROOT / "models" / "ground.toml").read_text(encoding="utf-8")
+POLES = (ROOT / "controllers" / "poles.toml").read_text(encoding="utf-8")
 
 
 def _edit(text: str, old: str, new: str) -> str:
@@ -23,6 +25,14 @@ def _edit(text: str, old: str, new: str) -> str:
 FILES = {  # name: content, each a file a user could have edited by hand
     "prov.toml": _edit(GROUND, "[provenance]\n", "provenance = 'notes'\n[other]\n"),
     "data.toml": _edit(GROUND, "data = []", "data = 'run.csv'"),
+    "std.toml": _edit(GROUND, "nk = 2\n", "nk = 2\ntheta_std = ['a', 'b', 'c', 'd']\n"),
+    # beside the model it was designed on, so that no warning says the model changed
+    "controllers/est.toml": _edit(POLES, "[motors.a.estimator]\n", "estimator = 'kalman'\n[x]\n"),
+    "controllers/timing.toml": _edit(
+        POLES,
+        "timing_noise_std_ticks = 0.5\n\n[motors.a.analysis]",
+        "timing_noise_std_ticks = -0.5\n\n[motors.a.analysis]",
+    ),
 }
 
 # fmt: off
@@ -31,6 +41,14 @@ CASES = [
     ("inspect prov.toml", "prov.toml", "'provenance'", "wrong type"),
     ("design prov.toml --method pi", "prov.toml", "'provenance'"),
     ("inspect data.toml", "data.toml", "'data' in [provenance]", "wrong type"),  # was split
+    # theta_std that is not numbers: ValueError from numpy
+    ("export std.toml --mat x.mat", "std.toml", "theta_std in [motors.a]", "list of numbers"),
+    # a controller's estimator that is not a table, or a timing noise out of range: tracebacks
+    ("export controllers/est.toml --arduino", "est.toml", "[motors.a]", "estimator"),
+    ("virtual-cart --onboard controllers/est.toml --duration 0.1", "est.toml", "estimator"),
+    ("export controllers/timing.toml --arduino --out x.h", "timing.toml",
+     "timing_noise_std_ticks must be a number of ticks in [0, 10], got -0.5"),
+    ("virtual-cart --onboard controllers/timing.toml --duration 0.1", "timing_noise_std_ticks"),
 ]
 # fmt: on
 
@@ -38,6 +56,8 @@ CASES = [
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("bad_files")
+    shutil.copytree(ROOT / "models", root / "models")
+    (root / "controllers").mkdir()
     for name, text in FILES.items():
         (root / name).write_text(text, encoding="utf-8")
     return root

@@ -61,6 +61,7 @@ def onboard_controllers(path: str | Path) -> dict[str, Controller]:
     """The controllers of a controller file as the exported C runs them (fixed-gain estimator)."""
     controller = load_controller(path)
     _check_period(controller, str(path))
+    build_controllers(controller)  # the checks the loop applies, on the file as it is
     return build_controllers(as_steady_state(controller))
 
 
@@ -178,8 +179,8 @@ def arduino_source(controller: ControllerFile, *, command: str = "") -> str:
     quoted in its header: per motor m, a state ``cartctl_state_m``, ``cartctl_reset_m()`` and
     ``float cartctl_step_m(float reference_rad_s, float measured_rad_s)`` returning the voltage."""
     _check_period(controller, where(controller), ", so design on a 10 ms model")
-    # the checks the loop applies (keys, gains, anti-windup) before any C is written
-    build_controllers(as_steady_state(controller))
+    # the checks the loop applies (keys, gains, anti-windup, estimator) before any C is written
+    build_controllers(controller)
     lines = _header(controller, command)
     code = pi_code if controller.method == "pi" else poles_code
     for motor in sorted(controller.motors):

@@ -13,6 +13,7 @@ from cartctl.data.modelfile import ModelFile
 from cartctl.data.tomlfile import CONTROLLER_FORMAT, MODEL_FORMAT
 from cartctl.design.controller_ss import controller_state_space, feedback_gains
 from cartctl.design.controllerfile import ControllerFile, build_controllers
+from cartctl.errors import DataFileError
 
 _KALMAN_KEYS = ("A", "B", "C", "Q", "R", "P", "L", "timing_noise_std_ticks")
 
@@ -26,11 +27,16 @@ def model_mat(models: ModelFile, source: str = "") -> dict[str, Any]:
     }
     for name, model in models.motors.items():
         std = models.stats.get(name, {}).get("theta_std")
+        try:
+            std = np.asarray(std if std is not None else [], dtype=float)
+        except (TypeError, ValueError):
+            problem = f"theta_std in [motors.{name}] must be a list of numbers, got {std!r}"
+            raise DataFileError(models.path or "model file", problem) from None
         out[f"motor_{name}"] = {
             "num": np.asarray(model.num(), dtype=float),
             "den": np.asarray(model.den(), dtype=float),
             "theta": np.asarray(model.theta, dtype=float),
-            "theta_std": np.asarray(std if std is not None else [], dtype=float),
+            "theta_std": std,
             "na": model.na,
             "nb": model.nb,
             "nk": model.nk,

@@ -116,10 +116,10 @@ def _write_arduino(args: argparse.Namespace) -> None:
     from cartctl.export.arduino import arduino_source, timing_noise_note
 
     controller = load_controller(args.file)
+    source = arduino_source(controller, command=_command(args))  # checks the file first
     note = timing_noise_note(controller)
     if note is not None:
         print(f"cartctl export: warning: {note}", file=sys.stderr)
-    source = arduino_source(controller, command=_command(args))
     if args.out:
         path = Path(args.out)
         path.parent.mkdir(parents=True, exist_ok=True)
