@@ -346,3 +346,22 @@ def test_report_writes_the_figures_and_summary(
     assert f"{fit:.2f}" in summary
     assert "ARX, unfiltered" in summary
     assert "ARX, prefiltered" in summary
+
+
+def test_average_with_oe_says_the_refinement_is_on_the_raw_experiments(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    # the OE refinement simulates from rest, so it runs on the raw record while the ARX start is
+    # fitted on the averaged cycles; that went unsaid (the OE row did not move with --average)
+    rng = np.random.default_rng(6)
+    u = square(10.0, cycles=4)
+    y = ArxModel.from_theta(THETA_A).simulate(u) + rng.normal(0.0, 0.2, u.size)
+    path = _trace(tmp_path / "sq.csv", u, y)
+    doc = _identify_json(capsys, str(path), "--average", "--method", "oe")
+    motor = doc["motors"]["a"]
+    assert motor["cycles_averaged"] == 3
+    assert motor["arx"]["n_samples"] == u.size // 4  # one cycle's equations
+    assert motor["oe"]["n_samples"] == u.size  # the raw record
+    assert any("raw experiments" in note for note in motor["oe"]["notes"])
+    assert main(["identify", str(path), "--average", "--method", "oe"]) == 0
+    assert "OE: --average" in capsys.readouterr().out

@@ -260,6 +260,12 @@ def _identify_motor(
     if request.prefilter is not None:
         unfiltered = arx(raw if start is None else _averaged(raw, start, sources)[0])
     oe_fit = fit_oe(work, arx_fit.model, eval_segments=raw) if request.method == "oe" else None
+    if oe_fit is not None and request.average:  # it simulates from rest; an averaged cycle is not
+        note = (
+            "--average: refined on the raw experiments (its simulation starts from rest, an "
+            "averaged cycle does not); the averaged cycles gave its ARX start"
+        )
+        oe_fit = dataclasses.replace(oe_fit, notes=(note, *oe_fit.notes))
     diagnostics = diagnose(oe_fit or arx_fit, raw, validation, None)
     if request.orders is not None:  # after the residual tests, which refuse too few samples
         table_data = work
