@@ -286,6 +286,8 @@ CASES = [
     _case("monitor virtual --duration 0.1 --onboard controllers/pi.toml --reference x",
           "--reference", "'x'"),
     _case("monitor virtual --duration 0.1 --labels nonsense", "--labels", "'nonsense'"),
+    _case("monitor serial:folder --duration 0.1", "serial port folder is a folder"),
+    _case("run --plant serial:trace.csv --rerun off", "serial port trace.csv is not a serial device"),
     _case("monitor virtual --duration 0.1 --connect-timeout nan", "--connect-timeout"),
     # commission (each refuses before a cart is made)
     _case("commission moon", "PLANT", "'moon'"),
@@ -294,6 +296,8 @@ CASES = [
     _case("commission physics --noise -1", "--noise"),
     _case("commission physics --seed -1", "--seed"),
     _case("commission serial:", "needs a port"),
+    _case("commission serial:/dev/ttyNOPE", "serial port /dev/ttyNOPE does not exist"),
+    _case("commission serial:folder", "serial port folder is a folder, not a serial device"),
     _case("commission virtual --connect-timeout nan", "--connect-timeout"),
     # a plant option the plant does not use: it was silently ignored
     _case("commission physics --connect-timeout 3",

@@ -7,6 +7,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import os
+import stat
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -39,6 +40,15 @@ def _ports_hint() -> str:
     except Exception:
         ports = []
     return "serial ports present: " + (", ".join(ports) if ports else "none")
+
+
+def check_port(port: str) -> None:
+    """A typo, not a fault (InputError): ``port`` is not there, or is a folder or a file."""
+    if not os.path.exists(port):
+        raise InputError(f"serial port {port} does not exist; {_ports_hint()}")
+    if not stat.S_ISCHR(os.stat(port).st_mode):
+        what = "is a folder, not" if os.path.isdir(port) else "is not"
+        raise InputError(f"serial port {port} {what} a serial device; {_ports_hint()}")
 
 
 def print_to_stderr(line: str) -> None:
@@ -87,8 +97,8 @@ class CartLink:
         import serial
 
         factory = self._factory or serial.Serial
-        if self._factory is None and not os.path.exists(self.port):  # a typo, not a fault
-            raise InputError(f"serial port {self.port} does not exist; {_ports_hint()}")
+        if self._factory is None:
+            check_port(self.port)
         try:
             self._serial = factory(self.port, self.baud, timeout=READ_SLICE_S, write_timeout=0.5)
         except (OSError, serial.SerialException) as exc:

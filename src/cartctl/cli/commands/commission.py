@@ -77,7 +77,10 @@ def _check(args: argparse.Namespace) -> Path:
     if earlier:
         raise InputError(f"--out {out} already holds {earlier[0]} of an earlier commissioning; "
                          "give another folder")  # fmt: skip
-    check_plant_name(args.plant)  # its options, and the port of serial:PORT
+    if check_plant_name(args.plant) == "serial":  # its options, and the port of serial:PORT
+        from cartctl.link.cart_link import check_port
+
+        check_port(args.plant.partition(":")[2])
     return out
 
 
