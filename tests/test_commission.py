@@ -168,6 +168,27 @@ def test_commission_bad_input_is_one_line(argv, words, tmp_path, capsys) -> None
     assert not (tmp_path / "c").exists()
 
 
+def test_a_cart_that_never_answers_is_not_said_to_have_stopped(tmp_path, capsys, monkeypatch):
+    """A port where no cart talks (a cart not powered): the line says what the link found, not
+    that a cart that never started 'stopped'."""
+    import os
+
+    from cartctl.link import cart_link
+
+    monkeypatch.setattr(cart_link, "LEGACY_LISTEN_S", 0.05)  # the second listen, at 115200 baud
+    master, slave = os.openpty()
+    try:
+        code = main(["commission", f"serial:{os.ttyname(slave)}", "--connect-timeout", "0.05",
+                     "--out", str(tmp_path / "c")])  # fmt: skip
+    finally:
+        os.close(master)
+        os.close(slave)
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert code == 1
+    assert err.startswith("cartctl commission: checks: no HEARTBEAT from a cart on"), err
+    assert "stopped" not in err
+
+
 class _StopAt:
     """A physics plant that raises KeyboardInterrupt (Ctrl-C) at step ``stop_at`` of its
     experiment, and remembers what it was told last."""

@@ -88,7 +88,6 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.cli.jsonout import dumps
     from cartctl.commission import StageError
     from cartctl.commission.stages import Commission, StageStoppedError
-    from cartctl.errors import PlantError
 
     out = _check(args)
     plant_options = {"preset": args.preset, "noise_std_rad_s": args.noise, "seed": args.seed,
@@ -100,8 +99,6 @@ def run(args: argparse.Namespace) -> int:
         job.run_all()
     except StageError as exc:
         code, failure = 1, str(exc)
-    except PlantError as exc:
-        code, failure = 1, f"{job.current}: the cart stopped: {exc}"
     except StageStoppedError as exc:
         code = 1 if exc.failure else stopping.exit_code()
         failure = f"{exc.stage}: " + (f"the cart stopped: {exc.failure}" if exc.failure
@@ -109,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         code, failure = stopping.exit_code(), f"{job.current}: interrupted; zero volts sent"
     except CartctlError as exc:  # the port or the cart in the checks (the user's to fix: its
-        # own code), or a refusal further on (a stage that failed: 1)
+        # own code; a cart that does not answer: 1), or a refusal further on (a stage that failed: 1)
         code, failure = (exc.exit_code if job.current == "checks" else 1), f"{job.current}: {exc}"
     if failure is not None:
         job.report.add("stopped", f"At stage **{job.current}**: {failure}. The files written so "
