@@ -333,3 +333,22 @@ def test_review_screenshot_of_a_monitor_shows_the_lines(
     # the monitor's speed and voltage lines, drawn in the run's colours (empty panels before)
     for entity in ("motor/a/speed", "motor/a/reference", "motor/a/voltage"):
         assert pixels_near(entity) > 300, entity
+
+
+def test_monitor_over_a_runs_name_leaves_no_stale_meta_file(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A monitor trace written over a run's (same --out and --name) kept the run's meta file
+    beside it: review smoothed with the run's model, identify took the run's loop delay."""
+    code, _, err = _cli(capsys, "run", "--fast", "--duration", "0.5", "--controller", str(PI),
+                        "--rerun", "off", "--out", str(tmp_path), "--name", "x")  # fmt: skip
+    assert code == 0, err
+    assert (tmp_path / "x.meta.toml").is_file()
+    code, _, err = _cli(capsys, "monitor", "virtual", "--onboard", str(PI), "--duration", "0.6",
+                        "--rerun", "off", "--out", str(tmp_path), "--name", "x")  # fmt: skip
+    assert code == 0, err
+    assert not (tmp_path / "x.meta.toml").exists()  # the meta file of a trace no longer there
+    code, out, err = _cli(capsys, "review", str(tmp_path / "x.csv"), "--json")
+    assert code == 0, err
+    review = json.loads(out)
+    assert review["trace_kind"] == "monitor" and review["smoothed"]["model"] is None
