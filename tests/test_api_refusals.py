@@ -351,3 +351,19 @@ def test_motors_given_as_the_command_lines_word() -> None:
     # the message spelled the string out letter by letter: ['b', 'o', 't', 'h']
     with pytest.raises(CartctlError, match=r"^motors must be 'a' and/or 'b', got 'both'$"):
         cartctl.design_pi("models/ground.toml", motors="both")
+
+
+@pytest.mark.parametrize("delay", [-1, 51])
+def test_identify_refuses_a_delay_out_of_range_in_one_line(
+    workdir: Path, capsys: pytest.CaptureFixture[str], delay: int
+) -> None:
+    # the command line said "--delay must be in 0..50 ticks", the API "nk (--delay) must be ..."
+    argv = ["excite", "--plant", "physics", "--amplitude", "10", "--cycles", "2", "--out", "sq.csv"]
+    assert main(argv) == 0
+    with pytest.raises(CartctlError) as refused:
+        cartctl.identify("sq.csv", delay=delay)
+    assert main(["identify", "sq.csv", f"--delay={delay}"]) == 2
+    line = capsys.readouterr().err.strip().removeprefix("cartctl identify: error: ")
+    assert (
+        line == str(refused.value) == f"nk (--delay) must be a whole number in 0..50, got {delay}"
+    )
