@@ -49,6 +49,17 @@ CASES = [
     ("export controllers/timing.toml --arduino --out x.h", "timing.toml",
      "timing_noise_std_ticks must be a number of ticks in [0, 10], got -0.5"),
     ("virtual-cart --onboard controllers/timing.toml --duration 0.1", "timing_noise_std_ticks"),
+    # estimator noise levels a controller file cannot hold: OverflowError, ValueError tracebacks
+    ("design models/ground.toml --method poles --process-noise-v 1e308", "--process-noise-v",
+     "up to 1000"),
+    ("design models/ground.toml --method poles --bias-drift-v 1e200", "--bias-drift-v"),
+    ("design models/ground.toml --method pi --estimator kalman --measurement-noise 1e200",
+     "--measurement-noise"),
+    ("tune models/ground.toml --method poles --process-noise-v 1e308", "--process-noise-v"),
+    ("design models/ground.toml --method poles --measurement-noise 1000", "estimator.R",
+     "--measurement-noise"),
+    ("design models/ground.toml --method poles --bias-drift-v 1e-20", "does not decay",
+     "--bias-drift-v"),
 ]
 # fmt: on
 

@@ -109,7 +109,14 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
             "controller_den": den.tolist(),
         }
     limit = request.voltage_limit_v
-    controller = build_controller(request.method, file_entry, model.period_s, limit)
+    try:  # the checks run applies to the file's estimator (its variances, its decay)
+        controller = build_controller(request.method, file_entry, model.period_s, limit)
+    except ValueError as exc:
+        why = str(exc).removesuffix("; redesign the controller")
+        raise InputError(
+            f"the design's estimator is unusable: {why}; try other "
+            "--process-noise-v, --bias-drift-v or --measurement-noise"
+        ) from None
     return MotorDesign(controller, entry, file_entry)
 
 

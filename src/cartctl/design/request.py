@@ -20,6 +20,7 @@ PM_RANGE_DEG = (0.0, 89.0)  # (0, 89] degrees: at 90° the PI's proportional gai
 MAX_EXTRA_DELAY_TICKS = 50  # 0.5 s is no speed loop; the design's state grows by one per tick
 MAX_LOOP_DELAY_TICKS = 100  # a recorded loop of at most 50 (identify --loop-delay) + 50 extra
 MAX_TIMING_NOISE_TICKS = 10.0  # a command landing ±10 ticks late is no loop
+MAX_NOISE_STD = 1e3  # V or rad/s: a variance of 1e6, the most a controller file's estimator holds
 PI_ESTIMATORS = ("none", "kalman")
 NOISE_FIELDS = (  # the estimator's, as design_kalman takes them
     "process_noise_std_v",
@@ -186,9 +187,12 @@ RANGES: dict[str, tuple[Callable[[Any], bool], str]] = {
                      _BELOW_NYQUIST),
     "settling_time_s": (lambda v: _number(v) and v > 0.0, "a positive number of seconds"),
     "overshoot_percent": (lambda v: _number(v) and 0.0 < v < 100.0, "in (0, 100) %"),
-    "process_noise_std_v": (lambda v: _number(v) and v > 0.0, "a positive number of volts"),
-    "bias_drift_std_v": (lambda v: _number(v) and v >= 0.0, "a number of volts >= 0"),
-    "extra_noise_std_rad_s": (lambda v: _number(v) and v >= 0.0, "a number of rad/s >= 0"),
+    "process_noise_std_v": (lambda v: _number(v) and 0.0 < v <= MAX_NOISE_STD,
+                            f"a positive number of volts up to {MAX_NOISE_STD:g}"),
+    "bias_drift_std_v": (lambda v: _number(v) and 0.0 <= v <= MAX_NOISE_STD,
+                         f"a number of volts >= 0 and up to {MAX_NOISE_STD:g}"),
+    "extra_noise_std_rad_s": (lambda v: _number(v) and 0.0 <= v <= MAX_NOISE_STD,
+                              f"a number of rad/s >= 0 and up to {MAX_NOISE_STD:g}"),
     "timing_noise_std_ticks": (lambda v: _number(v) and 0.0 <= v <= MAX_TIMING_NOISE_TICKS,
                                f"in [0, {MAX_TIMING_NOISE_TICKS:g}] ticks"),
     "extra_delay_ticks": (lambda v: _whole(v, MAX_EXTRA_DELAY_TICKS),
