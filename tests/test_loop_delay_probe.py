@@ -204,6 +204,28 @@ def test_a_clean_virtual_cart_measures_one_tick(
     assert max(seen, key=lambda d: seen[d]) == 1
 
 
+def test_the_link_line_names_the_report_s_nk_not_the_model_s() -> None:
+    """A run of a controller designed on an nk = 1 model (what identify --delay auto and commission
+    fit over serial) was told 'model nk = 2': that is the report's structure for the loop delay."""
+    from cartctl.sinks.summary import format_summary
+
+    metrics = ("overshoot_percent", "rise_time_s", "settling_time_s", "steady_state_error",
+               "rms_error", "max_abs_voltage")  # fmt: skip
+    link = {"port": "/dev/ttyACM0", "echo_delay_ticks": 1, "frames": 10, "crc_errors": 0,
+            "garbage_bytes": 0, "lost_frames": 0, "missed_ticks": 0, "skipped_ticks": 0,
+            "watchdog_trips": 0, "host_frames_sent": 10, "host_frames_lost": 0,
+            "host_frames_lost_percent": 0.0}  # fmt: skip
+    summary = {"ticks": 11, "duration_s": 0.1, "deadline_misses": 0, "metrics_signal": "speed",
+               "period_error_us": {"p50": 1.0, "p99": 2.0, "max": 3.0},
+               "compute_us": {"p50": 1.0, "p99": 2.0, "max": 3.0},
+               "settling_band": {"fraction": 0.02, "floor_rad_s": 0.35},
+               "motors": {"a": dict.fromkeys(metrics)}, "link": link,
+               "loop_delay_ticks": 1, "controller_loop_delay_ticks": 1}  # fmt: skip
+    text = format_summary(summary)
+    assert "loop delay 1 ticks (echo 1; the report's model: nk = 2)" in text, text
+    assert "model nk" not in text
+
+
 def test_the_summary_shows_the_run_s_delays_the_probe_s_and_a_change() -> None:
     from cartctl.sinks.summary import delay_seen_lines
 

@@ -172,7 +172,8 @@ def format_summary(summary: Mapping[str, Any]) -> str:
     if link:
         shown = "—"
         if delay is not None:
-            shown = f"{delay} ticks (echo {link['echo_delay_ticks']}; model nk = {delay + 1})"
+            echo = link["echo_delay_ticks"]
+            shown = f"{delay} ticks (echo {echo}; the report's model: nk = {delay + 1})"
         if designed is not None:
             shown += f", the controller is designed for {designed}"
         lines.append(
