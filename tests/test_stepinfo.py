@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import json
+import tomllib
+from pathlib import Path
+
 import control
 import numpy as np
 import pytest
 
+from cartctl.cli import main
 from cartctl.errors import InputError
 from cartctl.measures.stepinfo import StepOnset, final_value, find_step, step_info
 
@@ -165,3 +170,42 @@ def test_final_value_averages_the_last_five_percent() -> None:
 )
 def test_find_step(values: list[float], expected: StepOnset | None) -> None:
     assert find_step(np.asarray(values, dtype=float)) == expected
+
+
+def test_final_value_ignores_the_samples_before_a_late_onset() -> None:
+    # A step at 4.8 s of a 5 s record: the last 5 % of the record (26 samples) would reach back
+    # before the onset and average the zeros there in; the final value is the mean of the last
+    # 5 % (at least 5 samples) of the response from its onset on.
+    t = np.arange(501) * TS
+    y = np.where(t >= 4.8 - 1e-9, 10.0, 0.0)
+    info = step_info(t, y, reference=10.0, onset_s=4.8)
+    assert info.steady_state_value == pytest.approx(10.0)
+    assert info.steady_state_error == pytest.approx(0.0, abs=1e-12)
+    # without a reference the final value is the target: a clean step, 100 % at once
+    info = step_info(t, y, onset_s=4.8, interpolate=False)
+    assert info.step_size == pytest.approx(10.0)
+    assert info.overshoot_percent == 0.0
+
+
+def test_run_summary_of_a_late_step_against_python_control(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The shipped PI on the sim plant (the ground model, the loop C·G), a 10 rad/s step 0.2 s
+    # before the end of a 5 s run: the steady-state error is the reference minus the mean of the
+    # last 5 samples after the onset (21 of them), here from python-control's closed loop.
+    root = Path(__file__).resolve().parents[1]
+    pi = tomllib.loads((root / "controllers" / "pi.toml").read_text(encoding="utf-8"))
+    ground = tomllib.loads((root / "models" / "ground.toml").read_text(encoding="utf-8"))
+    args = ["run", "--plant", "sim", "--reference", "step:10:4.8", "--duration", "5", "--fast"]
+    args += ["--rerun", "off", "--out", str(tmp_path), "--json"]
+    assert main(args) == 0
+    summary = json.loads(capsys.readouterr().out)
+    for m in ("a", "b"):
+        c, d, a, b = ground["motors"][m]["theta"]
+        kp, ki = pi["motors"][m]["kp"], pi["motors"][m]["ki"]
+        loop = control.tf([kp + ki * TS, -kp], [1.0, -1.0], TS) * control.tf(
+            [a, b], [1, c, d, 0], TS
+        )
+        y = control.step_response(10.0 * control.feedback(loop, 1), np.arange(21) * TS).outputs
+        expected = 10.0 - float(np.mean(y[-5:]))
+        assert summary["motors"][m]["steady_state_error"] == pytest.approx(expected, abs=1e-9)

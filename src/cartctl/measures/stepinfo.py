@@ -4,7 +4,8 @@
 The target is the reference when given, else the final value; levels are fractions of the way
 from ``initial`` to the target, so a step down is measured like a step up.
 
-- final value: the mean of the last 5 % of the samples (at least :data:`MIN_FINAL_SAMPLES`);
+- final value: the mean of the last 5 % of the samples from the onset on (at least
+  :data:`MIN_FINAL_SAMPLES`);
 - rise time: from the first reach of 10 % to the first reach of 90 %;
 - overshoot: beyond the target, in % of the step size (0 if never);
 - settling time: until the response stays within ±2 % of the step around the target, or within
@@ -192,7 +193,9 @@ def step_info(
         raise InputError(
             f"step onset {onset_s} s lies outside the record ({t[0]:g} s to {t[-1]:g} s)"
         )
-    final = final_value(y)
+    k0 = int(np.searchsorted(t, onset, side="left"))
+    ts, ys = t[k0:], y[k0:]
+    final = final_value(ys)  # of the response from the onset on, not of the samples before
     target = final if reference is None else float(reference)
     size = target - float(initial)
     if not math.isfinite(size) or size == 0.0:
@@ -201,8 +204,6 @@ def step_info(
             f"step of size zero: the {what} equals the initial value {initial:g}; a step "
             "response must end away from where it starts"
         )
-    k0 = int(np.searchsorted(t, onset, side="left"))
-    ts, ys = t[k0:], y[k0:]
     z = (ys - initial) / size  # 0 at the initial value, 1 at the target, whatever the sign
 
     lo, hi = (_crossing(ts, z, level, interpolate=interpolate) for level in RISE_LIMITS)
