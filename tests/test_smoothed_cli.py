@@ -295,3 +295,34 @@ def test_a_runs_loop_delay_beyond_the_models_is_the_smoothers_extra_delay(
         smoothed = json.loads(out)["smoothed"]
         assert Path(smoothed["model"]).resolve() == Path(GROUND).resolve()
         assert smoothed["extra_delay_ticks"] == 1
+
+
+def test_a_trace_is_smoothed_with_its_own_runs_model_not_a_stale_recordings(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A run with --rerun off over an earlier run's name leaves that run's RUN.rrd beside the new
+    RUN.csv and RUN.meta.toml; review took the model from the old recording (its meta file
+    is written with the trace, so it names this run's), and a monitor trace's never has one."""
+    for controller, rerun in (("pi", "save"), ("poles", "off")):  # pi: ground, poles: ground-timing
+        code, _, err = _cli(capsys, "run", "--fast", "--duration", "0.5", "--controller",
+                            str(ROOT / "controllers" / f"{controller}.toml"), "--rerun", rerun,
+                            "--out", str(tmp_path), "--name", "x")  # fmt: skip
+        assert code == 0, err
+    assert (tmp_path / "x.rrd").is_file()
+    cart = _without_true_speed(tmp_path / "x.csv", tmp_path / "cart.csv")
+    (tmp_path / "x.meta.toml").replace(tmp_path / "cart.meta.toml")
+    (tmp_path / "x.rrd").replace(tmp_path / "cart.rrd")
+    code, out, err = _cli(capsys, "review", str(cart), "--json")
+    assert code == 0, err
+    assert Path(json.loads(out)["smoothed"]["model"]).name == "ground-timing.toml"
+    with cart.open(newline="") as f:  # as a monitor's trace (no loop timing, no meta file)
+        rows = list(csv.reader(f))
+    keep = [i for i, name in enumerate(rows[0]) if name not in ("period_error_us", "compute_us")]
+    with cart.open("w", newline="") as f:
+        csv.writer(f).writerows([[row[i] for i in keep] for row in rows])
+    (tmp_path / "cart.meta.toml").unlink()
+    code, out, err = _cli(capsys, "review", str(cart), "--json")
+    assert code == 0, err
+    assert (
+        json.loads(out)["trace_kind"] == "monitor" and json.loads(out)["smoothed"]["model"] is None
+    )

@@ -48,9 +48,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--model",
         metavar="MODEL.toml",
         help="the motor model for the smoothed speed (Kalman RTS over the trace with the recorded "
-        "voltages), whose metrics stand beside the encoder's; default: the model a run named in "
-        "its recording (RUN.rrd, also beside RUN.csv), else that of the controller its "
-        "RUN.meta.toml's command ran",
+        "voltages), whose metrics stand beside the encoder's; default: the model RUN.meta.toml "
+        "names (beside RUN.csv: that of the controller the run ran), else the one a run named in "
+        "its recording (RUN.rrd)",
     )
     options.add_map_option(p)
     p.set_defaults(func=run)

@@ -208,7 +208,10 @@ def smooth_csv(
     serial, run_model, delay = trace_hints(path)
     if not wanted(summary, serial_path=serial, asked=model is not None):
         return summary
-    model_path = model or recorded_model_of(Path(path).with_suffix(".rrd")) or run_model
+    # the meta file is written with the trace; a recording of that name may be an earlier run's,
+    # and a monitor's names no model
+    recorded = summary["trace_kind"] == "run" and recorded_model_of(Path(path).with_suffix(".rrd"))
+    model_path = model or run_model or recorded or None
     add_smoothed(summary, trace.columns(), trace.period_s, model_path,
                  loop_delay_ticks=delay, strict=model is not None)  # fmt: skip
     return summary
