@@ -25,6 +25,7 @@ def _edit(text: str, old: str, new: str) -> str:
 FILES = {  # name: content, each a file a user could have edited by hand
     "prov.toml": _edit(GROUND, "[provenance]\n", "provenance = 'notes'\n[other]\n"),
     "data.toml": _edit(GROUND, "data = []", "data = 'run.csv'"),
+    "latin1.csv": "time_s,reference\n0,1\n1,caf\u00e9\n",
     "std.toml": _edit(GROUND, "nk = 2\n", "nk = 2\ntheta_std = ['a', 'b', 'c', 'd']\n"),
     # beside the model it was designed on, so that no warning says the model changed
     "controllers/est.toml": _edit(POLES, "[motors.a.estimator]\n", "estimator = 'kalman'\n[x]\n"),
@@ -49,6 +50,8 @@ CASES = [
     ("export controllers/timing.toml --arduino --out x.h", "timing.toml",
      "timing_noise_std_ticks must be a number of ticks in [0, 10], got -0.5"),
     ("virtual-cart --onboard controllers/timing.toml --duration 0.1", "timing_noise_std_ticks"),
+    # a reference file that is not UTF-8: UnicodeDecodeError
+    ("run --fast --reference file:latin1.csv", "latin1.csv", "not UTF-8 text (byte 26)"),
     # estimator noise levels a controller file cannot hold: OverflowError, ValueError tracebacks
     ("design models/ground.toml --method poles --process-noise-v 1e308", "--process-noise-v",
      "up to 1000"),
@@ -70,7 +73,7 @@ def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
     shutil.copytree(ROOT / "models", root / "models")
     (root / "controllers").mkdir()
     for name, text in FILES.items():
-        (root / name).write_text(text, encoding="utf-8")
+        (root / name).write_text(text, encoding="latin-1" if "latin" in name else "utf-8")
     return root
 
 
@@ -92,3 +95,18 @@ def test_one_line_naming_the_mistake(
     assert line.startswith(f"cartctl {words[0]}: error: "), line
     assert all(text in line for text in says), line
     assert sorted(folder.rglob("*")) == before
+
+
+@pytest.mark.parametrize(
+    ("name", "data"),
+    [("bom.csv", b"\xef\xbb\xbftime_s,reference\n0,5\n1,8\n"),
+     ("crlf.csv", b"time_s,reference\r\n0,5\r\n1,8\r\n")],
+)  # fmt: skip
+def test_a_reference_file_from_windows_runs(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, name: str, data: bytes
+) -> None:
+    """A UTF-8 BOM (the header's first name was '\\ufefftime_s') or CRLF line ends."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / name).write_bytes(data)
+    argv = ["run", "--fast", "--rerun", "off", "--duration", "0.2", "--reference", f"file:{name}"]
+    assert main(argv) == 0

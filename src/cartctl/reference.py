@@ -46,8 +46,11 @@ def _read_reference_file(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The (time, reference) points of a reference file, read once per file version."""
     path = Path(path_text)
-    with path.open(newline="", encoding="utf-8") as f:
-        rows = list(csv.reader(f))
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as f:  # -sig: a BOM is no column name
+            rows = list(csv.reader(f))
+    except UnicodeDecodeError as err:
+        raise DataFileError(path, f"not UTF-8 text (byte {err.start}); expected CSV") from None
     if len(rows) < 2:
         raise DataFileError(path, "a reference file needs a header and at least one row")
     header = [h.strip() for h in rows[0]]
