@@ -11,9 +11,12 @@ import numpy as np
 import pytest
 
 import cartctl
+from cartctl.choices import FORMS
 from cartctl.cli import main
 from cartctl.design.controllerfile import load_controller
 from cartctl.errors import CartctlError
+
+_DURATION = "--duration must be a positive number of seconds up to 86400 (24 h)"
 
 
 def _run_line(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
@@ -234,7 +237,12 @@ def test_a_motor_a_result_does_not_have(workdir: Path) -> None:
 @pytest.mark.parametrize(
     ("options", "line"),
     [
-        ({"amplitude_v": float("nan")}, "amplitude must be a positive finite number, got nan"),
+        ({"amplitude_v": float("nan")}, "amplitude_v must be a number, got nan"),
+        ({"amplitude_v": "10"}, "amplitude_v must be a number, got '10'"),
+        ({"amplitude_v": None}, "amplitude_v must be a number, got None"),
+        ({"signal": "prbs", "duration_s": True}, f"{_DURATION}, got True"),
+        ({"signal": "prbs", "duration_s": "2"}, f"{_DURATION}, got '2'"),
+        ({"noise_std_rad_s": "0.1"}, "--noise must be a number, got '0.1'"),
         ({"cycles": 2.5}, "--cycles must be a whole number, got 2.5"),
         ({"cycles": float("nan")}, "--cycles must be a whole number, got nan"),
     ],
@@ -246,6 +254,38 @@ def test_excite_refuses_a_value_of_the_wrong_kind(
     with pytest.raises(CartctlError) as refused:
         cartctl.excite(**options)  # type: ignore[arg-type]
     assert str(refused.value) == line
+
+
+@pytest.mark.parametrize(
+    ("options", "line"),
+    [
+        ({"duration_s": True}, f"{_DURATION}, got True"),
+        ({"duration_s": None}, f"{_DURATION}, got None"),
+        ({"duration_s": "2"}, f"{_DURATION}, got '2'"),
+        ({"reference": 5}, "--reference: unknown reference 5; expected " + FORMS),
+        ({"reference": None}, "--reference: unknown reference None; expected " + FORMS),
+        ({"plant": None}, "simulate runs on 'sim' or 'physics[:actuation_ms=X]', not 'None'"),
+        ({"noise_std_rad_s": None}, "--noise must be a number, got None"),
+    ],
+)
+def test_simulate_refuses_a_value_of_the_wrong_kind(
+    workdir: Path, options: dict[str, object], line: str
+) -> None:
+    # duration_s=True ran 1 s and '2' ran 2 s; None, a reference or plant that is no text and a
+    # noise given as text raised TypeError or AttributeError ('int' object has no attribute
+    # 'partition')
+    assert _simulate_line("controllers/pi.toml", **options) == line
+
+
+def test_identify_refuses_a_prefilter_that_is_no_number(workdir: Path) -> None:
+    # prefilter_hz=True filtered at 1 Hz; '10' raised TypeError
+    trace = cartctl.excite(plant="physics", cycles=1)
+    for cutoff in (True, "10"):
+        with pytest.raises(CartctlError) as refused:
+            cartctl.identify(trace, prefilter_hz=cutoff)  # type: ignore[arg-type]
+        assert str(refused.value) == (
+            f"prefilter cut-off (--cutoff-hz) must be a number, got {cutoff!r}"
+        )
 
 
 def test_save_where_no_file_can_be(capsys: pytest.CaptureFixture[str], workdir: Path) -> None:

@@ -7,7 +7,7 @@ The parser is built from these before any command runs, so this module imports n
 from __future__ import annotations
 
 import math
-from numbers import Integral
+from numbers import Integral, Real
 from pathlib import Path
 from types import MappingProxyType
 from typing import TYPE_CHECKING, TypeGuard
@@ -26,9 +26,12 @@ def is_whole(value: object) -> TypeGuard[int | np.integer]:
 
 
 def check_finite(value: float, option: str) -> float:
-    """``value`` if it is a finite number; else one line: ``OPTION must be a number, got nan``."""
+    """``value`` if it is a finite number; else one line: ``OPTION must be a number, got nan``
+    (or text, None, a bool: no number)."""
     from cartctl.errors import InputError  # here: setup.py reads this file without the package
 
+    if isinstance(value, bool) or not isinstance(value, Real):  # (from Python: the API)
+        raise InputError(f"{option} must be a number, got {value!r}")
     if math.isnan(value):
         raise InputError(f"{option} must be a number, got nan")
     if math.isinf(value):
@@ -40,10 +43,14 @@ def check_duration(seconds: float, option: str = "--duration") -> float:
     """``seconds`` if in (0, :data:`MAX_DURATION_S`]; else one line naming ``option``."""
     from cartctl.errors import InputError  # here: setup.py reads this file without the package
 
-    if not (math.isfinite(seconds) and 0.0 < seconds <= MAX_DURATION_S):
+    number = isinstance(seconds, Real) and not isinstance(seconds, bool)
+    if not (number and 0.0 < seconds <= MAX_DURATION_S):  # (NaN and inf fail the range too)
+        shown = (
+            f"{seconds:g}" if isinstance(seconds, float) else seconds if number else repr(seconds)
+        )
         raise InputError(
             f"{option} must be a positive number of seconds up to {MAX_DURATION_S:g} (24 h), "
-            f"got {seconds:g}"
+            f"got {shown}"
         )
     return seconds
 

@@ -107,6 +107,8 @@ def reference_signal(
 
 def check_reference(spec: str, option: str = "--reference", period_s: float = PERIOD_S) -> str:
     """``spec`` if it names a reference (a file one is read); else one line naming ``option``."""
+    if not isinstance(spec, str):  # (from Python: the API)
+        raise InputError(f"{option}: unknown reference {spec!r}; expected {FORMS}")
     try:
         reference_signal(spec, 1, period_s)
     except InputError as exc:

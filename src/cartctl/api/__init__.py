@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from cartctl.api.results import Design, Identification, MotorResult, SimulationResult, writable
-from cartctl.choices import DEFAULT_MODEL, check_duration, is_whole
+from cartctl.choices import DEFAULT_MODEL, check_duration, check_finite, is_whole
 from cartctl.data.modelfile import ModelFile, load_models, save_models
 from cartctl.data.read import read_trace
 from cartctl.data.trace import MOTORS, Trace, parse_mapping
@@ -63,7 +63,7 @@ def load_trace(path: str | Path, map: str | Mapping[str, str] | None = None) -> 
 def _check_simulated(
     plant: str, what: str, model: object, preset: str, noise: float, seed: Any
 ) -> None:
-    if plant_kind(plant) not in SIMULATED:
+    if not isinstance(plant, str) or plant_kind(plant) not in SIMULATED:
         raise InputError(f"{what} runs on 'sim' or 'physics[:actuation_ms=X]', not '{plant}'")
     if seed is not None and not (is_whole(seed) and seed >= 0):  # as --seed (else numpy's error)
         raise InputError(f"a seed is a whole number >= 0, got {seed!r}")
@@ -118,7 +118,7 @@ def excite(
     _check_simulated(plant, "excite", model, preset, noise_std_rad_s, seed)
     if motor not in ("a", "b", "both"):
         raise InputError(f"motor must be 'a', 'b' or 'both', got {motor!r}")
-    if amplitude_v > SUPPLY_V:  # (NaN: make_signal's line)
+    if check_finite(amplitude_v, "amplitude_v") > SUPPLY_V:
         raise InputError(f"amplitude_v {amplitude_v} V is beyond the cart's ±{SUPPLY_V:g} V supply")
     if duration_s is not None and signal == "square":
         raise InputError("duration_s does not apply to the square signal; use cycles (3 s each)")
@@ -284,6 +284,7 @@ def simulate(
         Run time (s); ``cartctl run`` runs 5 s by default.
     """
     _check_simulated(plant, "simulate", model, preset, noise_std_rad_s, seed)
+    check_duration(duration_s)
     check_reference(reference)  # named as run names it
     if isinstance(controller, Design):
         file = replace(controller.controller_file(), path=None)

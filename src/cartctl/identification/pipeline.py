@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from functools import partial
+from numbers import Real
 from typing import Any
 
 import numpy as np
@@ -53,6 +54,10 @@ class Prefilter:
         if not is_whole(self.order) or not 1 <= self.order <= 12:
             raise InputError(
                 f"prefilter order (--order) must be a whole number in 1..12, got {self.order!r}"
+            )
+        if isinstance(self.cutoff_hz, bool) or not isinstance(self.cutoff_hz, Real):
+            raise InputError(
+                f"prefilter cut-off (--cutoff-hz) must be a number, got {self.cutoff_hz!r}"
             )
         if math.isnan(self.cutoff_hz):
             raise InputError("prefilter cut-off (--cutoff-hz) must be a number, got nan")
