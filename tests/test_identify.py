@@ -365,3 +365,21 @@ def test_average_with_oe_says_the_refinement_is_on_the_raw_experiments(
     assert any("raw experiments" in note for note in motor["oe"]["notes"])
     assert main(["identify", str(path), "--average", "--method", "oe"]) == 0
     assert "OE: --average" in capsys.readouterr().out
+
+
+def test_compare_refuses_a_model_of_another_sample_period(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, air_path: Path
+) -> None:
+    # a 20 ms model was simulated on 10 ms data as if it were 10 ms: a fit in the table, poles
+    # in Hz of its own period; validate refuses the same mismatch
+    u = square(10.0, cycles=2)
+    path = str(_trace(tmp_path / "sq.csv", u, ArxModel.from_theta(THETA_A).simulate(u)))
+    slow = tmp_path / "slow.toml"
+    slow.write_text(
+        air_path.read_text(encoding="utf-8").replace("period_s = 0.01", "period_s = 0.02"),
+        encoding="utf-8",
+    )
+    assert main(["identify", path, "--compare", str(air_path), str(slow)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--compare" in err[0] and "slow.toml" in err[0]
+    assert "20 ms" in err[0] and "10 ms" in err[0]

@@ -281,6 +281,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.data.read import read_trace
     from cartctl.data.trace import loop_delay_of
     from cartctl.identification.pipeline import identify, model_file
+    from cartctl.identification.validate import PERIOD_TOLERANCE
 
     options.check_outputs(args, files=("out",), folders=("report",))
     recorded = loop_delay_of(args.files)  # the traces' meta files; they must agree
@@ -293,6 +294,13 @@ def run(args: argparse.Namespace) -> int:
     request = request_from_args(args, recorded)
     compare = {path: load_models(path) for path in args.compare}  # fail early on a bad file
     traces = [read_trace(path, args.map) for path in args.files]
+    for path, models in compare.items():  # simulated on the data: the period must be theirs
+        if abs(traces[0].period_s - models.period_s) > PERIOD_TOLERANCE * models.period_s:
+            raise InputError(
+                f"--compare {path}: the model has Ts = {models.period_s * 1e3:.4g} ms but "
+                f"{traces[0].source} is sampled every {traces[0].period_s * 1e3:.4g} ms; compare "
+                "models of the data's period"
+            )
     validation = [read_trace(path, args.map) for path in args.validate_on]
     result = identify(traces, request, validation)
     for note in result.notes:
