@@ -110,3 +110,11 @@ def test_a_reference_file_from_windows_runs(
     (tmp_path / name).write_bytes(data)
     argv = ["run", "--fast", "--rerun", "off", "--duration", "0.2", "--reference", f"file:{name}"]
     assert main(argv) == 0
+
+
+def test_a_step_that_never_rises_is_shown(capsys: pytest.CaptureFixture[str]) -> None:
+    """A pole a hair inside the unit circle: the simulated step never reaches 90 %, so it has no
+    rise time (the table's formatting raised TypeError on None)."""
+    assert main(["design", "models/ground.toml", "--method", "poles",
+                 "--poles", "0.99999999999,0.5,0.5"]) == 0  # fmt: skip
+    assert "rise —, settling —" in capsys.readouterr().out

@@ -184,7 +184,7 @@ def _format(method: str, motors: dict[str, dict[str, Any]]) -> str:
     for m, e in motors.items():
         step, bound = e["step"], e["settling_bound_s"]
         pm, gm, fc = e.get("phase_margin_deg"), e.get("gain_margin_db"), e.get("crossover_hz")
-        settle = step["settling_time_s"]
+        settle, rise = step["settling_time_s"], step["rise_time_s"]
         lines += [
             f"motor {m}: {_gains_line(method, e)}",
             f"  margins: phase {pm:.1f}°, gain {'∞' if gm is None else f'{gm:.1f} dB'}, "
@@ -193,7 +193,7 @@ def _format(method: str, motors: dict[str, dict[str, Any]]) -> str:
             *_analysis_lines(e),
             *_pole_lines(e),
             f"  {step['step_rad_s']:g} rad/s step: overshoot {step['overshoot_percent']:.2f} %, "
-            f"rise {step['rise_time_s'] * 1e3:.0f} ms, settling "
+            f"rise {'—' if rise is None else f'{rise * 1e3:.0f} ms'}, settling "
             + ("—" if settle is None else f"{settle * 1e3:.0f} ms")
             + f", peak {step['peak_voltage_v']:.2f} V, steady-state error "
             + f"{sig(step['steady_state_error'], scale=step['step_rad_s'])} rad/s",
