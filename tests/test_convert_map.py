@@ -145,3 +145,26 @@ def test_partial_map_without_counterparts_still_zero_fills(
     table = np.array(rows, dtype=float)
     assert not table[:, header.index("voltage_b")].any()
     assert "voltB" in header and "other" in header
+
+
+def test_convert_out_over_a_traces_name_leaves_no_stale_meta_file(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A log converted onto an earlier trace's name kept that trace's meta file beside it, so
+    identify took the earlier recording's loop delay for the log (unknown); converting a trace
+    onto itself keeps its own."""
+    log = _qrc6(tmp_path / "log.csv", _channels(40))
+    out = tmp_path / "run.csv"
+    (tmp_path / "run.meta.toml").write_text(
+        'format = "cartctl-trace-meta/1"\nplant = "sim (models/ground.toml)"\nloop_delay_ticks = 3\n'
+    )
+    code, _, err = _cli(capsys, "convert", str(log), "--map", "voltage_a=voltA,speed_a=speedA",
+                        "--out", str(out))  # fmt: skip
+    assert code == 0, err
+    assert not (tmp_path / "run.meta.toml").exists()
+    (tmp_path / "run.meta.toml").write_text(
+        'format = "cartctl-trace-meta/1"\nplant = "sim (models/ground.toml)"\nloop_delay_ticks = 3\n'
+    )
+    code, _, err = _cli(capsys, "convert", str(out), "--out", str(tmp_path / "." / "run.csv"))
+    assert code == 0, err
+    assert (tmp_path / "run.meta.toml").is_file()

@@ -46,7 +46,7 @@ def summary(trace: Trace) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     from cartctl.cli.jsonout import dumps
     from cartctl.data.read import read_trace
-    from cartctl.data.trace import write_trace
+    from cartctl.data.trace import meta_path, write_trace
 
     options.check_outputs(args, files=("out",))
     trace = read_trace(args.file, args.map)
@@ -54,6 +54,9 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         write_trace(trace, args.out)  # integer channels as integers
         info["written"] = args.out
+        stale = meta_path(args.out)  # an earlier trace's of that name (this one's: onto itself)
+        if stale.resolve() != meta_path(args.file).resolve():
+            stale.unlink(missing_ok=True)
     if args.json:
         print(dumps(info))
         return 0
