@@ -164,6 +164,11 @@ def test_identify_refuses_a_prefilter_shape_without_a_prefilter(
     [
         ("pi", {"estimator": "Kalman"}, "unknown estimator 'Kalman'; expected one of none, kalman"),
         (
+            "pi",
+            {"anti_windup": "Conditional"},
+            "unknown anti-windup 'Conditional'; expected one of conditional, back-calculation, none",
+        ),
+        (
             "poles",
             {"poles": [0.5, 0.5]},
             "--poles must be text like '0.8,0.7+0.1j,0.7-0.1j', got [0.5, 0.5]",

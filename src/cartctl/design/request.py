@@ -12,6 +12,7 @@ from typing import Any
 
 from cartctl.cart import PERIOD_S, SUPPLY_V, check_voltage_limit, nk_fits_loop_delay
 from cartctl.errors import InputError
+from cartctl.runtime.base import ANTI_WINDUP
 
 METHODS = ("pi", "poles")
 DEFAULT_PROCESS_NOISE_STD_V = 0.1  # V std per tick, the estimator's (cartctl.design.kalman)
@@ -86,6 +87,9 @@ class DesignRequest:
         if self.estimator not in PI_ESTIMATORS:  # (the command line's choices)
             allowed = ", ".join(PI_ESTIMATORS)
             raise InputError(f"unknown estimator {self.estimator!r}; expected one of {allowed}")
+        if self.anti_windup not in ANTI_WINDUP:  # (the runtime's line, before any design)
+            allowed = ", ".join(ANTI_WINDUP)
+            raise InputError(f"unknown anti-windup {self.anti_windup!r}; expected one of {allowed}")
         if not isinstance(self.poles, str | None):
             raise InputError(
                 f"--poles must be text like '0.8,0.7+0.1j,0.7-0.1j', got {self.poles!r}"
