@@ -383,3 +383,21 @@ def test_compare_refuses_a_model_of_another_sample_period(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--compare" in err[0] and "slow.toml" in err[0]
     assert "20 ms" in err[0] and "10 ms" in err[0]
+
+
+def test_the_delay_evidence_of_an_averaged_fit_is_on_the_averaged_cycle(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    # it was on the raw record (the same evidence with and without --average), while the model
+    # and the order table are fitted on the averaged cycle
+    rng = np.random.default_rng(7)
+    u = square(10.0, cycles=6)
+    y = ArxModel.from_theta(THETA_A).simulate(u) + rng.normal(0.0, 0.5, u.size)
+    path = str(_trace(tmp_path / "sq.csv", u, y))
+    plain = _identify_json(capsys, path, "--delay", "auto")["motors"]["a"]["delay_estimate"]
+    doc = _identify_json(capsys, path, "--delay", "auto", "--average")
+    averaged = doc["motors"]["a"]["delay_estimate"]
+    assert plain["equations"] > u.size // 2 and averaged["equations"] == u.size // 6
+    assert averaged["nk"] == doc["motors"]["a"]["nk"] == 2
+    ours = {c["nk"]: c["residual_rms"] for c in averaged["candidates"]}
+    assert ours[2] < 0.5 * {c["nk"]: c["residual_rms"] for c in plain["candidates"]}[2]

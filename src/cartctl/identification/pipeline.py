@@ -339,11 +339,14 @@ def identify(
         for m, (raw, _, _) in data.items()
     }
     joint, nk = None, request.delay
-    if nk is None:  # one loop, one delay: chosen from both motors' evidence
+    if nk is None:  # one loop, one delay: chosen from both motors' evidence, on the fit's data
         evidence = partial(delay_evidence, na=request.na, nb=request.nb, period_s=period_s)
+        cands = request.delay_candidates
+        lags = max((first_row(request.na, request.nb, c) for c in cands), default=0)
         joint = joint_delay({
-            m: evidence(work[m], candidates=request.delay_candidates, eval_segments=raw)
-            for m, (raw, _, _) in data.items()
+            m: evidence(_averaged(raw, lags, src, pf, period_s)[0] if request.average else work[m],
+                        candidates=cands, eval_segments=raw)
+            for m, (raw, src, _) in data.items()
         })  # fmt: skip
         nk = joint.nk
         if (note := joint.note()) is not None:
