@@ -68,6 +68,24 @@ def test_commission_recordings_hold_each_stage(commissioned, rrd_rows) -> None:
         assert counted[entity] == rows if rows is not None else counted[entity] > 100, stage
 
 
+def test_review_shows_what_each_stage_recorded(commissioned, tmp_path, rrd_rows, blueprint_views):
+    """`cartctl review identification.rrd` (and tuning.rrd) laid the run's motor/... plots over
+    a recording of other entities: every plot empty. Each scalar series recorded is in a view."""
+    from rerun.chunk import RrdReader
+
+    from cartctl.cli.commands.review.recording import layout
+
+    _, _, out = commissioned
+    for stage in ("identification", "tuning"):
+        reader = RrdReader(out / f"{stage}.rrd")
+        saved = tmp_path / f"{stage}.rbl"
+        layout(list(reader.stream(store=reader.recordings()[0]))).save("cartctl", saved)
+        views = blueprint_views(saved)
+        shown = {c.replace("$origin", v["origin"]).strip("/") for v in views.values()
+                 for c in v["contents"]}  # fmt: skip
+        assert set(rrd_rows(out / f"{stage}.rrd")) <= shown, stage
+
+
 def test_commission_json_keys_and_figures(commissioned) -> None:
     _, result, out = commissioned
     assert result["model"]["path"] == str(out / "model.toml")

@@ -193,7 +193,7 @@ def review_blueprint(
 ) -> rrb.Blueprint:
     """The layout ``cartctl review`` gives a recording of entity ``paths``, with y ranges from
     entity path → (min, max): a run's (``motor/...``); a monitor's built from its labels
-    (``gpio/...``); the run's plain layout otherwise.
+    (``gpio/...``); other series' (:func:`figures_blueprint`); the run's plain layout otherwise.
 
     A monitor's labels that name a motor's signals (``speedA`` too) get the run's arrangement;
     the other channels follow, fractions in one plot and the ``whole``-number paths in another;
@@ -204,7 +204,7 @@ def review_blueprint(
     labels = sorted((p.removeprefix(f"{GPIO_ROOT}/") for p in extremes
                      if p.startswith(f"{GPIO_ROOT}/")), key=_natural)  # fmt: skip
     if not labels:
-        return blueprint()
+        return figures_blueprint(extremes, paths) or blueprint()
     run = {label: _RUN_ENTITY.get(label_key(label), "") for label in labels}
 
     def view(name: str, chosen: list[str], margin: float = 0.1) -> rrb.TimeSeriesView:
@@ -236,3 +236,25 @@ def review_blueprint(
     if any(p.startswith(f"{CART_ROOT}/") for p in paths):
         rows.append((1.5, rrb.TextLogView(name="Cart messages", origin=f"/{CART_ROOT}")))
     return collapsed(rrb.Vertical(*(v for _, v in rows), row_shares=[s for s, _ in rows]))
+
+
+def figures_blueprint(
+    extremes: Mapping[str, Range], paths: Collection[str]
+) -> rrb.Blueprint | None:
+    """Series neither a run's nor a monitor's (a commissioning stage's figures,
+    ``identification/a/simulated``): a plot of each parent's series, and the stage's note
+    (``commission/...``); None without such series."""
+    groups: dict[str, list[str]] = {}
+    for path in sorted(extremes, key=_natural):
+        if "/" in path and path.split("/")[0] not in ("motor", "loop"):
+            groups.setdefault(path.rpartition("/")[0], []).append(path)
+    if not groups:
+        return None
+    plots = []
+    for parent, chosen in groups.items():
+        contents = [path.replace(parent, "$origin", 1) for path in chosen]
+        plots.append(plot(parent, parent, span_of(extremes, chosen), contents))
+    if not any(p.startswith("commission/") for p in paths):
+        return collapsed(rrb.Grid(*plots))
+    note = rrb.TextDocumentView(name="Note", origin="/commission")
+    return collapsed(rrb.Vertical(rrb.Grid(*plots), note, row_shares=[3, 1]))
