@@ -52,6 +52,12 @@ CASES = [
     ("virtual-cart --onboard controllers/timing.toml --duration 0.1", "timing_noise_std_ticks"),
     # a reference file that is not UTF-8: UnicodeDecodeError
     ("run --fast --reference file:latin1.csv", "latin1.csv", "not UTF-8 text (byte 26)"),
+    # a measurement noise that overflows: a trace of ±1e308, a traceback in the virtual cart's
+    # thread (exit 0), a refusal of the trace being written (excite), or after the first stage
+    ("run --fast --noise 1e308", "--noise", "up to 1000, got 1e+308"),
+    ("virtual-cart --noise 1e308 --duration 0.1", "--noise", "up to 1000"),
+    ("excite --signal step --amplitude 5 --noise 1e300 --out x.csv", "--noise", "up to 1000"),
+    ("commission physics --noise 1e308", "--noise", "up to 1000"),
     # estimator noise levels a controller file cannot hold: OverflowError, ValueError tracebacks
     ("design models/ground.toml --method poles --process-noise-v 1e308", "--process-noise-v",
      "up to 1000"),

@@ -24,6 +24,9 @@ PLANTS_USING = {
 }
 """The plant kinds that use each plant option of the command line (:func:`make_plant`'s)."""
 
+MAX_NOISE_RAD_S = 1e3
+"""The largest ``--noise`` (rad/s): the cart turns at some 30 rad/s; beyond, a trace is noise."""
+
 
 def plant_kind(spec: str) -> str:
     """The kind of a ``--plant`` name: 'sim', 'physics', 'virtual', 'serial', or the name as given."""
@@ -50,8 +53,11 @@ def check_plant_options(
     noise (rad/s) and the connect timeout (s) in range, and no option in ``given`` (its name on
     the command line) that the plant ``spec`` names does not use."""
     noise = check_finite(noise_std_rad_s, "--noise")
-    if noise < 0.0:
-        raise InputError(f"--noise must be a standard deviation >= 0 rad/s, got {noise:g}")
+    if not 0.0 <= noise <= MAX_NOISE_RAD_S:
+        raise InputError(
+            f"--noise must be a standard deviation >= 0 rad/s and up to {MAX_NOISE_RAD_S:g}, "
+            f"got {noise:g}"
+        )
     timeout = check_finite(connect_timeout_s, "--connect-timeout")
     if timeout <= 0.0:
         raise InputError(f"--connect-timeout must be a positive number of seconds, got {timeout:g}")
