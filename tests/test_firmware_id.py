@@ -198,6 +198,8 @@ def test_no_frame_still_opens_the_sinks() -> None:
     assert rows.columns == ["time_s", "tick", *DEFAULT_LABELS] and rows.rows == []
     assert said == [describe_labels(None, None, DEFAULT_LABELS, given=False)]
     assert "no frame came" in said[0]
+    # no frame, so no word on the firmware (it said "not one of cartctl's, by no frame came")
+    assert said[0].startswith("firmware: unknown, no frame came; ") and "cartctl's" not in said[0]
 
 
 def test_given_labels_override_and_the_firmware_is_still_told() -> None:

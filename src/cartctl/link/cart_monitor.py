@@ -78,8 +78,9 @@ def describe_labels(
 ) -> str:
     """One line: the firmware (told by float 6 = ``marker``; None: no frame came) and the labels
     used (``given``: from ``--labels``)."""
-    told = "no frame came" if marker is None else f"float {CH_FIRMWARE_ID} = {marker:g}"
     what = firmware.name if firmware is not None else "not one of cartctl's"
+    told = "no frame came" if marker is None else f"by float {CH_FIRMWARE_ID} = {marker:g}"
+    what = "unknown" if marker is None else what  # no frame: nothing is known of it
     named = ",".join(
         f"{key}={label}"
         for key, label, default in zip(CHANNEL_KEYS, labels, DEFAULT_LABELS, strict=True)
@@ -89,7 +90,7 @@ def describe_labels(
     if not named:
         used = "QRoboticsCenter's labels (FloatIn0..7, IntIn0..3)"
         used += "" if given else "; name the channels with --labels"
-    return f"firmware: {what}, by {told}; {used}"
+    return f"firmware: {what}, {told}; {used}"
 
 
 class TextSink(Protocol):
