@@ -86,6 +86,21 @@ def test_review_shows_what_each_stage_recorded(commissioned, tmp_path, rrd_rows,
         assert set(rrd_rows(out / f"{stage}.rrd")) <= shown, stage
 
 
+def test_summary_tables_are_markdown_tables(commissioned) -> None:
+    """Each table of summary.md has as many cells in every line as its delimiter row: a '|' in a
+    cell ('max |pole|') split it, and the identification table rendered as text."""
+    import re
+
+    _, _, out = commissioned
+    lines = (out / "summary.md").read_text(encoding="utf-8").splitlines()
+    cells = [len(re.findall(r"(?<!\\)\|", line)) for line in lines]
+    delimiters = [i for i, line in enumerate(lines) if re.fullmatch(r"\|(---\|)+", line)]
+    assert len(delimiters) >= 4  # checks, identification, tuning, verification
+    for i in delimiters:
+        table = range(i - 1, next((j for j in range(i, len(lines)) if not lines[j]), len(lines)))
+        assert {cells[j] for j in table} == {cells[i]}, lines[i - 1]
+
+
 def test_commission_json_keys_and_figures(commissioned) -> None:
     _, result, out = commissioned
     assert result["model"]["path"] == str(out / "model.toml")
