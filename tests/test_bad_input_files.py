@@ -25,6 +25,7 @@ def _edit(text: str, old: str, new: str) -> str:
 FILES = {  # name: content, each a file a user could have edited by hand
     "prov.toml": _edit(GROUND, "[provenance]\n", "provenance = 'notes'\n[other]\n"),
     "data.toml": _edit(GROUND, "data = []", "data = 'run.csv'"),
+    "trace.csv": "time_s,voltage_a,voltage_b,speed_a,speed_b\n0,0,0,0,0\n0.01,5,5,0,0\n",
     "latin1.csv": "time_s,reference\n0,1\n1,caf\u00e9\n",
     "std.toml": _edit(GROUND, "nk = 2\n", "nk = 2\ntheta_std = ['a', 'b', 'c', 'd']\n"),
     # beside the model it was designed on, so that no warning says the model changed
@@ -58,6 +59,12 @@ CASES = [
     ("virtual-cart --noise 1e308 --duration 0.1", "--noise", "up to 1000"),
     ("excite --signal step --amplitude 5 --noise 1e300 --out x.csv", "--noise", "up to 1000"),
     ("commission physics --noise 1e308", "--noise", "up to 1000"),
+    # an output onto a file the command reads: the trace or model was replaced by the result
+    ("identify trace.csv --out trace.csv", "--out trace.csv is a file this command reads"),
+    ("identify trace.csv --compare models/air.toml --out ./models/air.toml", "--out"),
+    ("design models/ground.toml --method pi --out models/ground.toml", "--out models/ground.toml"),
+    ("tune models/ground.toml --method pi --choose 1 --out models/ground.toml", "--out"),
+    ("export models/ground.toml --mat models/ground.toml", "--mat models/ground.toml"),
     # estimator noise levels a controller file cannot hold: OverflowError, ValueError tracebacks
     ("design models/ground.toml --method poles --process-noise-v 1e308", "--process-noise-v",
      "up to 1000"),
@@ -92,7 +99,7 @@ def test_one_line_naming_the_mistake(
     says: tuple[str, ...],
 ) -> None:
     monkeypatch.chdir(folder)
-    before = sorted(folder.rglob("*"))
+    before = {path: path.read_bytes() if path.is_file() else b"" for path in folder.rglob("*")}
     words = shlex.split(argv)
     code = main(words)
     out, err = capsys.readouterr()
@@ -100,7 +107,9 @@ def test_one_line_naming_the_mistake(
     (line,) = err.splitlines()
     assert line.startswith(f"cartctl {words[0]}: error: "), line
     assert all(text in line for text in says), line
-    assert sorted(folder.rglob("*")) == before
+    assert {
+        path: path.read_bytes() if path.is_file() else b"" for path in folder.rglob("*")
+    } == before
 
 
 @pytest.mark.parametrize(

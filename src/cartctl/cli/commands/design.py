@@ -213,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
             f"--disturbance-v must be a non-zero voltage within ±{SUPPLY_V:g} V, "
             f"got {args.disturbance_v}"
         )
-    options.check_outputs(args, files=("out",), folders=("report",))
+    options.check_outputs(args, files=("out",), folders=("report",), inputs=(args.model,))
 
     from cartctl.cli.jsonout import dumps
     from cartctl.data.modelfile import load_models

@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.out and not args.arduino:
         raise InputError("--out is where --arduino writes its C; for --mat give the file there")
-    options.check_outputs(args, files=("out", "mat"))
+    options.check_outputs(args, files=("out", "mat"), inputs=(args.file,))
     kind, found = file_kind(args.file)
     if args.arduino and kind != "controller":
         raise InputError(

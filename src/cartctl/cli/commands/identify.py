@@ -283,7 +283,8 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.identification.pipeline import identify, model_file
     from cartctl.identification.validate import PERIOD_TOLERANCE
 
-    options.check_outputs(args, files=("out",), folders=("report",))
+    inputs = (*args.files, *(args.validate_on or ()), *(args.compare or ()))
+    options.check_outputs(args, files=("out",), folders=("report",), inputs=inputs)
     recorded = loop_delay_of(args.files)  # the traces' meta files; they must agree
     if args.loop_delay is not None and recorded is not None and recorded != args.loop_delay:
         print(

@@ -126,15 +126,24 @@ def check_run_outputs(args: argparse.Namespace, prefix: str) -> tuple[Path, Path
 
 
 def check_outputs(
-    args: argparse.Namespace, *, files: tuple[str, ...] = (), folders: tuple[str, ...] = ()
+    args: argparse.Namespace,
+    *,
+    files: tuple[str, ...] = (),
+    folders: tuple[str, ...] = (),
+    inputs: tuple[str, ...] = (),
 ) -> None:
     """The output options given, named by their ``args`` attribute (``"out"`` is ``--out``),
-    checked as files or folders before any work."""
+    checked as files or folders before any work; an output file that is one of the ``inputs``
+    (the files the command reads) is refused: it would be replaced by another kind of file."""
+    read = {Path(path).resolve() for path in inputs}
     for names, check in ((files, check_output_file), (folders, check_output_folder)):
         for name in names:
             value = getattr(args, name, None)
+            option = "--" + name.replace("_", "-")
+            if value and check is check_output_file and Path(value).resolve() in read:
+                raise InputError(f"{option} {value} is a file this command reads; give another")
             if value:
-                check(value, "--" + name.replace("_", "-"))
+                check(value, option)
 
 
 def command_line(command: str) -> str:

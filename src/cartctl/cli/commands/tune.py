@@ -278,7 +278,7 @@ def run(args: argparse.Namespace) -> int:
     settings = tuning.grid_settings(tuning.parse_grid(args.grid, args.method))
     checks.check_work(args, len(settings))
     checks.check_inputs(args, len(settings))
-    check_outputs(args, files=("out", "plot"))
+    check_outputs(args, files=("out", "plot"), inputs=(args.model,))
     check_plot_path(args.plot)  # a PNG: matplotlib would refuse another suffix after the work
 
     from cartctl.cli.jsonout import dumps
