@@ -257,3 +257,26 @@ def test_oe_refined_on_the_unfiltered_data_has_one_covariance(
     err = y - y_hat(theta)
     by_hand = float(err @ err) / (y.size - theta.size) * np.linalg.inv(jac.T @ jac)
     np.testing.assert_allclose(np.diag(cov), np.diag(by_hand), rtol=1e-4)
+
+
+def test_oe_refined_on_the_unfiltered_data_predicts_on_it(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """Its one-step prediction fit is on the data it was refined on (the raw data), as its
+    covariance and residual RMS are; it was on the prefiltered data."""
+    from cartctl.data.read import read_trace
+
+    data = tmp_path / "sq.csv"
+    code, _, _ = _run(capsys, "excite", "--plant", "physics", "--signal", "square",
+                      "--amplitude", "10", "--out", str(data))  # fmt: skip
+    assert code == 0
+    code, out, _ = _run(capsys, "identify", str(data), "--method", "oe", "--prefilter", "butter",
+                        "--motor", "a", "--json")  # fmt: skip
+    doc = json.loads(out)["motors"]["a"]
+    assert any("refined on the unfiltered data" in note for note in doc["notes"])
+    trace = read_trace(data)
+    y, u = trace.speed("a"), trace.voltage("a")
+    (c, d, a, b), nk = doc["theta"], doc["nk"]
+    k = np.arange(max(2, nk + 1), y.size)
+    predicted = -c * y[k - 1] - d * y[k - 2] + a * u[k - nk] + b * u[k - nk - 1]
+    assert doc["fit_prediction_percent"] == pytest.approx(_nrmse(y[k], predicted), abs=1e-9)

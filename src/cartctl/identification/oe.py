@@ -196,8 +196,9 @@ def fit_oe(
     """Refine ``initial`` (orders and delay kept) by output-error least squares on ``segments``.
 
     ``eval_segments`` (default ``segments``; the unfiltered data when those are prefiltered) decide
-    by simulation fit; every pole ends inside ``pole_bound``; Σ is σ̂² (JᵀJ)⁻¹ on the data the
-    chosen θ was refined on (:func:`~cartctl.identification.arx.theta_covariance`).
+    by simulation fit; every pole ends inside ``pole_bound``; Σ, σ̂² (JᵀJ)⁻¹
+    (:func:`~cartctl.identification.arx.theta_covariance`), and the prediction fit are on the data
+    the chosen θ was refined on.
     """
     if max_evaluations < 1:
         raise InputError(f"max_evaluations must be at least 1, got {max_evaluations}")
@@ -260,7 +261,7 @@ def fit_oe(
         model=model,
         theta_cov=theta_covariance(np.linalg.qr(jac, mode="r"), float(err @ err), n),
         fit_simulation_percent=simulation_fit(model, evaluation),
-        fit_prediction_percent=prediction_fit(model, data),
+        fit_prediction_percent=prediction_fit(model, fit_data),
         residual_rms=float(np.sqrt(np.mean(err**2))),
         n_samples=int(n),
         method="oe",
