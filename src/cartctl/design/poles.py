@@ -101,12 +101,13 @@ def _check_poles(poles: Sequence[complex], count: int, what: str) -> list[comple
     """The poles with exact conjugate pairs, sorted; InputError for the wrong number, one not
     finite or not inside the unit circle, or a complex one without its conjugate."""
     p = [complex(v) for v in poles]
+    for v in p:  # before the real ones are made exact: infj is no tiny imaginary part
+        if not (math.isfinite(v.real) and math.isfinite(v.imag)):
+            raise InputError(f"pole {v} is not a finite number")
     p = [complex(v.real, 0.0) if abs(v.imag) <= 1e-12 * max(1.0, abs(v)) else v for v in p]
     if len(p) != count:
         raise InputError(f"{what} needs {count} closed-loop poles, got {len(p)}")
     for v in p:
-        if not (math.isfinite(v.real) and math.isfinite(v.imag)):
-            raise InputError(f"pole {v} is not a finite number")
         if abs(v) >= 1.0:
             raise InputError(
                 f"pole {v:.6g} lies on or outside the unit circle (|z| = {abs(v):.6g}); a stable "
