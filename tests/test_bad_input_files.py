@@ -127,6 +127,22 @@ def test_a_reference_file_from_windows_runs(
     assert main(argv) == 0
 
 
+@pytest.mark.parametrize(
+    "argv", ["inspect models/ground.toml", "export controllers/pi.toml --arduino"]
+)
+def test_a_toml_file_saved_with_a_bom_reads(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, argv: str
+) -> None:
+    """A model or controller file saved by a Windows editor, with a UTF-8 BOM and CRLF line ends
+    (the BOM was 'not a valid TOML model file (Invalid statement (at line 1, column 1))')."""
+    monkeypatch.chdir(tmp_path)
+    for folder in ("models", "controllers"):
+        shutil.copytree(ROOT / folder, tmp_path / folder)
+    path = tmp_path / shlex.split(argv)[1]
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes().replace(b"\n", b"\r\n"))
+    assert main(shlex.split(argv)) == 0
+
+
 def test_a_step_that_never_rises_is_shown(capsys: pytest.CaptureFixture[str]) -> None:
     """A pole a hair inside the unit circle: the simulated step never reaches 90 %, so it has no
     rise time (the table's formatting raised TypeError on None)."""

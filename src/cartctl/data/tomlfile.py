@@ -34,7 +34,7 @@ def read_toml(path: str | Path, what: str) -> dict[str, Any]:
     if not path.is_file():
         raise MissingFileError(path, what)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # a BOM (Windows editors) is no statement
     except UnicodeDecodeError:
         raise DataFileError(path, f"is not text; expected a {what} (TOML)") from None
     if not text.strip():
