@@ -161,6 +161,8 @@ CASES = [
     _case("design models/ground.toml --method poles --poles 1.5,0.5,0.5", "--poles",
           "unit circle"),
     _case("design models/ground.toml --method poles --poles nan,0.5,0.5", "--poles", "finite"),
+    _case("design models/ground.toml --method poles --poles ''", "--poles must be text like",
+          "got ''"),  # (it designed from the settling time and overshoot)
     _case("design models/ground.toml --method poles --poles infj,0.5,0.5", "--poles", "infj",
           "finite"),  # (it was placed at 0)
     _case("design models/ground.toml --method poles --poles 0.5+1e999j,0.5-1e999j,0.5",

@@ -90,7 +90,7 @@ class DesignRequest:
         if self.anti_windup not in ANTI_WINDUP:  # (the runtime's line, before any design)
             allowed = ", ".join(ANTI_WINDUP)
             raise InputError(f"unknown anti-windup {self.anti_windup!r}; expected one of {allowed}")
-        if not isinstance(self.poles, str | None):
+        if self.poles is not None and not (isinstance(self.poles, str) and self.poles.strip()):
             raise InputError(
                 f"--poles must be text like '0.8,0.7+0.1j,0.7-0.1j', got {self.poles!r}"
             )
