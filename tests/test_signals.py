@@ -118,3 +118,19 @@ def test_numpy_whole_numbers_are_counts() -> None:
     np.testing.assert_array_equal(make_signal("square", 5.0, cycles=np.int64(2)),
                                   square(5.0, cycles=2))  # fmt: skip
     np.testing.assert_array_equal(prbs(5.0, order=np.int32(8), seed=np.int64(1)), prbs(5.0))
+
+
+def test_a_step_no_longer_than_its_wait_names_duration(capsys, tmp_path, monkeypatch) -> None:
+    """excite's step holds 0 V for 0.5 s: --duration 0.5 was refused as 'step delay must be in
+    [0, duration), got 0.5 s', naming no option the user has."""
+    from cartctl.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    code = main(
+        ["excite", "--signal", "step", "--amplitude", "3", "--duration", "0.5", "--out", "x"]
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert "--duration 0.5 s" in err[0] and "0.51 s" in err[0] and "delay" not in err[0], err[0]
+    assert not list(tmp_path.iterdir())
+    assert make_signal("step", 3.0, duration_s=0.51)[-1] == 3.0  # the shortest: one tick of step

@@ -194,6 +194,12 @@ def make_signal(
             )
     if name == "square":
         return square(amplitude_v, cycles=int(cycles or 5), period_s=period_s)
+    shortest = 0.5 + period_s  # a tick of step after step()'s delay_s
+    if name == "step" and duration_s and duration_s < shortest:
+        raise InputError(
+            f"--duration {duration_s:g} s ends before the step (0 V for its first "
+            f"0.5 s); give at least {shortest:g} s"
+        )
     if name == "multisine" and cycles:
         duration_s = 2.56 * cycles
     given = {"duration_s": duration_s} if duration_s else {}  # else each one's default
