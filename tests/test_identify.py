@@ -401,3 +401,14 @@ def test_the_delay_evidence_of_an_averaged_fit_is_on_the_averaged_cycle(
     assert averaged["nk"] == doc["motors"]["a"]["nk"] == 2
     ours = {c["nk"]: c["residual_rms"] for c in averaged["candidates"]}
     assert ours[2] < 0.5 * {c["nk"]: c["residual_rms"] for c in plain["candidates"]}[2]
+
+
+def test_average_on_too_few_cycles_names_the_option_and_the_file(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    # the line said only "needs at least 2 whole cycle(s) after dropping the first (transient)"
+    u = square(10.0, cycles=2)
+    path = str(_trace(tmp_path / "sq.csv", u, ArxModel.from_theta(THETA_A).simulate(u)))
+    assert main(["identify", path, "--average"]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith(f"cartctl identify: error: --average on {path}: needs at least 2 whole")

@@ -210,7 +210,10 @@ def _averaged(
             raise InputError(
                 f"--average needs a periodic input with at least two whole cycles; {src}'s is not"
             )
-        y_avg, u_avg, n = average_cycles(y, u, period)
+        try:
+            y_avg, u_avg, n = average_cycles(y, u, period)
+        except InputError as exc:  # too few cycles: name the option and the file
+            raise InputError(f"--average on {src}: {exc}") from None
         if prefilter is not None:
             y_avg, u_avg = (prefilter.apply_periodic(x, period_s) for x in (y_avg, u_avg))
         out.append(periodic_regression_pad(y_avg, u_avg, lags))
