@@ -7,10 +7,13 @@ from __future__ import annotations
 import shlex
 import shutil
 from pathlib import Path
+from typing import Any
 
 import pytest
 
+import cartctl
 from cartctl.cli import main
+from cartctl.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
 GROUND = (ROOT / "models" / "ground.toml").read_text(encoding="utf-8")
@@ -149,3 +152,15 @@ def test_a_step_that_never_rises_is_shown(capsys: pytest.CaptureFixture[str]) ->
     assert main(["design", "models/ground.toml", "--method", "poles",
                  "--poles", "0.99999999999,0.5,0.5"]) == 0  # fmt: skip
     assert "rise —, settling —" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("call", "says"),
+    [(lambda: cartctl.excite(plant="sim", signal="step", amplitude_v=10**400), "amplitude_v"),
+     (lambda: cartctl.excite(plant="sim", signal="step", noise_std_rad_s=10**400), "--noise"),
+     (lambda: cartctl.simulate("controllers/pi.toml", noise_std_rad_s=10**400), "--noise")],
+)  # fmt: skip
+def test_the_api_refuses_a_whole_number_beyond_any_float(call: Any, says: str) -> None:
+    """A Python int too large for a float raised OverflowError from math.isnan."""
+    with pytest.raises(InputError, match=says):
+        call()

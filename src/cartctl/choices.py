@@ -32,10 +32,14 @@ def check_finite(value: float, option: str) -> float:
 
     if isinstance(value, bool) or not isinstance(value, Real):  # (from Python: the API)
         raise InputError(f"{option} must be a number, got {value!r}")
-    if math.isnan(value):
+    try:
+        number = float(value)
+    except OverflowError:  # a whole number beyond any float
+        number = math.inf
+    if math.isnan(number):
         raise InputError(f"{option} must be a number, got nan")
-    if math.isinf(value):
-        raise InputError(f"{option} must be finite, got {value:g}")
+    if math.isinf(number):
+        raise InputError(f"{option} must be finite, got {number:g}")
     return value
 
 
