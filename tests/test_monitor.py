@@ -332,6 +332,22 @@ def test_ctrl_c_stops_cleanly(capsys: pytest.CaptureFixture[str], tmp_path: Path
 
 
 @pytest.mark.realtime
+def test_virtual_cart_names_its_firmware_and_its_help_every_option(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A generation-B cart was announced as 'the bridge sketch version 2'; --help left out the
+    options docs/serial.md gives (actuation_ms, usb, bridge, receive, reply_jitter_ms)."""
+    from cartctl.cli import build_parser
+    from cartctl.link.cart_faults import _FIELD_OF
+
+    code, _, err = _cli(capsys, "virtual-cart", "--faults", "generation=b", "--duration", "0.05")
+    assert code == 0, err
+    assert "generation B" in err and "bridge sketch" not in err, err
+    shown = " ".join(build_parser().subcommands["virtual-cart"].format_help().split())
+    assert not [key for key in _FIELD_OF if f"{key}=" not in shown], shown
+
+
+@pytest.mark.realtime
 def test_virtual_cart_onboard_options(capsys: pytest.CaptureFixture[str]) -> None:
     code, _, err = _cli(capsys, "virtual-cart", "--reference", "step:8")
     assert code == 2 and "--reference needs --onboard" in err

@@ -53,7 +53,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "host's first frame), late=FRACTION (that fraction of the ticks, in stretches of 5, take "
         "the host's commands a tick late), generation=b (speak the "
         "newer MAVLink 2 firmware instead), reverse_a=1 / reverse_b=1 (that motor wired "
-        "backwards: + volts turn it the negative way)",
+        "backwards: + volts turn it the negative way); the cart itself: actuation_ms=X (a command "
+        "on the wheels X ms after its tick, 0 < X <= 10, default 3), usb=off, bridge=1, "
+        "receive=microos, reply_jitter_ms=J (docs/serial-protocol.md §8)",
     )  # fmt: skip
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     p.add_argument(
@@ -102,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
     try:  # a stop signal from the port's line on: the cart's own stop line too
         print(cart.port, flush=True)
         running = f"the bridge sketch version {cart.bridge_version}"
+        if cart.faults.generation == "b":
+            running = "microOS generation B (MAVLink 2)"
         if args.onboard:
             running = f"controller {args.onboard} on board"
         usb = "modelled" if cart.faults.usb else "off"
