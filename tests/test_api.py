@@ -137,13 +137,17 @@ def test_design_and_simulate_agree_with_design_and_run(
     [("pi", ["--phase-margin", "60", "--crossover-hz", "4", "--voltage-limit", "10", "--step", "8"],
       {"phase_margin_deg": 60, "crossover_hz": 4, "voltage_limit_v": 10, "step_rad_s": 8}),
      ("poles", ["--settling-time", "1", "--overshoot", "2"],
-      {"settling_time_s": 1, "overshoot_percent": 2})],
+      {"settling_time_s": 1, "overshoot_percent": 2}),
+     ("pi", ["--crossover-hz", "4.5", "--extra-delay", "1", "--step", "8"],  # numpy's numbers
+      {"crossover_hz": np.float64(4.5), "extra_delay_ticks": np.int64(1),
+       "step_rad_s": np.float32(8)})],
 )  # fmt: skip
 def test_design_save_writes_the_file_design_out_writes(
     method: str, argv: list[str], options: dict, workdir: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Whole numbers given to the API are the floats the command line parses (8.0, not 8), and
-    the header's command writes the file again (its --out); the creation time aside."""
+    """Whole numbers given to the API are the floats the command line parses (8.0, not 8), numpy's
+    numbers plain ones (not --crossover-hz 'np.float64(4.5)'), and the header's command writes the
+    file again (its --out); the creation time aside."""
     out = "controllers/same.toml"
     args = ["design", "models/ground.toml", "--method", method, *argv, "--out", out]
     monkeypatch.setattr(sys, "argv", ["cartctl", *args])

@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from contextlib import suppress
 from dataclasses import fields, replace
+from numbers import Real
 from pathlib import Path
 from typing import Any
 
@@ -227,11 +228,12 @@ def _design(model: str | Path | ModelFile, request: DesignRequest, motors: Seque
 
 
 def _request(method: str, options: dict[str, Any]) -> DesignRequest:
-    """The request of ``options``, a whole number given for a number of the command line as the
-    float it parses (``8`` is ``8.0``, in the controller file too; bools stay, to be refused)."""
+    """The request of ``options``, a number given for a number of the command line as the float
+    it parses (``8`` and numpy's ``float64(8)`` are ``8.0``, in the controller file and its
+    command too; bools stay, to be refused)."""
     floats = {f.name for f in fields(DesignRequest) if str(f.type).startswith("float")}
     for name, value in options.items():
-        if name in floats and is_whole(value):
+        if name in floats and isinstance(value, Real) and not isinstance(value, bool):
             with suppress(OverflowError):  # beyond any float: its range refuses it
                 options[name] = float(value)
     return DesignRequest(method=method, **options)
