@@ -29,6 +29,8 @@ FILES = {  # name: content, each a file a user could have edited by hand
     "prov.toml": _edit(GROUND, "[provenance]\n", "provenance = 'notes'\n[other]\n"),
     "data.toml": _edit(GROUND, "data = []", "data = 'run.csv'"),
     "trace.csv": "time_s,voltage_a,voltage_b,speed_a,speed_b\n0,0,0,0,0\n0.01,5,5,0,0\n",
+    "v9.toml": _edit(GROUND, "cartctl-model/2", "cartctl-model/9"),
+    "controllers/v9.toml": _edit(POLES, "cartctl-controller/2", "cartctl-controller/9"),
     "latin1.csv": "time_s,reference\n0,1\n1,caf\u00e9\n",
     "std.toml": _edit(GROUND, "nk = 2\n", "nk = 2\ntheta_std = ['a', 'b', 'c', 'd']\n"),
     # beside the model it was designed on, so that no warning says the model changed
@@ -54,6 +56,9 @@ CASES = [
     ("export controllers/timing.toml --arduino --out x.h", "timing.toml",
      "timing_noise_std_ticks must be a number of ticks in [0, 10], got -0.5"),
     ("virtual-cart --onboard controllers/timing.toml --duration 0.1", "timing_noise_std_ticks"),
+    # a newer version of a file: 'is neither a model file nor a controller file'
+    ("export v9.toml --mat x.mat", "'cartctl-model/9', a version this cartctl does not read"),
+    ("export controllers/v9.toml --mat x.mat", "'cartctl-controller/9', a version this"),
     # a reference file that is not UTF-8: UnicodeDecodeError
     ("run --fast --reference file:latin1.csv", "latin1.csv", "not UTF-8 text (byte 26)"),
     # a measurement noise that overflows: a trace of ±1e308, a traceback in the virtual cart's

@@ -54,7 +54,7 @@ def _command(args: argparse.Namespace) -> str:
 def file_kind(path: str | Path) -> tuple[str, Path]:
     """('model' or 'controller', the file found) from the file's ``format`` line."""
     from cartctl.choices import find_file
-    from cartctl.data.tomlfile import read_toml
+    from cartctl.data.tomlfile import check_format, read_toml
 
     found = find_file(path)
     doc = read_toml(found, "model or controller file")
@@ -63,6 +63,9 @@ def file_kind(path: str | Path) -> tuple[str, Path]:
         return "controller", found
     if fmt in READABLE[MODEL_FORMAT] or (fmt is None and "motors" in doc and "method" not in doc):
         return "model", found
+    for written, what in ((CONTROLLER_FORMAT, "controller file"), (MODEL_FORMAT, "model file")):
+        if isinstance(fmt, str) and fmt.partition("/")[0] == written.partition("/")[0]:
+            check_format(doc, found, written, what)  # another version: says which are read
     shown = "has no 'format' line" if fmt is None else f"has format {fmt!r}"
     raise DataFileError(
         found,
