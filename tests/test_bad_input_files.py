@@ -29,6 +29,7 @@ FILES = {  # name: content, each a file a user could have edited by hand
     "prov.toml": _edit(GROUND, "[provenance]\n", "provenance = 'notes'\n[other]\n"),
     "data.toml": _edit(GROUND, "data = []", "data = 'run.csv'"),
     "trace.csv": "time_s,voltage_a,voltage_b,speed_a,speed_b\n0,0,0,0,0\n0.01,5,5,0,0\n",
+    "zero.toml": _edit(GROUND, "0.6466, -0.07751", "0.0, 0.0"),
     "v9.toml": _edit(GROUND, "cartctl-model/2", "cartctl-model/9"),
     "controllers/v9.toml": _edit(POLES, "cartctl-controller/2", "cartctl-controller/9"),
     "latin1.csv": "time_s,reference\n0,1\n1,caf\u00e9\n",
@@ -56,6 +57,9 @@ CASES = [
     ("export controllers/timing.toml --arduino --out x.h", "timing.toml",
      "timing_noise_std_ticks must be a number of ticks in [0, 10], got -0.5"),
     ("virtual-cart --onboard controllers/timing.toml --duration 0.1", "timing_noise_std_ticks"),
+    # a model no voltage moves: a numpy warning line, then 'it would need Kp = -inf'
+    ("design zero.toml --method pi", "zero.toml: motor a's model has b = 0"),
+    ("tune zero.toml --method pi", "zero.toml: motor a's model has b = 0"),
     # a newer version of a file: 'is neither a model file nor a controller file'
     ("export v9.toml --mat x.mat", "'cartctl-model/9', a version this cartctl does not read"),
     ("export controllers/v9.toml --mat x.mat", "'cartctl-controller/9', a version this"),

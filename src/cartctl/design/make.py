@@ -306,6 +306,8 @@ def check_models(
     by_motor = {m: models.motor(m) if isinstance(models, ModelFile) else models[m] for m in motors}
     for m, model in by_motor.items():
         check_input_delay(model.nk, f"{where}motor {m}'s model: ")
+        if not any(model.b):
+            raise InputError(f"{where}motor {m}'s model has b = 0: no voltage moves it")
         if not model.is_stable():
             raise InputError(
                 f"{where}motor {m}'s model is {model.stability()} (pole at |z| = "
