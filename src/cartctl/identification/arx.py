@@ -108,17 +108,23 @@ def first_row(na: int, nb: int, nk: int) -> int:
     return max(na, nk + nb - 1)
 
 
+def rows_from(segments: Sequence[Checked], start: int) -> list[Checked]:
+    """The experiments longer than ``start`` samples; refuses none."""
+    used = [(y, u) for y, u in segments if y.size > start]
+    if not used:
+        raise IdentificationError(
+            f"too few samples: the model needs more than {start} samples per experiment"
+        )
+    return used
+
+
 def augmented_regression(
     segments: Sequence[Checked], na: int, nb: int, nk: int, start: int | None = None
 ) -> NDArray[np.float64]:
     """[Φ | y] of all experiments in one Fortran-order array, ready for an in-place QR: rows
     k = ``start`` (default :func:`first_row`) … n − 1 of each experiment longer than ``start``."""
     start = first_row(na, nb, nk) if start is None else start
-    used = [(y, u) for y, u in segments if y.size > start]
-    if not used:
-        raise IdentificationError(
-            f"too few samples: the model needs more than {start} samples per experiment"
-        )
+    used = rows_from(segments, start)
     rows = sum(y.size - start for y, _ in used)
     out = np.empty((rows, na + nb + 1), order="F")
     row = 0

@@ -28,7 +28,8 @@ from cartctl.identification.arx import (
     IdentificationError,
     Segment,
     as_segments,
-    prediction_fit,
+    first_row,
+    rows_from,
     simulation_fit,
     theta_covariance,
 )
@@ -208,6 +209,7 @@ def fit_oe(
     data = as_segments(segments)
     evaluation = data if eval_segments is None else as_segments(eval_segments)
     na, nb, nk, ts = initial.na, initial.nb, initial.nk, initial.period_s
+    rows_from(data, first_row(na, nb, nk))
     rho = float(pole_bound)
 
     def model_of(theta: NDArray[np.float64]) -> ArxModel:
@@ -261,7 +263,7 @@ def fit_oe(
         model=model,
         theta_cov=theta_covariance(np.linalg.qr(jac, mode="r"), float(err @ err), n),
         fit_simulation_percent=simulation_fit(model, evaluation),
-        fit_prediction_percent=prediction_fit(model, fit_data),
+        fit_prediction_percent=simulation_fit(model, fit_data),  # an OE predictor simulates
         residual_rms=float(np.sqrt(np.mean(err**2))),
         n_samples=int(n),
         method="oe",
