@@ -31,6 +31,7 @@ FILES = {  # name: content, each a file a user could have edited by hand
     "trace.csv": "time_s,voltage_a,voltage_b,speed_a,speed_b\n0,0,0,0,0\n0.01,5,5,0,0\n",
     "zero.toml": _edit(GROUND, "0.6466, -0.07751", "0.0, 0.0"),
     "v9.toml": _edit(GROUND, "cartctl-model/2", "cartctl-model/9"),
+    "controllers/pi.toml": (ROOT / "controllers" / "pi.toml").read_text(encoding="utf-8"),
     "controllers/v9.toml": _edit(POLES, "cartctl-controller/2", "cartctl-controller/9"),
     "latin1.csv": "time_s,reference\n0,1\n1,caf\u00e9\n",
     "std.toml": _edit(GROUND, "nk = 2\n", "nk = 2\ntheta_std = ['a', 'b', 'c', 'd']\n"),
@@ -60,6 +61,12 @@ CASES = [
     # a model no voltage moves: a numpy warning line, then 'it would need Kp = -inf'
     ("design zero.toml --method pi", "zero.toml: motor a's model has b = 0"),
     ("tune zero.toml --method pi", "zero.toml: motor a's model has b = 0"),
+    # an on-board reference no motor reaches: 1e308 overflowed the cart's float channels (a
+    # traceback in its thread, exit 0; monitor: 'no data from the cart', exit 1)
+    ("virtual-cart --onboard controllers/pi.toml --reference const:1e308 --duration 0.1",
+     "the reference asks for motor a 1e+308 rad/s"),
+    ("monitor virtual --onboard controllers/pi.toml --reference const:1e39 --duration 0.1",
+     "the reference asks for motor a 1e+39 rad/s"),
     # a newer version of a file: 'is neither a model file nor a controller file'
     ("export v9.toml --mat x.mat", "'cartctl-model/9', a version this cartctl does not read"),
     ("export controllers/v9.toml --mat x.mat", "'cartctl-controller/9', a version this"),

@@ -90,7 +90,30 @@ def onboard_firmware(args: argparse.Namespace, reference: str | None) -> Onboard
     from cartctl.export.arduino import onboard_controllers
     from cartctl.link.firmware import OnboardFirmware
 
-    return OnboardFirmware(onboard_controllers(args.onboard), reference=reference)
+    controllers = onboard_controllers(args.onboard)
+    if reference:
+        _check_reach(args.onboard, reference, args.duration)
+    return OnboardFirmware(controllers, reference=reference)
+
+
+def _check_reach(path: str, spec: str, duration_s: float | None) -> None:
+    """Refuse a reference far beyond what the controller's model reaches, as ``run`` does (over
+    the run, or its first minute): 1e308 overflowed the cart's float channels in its thread."""
+    from cartctl.cart import PERIOD_S
+    from cartctl.data.modelfile import load_models
+    from cartctl.design.controllerfile import load_controller
+    from cartctl.errors import CartctlError
+    from cartctl.reference import ReferenceSchedule
+    from cartctl.session.prepare import check_reach
+
+    controller = load_controller(path)
+    try:
+        models = dict(load_models(controller.model_path).motors)
+    except (CartctlError, OSError):  # the model moved: nothing to measure the reference by
+        return
+    n = round(min(duration_s or 60.0, 60.0) / PERIOD_S)
+    references = {m: ReferenceSchedule(spec, n, PERIOD_S, m) for m in controller.motors}
+    check_reach(references, models, controller.voltage_limit_v, controller.model_path)
 
 
 def run(args: argparse.Namespace) -> int:
