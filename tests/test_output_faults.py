@@ -271,6 +271,20 @@ def test_a_write_cut_mid_run_leaves_whole_rows_and_says_how_many(tmp_path: Path)
     assert summary["ticks"] < 6000  # it stopped at the failure, not after 60 s
 
 
+@pytest.mark.skipif(sys.platform != "linux", reason="RLIMIT_FSIZE and its EFBIG as on Linux")
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")  # what a cut recording lacks
+def test_a_recording_cut_by_a_full_disk_still_reads(tmp_path: Path, rrd_rows) -> None:
+    """The SDK's write stops mid-message at the limit; the file is cut back to its last whole
+    message, so the recording so far reads (a reader fails on a message cut short)."""
+    result = cartctl("run", "--fast", "--rerun", "save", "--duration", "60", "--out", str(tmp_path),
+                     "--name", "cut", cwd=ROOT, file_size_limit=150_000)  # fmt: skip
+    assert result.returncode == 1
+    rrd = tmp_path / "cut.rrd"
+    assert f"{rrd} is incomplete" in _one_line(result.stderr)
+    assert 0 < rrd.stat().st_size < 150_000
+    assert rrd_rows(rrd)["motor/a/voltage"] > 0
+
+
 @needs_dev_full
 def test_excite_on_a_full_disk_is_a_fault(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch

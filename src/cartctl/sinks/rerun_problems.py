@@ -68,6 +68,32 @@ def file_failure(exc: BaseException, path: Path | None) -> str | None:
     return "No space left on device" if full else "the recording's writer stopped"
 
 
+_RRD_HEADER = 12  # b"RRF2", the SDK's version, the encoding options; then each message's header
+_MESSAGE_HEADER = 16  # kind and payload length, u64 little-endian each, then the payload
+
+
+def cut_to_whole_messages(path: Path) -> None:
+    """Cut a ``.rrd`` the SDK stopped writing mid-message (a full disk) back to its last whole
+    message: a reader fails on the message cut short, and the recording so far reads without it
+    (as a file with no footer). Never raises; a file of another format is left alone."""
+    try:
+        size = path.stat().st_size
+        with path.open("r+b") as f:
+            if f.read(4) != b"RRF2":
+                return
+            end = _RRD_HEADER
+            while end + _MESSAGE_HEADER <= size:
+                f.seek(end + 8)
+                message_end = end + _MESSAGE_HEADER + int.from_bytes(f.read(8), "little")
+                if message_end > size:
+                    break
+                end = message_end
+            if end < size:
+                f.truncate(end)
+    except OSError:
+        pass
+
+
 VIEWER_PORT: Final[int] = 9876
 VIEWER_URL: Final[str] = f"rerun+http://127.0.0.1:{VIEWER_PORT}/proxy"  # the native viewer's
 

@@ -38,6 +38,7 @@ from cartctl.sinks.rerun_problems import (
     VIEWER_URL,
     RecordingError,
     RecordingWarning,
+    cut_to_whole_messages,
     display_available,
     file_failure,
     viewer_executable,
@@ -198,6 +199,8 @@ class RerunSink:
                     self._problem(f"{step} the recording failed: {exc}")
         self._report()
         if failed is not None:
+            if self.path is not None:
+                cut_to_whole_messages(self.path)
             self.error = OutputError(self.path or "", failed)
             raise self.error
 
