@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import shlex
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -364,6 +365,25 @@ def test_a_design_or_run_of_something_else(workdir: Path) -> None:
     )
     model = cartctl.load_model("models/ground.toml")  # a model file read from a path designs
     assert cartctl.design_pi(model).model_path == model.path
+
+
+@pytest.mark.parametrize(
+    ("call", "line"),
+    [
+        (lambda: cartctl.identify(None), "identify takes a trace, its path or a list of them, not None"),
+        (lambda: cartctl.identify(5), "identify takes a trace, its path or a list of them, not 5"),
+        (lambda: cartctl.design_pi("models/ground.toml", motors=None),
+         "motors must be 'a' and/or 'b', got None"),
+        (lambda: cartctl.load_trace("logs/x.csv", map=5),
+         "map must be text like 'voltage_a=FloatIn2,speed_a=FloatIn0' or a dict, got 5"),
+    ],
+)  # fmt: skip
+def test_a_container_of_the_wrong_kind(workdir: Path, call: Any, line: str) -> None:
+    # TypeError ('NoneType' object is not iterable) or AttributeError ('int' object has no
+    # attribute 'items')
+    with pytest.raises(CartctlError) as refused:
+        call()
+    assert str(refused.value) == line
 
 
 @pytest.mark.parametrize(

@@ -7,7 +7,7 @@ Each function takes the command line's path (``cartctl excite``, ``identify``, `
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from contextlib import suppress
 from dataclasses import fields, replace
 from numbers import Real
@@ -57,6 +57,9 @@ def load_trace(path: str | Path, map: str | Mapping[str, str] | None = None) -> 
     map : str or mapping, optional
         Which log channel is which column: ``"voltage_a=FloatIn2,speed_a=FloatIn0"`` or a dict.
     """
+    if map is not None and not isinstance(map, str | Mapping):
+        shown = "'voltage_a=FloatIn2,speed_a=FloatIn0'"
+        raise InputError(f"map must be text like {shown} or a dict, got {map!r}")
     mapping = parse_mapping(map) if isinstance(map, str) else map
     return read_trace(path, mapping)
 
@@ -170,6 +173,8 @@ def identify(
     """
     from cartctl.data.trace import loop_delay_of
 
+    if not isinstance(traces, Trace | str | Path | Iterable):
+        raise InputError(f"identify takes a trace, its path or a list of them, not {traces!r}")
     items = [traces] if isinstance(traces, Trace | str | Path) else list(traces)
     loaded = [t if isinstance(t, Trace) else read_trace(t) for t in items]
     if loop_delay_ticks is None:
@@ -220,11 +225,11 @@ def _design(model: str | Path | ModelFile, request: DesignRequest, motors: Seque
         model = model.path
     if not isinstance(model, str | Path):  # an unsaved model file, an Identification …
         raise InputError("design from a saved model file: give its path (save_model first)")
-    if not motors or not set(motors) <= set(MOTORS):
-        given = motors if isinstance(motors, str) else list(motors)  # 'both' as itself
-        raise InputError(f"motors must be 'a' and/or 'b', got {given!r}")
+    given = list(motors) if isinstance(motors, Iterable) and not isinstance(motors, str) else motors
+    if not given or not isinstance(given, str | list) or not set(given) <= set(MOTORS):
+        raise InputError(f"motors must be 'a' and/or 'b', got {given!r}")  # 'both' as itself
     models = load_models(model)
-    return Design(design_models(request, models, tuple(motors)), Path(model), models.period_s)
+    return Design(design_models(request, models, tuple(given)), Path(model), models.period_s)
 
 
 def _request(method: str, options: dict[str, Any]) -> DesignRequest:
