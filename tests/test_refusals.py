@@ -189,6 +189,34 @@ def test_a_port_that_does_not_exist_is_a_user_mistake(
     assert not (workdir / "logs").exists()
 
 
+def test_a_port_another_program_holds_is_refused_in_one_line(
+    capsys: pytest.CaptureFixture[str], workdir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A monitor left running on the port: a second cartctl shared its bytes with it (the run
+    lost frames, the monitor stopped with 'cable pulled?'). The port is now opened exclusively."""
+    import os
+
+    import serial
+
+    from cartctl.link import cart_link
+
+    monkeypatch.setattr(cart_link, "LEGACY_LISTEN_S", 0.05)  # the old code's second listen
+    master, slave = os.openpty()
+    port = os.ttyname(slave)
+    holder = serial.Serial(port, 500000, exclusive=True)  # as cartctl monitor holds it
+    try:
+        code, _, err = _run(capsys, "run", "--plant", f"serial:{port}", "--rerun", "off",
+                            "--connect-timeout", "0.05")  # fmt: skip
+    finally:
+        holder.close()
+        os.close(master)
+        os.close(slave)
+    lines = err.strip().splitlines()
+    assert code == 1 and len(lines) == 1, err
+    assert f"serial port {port} is in use by another program" in lines[0], lines[0]
+    assert not (workdir / "logs").exists()
+
+
 def test_an_ill_conditioned_placement_is_one_readable_line(
     capsys: pytest.CaptureFixture[str], workdir: Path
 ) -> None:

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import errno
+import functools
 import os
 import stat
 import sys
@@ -96,12 +98,18 @@ class CartLink:
         """Open the port at :attr:`baud` 8N1, no flow control."""
         import serial
 
-        factory = self._factory or serial.Serial
+        # one program at a time (a lock): two would split the cart's bytes between them
+        factory = self._factory or functools.partial(serial.Serial, exclusive=True)
         if self._factory is None:
             check_port(self.port)
         try:
             self._serial = factory(self.port, self.baud, timeout=READ_SLICE_S, write_timeout=0.5)
         except (OSError, serial.SerialException) as exc:
+            if getattr(exc, "errno", None) == errno.EAGAIN:  # another program holds the lock
+                raise PlantError(
+                    f"serial port {self.port} is in use by another program (a "
+                    "cartctl monitor or run still open?)"
+                ) from None
             reason = getattr(exc, "strerror", None) or str(exc)
             raise PlantError(
                 f"cannot open serial port {self.port}: {reason}; {_ports_hint()}"
