@@ -35,6 +35,9 @@ def check_output_file(path: str | Path, option: str) -> Path:
     why = _unwritable(parent, there="cannot create")
     if why is None and path.exists() and not os.access(path, os.W_OK):
         why = "cannot write: permission denied"
+    base = next(folder for folder in path.absolute().parents if folder.is_dir())
+    if why is None and len(os.fsencode(path.name)) > os.pathconf(base, "PC_NAME_MAX"):
+        why = "cannot create: file name too long"  # the folder is fine, the file is not
     if why is not None:
         raise InputError(f"{option} {path}: {why}")
     return path
