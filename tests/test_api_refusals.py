@@ -201,6 +201,20 @@ def test_a_whole_number_beyond_any_float(workdir: Path, option: str, line: str) 
     assert str(refused.value).startswith(line) and ", got 1000" in str(refused.value)
 
 
+def test_a_design_option_by_another_name(workdir: Path) -> None:
+    # a TypeError naming DesignRequest.__init__ (an option by its command-line name, a typo)
+    with pytest.raises(CartctlError) as refused:
+        cartctl.design_pi("models/ground.toml", estimator="kalman", process_noise_v=0.2)
+    assert str(refused.value) == (
+        "design_pi has no option 'process_noise_v'; --process-noise-v is process_noise_std_v"
+    )
+    with pytest.raises(CartctlError) as refused:
+        cartctl.design_poles("models/ground.toml", settling=0.1)
+    assert str(refused.value).startswith(
+        "design_poles has no option 'settling'; the options are anti_windup, bandwidth_hz, "
+    )
+
+
 def test_a_design_of_one_motor_records_its_command(
     capsys: pytest.CaptureFixture[str], workdir: Path
 ) -> None:

@@ -23,7 +23,7 @@ from cartctl.data.read import read_trace
 from cartctl.data.trace import MOTORS, Trace, parse_mapping
 from cartctl.design.controllerfile import ControllerFile, load_controller
 from cartctl.design.make import design_models
-from cartctl.design.request import DesignRequest
+from cartctl.design.request import OPTIONS, DesignRequest
 from cartctl.errors import InputError, PlantError
 from cartctl.identification.pipeline import IdentifyRequest, Prefilter
 from cartctl.identification.pipeline import identify as identify_traces
@@ -236,6 +236,12 @@ def _request(method: str, options: dict[str, Any]) -> DesignRequest:
     """The request of ``options``, a number given for a number of the command line as the float
     it parses (``8`` and numpy's ``float64(8)`` are ``8.0``, in the controller file and its
     command too; bools stay, to be refused)."""
+    names = {f.name for f in fields(DesignRequest)} - {"method"}
+    for name in sorted(options.keys() - names):  # (else a TypeError naming DesignRequest)
+        flag = "--" + name.replace("_", "-")  # an option by its command-line name?
+        known = [f"{flag} is {f}" for f, o in OPTIONS.items() if o == flag]
+        hint = known[0] if known else "the options are " + ", ".join(sorted(names))
+        raise InputError(f"design_{method} has no option {name!r}; {hint}")
     floats = {f.name for f in fields(DesignRequest) if str(f.type).startswith("float")}
     for name, value in options.items():
         if name in floats and isinstance(value, Real) and not isinstance(value, bool):
