@@ -33,6 +33,7 @@ FILES = {  # name: content, each a file a user could have edited by hand
     "v9.toml": _edit(GROUND, "cartctl-model/2", "cartctl-model/9"),
     "controllers/pi.toml": (ROOT / "controllers" / "pi.toml").read_text(encoding="utf-8"),
     "controllers/v9.toml": _edit(POLES, "cartctl-controller/2", "cartctl-controller/9"),
+    "one.csv": "time_s,voltage_a,voltage_b,speed_a,speed_b\n0,5,5,0,0\n",
     "latin1.csv": "time_s,reference\n0,1\n1,caf\u00e9\n",
     "std.toml": _edit(GROUND, "nk = 2\n", "nk = 2\ntheta_std = ['a', 'b', 'c', 'd']\n"),
     # beside the model it was designed on, so that no warning says the model changed
@@ -70,6 +71,10 @@ CASES = [
     # a newer version of a file: 'is neither a model file nor a controller file'
     ("export v9.toml --mat x.mat", "'cartctl-model/9', a version this cartctl does not read"),
     ("export controllers/v9.toml --mat x.mat", "'cartctl-controller/9', a version this"),
+    # a trace of one row among several: the line did not say which file
+    ("identify trace.csv one.csv", "one.csv has 1"),
+    ("identify trace.csv --validate-on one.csv", "one.csv has 1"),
+    ("validate models/ground.toml one.csv", "one.csv has 1"),
     # a reference file that is not UTF-8: UnicodeDecodeError
     ("run --fast --reference file:latin1.csv", "latin1.csv", "not UTF-8 text (byte 26)"),
     # a measurement noise that overflows: a trace of ±1e308, a traceback in the virtual cart's

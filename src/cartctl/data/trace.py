@@ -96,7 +96,10 @@ class Trace:
     def period_s(self) -> float:
         """The median time step (s); InputError below two ticks."""
         if len(self) < 2:
-            raise InputError(f"a trace needs two ticks or more to have a period; has {len(self)}")
+            which = f"{self.source} has" if self.source else "has"  # which of several files
+            raise InputError(
+                f"a trace needs two ticks or more to have a period; {which} {len(self)}"
+            )
         return float(np.median(np.diff(self.time_s)))
 
     @classmethod
