@@ -189,3 +189,17 @@ def test_the_api_refuses_a_whole_number_beyond_any_float(call: Any, says: str) -
     """A Python int too large for a float raised OverflowError from math.isnan."""
     with pytest.raises(InputError, match=says):
         call()
+
+
+def test_a_cut_recording_is_one_line(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """A recording cut mid-message or to its first bytes: the Rerun SDK's warning (no footer, a
+    legacy format) came as a line of its own before the refusal."""
+    argv = ["run", "--fast", "--rerun", "save", "--duration", "0.3", "--out", str(tmp_path)]
+    assert main([*argv, "--name", "r"]) == 0
+    data = (tmp_path / "r.rrd").read_bytes()
+    for name, cut in (("half.rrd", data[: len(data) // 2]), ("head.rrd", data[:20])):
+        (tmp_path / name).write_bytes(cut)
+        capsys.readouterr()
+        assert main(["review", str(tmp_path / name)]) == 2
+        (line,) = capsys.readouterr().err.splitlines()
+        assert line.startswith("cartctl review: error: ") and name in line, line

@@ -13,6 +13,7 @@ import subprocess
 import tempfile
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -53,13 +54,17 @@ def read_recording(path: Path) -> tuple[RrdReader, StoreEntry]:
         raise MissingFileError(path, "recording")
     if path.stat().st_size == 0:
         raise DataFileError(path, "the file is empty; expected a Rerun recording (.rrd)")
-    try:
-        reader = RrdReader(path)
-        entries = reader.recordings()
-    except (RuntimeError, ValueError, OSError) as exc:
-        raise DataFileError(path, f"not a readable Rerun recording ({exc})") from None
+    with warnings.catch_warnings(record=True) as said:  # the SDK's: shown if the file reads
+        warnings.simplefilter("always")
+        try:
+            reader = RrdReader(path)
+            entries = reader.recordings()
+        except (RuntimeError, ValueError, OSError) as exc:
+            raise DataFileError(path, f"not a readable Rerun recording ({exc})") from None
     if not entries:
         raise DataFileError(path, "holds no recording (a blueprint file?)")
+    for w in said:
+        warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     return reader, entries[0]
 
 
