@@ -179,11 +179,20 @@ def test_a_step_that_never_rises_is_shown(capsys: pytest.CaptureFixture[str]) ->
     assert "rise —, settling —" in capsys.readouterr().out
 
 
+def _square() -> Any:
+    from cartctl.data.trace import Trace
+
+    volts = [6.0 if k // 50 % 2 else -6.0 for k in range(400)]
+    return Trace.from_columns({"time_s": [k * 0.01 for k in range(400)], "voltage_a": volts,
+                               "voltage_b": volts, "speed_a": volts, "speed_b": volts})  # fmt: skip
+
+
 @pytest.mark.parametrize(
     ("call", "says"),
     [(lambda: cartctl.excite(plant="sim", signal="step", amplitude_v=10**400), "amplitude_v"),
      (lambda: cartctl.excite(plant="sim", signal="step", noise_std_rad_s=10**400), "--noise"),
-     (lambda: cartctl.simulate("controllers/pi.toml", noise_std_rad_s=10**400), "--noise")],
+     (lambda: cartctl.simulate("controllers/pi.toml", noise_std_rad_s=10**400), "--noise"),
+     (lambda: cartctl.identify(_square(), prefilter_hz=10**400), "--cutoff-hz")],
 )  # fmt: skip
 def test_the_api_refuses_a_whole_number_beyond_any_float(call: Any, says: str) -> None:
     """A Python int too large for a float raised OverflowError from math.isnan."""

@@ -59,12 +59,16 @@ class Prefilter:
             raise InputError(
                 f"prefilter cut-off (--cutoff-hz) must be a number, got {self.cutoff_hz!r}"
             )
-        if math.isnan(self.cutoff_hz):
+        try:
+            cutoff = float(self.cutoff_hz)
+        except OverflowError:  # a whole number beyond any float
+            cutoff = math.inf
+        if math.isnan(cutoff):
             raise InputError("prefilter cut-off (--cutoff-hz) must be a number, got nan")
-        if not (math.isfinite(self.cutoff_hz) and self.cutoff_hz > 0.0):
+        if not (math.isfinite(cutoff) and cutoff > 0.0):
             raise InputError(
                 "prefilter cut-off (--cutoff-hz) must be a positive, finite frequency in Hz, got "
-                f"{self.cutoff_hz:g}"
+                f"{cutoff:g}"
             )
 
     def _sos(self, period_s: float) -> NDArray[np.float64]:
