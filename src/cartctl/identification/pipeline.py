@@ -59,10 +59,7 @@ class Prefilter:
             raise InputError(
                 f"prefilter cut-off (--cutoff-hz) must be a number, got {self.cutoff_hz!r}"
             )
-        try:
-            cutoff = float(self.cutoff_hz)
-        except OverflowError:  # a whole number beyond any float
-            cutoff = math.inf
+        cutoff = math.inf if abs(self.cutoff_hz) >= 2**1024 else float(self.cutoff_hz)  # 10**400
         if math.isnan(cutoff):
             raise InputError("prefilter cut-off (--cutoff-hz) must be a number, got nan")
         if not (math.isfinite(cutoff) and cutoff > 0.0):
