@@ -183,8 +183,11 @@ def _square() -> Any:
     from cartctl.data.trace import Trace
 
     volts = [6.0 if k // 50 % 2 else -6.0 for k in range(400)]
+    speed = [0.0, 0.0]
+    for k in range(2, 400):  # a first-order motor with nk = 2, and a little noise
+        speed.append(0.8 * speed[-1] + 0.5 * volts[k - 2] + 0.01 * ((k * 7919) % 13 - 6))
     return Trace.from_columns({"time_s": [k * 0.01 for k in range(400)], "voltage_a": volts,
-                               "voltage_b": volts, "speed_a": volts, "speed_b": volts})  # fmt: skip
+                               "voltage_b": volts, "speed_a": speed, "speed_b": speed})  # fmt: skip
 
 
 @pytest.mark.parametrize(
@@ -212,3 +215,12 @@ def test_a_cut_recording_is_one_line(capsys: pytest.CaptureFixture[str], tmp_pat
         assert main(["review", str(tmp_path / name)]) == 2
         (line,) = capsys.readouterr().err.splitlines()
         assert line.startswith("cartctl review: error: ") and name in line, line
+
+
+def test_a_numpy_cut_off_is_taken() -> None:
+    """The overflow guard of the prefilter's cut-off leaves numpy numbers alone (16954d6 raised
+    OverflowError for np.float64(5.0): numpy compared it with 2**1024)."""
+    import numpy as np
+
+    for cutoff in (np.float64(5.0), np.float32(5.0), np.int64(5)):
+        assert set(cartctl.identify(_square(), prefilter_hz=cutoff).motors) == {"a", "b"}

@@ -59,7 +59,8 @@ class Prefilter:
             raise InputError(
                 f"prefilter cut-off (--cutoff-hz) must be a number, got {self.cutoff_hz!r}"
             )
-        cutoff = math.inf if abs(self.cutoff_hz) >= 2**1024 else float(self.cutoff_hz)  # 10**400
+        big = isinstance(self.cutoff_hz, int) and abs(self.cutoff_hz) >= 2**1024  # 10**400
+        cutoff = math.inf if big else float(self.cutoff_hz)
         if math.isnan(cutoff):
             raise InputError("prefilter cut-off (--cutoff-hz) must be a number, got nan")
         if not (math.isfinite(cutoff) and cutoff > 0.0):
