@@ -301,6 +301,31 @@ def test_excite_on_a_full_disk_is_a_fault(
     assert not (tmp_path / "ex.meta.toml").exists()
 
 
+@needs_dev_full
+def test_commission_on_a_full_disk_is_a_fault_naming_the_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A stage's figure on a full disk: exit 1 and the file named (it was exit 2, the code of a
+    user's mistake, and a bare 'No space left on device'), the summary says where it stopped."""
+    out = tmp_path / "c"
+    out.mkdir()
+    (out / "checks.png").symlink_to(FULL)
+    from cartctl.commission import report
+
+    monkeypatch.chdir(ROOT)
+    code = main(["commission", "physics", "--out", str(out), "--jobs", "1"])
+    assert code == 1
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        f"cartctl commission: checks: {out / 'checks.png'} is incomplete: No space left on device"
+    )
+    assert "At stage **checks**" in (out / "summary.md").read_text(encoding="utf-8")
+    assert (out / "checks.csv").is_file() and not (out / "model.toml").exists()
+    (out / "summary.md.tmp").symlink_to(FULL)  # the summary itself on a full disk
+    with pytest.raises(OSError, match="No space left on device"):
+        report.Report(out / "summary.md", "t").add("x", "y")
+    assert not (out / "summary.md.tmp").exists()  # no half-written temporary left
+
+
 class BudgetFile:
     """A raw file that takes ``budget`` bytes (a last write only in part), then fails: ENOSPC."""
 

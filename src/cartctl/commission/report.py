@@ -18,9 +18,10 @@ from numpy.typing import NDArray
 
 from cartctl.commission import checks, tuning
 from cartctl.data.trace import Trace
+from cartctl.errors import OutputError
 from cartctl.measures.numfmt import format_fixed, markdown_table
 from cartctl.sinks.rerun_layout import ENTITY_PATHS, blueprint
-from cartctl.sinks.rerun_problems import file_failure
+from cartctl.sinks.rerun_problems import cut_to_whole_messages, file_failure
 from cartctl.sinks.rerun_sink import APPLICATION_ID
 from cartctl.tune.batch import later_command
 
@@ -48,8 +49,12 @@ class Report:
         self.sections[heading] = body
         parts = [f"# {self.title}", *(f"## {h}\n\n{b.strip()}" for h, b in self.sections.items())]
         tmp = self.path.with_suffix(".md.tmp")
-        tmp.write_text("\n\n".join(parts) + "\n", encoding="utf-8")
-        tmp.replace(self.path)
+        try:
+            tmp.write_text("\n\n".join(parts) + "\n", encoding="utf-8")
+            tmp.replace(self.path)
+        except OSError:  # a full disk: no half-written temporary left behind
+            tmp.unlink(missing_ok=True)
+            raise
 
 
 def plot_lines(path: Path, title: str, panels: Sequence[tuple[str, Mapping[str, Line]]]) -> None:
@@ -67,7 +72,10 @@ def plot_lines(path: Path, title: str, panels: Sequence[tuple[str, Mapping[str, 
     axes[-1, 0].set_xlabel("time (s)")
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    try:
+        fig.savefig(path, dpi=100)
+    except OSError as exc:  # a full disk: a fault naming the figure
+        raise OutputError(path, exc.strerror or str(exc)) from None
 
 
 def _table(rows: Sequence[Sequence[tuple[str, str]]]) -> str:
@@ -290,5 +298,7 @@ def record_stage(path: Path, series: Series, note: str, stage: str, *,
         rec.flush(timeout_sec=5.0)
         rec.disconnect()
     except Exception as exc:  # the SDK's failures: commissioning goes on, the summary says so
-        return f"{path}: {file_failure(exc, path) or exc}"  # the SDK's own log lines are off
+        if (why := file_failure(exc, path)) is not None:  # the recording so far must read
+            cut_to_whole_messages(path)
+        return f"{path}: {why or exc}"  # the SDK's own log lines are off
     return None

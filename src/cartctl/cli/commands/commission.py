@@ -4,6 +4,7 @@ stages of :mod:`cartctl.commission`); exit 0 verified, 1 a stage failed, 2 bad i
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 from datetime import datetime
 from pathlib import Path
@@ -108,9 +109,12 @@ def run(args: argparse.Namespace) -> int:
     except CartctlError as exc:  # the port or the cart in the checks (the user's to fix: its
         # own code; a cart that does not answer: 1), or a refusal further on (a stage that failed: 1)
         code, failure = (exc.exit_code if job.current == "checks" else 1), f"{job.current}: {exc}"
+    except OSError as exc:  # a stage's file not written (a full disk): a fault, as in run
+        code, failure = 1, f"{job.current}: {exc.strerror or exc}: {exc.filename or out}"
     if failure is not None:
-        job.report.add("stopped", f"At stage **{job.current}**: {failure}. The files written so "
-                       "far are kept.")  # fmt: skip
+        with contextlib.suppress(OSError):  # on a full disk the summary cannot be written either
+            job.report.add("stopped", f"At stage **{job.current}**: {failure}. The files written "
+                           "so far are kept.")  # fmt: skip
     if args.json:
         stages = ("checks", "excitation", "model", "controller", "verification")
         print(dumps({"out": str(job.out), "plant": job.description,
@@ -132,7 +136,6 @@ def run(args: argparse.Namespace) -> int:
 def run_in_process(argv: list[str]) -> tuple[int, dict[str, Any] | None]:
     """``cartctl run ARGV`` in this process: its exit code and its ``--json`` summary (None when
     it printed none). Commissioning verifies its controller on the path users take."""
-    import contextlib
     import io
     import json
 
