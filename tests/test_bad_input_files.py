@@ -18,6 +18,7 @@ from cartctl.errors import InputError
 ROOT = Path(__file__).resolve().parents[1]
 GROUND = (ROOT / "models" / "ground.toml").read_text(encoding="utf-8")
 POLES = (ROOT / "controllers" / "poles.toml").read_text(encoding="utf-8")
+PI = (ROOT / "controllers" / "pi.toml").read_text(encoding="utf-8")
 
 
 def _edit(text: str, old: str, new: str) -> str:
@@ -31,7 +32,10 @@ FILES = {  # name: content, each a file a user could have edited by hand
     "trace.csv": "time_s,voltage_a,voltage_b,speed_a,speed_b\n0,0,0,0,0\n0.01,5,5,0,0\n",
     "zero.toml": _edit(GROUND, "0.6466, -0.07751", "0.0, 0.0"),
     "v9.toml": _edit(GROUND, "cartctl-model/2", "cartctl-model/9"),
-    "controllers/pi.toml": (ROOT / "controllers" / "pi.toml").read_text(encoding="utf-8"),
+    "controllers/pi.toml": PI,
+    "controllers/kp.toml": _edit(PI, "kp = 0.17191709625355944", "kp = 'fast'"),
+    "controllers/K.toml": _edit(POLES, "K = [\n    0.10498612817563781,", "K = [\n    'x',"),
+    "controllers/A.toml": _edit(POLES, "        0.7947558602793067,\n", ""),
     "controllers/v9.toml": _edit(POLES, "cartctl-controller/2", "cartctl-controller/9"),
     "one.csv": "time_s,voltage_a,voltage_b,speed_a,speed_b\n0,5,5,0,0\n",
     "latin1.csv": "time_s,reference\n0,1\n1,caf\u00e9\n",
@@ -68,6 +72,10 @@ CASES = [
      "the reference asks for motor a 1e+308 rad/s"),
     ("monitor virtual --onboard controllers/pi.toml --reference const:1e39 --duration 0.1",
      "the reference asks for motor a 1e+39 rad/s"),
+    # a gain or estimator matrix that is not numbers: numpy's words without the key
+    ("run --fast --controller controllers/kp.toml", "kp.toml: [motors.a]: kp and ki must be numbers"),
+    ("export controllers/K.toml --mat x.mat", "K (a list), Ki and Kr must be numbers"),
+    ("export controllers/A.toml --arduino", "estimator.A must be numbers in rows of one length"),
     # a newer version of a file: 'is neither a model file nor a controller file'
     ("export v9.toml --mat x.mat", "'cartctl-model/9', a version this cartctl does not read"),
     ("export controllers/v9.toml --mat x.mat", "'cartctl-controller/9', a version this"),

@@ -152,7 +152,7 @@ def test_wrong_files_and_options_are_one_line(
     ("shipped", "line", "replacement", "expected"),
     [
         ("poles.toml", "Ki = ", None, "misses Ki"),
-        ("pi.toml", "ki = ", 'ki = "x"', "could not convert string to float"),
+        ("pi.toml", "ki = ", 'ki = "x"', "kp and ki must be numbers"),
         ("pi.toml", "anti_windup = ", 'anti_windup = "sometimes"', "anti-windup"),
     ],
 )

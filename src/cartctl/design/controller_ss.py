@@ -48,7 +48,10 @@ def kalman_from_entry(entry: Mapping[str, Any]) -> KalmanDesign:
                 continue
             raise KeyError(f"estimator.{f.name}")
         value = entry[f.name]
-        values[f.name] = np.asarray(value, dtype=float) if f.name in _KALMAN_ARRAYS else value
+        try:
+            values[f.name] = np.asarray(value, dtype=float) if f.name in _KALMAN_ARRAYS else value
+        except (TypeError, ValueError):  # numpy's words: 'an inhomogeneous shape', 'convert'
+            raise ValueError(f"estimator.{f.name} must be numbers in rows of one length") from None
     # shapes that fit together, finite numbers, covariances, and an error that decays
     A = values["A"]
     m = A.shape[0] if A.ndim == 2 else -1
@@ -103,8 +106,15 @@ def feedback_gains(entry: Mapping[str, Any], period_s: float) -> _Gains:
     """A pole-placement entry's K, Ki, Kr and estimator; KeyError, TypeError or ValueError for a
     missing gain or one that is not a number."""
     kalman = kalman_from_entry(entry["estimator"])
-    k = np.asarray(entry["K"], dtype=float).ravel()
-    return _Gains(k, float(entry["Ki"]), float(entry["Kr"]), float(period_s), kalman)
+    try:
+        k, ki, kr = (
+            np.asarray(entry["K"], dtype=float).ravel(),
+            float(entry["Ki"]),
+            float(entry["Kr"]),
+        )
+    except (TypeError, ValueError):
+        raise ValueError("K (a list), Ki and Kr must be numbers") from None
+    return _Gains(k, ki, kr, float(period_s), kalman)
 
 
 @dataclass(frozen=True, eq=False)

@@ -340,9 +340,13 @@ def build_controller(
     ValueError for a key missing or not fitting."""
     if method == "pi":
         est = entry.get("estimator")
+        try:
+            kp, ki = float(entry["kp"]), float(entry["ki"])
+        except (TypeError, ValueError):
+            raise ValueError("kp and ki must be numbers") from None
         return PiController(
-            float(entry["kp"]),
-            float(entry["ki"]),
+            kp,
+            ki,
             period_s,
             voltage_limit_v=voltage_limit_v,
             anti_windup=str(entry.get("anti_windup", "conditional")),
