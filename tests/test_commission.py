@@ -270,6 +270,7 @@ def test_ctrl_c_in_the_excitation_keeps_the_files_and_zero_volts(tmp_path, capsy
     assert len(rows) == 1 + 100  # the header and the 100 ticks measured before Ctrl-C
     summary = (out / "summary.md").read_text(encoding="utf-8")
     assert "## checks" in summary and "## stopped" in summary
+    assert "At stage **excitation**: interrupted; zero volts sent." in summary  # the stage once
     assert "**Stopped** after 100 ticks: interrupted; excitation.csv holds them." in summary
     assert "Error" not in summary  # no class name in the user's report
     assert not (out / "model.toml").exists()

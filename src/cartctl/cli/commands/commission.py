@@ -113,7 +113,8 @@ def run(args: argparse.Namespace) -> int:
         code, failure = 1, f"{job.current}: {exc.strerror or exc}: {exc.filename or out}"
     if failure is not None:
         with contextlib.suppress(OSError):  # on a full disk the summary cannot be written either
-            job.report.add("stopped", f"At stage **{job.current}**: {failure}. The files written "
+            why = failure.removeprefix(f"{job.current}: ")  # the stage once, in the heading
+            job.report.add("stopped", f"At stage **{job.current}**: {why}. The files written "
                            "so far are kept.")  # fmt: skip
     if args.json:
         stages = ("checks", "excitation", "model", "controller", "verification")
