@@ -76,6 +76,9 @@ CASES = [
     ("run --fast --controller controllers/kp.toml", "kp.toml: [motors.a]: kp and ki must be numbers"),
     ("export controllers/K.toml --mat x.mat", "K (a list), Ki and Kr must be numbers"),
     ("export controllers/A.toml --arduino", "estimator.A must be numbers in rows of one length"),
+    # a character device that is no terminal: 'cannot open ... Inappropriate ioctl', exit 1
+    ("run --plant serial:/dev/null --rerun off", "serial port /dev/null is not a serial device"),
+    ("monitor serial:/dev/null --duration 0.1", "serial port /dev/null is not a serial device"),
     # a newer version of a file: 'is neither a model file nor a controller file'
     ("export v9.toml --mat x.mat", "'cartctl-model/9', a version this cartctl does not read"),
     ("export controllers/v9.toml --mat x.mat", "'cartctl-controller/9', a version this"),

@@ -110,6 +110,9 @@ class CartLink:
                     f"serial port {self.port} is in use by another program (a "
                     "cartctl monitor or run still open?)"
                 ) from None
+            if getattr(exc.__context__, "args", ())[:1] == (errno.ENOTTY,):  # termios: /dev/null
+                why = "is not a serial device (no terminal)"
+                raise InputError(f"serial port {self.port} {why}; {_ports_hint()}") from None
             reason = getattr(exc, "strerror", None) or str(exc)
             raise PlantError(
                 f"cannot open serial port {self.port}: {reason}; {_ports_hint()}"
