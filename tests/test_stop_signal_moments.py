@@ -443,3 +443,48 @@ def test_a_forked_worker_does_not_take_the_parents_signal_order(stop_handlers) -
     _, status = os.waitpid(pid, 0)
     assert os.waitstatus_to_exitcode(status) == signal.SIGINT
     assert stopping.came_first(signal.SIGINT) == signal.SIGTERM  # the parent's, still there
+
+
+class _ClosingTerminal:
+    """stdout and stderr on a terminal that closes at its first write: SIGHUP to this process,
+    then every write fails (EIO), as on a real hang-up."""
+
+    def __init__(self) -> None:
+        self.closed = False
+
+    def isatty(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        if not self.closed:
+            self.closed = True
+            os.kill(os.getpid(), signal.SIGHUP)
+        raise OSError(5, "Input/output error")
+
+    def flush(self) -> None:
+        if self.closed:
+            raise OSError(5, "Input/output error")
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["excite", "--amplitude", "3", "--cycles", "1", "--out", "{tmp}/ex.csv"],  # progress bar
+        ["run", "--fast", "--rerun", "off", "--duration", "1", "--out", "{tmp}", "--name", "ex"],
+    ],
+    ids=["excite", "run"],
+)
+def test_a_terminal_that_closes_keeps_the_trace_and_exits_129(
+    argv: list[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Found closing the terminal of ``excite`` over serial: the progress bar's last write
+    failed (EIO) after the experiment and the trace was never written; ``run`` exited 1 (its
+    summary's print failed, then the error line's), not SIGHUP's 129."""
+    terminal = _ClosingTerminal()
+    monkeypatch.setattr("sys.stdout", terminal)
+    monkeypatch.setattr("sys.stderr", terminal)
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])
+    code = main([a.format(tmp=tmp_path) for a in argv])
+    assert code == 129
+    assert len(read_trace(tmp_path / "ex.csv")) > 0
+    assert meta_path(tmp_path / "ex.csv").exists()

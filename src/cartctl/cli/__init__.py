@@ -20,6 +20,7 @@ if _started_as_cartctl():  # before any other import: a stop signal from here on
     stopping.install_at_start()
 
 import argparse  # noqa: E402 - the stop handlers come first
+import contextlib  # noqa: E402
 import warnings  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
 from typing import NoReturn  # noqa: E402
@@ -125,8 +126,9 @@ def _main(argv: Sequence[str] | None) -> int:
         return 0
     except OSError as exc:  # a file we could not write or read for a reason the user can fix
         reason = f"{exc.strerror or exc}: {exc.filename or ''}".rstrip(": ")
-        print(f"cartctl {args.command}: error: {reason}", file=sys.stderr)
-        return 2
+        with contextlib.suppress(OSError):  # stderr gone with a closed terminal (EIO)
+            print(f"cartctl {args.command}: error: {reason}", file=sys.stderr)
+        return stopping.exit_code(2)  # SIGHUP's code when the terminal closed
     except (KeyboardInterrupt, Exception) as exc:
         # Ctrl-C or a stop signal; after a stop signal, also a library's error of its own (pyarrow's
         # compiled code: a TypeError), or an ImportError: the command's heavy imports come first

@@ -30,14 +30,20 @@ class ProgressBar:
         frac = min(1.0, done / self.total)
         width = 30
         filled = round(width * frac)
-        self.stream.write(
+        self._draw(
             f"\r{self.label} [{'#' * filled}{'-' * (width - filled)}] {100 * frac:3.0f} %  {done}/{self.total}"
         )
-        self.stream.flush()
         self._drawn = True
 
     def close(self) -> None:
         """End the bar's line."""
         if self.enabled and self._drawn:
-            self.stream.write("\n")
+            self._draw("\n")
+
+    def _draw(self, text: str) -> None:
+        """Write ``text``; a terminal gone (closed: EIO) ends the bar, never what it shows."""
+        try:
+            self.stream.write(text)
             self.stream.flush()
+        except OSError:
+            self.enabled = False
