@@ -488,3 +488,28 @@ def test_a_terminal_that_closes_keeps_the_trace_and_exits_129(
     assert code == 129
     assert len(read_trace(tmp_path / "ex.csv")) > 0
     assert meta_path(tmp_path / "ex.csv").exists()
+
+
+@pytest.mark.realtime  # the virtual cart behind a pseudo-terminal
+def test_monitor_stopped_by_a_closing_terminal_exits_129(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The terminal closes at the monitor's fifth frame: it stops after that frame (its own
+    handler took the SIGHUP) and its summary's print fails; it exited 2, a user's mistake."""
+    from cartctl.link.cart_monitor import Monitor
+
+    terminal, record = _ClosingTerminal(), Monitor._record
+
+    def closing(self: Monitor, *args: Any) -> None:
+        record(self, *args)
+        if self.result.frames == 5:
+            monkeypatch.setattr("sys.stdout", terminal)
+            monkeypatch.setattr("sys.stderr", terminal)
+            terminal.closed = True  # the hang-up: every write from now on fails, and SIGHUP
+            os.kill(os.getpid(), signal.SIGHUP)
+
+    monkeypatch.setattr(Monitor, "_record", closing)
+    code = main(["monitor", "virtual", "--duration", "30", "--out", str(tmp_path), "--name", "m",
+                 "--rerun", "off"])  # fmt: skip
+    assert code == 129
+    assert len(read_trace(tmp_path / "m.csv")) >= 5

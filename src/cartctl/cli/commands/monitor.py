@@ -204,9 +204,14 @@ def _monitor(args: argparse.Namespace, after: contextlib.ExitStack) -> int:
         "trace": str(csv_path),
         "recording": str(rrd_path) if rerun is not None else None,
     }
-    print(dumps(summary) if args.json else _format(summary))
+    try:
+        print(dumps(summary) if args.json else _format(summary))
+        if result.failure:
+            print(f"cartctl monitor: error: {result.failure}", file=sys.stderr)
+    except OSError:  # stdout and stderr gone with a closed terminal (EIO): the files are whole,
+        if not received:  # and the code below says which signal stopped it
+            raise
     if result.failure:
-        print(f"cartctl monitor: error: {result.failure}", file=sys.stderr)
         return 1
     signum = received[0] if received else stopping.received()  # while it ran, or after it
     if signum is not None and signum != signal.SIGINT:  # Ctrl-C is the normal way to stop it
