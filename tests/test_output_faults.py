@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 
 from cartctl.cli import main
 from cartctl.data.outputs import check_output_folder
+from cartctl.data.read import read_trace
 from cartctl.errors import InputError, OutputError
 from cartctl.model import ArxModel
 from cartctl.plants.sim import ArxPlant
@@ -458,3 +459,28 @@ def test_the_sdk_logs_are_off_unless_the_user_asked(monkeypatch: pytest.MonkeyPa
     rerun_problems.quiet_sdk_logs()
     assert os.environ["RUST_LOG"] == "debug"
     assert rerun_problems.viewer_env()["RUST_LOG"] == "debug"
+
+
+def test_excite_keeps_the_ticks_before_a_fault_of_its_own(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An error of cartctl itself in the 51st step (not a PlantError): zero volts, and the 51
+    rows recorded are written, as for a plant's fault; it was a traceback and no trace at all."""
+    step = ArxPlant.step
+    calls = {"n": 0}
+
+    def failing(self: ArxPlant, *args: float) -> object:
+        calls["n"] += 1
+        if calls["n"] == 51:
+            raise RuntimeError("a bug")
+        return step(self, *args)
+
+    monkeypatch.setattr(ArxPlant, "step", failing)
+    monkeypatch.chdir(ROOT)
+    code = main(["excite", "--amplitude", "3", "--cycles", "1", "--out", str(tmp_path / "ex.csv")])
+    assert code == 1
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        "cartctl excite: error: internal error: RuntimeError: a bug; the trace holds the ticks "
+        "recorded so far"
+    )
+    assert len(read_trace(tmp_path / "ex.csv")) == 51

@@ -290,9 +290,9 @@ def run_experiment(
 ) -> ExperimentResult:
     """Apply the voltage sequences (V per tick) and record them with the measured speeds (rows as
     :mod:`cartctl.plants.base` numbers them). The plant is reset first and closed on every path
-    (a stop signal meanwhile is only noted: :func:`cartctl.stopping.received`); Ctrl-C or a
-    PlantError after the first tick ends the run with the ticks so far. ``on_tick`` gets the
-    number of ticks done."""
+    (a stop signal meanwhile is only noted: :func:`cartctl.stopping.received`); Ctrl-C, a
+    PlantError or an error of cartctl's own after the first tick ends the run with the ticks so
+    far. ``on_tick`` gets the number of ticks done."""
     ua = np.asarray(voltage_a_v, dtype=float)
     ub = np.asarray(voltage_b_v, dtype=float)
     if ua.ndim != 1 or ua.shape != ub.shape:
@@ -312,10 +312,11 @@ def run_experiment(
                 on_tick(k + 1)
     except KeyboardInterrupt:
         interrupted = True
-    except PlantError as exc:
+    except Exception as exc:  # a plant's fault, or cartctl's own: the ticks so far are kept
         if not rows:  # nothing recorded: the plant never worked; say so as such
             raise
-        failure = str(exc)
+        internal = not isinstance(exc, PlantError)
+        failure = f"internal error: {type(exc).__name__}: {exc}" if internal else str(exc)
     finally:
         with deferred():  # zero volts and the port closed whole; the caller sees the signal
             plant.close()
