@@ -132,7 +132,9 @@ def test_hopeless_uncertainty_and_bad_counts_are_one_line_errors() -> None:
         sample_plants(_with_std([50.0, 50.0, 0.0, 0.0]), 20, seed=1)
     with pytest.raises(InputError, match="--plants"):
         sample_plants(load_models(GROUND), 0, seed=1)
-    unstable = ModelFile({m: ArxModel((-1.5, 0.5), (1.0,), 1) for m in ("a", "b")},
-                         Provenance("test", "2024-01-01"))  # fmt: skip
-    with pytest.raises(InputError, match="unstable"):
-        sample_plants(unstable, 5, seed=1)
+    # (z − 1)(z − 0.5): an integrator, marginally stable; (z − 2)(z − 0.5): unstable
+    for ar, word in (((-1.5, 0.5), "marginally stable"), ((-2.5, 1.0), "is unstable")):
+        model = ModelFile({m: ArxModel(ar, (1.0,), 1) for m in ("a", "b")},
+                          Provenance("test", "2024-01-01"))  # fmt: skip
+        with pytest.raises(InputError, match=word):
+            sample_plants(model, 5, seed=1)
