@@ -160,6 +160,21 @@ def test_runs_do_not_overwrite_each_other(
     assert len(traces) == 2
 
 
+def test_a_run_without_recording_removes_an_earlier_recording_of_its_name(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    """``--rerun off`` over an earlier run of the same --name left that run's X.rrd beside the
+    new X.csv: ``review X.rrd`` showed the old run as this one's."""
+    code, _, err = _run(capsys, "--fast", "--duration", "0.5", "--rerun", "save", "--name", "x")
+    assert code == 0, err
+    assert (workdir / "logs" / "x.rrd").is_file()
+    code, summary, err = _run(capsys, "--fast", "--duration", "0.3", "--rerun", "off", "--json",
+                              "--name", "x")  # fmt: skip
+    assert code == 0, err
+    assert summary["recording"] is None
+    assert not (workdir / "logs" / "x.rrd").exists()
+
+
 def test_trace_has_one_row_per_tick_with_true_speed(
     capsys: pytest.CaptureFixture[str], workdir: Path
 ) -> None:

@@ -178,6 +178,8 @@ def _monitor(args: argparse.Namespace, after: contextlib.ExitStack) -> int:
         monitor.rows.append(CsvSink(csv_path))
         with contextlib.suppress(OSError):  # a run's of this name would describe its trace here
             meta_path(csv_path).unlink(missing_ok=True)
+            if rerun is None:  # and its recording would pass for this one
+                rrd_path.unlink(missing_ok=True)
         if rerun is not None:
             monitor.rows.append(rerun)
             monitor.texts.append(rerun)

@@ -151,6 +151,8 @@ def _sinks(
                          command=options.command_line("run"),
                          controller=prepared.controller_file.path or find_file(given),
                          model=find_file(prepared.controller_file.model_path))  # fmt: skip
+        if args.rerun == "off":  # an earlier run's of this name would pass for this one's
+            rrd_path.unlink(missing_ok=True)
     except OSError as exc:  # a full disk: nothing driven yet
         raise OutputError(exc.filename or csv_path, exc.strerror or str(exc)) from None
     memory = MemorySink()
