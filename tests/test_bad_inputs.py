@@ -307,7 +307,7 @@ CASES = [
     _case("commission virtual --connect-timeout nan", "--connect-timeout"),
     # a plant option the plant does not use: it was silently ignored
     _case("commission physics --connect-timeout 3",
-          "--connect-timeout is for the virtual and serial plants", "--plant physics does not use it"),
+          "--connect-timeout is for the virtual and serial plants", "PLANT physics does not use it"),
     _case("commission serial:/dev/ttyACM0 --preset air", "--preset is for the physics and virtual"),
     _case("commission serial:/dev/ttyACM0 --noise 0.2", "--noise is for the sim, physics and"),
 ]

@@ -71,9 +71,12 @@ def _check_simulated(
         raise InputError(f"{what} runs on 'sim' or 'physics[:actuation_ms=X]', not '{plant}'")
     if seed is not None and not (is_whole(seed) and seed >= 0):  # as --seed (else numpy's error)
         raise InputError(f"a seed is a whole number >= 0, got {seed!r}")
-    given = [
-        o for o, on in (("--model", model is not None), ("--preset", preset != "ground")) if on
-    ]
+    options = {
+        "--model": model is not None,
+        "--preset": preset != "ground",
+        "--seed": seed is not None,
+    }
+    given = [o for o, on in options.items() if on]
     # the command line's lines: --noise in range, no plant option its plant does not use
     check_plant_options(plant, noise_std_rad_s=noise, given=given)
 

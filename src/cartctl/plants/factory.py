@@ -34,12 +34,12 @@ def plant_kind(spec: str) -> str:
     return kind if kind in ("physics", "virtual", "serial") else spec
 
 
-def check_option_used(option: str, spec: str) -> None:
-    """InputError if the plant ``spec`` names does not use the plant option ``option``."""
+def check_option_used(option: str, spec: str, named: str = "--plant") -> None:
+    """InputError if the plant ``spec`` (given as ``named``) does not use ``option``."""
     *others, last = PLANTS_USING[option]
     if plant_kind(spec) not in (*others, last):
         uses = f"{', '.join(others)} and {last} plants" if others else f"{last} plant"
-        raise InputError(f"{option} is for the {uses}; --plant {spec} does not use it")
+        raise InputError(f"{option} is for the {uses}; {named} {spec} does not use it")
 
 
 def check_plant_options(
@@ -48,10 +48,12 @@ def check_plant_options(
     noise_std_rad_s: float = 0.0,
     connect_timeout_s: float = 1.0,
     given: Iterable[str] = (),
+    named: str = "--plant",
 ) -> None:
     """The plant options' refusals, in the command line's words, before a plant is made: the
     noise (rad/s) and the connect timeout (s) in range, and no option in ``given`` (its name on
-    the command line) that the plant ``spec`` names does not use."""
+    the command line) that the plant ``spec`` (given as ``named``) does not use: ``--seed``
+    without noise on a simulated plant (it seeds nothing else there)."""
     noise = check_finite(noise_std_rad_s, "--noise")
     if not 0.0 <= noise <= MAX_NOISE_RAD_S:
         raise InputError(
@@ -62,7 +64,12 @@ def check_plant_options(
     if timeout <= 0.0:
         raise InputError(f"--connect-timeout must be a positive number of seconds, got {timeout:g}")
     for option in sorted(given):  # after the ranges: those say more
-        check_option_used(option, spec)
+        check_option_used(option, spec, named)
+    if "--seed" in given and noise == 0.0 and plant_kind(spec) in SIMULATED:
+        raise InputError(
+            f"--seed seeds the measurement noise, which is off; {named} {spec} uses it for "
+            "nothing else: give --noise RAD_S too, or no --seed"
+        )
 
 
 def physics_options(text: str) -> dict[str, Any]:

@@ -70,7 +70,7 @@ def _check(args: argparse.Namespace) -> Path:
     if plant_kind(args.plant) not in COMMISSIONED:
         raise InputError(f"PLANT must be physics[:OPTIONS], virtual[:OPTIONS] or serial:PORT, "
                          f"got '{args.plant}' (sim is a model already)")  # fmt: skip
-    options.check_plant_options(args)
+    options.check_plant_options(args, "PLANT")
     options.check_jobs(args.jobs)
     default = datetime.now().strftime("logs/commission-%Y%m%d-%H%M%S")
     out = options.check_output_folder(args.out or default, "--out")

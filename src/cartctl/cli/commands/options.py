@@ -235,10 +235,12 @@ def check_input_file(path: str | Path, what: str, option: str | None = None) -> 
     return found
 
 
-def check_plant_options(args: argparse.Namespace) -> None:
-    """:func:`cartctl.plants.factory.check_plant_options` on the options the command has."""
+def check_plant_options(args: argparse.Namespace, named: str = "--plant") -> None:
+    """:func:`cartctl.plants.factory.check_plant_options` on the options the command has;
+    ``named``: how the plant was given (``PLANT``: a positional)."""
     from cartctl.plants.factory import check_plant_options as check
 
     noise, timeout = getattr(args, "noise", 0.0), getattr(args, "connect_timeout", 1.0)
     given = getattr(args, "given", ())  # (virtual-cart has no --plant, so nothing given here)
-    check(getattr(args, "plant", ""), noise_std_rad_s=noise, connect_timeout_s=timeout, given=given)
+    plant = getattr(args, "plant", "")
+    check(plant, noise_std_rad_s=noise, connect_timeout_s=timeout, given=given, named=named)

@@ -1,0 +1,66 @@
+"""Options that change nothing, and option texts that parse loosely: each is one line, exit 2.
+
+Found by the bug hunt of issue 25: ``--seed`` without noise on a simulated plant (the same run
+for every seed), and the refusal of a plant option on ``commission`` naming ``--plant``, an
+option commission does not have (its plant is the positional PLANT).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+import cartctl
+from cartctl.cli import main
+from cartctl.errors import CartctlError
+
+
+def _line(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
+    """The one error line of a refused command line (exit 2, nothing on stdout)."""
+    try:
+        code = main(list(argv))
+    except SystemExit as exc:  # argparse's own refusals
+        code = int(exc.code or 0)
+    out, err = capsys.readouterr()
+    assert (code, out, len(err.splitlines())) == (2, "", 1), err
+    return err.strip()
+
+
+SEED_OFF = "--seed seeds the measurement noise, which is off; {} uses it for nothing else"
+
+
+@pytest.mark.parametrize(
+    ("argv", "plant"),
+    [
+        (("run", "--plant", "physics", "--seed", "3", "--fast"), "--plant physics"),
+        (("run", "--seed", "0", "--noise", "0", "--fast"), "--plant sim"),
+        (("excite", "--plant", "physics:actuation_ms=4", "--seed", "3", "--amplitude", "5",
+          "--out", "x.csv"), "--plant physics:actuation_ms=4"),
+        (("commission", "physics", "--seed", "3"), "PLANT physics"),
+    ],
+)  # fmt: skip
+def test_a_seed_without_noise_on_a_simulated_plant_is_refused(
+    capsys: pytest.CaptureFixture[str], workdir: Path, argv: tuple[str, ...], plant: str
+) -> None:
+    # the run was the same for every seed: physics and sim use the seed for the noise alone
+    assert SEED_OFF.format(plant) in _line(capsys, *argv)
+    assert not (workdir / "x.csv").exists() and not (workdir / "logs").exists()
+
+
+def test_a_seed_without_noise_is_refused_by_the_api_too(workdir: Path) -> None:
+    for call in (cartctl.excite, lambda **kw: cartctl.simulate("controllers/pi.toml", **kw)):
+        with pytest.raises(CartctlError, match=SEED_OFF.format("--plant physics")):
+            call(plant="physics", seed=3)
+    result = cartctl.simulate("controllers/pi.toml", plant="physics", seed=3,
+                              noise_std_rad_s=0.2, duration_s=0.2)  # fmt: skip
+    assert result.failure is None and result.columns["time_s"].size > 0
+
+
+def test_commission_names_its_plant_as_the_user_gave_it(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    # the line said "--plant physics does not use it": commission has no --plant
+    line = _line(capsys, "commission", "physics", "--connect-timeout", "3")
+    assert line.endswith("--connect-timeout is for the virtual and serial plants; "
+                         "PLANT physics does not use it")  # fmt: skip
