@@ -168,3 +168,19 @@ def test_convert_out_over_a_traces_name_leaves_no_stale_meta_file(
     code, _, err = _cli(capsys, "convert", str(out), "--out", str(tmp_path / "." / "run.csv"))
     assert code == 0, err
     assert (tmp_path / "run.meta.toml").is_file()
+
+
+def test_convert_out_to_a_new_name_carries_the_traces_meta_file(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A cartctl trace converted to a new name lost its meta file: identify on the copy did not
+    know the loop delay it was recorded with (its model file had no loop_delay_ticks)."""
+    trace, copy = tmp_path / "e.csv", tmp_path / "copy.csv"
+    code, _, err = _cli(capsys, "excite", "--amplitude", "6", "--cycles", "1", "--out", str(trace))
+    assert code == 0, err
+    code, _, err = _cli(capsys, "convert", str(trace), "--out", str(copy))
+    assert code == 0, err
+    assert (tmp_path / "copy.meta.toml").read_text() == (tmp_path / "e.meta.toml").read_text()
+    code, out, err = _cli(capsys, "identify", str(copy), "--json")
+    assert code == 0, err
+    assert json.loads(out)["loop_delay_ticks"] == 1

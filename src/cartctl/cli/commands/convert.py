@@ -4,6 +4,7 @@ QRoboticsCenter log, and write it as the trace CSV every other command reads."""
 from __future__ import annotations
 
 import argparse
+import shutil
 from typing import TYPE_CHECKING, Any
 
 import cartctl.cli.commands.options as options
@@ -54,9 +55,12 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         write_trace(trace, args.out)  # integer channels as integers
         info["written"] = args.out
-        stale = meta_path(args.out)  # an earlier trace's of that name (this one's: onto itself)
-        if stale.resolve() != meta_path(args.file).resolve():
-            stale.unlink(missing_ok=True)
+        own, beside = meta_path(args.file), meta_path(args.out)  # the loop it was recorded in
+        if beside.resolve() != own.resolve():  # converted onto itself: its own is kept
+            if own.is_file():  # carried over, replacing an earlier trace's of that name
+                shutil.copyfile(own, beside)
+            else:
+                beside.unlink(missing_ok=True)  # an earlier trace's of that name
     if args.json:
         print(dumps(info))
         return 0
