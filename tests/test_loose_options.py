@@ -64,3 +64,45 @@ def test_commission_names_its_plant_as_the_user_gave_it(
     line = _line(capsys, "commission", "physics", "--connect-timeout", "3")
     assert line.endswith("--connect-timeout is for the virtual and serial plants; "
                          "PLANT physics does not use it")  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [  # the last one won, silently
+        (("run", "--plant", "physics:actuation_ms=3,actuation_ms=4", "--fast"),
+         "physics option actuation_ms is given twice; give it once"),
+        (("run", "--plant", "physics:reverse_b=1,reverse_b=0", "--fast"),
+         "physics option reverse_b is given twice"),
+        (("commission", "physics:actuation_ms=3,actuation_ms=4"),
+         "physics option actuation_ms is given twice"),
+        (("virtual-cart", "--faults", "garbage=0.1,garbage=0.2", "--duration", "0.1"),
+         "virtual cart option 'garbage' is given twice; give it once"),
+        (("run", "--plant", "virtual:late=0.1,late=0.3"), "virtual cart option 'late' is given"),
+        (("identify", "models/ground.toml", "--orders", "na=1:3,na=2"),
+         "--orders: na is given twice; give each of na, nb, nk once"),
+    ],
+)  # fmt: skip
+def test_a_key_given_twice_in_one_option_is_refused(
+    capsys: pytest.CaptureFixture[str], workdir: Path, argv: tuple[str, ...], says: str
+) -> None:
+    assert says in _line(capsys, *argv)
+
+
+QRC6 = Path(__file__).parent / "data" / "qrc6_sample.csv"
+
+
+def test_one_channel_mapped_to_two_quantities_is_refused(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    # speed_a was a copy of the voltage: a map's typo, taken silently
+    line = _line(capsys, "convert", str(QRC6), "--map", "voltage_a=voltA,speed_a=voltA")
+    assert line.endswith("the mapping gives 'voltA' to both voltage_a and speed_a; "
+                         "map each to its own channel")  # fmt: skip
+    with pytest.raises(CartctlError, match="gives 'speedA' to both speed_a and raw"):
+        cartctl.load_trace(QRC6, map={"voltage_a": "voltA", "speed_a": "speedA", "raw": "speedA"})
+    # one reference channel for both motors is one quantity: it stays allowed
+    both = "voltage_a=voltA,speed_a=speedA,reference_a=FloatIn10,reference_b=FloatIn10"
+    assert main(["convert", str(QRC6), "--map", both, "--out", "both.csv"]) == 0
+    capsys.readouterr()
+    trace = cartctl.load_trace("both.csv")
+    assert trace.columns()["reference_b"].tolist() == trace.columns()["reference_a"].tolist()

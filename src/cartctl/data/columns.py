@@ -132,6 +132,12 @@ def check_mapping(mapping: Mapping[str, str]) -> dict[str, str]:
         if not isinstance(label, str) or not label.strip():
             raise InputError(f"the mapping gives {name} no label ({label!r}); expected {_MAP_FORM}")
         checked[name] = label.strip()
+        other = next((o for o in checked if o != name and checked[o] == checked[name]), name)
+        if re.sub("_[ab]$", "", other) != re.sub("_[ab]$", "", name):  # one reference for both: ok
+            raise InputError(
+                f"the mapping gives {checked[name]!r} to both {other} and {name}; "
+                "map each to its own channel"
+            )
     return checked
 
 

@@ -213,10 +213,14 @@ def parse_grid(spec: str | None) -> dict[str, tuple[int, ...]]:
     expected = (
         "expected e.g. na=1:3,nb=1:3,nk=1:4 (each a whole number or an inclusive range lo:hi)"
     )
+    seen: set[str] = set()
     for part in spec.split(","):
         key, sep, value = (s.strip() for s in part.partition("="))
         if not sep or key not in grid:
             raise InputError(f"--orders: cannot read '{part.strip()}'; {expected}")
+        if key in seen:
+            raise InputError(f"--orders: {key} is given twice; give each of na, nb, nk once")
+        seen.add(key)
         match = re.fullmatch(r"(\d+)(?::(\d+))?", value)
         if match is None:
             raise InputError(

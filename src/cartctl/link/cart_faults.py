@@ -77,7 +77,7 @@ class CartFaults:
     @classmethod
     def parse(cls, text: str) -> CartFaults:
         """Faults from ``key=value,...``, e.g. ``garbage=0.05,stall=2,usb=off,reverse_b=1``."""
-        faults = cls()
+        faults, seen = cls(), set()
         for item in filter(None, (part.strip() for part in text.split(","))):
             key, sep, raw = item.partition("=")
             key, value = key.strip(), raw.strip().lower()
@@ -86,6 +86,9 @@ class CartFaults:
                     f"bad virtual cart option '{item}'; expected key=value with key in "
                     f"{', '.join(_FIELD_OF)}"
                 )
+            if key in seen:
+                raise InputError(f"virtual cart option '{key}' is given twice; give it once")
+            seen.add(key)
             choices = _CHOICES.get(key)
             parsed: Any = value
             if choices is not None:

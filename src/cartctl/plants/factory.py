@@ -78,8 +78,12 @@ def physics_options(text: str) -> dict[str, Any]:
     from cartctl.plants.physics_params import check_actuation_ms
 
     options: dict[str, Any] = {}
+    seen: set[str] = set()
     for item in filter(None, (part.strip() for part in text.split(","))):
         key, sep, value = (part.strip() for part in item.partition("="))
+        if sep and key in seen:
+            raise InputError(f"physics option {key} is given twice; give it once")
+        seen.add(key)
         if sep and key in ("reverse_a", "reverse_b"):
             if value not in ("0", "1"):
                 raise InputError(f"physics option {key} must be 0 or 1, got '{value}'")
