@@ -127,6 +127,32 @@ def test_a_missing_model_is_one_line_and_exit_2(
     assert "none.toml" in err and len(err.strip().splitlines()) == 1
 
 
+def test_a_model_of_one_motor_smooths_that_motor_and_says_so_for_the_other(
+    capsys: pytest.CaptureFixture[str], physics_run: Path, tmp_path: Path
+) -> None:
+    """``--model`` with only motor a's model was refused ('no model for motor 'b''): motor a is
+    smoothed, one line says motor b has none (the trace, the recording)."""
+    text = Path(GROUND).read_text()
+    one = tmp_path / "one.toml"
+    one.write_text(text[: text.index("[motors.b]")])
+    cart = _without_true_speed(physics_run / "p.csv", tmp_path / "cart.csv")
+    code, out, err = _cli(capsys, "review", str(cart), "--json", "--model", str(one))
+    assert code == 0, err
+    doc = json.loads(out)
+    assert "smoothed" in doc["motors"]["a"] and "smoothed" not in doc["motors"]["b"]
+    assert "motor b" in doc["smoothed"]["note"]
+    code, out, err = _cli(capsys, "review", str(cart), "--model", str(one))
+    assert code == 0 and err == "", err
+    lines = out.splitlines()
+    assert any(line.split()[:2] == ["a", "smoothed"] for line in lines)
+    assert not any(line.split()[:2] == ["b", "smoothed"] for line in lines)
+    assert len([line for line in lines if "motor b" in line]) == 1
+    code, out, err = _cli(capsys, "review", str(physics_run / "p.rrd"), "--model", str(one),
+                          "--screenshot", str(tmp_path / "shot.png"))  # fmt: skip
+    assert code == 0, err
+    assert (tmp_path / "shot.png").is_file()
+
+
 def test_review_of_a_recording_adds_the_smoothed_series(physics_run: Path) -> None:
     from cartctl.cli.commands.review.smoothed import recording_summary
 
@@ -300,18 +326,18 @@ def test_a_runs_loop_delay_beyond_the_models_is_the_smoothers_extra_delay(
 def test_a_trace_is_smoothed_with_its_own_runs_model_not_a_stale_recordings(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
-    """A run with --rerun off over an earlier run's name leaves that run's RUN.rrd beside the new
-    RUN.csv and RUN.meta.toml; review took the model from the old recording (its meta file
-    is written with the trace, so it names this run's), and a monitor trace's never has one."""
+    """An earlier run's RUN.rrd beside a new RUN.csv and RUN.meta.toml (a run with --rerun off
+    over its name left it there before 4e1b69e; a copy can still put one there): review took the
+    model from the old recording (the meta file is written with the trace, so it names this
+    run's), and a monitor trace's never has one."""
     for controller, rerun in (("pi", "save"), ("poles", "off")):  # pi: ground, poles: ground-timing
         code, _, err = _cli(capsys, "run", "--fast", "--duration", "0.5", "--controller",
                             str(ROOT / "controllers" / f"{controller}.toml"), "--rerun", rerun,
-                            "--out", str(tmp_path), "--name", "x")  # fmt: skip
+                            "--out", str(tmp_path), "--name", controller)  # fmt: skip
         assert code == 0, err
-    assert (tmp_path / "x.rrd").is_file()
-    cart = _without_true_speed(tmp_path / "x.csv", tmp_path / "cart.csv")
-    (tmp_path / "x.meta.toml").replace(tmp_path / "cart.meta.toml")
-    (tmp_path / "x.rrd").replace(tmp_path / "cart.rrd")
+    cart = _without_true_speed(tmp_path / "poles.csv", tmp_path / "cart.csv")
+    (tmp_path / "poles.meta.toml").replace(tmp_path / "cart.meta.toml")
+    (tmp_path / "pi.rrd").replace(tmp_path / "cart.rrd")
     code, out, err = _cli(capsys, "review", str(cart), "--json")
     assert code == 0, err
     assert Path(json.loads(out)["smoothed"]["model"]).name == "ground-timing.toml"

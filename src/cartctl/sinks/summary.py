@@ -205,10 +205,12 @@ def smoothed_lines(summary: Mapping[str, Any]) -> list[str]:
         rows[f"{m} {label}"] = entry
         if "smoothed" in entry:
             rows[f"{m} smoothed"] = entry["smoothed"]
+    note = smoothed.get("note")  # a motor the model has none for
     return [
         f"  smoothed: the speed by a Kalman RTS smoother over the trace with the model "
         f"{smoothed.get('model')} and the recorded voltages",
         *motor_table(rows),
+        *([f"  {note}"] if note else []),
     ]
 
 

@@ -42,7 +42,7 @@ def wanted(summary: Mapping[str, Any], *, serial_path: bool = False, asked: bool
 def smoothed_speeds(
     columns: Columns, models: ModelFile, period_s: float, *, extra_delay_ticks: int = 0
 ) -> dict[str, Array]:
-    """Per motor with a reference in the trace, the smoothed speed at each row (rad/s).
+    """Per motor with a reference in the trace and a model, the smoothed speed at each row (rad/s).
 
     A run's trace ends with its stop row, the zero-volt command sent at the end, which acts only
     after the last measurement: the smoother holds the last tick's voltage there instead, so the
@@ -54,7 +54,7 @@ def smoothed_speeds(
         )
     stop_row = "period_error_us" in columns and "compute_us" in columns
     out: dict[str, Array] = {}
-    for m in (m for m in ("a", "b") if f"reference_{m}" in columns):
+    for m in (m for m in ("a", "b") if f"reference_{m}" in columns and m in models.motors):
         voltage_v = np.array(columns[f"voltage_{m}"], dtype=float)
         if stop_row and voltage_v.size > 1:
             voltage_v[-1] = voltage_v[-2]
@@ -93,6 +93,11 @@ def add_smoothed(
         entry["note"] = f"smoothed metrics: none ({exc})"
         return {}
     add_smoothed_metrics(summary, columns, speeds, period_s)
+    unmodelled = [m for m in ("a", "b") if f"reference_{m}" in columns and m not in speeds]
+    if unmodelled:  # a model file of the other motor only
+        entry["note"] = (
+            f"smoothed metrics: none for motor {', '.join(unmodelled)} ({model} has no model for it)"
+        )
     entry["extra_delay_ticks"] = extra
     return speeds
 
