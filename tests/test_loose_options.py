@@ -106,3 +106,16 @@ def test_one_channel_mapped_to_two_quantities_is_refused(
     capsys.readouterr()
     trace = cartctl.load_trace("both.csv")
     assert trace.columns()["reference_b"].tolist() == trace.columns()["reference_a"].tolist()
+
+
+@pytest.mark.parametrize("option", ["--reference", "--reference-b"])
+def test_a_step_before_the_run_starts_is_refused(
+    capsys: pytest.CaptureFixture[str], workdir: Path, option: str
+) -> None:
+    # step:10:-1 ran as step:10:0, a delay the run cannot have
+    line = _line(capsys, "run", option, "step:10:-1", "--fast")
+    assert line.endswith(
+        f"{option}: reference 'step:10:-1': the step's delay must be >= 0 s, got -1"
+    )
+    with pytest.raises(CartctlError, match=r"the step.s delay must be >= 0 s, got -0\.5"):
+        cartctl.simulate("controllers/pi.toml", reference="step:3:-0.5")

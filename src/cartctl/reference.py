@@ -2,7 +2,7 @@
 
 Specs (speeds in rad/s, times in s):
 
-- ``step:A[:DELAY]``: 0 until DELAY (default 0.5 s), then A.
+- ``step:A[:DELAY]``: 0 until DELAY (>= 0, default 0.5 s), then A.
 - ``square:A:PERIOD``: +A for half a period, −A for the other half, repeated (starts at +A).
 - ``ramp:SLOPE[:LIMIT]``: SLOPE rad/s per second from 0, held at ±LIMIT when given.
 - ``const:A``: A throughout.
@@ -83,6 +83,10 @@ def reference_signal(
     t = (start_tick + np.arange(n_ticks, dtype=np.float64)) * period_s
     if kind == "step":
         amp, *delay = _numbers(spec, parts, 1, 2)
+        if delay and delay[0] < 0.0:  # the run starts at 0 s
+            raise InputError(
+                f"reference '{spec}': the step's delay must be >= 0 s, got {delay[0]:g}"
+            )
         return np.where(t >= (delay[0] if delay else 0.5) - 1e-12, amp, 0.0)
     if kind == "square":
         amp, period = _numbers(spec, parts, 2, 2)
