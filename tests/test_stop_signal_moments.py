@@ -112,56 +112,49 @@ def test_run_a_signal_before_the_sinks_open_is_one_line(
 def test_excite_a_signal_while_the_trace_is_written_leaves_it_whole(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    import cartctl.data.trace as trace_module
+    """The trace goes to the file as it is recorded (blocks of 1000 rows on a simulated plant): a
+    signal while a block is written stops the experiment with every row so far in the file."""
+    from cartctl.sinks.csv_sink import CsvSink
 
-    monkeypatch.setattr(trace_module, "_WRITE_CHUNK_ROWS", 100)  # the signal between two blocks
-    original = trace_module.csv.writer
+    original, blocks = CsvSink._flush, []
 
-    class Writer:
-        def __init__(self, file: Any, **kwargs: Any) -> None:
-            self.writer, self.blocks = original(file, **kwargs), 0
+    def flush(self: CsvSink) -> None:
+        original(self)
+        blocks.append(self.rows_written)
+        if len(blocks) == 2:  # the header, then the first 1000 rows
+            os.kill(os.getpid(), signal.SIGINT)
 
-        def writerow(self, row: Any) -> None:
-            self.writer.writerow(row)
-
-        def writerows(self, rows: Any) -> None:
-            self.writer.writerows(rows)
-            self.blocks += 1
-            if self.blocks == 2:
-                os.kill(os.getpid(), signal.SIGINT)
-
-    # the trace module's csv alone: the csv module itself stays as it is for everything else
-    monkeypatch.setattr(trace_module, "csv", SimpleNamespace(writer=Writer))
+    monkeypatch.setattr(CsvSink, "_flush", flush)
     out = tmp_path / "x.csv"
-    code = main(["excite", "--plant", "physics", "--amplitude", "10", "--cycles", "1",
+    code = main(["excite", "--plant", "physics", "--amplitude", "10", "--cycles", "5",
                  "--out", str(out), "--json"])  # fmt: skip
     stdout, err = capsys.readouterr()
     assert code == 130
     assert len(_lines(err)) == 1 and "Traceback" not in err
-    assert len(read_trace(out)) == json.loads(stdout)["ticks"] == 300  # the whole experiment
+    assert len(read_trace(out)) == json.loads(stdout)["ticks"] == 1000 == blocks[1]
     assert meta_path(out).is_file()
 
 
 def test_commission_a_signal_while_a_stage_trace_is_written_leaves_it_whole(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from cartctl.commission import stages
+    from cartctl.sinks.csv_sink import CsvSink
 
-    written: list[Path] = []
+    closed: list[Path] = []
 
-    def write_trace(trace: Any, path: Path, **kwargs: Any) -> None:
-        os.kill(os.getpid(), signal.SIGTERM)  # the checks' experiment is over: its trace
-        original(trace, path, **kwargs)
-        written.append(path)
+    def close(self: CsvSink) -> None:
+        os.kill(os.getpid(), signal.SIGTERM)  # the checks' experiment is over: its last rows
+        original(self)
+        closed.append(self.path)
 
-    original = stages.write_trace
-    monkeypatch.setattr(stages, "write_trace", write_trace)
+    original = CsvSink.close
+    monkeypatch.setattr(CsvSink, "close", close)
     out = tmp_path / "c"
     code = main(["commission", "physics", "--out", str(out)])
     err = capsys.readouterr().err
     assert code == 143
     assert "Traceback" not in err
-    assert written == [out / "checks.csv"]
+    assert closed == [out / "checks.csv"]
     assert len(read_trace(out / "checks.csv")) == 540  # the whole checks sequence
     assert meta_path(out / "checks.csv").is_file()
     assert "checks: interrupted; zero volts sent" in _lines(err)[-1]

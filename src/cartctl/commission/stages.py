@@ -7,7 +7,7 @@ ticks (:func:`cartctl.runtime.loop.run_experiment`)."""
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -19,13 +19,15 @@ from cartctl.cart import PERIOD_S
 from cartctl.cli.progress import ProgressBar
 from cartctl.commission import StageError, checks, report, tuning
 from cartctl.data.modelfile import save_models
-from cartctl.data.trace import Trace, write_trace, write_trace_meta
+from cartctl.data.trace import Trace, meta_path, write_trace, write_trace_meta
+from cartctl.errors import OutputError
 from cartctl.identification.pipeline import model_file
 from cartctl.plants.base import ClockedPlant
 from cartctl.plants.factory import PLANTS_USING, SIMULATED, make_plant, plant_kind
 from cartctl.runtime.loop import run_experiment
 from cartctl.runtime.realtime import one_blas_thread
 from cartctl.signals import make_signal
+from cartctl.sinks.csv_sink import CsvSink
 from cartctl.tune.engine import save_setting
 
 STAGES = ("checks", "excitation", "identification", "tuning", "verification")
@@ -108,17 +110,27 @@ class Commission:
         except BaseException:
             plant.close()
             raise
-        bar = ProgressBar(ua.size, f"cartctl commission {stage}")
+        bar, path = ProgressBar(ua.size, f"cartctl commission {stage}"), self.out / f"{stage}.csv"
+        sink = CsvSink(path, flush_every=50 if isinstance(plant, ClockedPlant) else 1000)  # run's
+        opened: list[tuple[str, ...]] = []
+
+        def meta(columns: Sequence[str]) -> None:  # from the first row: a cut trace has its loop
+            opened.append(tuple(columns))
+            try:
+                write_trace_meta(path, plant=self.description, command=f"cartctl commission "
+                                 f"{self.spec}", loop_delay_ticks=self.loop_delay_ticks)  # fmt: skip
+            except OSError as exc:  # a full disk: a fault naming the file, as the trace's
+                raise OutputError(meta_path(path), exc.strerror or str(exc)) from None
+
         try:
-            result = run_experiment(plant, ua, ub, on_tick=bar.update, source=self.description)
+            result = run_experiment(
+                plant, ua, ub, on_tick=bar.update, source=self.description, sink=sink, on_open=meta
+            )
         finally:
             bar.close()
         with stopping.deferred():  # the experiment is over: a stop signal waits for its trace
-            if len(result.trace):
-                write_trace(result.trace, self.out / f"{stage}.csv")
-                write_trace_meta(self.out / f"{stage}.csv", plant=self.description,
-                                 loop_delay_ticks=self.loop_delay_ticks,
-                                 command=f"cartctl commission {self.spec}")  # fmt: skip
+            if len(result.trace) and tuple(result.trace.columns()) != opened[0]:  # true speeds cut
+                write_trace(result.trace, path)
         if result.interrupted or result.failure or stopping.received() is not None:
             self.report.add(stage, f"**Stopped** after {len(result.trace)} ticks: "
                                    f"{result.failure or 'interrupted'}; {stage}.csv holds them.")  # fmt: skip

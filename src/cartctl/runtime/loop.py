@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cartctl.cart import PERIOD_S, SUPPLY_V
-from cartctl.data.trace import Trace
+from cartctl.data.trace import REQUIRED_COLUMNS, Trace
 from cartctl.errors import InputError, OutputError, PlantError
 from cartctl.plants.base import ClockedPlant, Measurement, Plant
 from cartctl.plants.sim import saturate
@@ -287,12 +287,16 @@ def run_experiment(
     *,
     on_tick: Callable[[int], None] | None = None,
     source: str | None = None,
+    sink: Sink | None = None,
+    on_open: Callable[[Sequence[str]], object] | None = None,
 ) -> ExperimentResult:
     """Apply the voltage sequences (V per tick) and record them with the measured speeds (rows as
     :mod:`cartctl.plants.base` numbers them). The plant is reset first and closed on every path
     (a stop signal meanwhile is only noted: :func:`cartctl.stopping.received`); Ctrl-C, a
     PlantError or an error of cartctl's own after the first tick ends the run with the ticks so
-    far. ``on_tick`` gets the number of ticks done."""
+    far. ``on_tick`` gets the number of ticks done. ``sink`` gets each row as it is recorded (the
+    trace's columns: opened at the first measurement, then ``on_open(columns)`` runs) and is closed
+    after the plant; a failed write (OutputError) stops the experiment and is raised."""
     ua = np.asarray(voltage_a_v, dtype=float)
     ub = np.asarray(voltage_b_v, dtype=float)
     if ua.ndim != 1 or ua.shape != ub.shape:
@@ -301,17 +305,24 @@ def run_experiment(
         )
     rows: list[Measurement] = []  # row k: the measurement of tick k
     ticks: list[int] = []  # its tick: k, or a cart's count from its first (lost frames skipped)
-    interrupted, failure = False, None
+    interrupted, failure, width = False, None, 0
     try:
         y = plant.reset()
         for k in range(ua.size):
-            rows.append(y)
-            ticks.append(getattr(plant, "tick_index", k))
+            with held():  # the row kept and streamed, or neither
+                rows.append(y)
+                ticks.append(getattr(plant, "tick_index", k))
+                if sink is not None:
+                    width = width or _open_stream(sink, on_open, y)
+                    row = (ticks[-1] * plant.period_s, ua[k], ub[k], *_speeds(y))
+                    sink.write([np.nan if v is None else float(v) for v in row[:width]])
             y = plant.step(float(ua[k]), float(ub[k]))
             if on_tick is not None:
                 on_tick(k + 1)
     except KeyboardInterrupt:
         interrupted = True
+    except OutputError:  # the file cannot hold the experiment: stop it
+        raise
     except Exception as exc:  # a plant's fault, or cartctl's own: the ticks so far are kept
         if not rows:  # nothing recorded: the plant never worked; say so as such
             raise
@@ -319,12 +330,13 @@ def run_experiment(
         failure = f"internal error: {type(exc).__name__}: {exc}" if internal else str(exc)
     finally:
         with deferred():  # zero volts and the port closed whole; the caller sees the signal
-            plant.close()
+            try:
+                plant.close()
+            finally:
+                if sink is not None:
+                    sink.close()
     done = len(rows)
-    speeds = [
-        (y.speed_a_rad_s, y.speed_b_rad_s, y.true_speed_a_rad_s, y.true_speed_b_rad_s) for y in rows
-    ]
-    table = np.array(speeds, dtype=float).reshape(done, 4)  # an unknown true speed is NaN
+    table = np.array([_speeds(y) for y in rows], dtype=float).reshape(done, 4)  # unknown: NaN
     keep = 4 if done and not np.isnan(table[:, 2:]).any() else 2
     names = ("speed_a", "speed_b", "true_speed_a", "true_speed_b")[:keep]
     columns = {
@@ -334,3 +346,20 @@ def run_experiment(
     }
     columns |= {name: table[:, i] for i, name in enumerate(names)}
     return ExperimentResult(Trace.from_columns(columns, source=source), interrupted, failure)
+
+
+def _speeds(y: Measurement) -> tuple[float | None, ...]:
+    return (y.speed_a_rad_s, y.speed_b_rad_s, y.true_speed_a_rad_s, y.true_speed_b_rad_s)
+
+
+def _open_stream(
+    sink: Sink, on_open: Callable[[Sequence[str]], object] | None, first: Measurement
+) -> int:
+    """Open ``sink`` with the columns of :func:`run_experiment`'s trace (true speeds when the first
+    measurement has them), then ``on_open``; the row width."""
+    true = None not in (first.true_speed_a_rad_s, first.true_speed_b_rad_s)
+    columns = REQUIRED_COLUMNS + (("true_speed_a", "true_speed_b") if true else ())
+    sink.open(columns)
+    if on_open is not None:
+        on_open(columns)
+    return len(columns)

@@ -7,7 +7,7 @@ import contextlib
 import os
 import stat
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -63,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.runtime.loop import run_experiment
     from cartctl.runtime.realtime import gc_paused
     from cartctl.signals import make_signal
+    from cartctl.sinks.csv_sink import CsvSink
 
     serial = check_plant_name(args.plant) in ("virtual", "serial")
     amplitude_v = options.check_finite(args.amplitude, "--amplitude")
@@ -90,6 +91,15 @@ def run(args: argparse.Namespace) -> int:
         connect_timeout_s=args.connect_timeout,
         motors="ab" if args.motor == "both" else args.motor,
     )
+    sink = CsvSink(args.out, flush_every=50 if serial else 1000)  # as run's (and run --fast's)
+    opened: list[tuple[str, ...]] = []
+
+    def on_open(columns: Sequence[str]) -> None:  # the meta file from the first row: a cut trace
+        opened.append(tuple(columns))  # is identified in its loop (a cart's delay: at the end)
+        _write_meta(
+            args.out, description, None if serial else getattr(plant, "loop_delay_ticks", None)
+        )
+
     bar = ProgressBar(volts.size, f"excite {args.signal}")
     switch_interval = sys.getswitchinterval()
     if serial:  # answer each cart tick at once: threads hand the GIL back quickly
@@ -98,18 +108,33 @@ def run(args: argparse.Namespace) -> int:
         # no collector pass at a random tick of a cart: a late answer raises the echo (a
         # simulated plant has no deadline)
         with gc_paused() if serial else contextlib.nullcontext():
-            result = run_experiment(plant, ua, ub, on_tick=bar.update, source=description)
+            result = run_experiment(
+                plant, ua, ub, on_tick=bar.update, source=description, sink=sink, on_open=on_open
+            )
     finally:
         sys.setswitchinterval(switch_interval)
         bar.close()
     with stopping.deferred():  # the experiment is over: a stop signal waits for its files
-        return _save(args, result, plant, description)
+        return _save(args, result, plant, description, opened)
 
 
-def _save(args: argparse.Namespace, result: Any, plant: Any, description: str) -> int:
-    """The trace and its meta file written, what was done printed; the exit code."""
+def _write_meta(path: str | Path, description: str, loop_delay: int | None) -> Path:
+    from cartctl.data.trace import meta_path, write_trace_meta
+
+    try:
+        return write_trace_meta(path, plant=description, loop_delay_ticks=loop_delay,
+                                command=options.command_line("excite"))  # fmt: skip
+    except OSError as exc:  # the trace is kept; its meta file is not
+        raise OutputError(meta_path(path), exc.strerror or str(exc)) from None
+
+
+def _save(
+    args: argparse.Namespace, result: Any, plant: Any, description: str, opened: list[Any]
+) -> int:
+    """The meta file written again (a cart's loop delay), the trace rewritten if its columns are
+    not the streamed ones, what was done printed; the exit code."""
     from cartctl.cli.jsonout import dumps
-    from cartctl.data.trace import meta_path, write_trace, write_trace_meta
+    from cartctl.data.trace import write_trace
     from cartctl.sinks.summary import host_loss_text, warn_host_losses
 
     n = len(result.trace)
@@ -117,17 +142,14 @@ def _save(args: argparse.Namespace, result: Any, plant: Any, description: str) -
         print("cartctl excite: interrupted before the first tick; nothing written", file=sys.stderr)
         return stopping.exit_code()
     path = args.out
-    _write_whole(lambda target: write_trace(result.trace, target), path)
+    if tuple(result.trace.columns()) != opened[0]:  # a true speed missing at a later tick
+        _write_whole(lambda target: write_trace(result.trace, target), path)
     link_summary = getattr(plant, "link_summary", None)
     link = link_summary() if link_summary is not None else None
     loop_delay = (
         getattr(plant, "loop_delay_ticks", None) if link is None else link["loop_delay_ticks"]
     )  # the simulators know theirs; over serial, the echo's
-    try:
-        meta = write_trace_meta(path, plant=description, loop_delay_ticks=loop_delay,
-                                command=options.command_line("excite"))  # fmt: skip
-    except OSError as exc:  # the trace is whole; its meta file is not
-        raise OutputError(meta_path(path), exc.strerror or str(exc)) from None
+    meta = _write_meta(path, description, loop_delay)
     interrupted = result.interrupted or stopping.received() is not None  # during it or after
     stopped = "failure" if result.failure else "interrupted" if interrupted else None
     if args.json:
