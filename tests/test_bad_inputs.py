@@ -304,6 +304,7 @@ CASES = [
     _case("commission serial:", "needs a port"),
     _case("commission serial:/dev/ttyNOPE", "serial port /dev/ttyNOPE does not exist"),
     _case("commission serial:folder", "serial port folder is a folder, not a serial device"),
+    _case("commission serial:/dev/null", "serial port /dev/null is not a serial device"),
     _case("commission virtual --connect-timeout nan", "--connect-timeout"),
     # a plant option the plant does not use: it was silently ignored
     _case("commission physics --connect-timeout 3",

@@ -45,12 +45,19 @@ def _ports_hint() -> str:
 
 
 def check_port(port: str) -> None:
-    """A typo, not a fault (InputError): ``port`` is not there, or is a folder or a file."""
+    """A typo, not a fault (InputError): ``port`` is not there, or is a folder or a file, or (where
+    sysfs says, without opening it) a character device that is no terminal (``/dev/null``)."""
     if not os.path.exists(port):
         raise InputError(f"serial port {port} does not exist; {_ports_hint()}")
-    if not stat.S_ISCHR(os.stat(port).st_mode):
+    device = os.stat(port)
+    if not stat.S_ISCHR(device.st_mode):
         what = "is a folder, not" if os.path.isdir(port) else "is not"
         raise InputError(f"serial port {port} {what} a serial device; {_ports_hint()}")
+    kind = f"/sys/dev/char/{os.major(device.st_rdev)}:{os.minor(device.st_rdev)}/subsystem"
+    if os.path.exists(kind) and os.path.basename(os.path.realpath(kind)) != "tty":
+        raise InputError(
+            f"serial port {port} is not a serial device (no terminal); {_ports_hint()}"
+        )
 
 
 def print_to_stderr(line: str) -> None:
