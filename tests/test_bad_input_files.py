@@ -104,6 +104,9 @@ CASES = [
     # writing (exit 1); monitor connected first
     ("run --fast --out logs --name " + "x" * 300, "--out logs/xxx", "file name too long"),
     ("monitor virtual --duration 0.1 --out logs --name " + "x" * 300, "file name too long"),
+    # ... into a folder that exists (Path.is_dir raised ENAMETOOLONG before that check)
+    ("run --fast --out controllers --name " + "x" * 300, "--out controllers/xxx", "too long"),
+    ("identify trace.csv --out " + "x" * 300 + ".toml", "--out xxx", "file name too long"),
     # estimator noise levels a controller file cannot hold: OverflowError, ValueError tracebacks
     ("design models/ground.toml --method poles --process-noise-v 1e308", "--process-noise-v",
      "up to 1000"),

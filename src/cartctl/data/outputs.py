@@ -27,17 +27,18 @@ def check_output_folder(folder: str | Path, option: str) -> Path:
 def check_output_file(path: str | Path, option: str) -> Path:
     """``path`` when cartctl can write (or replace) it; else as :func:`check_output_folder`."""
     path = Path(path)
-    if path.is_dir():
+    base = next((folder for folder in path.absolute().parents if folder.is_dir()), Path("/"))
+    long = len(os.fsencode(path.name)) > os.pathconf(base, "PC_NAME_MAX")  # is_dir would raise
+    if not long and path.is_dir():
         raise InputError(f"{option} {path}: is a folder, not a file")
     parent = path.parent
     if parent.exists() and not parent.is_dir():
         raise InputError(f"{option} {path}: cannot create: {parent} is a file")
     why = _unwritable(parent, there="cannot create")
+    if why is None and long:
+        why = "cannot create: file name too long"  # the folder is fine, the file is not
     if why is None and path.exists() and not os.access(path, os.W_OK):
         why = "cannot write: permission denied"
-    base = next(folder for folder in path.absolute().parents if folder.is_dir())
-    if why is None and len(os.fsencode(path.name)) > os.pathconf(base, "PC_NAME_MAX"):
-        why = "cannot create: file name too long"  # the folder is fine, the file is not
     if why is not None:
         raise InputError(f"{option} {path}: {why}")
     return path
