@@ -276,6 +276,39 @@ def test_ctrl_c_in_the_excitation_keeps_the_files_and_zero_volts(tmp_path, capsy
     assert not (out / "model.toml").exists()
 
 
+def test_an_error_of_cartctls_own_in_a_stage_is_not_blamed_on_the_cart(
+    tmp_path, capsys, monkeypatch
+):
+    """A bug of cartctl in a stage's experiment (a RuntimeError, no PlantError) read 'checks: the
+    cart stopped: internal error: …'; the line and the summary say it is cartctl's, as run does."""
+    from cartctl.commission import stages
+    from cartctl.plants.factory import make_plant
+
+    class Failing(_StopAt):
+        def step(self, va: float, vb: float):
+            if self.steps + 1 == self.stop_at:
+                raise RuntimeError("a bug")
+            return super().step(va, vb)
+
+    made: list[Failing] = []
+
+    def make(spec, **options):
+        plant, description = make_plant(spec, **options)
+        made.append(Failing(plant, 51))
+        return made[-1], description
+
+    monkeypatch.setattr(stages, "make_plant", make)
+    out = tmp_path / "c"
+    code = main(["commission", "physics", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1 and made[0].closed and made[0].plant.applied_voltage_v == (0.0, 0.0)
+    assert err[-1] == "cartctl commission: checks: internal error: RuntimeError: a bug", err
+    summary = (out / "summary.md").read_text(encoding="utf-8")
+    assert "At stage **checks**: internal error: RuntimeError: a bug." in summary
+    assert "cart stopped" not in summary
+    assert len((out / "checks.csv").read_text().strip().splitlines()) == 1 + 51  # up to step 51
+
+
 # -- the pure parts --------------------------------------------------------------------------------
 
 

@@ -102,8 +102,10 @@ def run(args: argparse.Namespace) -> int:
         code, failure = 1, str(exc)
     except StageStoppedError as exc:
         code = 1 if exc.failure else stopping.exit_code()
-        failure = f"{exc.stage}: " + (f"the cart stopped: {exc.failure}" if exc.failure
-                                      else "interrupted; zero volts sent")  # fmt: skip
+        why = exc.failure or "interrupted; zero volts sent"
+        if exc.failure and not exc.failure.startswith("internal error:"):  # not cartctl's own
+            why = f"the cart stopped: {why}"
+        failure = f"{exc.stage}: {why}"
     except KeyboardInterrupt:
         code, failure = stopping.exit_code(), f"{job.current}: interrupted; zero volts sent"
     except CartctlError as exc:  # the port or the cart in the checks (the user's to fix: its
