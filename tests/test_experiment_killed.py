@@ -12,11 +12,15 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from cartctl.cli import main
 from cartctl.data.read import read_trace
 from cartctl.data.trace import read_trace_meta
+from cartctl.plants.base import ClockedPlant, Measurement
+from cartctl.runtime.loop import run_experiment
+from cartctl.sinks.csv_sink import CsvSink
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -73,3 +77,53 @@ def test_commission_killed_mid_excitation_keeps_the_rows_so_far(tmp_path: Path) 
     assert len(read_trace(out / "excitation.csv")) == 1000  # killed at its 1201st tick of 1500
     meta = read_trace_meta(out / "excitation.csv")
     assert meta is not None and meta.loop_delay_ticks == 1
+
+
+class _Cart:
+    """A cart-clocked plant (no true speeds) noting the trace file's size at each send and
+    receive."""
+
+    period_s, arrival_s, tick_index = 0.01, 0.0, 0
+
+    def __init__(self, path: Path) -> None:
+        self.path, self.sizes = path, []
+
+    def _size(self, what: str) -> None:
+        self.sizes.append((what, self.path.stat().st_size if self.path.exists() else 0))
+
+    def connect(self) -> None:
+        pass
+
+    def reset(self) -> Measurement:
+        self.tick_index = 0
+        return Measurement(0.0, 0.0)
+
+    def send(self, voltage_a_v: float, voltage_b_v: float) -> None:
+        self._size("send")
+
+    def receive(self) -> Measurement:
+        self._size("receive")
+        self.tick_index += 1
+        return Measurement(float(self.tick_index), 0.0)
+
+    def step(self, voltage_a_v: float, voltage_b_v: float) -> Measurement:
+        self.send(voltage_a_v, voltage_b_v)
+        return self.receive()
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_cart_experiment_writes_its_blocks_between_a_command_and_the_next_tick(
+    tmp_path: Path,
+) -> None:
+    """As ``run``'s loop does on a cart: a block of 50 rows is written after the tick's command
+    went out, while the cart's next tick is awaited, never between a measurement and its answer."""
+    path = tmp_path / "cart.csv"
+    cart = _Cart(path)
+    assert isinstance(cart, ClockedPlant)
+    result = run_experiment(cart, np.ones(120), np.zeros(120), sink=CsvSink(path, flush_every=50))
+    grew = [k for k in range(1, len(cart.sizes)) if cart.sizes[k][1] > cart.sizes[k - 1][1]]
+    assert [cart.sizes[k][0] for k in grew] == ["receive", "receive"]  # rows 50 and 100
+    assert len(grew) == 2 and read_trace(path).speed_a.tolist() == result.trace.speed_a.tolist()
+    assert path.read_text().splitlines()[0] == "time_s,voltage_a,voltage_b,speed_a,speed_b"

@@ -306,6 +306,7 @@ def run_experiment(
     rows: list[Measurement] = []  # row k: the measurement of tick k
     ticks: list[int] = []  # its tick: k, or a cart's count from its first (lost frames skipped)
     interrupted, failure, width = False, None, 0
+    idle = getattr(sink, "idle", None) if isinstance(plant, ClockedPlant) else None
     try:
         y = plant.reset()
         for k in range(ua.size):
@@ -316,7 +317,12 @@ def run_experiment(
                     width = width or _open_stream(sink, on_open, y)
                     row = (ticks[-1] * plant.period_s, ua[k], ub[k], *_speeds(y))
                     sink.write([np.nan if v is None else float(v) for v in row[:width]])
-            y = plant.step(float(ua[k]), float(ub[k]))
+            if idle is not None:  # a cart: the block written after the command, as run's loop
+                plant.send(float(ua[k]), float(ub[k]))  # type: ignore[attr-defined]
+                idle()
+                y = plant.receive()  # type: ignore[attr-defined]
+            else:
+                y = plant.step(float(ua[k]), float(ub[k]))
             if on_tick is not None:
                 on_tick(k + 1)
     except KeyboardInterrupt:
