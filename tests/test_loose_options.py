@@ -119,3 +119,15 @@ def test_a_step_before_the_run_starts_is_refused(
     )
     with pytest.raises(CartctlError, match=r"the step.s delay must be >= 0 s, got -0\.5"):
         cartctl.simulate("controllers/pi.toml", reference="step:3:-0.5")
+
+
+def test_the_deadbeat_limit_names_the_option_on_the_command_line(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    # design said 'settling_time_s must be at least …', the API's name, not the option's
+    line = _line(capsys, "design", "models/ground.toml", "--method", "poles", "--settling-time",
+                 "0.02")  # fmt: skip
+    assert line == ("cartctl design: error: --settling-time must be at least 3 ticks (0.03 s), "
+                    "the deadbeat time of a loop with 3 poles; got 0.02")  # fmt: skip
+    with pytest.raises(CartctlError, match=r"^settling_time_s must be at least 3 ticks"):
+        cartctl.design_poles("models/ground.toml", settling_time_s=0.02, overshoot_percent=5)

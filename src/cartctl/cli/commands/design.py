@@ -229,7 +229,11 @@ def run(args: argparse.Namespace) -> int:
             loop_delay_for(request, {m: models.motor(m) for m in names}, models.loop_delay_ticks)
         except InputError as exc:
             raise InputError(str(exc) if given else f"--out: {exc}") from None
-    designs = design_models(request, models, names, disturbance_v=disturbance_v)
+    try:
+        designs = design_models(request, models, names, disturbance_v=disturbance_v)
+    except InputError as exc:  # a refusal naming a request field names its option here
+        field, _, rest = str(exc).partition(" ")
+        raise InputError(f"{OPTIONS[field]} {rest}" if field in OPTIONS else str(exc)) from None
     if designs.loop_delay_note is not None:
         print(f"cartctl design: note: {designs.loop_delay_note}", file=sys.stderr)
     motors_json = designs.entries()
