@@ -484,3 +484,43 @@ def test_excite_keeps_the_ticks_before_a_fault_of_its_own(
         "recorded so far"
     )
     assert len(read_trace(tmp_path / "ex.csv")) == 51
+
+
+@needs_dev_full
+def test_identify_report_on_a_full_disk_is_a_fault_naming_the_file(
+    inputs: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """identify --report DIR with summary.md (written last) or a figure on a full disk: a bare
+    'No space left on device', exit 2, the figures left without a word; now exit 1 naming the
+    file, as the other commands' files on a full disk."""
+    for name in ("summary.md", "io.png"):
+        report = tmp_path / name.replace(".", "_")
+        report.mkdir()
+        (report / name).symlink_to(FULL)
+        assert main(["identify", str(inputs / "ex.csv"), "--report", str(report)]) == 1
+        assert capsys.readouterr().err == (
+            f"cartctl identify: error: {report / name} is incomplete: No space left on device\n"
+        )
+
+
+def test_identify_report_whose_summary_is_a_folder_is_refused_first(
+    inputs: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A folder named summary.md in --report DIR: the model file and the figures were written,
+    then 'Is a directory'; now one line before anything is written."""
+    report = tmp_path / "r"
+    (report / "summary.md").mkdir(parents=True)
+    before = tree(tmp_path)
+    argv = [
+        "identify",
+        str(inputs / "ex.csv"),
+        "--report",
+        str(report),
+        "--out",
+        str(tmp_path / "m.toml"),
+    ]
+    assert main(argv) == 2
+    assert capsys.readouterr().err == (
+        f"cartctl identify: error: --report {report / 'summary.md'}: is a folder, not a file\n"
+    )
+    assert tree(tmp_path) == before

@@ -14,6 +14,7 @@ import numpy as np
 
 from cartctl.data.modelfile import ModelFile
 from cartctl.data.trace import Trace
+from cartctl.errors import OutputError
 from cartctl.identification import figures
 from cartctl.identification.etfe import etfe, find_period
 from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, MotorIdentification
@@ -64,7 +65,10 @@ def write_summary(out_dir: Path, *, title: str, sections: Sequence[ReportSection
         if section.table:
             lines += [_table(section.table), ""]
     path = out_dir / "summary.md"
-    path.write_text("\n".join(lines), encoding="utf-8")
+    try:
+        path.write_text("\n".join(lines), encoding="utf-8")
+    except OSError as exc:  # a full disk: a fault naming the file, as a figure's
+        raise OutputError(path, exc.strerror or str(exc)) from None
     return path
 
 

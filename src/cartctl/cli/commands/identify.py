@@ -285,6 +285,8 @@ def run(args: argparse.Namespace) -> int:
 
     inputs = (*args.files, *(args.validate_on or ()), *(args.compare or ()))
     options.check_outputs(args, files=("out",), folders=("report",), inputs=inputs)
+    if args.report:  # its summary, written last, as well as the folder
+        options.check_output_file(Path(args.report) / "summary.md", "--report")
     recorded = loop_delay_of(args.files)  # the traces' meta files; they must agree
     if args.loop_delay is not None and recorded is not None and recorded != args.loop_delay:
         print(
