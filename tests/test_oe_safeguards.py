@@ -280,3 +280,28 @@ def test_oe_refined_on_the_unfiltered_data_predicts_on_it(
     y, u = trace.speed("a"), trace.voltage("a")
     theta, nk = np.asarray(doc["theta"]), doc["nk"]
     assert doc["fit_prediction_percent"] == pytest.approx(_sim_fit(theta, 2, nk, y, u), abs=1e-9)
+
+
+def test_oe_on_validation_data_predicts_by_its_simulation(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """With --validate-on (or --split) the fits are on the validation data: the OE row's one-step
+    prediction fit is its simulation there too (it was the ARX form φ(k)ᵀθ with the OE θ)."""
+    from cartctl.data.read import read_trace
+
+    est, val = tmp_path / "est.csv", tmp_path / "val.csv"
+    for path, seed in ((est, "1"), (val, "2")):
+        code, _, _ = _run(capsys, "excite", "--plant", "physics", "--amplitude", "10", "--cycles",
+                          "3", "--noise", "0.3", "--seed", seed, "--out", str(path))  # fmt: skip
+        assert code == 0
+    code, out, _ = _run(capsys, "identify", str(est), "--method", "oe", "--validate-on", str(val),
+                        "--motor", "a", "--json")  # fmt: skip
+    assert code == 0
+    doc = json.loads(out)["motors"]["a"]
+    assert doc["fit_data"] == "validation"
+    trace = read_trace(val)
+    y, u = trace.speed("a"), trace.voltage("a")
+    theta, nk = np.asarray(doc["oe"]["theta"]), doc["oe"]["nk"]
+    expected = _sim_fit(theta, 2, nk, y, u)
+    assert doc["oe"]["fit_simulation_percent"] == pytest.approx(expected, abs=1e-9)
+    assert doc["oe"]["fit_prediction_percent"] == pytest.approx(expected, abs=1e-9)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import numpy as np
@@ -63,6 +63,11 @@ class OeFit(ArxFit):
     start_projected: bool = False
     start_fit_simulation_percent: float = math.nan
     notes: tuple[str, ...] = ()
+
+    def on(self, segments: Sequence[Segment]) -> OeFit:
+        """As :meth:`ArxFit.on`; the prediction fit is the simulation's (an OE predictor simulates)."""
+        fit = super().on(segments)
+        return replace(fit, fit_prediction_percent=fit.fit_simulation_percent)
 
     def to_dict(self) -> dict[str, Any]:
         own = [f.name for f in fields(self) if f.name not in ArxFit.__dataclass_fields__]
