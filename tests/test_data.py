@@ -401,6 +401,20 @@ def test_qrc5_truncated_log_is_read_with_a_warning(tmp_path: Path) -> None:
     assert len(trace) == 19
 
 
+def test_a_trace_cut_mid_row_by_a_kill_reads_its_whole_rows(tmp_path: Path) -> None:
+    """A recording stopped mid-write (a kill, a power loss) ends in part of a row and no newline:
+    its whole rows read, with a warning; a short row elsewhere is still a bad file."""
+    header = ",".join(REQUIRED_COLUMNS)
+    rows = [f"{k * 0.01:.2f}," + ",".join(["1.0"] * (len(REQUIRED_COLUMNS) - 1)) for k in range(5)]
+    cut = header + "\n" + "\n".join(rows) + "\n0.05,1.0,1."
+    with pytest.warns(DataWarning, match="last row is cut short.*5 complete rows"):
+        trace = read_trace(write(tmp_path, cut, "cut.csv"))
+    np.testing.assert_allclose(trace.time_s, [0.0, 0.01, 0.02, 0.03, 0.04])
+    for text in (cut + "\n", header + "\n" + rows[0] + "\n0.01,1.0\n" + "\n".join(rows[2:])):
+        with pytest.raises(DataFileError, match="fields, the header has"):
+            read_trace(write(tmp_path, text, "short.csv"))
+
+
 def test_qrc5_default_labels_when_none_given(tmp_path: Path) -> None:
     text = QRC5.read_text()
     text = text[: text.index("<labels>")] + text[text.index("</labels>") + 9 :]

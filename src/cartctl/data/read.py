@@ -40,6 +40,14 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
         plain = _read_plain_csv(path)
         if plain is None:
             names, header_line, rows, csv_lines, bad = _read_csv(path)
+            if len(rows) > 1 and len(rows[-1]) < len(names) and not _ends_with_newline(path):
+                rows.pop()  # a write cut short (a kill, a power loss): whole rows were written
+                warnings.warn(
+                    f"{path}: the last row is cut short (the recording stopped mid-write); "
+                    f"read its {len(rows)} complete rows",
+                    DataWarning,
+                    stacklevel=2,
+                )
         else:
             (names, values, text), header_line, rows, bad = plain, 1, [], None
             csv_lines = list(range(2, len(values) + 2))
@@ -279,6 +287,12 @@ def _read_csv(
             path, "no data rows after the header; expected one per 10 ms tick"
         )
     return names, number, rows, lines, bad
+
+
+def _ends_with_newline(path: Path) -> bool:
+    with path.open("rb") as file:
+        file.seek(-1, 2)
+        return file.read(1) in (b"\n", b"\r")
 
 
 def _is_number(text: str) -> bool:
