@@ -11,10 +11,12 @@ import re
 import shutil
 import socket
 import sys
+import time
 from pathlib import Path
-from typing import Final
+from typing import Any, Final
 from urllib.parse import urlsplit
 
+from cartctl import stopping
 from cartctl.errors import CartctlError
 
 
@@ -127,3 +129,57 @@ def viewer_reachable(url: str, timeout_s: float = 0.5) -> bool:
             return True
     except (OSError, ValueError):
         return False
+
+
+VIEWER_WAIT_S: Final[float] = 5.0  # closing: the longest wait for the viewer's stream to end
+_WAIT_AFTER_STOP_S = 0.5  # the same once a stop signal came (Ctrl-C during the wait: at once)
+
+
+def disconnect(rec: Any, viewer_url: str, path: Path | None) -> None:
+    """Flush and close a recording's sinks (its file ``path`` first, then the viewer's stream),
+    waiting at most :data:`VIEWER_WAIT_S` (or 0.5 s once a stop signal came). The SDK waits with no
+    timeout for a viewer that took the connection but never answers (suspended with Ctrl-Z), in
+    ``disconnect()`` and in its exit hook (rerun-io/rerun#12620), and the file waits behind it:
+    such a viewer is left to a thread, the hook dropped, the file cut to its whole messages, and
+    TimeoutError says so; the SDK's first error is raised."""
+    import threading
+
+    import rerun
+    from rerun_bindings import finalize_deferred_sinks
+
+    done: list[str] = []
+    failed: list[Exception] = []
+
+    def close() -> None:
+        try:
+            rec.flush(timeout_sec=VIEWER_WAIT_S)
+        except Exception as exc:  # and the file and the stream are closed all the same
+            failed.append(exc)
+        try:
+            finalize_deferred_sinks(recording=rec.to_native())  # the file's footer
+            done.append("file")
+            rec.disconnect()
+        except Exception as exc:
+            failed.append(exc)
+
+    thread = threading.Thread(target=close, name="rerun-disconnect", daemon=True)
+    thread.start()
+    start = time.monotonic()
+    try:
+        while thread.is_alive():
+            waited = time.monotonic() - start
+            if waited > VIEWER_WAIT_S or (waited > _WAIT_AFTER_STOP_S and stopping.received()):
+                raise TimeoutError(_silent(viewer_url, None if done else path))
+            thread.join(0.05)
+    finally:
+        if thread.is_alive():  # the SDK's exit hook would wait for it
+            rerun.unregister_shutdown()
+            if path is not None and not done:
+                cut_to_whole_messages(path)
+    if failed:
+        raise failed[0]
+
+
+def _silent(viewer_url: str, path: Path | None) -> str:
+    lost = "its stream" if path is None else f"its stream and the end of {path.name}"
+    return f"the Rerun viewer at {viewer_url} did not answer: {lost} may be incomplete"

@@ -39,6 +39,7 @@ from cartctl.sinks.rerun_problems import (
     RecordingError,
     RecordingWarning,
     cut_to_whole_messages,
+    disconnect,
     display_available,
     file_failure,
     viewer_executable,
@@ -101,6 +102,7 @@ class RerunSink:
         self._tick_index: int | None = None
         self._signals: tuple[tuple[int, str], ...] = ()
         self._closed = False
+        self._viewer: str | None = None  # the address streamed to
         self.error: OutputError | None = None  # the file could not be written (raised once)
 
     def open(self, columns: Sequence[str]) -> None:
@@ -119,7 +121,7 @@ class RerunSink:
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             sinks.append(rr.FileSink(self.path))
-        url = self._viewer_url(rec)
+        url = self._viewer = self._viewer_url(rec)
         if url is not None:
             sinks.append(rr.GrpcSink(url))
         try:
@@ -190,13 +192,16 @@ class RerunSink:
         rec, self._recording = self._recording, None
         steps = {} if rec is None else {"flushing": lambda: rec.flush(timeout_sec=_FLUSH_TIMEOUT_S),
                                         "closing": rec.disconnect}  # fmt: skip
+        if rec is not None and self._viewer is not None:  # bounded: a viewer may never answer
+            steps = {"closing": lambda: disconnect(rec, self._viewer or "", self.path)}
         for step, call in steps.items():
             try:
                 call()
             except Exception as exc:
                 failed = failed or file_failure(exc, self.path)
                 if failed is None:  # the viewer's side: a problem, not a fault
-                    self._problem(f"{step} the recording failed: {exc}")
+                    timeout = isinstance(exc, TimeoutError)
+                    self._problem(str(exc) if timeout else f"{step} the recording failed: {exc}")
         self._report()
         if failed is not None:
             if self.path is not None:

@@ -1,0 +1,96 @@
+"""A Rerun viewer that accepts the connection but never answers (suspended with Ctrl-Z): closing
+the recording must not wait for it for ever (the SDK's ``disconnect()`` and its exit hook do,
+rerun-io/rerun#12620). A socket server in the test accepts and reads nothing; the run ends with
+its summary, its whole files and one warning line naming the viewer."""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import threading
+import time
+import warnings
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from cartctl import stopping
+from cartctl.sinks.rerun_sink import RecordingWarning, RerunSink
+
+HANG_TIMEOUT_S = 60.0  # far above the run's own bounded wait (seconds)
+
+# the file waits behind the stream in the SDK: it is cut to its whole messages, with no footer
+pytestmark = pytest.mark.filterwarnings("ignore:RRD file has no footer")
+
+
+@pytest.fixture
+def silent_viewer() -> Iterator[str]:
+    """The gRPC address of a server that accepts connections and never reads or answers."""
+    server = socket.create_server(("127.0.0.1", 0))
+    accepted: list[socket.socket] = []
+
+    def accept() -> None:
+        while True:
+            try:
+                accepted.append(server.accept()[0])
+            except OSError:  # closed at the test's end
+                return
+
+    thread = threading.Thread(target=accept, daemon=True)
+    thread.start()
+    yield f"rerun+http://127.0.0.1:{server.getsockname()[1]}/proxy"
+    server.close()
+    for conn in accepted:
+        conn.close()
+    thread.join(5)
+
+
+def test_run_streaming_to_a_silent_viewer_ends(workdir: Path, silent_viewer: str, rrd_rows) -> None:
+    process = subprocess.Popen(
+        [sys.executable, "-m", "cartctl", "run", "--fast", "--duration", "1", "--json",
+         "--rerun", "connect", "--connect-url", silent_viewer, "--name", "s"],
+        cwd=workdir, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )  # fmt: skip
+    try:
+        out, err = process.communicate(timeout=HANG_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.communicate()
+        pytest.fail("cartctl run hung on a viewer that never answers")
+    assert process.returncode == 0, err
+    assert "Traceback" not in err
+    lines = err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("cartctl run: warning: Rerun recording"), err
+    assert f"the Rerun viewer at {silent_viewer} did not answer" in lines[0]
+    summary = json.loads(out)
+    rows = rrd_rows(workdir / "logs" / "s.rrd")  # readable, every row
+    assert rows["motor/a/voltage"] == summary["ticks"] > 90
+
+
+def _sink_with_rows(path: Path, url: str) -> RerunSink:
+    sink = RerunSink("connect", path, connect_url=url)
+    sink.open(["time_s", "speed_a"])
+    for k in range(50):
+        sink.write([k * 0.01, float(k)])
+    return sink
+
+
+def test_closing_waits_briefly_for_a_silent_viewer_after_a_stop_signal(
+    tmp_path: Path, silent_viewer: str, monkeypatch: pytest.MonkeyPatch, rrd_rows
+) -> None:
+    sink = _sink_with_rows(tmp_path / "r.rrd", silent_viewer)
+    monkeypatch.setattr(stopping, "received", lambda: 2)  # a Ctrl-C came: leave at once
+    closing = threading.Thread(target=sink.close, daemon=True)  # the old SDK call never returned
+    start = time.monotonic()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        closing.start()
+        closing.join(HANG_TIMEOUT_S)
+    assert not closing.is_alive(), "closing the recording hung on a viewer that never answers"
+    assert time.monotonic() - start < 3.0
+    assert [type(w.message) for w in caught] == [RecordingWarning]
+    assert "did not answer: its stream may be incomplete" in str(caught[0].message)
+    assert rrd_rows(tmp_path / "r.rrd")["motor/a/speed"] == 50
