@@ -524,3 +524,33 @@ def test_identify_report_whose_summary_is_a_folder_is_refused_first(
         f"cartctl identify: error: --report {report / 'summary.md'}: is a folder, not a file\n"
     )
     assert tree(tmp_path) == before
+
+
+def test_a_screenshot_on_a_full_disk_is_a_fault_not_a_missing_driver(
+    inputs: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The viewer failing to save the picture (its error, as rerun-sdk 0.2x words it for a full
+    disk: seen on a 32 kB tmpfs) read 'the headless viewer could not render (<a raw log line of
+    the viewer>); it needs a Vulkan driver'; it is exit 1 naming the file."""
+    from rerun.experimental import ViewerClient
+
+    from cartctl.cli.commands.review import recording
+
+    if not recording.vulkan_available():
+        pytest.skip("no Vulkan driver (apt-get install mesa-vulkan-drivers libvulkan1)")
+
+    def full(self: object, file_path: str, view_id: object = None) -> None:
+        raise ConnectionError(
+            f"Failed to save screenshot to {file_path}: No space left on device (os error 28) "
+            '(Internal)\n- metadata: {"content-type": "application/grpc"}'
+        )
+
+    monkeypatch.setattr(ViewerClient, "save_screenshot", full)
+    out = tmp_path / "s.png"
+    assert main(["review", str(inputs / "r.rrd"), "--screenshot", str(out)]) == 1
+    assert capsys.readouterr().err == (
+        f"cartctl review: error: {out} is incomplete: No space left on device\n"
+    )

@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import glob
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -20,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 from urllib.parse import quote
 from uuid import uuid4
 
-from cartctl.errors import CartctlError, DataFileError, InputError, MissingFileError
+from cartctl.errors import CartctlError, DataFileError, InputError, MissingFileError, OutputError
 from cartctl.sinks.rerun_problems import (
     VIEWER_PORT,
     VIEWER_URL,
@@ -301,7 +302,11 @@ def screenshot(path: Path, out: Path, *, extra: Series | None = None) -> Path:
         except (RuntimeError, ConnectionError, OSError, TimeoutError) as exc:
             if viewer is None:  # it could not be started: the system's own error
                 raise
-            reason = _viewer_failure(log_path) or str(exc).splitlines()[0]
+            first = str(exc).partition("\n")[0]
+            why = re.sub(r"( \((os error \d+|Internal)\))+$", "", first).split(f"{out}: ", 1)
+            if first.startswith("Failed to save screenshot to ") and len(why) == 2:  # a full disk
+                raise OutputError(out, why[1]) from None
+            reason = _viewer_failure(log_path) or first
             raise _needs_vulkan(f"the headless viewer could not render ({reason})") from None
         finally:  # the viewer is in a session of its own: a Ctrl-C does not reach it
             with held():
