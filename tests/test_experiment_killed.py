@@ -7,6 +7,7 @@ a fixed tick (no timing): blocks of 1000 rows on a simulated plant, so 2000 rows
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -127,3 +128,27 @@ def test_a_cart_experiment_writes_its_blocks_between_a_command_and_the_next_tick
     assert [cart.sizes[k][0] for k in grew] == ["receive", "receive"]  # rows 50 and 100
     assert len(grew) == 2 and read_trace(path).speed_a.tolist() == result.trace.speed_a.tolist()
     assert path.read_text().splitlines()[0] == "time_s,voltage_a,voltage_b,speed_a,speed_b"
+
+
+def test_a_stop_signal_while_a_cart_experiments_block_is_written_keeps_the_block(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, stop_handlers: None
+) -> None:
+    """Ctrl-C while a block of 50 rows goes to the file (after the command, before the next
+    tick): the block is written whole, then the experiment stops; it was taken from the sink and
+    lost (the file held the header only while the result, and excite's line, had 50 rows)."""
+    original, calls = CsvSink._take_text, []
+
+    def take_text(self: CsvSink) -> bytes:
+        data = original(self)
+        calls.append(len(data))
+        if len(calls) == 2:  # the header, then the first block
+            os.kill(os.getpid(), signal.SIGINT)
+        return data
+
+    monkeypatch.setattr(CsvSink, "_take_text", take_text)
+    path = tmp_path / "cart.csv"
+    result = run_experiment(
+        _Cart(path), np.ones(120), np.zeros(120), sink=CsvSink(path, flush_every=50)
+    )
+    assert result.interrupted and len(result.trace) == 50
+    assert read_trace(path).speed_a.tolist() == result.trace.speed_a.tolist()

@@ -319,7 +319,8 @@ def run_experiment(
                     sink.write([np.nan if v is None else float(v) for v in row[:width]])
             if idle is not None:  # a cart: the block written after the command, as run's loop
                 plant.send(float(ua[k]), float(ub[k]))  # type: ignore[attr-defined]
-                idle()
+                with held():  # the block written whole: a stop signal waits for it
+                    idle()
                 y = plant.receive()  # type: ignore[attr-defined]
             else:
                 y = plant.step(float(ua[k]), float(ub[k]))
