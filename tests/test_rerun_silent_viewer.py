@@ -48,26 +48,43 @@ def silent_viewer() -> Iterator[str]:
     thread.join(5)
 
 
-def test_run_streaming_to_a_silent_viewer_ends(workdir: Path, silent_viewer: str, rrd_rows) -> None:
+def _cartctl(workdir: Path, *argv: str) -> tuple[str, str]:
+    """Run ``cartctl ARGV`` to its end (a failure if it hangs); its stdout and stderr."""
     process = subprocess.Popen(
-        [sys.executable, "-m", "cartctl", "run", "--fast", "--duration", "1", "--json",
-         "--rerun", "connect", "--connect-url", silent_viewer, "--name", "s"],
-        cwd=workdir, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        [sys.executable, "-m", "cartctl", *argv], cwd=workdir, text=True,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE,
     )  # fmt: skip
     try:
         out, err = process.communicate(timeout=HANG_TIMEOUT_S)
     except subprocess.TimeoutExpired:
         process.kill()
         process.communicate()
-        pytest.fail("cartctl run hung on a viewer that never answers")
+        pytest.fail(f"cartctl {argv[0]} hung on a viewer that never answers")
     assert process.returncode == 0, err
     assert "Traceback" not in err
+    return out, err
+
+
+def test_run_streaming_to_a_silent_viewer_ends(workdir: Path, silent_viewer: str, rrd_rows) -> None:
+    out, err = _cartctl(workdir, "run", "--fast", "--duration", "1", "--json",
+                        "--rerun", "connect", "--connect-url", silent_viewer, "--name", "s")  # fmt: skip
     lines = err.splitlines()
     assert len(lines) == 1 and lines[0].startswith("cartctl run: warning: Rerun recording"), err
     assert f"the Rerun viewer at {silent_viewer} did not answer" in lines[0]
     summary = json.loads(out)
     rows = rrd_rows(workdir / "logs" / "s.rrd")  # readable, every row
     assert rows["motor/a/voltage"] == summary["ticks"] > 90
+
+
+def test_monitor_streaming_to_a_silent_viewer_ends(
+    workdir: Path, silent_viewer: str, rrd_rows
+) -> None:
+    out, err = _cartctl(workdir, "monitor", "virtual", "--duration", "1", "--json",
+                        "--rerun", "connect", "--connect-url", silent_viewer, "--name", "m")  # fmt: skip
+    warned = [line for line in err.splitlines() if line.startswith("cartctl monitor:")]
+    assert len(warned) == 1 and f"the Rerun viewer at {silent_viewer} did not answer" in warned[0]
+    frames = json.loads(out)["frames"]
+    assert rrd_rows(workdir / "logs" / "m.rrd")["gpio/speed_a"] == frames > 50
 
 
 def _sink_with_rows(path: Path, url: str) -> RerunSink:
