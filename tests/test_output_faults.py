@@ -554,3 +554,38 @@ def test_a_screenshot_on_a_full_disk_is_a_fault_not_a_missing_driver(
     assert capsys.readouterr().err == (
         f"cartctl review: error: {out} is incomplete: No space left on device\n"
     )
+
+
+@needs_dev_full
+@pytest.mark.parametrize(
+    ("argv", "name"),
+    [
+        (["identify", "{i}/ex.csv", "--out", "{f}"], "m.toml"),
+        (["design", "models/ground.toml", "--method", "pi", "--out", "{f}"], "c.toml"),
+        (["design", "models/ground.toml", "--method", "pi", "--report", "{d}"], "design_a.png"),
+        (["validate", "models/ground.toml", "{i}/ex.csv", "--plot", "{f}"], "v.png"),
+        (["tune", "models/ground.toml", "--method", "pi", "--plot", "{f}"], "t.png"),
+        (
+            ["tune", "models/ground.toml", "--method", "pi", "--choose", "5", "--out", "{f}"],
+            "t.toml",
+        ),
+        (["export", "controllers/pi.toml", "--arduino", "--out", "{f}"], "c.h"),
+        (["export", "controllers/pi.toml", "--mat", "{f}"], "c.mat"),
+        (["convert", "{i}/ex.csv", "--out", "{f}"], "c.csv"),
+    ],
+    ids=lambda v: v[0] + " " + v[-2] if isinstance(v, list) else v,
+)
+def test_a_file_on_a_full_disk_is_a_fault_naming_it(
+    argv: list[str], name: str, inputs: Path, tmp_path: Path,
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+) -> None:  # fmt: skip
+    """A model, controller, figure, export or converted trace on a full disk was a bare 'No space
+    left on device', exit 2 (a user's mistake), naming no file; it is exit 1 naming the file, as
+    a run's trace."""
+    monkeypatch.chdir(ROOT)
+    (tmp_path / name).symlink_to(FULL)
+    words = [w.format(i=inputs, f=tmp_path / name, d=tmp_path) for w in argv]
+    assert main(words) == 1
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        f"cartctl {argv[0]}: error: {tmp_path / name} is incomplete: No space left on device"
+    )

@@ -13,6 +13,7 @@ from typing import Any
 import tomli_w
 
 from cartctl.choices import find_file
+from cartctl.data.outputs import writing
 from cartctl.data.tomlfile import MODEL_FORMAT, check_format, read_loop_delay, read_toml, require
 from cartctl.errors import CartctlError, DataFileError, InputError
 from cartctl.model import ArxModel
@@ -95,7 +96,8 @@ def save_models(models: ModelFile, path: str | Path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     header = "# cartctl motor models: theta = [a_1..a_na, b_0..b_nb-1], the report's [c, d, a, b]\n"
-    path.write_text(header + tomli_w.dumps(models.to_toml_dict()), encoding="utf-8")
+    with writing(path):
+        path.write_text(header + tomli_w.dumps(models.to_toml_dict()), encoding="utf-8")
     return path
 
 

@@ -6,11 +6,12 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
-from cartctl.errors import InputError
+from cartctl.errors import InputError, OutputError
 
-__all__ = ["check_output_file", "check_output_folder"]
+__all__ = ["check_output_file", "check_output_folder", "writing"]
 
 
 def check_output_folder(folder: str | Path, option: str) -> Path:
@@ -22,6 +23,18 @@ def check_output_folder(folder: str | Path, option: str) -> Path:
     if why is not None:
         raise InputError(f"{option} {folder}: {why}")
     return folder
+
+
+@contextlib.contextmanager
+def writing(path: str | Path) -> Iterator[None]:
+    """A block writing ``path``: an OSError in it (a full disk) is an :class:`OutputError` naming
+    the file, exit 1 as a run's trace, not the bare reason (exit 2, no file)."""
+    try:
+        yield
+    except OutputError:
+        raise
+    except OSError as exc:
+        raise OutputError(path, exc.strerror or str(exc)) from None
 
 
 def check_output_file(path: str | Path, option: str) -> Path:

@@ -17,6 +17,7 @@ import numpy as np
 import tomli_w
 from numpy.typing import ArrayLike
 
+from cartctl.data.outputs import writing
 from cartctl.data.tomlfile import TRACE_META_FORMAT, read_loop_delay, read_toml
 from cartctl.errors import DataFileError, InputError
 
@@ -222,7 +223,7 @@ def write_trace(
                 f"cannot write column {list(columns)[j]!r} as integers: it has fractions"
             )
     path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", encoding="utf-8", newline="") as file:
+    with writing(path), path.open("w", encoding="utf-8", newline="") as file:
         writer = csv.writer(file, lineterminator="\n")  # str of a Python float: shortest exact
         writer.writerow(columns)
         for start in range(0, len(data), _WRITE_CHUNK_ROWS):

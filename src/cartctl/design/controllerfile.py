@@ -19,6 +19,7 @@ import tomli_w
 from cartctl.cart import check_voltage_limit, encoder_quantum_rad_s
 from cartctl.choices import find_file
 from cartctl.data import tomlfile
+from cartctl.data.outputs import writing
 from cartctl.data.tomlfile import CONTROLLER_FORMAT, check_format, read_toml, require
 from cartctl.design.controller_ss import (
     consistency_problems,
@@ -219,7 +220,8 @@ def save_controller(controller: ControllerFile, path: str | Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     header = f"# cartctl controller ({controller.method}); regenerate with: {controller.command}\n"
     document = controller.to_toml_dict(path.parent)
-    path.write_text(header + tomli_w.dumps(document), encoding="utf-8")
+    with writing(path):
+        path.write_text(header + tomli_w.dumps(document), encoding="utf-8")
     return path
 
 

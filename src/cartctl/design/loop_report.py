@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from cartctl.data.outputs import writing
 from cartctl.design.analysis import settling_bound
 from cartctl.design.controller_ss import controller_state_space
 from cartctl.design.make import Designs, MotorAnalysis
@@ -110,7 +111,8 @@ def write_report(out_dir: str | Path, designs: Designs) -> list[Path]:
         }
         for name, figure in figures.items():
             paths.append(out / f"{name}_{m}.png")
-            figure.savefig(paths[-1])
+            with writing(paths[-1]):
+                figure.savefig(paths[-1])
     return paths
 
 

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from cartctl.data.modelfile import ModelFile
+from cartctl.data.outputs import writing
 from cartctl.data.tomlfile import CONTROLLER_FORMAT, MODEL_FORMAT
 from cartctl.design.controller_ss import controller_state_space, feedback_gains
 from cartctl.design.controllerfile import ControllerFile, build_controllers
@@ -95,5 +96,6 @@ def write_mat(variables: Mapping[str, Any], path: str | Path) -> Path:
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    scipy.io.savemat(path, dict(variables), oned_as="row", do_compression=True)
+    with writing(path):
+        scipy.io.savemat(path, dict(variables), oned_as="row", do_compression=True)
     return path

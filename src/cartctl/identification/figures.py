@@ -14,7 +14,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from cartctl.errors import InputError, OutputError
+from cartctl.data.outputs import writing
+from cartctl.errors import InputError
 from cartctl.identification.etfe import Etfe, model_response
 from cartctl.measures.metrics import fit_percent
 from cartctl.model import ArxModel
@@ -54,10 +55,8 @@ def figure(width_in: float, height_in: float, path: Path, title: str) -> Iterato
         yield fig
         fig.suptitle(title)
         Path(path).parent.mkdir(parents=True, exist_ok=True)
-        try:
+        with writing(path):  # a full disk: a fault naming the figure
             fig.savefig(path, dpi=DPI)
-        except OSError as exc:  # a full disk: a fault naming the figure
-            raise OutputError(path, exc.strerror or str(exc)) from None
 
 
 def color(i: int) -> str:

@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 
 from cartctl.data.modelfile import ModelFile
+from cartctl.data.outputs import writing
 from cartctl.data.trace import Trace
-from cartctl.errors import OutputError
 from cartctl.identification import figures
 from cartctl.identification.etfe import etfe, find_period
 from cartctl.identification.pipeline import IdentifyRequest, IdentifyResult, MotorIdentification
@@ -65,10 +65,8 @@ def write_summary(out_dir: Path, *, title: str, sections: Sequence[ReportSection
         if section.table:
             lines += [_table(section.table), ""]
     path = out_dir / "summary.md"
-    try:
+    with writing(path):  # a full disk: a fault naming the file, as a figure's
         path.write_text("\n".join(lines), encoding="utf-8")
-    except OSError as exc:  # a full disk: a fault naming the file, as a figure's
-        raise OutputError(path, exc.strerror or str(exc)) from None
     return path
 
 

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from cartctl.data.outputs import writing
 from cartctl.tune.grid import TuneResult
 from cartctl.tune.robust import RobustRow
 
@@ -127,7 +128,8 @@ def _finish(fig: Any, ax: Any, front: Sequence[tuple[float, float, int]],
         legend.get_texts()[-1].set_text(_unplaced_note(unplaced) if unplaced
                                         else "every ringed point has its #")  # fmt: skip
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
+    with writing(path):
+        fig.savefig(path)
 
 
 def plot_tuning(path: str, method: str, results: Sequence[TuneResult]) -> None:

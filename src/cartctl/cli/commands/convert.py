@@ -46,6 +46,7 @@ def summary(trace: Trace) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     from cartctl.cli.jsonout import dumps
+    from cartctl.data.outputs import writing
     from cartctl.data.read import read_trace
     from cartctl.data.trace import meta_path, write_trace
 
@@ -58,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
         own, beside = meta_path(args.file), meta_path(args.out)  # the loop it was recorded in
         if beside.resolve() != own.resolve():  # converted onto itself: its own is kept
             if own.is_file():  # carried over, replacing an earlier trace's of that name
-                shutil.copyfile(own, beside)
+                with writing(beside):
+                    shutil.copyfile(own, beside)
             else:
                 beside.unlink(missing_ok=True)  # an earlier trace's of that name
     if args.json:

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import cartctl.cli.commands.options as options
+from cartctl.data.outputs import writing
 from cartctl.data.tomlfile import CONTROLLER_FORMAT, MODEL_FORMAT, READABLE
 from cartctl.errors import DataFileError, InputError
 
@@ -126,7 +127,8 @@ def _write_arduino(args: argparse.Namespace) -> None:
     if args.out:
         path = Path(args.out)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(source, encoding="utf-8")
+        with writing(path):
+            path.write_text(source, encoding="utf-8")
         print(f"wrote {args.out}")
     else:
         print(source, end="")

@@ -68,11 +68,13 @@ def show(args: argparse.Namespace, doc: dict[str, Any], text: str, figure: Any) 
     """``figure()`` saved to ``--plot`` (if given), then ``doc`` as JSON or ``text`` and where the
     figure went (validate's and linearity's output)."""
     from cartctl.cli.jsonout import dumps
+    from cartctl.data.outputs import writing
 
     path = None if args.plot is None else Path(args.plot)
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
-        figure().savefig(path, format="png", dpi=120)
+        with writing(path):
+            figure().savefig(path, format="png", dpi=120)
     print(dumps(doc) if args.json else text)
     if path is not None and not args.json:
         print(f"\nwrote {path}")
