@@ -111,3 +111,34 @@ def test_closing_waits_briefly_for_a_silent_viewer_after_a_stop_signal(
     assert [type(w.message) for w in caught] == [RecordingWarning]
     assert "did not answer: its stream may be incomplete" in str(caught[0].message)
     assert rrd_rows(tmp_path / "r.rrd")["motor/a/speed"] == 50
+
+
+def test_review_into_a_silent_viewer_ends(
+    tmp_path: Path, silent_viewer: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from cartctl.cli.commands.review import recording
+
+    path = tmp_path / "r.rrd"
+    sink = RerunSink("save", path)
+    sink.open(["time_s", "speed_a"])
+    sink.write([0.0, 1.0])
+    sink.close()
+    # the silent server is the viewer already running at the viewer's port: review uses it
+    monkeypatch.setattr(recording, "VIEWER_URL", silent_viewer)
+    monkeypatch.setattr(recording, "VIEWER_PORT", int(silent_viewer.split(":")[2].split("/")[0]))
+    monkeypatch.setattr(recording, "LOAD_TIMEOUT_S", 1.0)  # its flush gives up, as it did
+    monkeypatch.setenv("DISPLAY", ":99")
+    raised: list[BaseException] = []
+
+    def review() -> None:
+        try:
+            recording.open_in_viewer(path)
+        except BaseException as exc:
+            raised.append(exc)
+
+    reviewing = threading.Thread(target=review, daemon=True)  # the old SDK call never returned
+    reviewing.start()
+    reviewing.join(HANG_TIMEOUT_S)
+    assert not reviewing.is_alive(), "review hung on a viewer that never answers"
+    assert [type(e) for e in raised] == [recording.ViewerError]
+    assert f"the Rerun viewer at {silent_viewer} did not answer" in str(raised[0])

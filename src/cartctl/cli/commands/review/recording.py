@@ -25,6 +25,7 @@ from cartctl.errors import CartctlError, DataFileError, InputError, MissingFileE
 from cartctl.sinks.rerun_problems import (
     VIEWER_PORT,
     VIEWER_URL,
+    disconnect,
     display_available,
     viewer_env,
     viewer_executable,
@@ -233,8 +234,11 @@ def open_in_viewer(path: Path, *, extra: Series | None = None) -> str:
         raise ViewerError(
             f"could not hand the recording to the viewer at {VIEWER_URL}: {exc}"
         ) from None
-    finally:
-        rec.disconnect()
+    finally:  # bounded: a viewer that took the connection may never answer (Ctrl-Z)
+        try:
+            disconnect(rec, VIEWER_URL, None)
+        except TimeoutError as exc:
+            raise ViewerError(str(exc)) from None
     return VIEWER_URL
 
 
