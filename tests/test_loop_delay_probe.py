@@ -191,6 +191,7 @@ def test_a_spread_delay_warns_runs_and_shows_in_the_summary(
 
 
 @pytest.mark.realtime
+@pytest.mark.filterwarnings("always::cartctl.errors.DataWarning")
 def test_a_clean_virtual_cart_measures_one_tick(
     capsys: pytest.CaptureFixture[str], workdir: Path
 ) -> None:
@@ -198,6 +199,8 @@ def test_a_clean_virtual_cart_measures_one_tick(
     assert code == 0, err
     summary = json.loads(out)
     link = summary["link"]
+    # a busy machine holds the host up: the probe's echoes spread (seen: 1 tick in 32 of 50), it
+    # warns 'not clear' and runs; the delay it names is still the most frequent one, 1 tick
     assert summary["loop_delay_ticks"] == link["loop_delay_probe"]["ticks"] == 1
     assert link["loop_delay_probe"]["echoes"] >= MIN_ECHOES
     seen = {int(d): n for d, n in link["loop_delay_ticks_seen"].items()}

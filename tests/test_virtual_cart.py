@@ -14,6 +14,7 @@ import os
 import signal
 import tty
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -26,7 +27,12 @@ from cartctl.errors import PlantError
 from cartctl.link.bridge import HostCommand
 from cartctl.link.dialect import Framer, Gpio
 from cartctl.link.serial_cart import PROBE_ECHOES, SerialCart
-from cartctl.link.virtual_cart import CartFaults, VirtualCart, VirtualSerialCart
+from cartctl.link.virtual_cart import (
+    SILENCE_TIMEOUT_S,
+    CartFaults,
+    VirtualCart,
+    VirtualSerialCart,
+)
 from realtime_upsets import link_upsets
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,6 +46,22 @@ def delay_controller(tmp_path_factory: pytest.TempPathFactory) -> Path:
                  "65", "--crossover-hz", "4", "--extra-delay", "0", "--out", str(path)])  # fmt: skip
     assert code == 0
     return path
+
+
+class _InProcessCart(SerialCart):
+    """``serial:PORT`` on a :class:`VirtualCart` of this process: silent after the virtual cart's
+    0.5 s, as ``--plant virtual`` waits, not a real cart's 0.1 s. The cart is threads of this
+    process, not the loop's SCHED_FIFO one: on a busy machine they were held up past 0.1 s (1 run
+    in 30 with a core busy: 'no data from the cart ... for 100 ms')."""
+
+    def __init__(self, port: str, **options: Any) -> None:
+        super().__init__(port, silence_timeout_s=SILENCE_TIMEOUT_S, **options)
+
+
+@pytest.fixture
+def in_process_cart(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--plant serial:PORT`` builds an :class:`_InProcessCart`."""
+    monkeypatch.setattr("cartctl.link.serial_cart.SerialCart", _InProcessCart)
 
 
 # Real time on a shared machine: a skipped cart tick leaves a gap that read_trace warns about.
@@ -61,7 +83,7 @@ def _error_lines(err: str) -> list[str]:
 
 @pytest.mark.realtime
 def test_closed_loop_tracks_8_rad_s_reports_the_delay_and_ends_at_zero_volts(
-    capsys: pytest.CaptureFixture[str], workdir: Path, delay_controller: Path
+    capsys: pytest.CaptureFixture[str], workdir: Path, delay_controller: Path, in_process_cart: None
 ) -> None:
     with VirtualCart(seed=1) as cart:
         code, summary, err = _cli(capsys, "run", "--plant", f"serial:{cart.port}", "--controller",
