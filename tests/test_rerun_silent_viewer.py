@@ -18,12 +18,14 @@ from pathlib import Path
 import pytest
 
 from cartctl import stopping
+from cartctl.sinks import rerun_problems
 from cartctl.sinks.rerun_sink import RecordingWarning, RerunSink
 
 HANG_TIMEOUT_S = 60.0  # far above the run's own bounded wait (seconds)
 
-# the file waits behind the stream in the SDK: it is cut to its whole messages, with no footer
-pytestmark = pytest.mark.filterwarnings("ignore:RRD file has no footer")
+# the wait for the viewer is on the wall clock (5 s; monitor's cart behind a pseudo-terminal); the
+# file waits behind the stream in the SDK: it is cut to its whole messages, with no footer
+pytestmark = [pytest.mark.realtime, pytest.mark.filterwarnings("ignore:RRD file has no footer")]
 
 
 @pytest.fixture
@@ -42,6 +44,7 @@ def silent_viewer() -> Iterator[str]:
     thread = threading.Thread(target=accept, daemon=True)
     thread.start()
     yield f"rerun+http://127.0.0.1:{server.getsockname()[1]}/proxy"
+    server.shutdown(socket.SHUT_RDWR)  # wakes accept() (close alone does not)
     server.close()
     for conn in accepted:
         conn.close()
@@ -127,6 +130,7 @@ def test_review_into_a_silent_viewer_ends(
     monkeypatch.setattr(recording, "VIEWER_URL", silent_viewer)
     monkeypatch.setattr(recording, "VIEWER_PORT", int(silent_viewer.split(":")[2].split("/")[0]))
     monkeypatch.setattr(recording, "LOAD_TIMEOUT_S", 1.0)  # its flush gives up, as it did
+    monkeypatch.setattr(rerun_problems, "VIEWER_WAIT_S", 1.0)  # and the connection's end too
     monkeypatch.setenv("DISPLAY", ":99")
     raised: list[BaseException] = []
 
