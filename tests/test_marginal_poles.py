@@ -85,3 +85,17 @@ def test_design_says_marginally_stable_for_an_integrator(
         assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
         assert "marginally stable" in err and "is unstable" not in err
         assert not (tmp_path / "c.toml").exists()
+
+
+def test_validate_names_a_marginal_model_so(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """validate said 'unstable' of an integrator, as inspect and design no longer do."""
+    data = tmp_path / "sq.csv"
+    code, _, _ = _cli(capsys, "excite", "--plant", "sim", "--signal", "square", "--amplitude",
+                      "6", "--out", str(data))  # fmt: skip
+    assert code == 0
+    for poles, word in (([1.0, 0.5], "marginally stable"), ([2.0, 0.5], "unstable")):
+        code, out, err = _cli(capsys, "validate", str(_model(tmp_path, poles)), str(data))
+        assert f"motor a's model is {word} (pole at |z| = {max(np.abs(poles)):.4g})" in err
+        assert f"motor a: the model is {word} (pole at" in out

@@ -57,7 +57,8 @@ class ValidationResult:
     """A model simulated on one motor's recorded input against the measured speed (rad/s, V, s):
     the NRMSE fit of :func:`~cartctl.identification.arx.simulation_fit` (NaN for a constant speed,
     −inf for an unstable model), the step comparison for a single step from 0 V, and
-    ``unstable_pole`` |z| of an unstable model, whose simulation runs away (no fit, no step)."""
+    ``unstable_pole`` |z| of a model that is not stable, whose simulation runs away or drifts (no
+    fit, no step), with its ``stability`` (:meth:`~cartctl.model.ArxModel.stability`)."""
 
     motor: str
     fit_simulation_percent: float
@@ -68,6 +69,7 @@ class ValidationResult:
     abs_error_rad_s: np.ndarray = field(repr=False)
     step: StepComparison | None = None
     unstable_pole: float | None = None
+    stability: str = "stable"
 
     def error_summary(self) -> dict[str, float]:
         """Max, mean and RMS of the absolute error (rad/s)."""
@@ -121,6 +123,7 @@ def validate(model: ArxModel, trace: Trace, motor: str) -> ValidationResult:
         if stable
         else None,
         unstable_pole=None if stable else model.pole_radius(),
+        stability=model.stability(),
     )
 
 

@@ -118,8 +118,8 @@ _STEP_ROWS = (  # label, StepInfo field, format
 def format_result(r: ValidationResult) -> list[str]:
     if r.unstable_pole is not None:
         return [
-            f"motor {r.motor}: the model is unstable (pole at |z| = {r.unstable_pole:.4g}): its "
-            "simulation runs away from any input, so there is no fit to show"
+            f"motor {r.motor}: the model is {r.stability} (pole at |z| = {r.unstable_pole:.4g}): "
+            "its simulation runs away or drifts, so there is no fit to show"
         ]
     e = r.error_summary()
     lines = [
@@ -184,7 +184,7 @@ def run(args: argparse.Namespace) -> int:
     for r in validation.results.values():
         if r.unstable_pole is not None:
             say(
-                f"warning: {args.model}: motor {r.motor}'s model is unstable (pole at |z| = "
+                f"warning: {args.model}: motor {r.motor}'s model is {r.stability} (pole at |z| = "
                 f"{r.unstable_pole:.4g}); identify it again"
             )
     text = format_table(validation)
