@@ -163,7 +163,10 @@ def disconnect(rec: Any, viewer_url: str, path: Path | None) -> None:
             failed.append(exc)
 
     thread = threading.Thread(target=close, name="rerun-disconnect", daemon=True)
-    thread.start()
+    try:
+        thread.start()
+    except RuntimeError:  # at the interpreter's exit Python 3.12+ starts no thread: close here
+        close()
     start = time.monotonic()
     try:
         while thread.is_alive():
