@@ -146,33 +146,3 @@ def test_review_into_a_silent_viewer_ends(
     assert not reviewing.is_alive(), "review hung on a viewer that never answers"
     assert [type(e) for e in raised] == [recording.ViewerError]
     assert f"the Rerun viewer at {silent_viewer} did not answer" in str(raised[0])
-
-
-def test_closing_at_the_interpreters_exit_closes_without_a_thread(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    """At exit Python 3.12+ refuses new threads (RuntimeError): the recording still closes, in
-    order (flush, the file's footer, disconnect), on the calling thread."""
-    import rerun_bindings
-
-    calls: list[str] = []
-
-    class Recording:
-        def flush(self, timeout_sec: float) -> None:
-            calls.append("flush")
-
-        def to_native(self) -> object:
-            return self
-
-        def disconnect(self) -> None:
-            calls.append("disconnect")
-
-    def refuse(self: threading.Thread) -> None:
-        raise RuntimeError("can't create new thread at interpreter shutdown")
-
-    monkeypatch.setattr(threading.Thread, "start", refuse)
-    monkeypatch.setattr(
-        rerun_bindings, "finalize_deferred_sinks", lambda recording: calls.append("footer")
-    )
-    rerun_problems.disconnect(Recording(), "rerun+http://127.0.0.1:1/proxy", None)
-    assert calls == ["flush", "footer", "disconnect"]

@@ -412,3 +412,37 @@ def test_review_screenshot_draws_the_lines(
 
     for entity in ("motor/a/speed", "motor/a/voltage", "loop/period_error_us"):
         assert pixels_near(entity) > 300, entity
+
+
+def test_closing_at_the_interpreters_exit_closes_without_a_thread(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """At exit Python 3.12+ refuses new threads (RuntimeError): the recording still closes, in
+    order (flush, the file's footer, disconnect), on the calling thread."""
+    import threading
+
+    import rerun_bindings
+
+    from cartctl.sinks.rerun_problems import disconnect
+
+    calls: list[str] = []
+
+    class Recording:
+        def flush(self, timeout_sec: float) -> None:
+            calls.append("flush")
+
+        def to_native(self) -> object:
+            return self
+
+        def disconnect(self) -> None:
+            calls.append("disconnect")
+
+    def refuse(self: threading.Thread) -> None:
+        raise RuntimeError("can't create new thread at interpreter shutdown")
+
+    monkeypatch.setattr(threading.Thread, "start", refuse)
+    monkeypatch.setattr(
+        rerun_bindings, "finalize_deferred_sinks", lambda recording: calls.append("footer")
+    )
+    disconnect(Recording(), "rerun+http://127.0.0.1:1/proxy", None)
+    assert calls == ["flush", "footer", "disconnect"]
