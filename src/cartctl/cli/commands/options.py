@@ -4,6 +4,7 @@ no numpy or scipy here; names, limits and defaults come from :mod:`cartctl.choic
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 import sys
 from datetime import datetime
@@ -18,6 +19,7 @@ from cartctl.choices import (
     SIGNALS,
     check_duration,
     check_finite,
+    find_file,
 )
 from cartctl.data.outputs import check_output_file, check_output_folder
 from cartctl.errors import InputError
@@ -108,9 +110,12 @@ def add_rerun_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--connect-url", metavar="URL", help="viewer address for --rerun connect")
 
 
-def check_run_outputs(args: argparse.Namespace, prefix: str) -> tuple[Path, Path]:
-    """The trace (``.csv``) and recording (``.rrd``) paths of ``--out`` and ``--name``, checked;
-    without ``--name`` ``PREFIX-YYYYmmdd-HHMMSS``, with ``-2``, ``-3`` … when that run exists;
+def check_run_outputs(
+    args: argparse.Namespace, prefix: str, inputs: tuple[str, ...] = ()
+) -> tuple[Path, Path]:
+    """The trace (``.csv``) and recording (``.rrd``) paths of ``--out`` and ``--name``, checked
+    (none may be one of the ``inputs``, as in :func:`check_outputs`); without ``--name``
+    ``PREFIX-YYYYmmdd-HHMMSS``, with ``-2``, ``-3`` … when that run exists;
     ``--connect-url`` only with ``--rerun connect``."""
     if args.connect_url and args.rerun != "connect":
         raise InputError(f"--connect-url is for --rerun connect, not --rerun {args.rerun}")
@@ -121,7 +126,10 @@ def check_run_outputs(args: argparse.Namespace, prefix: str) -> tuple[Path, Path
         n += 1
         candidate = f"{stem}-{n}"
     for suffix in (".csv", ".rrd", ".meta.toml"):
-        check_output_file(out / f"{candidate}{suffix}", "--out")
+        path = out / f"{candidate}{suffix}"
+        if any(_same(str(path), Path(read)) for read in inputs):
+            raise InputError(f"--out {path} is a file this command reads; give another --name")
+        check_output_file(path, "--out")
     return out / f"{candidate}.csv", out / f"{candidate}.rrd"
 
 
@@ -135,15 +143,22 @@ def check_outputs(
     """The output options given, named by their ``args`` attribute (``"out"`` is ``--out``),
     checked as files or folders before any work; an output file that is one of the ``inputs``
     (the files the command reads) is refused: it would be replaced by another kind of file."""
-    read = {Path(path).resolve() for path in inputs}
+    read = [find_file(path) for path in inputs]  # as the command finds them: a shipped model
     for names, check in ((files, check_output_file), (folders, check_output_folder)):
         for name in names:
             value = getattr(args, name, None)
             option = "--" + name.replace("_", "-")
-            if value and check is check_output_file and Path(value).resolve() in read:
+            if value and check is check_output_file and any(_same(value, p) for p in read):
                 raise InputError(f"{option} {value} is a file this command reads; give another")
             if value:
                 check(value, option)
+
+
+def _same(out: str, read: Path) -> bool:
+    """Whether the output path ``out`` is the file ``read`` (through links, or as paths)."""
+    if os.path.exists(out) and os.path.exists(read):  # (False for a name too long)
+        return os.path.samefile(out, read)
+    return Path(out).resolve() == read.resolve()
 
 
 def command_line(command: str) -> str:

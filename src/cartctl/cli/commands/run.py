@@ -108,7 +108,8 @@ def _checked_outputs(args: argparse.Namespace) -> tuple[Path, Path]:
     check_reference(args.reference, "--reference")
     if args.reference_b:
         check_reference(args.reference_b, "--reference-b")
-    csv_path, rrd_path = options.check_run_outputs(args, "run")
+    files = [spec[5:] for spec in (args.reference, args.reference_b or "") if spec[:5] == "file:"]
+    csv_path, rrd_path = options.check_run_outputs(args, "run", inputs=tuple(files))
     if args.fast and kind not in SIMULATED:
         raise InputError(f"--fast needs a simulated plant (sim or physics), not '{args.plant}'")
     return csv_path, rrd_path
