@@ -4,7 +4,9 @@ QRoboticsCenter log, and write it as the trace CSV every other command reads."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import shutil
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import cartctl.cli.commands.options as options
@@ -63,6 +65,10 @@ def run(args: argparse.Namespace) -> int:
                     shutil.copyfile(own, beside)
             else:
                 beside.unlink(missing_ok=True)  # an earlier trace's of that name
+        stale, own = (Path(path).with_suffix(".rrd").resolve() for path in (args.out, args.file))
+        if stale not in (own, Path(args.out).resolve()):  # an earlier run's would pass for this
+            with contextlib.suppress(OSError):  # trace's recording
+                stale.unlink(missing_ok=True)
     if args.json:
         print(dumps(info))
         return 0

@@ -99,6 +99,10 @@ def run(args: argparse.Namespace) -> int:
         _write_meta(
             args.out, description, None if serial else getattr(plant, "loop_delay_ticks", None)
         )
+        stale = Path(args.out).with_suffix(".rrd")  # an earlier run's of this name would pass
+        with contextlib.suppress(OSError):  # for this trace's recording
+            if stale != Path(args.out):
+                stale.unlink(missing_ok=True)
 
     bar = ProgressBar(volts.size, f"excite {args.signal}")
     switch_interval = sys.getswitchinterval()
