@@ -5,11 +5,15 @@ recording (``X.rrd``) or meta file (``X.meta.toml``) would pass for the new trac
 from __future__ import annotations
 
 import os
+import signal
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from cartctl.cli import main
+from cartctl.errors import PlantError
 
 EXCITE = ["excite", "--amplitude", "5", "--cycles", "1"]
 
@@ -42,3 +46,44 @@ def test_convert_removes_an_earlier_runs_recording(
     Path("x.rrd").write_bytes(b"the trace's own recording")  # converted onto itself: kept
     _ok(capsys, ["convert", "x.csv", "--out", "./x.csv"])
     assert Path("x.rrd").read_bytes() == b"the trace's own recording"
+
+
+def _fails_in_reset(make_plant: Callable[..., Any]) -> Callable[..., Any]:
+    def make(*args: Any, **kwargs: Any) -> Any:
+        plant, description = make_plant(*args, **kwargs)
+        plant.reset = lambda: (_ for _ in ()).throw(PlantError("the plant failed in its reset"))
+        return plant, description
+
+    return make
+
+
+def _stop_signal(start: Callable[..., Any]) -> Callable[..., Any]:
+    def signalled(*args: Any, **kwargs: Any) -> Any:
+        os.kill(os.getpid(), signal.SIGTERM)  # the handler raises at once
+        return start(*args, **kwargs)
+
+    return signalled
+
+
+@pytest.mark.parametrize("stop", ["plant", "signal"])
+def test_a_run_stopped_before_its_first_tick_leaves_an_earlier_runs_files(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path, stop: str
+) -> None:
+    """The meta file was written before the loop: a run that failed in the plant's reset (or was
+    stopped as the loop started) put its meta file beside the earlier run's trace and recording."""
+    from cartctl.cli.commands import run as run_command
+    from cartctl.runtime.loop import ControlLoop
+
+    monkeypatch.chdir(tmp_path)
+    argv = ["run", "--fast", "--duration", "0.3", "--out", ".", "--name", "x"]
+    _ok(capsys, [*argv, "--rerun", "save"])
+    before = {name: Path(name).read_bytes() for name in os.listdir()}
+    assert sorted(before) == ["x.csv", "x.meta.toml", "x.rrd"]
+    if stop == "plant":
+        monkeypatch.setattr(run_command, "make_plant", _fails_in_reset(run_command.make_plant))
+    else:
+        monkeypatch.setattr(ControlLoop, "start", _stop_signal(ControlLoop.start))
+    code = main([*argv, "--rerun", "off", "--model", "models/air.toml"])
+    (line,) = capsys.readouterr().err.splitlines()
+    assert code == (1 if stop == "plant" else 143), line
+    assert {name: Path(name).read_bytes() for name in os.listdir()} == before

@@ -10,7 +10,7 @@ import contextlib
 import csv
 import io
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from cartctl.errors import OutputError
@@ -20,8 +20,15 @@ class CsvSink:
     """Writes the loop's rows to a CSV file (``str`` of each value: shortest exact floats), in
     blocks of ``flush_every`` rows; ``rows_written`` counts the rows the file holds complete."""
 
-    def __init__(self, path: str | Path, *, flush_every: int = 50) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        flush_every: int = 50,
+        on_open: Callable[[], object] | None = None,
+    ) -> None:
         self.path = Path(path)
+        self._on_open = on_open
         self.flush_every = max(1, int(flush_every))
         self._file: io.FileIO | None = None
         self._rows: list[Sequence[float]] = []
@@ -34,12 +41,14 @@ class CsvSink:
         self.error: OutputError | None = None
 
     def open(self, columns: Sequence[str]) -> None:
-        """Create the file (parent folders too) and write the header."""
+        """Create the file (parent folders too) and write the header; then ``on_open()``."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = io.FileIO(self.path, "w")  # unbuffered: each block is one write we can count
         self._width = len(columns)
         self._writer.writerow(columns)
         self._flush()  # the header alone
+        if self._on_open is not None:  # (run's meta file: with the trace, not before it)
+            self._on_open()
 
     def write(self, row: Sequence[float]) -> None:
         """Keep one row, a value per column (ValueError otherwise, and nothing kept)."""

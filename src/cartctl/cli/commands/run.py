@@ -138,27 +138,30 @@ def _prepared(args: argparse.Namespace, given: str) -> PreparedRun:
 def _sinks(
     args: argparse.Namespace, prepared: PreparedRun, given: str, csv_path: Path, rrd_path: Path
 ) -> tuple[list[Any], MemorySink, Any]:
-    """Step 3, the trace's meta file (before the loop: an interrupted run has it too), then where
-    the rows go: the trace, memory (for the summary), the recording (or None), a status line on
-    a terminal."""
+    """Step 3, where the rows go: the trace (and its meta file, written with its header: a run
+    stopped before its first tick leaves an earlier run's files of its name as they were),
+    memory (for the summary), the recording (or None), a status line on a terminal."""
     from cartctl.choices import find_file
     from cartctl.data.trace import write_trace_meta
     from cartctl.runtime.loop import MemorySink
     from cartctl.sinks.csv_sink import CsvSink
 
-    try:
-        write_trace_meta(csv_path, plant=prepared.description,
-                         loop_delay_ticks=prepared.loop_delay_ticks,
-                         command=options.command_line("run"),
-                         controller=prepared.controller_file.path or find_file(given),
-                         model=find_file(prepared.controller_file.model_path))  # fmt: skip
-        if args.rerun == "off":  # an earlier run's of this name would pass for this one's
-            rrd_path.unlink(missing_ok=True)
-    except OSError as exc:  # a full disk: nothing driven yet
-        raise OutputError(exc.filename or csv_path, exc.strerror or str(exc)) from None
+    def write_meta() -> None:
+        try:
+            write_trace_meta(csv_path, plant=prepared.description,
+                             loop_delay_ticks=prepared.loop_delay_ticks,
+                             command=options.command_line("run"),
+                             controller=prepared.controller_file.path or find_file(given),
+                             model=find_file(prepared.controller_file.model_path))  # fmt: skip
+            if args.rerun == "off":  # an earlier run's of this name would pass for this one's
+                rrd_path.unlink(missing_ok=True)
+        except OSError as exc:  # a full disk
+            raise OutputError(exc.filename or csv_path, exc.strerror or str(exc)) from None
+
     memory = MemorySink()
     # on the simulated clock a second of trace takes milliseconds: write it in bigger blocks
-    sinks: list[Any] = [CsvSink(csv_path, flush_every=1000 if args.fast else 50), memory]
+    trace = CsvSink(csv_path, flush_every=1000 if args.fast else 50, on_open=write_meta)
+    sinks: list[Any] = [trace, memory]
     rerun = None
     if args.rerun != "off":
         from cartctl.sinks.rerun_layout import run_ranges
