@@ -122,6 +122,21 @@ def test_identify_carries_the_loop_delay_into_the_model(
     assert models.motor("a").nk == models.motor("b").nk == 2  # one delay for both motors
 
 
+def test_identify_says_why_the_loop_delay_is_unknown(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A meta file without a loop delay (a killed cart excite leaves one) was reported as 'no
+    .meta.toml beside the data'."""
+    data = _sim_trace(tmp_path / "x.csv", 2, 4)
+    assert main(["identify", str(data)]) == 0
+    assert "loop delay: unknown (no .meta.toml beside the data;" in capsys.readouterr().out
+    write_trace_meta(data, plant="cart on /dev/ttyACM0", loop_delay_ticks=None)
+    assert main(["identify", str(data)]) == 0
+    assert "loop delay: unknown (the .meta.toml beside the data records none;" in (
+        capsys.readouterr().out
+    )
+
+
 def _model_file(tmp_path: Path, nk: int, loop_delay_ticks: int | None) -> Path:
     model = ArxModel.from_theta(GROUND_A, nk=nk)
     prov = Provenance(source="test", created="2026-11-25")

@@ -233,6 +233,8 @@ def format_result(
     compare: dict[str, ModelFile],
 ) -> str:
     """The whole human-readable output."""
+    from cartctl.data.trace import meta_path
+
     what = f"{request.method.upper()}, na={request.na} nb={request.nb}"
     if request.prefilter:
         what += f", prefilter {request.prefilter.describe()}"
@@ -252,8 +254,10 @@ def format_result(
             f"geometric mean of the motors' equation-error RMS, rad/s): {evidence}"
         )
     delay = result.loop_delay_ticks
+    meta = any(meta_path(path).is_file() for path in files)  # a killed cart excite's has none
+    why = "the .meta.toml beside the data records none" if meta else "no .meta.toml beside the data"
     lines.append(
-        "loop delay: unknown (no .meta.toml beside the data; --loop-delay N states it)"
+        f"loop delay: unknown ({why}; --loop-delay N states it)"
         if delay is None
         else f"loop delay: {delay} tick(s), written into the model for design"
         + ("" if not result.motors else _nk_remark(result, delay))
