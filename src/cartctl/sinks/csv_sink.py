@@ -42,9 +42,13 @@ class CsvSink:
 
     def open(self, columns: Sequence[str]) -> None:
         """Create the file (parent folders too) and write the header; then ``on_open()``."""
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = io.FileIO(self.path, "w")  # unbuffered: each block is one write we can count
-        self._width = len(columns)
+        self._width = len(columns)  # (rows are taken, and dropped, when the file cannot be made)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._file = io.FileIO(self.path, "w")  # unbuffered: each block is one write we count
+        except OSError as exc:  # its folder gone or made a file since the output check
+            self.error = OutputError(self.path, exc.strerror or str(exc), rows=0)
+            raise self.error from exc
         self._writer.writerow(columns)
         self._flush()  # the header alone
         if self._on_open is not None:  # (run's meta file: with the trace, not before it)
