@@ -39,7 +39,21 @@ def test_a_shipped_model_found_from_another_folder(
     _refused(capsys, argv, f"--out {model}")
     _refused(capsys, ["tune", "models/ground.toml", "--method", "pi", "--choose", "1",
                       "--out", str(model)], "--out")  # fmt: skip
+    excite = ["excite", "--amplitude", "5", "--cycles", "1"]  # the sim plant's default model
+    _refused(capsys, [*excite, "--out", str(model)], "--out")
     assert model.read_bytes() == before
+
+
+def test_excite_onto_its_sim_plants_model(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """excite --model M.toml --out M.toml replaced the model by the trace."""
+    monkeypatch.chdir(tmp_path)
+    shutil.copy(ROOT / "models" / "ground.toml", "m.toml")
+    before = Path("m.toml").read_bytes()
+    argv = ["excite", "--amplitude", "5", "--cycles", "1", "--model", "m.toml", "--out", "./m.toml"]
+    _refused(capsys, argv, "--out ./m.toml")
+    assert sorted(os.listdir()) == ["m.toml"] and Path("m.toml").read_bytes() == before
 
 
 def test_a_hard_link_to_the_model(

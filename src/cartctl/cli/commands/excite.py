@@ -65,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
     from cartctl.signals import make_signal
     from cartctl.sinks.csv_sink import CsvSink
 
-    serial = check_plant_name(args.plant) in ("virtual", "serial")
+    kind = check_plant_name(args.plant)
+    serial = kind in ("virtual", "serial")
     amplitude_v = options.check_finite(args.amplitude, "--amplitude")
     if amplitude_v > SUPPLY_V:
         raise InputError(
@@ -78,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--duration does not apply to the square signal; use --cycles (3 s each)")
     if args.duration is not None:
         options.check_duration(args.duration)
-    options.check_output_file(args.out, "--out")  # before anything is driven
+    read = (args.model,) if kind == "sim" else ()  # the sim plant's model file
+    options.check_outputs(args, files=("out",), inputs=read)  # before anything is driven
     options.check_output_file(meta_path(args.out), "--out")
     volts = make_signal(args.signal, args.amplitude, cycles=args.cycles, duration_s=args.duration)
     ua, ub = (volts if args.motor in (m, "both") else np.zeros_like(volts) for m in "ab")
