@@ -14,7 +14,6 @@ import os
 import signal
 import tty
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
@@ -26,14 +25,9 @@ from cartctl.data.read import read_trace
 from cartctl.errors import PlantError
 from cartctl.link.bridge import HostCommand
 from cartctl.link.dialect import Framer, Gpio
-from cartctl.link.serial_cart import PROBE_ECHOES, SerialCart
-from cartctl.link.virtual_cart import (
-    SILENCE_TIMEOUT_S,
-    CartFaults,
-    VirtualCart,
-    VirtualSerialCart,
-)
-from realtime_upsets import link_upsets
+from cartctl.link.serial_cart import PROBE_ECHOES
+from cartctl.link.virtual_cart import CartFaults, VirtualCart, VirtualSerialCart
+from realtime_upsets import InProcessCart, link_upsets
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -48,20 +42,10 @@ def delay_controller(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-class _InProcessCart(SerialCart):
-    """``serial:PORT`` on a :class:`VirtualCart` of this process: silent after the virtual cart's
-    0.5 s, as ``--plant virtual`` waits, not a real cart's 0.1 s. The cart is threads of this
-    process, not the loop's SCHED_FIFO one: on a busy machine they were held up past 0.1 s (1 run
-    in 30 with a core busy: 'no data from the cart ... for 100 ms')."""
-
-    def __init__(self, port: str, **options: Any) -> None:
-        super().__init__(port, silence_timeout_s=SILENCE_TIMEOUT_S, **options)
-
-
 @pytest.fixture
 def in_process_cart(monkeypatch: pytest.MonkeyPatch) -> None:
-    """``--plant serial:PORT`` builds an :class:`_InProcessCart`."""
-    monkeypatch.setattr("cartctl.link.serial_cart.SerialCart", _InProcessCart)
+    """``--plant serial:PORT`` builds an :class:`~realtime_upsets.InProcessCart`."""
+    monkeypatch.setattr("cartctl.link.serial_cart.SerialCart", InProcessCart)
 
 
 # Real time on a shared machine: a skipped cart tick leaves a gap that read_trace warns about.
@@ -169,7 +153,7 @@ def test_the_serial_plant_notices_a_fault(fault: str) -> None:
     cart's last tick. (How soon in wall time: ``benchmarks/bench_speeds.py``.)"""
     steps = 0
     with VirtualCart(faults=CartFaults.parse(f"{fault}=0.3")) as cart:
-        plant = SerialCart(cart.port, on_print=lambda line: None)
+        plant = InProcessCart(cart.port, on_print=lambda line: None)
         plant.reset()
         with pytest.raises(PlantError):  # noqa: PT012
             for _ in range(300):
@@ -194,7 +178,7 @@ def test_a_pulled_cable_closes_the_port_only_once_the_line_threads_have_stopped(
             close_fds()
 
         cart._close_fds = noting_close  # type: ignore[method-assign]
-        plant = SerialCart(cart.port, on_print=lambda line: None)
+        plant = InProcessCart(cart.port, on_print=lambda line: None)
         plant.reset()
         with pytest.raises(PlantError):  # noqa: PT012
             for _ in range(300):

@@ -31,8 +31,8 @@ from cartctl.link.cart_uart import (
 )
 from cartctl.link.dialect import Encoder, Framer, Gpio
 from cartctl.link.firmware import CartIO
-from cartctl.link.serial_cart import SerialCart
 from cartctl.link.virtual_cart import CartFaults, VirtualCart
+from realtime_upsets import InProcessCart
 
 FRAME_S = 60 * BYTE_TIME_S
 CART_SENDS_S = 0.0012  # the communication thread's send, into each tick
@@ -214,7 +214,7 @@ def test_the_watchdog_stops_the_motors_once_the_host_goes_quiet() -> None:
     comes no sooner than 70 ms after the host's last byte was through the line, and the motors
     stay at 0 V. (How late on this machine: ``benchmarks/bench_speeds.py``.)"""
     with VirtualCart(seed=2) as cart:
-        plant = SerialCart(cart.port, on_print=lambda line: None)
+        plant = InProcessCart(cart.port, on_print=lambda line: None)
         plant.reset()
         for _ in range(40):
             plant.step(3.0, -3.0)
