@@ -8,6 +8,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import statistics
+import sys
 import time
 from collections.abc import Callable
 from typing import Any
@@ -190,8 +191,9 @@ class SerialCart:
         self.reset()
         self.echo_delays.clear()
         judged = False
-        silence_s = self.link.silence_timeout_s
+        silence_s, switch_s = self.link.silence_timeout_s, sys.getswitchinterval()
         self.link.silence_timeout_s = max(silence_s, UNDRIVEN_SILENCE_S)
+        sys.setswitchinterval(min(switch_s, 1e-4))  # as in the loop it judges (run, excite)
         try:
             for _ in range(max_ticks):
                 self.send(0.0, 0.0, drive=False)
@@ -205,6 +207,7 @@ class SerialCart:
                         break
         finally:
             self.link.silence_timeout_s = silence_s
+            sys.setswitchinterval(switch_s)
         self.probe_delays = bridge.EchoDelays.of(self.echo_delays)
         delay = self.loop_delay_ticks
         if delay is None:
