@@ -101,3 +101,13 @@ def _unwritable(folder: Path, there: str = "cannot write there") -> str | None:
             with contextlib.suppress(OSError):
                 path.rmdir()
     return None
+
+
+def remove_stale_recording(trace: str | Path, keep: str | Path | None = None) -> None:
+    """Remove the ``.rrd`` beside a new ``trace``: an earlier run's of that name would pass for
+    this trace's recording. Not when it is ``trace`` itself or ``keep``; a failure is ignored."""
+    stale = Path(trace).with_suffix(".rrd").resolve()
+    if stale == Path(trace).resolve() or (keep is not None and stale == Path(keep).resolve()):
+        return
+    with contextlib.suppress(OSError):
+        stale.unlink(missing_ok=True)

@@ -4,7 +4,6 @@ QRoboticsCenter log, and write it as the trace CSV every other command reads."""
 from __future__ import annotations
 
 import argparse
-import contextlib
 import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -48,7 +47,7 @@ def summary(trace: Trace) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     from cartctl.cli.jsonout import dumps
-    from cartctl.data.outputs import writing
+    from cartctl.data.outputs import remove_stale_recording, writing
     from cartctl.data.read import read_trace
     from cartctl.data.trace import meta_path, write_trace
 
@@ -65,10 +64,7 @@ def run(args: argparse.Namespace) -> int:
                     shutil.copyfile(own, beside)
             else:
                 beside.unlink(missing_ok=True)  # an earlier trace's of that name
-        stale, own = (Path(path).with_suffix(".rrd").resolve() for path in (args.out, args.file))
-        if stale not in (own, Path(args.out).resolve()):  # an earlier run's would pass for this
-            with contextlib.suppress(OSError):  # trace's recording
-                stale.unlink(missing_ok=True)
+        remove_stale_recording(args.out, keep=Path(args.file).with_suffix(".rrd"))  # not its own
     if args.json:
         print(dumps(info))
         return 0

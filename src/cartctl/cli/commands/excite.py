@@ -58,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
 
     from cartctl.cart import SUPPLY_V
     from cartctl.cli.progress import ProgressBar
+    from cartctl.data.outputs import remove_stale_recording
     from cartctl.data.trace import meta_path
     from cartctl.plants.factory import check_plant_name, make_plant
     from cartctl.runtime.loop import run_experiment
@@ -101,10 +102,7 @@ def run(args: argparse.Namespace) -> int:
         _write_meta(
             args.out, description, None if serial else getattr(plant, "loop_delay_ticks", None)
         )
-        stale = Path(args.out).with_suffix(".rrd")  # an earlier run's of this name would pass
-        with contextlib.suppress(OSError):  # for this trace's recording
-            if stale != Path(args.out):
-                stale.unlink(missing_ok=True)
+        remove_stale_recording(args.out)
 
     bar = ProgressBar(volts.size, f"excite {args.signal}")
     switch_interval = sys.getswitchinterval()

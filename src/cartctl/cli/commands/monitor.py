@@ -143,6 +143,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _monitor(args: argparse.Namespace, after: contextlib.ExitStack) -> int:
     from cartctl.cli.jsonout import dumps
+    from cartctl.data.outputs import remove_stale_recording
     from cartctl.data.trace import meta_path
     from cartctl.link.cart_link import CartLink, print_to_stderr
     from cartctl.link.cart_monitor import Monitor, parse_labels
@@ -178,8 +179,8 @@ def _monitor(args: argparse.Namespace, after: contextlib.ExitStack) -> int:
         monitor.rows.append(CsvSink(csv_path))
         with contextlib.suppress(OSError):  # a run's of this name would describe its trace here
             meta_path(csv_path).unlink(missing_ok=True)
-            if rerun is None:  # and its recording would pass for this one
-                rrd_path.unlink(missing_ok=True)
+        if rerun is None:  # and its recording would pass for this one
+            remove_stale_recording(csv_path)
         if rerun is not None:
             monitor.rows.append(rerun)
             monitor.texts.append(rerun)
