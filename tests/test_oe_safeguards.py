@@ -197,6 +197,37 @@ def test_inspect_flags_a_slow_or_marginal_pole(
     assert "SLOW OR MARGINAL" not in block_b and "slow or marginal (|z|" not in block_b
 
 
+def test_inspect_json_flags_slow_or_marginal_only_on_a_stable_model(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """docs/identification.md: "slow_or_marginal" is a stable but slow pole (as the table's row
+    and summary line); a model with a pole outside the unit circle or on it is not flagged so."""
+    theta = {
+        m: [float(v) for v in np.poly(poles)[1:]]
+        for m, poles in (("a", [1.05, 0.995]), ("b", [1.0, 0.5]))
+    }
+    path = tmp_path / "unstable.toml"
+    path.write_text(
+        'format = "cartctl-model/1"\nperiod_s = 0.01\n\n[provenance]\nsource = "test"\n'
+        'created = "2026-11-25"\n\n'
+        + "".join(
+            f"[motors.{m}]\ntheta = [{c!r}, {d!r}, 0.01, 0.0]\nna = 2\nnb = 2\nnk = 2\n\n"
+            for m, (c, d) in theta.items()
+        )
+    )
+    code, out, err = _run(capsys, "inspect", str(path), "--json")
+    assert code == 0, err
+    a, b = (json.loads(out)["motors"][m] for m in "ab")
+    assert a["stable"] is False and a["slow_or_marginal"] is False and a["flags"] == []
+    flagged = {round(p["magnitude"], 3): p["slow_or_marginal"] for p in a["poles"]}
+    assert flagged == {1.05: False, 0.995: True, 0.0: False}  # 0.995 as its row says
+    assert b["stable"] is False and b["slow_or_marginal"] is False and b["flags"] == []
+    assert not any(p["slow_or_marginal"] for p in b["poles"])  # on the unit circle
+    code, out, _ = _run(capsys, "inspect", str(path))
+    assert "unstable (|z| > 1)" in out and "on the unit circle" in out
+    assert "SLOW OR MARGINAL" not in out and out.count("slow or marginal (|z| > 0.99)") == 1
+
+
 # -- (e) design warns on a lightly damped loop ----------------------------------------------------
 
 

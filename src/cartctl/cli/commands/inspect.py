@@ -32,10 +32,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _slow(root: Root) -> bool:
-    """A pole with |z| above :data:`~cartctl.model.MARGINAL_POLE_RADIUS` (slow or marginal)."""
-    from cartctl.model import MARGINAL_POLE_RADIUS
+    """A stable pole with |z| above :data:`~cartctl.model.MARGINAL_POLE_RADIUS` (slow or
+    marginal); one on the unit circle or outside it is not stable."""
+    from cartctl.model import MARGINAL_POLE_RADIUS, UNIT_CIRCLE_TOLERANCE
 
-    return abs(root.value) > MARGINAL_POLE_RADIUS
+    return MARGINAL_POLE_RADIUS < abs(root.value) < 1.0 - UNIT_CIRCLE_TOLERANCE
 
 
 def outside_zeros(model: ArxModel) -> list[complex]:
@@ -47,7 +48,8 @@ def model_summary(model: ArxModel) -> dict[str, Any]:
     """``inspect --json``'s entry of one motor."""
     from cartctl.measures.metrics import finite_or_none
 
-    marginal, outside = any(_slow(r) for r in model.poles()), bool(outside_zeros(model))
+    marginal = model.is_stable() and any(_slow(r) for r in model.poles())
+    outside = bool(outside_zeros(model))
     return {
         "minimum_phase": not outside,
         "slow_or_marginal": marginal,
@@ -77,10 +79,10 @@ def _cells(root: Root) -> list[str]:
     flag = "non-minimum-phase" if root.kind == "zero" and abs(root.value) > 1.0 else ""
     if root.kind == "pole" and _slow(root):
         flag = "slow or marginal (|z| > 0.99)"
-        if abs(abs(root.value) - 1.0) <= UNIT_CIRCLE_TOLERANCE:
-            flag = "on the unit circle"
-        elif abs(root.value) > 1.0:
-            flag = "unstable (|z| > 1)"
+    elif root.kind == "pole" and abs(abs(root.value) - 1.0) <= UNIT_CIRCLE_TOLERANCE:
+        flag = "on the unit circle"
+    elif root.kind == "pole" and abs(root.value) > 1.0:
+        flag = "unstable (|z| > 1)"
     z, freq, damping = root.value, format_fixed(root.freq_hz, 2), format_fixed(root.damping, 3)
     return [root.kind, _fmt_z(z), f"{abs(z):.4f}", freq, damping, flag]
 
