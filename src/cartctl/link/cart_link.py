@@ -44,20 +44,22 @@ def _ports_hint() -> str:
     return "serial ports present: " + (", ".join(ports) if ports else "none")
 
 
+def _no_port(port: str, what: str = "is not a serial device (no terminal)") -> InputError:
+    return InputError(f"serial port {port} {what}; {_ports_hint()}")
+
+
 def check_port(port: str) -> None:
     """A typo, not a fault (InputError): ``port`` is not there, or is a folder or a file, or (where
     sysfs says, without opening it) a character device that is no terminal (``/dev/null``)."""
     if not os.path.exists(port):
-        raise InputError(f"serial port {port} does not exist; {_ports_hint()}")
+        raise _no_port(port, "does not exist")
     device = os.stat(port)
     if not stat.S_ISCHR(device.st_mode):
         what = "is a folder, not" if os.path.isdir(port) else "is not"
-        raise InputError(f"serial port {port} {what} a serial device; {_ports_hint()}")
+        raise _no_port(port, f"{what} a serial device")
     kind = f"/sys/dev/char/{os.major(device.st_rdev)}:{os.minor(device.st_rdev)}/subsystem"
     if os.path.exists(kind) and os.path.basename(os.path.realpath(kind)) != "tty":
-        raise InputError(
-            f"serial port {port} is not a serial device (no terminal); {_ports_hint()}"
-        )
+        raise _no_port(port)
 
 
 def print_to_stderr(line: str) -> None:
@@ -118,8 +120,7 @@ class CartLink:
                     "cartctl monitor or run still open?)"
                 ) from None
             if getattr(exc.__context__, "args", ())[:1] == (errno.ENOTTY,):  # termios: /dev/null
-                why = "is not a serial device (no terminal)"
-                raise InputError(f"serial port {self.port} {why}; {_ports_hint()}") from None
+                raise _no_port(self.port) from None
             reason = getattr(exc, "strerror", None) or str(exc)
             raise PlantError(
                 f"cannot open serial port {self.port}: {reason}; {_ports_hint()}"
