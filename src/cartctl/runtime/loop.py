@@ -303,20 +303,25 @@ def run_experiment(
         raise InputError(
             f"voltage sequences must be 1-D and equally long, got {ua.shape} and {ub.shape}"
         )
-    rows: list[Measurement] = []  # row k: the measurement of tick k
-    ticks: list[int] = []  # its tick: k, or a cart's count from its first (lost frames skipped)
-    interrupted, failure, width = False, None, 0
+    rows: list[list[float]] = []  # row k: tick k's time, voltages and speeds (unknown: NaN)
+    names, width = (*REQUIRED_COLUMNS, *TRUE_SPEED_COLUMNS), 0  # the row's, true speeds last
+    interrupted, failure = False, None
     idle = getattr(sink, "idle", None) if isinstance(plant, ClockedPlant) else None
     try:
         y = plant.reset()
         for k in range(ua.size):
             with held():  # the row kept and streamed, or neither
-                rows.append(y)
-                ticks.append(getattr(plant, "tick_index", k))
+                tick = getattr(plant, "tick_index", k)  # a cart's from its first (lost: skipped)
+                true = (y.true_speed_a_rad_s, y.true_speed_b_rad_s)
+                row = (tick * plant.period_s, ua[k], ub[k], y.speed_a_rad_s, y.speed_b_rad_s, *true)
+                rows.append([np.nan if v is None else float(v) for v in row])
                 if sink is not None:
-                    width = width or _open_stream(sink, on_open, y)
-                    row = (ticks[-1] * plant.period_s, ua[k], ub[k], *_speeds(y))
-                    sink.write([np.nan if v is None else float(v) for v in row[:width]])
+                    if not width:  # the first row: the trace's columns (true speeds if it has them)
+                        width = 7 if None not in true else 5
+                        sink.open(names[:width])
+                        if on_open is not None:
+                            on_open(names[:width])
+                    sink.write(rows[-1][:width])
             if idle is not None:  # a cart: the block written after the command, as run's loop
                 plant.send(float(ua[k]), float(ub[k]))  # type: ignore[attr-defined]
                 with held():  # the block written whole: a stop signal waits for it
@@ -342,31 +347,7 @@ def run_experiment(
             finally:
                 if sink is not None:
                     sink.close()
-    done = len(rows)
-    table = np.array([_speeds(y) for y in rows], dtype=float).reshape(done, 4)  # unknown: NaN
-    keep = 4 if done and not np.isnan(table[:, 2:]).any() else 2
-    names = ("speed_a", "speed_b", "true_speed_a", "true_speed_b")[:keep]
-    columns = {
-        "time_s": np.asarray(ticks, dtype=float) * plant.period_s,
-        "voltage_a": ua[:done],
-        "voltage_b": ub[:done],
-    }
-    columns |= {name: table[:, i] for i, name in enumerate(names)}
+    table = np.array(rows, dtype=float).reshape(len(rows), 7)
+    keep = 7 if rows and not np.isnan(table[:, 5:]).any() else 5
+    columns = {name: table[:, j] for j, name in enumerate(names[:keep])}
     return ExperimentResult(Trace.from_columns(columns, source=source), interrupted, failure)
-
-
-def _speeds(y: Measurement) -> tuple[float | None, ...]:
-    return (y.speed_a_rad_s, y.speed_b_rad_s, y.true_speed_a_rad_s, y.true_speed_b_rad_s)
-
-
-def _open_stream(
-    sink: Sink, on_open: Callable[[Sequence[str]], object] | None, first: Measurement
-) -> int:
-    """Open ``sink`` with the columns of :func:`run_experiment`'s trace (true speeds when the first
-    measurement has them), then ``on_open``; the row width."""
-    true = None not in (first.true_speed_a_rad_s, first.true_speed_b_rad_s)
-    columns = REQUIRED_COLUMNS + (("true_speed_a", "true_speed_b") if true else ())
-    sink.open(columns)
-    if on_open is not None:
-        on_open(columns)
-    return len(columns)
