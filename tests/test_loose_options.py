@@ -131,3 +131,50 @@ def test_the_deadbeat_limit_names_the_option_on_the_command_line(
                     "the deadbeat time of a loop with 3 poles; got 0.02")  # fmt: skip
     with pytest.raises(CartctlError, match=r"^settling_time_s must be at least 3 ticks"):
         cartctl.design_poles("models/ground.toml", settling_time_s=0.02, overshoot_percent=5)
+
+
+@pytest.mark.parametrize(
+    ("argv", "step"),
+    [
+        (("run", "--reference", "step:10:6"), "'step:10:6': the step at 6 s"),
+        (("run", "--reference", "step:10:5"), "'step:10:5': the step at 5 s"),  # at the end
+        (("run", "--reference-b", "step:10:7"), "'step:10:7': the step at 7 s"),
+    ],
+)
+def test_a_step_after_the_run_ends_is_refused(
+    capsys: pytest.CaptureFixture[str], workdir: Path, argv: tuple[str, ...], step: str
+) -> None:
+    # it never acted: the summary was all '—', exit 0 (a delay the run cannot reach)
+    line = _line(capsys, *argv, "--fast", "--duration", "5", "--rerun", "off")
+    assert line.endswith(
+        f"{argv[1]}: reference {step} comes after the run's last tick (4.99 s); give a delay "
+        "within the run or a longer duration"
+    )
+    assert not Path("logs").exists()  # refused before anything was written
+
+
+def test_a_step_after_the_run_ends_is_refused_by_simulate_and_tune(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    with pytest.raises(CartctlError, match=r"the step at 2 s comes after the run's last tick"):
+        cartctl.simulate("controllers/pi.toml", reference="step:3:2")  # 2 s by default
+    line = _line(
+        capsys,
+        "tune",
+        "models/ground.toml",
+        "--method",
+        "pi",
+        "--reference",
+        "step:10:3",
+        "--grid",
+        "crossover-hz=4",
+        "--jobs",
+        "1",
+    )
+    assert line.endswith(
+        "'step:10:3': the step at 3 s comes after the run's last tick (1.99 s); "
+        "give a delay within the run or a longer duration"
+    )
+    # the last tick still steps (and an earlier run's summary has figures)
+    run = cartctl.simulate("controllers/pi.toml", reference="step:3:1.99")
+    assert run.summary["motors"]["a"]["max_abs_voltage"] > 0.0

@@ -120,6 +120,17 @@ def check_reference(spec: str, option: str = "--reference", period_s: float = PE
     return spec
 
 
+def check_step_in_run(spec: str, n_ticks: int, period_s: float, option: str) -> None:
+    """Refuse a ``step:A:DELAY`` whose DELAY comes after the run's last tick: it never acts."""
+    kind, _, rest = spec.partition(":")
+    parts, last_s = rest.split(":"), (n_ticks - 1) * period_s
+    if kind == "step" and len(parts) == 2 and float(parts[1]) > last_s + 1e-12:
+        raise InputError(
+            f"{option}: reference '{spec}': the step at {float(parts[1]):g} s comes after the "
+            f"run's last tick ({last_s:g} s); give a delay within the run or a longer duration"
+        )
+
+
 class ReferenceSchedule:
     """A reference spec over ``n_ticks`` ticks, computed ``chunk_ticks`` at a time (a minute at
     10 ms) as ``schedule[k]`` reaches them, so a long run never holds all of it. A bad spec fails

@@ -179,7 +179,7 @@ def prepare_run(
     from cartctl.design.controllerfile import build_controllers as build_from_file
     from cartctl.plants.base import ClockedPlant
     from cartctl.plants.factory import make_plant as factory_make_plant
-    from cartctl.reference import ReferenceSchedule
+    from cartctl.reference import ReferenceSchedule, check_step_in_run
 
     check_duration(duration_s)
     make_plant = make_plant or factory_make_plant
@@ -243,6 +243,8 @@ def prepare_run(
             m: ReferenceSchedule(spec if m in controllers else "const:0", n, period_s, m)
             for m, spec in specs.items()
         }
+        for option, spec in (("--reference", reference), ("--reference-b", reference_b or "")):
+            check_step_in_run(spec, n, period_s, option)  # a step after the run never acts
         if own is not None:
             check_reach(references, dict(zip("ab", own, strict=True)), limit, str(model))
         else:  # the models the controller was designed on, if that file is still readable

@@ -164,7 +164,7 @@ def check_inputs(args: argparse.Namespace, n_settings: int) -> None:
     from cartctl.data.modelfile import load_models
     from cartctl.design.make import check_models
     from cartctl.plants.factory import SIMULATED, check_plant_name, plant_kind
-    from cartctl.reference import ReferenceSchedule
+    from cartctl.reference import ReferenceSchedule, check_step_in_run
     from cartctl.session.prepare import check_reach
 
     args.choose = _choice(args.choose, n_settings)
@@ -185,3 +185,4 @@ def check_inputs(args: argparse.Namespace, n_settings: int) -> None:
     n = max(1, round(args.duration / period_s))
     references = {m: ReferenceSchedule(args.reference, n, period_s, m) for m in ("a", "b")}
     check_reach(references, dict(models.motors), SUPPLY_V, str(args.model))
+    check_step_in_run(args.reference, n, period_s, "--reference")  # else every setting: no step
