@@ -123,13 +123,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _write_meta(path: str | Path, description: str, loop_delay: int | None) -> Path:
+    from cartctl.data.outputs import writing
     from cartctl.data.trace import meta_path, write_trace_meta
 
-    try:
+    with writing(meta_path(path)):  # the trace is kept; its meta file is not
         return write_trace_meta(path, plant=description, loop_delay_ticks=loop_delay,
                                 command=options.command_line("excite"))  # fmt: skip
-    except OSError as exc:  # the trace is kept; its meta file is not
-        raise OutputError(meta_path(path), exc.strerror or str(exc)) from None
 
 
 def _save(

@@ -93,15 +93,6 @@ def _check(args: argparse.Namespace) -> tuple[str, str]:
     return kind, rest
 
 
-def _virtual_cart(faults_text: str, args: argparse.Namespace) -> Any:
-    from cartctl.link.virtual_cart import CartFaults, VirtualCart
-
-    faults = CartFaults.parse(faults_text)
-    return VirtualCart(
-        faults=faults, firmware=onboard_firmware(args, args.reference or DEFAULT_REFERENCE)
-    )
-
-
 def _rerun_sink(args: argparse.Namespace, path: Path) -> Any:
     from cartctl.link.dialect import GPIO_FLOAT_COUNT
 
@@ -156,15 +147,19 @@ def _monitor(args: argparse.Namespace, after: contextlib.ExitStack) -> int:
         labels = parse_labels(args.labels) if args.labels is not None else None
     except InputError as exc:
         raise InputError(f"--labels: {exc}") from None
-    cart = _virtual_cart(rest, args) if kind == "virtual" else None
+    cart: Any = None
+    if kind == "virtual":
+        from cartctl.link.virtual_cart import SILENCE_TIMEOUT_S, CartFaults, VirtualCart
+
+        faults = CartFaults.parse(rest)  # before --onboard's controller is loaded
+        reference = args.reference or DEFAULT_REFERENCE
+        cart = VirtualCart(faults=faults, firmware=onboard_firmware(args, reference))
     port = cart.port if cart is not None else rest
     announce = functools.partial(print, file=sys.stderr, flush=True)
     monitor = Monitor([], [], labels, echo=print_to_stderr, announce=announce)
     received: list[int] = []
     link = CartLink(port, on_event=monitor.on_event, on_print=monitor.on_print)
     if cart is not None:  # the virtual cart's rate is known: the bridge's, or the course's
-        from cartctl.link.virtual_cart import SILENCE_TIMEOUT_S
-
         link.baud = cart.baud
         link.silence_timeout_s = SILENCE_TIMEOUT_S  # it shares this process: see there
     try:
@@ -217,9 +212,7 @@ def _monitor(args: argparse.Namespace, after: contextlib.ExitStack) -> int:
     if result.failure:
         return 1
     signum = received[0] if received else stopping.received()  # while it ran, or after it
-    if signum is not None and signum != signal.SIGINT:  # Ctrl-C is the normal way to stop it
-        return 128 + signum
-    return 0
+    return 0 if signum in (None, signal.SIGINT) else 128 + signum  # Ctrl-C: the normal way
 
 
 def _close_all(sinks: list[Any]) -> None:

@@ -239,8 +239,6 @@ def check_input_file(path: str | Path, what: str, option: str | None = None) -> 
     """The file ``path`` names (a shipped file's relative path finds the shipped one), checked
     before the work that needs it; else one line naming ``option`` (None: a positional) and
     ``path``, ``is a directory`` or ``not found``, and ``what`` it should be."""
-    from cartctl.choices import find_file
-
     found = find_file(path)
     lead = f"{option} {path}" if option else str(path)
     if found.is_dir():
