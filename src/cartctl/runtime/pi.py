@@ -125,7 +125,6 @@ class PiController:
                 )
         self.voltage_limit_v = limit
         self.anti_windup = anti_windup
-        self.tracking_gain_per_tick = kt  # Kt in use: tracking_gain, or its default
         self.estimator = estimator
         # pi_law's Kp, Ki·Ts, Kt and mode (the batch loop of tune --robust takes them too)
         self.gains = (self.kp, self.ki * self.period_s, kt, ANTI_WINDUP.index(anti_windup))

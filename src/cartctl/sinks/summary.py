@@ -196,21 +196,20 @@ def smoothed_lines(summary: Mapping[str, Any]) -> list[str]:
     """The motor table; with smoothed metrics, two labelled rows a motor and their model."""
     motors = summary["motors"]
     smoothed = summary.get("smoothed") or {}
+    note = [f"  {smoothed['note']}"] if smoothed.get("note") else []  # why none (for a motor)
     if not any("smoothed" in e for e in motors.values()):
-        note = smoothed.get("note")
-        return [*motor_table(motors), *([f"  {note}"] if note else [])]
+        return [*motor_table(motors), *note]
     label = ROW_LABELS.get(summary.get("metrics_signal", "speed"), "encoder")
     rows: dict[str, Mapping[str, Any]] = {}
     for m, entry in motors.items():
         rows[f"{m} {label}"] = entry
         if "smoothed" in entry:
             rows[f"{m} smoothed"] = entry["smoothed"]
-    note = smoothed.get("note")  # a motor the model has none for
     return [
         f"  smoothed: the speed by a Kalman RTS smoother over the trace with the model "
         f"{smoothed.get('model')} and the recorded voltages",
         *motor_table(rows),
-        *([f"  {note}"] if note else []),
+        *note,
     ]
 
 
