@@ -178,3 +178,15 @@ def test_a_step_after_the_run_ends_is_refused_by_simulate_and_tune(
     # the last tick still steps (and an earlier run's summary has figures)
     run = cartctl.simulate("controllers/pi.toml", reference="step:3:1.99")
     assert run.summary["motors"]["a"]["max_abs_voltage"] > 0.0
+
+
+@pytest.mark.parametrize("command", ["virtual-cart", "monitor virtual --rerun off"])
+def test_an_onboard_step_after_the_run_ends_is_refused(
+    capsys: pytest.CaptureFixture[str], workdir: Path, command: str
+) -> None:
+    argv = [*command.split(), "--onboard", "controllers/pi.toml", "--reference", "step:10:3"]
+    line = _line(capsys, *argv, "--duration", "2")
+    assert line.endswith(
+        "'step:10:3': the step at 3 s comes after the run's last tick (1.99 s); "
+        "give a delay within the run or a longer duration"
+    )

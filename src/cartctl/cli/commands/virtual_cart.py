@@ -98,14 +98,17 @@ def onboard_firmware(args: argparse.Namespace, reference: str | None) -> Onboard
 
 def _check_reach(path: str, spec: str, duration_s: float | None) -> None:
     """Refuse a reference far beyond what the controller's model reaches, as ``run`` does (over
-    the run, or its first minute): 1e308 overflowed the cart's float channels in its thread."""
+    the run, or its first minute): 1e308 overflowed the cart's float channels in its thread; and
+    a step after the run, as ``run`` does."""
     from cartctl.cart import PERIOD_S
     from cartctl.data.modelfile import load_models
     from cartctl.design.controllerfile import load_controller
     from cartctl.errors import CartctlError
-    from cartctl.reference import ReferenceSchedule
+    from cartctl.reference import ReferenceSchedule, check_step_in_run
     from cartctl.session.prepare import check_reach
 
+    if duration_s:
+        check_step_in_run(spec, round(duration_s / PERIOD_S), PERIOD_S, "--reference")
     controller = load_controller(path)
     try:
         models = dict(load_models(controller.model_path).motors)
