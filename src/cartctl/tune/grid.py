@@ -147,12 +147,8 @@ def request_axes(method: str) -> tuple[str, ...]:
 
 def worst_metrics(motors: Mapping[str, Mapping[str, Any]]) -> dict[str, float | None]:
     """Per metric of :data:`METRICS`, the larger (worse) of the motors; None if any is None."""
-    out: dict[str, float | None] = {}
-    for key in METRICS:
-        values = [m.get(key) for m in motors.values()]
-        known = [v for v in values if v is not None]
-        out[key] = float(max(known)) if values and len(known) == len(values) else None
-    return out
+    known = {key: [m[key] for m in motors.values() if m.get(key) is not None] for key in METRICS}
+    return {k: float(max(v)) if v and len(v) == len(motors) else None for k, v in known.items()}
 
 
 @dataclass(frozen=True)

@@ -21,18 +21,13 @@ from cartctl.plants.sim import ArxPlant
 from cartctl.reference import reference_signal
 from cartctl.tune.batch import ArxBatch, BatchTrace, PlantSample, later_command, simulate_batch
 from cartctl.tune.engine import Nominal, TuneJob, evaluate_nominal, scoring_plant, simulate
-from cartctl.tune.grid import TuneResult, worst_metrics
+from cartctl.tune.grid import METRICS, TuneResult, worst_metrics
 
 FloatArray = NDArray[np.float64]
 
-# the robust metrics (%, s, rad/s, V), each with its key in the run summary
-SUMMARY_KEYS = {
-    "overshoot_percent": "overshoot_percent",
-    "settling_time_s": "settling_time_s",
-    "rms_error": "rms_error",
-    "peak_voltage_v": "max_abs_voltage",
-}
-ROBUST_METRICS = tuple(SUMMARY_KEYS)
+# the robust metrics (%, s, rad/s, V), each with its key in the run summary (grid.METRICS)
+ROBUST_METRICS = ("overshoot_percent", "settling_time_s", "rms_error", "peak_voltage_v")
+SUMMARY_KEYS = dict(zip(ROBUST_METRICS, METRICS, strict=True))
 PERCENTILES = (5, 50, 95)  # the spread over the sampled plants
 
 
