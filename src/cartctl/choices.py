@@ -25,17 +25,27 @@ def is_whole(value: object) -> TypeGuard[int | np.integer]:
     return isinstance(value, Integral) and not isinstance(value, bool)
 
 
+def is_number(value: object) -> TypeGuard[float]:
+    """True for a real number, numpy's too; False for a bool, text, None …"""
+    return isinstance(value, Real) and not isinstance(value, bool)
+
+
+def as_float(value: float) -> float:
+    """``float(value)``; inf for a whole number beyond any float."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf
+
+
 def check_finite(value: float, option: str) -> float:
     """``value`` if it is a finite number; else one line: ``OPTION must be a number, got nan``
     (or text, None, a bool: no number)."""
     from cartctl.errors import InputError  # here: setup.py reads this file without the package
 
-    if isinstance(value, bool) or not isinstance(value, Real):  # (from Python: the API)
+    if not is_number(value):  # (from Python: the API)
         raise InputError(f"{option} must be a number, got {value!r}")
-    try:
-        number = float(value)
-    except OverflowError:  # a whole number beyond any float
-        number = math.inf
+    number = as_float(value)
     if math.isnan(number):
         raise InputError(f"{option} must be a number, got nan")
     if math.isinf(number):
@@ -47,7 +57,7 @@ def check_duration(seconds: float, option: str = "--duration") -> float:
     """``seconds`` if in (0, :data:`MAX_DURATION_S`]; else one line naming ``option``."""
     from cartctl.errors import InputError  # here: setup.py reads this file without the package
 
-    number = isinstance(seconds, Real) and not isinstance(seconds, bool)
+    number = is_number(seconds)
     if not (number and 0.0 < seconds <= MAX_DURATION_S):  # (NaN and inf fail the range too)
         shown = (
             f"{seconds:g}" if isinstance(seconds, float) else seconds if number else repr(seconds)

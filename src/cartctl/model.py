@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cartctl.cart import PERIOD_S
+from cartctl.choices import is_whole
 from cartctl.errors import InputError
 
 RootKind = Literal["delay", "pole", "zero"]
@@ -31,7 +32,7 @@ comes out of the root finder within about 1e-15): not stable (:meth:`ArxModel.st
 
 def check_extra_delay_ticks(ticks: object, name: str = "extra delay") -> int:
     """``ticks`` as a whole number >= 0 of extra loop delay, else InputError naming ``name``."""
-    if isinstance(ticks, bool) or not isinstance(ticks, int | np.integer) or ticks < 0:
+    if not is_whole(ticks) or ticks < 0:
         raise InputError(f"{name} must be a whole number >= 0 ticks, got {ticks!r}")
     return int(ticks)
 

@@ -10,14 +10,13 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping, Sequence
 from contextlib import suppress
 from dataclasses import fields, replace
-from numbers import Real
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from cartctl.api.results import Design, Identification, MotorResult, SimulationResult, writable
-from cartctl.choices import DEFAULT_MODEL, check_duration, check_finite, is_whole
+from cartctl.choices import DEFAULT_MODEL, check_duration, check_finite, is_number, is_whole
 from cartctl.data.modelfile import ModelFile, load_models, save_models
 from cartctl.data.read import read_trace
 from cartctl.data.trace import MOTORS, Trace, parse_mapping
@@ -247,7 +246,7 @@ def _request(method: str, options: dict[str, Any]) -> DesignRequest:
         raise InputError(f"design_{method} has no option {name!r}; {hint}")
     floats = {f.name for f in fields(DesignRequest) if str(f.type).startswith("float")}
     for name, value in options.items():
-        if name in floats and isinstance(value, Real) and not isinstance(value, bool):
+        if name in floats and is_number(value):
             with suppress(OverflowError):  # beyond any float: its range refuses it
                 options[name] = float(value)
     return DesignRequest(method=method, **options)

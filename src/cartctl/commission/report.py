@@ -17,8 +17,8 @@ import rerun as rr
 from numpy.typing import NDArray
 
 from cartctl.commission import checks, tuning
+from cartctl.data.outputs import writing
 from cartctl.data.trace import Trace
-from cartctl.errors import OutputError
 from cartctl.measures.numfmt import format_fixed, markdown_table
 from cartctl.sinks.rerun_layout import ENTITY_PATHS, blueprint
 from cartctl.sinks.rerun_problems import cut_to_whole_messages, file_failure
@@ -72,10 +72,8 @@ def plot_lines(path: Path, title: str, panels: Sequence[tuple[str, Mapping[str, 
     axes[-1, 0].set_xlabel("time (s)")
     fig.suptitle(title)
     fig.tight_layout()
-    try:
+    with writing(path):  # a full disk: a fault naming the figure
         fig.savefig(path, dpi=100)
-    except OSError as exc:  # a full disk: a fault naming the figure
-        raise OutputError(path, exc.strerror or str(exc)) from None
 
 
 def _table(rows: Sequence[Sequence[tuple[str, str]]]) -> str:

@@ -19,8 +19,8 @@ from cartctl.cart import PERIOD_S
 from cartctl.cli.progress import ProgressBar
 from cartctl.commission import StageError, checks, report, tuning
 from cartctl.data.modelfile import save_models
+from cartctl.data.outputs import writing
 from cartctl.data.trace import Trace, meta_path, write_trace, write_trace_meta
-from cartctl.errors import OutputError
 from cartctl.identification.pipeline import model_file
 from cartctl.plants.base import ClockedPlant
 from cartctl.plants.factory import PLANTS_USING, SIMULATED, make_plant, plant_kind
@@ -116,11 +116,9 @@ class Commission:
 
         def meta(columns: Sequence[str]) -> None:  # from the first row: a cut trace has its loop
             opened.append(tuple(columns))
-            try:
+            with writing(meta_path(path)):  # a full disk: a fault naming the file, as the trace's
                 write_trace_meta(path, plant=self.description, command=f"cartctl commission "
                                  f"{self.spec}", loop_delay_ticks=self.loop_delay_ticks)  # fmt: skip
-            except OSError as exc:  # a full disk: a fault naming the file, as the trace's
-                raise OutputError(meta_path(path), exc.strerror or str(exc)) from None
 
         try:
             result = run_experiment(

@@ -7,10 +7,10 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Collection
 from dataclasses import dataclass, fields
-from numbers import Integral, Real
 from typing import Any
 
 from cartctl.cart import PERIOD_S, SUPPLY_V, check_voltage_limit, nk_fits_loop_delay
+from cartctl.choices import as_float, is_number, is_whole
 from cartctl.errors import InputError
 from cartctl.runtime.base import ANTI_WINDUP
 
@@ -158,12 +158,7 @@ class DesignRequest:
 
 
 def _number(value: Any) -> bool:
-    if not isinstance(value, Real) or isinstance(value, bool):
-        return False
-    try:
-        return math.isfinite(value)
-    except OverflowError:  # a whole number beyond any float
-        return False
+    return is_number(value) and math.isfinite(as_float(value))
 
 
 def _voltage_limit(value: Any) -> bool:
@@ -177,7 +172,7 @@ def _voltage_limit(value: Any) -> bool:
 
 
 def _whole(value: Any, high: int) -> bool:
-    return isinstance(value, Integral) and not isinstance(value, bool) and 0 <= int(value) <= high
+    return is_whole(value) and 0 <= int(value) <= high
 
 
 _NYQUIST_HZ = 0.5 / PERIOD_S

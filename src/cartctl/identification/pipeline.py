@@ -11,14 +11,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from functools import partial
-from numbers import Real
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import signal
 
-from cartctl.choices import is_whole
+from cartctl.choices import as_float, is_number, is_whole
 from cartctl.data.modelfile import ModelFile, Provenance
 from cartctl.data.trace import Trace
 from cartctl.errors import InputError
@@ -55,12 +54,11 @@ class Prefilter:
             raise InputError(
                 f"prefilter order (--order) must be a whole number in 1..12, got {self.order!r}"
             )
-        if isinstance(self.cutoff_hz, bool) or not isinstance(self.cutoff_hz, Real):
+        if not is_number(self.cutoff_hz):
             raise InputError(
                 f"prefilter cut-off (--cutoff-hz) must be a number, got {self.cutoff_hz!r}"
             )
-        big = isinstance(self.cutoff_hz, int) and abs(self.cutoff_hz) >= 2**1024  # 10**400
-        cutoff = math.inf if big else float(self.cutoff_hz)
+        cutoff = as_float(self.cutoff_hz)
         if math.isnan(cutoff):
             raise InputError("prefilter cut-off (--cutoff-hz) must be a number, got nan")
         if not (math.isfinite(cutoff) and cutoff > 0.0):
