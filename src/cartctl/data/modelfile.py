@@ -94,7 +94,6 @@ with them)."""
 def save_models(models: ModelFile, path: str | Path) -> Path:
     """Write a model file (TOML), creating parent folders; returns the path."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     header = "# cartctl motor models: theta = [a_1..a_na, b_0..b_nb-1], the report's [c, d, a, b]\n"
     with writing(path):
         path.write_text(header + tomli_w.dumps(models.to_toml_dict()), encoding="utf-8")

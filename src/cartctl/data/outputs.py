@@ -27,8 +27,9 @@ def check_output_folder(folder: str | Path, option: str) -> Path:
 
 @contextlib.contextmanager
 def writing(path: str | Path) -> Iterator[None]:
-    """A block writing ``path``: an OSError in it (a full disk) is an :class:`OutputError` naming
-    the file, exit 1 as a run's trace, not the bare reason (exit 2, no file)."""
+    """A block writing ``path`` (its folder made first): an OSError in it (a full disk) is an
+    :class:`OutputError` naming the file, exit 1 as a run's trace, not the bare reason (exit 2)."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)  # (its failure: the bare reason)
     try:
         yield
     except OutputError:

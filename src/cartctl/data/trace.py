@@ -222,7 +222,6 @@ def write_trace(
             raise InputError(
                 f"cannot write column {list(columns)[j]!r} as integers: it has fractions"
             )
-    path.parent.mkdir(parents=True, exist_ok=True)
     with writing(path), path.open("w", encoding="utf-8", newline="") as file:
         writer = csv.writer(file, lineterminator="\n")  # str of a Python float: shortest exact
         writer.writerow(columns)
