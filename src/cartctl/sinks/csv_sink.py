@@ -103,7 +103,6 @@ class CsvSink:
                 with contextlib.suppress(OSError):
                     os.ftruncate(file.fileno(), self._size)
             self._rows, self._file = [], None
-            self._take_text()
             with contextlib.suppress(OSError):
                 file.close()
             self.error = OutputError(self.path, exc.strerror or str(exc), rows=self.rows_written)
