@@ -107,11 +107,8 @@ def feedback_gains(entry: Mapping[str, Any], period_s: float) -> _Gains:
     missing gain or one that is not a number."""
     kalman = kalman_from_entry(entry["estimator"])
     try:
-        k, ki, kr = (
-            np.asarray(entry["K"], dtype=float).ravel(),
-            float(entry["Ki"]),
-            float(entry["Kr"]),
-        )
+        k = np.asarray(entry["K"], dtype=float).ravel()
+        ki, kr = float(entry["Ki"]), float(entry["Kr"])
     except (TypeError, ValueError):
         raise ValueError("K (a list), Ki and Kr must be numbers") from None
     return _Gains(k, ki, kr, float(period_s), kalman)

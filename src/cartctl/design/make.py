@@ -64,7 +64,7 @@ class MotorDesign:
 def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
     """Design one motor's controller as ``request`` asks."""
     extra = request.extra_delay_ticks
-    noise = {f: getattr(request, f) for f in NOISE_FIELDS}
+    estimator = {f: getattr(request, f) for f in NOISE_FIELDS} | {"extra_delay_ticks": extra}
     if request.method == "pi":
         pm = request.phase_margin_deg
         given: dict[str, Any] = {"phase_margin_deg": pm, "extra_delay_ticks": extra}
@@ -77,7 +77,7 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
         file_entry: dict[str, Any] = {"kp": d.kp, "ki": d.ki, "anti_windup": request.anti_windup,
                                       "controller_num": num, "controller_den": den}  # fmt: skip
         if request.estimator == "kalman":
-            kalman = design_kalman(model, extra_delay_ticks=extra, **noise)
+            kalman = design_kalman(model, **estimator)
             entry["estimator_poles"] = [[p.real, p.imag] for p in kalman.poles()]
             file_entry["estimator"] = _kalman_entry(kalman)
             # the margins of the loop as it runs (the PI on its estimate), not the bare PI's
@@ -88,12 +88,7 @@ def design_motor(request: DesignRequest, model: ArxModel) -> MotorDesign:
         poles = parse_poles(request.poles) if request.poles else None
         spec = (None, None) if poles else (request.settling_time_s, request.overshoot_percent)
         placement = design_poles(
-            model,
-            poles=poles,
-            settling_time_s=spec[0],
-            overshoot_percent=spec[1],
-            **noise,
-            extra_delay_ticks=extra,
+            model, poles=poles, settling_time_s=spec[0], overshoot_percent=spec[1], **estimator
         )
         num, den = feedback_tf_coeffs(placement)
         file_entry = {"K": placement.K, "Ki": placement.Ki, "Kr": placement.Kr,
