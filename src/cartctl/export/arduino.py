@@ -60,17 +60,17 @@ def as_steady_state(controller: ControllerFile) -> ControllerFile:
 def onboard_controllers(path: str | Path) -> dict[str, Controller]:
     """The controllers of a controller file as the exported C runs them (fixed-gain estimator)."""
     controller = load_controller(path)
-    _check_period(controller, str(path))
-    build_controllers(controller)  # the checks the loop applies, on the file as it is
+    _check(controller, str(path))
     return build_controllers(as_steady_state(controller))
 
 
-def _check_period(controller: ControllerFile, name: str, advice: str = "") -> None:
+def _check(controller: ControllerFile, name: str, advice: str = "") -> None:
     if not math.isclose(controller.period_s, PERIOD_S, rel_tol=1e-9):
         raise InputError(
             f"{name} was designed for a period of {controller.period_s:g} s; the cart's "
             f"control() runs every {PERIOD_S:g} s{advice}"
         )
+    build_controllers(controller)  # the loop's checks (keys, gains, anti-windup, estimator)
 
 
 def _usage(motors: Sequence[str]) -> list[str]:
@@ -178,9 +178,7 @@ def arduino_source(controller: ControllerFile, *, command: str = "") -> str:
     """The controller as C for the course template's ``Robot::control()``, the ``command``
     quoted in its header: per motor m, a state ``cartctl_state_m``, ``cartctl_reset_m()`` and
     ``float cartctl_step_m(float reference_rad_s, float measured_rad_s)`` returning the voltage."""
-    _check_period(controller, where(controller), ", so design on a 10 ms model")
-    # the checks the loop applies (keys, gains, anti-windup, estimator) before any C is written
-    build_controllers(controller)
+    _check(controller, where(controller), ", so design on a 10 ms model")  # before any C
     lines = _header(controller, command)
     code = pi_code if controller.method == "pi" else poles_code
     for motor in sorted(controller.motors):
