@@ -109,11 +109,14 @@ class CartSample:
     @classmethod
     def from_gpio(cls, gpio: Gpio) -> CartSample:
         """The sample carried by a GPIO message from the cart."""
-        check_gpio_counts(gpio.floats, gpio.ints)
-        echo, tick, status, lost = gpio.ints
-        flags = bool(status & STATUS_DRIVING), bool(status & STATUS_WATCHDOG)
-        lost, version = lost % SEQ_MODULO, _version(gpio.floats[CH_BRIDGE_VERSION])
-        return cls(gpio.time_ms, *gpio.floats[:6], echo, tick, *flags, lost, version)
+        floats, ints = gpio.floats, gpio.ints
+        check_gpio_counts(floats, ints)
+        speed_a, speed_b, applied_a, applied_b, position_a, position_b, version, _ = floats
+        measured = (speed_a, speed_b, applied_a, applied_b, position_a, position_b)
+        echo, tick, status, lost = ints
+        driving, tripped = bool(status & STATUS_DRIVING), bool(status & STATUS_WATCHDOG)
+        lost %= SEQ_MODULO
+        return cls(gpio.time_ms, *measured, echo, tick, driving, tripped, lost, _version(version))
 
 
 MIN_ECHOES = 20  # echoes a measurement needs before it can be clear
