@@ -154,9 +154,7 @@ def request_from_args(
         need = "needs" if len(given) == 1 else "need"
         raise InputError(f"{' and '.join(given)} {need} --prefilter butter")
     if args.prefilter == "butter":
-        prefilter = Prefilter(
-            order=args.order, cutoff_hz=args.cutoff_hz, zero_phase=args.zero_phase
-        )
+        prefilter = Prefilter(**{field: getattr(args, field) for _, field in shape})
     return IdentifyRequest(
         orders=None if args.orders is None else parse_grid(args.orders),
         split=args.split,
