@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import itertools
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -71,14 +72,11 @@ _REASONS = {
 def _unwritable(folder: Path, there: str = "cannot write there") -> str | None:
     """None when a file can be written in ``folder`` (made for the test and removed), else why;
     ``there`` begins the answer when ``folder`` exists but takes no file."""
-    existing, missing = folder, []
-    while not existing.exists():
-        if existing.is_symlink():  # a dangling link: mkdir would fail on it
-            return f"cannot create: {existing} is a broken link"
-        missing.append(existing)
-        if existing.parent == existing:
-            break
-        existing = existing.parent
+    missing = list(itertools.takewhile(lambda p: not p.exists(), [folder, *folder.parents]))
+    broken = next((p for p in missing if p.is_symlink()), None)
+    if broken is not None:  # a dangling link: mkdir would fail on it
+        return f"cannot create: {broken} is a broken link"
+    existing = missing[-1].parent if missing else folder
     if not existing.is_dir():
         if existing == folder:
             return "is a file, not a folder"
