@@ -340,13 +340,19 @@ def test_monitor_over_a_runs_name_leaves_no_stale_meta_file(
 ) -> None:
     """A monitor trace written over a run's (same --out and --name) kept the run's meta file
     beside it: review smoothed with the run's model, identify took the run's loop delay; with
-    ``--rerun off`` the run's recording stayed too (``review x.rrd`` showed the run)."""
+    ``--rerun off`` the run's recording stayed too (``review x.rrd`` showed the run). The run's
+    trace itself is no longer replaced (refused, as its line says: remove it); its meta file and
+    recording left behind go when the monitor writes its trace."""
     code, _, err = _cli(capsys, "run", "--fast", "--duration", "0.5", "--controller", str(PI),
                         "--rerun", "save", "--out", str(tmp_path), "--name", "x")  # fmt: skip
     assert code == 0, err
     assert (tmp_path / "x.meta.toml").is_file() and (tmp_path / "x.rrd").is_file()
-    code, _, err = _cli(capsys, "monitor", "virtual", "--onboard", str(PI), "--duration", "0.6",
-                        "--rerun", "off", "--out", str(tmp_path), "--name", "x")  # fmt: skip
+    argv = ["monitor", "virtual", "--onboard", str(PI), "--duration", "0.6", "--rerun", "off",
+            "--out", str(tmp_path), "--name", "x"]  # fmt: skip
+    code, _, err = _cli(capsys, *argv)
+    assert code == 2 and "x.csv holds a run's trace; cartctl monitor replaces only" in err, err
+    (tmp_path / "x.csv").unlink()
+    code, _, err = _cli(capsys, *argv)
     assert code == 0, err
     assert not (tmp_path / "x.meta.toml").exists()  # the meta file of a trace no longer there
     assert not (tmp_path / "x.rrd").exists()  # nor the recording

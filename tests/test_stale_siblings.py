@@ -87,3 +87,59 @@ def test_a_run_stopped_before_its_first_tick_leaves_an_earlier_runs_files(
     (line,) = capsys.readouterr().err.splitlines()
     assert code == (1 if stop == "plant" else 143), line
     assert {name: Path(name).read_bytes() for name in os.listdir()} == before
+
+
+RUN = ["run", "--fast", "--duration", "0.3", "--rerun", "off", "--out", ".", "--name", "x"]
+MONITOR = ["monitor", "virtual", "--duration", "0.3", "--rerun", "off", "--out", ".", "--name", "x"]
+EXCITATION = "x.csv holds an excitation; cartctl {} replaces only {}: give another {} or remove it"
+
+
+@pytest.mark.parametrize(
+    ("first", "then", "line"),
+    [
+        ([*EXCITE, "--out", "x.csv"], RUN, EXCITATION.format("run", "a run's trace", "--name")),
+        (
+            [*EXCITE, "--out", "x.csv"],
+            MONITOR,
+            EXCITATION.format(
+                "monitor", "a trace without a .meta.toml (a monitor's, a converted log)", "--name"
+            ),
+        ),
+        (
+            RUN,
+            [*EXCITE, "--out", "x.csv"],
+            "x.csv holds a run's trace; cartctl excite replaces only an excitation: give another "
+            "--out or remove it",
+        ),
+        (
+            None,
+            RUN,
+            "x.csv holds a trace without a .meta.toml (a monitor's, a converted log); "
+            "cartctl run replaces only a run's trace: give another --name or remove it",
+        ),
+    ],
+    ids=["run-over-excitation", "monitor-over-excitation", "excite-over-run", "run-over-no-meta"],
+)
+def test_a_trace_another_command_recorded_is_not_replaced(
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path,
+    first: list[str] | None,
+    then: list[str],
+    line: str,
+) -> None:
+    """run --name x replaced the excitation x.csv (identify's data) and its meta file, silently:
+    run, excite and monitor replace only a trace of their own kind, as the meta file tells."""
+    monkeypatch.chdir(tmp_path)
+    if first is None:  # a monitor's trace, a converted QRC log: no meta file
+        Path("x.csv").write_text("time_s,voltage_a,speed_a\n0.0,0.0,0.0\n", encoding="utf-8")
+    else:
+        _ok(capsys, first)
+    before = {name: Path(name).read_bytes() for name in os.listdir()}
+    code = main(then)
+    out, err = capsys.readouterr()
+    assert (code, out, err.count("\n")) == (2, "", 1), err
+    assert err.rstrip().endswith(line)
+    assert {name: Path(name).read_bytes() for name in os.listdir()} == before
+    if first is not None:
+        _ok(capsys, first)  # a trace of its own kind is still replaced

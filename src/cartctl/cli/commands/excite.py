@@ -83,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
     read = (args.model,) if kind == "sim" else ()  # the sim plant's model file
     options.check_outputs(args, files=("out",), inputs=read)  # before anything is driven
     options.check_output_file(meta_path(args.out), "--out")
+    options.check_own_trace(Path(args.out), "excite", "--out")  # an earlier excitation only
     volts = make_signal(args.signal, args.amplitude, cycles=args.cycles, duration_s=args.duration)
     ua, ub = (volts if args.motor in (m, "both") else np.zeros_like(volts) for m in "ab")
     plant, description = make_plant(

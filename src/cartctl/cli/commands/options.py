@@ -130,7 +130,30 @@ def check_run_outputs(
         if any(_same(str(path), Path(read)) for read in inputs):
             raise InputError(f"--out {path} is a file this command reads; give another --name")
         check_output_file(path, "--out")
+    check_own_trace(out / f"{candidate}.csv", prefix, "--name")
     return out / f"{candidate}.csv", out / f"{candidate}.rrd"
+
+
+_KINDS = {
+    "run": "a run's trace",
+    "excite": "an excitation",
+    "monitor": "a trace without a .meta.toml (a monitor's, a converted log)",
+}
+
+
+def check_own_trace(trace: Path, command: str, option: str) -> None:
+    """Refuse to replace ``trace`` unless ``command`` recorded it (an earlier output of its own):
+    its .meta.toml names a run's controller, an excitation's none; ``monitor`` writes none."""
+    if trace.is_file():
+        from cartctl.data.trace import read_trace_meta
+
+        meta = read_trace_meta(trace)
+        kind = "monitor" if meta is None else "run" if meta.controller else "excite"
+        if kind != command:
+            raise InputError(
+                f"{option}: {trace} holds {_KINDS[kind]}; cartctl {command} replaces "
+                f"only {_KINDS[command]}: give another {option} or remove it"
+            )
 
 
 def check_outputs(
