@@ -15,9 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from cartctl.api.results import Design, Identification, MotorResult, SimulationResult, writable
+from cartctl.api.results import Design, Identification, MotorResult, SimulationResult
 from cartctl.choices import DEFAULT_MODEL, check_duration, check_finite, is_number, is_whole
 from cartctl.data.modelfile import ModelFile, load_models, save_models
+from cartctl.data.outputs import check_output_file
 from cartctl.data.read import read_trace
 from cartctl.data.trace import MOTORS, Trace, parse_mapping
 from cartctl.design.controllerfile import ControllerFile, load_controller
@@ -216,9 +217,8 @@ def save_model(models: ModelFile | Identification, path: str | Path) -> Path:
     """Write a model file (from :func:`load_model` or :func:`identify`); returns its path."""
     if not isinstance(models, ModelFile | Identification):
         raise InputError(f"save_model takes load_model's or identify's result, not {models!r}")
-    save_models(
-        models.model_file() if isinstance(models, Identification) else models, writable(path)
-    )
+    file = models.model_file() if isinstance(models, Identification) else models
+    save_models(file, check_output_file(path, "save"))  # as --out is checked
     return Path(path)
 
 

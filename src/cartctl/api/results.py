@@ -52,11 +52,6 @@ def _has(motors: Collection[str], motor: str, what: str) -> str:
     return motor
 
 
-def writable(path: str | Path) -> Path:
-    """``path`` if a file can be written there, as ``--out`` is checked; else InputError."""
-    return check_output_file(path, "save")
-
-
 _IDENT_HEADERS = ("motor", "nk", "θ", "θ std", "fit sim (%)", "fit pred (%)", "max |pole|")
 
 
@@ -145,7 +140,7 @@ class Identification(_Shown):
 
     def save(self, path: str | Path) -> Path:
         """Write the model file; returns its path."""
-        save_models(self.model_file(), writable(path))
+        save_models(self.model_file(), check_output_file(path, "save"))
         return Path(path)
 
     def _summary(self) -> _Table:
@@ -218,7 +213,7 @@ class Design(_Shown):
 
     def save(self, path: str | Path) -> Path:
         """Write the controller file; ``cartctl run --controller PATH`` runs it."""
-        save_controller(self.controller_file(path), writable(path))
+        save_controller(self.controller_file(path), check_output_file(path, "save"))
         return Path(path)
 
     def _summary(self) -> _Table:
