@@ -95,7 +95,6 @@ def write_mat(variables: Mapping[str, Any], path: str | Path) -> Path:
     import scipy.io
 
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     with writing(path):
         scipy.io.savemat(path, dict(variables), oned_as="row", do_compression=True)
     return path

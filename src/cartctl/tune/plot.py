@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 from cartctl.data.outputs import writing
@@ -127,7 +126,6 @@ def _finish(fig: Any, ax: Any, front: Sequence[tuple[float, float, int]],
         unplaced = place_labels(fig, ax, labels, obstacles)
         legend.get_texts()[-1].set_text(_unplaced_note(unplaced) if unplaced
                                         else "every ringed point has its #")  # fmt: skip
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
     with writing(path):
         fig.savefig(path)
 
