@@ -107,6 +107,7 @@ def validate(model: ArxModel, trace: Trace, motor: str) -> ValidationResult:
     stable = model.is_stable()
     if not stable:
         simulated = np.where(np.isfinite(simulated), simulated, np.nan)
+    step = _compare_step(trace.time_s, voltage, measured, simulated, period_s) if stable else None
     return ValidationResult(
         motor=motor,
         fit_simulation_percent=(  # NaN, not simulation_fit's refusal, for a non-finite trace
@@ -119,9 +120,7 @@ def validate(model: ArxModel, trace: Trace, motor: str) -> ValidationResult:
         measured_rad_s=measured,
         simulated_rad_s=simulated,
         abs_error_rad_s=np.abs(measured - simulated),
-        step=_compare_step(trace.time_s, voltage, measured, simulated, period_s)
-        if stable
-        else None,
+        step=step,
         unstable_pole=None if stable else model.pole_radius(),
         stability=model.stability(),
     )
