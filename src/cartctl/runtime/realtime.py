@@ -81,13 +81,12 @@ def enable_realtime(priority: int = 50, *, lock_memory: bool = True) -> str:
     text = f"SCHED_FIFO priority {priority}"
     if not lock_memory:
         return text
-    if _saved["locked"]:
-        return text + ", memory locked"
-    _saved["locked"] = 1
-    why = _lock_memory()
-    if why:
-        _saved["locked"] = 0
-        return f"{text}, memory not locked ({why})"
+    if not _saved["locked"]:
+        _saved["locked"] = 1
+        why = _lock_memory()
+        if why:
+            _saved["locked"] = 0
+            return f"{text}, memory not locked ({why})"
     return text + ", memory locked"
 
 
