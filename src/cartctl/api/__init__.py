@@ -60,8 +60,7 @@ def load_trace(path: str | Path, map: str | Mapping[str, str] | None = None) -> 
     if map is not None and not isinstance(map, str | Mapping):
         shown = "'voltage_a=FloatIn2,speed_a=FloatIn0'"
         raise InputError(f"map must be text like {shown} or a dict, got {map!r}")
-    mapping = parse_mapping(map) if isinstance(map, str) else map
-    return read_trace(path, mapping)
+    return read_trace(path, parse_mapping(map) if isinstance(map, str) else map)
 
 
 def _check_simulated(

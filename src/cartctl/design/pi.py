@@ -194,8 +194,7 @@ def design_pi_bandwidth(
         from scipy import optimize
 
         fc = optimize.brentq(lambda f: at(f).bandwidth_hz() - bandwidth_hz, low, fc, xtol=1e-9)
-    design = at(fc)
-    return replace(design, target_bandwidth_hz=float(bandwidth_hz))
+    return replace(at(fc), target_bandwidth_hz=float(bandwidth_hz))
 
 
 @dataclass(frozen=True)
