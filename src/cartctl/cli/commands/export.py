@@ -125,10 +125,8 @@ def _write_arduino(args: argparse.Namespace) -> None:
     if note is not None:
         print(f"cartctl export: warning: {note}", file=sys.stderr)
     if args.out:
-        path = Path(args.out)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with writing(path):
-            path.write_text(source, encoding="utf-8")
+        with writing(args.out):
+            Path(args.out).write_text(source, encoding="utf-8")
         print(f"wrote {args.out}")
     else:
         print(source, end="")

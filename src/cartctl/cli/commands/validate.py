@@ -72,7 +72,6 @@ def show(args: argparse.Namespace, doc: dict[str, Any], text: str, figure: Any) 
 
     path = None if args.plot is None else Path(args.plot)
     if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
         with writing(path):
             figure().savefig(path, format="png", dpi=120)
     print(dumps(doc) if args.json else text)
