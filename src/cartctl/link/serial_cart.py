@@ -10,7 +10,6 @@ import contextlib
 import statistics
 import sys
 import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -19,7 +18,7 @@ import cartctl.link.bridge as bridge
 from cartctl.cart import PERIOD_S
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.errors import PlantError
-from cartctl.link.cart_link import DEFAULT_SILENCE_TIMEOUT_S, CartLink, UnsupportedCartError
+from cartctl.link.cart_link import CartLink, UnsupportedCartError
 from cartctl.link.dialect import Encoder, Gpio
 from cartctl.measures.metrics import percentiles
 from cartctl.plants.base import Measurement
@@ -43,7 +42,7 @@ class SerialCart:
     """A cart on a serial port as a :class:`~cartctl.plants.base.Plant`, clocked by the cart.
 
     ``connect_timeout_s`` bounds the wait for the first HEARTBEAT; the rest goes to the
-    :class:`~cartctl.link.cart_link.CartLink`. :meth:`send` and :meth:`receive` split
+    :class:`~cartctl.link.cart_link.CartLink` (``silence_timeout_s``, ``on_print``, ...). :meth:`send` and :meth:`receive` split
     :meth:`step` (the cart-clocked loop times its compute between).
     """
 
@@ -54,18 +53,11 @@ class SerialCart:
         port: str,
         *,
         connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S,
-        silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
-        on_print: Callable[[str], None] | None = None,
-        serial_factory: Callable[..., Any] | None = None,
+        **link_options: Any,
     ) -> None:
         self.port = port
         self.connect_timeout_s = float(connect_timeout_s)
-        self.link = CartLink(
-            port,
-            silence_timeout_s=silence_timeout_s,
-            on_print=on_print,
-            serial_factory=serial_factory,
-        )
+        self.link = CartLink(port, **link_options)
         self.encoder = Encoder()
         self.connected = False
         self.sample: bridge.CartSample | None = None
