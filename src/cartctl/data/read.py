@@ -7,7 +7,7 @@ from __future__ import annotations
 import csv
 import re
 import warnings
-from collections.abc import Mapping
+from collections.abc import Mapping, Sized
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,11 +42,8 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
             names, header_line, rows, csv_lines, bad = _read_csv(path)
             if len(rows) > 1 and len(rows[-1]) < len(names) and not _ends_with_newline(path):
                 rows.pop()  # a write cut short (a kill, a power loss): whole rows were written
-                warnings.warn(
-                    f"{path}: the last row is cut short (the recording stopped mid-write); "
-                    f"read its {len(rows)} complete rows",
-                    DataWarning,
-                    stacklevel=2,
+                _cut_short(
+                    path, "the last row is cut short (the recording stopped mid-write)", rows
                 )
         else:
             (names, values, text), header_line, rows, bad = plain, 1, [], None
@@ -59,12 +56,8 @@ def read_trace(path: str | Path, mapping: Mapping[str, str] | None = None) -> Tr
     else:
         log = read_qrc5(path) if kind == "qrc5" else read_qrc6(path)
         if log.truncated:
-            warnings.warn(
-                f"{path}: the QRC log ends without its closing tags (QRC did not close the "
-                f"recording); read its {len(log.rows)} complete rows",
-                DataWarning,
-                stacklevel=2,
-            )
+            why = "the QRC log ends without its closing tags (QRC did not close the recording)"
+            _cut_short(path, why, log.rows)
         names, rows = ["time", *log.labels], log.rows
         time_j, plan = plan_columns(path, log.kind, names, checked, None)
         lines = log.row_lines
@@ -293,6 +286,11 @@ def _ends_with_newline(path: Path) -> bool:
     with path.open("rb") as file:
         file.seek(-1, 2)
         return file.read(1) in (b"\n", b"\r")
+
+
+def _cut_short(path: Path, why: str, rows: Sized) -> None:
+    """Warn that ``path`` ends in a write cut short, of which its whole ``rows`` are read."""
+    warnings.warn(f"{path}: {why}; read its {len(rows)} complete rows", DataWarning, stacklevel=3)
 
 
 def _is_number(text: str) -> bool:
