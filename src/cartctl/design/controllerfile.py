@@ -62,10 +62,8 @@ def file_sha256(path: str | Path) -> str:
 
 def _plain(value: Any) -> Any:
     """numpy arrays and scalars → lists and floats, None dropped (TOML has no null)."""
-    if isinstance(value, np.ndarray):
+    if isinstance(value, np.ndarray | np.generic):  # a numpy scalar's tolist() is its item()
         return _plain(value.tolist())
-    if isinstance(value, np.generic):
-        return value.item()
     if isinstance(value, Mapping):
         return {str(k): _plain(v) for k, v in value.items() if v is not None}
     if isinstance(value, list | tuple):
