@@ -84,23 +84,20 @@ def final_value(response: ArrayLike) -> float:
     return float(np.mean(y[-count:]))
 
 
-def find_step(
-    values: ArrayLike, *, initial: float = 0.0, tolerance: float = 1e-6
-) -> StepOnset | None:
-    """A single step: ``initial`` up to some sample, then one other level (within ``tolerance``) to
-    the end; a signal at another level from sample 0 steps at index 0. None: no step, or not one
-    clean step."""
+def find_step(values: ArrayLike) -> StepOnset | None:
+    """A single step: 0 up to some sample, then one other level (within 1e-6) to the end; a signal
+    at another level from sample 0 steps at index 0. None: no step, or not one clean step."""
     u = np.asarray(values, dtype=float)
     if u.ndim != 1:
         raise InputError(f"a signal must be 1-D, got shape {u.shape}")
-    off = np.flatnonzero(np.abs(u - initial) > tolerance)
+    off = np.flatnonzero(np.abs(u) > 1e-6)
     if off.size == 0:
         return None
     index = int(off[0])
     level = float(u[index])
-    if np.any(np.abs(u[index:] - level) > tolerance):
+    if np.any(np.abs(u[index:] - level) > 1e-6):
         return None
-    return StepOnset(index, level - initial)
+    return StepOnset(index, level)
 
 
 def first_step(reference: NDArray[np.float64], *, initial: float = 0.0) -> tuple[int, int] | None:
