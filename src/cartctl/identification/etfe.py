@@ -101,8 +101,7 @@ def split_cycles(
             f"needs at least {min_cycles} whole cycle(s){skipped}; {y.size} samples hold "
             f"{n_whole} whole cycle(s) of {p} ticks, so {max(n_cycles, 0)} usable"
         )
-    y_cycles = y[first * p : n_whole * p].reshape(n_cycles, p)
-    u_cycles = u[first * p : n_whole * p].reshape(n_cycles, p)
+    y_cycles, u_cycles = (x[first * p : n_whole * p].reshape(n_cycles, p) for x in (y, u))
     tol = PERIOD_RTOL * max(float(np.max(np.abs(u_cycles))), math.ulp(1.0))
     spread = float(np.max(np.abs(u_cycles - u_cycles[0])))
     if spread > tol:
