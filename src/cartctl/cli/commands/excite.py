@@ -172,13 +172,12 @@ def _save(
         )
         ticks = "unknown" if loop_delay is None else f"{loop_delay} tick(s)"
         print(f"wrote {meta}: loop delay {ticks} and the plant, for identify")
-    if link is not None:
-        delay = link["loop_delay_ticks"]
+    if link is not None:  # loop_delay: the echo's
         stats = link["link"]
         if not args.json:
             print(
-                f"  loop delay {delay} ticks from the echo (the report's model structure for "
-                f"this loop: nk = {None if delay is None else delay + 1}); "
+                f"  loop delay {loop_delay} ticks from the echo (the report's model structure for "
+                f"this loop: nk = {None if loop_delay is None else loop_delay + 1}); "
                 f"{stats['crc_errors']} CRC errors, {stats['lost_frames']} frames lost, "
                 f"{stats['missed_ticks']} cart ticks missed; " + host_loss_text(stats)
             )
