@@ -238,11 +238,10 @@ class Commission:
     def run_verification(self) -> None:
         """Stage 5: ``cartctl run`` of the controller on the plant; measured against predicted."""
         assert self.tuned is not None
-        fast = plant_kind(self.spec) in SIMULATED
+        kind, opts = plant_kind(self.spec), self.plant_options
+        fast = kind in SIMULATED
         self.say("verification", f"{checks.REFERENCE} for {checks.DURATION_S:g} s with "
                  f"controller.toml{' (--fast)' if fast else ''}")  # fmt: skip
-        opts = self.plant_options
-        kind = plant_kind(self.spec)
         plant_options = [
             a
             for f, k in PLANT_FLAGS.items()
