@@ -58,11 +58,8 @@ def actuation_timings(text: str | None) -> tuple[float, ...]:
 def design_fixed(args: argparse.Namespace) -> dict[str, float]:
     """``--process-noise-v`` and ``--bias-drift-v``, the design fields every setting shares,
     checked as ``cartctl design`` checks them."""
-    fixed = {}
-    for field, value in (("process_noise_std_v", args.process_noise_v),
-                         ("bias_drift_std_v", args.bias_drift_v)):  # fmt: skip
-        if value is not None:
-            fixed[field] = float(check_field(field, value))
+    given = (("process_noise_std_v", args.process_noise_v), ("bias_drift_std_v", args.bias_drift_v))
+    fixed = {field: float(check_field(field, value)) for field, value in given if value is not None}
     if fixed and args.method == "pi":  # tune's PI runs on the measurement
         verb = "applies" if len(fixed) == 1 else "apply"
         raise InputError(f"{' and '.join(OPTIONS[f] for f in fixed)} only {verb} to --method poles")

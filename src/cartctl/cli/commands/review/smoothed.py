@@ -58,10 +58,9 @@ def smoothed_speeds(
         voltage_v = np.array(columns[f"voltage_{m}"], dtype=float)
         if stop_row and voltage_v.size > 1:
             voltage_v[-1] = voltage_v[-2]
-        result = smooth_speed(
+        out[m] = smooth_speed(
             models.motor(m), voltage_v, columns[f"speed_{m}"], extra_delay_ticks=extra_delay_ticks
-        )
-        out[m] = result.speed_rad_s
+        ).speed_rad_s
     return out
 
 
