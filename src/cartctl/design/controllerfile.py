@@ -215,7 +215,6 @@ def _resolve_model(stored: str, controller_path: Path, *, legacy: bool) -> str:
 def save_controller(controller: ControllerFile, path: str | Path) -> Path:
     """Write a controller file (parent folders created, the model path relative to its folder)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     header = f"# cartctl controller ({controller.method}); regenerate with: {controller.command}\n"
     document = controller.to_toml_dict(path.parent)
     with writing(path):

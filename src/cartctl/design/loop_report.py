@@ -103,7 +103,6 @@ def write_report(out_dir: str | Path, designs: Designs) -> list[Path]:
     """``design_X.png`` (:func:`design_figure`) and ``analysis_X.png`` (:func:`analysis_figure`)
     per motor; returns their paths."""
     out, paths = Path(out_dir), []
-    out.mkdir(parents=True, exist_ok=True)
     for m, analysis in designs.analyses.items():
         figures = {
             "design": design_figure(m, designs),

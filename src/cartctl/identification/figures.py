@@ -54,7 +54,6 @@ def figure(width_in: float, height_in: float, path: Path, title: str) -> Iterato
         fig = Figure(figsize=(width_in, height_in), dpi=DPI, layout="constrained")
         yield fig
         fig.suptitle(title)
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
         with writing(path):  # a full disk: a fault naming the figure
             fig.savefig(path, dpi=DPI)
 

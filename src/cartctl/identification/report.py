@@ -52,7 +52,6 @@ def write_summary(out_dir: Path, *, title: str, sections: Sequence[ReportSection
     """Write ``out_dir/summary.md`` (the title, then each section's text, figures and table)
     and return its path."""
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     lines = [f"# {title}", ""]
     for section in sections:
         lines += [f"## {section.heading}", ""]
