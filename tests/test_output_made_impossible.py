@@ -14,7 +14,6 @@ import pytest
 
 import cartctl.plants.factory
 from cartctl.cli import main
-from cartctl.cli.commands import run as run_command
 
 
 def _folder_made_a_file(make_plant: Callable[..., Any]) -> Callable[..., Any]:
@@ -36,12 +35,11 @@ def test_a_trace_that_cannot_be_created_is_one_line(
 ) -> None:
     monkeypatch.chdir(tmp_path)
     Path("sub").mkdir()
+    factory = cartctl.plants.factory
+    monkeypatch.setattr(factory, "make_plant", _folder_made_a_file(factory.make_plant))
     if command == "excite":
-        factory = cartctl.plants.factory
-        monkeypatch.setattr(factory, "make_plant", _folder_made_a_file(factory.make_plant))
         argv = ["excite", "--amplitude", "5", "--cycles", "1", "--out", "sub/e.csv"]
     else:
-        monkeypatch.setattr(run_command, "make_plant", _folder_made_a_file(run_command.make_plant))
         argv = [
             "run",
             "--fast",

@@ -10,8 +10,8 @@ import pytest
 from rerun.chunk import RrdReader
 
 from cartctl.cli import main
-from cartctl.cli.commands import run as run_command
 from cartctl.data.read import read_trace
+from cartctl.plants import factory
 from cartctl.plants.sim import ArxPlant
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -93,13 +93,13 @@ def test_ctrl_c_leaves_zero_volts_and_readable_files(
                 raise KeyboardInterrupt
             return super().step(voltage_a_v, voltage_b_v)
 
-    original = run_command.make_plant
+    original = factory.make_plant
 
     def fake_make_plant(*args, **kwargs):
         plant, _ = original(*args, **kwargs)
         return Interrupting(*plant.models), "interrupting sim"
 
-    monkeypatch.setattr(run_command, "make_plant", fake_make_plant)
+    monkeypatch.setattr(factory, "make_plant", fake_make_plant)
     code, _out, err = _run(capsys, "--fast", "--duration", "5", "--rerun", "save", "--name", "cut")
     assert code == 130
     assert "interrupted" in err

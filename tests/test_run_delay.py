@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from cartctl.cli import main
-from cartctl.cli.commands import run as run_command
 from cartctl.data.read import read_trace
+from cartctl.design import controllerfile
 from cartctl.errors import DataWarning
+from cartctl.plants import factory
 
 ROOT = Path(__file__).resolve().parents[1]
 MISMATCH = (
@@ -139,7 +140,7 @@ def test_serial_controller_on_the_virtual_cart_stops_before_driving(
     capsys: pytest.CaptureFixture[str], workdir: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     sent: list[tuple[float, float, bool]] = []
-    original = run_command.make_plant
+    original = factory.make_plant
 
     def recording_make_plant(*args, **kwargs):
         plant, description = original(*args, **kwargs)
@@ -152,7 +153,7 @@ def test_serial_controller_on_the_virtual_cart_stops_before_driving(
         plant.send = record
         return plant, description
 
-    monkeypatch.setattr(run_command, "make_plant", recording_make_plant)
+    monkeypatch.setattr(factory, "make_plant", recording_make_plant)
     unclear: DataWarning | None = None
     try:
         code, _out, err = _run(capsys, "--plant", "virtual", "--controller",
@@ -193,14 +194,14 @@ def test_voltage_limit_is_the_controllers_limit(
     for tens of ticks."""
     (workdir / "ref.csv").write_text("time_s,reference\n0,10\n0.999,10\n1.0,6\n3,6\n", "utf-8")
     built = []
-    original = run_command.build_controllers
+    original = controllerfile.build_controllers
 
     def capture(*args, **kwargs):
         controllers = original(*args, **kwargs)
         built.append(controllers)
         return controllers
 
-    monkeypatch.setattr(run_command, "build_controllers", capture)
+    monkeypatch.setattr(controllerfile, "build_controllers", capture)
     code, out, err = _run(capsys, "--fast", "--voltage-limit", "4", "--reference", "file:ref.csv",
                           "--duration", "2", "--rerun", "off", "--json")  # fmt: skip
     assert code == 0, err

@@ -71,7 +71,7 @@ def test_a_run_stopped_before_its_first_tick_leaves_an_earlier_runs_files(
 ) -> None:
     """The meta file was written before the loop: a run that failed in the plant's reset (or was
     stopped as the loop started) put its meta file beside the earlier run's trace and recording."""
-    from cartctl.cli.commands import run as run_command
+    from cartctl.plants import factory
     from cartctl.runtime.loop import ControlLoop
 
     monkeypatch.chdir(tmp_path)
@@ -80,7 +80,7 @@ def test_a_run_stopped_before_its_first_tick_leaves_an_earlier_runs_files(
     before = {name: Path(name).read_bytes() for name in os.listdir()}
     assert sorted(before) == ["x.csv", "x.meta.toml", "x.rrd"]
     if stop == "plant":
-        monkeypatch.setattr(run_command, "make_plant", _fails_in_reset(run_command.make_plant))
+        monkeypatch.setattr(factory, "make_plant", _fails_in_reset(factory.make_plant))
     else:
         monkeypatch.setattr(ControlLoop, "start", _stop_signal(ControlLoop.start))
     code = main([*argv, "--rerun", "off", "--model", "models/air.toml"])

@@ -73,8 +73,10 @@ def test_run_a_signal_during_a_completed_runs_shutdown_is_not_swallowed(
 def test_run_a_signal_before_the_loop_closes_the_plant(
     workdir: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    from cartctl.plants import factory
+
     closed: list[bool] = []
-    original = run_command.make_plant
+    original = factory.make_plant
 
     def make_plant(*args: Any, **kwargs: Any) -> Any:
         plant, description = original(*args, **kwargs)
@@ -82,7 +84,7 @@ def test_run_a_signal_before_the_loop_closes_the_plant(
         plant.close = lambda: (closed.append(True), close())[1]
         return plant, description
 
-    monkeypatch.setattr(run_command, "make_plant", make_plant)
+    monkeypatch.setattr(factory, "make_plant", make_plant)
     monkeypatch.setattr(run_command, "_sinks", _signalling(run_command._sinks))
     code = main(["run", "--fast", "--duration", "1", "--rerun", "off", "--name", "s"])
     err = capsys.readouterr().err

@@ -20,20 +20,6 @@ if TYPE_CHECKING:
     from cartctl.session.prepare import PreparedRun
 
 
-def make_plant(*args: Any, **kwargs: Any) -> Any:
-    """:func:`cartctl.plants.factory.make_plant`, imported on the first call (tests replace it)."""
-    from cartctl.plants.factory import make_plant
-
-    return make_plant(*args, **kwargs)
-
-
-def build_controllers(*args: Any, **kwargs: Any) -> Any:
-    """:func:`cartctl.design.build.build_controllers`, imported on the first call."""
-    from cartctl.design.controllerfile import build_controllers
-
-    return build_controllers(*args, **kwargs)
-
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "run",
@@ -130,8 +116,7 @@ def _prepared(args: argparse.Namespace, given: str) -> PreparedRun:
         reference_b=args.reference_b, model=args.model, preset=args.preset,
         noise_std_rad_s=args.noise, seed=args.seed, connect_timeout_s=args.connect_timeout,
         voltage_limit_v=args.voltage_limit, force=args.force, allow_unstable=args.allow_unstable,
-        allow_delay_mismatch=args.allow_delay_mismatch, make_plant=make_plant,
-        build_controllers=build_controllers, before_plant=warm_up_rerun,
+        allow_delay_mismatch=args.allow_delay_mismatch, before_plant=warm_up_rerun,
     )  # fmt: skip
 
 
