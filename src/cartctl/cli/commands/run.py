@@ -289,35 +289,26 @@ def _report(args: argparse.Namespace, summary: dict[str, Any], loop: ControlLoop
         print(f"cartctl run: warning: {problem}", file=sys.stderr)
     warn_host_losses(summary.get("link"), "run")
     warn_delay_change(summary.get("link"), "run")
+    return _ended(args, loop, "; zero volts sent, the trace and recording hold the run so far")
+
+
+def _ended(args: argparse.Namespace, loop: ControlLoop, what: str) -> int:
+    """How the run ended, as one line on stderr, and the exit code: the error line (each file and
+    why, the failure, the motors), 1; else the stop signal's line (``what`` after its name; left
+    to commission when it runs ``run`` in process) and its code; else 0."""
     state = loop.state
-    if state.incomplete or state.failure:  # one line: each file and why, the failure, the motors
+    if state.incomplete or state.failure:
         failed = [str(e) for e in state.incomplete] + [state.failure or ""]
         stopped = "; the motors were stopped" if state.incomplete and state.zero_volts_sent else ""
         print(f"cartctl run: error: {'; '.join(f for f in failed if f)}{stopped}", file=sys.stderr)
         return 1
-    if loop.state.interrupted or stopping.received() is not None:  # during the run or after it
-        return _stopped(args, "; zero volts sent, the trace and recording hold the run so far")
-    return 0
-
-
-def _stopped(args: argparse.Namespace, what: str) -> int:
-    """The stop signal's line (``what`` after its name; left to commission when it runs ``run``
-    in process) and its exit code."""
     signum = stopping.received()
+    if not state.interrupted and signum is None:  # a signal during the run or after it
+        return 0
     why = "interrupted" if signum is None else f"stopped by {signal.Signals(signum).name}"
     if args.say_stopped:
         print(f"cartctl run: {why}{what}", file=sys.stderr)
     return stopping.exit_code()
-
-
-def _unrecorded(args: argparse.Namespace, loop: ControlLoop) -> int:
-    """A run stopped before its first tick (a signal, a plant fault as it started): one line, the
-    exit code."""
-    state = loop.state
-    if state.failure:
-        print(f"cartctl run: error: {state.failure}", file=sys.stderr)
-        return 1
-    return _stopped(args, " before the first tick; zero volts sent, nothing recorded")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -332,8 +323,8 @@ def run(args: argparse.Namespace) -> int:
         raise
     with contextlib.ExitStack() as after:  # a signal after the loop: the summary, then its code
         loop, timing, scheduling = _run_loop(args, prepared, sinks, after)
-        if not memory.columns:  # it stopped before the sinks opened: no rows, no summary
-            return _unrecorded(args, loop)
+        if not memory.columns:  # it stopped before the sinks opened (a signal, a plant fault)
+            return _ended(args, loop, " before the first tick; zero volts sent, nothing recorded")
         run_facts = {"recording": str(rrd_path) if rerun is not None else None,
                      "trace": str(csv_path), "plant": prepared.description, "controller": given,
                      "scheduling": scheduling}  # fmt: skip
