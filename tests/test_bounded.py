@@ -108,9 +108,9 @@ CASES = [
     # durations and repetitions: already bounded at 24 h of signal
     (["run", "--fast", "--duration", "1e9", "--rerun", "off"], "--duration", PLANT_WORK),
     (["excite", "--plant", "sim", "--signal", "square", "--amplitude", "5", "--cycles",
-      "100000000", "--out", "x.csv"], "cycles", PLANT_WORK),
+      "100000000", "--out", "y.csv"], "cycles", PLANT_WORK),
     (["excite", "--plant", "sim", "--signal", "prbs", "--amplitude", "5", "--duration", "1e9",
-      "--out", "x.csv"], "--duration", PLANT_WORK),
+      "--out", "y.csv"], "--duration", PLANT_WORK),
     (["monitor", "virtual", "--duration", "1e9"], "--duration", CART_WORK),
     (["virtual-cart", "--duration", "1e300"], "--duration", CART_WORK),
 ]  # fmt: skip
