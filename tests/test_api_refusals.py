@@ -446,3 +446,20 @@ def test_identify_refuses_a_delay_out_of_range_in_one_line(
     assert (
         line == str(refused.value) == f"nk (--delay) must be a whole number in 0..50, got {delay}"
     )
+
+
+def test_the_overrides_the_refusals_name_run_in_the_api_too(workdir: Path) -> None:
+    # the refusals end "or pass --allow-unstable" / "--allow-delay-mismatch": simulate takes both
+    text = (workdir / "models" / "ground.toml").read_text(encoding="utf-8")
+    unstable = workdir / "models" / "unstable.toml"
+    unstable.write_text(text.replace("[-0.9356, 0.2173,", "[-2.1, 1.05,"), encoding="utf-8")
+    ran = cartctl.simulate("controllers/pi.toml", model=str(unstable), duration_s=30,
+                           allow_unstable=True)  # fmt: skip
+    assert ran.failure is not None and "ran away" in ran.failure
+    assert len(ran.columns["time_s"]) < 3000  # stopped early, as run --allow-unstable does
+    with pytest.warns(UserWarning, match="designed for a loop delay of 3"):
+        mismatched = cartctl.simulate("controllers/serial-pi.toml", plant="physics",
+                                      duration_s=1, allow_delay_mismatch=True)  # fmt: skip
+    assert (
+        mismatched.failure is None and len(mismatched.columns["time_s"]) == 100 + 1
+    )  # 1 s of 10 ms ticks, the stop row

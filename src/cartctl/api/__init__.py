@@ -283,6 +283,8 @@ def simulate(
     preset: str = "ground",
     noise_std_rad_s: float = 0.0,
     seed: int | None = None,
+    allow_unstable: bool = False,
+    allow_delay_mismatch: bool = False,
 ) -> SimulationResult:
     """Run a controller in the simulated loop as ``cartctl run --fast`` does (and refuses).
 
@@ -296,6 +298,9 @@ def simulate(
         A reference spec (``step:10``, ``square:8:2``, ``file:ref.csv`` …).
     duration_s : float
         Run time (s); ``cartctl run`` runs 5 s by default.
+    allow_unstable, allow_delay_mismatch : bool
+        Run what is refused without ``--allow-unstable`` or ``--allow-delay-mismatch``, the
+        options the refusals name: an unstable model, or another loop delay than designed for.
     """
     _check_simulated(plant, "simulate", model, preset, noise_std_rad_s, seed)
     check_duration(duration_s)
@@ -315,7 +320,9 @@ def simulate(
     # what cartctl run refuses, refused here with the same line (cartctl.session)
     prepared = prepare_run(file, given=name, plant=plant, duration_s=float(duration_s),
                            reference=reference, model=model or file.model_path, preset=preset,
-                           noise_std_rad_s=noise_std_rad_s, seed=seed)  # fmt: skip
+                           noise_std_rad_s=noise_std_rad_s, seed=seed,
+                           allow_unstable=allow_unstable,
+                           allow_delay_mismatch=allow_delay_mismatch)  # fmt: skip
     period_s = prepared.period_s
     columns, state = run_in_memory(prepared.plant, prepared.controllers, prepared.references,
                                    period_s=period_s,
