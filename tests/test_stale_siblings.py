@@ -143,3 +143,30 @@ def test_a_trace_another_command_recorded_is_not_replaced(
     assert {name: Path(name).read_bytes() for name in os.listdir()} == before
     if first is not None:
         _ok(capsys, first)  # a trace of its own kind is still replaced
+
+
+@pytest.mark.parametrize(
+    "left",
+    [
+        {"x.csv": ""},  # a full disk as the header was written
+        {"x.csv": "time_s,voltage_a,speed_a\n", "x.meta.toml": ""},  # ... as the meta file was
+        {"x.csv": "time_s,voltage_a,speed_a\n"},  # a kill between the header and the meta file
+    ],
+    ids=["empty", "header-and-empty-meta", "header-only"],
+)
+@pytest.mark.parametrize("then", [RUN, [*EXCITE, "--out", "x.csv"]], ids=["run", "excite"])
+def test_a_trace_without_rows_is_replaced_by_the_same_command(
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path,
+    left: dict[str, str],
+    then: list[str],
+) -> None:
+    """A run or an excitation stopped by a full disk before its first row left a trace without
+    rows (and no meta file, or an empty one): the same command again was refused (a trace
+    'without a .meta.toml', or the empty meta file), though it holds nothing to lose."""
+    monkeypatch.chdir(tmp_path)
+    for name, text in left.items():
+        Path(name).write_text(text, encoding="utf-8")
+    _ok(capsys, then)
+    assert Path("x.meta.toml").read_text(encoding="utf-8").startswith("# cartctl")

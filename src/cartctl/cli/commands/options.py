@@ -143,17 +143,22 @@ _KINDS = {
 
 def check_own_trace(trace: Path, command: str, option: str) -> None:
     """Refuse to replace ``trace`` unless ``command`` recorded it (an earlier output of its own):
-    its .meta.toml names a run's controller, an excitation's none; ``monitor`` writes none."""
-    if trace.is_file():
-        from cartctl.data.trace import read_trace_meta
+    its .meta.toml names a run's controller, an excitation's none; ``monitor`` writes none. A
+    trace without rows (a full disk as it began) holds nothing."""
+    if not trace.is_file():
+        return
+    with trace.open("rb") as file:
+        if not (file.readline() and file.readline()):  # no row: its meta file may be cut too
+            return
+    from cartctl.data.trace import read_trace_meta
 
-        meta = read_trace_meta(trace)
-        kind = "monitor" if meta is None else "run" if meta.controller else "excite"
-        if kind != command:
-            raise InputError(
-                f"{option}: {trace} holds {_KINDS[kind]}; cartctl {command} replaces "
-                f"only {_KINDS[command]}: give another {option} or remove it"
-            )
+    meta = read_trace_meta(trace)
+    kind = "monitor" if meta is None else "run" if meta.controller else "excite"
+    if kind != command:
+        raise InputError(
+            f"{option}: {trace} holds {_KINDS[kind]}; cartctl {command} replaces "
+            f"only {_KINDS[command]}: give another {option} or remove it"
+        )
 
 
 def check_outputs(
