@@ -170,3 +170,29 @@ def test_a_trace_without_rows_is_replaced_by_the_same_command(
         Path(name).write_text(text, encoding="utf-8")
     _ok(capsys, then)
     assert Path("x.meta.toml").read_text(encoding="utf-8").startswith("# cartctl")
+
+
+def test_a_run_whose_meta_file_names_no_controller_is_still_a_run(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """A run's meta file names its controller since 9082b29; one written before (the same
+    format, its command line 'cartctl run ...') was taken for an excitation: run --name over
+    it was refused and excite --out replaced it."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("sys.argv", ["cartctl", *RUN])  # the command line its meta file keeps
+    _ok(capsys, RUN)
+    meta = Path("x.meta.toml")
+    lines = meta.read_text(encoding="utf-8").splitlines(keepends=True)
+    meta.write_text("".join(x for x in lines if not x.startswith(("controller", "model"))))
+    before = {name: Path(name).read_bytes() for name in os.listdir()}
+    assert main([*EXCITE, "--out", "x.csv"]) == 2
+    assert (
+        capsys.readouterr()
+        .err.rstrip()
+        .endswith(
+            "x.csv holds a run's trace; cartctl excite replaces only an excitation: give another "
+            "--out or remove it"
+        )
+    )
+    assert {name: Path(name).read_bytes() for name in os.listdir()} == before
+    _ok(capsys, RUN)

@@ -143,8 +143,8 @@ _KINDS = {
 
 def check_own_trace(trace: Path, command: str, option: str) -> None:
     """Refuse to replace ``trace`` unless ``command`` recorded it (an earlier output of its own):
-    its .meta.toml names a run's controller, an excitation's none; ``monitor`` writes none. A
-    trace without rows (a full disk as it began) holds nothing."""
+    its .meta.toml names a run's controller (before 9082b29: its command line), an excitation's
+    none; ``monitor`` writes none. A trace without rows (a full disk as it began) holds nothing."""
     if not trace.is_file():
         return
     with trace.open("rb") as file:
@@ -153,7 +153,8 @@ def check_own_trace(trace: Path, command: str, option: str) -> None:
     from cartctl.data.trace import read_trace_meta
 
     meta = read_trace_meta(trace)
-    kind = "monitor" if meta is None else "run" if meta.controller else "excite"
+    ran = meta is not None and (meta.controller or meta.command.split()[1:2] == ["run"])
+    kind = "monitor" if meta is None else "run" if ran else "excite"
     if kind != command:
         raise InputError(
             f"{option}: {trace} holds {_KINDS[kind]}; cartctl {command} replaces "
