@@ -190,3 +190,15 @@ def test_an_onboard_step_after_the_run_ends_is_refused(
         "'step:10:3': the step at 3 s comes after the run's last tick (1.99 s); "
         "give a delay within the run or a longer duration"
     )
+
+
+def test_an_onboard_step_within_a_duration_between_ticks_is_recorded(
+    capsys: pytest.CaptureFixture[str], workdir: Path
+) -> None:
+    """monitor records while the cart's time is below --duration: 0.104 s holds the frame at
+    0.10 s, where a step at 0.1 s acts; it was refused as after the last tick (0.09 s)."""
+    argv = ["monitor", "virtual", "--rerun", "off", "--onboard", "controllers/pi.toml"]
+    code = main([*argv, "--reference", "step:8:0.1", "--duration", "0.104", "--name", "x"])
+    assert code == 0, capsys.readouterr().err
+    header, *_, last = Path("logs/x.csv").read_text(encoding="utf-8").splitlines()
+    assert float(last.split(",")[header.split(",").index("reference_a")]) == 8.0  # at 0.10 s

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
 from typing import TYPE_CHECKING
@@ -107,8 +108,8 @@ def _check_reach(path: str, spec: str, duration_s: float | None) -> None:
     from cartctl.reference import ReferenceSchedule, check_step_in_run
     from cartctl.session.prepare import check_reach
 
-    if duration_s:
-        check_step_in_run(spec, round(duration_s / PERIOD_S), PERIOD_S, "--reference")
+    if duration_s:  # the cart's ticks before --duration (monitor's frames: 0.104 s holds 0.10 s)
+        check_step_in_run(spec, math.ceil((duration_s - 1e-9) / PERIOD_S), PERIOD_S, "--reference")
     controller = load_controller(path)
     try:
         models = dict(load_models(controller.model_path).motors)
