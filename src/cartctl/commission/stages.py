@@ -111,7 +111,6 @@ class Commission:
             plant.close()
             raise
         bar, path = ProgressBar(ua.size, f"cartctl commission {stage}"), self.out / f"{stage}.csv"
-        sink = CsvSink(path, flush_every=50 if isinstance(plant, ClockedPlant) else 1000)  # run's
         opened: list[tuple[str, ...]] = []
 
         def meta(columns: Sequence[str]) -> None:  # from the first row: a cut trace has its loop
@@ -120,9 +119,11 @@ class Commission:
                 write_trace_meta(path, plant=self.description, command=f"cartctl commission "
                                  f"{self.spec}", loop_delay_ticks=self.loop_delay_ticks)  # fmt: skip
 
+        flush_every = 50 if isinstance(plant, ClockedPlant) else 1000  # run's
+        sink = CsvSink(path, flush_every=flush_every, on_open=meta)
         try:
             result = run_experiment(
-                plant, ua, ub, on_tick=bar.update, source=self.description, sink=sink, on_open=meta
+                plant, ua, ub, on_tick=bar.update, source=self.description, sink=sink
             )
         finally:
             bar.close()

@@ -288,15 +288,14 @@ def run_experiment(
     on_tick: Callable[[int], None] | None = None,
     source: str | None = None,
     sink: Sink | None = None,
-    on_open: Callable[[Sequence[str]], object] | None = None,
 ) -> ExperimentResult:
     """Apply the voltage sequences (V per tick) and record them with the measured speeds (rows as
     :mod:`cartctl.plants.base` numbers them). The plant is reset first and closed on every path
     (a stop signal meanwhile is only noted: :func:`cartctl.stopping.received`); Ctrl-C, a
     PlantError or an error of cartctl's own after the first tick ends the run with the ticks so
-    far. ``on_tick`` gets the number of ticks done. ``sink`` gets each row as it is recorded (the
-    trace's columns: opened at the first measurement, then ``on_open(columns)`` runs) and is closed
-    after the plant; a failed write (OutputError) stops the experiment and is raised."""
+    far. ``on_tick`` gets the number of ticks done. ``sink`` gets each row as it is recorded (opened
+    with the trace's columns at the first measurement) and is closed after the plant; a failed
+    write (OutputError) stops the experiment and is raised."""
     ua = np.asarray(voltage_a_v, dtype=float)
     ub = np.asarray(voltage_b_v, dtype=float)
     if ua.ndim != 1 or ua.shape != ub.shape:
@@ -319,8 +318,6 @@ def run_experiment(
                     if not width:  # the first row: the trace's columns (true speeds if it has them)
                         width = 7 if None not in true else 5
                         sink.open(names[:width])
-                        if on_open is not None:
-                            on_open(names[:width])
                     sink.write(rows[-1][:width])
             if idle is not None:  # a cart: the block written after the command, as run's loop
                 plant.send(float(ua[k]), float(ub[k]))  # type: ignore[attr-defined]

@@ -25,7 +25,7 @@ class CsvSink:
         path: str | Path,
         *,
         flush_every: int = 50,
-        on_open: Callable[[], object] | None = None,
+        on_open: Callable[[Sequence[str]], object] | None = None,
     ) -> None:
         self.path = Path(path)
         self._on_open = on_open
@@ -41,7 +41,7 @@ class CsvSink:
         self.error: OutputError | None = None
 
     def open(self, columns: Sequence[str]) -> None:
-        """Create the file (parent folders too) and write the header; then ``on_open()``."""
+        """Create the file (parent folders too) and write the header; then ``on_open(columns)``."""
         self._width = len(columns)  # (rows are taken, and dropped, when the file cannot be made)
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -51,8 +51,8 @@ class CsvSink:
             raise self.error from exc
         self._writer.writerow(columns)
         self._flush()  # the header alone
-        if self._on_open is not None:  # (run's meta file: with the trace, not before it)
-            self._on_open()
+        if self._on_open is not None:  # (a meta file: with the trace, not before it)
+            self._on_open(columns)
 
     def write(self, row: Sequence[float]) -> None:
         """Keep one row, a value per column (ValueError otherwise, and nothing kept)."""

@@ -95,7 +95,6 @@ def run(args: argparse.Namespace) -> int:
         connect_timeout_s=args.connect_timeout,
         motors="ab" if args.motor == "both" else args.motor,
     )
-    sink = CsvSink(args.out, flush_every=50 if serial else 1000)  # as run's (and run --fast's)
     opened: list[tuple[str, ...]] = []
 
     def on_open(columns: Sequence[str]) -> None:  # the meta file from the first row: a cut trace
@@ -105,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
         )
         remove_stale_recording(args.out)
 
+    sink = CsvSink(args.out, flush_every=50 if serial else 1000, on_open=on_open)  # as run's
     bar = ProgressBar(volts.size, f"excite {args.signal}")
     switch_interval = sys.getswitchinterval()
     if serial:  # answer each cart tick at once: threads hand the GIL back quickly
@@ -114,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         # simulated plant has no deadline)
         with gc_paused() if serial else contextlib.nullcontext():
             result = run_experiment(
-                plant, ua, ub, on_tick=bar.update, source=description, sink=sink, on_open=on_open
+                plant, ua, ub, on_tick=bar.update, source=description, sink=sink
             )
     finally:
         sys.setswitchinterval(switch_interval)

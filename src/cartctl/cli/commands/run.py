@@ -131,7 +131,7 @@ def _sinks(
     from cartctl.runtime.loop import MemorySink
     from cartctl.sinks.csv_sink import CsvSink
 
-    def write_meta() -> None:
+    def write_meta(_columns: object) -> None:
         try:
             write_trace_meta(csv_path, plant=prepared.description,
                              loop_delay_ticks=prepared.loop_delay_ticks,
