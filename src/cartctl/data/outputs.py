@@ -7,7 +7,7 @@ import contextlib
 import errno
 import itertools
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 from cartctl.errors import InputError, OutputError
@@ -110,3 +110,21 @@ def remove_stale_recording(trace: str | Path, keep: str | Path | None = None) ->
         return
     with contextlib.suppress(OSError):
         stale.unlink(missing_ok=True)
+
+
+def call_each(
+    calls: Iterable[Callable[..., object]],
+    *args: object,
+    failed: Callable[[OutputError], object] = lambda exc: None,
+) -> None:
+    """Call each with ``args``; a failed file write (an OutputError, given to ``failed``) does not
+    stop the others, and the first is raised once all have run."""
+    first: OutputError | None = None
+    for call in calls:
+        try:
+            call(*args)
+        except OutputError as exc:
+            failed(exc)
+            first = first or exc
+    if first is not None:
+        raise first

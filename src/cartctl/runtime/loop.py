@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cartctl.cart import PERIOD_S, SUPPLY_V
+from cartctl.data.outputs import call_each
 from cartctl.data.trace import REQUIRED_COLUMNS, Trace
 from cartctl.errors import InputError, OutputError, PlantError
 from cartctl.plants.base import ClockedPlant, Measurement, Plant
@@ -152,22 +153,10 @@ class ControlLoop:
             self._y = self.plant.reset()
             self._true = self._y.true_speed_a_rad_s is not None
         columns = TRACE_COLUMNS + (TRUE_SPEED_COLUMNS if self._true else ())
-        with held():  # a stop signal waits until every file has its header, and a cart's first
-            self._each([s.open for s in self.sinks], columns)  # measurement, for the stop row
-            if self._clocked:
+        with held():  # a stop signal waits for every file's header and a cart's first measurement
+            call_each([s.open for s in self.sinks], columns, failed=self.state.output_failed)
+            if self._clocked:  # (for the stop row)
                 self._y = self.plant.reset()
-
-    def _each(self, calls: Sequence[Callable[..., None]], *args: object) -> None:
-        """Call each with ``args``; a failed file write is kept and raised once all have run."""
-        failed: OutputError | None = None
-        for call in calls:
-            try:
-                call(*args)
-            except OutputError as exc:
-                self.state.output_failed(exc)
-                failed = failed or exc
-        if failed is not None:
-            raise failed
 
     def _command(self, motor: str, reference: float, measured: float) -> tuple[float, float]:
         ctrl = self.controllers.get(motor)
@@ -206,11 +195,11 @@ class ControlLoop:
             row += (y.true_speed_a_rad_s, y.true_speed_b_rad_s)  # type: ignore[operator]
         self.state.rows += 1
         self._last_time_s = row[0]
-        self._each(self._writers, row)
+        call_each(self._writers, row, failed=self.state.output_failed)
 
     def idle(self) -> None:
         """The sinks' work that need not delay a command, after a tick's compute time is taken."""
-        self._each(self._idlers)
+        call_each(self._idlers, failed=self.state.output_failed)
 
     def finish(self) -> None:
         """Zero volts, plant and sinks closed, on every exit path; never raises. The zero-volt

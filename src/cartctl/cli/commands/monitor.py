@@ -19,7 +19,7 @@ import cartctl.cli.commands.options as options
 from cartctl import stopping
 from cartctl.choices import DEFAULT_CONNECT_TIMEOUT_S
 from cartctl.cli.commands.virtual_cart import check_cart_options, onboard_firmware
-from cartctl.errors import InputError, OutputError
+from cartctl.errors import InputError
 
 if TYPE_CHECKING:  # cartctl.plants loads numpy and scipy: imported where used, not for --help
     from cartctl.link.cart_monitor import Monitor
@@ -134,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _monitor(args: argparse.Namespace, after: contextlib.ExitStack) -> int:
     from cartctl.cli.jsonout import dumps
-    from cartctl.data.outputs import remove_stale_recording
+    from cartctl.data.outputs import call_each, remove_stale_recording
     from cartctl.data.trace import meta_path
     from cartctl.link.cart_link import CartLink, print_to_stderr
     from cartctl.link.cart_monitor import Monitor, parse_labels
@@ -185,7 +185,7 @@ def _monitor(args: argparse.Namespace, after: contextlib.ExitStack) -> int:
                 result = monitor.run(link, args.duration)
         finally:  # its own handlers are gone: a signal must not cut the closing short
             after.enter_context(stopping.deferred())
-            _close_all(monitor.rows)
+            call_each([sink.close for sink in monitor.rows])  # each closed; a failure raised after
     finally:
         link.close()
         if cart is not None:
@@ -213,18 +213,6 @@ def _monitor(args: argparse.Namespace, after: contextlib.ExitStack) -> int:
         return 1
     signum = received[0] if received else stopping.received()  # while it ran, or after it
     return 0 if signum in (None, signal.SIGINT) else 128 + signum  # Ctrl-C: the normal way
-
-
-def _close_all(sinks: list[Any]) -> None:
-    """Close every sink; the first file found incomplete (an OutputError) is raised after."""
-    failed: OutputError | None = None
-    for sink in sinks:
-        try:
-            sink.close()
-        except OutputError as exc:
-            failed = failed or exc
-    if failed is not None:
-        raise failed
 
 
 def _format(summary: dict[str, Any]) -> str:
