@@ -28,7 +28,6 @@ late or woke late. ``--busy`` keeps one other core busy meanwhile (as ``bench_ru
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from array import array
@@ -132,15 +131,12 @@ def measure(
             return keep
 
         scheduling = "simulated clock" if fast else enable_realtime()
-        old = sys.getswitchinterval()
-        sys.setswitchinterval(1e-4)
         try:
-            with gc_paused():
+            with gc_paused(quick_gil=True):  # as run's loop
                 loop.start()
                 executor.run(tick, timers.wrap("idle", loop.idle))
         finally:
             loop.finish()
-            sys.setswitchinterval(old)
             restore()
     samples = {p: np.frombuffer(a, dtype=np.float64).copy() for p, a in timers.samples.items()}
     stats = executor.stats()

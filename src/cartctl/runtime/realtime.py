@@ -14,6 +14,7 @@ from __future__ import annotations
 import ctypes
 import gc
 import os
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from typing import Any
@@ -113,19 +114,23 @@ def realtime_scheduling(priority: int = 50, *, lock_memory: bool = True) -> Iter
 
 
 @contextmanager
-def gc_paused(*, collect_new: bool = False) -> Iterator[None]:
+def gc_paused(*, collect_new: bool = False, quick_gil: bool = False) -> Iterator[None]:
     """Within the block: one collection first, the survivors frozen (:func:`gc.freeze`) and
     automatic collection off. ``collect_new``: keep collecting what the block allocates (a short
-    walk), for loops that may run for hours (``cartctl monitor``).
+    walk), for loops that may run for hours (``cartctl monitor``). ``quick_gil``: any other thread
+    hands the GIL back within 0.1 ms too (:func:`sys.setswitchinterval`), for a loop on a cart.
     """
-    was_enabled = gc.isenabled()
+    was_enabled, switch_s = gc.isenabled(), sys.getswitchinterval()
     gc.collect()
     try:  # a stop signal raised right after the freeze or the switch still undoes them
+        if quick_gil:
+            sys.setswitchinterval(1e-4)
         gc.freeze()
         if not collect_new:
             gc.disable()
         yield
     finally:
+        sys.setswitchinterval(switch_s)
         gc.unfreeze()
         if was_enabled:
             gc.enable()

@@ -106,18 +106,14 @@ def run(args: argparse.Namespace) -> int:
 
     sink = CsvSink(args.out, flush_every=50 if serial else 1000, on_open=on_open)  # as run's
     bar = ProgressBar(volts.size, f"excite {args.signal}")
-    switch_interval = sys.getswitchinterval()
-    if serial:  # answer each cart tick at once: threads hand the GIL back quickly
-        sys.setswitchinterval(1e-4)
     try:
-        # no collector pass at a random tick of a cart: a late answer raises the echo (a
-        # simulated plant has no deadline)
-        with gc_paused() if serial else contextlib.nullcontext():
+        # no collector pass at a random tick of a cart, and each tick answered at once: a late
+        # answer raises the echo (a simulated plant has no deadline)
+        with gc_paused(quick_gil=True) if serial else contextlib.nullcontext():
             result = run_experiment(
                 plant, ua, ub, on_tick=bar.update, source=description, sink=sink
             )
     finally:
-        sys.setswitchinterval(switch_interval)
         bar.close()
     with stopping.deferred():  # the experiment is over: a stop signal waits for its files
         return _save(args, result, plant, description, opened)
