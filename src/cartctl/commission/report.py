@@ -77,9 +77,7 @@ def plot_lines(path: Path, title: str, panels: Sequence[tuple[str, Mapping[str, 
 
 
 def _table(rows: Sequence[Sequence[tuple[str, str]]]) -> str:
-    """A Markdown table of rows of (header, cell); the headers are the first row's. A '|' in a
-    header or cell ('max |pole|', a verdict's '|z|') is escaped, not a cell's end."""
-    rows = [[(h.replace("|", "\\|"), c.replace("|", "\\|")) for h, c in row] for row in rows]
+    """A Markdown table of rows of (header, cell); the headers are the first row's."""
     return markdown_table([h for h, _ in rows[0]], [[cell for _, cell in row] for row in rows])
 
 

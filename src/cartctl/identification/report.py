@@ -38,7 +38,7 @@ def _cell(value: Any) -> str:
     if value is None:
         return ""
     text = f"{float(value):.4g}" if isinstance(value, float | np.floating) else str(value)
-    return text.replace("|", "\\|").replace("\n", " ")
+    return text.replace("\n", " ")
 
 
 def _table(rows: Sequence[Mapping[str, Any]]) -> str:

@@ -101,6 +101,7 @@ def render_table(
 
 
 def markdown_table(headers: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
-    """A Markdown table of text cells (``summary.md``)."""
-    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
-    return "\n".join([*lines, *("| " + " | ".join(r) + " |" for r in rows)])
+    """A Markdown table of text cells (``summary.md``); a '|' in a header or cell ('max |pole|',
+    a verdict's '|z|') is escaped, not a cell's end."""
+    lines = ["| " + " | ".join(c.replace("|", "\\|") for c in r) + " |" for r in [headers, *rows]]
+    return "\n".join([lines[0], "|" + "---|" * len(headers), *lines[1:]])
