@@ -12,7 +12,7 @@ from typing import Any
 
 import tomli_w
 
-from cartctl.choices import find_file
+from cartctl.choices import find_file, is_number
 from cartctl.data.outputs import writing
 from cartctl.data.tomlfile import MODEL_FORMAT, check_format, read_loop_delay, read_toml, require
 from cartctl.errors import CartctlError, DataFileError, InputError
@@ -136,7 +136,7 @@ def _parse(doc: Mapping[str, Any], path: Path) -> ModelFile:
         where = f"[motors.{name}]"
         theta = require(entry, "theta", list, path, where)
         na, nb, nk = (require(entry, key, int, path, where) for key in ("na", "nb", "nk"))
-        if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in theta):
+        if not all(is_number(v) for v in theta):
             raise DataFileError(path, f"theta in {where} must be a list of numbers, got {theta!r}")
         if not all(math.isfinite(v) for v in theta):
             raise DataFileError(path, f"theta in {where} must hold finite numbers, got {theta!r}")

@@ -17,7 +17,7 @@ import numpy as np
 import tomli_w
 
 from cartctl.cart import check_voltage_limit, encoder_quantum_rad_s
-from cartctl.choices import find_file
+from cartctl.choices import find_file, is_number
 from cartctl.data import tomlfile
 from cartctl.data.outputs import writing
 from cartctl.data.tomlfile import CONTROLLER_FORMAT, check_format, read_toml, require
@@ -164,7 +164,7 @@ def absurd_gain(controller: ControllerFile) -> str | None:
         for key, per_error in gains:  # K: only finite here, its switch test follows
             values = entry.get(key, [])
             for value in values if isinstance(values, list) else [values]:
-                if not isinstance(value, int | float) or isinstance(value, bool):
+                if not is_number(value):
                     continue  # build_controllers names a gain that is not a number
                 if not math.isfinite(value):
                     return f"[motors.{motor}] {key} = {value} is not a finite number"

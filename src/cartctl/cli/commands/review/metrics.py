@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from cartctl.choices import is_number
 from cartctl.data.columns import MONITOR_LABELS_HINT
 from cartctl.data.trace import Trace
 from cartctl.errors import DataFileError
@@ -84,9 +85,7 @@ def _rows(a: Mapping[str, Any], b: Mapping[str, Any]) -> list[_Row]:
 
 def _number(value: Any) -> float | None:
     """A finite number (not a bool) as float, else None."""
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        return None
-    return float(value) if math.isfinite(value) else None
+    return float(value) if is_number(value) and math.isfinite(value) else None
 
 
 _SKIP = object()
@@ -94,7 +93,7 @@ _SKIP = object()
 
 def _slot(value: Any) -> bool:
     """A number's place: a number (not a bool) or None (a metric without a value)."""
-    return value is None or (isinstance(value, int | float) and not isinstance(value, bool))
+    return value is None or is_number(value)
 
 
 def difference(a: Any, b: Any) -> Any:
