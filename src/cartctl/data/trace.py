@@ -150,9 +150,7 @@ def parse_mapping(text: str) -> dict[str, str]:
     (``speed_A``), a bad item or a name given twice is an InputError.
     """
     mapping: dict[str, str] = {}
-    for item in (part.strip() for part in text.split(",")):
-        if not item:
-            continue
+    for item in filter(None, (part.strip() for part in text.split(","))):
         name, equals, label = (part.strip() for part in item.partition("="))
         if not equals or not name or not label:
             raise InputError(f"bad column mapping item {item!r}; expected {_MAP_FORM}")
