@@ -206,10 +206,13 @@ def _run_loop(
     else:
         executor = PeriodicExecutor(period_s, clock, max_ticks=n)
     scheduling = "simulated clock (--fast)"
+    switch_interval = sys.getswitchinterval()
     stats = None
     try:
         if not args.fast:  # before the start: locking memory takes a while, and a cart ticks on
             scheduling = enable_realtime()
+            sys.setswitchinterval(1e-4)  # any other thread hands the GIL back within 0.1 ms,
+            # also while loop.finish() sends zero volts (restored after it)
 
         loop_tick, fast = loop.tick, bool(args.fast)
 
@@ -219,8 +222,8 @@ def _run_loop(
             time_s = executor.time_s if clocked else executor.grid_index * period_s
             return loop_tick(k, executor.period_error_us, executor.start_s, time_s)
 
-        # no collector pass nor a slow GIL at a random tick (gc_paused); simulated clock: no deadline
-        with contextlib.nullcontext() if fast else gc_paused(quick_gil=True):
+        # no collector pass at a random tick (gc_paused); the simulated clock has no deadline
+        with contextlib.nullcontext() if fast else gc_paused():
             loop.start()  # after the one collection: a cart ticks on from its reset
             # a cart-clocked loop calls its idle() itself, while it waits for the cart's frame
             stats = executor.run(tick) if clocked else executor.run(tick, loop.idle)
@@ -237,6 +240,7 @@ def _run_loop(
             after.enter_context(stopping.deferred())
         finally:  # zero volts even for a first signal raised before the deferral began
             loop.finish()
+            sys.setswitchinterval(switch_interval)
             if not args.fast:
                 restore()
         timing = (stats or executor.stats()).to_dict()
