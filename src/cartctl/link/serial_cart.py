@@ -42,8 +42,9 @@ class SerialCart:
     """A cart on a serial port as a :class:`~cartctl.plants.base.Plant`, clocked by the cart.
 
     ``connect_timeout_s`` bounds the wait for the first HEARTBEAT; the rest goes to the
-    :class:`~cartctl.link.cart_link.CartLink` (``silence_timeout_s``, ``on_print``, ...). :meth:`send` and :meth:`receive` split
-    :meth:`step` (the cart-clocked loop times its compute between).
+    :class:`~cartctl.link.cart_link.CartLink` (``silence_timeout_s``, ``on_print``, ...).
+    :meth:`send` and :meth:`receive` split :meth:`step` (the cart-clocked loop times its compute
+    between).
     """
 
     period_s: float = PERIOD_S
