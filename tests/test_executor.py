@@ -321,3 +321,24 @@ def test_gc_paused_freezes_and_restores() -> None:
     ((enabled, frozen),) = seen
     assert not enabled and frozen > 0  # the heap from before: no collection walks it
     assert gc.isenabled() and gc.get_freeze_count() == 0
+
+
+def test_gc_paused_leaves_the_switch_interval_it_did_not_set() -> None:
+    """run sets the 0.1 ms GIL hand-over itself, to last through loop.finish()'s zero volts:
+    a plain pause must leave it as it is. Restoring it anyway went through a float round trip
+    (1e-4 s read back as 99.99... µs) and left 99 µs for the shutdown (371bf52)."""
+    import sys
+
+    from cartctl.runtime.realtime import gc_paused
+
+    before = sys.getswitchinterval()
+    try:
+        sys.setswitchinterval(1e-4)  # as run's loop, before its pause
+        expected = sys.getswitchinterval()
+        with gc_paused():
+            pass
+        assert sys.getswitchinterval() == expected
+        with gc_paused(quick_gil=True):  # excite's: its own set, undone on the way out
+            assert sys.getswitchinterval() < 2e-4
+    finally:
+        sys.setswitchinterval(before)
