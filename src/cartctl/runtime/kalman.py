@@ -77,12 +77,13 @@ class KalmanSpeedEstimator:
     """The Kalman filter with its covariance propagated, for a design with timing noise: a
     command change Δu landing ε ticks early or late acts as an input −ε Δu, so ``predict``
     propagates P with Q + (σ_ε Δu[k])² B Bᵀ (u[−1] = 0 after a reset); ``correct`` uses
-    L[k] = P Cᵀ / (C P Cᵀ + R) and the Joseph form.
+    L[k] = P Cᵀ / (C P Cᵀ + R) and P − L[k] C P.
     """
 
     def __init__(self, design: KalmanDesign) -> None:
         self.design = design
-        self._eye = np.eye(design.A.shape[0])
+        self._BB = np.outer(design.B, design.B)
+        self._AT = np.ascontiguousarray(design.A.T)
         self.reset()
 
     def reset(self) -> None:
@@ -93,13 +94,12 @@ class KalmanSpeedEstimator:
 
     def correct(self, measured_rad_s: float) -> float:
         if math.isfinite(measured_rad_s):
-            d, P = self.design, self._P
-            PC = P @ d.C
-            gain = PC / float(d.C @ PC + d.R)
-            self._x = self._x + gain * (float(measured_rad_s) - float(d.C @ self._x))
-            joseph = self._eye - np.outer(gain, d.C)
-            self._P = joseph @ P @ joseph.T + d.R * np.outer(gain, gain)
-            self.gain = gain
+            d = self.design
+            PC = self._P @ d.C
+            s = float(PC @ d.C) + d.R
+            self.gain = PC / s
+            self._x += self.gain * (float(measured_rad_s) - float(self._x @ d.C))
+            self._P -= np.outer(PC, PC) / s  # symmetric, as P
         return float(self._x[0])
 
     def predict(self, voltage_v: float) -> None:
@@ -107,9 +107,10 @@ class KalmanSpeedEstimator:
         u = float(voltage_v) if math.isfinite(voltage_v) else 0.0
         extra = (d.timing_noise_std_ticks * (u - self._last_voltage_v)) ** 2
         self._last_voltage_v = u
-        Q = d.Q + extra * np.outer(d.B, d.B) if extra > 0.0 else d.Q
         self._x = d.A @ self._x + d.B * u
-        self._P = d.A @ self._P @ d.A.T + Q
+        self._P = d.A @ self._P @ self._AT + d.Q
+        if extra > 0.0:
+            self._P += extra * self._BB
 
     @property
     def state(self) -> NDArray[np.float64]:
