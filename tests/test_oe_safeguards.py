@@ -256,11 +256,11 @@ def test_design_warns_on_a_lightly_damped_closed_loop(
     assert all(e["warnings"] == [] for e in json.loads(out)["motors"].values())
 
 
-def test_oe_refined_on_the_unfiltered_data_has_one_covariance(
+def _oe_refined_on_raw_data(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
-) -> None:
-    """A prefiltered OE fit refined on the raw data: theta_std and the diagnostics' Σ are one
-    matrix, σ̂² (JᵀJ)⁻¹ on the raw data (J by central differences of lfilter here)."""
+) -> tuple[dict, np.ndarray, np.ndarray]:
+    """identify --method oe --prefilter butter --json of motor a on a physics square wave (its
+    fit refined on the unfiltered data, as its note says): the motor's entry, y and u."""
     from cartctl.data.read import read_trace
 
     data = tmp_path / "sq.csv"
@@ -271,10 +271,18 @@ def test_oe_refined_on_the_unfiltered_data_has_one_covariance(
                         "--motor", "a", "--json")  # fmt: skip
     doc = json.loads(out)["motors"]["a"]
     assert any("refined on the unfiltered data" in note for note in doc["notes"])
+    trace = read_trace(data)
+    return doc, trace.speed("a"), trace.voltage("a")
+
+
+def test_oe_refined_on_the_unfiltered_data_has_one_covariance(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A prefiltered OE fit refined on the raw data: theta_std and the diagnostics' Σ are one
+    matrix, σ̂² (JᵀJ)⁻¹ on the raw data (J by central differences of lfilter here)."""
+    doc, y, u = _oe_refined_on_raw_data(capsys, tmp_path)
     cov = np.asarray(doc["theta_cov"])
     np.testing.assert_allclose(doc["theta_std"], np.sqrt(np.diag(cov)), rtol=1e-12)
-    trace = read_trace(data)
-    y, u = trace.speed("a"), trace.voltage("a")
     theta, nk = np.asarray(doc["theta"]), doc["nk"]
 
     def y_hat(th: np.ndarray) -> np.ndarray:
@@ -297,18 +305,7 @@ def test_oe_refined_on_the_unfiltered_data_predicts_on_it(
     covariance and residual RMS are; it was on the prefiltered data. An OE model has no noise
     model (H = 1), so its one-step predictor is its simulation (MATLAB's compare(data, m, 1)):
     the ARX form φ(k)ᵀθ with the OE θ is not its predictor."""
-    from cartctl.data.read import read_trace
-
-    data = tmp_path / "sq.csv"
-    code, _, _ = _run(capsys, "excite", "--plant", "physics", "--signal", "square",
-                      "--amplitude", "10", "--out", str(data))  # fmt: skip
-    assert code == 0
-    code, out, _ = _run(capsys, "identify", str(data), "--method", "oe", "--prefilter", "butter",
-                        "--motor", "a", "--json")  # fmt: skip
-    doc = json.loads(out)["motors"]["a"]
-    assert any("refined on the unfiltered data" in note for note in doc["notes"])
-    trace = read_trace(data)
-    y, u = trace.speed("a"), trace.voltage("a")
+    doc, y, u = _oe_refined_on_raw_data(capsys, tmp_path)
     theta, nk = np.asarray(doc["theta"]), doc["nk"]
     assert doc["fit_prediction_percent"] == pytest.approx(_sim_fit(theta, 2, nk, y, u), abs=1e-9)
 
