@@ -38,6 +38,17 @@ def _trace(
     return path
 
 
+def _noisy_square(
+    tmp_path: Path, *, cycles: int, noise_std: float, seed: int
+) -> tuple[Path, np.ndarray]:
+    """sq.csv: a 10 V square of ``cycles`` cycles on motor a through THETA_A, with seeded white
+    noise of ``noise_std`` rad/s on the speed; its path and the voltage."""
+    u = square(10.0, cycles=cycles)
+    rng = np.random.default_rng(seed)
+    y = ArxModel.from_theta(THETA_A).simulate(u) + rng.normal(0.0, noise_std, u.size)
+    return _trace(tmp_path / "sq.csv", u, y), u
+
+
 def _identify_json(capsys: pytest.CaptureFixture[str], *argv: str) -> dict:
     code = main(["identify", *argv, "--json"])
     out, err = capsys.readouterr()
@@ -272,10 +283,7 @@ def test_the_order_table_of_an_averaged_fit_is_on_the_averaged_cycle(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
     # it was fitted on the raw record, so its row of the chosen orders disagreed with the model
-    rng = np.random.default_rng(5)
-    u = square(10.0, cycles=6)
-    y = ArxModel.from_theta(THETA_A).simulate(u) + rng.normal(0.0, 0.2, u.size)
-    path = _trace(tmp_path / "sq.csv", u, y)
+    path, u = _noisy_square(tmp_path, cycles=6, noise_std=0.2, seed=5)
     doc = _identify_json(capsys, str(path), "--average", "--orders", "na=1:2,nb=1:3,nk=1:2")
     motor = doc["motors"]["a"]
     period = u.size // 6
@@ -353,10 +361,7 @@ def test_average_with_oe_says_the_refinement_is_on_the_raw_experiments(
 ) -> None:
     # the OE refinement simulates from rest, so it runs on the raw record while the ARX start is
     # fitted on the averaged cycles; that went unsaid (the OE row did not move with --average)
-    rng = np.random.default_rng(6)
-    u = square(10.0, cycles=4)
-    y = ArxModel.from_theta(THETA_A).simulate(u) + rng.normal(0.0, 0.2, u.size)
-    path = _trace(tmp_path / "sq.csv", u, y)
+    path, u = _noisy_square(tmp_path, cycles=4, noise_std=0.2, seed=6)
     doc = _identify_json(capsys, str(path), "--average", "--method", "oe")
     motor = doc["motors"]["a"]
     assert motor["cycles_averaged"] == 3
@@ -390,10 +395,8 @@ def test_the_delay_evidence_of_an_averaged_fit_is_on_the_averaged_cycle(
 ) -> None:
     # it was on the raw record (the same evidence with and without --average), while the model
     # and the order table are fitted on the averaged cycle
-    rng = np.random.default_rng(7)
-    u = square(10.0, cycles=6)
-    y = ArxModel.from_theta(THETA_A).simulate(u) + rng.normal(0.0, 0.5, u.size)
-    path = str(_trace(tmp_path / "sq.csv", u, y))
+    path, u = _noisy_square(tmp_path, cycles=6, noise_std=0.5, seed=7)
+    path = str(path)
     plain = _identify_json(capsys, path, "--delay", "auto")["motors"]["a"]["delay_estimate"]
     doc = _identify_json(capsys, path, "--delay", "auto", "--average")
     averaged = doc["motors"]["a"]["delay_estimate"]
